@@ -1,0 +1,39 @@
+# Quick start: `make demo` (set up + flagship study) and `make test` (set up + tests).
+PYTHON ?= python3.11
+VENV   ?= .venv
+PY      = $(VENV)/bin/python
+OUT    ?= results
+
+.PHONY: setup demo test lint format bench clean
+
+$(VENV)/.installed: pyproject.toml
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found; run make PYTHON=python3"; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	@touch $@
+
+setup: $(VENV)/.installed
+
+demo: setup
+	$(VENV)/bin/encdesign study run cramer --out $(OUT)/cramer --json $(OUT)/cramer/cramer.json
+	$(VENV)/bin/encdesign study run reference-head --out $(OUT)/reference-head --json $(OUT)/reference-head/reference-head.json
+	@echo "figures and JSON written under $(OUT)/"
+
+test: setup
+	$(VENV)/bin/ruff check encdesign studies tests benchmarks
+	$(VENV)/bin/ruff format --check encdesign studies tests benchmarks
+	$(PY) -m pytest -q -p no:cacheprovider tests
+
+lint: setup
+	$(VENV)/bin/ruff check encdesign studies tests benchmarks
+
+format: setup
+	$(VENV)/bin/ruff format encdesign studies tests benchmarks
+	$(VENV)/bin/ruff check --fix encdesign studies tests benchmarks
+
+bench: setup
+	$(PY) benchmarks/kinematics.py --json $(OUT)/bench-kinematics.json
+
+clean:
+	rm -rf $(VENV) $(OUT)

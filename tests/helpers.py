@@ -1,0 +1,1 @@
+"""Canonical configurations shared by the tests (one place, parametrised over)."""
