@@ -343,9 +343,7 @@ def _open_text(path: Path):
     return open(path, encoding="utf-8", newline="")
 
 
-def _convert(
-    where: str, name: str, values: list[str], kind: str, spec: KindSpec
-) -> np.ndarray:
+def _convert(where: str, name: str, values: list[str], kind: str, spec: KindSpec) -> np.ndarray:
     if name in spec.string_columns:
         arr = np.asarray([v.strip() for v in values], dtype=str)
         return arr
@@ -400,8 +398,10 @@ def validate_columns(where: str, kind: str, meta: dict, columns: Mapping[str, An
     out: dict[str, np.ndarray] = {}
     for name in names:
         vals = columns[name]
-        if isinstance(vals, np.ndarray) and vals.dtype.kind in "fiu" and name not in (
-            spec.string_columns
+        if (
+            isinstance(vals, np.ndarray)
+            and vals.dtype.kind in "fiu"
+            and name not in (spec.string_columns)
         ):
             out[name] = _convert_array(where, name, vals, spec)
         else:
@@ -534,7 +534,9 @@ def write_recording(
         meta["description"] = description
     for name, tab in (("encoder", encoder), ("motor", motor), ("provenance", provenance)):
         if tab is not None:
-            meta[name] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in tab.items()}
+            meta[name] = {
+                k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in tab.items()
+            }
     meta = validate_meta(meta, str(path))
     cols = {k: np.asarray(v) for k, v in columns.items()}
     conv = validate_columns(str(path.parent / data_name), kind, meta, cols)
@@ -557,6 +559,10 @@ def write_recording(
         tmp_files.append(tmp_toml)
         with open(tmp_toml, "wb") as fh:
             tomli_w.dump(meta, fh)
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp in tmp_files:
+            os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp_data, data_path)
         os.replace(tmp_toml, path)
     finally:

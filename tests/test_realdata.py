@@ -1,0 +1,86 @@
+"""The shipped real recordings load, and the converters refuse malformed sources."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from encdesign import EncdesignInputError, load_recording
+from encdesign._cli import main
+from encdesign._realdata import import_nmm, import_odrive
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "real"
+
+
+@pytest.mark.parametrize(
+    ("name", "kind", "rows"),
+    [
+        ("nmm_x", "quadrature", 16511),
+        ("nmm_y", "quadrature", 16511),
+        ("odrive_nocomp", "motion", 4306),
+        ("odrive_comp", "motion", 4377),
+    ],
+)
+def test_shipped_recordings_load_with_provenance(name, kind, rows):
+    rec = load_recording(DATA / f"{name}.toml")
+    assert rec.kind == kind
+    assert rec.n_rows == rows
+    assert "MIT License" in rec.meta["provenance"]["license"]
+
+
+def test_nmm_signals_are_on_the_lissajous_circle():
+    rec = load_recording(DATA / "nmm_x.toml")
+    r = np.hypot(rec.columns["sa"], rec.columns["sb"])
+    assert 490 < r.min() < r.max() < 510  # ADC counts, as the source's radius column
+
+
+def test_odrive_is_one_turn_in_ten_seconds():
+    rec = load_recording(DATA / "odrive_nocomp.toml")
+    turns = np.ptp(rec.columns["counts"]) / rec.encoder["counts_per_rev"]
+    assert 0.95 < turns < 1.01
+    assert 9.9 < np.ptp(rec.columns["t"]) < 10.1
+    assert rec.meta["motor"] == {"pole_pairs": 7, "stator_slots": 12}
+
+
+def test_import_round_trip(tmp_path):
+    src = tmp_path / "nmm_Q_raw.csv"
+    phase = np.linspace(0, 359, 50)
+    rows = "\n".join(f"{p}, {500 + np.sin(np.deg2rad(p))}, 0.0" for p in phase)
+    src.write_text("Phase (deg), Radius, Roundness deviation\n" + rows + "\n")
+    rec = import_nmm(src, tmp_path / "q.toml")
+    back = load_recording(tmp_path / "q.toml")
+    np.testing.assert_allclose(back.columns["sa"], rec.columns["sa"], rtol=0, atol=1e-12)
+    assert "Q interferometer" in back.meta["description"]
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("a,b,c\n1,2,3\n", "header"),
+        ("Phase (deg), Radius, Roundness deviation\n1, x, 3\n2,3,4\n3,4,5\n", "non-numeric"),
+        ("Phase (deg), Radius, Roundness deviation\n1, nan, 3\n2,3,4\n3,4,5\n", "non-finite"),
+        ("Phase (deg), Radius, Roundness deviation\n1, -1, 3\n2,3,4\n3,4,5\n", "radius"),
+    ],
+)
+def test_nmm_refusals(tmp_path, content, message):
+    src = tmp_path / "bad.csv"
+    src.write_text(content)
+    with pytest.raises(EncdesignInputError, match=message):
+        import_nmm(src, tmp_path / "out.toml")
+    assert not (tmp_path / "out.toml").exists()
+
+
+def test_odrive_refusals(tmp_path):
+    np.save(tmp_path / "bad.npy", np.zeros((2, 10)))
+    with pytest.raises(EncdesignInputError, match=r"shape \[3, N\]"):
+        import_odrive(tmp_path / "bad.npy", tmp_path / "out.toml")
+    a = np.vstack([np.arange(10.0), np.arange(10.0), np.zeros(10)])
+    a[0, 5] = 1.0  # time goes backwards
+    np.save(tmp_path / "back.npy", a)
+    with pytest.raises(EncdesignInputError, match="time goes backwards"):
+        import_odrive(tmp_path / "back.npy", tmp_path / "out.toml")
+
+
+def test_cli_import_bad_file_exits_2(tmp_path, capsys):
+    assert main(["import", "odrive", str(tmp_path / "missing.npy"), "--out", "x.toml"]) == 2
+    assert "not found" in capsys.readouterr().err
