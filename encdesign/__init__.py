@@ -17,9 +17,177 @@ from ._recording import (
 )
 
 # --- kinematics, encoder theorem, self-compensation (issue 2) ---
+from ._design import (
+    BenchRun as BenchRun,
+    Design as Design,
+    load_design as load_design,
+    parse_design as parse_design,
+    simulate_bench as simulate_bench,
+    simulate_recording as simulate_recording,
+)
+from ._kinematics import (
+    Disk as Disk,
+    EncoderModel as EncoderModel,
+    Heads as Heads,
+    Motion as Motion,
+    head_errors as head_errors,
+    head_errors_batch as head_errors_batch,
+    head_readings as head_readings,
+    make_model as make_model,
+    noisy_head_readings as noisy_head_readings,
+    stack_models as stack_models,
+)
+from ._selfcomp import (
+    EncoderMap as EncoderMap,
+    SelfCompensation as SelfCompensation,
+    apply_map as apply_map,
+    cotangent_equations as cotangent_equations,
+    cotangent_sensitivity as cotangent_sensitivity,
+    encoder_map as encoder_map,
+    self_compensate as self_compensate,
+)
+from ._theorem import (
+    averaged_error as averaged_error,
+    fourier_coefficients as fourier_coefficients,
+    mode_amplitudes as mode_amplitudes,
+    mode_transfer as mode_transfer,
+    model_mode_transfer as model_mode_transfer,
+    surviving_orders as surviving_orders,
+)
 
 # --- shifted-delta-sum timing model (issue 3) ---
+from ._motor import (
+    Motor as Motor,
+    motor_order_sources as motor_order_sources,
+    motor_orders as motor_orders,
+    time_at_angle as time_at_angle,
+)
+from ._sds import (
+    DiskMarks as DiskMarks,
+    SDSDesign as SDSDesign,
+    SDSReadings as SDSReadings,
+    edge_times as edge_times,
+    equally_spaced as equally_spaced,
+    mark_angles as mark_angles,
+    perfect_disk as perfect_disk,
+    reference_design as reference_design,
+    reference_disk as reference_disk,
+    reference_errors as reference_errors,
+    reference_motor as reference_motor,
+    sds_from_edges as sds_from_edges,
+    sds_phi_error as sds_phi_error,
+    sds_residual as sds_residual,
+    simulate_readings as simulate_readings,
+    validate_design as validate_design,
+)
+from ._sds_errors import (
+    SDSErrors as SDSErrors,
+    SpeedMarkPrediction as SpeedMarkPrediction,
+    axis_tilt_error as axis_tilt_error,
+    bearing_noise as bearing_noise,
+    predict_speed_mark_error as predict_speed_mark_error,
+)
+from ._sds_recording import (
+    SDSRecordingResult as SDSRecordingResult,
+    sds_readings_from_recording as sds_readings_from_recording,
+    simulate_sds_recording as simulate_sds_recording,
+)
 
 # --- quadrature signal layer (issue 6) ---
+from ._ellipse import (
+    EllipseFit as EllipseFit,
+    EllipseParams as EllipseParams,
+    VibrationLUT as VibrationLUT,
+    build_vibration_lut as build_vibration_lut,
+    compensation_signal_m as compensation_signal_m,
+    correct_signals as correct_signals,
+    corrected_phase_rad as corrected_phase_rad,
+    fit_ellipse as fit_ellipse,
+    position_from_signals_m as position_from_signals_m,
+    seed_eq7_choice as seed_eq7_choice,
+    vibration_compensation_m as vibration_compensation_m,
+)
+from ._quadrature import (
+    Eq4Terms as Eq4Terms,
+    SignalErrors as SignalErrors,
+    eq4_terms_m as eq4_terms_m,
+    error_harmonics as error_harmonics,
+    interpolation_error_m as interpolation_error_m,
+    interpolation_error_rad as interpolation_error_rad,
+    line_period_error as line_period_error,
+    phase_error_eq4_rad as phase_error_eq4_rad,
+    phase_error_exact_rad as phase_error_exact_rad,
+    quadrature_signals as quadrature_signals,
+    signal_phase_rad as signal_phase_rad,
+    synthesize_signals as synthesize_signals,
+)
+from ._vibration import (
+    ExcitationEstimate as ExcitationEstimate,
+    Vibration as Vibration,
+    eq5_signal_terms as eq5_signal_terms,
+    estimate_excitation as estimate_excitation,
+    signal_spectrum as signal_spectrum,
+    vibrating_signals as vibrating_signals,
+    vibration_error_rad as vibration_error_rad,
+)
+
+# --- design optimisation (issue 4) ---
+from ._cases import (
+    Case as Case,
+    CaseRecorder as CaseRecorder,
+    read_cases as read_cases,
+    write_cases as write_cases,
+)
+from ._drivers import (
+    DOEResult as DOEResult,
+    EnumerationResult as EnumerationResult,
+    MonteCarloResult as MonteCarloResult,
+    OptimisationError as OptimisationError,
+    Solution as Solution,
+    doe as doe,
+    enumerate_designs as enumerate_designs,
+    expected_value as expected_value,
+    grid_points as grid_points,
+    latin_hypercube as latin_hypercube,
+    monte_carlo as monte_carlo,
+    optimise as optimise,
+)
+from ._problem import (
+    Problem as Problem,
+    ProblemObjective as ProblemObjective,
+    VariableInfo as VariableInfo,
+    load_problem as load_problem,
+    parse_problem as parse_problem,
+)
+from ._solve import (
+    ProblemResult as ProblemResult,
+    check_gradients as check_gradients,
+    solve_problem as solve_problem,
+    sweep_problem as sweep_problem,
+)
+from ._tolerance import (
+    Allocation as Allocation,
+    Contributions as Contributions,
+    SweepTable as SweepTable,
+    allocate as allocate,
+    check_yield as check_yield,
+    contributions as contributions,
+    sweep_scales as sweep_scales,
+    tolerance_cost as tolerance_cost,
+)
+from .objectives import (
+    EncoderDesign as EncoderDesign,
+    Tolerances as Tolerances,
+)
+
+# --- discrepancy finder (issue 5) ---
+from ._conceal import simulate_bench as simulate_bench, write_concealed as write_concealed
+from ._diagnose import (
+    Diagnosis as Diagnosis,
+    EffectResult as EffectResult,
+    diagnose as diagnose,
+    report_text as diagnosis_report_text,
+    write_plots as write_diagnosis_plots,
+)
 
 __version__ = "0.1.0"

@@ -203,7 +203,9 @@ def _sds_required(meta: dict) -> list[str]:
 
 def _sds_check(where: str, meta: dict, cols: dict) -> None:
     # Deeper checks (missing edges, monotone times per sensor) live in the SDS module and
-    # are registered by it through ``register_check``.
+    # are registered by it through ``register_check`` when it is imported.
+    from . import _sds_recording  # noqa: F401
+
     for extra in _EXTRA_CHECKS.get("sds", []):
         extra(where, meta, cols)
 

@@ -1,1 +1,53 @@
 """Canonical configurations shared by the tests (one place, parametrised over)."""
+
+# --- quadrature signal layer (issue 6) ---
+# A 20 um pitch linear encoder (seed 002) with moderate signal errors: offsets B/A,
+# amplitude ratio A1/A2, phase error of S_A (rad).
+QUADRATURE_PITCH_M = 20e-6
+QUADRATURE_ERRORS = {
+    "offset_a": 0.04,
+    "offset_b": -0.03,
+    "amplitude_ratio": 0.95,
+    "phase_error_rad": 0.05,
+}
+
+# --- kinematics, encoder theorem, self-compensation (issue 2) ---
+# Cramer's simulation case (seed 000, figs. 7-8): 2.54 cm optical radius, 5 um centering
+# error, 6 mrad tilt, 5 urad grating mode 3 and 2.5 urad mode 4; heads 0/120/240 deg plus
+# a reference head at 22 deg (index 3).
+CRAMER_RADIUS_M = 0.0254
+CRAMER_ECCENTRICITY_M = 5e-6
+CRAMER_TILT_RAD = 6e-3
+CRAMER_GRATING_SIN_RAD = (0.0, 0.0, 5e-6, 0.0)
+CRAMER_GRATING_COS_RAD = (0.0, 0.0, 0.0, 2.5e-6)
+CRAMER_HEADS_DEG = (0.0, 120.0, 240.0, 22.0)
+CRAMER_REFERENCE_HEAD = 3
+
+
+def cramer_model(**overrides):
+    """The Cramer 3+1 encoder as an :class:`encdesign.EncoderModel` (keyword overrides
+    go to :func:`encdesign.make_model`)."""
+    import numpy as np
+
+    from encdesign import make_model
+
+    kw = dict(
+        eccentricity_m=(CRAMER_ECCENTRICITY_M, 0.0),
+        tilt_rad=(CRAMER_TILT_RAD, 0.0),
+        grating_sin_rad=CRAMER_GRATING_SIN_RAD,
+        grating_cos_rad=CRAMER_GRATING_COS_RAD,
+    )
+    kw.update(overrides)
+    return make_model(CRAMER_RADIUS_M, np.deg2rad(CRAMER_HEADS_DEG), **kw)
+
+
+# --- shifted-delta-sum timing model (issue 3) ---
+SDS_TEST_MARKS = 240  # marks per revolution in the SDS tests (the physics does not need 10,000)
+
+
+def sds_reference(n_fixed: int = 2, n_moving: int = 2, marks: int = SDS_TEST_MARKS):
+    """The seed's first SDS device (6 pole pairs, 18 coils, six-step drive, 10 rev/s) with
+    ``marks`` marks per disk and equally spaced sensors (:func:`encdesign.reference_design`)."""
+    from encdesign import reference_design
+
+    return reference_design(n_fixed, n_moving, marks_per_rev=marks)

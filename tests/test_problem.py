@@ -1,0 +1,213 @@
+"""Problem statements: TOML validation, bad files refused, solving, case recording."""
+
+import math
+
+import jax.numpy as jnp
+import pytest
+
+from encdesign import EncdesignInputError
+from encdesign._cases import CaseRecorder, read_cases, write_cases
+from encdesign._cli import main
+from encdesign._problem import ProblemObjective, VariableInfo, load_problem, parse_problem
+from encdesign._solve import check_gradients, solve_problem, sweep_problem
+
+
+def _quadratic_build(problem, discrete):
+    """f = (x - c)^2 + 0.1 (y + 1)^2 + k * 0.01, c = model["c"] + 0.1 * k (k discrete)."""
+    k = discrete.get("k", 0)
+    c = problem.model["c"] + 0.1 * k
+
+    def evaluate(x):
+        xv = x.get("x", 0.0)
+        yv = x.get("y", 0.0)
+        f = (xv - c) ** 2 + 0.1 * (yv + 1.0) ** 2 + 0.01 * k
+        return {"f": f, "g": xv + yv, "residuals": jnp.stack([xv - c, 0.3 * (yv + 1.0)])}
+
+    return evaluate
+
+
+REGISTRY = {
+    "quad": ProblemObjective(
+        name="quad",
+        doc="analytic test objective",
+        variables={
+            "x": VariableInfo("m"),
+            "y": VariableInfo("rad"),
+            "k": VariableInfo("1", discrete=True, integer=True, lower=0),
+        },
+        model={"c": 0.5},
+        outputs=("f", "g", "residuals"),
+        build=_quadratic_build,
+    )
+}
+
+
+def _problem(**over):
+    data = {
+        "problem": {"name": "t", "objective": "quad", "seed": 3},
+        "model": {"c": 0.5},
+        "variables": {
+            "x": {"units": "mm", "start": 100.0, "lower": -2000.0, "upper": 2000.0},
+            "y": {"units": "deg", "start": 0.0, "lower": -90.0, "upper": 90.0},
+        },
+        "driver": {"kind": "lbfgsb", "max_steps": 200},
+    }
+    for k, v in over.items():
+        data[k] = v
+    return data
+
+
+def test_units_converted_to_si():
+    p = parse_problem(_problem(), REGISTRY)
+    x, y = p.variables
+    assert x.start == pytest.approx(0.1) and x.upper == pytest.approx(2.0)
+    assert y.lower == pytest.approx(-math.pi / 2)
+    assert p.seed == 3 and p.driver["kind"] == "lbfgsb"
+
+
+@pytest.mark.parametrize("kind", ["lbfgsb", "bfgs", "lm"])
+def test_gradient_drivers_solve(kind):
+    p = parse_problem(_problem(driver={"kind": kind}), REGISTRY)
+    r = solve_problem(p)
+    assert r.status == "success", r.message
+    assert r.best.inputs["x"] == pytest.approx(0.5, abs=1e-6)
+    assert r.best.inputs["y"] == pytest.approx(-1.0, abs=1e-5)
+
+
+def test_enumeration_wrapped_around_continuous_optimum(tmp_path):
+    vars_ = _problem()["variables"] | {"k": {"values": [0, 1, 2]}}
+    p = parse_problem(_problem(variables=vars_, driver={"kind": "bfgs"}), REGISTRY)
+    with CaseRecorder(tmp_path / "c.jsonl") as rec:
+        r = solve_problem(p, recorder=rec)
+    assert r.status == "success"
+    assert r.best.discrete == {"k": 0}  # the 0.01 k term makes k = 0 best
+    assert [res.inputs["x"] for res in r.results] == pytest.approx([0.5, 0.6, 0.7], abs=1e-6)
+    back = read_cases(tmp_path / "c.jsonl")
+    assert back == rec.cases and len(back) == 3
+
+
+def test_constraint_is_respected_or_reported():
+    p = parse_problem(
+        _problem(constraints={"g": {"upper": -1.0}}, driver={"kind": "bfgs"}), REGISTRY
+    )
+    r = solve_problem(p)
+    assert r.status == "success", r.results[0].message
+    # the constrained optimum of (x - .5)^2 + .1 (y + 1)^2 on x + y = -1
+    assert r.best.inputs["x"] == pytest.approx(0.5 / 1.1, abs=1e-4)
+    assert r.best.outputs["g"] <= -1.0 + 1e-4
+    # infeasible: both bounds on g contradict the variable bounds
+    p2 = parse_problem(
+        _problem(constraints={"g": {"lower": 100.0}}, driver={"kind": "bfgs"}), REGISTRY
+    )
+    r2 = solve_problem(p2)
+    assert r2.status == "failed" and r2.results[0].status == "infeasible"
+
+
+def test_grid_sweep_finds_known_optimum_and_records(tmp_path):
+    d = _problem(sweep={"kind": "grid", "points_per_dim": 21})
+    d["variables"] = {"x": {"units": "m", "start": 0.0, "lower": -1.0, "upper": 1.0}}
+    p = parse_problem(d, REGISTRY)
+    with CaseRecorder(tmp_path / "s.csv") as rec:
+        r = sweep_problem(p, recorder=rec)
+    assert r.best.inputs["x"] == pytest.approx(0.5, abs=1e-12)
+    cases = read_cases(tmp_path / "s.csv")
+    assert len(cases) == 21 and cases == rec.cases
+    assert all(c.seed == 3 for c in cases)
+
+
+def test_case_files_round_trip_exactly(tmp_path):
+    with CaseRecorder(None) as rec:
+        rec.record({"a": 0.1 + 0.2, "n": 3, "s": "x"}, {"v": 1e-300, "w": math.nan}, "nonfinite", 7)
+        rec.record({"a": -1.0 / 3.0, "n": 4, "s": "y"}, {"v": [1.5, 2.0]}, "success", None)
+    for suffix in (".jsonl", ".csv"):
+        path = write_cases(tmp_path / f"c{suffix}", rec.cases)
+        back = read_cases(path)
+        assert back[0].inputs == rec.cases[0].inputs and back[1] == rec.cases[1]
+        assert math.isnan(back[0].outputs["w"]) and back[0].outputs["v"] == 1e-300
+        assert isinstance(back[0].inputs["n"], int) and back[0].seed == 7
+
+
+def test_check_gradients_table():
+    p = parse_problem(_problem(), REGISTRY)
+    rows = check_gradients(p)
+    assert {(r.output, r.variable) for r in rows} == {("f", "x"), ("f", "y")}
+    assert all(r.ok for r in rows)
+    fx = next(r for r in rows if r.variable == "x")
+    assert fx.ad == pytest.approx(2 * (0.1 - 0.5))
+
+
+@pytest.mark.parametrize(
+    ("edit", "needle"),
+    [
+        (lambda d: d["variables"].update(z={"start": 1.0}), "unknown variable 'z'"),
+        (lambda d: d["variables"]["x"].update(start=5000.0), "outside the bounds"),
+        (lambda d: d.update({"yield": {"target": 1.0, "spec": 1.0}}), "infeasible yield target"),
+        (
+            lambda d: d.update({"yield": {"target": 0.999, "spec": 1.0, "n_builds": 100}}),
+            "infeasible yield target",
+        ),
+        (lambda d: d["variables"].update(k={"values": [1, 2.5]}), "not an integer"),
+        (lambda d: d["problem"].update(objective="nope"), "unknown objective"),
+        (lambda d: d["variables"]["x"].update(units="kg"), "unknown units"),
+        (lambda d: d["variables"]["y"].update(units="mm"), "not a unit of 'rad'"),
+        (lambda d: d["driver"].update(kind="newton"), "unknown driver"),
+        (lambda d: d["model"].update(q=1.0), "unknown model setting"),
+        (lambda d: d.update(constraints={"zz": {"upper": 1.0}}), "unknown output"),
+    ],
+)
+def test_bad_problems_are_refused(edit, needle):
+    d = _problem()
+    edit(d)
+    with pytest.raises(EncdesignInputError, match=needle):
+        parse_problem(d, REGISTRY)
+
+
+BAD_POLES = """
+[problem]
+name = "poles"
+objective = "sds_residual"
+
+[variables.pole_pairs]
+values = [5, 6.5]
+
+[variables.n_sensors]
+values = [3]
+"""
+
+
+def test_non_integer_pole_count_names_field(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(BAD_POLES)
+    with pytest.raises(EncdesignInputError, match=r"variables\.pole_pairs\.values\[1\]"):
+        load_problem(path)
+    assert main(["optimize", str(path)]) == 2
+    assert "not an integer" in capsys.readouterr().err
+    assert path.read_text() == BAD_POLES  # input never modified
+
+
+def test_cli_optimize_and_check_gradients(tmp_path, capsys):
+    path = tmp_path / "p.toml"
+    path.write_text(
+        "[problem]\nname='sens'\nobjective='cotangent_sensitivity'\n"
+        "[model]\nn_heads=3\nmax_order=9\nn_builds=0\n"
+        "[variables.reference_angle]\nunits='deg'\nstart=20.0\nlower=14.0\nupper=28.0\n"
+        "[driver]\nkind='bfgs'\n"
+    )
+    assert main(["check-gradients", str(path), "--json", str(tmp_path / "g.json")]) == 0
+    out = capsys.readouterr().out
+    assert "sensitivity" in out and "1/1 gradients agree" in out
+    rc = main(
+        [
+            "optimize",
+            str(path),
+            "--quiet",
+            "--cases",
+            str(tmp_path / "c.csv"),
+            "--json",
+            str(tmp_path / "s.json"),
+        ]
+    )
+    assert rc == 0
+    cases = read_cases(tmp_path / "c.csv")
+    assert len(cases) == 1 and cases[0].status == "success"
+    assert 14.0 < math.degrees(cases[0].inputs["reference_angle"]) < 28.0
