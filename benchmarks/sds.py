@@ -40,7 +40,7 @@ def _design():
 # ----------------------------------------------------------------------------- NumPy
 
 
-def numpy_edge_times(design, phi: float, n_revs: int, n_newton: int = 3) -> np.ndarray:
+def numpy_edge_times(design, phi: float, n_revs: int, n_newton: int = 2) -> np.ndarray:
     """The same physics as ``ed.edge_times`` (no error sources), in plain NumPy."""
     m = design.motor
     orders = np.asarray(m.orders, dtype=float)
@@ -77,7 +77,8 @@ def numpy_edge_times(design, phi: float, n_revs: int, n_newton: int = 3) -> np.n
     revs = np.arange(n_revs)[:, None]
     for i, (p, mu) in enumerate(zip(psi, mus)):
         target = np.mod(p, 2 * np.pi) + mu[None, :] + 2 * np.pi * revs
-        t = target / w
+        x = target / w
+        t = 2 * x / (1 + np.sqrt(1 + 2 * drift * x))
         t = t - (theta_omega(t)[0] - target) / w
         for _ in range(n_newton + 1):
             th, om = theta_omega(t)
@@ -89,8 +90,9 @@ def numpy_edge_times(design, phi: float, n_revs: int, n_newton: int = 3) -> np.n
 def numpy_sds(alpha, period, k_f, tau, k_m, offsets):
     """Shifted delta sum per pair and pair average (seed eqs. 23–24), plain NumPy."""
     n = tau.shape[-1]
-    s = 2 * np.pi * np.sum(tau[:, None, :, :] - alpha[:, :, None, :], axis=-1)
-    s = s / period[:, :, None]
+    t0 = alpha[:, :1, :1]
+    diff = np.sum(tau - t0, axis=-1)[:, None, :] - np.sum(alpha - t0, axis=-1)[:, :, None]
+    s = 2 * np.pi * diff / period[:, :, None]
     k = k_m[:, None, :] - k_f[:, :, None]
     phi = s / n + 2 * np.pi * k / n - offsets
     ref = phi[:, :1, :1]
@@ -156,7 +158,7 @@ def main(argv=None) -> int:
     )
 
     # SDS readings: windows of N_REVS revolutions (prepared once), then measurement only
-    win = jax.jit(jax.vmap(lambda r: _revolution(d, ed.SDSErrors(), jnp.asarray(phi), r, None, 3)))
+    win = jax.jit(jax.vmap(lambda r: _revolution(d, ed.SDSErrors(), jnp.asarray(phi), r, None, 1)))
     alpha, period, k_f, tau, k_m = (np.asarray(x) for x in win(jnp.arange(N_REVS, dtype=float)))
     offsets = np.asarray(d.zero_offsets_rad())
 

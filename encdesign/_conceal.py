@@ -142,8 +142,14 @@ def simulate_bench(
         zs = np.zeros(order)
         zc[-1], zs[-1] = z * np.cos(ph), z * np.sin(ph)
         extra += np.asarray(
-            fx.beam_tilt_axial_rad(th, R_m, jnp.asarray(beta), jnp.asarray(zc), jnp.asarray(zs),
-                                   jnp.arange(1.0, order + 1))
+            fx.beam_tilt_axial_rad(
+                th,
+                R_m,
+                jnp.asarray(beta),
+                jnp.asarray(zc),
+                jnp.asarray(zs),
+                jnp.arange(1.0, order + 1),
+            )
         )
         truth["params"] = dict(
             runout_orders=[order],
@@ -157,8 +163,9 @@ def simulate_bench(
         phs = rng.uniform(0, 2 * np.pi, R)
         Ar, Br = rho * np.cos(phs), rho * np.sin(phs)
         extra += np.asarray(
-            fx.bearing_wobble_rad(th, jnp.asarray(alpha), R_m, nu, jnp.asarray(Ar[run]),
-                                  jnp.asarray(Br[run]))
+            fx.bearing_wobble_rad(
+                th, jnp.asarray(alpha), R_m, nu, jnp.asarray(Ar[run]), jnp.asarray(Br[run])
+            )
         )
         truth["params"] = dict(frequency_ratio=nu, runout_m=rho)
     elif effect == "vibration":
@@ -207,12 +214,17 @@ def simulate_bench(
         ph = rng.uniform(0, 2 * np.pi)
         w = 0.5 * dt
         extra += np.asarray(
-            fx.eccentricity_shift_rad(th, jnp.asarray(tau), jnp.asarray(alpha), R_m, ts,
-                                      d * np.cos(ph), d * np.sin(ph), w)
+            fx.eccentricity_shift_rad(
+                th, jnp.asarray(tau), jnp.asarray(alpha), R_m, ts, d * np.cos(ph), d * np.sin(ph), w
+            )
         )
         i = int(np.searchsorted(tau, ts))
-        truth["params"] = dict(shift_m=d, shift_time_s=float(t_run[i]), shift_run=int(run[i]),
-                               shift_global_time_s=float(ts))
+        truth["params"] = dict(
+            shift_m=d,
+            shift_time_s=float(t_run[i]),
+            shift_run=int(run[i]),
+            shift_global_time_s=float(ts),
+        )
     elif effect == "count_jump":
         k = int(rng.integers(H))
         ts = tau[0] + (tau[-1] - tau[0]) * rng.uniform(0.25, 0.75)
@@ -252,8 +264,9 @@ def simulate_bench(
         reference_head=H - 1,
         grating_lines=L,
     )
-    truth.update(layout=layout, noise_rad=noise_rad, theta_ref=theta_ref,
-                 speeds_rev_s=list(speeds_rev_s))
+    truth.update(
+        layout=layout, noise_rad=noise_rad, theta_ref=theta_ref, speeds_rev_s=list(speeds_rev_s)
+    )
     return cols, encoder, truth
 
 
@@ -266,8 +279,11 @@ def write_concealed(
     not read it; the finder never does).
     """
     cols, enc, truth = simulate_bench(key=key, **kwargs)
-    prov = {"generator": "encdesign._conceal", "hidden": str(truth["effect"]),
-            "concealment": truth["concealment"]}
+    prov = {
+        "generator": "encdesign._conceal",
+        "hidden": str(truth["effect"]),
+        "concealment": truth["concealment"],
+    }
     rec = write_recording(
         path,
         "multihead",

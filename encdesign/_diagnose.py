@@ -35,8 +35,8 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import lineax as lx
+import numpy as np
 import optimistix as optx
 
 from . import _effects as fx
@@ -552,8 +552,9 @@ def _run_lm(prep: Prepared, p: np.ndarray, active: list[int], w: np.ndarray):
     jidx, jw, jsc = jnp.asarray(idx), jnp.asarray(w), jnp.asarray(sc)
     # Gauss-Newton warm start (exact for the linear parameters), then Levenberg-Marquardt
     for _ in range(3):
-        A, g, ssr = (np.asarray(v) for v in _normal_eq(jnp.asarray(p), jsc, jidx, prep.data, jw,
-                                                        layout=lay))
+        A, g, ssr = (
+            np.asarray(v) for v in _normal_eq(jnp.asarray(p), jsc, jidx, prep.data, jw, layout=lay)
+        )
         A = A + 1e-9 * np.trace(A) / A.shape[0] * np.eye(A.shape[0])
         try:
             dz = -np.linalg.solve(A, g)
@@ -651,10 +652,9 @@ def candidates_for(f: Finding, layout: Layout) -> list[str]:
             if fixed in ("undetermined", "single_run"):
                 out.append("vibration")
         elif not integer:
-            if fixed in ("hz", "undetermined", "single_run"):
-                out.append("vibration")
-            if fixed in ("order", "undetermined"):
-                out.append("bearing_wobble")
+            # both: with short runs the Hz/order classification can be ambiguous, and the
+            # information criterion and held-out data decide between them
+            out += ["vibration", "bearing_wobble"]
         if fixed == "hz" and "vibration" not in out:
             out.append("vibration")
         return out
@@ -720,17 +720,23 @@ def _init_candidate(
                 orders |= _profile_orders(prep, state.resid, f, lay.runout_orders)
         orders = sorted(o for o in orders if 1 <= o <= lay.runout_orders)
         if orders:
-            q = p.copy()
-            beta, zc, zs = _rank1_beam(prep, state.resid, orders)
-            q[prep.idx("bt_beta")] = beta
-            q[prep.idx("bt_zc", [o - 1 for o in orders])] = zc
-            q[prep.idx("bt_zs", [o - 1 for o in orders])] = zs
             lin = (
                 prep.idx("bt_beta")
                 + prep.idx("bt_zc", [o - 1 for o in orders])
                 + prep.idx("bt_zs", [o - 1 for o in orders])
             )
-            alts.append((q, [lin, lin]))
+            # two starts: the current state, and one with the head placements reset (a
+            # head-specific order-1 error is partly absorbed by placement errors, which
+            # multiply the large eccentricity: a valley the joint fit may not leave)
+            p_nod = p.copy()
+            p_nod[prep.idx("d")] = 0.0
+            for q0, res in ((p, state.resid), (p_nod, _resid(prep, p_nod))):
+                q = q0.copy()
+                beta, zc, zs = _rank1_beam(prep, res, orders)
+                q[prep.idx("bt_beta")] = beta
+                q[prep.idx("bt_zc", [o - 1 for o in orders])] = zc
+                q[prep.idx("bt_zs", [o - 1 for o in orders])] = zs
+                alts.append((q, [lin, lin]))
     elif name == "thermal_drift":
         lin = prep.idx("th_k")
         alts.append((p.copy(), [lin, lin]))
@@ -919,7 +925,11 @@ def _cov_se(prep: Prepared, st: FitState, sigma2: float) -> dict[int, float]:
     scale = _scales(prep, st.p)
     J = np.asarray(
         _jac(
-            jnp.asarray(st.p), jnp.asarray(scale), jnp.asarray(idx), prep.data, jnp.ones(prep.n),
+            jnp.asarray(st.p),
+            jnp.asarray(scale),
+            jnp.asarray(idx),
+            prep.data,
+            jnp.ones(prep.n),
             layout=lay,
         )
     )[:, : len(st.active)]
@@ -1003,16 +1013,19 @@ def _effect_params(name: str, prep: Prepared, st: FitState, se: dict[int, float]
         orders = [m + 1 for m in range(lay.runout_orders) if za[m] > 0]
         prod = np.abs(beta)[:, None] * za[None, :]
         out["runout_orders"] = orders
-        out["error_amplitude_rad"] = [[float(prod[k, m - 1] / prep.radius_m) for m in orders]
-                                      for k in range(H)]
-        out["tilt_runout_product_m_rad"] = [[float(prod[k, m - 1]) for m in orders]
-                                            for k in range(H)]
+        out["error_amplitude_rad"] = [
+            [float(prod[k, m - 1] / prep.radius_m) for m in orders] for k in range(H)
+        ]
+        out["tilt_runout_product_m_rad"] = [
+            [float(prod[k, m - 1]) for m in orders] for k in range(H)
+        ]
         zref = 2.54e-6
         zmax = max(za.max(), 1e-300)
         out["assumed_axial_runout_m"] = zref
         out["beam_tilt_rad"] = [float(b * zmax / zref) for b in beta]
-        out["axial_runout_m"] = {str(m): [float(zc[m - 1] / zmax * zref),
-                                          float(zs[m - 1] / zmax * zref)] for m in orders}
+        out["axial_runout_m"] = {
+            str(m): [float(zc[m - 1] / zmax * zref), float(zs[m - 1] / zmax * zref)] for m in orders
+        }
         if not lay.has_ref:
             out["note"] = "without theta_ref only beta_k minus the head mean is observable"
     elif name == "thermal_drift":
@@ -1136,8 +1149,10 @@ def _base_report(prep: Prepared, st: FitState, se: dict[int, float], sigma) -> d
         "fourier_amplitude_rad": np.hypot(a, b).tolist(),
         "disk_eccentricity_m": [float(b[0] * prep.radius_m), float(a[0] * prep.radius_m)],
         "disk_eccentricity_m_se": _nan_none(
-            [se.get(prep.idx("b")[0], float("nan")) * prep.radius_m,
-             se.get(prep.idx("a")[0], float("nan")) * prep.radius_m]
+            [
+                se.get(prep.idx("b")[0], float("nan")) * prep.radius_m,
+                se.get(prep.idx("a")[0], float("nan")) * prep.radius_m,
+            ]
         ),
         "head_placement_rad": _vals(st.p, prep, "d").tolist(),
         "head_placement_rad_se": _nan_none(_ses(se, prep, "d")),
@@ -1190,8 +1205,10 @@ def diagnose(
     linp = _locate_input(prep, base.resid, sigma)
     L = lay.grating_lines
     findings0 = locate(linp, line_orders=(L, 2 * L) if L else ())
-    _progress(f"base rms {math.sqrt(base.ssr / base.resid.size):.3g} rad, "
-              f"{len(findings0)} finding(s)", verbose)
+    _progress(
+        f"base rms {math.sqrt(base.ssr / base.resid.size):.3g} rad, {len(findings0)} finding(s)",
+        verbose,
+    )
     base_set = set(base.active)
     current, findings = base, findings0
     effects: list[EffectResult] = []
@@ -1260,10 +1277,18 @@ def diagnose(
                 )
             if before > 0 and after > 0.5 * before:
                 reasons.append(f"explains only {100 * (1 - after / before):.0f}% of it")
+            # it must also carry a fair share of everything located, so that a larger
+            # structure it cannot explain is not pinned on it through a small part
+            tot = sum(f.power for f in findings)
+            left_all = sum(min(finding_power(f, lin_new, st.resid), f.power) for f in findings)
+            if tot > 0 and tot - left_all < 0.3 * tot:
+                reasons.append(
+                    f"explains only {100 * (tot - left_all) / tot:.0f}% of all located structure"
+                )
             trials.append((name, st, extra, dbic, reasons, new_f, dchi))
             status_ok = status_ok and st.ok
         good = [t for t in trials if not t[4]]
-        for name, st, extra, dbic, reasons, _, _ in trials:
+        for name, _st, _extra, dbic, reasons, _, _ in trials:
             if reasons:
                 rejected.append(dict(name=name, reason="; ".join(reasons), delta_bic=dbic))
         if not good:
@@ -1303,8 +1328,11 @@ def diagnose(
                 view=f.view,
                 variance_share=f.variance_share,
                 log10_p=f.log10_p,
-                detail={k: v for k, v in j.items()
-                        if k not in ("where", "rms", "view", "variance_share", "log10_p")},
+                detail={
+                    k: v
+                    for k, v in j.items()
+                    if k not in ("where", "rms", "view", "variance_share", "log10_p")
+                },
             )
         )
     if effects:
@@ -1359,9 +1387,7 @@ def report_text(d: Diagnosis) -> str:
         lines.append("located in the base residual:")
         for f in d.findings_before[:8]:
             w = f["where"]
-            loc = ", ".join(
-                f"{k} {[round(v, 3) for v in w[k]]}" for k in w if w[k]
-            )
+            loc = ", ".join(f"{k} {[round(v, 3) for v in w[k]]}" for k in w if w[k])
             lines.append(
                 f"  - {f['view']}: {loc}; {100 * f['variance_share']:.1f}% of residual "
                 f"variance, log10 p = {f['log10_p']:.1f}"

@@ -342,6 +342,19 @@ class MonteCarloResult:
         return p, math.sqrt(max(p * (1.0 - p), 0.0) / self.n)
 
 
+@functools.lru_cache(maxsize=64)
+def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int):
+    """Jitted values of one chunk of builds (cached per ``fn``: reruns don't recompile)."""
+
+    @jax.jit
+    def run_chunk(key, c, th):
+        idx = c * chunk + jnp.arange(chunk)
+        z = build_normals(key, idx, dim)
+        return jax.vmap(lambda zi: fn(th, zi))(z)
+
+    return run_chunk
+
+
 def monte_carlo(
     fn: Callable[[Any, jax.Array], jax.Array],
     theta: Any,
@@ -365,18 +378,12 @@ def monte_carlo(
 
         raise input_error("monte_carlo", f"n={n}, dim={dim}", "n >= 1 and dim >= 1")
     chunk = int(min(chunk_size, n))
-
-    @jax.jit
-    def run_chunk(c, th):
-        idx = c * chunk + jnp.arange(chunk)
-        z = build_normals(key, idx, dim)
-        return jax.vmap(lambda zi: fn(th, zi))(z)
-
+    run_chunk = _mc_chunk(fn, chunk, int(dim))
     n_chunks = -(-n // chunk)
     out = []
     with Progress("monte carlo", n_chunks, enabled=progress) as bar:
         for c in range(n_chunks):
-            out.append(np.asarray(run_chunk(c, theta)))
+            out.append(np.asarray(run_chunk(key, c, theta)))
             bar.update()
     values = np.concatenate(out)[:n].astype(np.float64)
     bad = int(np.sum(~np.isfinite(values)))

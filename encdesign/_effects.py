@@ -50,7 +50,7 @@ Derivations (first order in the small quantities; seed 000 section V.A, seed 001
 from __future__ import annotations
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jax import Array
 
 CATALOG_MULTIHEAD = (
     "beam_tilt_axial",
@@ -66,12 +66,12 @@ ARCSEC_RAD = jnp.pi / (180.0 * 3600.0)
 
 
 def base_error_rad(
-    theta_rad: Float[Array, " n"],
-    head_angles_rad: Float[Array, " H"],
-    fourier_cos_rad: Float[Array, " M"],
-    fourier_sin_rad: Float[Array, " M"],
-    placement_rad: Float[Array, " H"],
-) -> Float[Array, "n H"]:
+    theta_rad: Array,
+    head_angles_rad: Array,
+    fourier_cos_rad: Array,
+    fourier_sin_rad: Array,
+    placement_rad: Array,
+) -> Array:
     """Base multihead model: one disk error function seen through every head's azimuth.
 
     ``e_k(theta) = sum_{m=1..M} a_m cos m(theta - alpha_k - d_k) + b_m sin m(...)`` (rad).
@@ -90,12 +90,12 @@ def base_error_rad(
 
 
 def eccentricity_rad(
-    theta_rad: Float[Array, " n"],
-    head_angles_rad: Float[Array, " H"],
+    theta_rad: Array,
+    head_angles_rad: Array,
     optical_radius_m: float,
-    offset_x_m: Float[Array, ""],
-    offset_y_m: Float[Array, ""],
-) -> Float[Array, "n H"]:
+    offset_x_m: Array,
+    offset_y_m: Array,
+) -> Array:
     """Error of a grating centre offset ``(x, y)`` (m, disk frame), first order in ``e/R``:
     ``e_k = [x sin(theta - alpha_k) + y cos(theta - alpha_k)] / R`` (rad)."""
     d = theta_rad[:, None] - head_angles_rad[None, :]
@@ -103,13 +103,13 @@ def eccentricity_rad(
 
 
 def beam_tilt_axial_rad(
-    theta_rad: Float[Array, " n"],
+    theta_rad: Array,
     optical_radius_m: float,
-    beam_tilt_rad: Float[Array, " H"],
-    runout_cos_m: Float[Array, " Mz"],
-    runout_sin_m: Float[Array, " Mz"],
-    runout_orders: Float[Array, " Mz"],
-) -> Float[Array, "n H"]:
+    beam_tilt_rad: Array,
+    runout_cos_m: Array,
+    runout_sin_m: Array,
+    runout_orders: Array,
+) -> Array:
     """Axial disk motion seen through tangentially tilted beams: ``beta_k z(theta) / R`` (rad).
 
     Args:
@@ -125,13 +125,13 @@ def beam_tilt_axial_rad(
 
 
 def bearing_wobble_rad(
-    theta_rad: Float[Array, " n"],
-    head_angles_rad: Float[Array, " H"],
+    theta_rad: Array,
+    head_angles_rad: Array,
     optical_radius_m: float,
-    frequency_ratio: Float[Array, ""],
-    amp_cos_m: Float[Array, " n"],
-    amp_sin_m: Float[Array, " n"],
-) -> Float[Array, "n H"]:
+    frequency_ratio: Array,
+    amp_cos_m: Array,
+    amp_sin_m: Array,
+) -> Array:
     """Non-synchronous radial runout: ``(rho/R) sin(nu theta + phi - alpha_k)`` (rad).
 
     Written linearly as ``[A sin(nu theta - alpha_k) + B cos(nu theta - alpha_k)] / R`` with
@@ -145,33 +145,31 @@ def bearing_wobble_rad(
 
 
 def vibration_rad(
-    time_s: Float[Array, " n"],
-    frequency_hz: Float[Array, ""],
-    cos_rad: Float[Array, "n H"],
-    sin_rad: Float[Array, "n H"],
-) -> Float[Array, "n H"]:
+    time_s: Array,
+    frequency_hz: Array,
+    cos_rad: Array,
+    sin_rad: Array,
+) -> Array:
     """Relative head-scale oscillation: ``C cos(2 pi f t) + S sin(2 pi f t)`` (rad), with
     ``C``, ``S`` given per sample and head (a run's coefficients broadcast to its samples)."""
     w = 2.0 * jnp.pi * frequency_hz * time_s[:, None]
     return cos_rad * jnp.cos(w) + sin_rad * jnp.sin(w)
 
 
-def thermal_drift_rad(
-    delta_rad_per_unit: Float[Array, " H"], driver: Float[Array, " n"]
-) -> Float[Array, "n H"]:
+def thermal_drift_rad(delta_rad_per_unit: Array, driver: Array) -> Array:
     """``kappa_k * (T - T0)``: ``driver`` is ``T - T0`` in K (``kappa`` rad/K) or ``t - t0`` in
     s (``kappa`` rad/s)."""
     return driver[:, None] * delta_rad_per_unit[None, :]
 
 
 def interpolation_error_exact_rad(
-    reading_rad: Float[Array, "n H"],
+    reading_rad: Array,
     grating_lines: int,
-    offset_a: Float[Array, " H"],
-    offset_b: Float[Array, " H"],
-    amplitude_error: Float[Array, " H"],
-    phase_error_rad: Float[Array, " H"],
-) -> Float[Array, "n H"]:
+    offset_a: Array,
+    offset_b: Array,
+    amplitude_error: Array,
+    phase_error_rad: Array,
+) -> Array:
     """Arctangent interpolation of imperfect quadrature signals (seed 002 eq. 1-3), rad.
 
     ``S_A = sin psi + o_a``, ``S_B = (1 + eps) cos(psi + delta) + o_b``, ``psi = L reading``;
@@ -186,10 +184,10 @@ def interpolation_error_exact_rad(
 
 
 def interpolation_harmonics_rad(
-    psi_rad: Float[Array, "n H"],
+    psi_rad: Array,
     grating_lines: int,
-    coef: Float[Array, "4 H"],
-) -> Float[Array, "n H"]:
+    coef: Array,
+) -> Array:
     """First-order interpolation error ``[p1 cos psi + q1 sin psi + p2 cos 2psi + q2 sin 2psi]/L``
     (rad), linear in ``coef = (p1, q1, p2, q2)``. With a head zero on a grating line,
     ``o_a = p1``, ``o_b = -q1``, ``eps = -2 q2``, ``delta = -2 p2``."""
@@ -201,21 +199,21 @@ def interpolation_harmonics_rad(
     ) / grating_lines
 
 
-def smooth_step(time_s: Float[Array, " n"], t0_s: Float[Array, ""], width_s: float):
+def smooth_step(time_s: Array, t0_s: Array, width_s: float):
     """Logistic step ``1 / (1 + exp(-(t - t0)/w))``: differentiable in ``t0``."""
     return 0.5 * (1.0 + jnp.tanh(0.5 * (time_s - t0_s) / width_s))
 
 
 def eccentricity_shift_rad(
-    theta_rad: Float[Array, " n"],
-    time_s: Float[Array, " n"],
-    head_angles_rad: Float[Array, " H"],
+    theta_rad: Array,
+    time_s: Array,
+    head_angles_rad: Array,
     optical_radius_m: float,
-    shift_time_s: Float[Array, ""],
-    shift_x_m: Float[Array, ""],
-    shift_y_m: Float[Array, ""],
+    shift_time_s: Array,
+    shift_x_m: Array,
+    shift_y_m: Array,
     width_s: float,
-) -> Float[Array, "n H"]:
+) -> Array:
     """A jump ``(dx, dy)`` (m, disk frame) of the grating centre at ``shift_time_s`` (rad).
 
     ``time_s`` is the record's global time (runs laid end to end in file order).

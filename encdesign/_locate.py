@@ -128,7 +128,11 @@ def noise_sigma(resid: np.ndarray, run: np.ndarray) -> np.ndarray:
 
 
 def _chi2_log10_sf(stat: float, dof: int) -> float:
-    return float(stats.chi2.logsf(stat, dof) / math.log(10.0))
+    v = float(stats.chi2.logsf(stat, dof))
+    if not math.isfinite(v):  # far tail: leading term of the asymptotic series
+        x = 0.5 * stat
+        v = -x + (0.5 * dof - 1.0) * math.log(max(x, 1e-300)) - math.lgamma(0.5 * dof)
+    return v / math.log(10.0)
 
 
 def _chi2_threshold(dof: int, n_tests: int, alpha: float = ALPHA_VIEW) -> float:
@@ -317,7 +321,7 @@ def _group_peaks(peaks, runs, inp, total_ss, thr, relaxed) -> list[Finding]:
         seen = {m["run"] for m in members}
         ev_hz = ev_o = 0.0
         distinct_speed = False
-        for r, rows, t, dur, revs, f_rev in runs:
+        for r, _rows, _t, dur, _revs, f_rev in runs:
             if r in seen or f_rev <= 0:
                 continue
             fo = p["order"] * f_rev
@@ -387,7 +391,7 @@ def _repeatability_view(inp: LocateInput, total_ss: float) -> list[Finding]:
     runs = _run_info(inp)
     out = []
     n_tests = len(runs) * H
-    for r, rows, t, dur, revs, f_rev in runs:
+    for r, rows, _t, _dur, revs, _f_rev in runs:
         if revs < 2.5:
             continue
         spr = rows.size / revs
@@ -409,7 +413,8 @@ def _repeatability_view(inp: LocateInput, total_ss: float) -> list[Finding]:
                         log10_p=_chi2_log10_sf(st, nb - 1),
                         detail=dict(
                             n_bins=nb,
-                            repeatable_share=pw / max(float(np.sum(inp.resid[rows, k] ** 2)), 1e-300),
+                            repeatable_share=pw
+                            / max(float(np.sum(inp.resid[rows, k] ** 2)), 1e-300),
                             n_samples=int(rows.size),
                         ),
                         specs=[spec],
@@ -538,9 +543,7 @@ def _drift_view(inp: LocateInput, total_ss: float) -> list[Finding]:
                 out.append(
                     Finding(
                         view="drift",
-                        where=dict(
-                            orders=[], frequencies_hz=[], heads=[k], runs=[], times_s=[]
-                        ),
+                        where=dict(orders=[], frequencies_hz=[], heads=[k], runs=[], times_s=[]),
                         power=pw,
                         variance_share=pw / total_ss,
                         stat=st,

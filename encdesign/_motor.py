@@ -28,7 +28,7 @@ Model (seed ``001_…``, "angular velocity errors", eqs. 28–29 and the motor d
 
 The shaft angle ``θ(t)`` is the integral of the speed; edge times come from inverting it
 (:func:`time_at_angle`: Newton iterations with a fixed count and an implicit-function
-gradient, accurate to ~1e-16 of the time, i.e. far below 1 ps).
+gradient, accurate to the float64 rounding of the time, far below 1 ps).
 """
 
 from __future__ import annotations
@@ -253,19 +253,21 @@ def _dense(motor: Motor, values: Array) -> Array:
 def _fourier(x: Array, coef: Array) -> Array:
     """``Σ_n coef[n-1, 0, j] sin(n x) + coef[n-1, 1, j] cos(n x)``, shape ``x.shape + (J,)``.
 
-    Harmonics by the angle-addition recurrence (one sin/cos per element, then 4 products
-    per order) inside a ``lax.scan`` over orders, so memory stays ~ x.size · J.
+    Harmonics by the angle-addition recurrence (one sin/cos per element, then a few
+    products per order) inside a ``lax.scan`` over orders (unrolled by 8 so that XLA fuses
+    several orders per pass over memory), so memory stays ~ x.size · J.
     """
     s1, c1 = jnp.sin(x), jnp.cos(x)
+    n_out = coef.shape[2]
 
     def step(carry, cf):
-        sn, cn, acc = carry
-        acc = acc + sn[..., None] * cf[0] + cn[..., None] * cf[1]
-        return (sn * c1 + cn * s1, cn * c1 - sn * s1, acc), None
+        sn, cn, *acc = carry
+        acc = [a + sn * cf[0, j] + cn * cf[1, j] for j, a in enumerate(acc)]
+        return (sn * c1 + cn * s1, cn * c1 - sn * s1, *acc), None
 
-    acc0 = jnp.zeros(x.shape + (coef.shape[2],), dtype=x.dtype)
-    (_, _, acc), _ = jax.lax.scan(step, (s1, c1, acc0), coef)
-    return acc
+    init = (s1, c1, *[jnp.zeros_like(x) for _ in range(n_out)])
+    (_, _, *acc), _ = jax.lax.scan(step, init, coef, unroll=8)
+    return jnp.stack(acc, axis=-1)
 
 
 def _theta_omega(motor: Motor, ripple: tuple[Array, Array], t: Array) -> tuple[Array, Array]:
@@ -296,7 +298,7 @@ def time_at_angle(
     motor: Motor,
     target_rad: ArrayLike,
     shift_rad: Callable[[Array], Array] | None = None,
-    n_newton: int = 3,
+    n_newton: int = 2,
 ) -> Array:
     """Times at which the shaft reaches ``target_rad``: solves ``θ(t) − δ(t) = Θ``.
 
@@ -305,13 +307,17 @@ def time_at_angle(
         target_rad: unwrapped target angles Θ, rad (any shape).
         shift_rad: optional time-dependent shift δ(t) in rad of the sensor's effective
             azimuth (bearing runout, thermal drift), same shape as ``target_rad``.
-        n_newton: Newton iterations after a first-order start (fixed count, static).
+        n_newton: Newton iterations without gradient after the start (fixed count,
+            static); one more, differentiable, Newton step follows.
 
     Returns:
-        Times in s, same shape. The iterations run without gradient; a final Newton step
-        carries the implicit-function gradient ``dt/dp = −(∂r/∂p)/(∂r/∂t)``, exact at the
-        converged root. With ripple of a few percent, 3 iterations converge to the
-        float64 rounding of θ (≈1e-16 relative), far below 1 ps.
+        Times in s, same shape. The start (drifting mean speed solved exactly, then one
+        fixed-point step for the ripple) is within
+        ~ε·|ripple|/Ω of the root (ε the relative speed ripple), and Newton converges
+        quadratically: with speed ripple up to ~5 % the default (2 + 1 steps) reaches the
+        float64 rounding of θ (residual < 1e-13 s over 1,000 revolutions, tested), far
+        below 1 ps. The last step carries the implicit-function gradient
+        ``dt/dp = −(∂r/∂p)/(∂r/∂t)``, exact at the converged root.
     """
     target = jnp.asarray(target_rad, dtype=float)
     ripple = motor.speed_ripple()
@@ -325,7 +331,10 @@ def time_at_angle(
         return t - r / om
 
     def solve():
-        t = target / w
+        # exact for the drifting mean speed Ω(t + d t²/2) = Θ, then one fixed-point step
+        # for the ripple
+        x = target / w
+        t = 2 * x / (1 + jnp.sqrt(jnp.maximum(1 + 2 * motor.speed_drift_per_s * x, 0.0)))
         t = t - (_theta(motor, ripple, t) - target) / w
         return jax.lax.fori_loop(0, n_newton, lambda _, t: step(t), t)
 

@@ -263,20 +263,40 @@ def _sensor_azimuths(design: SDSDesign, errors: SDSErrors, phi: Array) -> tuple[
     return psi_f, psi_m
 
 
-def _time_shift_fn(design: SDSDesign, errors: SDSErrors, psi: Array, moving: bool):
-    """δ(t) for sensors at static azimuths psi (broadcast against target arrays)."""
-    has_bearing = errors.has_time_shift
-    drift = moving
+def _solve_edges(
+    design: SDSDesign,
+    errors: SDSErrors,
+    theta_f: Array,
+    psi_f: Array,
+    theta_m: Array,
+    psi_m: Array,
+    n_newton: int,
+) -> tuple[Array, Array]:
+    """Edge times of fixed (F, A) and moving (M, B) targets in one Newton solve.
 
-    def fn(t):
-        out = jnp.zeros_like(t)
+    The time-dependent sensor shifts δ(t): bearing runout at each sensor's azimuth, and
+    thermal drift for the moving sensors.
+    """
+    nf, nm = theta_f.size, theta_m.size
+    target = jnp.concatenate([theta_f.reshape(-1), theta_m.reshape(-1)])
+    psi = jnp.concatenate(
+        [
+            jnp.broadcast_to(psi_f[:, None], theta_f.shape).reshape(-1),
+            jnp.broadcast_to(psi_m[:, None], theta_m.shape).reshape(-1),
+        ]
+    )
+    moving = jnp.concatenate([jnp.zeros(nf), jnp.ones(nm)])
+    has_bearing = errors.has_time_shift
+    drift = errors.thermal_drift_rad_per_k * errors.temperature_rate_k_per_s
+
+    def shift(t):
+        out = moving * drift * t
         if has_bearing:
             out = out + errors.bearing_shift_rad(t, psi, design.motor.speed_rad_s, design.radius_m)
-        if drift:
-            out = out + errors.thermal_drift_rad_per_k * errors.temperature_rate_k_per_s * t
         return out
 
-    return fn
+    t = time_at_angle(design.motor, target, shift, n_newton)
+    return t[:nf].reshape(theta_f.shape), t[nf:].reshape(theta_m.shape)
 
 
 def _stamp(t: Array, errors: SDSErrors, key: Array | None) -> Array:
@@ -321,13 +341,7 @@ def _revolution(
     first = jnp.argmin(jax.lax.stop_gradient(theta_f), axis=1)
     theta_first = jnp.take_along_axis(theta_f, first[:, None], axis=1)
     theta_f_all = jnp.concatenate([theta_f, theta_first + two_pi], axis=1)  # (F, N+1)
-    motor = design.motor
-    t_f = time_at_angle(
-        motor, theta_f_all, _time_shift_fn(design, errors, psi_f[:, None], False), n_newton
-    )
-    t_m = time_at_angle(
-        motor, theta_m, _time_shift_fn(design, errors, psi_m[:, None], True), n_newton
-    )
+    t_f, t_m = _solve_edges(design, errors, theta_f_all, psi_f, theta_m, psi_m, n_newton)
     if key is not None:
         kf, km = jax.random.split(key)
         t_f, t_m = _stamp(t_f, errors, kf), _stamp(t_m, errors, km)
@@ -369,8 +383,13 @@ def sds_from_edges(
     alpha = jnp.asarray(alpha_s, dtype=float)
     tau = jnp.asarray(tau_s, dtype=float)
     n = tau.shape[-1]
-    diff = tau[..., None, :, :] - alpha[..., :, None, :]  # (..., F, M, N)
-    s = 2 * jnp.pi * jnp.sum(diff, axis=-1) / jnp.asarray(period_s)[..., :, None]
+    # Σ_j (τ_j − α_j) = Σ τ − Σ α; times taken from the window start so that the sums stay
+    # small (N·T) and keep full precision
+    t0 = jax.lax.stop_gradient(alpha[..., :1, :1])
+    sum_a = jnp.sum(alpha - t0, axis=-1)  # (..., F)
+    sum_t = jnp.sum(tau - t0, axis=-1)  # (..., M)
+    diff = sum_t[..., None, :] - sum_a[..., :, None]  # (..., F, M)
+    s = 2 * jnp.pi * diff / jnp.asarray(period_s)[..., :, None]
     k = jnp.asarray(k_moving)[..., None, :] - jnp.asarray(k_fixed)[..., :, None]
     return s / n + 2 * jnp.pi * k / n - jnp.asarray(zero_offsets_rad)
 
@@ -387,7 +406,7 @@ def sds_phi_error(
     errors: SDSErrors | None = None,
     *,
     rev: int = 0,
-    n_newton: int = 3,
+    n_newton: int = 2,
     batch_size: int = 8,
 ) -> Array:
     """Error of the SDS reading of φ (pair average, one revolution), rad. jit/grad-able.
@@ -422,7 +441,7 @@ def sds_residual(
     errors: SDSErrors | None = None,
     *,
     n_phi: int = 64,
-    n_newton: int = 3,
+    n_newton: int = 2,
 ) -> Array:
     """SDS residual objective: RMS over a platform turn of the φ error minus its mean, rad.
 
@@ -461,7 +480,7 @@ def simulate_readings(
     key: Array | None = None,
     revs_per_reading: int = 1,
     first_rev: int = 0,
-    n_newton: int = 3,
+    n_newton: int = 2,
 ) -> SDSReadings:
     """Simulate the SDS readings of a platform at rest at ``phi_rad`` for ``n_revs`` turns.
 
@@ -508,7 +527,7 @@ def edge_times(
     *,
     key: Array | None = None,
     first_rev: int = 0,
-    n_newton: int = 3,
+    n_newton: int = 2,
 ) -> tuple[Array, Array]:
     """Edge times of every sensor for ``n_revs`` revolutions, s.
 
@@ -528,29 +547,17 @@ def edge_times(
     mu_b = mark_angles(design.disk_b)
     two_pi = 2 * jnp.pi
 
-    def sensor_edges(psi, mu, moving, rev, sub):
-        base = jnp.mod(psi, two_pi) - psi  # static azimuth reduced to [0, 2π)
-        theta = psi + base + mu + two_pi * rev
-        shift = _time_shift_fn(design, errors, psi, moving)
-        t = time_at_angle(design.motor, theta, shift, n_newton)
-        return _stamp(t, errors, sub)
+    base_f = psi_f + (jnp.mod(psi_f, two_pi) - psi_f)  # static azimuths reduced to [0, 2π)
+    base_m = psi_m + (jnp.mod(psi_m, two_pi) - psi_m)
 
     def one(rev):
-        sub = None if key is None else jax.random.fold_in(key, rev.astype(jnp.int32))
-        kf = km = None
-        if sub is not None:
-            kf, km = jax.random.split(sub)
-            kf = jax.random.split(kf, design.n_fixed)
-            km = jax.random.split(km, design.n_moving)
-        f = [
-            sensor_edges(psi_f[i], mu_a, False, rev, None if kf is None else kf[i])
-            for i in range(design.n_fixed)
-        ]
-        m = [
-            sensor_edges(psi_m[i], mu_b, True, rev, None if km is None else km[i])
-            for i in range(design.n_moving)
-        ]
-        return jnp.stack(f), jnp.stack(m)
+        theta_f = base_f[:, None] + mu_a[None, :] + two_pi * rev
+        theta_m = base_m[:, None] + mu_b[None, :] + two_pi * rev
+        t_f, t_m = _solve_edges(design, errors, theta_f, psi_f, theta_m, psi_m, n_newton)
+        if key is None:
+            return _stamp(t_f, errors, None), _stamp(t_m, errors, None)
+        kf, km = jax.random.split(jax.random.fold_in(key, rev.astype(jnp.int32)))
+        return _stamp(t_f, errors, kf), _stamp(t_m, errors, km)
 
     revs = first_rev + jnp.arange(n_revs, dtype=float)
     f, m = jax.lax.map(one, revs)

@@ -238,7 +238,7 @@ def predict_speed_mark_error(design: SDSDesign, phi_rad: ArrayLike) -> SpeedMark
 
     * ``A_i`` = disk angle at which mark i of disk A passes the fixed sensor,
       ``B_i + φ`` the same for disk B and the moving sensor; the shift k pairs each A_i
-      with the nearest following B mark; ``f(i) = B_{i−k} + φ − A_i`` (eq. 51);
+      with the nearest B mark; ``f(i) = B_{i−k} + φ − A_i`` (eq. 51);
     * ``g(i) = e(t(ψ_i)) t'(ψ_i)`` (eq. 52) with ψ_i the midpoint of [A_i, B_{i−k}+φ]
       (mean-value point of eq. 49), ``t(ψ)`` the inverse of θ(t) from ``t ≈ ψ/Ω`` (eq. 50)
       refined by three fixed-point steps, and ``t' = 1/(Ω + e)``;

@@ -132,6 +132,9 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
 
 register_check("sds", check_sds_columns)
 
+_edge_times_jit = jax.jit(edge_times, static_argnums=(2,), static_argnames=("n_newton",))
+_sds_jit = jax.jit(sds_from_edges)
+
 
 # ----------------------------------------------------------------------------- write
 
@@ -146,7 +149,7 @@ def simulate_sds_recording(
     key: jax.Array | None = None,
     description: str | None = None,
     compress: bool = False,
-    n_newton: int = 3,
+    n_newton: int = 2,
 ) -> Recording:
     """Simulate a bench run and write it as an ``sds`` recording (TOML + CSV).
 
@@ -174,16 +177,18 @@ def simulate_sds_recording(
     phis = np.atleast_1d(np.asarray(phi_rad, dtype=float))
     n_marks = design.marks_per_rev
     names = [f"f{i}" for i in range(design.n_fixed)] + [f"m{i}" for i in range(design.n_moving)]
-    fn = jax.jit(
-        lambda d, e, p, r0, k: edge_times(
-            d, p, n_revs + 1, e, key=k, first_rev=r0, n_newton=n_newton
-        ),
-        static_argnums=(),
-    )
+    key = jax.random.PRNGKey(0) if key is None else key  # jitter_s = 0: no effect
     cols: dict[str, list[np.ndarray]] = {c: [] for c in ("run", "phi_ref", "sensor", "mark", "t")}
     for i, phi in enumerate(phis):
-        sub = None if key is None else jax.random.fold_in(key, i)
-        f, m = fn(design, errors, jnp.asarray(phi), jnp.asarray(i * (n_revs + 2), float), sub)
+        f, m = _edge_times_jit(
+            design,
+            jnp.asarray(phi),
+            n_revs + 1,
+            errors,
+            key=jax.random.fold_in(key, i),
+            first_rev=jnp.asarray(i * (n_revs + 2), float),
+            n_newton=n_newton,
+        )
         times = np.concatenate([np.asarray(f), np.asarray(m)], axis=0)  # (S, R, N)
         s_count, r_count, _ = times.shape
         t = times.reshape(-1)
@@ -326,7 +331,6 @@ def sds_readings_from_recording(rec: Recording, *, revs_per_reading: int = 1) ->
     offsets = jnp.asarray(psi_m[None, :] - psi_f[:, None])
     cols = rec.columns
     run = rec.runs
-    sds = jax.jit(sds_from_edges)
     runs, phis, readings, refs = [], [], [], []
     for r in np.unique(run):
         sel = run == r
@@ -338,7 +342,7 @@ def sds_readings_from_recording(rec: Recording, *, revs_per_reading: int = 1) ->
                 raise input_error(f"{where}, run {int(r)}", f"no edges of sensor {name}")
             times[name], marks[name] = t[s], mk[s]
         alpha, period, k_f, tau, k_m = _run_windows(where, int(r), times, marks, n_marks, nf, nm)
-        pair = np.asarray(sds(alpha, period, k_f, tau, k_m, offsets))  # (R, F, M)
+        pair = np.asarray(_sds_jit(alpha, period, k_f, tau, k_m, offsets))  # (R, F, M)
         if not np.all(np.isfinite(pair)):
             raise input_error(f"{where}, run {int(r)}", "non-finite SDS result", "finite times")
         per_rev = _circ_mean(pair.reshape(pair.shape[0], -1), axis=1)

@@ -81,13 +81,22 @@ PLAN = {
         ("near_noise", "3+1", True),
         ("near_noise", "3+1", False),
     ],
-    "count_jump": [("near_noise", "3+1", True), ("near_noise", "2+1", True),
-                   ("near_noise", "3+1", False)],
-    "chirp": [("near_noise", "3+1", True), ("near_noise", "2+1", True),
-              ("near_noise", "3+1", False)],
+    "count_jump": [
+        ("near_noise", "3+1", True),
+        ("near_noise", "2+1", True),
+        ("near_noise", "3+1", False),
+    ],
+    "chirp": [
+        ("near_noise", "3+1", True),
+        ("near_noise", "2+1", True),
+        ("near_noise", "3+1", False),
+    ],
 }
-QUICK = {None: [("near_noise", "3+1", True)], "vibration": [("near_noise", "3+1", True)],
-         "count_jump": [("near_noise", "3+1", True)]}
+QUICK = {
+    None: [("near_noise", "3+1", True)],
+    "vibration": [("near_noise", "3+1", True)],
+    "count_jump": [("near_noise", "3+1", True)],
+}
 
 
 def _located(truth: dict, unexplained: list[dict]) -> bool:
@@ -97,9 +106,10 @@ def _located(truth: dict, unexplained: list[dict]) -> bool:
         if not set(w.get("heads", [])) & set(uw["heads"]):
             continue
         if truth["effect"] == "count_jump":
-            if any(abs(t - w["times_s"][0]) < 0.5 for t in uw["times_s"]) and w["runs"][0] in uw[
-                "runs"
-            ]:
+            if (
+                any(abs(t - w["times_s"][0]) < 0.5 for t in uw["times_s"])
+                and w["runs"][0] in uw["runs"]
+            ):
                 return True
         elif truth["effect"] == "chirp":
             lo, hi = w["frequencies_hz"]
@@ -171,21 +181,25 @@ def main(argv: list[str] | None = None) -> int:
     named_rows = [r for r in rows if r["named"]]
     truths = list(dict.fromkeys(r["truth"] for r in rows))
     labels = sorted({r["label"] for r in rows})
-    confusion = {t: {lab: sum(1 for r in rows if r["truth"] == t and r["label"] == lab)
-                     for lab in labels} for t in truths}
+    confusion = {
+        t: {lab: sum(1 for r in rows if r["truth"] == t and r["label"] == lab) for lab in labels}
+        for t in truths
+    }
     summary = dict(
         n_recordings=len(rows),
         named_correctly_pct=100 * np.mean([r["correct"] for r in cat]) if cat else None,
         clean_no_claim_pct=100 * np.mean([r["correct"] for r in clean]) if clean else None,
         clean_false_positive_pct=100 - 100 * np.mean([r["correct"] for r in clean])
-        if clean else None,
+        if clean
+        else None,
         out_of_catalog_located_pct=100 * np.mean([r["correct"] for r in ooc]) if ooc else None,
         heldout_improved_whenever_named=bool(
             all(r["heldout_rms_after"] < r["heldout_rms_before"] for r in named_rows)
         ),
-        median_heldout_improvement_pct=100 * float(
-            np.median([r["heldout_improvement"] for r in named_rows])
-        ) if named_rows else None,
+        median_heldout_improvement_pct=100
+        * float(np.median([r["heldout_improvement"] for r in named_rows]))
+        if named_rows
+        else None,
         per_effect_correct_pct={
             t: 100 * np.mean([r["correct"] for r in rows if r["truth"] == t]) for t in truths
         },

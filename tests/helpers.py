@@ -51,3 +51,8 @@ def sds_reference(n_fixed: int = 2, n_moving: int = 2, marks: int = SDS_TEST_MAR
     from encdesign import reference_design
 
     return reference_design(n_fixed, n_moving, marks_per_rev=marks)
+
+
+# --- discrepancy finder (issue 5) ---
+DIAGNOSE_TEST_SAMPLES_PER_RUN = 600  # rows per run of the finder's test benches (3 runs)
+DIAGNOSE_TEST_AMPLITUDE = 4.0  # hidden-effect amplitude in units of the read noise

@@ -115,3 +115,20 @@ def test_cli_diagnose_refuses_malformed_motion(tmp_path, capsys):
     assert main(["diagnose", str(tmp_path / "m.toml"), "--json", str(tmp_path / "o.json")]) == 2
     assert "pole_pairs" in capsys.readouterr().err
     assert not (tmp_path / "o.json").exists()
+
+
+def test_shipped_interferometer_capture_beats_heydemann():
+    """NMM X capture, every 4th sample: ellipse as Heydemann's, signal_shape named."""
+    from encdesign import Recording, load_recording
+
+    full = load_recording(DATA / "nmm_x.toml")
+    rec = Recording(
+        kind="quadrature",
+        meta=full.meta,
+        columns={k: v[::4] for k, v in full.columns.items()},
+        path=full.path,
+    )
+    d = diagnose_quadrature(rec)
+    assert d["base"]["offset_a"] == pytest.approx(d["heydemann"]["offset_a"], abs=0.5)
+    assert [e["name"] for e in d["effects"]] == ["signal_shape"]
+    assert d["effects"][0]["heldout_rms_after"] < 0.8 * d["heydemann"]["heldout_rms"]

@@ -1,6 +1,7 @@
 """Shifted-delta-sum timing model: motor, marks, edge times, SDS, error physics, recordings."""
 
 import math
+import re
 from pathlib import Path
 
 import equinox as eqx
@@ -39,6 +40,30 @@ def _design(motor, n_fixed=2, n_moving=3, key=0, n=N, fixed=None, moving=None):
 
 
 PHI = jnp.asarray([0.0, 0.7, 1.9, 3.0, 3.3, 4.4, 5.9])
+
+# one compiled simulator for every error-physics test: same design and error shapes
+simulate = jax.jit(ed.simulate_readings, static_argnums=(2,), static_argnames=("revs_per_reading",))
+KEY = jax.random.PRNGKey(0)
+
+
+def _errs(**kw) -> ed.SDSErrors:
+    """SDSErrors with the canonical array shapes of these tests (shared compiles)."""
+    base = dict(
+        axial_runout_cos_m=[0.0],
+        axial_runout_sin_m=[0.0],
+        bearing_amplitude_m=np.zeros(6),
+        bearing_ratio=np.ones(6),
+        bearing_phase_rad=np.zeros(6),
+    )
+    base.update(kw)
+    return ed.SDSErrors(**base)
+
+
+def _still(n_sensors=1):
+    """Constant speed, perfect disks, n equally spaced sensors per disk."""
+    motor = ed.Motor(6, 18, 6)
+    az = ed.equally_spaced(n_sensors)
+    return ed.SDSDesign(motor, ed.perfect_disk(N), ed.perfect_disk(N), az, az)
 
 
 # ----------------------------------------------------------------------------- motor
@@ -124,11 +149,10 @@ def test_k_shift_identity_from_edge_times():
 
 
 def test_axis_tilt_matches_seed_formula():
-    motor = ed.Motor(6, 18, 6)
-    d = ed.SDSDesign(motor, ed.perfect_disk(N), ed.perfect_disk(N), [0.0], [0.0])
+    d = _still()
     tilt = 20 * ARCSEC
     phi = jnp.linspace(0, 2 * math.pi, 49)[:-1]
-    err = phi_error(d, phi, ed.SDSErrors(axis_tilt_rad=tilt))
+    err = phi_error(d, phi, _errs(axis_tilt_rad=tilt))
     expect = ed.axis_tilt_error(phi, tilt)
     assert float(jnp.max(jnp.abs(err - expect))) < 1e-15
     assert 0.4 * MAS < float(jnp.max(jnp.abs(err))) < 0.5 * MAS
@@ -155,18 +179,19 @@ def test_prediction_eq46_53_agrees_with_simulation():
 
 
 def test_sensor_count_cancels_orders():
-    """Speed ripple at order 2 only, mark error at order 2 only: 3 moving sensors leave a
-    constant error (no φ dependence), 2 moving sensors do not."""
-    motor = ed.Motor(3, 9, 6, torque_cos={2: 0.02})
-    disk = ed.DiskMarks(N, jnp.asarray([0.0, 5e-4]), jnp.zeros(2), jnp.zeros(N))
+    """Three equally spaced moving sensors: speed ripple and mark error at order 2 leave a
+    constant error (no φ dependence); at order 3 (a multiple of 3) the error varies."""
     phi = jnp.linspace(0, 2 * math.pi, 13)[:-1]
     spread = {}
-    for m in (2, 3):
-        d = ed.SDSDesign(motor, disk, disk, [0.0], ed.equally_spaced(m))
+    for order in (2, 3):
+        motor = ed.Motor(3, 9, 6, torque_cos={order: 0.02})
+        harm = jnp.zeros(3).at[order - 1].set(5e-4)
+        disk = ed.DiskMarks(N, harm, jnp.zeros(3), jnp.zeros(N))
+        d = ed.SDSDesign(motor, disk, disk, [0.0], ed.equally_spaced(3))
         e = phi_error(d, phi)
-        spread[m] = float(jnp.max(e) - jnp.min(e))
-    assert spread[2] > 1e-7
-    assert spread[3] < 1e-4 * spread[2]
+        spread[order] = float(jnp.max(e) - jnp.min(e))
+    assert spread[3] > 1e-7
+    assert spread[2] < 1e-4 * spread[3]
 
 
 # ----------------------------------------------------------------------------- gradients
@@ -202,59 +227,50 @@ def test_residual_objective_is_differentiable():
     d = sds_reference(1, 1)
     val, g = jax.jit(jax.value_and_grad(lambda m: ed.sds_residual(m, n_phi=4)))(d)
     assert float(val) > 0
-    assert np.all(np.isfinite(np.asarray(g.motor.torque_cos)))
+    for leaf in jax.tree_util.tree_leaves(g):  # ripple, marks, azimuths, radius, speed
+        assert np.all(np.isfinite(np.asarray(leaf)))
     assert float(jnp.max(jnp.abs(g.motor.torque_cos))) > 0
+    assert float(jnp.max(jnp.abs(g.disk_b.harmonic_cos_rad))) > 0
 
 
 # ----------------------------------------------------------------------------- error physics
 
 
 def test_bearing_wobble_cancels_in_opposed_pairs_and_noise_averages():
-    motor = ed.Motor(6, 18, 6)
-    bearing = ed.bearing_noise(jax.random.PRNGKey(1), 2.5e-6, 6)
-    errs = ed.SDSErrors(**bearing)
-    sim = jax.jit(ed.simulate_readings, static_argnums=(2,))
+    errs = _errs(**ed.bearing_noise(jax.random.PRNGKey(1), 2.5e-6, 6))
     std = {}
     for n in (1, 2):
-        d = ed.SDSDesign(
-            motor,
-            ed.perfect_disk(N),
-            ed.perfect_disk(N),
-            ed.equally_spaced(n),
-            ed.equally_spaced(n),
-        )
-        r = sim(d, 0.5, 6, errs)
-        std[n] = float(jnp.std(r.error_rad))
+        r = simulate(_still(n), 0.5, 8, errs, key=KEY, revs_per_reading=2)
+        std[n] = float(jnp.std(r.pair_error_rad.mean(axis=(1, 2))))
     assert std[1] > 1e-3 * ARCSEC
     assert std[2] < 1e-3 * std[1]  # seed: 0.42 → 0.02 arcsec
 
 
 def test_timing_quantization_and_jitter_are_random_and_average_down():
-    motor = ed.Motor(6, 18, 6)
-    d = ed.SDSDesign(motor, ed.perfect_disk(N), ed.perfect_disk(N), [0.0], [0.0])
-    errs = ed.SDSErrors(clock_period_s=1e-8, jitter_s=3e-9)
-    r = ed.simulate_readings(d, 1.0, 8, errs, key=jax.random.PRNGKey(0), revs_per_reading=2)
+    d = _still()
+    r = simulate(d, 1.0, 8, _errs(clock_period_s=1e-8, jitter_s=3e-9), key=KEY, revs_per_reading=2)
     e = np.asarray(r.pair_error_rad).reshape(-1)
     assert np.all(np.isfinite(e)) and np.std(e) > 0
     # per edge ~ 2π·(σ/T)/√N per sensor; a reading is far below one clock tick
-    tick = 2 * math.pi * 1e-8 / float(motor.period_s)
+    tick = 2 * math.pi * 1e-8 / float(d.motor.period_s)
     assert np.max(np.abs(e)) < tick
     assert r.error_rad.shape == (4,)
     np.testing.assert_allclose(r.error_rad, e.reshape(4, 2).mean(1), atol=1e-15)
+    # without jitter and clock the same simulation is exact
+    r0 = simulate(d, 1.0, 8, _errs(), key=KEY, revs_per_reading=2)
+    assert float(jnp.max(jnp.abs(r0.pair_error_rad))) < 1e-13
 
 
 def test_thermal_drift_and_axial_shift():
-    motor = ed.Motor(6, 18, 6)
-    d = ed.SDSDesign(motor, ed.perfect_disk(N), ed.perfect_disk(N), [0.0], [0.0])
+    d = _still()
     rate = 1.0  # K/s (exaggerated to see it in a few revolutions)
-    errs = ed.SDSErrors(thermal_drift_rad_per_k=0.7 * ARCSEC, temperature_rate_k_per_s=rate)
-    r = ed.simulate_readings(d, 0.2, 5, errs)
-    slope = np.polyfit(np.arange(5) * float(motor.period_s), np.asarray(r.error_rad), 1)[0]
+    errs = _errs(thermal_drift_rad_per_k=0.7 * ARCSEC, temperature_rate_k_per_s=rate)
+    r = simulate(d, 0.2, 8, errs, key=KEY, revs_per_reading=2)
+    per_rev = np.asarray(r.pair_error_rad).reshape(-1)
+    slope = np.polyfit(np.arange(8) * float(d.motor.period_s), per_rev, 1)[0]
     assert slope == pytest.approx(0.7 * ARCSEC * rate, rel=1e-3)
     # axial runout (order 1 in φ) seen through a tilted optical axis: γ·dz/R
-    errs = ed.SDSErrors(
-        optical_tilt_moving_rad=0.01, axial_runout_cos_m=[2e-6], axial_runout_sin_m=[0.0]
-    )
+    errs = _errs(optical_tilt_moving_rad=0.01, axial_runout_cos_m=[2e-6])
     phi = jnp.asarray([0.0, math.pi / 2, math.pi])
     e = phi_error(d, phi, errs)
     np.testing.assert_allclose(np.asarray(e), 0.01 * 2e-6 / 0.0254 * np.cos(phi), atol=1e-15)
@@ -395,3 +411,19 @@ def test_study_sds_poles_quick(tmp_path):
     for m in ("sensors_3", "sensors_4"):
         r = res["rule_pole_count_not_multiple_of_sensors"][m]
         assert r["mean_residual_pole_not_multiple_arcsec"] < r["mean_residual_pole_multiple_arcsec"]
+
+
+def test_cli_sds_simulate_and_measure(tmp_path, capsys):
+    from encdesign._cli import main
+
+    rec = tmp_path / "cli.toml"
+    args = ["sds", "simulate", "--out", str(rec), "--marks", "20", "--revs", "2"]
+    args += ["--fixed", "1", "--moving", "1"]
+    assert main(args + ["--phi-deg", "0", "100", "--errors", "none"]) == 0
+    assert main(["sds", "measure", str(rec), "--json", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    phi_deg = [float(x) for x in re.findall(r"run +\d+: phi +([-\d.]+) deg", out)]
+    np.testing.assert_allclose(phi_deg, [0.0, 100.0], atol=1e-3)
+    _edit_csv(rec, lambda ls: _set_field(ls, 4, "mark", "21"))
+    assert main(["sds", "measure", str(rec)]) == 2
+    assert "out of range" in capsys.readouterr().err

@@ -1,0 +1,299 @@
+"""Benchmark: Monte Carlo yield of encoder builds, and the cost of its gradient.
+
+Configuration: 3+1 heads (reference at 18.09 deg), r = 2.54 cm, nominal tilt 6 mrad,
+``--angles`` samples per revolution (default 2,048), grating and self-compensation orders
+1-16, the tolerance set of ``studies/tolerance_budget.py``'s reference. Each build: kinematic
+model -> head errors -> symmetry average -> self-compensation -> RMS residual
+(:func:`encdesign.objectives.residual_rms`); yield = fraction with RMS <= 1 urad.
+
+Measured:
+
+* wall time and peak resident memory of the yield estimate over ``--builds`` builds
+  (default 100,000), streamed in jitted chunks of ``--chunk`` builds (memory bounded by one
+  chunk, independent of the number of builds; run with ``--builds 1000000`` to see it);
+* time of the expected RMS residual over ``--grad-builds`` builds and of its gradient with
+  respect to the seven tolerances (reverse mode), and their ratio;
+* a plain NumPy implementation of the same physics (ray-plane kinematics, head average,
+  DFT + cotangent equations, map) on ``--numpy-builds`` builds: its time per build and
+  its agreement with the JAX values for the same builds.
+
+Usage: ``python benchmarks/optimize.py --json results/bench-optimize.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import encdesign  # noqa: F401  (float64)
+from encdesign._drivers import build_normals
+from encdesign.objectives import EncoderDesign, Tolerances, n_build_normals, residual_rms
+
+SPEC_RAD = 1e-6
+TOL = Tolerances(
+    eccentricity=5e-6,
+    tilt=1e-3,
+    placement=2e-4,
+    grating=5e-6,
+    beam_tilt=1e-3,
+    axial_runout=2e-6,
+    noise=2e-7,
+)
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process so far, MB (Linux ru_maxrss is in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def design(n_angles: int) -> EncoderDesign:
+    return EncoderDesign(
+        radius_m=0.0254,
+        reference_angle_rad=math.radians(18.09),
+        tilt_rad=6e-3,
+        n_heads=3,
+        max_order=16,
+        grating_orders=16,
+        axial_orders=2,
+        n_angles=n_angles,
+    )
+
+
+# ----------------------------------------------------------------------------- NumPy
+
+
+def numpy_rms(d: EncoderDesign, tol: Tolerances, z: np.ndarray) -> np.ndarray:
+    """The same physics in plain NumPy for builds ``z [B, dim]``: RMS residual per build."""
+    b = z.shape[0]
+    h = d.n_heads + 1
+    mg, ka = d.grating_orders, d.axial_orders
+    i = 0
+
+    def take(n):
+        nonlocal i
+        out = z[:, i : i + n]
+        i += n
+        return out
+
+    ecc = float(tol.eccentricity) * take(2)
+    tilt = float(tol.tilt) * take(2) + np.array([float(d.tilt_rad), 0.0])
+    place = float(tol.placement) * take(h)
+    j = np.arange(1, mg + 1)
+    gs = float(tol.grating) * take(mg) / j
+    gc = float(tol.grating) * take(mg) / j
+    beam = float(tol.beam_tilt) * take(h)
+    ac = float(tol.axial_runout) * take(ka)
+    asn = float(tol.axial_runout) * take(ka)
+    radius, gap = float(d.radius_m), float(d.gap_m)
+    alpha = np.asarray(d.head_angles_rad)
+    n = d.n_angles
+    th = np.arange(n) * (2 * np.pi / n)
+    # disk at theta = 0 (rotor frame)
+    tx, ty = np.tan(tilt[:, 0]), np.tan(tilt[:, 1])
+    nn = np.sqrt(1 + tx**2 + ty**2)
+    n0 = np.stack([tx / nn, ty / nn, 1 / nn], -1)  # [B,3]
+    ln = np.sqrt(1 - n0[:, 0] ** 2)
+    l0 = np.stack(
+        [(1 - n0[:, 0] ** 2) / ln, -n0[:, 0] * n0[:, 1] / ln, -n0[:, 0] * n0[:, 2] / ln], -1
+    )
+    c, s = np.cos(th), np.sin(th)
+
+    def rot(v):  # [B,3] -> [B,n,3] rotated by theta about z
+        return np.stack(
+            [
+                c * v[:, :1] - s * v[:, 1:2],
+                s * v[:, :1] + c * v[:, 1:2],
+                np.broadcast_to(v[:, 2:3], (b, n)),
+            ],
+            -1,
+        )
+
+    nv, lv = rot(n0), rot(l0)
+    cv = rot(np.concatenate([ecc, np.zeros((b, 1))], 1))
+    kk = np.arange(1, ka + 1)
+    cz = np.cos(th[:, None] * kk) @ ac.T + np.sin(th[:, None] * kk) @ asn.T  # [n,B]
+    cv[..., 2] = cz.T
+    beta = alpha + place  # [B,H]
+    cb, sb = np.cos(beta), np.sin(beta)
+    tg = np.tan(beam)
+    un = np.sqrt(1 + tg**2)
+    u = np.stack([-tg * sb / un, tg * cb / un, -1 / un], -1)  # [B,H,3]
+    r = np.stack([radius * cb, radius * sb, np.full_like(cb, gap)], -1)  # [B,H,3]
+    w = cv[:, :, None, :] - r[:, None, :, :]  # [B,n,H,3]
+    nvb = nv[:, :, None, :]
+    t = np.sum(w * nvb, -1) / np.sum(u[:, None] * nvb, -1)
+    v = t[..., None] * u[:, None] - w
+    lvb = lv[:, :, None, :]
+    cr = np.cross(v, lvb)
+    sin_part = np.sum(cr * nvb, -1)
+    cos_part = np.sum(v * lvb, -1)
+    psi = np.arctan2(sin_part, cos_part)  # [B,n,H]
+    arg = psi[..., None] * j
+    g = np.sum(gs[:, None, None, :] * np.sin(arg) + gc[:, None, None, :] * np.cos(arg), -1)
+    err = np.remainder(psi + alpha - th[None, :, None] + np.pi, 2 * np.pi) - np.pi + g
+    ns = d.n_heads
+    avg = err[..., :ns].mean(-1)  # [B,n]
+    # self-compensation: DFT of the differences, cotangent equations, averaged over pairs
+    diff = err[..., :ns] - err[..., ns:]  # [B,n,P]
+    m = np.arange(1, d.max_order + 1)
+    e = np.exp(-1j * th[:, None] * m)  # [n,M]
+    a = 2.0 / n * np.einsum("bnp,nm->bpm", diff, e)  # complex C' - i S'
+    h_off = alpha[ns] - alpha[:ns]
+    k = 1.0 / (np.exp(1j * m[None, :] * h_off[:, None]) - 1.0)  # [P,M]
+    est = np.mean(a * k[None], axis=1)  # reference head's complex coefficients C - i S
+    transfer = np.mean(np.exp(1j * m[:, None] * h_off[None, :]), axis=1)  # [M]
+    amp = est * transfer
+    mp = np.real(amp @ np.exp(1j * m[:, None] * th[None, :]))  # map m(theta)
+    res = avg - mp
+    res = res - res.mean(1, keepdims=True)
+    # expected calibration-noise mean square (same formula as objectives)
+    kk2 = np.abs(k) ** 2
+    var = kk2.sum(0) / ns**2 + np.abs(k.mean(0)) ** 2
+    ms_noise = np.sum(np.abs(transfer) ** 2 * var) * float(tol.noise) ** 2 * 2.0 / n
+    return np.sqrt(np.mean(res**2, 1) + ms_noise)
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--json", type=Path, default=None)
+    p.add_argument("--builds", type=int, default=100_000)
+    p.add_argument("--angles", type=int, default=2048)
+    p.add_argument("--chunk", type=int, default=512)
+    p.add_argument("--grad-builds", type=int, default=1024)
+    p.add_argument("--numpy-builds", type=int, default=64)
+    p.add_argument("--skip-yield", action="store_true", help="only gradient and NumPy parts")
+    args = p.parse_args(argv)
+    d = design(args.angles)
+    dim = n_build_normals(d)
+    key = jax.random.key(0)
+    out: dict = {
+        "config": {
+            "layout": "3+1",
+            "n_angles": args.angles,
+            "orders": "1-16",
+            "chunk": args.chunk,
+            "builds": args.builds,
+            "spec_rad": SPEC_RAD,
+        },
+        "machine": {
+            "python": platform.python_version(),
+            "jax": jax.__version__,
+            "devices": [str(x) for x in jax.devices()],
+        },
+    }
+    rss0 = peak_rss_mb()
+
+    @jax.jit
+    def chunk_counts(tv, first):
+        idx = first + jnp.arange(args.chunk)
+        z = build_normals(key, idx, dim)
+        v = jax.vmap(lambda zi: residual_rms(d, Tolerances.from_vector(tv), zi))(z)
+        return jnp.sum(v <= SPEC_RAD), jnp.sum(v), jnp.sum(~jnp.isfinite(v))
+
+    tv = TOL.vector()
+    if not args.skip_yield:
+        t0 = time.perf_counter()
+        jax.block_until_ready(chunk_counts(tv, 0))
+        compile_s = time.perf_counter() - t0
+        n_chunks = -(-args.builds // args.chunk)
+        passed, total, bad = 0, 0.0, 0
+        t0 = time.perf_counter()
+        for c in range(n_chunks):
+            a, s, nb = chunk_counts(tv, c * args.chunk)
+            passed += int(a)
+            total += float(s)
+            bad += int(nb)
+            if c % 10 == 0 or c == n_chunks - 1:
+                el = time.perf_counter() - t0
+                print(
+                    f"\r  yield: {c + 1}/{n_chunks} chunks, {el:7.1f} s, "
+                    f"peak RSS {peak_rss_mb():7.1f} MB",
+                    end="",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        print(file=sys.stderr)
+        wall = time.perf_counter() - t0
+        n = n_chunks * args.chunk
+        y = passed / n
+        out["yield"] = {
+            "builds": n,
+            "yield": y,
+            "yield_stderr": math.sqrt(y * (1 - y) / n),
+            "mean_rms_rad": total / n,
+            "nonfinite_builds": bad,
+            "wall_s": wall,
+            "compile_s": compile_s,
+            "us_per_build": wall / n * 1e6,
+            "peak_rss_mb": peak_rss_mb(),
+            "peak_rss_before_mb": rss0,
+        }
+        print(json.dumps(out["yield"], indent=1), file=sys.stderr)
+
+    # gradient of the expected objective vs one forward evaluation
+    nb = args.grad_builds
+    zg = build_normals(jax.random.key(1), jnp.arange(nb), dim)
+
+    def expected(tv):
+        v = jax.lax.map(
+            lambda zc: jax.vmap(lambda zi: residual_rms(d, Tolerances.from_vector(tv), zi))(zc),
+            zg.reshape(-1, min(args.chunk, nb), dim),
+        )
+        return jnp.mean(v)
+
+    fwd = jax.jit(expected)
+    grad = jax.jit(jax.grad(expected))
+
+    def timeit(f, reps=3):
+        jax.block_until_ready(f(tv))
+        ts = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(tv))
+            ts.append(time.perf_counter() - t0)
+        return min(ts)
+
+    tf, tg = timeit(fwd), timeit(grad)
+    out["gradient"] = {
+        "builds": nb,
+        "forward_s": tf,
+        "gradient_s": tg,
+        "ratio": tg / tf,
+        "gradient": np.asarray(grad(tv)).tolist(),
+    }
+    print(json.dumps(out["gradient"], indent=1), file=sys.stderr)
+
+    # plain NumPy implementation of the same physics
+    zn = np.asarray(build_normals(key, jnp.arange(args.numpy_builds), dim))
+    t0 = time.perf_counter()
+    v_np = numpy_rms(d, TOL, zn)
+    t_np = time.perf_counter() - t0
+    v_jax = np.asarray(jax.jit(jax.vmap(lambda zi: residual_rms(d, TOL, zi)))(jnp.asarray(zn)))
+    out["numpy"] = {
+        "builds": args.numpy_builds,
+        "us_per_build": t_np / args.numpy_builds * 1e6,
+        "max_rel_diff_vs_jax": float(np.max(np.abs(v_np - v_jax) / v_jax)),
+    }
+    print(json.dumps(out["numpy"], indent=1), file=sys.stderr)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,65 @@
+"""Diagnose example: a 3+1 bench recording with a hidden vibration, diagnosed end to end.
+
+A 4-head recording of 16,000 samples (four runs of 4,000 at 0.6 to 1.8 rev/s, 200 Hz,
+0.5 urad read noise, ``theta_ref`` and ``temp_c``) is written with a structural vibration
+of about one noise standard deviation hidden in it. ``encdesign.diagnose`` fits the base
+model, locates the mismatch (a line fixed in Hz while its shaft order moves with speed),
+names ``vibration``, fits it, and shows the residual before and after on fitted and
+held-out revolutions. The wall time (compilation included) is recorded.
+
+Outputs (``--out``): ``diagnose-example.json`` (the CLI's JSON plus timing), the recording
+under ``recording/``, ``report.txt`` and the figures ``rms_before_after.png``,
+``residual_spectra.png`` and ``head_residuals.png``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import jax
+
+from encdesign._conceal import write_concealed
+from encdesign._diagnose import diagnose, report_text, write_plots
+from encdesign._study import study_parser, write_results
+
+NAME = "diagnose-example"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the example; returns 0."""
+    args = study_parser(NAME, __doc__).parse_args(argv)
+    spr, speeds = (600, (0.6, 1.0, 1.45)) if args.quick else (4000, (0.6, 1.0, 1.4, 1.8))
+    rec, truth = write_concealed(
+        args.out / "recording" / "bench.toml",
+        key=jax.random.key(args.seed + 7),
+        effect="vibration",
+        samples_per_run=spr,
+        speeds_rev_s=speeds,
+        amplitude=1.5,
+    )
+    print(
+        f"[{NAME}] diagnosing {rec.n_rows} samples x {len(rec.head_columns)} heads",
+        file=sys.stderr,
+        flush=True,
+    )
+    t0 = time.perf_counter()
+    d = diagnose(rec, verbose=True)
+    wall = time.perf_counter() - t0
+    text = report_text(d)
+    (args.out / "report.txt").write_text(text, encoding="utf-8")
+    print(text)
+    figs = [] if args.no_plots else write_plots(d, args.out)
+    summary = dict(
+        diagnosis=d.to_json(),
+        truth=truth,
+        n_samples=rec.n_rows,
+        n_heads=len(rec.head_columns),
+        wall_time_s=wall,
+    )
+    write_results(args, NAME, summary, figs)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""Drivers on small analytic objectives: statuses, Monte Carlo, DOE, enumeration."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from encdesign._drivers import (
+    OptimisationError,
+    build_normals,
+    doe,
+    enumerate_designs,
+    expected_value,
+    grid_points,
+    latin_hypercube,
+    monte_carlo,
+    optimise,
+)
+
+
+def rosen(y, a):
+    return (1.0 - y[0]) ** 2 + 100.0 * (y[1] - y[0] ** 2) ** 2
+
+
+def test_bfgs_and_lm_find_rosenbrock_minimum():
+    s = optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=500)
+    assert s.ok and np.allclose(s.value, [1.0, 1.0], atol=1e-6)
+    r = optimise(
+        lambda y, a: jnp.stack([1.0 - y[0], 10.0 * (y[1] - y[0] ** 2)]),
+        "lm",
+        jnp.array([-1.2, 1.0]),
+    )
+    assert r.ok and np.allclose(r.value, [1.0, 1.0], atol=1e-8) and r.objective < 1e-16
+
+
+def test_lbfgsb_keeps_bounds():
+    s = optimise(rosen, "lbfgsb", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
+    assert s.ok and s.value[0] == pytest.approx(0.5) and s.value[1] == pytest.approx(0.25)
+    # unconstrained BFGS with the same bounds reports the violation instead of hiding it
+    b = optimise(rosen, "bfgs", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
+    assert b.status == "bounds_violated"
+
+
+def test_failures_come_back_with_a_status():
+    s = optimise(lambda y, a: jnp.log(y[0]) + y[0], "bfgs", jnp.array([1.0]))
+    assert not s.ok and s.status in ("nonfinite", "failed", "max_steps_reached")
+    m = optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=3)
+    assert m.status == "max_steps_reached"
+    with pytest.raises(OptimisationError, match="max_steps_reached"):
+        optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=3, throw=True)
+
+
+def test_common_random_numbers_independent_of_chunking():
+    k = jax.random.key(5)
+    a = build_normals(k, jnp.arange(10), 3)
+    b = build_normals(k, jnp.arange(4, 7), 3)
+    assert np.array_equal(np.asarray(a[4:7]), np.asarray(b))
+    f = lambda th, z: th * z[0] ** 2 + z[1]
+    r1 = monte_carlo(f, 2.0, key=k, n=1000, dim=3, chunk_size=7)
+    r2 = monte_carlo(f, 2.0, key=k, n=1000, dim=3, chunk_size=1000)
+    assert np.array_equal(r1.values, r2.values) and r1.ok
+
+
+def _sq(th, z):
+    return z[0] ** 2 + z[1]
+
+
+def test_monte_carlo_converges_as_one_over_sqrt_n():
+    # E[z0^2 + z1] = 1, var = 3; the spread over independent keys shrinks as 1/sqrt(n)
+    spreads = []
+    for n in (100, 1600):
+        est = [
+            monte_carlo(_sq, 0.0, key=jax.random.key(100 + i), n=n, dim=2, chunk_size=n).mean
+            for i in range(40)
+        ]
+        spreads.append(np.std(est))
+        assert np.mean(est) == pytest.approx(1.0, abs=4 * math.sqrt(3.0 / n / 40) + 1e-3)
+    ratio = spreads[0] / spreads[1]
+    assert 2.6 < ratio < 6.0  # sqrt(1600 / 100) = 4
+    r = monte_carlo(_sq, 0.0, key=jax.random.key(1), n=1600, dim=2)
+    assert r.stderr == pytest.approx(math.sqrt(3.0 / 1600), rel=0.2)
+
+
+def test_expected_value_gradient_is_smooth_and_matches_fd():
+    k = jax.random.key(2)
+    f = lambda th, z: jnp.sqrt((th * z[0]) ** 2 + 0.1 + jnp.sin(th) * z[1] ** 2)
+    ev = lambda th: expected_value(f, th, key=k, n=500, dim=2, chunk_size=128)
+    g = jax.grad(ev)(0.7)
+    h = 1e-5
+    fd = (ev(0.7 + h) - ev(0.7 - h)) / (2 * h)
+    assert float(g) == pytest.approx(float(fd), rel=1e-7)
+
+
+def test_nonfinite_builds_are_reported():
+    r = monte_carlo(lambda th, z: jnp.log(z[0]), 0.0, key=jax.random.key(0), n=50, dim=1)
+    assert r.status == "nonfinite" and r.n_nonfinite > 0
+    with pytest.raises(OptimisationError):
+        monte_carlo(
+            lambda th, z: jnp.log(z[0]), 0.0, key=jax.random.key(0), n=50, dim=1, throw=True
+        )
+
+
+def test_grid_and_lhs_find_known_optimum():
+    f = lambda x, a: (x[0] - 0.3) ** 2 + 2.0 * (x[1] + 0.2) ** 2
+    g = doe(f, grid_points([-1, -1], [1, 1], 21))
+    assert g.ok and np.allclose(g.best_point, [0.3, -0.2], atol=1e-12)
+    pts = latin_hypercube(jax.random.key(3), [-1, -1], [1, 1], 400)
+    # one point per stratum in every dimension
+    for d in range(2):
+        strata = np.floor((pts[:, d] + 1) / 2 * 400).astype(int)
+        assert sorted(strata) == list(range(400))
+    best = doe(f, pts).best_point
+    assert np.allclose(best, [0.3, -0.2], atol=0.1)
+    bad = doe(lambda x, a: jnp.log(x[0]), np.array([[-1.0], [2.0]]))
+    assert bad.statuses == ("nonfinite", "success") and bad.best_index == 1
+
+
+def test_enumeration_finds_discrete_and_continuous_optimum():
+    # f(x; n, m) = (x - n)^2 + (n - 2)^2 + 0.5 * |m - 1|: best n = 2, m = 1, x = 2
+    def solve(c):
+        fn = lambda y, a: (y[0] - a[0]) ** 2 + (a[0] - 2.0) ** 2 + 0.5 * jnp.abs(a[1] - 1.0)
+        return optimise(fn, "bfgs", jnp.zeros(1), jnp.array([c["n"], c["m"]], dtype=float))
+
+    r = enumerate_designs(solve, {"n": [1, 2, 3], "m": [0, 1]})
+    assert r.ok and r.best_choice == {"n": 2, "m": 1}
+    assert r.best_solution.value[0] == pytest.approx(2.0, abs=1e-6)
+    assert len(r.choices) == 6

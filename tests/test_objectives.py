@@ -1,0 +1,190 @@
+"""Objectives: physics of the residual pipeline and gradients of every objective vs FD."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from encdesign._drivers import build_normals
+from encdesign._sds import sds_residual
+from encdesign.objectives import (
+    TOLERANCE_NAMES,
+    EncoderDesign,
+    SDSTolerances,
+    Tolerances,
+    build_metrics,
+    build_residual,
+    build_yield,
+    calibration_noise_ms,
+    cotangent_sensitivity,
+    expected_sensitivity,
+    n_build_normals,
+    residual_peak,
+    residual_percentile,
+    residual_rms,
+    sds_design,
+    tolerance_cost,
+)
+
+DESIGN = EncoderDesign(
+    radius_m=0.0254,
+    reference_angle_rad=math.radians(18.09),
+    tilt_rad=6e-3,
+    n_heads=3,
+    max_order=8,
+    grating_orders=8,
+    axial_orders=1,
+    n_angles=40,
+)
+TOL = Tolerances(
+    eccentricity=5e-6,
+    tilt=1e-3,
+    placement=2e-4,
+    grating=5e-6,
+    beam_tilt=5e-4,
+    axial_runout=2e-6,
+    noise=1e-7,
+)
+Z = build_normals(jax.random.key(4), jnp.arange(1), n_build_normals(DESIGN))[0]
+
+
+def _check(f, x, rel_h=1e-4, rtol=2e-5):
+    """AD gradient of scalar ``f`` at ``x`` against central finite differences."""
+    x = jnp.asarray(x, dtype=jnp.float64)
+    flat = x.reshape(-1)
+    fx = lambda v: f(v.reshape(x.shape))
+    g = np.asarray(jax.grad(fx)(flat))
+    scale = abs(float(fx(flat)))
+    for i in range(flat.size):
+        h = rel_h * max(abs(float(flat[i])), 1e-12)
+        e = jnp.zeros_like(flat).at[i].set(h)
+        fd = float((fx(flat + e) - fx(flat - e)) / (2 * h))
+        assert np.isfinite(g[i])
+        assert g[i] == pytest.approx(fd, rel=rtol, abs=1e-10 * scale / h), i
+
+
+def test_self_compensation_removes_degenerate_grating_modes():
+    # perfect heads, grating at orders 3 and 6 only: averaging keeps them, the map removes them
+    z = jnp.zeros(n_build_normals(DESIGN))
+    j = 3  # S_3 sits at offset 2 (ecc) + 2 (tilt) + 4 (placement) + 2 (index of order 3)
+    z = z.at[4 + 4 + j - 1].set(3.0).at[4 + 4 + 6 - 1].set(-2.0)
+    tol = Tolerances(grating=5e-6)
+    flat = EncoderDesign(
+        0.0254,
+        DESIGN.reference_angle_rad,
+        0.0,
+        n_heads=3,
+        max_order=8,
+        grating_orders=8,
+        axial_orders=1,
+        n_angles=40,
+    )
+    assert float(residual_rms(flat, tol, z)) < 1e-12
+    worse = Tolerances(grating=5e-6, placement=1e-3)
+    zp = z.at[4].set(1.0).at[7].set(-1.0)
+    assert float(residual_rms(flat, worse, zp)) > 1e-9  # placement error: modal leakage
+
+
+def test_rms_peak_and_noise_terms_are_consistent():
+    r = build_residual(DESIGN, TOL, Z)
+    assert abs(float(jnp.mean(r))) < 1e-18
+    ms_noise = float(calibration_noise_ms(DESIGN, TOL))
+    assert float(residual_rms(DESIGN, TOL, Z)) ** 2 == pytest.approx(
+        float(jnp.mean(r**2)) + ms_noise, rel=1e-12
+    )
+    assert float(residual_peak(DESIGN, TOL, Z)) >= float(jnp.sqrt(jnp.mean(r**2)))
+    # noise term scales with the noise variance and the cotangent amplification
+    tol2 = eqx.tree_at(lambda t: t.noise, TOL, 2e-7)
+    assert float(calibration_noise_ms(DESIGN, tol2)) == pytest.approx(4 * ms_noise, rel=1e-12)
+
+
+def test_residual_rms_gradient_for_every_tolerance():
+    # d rms / d ln sigma_i for all seven tolerances at once (one compile)
+    base = TOL.vector()
+    f = jax.jit(lambda u: residual_rms(DESIGN, Tolerances.from_vector(base * jnp.exp(u)), Z))
+    _check(f, jnp.zeros(len(TOLERANCE_NAMES)) + 0.05, rel_h=1e-3, rtol=1e-5)
+
+
+def test_residual_peak_and_reference_angle_gradients():
+    def f(a):
+        d = eqx.tree_at(lambda d: d.reference_angle_rad, DESIGN, a)
+        return residual_peak(d, TOL, Z)
+
+    _check(jax.jit(f), jnp.array(DESIGN.reference_angle_rad), rel_h=1e-6)
+
+    def g(a):
+        d = eqx.tree_at(lambda d: d.reference_angle_rad, DESIGN, a)
+        return residual_rms(d, TOL, Z)
+
+    _check(jax.jit(g), jnp.array(DESIGN.reference_angle_rad), rel_h=1e-6)
+
+
+SMALL = EncoderDesign(
+    radius_m=0.0254,
+    reference_angle_rad=math.radians(18.09),
+    tilt_rad=6e-3,
+    n_heads=3,
+    max_order=4,
+    grating_orders=4,
+    axial_orders=1,
+    n_angles=16,
+)
+
+
+def test_percentile_and_smooth_yield_gradients():
+    key = jax.random.key(9)
+
+    def p99(s):
+        return residual_percentile(SMALL, Tolerances.from_vector(s), key=key, n_builds=24, q=90)
+
+    def ys(s):
+        return build_yield(
+            SMALL, Tolerances.from_vector(s), 3e-6, key=key, n_builds=24, smooth_width_rad=3e-7
+        )
+
+    s0 = TOL.vector()
+    both = jax.jit(lambda u: jnp.stack([p99(s0 * jnp.exp(u)), ys(s0 * jnp.exp(u))]))
+    d_ad = np.asarray(jax.jit(jax.jacfwd(both))(0.1))
+    h = 1e-3
+    d_fd = (np.asarray(both(0.1 + h)) - np.asarray(both(0.1 - h))) / (2 * h)
+    assert np.all(np.abs(d_ad) > 0)
+    np.testing.assert_allclose(d_ad, d_fd, rtol=1e-4)
+    exact = float(build_yield(SMALL, TOL, 3e-6, key=key, n_builds=24))
+    vals = np.asarray(build_metrics(SMALL, TOL, key=key, n_builds=24))
+    assert exact == pytest.approx(np.mean(vals <= 3e-6))
+
+
+def test_sensitivity_gradients():
+    _check(lambda a: cotangent_sensitivity(a, 3, 16), jnp.array(0.3158), rel_h=1e-6)
+    k = jax.random.key(0)
+    _check(
+        lambda a: expected_sensitivity(a, 3, 16, 1e-4, key=k, n_builds=16),
+        jnp.array(0.3158),
+        rel_h=1e-6,
+    )
+    _check(
+        lambda s: expected_sensitivity(0.3158, 3, 16, s, key=k, n_builds=16),
+        jnp.array(1e-3),
+        rel_h=1e-4,
+    )
+
+
+def test_tolerance_cost_gradient_and_form():
+    ref = jnp.array([5e-6, 1e-3, 0.0])
+    s = jnp.array([2.5e-6, 2e-3, 7.0])
+    assert float(tolerance_cost(s, ref)) == pytest.approx(2.0 + 0.5)
+    _check(lambda x: tolerance_cost(x, ref, jnp.array([2.0, 1.0, 1.0])), s)
+
+
+def test_sds_residual_gradient_in_mark_errors():
+    # disk B (read by the moving sensors); see docs/optimization.md on disk A
+    d = sds_design(5, 3, SDSTolerances(), key=jax.random.key(1), marks_per_rev=120, n_harmonics=4)
+
+    def f(a):
+        dd = eqx.tree_at(lambda d: d.disk_b.harmonic_cos_rad, d, d.disk_b.harmonic_cos_rad * a)
+        return sds_residual(dd, n_phi=8) * 1e6
+
+    _check(jax.jit(f), jnp.array(1.3), rel_h=1e-3, rtol=1e-3)

@@ -1,0 +1,170 @@
+"""Tolerance budgets on an analytic error model, and the three studies in --quick mode."""
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from encdesign import EncdesignInputError
+from encdesign._cli import main
+from encdesign._drivers import build_normals
+from encdesign._tolerance import (
+    allocate,
+    check_yield,
+    contributions,
+    sweep_scales,
+    tolerance_cost,
+    yield_stats,
+)
+
+NAMES = ("a", "b", "c")
+WEIGHT = jnp.array([1.0, 4.0, 0.25])  # how strongly each tolerance drives the error
+
+
+def _z(seed, n):
+    return build_normals(jax.random.key(seed), jnp.arange(n), 3)
+
+
+Z_TRAIN = _z(0, 400)
+
+
+def ms_fn(s, z=Z_TRAIN):
+    """Mean-square error of each build: sum_i (w_i s_i z_i)^2 (linear error model)."""
+    return jnp.sum((WEIGHT * s * z) ** 2, axis=1)
+
+
+def values_fn(s, z=Z_TRAIN):
+    return jnp.sqrt(ms_fn(s, z))
+
+
+def test_contributions_are_exact_variance_shares():
+    s = jnp.array([0.3, 0.1, 0.8])
+    con = contributions(ms_fn, values_fn, s, NAMES)
+    per = np.asarray(jnp.mean((WEIGHT * s * Z_TRAIN) ** 2, axis=0))
+    np.testing.assert_allclose(con.variance_share, per / per.sum(), rtol=1e-12)
+    assert con.variance_share.sum() == pytest.approx(1.0)
+    assert con.order[0] == int(np.argmax(per))
+    assert np.all(con.gradient_sensitivity > 0)
+
+
+def test_sweep_is_monotonic_and_2d_shape():
+    s = np.array([0.3, 0.1, 0.8])
+    t = sweep_scales(values_fn, s, NAMES, 1.0, [0.5, 1.0, 2.0])
+    assert np.all(np.diff(t.yield_) <= 0) and np.all(np.diff(t.percentile) > 0)
+    # all tolerances x 2 doubles the linear error's percentile
+    assert t.percentile[2] == pytest.approx(2 * t.percentile[1])
+    t2 = sweep_scales(
+        values_fn,
+        s,
+        NAMES,
+        1.0,
+        [0.5, 1.0],
+        group_a=["b"],
+        group_b=["a", "c"],
+        scales_b=[0.5, 1.0, 2.0],
+    )
+    assert t2.yield_.shape == (2, 3) and len(t2.rows()) == 6
+    with pytest.raises(EncdesignInputError, match="unknown tolerance"):
+        sweep_scales(values_fn, s, NAMES, 1.0, [1.0], group_a=["zz"])
+
+
+def test_allocation_meets_target_on_fresh_builds_and_beats_uniform_scaling():
+    ref = np.array([0.3, 0.3, 0.3])
+    spec, target = 1.0, 0.9
+    al = allocate(values_fn, ref, NAMES, spec, target, max_steps=150)
+    assert al.ok, al.message
+    assert al.train_yield >= target
+    fresh = np.asarray(values_fn(jnp.asarray(al.sigmas), _z(77, 20000)))
+    chk = check_yield(fresh, spec, target)
+    assert chk["meets_target"], chk
+    # uniform scaling of the reference to the same training yield costs more
+    lo, hi = 1e-3, 10.0
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        if yield_stats(values_fn(jnp.asarray(ref * mid)), spec)[0] >= al.train_yield:
+            lo = mid
+        else:
+            hi = mid
+    uniform_cost = float(tolerance_cost(ref * lo, ref))
+    assert al.cost < 0.95 * uniform_cost
+    # the strongly weighted tolerance is held tighter than the weak one
+    assert al.sigmas[1] < al.sigmas[0] < al.sigmas[2]
+
+
+def test_infeasible_targets_are_refused():
+    with pytest.raises(EncdesignInputError, match="infeasible yield target"):
+        allocate(values_fn, np.ones(3), NAMES, 1.0, 1.0)
+
+
+def test_reference_head_opt_quick(tmp_path):
+    out = tmp_path / "rho.json"
+    rc = main(
+        [
+            "study",
+            "run",
+            "reference-head-opt",
+            "--quick",
+            "--no-plots",
+            "--out",
+            str(tmp_path),
+            "--json",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert [e["layout"] for e in d["layouts"]] == ["2+1", "3+1", "4+1"]
+    for e in d["layouts"]:
+        step = e["grid_step_deg"]
+        assert abs(e["reference_angle_deg"] - e["grid_best_angle_deg"]) <= step
+        assert e["sensitivity"] <= e["grid_best_sensitivity"] * (1 + 1e-12)
+
+
+def test_tolerance_budget_quick(tmp_path):
+    out = tmp_path / "tb.json"
+    rc = main(
+        [
+            "study",
+            "run",
+            "tolerance-budget",
+            "--quick",
+            "--no-plots",
+            "--out",
+            str(tmp_path),
+            "--json",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["target_yield"] == 0.99
+    assert d["checked_yield"] + 2 * d["checked_yield_stderr"] >= d["target_yield"]
+    assert sum(d["contributions"].values()) == pytest.approx(1.0, abs=1e-9)
+    assert set(d["tolerances"]) == set(d["contributions"])
+    assert all(v > 0 for v in d["tolerances"].values())
+
+
+def test_pole_sensor_opt_quick(tmp_path):
+    out = tmp_path / "ps.json"
+    rc = main(
+        [
+            "study",
+            "run",
+            "pole-sensor-opt",
+            "--quick",
+            "--no-plots",
+            "--out",
+            str(tmp_path),
+            "--json",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    d = json.loads(out.read_text())
+    best = d["best"]
+    # seed 001: the pole count should not be a multiple of the sensor count
+    assert not best["pole_multiple_of_sensors"]
+    assert best["residual_mean_rad"] == min(r["residual_mean_rad"] for r in d["table"])
