@@ -175,6 +175,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grad-builds", type=int, default=1024)
     p.add_argument("--numpy-builds", type=int, default=64)
     p.add_argument("--skip-yield", action="store_true", help="only gradient and NumPy parts")
+    p.add_argument(
+        "--time-limit-s",
+        type=float,
+        default=0.0,
+        help="stop the yield loop after this long (report builds done; 0 = no limit)",
+    )
+    p.add_argument("--skip-gradient", action="store_true", help="skip the gradient part")
     args = p.parse_args(argv)
     d = design(args.angles)
     dim = n_build_normals(d)
@@ -201,7 +208,12 @@ def main(argv: list[str] | None = None) -> int:
         idx = first + jnp.arange(args.chunk)
         z = build_normals(key, idx, dim)
         v = jax.vmap(lambda zi: residual_rms(d, Tolerances.from_vector(tv), zi))(z)
-        return jnp.sum(v <= SPEC_RAD), jnp.sum(v), jnp.sum(~jnp.isfinite(v))
+        live = idx < args.builds  # the last chunk may run past the requested count
+        return (
+            jnp.sum(live & (v <= SPEC_RAD)),
+            jnp.sum(jnp.where(live, v, 0.0)),
+            jnp.sum(live & ~jnp.isfinite(v)),
+        )
 
     tv = TOL.vector()
     if not args.skip_yield:
@@ -211,7 +223,11 @@ def main(argv: list[str] | None = None) -> int:
         n_chunks = -(-args.builds // args.chunk)
         passed, total, bad = 0, 0.0, 0
         t0 = time.perf_counter()
+        done = 0
         for c in range(n_chunks):
+            if args.time_limit_s and time.perf_counter() - t0 > args.time_limit_s:
+                break
+            done = c + 1
             a, s, nb = chunk_counts(tv, c * args.chunk)
             passed += int(a)
             total += float(s)
@@ -227,10 +243,13 @@ def main(argv: list[str] | None = None) -> int:
                 )
         print(file=sys.stderr)
         wall = time.perf_counter() - t0
-        n = n_chunks * args.chunk
+        n = min(done * args.chunk, args.builds)
         y = passed / n
         out["yield"] = {
+            "builds_requested": args.builds,
             "builds": n,
+            "complete": n == args.builds,
+            "wall_s_extrapolated_to_requested": wall * args.builds / n,
             "yield": y,
             "yield_stderr": math.sqrt(y * (1 - y) / n),
             "mean_rms_rad": total / n,
@@ -244,37 +263,38 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(out["yield"], indent=1), file=sys.stderr)
 
     # gradient of the expected objective vs one forward evaluation
-    nb = args.grad_builds
-    zg = build_normals(jax.random.key(1), jnp.arange(nb), dim)
+    if not args.skip_gradient:
+        nb = args.grad_builds
+        zg = build_normals(jax.random.key(1), jnp.arange(nb), dim)
 
-    def expected(tv):
-        v = jax.lax.map(
-            lambda zc: jax.vmap(lambda zi: residual_rms(d, Tolerances.from_vector(tv), zi))(zc),
-            zg.reshape(-1, min(args.chunk, nb), dim),
-        )
-        return jnp.mean(v)
+        def expected(tv):
+            v = jax.lax.map(
+                lambda zc: jax.vmap(lambda zi: residual_rms(d, Tolerances.from_vector(tv), zi))(zc),
+                zg.reshape(-1, min(args.chunk, nb), dim),
+            )
+            return jnp.mean(v)
 
-    fwd = jax.jit(expected)
-    grad = jax.jit(jax.grad(expected))
+        fwd = jax.jit(expected)
+        grad = jax.jit(jax.grad(expected))
 
-    def timeit(f, reps=3):
-        jax.block_until_ready(f(tv))
-        ts = []
-        for _ in range(reps):
-            t0 = time.perf_counter()
+        def timeit(f, reps=3):
             jax.block_until_ready(f(tv))
-            ts.append(time.perf_counter() - t0)
-        return min(ts)
+            ts = []
+            for _ in range(reps):
+                t0 = time.perf_counter()
+                jax.block_until_ready(f(tv))
+                ts.append(time.perf_counter() - t0)
+            return min(ts)
 
-    tf, tg = timeit(fwd), timeit(grad)
-    out["gradient"] = {
-        "builds": nb,
-        "forward_s": tf,
-        "gradient_s": tg,
-        "ratio": tg / tf,
-        "gradient": np.asarray(grad(tv)).tolist(),
-    }
-    print(json.dumps(out["gradient"], indent=1), file=sys.stderr)
+        tf, tg = timeit(fwd), timeit(grad)
+        out["gradient"] = {
+            "builds": nb,
+            "forward_s": tf,
+            "gradient_s": tg,
+            "ratio": tg / tf,
+            "gradient": np.asarray(grad(tv)).tolist(),
+        }
+        print(json.dumps(out["gradient"], indent=1), file=sys.stderr)
 
     # plain NumPy implementation of the same physics
     zn = np.asarray(build_normals(key, jnp.arange(args.numpy_builds), dim))

@@ -1,4 +1,7 @@
-"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE]``."""
+"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE]``.
+
+Multihead recordings go to :func:`encdesign.diagnose`; quadrature and motion recordings to
+their own finders (``encdesign._diagnose_dispatch``); the sds kind is refused (exit 2)."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ HELP = "find where a recording and the model disagree, name the missing physics,
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the command's arguments."""
-    parser.add_argument("recording", type=Path, help="recording TOML file (multihead kind)")
+    parser.add_argument("recording", type=Path, help="recording TOML file")
     parser.add_argument("--json", type=Path, required=True, help="write the diagnosis here")
     parser.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     parser.add_argument("--report", type=Path, default=None, help="write the text report here")
@@ -41,7 +44,19 @@ def run(args: argparse.Namespace) -> int:
 
     if args.max_order < 1:
         raise input_error("--max-order", f"got {args.max_order}", "a positive integer")
-    d = diagnose(args.recording, max_order=args.max_order, verbose=not args.quiet)
+    from ._recording import load_recording
+
+    rec = load_recording(args.recording)
+    if rec.kind in ("quadrature", "motion"):
+        # signal-level and shaft-motion recordings have their own finders
+        from ._diagnose_dispatch import diagnose_any
+
+        doc = diagnose_any(rec, plots=args.plots)
+        write_json(args.json, doc)
+        print(f"verdict: {doc['verdict']}")
+        print(f"wrote {args.json}", file=sys.stderr)
+        return 0
+    d = diagnose(rec, max_order=args.max_order, verbose=not args.quiet)
     doc = d.to_json()
     if args.plots is not None:
         doc["plots"] = [str(p) for p in write_plots(d, args.plots)]

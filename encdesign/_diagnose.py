@@ -63,7 +63,9 @@ class Layout:
     Attributes:
         n_heads, max_order, n_runs, runout_orders, grating_lines: sizes.
         has_ref: whether ``theta_ref`` is fitted against.
-        n_active: length of the gathered (active) parameter vector.
+        n_active: length of the gathered (active) parameter vector (the largest of the
+            sizes in ``active_sizes``).
+        active_sizes: the gathered lengths compiled for (smallest that fits is used).
     """
 
     n_heads: int
@@ -73,6 +75,7 @@ class Layout:
     grating_lines: int
     has_ref: bool
     n_active: int
+    active_sizes: tuple[int, ...] = ()
 
     @property
     def segments(self) -> dict[str, tuple[int, int]]:
@@ -446,7 +449,8 @@ def prepare(rec: Recording, *, max_order: int = 12, runout_orders: int = 6) -> P
     R = run_ids.size
     n_base = H + 2 * M + H
     eff_sizes = sorted([H + 2 * runout_orders, 1 + 2 * R, 1 + 2 * R * H, H, 4 * H, 3])
-    layout = Layout(H, M, R, runout_orders, L, has_ref, n_base + sum(eff_sizes[-3:]))
+    sizes = (n_base + eff_sizes[-1], n_base + sum(eff_sizes[-3:]))
+    layout = Layout(H, M, R, runout_orders, L, has_ref, sizes[-1], sizes)
     dt_med = float(np.median(np.diff(tau)))
     onehot = np.zeros((n, R))
     onehot[np.arange(n), run] = 1.0
@@ -542,11 +546,17 @@ def _scales(prep: Prepared, p: np.ndarray) -> np.ndarray:
     return sc
 
 
+def _sized(layout: Layout, n: int) -> Layout:
+    """The layout whose gathered length is the smallest compiled size holding ``n``."""
+    for k in layout.active_sizes or (layout.n_active,):
+        if n <= k:
+            return dataclasses.replace(layout, n_active=k)
+    raise RuntimeError(f"{n} active parameters exceed the compiled {layout.n_active}")
+
+
 def _run_lm(prep: Prepared, p: np.ndarray, active: list[int], w: np.ndarray):
-    lay = prep.layout
+    lay = _sized(prep.layout, len(active))
     idx = np.full(lay.n_active, lay.size, dtype=np.int64)
-    if len(active) > lay.n_active:
-        raise RuntimeError("too many active parameters")
     idx[: len(active)] = sorted(active)
     sc = _scales(prep, p)
     jidx, jw, jsc = jnp.asarray(idx), jnp.asarray(w), jnp.asarray(sc)
@@ -919,7 +929,7 @@ class Diagnosis:
 
 def _cov_se(prep: Prepared, st: FitState, sigma2: float) -> dict[int, float]:
     """Standard errors (parameter units) of the active parameters, from J^T J."""
-    lay = prep.layout
+    lay = _sized(prep.layout, len(st.active))
     idx = np.full(lay.n_active, lay.size, dtype=np.int64)
     idx[: len(st.active)] = sorted(st.active)
     scale = _scales(prep, st.p)

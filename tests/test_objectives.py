@@ -108,20 +108,6 @@ def test_residual_rms_gradient_for_every_tolerance():
     _check(f, jnp.zeros(len(TOLERANCE_NAMES)) + 0.05, rel_h=1e-3, rtol=1e-5)
 
 
-def test_residual_peak_and_reference_angle_gradients():
-    def f(a):
-        d = eqx.tree_at(lambda d: d.reference_angle_rad, DESIGN, a)
-        return residual_peak(d, TOL, Z)
-
-    _check(jax.jit(f), jnp.array(DESIGN.reference_angle_rad), rel_h=1e-6)
-
-    def g(a):
-        d = eqx.tree_at(lambda d: d.reference_angle_rad, DESIGN, a)
-        return residual_rms(d, TOL, Z)
-
-    _check(jax.jit(g), jnp.array(DESIGN.reference_angle_rad), rel_h=1e-6)
-
-
 SMALL = EncoderDesign(
     radius_m=0.0254,
     reference_angle_rad=math.radians(18.09),
@@ -132,6 +118,20 @@ SMALL = EncoderDesign(
     axial_orders=1,
     n_angles=16,
 )
+
+
+def test_residual_peak_and_reference_angle_gradients():
+    def f(a):
+        d = eqx.tree_at(lambda d: d.reference_angle_rad, SMALL, a)
+        return residual_peak(d, TOL, Z)
+
+    _check(jax.jit(f), jnp.array(SMALL.reference_angle_rad), rel_h=1e-6)
+
+    def g(a):
+        d = eqx.tree_at(lambda d: d.reference_angle_rad, SMALL, a)
+        return residual_rms(d, TOL, Z)
+
+    _check(jax.jit(g), jnp.array(SMALL.reference_angle_rad), rel_h=1e-6)
 
 
 def test_percentile_and_smooth_yield_gradients():
