@@ -181,7 +181,10 @@ from .objectives import (
 )
 
 # --- discrepancy finder (issue 5) ---
-from ._conceal import simulate_bench as simulate_bench, write_concealed as write_concealed
+from ._conceal import (
+    simulate_concealed_bench as simulate_concealed_bench,
+    write_concealed as write_concealed,
+)
 from ._diagnose import (
     Diagnosis as Diagnosis,
     EffectResult as EffectResult,

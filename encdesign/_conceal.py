@@ -44,7 +44,7 @@ CONCEALMENTS = ("near_noise", "masked", "aliased", "partial")
 LAYOUTS = {"3+1": [0.0, 120.0, 240.0, 50.0], "2+1": [0.0, 180.0, 75.0]}
 
 
-def simulate_bench(
+def simulate_concealed_bench(
     *,
     key: jax.Array,
     effect: str | None = None,
@@ -273,12 +273,12 @@ def simulate_bench(
 def write_concealed(
     path: str | os.PathLike, *, key: jax.Array, **kwargs: Any
 ) -> tuple[Recording, dict[str, Any]]:
-    """Simulate a bench (:func:`simulate_bench` arguments) and write it as a recording.
+    """Simulate a bench (:func:`simulate_concealed_bench` arguments) and write it as a recording.
 
     The truth is written into the TOML's ``[provenance]`` table (a blind benchmark must
     not read it; the finder never does).
     """
-    cols, enc, truth = simulate_bench(key=key, **kwargs)
+    cols, enc, truth = simulate_concealed_bench(key=key, **kwargs)
     prov = {
         "generator": "encdesign._conceal",
         "hidden": str(truth["effect"]),

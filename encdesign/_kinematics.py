@@ -311,8 +311,14 @@ _ATAN_MOREBITS = 6.123233995736765886130e-17
 _TAN_3PI_8 = 2.41421356237309504880
 
 
+@jax.custom_jvp
 def _atan(x: Array) -> Array:
-    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere."""
+    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere.
+
+    Its derivative is given in closed form (``1 / (1 + x²)``, :func:`_atan_jvp`) rather than
+    traced through the selects of the rational approximation: the reverse pass of a Monte
+    Carlo gradient is then about as cheap as the forward pass.
+    """
     s = jnp.where(x > 0, 1.0, -1.0)
     big = (x > _TAN_3PI_8) | (x < -_TAN_3PI_8)
     mid = ((x > 0.66) | (x < -0.66)) & ~big
@@ -324,6 +330,12 @@ def _atan(x: Array) -> Array:
     num = (((p[0] * z + p[1]) * z + p[2]) * z + p[3]) * z + p[4]
     den = ((((z + q[0]) * z + q[1]) * z + q[2]) * z + q[3]) * z + q[4]
     return y0 + (xr * z * num / den + xr) + corr
+
+
+@_atan.defjvp
+def _atan_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return _atan(x), dx / (1.0 + x * x)
 
 
 def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -> Array:
