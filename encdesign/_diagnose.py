@@ -367,8 +367,8 @@ def prepare(rec: Recording, *, max_order: int = 12, runout_orders: int = 6) -> P
     if rec.kind != "multihead":
         raise input_error(
             f"{where}: kind",
-            f"got {rec.kind!r}; the discrepancy finder handles multihead recordings",
-            "'multihead'",
+            f"got {rec.kind!r}; diagnosis of {rec.kind!r} recordings is not implemented yet",
+            "'multihead', 'quadrature' or 'motion'",
         )
     H = len(rec.head_columns)
     if H < 2:

@@ -133,7 +133,8 @@ def _summary_plot(rows: list[dict], out: Path) -> Path:
         a.bar(range(len(names)), held, color=["0.6"] + ["C0"] * (len(names) - 1))
         a.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
         unit = "rad" if row["kind"] == "motion" else "rel. radius"
-        a.set(title=f"{row['name']}: {row['verdict']}", ylabel=f"held-out RMS ({unit})")
+        extra = "\n+ unexplained structure" if row["unexplained"] else ""
+        a.set(title=f"{row['name']}: {row['verdict']}{extra}", ylabel=f"held-out RMS ({unit})")
     return save_figure(fig, out, "real-recordings-summary.png")
 
 

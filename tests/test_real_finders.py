@@ -132,3 +132,31 @@ def test_shipped_interferometer_capture_beats_heydemann():
     assert d["base"]["offset_a"] == pytest.approx(d["heydemann"]["offset_a"], abs=0.5)
     assert [e["name"] for e in d["effects"]] == ["signal_shape"]
     assert d["effects"][0]["heldout_rms_after"] < 0.8 * d["heydemann"]["heldout_rms"]
+
+
+def test_real_recordings_study_quick_json(tmp_path):
+    import json
+
+    out = tmp_path / "rr.json"
+    assert (
+        main(
+            [
+                "study",
+                "run",
+                "real-recordings",
+                "--quick",
+                "--out",
+                str(tmp_path),
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    rows = json.loads(out.read_text())["recordings"]
+    assert [r["name"] for r in rows] == ["nmm_x", "odrive_nocomp"]
+    for r in rows:
+        assert {"name", "kind", "verdict", "heldout_rms_before", "effects"} <= set(r)
+        for e in r["effects"]:
+            assert e["heldout_rms_after"] <= 0.8 * r["heldout_rms_before"]
+    assert (tmp_path / "real-recordings-summary.png").exists()
