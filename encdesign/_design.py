@@ -11,7 +11,6 @@ writes it as an ``encdesign-recording/1`` multihead recording.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import tomllib
 from collections.abc import Mapping
@@ -24,7 +23,13 @@ import numpy as np
 
 from ._errors import input_error
 from ._kinematics import EncoderModel, make_model, noisy_head_readings
-from ._recording import Recording, load_recording, write_recording
+from ._recording import (
+    Recording,
+    _finite_number,
+    _positive_number,
+    load_recording,
+    write_recording,
+)
 
 __all__ = [
     "DESIGN_FORMAT",
@@ -117,17 +122,8 @@ class Design:
 # ----------------------------------------------------------------------------- checkers
 
 
-def _number(where: str, v: Any) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise input_error(where, f"got {v!r}", "a finite number")
-    return float(v)
-
-
-def _positive(where: str, v: Any) -> float:
-    x = _number(where, v)
-    if x <= 0:
-        raise input_error(where, f"got {v!r}", "a positive number")
-    return x
+_number = _finite_number
+_positive = _positive_number
 
 
 def _nonneg(where: str, v: Any) -> float:
