@@ -50,10 +50,12 @@ def print_result(summary: dict, stream=None) -> None:
         print(f"best      {disc} {ins}".rstrip(), file=out)
 
 
-def run(args: argparse.Namespace) -> int:
+def run_and_report(args: argparse.Namespace, solve) -> int:
+    """Load ``args.problem``, run ``solve(problem, recorder=, progress=)``, record the cases,
+    print the result and write the ``--json`` summary; exit 0 on success, else 1."""
     problem = load_problem(args.problem)
     with CaseRecorder(args.cases) as rec:
-        result = solve_problem(problem, recorder=rec, progress=not args.quiet)
+        result = solve(problem, recorder=rec, progress=not args.quiet)
     summary = result.summary()
     summary["n_cases"] = len(rec.cases)
     summary["cases_file"] = None if args.cases is None else str(args.cases)
@@ -63,3 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         print(f"wrote {write_json(args.json, summary)}")
     return 0 if result.status == "success" else 1
+
+
+def run(args: argparse.Namespace) -> int:
+    return run_and_report(args, solve_problem)

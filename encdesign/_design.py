@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from ._recording import (
     _finite_number,
     _positive_number,
     load_recording,
+    read_toml,
     write_recording,
 )
 
@@ -352,17 +352,7 @@ def load_design(path: str | os.PathLike) -> Design:
         EncdesignInputError: the file is missing, not TOML, or breaks the format.
     """
     path = Path(path)
-    where = str(path)
-    if not path.exists():
-        raise input_error(where, "file not found")
-    try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise input_error(where, f"not valid TOML ({exc})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise input_error(where, f"cannot read ({exc})") from None
-    return dataclasses.replace(parse_design(raw, where), path=path)
+    return dataclasses.replace(parse_design(read_toml(path), str(path)), path=path)
 
 
 def simulate_bench(

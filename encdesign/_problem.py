@@ -47,12 +47,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ._errors import input_error
+from ._recording import read_toml
 
 # unit name -> (SI unit, factor to SI)
 UNITS: dict[str, tuple[str, float]] = {
@@ -484,11 +484,4 @@ def load_problem(
     Raises :class:`~encdesign.EncdesignInputError` naming the file and field on bad input.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise input_error(str(path), f"cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise input_error(str(path), f"not valid TOML ({exc})") from None
-    return parse_problem(data, registry, source=path)
+    return parse_problem(read_toml(path), registry, source=path)

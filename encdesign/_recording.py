@@ -460,6 +460,25 @@ def read_table(path: Path) -> dict[str, list[str]]:
     return {h: list(c) for h, c in zip(header, cols)}
 
 
+def read_toml(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a TOML file (recording, design or problem) into a dict; never modifies it.
+
+    Raises:
+        EncdesignInputError: the file is missing, unreadable or not valid TOML.
+    """
+    path = Path(path)
+    where = str(path)
+    if not path.exists():
+        raise input_error(where, "file not found")
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise input_error(where, f"not valid TOML ({exc})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise input_error(where, f"cannot read ({exc})") from None
+
+
 def load_recording(path: str | os.PathLike) -> Recording:
     """Load and validate a recording from its TOML file.
 
@@ -475,16 +494,7 @@ def load_recording(path: str | os.PathLike) -> Recording:
     """
     path = Path(path)
     where = str(path)
-    if not path.exists():
-        raise input_error(where, "file not found")
-    try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise input_error(where, f"not valid TOML ({exc})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise input_error(where, f"cannot read ({exc})") from None
-    meta = validate_meta(raw, where)
+    meta = validate_meta(read_toml(path), where)
     if "data" not in meta:
         raise input_error(where, "missing key 'data'", "the name of the CSV data table")
     data_path = (path.parent / meta["data"]).resolve()
