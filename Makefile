@@ -23,7 +23,9 @@ demo: setup
 test: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks
 	$(VENV)/bin/ruff format --check encdesign studies tests benchmarks
-	$(PY) -m pytest -q -p no:cacheprovider tests
+	# single-threaded BLAS: the finders' many small least-squares solves run far slower
+	# with threads competing for 2 cores
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider tests
 
 lint: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks

@@ -1,7 +1,7 @@
 """``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE]``.
 
-Multihead recordings go to :func:`encdesign.diagnose`; quadrature and motion recordings to
-their own finders (``encdesign._diagnose_dispatch``); the sds kind is refused (exit 2)."""
+Multihead recordings go to :func:`encdesign.diagnose`; sds, quadrature and motion recordings
+to their own finders (``encdesign._diagnose_dispatch``)."""
 
 from __future__ import annotations
 
@@ -47,12 +47,14 @@ def run(args: argparse.Namespace) -> int:
     from ._recording import load_recording
 
     rec = load_recording(args.recording)
-    if rec.kind in ("quadrature", "motion"):
-        # signal-level and shaft-motion recordings have their own finders
+    if rec.kind in ("quadrature", "motion", "sds"):
+        # timing, signal-level and shaft-motion recordings have their own finders
         from ._diagnose_dispatch import diagnose_any
 
         doc = diagnose_any(rec, plots=args.plots)
         write_json(args.json, doc)
+        if args.report is not None and "report" in doc:
+            _write_text(args.report, doc["report"])
         print(f"verdict: {doc['verdict']}")
         print(f"wrote {args.json}", file=sys.stderr)
         return 0

@@ -1,8 +1,9 @@
 """One entry for the discrepancy finder over every recording kind.
 
-``multihead`` and ``sds`` recordings go to the kinematic/timing finder
-(:mod:`encdesign._diagnose`); ``quadrature`` and ``motion`` recordings to their own finders
-(:mod:`encdesign._quadrature_finder`, :mod:`encdesign._motion_finder`). All return the same
+``multihead`` recordings go to the kinematic finder (:mod:`encdesign._diagnose`);
+``sds``, ``quadrature`` and ``motion`` recordings to their own finders
+(:mod:`encdesign._sds_finder`, :mod:`encdesign._quadrature_finder`,
+:mod:`encdesign._motion_finder`). All return the same
 JSON contract: ``verdict``, ``rms_before``, ``heldout_rms_before``, ``effects``,
 ``unexplained`` (see ``docs/diagnose.md``).
 """
@@ -21,6 +22,10 @@ def diagnose_any(rec: Recording, *, plots: str | Path | None = None) -> dict[str
         from ._motion_finder import diagnose_motion
 
         return diagnose_motion(rec, plots=plots)
+    if rec.kind == "sds":
+        from ._sds_finder import diagnose_sds
+
+        return diagnose_sds(rec, plots=plots)
     if rec.kind == "quadrature":
         from ._quadrature_finder import diagnose_quadrature
 

@@ -277,7 +277,53 @@ def build_normals(key: jax.Array, index: jax.Array, dim: int) -> jax.Array:
     """
     flat = jnp.ravel(index)
     z = jax.vmap(lambda i: jax.random.normal(jax.random.fold_in(key, i), (dim,)))(flat)
-    return z.reshape((*jnp.shape(index), dim))
+    # materialise z: without the barrier XLA may fuse the random-number generation into
+    # every elementwise consumer and recompute it per reading (measured: the Monte Carlo
+    # objective ran 1.8x slower)
+    return jax.lax.optimization_barrier(z.reshape((*jnp.shape(index), dim)))
+
+
+VECTOR_BUILDS = 8  # builds vectorised together: a working set that stays in the CPU caches
+
+
+def values_of_normals(fn_z: Callable[[jax.Array], jax.Array], z: jax.Array, vector: int):
+    """``fn_z`` on every row of ``z [B, dim]`` (``B`` a multiple of ``vector``): ``lax.map``
+    over groups of ``vector`` rows, ``vmap`` within a group; returns ``[B]``."""
+    groups = z.reshape(-1, vector, z.shape[-1])
+    return jax.lax.map(jax.vmap(fn_z), groups).reshape(-1)
+
+
+def map_builds(
+    fn_z: Callable[[jax.Array], jax.Array],
+    key: jax.Array,
+    n: int,
+    dim: int,
+    *,
+    first: int = 0,
+    block: int = 512,
+    vector: int = VECTOR_BUILDS,
+) -> jax.Array:
+    """Traceable per-build values ``fn_z(z_i)`` for builds ``first … first + n - 1`` of
+    ``key`` (:func:`build_normals`), ``[n]``.
+
+    Memory is bounded at any ``n``: the random numbers are drawn ``block`` builds at a
+    time (rounded up to a multiple of ``vector``) and the builds are vectorised ``vector``
+    at a time (small groups keep the working set in the CPU caches: measured fastest for
+    values and gradients alike). Drawing the numbers per block rather than inside the
+    innermost loop matters: XLA compiles that loop markedly slower (1.8x) when it also
+    draws random numbers.
+    """
+    vector = int(max(1, min(vector, n)))
+    n_groups = -(-n // vector)
+    per_block = int(max(1, min(n_groups, -(-int(block) // vector))))
+    size = per_block * vector
+    n_blocks = -(-n // size)
+
+    def one_block(b):
+        z = build_normals(key, first + b * size + jnp.arange(size), dim)
+        return values_of_normals(fn_z, z, vector)
+
+    return jax.lax.map(one_block, jnp.arange(n_blocks)).reshape(-1)[:n]
 
 
 def _chunked_values(
@@ -288,18 +334,10 @@ def _chunked_values(
     dim: int,
     chunk_size: int,
 ) -> jax.Array:
-    """Per-build values ``fn(theta, z_i)`` for builds ``0 … n-1``, ``chunk_size`` at a time
-    (``lax.map`` over chunks: memory is bounded by one chunk)."""
-    chunk = int(min(chunk_size, n))
-    n_chunks = -(-n // chunk)
-
-    def one(c):
-        idx = c * chunk + jnp.arange(chunk)
-        z = build_normals(key, idx, dim)
-        return jax.vmap(lambda zi: fn(theta, zi))(z)
-
-    vals = jax.lax.map(one, jnp.arange(n_chunks))
-    return vals.reshape(-1)[:n]
+    """Per-build values ``fn(theta, z_i)`` for builds ``0 … n-1`` (:func:`map_builds`:
+    random numbers drawn ``chunk_size`` builds at a time, so memory is bounded by one
+    chunk)."""
+    return map_builds(lambda z: fn(theta, z), key, n, dim, block=chunk_size)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -346,11 +384,13 @@ class MonteCarloResult:
 def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int):
     """Jitted values of one chunk of builds (cached per ``fn``: reruns don't recompile)."""
 
+    vector = VECTOR_BUILDS if chunk % VECTOR_BUILDS == 0 else 1
+
     @jax.jit
     def run_chunk(key, c, th):
         idx = c * chunk + jnp.arange(chunk)
         z = build_normals(key, idx, dim)
-        return jax.vmap(lambda zi: fn(th, zi))(z)
+        return values_of_normals(lambda zi: fn(th, zi), z, vector)
 
     return run_chunk
 

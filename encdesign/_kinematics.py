@@ -37,6 +37,7 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, ArrayLike
 
 __all__ = [
@@ -53,7 +54,7 @@ __all__ = [
 ]
 
 _CHUNK_READINGS = 2**15  # default readings per chunk in head_errors_batch
-_GRATING_LOOP_MAX = 64  # orders up to this use the rotation recurrence, beyond: direct sin/cos
+_GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
 
 
 def _f64(x: ArrayLike) -> Array:
@@ -347,17 +348,99 @@ def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -
         j = jnp.arange(1, m + 1, dtype=psi.dtype)
         arg = psi[..., None] * j
         return jnp.sum(sin_rad * jnp.sin(arg) + cos_rad * jnp.cos(arg), axis=-1)
-    s, c = s1, c1
-    g = sin_rad[0] * s + cos_rad[0] * c
-    for j in range(1, m):  # rotation recurrence: (s, c) of order j+1 from order j
-        s, c = s * c1 + c * s1, c * c1 - s * s1
-        g = g + sin_rad[j] * s + cos_rad[j] * c
-    return g
+    return _grating_series(sin_rad, cos_rad, s1, c1)
+
+
+def _instantiate(t):
+    return jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t
+
+
+def _clenshaw(cos_coef: Array, sin_coef: Array, c1: Array, s1: Array) -> Array:
+    """``sum_j a_j cos(j psi) + b_j sin(j psi)`` for ``j = 1 … M`` by Clenshaw's recurrence
+    (Chebyshev ``T_j`` for the cosines, ``sin psi U_{j-1}`` for the sines), from
+    ``c1 = cos psi``, ``s1 = sin psi``: two multiply-adds per order and series."""
+    m = cos_coef.shape[0]
+    x2 = 2.0 * c1
+    bc1 = bc2 = bs1 = bs2 = jnp.zeros_like(c1)
+    for j in range(m - 1, 0, -1):  # orders M … 2
+        bc1, bc2 = cos_coef[j] + x2 * bc1 - bc2, bc1
+        bs1, bs2 = sin_coef[j] + x2 * bs1 - bs2, bs1
+    cos_sum = c1 * (cos_coef[0] + x2 * bc1 - bc2) - bc1
+    sin_sum = s1 * (sin_coef[0] + x2 * bs1 - bs2)
+    return cos_sum + sin_sum
+
+
+@jax.custom_jvp
+def _grating_series(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array) -> Array:
+    """``sum_j S_j sin(j psi) + C_j cos(j psi)`` from the unit vector
+    ``(c1, s1) = (cos psi, sin psi)``; rad."""
+    return _clenshaw(cos_rad, sin_rad, c1, s1)
+
+
+def _grating_series_jvp(primals, tangents):
+    """Closed-form tangent: the series' derivative in ``psi`` is the series of coefficients
+    ``j C_j`` (sines, negated) and ``j S_j`` (cosines), and ``d psi = cos psi d(sin psi) -
+    sin psi d(cos psi)`` on the unit circle; a coefficient tangent enters linearly.
+    Reverse mode then transposes a few multiply-adds per reading."""
+    sin_rad, cos_rad, s1, c1 = primals
+    d_sin, d_cos, ds1, dc1 = tangents
+    j = jnp.arange(1, sin_rad.shape[0] + 1, dtype=s1.dtype)
+    g = _clenshaw(cos_rad, sin_rad, c1, s1)
+    gp = _clenshaw(j * sin_rad, -j * cos_rad, c1, s1)
+    dg = gp * (c1 * _instantiate(ds1) - s1 * _instantiate(dc1))
+    if not (isinstance(d_sin, SymbolicZero) and isinstance(d_cos, SymbolicZero)):
+        dg = dg + _clenshaw(_instantiate(d_cos), _instantiate(d_sin), c1, s1)
+    return g, dg
+
+
+_grating_series.defjvp(_grating_series_jvp, symbolic_zeros=True)
 
 
 @jax.jit
 def _errors(model: EncoderModel, theta: Array, time: Array | None) -> Array:
     """Head errors ``(n, H)``, rad, for shaft angles ``theta (n,)`` rad and times ``(n,)`` s."""
+    geom, s1, c1, psi = _geometry(model, theta, time)
+    d = model.disk
+    return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
+
+
+def errors_scaled_grating(
+    model: EncoderModel,
+    theta_rad: Array,
+    grating_scale_rad: Array,
+    unit_sin: Array,
+    unit_cos: Array,
+) -> Array:
+    """Head errors ``(n, H)``, rad, with the grating error written as a scale times a
+    fixed shape: ``g(psi) = grating_scale_rad * sum_j unit_sin_j sin(j psi) + unit_cos_j
+    cos(j psi)`` (the model's own grating coefficients are ignored).
+
+    The same physics as :func:`head_errors`, arranged for Monte Carlo gradients with
+    respect to a grating tolerance: reverse mode then needs one reduction for the scale
+    instead of one per coefficient, and the forward pass is recomputed in the backward
+    pass (``jax.checkpoint``) instead of stored, so the gradient costs about three
+    forward evaluations at any batch size.
+
+    Args:
+        model: the encoder (its ``disk.grating_*`` are not used).
+        theta_rad: shaft angles, rad, ``(n,)``.
+        grating_scale_rad: scalar, rad.
+        unit_sin, unit_cos: the grating shape, orders ``1 … M`` (dimensionless).
+    """
+    return _errors_scaled(model, _f64(theta_rad).reshape(-1), grating_scale_rad, unit_sin, unit_cos)
+
+
+@jax.checkpoint
+def _errors_scaled(model, theta, scale, unit_sin, unit_cos):
+    geom, s1, c1, psi = _geometry(model, theta, None)
+    return geom + scale * _grating(_f64(unit_sin), _f64(unit_cos), s1, c1, psi)
+
+
+def _geometry(
+    model: EncoderModel, theta: Array, time: Array | None
+) -> tuple[Array, Array, Array, Array]:
+    """Geometric head errors ``(n, H)`` (rad, no grating error) and the read point's
+    ``sin psi``, ``cos psi`` and ``psi`` (rad) on the disk."""
     d, hd, mo = model.disk, model.heads, model.motion
     radius = d.optical_radius_m
     # --- disk in the rotor frame at theta = 0
@@ -411,7 +494,7 @@ def _errors(model: EncoderModel, theta: Array, time: Array | None) -> Array:
     # exact for |phi| < pi (a head 180 deg off is not an encoder)
     geom = 2.0 * _atan((s1 * cd - c1 * sd) / (1.0 + c1 * cd + s1 * sd))
     psi = geom + (th - hd.angles_rad)  # only used for orders > _GRATING_LOOP_MAX
-    return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
+    return geom, s1, c1, psi
 
 
 def _as_theta(theta_rad: ArrayLike) -> tuple[Array, bool]:

@@ -275,10 +275,20 @@ def _window(t: np.ndarray, m: np.ndarray, anchor: float, n_marks: int, need_next
 
 
 def _run_windows(where: str, run: int, times: dict, marks: dict, n_marks: int, nf: int, nm: int):
-    """Edge windows of every complete reading of one run (start: a mark-0 edge of f0)."""
-    tf0, mf0 = times["f0"], marks["f0"]
+    """Edge windows of every complete reading of one run, aligned in time.
+
+    Readings start at edges of f0 spaced by N edges, beginning at the first f0 edge at or
+    after the latest first edge of any sensor: every sensor's window then starts within one
+    mark spacing of the others, so the windows cover the same revolution (a sensor whose
+    edges begin later would otherwise read a window shifted by up to one revolution, which
+    does not cancel errors that change from one revolution to the next).
+    """
+    tf0 = times["f0"]
+    names = [f"f{f}" for f in range(nf)] + [f"m{m}" for m in range(nm)]
+    t_start = max(float(times[s][0]) for s in names)
+    first = int(np.searchsorted(tf0, t_start))
     alphas, periods, kfs, taus, kms = [], [], [], [], []
-    for s in np.flatnonzero(mf0 == 0):
+    for s in range(first, len(tf0), n_marks):
         anchor = tf0[s]
         fixed = [_window(times[f"f{f}"], marks[f"f{f}"], anchor, n_marks, True) for f in range(nf)]
         moving = [
@@ -296,7 +306,7 @@ def _run_windows(where: str, run: int, times: dict, marks: dict, n_marks: int, n
             f"{where}, run {run}",
             "no complete revolution for all sensor pairs",
             f"every sensor to cover at least one full revolution ({n_marks} edges) after "
-            "a mark-0 edge of sensor f0, the fixed sensors one edge more",
+            "the first edge of the sensor that starts last, the fixed sensors one edge more",
         )
     return (
         np.stack(alphas),
@@ -310,8 +320,9 @@ def _run_windows(where: str, run: int, times: dict, marks: dict, n_marks: int, n
 def sds_readings_from_recording(rec: Recording, *, revs_per_reading: int = 1) -> SDSRecordingResult:
     """Measure φ from an ``sds`` recording: SDS per fixed × moving pair, averaged.
 
-    Each reading starts at a mark-0 edge of fixed sensor f0; every sensor contributes its
-    next N edges (seed eqs. 23–24, k = pos(B_0) − pos(A_0)); the pair constants are the
+    Each reading starts at an edge of fixed sensor f0 once every sensor has begun (so all
+    windows cover the same revolution); every sensor contributes its next N edges (seed
+    eqs. 23–24, k = pos(B_0) − pos(A_0)); the pair constants are the
     nominal azimuth differences from the TOML; ``revs_per_reading`` consecutive
     revolutions are averaged.
 

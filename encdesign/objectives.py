@@ -39,8 +39,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ._drivers import build_normals
-from ._kinematics import EncoderModel, head_errors
+from ._drivers import build_normals, map_builds
+from ._kinematics import EncoderModel, errors_scaled_grating
 from ._problem import ProblemObjective, VariableInfo
 from ._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ._selfcomp import encoder_map, self_compensate
@@ -313,12 +313,25 @@ def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Encoder
     )
 
 
+def _grating_shape(design: EncoderDesign, z: ArrayLike) -> tuple[Array, Array]:
+    """The grating error of one build per unit tolerance: ``(S_j, C_j) / tol.grating``."""
+    z = _f64(z)
+    i = 4 + design.n_heads + 1
+    mg = design.grating_orders
+    j = jnp.arange(1, mg + 1, dtype=jnp.float64)
+    return z[i : i + mg] / j, z[i + mg : i + 2 * mg] / j
+
+
 def build_residual(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
     """Residual error of one build after symmetry averaging and self-compensation, rad,
     at :attr:`EncoderDesign.theta_rad` (mean removed; see the module docstring)."""
     model = build_model(design, tol, z)
     theta = design.theta_rad
-    err = head_errors(model, theta)  # (n, N+1), rad
+    # the same errors as head_errors(model, theta), with the grating error written as
+    # tol.grating times its unit shape: cheaper reverse-mode gradients (see
+    # encdesign._kinematics.errors_scaled_grating)
+    unit_sin, unit_cos = _grating_shape(design, z)
+    err = errors_scaled_grating(model, theta, tol.grating, unit_sin, unit_cos)  # (n, N+1)
     readings = theta[:, None] + err
     n = design.n_heads
     avg = averaged_error(err[:, :n])
@@ -380,17 +393,20 @@ def build_metrics(
     first_build: int = 0,
 ) -> Array:
     """Per-build metric for builds ``first_build … first_build + n_builds - 1`` of ``key``
-    (common random numbers), chunked with ``lax.map``; rad (rad² for ``"ms"``)."""
-    dim = n_build_normals(design)
-    chunk = int(min(chunk_size, n_builds))
-    n_chunks = -(-n_builds // chunk)
+    (common random numbers), chunked with ``lax.map``; rad (rad² for ``"ms"``).
 
-    def one(c):
-        idx = first_build + c * chunk + jnp.arange(chunk)
-        z = build_normals(key, idx, dim)
-        return jax.vmap(lambda zi: build_metric(design, tol, zi, metric))(z)
-
-    return jax.lax.map(one, jnp.arange(n_chunks)).reshape(-1)[:n_builds]
+    Memory is bounded by one chunk of ``chunk_size`` builds; within a chunk, builds are
+    vectorised 8 at a time (:func:`encdesign._drivers.map_builds`), which keeps the
+    working set in the CPU caches (the fastest setting measured on CPU for the value and
+    its gradient, ``benchmarks/optimize.py``)."""
+    return map_builds(
+        lambda zi: build_metric(design, tol, zi, metric),
+        key,
+        n_builds,
+        n_build_normals(design),
+        first=first_build,
+        block=chunk_size,
+    )
 
 
 def residual_percentile(

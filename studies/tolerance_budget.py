@@ -104,7 +104,6 @@ def main(argv: list[str] | None = None) -> int:
             Tolerances.from_vector(s),
             key=k,
             n_builds=n_train,
-            chunk_size=100,
             first_build=first,
         )
 

@@ -43,6 +43,40 @@ def test_lbfgsb_keeps_bounds():
     assert b.status == "bounds_violated"
 
 
+def test_lbfgsb_compiles_once_per_function():
+    traces = []
+
+    def f(y, a):
+        if isinstance(y, jax.core.Tracer):
+            traces.append(1)
+        return jnp.sum((y - a) ** 2)
+
+    s1 = optimise(
+        f, "lbfgsb", jnp.array([0.0, 0.0]), jnp.array([1.0, 2.0]), upper=jnp.array([0.5, 3.0])
+    )
+    n = len(traces)
+    # another start, other bounds, other args: the jitted value-and-gradient is reused
+    s2 = optimise(
+        f, "lbfgsb", jnp.array([0.2, 0.1]), jnp.array([-1.0, 0.5]), lower=jnp.array([-0.5, -1.0])
+    )
+    assert n >= 1 and len(traces) == n
+    assert s1.ok and s2.ok
+    np.testing.assert_allclose(s1.value, [0.5, 2.0], atol=1e-6)
+    np.testing.assert_allclose(s2.value, [-0.5, 0.5], atol=1e-6)
+
+
+def test_map_builds_is_independent_of_chunking():
+    from encdesign._drivers import map_builds
+
+    key = jax.random.key(7)
+    ref = build_normals(key, jnp.arange(3, 3 + 203), 5) @ jnp.arange(1.0, 6.0)
+    for vector, block in ((1, 7), (4, 4), (8, 512), (8, 20), (64, 64)):
+        got = map_builds(
+            lambda z: z @ jnp.arange(1.0, 6.0), key, 203, 5, first=3, block=block, vector=vector
+        )
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+
 def test_failures_come_back_with_a_status():
     s = optimise(lambda y, a: jnp.log(y[0]) + y[0], "bfgs", jnp.array([1.0]))
     assert not s.ok and s.status in ("nonfinite", "failed", "max_steps_reached")

@@ -192,3 +192,27 @@ def test_invalid_shapes_raise():
 def test_public_names():
     for name in ("EncoderModel", "head_readings", "head_errors", "make_model", "Disk"):
         assert hasattr(encdesign, name)
+
+
+@pytest.mark.parametrize("m", [1, 2, 7, 64])
+def test_grating_series_matches_direct_sum_and_its_derivatives(m):
+    from encdesign._kinematics import _grating_series
+
+    rng = np.random.default_rng(m)
+    psi = jnp.asarray(np.concatenate([rng.uniform(-np.pi, np.pi, 50), [0.0, np.pi, 1e-9]]))
+    s = jnp.asarray(rng.normal(size=m) * 1e-6)
+    c = jnp.asarray(rng.normal(size=m) * 1e-6)
+    j = jnp.arange(1, m + 1)
+
+    def direct(s, c, psi):
+        return jnp.sin(psi[:, None] * j) @ s + jnp.cos(psi[:, None] * j) @ c
+
+    def series(s, c, psi):
+        return _grating_series(s, c, jnp.sin(psi), jnp.cos(psi))
+
+    np.testing.assert_allclose(series(s, c, psi), direct(s, c, psi), rtol=0, atol=1e-18 * m**2)
+    w = jnp.asarray(rng.normal(size=psi.shape))
+    for argnum in (0, 1, 2):
+        ga = jax.grad(lambda *a: w @ series(*a), argnums=argnum)(s, c, psi)
+        gd = jax.grad(lambda *a: w @ direct(*a), argnums=argnum)(s, c, psi)
+        np.testing.assert_allclose(ga, gd, rtol=1e-9, atol=1e-15 * m**2)
