@@ -259,6 +259,8 @@ KINDS: dict[str, KindSpec] = {
             "stator_coils": _positive_int,
             "commutation_states": _positive_int,
             "clock_hz": _positive_number,
+            # extension of the spec: the read radius turns fitted angles into lengths
+            "optical_radius_m": _positive_number,
         },
         required_encoder=("marks_per_rev", "fixed_sensor_angles_deg", "moving_sensor_angles_deg"),
         required_columns=_sds_required,

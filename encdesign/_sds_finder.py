@@ -1098,8 +1098,9 @@ def diagnose_sds(
             ``commutation_states`` for the design's motor orders; ``clock_hz`` for the
             design clock).
         plots: folder for PNG figures (``None``: no plots).
-        radius_m: read radius for converting angles to lengths (default the encoder's
-            ``radius_m`` or the seed's 25.4 mm).
+        radius_m: read radius for converting angles to lengths, m (default: the
+            recording's optional ``[encoder] optical_radius_m``, else the seed's 25.4 mm;
+            the report says which).
 
     Returns:
         ``verdict``, ``rms_before``, ``heldout_rms_before`` (rad), ``effects``,
@@ -1110,7 +1111,9 @@ def diagnose_sds(
     tab = sds_pair_table(rec)
     enc = rec.encoder
     where = str(rec.path) if rec.path is not None else "<recording>"
-    radius_m = float(REFERENCE_RADIUS_M if radius_m is None else radius_m)
+    if radius_m is None:
+        radius_m = enc.get("optical_radius_m", REFERENCE_RADIUS_M)
+    radius_m = float(radius_m)
     n_runs = len(tab.run_ids)
     if n_runs < 4:
         raise input_error(

@@ -193,3 +193,22 @@ def test_common_only_coil_order_is_unidentifiable_without_phi_ref(sds_bench):
     assert d["effects"][0]["name"] == "coil_mismatch", d["report"]
     # three equally spaced moving sensors: order 3 has one phase at all of them
     assert any("orders [3]" in u for u in d["base"]["unidentifiable"]), d["report"]
+
+
+def test_optical_radius_from_the_recording(sds_bench, tmp_path):
+    rec, _ = sds_bench("bearing_wobble")
+    base = diagnose_sds(rec)
+    enc = dict(rec.encoder, optical_radius_m=0.05)
+    path = tmp_path / "r.toml"
+    write_recording(path, "sds", dict(rec.columns), encoder=enc)
+    d = diagnose_sds(load_recording(path))
+    assert base["base"]["radius_m"] == pytest.approx(0.0254)
+    assert d["base"]["radius_m"] == pytest.approx(0.05)
+    bad = tmp_path / "bad.toml"
+    with pytest.raises(encdesign.EncdesignInputError, match="optical_radius_m"):
+        write_recording(bad, "sds", dict(rec.columns), encoder=dict(enc, optical_radius_m=-1.0))
+    assert not bad.exists()
+    text = path.read_text().replace("optical_radius_m = 0.05", "optical_radius_m = -1.0")
+    bad.write_text(text)
+    with pytest.raises(encdesign.EncdesignInputError, match="optical_radius_m"):
+        load_recording(bad)
