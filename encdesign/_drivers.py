@@ -384,13 +384,9 @@ class MonteCarloResult:
 def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int):
     """Jitted values of one chunk of builds (cached per ``fn``: reruns don't recompile)."""
 
-    vector = VECTOR_BUILDS if chunk % VECTOR_BUILDS == 0 else 1
-
     @jax.jit
     def run_chunk(key, c, th):
-        idx = c * chunk + jnp.arange(chunk)
-        z = build_normals(key, idx, dim)
-        return values_of_normals(lambda zi: fn(th, zi), z, vector)
+        return map_builds(lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=chunk)
 
     return run_chunk
 

@@ -245,39 +245,63 @@ def expected_sensitivity(
 # ----------------------------------------------------------------------------- builds
 
 
+def _deviation_sizes(design: EncoderDesign) -> dict[str, int]:
+    """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
+    h = design.n_heads + 1
+    mg, ka = design.grating_orders, design.axial_orders
+    return {
+        "eccentricity": 2,
+        "tilt": 2,
+        "placement": h,
+        "grating_sin": mg,
+        "grating_cos": mg,
+        "beam_tilt": h,
+        "axial_cos": ka,
+        "axial_sin": ka,
+    }
+
+
 def n_build_normals(design: EncoderDesign) -> int:
     """Length of the standard-normal vector ``z`` of one build of ``design``."""
-    h = design.n_heads + 1
-    return 2 + 2 + h + 2 * design.grating_orders + h + 2 * design.axial_orders
+    return sum(_deviation_sizes(design).values())
 
 
-def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> EncoderModel:
-    """The kinematic model of one build: ``design`` with deviations ``sigma * z``.
+def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
+    """The deviations of one build per unit tolerance, by name.
 
     ``z`` (``[n_build_normals(design)]``) is split in order: eccentricity (x, y), tilt
     (x, y), placement (per head), grating (``S_1…S_M``, ``C_1…C_M``, scaled by ``1/j``),
     beam tilt (per head), axial runout (cos, sin per order).
     """
     z = _f64(z)
+    out, i = {}, 0
+    for name, n in _deviation_sizes(design).items():
+        out[name] = z[i : i + n]
+        i += n
+    j = jnp.arange(1, design.grating_orders + 1, dtype=jnp.float64)
+    out["grating_sin"] = out["grating_sin"] / j
+    out["grating_cos"] = out["grating_cos"] / j
+    return out
+
+
+def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> EncoderModel:
+    """The kinematic model of one build: ``design`` with deviations ``sigma * z`` (the
+    layout of ``z``: :func:`_unit_deviations`)."""
+    return _model_of(design, tol, _unit_deviations(design, z))
+
+
+def _model_of(design: EncoderDesign, tol: Tolerances, u: dict[str, Array]) -> EncoderModel:
+    """:func:`build_model` from the unit deviations ``u`` of :func:`_unit_deviations`."""
     h = design.n_heads + 1
     mg, ka = design.grating_orders, design.axial_orders
-    i = 0
-
-    def take(n):
-        nonlocal i
-        out = z[i : i + n]
-        i += n
-        return out
-
-    ecc = tol.eccentricity * take(2)
-    tilt = tol.tilt * take(2) + jnp.array([1.0, 0.0]) * design.tilt_rad
-    place = tol.placement * take(h)
-    j = jnp.arange(1, mg + 1, dtype=jnp.float64)
-    gs = tol.grating * take(mg) / j
-    gc = tol.grating * take(mg) / j
-    beam = tol.beam_tilt * take(h)
-    ac = tol.axial_runout * take(ka)
-    asn = tol.axial_runout * take(ka)
+    ecc = tol.eccentricity * u["eccentricity"]
+    tilt = tol.tilt * u["tilt"] + jnp.array([1.0, 0.0]) * design.tilt_rad
+    place = tol.placement * u["placement"]
+    gs = tol.grating * u["grating_sin"]
+    gc = tol.grating * u["grating_cos"]
+    beam = tol.beam_tilt * u["beam_tilt"]
+    ac = tol.axial_runout * u["axial_cos"]
+    asn = tol.axial_runout * u["axial_sin"]
     # The kinematic classes validate concrete values in __check_init__; build a nominal
     # template eagerly and swap the (possibly traced) leaves in with tree_at.
     with jax.ensure_compile_time_eval():
@@ -313,25 +337,16 @@ def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Encoder
     )
 
 
-def _grating_shape(design: EncoderDesign, z: ArrayLike) -> tuple[Array, Array]:
-    """The grating error of one build per unit tolerance: ``(S_j, C_j) / tol.grating``."""
-    z = _f64(z)
-    i = 4 + design.n_heads + 1
-    mg = design.grating_orders
-    j = jnp.arange(1, mg + 1, dtype=jnp.float64)
-    return z[i : i + mg] / j, z[i + mg : i + 2 * mg] / j
-
-
 def build_residual(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
     """Residual error of one build after symmetry averaging and self-compensation, rad,
     at :attr:`EncoderDesign.theta_rad` (mean removed; see the module docstring)."""
-    model = build_model(design, tol, z)
+    u = _unit_deviations(design, z)
+    model = _model_of(design, tol, u)
     theta = design.theta_rad
     # the same errors as head_errors(model, theta), with the grating error written as
     # tol.grating times its unit shape: cheaper reverse-mode gradients (see
     # encdesign._kinematics.errors_scaled_grating)
-    unit_sin, unit_cos = _grating_shape(design, z)
-    err = errors_scaled_grating(model, theta, tol.grating, unit_sin, unit_cos)  # (n, N+1)
+    err = errors_scaled_grating(model, theta, tol.grating, u["grating_sin"], u["grating_cos"])
     readings = theta[:, None] + err
     n = design.n_heads
     avg = averaged_error(err[:, :n])
