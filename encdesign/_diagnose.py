@@ -1424,7 +1424,7 @@ def report_text(d: Diagnosis) -> str:
 def write_plots(d: Diagnosis, out_dir: str | os.PathLike) -> list[Path]:
     """PNG figures: RMS before/after (fitted, held out), residual spectra before/after,
     per-head residuals before/after. Returns the paths."""
-    from ._study import new_figure, save_figure
+    from ._study import new_figure, rms_bars, save_figure
 
     out = Path(out_dir)
     pd = d._plot_data
@@ -1433,14 +1433,15 @@ def write_plots(d: Diagnosis, out_dir: str | os.PathLike) -> list[Path]:
     paths = []
     u = 1e6
     fig, ax = new_figure(figsize=(6, 3.5))
-    labels = ["base"] + [e.name for e in d.effects]
-    fitted = [d.rms_before] + [e.rms_after for e in d.effects]
-    held = [d.heldout_rms_before] + [e.heldout_rms_after for e in d.effects]
-    x = np.arange(len(labels))
-    ax.bar(x - 0.2, np.asarray(fitted) * u, 0.4, label="fitted")
-    ax.bar(x + 0.2, np.asarray(held) * u, 0.4, label="held out")
+    rms_bars(
+        ax,
+        ["base"] + [f"+ {e.name}" for e in d.effects],
+        [d.rms_before] + [e.rms_after for e in d.effects],
+        [d.heldout_rms_before] + [e.heldout_rms_after for e in d.effects],
+        scale=u,
+        fontsize=8,
+    )
     ax.axhline(np.mean(d.noise_rad) * u, color="k", ls=":", label="noise estimate")
-    ax.set_xticks(x, ["base"] + [f"+ {n}" for n in labels[1:]], fontsize=8)
     ax.set_ylabel("residual RMS (urad)")
     ax.set_title(f"verdict: {d.verdict}")
     ax.legend(fontsize=8)

@@ -299,7 +299,7 @@ def motion_report(d: dict) -> str:
 
 def plot_motion(d: dict, theta: np.ndarray, base: dict, final: dict, folder: str | Path) -> list:
     """Residual spectra before/after, residual vs angle, held-out RMS bars (PNG)."""
-    from ._study import new_figure, save_figure
+    from ._study import new_figure, rms_bars, rms_steps, save_figure
 
     folder = Path(folder)
     stem = Path(d["recording"] or "motion").stem
@@ -313,13 +313,7 @@ def plot_motion(d: dict, theta: np.ndarray, base: dict, final: dict, folder: str
     ax[1].plot(deg, base["resid"] * 1e3, ",", label="base")
     ax[1].plot(deg, final["resid"] * 1e3, ",", label="after")
     ax[1].set(xlabel="shaft angle (deg)", ylabel="residual (mrad)")
-    names = ["base"] + [e["name"] for e in d["effects"]]
-    fitted = [d["rms_before"]] + [e["rms_after"] for e in d["effects"]]
-    heldout = [d["heldout_rms_before"]] + [e["heldout_rms_after"] for e in d["effects"]]
-    x = np.arange(len(names))
-    ax[2].bar(x - 0.2, np.asarray(fitted) * 1e3, 0.4, label="fitted")
-    ax[2].bar(x + 0.2, np.asarray(heldout) * 1e3, 0.4, label="held out")
-    ax[2].set_xticks(x, names)
+    rms_bars(ax[2], *rms_steps(d), scale=1e3)
     ax[2].set(ylabel="RMS (mrad)")
     ax[2].legend()
     return [save_figure(fig, folder, f"{stem}-diagnosis.png")]

@@ -385,7 +385,7 @@ def quadrature_report(d: dict) -> str:
 
 def plot_quadrature(d, sa, sb, psi, base, final, folder) -> list:
     """Lissajous figure with the fitted curves, residual vs phase, spectra, RMS bars."""
-    from ._study import new_figure, save_figure
+    from ._study import new_figure, rms_bars, rms_steps, save_figure
 
     folder = Path(folder)
     stem = Path(d["recording"] or "quadrature").stem
@@ -408,15 +408,13 @@ def plot_quadrature(d, sa, sb, psi, base, final, folder) -> list:
     ax[1, 0].semilogy(o, d["spectrum"]["after"], "o-", ms=3, label="final")
     ax[1, 0].set(xlabel="order (cycles per signal period)", ylabel="residual amplitude")
     ax[1, 0].legend(fontsize=8)
-    names = ["Heydemann", "base"] + [e["name"] for e in d["effects"]]
-    fitted = [d["heydemann"]["rms"], d["rms_before"]] + [e["rms_after"] for e in d["effects"]]
-    held = [d["heydemann"]["heldout_rms"], d["heldout_rms_before"]] + [
-        e["heldout_rms_after"] for e in d["effects"]
-    ]
-    x = np.arange(len(names))
-    ax[1, 1].bar(x - 0.2, fitted, 0.4, label="fitted")
-    ax[1, 1].bar(x + 0.2, held, 0.4, label="held out")
-    ax[1, 1].set_xticks(x, names)
+    names, fitted, held = rms_steps(d)
+    rms_bars(
+        ax[1, 1],
+        ["Heydemann", *names],
+        [d["heydemann"]["rms"], *fitted],
+        [d["heydemann"]["heldout_rms"], *held],
+    )
     ax[1, 1].set(ylabel="RMS (relative radius)")
     ax[1, 1].legend(fontsize=8)
     return [save_figure(fig, folder, f"{stem}-diagnosis.png")]

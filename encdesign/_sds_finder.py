@@ -1567,7 +1567,7 @@ def sds_report(d: dict) -> str:
 
 def plot_sds(d: dict, fitter: _Fitter, base: dict, final: dict, folder: str | Path) -> list:
     """Residual vs φ before/after, residual spectra before/after, per-pair residuals (PNG)."""
-    from ._study import new_figure, save_figure
+    from ._study import new_figure, rms_bars, rms_steps, save_figure
 
     folder = Path(folder)
     tab = fitter.tab
@@ -1579,13 +1579,7 @@ def plot_sds(d: dict, fitter: _Fitter, base: dict, final: dict, folder: str | Pa
     ax[0].plot(phi, final["resid"] * 1e9, ".", ms=3, label="with named effects")
     ax[0].set(xlabel="platform angle φ (deg)", ylabel="residual (nrad)", title="residual vs φ")
     ax[0].legend()
-    names = ["base"] + [e["name"] for e in d["effects"]]
-    fitted = [d["rms_before"]] + [e["rms_after"] for e in d["effects"]]
-    held = [d["heldout_rms_before"]] + [e["heldout_rms_after"] for e in d["effects"]]
-    x = np.arange(len(names))
-    ax[1].bar(x - 0.2, np.asarray(fitted) * 1e9, 0.4, label="fitted")
-    ax[1].bar(x + 0.2, np.asarray(held) * 1e9, 0.4, label="held out")
-    ax[1].set_xticks(x, names)
+    rms_bars(ax[1], *rms_steps(d), scale=1e9)
     ax[1].set(ylabel="RMS (nrad)")
     ax[1].legend()
     files.append(save_figure(fig, folder, "rms_before_after.png"))
