@@ -1,7 +1,7 @@
 """Benchmark: the discrepancy finder on concealed effects, and its model terms vs NumPy.
 
 1. The reading-space model (base multihead model plus every catalog term) evaluated by
-   ``encdesign._diagnose._predict`` (JAX, jit) and by a plain NumPy implementation of the
+   ``encdesign.diagnose._multihead._predict`` (JAX, jit) and by a plain NumPy implementation of the
    same equations in this file: compared (max abs difference, rad) and timed.
 2. ``encdesign.diagnose`` on a 4-head, 16,000-sample recording (compilation included:
    the first call in a fresh process), the issue's performance criterion (< 60 s).
@@ -27,8 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign
-from encdesign import _diagnose as D
-from encdesign._conceal import write_concealed
+from encdesign.diagnose import _multihead as D
+from encdesign.diagnose._conceal import write_concealed
 
 
 def numpy_predict(p: np.ndarray, prep: D.Prepared) -> np.ndarray:
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     if args.conceal:
-        from encdesign._cli import _load_study
+        from encdesign.cli._main import _load_study
 
         mod = _load_study("conceal-benchmark")
         sj = tmp / "conceal.json"

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign  # noqa: F401  (float64 on)
-from encdesign._kinematics import EncoderModel, head_errors_batch, make_model
+from encdesign.physics._kinematics import EncoderModel, head_errors_batch, make_model
 
 
 def make_population(key, n_designs: int, n_heads: int, n_orders: int) -> EncoderModel:

@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
-from encdesign._drivers import VECTOR_BUILDS, build_normals, values_of_normals
+from encdesign.design._drivers import VECTOR_BUILDS, build_normals, values_of_normals
 from encdesign.objectives import (
     EncoderDesign,
     Tolerances,

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign._study import write_json
+from encdesign.io._study import write_json
 
 PITCH_M = 20e-6
 ERR = {"offset_a": 0.04, "offset_b": -0.03, "amplitude_ratio": 0.95, "phase_error_rad": 0.05}

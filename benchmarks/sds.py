@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign._sds import _revolution
-from encdesign._study import write_json
+from encdesign.io._study import write_json
+from encdesign.physics._sds import _revolution
 
 N_MARKS = 10_000
 N_REVS = 100

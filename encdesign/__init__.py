@@ -10,14 +10,14 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._errors import EncdesignInputError as EncdesignInputError
-from ._recording import (
+from .io import (
     Recording as Recording,
     load_recording as load_recording,
     write_recording as write_recording,
 )
 
 # --- kinematics, encoder theorem, self-compensation (issue 2) ---
-from ._design import (
+from .design import (
     BenchRun as BenchRun,
     Design as Design,
     load_design as load_design,
@@ -25,7 +25,7 @@ from ._design import (
     simulate_bench as simulate_bench,
     simulate_recording as simulate_recording,
 )
-from ._kinematics import (
+from .physics import (
     Disk as Disk,
     EncoderModel as EncoderModel,
     Heads as Heads,
@@ -37,7 +37,7 @@ from ._kinematics import (
     noisy_head_readings as noisy_head_readings,
     stack_models as stack_models,
 )
-from ._selfcomp import (
+from .physics import (
     EncoderMap as EncoderMap,
     SelfCompensation as SelfCompensation,
     apply_map as apply_map,
@@ -46,7 +46,7 @@ from ._selfcomp import (
     encoder_map as encoder_map,
     self_compensate as self_compensate,
 )
-from ._theorem import (
+from .physics import (
     averaged_error as averaged_error,
     fourier_coefficients as fourier_coefficients,
     mode_amplitudes as mode_amplitudes,
@@ -56,13 +56,13 @@ from ._theorem import (
 )
 
 # --- shifted-delta-sum timing model (issue 3) ---
-from ._motor import (
+from .physics import (
     Motor as Motor,
     motor_order_sources as motor_order_sources,
     motor_orders as motor_orders,
     time_at_angle as time_at_angle,
 )
-from ._sds import (
+from .physics import (
     DiskMarks as DiskMarks,
     SDSDesign as SDSDesign,
     SDSReadings as SDSReadings,
@@ -80,21 +80,23 @@ from ._sds import (
     simulate_readings as simulate_readings,
     validate_design as validate_design,
 )
-from ._sds_errors import (
+from .physics import (
     SDSErrors as SDSErrors,
-    SpeedMarkPrediction as SpeedMarkPrediction,
     axis_tilt_error as axis_tilt_error,
     bearing_noise as bearing_noise,
+)
+from .physics import (
+    SpeedMarkPrediction as SpeedMarkPrediction,
     predict_speed_mark_error as predict_speed_mark_error,
 )
-from ._sds_recording import (
+from .io import (
     SDSRecordingResult as SDSRecordingResult,
     sds_readings_from_recording as sds_readings_from_recording,
     simulate_sds_recording as simulate_sds_recording,
 )
 
 # --- quadrature signal layer (issue 6) ---
-from ._ellipse import (
+from .physics import (
     EllipseFit as EllipseFit,
     EllipseParams as EllipseParams,
     VibrationLUT as VibrationLUT,
@@ -107,7 +109,7 @@ from ._ellipse import (
     seed_eq7_choice as seed_eq7_choice,
     vibration_compensation_m as vibration_compensation_m,
 )
-from ._quadrature import (
+from .physics import (
     Eq4Terms as Eq4Terms,
     SignalErrors as SignalErrors,
     eq4_terms_m as eq4_terms_m,
@@ -121,7 +123,7 @@ from ._quadrature import (
     signal_phase_rad as signal_phase_rad,
     synthesize_signals as synthesize_signals,
 )
-from ._vibration import (
+from .physics import (
     ExcitationEstimate as ExcitationEstimate,
     Vibration as Vibration,
     eq5_signal_terms as eq5_signal_terms,
@@ -132,13 +134,13 @@ from ._vibration import (
 )
 
 # --- design optimisation (issue 4) ---
-from ._cases import (
+from .design import (
     Case as Case,
     CaseRecorder as CaseRecorder,
     read_cases as read_cases,
     write_cases as write_cases,
 )
-from ._drivers import (
+from .design import (
     DOEResult as DOEResult,
     EnumerationResult as EnumerationResult,
     MonteCarloResult as MonteCarloResult,
@@ -152,20 +154,20 @@ from ._drivers import (
     monte_carlo as monte_carlo,
     optimise as optimise,
 )
-from ._problem import (
+from .design import (
     Problem as Problem,
     ProblemObjective as ProblemObjective,
     VariableInfo as VariableInfo,
     load_problem as load_problem,
     parse_problem as parse_problem,
 )
-from ._solve import (
+from .design import (
     ProblemResult as ProblemResult,
     check_gradients as check_gradients,
     solve_problem as solve_problem,
     sweep_problem as sweep_problem,
 )
-from ._tolerance import (
+from .design import (
     Allocation as Allocation,
     Contributions as Contributions,
     SweepTable as SweepTable,
@@ -175,22 +177,22 @@ from ._tolerance import (
     sweep_scales as sweep_scales,
     tolerance_cost as tolerance_cost,
 )
-from .objectives import (
+from .design import (
     EncoderDesign as EncoderDesign,
     Tolerances as Tolerances,
 )
 
 # --- discrepancy finder (issue 5) ---
-from ._conceal import (
+from .diagnose import (
     simulate_concealed_bench as simulate_concealed_bench,
     write_concealed as write_concealed,
 )
-from ._diagnose import (
+from .diagnose import (
     Diagnosis as Diagnosis,
     EffectResult as EffectResult,
     diagnose as diagnose,
-    report_text as diagnosis_report_text,
-    write_plots as write_diagnosis_plots,
+    diagnosis_report_text as diagnosis_report_text,
+    write_diagnosis_plots as write_diagnosis_plots,
 )
 
 __version__ = "0.1.0"

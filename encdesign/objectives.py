@@ -1,51 +1,78 @@
-"""Objective and constraint functions for encoder design (public: ``from encdesign.objectives
-import …``).
+"""Objective and constraint functions for encoder design: the public face of
+:mod:`encdesign.design._objectives` (``from encdesign.objectives import ...`` keeps working).
 
-Every function is JAX: ``jit``, ``vmap`` and ``grad`` work through it in the continuous
-design variables and tolerances (gradients are checked against finite differences in
-``tests/test_objectives.py``). All values are SI (rad, m); randomness only through ``key``.
-
-Pipeline of one Monte Carlo *build* (:func:`build_residual`):
-
-1. draw the build's deviations ``sigma_i * z_i`` from the :class:`Tolerances` (``z`` a
-   standard-normal vector, common random numbers across designs, see
-   :func:`encdesign._drivers.build_normals`) and make an
-   :class:`~encdesign._kinematics.EncoderModel` of ``N`` symmetric heads plus one reference
-   head (seed 000, section V.A);
-2. read all heads over one revolution (``n_angles`` equally spaced shaft angles);
-3. average the ``N`` symmetric heads (encoder theorem, seed 000 eq. 1);
-4. self-compensate with the reference head: cotangent equations on the head differences
-   (seed 000 eq. 16), encoder map of the symmetric average (eq. 17), using the *nominal*
-   head angles (the builder does not know the placement errors);
-5. the residual is ``averaged error - map``, mean removed (a constant is no error).
-
-Scalar metrics of a build: RMS (:func:`residual_rms`) and peak (:func:`residual_peak`) of the
-residual; calibration read noise adds its expected mean square through the cotangent
-amplification (:func:`calibration_noise_ms`). Population metrics: :func:`residual_percentile`
-(percentile of the per-build RMS or peak over Monte Carlo builds), :func:`build_yield`
-(fraction of builds within an accuracy spec, optionally smoothed for gradients) and
-:func:`tolerance_cost` (``sum_i c_i * ref_i / sigma_i``: tighter costs more).
-
-:data:`PROBLEM_OBJECTIVES` registers these for problem files
-(:mod:`encdesign._problem`).
+See that module for the Monte Carlo build pipeline; all values are SI (rad, m).
 """
 
-from __future__ import annotations
-
-from typing import Any
-
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike
-
-from ._drivers import build_normals, map_builds
-from ._kinematics import EncoderModel, errors_scaled_grating
-from ._problem import ProblemObjective, VariableInfo
-from ._selfcomp import cotangent_sensitivity as _cot_sensitivity
-from ._selfcomp import encoder_map, self_compensate
-from ._theorem import averaged_error
-from ._tolerance import tolerance_cost
+from .design._objectives import (
+    PROBLEM_OBJECTIVES as PROBLEM_OBJECTIVES,
+)
+from .design._objectives import (
+    TOLERANCE_NAMES as TOLERANCE_NAMES,
+)
+from .design._objectives import (
+    TOLERANCE_UNITS as TOLERANCE_UNITS,
+)
+from .design._objectives import (
+    EncoderDesign as EncoderDesign,
+)
+from .design._objectives import (
+    SDSTolerances as SDSTolerances,
+)
+from .design._objectives import (
+    Tolerances as Tolerances,
+)
+from .design._objectives import (
+    build_metric as build_metric,
+)
+from .design._objectives import (
+    build_metrics as build_metrics,
+)
+from .design._objectives import (
+    build_model as build_model,
+)
+from .design._objectives import (
+    build_residual as build_residual,
+)
+from .design._objectives import (
+    build_yield as build_yield,
+)
+from .design._objectives import (
+    calibration_noise_ms as calibration_noise_ms,
+)
+from .design._objectives import (
+    cotangent_sensitivity as cotangent_sensitivity,
+)
+from .design._objectives import (
+    expected_sensitivity as expected_sensitivity,
+)
+from .design._objectives import (
+    n_build_normals as n_build_normals,
+)
+from .design._objectives import (
+    residual_peak as residual_peak,
+)
+from .design._objectives import (
+    residual_percentile as residual_percentile,
+)
+from .design._objectives import (
+    residual_rms as residual_rms,
+)
+from .design._objectives import (
+    sds_design as sds_design,
+)
+from .design._objectives import (
+    sds_residuals as sds_residuals,
+)
+from .design._objectives import (
+    smooth_yield as smooth_yield,
+)
+from .design._objectives import (
+    symmetric_angles as symmetric_angles,
+)
+from .design._objectives import (
+    tolerance_cost as tolerance_cost,
+)
 
 __all__ = [
     "TOLERANCE_NAMES",
@@ -72,689 +99,3 @@ __all__ = [
     "sds_residuals",
     "PROBLEM_OBJECTIVES",
 ]
-
-TOLERANCE_NAMES = (
-    "eccentricity",
-    "tilt",
-    "placement",
-    "grating",
-    "beam_tilt",
-    "axial_runout",
-    "noise",
-)
-"""The tolerance groups of a multihead build, in vector order."""
-
-TOLERANCE_UNITS = {
-    "eccentricity": "m",
-    "tilt": "rad",
-    "placement": "rad",
-    "grating": "rad",
-    "beam_tilt": "rad",
-    "axial_runout": "m",
-    "noise": "rad",
-}
-"""SI unit of each tolerance's standard deviation."""
-
-
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
-
-
-class Tolerances(eqx.Module):
-    """Standard deviations of the build-to-build deviations (all SI, all ``>= 0``).
-
-    Attributes:
-        eccentricity: disk centring, per axis, m (effect ``disk_eccentricity``).
-        tilt: disk tilt, per axis, rad, added to the design's nominal tilt
-            (effect ``disk_tilt``).
-        placement: azimuth error of every head, rad (effect ``head_placement``).
-        grating: grating error spectrum: the ``S_j`` and ``C_j`` of order ``j`` have std
-            ``grating / j``, rad (effect ``grating_error``).
-        beam_tilt: tangential beam tilt of every head, rad (effect ``beam_tilt_axial``).
-        axial_runout: axial disk motion, std of each Fourier coefficient of orders
-            ``1 … axial_orders``, m (effect ``beam_tilt_axial``, motion hook).
-        noise: white read noise per reading during self-compensation, rad (effect
-            ``noise``; enters through its expected mean square, not sampled).
-    """
-
-    eccentricity: Array = eqx.field(converter=_f64, default=0.0)
-    tilt: Array = eqx.field(converter=_f64, default=0.0)
-    placement: Array = eqx.field(converter=_f64, default=0.0)
-    grating: Array = eqx.field(converter=_f64, default=0.0)
-    beam_tilt: Array = eqx.field(converter=_f64, default=0.0)
-    axial_runout: Array = eqx.field(converter=_f64, default=0.0)
-    noise: Array = eqx.field(converter=_f64, default=0.0)
-
-    def __check_init__(self) -> None:
-        for name in TOLERANCE_NAMES:
-            v = getattr(self, name)
-            if hasattr(v, "shape") and v.shape != ():
-                raise ValueError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
-            if not isinstance(v, jax.core.Tracer) and hasattr(v, "shape") and float(v) < 0:
-                raise ValueError(f"Tolerances.{name}: {float(v)}, expected >= 0")
-
-    def vector(self) -> Array:
-        """The standard deviations in :data:`TOLERANCE_NAMES` order (SI)."""
-        return jnp.stack([getattr(self, n) for n in TOLERANCE_NAMES])
-
-    @staticmethod
-    def from_vector(v: ArrayLike) -> Tolerances:
-        """Inverse of :meth:`vector`."""
-        v = _f64(v)
-        return Tolerances(*[v[i] for i in range(len(TOLERANCE_NAMES))])
-
-    def only(self, name: str) -> Tolerances:
-        """A copy with every tolerance except ``name`` set to zero."""
-        return Tolerances(**{n: (getattr(self, n) if n == name else 0.0) for n in TOLERANCE_NAMES})
-
-
-def symmetric_angles(n_heads: int) -> Array:
-    """Azimuths of ``n_heads`` equally spaced heads starting at 0, rad."""
-    return jnp.arange(n_heads, dtype=jnp.float64) * (2 * jnp.pi / n_heads)
-
-
-class EncoderDesign(eqx.Module):
-    """An ``N+1`` encoder design: ``N`` equally spaced heads plus a reference head.
-
-    Attributes:
-        radius_m: optical radius, m.
-        reference_angle_rad: azimuth of the reference head, rad (a design variable).
-        tilt_rad: nominal disk tilt about x, rad (seed figure 8: 6 mrad).
-        gap_m: head-to-disk distance, m.
-        n_heads: number ``N`` of symmetric heads (static).
-        max_order: highest order ``M`` self-compensation determines (static).
-        grating_orders: orders ``1 … grating_orders`` of the grating error (static).
-        axial_orders: orders of the axial runout (static).
-        n_angles: samples per revolution (static).
-    """
-
-    radius_m: Array = eqx.field(converter=_f64)
-    reference_angle_rad: Array = eqx.field(converter=_f64)
-    tilt_rad: Array = eqx.field(converter=_f64, default=0.0)
-    gap_m: Array = eqx.field(converter=_f64, default=1e-3)
-    n_heads: int = eqx.field(static=True, default=3)
-    max_order: int = eqx.field(static=True, default=16)
-    grating_orders: int = eqx.field(static=True, default=16)
-    axial_orders: int = eqx.field(static=True, default=2)
-    n_angles: int = eqx.field(static=True, default=256)
-
-    def __check_init__(self) -> None:
-        if self.n_heads < 2:
-            raise ValueError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
-        if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise ValueError("EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0")
-        if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise ValueError(
-                f"EncoderDesign.n_angles: {self.n_angles} cannot resolve order "
-                f"{max(self.max_order, self.grating_orders)}"
-            )
-        r = self.radius_m
-        if not isinstance(r, jax.core.Tracer) and hasattr(r, "shape") and not float(r) > 0:
-            raise ValueError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
-
-    @property
-    def head_angles_rad(self) -> Array:
-        """All nominal azimuths, rad: the ``N`` symmetric heads, then the reference head."""
-        return jnp.concatenate([symmetric_angles(self.n_heads), self.reference_angle_rad[None]])
-
-    @property
-    def theta_rad(self) -> Array:
-        """The ``n_angles`` equally spaced shaft angles of one revolution, rad."""
-        return jnp.arange(self.n_angles, dtype=jnp.float64) * (2 * jnp.pi / self.n_angles)
-
-
-# ----------------------------------------------------------------------------- sensitivity
-
-
-def cotangent_sensitivity(reference_angle_rad: ArrayLike, n_heads: int, max_order: int) -> Array:
-    """Noise amplification of self-compensation over modes ``1 … max_order`` (seed 000,
-    section III.D), for ``n_heads`` equally spaced heads and a reference head at
-    ``reference_angle_rad`` (rad). Dimensionless; see
-    :func:`encdesign._selfcomp.cotangent_sensitivity` for the definition (RMS over the
-    degenerate orders of the per-coefficient amplification)."""
-    return _cot_sensitivity(reference_angle_rad, symmetric_angles(n_heads), max_order)[1]
-
-
-def expected_sensitivity(
-    reference_angle_rad: ArrayLike,
-    n_heads: int,
-    max_order: int,
-    placement_sigma_rad: ArrayLike,
-    *,
-    key: Array,
-    n_builds: int = 256,
-) -> Array:
-    """Mean cotangent sensitivity over builds whose heads are misplaced by
-    ``N(0, placement_sigma_rad**2)`` each (all ``n_heads + 1`` heads), rad.
-
-    Common random numbers: the same ``key`` gives the same builds for every reference
-    angle, so the mean is a smooth function of ``reference_angle_rad``.
-    """
-    z = build_normals(key, jnp.arange(n_builds), n_heads + 1)
-    sig = _f64(placement_sigma_rad)
-    base = symmetric_angles(n_heads)
-
-    def one(zi):
-        return _cot_sensitivity(
-            reference_angle_rad + sig * zi[-1], base + sig * zi[:-1], max_order
-        )[1]
-
-    return jnp.mean(jax.vmap(one)(z))
-
-
-# ----------------------------------------------------------------------------- builds
-
-
-def _deviation_sizes(design: EncoderDesign) -> dict[str, int]:
-    """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
-    h = design.n_heads + 1
-    mg, ka = design.grating_orders, design.axial_orders
-    return {
-        "eccentricity": 2,
-        "tilt": 2,
-        "placement": h,
-        "grating_sin": mg,
-        "grating_cos": mg,
-        "beam_tilt": h,
-        "axial_cos": ka,
-        "axial_sin": ka,
-    }
-
-
-def n_build_normals(design: EncoderDesign) -> int:
-    """Length of the standard-normal vector ``z`` of one build of ``design``."""
-    return sum(_deviation_sizes(design).values())
-
-
-def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
-    """The deviations of one build per unit tolerance, by name.
-
-    ``z`` (``[n_build_normals(design)]``) is split in order: eccentricity (x, y), tilt
-    (x, y), placement (per head), grating (``S_1…S_M``, ``C_1…C_M``, scaled by ``1/j``),
-    beam tilt (per head), axial runout (cos, sin per order).
-    """
-    z = _f64(z)
-    out, i = {}, 0
-    for name, n in _deviation_sizes(design).items():
-        out[name] = z[i : i + n]
-        i += n
-    j = jnp.arange(1, design.grating_orders + 1, dtype=jnp.float64)
-    out["grating_sin"] = out["grating_sin"] / j
-    out["grating_cos"] = out["grating_cos"] / j
-    return out
-
-
-def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> EncoderModel:
-    """The kinematic model of one build: ``design`` with deviations ``sigma * z`` (the
-    layout of ``z``: :func:`_unit_deviations`)."""
-    return _model_of(design, tol, _unit_deviations(design, z))
-
-
-def _model_of(design: EncoderDesign, tol: Tolerances, u: dict[str, Array]) -> EncoderModel:
-    """:func:`build_model` from the unit deviations ``u`` of :func:`_unit_deviations`."""
-    h = design.n_heads + 1
-    mg, ka = design.grating_orders, design.axial_orders
-    ecc = tol.eccentricity * u["eccentricity"]
-    tilt = tol.tilt * u["tilt"] + jnp.array([1.0, 0.0]) * design.tilt_rad
-    place = tol.placement * u["placement"]
-    gs = tol.grating * u["grating_sin"]
-    gc = tol.grating * u["grating_cos"]
-    beam = tol.beam_tilt * u["beam_tilt"]
-    ac = tol.axial_runout * u["axial_cos"]
-    asn = tol.axial_runout * u["axial_sin"]
-    # The kinematic classes validate concrete values in __check_init__; build a nominal
-    # template eagerly and swap the (possibly traced) leaves in with tree_at.
-    with jax.ensure_compile_time_eval():
-        template = EncoderModel.nominal(1.0, jnp.zeros(h), mg, gap_m=1e-3, n_axial_orders=ka)
-    return eqx.tree_at(
-        lambda m: (
-            m.disk.optical_radius_m,
-            m.disk.eccentricity_m,
-            m.disk.tilt_rad,
-            m.disk.grating_sin_rad,
-            m.disk.grating_cos_rad,
-            m.heads.angles_rad,
-            m.heads.placement_error_rad,
-            m.heads.beam_tilt_rad,
-            m.heads.gap_m,
-            m.motion.axial_cos_m,
-            m.motion.axial_sin_m,
-        ),
-        template,
-        (
-            jnp.asarray(design.radius_m, dtype=jnp.float64),
-            ecc,
-            tilt,
-            gs,
-            gc,
-            design.head_angles_rad,
-            place,
-            beam,
-            jnp.asarray(design.gap_m, dtype=jnp.float64),
-            ac,
-            asn,
-        ),
-    )
-
-
-def build_residual(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
-    """Residual error of one build after symmetry averaging and self-compensation, rad,
-    at :attr:`EncoderDesign.theta_rad` (mean removed; see the module docstring)."""
-    u = _unit_deviations(design, z)
-    model = _model_of(design, tol, u)
-    theta = design.theta_rad
-    # the same errors as head_errors(model, theta), with the grating error written as
-    # tol.grating times its unit shape: cheaper reverse-mode gradients (see
-    # encdesign._kinematics.errors_scaled_grating)
-    err = errors_scaled_grating(model, theta, tol.grating, u["grating_sin"], u["grating_cos"])
-    readings = theta[:, None] + err
-    n = design.n_heads
-    avg = averaged_error(err[:, :n])
-    comp = self_compensate(theta, readings, design.head_angles_rad, n, design.max_order)
-    emap = encoder_map(comp, design.head_angles_rad[:n])
-    res = avg - emap(theta)
-    return res - jnp.mean(res)
-
-
-def calibration_noise_ms(design: EncoderDesign, tol: Tolerances) -> Array:
-    """Expected mean square (rad²) that read noise during self-compensation leaves in the
-    map: each Fourier coefficient of one head's noise over ``n_angles`` samples has std
-    ``noise * sqrt(2 / n_angles)``, amplified by ``|T_j| A_j`` (cotangent sensitivity per
-    order, :func:`encdesign._selfcomp.cotangent_sensitivity`); order ``j`` contributes
-    ``|T_j|^2 A_j^2 sigma_c^2`` to the mean square."""
-    sym = symmetric_angles(design.n_heads)
-    amp, _ = _cot_sensitivity(design.reference_angle_rad, sym, design.max_order)
-    j = jnp.arange(1, design.max_order + 1, dtype=jnp.float64)
-    h = design.reference_angle_rad - sym
-    t2 = jnp.abs(jnp.mean(jnp.exp(1j * j[:, None] * h[None, :]), axis=1)) ** 2
-    sigma_c2 = tol.noise**2 * 2.0 / design.n_angles
-    return jnp.sum(t2 * amp**2) * sigma_c2
-
-
-def residual_rms(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
-    """RMS residual of one build, rad, including the expected calibration-noise term."""
-    r = build_residual(design, tol, z)
-    return jnp.sqrt(jnp.mean(r * r) + calibration_noise_ms(design, tol))
-
-
-def residual_peak(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
-    """Peak absolute residual of one build (noise-free), rad."""
-    return jnp.max(jnp.abs(build_residual(design, tol, z)))
-
-
-def build_metric(
-    design: EncoderDesign, tol: Tolerances, z: ArrayLike, metric: str = "rms"
-) -> Array:
-    """``"rms"`` (:func:`residual_rms`), ``"peak"`` (:func:`residual_peak`) or ``"ms"``
-    (mean square including the expected calibration-noise term, rad²) of one build."""
-    if metric == "rms":
-        return residual_rms(design, tol, z)
-    if metric == "peak":
-        return residual_peak(design, tol, z)
-    if metric == "ms":
-        r = build_residual(design, tol, z)
-        return jnp.mean(r * r) + calibration_noise_ms(design, tol)
-    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
-
-
-def build_metrics(
-    design: EncoderDesign,
-    tol: Tolerances,
-    *,
-    key: Array,
-    n_builds: int,
-    metric: str = "rms",
-    chunk_size: int = 256,
-    first_build: int = 0,
-) -> Array:
-    """Per-build metric for builds ``first_build … first_build + n_builds - 1`` of ``key``
-    (common random numbers), chunked with ``lax.map``; rad (rad² for ``"ms"``).
-
-    Memory is bounded by one chunk of ``chunk_size`` builds; within a chunk, builds are
-    vectorised 8 at a time (:func:`encdesign._drivers.map_builds`), which keeps the
-    working set in the CPU caches (the fastest setting measured on CPU for the value and
-    its gradient, ``benchmarks/optimize.py``)."""
-    return map_builds(
-        lambda zi: build_metric(design, tol, zi, metric),
-        key,
-        n_builds,
-        n_build_normals(design),
-        first=first_build,
-        block=chunk_size,
-    )
-
-
-def residual_percentile(
-    design: EncoderDesign,
-    tol: Tolerances,
-    *,
-    key: Array,
-    n_builds: int,
-    q: float = 99.0,
-    metric: str = "rms",
-    chunk_size: int = 256,
-) -> Array:
-    """The ``q``-th percentile (0–100) of the per-build metric over Monte Carlo builds,
-    rad (linear interpolation between order statistics; differentiable almost
-    everywhere)."""
-    vals = build_metrics(
-        design, tol, key=key, n_builds=n_builds, metric=metric, chunk_size=chunk_size
-    )
-    return jnp.percentile(vals, q)
-
-
-def smooth_yield(values: ArrayLike, spec: ArrayLike, width: ArrayLike) -> Array:
-    """Smooth surrogate of the fraction of ``values <= spec``: the mean of
-    ``sigmoid((spec - v) / width)`` (same units for ``values``, ``spec``, ``width``)."""
-    return jnp.mean(jax.nn.sigmoid((_f64(spec) - _f64(values)) / _f64(width)))
-
-
-def build_yield(
-    design: EncoderDesign,
-    tol: Tolerances,
-    spec_rad: ArrayLike,
-    *,
-    key: Array,
-    n_builds: int,
-    metric: str = "rms",
-    smooth_width_rad: float | None = None,
-    chunk_size: int = 256,
-) -> Array:
-    """Fraction of Monte Carlo builds whose metric is ``<= spec_rad``.
-
-    With ``smooth_width_rad`` the indicator is replaced by a sigmoid of that width (a
-    differentiable yield for gradient solvers); without it the exact fraction (zero
-    gradient) is returned.
-    """
-    vals = build_metrics(
-        design, tol, key=key, n_builds=n_builds, metric=metric, chunk_size=chunk_size
-    )
-    if smooth_width_rad is None:
-        return jnp.mean((vals <= spec_rad).astype(jnp.float64))
-    return smooth_yield(vals, spec_rad, smooth_width_rad)
-
-
-# ----------------------------------------------------------------------------- SDS
-
-
-class SDSTolerances(eqx.Module):
-    """Build-to-build tolerances of a shifted-delta-sum instrument (seed 001), SI.
-
-    Attributes:
-        eccentricity_rad: order-1 mark error of each disk (centring e/R), rad.
-        ellipticity_rad: order-2 mark error, rad.
-        harmonic_rad: orders ``3 … n_harmonics`` have amplitude ``harmonic_rad / n``, rad.
-        random_rad: white mark-position error per mark, rad.
-        speed_ripple: relative torque ripple of the motor at orders 1 and 2 (coil mismatch);
-            the motor's own orders follow its pole pairs (:func:`encdesign._sds.reference_motor`).
-        axis_tilt_rad: tilt of the disk axis to the platform axis, rad.
-    """
-
-    eccentricity_rad: float = 2e-3
-    ellipticity_rad: float = 8e-4
-    harmonic_rad: float = 2e-5
-    random_rad: float = 2e-6
-    speed_ripple: float = 0.012
-    axis_tilt_rad: float = 0.0
-
-
-def sds_design(
-    pole_pairs: int,
-    n_sensors: int,
-    tol: SDSTolerances,
-    *,
-    key: Array,
-    marks_per_rev: int = 1000,
-    n_harmonics: int = 16,
-) -> Any:
-    """One SDS build: motor with ``pole_pairs`` (3-phase, six-step drive, coil-mismatch
-    ripple ``tol.speed_ripple``), two disks whose mark errors are drawn from ``key`` with
-    the amplitudes of ``tol``, ``n_sensors`` equally spaced fixed and moving sensors."""
-    from ._sds import SDSDesign, equally_spaced, reference_disk, reference_motor
-
-    ka, kb = jax.random.split(key)
-    motor = reference_motor(
-        pole_pairs, low_order_torque=(tol.speed_ripple, 2.0 * tol.speed_ripple / 3.0)
-    )
-    kw = dict(
-        eccentricity_rad=tol.eccentricity_rad,
-        ellipticity_rad=tol.ellipticity_rad,
-        n_harmonics=n_harmonics,
-        harmonic_rad=tol.harmonic_rad,
-        random_rad=tol.random_rad,
-    )
-    return SDSDesign(
-        motor,
-        reference_disk(ka, marks_per_rev, **kw),
-        reference_disk(kb, marks_per_rev, **kw),
-        equally_spaced(n_sensors),
-        equally_spaced(n_sensors),
-    )
-
-
-def sds_residuals(
-    pole_pairs: int,
-    n_sensors: int,
-    tol: SDSTolerances,
-    *,
-    key: Array,
-    n_builds: int,
-    marks_per_rev: int = 1000,
-    n_phi: int = 32,
-) -> Array:
-    """SDS residual over the platform turn (RMS of the φ error minus its mean, rad;
-    :func:`encdesign._sds.sds_residual`) of ``n_builds`` Monte Carlo builds. Build ``i``
-    draws its disks from ``fold_in(key, i)`` (common random numbers across designs)."""
-    from ._sds import sds_residual
-    from ._sds_errors import SDSErrors
-
-    errors = SDSErrors(axis_tilt_rad=tol.axis_tilt_rad)
-
-    def one(i):
-        d = sds_design(
-            pole_pairs, n_sensors, tol, key=jax.random.fold_in(key, i), marks_per_rev=marks_per_rev
-        )
-        return sds_residual(d, errors, n_phi=n_phi)
-
-    return jax.lax.map(one, jnp.arange(n_builds))
-
-
-# ----------------------------------------------------------------------------- registry
-
-_RAD = VariableInfo("rad")
-_TOL_VARS = {
-    f"sigma_{n}": VariableInfo(TOLERANCE_UNITS[n], lower=0.0, doc=f"std of {n}")
-    for n in TOLERANCE_NAMES
-}
-_TOL_MODEL_KEYS = {f"sigma_{n}": 0.0 for n in TOLERANCE_NAMES}
-
-
-def _design_from(model: dict[str, Any], reference_angle: Any) -> EncoderDesign:
-    return EncoderDesign(
-        radius_m=model["radius_m"],
-        reference_angle_rad=reference_angle,
-        tilt_rad=model["tilt_rad"],
-        gap_m=model["gap_m"],
-        n_heads=int(model["n_heads"]),
-        max_order=int(model["max_order"]),
-        grating_orders=int(model["grating_orders"]),
-        axial_orders=int(model["axial_orders"]),
-        n_angles=int(model["n_angles"]),
-    )
-
-
-def _tolerances_from(model: dict[str, Any], x: dict[str, Any]) -> Tolerances:
-    return Tolerances(**{n: x.get(f"sigma_{n}", model[f"sigma_{n}"]) for n in TOLERANCE_NAMES})
-
-
-def _build_sensitivity(problem: Any, discrete: dict[str, Any]):
-    m = problem.model
-    n_heads = int(discrete.get("n_heads", m["n_heads"]))
-    key = jax.random.key(problem.seed)
-
-    def evaluate(x):
-        ang = x.get("reference_angle", m["reference_angle_rad"])
-        sig = x.get("sigma_placement", m["sigma_placement"])
-        if m["n_builds"] > 0 and (float(m["sigma_placement"]) > 0 or "sigma_placement" in x):
-            s = expected_sensitivity(
-                ang, n_heads, int(m["max_order"]), sig, key=key, n_builds=int(m["n_builds"])
-            )
-        else:
-            s = cotangent_sensitivity(ang, n_heads, int(m["max_order"]))
-        return {"sensitivity": s}
-
-    return evaluate
-
-
-def _build_residual(problem: Any, discrete: dict[str, Any]):
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    yt = problem.yield_target
-    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
-    q = float(m["percentile"])
-    ref = jnp.array([m[f"cost_ref_{n}"] for n in TOLERANCE_NAMES])
-
-    def evaluate(x):
-        design = _design_from(m, x.get("reference_angle", m["reference_angle_rad"]))
-        tol = _tolerances_from(m, x)
-        vals = build_metrics(
-            design,
-            tol,
-            key=key,
-            n_builds=n_builds,
-            metric=m["metric"],
-            chunk_size=int(m["chunk_size"]),
-        )
-        out = {
-            "residual_percentile": jnp.percentile(vals, q),
-            "residual_mean": jnp.mean(vals),
-            "cost": tolerance_cost(tol.vector(), ref),
-        }
-        if yt is not None:
-            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
-            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
-        return out
-
-    return evaluate
-
-
-def _build_cost(problem: Any, discrete: dict[str, Any]):
-    inner = _build_residual(problem, discrete)
-
-    def evaluate(x):
-        out = inner(x)
-        return {"cost": out["cost"], **{k: v for k, v in out.items() if k != "cost"}}
-
-    return evaluate
-
-
-def _build_sds(problem: Any, discrete: dict[str, Any]):
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    tol = SDSTolerances(**{k: float(m[k]) for k in _SDS_TOL_KEYS})
-
-    def evaluate(x):
-        vals = sds_residuals(
-            int(m["pole_pairs"]),
-            int(m["n_sensors"]),
-            tol,
-            key=key,
-            n_builds=int(m["n_builds"]),
-            marks_per_rev=int(m["marks_per_rev"]),
-            n_phi=int(m["n_phi"]),
-        )
-        return {"sds_residual": jnp.mean(vals), "sds_residual_max": jnp.max(vals)}
-
-    return evaluate
-
-
-_SDS_TOL_KEYS = (
-    "eccentricity_rad",
-    "ellipticity_rad",
-    "harmonic_rad",
-    "random_rad",
-    "speed_ripple",
-    "axis_tilt_rad",
-)
-
-_DESIGN_MODEL = {
-    "radius_m": 0.0254,
-    "reference_angle_rad": 0.5,
-    "tilt_rad": 0.0,
-    "gap_m": 1e-3,
-    "n_heads": 3,
-    "max_order": 16,
-    "grating_orders": 16,
-    "axial_orders": 2,
-    "n_angles": 128,
-    "n_builds": 200,
-    "metric": "rms",
-    "percentile": 99.0,
-    "smooth_width": 0.05,
-    "chunk_size": 64,
-    **_TOL_MODEL_KEYS,
-    **{f"cost_ref_{n}": 0.0 for n in TOLERANCE_NAMES},
-}
-
-PROBLEM_OBJECTIVES: dict[str, ProblemObjective] = {
-    "cotangent_sensitivity": ProblemObjective(
-        name="cotangent_sensitivity",
-        doc="noise amplification of self-compensation (mean over placement-error builds)",
-        variables={
-            "reference_angle": _RAD,
-            "sigma_placement": _TOL_VARS["sigma_placement"],
-            "n_heads": VariableInfo("1", discrete=True, integer=True, lower=2),
-        },
-        model={
-            "n_heads": 3,
-            "max_order": 16,
-            "reference_angle_rad": 0.5,
-            "sigma_placement": 0.0,
-            "n_builds": 64,
-        },
-        outputs=("sensitivity",),
-        build=_build_sensitivity,
-    ),
-    "residual": ProblemObjective(
-        name="residual",
-        doc="percentile of the per-build residual after averaging and self-compensation",
-        variables={
-            "reference_angle": _RAD,
-            **_TOL_VARS,
-            "n_heads": VariableInfo("1", discrete=True, integer=True, lower=2),
-        },
-        model=_DESIGN_MODEL,
-        outputs=("residual_percentile", "residual_mean", "cost", "yield_smooth", "yield"),
-        build=_build_residual,
-    ),
-    "tolerance_cost": ProblemObjective(
-        name="tolerance_cost",
-        doc="cost sum_i c_i ref_i / sigma_i of the tolerances (constrain yield_smooth)",
-        variables=dict(_TOL_VARS),
-        model=_DESIGN_MODEL,
-        outputs=("cost", "residual_percentile", "residual_mean", "yield_smooth", "yield"),
-        build=_build_cost,
-        requires_yield=True,
-    ),
-    "sds_residual": ProblemObjective(
-        name="sds_residual",
-        doc="mean SDS residual over the platform turn (Monte Carlo disks) per pole/sensor",
-        variables={
-            "pole_pairs": VariableInfo("1", discrete=True, integer=True, lower=1),
-            "n_sensors": VariableInfo("1", discrete=True, integer=True, lower=1),
-        },
-        model={
-            "pole_pairs": 6,
-            "n_sensors": 2,
-            "n_builds": 2,
-            "marks_per_rev": 500,
-            "n_phi": 16,
-            **{k: float(getattr(SDSTolerances(), k)) for k in _SDS_TOL_KEYS},
-        },
-        outputs=("sds_residual", "sds_residual_max"),
-        build=_build_sds,
-    ),
-}
-"""Objectives that problem files can name (``[problem] objective``)."""

@@ -1,6 +1,6 @@
 """Conceal benchmark: the discrepancy finder run blind on recordings with hidden effects.
 
-Simulated benches (``encdesign._conceal``: 3+1 and 2+1 multihead encoders, three runs at
+Simulated benches (``encdesign.diagnose._conceal``: 3+1 and 2+1 multihead encoders, three runs at
 different speeds, read noise, ``temp_c``, with and without ``theta_ref``), each carrying one
 catalog effect hidden near the noise, masked by larger base errors at the same order,
 aliased by coarse sampling or present in only part of the record; plus clean recordings
@@ -9,10 +9,10 @@ the truth. Scored: % of hidden effects named correctly, % of clean recordings wi
 out-of-catalog effects reported as ``unexplained`` at the right place, held-out RMS
 improvement whenever an effect is named; a confusion table truth x verdict/name.
 
-SDS instruments (``encdesign._conceal_sds``: 2 fixed + 3 moving sensors, 24 platform positions
+SDS instruments (``diagnose._conceal_sds``: 2 fixed + 3 moving sensors, 24 platform positions
 stepped by the golden angle, 5 revolutions each, 1 ns jitter, 100 MHz clock) are scored the
 same way in a separate ``sds`` block of the JSON (own confusion table and rates; the finder is
-``encdesign._sds_finder.diagnose_sds``). ``--kinds sds`` (or ``multihead``) runs one part only;
+``encdesign.diagnose._sds.diagnose_sds``). ``--kinds sds`` (or ``multihead``) runs one part only;
 the JSON adds ``per_kind`` and ``overall`` (pooled) rates, and the confusion figure shows both
 kinds. The multihead keys at the top level are unchanged.
 
@@ -28,12 +28,12 @@ import time
 import jax
 import numpy as np
 
-from encdesign._conceal import write_concealed
-from encdesign._conceal_sds import SDS_CATALOG, write_concealed_sds
-from encdesign._diagnose import diagnose
-from encdesign._effects import CATALOG_MULTIHEAD
-from encdesign._sds_finder import diagnose_sds
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign.diagnose._conceal import write_concealed
+from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
+from encdesign.diagnose._effects import CATALOG_MULTIHEAD
+from encdesign.diagnose._multihead import diagnose
+from encdesign.diagnose._sds import diagnose_sds
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
 NAME = "conceal-benchmark"
 

@@ -26,10 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign._kinematics import head_errors, head_readings, make_model
-from encdesign._selfcomp import apply_map, encoder_map, self_compensate
-from encdesign._study import new_figure, save_figure, study_parser, write_results
-from encdesign._theorem import (
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.physics._kinematics import head_errors, head_readings, make_model
+from encdesign.physics._selfcomp import apply_map, encoder_map, self_compensate
+from encdesign.physics._theorem import (
     averaged_error,
     mode_amplitudes,
     model_mode_transfer,

@@ -19,9 +19,9 @@ import time
 
 import jax
 
-from encdesign._conceal import write_concealed
-from encdesign._diagnose import diagnose, report_text, write_plots
-from encdesign._study import study_parser, write_results
+from encdesign.diagnose._conceal import write_concealed
+from encdesign.diagnose._multihead import diagnose, report_text, write_plots
+from encdesign.io._study import study_parser, write_results
 
 NAME = "diagnose-example"
 

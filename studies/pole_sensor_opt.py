@@ -5,7 +5,7 @@ the motor's speed ripple interacts with the disks' mark errors; the orders the r
 the mark errors share survive the average over equally spaced sensors unless the sensor
 count cancels them, hence the rule "pole count not a multiple of the sensor count". This
 study enumerates pole pairs x sensors per disk (the discrete design variables, with the
-enumeration driver :func:`encdesign._drivers.enumerate_designs`), and for each combination
+enumeration driver :func:`encdesign.design._drivers.enumerate_designs`), and for each combination
 evaluates the SDS residual over the platform turn
 (:func:`encdesign.objectives.sds_residuals`: RMS of the phi error minus its mean) on Monte
 Carlo builds whose disks draw their mark errors from the tolerance set (common random
@@ -26,9 +26,9 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from encdesign._cases import CaseRecorder
-from encdesign._drivers import NONFINITE, SUCCESS, enumerate_designs
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign.design._cases import CaseRecorder
+from encdesign.design._drivers import NONFINITE, SUCCESS, enumerate_designs
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 from encdesign.objectives import SDSTolerances, sds_residuals
 
 NAME = "pole-sensor-opt"

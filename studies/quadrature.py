@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
 NAME = "quadrature"
 PITCH_M = 20e-6

@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from encdesign import load_recording
-from encdesign._diagnose_dispatch import diagnose_any
-from encdesign._motion_finder import candidate_orders
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign.diagnose._dispatch import diagnose_any
+from encdesign.diagnose._motion import candidate_orders
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
 NAME = "real-recordings"
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"

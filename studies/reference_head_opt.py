@@ -29,9 +29,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign._cases import CaseRecorder
-from encdesign._drivers import Progress, optimise
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign._progress import progress_bar
+from encdesign.design._cases import CaseRecorder
+from encdesign.design._drivers import optimise
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 from encdesign.objectives import expected_sensitivity
 
 NAME = "reference-head-opt"
@@ -102,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         gi = int(np.flatnonzero(finite)[np.argmin(vals[finite])])
         best = None
         cl = cells(n, m, margin)
-        with Progress(f"[{NAME}] {label} cells", len(cl), enabled=True) as bar:
+        with progress_bar(f"[{NAME}] {label} cells", len(cl), enabled=True) as bar:
             for lo, hi in cl:
                 bounds = jnp.array([lo, hi])
                 n_starts = max(1, math.ceil(math.degrees(hi - lo) / args.start_spacing_deg))

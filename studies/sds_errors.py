@@ -28,8 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign._sds_errors import ARCSEC
-from encdesign._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.physics._sds_errors import ARCSEC
 
 NAME = "sds-errors"
 MAS = ARCSEC / 1000

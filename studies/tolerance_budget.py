@@ -9,7 +9,7 @@ self-compensation (:func:`encdesign.objectives.residual_rms`).
 
 Steps:
 
-1. *Allocation* (:func:`encdesign._tolerance.allocate`): minimise the tolerance cost
+1. *Allocation* (:func:`encdesign.design._tolerance.allocate`): minimise the tolerance cost
    ``sum_i ref_i / sigma_i`` subject to a smooth yield surrogate on ``n_train`` builds
    reaching 99 % plus a margin; a final common scale makes the exact training yield meet it.
 2. *Independent check*: a fresh seed, ``n_check`` new builds, exact yield with its binomial
@@ -34,9 +34,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign._cases import CaseRecorder
-from encdesign._study import study_parser, write_results
-from encdesign._tolerance import (
+from encdesign.design._cases import CaseRecorder
+from encdesign.design._tolerance import (
     allocate,
     check_yield,
     contributions,
@@ -44,6 +43,7 @@ from encdesign._tolerance import (
     sweep_scales,
     tolerance_cost,
 )
+from encdesign.io._study import study_parser, write_results
 from encdesign.objectives import (
     TOLERANCE_NAMES,
     TOLERANCE_UNITS,

@@ -19,7 +19,7 @@ from encdesign import (
     simulate_recording,
     write_recording,
 )
-from encdesign._cli import main
+from encdesign.cli import main
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "design-3plus1.toml"
 
@@ -117,7 +117,7 @@ def test_cli_simulate_and_like(tmp_path, capsys):
 def test_console_script_simulate(tmp_path):
     out = tmp_path / "r.toml"
     res = subprocess.run(
-        [sys.executable, "-m", "encdesign._cli", "simulate", str(EXAMPLE), "--out", str(out)],
+        [sys.executable, "-m", "encdesign.cli", "simulate", str(EXAMPLE), "--out", str(out)],
         capture_output=True,
         text=True,
     )

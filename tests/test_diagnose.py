@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import encdesign
-from encdesign import _diagnose as D
-from encdesign import _effects as fx
-from encdesign._cli import main as cli_main
-from encdesign._conceal import write_concealed
+from encdesign.cli import main as cli_main
+from encdesign.diagnose import _effects as fx
+from encdesign.diagnose import _multihead as D
+from encdesign.diagnose._conceal import write_concealed
 from tests.helpers import DIAGNOSE_TEST_AMPLITUDE, DIAGNOSE_TEST_SAMPLES_PER_RUN
 
 SEED = {

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from encdesign._drivers import (
+from encdesign.design._drivers import (
     OptimisationError,
     build_normals,
     doe,
@@ -66,7 +66,7 @@ def test_lbfgsb_compiles_once_per_function():
 
 
 def test_map_builds_is_independent_of_chunking():
-    from encdesign._drivers import map_builds
+    from encdesign.design._drivers import map_builds
 
     key = jax.random.key(7)
     ref = build_normals(key, jnp.arange(3, 3 + 203), 5) @ jnp.arange(1.0, 6.0)

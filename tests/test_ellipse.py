@@ -156,7 +156,7 @@ NMM = Path("/work/shared/realdata/nmm_X_raw.csv")
 
 @pytest.mark.skipif(not NMM.exists(), reason="shared real data not present")
 def test_fit_on_real_interferometer_capture():
-    from encdesign._realdata import read_nmm_csv
+    from encdesign.io._realdata import read_nmm_csv
 
     phase, r = read_nmm_csv(NMM)
     fit = ed.fit_ellipse(r * np.cos(phase), r * np.sin(phase))

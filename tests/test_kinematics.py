@@ -17,7 +17,7 @@ from encdesign import (
     noisy_head_readings,
     stack_models,
 )
-from encdesign._kinematics import _atan
+from encdesign.physics._kinematics import _atan
 
 N = 512
 THETA = jnp.arange(N) * (2 * np.pi / N)
@@ -196,7 +196,7 @@ def test_public_names():
 
 @pytest.mark.parametrize("m", [1, 2, 7, 64])
 def test_grating_series_matches_direct_sum_and_its_derivatives(m):
-    from encdesign._kinematics import _grating_series
+    from encdesign.physics._kinematics import _grating_series
 
     rng = np.random.default_rng(m)
     psi = jnp.asarray(np.concatenate([rng.uniform(-np.pi, np.pi, 50), [0.0, np.pi, 1e-9]]))

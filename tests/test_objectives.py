@@ -8,8 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from encdesign._drivers import build_normals
-from encdesign._sds import sds_residual
+from encdesign.design._drivers import build_normals
 from encdesign.objectives import (
     TOLERANCE_NAMES,
     EncoderDesign,
@@ -28,6 +27,7 @@ from encdesign.objectives import (
     sds_design,
     tolerance_cost,
 )
+from encdesign.physics._sds import sds_residual
 
 DESIGN = EncoderDesign(
     radius_m=0.0254,

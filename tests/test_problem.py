@@ -6,10 +6,10 @@ import jax.numpy as jnp
 import pytest
 
 from encdesign import EncdesignInputError
-from encdesign._cases import CaseRecorder, read_cases, write_cases
-from encdesign._cli import main
-from encdesign._problem import ProblemObjective, VariableInfo, load_problem, parse_problem
-from encdesign._solve import check_gradients, solve_problem, sweep_problem
+from encdesign.cli import main
+from encdesign.design._cases import CaseRecorder, read_cases, write_cases
+from encdesign.design._problem import ProblemObjective, VariableInfo, load_problem, parse_problem
+from encdesign.design._solve import check_gradients, solve_problem, sweep_problem
 
 
 def _quadratic_build(problem, discrete):

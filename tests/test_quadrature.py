@@ -7,7 +7,7 @@ import pytest
 from helpers import QUADRATURE_ERRORS
 
 import encdesign as ed
-from encdesign._quadrature import check_signals
+from encdesign.physics._quadrature import check_signals
 
 PSI = jnp.linspace(0.0, 2 * np.pi, 721)
 
@@ -122,7 +122,7 @@ def test_interpolation_error_shaft_angle_per_head_jit_grad():
 
 
 def test_composes_with_kinematic_model():
-    kin = pytest.importorskip("encdesign._kinematics")
+    kin = pytest.importorskip("encdesign.physics._kinematics")
     lines = 512
     model = kin.make_model(
         0.02, jnp.deg2rad(jnp.array([0.0, 120.0, 240.0])), eccentricity_m=(2e-6, 0.0)
@@ -174,7 +174,7 @@ def test_bad_signal_errors_and_signals():
 
 
 def test_matches_discrepancy_finder_convention():
-    eff = pytest.importorskip("encdesign._effects")
+    eff = pytest.importorskip("encdesign.diagnose._effects")
     lines = 100
     r = jnp.linspace(0.0, 0.2, 500)[:, None]
     oa, ob, eps, d = 0.02, -0.01, 0.03, 0.04

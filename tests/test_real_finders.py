@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from encdesign import write_recording
-from encdesign._cli import main
-from encdesign._motion_finder import candidate_orders, diagnose_motion
-from encdesign._quadrature_finder import diagnose_quadrature
+from encdesign.cli import main
+from encdesign.diagnose._motion import candidate_orders, diagnose_motion
+from encdesign.diagnose._quadrature import diagnose_quadrature
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
 

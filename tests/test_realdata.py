@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from encdesign import EncdesignInputError, load_recording
-from encdesign._cli import main
-from encdesign._realdata import import_nmm, import_odrive
+from encdesign.cli import main
+from encdesign.io._realdata import import_nmm, import_odrive
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
 

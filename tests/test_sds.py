@@ -13,7 +13,7 @@ from helpers import SDS_TEST_MARKS, sds_reference
 
 import encdesign as ed
 from encdesign._errors import EncdesignInputError
-from encdesign._sds_errors import ARCSEC
+from encdesign.physics._sds_errors import ARCSEC
 
 N = SDS_TEST_MARKS  # marks per revolution (the physics does not depend on N here)
 MAS = ARCSEC / 1000
@@ -378,7 +378,7 @@ def test_bad_design_input():
 def _run_study(name: str, tmp_path: Path) -> dict:
     import json
 
-    from encdesign._cli import main
+    from encdesign.cli import main
 
     out = tmp_path / name
     assert (
@@ -414,7 +414,7 @@ def test_study_sds_poles_quick(tmp_path):
 
 
 def test_cli_sds_simulate_and_measure(tmp_path, capsys):
-    from encdesign._cli import main
+    from encdesign.cli import main
 
     rec = tmp_path / "cli.toml"
     args = ["sds", "simulate", "--out", str(rec), "--marks", "20", "--revs", "2"]

@@ -1,4 +1,4 @@
-"""Discrepancy finder for sds recordings (``encdesign._sds_finder``)."""
+"""Discrepancy finder for sds recordings (``encdesign.diagnose._sds``)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign._cli import main as cli_main
-from encdesign._conceal_sds import write_concealed_sds
-from encdesign._recording import load_recording, write_recording
-from encdesign._sds_finder import _Fitter, diagnose_sds, sds_pair_table, sds_terms
+from encdesign.cli import main as cli_main
+from encdesign.diagnose._conceal_sds import write_concealed_sds
+from encdesign.diagnose._sds import _Fitter, diagnose_sds, sds_pair_table, sds_terms
+from encdesign.io._recording import load_recording, write_recording
 
 N_RUNS = 12  # platform positions per test recording (as in the benchmark)
 
@@ -176,7 +176,7 @@ def test_readings_windows_aligned_in_time(sds_bench):
     """Every reading's windows cover the same revolution: a wobble that changes from one
     revolution to the next gives no bias in the first reading of a run (it gave ~300 nrad
     when late-starting sensors read a window one revolution later)."""
-    from encdesign._sds_recording import sds_readings_from_recording
+    from encdesign.io._sds_recording import sds_readings_from_recording
 
     rec, truth = sds_bench("bearing_wobble")
     res = sds_readings_from_recording(rec)

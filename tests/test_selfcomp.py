@@ -185,7 +185,7 @@ def test_mode_amplitudes_of_selfcomp_residual_show_mode_six_only():
 def test_reference_head_study_quick_json(tmp_path):
     import json
 
-    from encdesign._cli import main
+    from encdesign.cli import main
 
     out = tmp_path / "rh.json"
     argv = ["study", "run", "reference-head", "--quick", "--out", str(tmp_path), "--json", str(out)]

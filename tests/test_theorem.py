@@ -125,7 +125,7 @@ def test_transfer_differentiable_in_head_angles():
 def test_cramer_study_quick_json(tmp_path):
     import json
 
-    from encdesign._cli import main
+    from encdesign.cli import main
 
     out = tmp_path / "cramer.json"
     rc = main(["study", "run", "cramer", "--quick", "--out", str(tmp_path), "--json", str(out)])

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from encdesign import EncdesignInputError
-from encdesign._cli import main
-from encdesign._drivers import build_normals
-from encdesign._tolerance import (
+from encdesign.cli import main
+from encdesign.design._drivers import build_normals
+from encdesign.design._tolerance import (
     allocate,
     check_yield,
     contributions,

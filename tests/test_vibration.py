@@ -9,7 +9,7 @@ import pytest
 from helpers import QUADRATURE_ERRORS, QUADRATURE_PITCH_M
 
 import encdesign as ed
-from encdesign._cli import main as cli_main
+from encdesign.cli import main as cli_main
 
 FS = 16384.0
 T = jnp.arange(2048) / FS

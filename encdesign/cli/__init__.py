@@ -1,0 +1,5 @@
+"""The ``encdesign`` command line: :func:`main` and one private module per sub-command."""
+
+from ._main import main as main
+
+__all__ = ["main"]

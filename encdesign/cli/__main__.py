@@ -1,0 +1,7 @@
+"""``python -m encdesign.cli``: the ``encdesign`` command."""
+
+import sys
+
+from ._main import main
+
+sys.exit(main())

@@ -1,0 +1,48 @@
+"""``encdesign check-gradients PROBLEM.toml``: AD gradients against finite differences."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from ..design._problem import load_problem
+from ..design._solve import check_gradients
+from ..io._study import write_json
+
+HELP = "compare AD gradients of a problem's outputs with central finite differences"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("problem", type=Path, help="problem file (TOML)")
+    parser.add_argument("--json", type=Path, default=None, help="write the table as JSON here")
+    parser.add_argument(
+        "--rel-step", type=float, default=1e-5, help="FD step relative to the variable's scale"
+    )
+    parser.add_argument("--rtol", type=float, default=1e-4, help="relative tolerance for 'ok'")
+
+
+def run(args: argparse.Namespace) -> int:
+    problem = load_problem(args.problem)
+    rows = check_gradients(problem, rel_step=args.rel_step, rtol=args.rtol)
+    print(f"problem {problem.name}: d(output)/d(variable), output units per SI unit")
+    head = f"{'output':22s} {'variable':20s} {'at':>12s} {'AD':>14s} {'FD':>14s} {'rel err':>9s}"
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        flag = "ok" if r.ok else "MISMATCH"
+        print(
+            f"{r.output:22s} {r.variable:20s} {r.at:12.5g} {r.ad:14.6e} {r.fd:14.6e} "
+            f"{r.rel_error:9.2e} {flag}"
+        )
+    n_bad = sum(not r.ok for r in rows)
+    print(f"{len(rows) - n_bad}/{len(rows)} gradients agree (rtol {args.rtol:g})")
+    if args.json is not None:
+        data = {
+            "problem": problem.name,
+            "rtol": args.rtol,
+            "rows": [dataclasses.asdict(r) for r in rows],
+            "all_ok": n_bad == 0,
+        }
+        print(f"wrote {write_json(args.json, data)}")
+    return 0 if n_bad == 0 else 1

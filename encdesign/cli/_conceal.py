@@ -1,0 +1,47 @@
+"""``encdesign conceal OUT.toml --effect NAME [--seed N] [...]``: a bench recording with a
+hidden effect (or none), for testing the discrepancy finder."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "write a simulated bench recording with one physics effect hidden (or none)"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the command's arguments."""
+    from ..diagnose._conceal import CONCEALMENTS, HIDDEN, LAYOUTS
+
+    parser.add_argument("out", type=Path, help="recording TOML to write (CSV beside it)")
+    parser.add_argument("--effect", default="none", choices=["none", *HIDDEN])
+    parser.add_argument("--concealment", default="near_noise", choices=list(CONCEALMENTS))
+    parser.add_argument("--layout", default="3+1", choices=list(LAYOUTS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--amplitude", type=float, default=2.0, help="in units of the noise")
+    parser.add_argument("--samples-per-run", type=int, default=2000)
+    parser.add_argument("--no-theta-ref", action="store_true")
+    parser.add_argument("--truth", type=Path, default=None, help="write the hidden truth here")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the recording (and the truth JSON when asked)."""
+    import jax
+
+    from ..diagnose._conceal import write_concealed
+    from ..io._study import write_json
+
+    _, truth = write_concealed(
+        args.out,
+        key=jax.random.key(args.seed),
+        effect=None if args.effect == "none" else args.effect,
+        concealment=args.concealment,
+        layout=args.layout,
+        amplitude=args.amplitude,
+        samples_per_run=args.samples_per_run,
+        theta_ref=not args.no_theta_ref,
+    )
+    if args.truth is not None:
+        write_json(args.truth, truth)
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,71 @@
+"""``encdesign optimize PROBLEM.toml``: solve a design problem with its driver."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from ..design._cases import CaseRecorder
+from ..design._problem import load_problem
+from ..design._solve import solve_problem
+from ..io._study import write_json
+
+HELP = "solve a design problem (TOML): variables, objective, constraints, driver"
+
+
+def add_common(parser: argparse.ArgumentParser) -> None:
+    """Flags shared by ``optimize`` and ``sweep``."""
+    parser.add_argument("problem", type=Path, help="problem file (TOML, see docs/optimization.md)")
+    parser.add_argument("--json", type=Path, default=None, help="write the summary JSON here")
+    parser.add_argument(
+        "--cases", type=Path, default=None, help="record every case here (.jsonl or .csv)"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    add_common(parser)
+
+
+def print_result(summary: dict, stream=None) -> None:
+    """Readable table of the per-combination results and the best design."""
+    out = stream or sys.stdout
+    units = summary["units"]
+    print(f"problem   {summary['problem']}  ({summary['objective']}, {summary['sense']})", file=out)
+    print(f"status    {summary['status']}: {summary['message']}", file=out)
+    for r in summary["results"]:
+        disc = " ".join(f"{k}={v}" for k, v in r["discrete"].items())
+        ins = " ".join(f"{k}={v:.6g} {units[k]}" for k, v in r["inputs_display"].items())
+        outs = " ".join(
+            f"{k}={v:.6g}" if v is not None and math.isfinite(v) else f"{k}=nan"
+            for k, v in r["outputs"].items()
+        )
+        print(f"  [{r['status']}] {disc} {ins} -> {outs}".replace("  ", " ", 1), file=out)
+    best = summary["best"]
+    if best is not None:
+        disc = " ".join(f"{k}={v}" for k, v in best["discrete"].items())
+        ins = " ".join(f"{k}={v:.6g} {units[k]}" for k, v in best["inputs_display"].items())
+        print(f"best      {disc} {ins}".rstrip(), file=out)
+
+
+def run_and_report(args: argparse.Namespace, solve) -> int:
+    """Load ``args.problem``, run ``solve(problem, recorder=, progress=)``, record the cases,
+    print the result and write the ``--json`` summary; exit 0 on success, else 1."""
+    problem = load_problem(args.problem)
+    with CaseRecorder(args.cases) as rec:
+        result = solve(problem, recorder=rec, progress=not args.quiet)
+    summary = result.summary()
+    summary["n_cases"] = len(rec.cases)
+    summary["cases_file"] = None if args.cases is None else str(args.cases)
+    print_result(summary)
+    if args.cases is not None:
+        print(f"wrote {args.cases} ({len(rec.cases)} cases)")
+    if args.json is not None:
+        print(f"wrote {write_json(args.json, summary)}")
+    return 0 if result.status == "success" else 1
+
+
+def run(args: argparse.Namespace) -> int:
+    return run_and_report(args, solve_problem)

@@ -1,0 +1,128 @@
+"""The design tool: design files, problems (variables, objective, constraints, yield), objectives,
+drivers (gradient, Monte Carlo, DOE, enumeration), tolerance allocation and recorded cases.
+May import physics and io; never diagnose.
+"""
+
+from ._cases import (
+    Case as Case,
+)
+from ._cases import (
+    CaseRecorder as CaseRecorder,
+)
+from ._cases import (
+    read_cases as read_cases,
+)
+from ._cases import (
+    write_cases as write_cases,
+)
+from ._design import (
+    BenchRun as BenchRun,
+)
+from ._design import (
+    Design as Design,
+)
+from ._design import (
+    load_design as load_design,
+)
+from ._design import (
+    parse_design as parse_design,
+)
+from ._design import (
+    simulate_bench as simulate_bench,
+)
+from ._design import (
+    simulate_recording as simulate_recording,
+)
+from ._drivers import (
+    DOEResult as DOEResult,
+)
+from ._drivers import (
+    EnumerationResult as EnumerationResult,
+)
+from ._drivers import (
+    MonteCarloResult as MonteCarloResult,
+)
+from ._drivers import (
+    OptimisationError as OptimisationError,
+)
+from ._drivers import (
+    Solution as Solution,
+)
+from ._drivers import (
+    doe as doe,
+)
+from ._drivers import (
+    enumerate_designs as enumerate_designs,
+)
+from ._drivers import (
+    expected_value as expected_value,
+)
+from ._drivers import (
+    grid_points as grid_points,
+)
+from ._drivers import (
+    latin_hypercube as latin_hypercube,
+)
+from ._drivers import (
+    monte_carlo as monte_carlo,
+)
+from ._drivers import (
+    optimise as optimise,
+)
+from ._objectives import (
+    EncoderDesign as EncoderDesign,
+)
+from ._objectives import (
+    Tolerances as Tolerances,
+)
+from ._problem import (
+    Problem as Problem,
+)
+from ._problem import (
+    ProblemObjective as ProblemObjective,
+)
+from ._problem import (
+    VariableInfo as VariableInfo,
+)
+from ._problem import (
+    load_problem as load_problem,
+)
+from ._problem import (
+    parse_problem as parse_problem,
+)
+from ._solve import (
+    ProblemResult as ProblemResult,
+)
+from ._solve import (
+    check_gradients as check_gradients,
+)
+from ._solve import (
+    solve_problem as solve_problem,
+)
+from ._solve import (
+    sweep_problem as sweep_problem,
+)
+from ._tolerance import (
+    Allocation as Allocation,
+)
+from ._tolerance import (
+    Contributions as Contributions,
+)
+from ._tolerance import (
+    SweepTable as SweepTable,
+)
+from ._tolerance import (
+    allocate as allocate,
+)
+from ._tolerance import (
+    check_yield as check_yield,
+)
+from ._tolerance import (
+    contributions as contributions,
+)
+from ._tolerance import (
+    sweep_scales as sweep_scales,
+)
+from ._tolerance import (
+    tolerance_cost as tolerance_cost,
+)

@@ -1,0 +1,469 @@
+"""Design files: a TOML description of one multihead encoder and its test bench.
+
+See ``docs/design-file.md`` for the format. :func:`load_design` validates the whole file
+before returning anything (unknown keys, wrong head counts, non-finite or out-of-range
+values and time running backwards are refused with an
+:class:`~encdesign.EncdesignInputError` naming the file, the key and what was expected);
+:func:`simulate_bench` turns a design into bench data, and :func:`simulate_recording`
+writes it as an ``encdesign-recording/1`` multihead recording.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import input_error
+from ..io._recording import (
+    Recording,
+    _finite_number,
+    _positive_number,
+    load_recording,
+    read_toml,
+    write_recording,
+)
+from ..physics._kinematics import EncoderModel, make_model, noisy_head_readings
+
+__all__ = [
+    "DESIGN_FORMAT",
+    "BenchRun",
+    "Design",
+    "load_design",
+    "parse_design",
+    "simulate_bench",
+    "simulate_recording",
+]
+
+DESIGN_FORMAT = "encdesign-design/1"
+MAX_SAMPLES = 20_000_000  # refuse benches that would not fit in memory
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchRun:
+    """One acquisition at constant speed.
+
+    Attributes:
+        speed_rev_per_s: shaft speed, rev/s (non-zero; negative turns backwards).
+        start_time_s, end_time_s: time span, s (end > start).
+        sample_rate_hz: samples per second, Hz.
+        start_angle_rad: shaft angle at ``start_time_s``, rad.
+    """
+
+    speed_rev_per_s: float = 1.0
+    start_time_s: float = 0.0
+    end_time_s: float = 1.0
+    sample_rate_hz: float = 2048.0
+    start_angle_rad: float = 0.0
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples ``round((end - start) * rate)``."""
+        return int(round((self.end_time_s - self.start_time_s) * self.sample_rate_hz))
+
+    def times_and_angles(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sample times (s) and true shaft angles (rad, unwrapped)."""
+        t = self.start_time_s + np.arange(self.n_samples) / self.sample_rate_hz
+        theta = self.start_angle_rad + 2 * np.pi * self.speed_rev_per_s * (t - self.start_time_s)
+        return t, theta
+
+
+@dataclasses.dataclass(frozen=True)
+class Design:
+    """A validated design.
+
+    Attributes:
+        model: the kinematic model (:class:`~encdesign.EncoderModel`).
+        head_angles_deg: nominal head azimuths, degrees.
+        reference_head: index of the asymmetric reference head, or ``None``.
+        grating_lines: lines per revolution, or ``None``.
+        runs: the bench acquisitions.
+        description: free text.
+        path: the file it came from (``None`` when parsed from a dict).
+    """
+
+    model: EncoderModel
+    head_angles_deg: tuple[float, ...]
+    reference_head: int | None
+    grating_lines: int | None
+    runs: tuple[BenchRun, ...]
+    description: str = ""
+    path: Path | None = None
+
+    @property
+    def n_heads(self) -> int:
+        """Number of heads."""
+        return len(self.head_angles_deg)
+
+    @property
+    def symmetric_heads(self) -> tuple[int, ...]:
+        """Indices of the heads other than the reference head."""
+        return tuple(k for k in range(self.n_heads) if k != self.reference_head)
+
+    def encoder_table(self) -> dict[str, Any]:
+        """The ``[encoder]`` table of a multihead recording of this design."""
+        enc: dict[str, Any] = {
+            "optical_radius_m": float(self.model.disk.optical_radius_m),
+            "head_angles_deg": [float(a) for a in self.head_angles_deg],
+        }
+        if self.reference_head is not None:
+            enc["reference_head"] = self.reference_head
+        if self.grating_lines is not None:
+            enc["grating_lines"] = self.grating_lines
+        return enc
+
+
+# ----------------------------------------------------------------------------- checkers
+
+
+_number = _finite_number
+_positive = _positive_number
+
+
+def _nonneg(where: str, v: Any) -> float:
+    x = _number(where, v)
+    if x < 0:
+        raise input_error(where, f"got {v!r}", "a non-negative number")
+    return x
+
+
+def _int(where: str, v: Any, low: int = 0) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < low:
+        raise input_error(where, f"got {v!r}", f"an integer >= {low}")
+    return int(v)
+
+
+def _list(where: str, v: Any, length: int | None = None, what: str = "") -> list[float]:
+    if not isinstance(v, list):
+        raise input_error(where, f"got {v!r}", "a list of numbers")
+    if length is not None and len(v) != length:
+        raise input_error(
+            where, f"{len(v)} values", f"{length}, one per {what}" if what else str(length)
+        )
+    return [_number(f"{where}[{i}]", x) for i, x in enumerate(v)]
+
+
+def _per_head(where: str, v: Any, n_heads: int, nonneg: bool = False) -> list[float]:
+    """A list with one value per head, or one number applied to every head."""
+    if isinstance(v, list):
+        vals = _list(where, v, n_heads, "head in [heads].angles_deg")
+    else:
+        vals = [_number(where, v)] * n_heads
+    if nonneg:
+        for i, x in enumerate(vals):
+            if x < 0:
+                raise input_error(f"{where}[{i}]", f"got {x!r}", "a non-negative number")
+    return vals
+
+
+def _table(where: str, raw: Mapping[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:
+    tab = raw.get(name, {})
+    if not isinstance(tab, dict):
+        raise input_error(f"{where}: {name}", f"got {tab!r}", f"a [{name}] table")
+    unknown = sorted(set(tab) - allowed)
+    if unknown:
+        raise input_error(
+            f"{where}: [{name}]", f"unknown key(s) {', '.join(unknown)}", f"only {sorted(allowed)}"
+        )
+    return tab
+
+
+_TOP = {"format", "description", "disk", "heads", "motion", "bench"}
+_DISK = {
+    "optical_radius_m",
+    "eccentricity_m",
+    "tilt_rad",
+    "grating_sin_rad",
+    "grating_cos_rad",
+    "grating_lines",
+}
+_HEADS = {
+    "angles_deg",
+    "reference_head",
+    "placement_error_rad",
+    "beam_tilt_rad",
+    "gap_m",
+    "noise_rad",
+}
+_MOTION = {
+    "axial_cos_m",
+    "axial_sin_m",
+    "runout_amplitude_m",
+    "runout_ratio",
+    "runout_phase_rad",
+    "runout_freq_hz",
+}
+_BENCH = {"runs"}
+_RUN = {f.name for f in dataclasses.fields(BenchRun)}
+
+
+def parse_design(raw: Mapping[str, Any], where: str = "design") -> Design:
+    """Validate a design given as a dict (the parsed TOML); see ``docs/design-file.md``.
+
+    Raises:
+        EncdesignInputError: naming ``where``, the key and what was expected.
+    """
+    if not isinstance(raw, Mapping):
+        raise input_error(where, "not a TOML table")
+    unknown = sorted(set(raw) - _TOP)
+    if unknown:
+        raise input_error(where, f"unknown key(s) {', '.join(unknown)}", f"only {sorted(_TOP)}")
+    fmt = raw.get("format", DESIGN_FORMAT)
+    if fmt != DESIGN_FORMAT:
+        raise input_error(f"{where}: format", f"got {fmt!r}", repr(DESIGN_FORMAT))
+    description = raw.get("description", "")
+    if not isinstance(description, str):
+        raise input_error(f"{where}: description", f"got {description!r}", "a string")
+
+    disk = _table(where, raw, "disk", _DISK)
+    heads = _table(where, raw, "heads", _HEADS)
+    motion = _table(where, raw, "motion", _MOTION)
+    bench = _table(where, raw, "bench", _BENCH)
+    if "optical_radius_m" not in disk:
+        raise input_error(f"{where}: [disk]", "missing key 'optical_radius_m'")
+    if "angles_deg" not in heads:
+        raise input_error(f"{where}: [heads]", "missing key 'angles_deg'")
+
+    w = f"{where}: [disk]."
+    radius = _positive(w + "optical_radius_m", disk["optical_radius_m"])
+    ecc = _list(w + "eccentricity_m", disk.get("eccentricity_m", [0.0, 0.0]), 2, "axis (x, y)")
+    tilt = _list(w + "tilt_rad", disk.get("tilt_rad", [0.0, 0.0]), 2, "axis (x, y)")
+    for i, t in enumerate(tilt):
+        if abs(t) >= 0.5:
+            raise input_error(f"{w}tilt_rad[{i}]", f"got {t!r}", "|tilt| < 0.5 rad")
+    gs = _list(w + "grating_sin_rad", disk.get("grating_sin_rad", []))
+    gc = _list(w + "grating_cos_rad", disk.get("grating_cos_rad", []))
+    lines = disk.get("grating_lines")
+    if lines is not None:
+        lines = _int(w + "grating_lines", lines, 1)
+
+    w = f"{where}: [heads]."
+    angles_raw = heads["angles_deg"]
+    if not isinstance(angles_raw, list) or not angles_raw:
+        raise input_error(w + "angles_deg", f"got {angles_raw!r}", "a non-empty list of degrees")
+    angles = _list(w + "angles_deg", angles_raw)
+    n_heads = len(angles)
+    ref = heads.get("reference_head")
+    if ref is not None:
+        ref = _int(w + "reference_head", ref, 0)
+        if ref >= n_heads:
+            raise input_error(
+                w + "reference_head", f"got {ref}", f"an index < {n_heads} (number of angles_deg)"
+            )
+    placement = _per_head(w + "placement_error_rad", heads.get("placement_error_rad", 0.0), n_heads)
+    beam = _per_head(w + "beam_tilt_rad", heads.get("beam_tilt_rad", 0.0), n_heads)
+    for i, b in enumerate(beam):
+        if abs(b) >= 1.0:
+            raise input_error(f"{w}beam_tilt_rad[{i}]", f"got {b!r}", "|tilt| < 1 rad")
+    gap = _positive(w + "gap_m", heads.get("gap_m", 1e-3))
+    noise = _per_head(w + "noise_rad", heads.get("noise_rad", 0.0), n_heads, nonneg=True)
+
+    w = f"{where}: [motion]."
+    ac = _list(w + "axial_cos_m", motion.get("axial_cos_m", []))
+    asn = _list(w + "axial_sin_m", motion.get("axial_sin_m", []))
+    runout = _nonneg(w + "runout_amplitude_m", motion.get("runout_amplitude_m", 0.0))
+    ratio = _number(w + "runout_ratio", motion.get("runout_ratio", 0.0))
+    rphase = _number(w + "runout_phase_rad", motion.get("runout_phase_rad", 0.0))
+    rfreq = _number(w + "runout_freq_hz", motion.get("runout_freq_hz", 0.0))
+
+    runs_raw = bench.get("runs", [{}])
+    if not isinstance(runs_raw, list) or not runs_raw:
+        raise input_error(f"{where}: [bench].runs", f"got {runs_raw!r}", "[[bench.runs]] tables")
+    runs = []
+    total = 0
+    for i, r in enumerate(runs_raw):
+        wr = f"{where}: [[bench.runs]] #{i}"
+        if not isinstance(r, dict):
+            raise input_error(wr, f"got {r!r}", "a table")
+        unknown = sorted(set(r) - _RUN)
+        if unknown:
+            raise input_error(wr, f"unknown key(s) {', '.join(unknown)}", f"only {sorted(_RUN)}")
+        d = BenchRun()
+        run = BenchRun(
+            speed_rev_per_s=_number(
+                f"{wr}.speed_rev_per_s", r.get("speed_rev_per_s", d.speed_rev_per_s)
+            ),
+            start_time_s=_number(f"{wr}.start_time_s", r.get("start_time_s", d.start_time_s)),
+            end_time_s=_number(f"{wr}.end_time_s", r.get("end_time_s", d.end_time_s)),
+            sample_rate_hz=_positive(
+                f"{wr}.sample_rate_hz", r.get("sample_rate_hz", d.sample_rate_hz)
+            ),
+            start_angle_rad=_number(
+                f"{wr}.start_angle_rad", r.get("start_angle_rad", d.start_angle_rad)
+            ),
+        )
+        if run.speed_rev_per_s == 0:
+            raise input_error(f"{wr}.speed_rev_per_s", "got 0", "a non-zero speed in rev/s")
+        if run.end_time_s <= run.start_time_s:
+            raise input_error(
+                f"{wr}.end_time_s",
+                f"time goes backwards or stands still (start_time_s {run.start_time_s!r}, "
+                f"end_time_s {run.end_time_s!r})",
+                "end_time_s > start_time_s",
+            )
+        if run.n_samples < 2:
+            raise input_error(wr, f"{run.n_samples} sample(s)", "at least 2 samples per run")
+        total += run.n_samples
+        runs.append(run)
+    if total > MAX_SAMPLES:
+        raise input_error(f"{where}: [bench]", f"{total} samples", f"at most {MAX_SAMPLES}")
+
+    try:
+        model = make_model(
+            radius,
+            np.deg2rad(angles),
+            eccentricity_m=ecc,
+            tilt_rad=tilt,
+            grating_sin_rad=gs,
+            grating_cos_rad=gc,
+            placement_error_rad=placement,
+            beam_tilt_rad=beam,
+            gap_m=gap,
+            noise_rad=noise,
+            axial_cos_m=ac,
+            axial_sin_m=asn,
+            runout_amplitude_m=runout,
+            runout_ratio=ratio,
+            runout_phase_rad=rphase,
+            runout_freq_hz=rfreq,
+        )
+    except ValueError as exc:  # pragma: no cover - the checks above should catch everything
+        raise input_error(where, str(exc)) from None
+    return Design(
+        model=model,
+        head_angles_deg=tuple(angles),
+        reference_head=ref,
+        grating_lines=lines,
+        runs=tuple(runs),
+        description=description,
+    )
+
+
+def load_design(path: str | os.PathLike) -> Design:
+    """Load and validate a design TOML file (never modifies it).
+
+    Raises:
+        EncdesignInputError: the file is missing, not TOML, or breaks the format.
+    """
+    path = Path(path)
+    return dataclasses.replace(parse_design(read_toml(path), str(path)), path=path)
+
+
+def simulate_bench(
+    design: Design,
+    *,
+    key: jax.Array,
+    t_s: np.ndarray | None = None,
+    theta_rad: np.ndarray | None = None,
+    run: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """Bench columns of a design: ``t``, ``run``, ``theta_ref``, ``h0 … h{H-1}``.
+
+    By default the samples are the design's ``[[bench.runs]]``. Passing ``t_s``,
+    ``theta_rad`` (and optionally ``run``) instead simulates at those samples (for
+    example those of a measured recording). Readings include the design's read noise.
+
+    Args:
+        design: the validated design.
+        key: ``jax.random`` key for the read noise.
+        t_s: sample times, s; theta_rad: true shaft angles, rad; run: run ids.
+
+    Returns:
+        Column name -> 1-D numpy array (SI units).
+    """
+    if t_s is None:
+        parts = [r.times_and_angles() for r in design.runs]
+        t_s = np.concatenate([p[0] for p in parts])
+        theta_rad = np.concatenate([p[1] for p in parts])
+        run = np.concatenate([np.full(len(p[0]), i, dtype=np.int64) for i, p in enumerate(parts)])
+    elif theta_rad is None:
+        raise ValueError("simulate_bench: theta_rad is needed with t_s")
+    if run is None:
+        run = np.zeros(len(t_s), dtype=np.int64)
+    readings = np.asarray(
+        _simulate_jit(design.model, jnp.asarray(theta_rad), jnp.asarray(t_s), key)
+    )
+    if not np.all(np.isfinite(readings)):
+        raise input_error(
+            str(design.path or "design"),
+            "the simulation produced non-finite readings",
+            "a geometry in which every beam meets the disk",
+        )
+    cols: dict[str, np.ndarray] = {"t": np.asarray(t_s, float), "run": np.asarray(run)}
+    cols["theta_ref"] = np.asarray(theta_rad, float)
+    for k in range(design.n_heads):
+        cols[f"h{k}"] = readings[:, k]
+    return cols
+
+
+@jax.jit
+def _simulate_jit(model: EncoderModel, theta: jax.Array, t: jax.Array, key: jax.Array):
+    return noisy_head_readings(model, theta, t, key=key)
+
+
+def simulate_recording(
+    design: Design,
+    out: str | os.PathLike,
+    *,
+    seed: int = 0,
+    like: str | os.PathLike | None = None,
+    compress: bool = False,
+) -> Recording:
+    """Simulate a bench and write it as a multihead recording (atomically).
+
+    Args:
+        design: the validated design.
+        out: output TOML path (the CSV goes beside it).
+        seed: PRNG seed of the read noise.
+        like: optional multihead recording whose samples (``t``, ``run``, ``theta_ref``)
+            are reused instead of the design's ``[[bench.runs]]``; its head count must
+            match the design's.
+        compress: write ``.csv.gz``.
+
+    Returns:
+        The written :class:`~encdesign.Recording`.
+    """
+    key = jax.random.key(seed)
+    provenance: dict[str, Any] = {"simulated_by": "encdesign simulate", "seed": seed}
+    if design.path is not None:
+        provenance["design"] = str(design.path)
+    if like is not None:
+        rec = load_recording(like)
+        where = str(rec.path)
+        if rec.kind != "multihead":
+            raise input_error(where, f"kind '{rec.kind}'", "a multihead recording for --like")
+        n_rec = len(rec.head_columns)
+        if n_rec != design.n_heads:
+            raise input_error(
+                where,
+                f"{n_rec} heads but the design has {design.n_heads}",
+                "the same head count in recording and design",
+            )
+        if "theta_ref" not in rec.columns:
+            raise input_error(where, "no column 'theta_ref'", "a reference angle to sample at")
+        cols = simulate_bench(
+            design,
+            key=key,
+            t_s=rec.columns["t"],
+            theta_rad=rec.columns["theta_ref"],
+            run=rec.runs,
+        )
+        provenance["samples_from"] = where
+    else:
+        cols = simulate_bench(design, key=key)
+    desc = design.description or "simulated bench recording"
+    return write_recording(
+        out,
+        "multihead",
+        cols,
+        encoder=design.encoder_table(),
+        description=desc,
+        provenance=provenance,
+        compress=compress,
+    )

@@ -1,0 +1,443 @@
+"""Design problems: variables, objective, constraints, yield target — apart from drivers.
+
+A *problem* says what to vary and what to minimise; a *driver* (:mod:`encdesign.design._drivers`)
+says how. Problems are written as TOML files (``encdesign optimize PROBLEM.toml``)::
+
+    [problem]
+    name = "reference head of a 3+1 encoder"
+    objective = "cotangent_sensitivity"   # a name in the objective registry
+    sense = "minimize"                    # or "maximize"
+    seed = 0                              # PRNG seed of any Monte Carlo inside
+
+    [model]                               # fixed settings of the objective (SI units)
+    n_heads = 3
+    max_order = 16
+
+    [variables.reference_angle]           # a continuous variable
+    units = "deg"                         # units of start/lower/upper in this file
+    start = 20.0
+    lower = 5.0
+    upper = 55.0
+
+    [variables.pole_pairs]                # a discrete variable: enumerated
+    values = [4, 5, 6, 7]
+
+    [constraints.residual_rms]            # bound on another output of the objective
+    upper = 1e-6
+
+    [yield]                               # optional: a yield target for Monte Carlo builds
+    target = 0.99
+    spec = 1.0
+    spec_units = "urad"
+    n_builds = 2000
+
+    [driver]
+    kind = "lbfgsb"                       # bfgs | lbfgsb | lm | grid | lhs
+    max_steps = 200
+
+Every name is checked against the objective's declaration in the registry
+(:class:`ProblemObjective`); values are converted to SI on load. Bad files raise
+:class:`~encdesign.EncdesignInputError` naming the file, the field, the value and what was
+expected: an unknown variable, bounds that exclude the start point, an infeasible yield
+target, a non-integer pole count, …
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from .._errors import input_error
+from ..io._recording import read_toml
+from ._objectives import PROBLEM_OBJECTIVES
+from ._spec import ProblemObjective as ProblemObjective
+from ._spec import VariableInfo as VariableInfo
+
+# unit name -> (SI unit, factor to SI)
+UNITS: dict[str, tuple[str, float]] = {
+    "rad": ("rad", 1.0),
+    "mrad": ("rad", 1e-3),
+    "urad": ("rad", 1e-6),
+    "nrad": ("rad", 1e-9),
+    "deg": ("rad", math.pi / 180.0),
+    "arcsec": ("rad", math.pi / 180.0 / 3600.0),
+    "m": ("m", 1.0),
+    "mm": ("m", 1e-3),
+    "um": ("m", 1e-6),
+    "nm": ("m", 1e-9),
+    "s": ("s", 1.0),
+    "ms": ("s", 1e-3),
+    "us": ("s", 1e-6),
+    "ns": ("s", 1e-9),
+    "1": ("1", 1.0),
+}
+
+DRIVER_KINDS = ("bfgs", "lbfgsb", "lm", "grid", "lhs")
+_TOP_KEYS = {"problem", "model", "variables", "constraints", "yield", "driver", "sweep"}
+
+
+def to_si(value: float, units: str, where: str, si_units: str | None = None) -> float:
+    """Convert ``value`` in ``units`` to SI; check the dimension against ``si_units``."""
+    if units not in UNITS:
+        raise input_error(where, f"unknown units {units!r}", f"one of {', '.join(UNITS)}")
+    si, factor = UNITS[units]
+    if si_units is not None and si != si_units:
+        raise input_error(where, f"units {units!r} are not a unit of {si_units!r}")
+    return float(value) * factor
+
+
+@dataclasses.dataclass(frozen=True)
+class Variable:
+    """A design variable of a problem (all values SI).
+
+    Attributes:
+        name: variable name.
+        units: units used in the problem file (for display).
+        si_units: SI unit.
+        start: start value (continuous) or first value (discrete), SI.
+        lower, upper: bounds, SI (``±inf`` when not given).
+        values: allowed values of a discrete variable (``None`` for continuous), SI.
+        integer: values are integers.
+    """
+
+    name: str
+    units: str
+    si_units: str
+    start: float
+    lower: float = -math.inf
+    upper: float = math.inf
+    values: tuple[float, ...] | None = None
+    integer: bool = False
+
+    @property
+    def discrete(self) -> bool:
+        """True for an enumerated variable."""
+        return self.values is not None
+
+    @property
+    def scale(self) -> float:
+        """A typical size used to normalise the variable for solvers (SI)."""
+        if math.isfinite(self.lower) and math.isfinite(self.upper) and self.upper > self.lower:
+            return self.upper - self.lower
+        return abs(self.start) if self.start != 0 else 1.0
+
+    def display(self, value_si: float) -> float:
+        """``value_si`` converted to the file's units."""
+        return value_si / UNITS[self.units][1]
+
+
+@dataclasses.dataclass(frozen=True)
+class Constraint:
+    """Bound on an output: ``lower <= output <= upper`` (SI)."""
+
+    output: str
+    lower: float = -math.inf
+    upper: float = math.inf
+
+
+@dataclasses.dataclass(frozen=True)
+class YieldTarget:
+    """Yield requirement: at least ``target`` of ``n_builds`` Monte Carlo builds have their
+    error metric ``<= spec`` (SI, e.g. rad)."""
+
+    target: float
+    spec: float
+    n_builds: int
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """A validated design problem (see the module docstring for the file format).
+
+    Attributes:
+        name: title.
+        objective: the registry entry.
+        sense: ``"minimize"`` or ``"maximize"``.
+        model: fixed settings (registry defaults overridden by the file), SI.
+        variables: the design variables in file order.
+        constraints: output bounds.
+        yield_target: the ``[yield]`` table or ``None``.
+        driver: ``[driver]`` settings (``kind`` always present).
+        sweep: ``[sweep]`` settings for ``encdesign sweep`` (``kind`` always present).
+        seed: PRNG seed.
+        path: the file (``None`` when built in memory).
+    """
+
+    name: str
+    objective: ProblemObjective
+    sense: str
+    model: dict[str, Any]
+    variables: tuple[Variable, ...]
+    constraints: tuple[Constraint, ...] = ()
+    yield_target: YieldTarget | None = None
+    driver: dict[str, Any] = dataclasses.field(default_factory=lambda: {"kind": "lbfgsb"})
+    sweep: dict[str, Any] = dataclasses.field(default_factory=lambda: {"kind": "grid"})
+    seed: int = 0
+    path: Path | None = None
+
+    @property
+    def continuous(self) -> tuple[Variable, ...]:
+        """The continuous variables."""
+        return tuple(v for v in self.variables if not v.discrete)
+
+    @property
+    def discrete(self) -> tuple[Variable, ...]:
+        """The enumerated variables."""
+        return tuple(v for v in self.variables if v.discrete)
+
+
+def _where(path: Path | str, *keys: str) -> str:
+    return f"{path}: " + ".".join(keys) if keys else str(path)
+
+
+def _num(value: Any, where: str, what: str = "a number") -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise input_error(where, f"{value!r} is not a number", what)
+    if not math.isfinite(float(value)):
+        raise input_error(where, f"{value!r} is not finite", what)
+    return float(value)
+
+
+def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str) -> None:
+    for k in table:
+        if k not in allowed:
+            raise input_error(where, f"unknown key {k!r}", f"one of {', '.join(sorted(allowed))}")
+
+
+def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
+    where = _where(src, "variables", name)
+    if not isinstance(table, Mapping):
+        raise input_error(where, f"{table!r} is not a table", "a [variables.NAME] table")
+    _check_keys(table, {"units", "start", "lower", "upper", "values"}, where)
+    units = table.get("units", info.units)
+    if not isinstance(units, str):
+        raise input_error(f"{where}.units", f"{units!r} is not a string")
+    to_si(1.0, units, f"{where}.units", info.units)
+    factor = UNITS[units][1]
+    if info.discrete or "values" in table:
+        if not info.discrete:
+            raise input_error(where, "has 'values' but is a continuous variable", "start/bounds")
+        for k in ("start", "lower", "upper"):
+            if k in table:
+                raise input_error(f"{where}.{k}", "given for a discrete variable", "values only")
+        vals = table.get("values")
+        if not isinstance(vals, list) or not vals:
+            raise input_error(f"{where}.values", f"{vals!r}", "a non-empty list of values")
+        out = []
+        for i, v in enumerate(vals):
+            w = f"{where}.values[{i}]"
+            x = _num(v, w, "an integer" if info.integer else "a number")
+            if info.integer and (not isinstance(v, int) or x != round(x)):
+                raise input_error(w, f"{v!r} is not an integer", f"an integer {name}")
+            xs = x * factor
+            if not info.lower <= xs <= info.upper:
+                raise input_error(w, f"{v!r} outside [{info.lower}, {info.upper}] (SI)")
+            out.append(int(x) if info.integer else xs)
+        if len(set(out)) != len(out):
+            raise input_error(f"{where}.values", f"{vals!r} has repeated values", "distinct")
+        return Variable(name, units, info.units, out[0], values=tuple(out), integer=info.integer)
+    if "start" not in table:
+        raise input_error(where, "no 'start'", "a start value")
+    start = _num(table["start"], f"{where}.start") * factor
+    lower = _num(table["lower"], f"{where}.lower") * factor if "lower" in table else info.lower
+    upper = _num(table["upper"], f"{where}.upper") * factor if "upper" in table else info.upper
+    if not lower < upper:
+        raise input_error(where, f"lower {lower} >= upper {upper} (SI)", "lower < upper")
+    if lower < info.lower or upper > info.upper:
+        raise input_error(
+            where,
+            f"bounds [{lower}, {upper}] leave the valid range [{info.lower}, {info.upper}] (SI)",
+        )
+    if not lower <= start <= upper:
+        raise input_error(
+            f"{where}.start",
+            f"start {table['start']} {units} is outside the bounds "
+            f"[{table.get('lower', lower / factor)}, {table.get('upper', upper / factor)}] {units}",
+            "lower <= start <= upper",
+        )
+    return Variable(name, units, info.units, start, lower, upper)
+
+
+def parse_problem(
+    data: Mapping[str, Any],
+    registry: Mapping[str, ProblemObjective] | None = None,
+    *,
+    source: str | os.PathLike = "<problem>",
+) -> Problem:
+    """Validate a problem given as a dict (the TOML content) and return a :class:`Problem`.
+
+    Args:
+        data: the parsed TOML.
+        registry: objective name -> :class:`ProblemObjective` (default: the objectives of
+            :mod:`encdesign.objectives`).
+        source: name used in error messages (the file path).
+    """
+    if registry is None:
+        registry = PROBLEM_OBJECTIVES
+    src = str(source)
+    _check_keys(data, _TOP_KEYS, src)
+    head = data.get("problem")
+    if not isinstance(head, Mapping):
+        raise input_error(src, "no [problem] table", "[problem] with name and objective")
+    _check_keys(head, {"name", "objective", "sense", "seed", "description"}, f"{src}: problem")
+    obj_name = head.get("objective")
+    if obj_name not in registry:
+        raise input_error(
+            _where(src, "problem", "objective"),
+            f"unknown objective {obj_name!r}",
+            f"one of {', '.join(sorted(registry))}",
+        )
+    spec = registry[obj_name]
+    sense = head.get("sense", "minimize")
+    if sense not in ("minimize", "maximize"):
+        raise input_error(_where(src, "problem", "sense"), f"{sense!r}", "minimize or maximize")
+    seed = head.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise input_error(_where(src, "problem", "seed"), f"{seed!r}", "an integer >= 0")
+    model = dict(spec.model)
+    for k, v in dict(data.get("model", {})).items():
+        if k not in spec.model:
+            raise input_error(
+                _where(src, "model", k),
+                f"unknown model setting {k!r} for objective {obj_name!r}",
+                f"one of {', '.join(sorted(spec.model)) or 'none'}",
+            )
+        default = spec.model[k]
+        if isinstance(default, bool):
+            ok = isinstance(v, bool)
+        elif isinstance(default, int):
+            ok = isinstance(v, int) and not isinstance(v, bool)
+        elif isinstance(default, float):
+            ok = isinstance(v, int | float) and not isinstance(v, bool)
+        elif isinstance(default, list | tuple):
+            ok = isinstance(v, list)
+        else:
+            ok = isinstance(v, type(default))
+        if not ok:
+            raise input_error(
+                _where(src, "model", k),
+                f"{v!r}",
+                f"a value like {default!r} ({type(default).__name__})",
+            )
+        model[k] = float(v) if isinstance(default, float) else v
+    vtables = data.get("variables", {})
+    if not isinstance(vtables, Mapping) or not vtables:
+        raise input_error(src, "no [variables.*] tables", "at least one design variable")
+    variables = []
+    for name, table in vtables.items():
+        if name not in spec.variables:
+            raise input_error(
+                _where(src, "variables", name),
+                f"unknown variable {name!r} for objective {obj_name!r}",
+                f"one of {', '.join(spec.variables)}",
+            )
+        variables.append(_variable(name, table, spec.variables[name], src))
+    constraints = []
+    for out, table in dict(data.get("constraints", {})).items():
+        where = _where(src, "constraints", out)
+        if out not in spec.outputs:
+            raise input_error(where, f"unknown output {out!r}", f"one of {', '.join(spec.outputs)}")
+        if not isinstance(table, Mapping):
+            raise input_error(where, f"{table!r} is not a table", "lower and/or upper")
+        _check_keys(table, {"lower", "upper"}, where)
+        lo = _num(table["lower"], f"{where}.lower") if "lower" in table else -math.inf
+        hi = _num(table["upper"], f"{where}.upper") if "upper" in table else math.inf
+        if not lo < hi:
+            raise input_error(where, f"lower {lo} >= upper {hi}", "lower < upper")
+        constraints.append(Constraint(out, lo, hi))
+    ytarget = None
+    if "yield" in data:
+        ytarget = _yield(data["yield"], src)
+    elif spec.requires_yield:
+        raise input_error(src, f"objective {obj_name!r} needs a [yield] table")
+    driver = dict(data.get("driver", {}))
+    driver.setdefault("kind", "lbfgsb")
+    _check_driver(driver, _where(src, "driver"), DRIVER_KINDS)
+    sweep = dict(data.get("sweep", {}))
+    sweep.setdefault("kind", "grid")
+    _check_driver(sweep, _where(src, "sweep"), ("grid", "lhs"))
+    if driver["kind"] == "lm" and "residuals" not in spec.outputs:
+        raise input_error(
+            _where(src, "driver", "kind"),
+            f"'lm' needs a residual vector but objective {obj_name!r} has none",
+            "bfgs, lbfgsb, grid or lhs",
+        )
+    name = head.get("name", Path(src).stem)
+    return Problem(
+        str(name),
+        spec,
+        sense,
+        model,
+        tuple(variables),
+        tuple(constraints),
+        ytarget,
+        driver,
+        sweep,
+        seed,
+        None if src == "<problem>" else Path(src),
+    )
+
+
+def _yield(table: Any, src: str) -> YieldTarget:
+    where = _where(src, "yield")
+    if not isinstance(table, Mapping):
+        raise input_error(where, f"{table!r} is not a table", "target, spec, n_builds")
+    _check_keys(table, {"target", "spec", "spec_units", "n_builds"}, where)
+    for k in ("target", "spec"):
+        if k not in table:
+            raise input_error(where, f"no {k!r}", "target, spec and n_builds")
+    target = _num(table["target"], f"{where}.target")
+    n = table.get("n_builds", 1000)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 10:
+        raise input_error(f"{where}.n_builds", f"{n!r}", "an integer >= 10")
+    if not 0.0 < target < 1.0:
+        raise input_error(
+            f"{where}.target",
+            f"infeasible yield target {target!r}: no Monte Carlo estimate can show it",
+            "a fraction strictly between 0 and 1",
+        )
+    if (1.0 - target) * n < 1.0:
+        raise input_error(
+            f"{where}.target",
+            f"infeasible yield target {target!r} with n_builds = {n}: fewer than one "
+            f"failing build is allowed, so the target cannot be told apart from 100 %",
+            f"n_builds >= {math.ceil(1.0 / (1.0 - target))} or a lower target",
+        )
+    units = table.get("spec_units", "rad")
+    spec = _num(table["spec"], f"{where}.spec")
+    spec_si = to_si(spec, units, f"{where}.spec_units")
+    if spec_si <= 0.0:
+        raise input_error(f"{where}.spec", f"{spec!r}", "a positive accuracy spec")
+    return YieldTarget(target, spec_si, int(n))
+
+
+def _check_driver(table: dict[str, Any], where: str, kinds: tuple[str, ...]) -> None:
+    kind = table["kind"]
+    if kind not in kinds:
+        raise input_error(f"{where}.kind", f"unknown driver {kind!r}", f"one of {', '.join(kinds)}")
+    ints = {"max_steps": 1, "n": 1, "points_per_dim": 2, "chunk_size": 1}
+    floats = {"gtol", "rtol", "atol", "penalty"}
+    _check_keys(table, {"kind", *ints, *floats}, where)
+    for k, lo in ints.items():
+        if k in table:
+            v = table[k]
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise input_error(f"{where}.{k}", f"{v!r}", f"an integer >= {lo}")
+    for k in floats:
+        if k in table and _num(table[k], f"{where}.{k}") <= 0:
+            raise input_error(f"{where}.{k}", f"{table[k]!r}", "a positive number")
+
+
+def load_problem(
+    path: str | os.PathLike, registry: Mapping[str, ProblemObjective] | None = None
+) -> Problem:
+    """Read and validate a problem TOML file (never modified).
+
+    Raises :class:`~encdesign.EncdesignInputError` naming the file and field on bad input.
+    """
+    path = Path(path)
+    return parse_problem(read_toml(path), registry, source=path)

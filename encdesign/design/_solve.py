@@ -1,0 +1,420 @@
+"""Hand a :class:`~encdesign.Problem` to its driver: optimise, sweep, check gradients.
+
+Continuous variables are normalised for the solvers, ``x = start + scale * u`` (``scale`` =
+bound width, or ``|start|``), so angles in rad and tolerances in µm are equally well
+conditioned. Discrete variables are enumerated (:func:`~encdesign.enumerate_designs`)
+around the continuous solve. Constraints enter gradient solves as a quadratic penalty and are
+checked on the answer (status ``"infeasible"`` when violated). Every evaluation that the
+driver reports is recorded as a case (:mod:`encdesign.design._cases`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import input_error
+from .._progress import progress_bar
+from ._cases import CaseRecorder
+from ._drivers import (
+    FAILED,
+    INFEASIBLE,
+    MAX_STEPS,
+    NONFINITE,
+    SUCCESS,
+    enumerate_designs,
+    grid_points,
+    latin_hypercube,
+    optimise,
+)
+from ._problem import Problem
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignResult:
+    """The answer for one combination of discrete values.
+
+    Attributes:
+        discrete: discrete variable -> value.
+        inputs: continuous variable -> value, SI.
+        outputs: output name -> value (scalars), SI.
+        objective: the minimised quantity (the objective output, negated for
+            ``sense = "maximize"``).
+        status: driver status (``"success"``, ``"infeasible"``, ``"max_steps_reached"``, …).
+        n_steps: solver steps (DOE: points evaluated).
+        message: account of the status.
+    """
+
+    discrete: dict[str, Any]
+    inputs: dict[str, float]
+    outputs: dict[str, float]
+    objective: float
+    status: str
+    n_steps: int = 0
+    message: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class ProblemResult:
+    """Result of :func:`solve_problem` (``best`` is ``None`` when nothing succeeded)."""
+
+    problem: Problem
+    results: tuple[DesignResult, ...]
+    best: DesignResult | None
+    status: str
+    message: str = ""
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able summary (SI values, plus the file's display units)."""
+        p = self.problem
+
+        def one(r: DesignResult) -> dict[str, Any]:
+            return {
+                "discrete": r.discrete,
+                "inputs": r.inputs,
+                "inputs_display": {
+                    v.name: v.display(r.inputs[v.name]) for v in p.continuous if v.name in r.inputs
+                },
+                "outputs": _finite_or_none(r.outputs),
+                "status": r.status,
+                "n_steps": r.n_steps,
+                "message": r.message,
+            }
+
+        return {
+            "problem": p.name,
+            "objective": p.objective.name,
+            "sense": p.sense,
+            "driver": p.driver,
+            "seed": p.seed,
+            "status": self.status,
+            "message": self.message,
+            "units": {v.name: v.units for v in p.variables},
+            "best": None if self.best is None else one(self.best),
+            "results": [one(r) for r in self.results],
+        }
+
+
+def _finite_or_none(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: (v if math.isfinite(v) else None) for k, v in d.items()}
+
+
+class _Evaluator:
+    """Normalised view of a problem for one discrete combination."""
+
+    def __init__(self, problem: Problem, discrete: dict[str, Any]):
+        self.problem = problem
+        self.discrete = discrete
+        self.vars = problem.continuous
+        self.start = np.array([v.start for v in self.vars], dtype=np.float64)
+        self.scale = np.array([v.scale for v in self.vars], dtype=np.float64)
+        self.lower = np.array([v.lower for v in self.vars], dtype=np.float64)
+        self.upper = np.array([v.upper for v in self.vars], dtype=np.float64)
+        self.evaluate = problem.objective.build(problem, dict(discrete))
+        self.name = problem.objective.outputs[0]
+        self.sign = -1.0 if problem.sense == "maximize" else 1.0
+
+    def x_of(self, u: jax.Array) -> dict[str, jax.Array]:
+        x = jnp.asarray(self.start) + jnp.asarray(self.scale) * u
+        return {v.name: x[i] for i, v in enumerate(self.vars)}
+
+    def outputs(self, u: jax.Array) -> dict[str, jax.Array]:
+        return self.evaluate(self.x_of(u))
+
+    def u_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self.lower - self.start) / self.scale, (self.upper - self.start) / self.scale
+
+    def scalar_outputs(self, u: jax.Array) -> dict[str, float]:
+        out = self.outputs(jnp.asarray(u))
+        return {k: float(v) for k, v in out.items() if jnp.ndim(v) == 0}
+
+    def inputs_of(self, u: np.ndarray) -> dict[str, float]:
+        x = self.start + self.scale * np.asarray(u)
+        return {v.name: float(x[i]) for i, v in enumerate(self.vars)}
+
+    def violation(self, outputs: dict[str, float]) -> float:
+        worst = 0.0
+        for c in self.problem.constraints:
+            g = outputs[c.output]
+            for bound, excess in ((c.upper, g - c.upper), (c.lower, c.lower - g)):
+                if math.isfinite(bound):
+                    worst = max(worst, excess / max(abs(bound), 1e-300))
+        return worst
+
+
+def _penalised(ev: _Evaluator, weight: float):
+    cons = ev.problem.constraints
+
+    def f(u: jax.Array, _args: Any) -> jax.Array:
+        out = ev.outputs(u)
+        val = ev.sign * out[ev.name]
+        pen = 0.0
+        for c in cons:
+            g = out[c.output]
+            if math.isfinite(c.upper):
+                pen = pen + (jax.nn.relu(g - c.upper) / max(abs(c.upper), 1e-300)) ** 2
+            if math.isfinite(c.lower):
+                pen = pen + (jax.nn.relu(c.lower - g) / max(abs(c.lower), 1e-300)) ** 2
+        return val + weight * pen
+
+    return f
+
+
+def _scaled(f, fscale: float):
+    return lambda u, a: f(u, a) / fscale
+
+
+def _finish_design(
+    ev: _Evaluator, u: np.ndarray, status: str, n_steps: int, message: str
+) -> DesignResult:
+    outs = ev.scalar_outputs(u)
+    val = outs.get(ev.name, math.nan)
+    if status == SUCCESS and not all(math.isfinite(v) for v in outs.values()):
+        status, message = NONFINITE, "non-finite output at the solution"
+    if status == SUCCESS and ev.violation(outs) > 1e-6:
+        status = INFEASIBLE
+        message = f"constraint violated by {ev.violation(outs):.3g} (relative)"
+    return DesignResult(
+        dict(ev.discrete), ev.inputs_of(u), outs, ev.sign * val, status, n_steps, message
+    )
+
+
+def _solve_combo(
+    problem: Problem, discrete: dict[str, Any], recorder: CaseRecorder | None, progress: bool
+) -> DesignResult:
+    ev = _Evaluator(problem, discrete)
+    drv = problem.driver
+    kind = drv["kind"]
+    n_cont = len(ev.vars)
+    if n_cont == 0:
+        res = _finish_design(ev, np.zeros(0), SUCCESS, 0, "evaluated (no continuous variable)")
+        _record(recorder, problem, res)
+        return res
+    ulo, uhi = ev.u_bounds()
+    if kind in ("grid", "lhs"):
+        return _doe_combo(ev, kind, drv, recorder, progress)
+    u0 = np.zeros(n_cont)
+    f0 = float(ev.sign * ev.outputs(jnp.asarray(u0))[ev.name])
+    if not math.isfinite(f0):
+        res = _finish_design(ev, u0, NONFINITE, 0, "objective not finite at the start point")
+        _record(recorder, problem, res)
+        return res
+    fscale = max(abs(f0), 1e-300)
+    weight = float(drv.get("penalty", 1e4)) * fscale
+    if kind == "lm":
+        sol = optimise(
+            lambda u, a: ev.outputs(u)["residuals"],
+            "lm",
+            u0,
+            lower=ulo,
+            upper=uhi,
+            max_steps=int(drv.get("max_steps", 256)),
+            rtol=float(drv.get("rtol", 1e-10)),
+            atol=float(drv.get("atol", 1e-14)),
+        )
+    else:
+        # quadratic penalty with increasing weight (one round without constraints)
+        weights = [weight] if not problem.constraints else [weight * 10.0**k for k in (-2, 0, 2, 4)]
+        u, n_steps = u0, 0
+        for w in weights:
+            f = _penalised(ev, w)
+            sol = optimise(
+                _scaled(f, fscale),
+                kind,
+                u,
+                lower=ulo,
+                upper=uhi,
+                max_steps=int(drv.get("max_steps", 256)),
+                rtol=float(drv.get("rtol", 1e-10)),
+                atol=float(drv.get("atol", 1e-14)),
+                gtol=float(drv.get("gtol", 1e-7)),
+            )
+            n_steps += sol.n_steps
+            if sol.status not in (SUCCESS, MAX_STEPS):
+                break
+            u = sol.value
+        sol = dataclasses.replace(sol, n_steps=n_steps)
+    res = _finish_design(ev, sol.value, sol.status, sol.n_steps, sol.message)
+    _record(recorder, problem, res)
+    return res
+
+
+def _doe_combo(
+    ev: _Evaluator, kind: str, drv: dict[str, Any], recorder: CaseRecorder | None, progress: bool
+) -> DesignResult:
+    problem = ev.problem
+    if not (np.all(np.isfinite(ev.lower)) and np.all(np.isfinite(ev.upper))):
+        raise input_error(
+            f"{problem.path or problem.name}: driver.kind",
+            f"{kind!r} needs lower and upper bounds on every continuous variable",
+        )
+    ulo, uhi = ev.u_bounds()
+    if kind == "grid":
+        pts = grid_points(ulo, uhi, int(drv.get("points_per_dim", 11)))
+    else:
+        pts = latin_hypercube(
+            jax.random.fold_in(jax.random.key(problem.seed), 1), ulo, uhi, int(drv.get("n", 64))
+        )
+    scalar_names = None
+    f = jax.jit(jax.vmap(lambda u: ev.outputs(u)))
+    rows = []
+    chunk = int(drv.get("chunk_size", 256))
+    with progress_bar(f"{kind} {ev.discrete or ''}".strip(), len(pts), enabled=progress) as bar:
+        for s in range(0, len(pts), chunk):
+            out = f(jnp.asarray(pts[s : s + chunk]))
+            if scalar_names is None:
+                scalar_names = [k for k, v in out.items() if jnp.ndim(v) == 1]
+            arr = {k: np.asarray(out[k]) for k in scalar_names}
+            for i in range(len(next(iter(arr.values())))):
+                rows.append({k: float(arr[k][i]) for k in scalar_names})
+            bar.update(min(chunk, len(pts) - s))
+    best_i, best_val = -1, math.inf
+    for i, (u, outs) in enumerate(zip(pts, rows)):
+        val = ev.sign * outs[ev.name]
+        finite = all(math.isfinite(v) for v in outs.values())
+        status = SUCCESS if finite else NONFINITE
+        if finite and ev.violation(outs) > 1e-6:
+            status = INFEASIBLE
+        if recorder is not None:
+            recorder.record({**ev.discrete, **ev.inputs_of(u)}, outs, status, seed=problem.seed)
+        if status == SUCCESS and val < best_val:
+            best_i, best_val = i, val
+    if best_i < 0:
+        return DesignResult(
+            dict(ev.discrete), {}, {}, math.nan, FAILED, len(pts), "no feasible finite point"
+        )
+    outs = rows[best_i]
+    return DesignResult(
+        dict(ev.discrete),
+        ev.inputs_of(pts[best_i]),
+        outs,
+        best_val,
+        SUCCESS,
+        len(pts),
+        f"best of {len(pts)} {kind} points",
+    )
+
+
+def _record(recorder: CaseRecorder | None, problem: Problem, r: DesignResult) -> None:
+    if recorder is not None:
+        recorder.record({**r.discrete, **r.inputs}, r.outputs, r.status, seed=problem.seed)
+
+
+def solve_problem(
+    problem: Problem,
+    *,
+    recorder: CaseRecorder | None = None,
+    progress: bool = False,
+    throw: bool = False,
+) -> ProblemResult:
+    """Solve ``problem`` with its ``[driver]``, enumerating discrete variables.
+
+    Args:
+        problem: a validated problem.
+        recorder: where to record the cases (``None``: not recorded).
+        progress: progress line on stderr.
+        throw: raise :class:`~encdesign.design._drivers.OptimisationError` unless successful.
+
+    Returns:
+        A :class:`ProblemResult`; ``best`` is the successful design with the smallest
+        (sense-adjusted) objective.
+    """
+    choices = {v.name: list(v.values) for v in problem.discrete}
+    enum = enumerate_designs(
+        lambda combo: _solve_combo(problem, combo, recorder, progress and not choices),
+        choices,
+        progress=progress and bool(choices),
+        throw=throw,
+    )
+    best = enum.best_solution if enum.ok else None
+    return ProblemResult(problem, tuple(enum.solutions), best, enum.status, enum.message)
+
+
+def sweep_problem(
+    problem: Problem,
+    *,
+    kind: str | None = None,
+    recorder: CaseRecorder | None = None,
+    progress: bool = False,
+) -> ProblemResult:
+    """Evaluate ``problem`` on its ``[sweep]`` design of experiments (no optimisation).
+
+    ``kind`` (``"grid"``/``"lhs"``) overrides ``[sweep] kind``. Every point is a case.
+    """
+    sweep = dict(problem.sweep)
+    if kind is not None:
+        sweep["kind"] = kind
+    p = dataclasses.replace(problem, driver=sweep)
+    return solve_problem(p, recorder=recorder, progress=progress)
+
+
+@dataclasses.dataclass(frozen=True)
+class GradientRow:
+    """One line of :func:`check_gradients` (derivative of ``output`` w.r.t. ``variable``,
+    in output units per SI unit of the variable)."""
+
+    output: str
+    variable: str
+    at: float
+    ad: float
+    fd: float
+    abs_error: float
+    rel_error: float
+    ok: bool
+
+
+def check_gradients(
+    problem: Problem,
+    *,
+    discrete: dict[str, Any] | None = None,
+    at: dict[str, float] | None = None,
+    rel_step: float = 1e-5,
+    rtol: float = 1e-4,
+) -> list[GradientRow]:
+    """Compare AD gradients with central finite differences for the objective and every
+    constrained output, at the start point (or ``at``, SI) and the first discrete values.
+
+    The FD step of variable ``i`` is ``rel_step * scale_i`` (``scale`` as in the module
+    docstring). A row is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol`` with
+    ``atol = rtol * (|f| + tiny) / scale_i``·1e-3 (a floor for near-zero derivatives).
+    """
+    combo = {v.name: v.values[0] for v in problem.discrete}
+    combo.update(discrete or {})
+    ev = _Evaluator(problem, combo)
+    names = [problem.objective.outputs[0]] + [
+        c.output for c in problem.constraints if c.output != problem.objective.outputs[0]
+    ]
+    x = {v.name: v.start for v in ev.vars}
+    x.update(at or {})
+    x0 = np.array([x[v.name] for v in ev.vars], dtype=np.float64)
+    rows = []
+    for name in names:
+
+        def f(xv, name=name):
+            return ev.evaluate({v.name: xv[i] for i, v in enumerate(ev.vars)})[name]
+
+        val = float(f(jnp.asarray(x0)))
+        g = np.asarray(jax.grad(f)(jnp.asarray(x0)))
+        for i, v in enumerate(ev.vars):
+            h = rel_step * ev.scale[i]
+            e = np.zeros_like(x0)
+            e[i] = h
+            fd = (float(f(jnp.asarray(x0 + e))) - float(f(jnp.asarray(x0 - e)))) / (2 * h)
+            err = abs(g[i] - fd)
+            atol = 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
+            rel = err / max(abs(g[i]), abs(fd), 1e-300)
+            ok = bool(np.isfinite(g[i]) and err <= rtol * max(abs(g[i]), abs(fd)) + atol)
+            rows.append(GradientRow(name, v.name, float(x0[i]), float(g[i]), fd, err, rel, ok))
+    return rows
+
+
+def discrete_combinations(problem: Problem) -> list[dict[str, Any]]:
+    """All combinations of the discrete variables' values (``[{}]`` when there are none)."""
+    names = [v.name for v in problem.discrete]
+    return [dict(zip(names, c)) for c in itertools.product(*(v.values for v in problem.discrete))]

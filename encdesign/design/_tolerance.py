@@ -1,0 +1,398 @@
+"""Tolerance budgets: sweeps, contribution ranking, cost and allocation.
+
+Everything here works on a *values function* ``values_fn(sigmas) -> [n]``: the per-build
+error metric (e.g. RMS residual, rad) of ``n`` fixed Monte Carlo builds (common random
+numbers) for tolerance standard deviations ``sigmas`` (SI, one per tolerance). It must be
+JAX-differentiable in ``sigmas``; :func:`encdesign.objectives.build_metrics` provides one.
+
+* :func:`sweep_scales` — scale all tolerances (1-D) or two groups (2-D) and tabulate yield
+  and percentile error; :func:`plot_sweep` draws the contour plots.
+* :func:`contributions` — each tolerance's *variance share* of the expected mean-square
+  error ``V(sigma) = E[ms]``: ``share_i = sigma_i dV/dsigma_i / sum_j sigma_j dV/dsigma_j``.
+  For a term ``a_i sigma_i^2`` (one tolerance acting alone, linear error) this is exactly its
+  share of the variance; a product term ``sigma_i^2 sigma_j^2`` (e.g. placement × centring
+  leakage) is split equally between the two. Shares sum to 1. Also the *gradient
+  sensitivity* ``d P_q / d ln sigma_i`` of the ``q``-th percentile.
+* :func:`tolerance_cost` — ``C(sigma) = sum_i c_i ref_i / sigma_i`` (tighter costs more).
+* :func:`allocate` — the cheapest tolerances meeting a yield target: minimise
+  ``C(sigma)`` subject to a smooth yield surrogate ``Y_s(sigma) >= target + margin``
+  (BFGS in ``ln sigma``, boxed through a sigmoid, with a quadratic penalty of increasing
+  weight), then a common
+  scale factor is tightened by bisection until the *exact* yield of the training builds
+  meets the target with margin; :func:`check_yield` then counts an independent Monte Carlo
+  population (fresh seed) and reports the binomial standard error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import input_error
+from .._progress import progress_bar
+from ._drivers import SUCCESS, optimise
+
+ValuesFn = Callable[[jax.Array], jax.Array]
+
+
+def tolerance_cost(sigmas: Any, reference: Any, weights: Any | None = None) -> jax.Array:
+    """``sum_i c_i ref_i / sigma_i`` (dimensionless); ``ref_i`` is the tolerance that costs
+    ``c_i`` (default 1). Entries with ``ref_i = 0`` are not under design and cost nothing."""
+    s = jnp.asarray(sigmas, dtype=jnp.float64)
+    ref = jnp.asarray(reference, dtype=jnp.float64)
+    c = jnp.ones_like(s) if weights is None else jnp.asarray(weights, dtype=jnp.float64)
+    active = ref > 0
+    return jnp.sum(jnp.where(active, c * ref / jnp.where(active, s, 1.0), 0.0))
+
+
+def yield_stats(values: Any, spec: float) -> tuple[float, float]:
+    """Fraction of ``values <= spec`` and its binomial standard error ``sqrt(p(1-p)/n)``."""
+    v = np.asarray(values)
+    if not np.all(np.isfinite(v)):
+        raise FloatingPointError(f"{int(np.sum(~np.isfinite(v)))} non-finite build values")
+    p = float(np.mean(v <= spec))
+    return p, math.sqrt(max(p * (1.0 - p), 0.0) / v.size)
+
+
+def smooth_yield(values: jax.Array, spec: float, width: float) -> jax.Array:
+    """Mean of ``sigmoid((spec - v) / width)``: a differentiable yield surrogate."""
+    return jnp.mean(jax.nn.sigmoid((spec - values) / width))
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepTable:
+    """Yield and percentile error over tolerance scale factors.
+
+    Attributes:
+        scales_a: scale factors of group A (1-D sweeps: of all tolerances).
+        scales_b: scale factors of group B (``None`` for a 1-D sweep).
+        group_a, group_b: names in each group.
+        yield_: ``[len(a)]`` or ``[len(a), len(b)]`` fraction of builds within ``spec``.
+        yield_stderr: binomial standard errors, same shape.
+        percentile: the ``q``-th percentile of the metric, same shape (metric units).
+        q: percentile level (0–100).
+        spec: accuracy spec (metric units).
+    """
+
+    scales_a: np.ndarray
+    scales_b: np.ndarray | None
+    group_a: tuple[str, ...]
+    group_b: tuple[str, ...]
+    yield_: np.ndarray
+    yield_stderr: np.ndarray
+    percentile: np.ndarray
+    q: float
+    spec: float
+
+    def rows(self) -> list[dict[str, float]]:
+        """The table as a list of dicts (one per scale point)."""
+        out = []
+        for idx in np.ndindex(self.yield_.shape):
+            r = {"scale_a": float(self.scales_a[idx[0]])}
+            if self.scales_b is not None:
+                r["scale_b"] = float(self.scales_b[idx[1]])
+            r.update(
+                yield_=float(self.yield_[idx]),
+                yield_stderr=float(self.yield_stderr[idx]),
+                percentile=float(self.percentile[idx]),
+            )
+            out.append({k.rstrip("_"): v for k, v in r.items()})
+        return out
+
+
+def sweep_scales(
+    values_fn: ValuesFn,
+    sigmas: Any,
+    names: Sequence[str],
+    spec: float,
+    scales_a: Sequence[float],
+    *,
+    group_a: Sequence[str] | None = None,
+    group_b: Sequence[str] | None = None,
+    scales_b: Sequence[float] | None = None,
+    q: float = 99.0,
+    progress: bool = False,
+) -> SweepTable:
+    """Tabulate yield and the ``q``-th percentile while scaling tolerances.
+
+    1-D (``group_b`` is ``None``): tolerances in ``group_a`` (default: all) are multiplied
+    by each of ``scales_a``. 2-D: ``group_a`` by ``scales_a`` and ``group_b`` by
+    ``scales_b`` on a grid (the rest stay at ``sigmas``).
+    """
+    names = list(names)
+    sig = np.asarray(sigmas, dtype=np.float64)
+    ga = tuple(group_a) if group_a is not None else tuple(names)
+    gb = tuple(group_b) if group_b is not None else ()
+    for g in (*ga, *gb):
+        if g not in names:
+            raise input_error("sweep_scales", f"unknown tolerance {g!r}", f"one of {names}")
+    ma = np.array([n in ga for n in names], dtype=np.float64)
+    mb = np.array([n in gb for n in names], dtype=np.float64)
+    sa = np.asarray(scales_a, dtype=np.float64)
+    sb = None if not gb else np.asarray(scales_b, dtype=np.float64)
+    shape = (len(sa),) if sb is None else (len(sa), len(sb))
+    y, ye, pc = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    f = jax.jit(values_fn)
+    with progress_bar("tolerance sweep", int(np.prod(shape)), enabled=progress) as bar:
+        for idx in np.ndindex(shape):
+            fac = 1.0 + ma * (sa[idx[0]] - 1.0)
+            if sb is not None:
+                fac = fac * (1.0 + mb * (sb[idx[1]] - 1.0))
+            vals = np.asarray(f(jnp.asarray(sig * fac)))
+            y[idx], ye[idx] = yield_stats(vals, spec)
+            pc[idx] = np.percentile(vals, q)
+            bar.update()
+    return SweepTable(sa, sb, ga, gb, y, ye, pc, float(q), float(spec))
+
+
+def plot_sweep(
+    table: SweepTable, out: str | Path, filename: str, *, units: str = "urad", factor: float = 1e6
+) -> Path:
+    """Contour plot (2-D) or line plot (1-D) of yield and percentile error; PNG path."""
+    from ..io._study import new_figure, save_figure
+
+    fig, axes = new_figure(1, 2, figsize=(10, 4))
+    if table.scales_b is None:
+        axes[0].plot(table.scales_a, table.yield_, "o-")
+        axes[0].set_xlabel("tolerance scale")
+        axes[0].set_ylabel("yield")
+        axes[1].plot(table.scales_a, table.percentile * factor, "o-")
+        axes[1].axhline(table.spec * factor, color="k", ls="--", label="spec")
+        axes[1].set_xlabel("tolerance scale")
+        axes[1].set_ylabel(f"P{table.q:g} error ({units})")
+        axes[1].legend()
+    else:
+        xa, xb = np.meshgrid(table.scales_b, table.scales_a)
+        c0 = axes[0].contourf(xa, xb, table.yield_, levels=12)
+        fig.colorbar(c0, ax=axes[0], label="yield")
+        c1 = axes[1].contourf(xa, xb, table.percentile * factor, levels=12)
+        fig.colorbar(c1, ax=axes[1], label=f"P{table.q:g} error ({units})")
+        axes[1].contour(xa, xb, table.percentile, levels=[table.spec], colors="k")
+        for ax in axes:
+            ax.set_xlabel(f"scale of {', '.join(table.group_b)}")
+            ax.set_ylabel(f"scale of {', '.join(table.group_a)}")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+    return save_figure(fig, out, filename)
+
+
+@dataclasses.dataclass(frozen=True)
+class Contributions:
+    """Contribution ranking of tolerances.
+
+    Attributes:
+        names: tolerance names.
+        variance_share: share of the expected mean-square error (sums to 1).
+        gradient_sensitivity: ``d P_q / d ln sigma_i`` (metric units): how much the
+            percentile error grows for a 100 % (e-fold) looser tolerance.
+        expected_ms: ``E[ms]`` at ``sigmas`` (metric units squared).
+        order: indices sorted by decreasing variance share.
+    """
+
+    names: tuple[str, ...]
+    variance_share: np.ndarray
+    gradient_sensitivity: np.ndarray
+    expected_ms: float
+    order: tuple[int, ...]
+
+    def as_dict(self) -> dict[str, float]:
+        """``{name: variance share}``."""
+        return {n: float(s) for n, s in zip(self.names, self.variance_share)}
+
+
+def contributions(
+    ms_fn: ValuesFn,
+    values_fn: ValuesFn,
+    sigmas: Any,
+    names: Sequence[str],
+    *,
+    q: float = 99.0,
+) -> Contributions:
+    """Rank tolerances by variance share and gradient sensitivity (module docstring).
+
+    Args:
+        ms_fn: per-build mean-square error ``[n]`` as a function of ``sigmas``.
+        values_fn: per-build metric ``[n]`` (for the percentile sensitivity).
+        sigmas: tolerances (SI), one per name; tolerances at zero get share 0.
+        names: their names.
+        q: percentile level (0–100).
+    """
+    s = jnp.asarray(sigmas, dtype=jnp.float64)
+    ev, g = jax.value_and_grad(lambda x: jnp.mean(ms_fn(x)))(s)
+    el = np.asarray(s * g)
+    total = float(np.sum(el))
+    if not (math.isfinite(total) and total > 0):
+        raise FloatingPointError(f"contributions: total elasticity {total} (expected > 0)")
+    share = el / total
+    gp = np.asarray(jax.grad(lambda x: jnp.percentile(values_fn(x), q))(s)) * np.asarray(s)
+    order = tuple(int(i) for i in np.argsort(-share))
+    return Contributions(tuple(names), share, gp, float(ev), order)
+
+
+@dataclasses.dataclass(frozen=True)
+class Allocation:
+    """Result of :func:`allocate`.
+
+    Attributes:
+        sigmas: allocated tolerances (SI), one per name.
+        names: their names.
+        cost: :func:`tolerance_cost` of ``sigmas``.
+        train_yield: exact yield of the training builds at ``sigmas``.
+        smooth_yield: surrogate yield at the optimiser's answer (before the final scale).
+        scale: common factor applied after the optimiser (``<= 1`` tightens).
+        status: ``"success"`` or the failing driver status.
+        message: account of the status.
+        n_steps: optimiser iterations (all penalty rounds).
+    """
+
+    sigmas: np.ndarray
+    names: tuple[str, ...]
+    cost: float
+    train_yield: float
+    smooth_yield: float
+    scale: float
+    status: str
+    message: str
+    n_steps: int
+
+    @property
+    def ok(self) -> bool:
+        """True when ``status == "success"``."""
+        return self.status == SUCCESS
+
+
+def allocate(
+    values_fn: ValuesFn,
+    reference: Any,
+    names: Sequence[str],
+    spec: float,
+    target: float,
+    *,
+    weights: Any | None = None,
+    margin: float | None = None,
+    width: float | None = None,
+    fixed: Any | None = None,
+    bounds: tuple[float, float] = (1e-3, 1e3),
+    penalties: Sequence[float] = (1e2, 1e4, 1e6),
+    max_steps: int = 200,
+    throw: bool = False,
+) -> Allocation:
+    """Cheapest tolerances with ``target`` of the training builds within ``spec``.
+
+    Args:
+        values_fn: per-build metric ``[n]`` of the training builds (metric units).
+        reference: reference tolerances ``ref_i`` (SI): the cost is ``sum c_i ref_i/sigma_i``
+            and the search starts from them; zero entries are not designed (kept zero).
+        names: tolerance names.
+        spec: accuracy spec (metric units).
+        target: required yield (0 < target < 1).
+        weights: cost weights ``c_i`` (default 1).
+        margin: yield margin added to the target for the training builds (default two
+            binomial standard errors of ``n`` builds), against the optimism of optimising
+            on the same builds that are counted.
+        width: sigmoid width of the smooth yield (default ``0.05 * spec``).
+        fixed: per tolerance, ``True`` to keep it at ``reference`` (not designed).
+        bounds: range of ``sigma / ref`` searched.
+        penalties: increasing penalty weights (relative to the reference cost).
+        max_steps: BFGS iterations per penalty round.
+        throw: raise :class:`~encdesign.design._drivers.OptimisationError` on failure.
+    """
+    if not 0.0 < target < 1.0:
+        raise input_error(
+            "allocate.target", f"infeasible yield target {target!r}", "0 < target < 1"
+        )
+    ref = np.asarray(reference, dtype=np.float64)
+    k = ref.size
+    fixed_m = np.zeros(k, bool) if fixed is None else np.asarray(fixed, dtype=bool)
+    design = (ref > 0) & ~fixed_m
+    if not design.any():
+        raise input_error("allocate.reference", "no tolerance to design", "some ref_i > 0")
+    cref = float(tolerance_cost(ref, np.where(design, ref, 0.0), weights))
+    n = int(np.asarray(jax.eval_shape(values_fn, jnp.asarray(ref)).shape[0]))
+    if margin is None:
+        margin = 2.0 * math.sqrt(target * (1.0 - target) / n)
+    goal = min(target + margin, 1.0 - 0.5 / n)
+    if width is None:
+        width = 0.05 * spec
+    didx = np.flatnonzero(design)
+
+    lo, hi = math.log(bounds[0]), math.log(bounds[1])
+
+    def u_of(v: jax.Array) -> jax.Array:  # box [lo, hi] through a sigmoid: bounds hold
+        return lo + (hi - lo) * jax.nn.sigmoid(v)
+
+    def sig_of(u: jax.Array) -> jax.Array:
+        return jnp.asarray(ref).at[didx].set(jnp.asarray(ref[didx]) * jnp.exp(u))
+
+    def objective(v: jax.Array, mu: jax.Array) -> jax.Array:
+        s = sig_of(u_of(v))
+        c = tolerance_cost(s, np.where(design, ref, 0.0), weights) / cref
+        ys = smooth_yield(values_fn(s), spec, width)
+        return c + mu * jax.nn.relu(goal - ys) ** 2
+
+    v = np.full(didx.size, math.log(-lo / hi)) if lo < 0 < hi else np.zeros(didx.size)
+    steps, status, msg = 0, SUCCESS, "converged"
+    for mu in penalties:
+        sol = optimise(
+            objective, "bfgs", v, jnp.asarray(mu), max_steps=max_steps, rtol=1e-6, atol=1e-9
+        )
+        steps += sol.n_steps
+        if sol.status not in (SUCCESS, "max_steps_reached"):
+            status, msg = sol.status, f"penalty {mu:g}: {sol.message}"
+            break
+        v = sol.value
+    u = np.asarray(u_of(jnp.asarray(v)))
+    ys_opt = float(smooth_yield(values_fn(sig_of(jnp.asarray(u))), spec, width))
+    # final common scale: largest factor (<= 1.5) whose exact training yield meets the goal
+    f = jax.jit(lambda s: values_fn(s))
+
+    def exact(fac: float) -> float:
+        s = np.asarray(sig_of(jnp.asarray(u + math.log(fac))))
+        return yield_stats(np.asarray(f(jnp.asarray(s))), spec)[0]
+
+    scale = 1.0
+    if status == SUCCESS:
+        a, b = 1e-3, 1.5
+        if exact(a) < goal:
+            status, msg = "infeasible", f"yield target {goal:.4g} unreachable within bounds"
+        else:
+            if exact(b) >= goal:
+                scale = b
+            else:
+                for _ in range(40):
+                    mid = math.sqrt(a * b)
+                    if exact(mid) >= goal:
+                        a = mid
+                    else:
+                        b = mid
+                    if b / a < 1 + 1e-4:
+                        break
+                scale = a
+    sig = np.asarray(sig_of(jnp.asarray(u + math.log(scale))))
+    train_y = yield_stats(np.asarray(f(jnp.asarray(sig))), spec)[0]
+    cost = float(tolerance_cost(sig, np.where(design, ref, 0.0), weights))
+    res = Allocation(sig, tuple(names), cost, train_y, ys_opt, scale, status, msg, steps)
+    if throw and status != SUCCESS:
+        from ._drivers import OptimisationError
+
+        raise OptimisationError(f"allocate: {status}: {msg}")
+    return res
+
+
+def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0) -> dict[str, Any]:
+    """Independent check of a yield: fraction within ``spec``, binomial standard error, and
+    whether the target is reached within ``n_sigma`` standard errors."""
+    p, se = yield_stats(values, spec)
+    return {
+        "checked_yield": p,
+        "checked_yield_stderr": se,
+        "n_builds": int(np.asarray(values).size),
+        "meets_target": bool(p + n_sigma * max(se, 1e-12) >= target),
+    }

@@ -1,0 +1,109 @@
+"""Deeper checks of ``sds`` recordings, run by ``load_recording`` for every ``sds`` file.
+
+Sensor ids declared in the TOML, mark indices in range, no missing edge within a sensor's
+sequence, strictly increasing times per sensor, one ``phi_ref`` per run. Plain NumPy: this
+module sits below :mod:`encdesign.io._recording` and imports no physics.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from .._errors import input_error
+
+# ----------------------------------------------------------------------------- checks
+
+
+def _sensor_counts(meta: dict) -> tuple[int, int, int]:
+    enc = meta["encoder"]
+    return (
+        int(enc["marks_per_rev"]),
+        len(enc["fixed_sensor_angles_deg"]),
+        len(enc["moving_sensor_angles_deg"]),
+    )
+
+
+def _sensor_index(ids: np.ndarray, n_fixed: int) -> np.ndarray:
+    """Sensor id -> 0…F−1 (fixed), F…F+M−1 (moving); −1 when malformed."""
+    out = np.full(len(ids), -1, dtype=np.int64)
+    for s in np.unique(ids):
+        m = re.fullmatch(r"([fm])(\d+)", str(s))
+        if m is None:
+            continue
+        out[ids == s] = int(m.group(2)) + (n_fixed if m.group(1) == "m" else 0)
+    return out
+
+
+def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
+    """Deeper checks of an ``sds`` table (registered for kind ``sds``).
+
+    Raises:
+        EncdesignInputError: naming the file, line and column and what was expected.
+    """
+    n_marks, n_fixed, n_moving = _sensor_counts(meta)
+    sensors = cols["sensor"]
+    allowed = [f"f{i}" for i in range(n_fixed)] + [f"m{i}" for i in range(n_moving)]
+    ok = np.isin(sensors, allowed)
+    if not np.all(ok):
+        i = int(np.flatnonzero(~ok)[0])
+        raise input_error(
+            f"{where}, line {i + 2}, column 'sensor'",
+            f"sensor {str(sensors[i])!r} is not declared in the TOML",
+            f"one of {', '.join(allowed)} (fixed_sensor_angles_deg lists {n_fixed}, "
+            f"moving_sensor_angles_deg lists {n_moving})",
+        )
+    mark = cols["mark"]
+    bad = np.flatnonzero((mark < 0) | (mark >= n_marks))
+    if bad.size:
+        i = int(bad[0])
+        raise input_error(
+            f"{where}, line {i + 2}, column 'mark'",
+            f"mark index {int(mark[i])} out of range",
+            f"0 … {n_marks - 1} (marks_per_rev = {n_marks})",
+        )
+    run = cols.get("run", np.zeros(len(mark), dtype=np.int64))
+    sidx = _sensor_index(sensors, n_fixed)
+    _, run_id = np.unique(run, return_inverse=True)
+    group = run_id * (n_fixed + n_moving) + sidx
+    order = np.argsort(group, kind="stable")
+    g = group[order]
+    same = g[1:] == g[:-1]
+    t = cols["t"][order]
+    dt = np.diff(t)
+    badt = np.flatnonzero(same & (dt <= 0))
+    if badt.size:
+        a, b = int(order[badt[0]]), int(order[badt[0] + 1])
+        raise input_error(
+            f"{where}, line {b + 2}, column 't'",
+            f"time of sensor {sensors[b]} goes backwards or repeats ({t[badt[0]]!r} at line "
+            f"{a + 2}, then {t[badt[0] + 1]!r}) within run {int(run[b])}",
+            "strictly increasing edge times for each sensor within a run",
+        )
+    mk = mark[order]
+    step = np.mod(np.diff(mk), n_marks)
+    badm = np.flatnonzero(same & (step != 1))
+    if badm.size:
+        a, b = int(order[badm[0]]), int(order[badm[0] + 1])
+        missing = int((step[badm[0]] - 1) % n_marks)
+        raise input_error(
+            f"{where}, line {b + 2}, column 'mark'",
+            f"sensor {sensors[b]} jumps from mark {int(mk[badm[0]])} (line {a + 2}) to mark "
+            f"{int(mk[badm[0] + 1])} in run {int(run[b])}: {missing} edge(s) missing"
+            if missing
+            else f"sensor {sensors[b]} repeats mark {int(mk[badm[0]])} in run {int(run[b])}",
+            "every edge of a revolution, mark indices increasing by one (mod marks_per_rev)",
+        )
+    if "phi_ref" in cols:
+        phi = cols["phi_ref"]
+        for r in np.unique(run):
+            idx = np.flatnonzero(run == r)
+            vals = phi[idx]
+            if np.any(vals != vals[0]):
+                j = int(idx[np.flatnonzero(vals != vals[0])[0]])
+                raise input_error(
+                    f"{where}, line {j + 2}, column 'phi_ref'",
+                    f"phi_ref changes within run {int(r)} ({vals[0]!r} then {phi[j]!r})",
+                    "one platform angle per run (the platform is at rest during a run)",
+                )

@@ -1,0 +1,123 @@
+"""Shared plumbing for ``studies/*.py``: flags, output folder, JSON and PNG writing.
+
+Every study has a title docstring, a ``main(argv=None) -> int``, flags made by
+:func:`study_parser`, and ends with :func:`write_results`, which writes
+``OUT/<name>.json`` (and the ``--json`` file if given) and returns the paths.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
+    """An argument parser with the flags every study has.
+
+    ``--out DIR`` (default ``results/<name>``), ``--json FILE`` (summary also written
+    there), ``--seed N`` (PRNG seed, default 0), ``--quick`` (smaller sizes for tests).
+    """
+    title = (doc or name).strip().splitlines()[0]
+    p = argparse.ArgumentParser(prog=f"encdesign study run {name}", description=title)
+    p.add_argument("--out", type=Path, default=Path("results") / name, help="output folder")
+    p.add_argument("--json", type=Path, default=None, help="also write the summary JSON here")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--quick", action="store_true", help="smaller sizes (for tests)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def to_jsonable(x: Any) -> Any:
+    """Convert numpy/JAX scalars and arrays (recursively) to plain JSON types.
+
+    Non-finite floats raise ``ValueError``: a study never writes a silent NaN.
+    """
+    if isinstance(x, Mapping):
+        return {str(k): to_jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [to_jsonable(v) for v in x]
+    if hasattr(x, "__array__") and not isinstance(x, str | bytes):
+        arr = np.asarray(x)
+        if arr.ndim == 0:
+            return to_jsonable(arr.item())
+        return [to_jsonable(v) for v in arr.tolist()]
+    if isinstance(x, float):
+        if not math.isfinite(x):
+            raise ValueError(f"non-finite value {x!r} in study results")
+        return x
+    if isinstance(x, np.generic):
+        return to_jsonable(x.item())
+    return x
+
+
+def write_json(path: str | os.PathLike, data: Mapping[str, Any]) -> Path:
+    """Write ``data`` as indented JSON atomically (temporary file renamed into place)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(to_jsonable(data), indent=2, sort_keys=False)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def write_results(
+    args: argparse.Namespace, name: str, summary: Mapping[str, Any], figures: Sequence[Path] = ()
+) -> list[Path]:
+    """Write ``OUT/<name>.json`` and the ``--json`` copy; print each path written once.
+
+    A ``--json`` path that resolves to ``OUT/<name>.json`` (as in ``make demo``) is written
+    and reported once, not twice."""
+    targets = [Path(args.out) / f"{name}.json"]
+    if args.json is not None:
+        targets.append(Path(args.json))
+    paths: list[Path] = []
+    seen: set[Path] = set()
+    for t in targets:
+        key = t.resolve()
+        if key in seen:
+            continue
+        seen.add(key)
+        paths.append(write_json(t, summary))
+    for p in [*paths, *figures]:
+        print(f"wrote {p}")
+    return paths
+
+
+def new_figure(*args: Any, **kwargs: Any):
+    """``plt.subplots`` on the non-interactive Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(*args, **kwargs)
+
+
+def save_figure(fig: Any, out: str | os.PathLike, filename: str) -> Path:
+    """Save a matplotlib figure as PNG under ``out`` and close it."""
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / filename
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,0 +1,589 @@
+"""Kinematic model of read heads on a spinning grating disk (Cramer, seed 000, section V.A).
+
+Stator frame: ``z`` is the nominal rotation axis, azimuths are counter-clockwise from ``+x``
+seen from ``+z``, the shaft turns by ``+theta`` counter-clockwise (see
+``docs/recording-format.md``). For every shaft angle the model
+
+1. rotates the disk's centre ``c0``, normal ``n0`` and index line ``l0`` about ``z``,
+   then adds the motion hooks (non-synchronous radial runout, axial disk motion);
+2. intersects each head's beam (a ray from the head position along its direction ``u``)
+   with the plane of the rotated disk (seed eq. 36, written for a ray not through the
+   origin);
+3. measures the signed angle ``psi`` about the disk normal from the intersection direction
+   to the index line: ``psi`` is the disk-frame coordinate of the grating point the head
+   reads, counted clockwise from the index line, i.e. the shaft angle at which that point
+   passes azimuth 0 on a perfect encoder;
+4. adds the grating error ``g(psi) = sum_j S_j sin(j psi) + C_j cos(j psi)`` and returns
+   ``reading_k = theta + error_k`` with ``error_k = wrap(psi_k + alpha_k - theta) + g(psi_k)``
+   (``alpha_k`` = nominal azimuth, so a perfect encoder reads ``theta`` at every head).
+
+All lengths in m, angles in rad, times in s. Everything is JAX: ``jit``, ``vmap`` and
+``grad`` work through :func:`head_readings` and :func:`head_errors`. Batches of designs
+(a Monte Carlo population) go through :func:`head_errors_batch`, chunked with
+``lax.map`` so memory stays bounded.
+
+Because the model is symmetric under rotations about ``z``, a head at azimuth ``alpha``
+sees the error function of a head at azimuth 0 delayed by ``alpha``:
+``error_alpha(theta) = error_0(theta - alpha)`` whenever the heads are identical and the
+runout hook is off. The encoder theorem (:mod:`encdesign.physics._theorem`) and the cotangent
+equations (:mod:`encdesign.physics._selfcomp`) rest on this.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
+from jaxtyping import Array, ArrayLike
+
+__all__ = [
+    "Disk",
+    "Heads",
+    "Motion",
+    "EncoderModel",
+    "make_model",
+    "head_readings",
+    "head_errors",
+    "head_errors_batch",
+    "noisy_head_readings",
+    "stack_models",
+]
+
+_CHUNK_READINGS = 2**15  # default readings per chunk in head_errors_batch
+_GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
+
+
+def _f64(x: ArrayLike) -> Array:
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+def _concrete(x: object) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+def _check_shape(name: str, x: Array, shape: tuple[int, ...]) -> None:
+    if not hasattr(x, "shape"):  # a sentinel placed by a JAX transformation
+        return
+    if tuple(x.shape) != shape:
+        raise ValueError(f"{name}: shape {tuple(x.shape)}, expected {shape}")
+
+
+class Disk(eqx.Module):
+    """The grating disk as mounted on the shaft (rotor frame, at shaft angle 0).
+
+    Attributes:
+        optical_radius_m: radius of the track the heads read, m (> 0).
+        eccentricity_m: ``(x, y)`` offset of the grating centre from the rotation axis, m
+            (effect ``disk_eccentricity``; order-1 error of amplitude ``|e| / R``).
+        tilt_rad: ``(x, y)`` tilt of the disk normal, rad: ``n0 ∝ (tan tx, tan ty, 1)``
+            (effect ``disk_tilt``; mostly order 2 with amplitude ``tilt**2 / 4``).
+        grating_sin_rad: ``S_j`` of the grating error for orders ``j = 1 … M``, rad.
+        grating_cos_rad: ``C_j`` of the grating error for orders ``j = 1 … M``, rad
+            (effect ``grating_error``: ``g(psi) = sum S_j sin(j psi) + C_j cos(j psi)``).
+    """
+
+    optical_radius_m: Array = eqx.field(converter=_f64)
+    eccentricity_m: Array = eqx.field(converter=_f64)
+    tilt_rad: Array = eqx.field(converter=_f64)
+    grating_sin_rad: Array = eqx.field(converter=_f64)
+    grating_cos_rad: Array = eqx.field(converter=_f64)
+
+    def __check_init__(self) -> None:
+        _check_shape("Disk.optical_radius_m", self.optical_radius_m, ())
+        _check_shape("Disk.eccentricity_m", self.eccentricity_m, (2,))
+        _check_shape("Disk.tilt_rad", self.tilt_rad, (2,))
+        m = self.grating_sin_rad.shape
+        if len(m) != 1:
+            raise ValueError(f"Disk.grating_sin_rad: shape {m}, expected (M,)")
+        _check_shape("Disk.grating_cos_rad", self.grating_cos_rad, m)
+        if _concrete(self.optical_radius_m) and not bool(self.optical_radius_m > 0):
+            raise ValueError(f"Disk.optical_radius_m: {self.optical_radius_m}, expected > 0")
+
+    @property
+    def n_orders(self) -> int:
+        """Highest grating order ``M`` (static)."""
+        return int(self.grating_sin_rad.shape[0])
+
+
+class Heads(eqx.Module):
+    """The read heads, fixed in the stator frame.
+
+    Attributes:
+        angles_rad: nominal azimuths ``alpha_k``, rad, shape ``(H,)``. Readings are
+            reported relative to these: a perfect head at its nominal place reads ``theta``.
+        placement_error_rad: azimuth error ``delta_k`` of each head, rad (effect
+            ``head_placement``): the head sits at ``alpha_k + delta_k``.
+        beam_tilt_rad: tangential tilt ``gamma_k`` of each head's beam from ``-z``, rad
+            (effect ``beam_tilt_axial``): axial disk motion ``a`` then moves the point read
+            along the track by ``a tan(gamma_k)``.
+        gap_m: nominal distance from the heads to the disk plane along ``z``, m.
+        noise_rad: white read-noise standard deviation per reading of each head, rad
+            (effect ``noise``; used only by :func:`noisy_head_readings`).
+    """
+
+    angles_rad: Array = eqx.field(converter=_f64)
+    placement_error_rad: Array = eqx.field(converter=_f64)
+    beam_tilt_rad: Array = eqx.field(converter=_f64)
+    gap_m: Array = eqx.field(converter=_f64)
+    noise_rad: Array = eqx.field(converter=_f64)
+
+    def __check_init__(self) -> None:
+        h = self.angles_rad.shape
+        if len(h) != 1 or h[0] < 1:
+            raise ValueError(f"Heads.angles_rad: shape {h}, expected (H,) with H >= 1")
+        _check_shape("Heads.placement_error_rad", self.placement_error_rad, h)
+        _check_shape("Heads.beam_tilt_rad", self.beam_tilt_rad, h)
+        _check_shape("Heads.noise_rad", self.noise_rad, h)
+        _check_shape("Heads.gap_m", self.gap_m, ())
+
+    @property
+    def n_heads(self) -> int:
+        """Number of heads ``H`` (static)."""
+        return int(self.angles_rad.shape[0])
+
+
+class Motion(eqx.Module):
+    """Motion hooks of the disk beyond rigid rotation about ``z``.
+
+    Attributes:
+        axial_cos_m: axial disk motion ``a(theta) = sum_j A_j cos(j theta) + B_j sin(j theta)``,
+            the ``A_j`` for orders ``j = 1 … K``, m (shape ``(K,)``, ``K`` may be 0).
+        axial_sin_m: the ``B_j``, m.
+        runout_amplitude_m: non-synchronous radial runout ``rho``, m (effect
+            ``bearing_wobble``): the disk is displaced in the stator frame by
+            ``rho (cos Phi, sin Phi, 0)`` with ``Phi = ratio * theta + 2 pi f t + phase``.
+        runout_ratio: frequency ratio of the runout to the shaft (cage ≈ 0.4), 1.
+        runout_phase_rad: runout phase at ``theta = 0, t = 0``, rad.
+        runout_freq_hz: extra runout frequency fixed in time, Hz (0 for none).
+    """
+
+    axial_cos_m: Array = eqx.field(converter=_f64)
+    axial_sin_m: Array = eqx.field(converter=_f64)
+    runout_amplitude_m: Array = eqx.field(converter=_f64)
+    runout_ratio: Array = eqx.field(converter=_f64)
+    runout_phase_rad: Array = eqx.field(converter=_f64)
+    runout_freq_hz: Array = eqx.field(converter=_f64)
+
+    def __check_init__(self) -> None:
+        k = self.axial_cos_m.shape
+        if len(k) != 1:
+            raise ValueError(f"Motion.axial_cos_m: shape {k}, expected (K,)")
+        _check_shape("Motion.axial_sin_m", self.axial_sin_m, k)
+        for name in ("runout_amplitude_m", "runout_ratio", "runout_phase_rad", "runout_freq_hz"):
+            _check_shape(f"Motion.{name}", getattr(self, name), ())
+
+    @staticmethod
+    def still(n_axial_orders: int = 0) -> Motion:
+        """No axial motion (``n_axial_orders`` zero coefficients) and no runout."""
+        z = jnp.zeros(n_axial_orders)
+        return Motion(z, z, 0.0, 0.0, 0.0, 0.0)
+
+
+class EncoderModel(eqx.Module):
+    """A complete encoder: disk, heads and motion hooks (a pytree of float64 arrays).
+
+    Batches (Monte Carlo builds) are the same class with a leading axis on every leaf;
+    use :func:`head_errors_batch` on them.
+    """
+
+    disk: Disk
+    heads: Heads
+    motion: Motion
+
+    @staticmethod
+    def nominal(
+        radius_m: float,
+        head_angles_rad: ArrayLike,
+        n_orders: int,
+        *,
+        gap_m: float = 1e-3,
+        n_axial_orders: int = 0,
+    ) -> EncoderModel:
+        """A perfect encoder: no eccentricity, tilt, grating error, placement error, beam
+        tilt, motion or noise; ``n_orders`` grating orders (zero) to be filled in.
+
+        Args:
+            radius_m: optical radius, m.
+            head_angles_rad: nominal head azimuths, rad, shape ``(H,)``.
+            n_orders: number ``M`` of grating orders (1 … M).
+            gap_m: head-to-disk distance, m.
+            n_axial_orders: number of axial-motion orders.
+        """
+        return make_model(
+            radius_m,
+            head_angles_rad,
+            grating_sin_rad=jnp.zeros(n_orders),
+            grating_cos_rad=jnp.zeros(n_orders),
+            gap_m=gap_m,
+            axial_cos_m=jnp.zeros(n_axial_orders),
+            axial_sin_m=jnp.zeros(n_axial_orders),
+        )
+
+    @property
+    def n_heads(self) -> int:
+        """Number of heads (static)."""
+        return self.heads.n_heads
+
+
+def make_model(
+    radius_m: float,
+    head_angles_rad: ArrayLike,
+    *,
+    eccentricity_m: ArrayLike = (0.0, 0.0),
+    tilt_rad: ArrayLike = (0.0, 0.0),
+    grating_sin_rad: ArrayLike = (),
+    grating_cos_rad: ArrayLike | None = None,
+    placement_error_rad: ArrayLike | None = None,
+    beam_tilt_rad: ArrayLike | None = None,
+    gap_m: float = 1e-3,
+    noise_rad: ArrayLike = 0.0,
+    axial_cos_m: ArrayLike = (),
+    axial_sin_m: ArrayLike | None = None,
+    runout_amplitude_m: float = 0.0,
+    runout_ratio: float = 0.0,
+    runout_phase_rad: float = 0.0,
+    runout_freq_hz: float = 0.0,
+) -> EncoderModel:
+    """Build an :class:`EncoderModel` from keyword parameters (SI units, see the classes).
+
+    Per-head parameters left out are zero; ``noise_rad`` may be a scalar (same for every
+    head). ``grating_sin_rad``/``grating_cos_rad`` list orders ``1 … M`` (a missing one of
+    the pair is zeros of the same length); likewise ``axial_cos_m``/``axial_sin_m``.
+
+    Example: the seed's figure-8 encoder, 3+1 heads::
+
+        make_model(0.0254, jnp.deg2rad(jnp.array([0, 120, 240, 50])),
+                   eccentricity_m=(5e-6, 0), tilt_rad=(6e-3, 0),
+                   grating_sin_rad=[0, 0, 5e-6, 2.5e-6])
+    """
+    angles = _f64(head_angles_rad).reshape(-1)
+    zeros_h = jnp.zeros_like(angles)
+    gs = _f64(grating_sin_rad).reshape(-1)
+    gc = jnp.zeros_like(gs) if grating_cos_rad is None else _f64(grating_cos_rad).reshape(-1)
+    if gc.shape != gs.shape:
+        m = max(gs.shape[0], gc.shape[0])
+        gs = jnp.pad(gs, (0, m - gs.shape[0]))
+        gc = jnp.pad(gc, (0, m - gc.shape[0]))
+    ac = _f64(axial_cos_m).reshape(-1)
+    asn = jnp.zeros_like(ac) if axial_sin_m is None else _f64(axial_sin_m).reshape(-1)
+    if asn.shape != ac.shape:
+        k = max(ac.shape[0], asn.shape[0])
+        ac = jnp.pad(ac, (0, k - ac.shape[0]))
+        asn = jnp.pad(asn, (0, k - asn.shape[0]))
+    noise = jnp.broadcast_to(_f64(noise_rad), angles.shape)
+    return EncoderModel(
+        disk=Disk(radius_m, eccentricity_m, tilt_rad, gs, gc),
+        heads=Heads(
+            angles,
+            zeros_h if placement_error_rad is None else placement_error_rad,
+            zeros_h if beam_tilt_rad is None else beam_tilt_rad,
+            gap_m,
+            noise,
+        ),
+        motion=Motion(ac, asn, runout_amplitude_m, runout_ratio, runout_phase_rad, runout_freq_hz),
+    )
+
+
+# ----------------------------------------------------------------------------- physics
+
+
+# Cephes' arctan (S. L. Moshier): a rational approximation after range reduction, within
+# 1 ulp in float64. Written with selects only, so XLA vectorises it (about 3x faster on CPU
+# than the library arctan2), and odd in x without abs/sign, so its gradient is right at 0.
+_ATAN_P = (
+    -8.750608600031904122785e-1,
+    -1.615753718733365076637e1,
+    -7.500855792314704667340e1,
+    -1.228866684490136173410e2,
+    -6.485021904942025371773e1,
+)
+_ATAN_Q = (
+    2.485846490142306297962e1,
+    1.650270098316988542046e2,
+    4.328810604912902668951e2,
+    4.853903996359136964868e2,
+    1.945506571482613964425e2,
+)
+_ATAN_MOREBITS = 6.123233995736765886130e-17
+_TAN_3PI_8 = 2.41421356237309504880
+
+
+@jax.custom_jvp
+def _atan(x: Array) -> Array:
+    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere.
+
+    Its derivative is given in closed form (``1 / (1 + x²)``, :func:`_atan_jvp`) rather than
+    traced through the selects of the rational approximation: the reverse pass of a Monte
+    Carlo gradient is then about as cheap as the forward pass.
+    """
+    s = jnp.where(x > 0, 1.0, -1.0)
+    big = (x > _TAN_3PI_8) | (x < -_TAN_3PI_8)
+    mid = ((x > 0.66) | (x < -0.66)) & ~big
+    xr = jnp.where(big, -1.0 / jnp.where(big, x, 1.0), jnp.where(mid, (x - s) / (1.0 + s * x), x))
+    y0 = jnp.where(big, s * (jnp.pi / 2), jnp.where(mid, s * (jnp.pi / 4), 0.0))
+    corr = jnp.where(big, s * _ATAN_MOREBITS, jnp.where(mid, s * 0.5 * _ATAN_MOREBITS, 0.0))
+    z = xr * xr
+    p, q = _ATAN_P, _ATAN_Q
+    num = (((p[0] * z + p[1]) * z + p[2]) * z + p[3]) * z + p[4]
+    den = ((((z + q[0]) * z + q[1]) * z + q[2]) * z + q[3]) * z + q[4]
+    return y0 + (xr * z * num / den + xr) + corr
+
+
+@_atan.defjvp
+def _atan_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return _atan(x), dx / (1.0 + x * x)
+
+
+def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -> Array:
+    """``sum_j S_j sin(j psi) + C_j cos(j psi)`` given ``sin psi``, ``cos psi`` (rad)."""
+    m = sin_rad.shape[0]
+    if m == 0:
+        return jnp.zeros_like(psi)
+    if m > _GRATING_LOOP_MAX:
+        j = jnp.arange(1, m + 1, dtype=psi.dtype)
+        arg = psi[..., None] * j
+        return jnp.sum(sin_rad * jnp.sin(arg) + cos_rad * jnp.cos(arg), axis=-1)
+    return _grating_series(sin_rad, cos_rad, s1, c1)
+
+
+def _instantiate(t):
+    return jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t
+
+
+def _clenshaw(cos_coef: Array, sin_coef: Array, c1: Array, s1: Array) -> Array:
+    """``sum_j a_j cos(j psi) + b_j sin(j psi)`` for ``j = 1 … M`` by Clenshaw's recurrence
+    (Chebyshev ``T_j`` for the cosines, ``sin psi U_{j-1}`` for the sines), from
+    ``c1 = cos psi``, ``s1 = sin psi``: two multiply-adds per order and series."""
+    m = cos_coef.shape[0]
+    x2 = 2.0 * c1
+    bc1 = bc2 = bs1 = bs2 = jnp.zeros_like(c1)
+    for j in range(m - 1, 0, -1):  # orders M … 2
+        bc1, bc2 = cos_coef[j] + x2 * bc1 - bc2, bc1
+        bs1, bs2 = sin_coef[j] + x2 * bs1 - bs2, bs1
+    cos_sum = c1 * (cos_coef[0] + x2 * bc1 - bc2) - bc1
+    sin_sum = s1 * (sin_coef[0] + x2 * bs1 - bs2)
+    return cos_sum + sin_sum
+
+
+@jax.custom_jvp
+def _grating_series(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array) -> Array:
+    """``sum_j S_j sin(j psi) + C_j cos(j psi)`` from the unit vector
+    ``(c1, s1) = (cos psi, sin psi)``; rad."""
+    return _clenshaw(cos_rad, sin_rad, c1, s1)
+
+
+def _grating_series_jvp(primals, tangents):
+    """Closed-form tangent: the series' derivative in ``psi`` is the series of coefficients
+    ``j C_j`` (sines, negated) and ``j S_j`` (cosines), and ``d psi = cos psi d(sin psi) -
+    sin psi d(cos psi)`` on the unit circle; a coefficient tangent enters linearly.
+    Reverse mode then transposes a few multiply-adds per reading."""
+    sin_rad, cos_rad, s1, c1 = primals
+    d_sin, d_cos, ds1, dc1 = tangents
+    j = jnp.arange(1, sin_rad.shape[0] + 1, dtype=s1.dtype)
+    g = _clenshaw(cos_rad, sin_rad, c1, s1)
+    gp = _clenshaw(j * sin_rad, -j * cos_rad, c1, s1)
+    dg = gp * (c1 * _instantiate(ds1) - s1 * _instantiate(dc1))
+    if not (isinstance(d_sin, SymbolicZero) and isinstance(d_cos, SymbolicZero)):
+        dg = dg + _clenshaw(_instantiate(d_cos), _instantiate(d_sin), c1, s1)
+    return g, dg
+
+
+_grating_series.defjvp(_grating_series_jvp, symbolic_zeros=True)
+
+
+@jax.jit
+def _errors(model: EncoderModel, theta: Array, time: Array | None) -> Array:
+    """Head errors ``(n, H)``, rad, for shaft angles ``theta (n,)`` rad and times ``(n,)`` s."""
+    geom, s1, c1, psi = _geometry(model, theta, time)
+    d = model.disk
+    return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
+
+
+def errors_scaled_grating(
+    model: EncoderModel,
+    theta_rad: Array,
+    grating_scale_rad: Array,
+    unit_sin: Array,
+    unit_cos: Array,
+) -> Array:
+    """Head errors ``(n, H)``, rad, with the grating error written as a scale times a
+    fixed shape: ``g(psi) = grating_scale_rad * sum_j unit_sin_j sin(j psi) + unit_cos_j
+    cos(j psi)`` (the model's own grating coefficients are ignored).
+
+    The same physics as :func:`head_errors`, arranged for Monte Carlo gradients with
+    respect to a grating tolerance: reverse mode then needs one reduction for the scale
+    instead of one per coefficient, and the forward pass is recomputed in the backward
+    pass (``jax.checkpoint``) instead of stored: the gradient of a Monte Carlo mean costs
+    about 3.4 forward evaluations (``benchmarks/optimize.py``).
+
+    Args:
+        model: the encoder (its ``disk.grating_*`` are not used).
+        theta_rad: shaft angles, rad, ``(n,)``.
+        grating_scale_rad: scalar, rad.
+        unit_sin, unit_cos: the grating shape, orders ``1 … M`` (dimensionless).
+    """
+    return _errors_scaled(model, _f64(theta_rad).reshape(-1), grating_scale_rad, unit_sin, unit_cos)
+
+
+@jax.checkpoint
+def _errors_scaled(model, theta, scale, unit_sin, unit_cos):
+    geom, s1, c1, psi = _geometry(model, theta, None)
+    return geom + scale * _grating(_f64(unit_sin), _f64(unit_cos), s1, c1, psi)
+
+
+def _geometry(
+    model: EncoderModel, theta: Array, time: Array | None
+) -> tuple[Array, Array, Array, Array]:
+    """Geometric head errors ``(n, H)`` (rad, no grating error) and the read point's
+    ``sin psi``, ``cos psi`` and ``psi`` (rad) on the disk."""
+    d, hd, mo = model.disk, model.heads, model.motion
+    radius = d.optical_radius_m
+    # --- disk in the rotor frame at theta = 0
+    tx, ty = jnp.tan(d.tilt_rad[0]), jnp.tan(d.tilt_rad[1])
+    nn = jnp.sqrt(1.0 + tx * tx + ty * ty)
+    n0x, n0y, n0z = tx / nn, ty / nn, 1.0 / nn
+    ln = jnp.sqrt(1.0 - n0x * n0x)  # index line: +x projected into the disk plane
+    l0x, l0y, l0z = (1.0 - n0x * n0x) / ln, -n0x * n0y / ln, -n0x * n0z / ln
+    c0x, c0y = d.eccentricity_m[0], d.eccentricity_m[1]
+    # --- rotate by theta about z; shapes (n, 1) so that heads broadcast along axis 1
+    th = theta[:, None]
+    ct, st = jnp.cos(th), jnp.sin(th)
+    nx, ny, nz = ct * n0x - st * n0y, st * n0x + ct * n0y, n0z
+    lx, ly, lz = ct * l0x - st * l0y, st * l0x + ct * l0y, l0z
+    cx, cy = ct * c0x - st * c0y, st * c0x + ct * c0y
+    # --- motion hooks
+    phase = mo.runout_ratio * th + mo.runout_phase_rad
+    if time is not None:
+        phase = phase + 2 * jnp.pi * mo.runout_freq_hz * time[:, None]
+    cx = cx + mo.runout_amplitude_m * jnp.cos(phase)
+    cy = cy + mo.runout_amplitude_m * jnp.sin(phase)
+    k = mo.axial_cos_m.shape[0]
+    if k:
+        j = jnp.arange(1, k + 1, dtype=theta.dtype)
+        arg = theta[:, None] * j
+        cz = (jnp.cos(arg) @ mo.axial_cos_m + jnp.sin(arg) @ mo.axial_sin_m)[:, None]
+    else:
+        cz = jnp.zeros_like(th)
+    # --- heads: position r, beam u (tangentially tilted from -z)
+    beta = hd.angles_rad + hd.placement_error_rad
+    cb, sb = jnp.cos(beta), jnp.sin(beta)
+    tg = jnp.tan(hd.beam_tilt_rad)
+    un = jnp.sqrt(1.0 + tg * tg)
+    ux, uy, uz = -tg * sb / un, tg * cb / un, -1.0 / un
+    rx, ry, rz = radius * cb, radius * sb, hd.gap_m
+    # --- ray-plane intersection (seed eq. 36 for a ray from r): i = r + s u
+    wx, wy, wz = cx - rx, cy - ry, cz - rz
+    s = (wx * nx + wy * ny + wz * nz) / (ux * nx + uy * ny + uz * nz)
+    vx, vy, vz = s * ux - wx, s * uy - wy, s * uz - wz  # v = i - c, in the disk plane
+    # --- signed angle psi from v to the index line about n
+    crx, cry, crz = vy * lz - vz * ly, vz * lx - vx * lz, vx * ly - vy * lx
+    sin_part = crx * nx + cry * ny + crz * nz  # rho sin(psi)
+    cos_part = vx * lx + vy * ly + vz * lz  # rho cos(psi)
+    rho = jnp.sqrt(sin_part * sin_part + cos_part * cos_part)
+    s1, c1 = sin_part / rho, cos_part / rho
+    # geometric error psi - (theta - alpha_k), wrapped to (-pi, pi): rotate (cos psi, sin psi)
+    # back by theta - alpha_k, whose sine and cosine need no further trigonometry
+    ca, sa = jnp.cos(hd.angles_rad), jnp.sin(hd.angles_rad)
+    cd, sd = ct * ca + st * sa, st * ca - ct * sa  # cos, sin of (theta - alpha_k)
+    # half-angle form of atan2 for unit vectors: phi = 2 atan(sin phi / (1 + cos phi)),
+    # exact for |phi| < pi (a head 180 deg off is not an encoder)
+    geom = 2.0 * _atan((s1 * cd - c1 * sd) / (1.0 + c1 * cd + s1 * sd))
+    psi = geom + (th - hd.angles_rad)  # only used for orders > _GRATING_LOOP_MAX
+    return geom, s1, c1, psi
+
+
+def _as_theta(theta_rad: ArrayLike) -> tuple[Array, bool]:
+    theta = _f64(theta_rad)
+    scalar = theta.ndim == 0
+    return theta.reshape(-1), scalar
+
+
+def head_errors(
+    model: EncoderModel, theta_rad: ArrayLike, time_s: ArrayLike | None = None
+) -> Array:
+    """Error of every head at every shaft angle: ``reading_k - theta``, rad.
+
+    Args:
+        model: the encoder.
+        theta_rad: shaft angles, rad, shape ``(n,)`` (or a scalar: result ``(H,)``).
+        time_s: sample times, s, same shape (only the runout's ``runout_freq_hz`` term
+            uses time; ``None`` means ``t = 0``).
+
+    Returns:
+        Errors, rad, shape ``(n, H)``; the constant of a head's placement error is kept
+        (``-delta_k``), as a real head would report it.
+    """
+    theta, scalar = _as_theta(theta_rad)
+    time = None if time_s is None else jnp.broadcast_to(_f64(time_s).reshape(-1), theta.shape)
+    out = _errors(model, theta, time)
+    return out[0] if scalar else out
+
+
+def head_readings(
+    model: EncoderModel, theta_rad: ArrayLike, time_s: ArrayLike | None = None
+) -> Array:
+    """Readings of every head, rad: ``reading_k = theta + error_k(theta, t)``, unwrapped.
+
+    Same arguments as :func:`head_errors`; the sign convention is that of
+    ``docs/recording-format.md`` (readings increase with ``theta``).
+    """
+    theta, scalar = _as_theta(theta_rad)
+    out = theta[:, None] + head_errors(model, theta, time_s)
+    return out[0] if scalar else out
+
+
+def noisy_head_readings(
+    model: EncoderModel,
+    theta_rad: ArrayLike,
+    time_s: ArrayLike | None = None,
+    *,
+    key: Array,
+) -> Array:
+    """:func:`head_readings` plus white read noise of std ``model.heads.noise_rad``, rad.
+
+    Args:
+        key: ``jax.random`` key for the noise.
+    """
+    clean = head_readings(model, theta_rad, time_s)
+    return clean + model.heads.noise_rad * jax.random.normal(key, clean.shape, clean.dtype)
+
+
+def head_errors_batch(
+    models: EncoderModel,
+    theta_rad: ArrayLike,
+    time_s: ArrayLike | None = None,
+    *,
+    chunk: int | None = None,
+) -> Array:
+    """:func:`head_errors` for a batch of designs (every leaf with a leading axis ``B``).
+
+    Designs are processed ``chunk`` at a time (``lax.map`` with ``batch_size``), so peak
+    memory is about ``chunk * n * H`` times the few dozen temporaries of the model. The
+    default picks ``chunk`` so that one chunk holds about ``2**15`` readings (small
+    enough for the CPU caches, which is markedly faster than one big batch).
+
+    Returns:
+        Errors, rad, shape ``(B, n, H)``.
+    """
+    theta, _ = _as_theta(theta_rad)
+    time = None if time_s is None else jnp.broadcast_to(_f64(time_s).reshape(-1), theta.shape)
+    n_designs = jax.tree_util.tree_leaves(models)[0].shape[0]
+    if chunk is None:
+        chunk = max(1, _CHUNK_READINGS // (theta.shape[0] * models.heads.angles_rad.shape[-1]))
+    chunk = min(chunk, n_designs)
+    return _batch(models, theta, time, chunk)
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _batch(models: EncoderModel, theta: Array, time: Array | None, chunk: int) -> Array:
+    return jax.lax.map(lambda m: _errors(m, theta, time), models, batch_size=chunk)
+
+
+def stack_models(models: Sequence[EncoderModel]) -> EncoderModel:
+    """Stack equally shaped models into one batched model (leading axis = design)."""
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *models)
