@@ -7,12 +7,22 @@ from pathlib import Path
 
 from ..io import _realdata
 
-HELP = "convert measured data (NmmQuad CSV, ODrive .npy, or the whole realdata folder)"
+HELP = (
+    "convert measured data (NmmQuad CSV, ODrive .npy, moteus encoder sweep, MagAlpha CSV, "
+    "or the whole realdata folder)"
+)
+
+IMPORTERS = {
+    "nmm": _realdata.import_nmm,
+    "odrive": _realdata.import_odrive,
+    "moteus": _realdata.import_moteus,
+    "magalpha": _realdata.import_magalpha,
+}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "source", choices=["nmm", "odrive", "realdata"], help="what SRC is (realdata: a folder)"
+        "source", choices=[*IMPORTERS, "realdata"], help="what SRC is (realdata: a folder)"
     )
     parser.add_argument("src", type=Path, help="input file (or folder for 'realdata')")
     parser.add_argument(
@@ -25,7 +35,6 @@ def run(args: argparse.Namespace) -> int:
         for p in _realdata.import_realdata_folder(args.src, args.out):
             print(f"wrote {p}")
         return 0
-    fn = _realdata.import_nmm if args.source == "nmm" else _realdata.import_odrive
-    rec = fn(args.src, args.out)
+    rec = IMPORTERS[args.source](args.src, args.out)
     print(f"wrote {rec.path} ({rec.kind}, {rec.n_rows} rows)")
     return 0

@@ -1,6 +1,6 @@
 """Converters from the public measured data in ``shared/realdata`` to recordings.
 
-Two sources (see ``data/real/README.md`` for the licenses, which travel with every
+Four sources (see ``data/real/README.md`` for the licenses, which travel with every
 converted file as the recording's ``[provenance]`` table):
 
 * NmmQuad (M. Matus, MIT): Lissajous captures of the X and Y homodyne laser
@@ -12,6 +12,19 @@ converted file as the recording's ``[provenance]`` table):
   without and with anti-cogging. ``.npy`` float64 ``[3, N]``: time (s), encoder position
   (counts, 8192 per turn, fractional: the controller's interpolated estimate), current
   ``Iq`` (A). Converted to kind ``motion`` with columns ``t``, ``counts``, ``current_a``.
+* moteus (mjbots, Apache-2.0): a calibration sweep of the controller's on-board magnetic
+  encoder against its own open-loop commanded angle, lines ``dir phase encoder``. Converted
+  to a sensor-against-reference ``multihead`` recording (one head ``h0`` = the encoder,
+  ``theta_ref`` = commanded mechanical angle). Read from the data: every encoder value is a
+  multiple of 4 of 65536, i.e. a 14-bit sensor; the up sweep of 21.007 electrical turns
+  moves the encoder 1.0002 turn, so 21 pole pairs (14 would move it 1.5 turns).
+* MagAlpha (Monolithic Power Systems, MIT): a magnetic angle sensor against a reference over
+  one turn, 200 rows in degrees, both angles on a 360/512 degree lattice. Converted to a
+  sensor-against-reference ``multihead`` recording after putting the rows near the 0/360
+  wrap in sweep order (the moved lines are listed in the provenance).
+
+Neither sensor source has time stamps: ``t`` is the sample index (1 per sample), so speeds
+and delays found in them are per sample, not per second.
 
 Motor type for the ODrive records: 7 pole pairs and 12 stator slots. Decided from the data:
 the published cogging map (``odrive_cogging_map_d_16.npy``) has its largest Fourier
@@ -141,9 +154,10 @@ def import_odrive(
 
 
 def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLike) -> list[Path]:
-    """Convert all four shared recordings found in ``src_dir`` into ``out_dir``.
+    """Convert the shared recordings found in ``src_dir`` into ``out_dir``.
 
-    Returns the TOML paths written: ``nmm_x``, ``nmm_y``, ``odrive_nocomp``, ``odrive_comp``.
+    Returns the TOML paths written: ``nmm_x``, ``nmm_y``, ``odrive_nocomp``, ``odrive_comp``,
+    ``moteus_cal``, ``magalpha_cal``.
     """
     src_dir, out_dir = Path(src_dir), Path(out_dir)
     jobs = [
@@ -151,9 +165,176 @@ def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLik
         (import_nmm, "nmm_Y_raw.csv", "nmm_y.toml"),
         (import_odrive, "odrive_slow2_nocomp_0.npy", "odrive_nocomp.toml"),
         (import_odrive, "odrive_slow2_comp_0.npy", "odrive_comp.toml"),
+        (import_moteus, "moteus_encoder_cal.txt", "moteus_cal.toml"),
+        (import_magalpha, "magalpha_calibration_example.csv", "magalpha_cal.toml"),
     ]
     written = []
     for fn, src, dst in jobs:
         fn(src_dir / src, out_dir / dst)
         written.append(out_dir / dst)
     return written
+
+
+# ----------------------------------------------------------------------------- sensors
+
+
+MOTEUS_PROVENANCE = {
+    "source": "github.com/mjbots/moteus, lib/python/moteus/test/calibrate_encoder_test.py "
+    "(SOURCE_DATA)",
+    "license": "Apache License 2.0, Copyright 2023 mjbots Robotic Systems, LLC",
+    "notes": "calibration sweep of a moteus controller's on-board magnetic encoder against "
+    "its own open-loop drive; source lines 'dir phase encoder': phase = commanded electrical "
+    "angle (uint16, 65536 per electrical turn), encoder = raw reading (uint16, 65536 per "
+    "mechanical turn). theta_ref = unwrapped phase / 65536 / 21 turns (21 pole pairs: the "
+    "sweep of 21.0 electrical turns moves the encoder 1.000 turn); h0 = unwrapped encoder. "
+    "dir 1 (phase up) then dir 2 (phase down) in one run. The source has no time stamps: "
+    "t is the sample index (1 per sample, not seconds), so speeds are per sample",
+}
+MOTEUS_POLE_PAIRS = 21
+MOTEUS_COUNTS = 65536
+
+MAGALPHA_PROVENANCE = {
+    "source": "github.com/monolithicpower/MagAlpha-Calibration-Curve-Toolbox, "
+    "input-files/calibration_data_input_example.csv",
+    "license": "MIT License, Copyright (c) 2017 Monolithic Power Systems",
+    "notes": "a MagAlpha magnetic angle sensor against a reference angle over one turn; "
+    "source columns 'Reference Angle [degree]', 'Measured Angle [degree]', both quantized to "
+    "360/512 degree and printed to 6 significant digits. Rows re-ordered along the sweep of "
+    "the reference (see 'reordered_rows'); both angles unwrapped to rad. The source has no "
+    "time stamps: t is the sample index (1 per sample, not seconds)",
+}
+
+
+def _unwrap_counts(x: np.ndarray, per_turn: int) -> np.ndarray:
+    """Unwrap a wrapping integer reading (``per_turn`` counts per turn) to counts."""
+    d = np.diff(x)
+    d = (d + per_turn // 2) % per_turn - per_turn // 2
+    return x[0] + np.concatenate([[0], np.cumsum(d)])
+
+
+def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
+    """Read a moteus ``dir phase encoder`` sweep; return int64 ``(n, 3)``.
+
+    Raises:
+        EncdesignInputError: not three integer columns, ``dir`` not 1 or 2, ``phase`` or
+            ``encoder`` outside ``0 … 65535``, fewer than 3 rows.
+    """
+    path = Path(path)
+    where = str(path)
+    if not path.exists():
+        raise input_error(where, "file not found")
+    try:
+        a = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as exc:
+        raise input_error(where, f"non-numeric data ({exc})", "lines 'dir phase encoder'") from None
+    if a.shape[1] != 3 or a.shape[0] < 3:
+        raise input_error(where, f"table of shape {a.shape}", "at least 3 lines of 3 integers")
+    bad = np.flatnonzero(~np.all(np.isfinite(a) & (a == np.round(a)), axis=1))
+    if bad.size:
+        raise input_error(f"{where}, data row {int(bad[0]) + 1}", "not integers", "integers")
+    a = a.astype(np.int64)
+    for j, name, lo, hi in ((0, "dir", 1, 2), (1, "phase", 0, 65535), (2, "encoder", 0, 65535)):
+        bad = np.flatnonzero((a[:, j] < lo) | (a[:, j] > hi))
+        if bad.size:
+            raise input_error(
+                f"{where}, data row {int(bad[0]) + 1}, column '{name}'",
+                f"got {int(a[bad[0], j])}",
+                f"{lo} … {hi}",
+            )
+    return a
+
+
+def import_moteus(
+    src: str | os.PathLike, out_toml: str | os.PathLike, *, pole_pairs: int = MOTEUS_POLE_PAIRS
+) -> Recording:
+    """Convert a moteus encoder-calibration sweep to a sensor-against-reference recording.
+
+    ``theta_ref`` is the commanded mechanical angle (unwrapped electrical phase divided by
+    the pole pairs), ``h0`` the magnetic encoder's unwrapped reading, both in rad; one run
+    (the sweep up then down), ``t`` the sample index. The electrical phase steps are checked
+    to be below half an electrical turn (else the unwrapping would be ambiguous).
+    """
+    a = read_moteus_cal(src)
+    where = str(src)
+    dp = (np.diff(a[:, 1]) + 32768) % 65536 - 32768
+    if np.any(np.abs(dp) >= 16384):
+        i = int(np.flatnonzero(np.abs(dp) >= 16384)[0]) + 2
+        raise input_error(
+            f"{where}, data row {i}", "phase step of a quarter electrical turn or more", "a sweep"
+        )
+    phase = _unwrap_counts(a[:, 1], 65536).astype(np.float64)
+    enc = _unwrap_counts(a[:, 2], MOTEUS_COUNTS).astype(np.float64)
+    theta_ref = 2 * np.pi * phase / 65536 / pole_pairs
+    h0 = 2 * np.pi * enc / MOTEUS_COUNTS
+    up = int(np.sum(a[:, 0] == 1))
+    prov = dict(MOTEUS_PROVENANCE)
+    prov["directions"] = f"rows 0-{up - 1}: dir 1 (up); rows {up}-{len(a) - 1}: dir 2 (down)"
+    return write_recording(
+        out_toml,
+        "multihead",
+        {"t": np.arange(len(a), dtype=np.float64), "theta_ref": theta_ref, "h0": h0},
+        encoder={"head_angles_deg": [0.0], "sensor": "magnetic", "signal_periods_per_rev": 1},
+        description="moteus on-board magnetic encoder against its open-loop commanded angle "
+        f"({pole_pairs} pole pairs), one turn up and one down",
+        provenance=prov,
+    )
+
+
+def read_magalpha_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read the MagAlpha toolbox CSV; return ``(reference_deg, measured_deg)``."""
+    path = Path(path)
+    where = str(path)
+    if not path.exists():
+        raise input_error(where, "file not found")
+    with open(path, encoding="utf-8") as fh:
+        header = [h.strip() for h in fh.readline().split(",")]
+    expected = ["Reference Angle [degree]", "Measured Angle [degree]"]
+    if header != expected:
+        raise input_error(where, f"header {header}", f"the MagAlpha toolbox columns {expected}")
+    try:
+        a = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as exc:
+        raise input_error(where, f"non-numeric data ({exc})", "two numeric columns") from None
+    if a.shape[1] != 2 or a.shape[0] < 8:
+        raise input_error(where, f"table of shape {a.shape}", "at least 8 rows of 2 columns")
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+    if bad.size:
+        raise input_error(f"{where}, line {int(bad[0]) + 2}", "non-finite value", "finite")
+    return a[:, 0], a[:, 1]
+
+
+def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recording:
+    """Convert the MagAlpha calibration example to a sensor-against-reference recording.
+
+    The rows are one sweep of the reference over a turn, a few of them out of order near
+    the 0/360 degree wrap; they are put in sweep order (sorted by the reference angle
+    counted from the first row along the sweep direction) and the rows moved are listed in
+    ``[provenance] reordered_rows``. Both angles are then unwrapped (rad).
+
+    Raises:
+        EncdesignInputError: bad table, or the measured angle does not follow the sweep
+            (a step of half a turn or more after re-ordering).
+    """
+    ref_deg, mea_deg = read_magalpha_csv(src)
+    where = str(src)
+    step = (np.diff(ref_deg) + 180.0) % 360.0 - 180.0
+    sense = 1.0 if np.median(step) >= 0 else -1.0
+    key = np.mod(sense * (ref_deg - ref_deg[0]), 360.0)
+    order = np.argsort(key, kind="stable")
+    moved = order[np.flatnonzero(order != np.arange(order.size))]
+    ref = np.unwrap(np.deg2rad(ref_deg[order]))
+    mea = np.unwrap(np.deg2rad(mea_deg[order]))
+    dm = np.diff(mea) * sense
+    if np.any(dm <= -np.pi / 2):
+        i = int(order[int(np.flatnonzero(dm <= -np.pi / 2)[0]) + 1]) + 2
+        raise input_error(f"{where}, line {i}", "the measured angle runs against the sweep")
+    prov = dict(MAGALPHA_PROVENANCE)
+    prov["reordered_rows"] = [int(i) + 2 for i in moved]  # file line numbers (header = 1)
+    return write_recording(
+        out_toml,
+        "multihead",
+        {"t": np.arange(ref.size, dtype=np.float64), "theta_ref": ref, "h0": mea},
+        encoder={"head_angles_deg": [0.0], "sensor": "magnetic", "signal_periods_per_rev": 1},
+        description="MagAlpha magnetic angle sensor against a reference angle, one turn",
+        provenance=prov,
+    )

@@ -8,6 +8,11 @@ atomically (temporary files renamed into place), so nothing is ever half-written
 
 Kinds: ``multihead``, ``sds``, ``quadrature``, ``motion``. Each kind has a
 :class:`KindSpec` in :data:`KINDS` stating its table keys, columns and extra checks.
+
+A ``multihead`` recording with one head and a ``theta_ref`` column is one sensor read
+against a reference (an optical head, a magnetic angle sensor, a resolver or a capacitive
+encoder: ``[encoder] sensor``, with ``signal_periods_per_rev`` signal periods per turn).
+``optical_radius_m`` is optional: it is needed only to report lengths.
 """
 
 from __future__ import annotations
@@ -79,6 +84,25 @@ class Recording:
         """Multihead readings as an array ``(n_rows, H)`` in rad."""
         return np.stack([self.columns[c] for c in self.head_columns], axis=1)
 
+    @property
+    def sensor(self) -> str:
+        """``[encoder] sensor`` of a multihead recording (``"optical"`` when absent)."""
+        return str(self.encoder.get("sensor", "optical"))
+
+    @property
+    def signal_periods_per_rev(self) -> int | None:
+        """Signal periods per turn: ``signal_periods_per_rev``, else ``grating_lines``, else
+        ``None`` (unknown)."""
+        enc = self.encoder
+        p = enc.get("signal_periods_per_rev", enc.get("grating_lines"))
+        return None if p is None else int(p)
+
+    @property
+    def radius_m(self) -> float | None:
+        """``[encoder] optical_radius_m`` in m, or ``None`` (results in angles only)."""
+        r = self.encoder.get("optical_radius_m")
+        return None if r is None else float(r)
+
 
 @dataclasses.dataclass(frozen=True)
 class KindSpec:
@@ -145,6 +169,16 @@ def _string(where: str, v: Any) -> str:
     return v
 
 
+SENSORS = ("optical", "magnetic", "resolver", "capacitive")
+"""Values of ``[encoder] sensor`` (multihead kind)."""
+
+
+def _sensor(where: str, v: Any) -> str:
+    if not isinstance(v, str) or v not in SENSORS:
+        raise input_error(where, f"got {v!r}", f"one of {', '.join(repr(s) for s in SENSORS)}")
+    return v
+
+
 def _table(where: str, v: Any) -> dict:
     if not isinstance(v, dict):
         raise input_error(where, f"got {v!r}", "a table")
@@ -162,6 +196,12 @@ def _multihead_required(meta: dict) -> list[str]:
 def _multihead_check(where: str, meta: dict, cols: dict) -> None:
     enc = meta["encoder"]
     n = len(enc["head_angles_deg"])
+    if n == 1 and "theta_ref" not in cols:
+        raise input_error(
+            where,
+            "one head needs a theta_ref column (head_angles_deg lists 1 head)",
+            "a theta_ref column (one sensor against a reference) or at least two heads",
+        )
     ref = enc.get("reference_head")
     if ref is not None and ref >= n:
         raise input_error(
@@ -242,8 +282,10 @@ KINDS: dict[str, KindSpec] = {
             "head_angles_deg": _angle_list,
             "reference_head": _nonneg_int,
             "grating_lines": _positive_int,
+            "sensor": _sensor,
+            "signal_periods_per_rev": _positive_int,
         },
-        required_encoder=("optical_radius_m", "head_angles_deg"),
+        required_encoder=("head_angles_deg",),
         required_columns=_multihead_required,
         optional_columns=lambda meta: ["run", "theta_ref", "temp_c"],
         check=_multihead_check,
