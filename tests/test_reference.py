@@ -259,8 +259,10 @@ def _bench(effect, seed, amplitude=6.0):
     setup = {
         "direction_hysteresis": dict(sensor="magnetic", directions="both", speeds_rev_s=(1.0,)),
         "reading_delay": dict(sensor="resolver", directions="both", speeds_rev_s=(0.5, 2.0)),
-        "scale_error": dict(sensor="capacitive", directions="forward", span_turns=3.0),
-        "interpolation_error": dict(sensor="resolver", directions="forward", span_turns=2.0),
+        # both directions: a ramp in angle, not in time (else it is a drift in time)
+        "scale_error": dict(sensor="capacitive", directions="both", span_turns=3.0),
+        # P = 32: orders 32 and 64 lie beyond the base model's orders
+        "interpolation_error": dict(sensor="capacitive", directions="forward", span_turns=2.0),
         "quantization": dict(sensor="optical", directions="forward", span_turns=0.02),
     }[effect]
     rng = np.random.default_rng(seed)
@@ -460,6 +462,43 @@ def test_candidates_say_when_they_cannot_apply():
     assert _CAND["scale_error"].applies(ctx) is None
     big = {"hysteresis_rad": np.asarray(1.0)}
     assert "not backlash" in _CAND["direction_hysteresis"].plausible(ctx, big)
+
+
+# ----------------------------------------------------------------------------- the engine
+
+
+def _diagnosed(tmp_path, effect, seed):
+    from encdesign import diagnose
+
+    cols, truth, params = _bench(effect, seed)
+    enc = {
+        "head_angles_deg": [0.0],
+        "sensor": truth["sensor"],
+        "signal_periods_per_rev": truth["signal_periods_per_rev"],
+    }
+    rec = write_recording(tmp_path / f"{effect}.toml", "multihead", cols, encoder=enc)
+    doc = diagnose(rec).doc
+    return doc, {e["name"]: e for e in doc["effects"]}, params
+
+
+@pytest.mark.parametrize("effect", rt.CATALOG_REFERENCE)
+def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effect):
+    pytest.importorskip("encdesign.diagnose._engine")
+    doc, named, params = _diagnosed(tmp_path, effect, SEEDS[0])
+    assert doc["verdict"] != "consistent"
+    assert effect in named, (list(named), doc["rejected"])
+    e = named[effect]
+    val = {k: v["value"] for k, v in e["params"].items()}
+    val.update({k: v["value"] for k, v in (e.get("derived") or {}).items()})
+    for k, truth in params.items():
+        got, want = val[k], truth
+        if k == "amplitude_ratio":
+            got, want = got - 1.0, truth - 1.0
+        assert got == pytest.approx(want, rel=0.1), k
+    if effect == "quantization":
+        assert 0.7 <= val["amplitude"] <= 1.3
+        assert val["bits_per_turn"] == pytest.approx(np.log2(2 * np.pi / params["lsb_rad"]))
+    assert e["heldout_rms_after"] < doc["heldout_rms_before"]
 
 
 # ----------------------------------------------------------------------------- simulator

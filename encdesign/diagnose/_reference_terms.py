@@ -764,14 +764,27 @@ def _candidates() -> tuple:
         name="quantization",
         fn=_quant_fn,
         params=(
-            Param("lsb_rad", "rad", fit=False, description="step of the value lattice (LSB)"),
-            Param("lattice_offset_rad", "rad", shape="runs", fit=False),
-            Param("smooth_rad", "rad", shape=(2 * QUANT_SMOOTH_ORDERS,), fit=False),
-            Param("zero_rad", "rad", shape="runs", fit=False),
-            Param("blur_rad", "rad", fit=False, description="noise ahead of the quantizer"),
+            # held at their start values (found from the data); they enter nonlinearly
+            Param(
+                "lsb_rad",
+                "rad",
+                linear=False,
+                fit=False,
+                description="step of the value lattice (LSB)",
+            ),
+            Param("lattice_offset_rad", "rad", shape="runs", linear=False, fit=False),
+            Param("smooth_rad", "rad", shape=(2 * QUANT_SMOOTH_ORDERS,), linear=False, fit=False),
+            Param("zero_rad", "rad", shape="runs", linear=False, fit=False),
+            Param(
+                "blur_rad",
+                "rad",
+                linear=False,
+                fit=False,
+                description="noise ahead of the quantizer",
+            ),
             Param("amplitude", "1", scale=1.0, description="1 when the staircase explains it"),
         ),
-        signature=("floor",),
+        signature=("floor", "spectrum", "time", "orders"),
         explanation=(
             "a reading of finite resolution: a staircase of one LSB on the value lattice of "
             "the readings, a uniform error of +-LSB/2 (RMS LSB/sqrt(12)), blurred by the "
