@@ -454,7 +454,7 @@ def test_candidates_recover_their_effect_within_10_percent(effect, seed):
 
 
 def test_candidates_say_when_they_cannot_apply():
-    cols, truth, _ = _bench("scale_error", SEEDS[0])  # one direction, one speed, no lattice
+    cols, truth, _ = _bench("interpolation_error", SEEDS[0])  # one direction and speed, no lattice
     ctx, _ = _context(cols, truth)
     assert "both directions" in _CAND["direction_hysteresis"].applies(ctx)
     assert "run constant" in _CAND["reading_delay"].applies(ctx)
