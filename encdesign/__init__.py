@@ -188,8 +188,8 @@ from .diagnose import (
     write_concealed as write_concealed,
 )
 from .diagnose import (
+    Candidate as Candidate,
     Diagnosis as Diagnosis,
-    EffectResult as EffectResult,
     diagnose as diagnose,
     diagnosis_report_text as diagnosis_report_text,
     write_diagnosis_plots as write_diagnosis_plots,

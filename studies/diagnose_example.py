@@ -18,9 +18,12 @@ import sys
 import time
 
 import jax
+import numpy as np
 
 from encdesign.diagnose._conceal import write_concealed
-from encdesign.diagnose._multihead import diagnose, report_text, write_plots
+from encdesign.diagnose._conceal_bench import draw_plan, simulate
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose._plots import engine_plots
 from encdesign.io._study import study_parser, write_results
 
 NAME = "diagnose-example"
@@ -46,13 +49,34 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     d = diagnose(rec, verbose=True)
     wall = time.perf_counter() - t0
-    text = report_text(d)
+    text = d.doc["report"]
+    # one sensor against a reference: a magnetic sensor turning both ways, with a
+    # direction offset hidden in it (a start-up move at the start of the first run)
+    rng = np.random.default_rng(args.seed + 11)
+    plan = draw_plan(rng, "sensor", "single")
+    plan.update(
+        effects=["direction_hysteresis"],
+        both_directions=True,
+        transient=True,
+        sensor="magnetic",
+        periods=7,
+        n_runs=1,
+        turns=1.0,
+    )
+    srec, struth = simulate(rng, plan)
+    ds = diagnose(srec)
+    text += "\n" + ds.doc["report"]
     (args.out / "report.txt").write_text(text, encoding="utf-8")
     print(text)
-    figs = [] if args.no_plots else write_plots(d, args.out)
+    figs = []
+    if not args.no_plots:
+        figs = engine_plots(d, args.out)
+        figs += engine_plots(ds, args.out / "sensor")
     summary = dict(
-        diagnosis=d.to_json(),
+        diagnosis=d.doc,
         truth=truth,
+        sensor_diagnosis=ds.doc,
+        sensor_truth={k: v for k, v in struth.items() if k != "plan"} | {"plan": plan},
         n_samples=rec.n_rows,
         n_heads=len(rec.head_columns),
         wall_time_s=wall,

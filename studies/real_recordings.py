@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from encdesign import load_recording
-from encdesign.diagnose._dispatch import diagnose_any
+from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._motion import candidate_orders
 from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         print(f"[{i}/{len(names)}] diagnosing {name} …", file=sys.stderr, flush=True)
         rec = load_recording(args.data / f"{name}.toml")
-        d = diagnose_any(rec, plots=None if args.no_plots else args.out)
+        d = diagnose(rec, plots=None if args.no_plots else args.out).doc
         results[name] = d
         figures += [Path(x) for x in d.get("plots", [])]
         rows.append(
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                 "heldout_rms_before": d["heldout_rms_before"],
                 "effects": [
                     {
-                        k: e[k]
+                        k: e.get(k)
                         for k in (
                             "name",
                             "params",

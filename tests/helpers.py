@@ -56,3 +56,16 @@ def sds_reference(n_fixed: int = 2, n_moving: int = 2, marks: int = SDS_TEST_MAR
 # --- discrepancy finder (issue 5) ---
 DIAGNOSE_TEST_SAMPLES_PER_RUN = 600  # rows per run of the finder's test benches (3 runs)
 DIAGNOSE_TEST_AMPLITUDE = 4.0  # hidden-effect amplitude in units of the read noise
+
+
+def validate_diagnosis(doc) -> None:
+    """Validate a diagnosis document (as written to JSON) against the shipped JSON Schema."""
+    import json
+
+    import jsonschema
+
+    from encdesign.diagnose import SCHEMA_PATH
+    from encdesign.io._study import to_jsonable
+
+    schema = json.loads(SCHEMA_PATH.read_text())
+    jsonschema.validate(json.loads(json.dumps(to_jsonable(doc))), schema)

@@ -7,8 +7,10 @@ import pytest
 
 from encdesign import write_recording
 from encdesign.cli import main
-from encdesign.diagnose._motion import candidate_orders, diagnose_motion
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose._motion import candidate_orders
 from encdesign.diagnose._quadrature import diagnose_quadrature
+from tests.helpers import validate_diagnosis
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
 
@@ -39,23 +41,25 @@ def test_candidate_orders_of_a_14_pole_12_slot_motor():
 
 def test_motion_names_magnet_asymmetry_with_amplitudes(tmp_path):
     rec = _motion(tmp_path, {7: 0.05, 14: 0.02})
-    d = diagnose_motion(rec, max_order=100)
+    d = diagnose(rec, max_order=100).doc
+    validate_diagnosis(d)
     assert d["verdict"] == "missing_physics"
     assert d["effects"][0]["name"] == "magnet_asymmetry"
-    ripple = d["effects"][0]["params"]["speed_ripple_relative"]
+    ripple = d["effects"][0]["derived"]["speed_ripple_relative"]["value"]
     assert ripple["7"] == pytest.approx(0.05, rel=0.1)
     assert ripple["14"] == pytest.approx(0.02, rel=0.1)
     assert d["effects"][0]["heldout_rms_after"] < 0.8 * d["heldout_rms_before"]
 
 
 def test_motion_clean_is_consistent(tmp_path):
-    d = diagnose_motion(_motion(tmp_path, {}), max_order=100)
+    d = diagnose(_motion(tmp_path, {}), max_order=100).doc
+    validate_diagnosis(d)
     assert d["verdict"] == "consistent"
     assert d["effects"] == [] and d["unexplained"] == []
 
 
 def test_motion_out_of_catalog_order_is_unexplained(tmp_path):
-    d = diagnose_motion(_motion(tmp_path, {43: 0.2}), max_order=100)
+    d = diagnose(_motion(tmp_path, {43: 0.2}), max_order=100).doc
     assert d["effects"] == []
     assert d["verdict"] == "unexplained"
     assert d["unexplained"][0]["where"]["orders"] == [43]
@@ -101,7 +105,8 @@ def test_quadrature_clipping_is_unexplained_not_signal_shape(tmp_path):
 def test_shipped_motor_record_names_pole_pair_orders():
     from encdesign import load_recording
 
-    d = diagnose_motion(load_recording(DATA / "odrive_nocomp.toml"), max_order=100)
+    d = diagnose(load_recording(DATA / "odrive_nocomp.toml"), max_order=100).doc
+    validate_diagnosis(d)
     assert d["effects"][0]["name"] == "magnet_asymmetry"
     assert d["effects"][0]["heldout_rms_after"] < 0.8 * d["heldout_rms_before"]
 

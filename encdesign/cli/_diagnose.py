@@ -1,7 +1,7 @@
 """``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE]``.
 
-Multihead recordings go to :func:`encdesign.diagnose`; sds, quadrature and motion recordings
-to their own finders (``encdesign.diagnose._dispatch``)."""
+Every kind goes through :func:`encdesign.diagnose.diagnose` (``encdesign.diagnose._dispatch``);
+the JSON follows ``encdesign/diagnose/diagnosis.schema.json``."""
 
 from __future__ import annotations
 
@@ -20,8 +20,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, required=True, help="write the diagnosis here")
     parser.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     parser.add_argument("--report", type=Path, default=None, help="write the text report here")
-    parser.add_argument("--max-order", type=int, default=12, help="base model's highest order")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument(
+        "--max-order",
+        type=int,
+        default=None,
+        help="base model's highest order (default: the kind's, capped at what the record "
+        "resolves; beyond that it is refused with the limit)",
+    )
+    parser.add_argument(
+        "--candidates",
+        type=Path,
+        default=None,
+        help="a Python file defining CANDIDATES = [Candidate(...), ...]: your own effects",
+    )
+    parser.add_argument("--max-effects", type=int, default=3, help="most effects to name")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -39,33 +52,29 @@ def _write_text(path: Path, text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     """Diagnose; exit 0 with the JSON written (bad input raises -> exit 2)."""
     from .._errors import input_error
-    from ..diagnose._multihead import diagnose, report_text, write_plots
+    from ..diagnose._dispatch import diagnose, load_candidates
+    from ..io._recording import load_recording
     from ..io._study import write_json
 
-    if args.max_order < 1:
+    if args.max_order is not None and args.max_order < 1:
         raise input_error("--max-order", f"got {args.max_order}", "a positive integer")
-    from ..io._recording import load_recording
-
+    if args.max_effects < 0:
+        raise input_error("--max-effects", f"got {args.max_effects}", "0 or more")
+    cands = load_candidates(args.candidates) if args.candidates is not None else ()
     rec = load_recording(args.recording)
-    if rec.kind in ("quadrature", "motion", "sds"):
-        # timing, signal-level and shaft-motion recordings have their own finders
-        from ..diagnose._dispatch import diagnose_any
-
-        doc = diagnose_any(rec, plots=args.plots)
-        write_json(args.json, doc)
-        if args.report is not None and "report" in doc:
-            _write_text(args.report, doc["report"])
-        print(f"verdict: {doc['verdict']}")
-        print(f"wrote {args.json}", file=sys.stderr)
-        return 0
-    d = diagnose(rec, max_order=args.max_order, verbose=not args.quiet)
-    doc = d.to_json()
-    if args.plots is not None:
-        doc["plots"] = [str(p) for p in write_plots(d, args.plots)]
+    d = diagnose(
+        rec,
+        max_order=args.max_order,
+        max_effects=args.max_effects,
+        candidates=cands,
+        verbose=not args.quiet,
+        plots=args.plots,
+    )
+    doc = d.doc
     write_json(args.json, doc)
-    text = report_text(d)
+    text = doc.get("report", "")
     if args.report is not None:
         _write_text(args.report, text)
-    print(text, end="")
+    print(text if text else f"verdict: {doc['verdict']}", end="" if text.endswith("\n") else "\n")
     print(f"wrote {args.json}", file=sys.stderr)
     return 0

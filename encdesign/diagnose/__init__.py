@@ -6,14 +6,29 @@ May import physics and io; never design.
 function; this subpackage's contents are imported as ``from encdesign.diagnose import ...``.
 """
 
+from pathlib import Path
+
+from ._candidates import (
+    Candidate as Candidate,
+    Context as Context,
+    Param as Param,
+)
 from ._conceal import (
     simulate_concealed_bench as simulate_concealed_bench,
     write_concealed as write_concealed,
 )
-from ._multihead import (
+from ._dispatch import (
     Diagnosis as Diagnosis,
-    EffectResult as EffectResult,
     diagnose as diagnose,
-    report_text as diagnosis_report_text,
-    write_plots as write_diagnosis_plots,
+    load_candidates as load_candidates,
 )
+from ._plots import engine_plots as write_diagnosis_plots
+
+
+def diagnosis_report_text(d: Diagnosis) -> str:
+    """The plain-text report of a diagnosis."""
+    return d.doc.get("report", "")
+
+
+SCHEMA_PATH = Path(__file__).with_name("diagnosis.schema.json")
+"""The JSON Schema every diagnosis document follows."""

@@ -1,0 +1,1789 @@
+"""The discrepancy finder's engine: every stage written once, for every recording kind.
+
+Stages (``docs/diagnose.md``):
+
+1. **prepare** (:func:`prepare`): the kind turns the recording into observations ``y`` (n, C)
+   and row columns; the engine finds the bench's nuisances: gaps in ``t``, segments where the
+   shaft does not turn steadily (start-up, return moves, reversals, dwells, speed far from the
+   segment's steady speed), single-sample glitches and count jumps; it estimates the noise per
+   channel from second differences (structure smooth on the sampling scale cannot inflate it)
+   and lays out K blocked, randomly assigned held-out folds.
+2. **base fit**: the kind's base terms (one constant per channel and run, run angle offsets,
+   the kind's error function up to the orders the record resolves) by Gauss-Newton /
+   Levenberg-Marquardt on sufficient statistics accumulated chunk by chunk (bounded memory).
+3. **locate** (:mod:`encdesign.diagnose._views`): views of the residual, each finding with
+   where it sits and a p-value.
+4. **select**: forward selection of candidates whose signature matches a finding, each refit
+   with everything accepted so far; accepted on information criterion, K-fold held-out gain,
+   plausibility and conditioning; then a backward check on held-out data.
+5. **held-out proof**: the K-fold held-out residual of each model, from the per-fold
+   sufficient statistics (exact for parameters the model is linear in).
+6. **verdict** and report: ``consistent`` only when the goodness-of-fit test (variance ratio
+   of the residual to the difference-based noise, globally and per time block) passes and no
+   view finds anything.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg as sla
+from scipy import stats
+
+from .._errors import input_error
+from ._candidates import Candidate, Context
+from ._views import ALPHA, locate
+
+VERDICTS = ("consistent", "missing_physics", "unexplained")
+MAX_PARAM_FRACTION = 0.1
+"""The model never has more parameters than this fraction of the fitted values."""
+N_FOLDS = 5
+BIC_MIN = 10.0
+HELDOUT_MIN = 10.0
+PLAUSIBLE_RATIO = 4.0
+LOCATED_SHARE_MIN = 0.2
+COLLINEAR_REFUSE = 0.995
+COLLINEAR_NOTE = 0.95
+CHUNK_ROWS = 8192
+D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
+"""Variance of log(residual variance / second-difference variance) times N (white noise)."""
+MEDIAN_VAR = 2.0 / math.log(2.0) ** 2
+"""Variance of log(median periodogram level) times the number of periodogram bins."""
+
+
+# ----------------------------------------------------------------------------- kind data
+
+
+@dataclasses.dataclass
+class KindData:
+    """What a kind hands the engine (numpy, SI). Built by the kind's ``data(rec)``.
+
+    Attributes:
+        y: observations ``(n, C)`` whose model is the sum of the terms (e.g. reading -
+            theta_ref), in ``unit``.
+        shaft: shaft angle per row (rad), used to find non-steady motion and revolutions.
+        t: time within the run, s. run: run id per row (any ints).
+        reading: each channel's reading ``(n, C)`` (rad) for line-phase terms.
+        theta_ref: reference angle or ``None``. temp: ``temp_c`` or ``None``.
+        alpha: channel azimuths (rad). radius_m: optical radius or ``None``.
+        signal_periods: signal periods per revolution (0: unknown).
+        project: remove the per-sample channel mean (no reference angle: only channel
+            differences are observable).
+        unit: unit of ``y``. channel_names: e.g. ``h0``...
+        sensor: ``[encoder] sensor``.
+        where: file name for messages.
+        steady_tolerance: relative speed deviation beyond which a sample is non-steady.
+        speed_window: the speed is measured over this fraction of the run (at least 5 rows;
+            longer for a motor whose own ripple is large).
+    """
+
+    y: np.ndarray
+    shaft: np.ndarray
+    t: np.ndarray
+    run: np.ndarray
+    reading: np.ndarray
+    theta_ref: np.ndarray | None
+    temp: np.ndarray | None
+    alpha: np.ndarray
+    radius_m: float | None
+    signal_periods: int
+    project: bool
+    unit: str
+    channel_names: list[str]
+    sensor: str
+    where: str
+    steady_tolerance: float = 0.1
+    speed_window: float = 0.01
+
+
+@dataclasses.dataclass(frozen=True)
+class Kind:
+    """A recording kind: how to read it, its base model, its views and its candidates.
+
+    Attributes:
+        name: kind name.
+        data: ``data(rec) -> KindData``.
+        base: ``base(prep, max_order) -> ([(Candidate, start), ...], info)``: base-model
+            terms for this record (``info``: ``{"unidentifiable": [...], "align": fn}``).
+        candidates: ``candidates(ctx) -> tuple[Candidate, ...]``.
+        views: names of the views run on the residual.
+        max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
+    """
+
+    name: str
+    data: Callable[[Any], KindData]
+    base: Callable[[Any, int], tuple[list, dict]]
+    candidates: Callable[[Context], tuple[Candidate, ...]]
+    views: tuple[str, ...]
+    max_order_limit: Callable[[Any], int]
+    default_max_order: int = 12
+
+
+# ----------------------------------------------------------------------------- prepared
+
+
+@dataclasses.dataclass
+class Prepared:
+    """A recording ready to fit: kept rows, row columns, noise, folds, nuisances."""
+
+    kd: KindData
+    ctx: Context
+    y: np.ndarray  # (n, C), rows sorted run-by-run in file order
+    rows: dict[str, np.ndarray]  # row columns for the terms
+    consts: dict[str, Any]
+    keep: np.ndarray  # bool (n,)
+    fold: np.ndarray  # int (n,), -1 for excluded rows
+    seg: np.ndarray  # int (n,) steady segment id, -1 excluded
+    sigma: np.ndarray  # (C,) noise std per channel
+    excluded: list[dict]
+    glitches: list[dict]
+    count_jumps: list[dict]
+    gaps: list[dict]
+    fold_design: dict
+    run_ids: np.ndarray
+    run: np.ndarray  # run index 0..R-1
+
+    @property
+    def n(self) -> int:
+        """Rows."""
+        return self.y.shape[0]
+
+    @property
+    def n_channels(self) -> int:
+        """Channels."""
+        return self.y.shape[1]
+
+    @property
+    def n_values(self) -> float:
+        """Independent fitted values (kept rows x channels, less the projection)."""
+        C = self.n_channels
+        return float(self.keep.sum() * (C - 1 if self.kd.project else C))
+
+
+def _smooth_speed(shaft: np.ndarray, t: np.ndarray, win: int) -> np.ndarray:
+    """Speed (rad/s) by a centred difference over ``win`` samples, then a running median."""
+    n = shaft.size
+    if n < 3:
+        return np.zeros(n)
+    h = max(1, win // 2)
+    i0 = np.clip(np.arange(n) - h, 0, n - 1)
+    i1 = np.clip(np.arange(n) + h, 0, n - 1)
+    dt = t[i1] - t[i0]
+    dt[dt <= 0] = np.inf
+    return (shaft[i1] - shaft[i0]) / dt
+
+
+def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Contiguous ``True`` stretches as (start, stop) index pairs."""
+    if mask.size == 0:
+        return []
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+def find_motion_segments(
+    shaft: np.ndarray, t: np.ndarray, tolerance: float = 0.1, window: float = 0.01
+) -> tuple[np.ndarray, list[dict]]:
+    """Steady segments of one run.
+
+    A sample is steady when the shaft turns in the direction of a long piece of the run at a
+    speed within ``tolerance`` (relative) of that piece's median speed. Pieces are maximal
+    stretches of one direction; a piece shorter than 10 % of the run (or 50 samples) is a
+    return move, a reversal or a start-up, and samples slower than 10 % of the steady speed
+    are dwells. Each excluded stretch is widened by the speed window (settling).
+
+    Returns:
+        ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
+    """
+    n = shaft.size
+    win = int(min(max(5, int(window * n)), 2001))
+    w = _smooth_speed(shaft, t, win)
+    seg = -np.ones(n, dtype=int)
+    out: list[dict] = []
+    if n < 8:
+        return np.zeros(n, dtype=int), out
+    sgn = np.sign(w)
+    big = np.abs(w) > 0.1 * np.median(np.abs(w))
+    longest = max((b - a for a, b in _runs_of(big & (sgn > 0))), default=0)
+    longest = max(longest, max((b - a for a, b in _runs_of(big & (sgn < 0))), default=0))
+    min_len = max(50, int(0.1 * n), int(0.5 * longest) if longest < 0.2 * n else 0)
+    min_len = min(min_len, max(50, int(0.1 * n)))
+    sid = 0
+    for s in (1, -1):
+        for a, b in _runs_of(big & (sgn == s)):
+            if b - a < min_len:
+                continue
+            med = np.median(w[a:b])
+            ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
+            for c, d in _runs_of(ok):
+                if d - c >= min(min_len, 20):
+                    seg[a + c : a + d] = sid
+                    sid += 1
+    # widen the exclusions (settling after a move)
+    bad = seg < 0
+    if bad.any() and not bad.all():
+        widened = bad.copy()
+        h = max(win, n // 50)
+        for a, b in _runs_of(bad):
+            widened[max(0, a - h) : min(n, b + h)] = True
+        seg[widened & ~bad] = -1
+    for a, b in _runs_of(seg < 0):
+        piece = w[a:b]
+        steady = np.median(np.abs(w[seg >= 0])) if (seg >= 0).any() else 0.0
+        if np.median(np.abs(piece)) < 0.1 * steady:
+            reason = "dwell (shaft nearly at rest)"
+        elif (
+            (seg[:a] >= 0).any()
+            and (seg[b:] >= 0).any()
+            and np.any(np.sign(piece) != np.sign(np.median(w[seg >= 0])))
+        ):
+            reason = "reversal or return move (direction changes)"
+        elif a == 0:
+            reason = "start-up (speed far from the steady speed)"
+        elif np.any(np.sign(piece) != np.sign(np.median(w[seg >= 0]) if steady else 1)):
+            reason = "return move (opposite direction)"
+        else:
+            reason = "speed far from the segment's steady speed"
+        out.append(dict(start=a, stop=b, reason=reason))
+    return seg, out
+
+
+def _noise_d2(r: np.ndarray, seg: np.ndarray, t: np.ndarray | None = None):
+    """Second differences of ``r`` (n, C) within segments, on any time grid: each value less
+    the straight line through its two neighbours, scaled so that white noise of std sigma
+    gives ``6 sigma^2`` (as the plain second difference on a uniform grid). A straight line
+    gives exactly zero on any grid. Returns (values (m, C), index of the centre row)."""
+    ok = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2]) & (seg[1:-1] >= 0)
+    if t is None:
+        d2 = r[2:] - 2 * r[1:-1] + r[:-2]
+    else:
+        h1 = t[1:-1] - t[:-2]
+        h2 = t[2:] - t[1:-1]
+        hs = np.where(h1 + h2 > 0, h1 + h2, 1.0)
+        w1, w2 = h2 / hs, h1 / hs
+        e = r[1:-1] - (w1[:, None] * r[:-2] + w2[:, None] * r[2:])
+        d2 = -2.0 * e * np.sqrt(1.5 / (1.0 + w1**2 + w2**2))[:, None]
+    return d2[ok], np.flatnonzero(ok) + 1
+
+
+def noise_sigma(
+    r: np.ndarray, seg: np.ndarray, robust: bool = False, t: np.ndarray | None = None
+) -> np.ndarray:
+    """Noise std per channel from second differences within segments:
+    ``var(d2) = 6 sigma^2`` for white noise; structure smooth on the sampling scale adds
+    ``(omega dt)^4`` of its variance only. ``robust``: from the MAD (glitch-proof)."""
+    d2, _ = _noise_d2(r, seg, t)
+    if d2.shape[0] < 4:
+        return np.full(r.shape[1], np.nan)
+    if robust:
+        return 1.4826 * np.median(np.abs(d2 - np.median(d2, 0)), 0) / math.sqrt(6.0)
+    return np.sqrt(np.mean(d2**2, 0) / 6.0)
+
+
+def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
+    """Noise std per channel from the median of the residual's periodogram, run by run.
+
+    For white noise each periodogram bin ``|X_j|^2 / n`` is ``sigma^2`` times a unit
+    exponential, whose median is ``ln 2``; structure in fewer than half of the bins (lines,
+    a band, a slow drift, a step) cannot inflate the median much, at any frequency (second
+    differences are inflated by structure near the Nyquist frequency)."""
+    C = resid.shape[1]
+    bins = [[] for _ in range(C)]
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero(prep.run == r)
+        kr = prep.keep[rows]
+        nk = int(kr.sum())
+        if nk < 16:
+            continue
+        x = np.where(kr[:, None], resid[rows], 0.0)
+        x = x - np.where(kr[:, None], x.sum(0) / nk, 0.0)
+        P = np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
+        P = P[1 : (x.shape[0] - 1) // 2 + 1]
+        for k in range(C):
+            bins[k].append(P[:, k])
+    out = np.full(C, np.nan)
+    eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
+    for k in range(C):
+        if bins[k]:
+            allb = np.concatenate(bins[k])
+            if allb.size >= 8:
+                out[k] = math.sqrt(np.median(allb) / math.log(2.0) / eff)
+    return out
+
+
+def find_glitches(
+    r: np.ndarray, seg: np.ndarray, project: bool, t: np.ndarray | None = None
+) -> tuple[list[tuple[int, int]], list[tuple[int, int, float]]]:
+    """Single-sample glitches and count jumps in ``r`` (n, C).
+
+    On the second differences (any grid, :func:`_noise_d2`), a glitch of size g at row i
+    gives ``(-1, 2, -1) g`` at rows ``i-1, i, i+1``; a step between rows i-1 and i gives
+    ``(s, -s)`` at ``i-1, i``. Outliers beyond the Gaussian quantile at ``1e-4 / n`` (MAD
+    scale) are classified by that pattern; a clean record has none.
+
+    Returns:
+        ``([(row, channel)] glitches, [(row of the first new value, channel, size)] jumps)``;
+        channel -1 when the projection cannot tell which channel (two channels, no reference).
+    """
+    n, C = r.shape
+    d2, centre = _noise_d2(r, seg, t)
+    out_g: list[tuple[int, int]] = []
+    out_j: list[tuple[int, int, float]] = []
+    if d2.shape[0] < 8:
+        return out_g, out_j
+    s = 1.4826 * np.median(np.abs(d2), axis=0)
+    s = np.where(s > 0, s, np.inf)
+    z = d2 / s
+    thr = stats.norm.isf(1e-4 / max(n, 1) / 2)
+    pos = {int(c): i for i, c in enumerate(centre)}
+    hit_rows = sorted({int(centre[i]) for i in np.flatnonzero(np.any(np.abs(z) > thr, 1))})
+    done: set[int] = set()
+    for row in hit_rows:
+        if row in done:
+            continue
+        i = pos[row]
+        k = int(np.argmax(np.abs(z[i])))
+        # the strongest centre in the neighbourhood
+        cands = [pos[q] for q in (row - 1, row, row + 1) if q in pos]
+        i = max(cands, key=lambda j: abs(z[j, k]))
+        row = int(centre[i])
+        zi = z[i, k]
+        zl = z[pos[row - 1], k] if row - 1 in pos else 0.0
+        zr = z[pos[row + 1], k] if row + 1 in pos else 0.0
+        kk = -1 if (project and C == 2) else k
+        if (
+            np.sign(zl) == -np.sign(zi)
+            and np.sign(zr) == -np.sign(zi)
+            and (0.25 < abs(zl / zi) < 0.75 and 0.25 < abs(zr / zi) < 0.75)
+        ):
+            out_g.append((row, kk))
+            done |= {row - 1, row, row + 1}
+            continue
+        # step: the neighbour of opposite sign and similar size
+        for nb, zn in ((row + 1, zr), (row - 1, zl)):
+            if np.sign(zn) == -np.sign(zi) and 0.6 < abs(zn / zi) < 1.6:
+                first = max(row, nb)
+                size = float(-d2[i, k] / 2.0 * (1 if first == row + 1 else -1))
+                # the step size: jump of the level between the two rows
+                a, b = first - 1, first
+                size = float(r[b, k] - r[a, k])
+                out_j.append((first, kk, size))
+                done |= {row - 1, row, row + 1, nb}
+                break
+        else:
+            out_g.append((row, kk))
+            done |= {row}
+    return out_g, out_j
+
+
+def _fold_blocks(prep_keep: np.ndarray, run: np.ndarray, k: int, seed: int = 0):
+    """K folds of contiguous blocks of kept rows, blocks assigned at random (balanced) per run:
+    random assignment cannot alias with any periodic structure."""
+    fold = -np.ones(run.size, dtype=int)
+    rng = np.random.default_rng(seed)
+    block_rows = []
+    for r in np.unique(run):
+        rows = np.flatnonzero((run == r) & prep_keep)
+        if rows.size == 0:
+            continue
+        nb = max(k, min(64, rows.size // 16))
+        nb = max(k, nb - nb % k)
+        edges = np.linspace(0, rows.size, nb + 1).astype(int)
+        assign = np.tile(np.arange(k), nb // k)
+        rng.shuffle(assign)
+        for b in range(nb):
+            fold[rows[edges[b] : edges[b + 1]]] = assign[b]
+        block_rows.append(int(np.median(np.diff(edges))))
+    design = {
+        "k": k,
+        "scheme": "contiguous blocks of kept rows within each run, assigned to folds at random "
+        "(balanced, seed 0); each fold is predicted by the model fitted on the other K-1",
+        "block_rows_median": int(np.median(block_rows)) if block_rows else 0,
+        "seed": seed,
+    }
+    return fold, design
+
+
+def prepare(kd: KindData, meta: dict) -> Prepared:
+    """Stage 1: nuisances, noise, folds (see module doc). Raises EncdesignInputError."""
+    n, C = kd.y.shape
+    where = kd.where
+    if n < 32:
+        raise input_error(where, f"only {n} rows", "at least 32 rows to diagnose")
+    if not np.all(np.isfinite(kd.y)):
+        raise input_error(where, "non-finite readings", "finite values")
+    run_ids, first = np.unique(kd.run, return_index=True)
+    order_runs = run_ids[np.argsort(first)]
+    run = np.empty(n, dtype=int)
+    for i, r in enumerate(order_runs):
+        run[kd.run == r] = i
+    R = order_runs.size
+    sort = np.lexsort((kd.t, run))
+    if not np.all(sort == np.arange(n)):
+        kd = dataclasses.replace(
+            kd,
+            y=kd.y[sort],
+            shaft=kd.shaft[sort],
+            t=kd.t[sort],
+            run=kd.run[sort],
+            reading=kd.reading[sort],
+            theta_ref=None if kd.theta_ref is None else kd.theta_ref[sort],
+            temp=None if kd.temp is None else kd.temp[sort],
+        )
+        run = run[sort]
+    t = kd.t
+    # gaps and segments
+    seg = -np.ones(n, dtype=int)
+    excluded: list[dict] = []
+    gaps: list[dict] = []
+    omega = np.zeros(n)
+    direction = np.ones(n)
+    nseg = 0
+    revs = np.zeros(R)
+    seg_speed: list[float] = []
+    for r in range(R):
+        rows = np.flatnonzero(run == r)
+        tr = t[rows]
+        dt = np.diff(tr)
+        med = np.median(dt) if dt.size else 1.0
+        cuts = np.flatnonzero(dt > 20.0 * med) + 1
+        for c in cuts:
+            gaps.append(
+                dict(run=int(order_runs[r]), t_s=float(tr[c - 1]), duration_s=float(dt[c - 1]))
+            )
+        bounds = [0, *cuts.tolist(), rows.size]
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            sub = rows[a:b]
+            if sub.size < 8:
+                excluded.append(
+                    dict(
+                        run=int(order_runs[r]),
+                        t_start_s=float(t[sub[0]]),
+                        t_end_s=float(t[sub[-1]]),
+                        n_rows=int(sub.size),
+                        reason="too few rows between gaps",
+                    )
+                )
+                continue
+            s_id, bad = find_motion_segments(
+                kd.shaft[sub], t[sub], kd.steady_tolerance, kd.speed_window
+            )
+            for sid in np.unique(s_id[s_id >= 0]):
+                m = sub[s_id == sid]
+                seg[m] = nseg
+                w = np.polyfit(t[m] - t[m].mean(), kd.shaft[m], 1)[0] if m.size > 2 else 0.0
+                omega[m] = w
+                direction[m] = 1.0 if w >= 0 else -1.0
+                seg_speed.append(float(w))
+                revs[r] += abs(kd.shaft[m[-1]] - kd.shaft[m[0]]) / (2 * np.pi)
+                nseg += 1
+            for e in bad:
+                ss = sub[e["start"] : e["stop"]]
+                excluded.append(
+                    dict(
+                        run=int(order_runs[r]),
+                        t_start_s=float(t[ss[0]]),
+                        t_end_s=float(t[ss[-1]]),
+                        n_rows=int(ss.size),
+                        reason=e["reason"],
+                    )
+                )
+    keep = seg >= 0
+    if keep.sum() < 32:
+        raise input_error(
+            where, "no steady segment of at least 32 rows", "a shaft turning steadily"
+        )
+    # noise (robust first), glitches and count jumps on a first detrended residual
+    y = kd.y.copy()
+    if kd.project:
+        y = y - y.mean(1, keepdims=True)
+    glitches_raw, jumps_raw = find_glitches(_detrend(y, seg), seg, kd.project, t)
+    glitches, count_jumps = [], []
+    for i, k in glitches_raw:
+        keep[i] = False
+        glitches.append(
+            dict(
+                run=int(order_runs[run[i]]),
+                t_s=float(t[i]),
+                row=int(sort[i]),
+                channel=None if k < 0 else kd.channel_names[k],
+            )
+        )
+    for i, k, size in jumps_raw:
+        count_jumps.append(
+            dict(
+                run=int(order_runs[run[i]]),
+                t_s=float(t[i]),
+                row=int(sort[i]),
+                channel=None if k < 0 else kd.channel_names[k],
+                channel_index=k,
+                size=size,
+                index=i,
+                note="a step of one channel's reading (missed or extra counts); modelled as "
+                "a constant change from then on"
+                + ("; two channels without a reference: which one cannot be told" if k < 0 else ""),
+            )
+        )
+    seg_eff = np.where(keep, seg, -1)
+    seg_noise = seg_eff.copy()
+    for i, _, _ in jumps_raw:  # the step itself is not noise
+        seg_noise[max(i - 1, 0) : i + 1] = -1
+    yd = _detrend(y, seg_eff)
+    sigma = noise_sigma(yd, seg_noise, robust=False, t=t)
+    sigma_r = noise_sigma(yd, seg_noise, robust=True, t=t)
+    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, sigma_r)
+    if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
+        raise input_error(where, "the noise cannot be estimated", "readings that vary")
+    fold, design = _fold_blocks(keep, run, N_FOLDS)
+    fold[~keep] = -1
+    # row columns
+    tau = np.empty(n)
+    off = 0.0
+    for r in range(R):
+        rows = np.flatnonzero(run == r)
+        tr = t[rows]
+        dtm = float(np.median(np.diff(tr))) if rows.size > 1 else 1.0
+        tau[rows] = tr - tr[0] + off
+        off = tau[rows][-1] + dtm
+    theta = kd.theta_ref if kd.theta_ref is not None else kd.shaft
+    if kd.temp is not None and np.ptp(kd.temp[keep]) > 0:
+        driver = kd.temp - kd.temp[keep].mean()
+        driver_name = "temp_c"
+    else:
+        driver = tau - tau[keep].mean()
+        driver_name = "time"
+    L = kd.signal_periods
+    psi = np.mod(L * kd.reading, 2 * np.pi) if L > 0 else np.zeros_like(kd.reading)
+    onehot = np.zeros((n, R))
+    onehot[np.arange(n), run] = 1.0
+    rows = dict(
+        t=t,
+        tau=tau,
+        theta=theta,
+        theta_ref=kd.theta_ref if kd.theta_ref is not None else np.zeros(n),
+        reading=kd.reading,
+        run_onehot=onehot,
+        omega=omega,
+        direction=direction,
+        driver=driver,
+        psi=psi,
+    )
+    dt_med = float(np.median(np.diff(t))) if n > 1 else 1.0
+    consts = dict(
+        step_width_s=np.asarray(0.5 * abs(dt_med) if dt_med > 0 else 1e-3),
+        alpha=np.asarray(kd.alpha, float),
+        radius_m=np.asarray(kd.radius_m if kd.radius_m else 1.0, float),
+        signal_periods=np.asarray(float(L)),
+        n_runs=np.asarray(float(R)),
+    )
+    krows = {k: v[keep] for k, v in rows.items()}
+    ctx = Context(
+        kind=meta.get("kind", ""),
+        n_channels=C,
+        n_runs=R,
+        has_ref=kd.theta_ref is not None,
+        sensor=kd.sensor,
+        signal_periods=L,
+        radius_m=kd.radius_m,
+        rows=krows,
+        consts=consts,
+        noise=sigma,
+        revolutions=revs,
+        meta=meta,
+    )
+    ctx.consts["driver_name"] = driver_name  # type: ignore[index]
+    return Prepared(
+        kd=kd,
+        ctx=ctx,
+        y=y,
+        rows=rows,
+        consts=consts,
+        keep=keep,
+        fold=fold,
+        seg=np.where(keep, seg, -1),
+        sigma=sigma,
+        excluded=excluded,
+        glitches=glitches,
+        count_jumps=count_jumps,
+        gaps=gaps,
+        fold_design=design,
+        run_ids=order_runs,
+        run=run,
+    )
+
+
+def _detrend(y: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """``y`` less a per-segment quadratic (for the noise and glitch scans only)."""
+    out = np.zeros_like(y)
+    for s in np.unique(seg[seg >= 0]):
+        m = seg == s
+        x = np.linspace(-1, 1, int(m.sum()))
+        X = np.stack([np.ones_like(x), x, x**2], 1)
+        coef, *_ = np.linalg.lstsq(X, y[m], rcond=None)
+        out[m] = y[m] - X @ coef
+    return out
+
+
+# ----------------------------------------------------------------------------- fitting
+
+
+@functools.lru_cache(maxsize=256)
+def _valjac_fn(cand: Candidate):
+    def vj(p, x):
+        v = cand.fn(p, x)
+        J = jax.jacfwd(cand.fn)(p, x)
+        return v, J
+
+    return jax.jit(vj)
+
+
+@functools.lru_cache(maxsize=256)
+def _val_fn(cand: Candidate):
+    return jax.jit(cand.fn)
+
+
+@dataclasses.dataclass
+class Term:
+    """A candidate with its current parameter values and which scalars are free."""
+
+    cand: Candidate
+    values: dict[str, np.ndarray]
+    free: dict[str, np.ndarray]  # bool masks, same shapes
+    scale: dict[str, np.ndarray]
+
+    def flat(self) -> np.ndarray:
+        """Values of the free scalars, in parameter order."""
+        return np.concatenate(
+            [self.values[p.name][self.free[p.name]].ravel() for p in self.cand.params]
+            or [np.zeros(0)]
+        )
+
+    def n_free(self) -> int:
+        """Free scalars."""
+        return int(sum(int(self.free[p.name].sum()) for p in self.cand.params))
+
+    def copy(self) -> Term:
+        """A deep copy."""
+        return Term(
+            self.cand,
+            {k: v.copy() for k, v in self.values.items()},
+            {k: v.copy() for k, v in self.free.items()},
+            {k: v.copy() for k, v in self.scale.items()},
+        )
+
+
+def make_term(cand: Candidate, prep: Prepared, start: dict | None = None) -> Term:
+    """A :class:`Term` at ``start`` (others zero), free where the parameter is fitted."""
+    C, R = prep.n_channels, prep.ctx.n_runs
+    vals, free, scale = {}, {}, {}
+    for p in cand.params:
+        shp = p.resolved_shape(C, R)
+        v = np.zeros(shp)
+        if start and p.name in start:
+            v = np.broadcast_to(np.asarray(start[p.name], float), shp).copy()
+        vals[p.name] = v
+        free[p.name] = np.full(shp, bool(p.fit))
+        scale[p.name] = np.full(shp, p.scale if p.scale else 1.0)
+    return Term(cand, vals, free, scale)
+
+
+@dataclasses.dataclass
+class FitResult:
+    """Sufficient statistics of a fitted model and what follows from them."""
+
+    terms: list[Term]
+    chi2: float  # whitened residual sum of squares (kept rows)
+    n_params: int
+    cov: np.ndarray  # covariance of the free scalars (parameter units)
+    heldout_chi2: float
+    heldout_ssr: float  # unwhitened, for an RMS
+    ssr: float
+    n_rows: int
+    converged: bool
+    A: np.ndarray  # whitened normal matrix in parameter units (free scalars)
+    unidentifiable: list[str]
+    slices: list[tuple[int, int]]  # per term, range in the free vector
+    determined: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
+
+    def n_determined(self, index: int) -> int:
+        """Determined (fitted) scalars of term ``index``."""
+        s0, s1 = self.slices[index]
+        return int(np.sum((self.determined >= s0) & (self.determined < s1)))
+
+    def rms(self, prep: Prepared) -> float:
+        """Fitted residual RMS (unit of y)."""
+        return math.sqrt(self.ssr / max(prep.n_values, 1))
+
+    def heldout_rms(self, prep: Prepared) -> float:
+        """K-fold held-out residual RMS (unit of y)."""
+        return math.sqrt(self.heldout_ssr / max(prep.n_values, 1))
+
+
+class Fitter:
+    """Chunked evaluation of a sum of terms, its Jacobian and the per-fold statistics."""
+
+    def __init__(self, prep: Prepared, progress: Callable[[], None] | None = None):
+        self.prep = prep
+        self.w_ch = 1.0 / prep.sigma**2
+        n = prep.n
+        self.chunk = int(min(CHUNK_ROWS, 1 << max(5, int(math.ceil(math.log2(max(n, 2)))))))
+        self.progress = progress
+        self._jcache: dict = {}
+        self._jbytes = 0
+        self._pcache: dict = {}
+        self._pbytes = 0
+        self._gram: dict = {}
+
+    def _chunks(self):
+        prep = self.prep
+        n = prep.n
+        c = self.chunk
+        for a in range(0, n, c):
+            b = min(n, a + c)
+            pad = c - (b - a)
+            x = {}
+            for k, v in prep.rows.items():
+                s = v[a:b]
+                if pad:
+                    s = np.concatenate([s, np.repeat(s[-1:], pad, axis=0)], axis=0)
+                x[k] = s
+            x.update({k: v for k, v in prep.consts.items() if isinstance(v, np.ndarray)})
+            yield a, b, x
+
+    def clear(self) -> None:
+        """Drop the cached Jacobians (after a row column changed)."""
+        self._jcache.clear()
+        self._pcache.clear()
+        self._gram.clear()
+        self._jbytes = self._pbytes = 0
+
+    @staticmethod
+    def _linear_only(term: Term) -> bool:
+        return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
+
+    def _eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
+        """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
+
+        A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
+        depending only on the held (nonlinear) parameters: those are cached (within a
+        memory budget), so refits with other terms cost one matrix product."""
+        p = {k: jnp.asarray(v) for k, v in term.values.items()}
+        if self._linear_only(term):
+            held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
+            fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
+            key = (id(term.cand), a, held, fmask)
+            hit = self._jcache.get(key)
+            if hit is None:
+                p0 = {
+                    q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
+                    for q in term.cand.params
+                }
+                v0, J = _valjac_fn(term.cand)(p0, x)
+                v0 = np.asarray(v0)[: b - a]
+                Jt = self._gather(term, J, b - a, v0.shape[1])
+                hit = (v0, Jt)
+                nbytes = Jt.nbytes + v0.nbytes
+                if self._jbytes + nbytes < 4e8:
+                    self._jcache[key] = hit
+                    self._jbytes += nbytes
+            v0, Jt = hit
+            lin = np.concatenate(
+                [term.values[q.name][term.free[q.name]].ravel() for q in term.cand.params]
+                or [np.zeros(0)]
+            )
+            # held linear parameters (fit=False) enter through v0 only when zero: add them
+            v = v0 + Jt @ lin if lin.size else v0.copy()
+            held_lin = [
+                q
+                for q in term.cand.params
+                if q.linear
+                and (~term.free[q.name]).any()
+                and np.any(term.values[q.name][~term.free[q.name]] != 0)
+            ]
+            if held_lin:
+                v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
+            return v, Jt
+        if jac:
+            v, J = _valjac_fn(term.cand)(p, x)
+            v = np.asarray(v)[: b - a]
+            return v, self._gather(term, J, b - a, v.shape[1])
+        v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
+        return v, None
+
+    @staticmethod
+    def _gather(term: Term, J: dict, rows: int, C: int) -> np.ndarray:
+        cols = []
+        for par in term.cand.params:
+            Jp = np.asarray(J[par.name])[:rows]
+            Jp = Jp.reshape(rows, C, -1)
+            cols.append(Jp[:, :, term.free[par.name].ravel()])
+        return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
+
+    def residual(self, terms: Sequence[Term]) -> np.ndarray:
+        """Residual ``(n, C)`` (projected when the kind says so), all rows."""
+        prep = self.prep
+        out = np.empty_like(prep.y)
+        for a, b, x in self._chunks():
+            pred = np.zeros((b - a, prep.n_channels))
+            for tm in terms:
+                pred += self._eval_term(tm, a, b, x, jac=False)[0]
+            r = prep.y[a:b] - pred
+            if prep.kd.project:
+                r = r - r.mean(1, keepdims=True)
+            out[a:b] = r
+        return out
+
+    def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
+        """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
+        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
+        prep = self.prep
+        pred = np.zeros((b - a, prep.n_channels))
+        Js = []
+        for tm in terms:
+            v, J = self._eval_term(tm, a, b, x, jac=True)
+            pred += v
+            Js.append(J)
+        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+        if prep.kd.project:
+            J = J - J.mean(1, keepdims=True)
+        order, edges = self._fold_order(a, b)
+        J = (J * sc[None, None, :] * np.sqrt(self.w_ch)[None, :, None])[order]
+        return pred, J, order, edges
+
+    def _fold_order(self, a: int, b: int):
+        f = self.prep.fold[a:b]
+        order = np.argsort(f, kind="stable")
+        edges = np.searchsorted(f[order], np.arange(N_FOLDS + 1) - 0.5)
+        return order, edges
+
+    def stats(self, terms: Sequence[Term], jac: bool = True):
+        """Per-fold ``(A_f, g_f, c_f, ssr_f)`` over kept rows; parameters in scaled units.
+
+        Terms whose free parameters are all linear form a *static* block: its processed
+        Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
+        costs the products with the candidate's columns only."""
+        prep = self.prep
+        K = N_FOLDS
+        terms = list(terms)
+        static = [t for t in terms if self._linear_only(t)]
+        dyn = [t for t in terms if not self._linear_only(t)]
+        perm_terms = static + dyn
+        p_s = sum(t.n_free() for t in static)
+        p = sum(t.n_free() for t in terms)
+
+        def scales(ts):
+            return np.concatenate(
+                [t.scale[q.name][t.free[q.name]].ravel() for t in ts for q in t.cand.params]
+                or [np.zeros(0)]
+            )
+
+        sc_s, sc_d = scales(static), scales(dyn)
+        skey = tuple(
+            (
+                id(t.cand),
+                tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
+                tuple(t.free[q.name].tobytes() for q in t.cand.params),
+            )
+            for t in static
+        )
+        gram = self._gram.get(skey)
+        A = np.zeros((K, p, p))
+        g = np.zeros((K, p))
+        c = np.zeros(K)
+        ssr = np.zeros(K)
+        sw = np.sqrt(self.w_ch)
+        new_gram = np.zeros((K, p_s, p_s)) if gram is None else None
+        for a, b, x in self._chunks():
+            ck = (skey, a)
+            hit = self._pcache.get(ck)
+            if hit is None:
+                J0 = self._processed(static, a, b, x, sc_s)
+                lin = [
+                    np.concatenate(
+                        [t.values[q.name][t.free[q.name]].ravel() for q in t.cand.params]
+                        or [np.zeros(0)]
+                    )
+                    for t in static
+                ]
+                del lin
+                hit = J0
+                if self._pbytes + J0[1].nbytes < 4e8:
+                    self._pcache[ck] = J0
+                    self._pbytes += J0[1].nbytes
+            _, Js_, order, edges = hit
+            # static prediction from current linear values (v0 + J p)
+            pred = np.zeros((b - a, prep.n_channels))
+            for tm in static:
+                pred += self._eval_term(tm, a, b, x, jac=False if not jac else True)[0]
+            if dyn:
+                if jac:
+                    pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
+                else:
+                    pd = sum(self._eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
+                    Jd = None
+                pred = pred + pd
+            else:
+                Jd = np.zeros((b - a, prep.n_channels, 0))[order]
+            r = prep.y[a:b] - pred
+            if prep.kd.project:
+                r = r - r.mean(1, keepdims=True)
+            rw = (r * sw)[order]
+            rr = r[order]
+            for k in range(K):
+                lo, hi = edges[k], edges[k + 1]
+                if hi <= lo:
+                    continue
+                c[k] += float(np.sum(rw[lo:hi] ** 2))
+                ssr[k] += float(np.sum(rr[lo:hi] ** 2))
+                if not jac:
+                    continue
+                rk = rw[lo:hi].ravel()
+                Sk = Js_[lo:hi].reshape(rk.size, p_s)
+                g[k, :p_s] += Sk.T @ rk
+                if new_gram is not None:
+                    new_gram[k] += Sk.T @ Sk
+                if Jd is not None and Jd.shape[2]:
+                    Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
+                    A[k, :p_s, p_s:] += Sk.T @ Dk
+                    A[k, p_s:, p_s:] += Dk.T @ Dk
+                    g[k, p_s:] += Dk.T @ rk
+            if self.progress is not None:
+                self.progress()
+        if jac:
+            if new_gram is not None:
+                gram = new_gram
+                self._gram[skey] = gram
+            A[:, :p_s, :p_s] = gram
+            A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
+        # back to the caller's term order
+        idx = []
+        pos = {}
+        s0 = 0
+        for t in perm_terms:
+            pos[id(t)] = (s0, s0 + t.n_free())
+            s0 += t.n_free()
+        for t in terms:
+            lo, hi = pos[id(t)]
+            idx += list(range(lo, hi))
+        idx = np.asarray(idx, dtype=int)
+        A = A[:, idx][:, :, idx]
+        g = g[:, idx]
+        sc = np.concatenate([sc_s, sc_d])[idx]
+        return A, g, c, ssr, sc
+
+    def fit(self, terms: list[Term], max_steps: int = 30) -> FitResult:
+        """Levenberg-Marquardt on the chunked normal equations; exact in one step for linear
+        terms. Parameters that the data cannot determine (pivoted Cholesky of the scaled
+        normal matrix) are held and listed."""
+        terms = [t.copy() for t in terms]
+        nonlinear = any(
+            (not q.linear) and t.free[q.name].any() for t in terms for q in t.cand.params
+        )
+        lam = 1e-6
+        converged = True
+        A, g, c, ssr, sc = self.stats(terms)
+        unident: list[str] = []
+        for it in range(max_steps):
+            At, gt, ct = A.sum(0), g.sum(0), c.sum()
+            dz, keep_idx = _solve(At, gt, lam if nonlinear else 0.0)
+            if it == 0:
+                unident = _names_of(terms, np.setdiff1d(np.arange(At.shape[0]), keep_idx))
+            new = _apply(terms, dz * sc)
+            if not nonlinear:
+                terms = new
+                A, g, c, ssr, sc = self.stats(terms)
+                break
+            A2, g2, c2, ssr2, sc2 = self.stats(new)
+            if c2.sum() <= ct:
+                rel = (ct - c2.sum()) / max(ct, 1e-300)
+                terms, A, g, c, ssr, sc = new, A2, g2, c2, ssr2, sc2
+                lam = max(lam / 10, 1e-9)
+                if rel < 1e-7 or (ct - c2.sum()) < 1e-2:
+                    break
+            else:
+                lam *= 10
+                if lam > 1e8:
+                    break
+        else:
+            converged = False
+        return self._result(terms, A, g, c, ssr, sc, converged, unident)
+
+    def _result(self, terms, A, g, c, ssr, sc, converged, unident) -> FitResult:
+        K = A.shape[0]
+        At, gt = A.sum(0), g.sum(0)
+        ho_c, ho_ssr = 0.0, 0.0
+        # one held-out step per fold from the full solution (exact for linear terms):
+        # delta_f = (A - A_f)^+ (g - g_f); held-out chi2 = c_f - 2 delta.g_f + delta A_f delta
+        _, kidx = _solve(At, gt, 0.0)
+        for k in range(K):
+            Ak = (At - A[k])[np.ix_(kidx, kidx)]
+            gk = (gt - g[k])[kidx]
+            try:
+                d = sla.solve(
+                    Ak + 1e-12 * np.trace(Ak) / max(len(kidx), 1) * np.eye(len(kidx)),
+                    gk,
+                    assume_a="pos",
+                )
+            except (np.linalg.LinAlgError, ValueError):
+                d = np.linalg.lstsq(Ak, gk, rcond=None)[0]
+            Af = A[k][np.ix_(kidx, kidx)]
+            gf = g[k][kidx]
+            hc = c[k] - 2 * d @ gf + d @ Af @ d
+            ho_c += hc
+            # unwhitened: scale by the mean channel variance ratio of this fold
+            ho_ssr += ssr[k] * (hc / c[k] if c[k] > 0 else 1.0)
+        p = At.shape[0]
+        cov = np.full((p, p), np.nan)
+        if kidx.size:
+            sub = At[np.ix_(kidx, kidx)]
+            try:
+                inv = np.linalg.inv(sub)
+            except np.linalg.LinAlgError:
+                inv = np.linalg.pinv(sub)
+            full = np.full((p, p), np.nan)
+            full[np.ix_(kidx, kidx)] = inv
+            cov = full * np.outer(sc, sc)
+        slices, s = [], 0
+        for t in terms:
+            slices.append((s, s + t.n_free()))
+            s += t.n_free()
+        Apar = At / np.outer(sc, sc) if p else At
+        return FitResult(
+            terms=terms,
+            chi2=float(c.sum()),
+            n_params=int(kidx.size),
+            cov=cov,
+            heldout_chi2=float(ho_c),
+            heldout_ssr=float(ho_ssr),
+            ssr=float(ssr.sum()),
+            n_rows=int(self.prep.keep.sum()),
+            converged=converged,
+            A=Apar,
+            unidentifiable=unident,
+            slices=slices,
+            determined=kidx,
+        )
+
+
+def _solve(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``(A + lam diag A) dz = g`` on the columns the data determine (pivoted Cholesky,
+    relative tolerance 1e-10); the others get 0. Returns (dz, determined indices)."""
+    p = A.shape[0]
+    if p == 0:
+        return np.zeros(0), np.zeros(0, dtype=int)
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)] + lam * np.eye(keep.size)
+    dz = np.zeros(p)
+    try:
+        dz[keep] = sla.solve(sub, (g / d)[keep], assume_a="pos") / d[keep]
+    except (np.linalg.LinAlgError, ValueError):
+        dz[keep] = np.linalg.lstsq(sub, (g / d)[keep], rcond=None)[0] / d[keep]
+    return dz, keep
+
+
+def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:
+    from scipy.linalg import lapack
+
+    c, piv, rank, info = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
+    zero_diag = np.diag(An) < 1e-200
+    piv = piv - 1
+    rank = int(rank)
+    if zero_diag.any():
+        good = [i for i in piv[:rank] if not zero_diag[i]]
+        rest = [i for i in piv if i not in good]
+        piv = np.array(good + rest)
+        rank = len(good)
+    return piv, rank
+
+
+def _apply(terms: list[Term], dz: np.ndarray) -> list[Term]:
+    out = []
+    s = 0
+    for t in terms:
+        t2 = t.copy()
+        for q in t.cand.params:
+            m = t.free[q.name]
+            k = int(m.sum())
+            v = t2.values[q.name]
+            v[m] = v[m] + dz[s : s + k]
+            s += k
+        out.append(t2)
+    return out
+
+
+def _names_of(terms: list[Term], idx: np.ndarray) -> list[str]:
+    names = []
+    s = 0
+    idx = set(int(i) for i in idx)
+    for t in terms:
+        for q in t.cand.params:
+            m = t.free[q.name]
+            pos = np.argwhere(m)
+            for j, ij in enumerate(pos):
+                if s + j in idx:
+                    ij_s = [int(v) for v in ij]
+                    names.append(f"{t.cand.name}.{q.name}{ij_s if ij_s else ''}")
+            s += int(m.sum())
+    return names
+
+
+# ----------------------------------------------------------------------------- goodness of fit
+
+
+def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
+    """Variance-ratio test of the residual against the noise level.
+
+    ``z = log(s_r^2) / sqrt(v / N)`` with ``s_r^2`` the residual variance per fitted value
+    (dof-corrected) whitened by the noise per channel (the periodogram-median estimate,
+    :func:`noise_spectral`, which structure in fewer than half the frequency bins cannot
+    inflate), and ``v = 2 + 2 MEDIAN_VAR`` (residual and noise estimate treated as
+    independent: conservative). Under white noise ``z ~ N(0, 1)``; structure the model misses
+    raises ``s_r^2``. Applied to the whole record and to each time block of each run
+    (Bonferroni); ``p`` is the smaller of the two (times 2).
+    """
+    keep = prep.keep
+    rw = resid / prep.sigma[None, :]
+    C = prep.n_channels
+    eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
+    N = float(keep.sum() * C * eff)
+    v = 2.0 + 2.0 * MEDIAN_VAR / eff
+    sr = float(np.sum(rw[keep] ** 2)) / max(N - n_params, 1.0)
+    z = math.log(sr) / math.sqrt(v / max(N, 1.0))
+    p_global = float(stats.norm.sf(z))
+    blocks = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero((prep.run == r) & keep)
+        nb = int(min(16, max(1, rows.size // 64)))
+        for part in np.array_split(rows, nb):
+            if part.size < 16:
+                continue
+            Nb = part.size * C * eff
+            srb = float(np.sum(rw[part] ** 2)) / max(Nb * (1 - n_params / max(N, 1)), 1.0)
+            zb = math.log(max(srb, 1e-300)) / math.sqrt(2.0 / Nb + (v - 2.0) / N)
+            blocks.append(
+                (
+                    float(stats.norm.sf(zb)),
+                    zb,
+                    int(prep.run_ids[r]),
+                    float(prep.rows["t"][part[0]]),
+                    float(prep.rows["t"][part[-1]]),
+                )
+            )
+    nbk = max(len(blocks), 1)
+    worst = min(blocks, default=(1.0, 0.0, 0, 0.0, 0.0))
+    p_block = min(1.0, worst[0] * nbk)
+    p = min(1.0, 2 * min(p_global, p_block))
+    return {
+        "test": "variance ratio of the whitened residual to the noise (median of the "
+        "periodogram per channel); log ratio ~ N(0, v/N) under white noise, whole record and "
+        "per time block (16 per run, Bonferroni)",
+        "statistic_z": z,
+        "variance_ratio": sr,
+        "p_value": p,
+        "p_value_whole": p_global,
+        "p_value_blocks": p_block,
+        "worst_block": {
+            "run": worst[2],
+            "t_start_s": worst[3],
+            "t_end_s": worst[4],
+            "z": worst[1],
+        },
+        "n_values": N,
+        "n_params": n_params,
+        "alpha": ALPHA,
+        "passes": bool(p >= ALPHA),
+    }
+
+
+# ----------------------------------------------------------------------------- selection
+
+
+@dataclasses.dataclass
+class Step:
+    """One accepted (or tried) candidate."""
+
+    name: str
+    fit: FitResult
+    resid: np.ndarray
+    delta_bic: float
+    delta_heldout: float
+    collinearity: float
+    notes: list[str]
+    term_rms: float
+    explained_rms: float
+
+
+def _collinearity(fit: FitResult, n_base_terms: int) -> float:
+    """Largest canonical correlation between the last term's columns and the base's."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    A = fit.A
+    p = A.shape[0]
+    if s1 <= s0 or base_n == 0:
+        return 0.0
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    e = np.arange(s0, s1)
+    Abb, Aee, Abe = An[np.ix_(b, b)], An[np.ix_(e, e)], An[np.ix_(b, e)]
+    try:
+        Lb = np.linalg.pinv(Abb, rcond=1e-10, hermitian=True)
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    M = Le @ Abe.T @ Lb @ Abe
+    ev = np.linalg.eigvals(M).real
+    del p
+    return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
+
+
+def _frozen(terms: list[Term]) -> list[Term]:
+    """Copies with the nonlinear parameters held (trial fits: one matrix product each)."""
+    out = []
+    for t in terms:
+        t2 = t.copy()
+        for q in t.cand.params:
+            if not q.linear:
+                t2.free[q.name][...] = False
+        out.append(t2)
+    return out
+
+
+def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
+    """``terms`` with the free masks of ``like`` (same order and names)."""
+    out = []
+    for t, l in zip(terms, like):
+        t2 = t.copy()
+        t2.free = {k: v.copy() for k, v in l.free.items()}
+        out.append(t2)
+    return out
+
+
+def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
+    """RMS of one term's own contribution (projected, whitened by the noise)."""
+    v = fitter.residual([term])
+    yk = prep.y - prep.y.mean(1, keepdims=True) if prep.kd.project else prep.y
+    pr = (yk - v)[prep.keep] / prep.sigma[None, :]
+    C = prep.n_channels
+    eff = (C - 1) / C if prep.kd.project else 1.0
+    return float(np.sqrt(np.sum(pr**2) / max(prep.keep.sum() * C * eff, 1)))
+
+
+def select(
+    prep: Prepared,
+    fitter: Fitter,
+    base_terms: list[Term],
+    candidates: Sequence[Candidate],
+    views: tuple[str, ...],
+    scan_order: int,
+    max_effects: int = 3,
+    log: Callable[[str], None] = lambda s: None,
+):
+    """Forward selection with refits, then a backward held-out check (stage 4)."""
+    base = fitter.fit(base_terms)
+    base_resid = fitter.residual(base.terms)
+    findings0 = locate(prep, base_resid, views, scan_order)
+    N = prep.n_values
+    current, cur_resid, findings = base, base_resid, findings0
+    accepted: list[Step] = []
+    rejected: list[dict] = []
+    not_testable: list[dict] = []
+    n_base_terms = len(base.terms)
+    tried_names: set[str] = set()
+    applicable = []
+    for c in candidates:
+        why = c.applies(prep.ctx) if c.applies else None
+        if why:
+            not_testable.append({"name": c.name, "reason": why})
+        else:
+            applicable.append(c)
+    gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
+    for _ in range(max_effects):
+        seen = {f.view for f in findings}
+        gof = goodness_of_fit(prep, cur_resid, current.n_params)
+        if not findings and gof["passes"]:
+            break
+        trials = []
+        for cand in applicable:
+            if cand.name in {s.name for s in accepted}:
+                continue
+            if cand.signature and not (set(cand.signature) & seen):
+                continue
+            if not cand.signature and gof["passes"]:
+                continue
+            tried_names.add(cand.name)
+            starts = cand.start(prep.ctx, cur_resid[prep.keep], findings) if cand.start else [{}]
+            best = None
+            # screen the starts with the nonlinear parameters held (one linear pass each),
+            # then run the full fit from the best one
+            screened = []
+            for st in starts[:4]:
+                term = make_term(cand, prep, st)
+                if prep.n_values - current.n_params - term.n_free() < 0 or (
+                    current.n_params + term.n_free() > MAX_PARAM_FRACTION * N
+                ):
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": "more parameters than "
+                            f"{MAX_PARAM_FRACTION:.0%} of the fitted values",
+                        }
+                    )
+                    break
+                if len(starts) > 1:
+                    held = _frozen([term])[0]
+                    fr0 = fitter.fit([*_frozen(current.terms), held])
+                    screened.append((fr0.chi2, term, fr0))
+                else:
+                    screened.append((0.0, term, None))
+            if screened:
+                screened.sort(key=lambda z: z[0])
+                term = screened[0][1]
+                if screened[0][2] is not None:
+                    term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
+                log(f"trying {cand.name}")
+                best = fitter.fit([*_frozen(current.terms), term])
+            if best is None:
+                continue
+            dchi = current.chi2 - best.chi2
+            k = best.n_determined(len(best.terms) - 1)
+            dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
+            dho = current.heldout_chi2 - best.heldout_chi2
+            trials.append((dbic, cand, best, dho, dchi, k))
+        trials.sort(key=lambda x: x[0])
+        chosen = None
+        for dbic, cand, fr, dho, dchi, _k in trials:
+            reasons = []
+            if dbic > -BIC_MIN:
+                reasons.append(f"information criterion not lowered enough (dBIC {dbic:.1f})")
+            if dho < HELDOUT_MIN:
+                reasons.append(
+                    f"held-out chi-square lowered by {dho:.1f} only (needs {HELDOUT_MIN:.0f})"
+                )
+            term = fr.terms[-1]
+            trms = _term_rms(fitter, term, prep)
+            erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
+            if trms > PLAUSIBLE_RATIO * max(erms, 1e-300) and trms > 1.0:
+                reasons.append(
+                    f"implausible: its own size ({trms:.3g} noise units RMS) is over "
+                    f"{PLAUSIBLE_RATIO:.0f}x the residual it explains ({erms:.3g})"
+                )
+            col = _collinearity(fr, n_base_terms)
+            if np.isfinite(col) and col > COLLINEAR_REFUSE:
+                reasons.append(
+                    f"ill-conditioned against the base model (canonical correlation {col:.4f})"
+                )
+            if cand.plausible is not None:
+                why = cand.plausible(prep.ctx, term.values)
+                if why:
+                    reasons.append(f"implausible: {why}")
+            if reasons:
+                rejected.append(
+                    {"name": cand.name, "reason": "; ".join(reasons), "delta_bic": float(dbic)}
+                )
+                continue
+            if chosen is not None:
+                rejected.append(
+                    {
+                        "name": cand.name,
+                        "reason": f"{chosen[0].name} lowers the "
+                        f"criterion more (dBIC {chosen[2]:.1f} vs {dbic:.1f})",
+                        "delta_bic": float(dbic),
+                    }
+                )
+                continue
+            # it must explain a fair share of everything located, so that a larger
+            # structure it cannot explain is not pinned on it through a small part of it
+            p0 = sum(f.power - f.dof for f in findings)
+            if p0 > 0:
+                after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+                p1 = sum(f.power - f.dof for f in after)
+                if p1 > (1.0 - LOCATED_SHARE_MIN) * p0:
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": f"explains only {100 * (1 - p1 / p0):.0f}% of the located "
+                            f"structure (needs {100 * LOCATED_SHARE_MIN:.0f}%)",
+                            "delta_bic": float(dbic),
+                        }
+                    )
+                    continue
+            notes = []
+            if col > COLLINEAR_NOTE:
+                notes.append(
+                    f"nearly collinear with the base model (canonical correlation "
+                    f"{col:.3f}): part of it could be absorbed by base parameters"
+                )
+            chosen = (cand, fr, dbic, dho, col, notes, trms, erms)
+        if chosen is None:
+            break
+        cand, fr, dbic, dho, col, notes, trms, erms = chosen
+        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
+        if full.chi2 <= fr.chi2:
+            fr = full
+        resid = fitter.residual(fr.terms)
+        accepted.append(Step(cand.name, fr, resid, dbic, dho, col, notes, trms, erms))
+        log(f"named {cand.name}")
+        current, cur_resid = fr, resid
+        findings = locate(prep, cur_resid, views, scan_order)
+    # backward check: each named effect must still earn its place on held-out data
+    if len(accepted) > 1:
+        for s in list(accepted):
+            others = [t for t in current.terms if t.cand.name != s.name]
+            fr = fitter.fit(others)
+            if fr.heldout_chi2 - current.heldout_chi2 < HELDOUT_MIN:
+                accepted.remove(s)
+                rejected.append(
+                    {
+                        "name": s.name,
+                        "reason": "backward check: with the other "
+                        "named effects it no longer lowers the held-out residual",
+                    }
+                )
+                current = fr
+                cur_resid = fitter.residual(fr.terms)
+                findings = locate(prep, cur_resid, views, scan_order)
+    # shares: what each effect explains given the others
+    shares = {}
+    total = base.chi2 - current.chi2
+    for s in accepted:
+        others = [t for t in current.terms if t.cand.name != s.name]
+        fr = fitter.fit(others) if len(accepted) > 1 else base
+        shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
+    return dict(
+        base=base,
+        base_resid=base_resid,
+        findings0=findings0,
+        gof0=gof0,
+        final=current,
+        final_resid=cur_resid,
+        findings=findings,
+        accepted=accepted,
+        rejected=rejected,
+        not_testable=not_testable,
+        shares=shares,
+        tried=sorted(tried_names),
+    )
+
+
+# ----------------------------------------------------------------------------- run + JSON
+
+
+def _jsonable(v):
+    a = np.asarray(v, float)
+    a = np.where(np.isfinite(a), a, np.nan)
+    if a.ndim == 0:
+        return None if np.isnan(a) else float(a)
+    return [_jsonable(x) for x in a]
+
+
+def term_params(term: Term, fit: FitResult, index: int) -> dict:
+    """``{name: {"value", "se", "unit"}}`` of one fitted term (se null where held)."""
+    s0, _ = fit.slices[index]
+    se_all = np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) if fit.cov.size else np.zeros(0)
+    out = {}
+    pos = s0
+    for q in term.cand.params:
+        m = term.free[q.name]
+        se = np.full(m.shape, np.nan)
+        k = int(m.sum())
+        se[m] = se_all[pos : pos + k] if k else []
+        pos += k
+        out[q.name] = {"value": _jsonable(term.values[q.name]), "se": _jsonable(se), "unit": q.unit}
+    return out
+
+
+def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
+    s0, _ = fit.slices[index]
+    se_all = np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) if fit.cov.size else np.zeros(0)
+    out, pos = {}, s0
+    for q in term.cand.params:
+        m = term.free[q.name]
+        se = np.full(m.shape, np.nan)
+        k = int(m.sum())
+        se[m] = se_all[pos : pos + k] if k else []
+        pos += k
+        out[q.name] = se
+    return out
+
+
+def run_engine(
+    kind: Kind,
+    rec,
+    *,
+    max_order: int | None = None,
+    max_effects: int = 3,
+    extra_candidates: Sequence[Candidate] = (),
+    verbose: bool = False,
+) -> dict[str, Any]:
+    """Diagnose ``rec`` with ``kind``; returns the diagnosis JSON document (a dict).
+
+    Raises:
+        EncdesignInputError: a recording the kind cannot diagnose, or ``max_order`` beyond
+            what the record resolves.
+    """
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    bar = tqdm(total=6, desc="diagnose", disable=not verbose, leave=False, unit="stage")
+
+    def stage(name: str) -> None:
+        bar.set_postfix_str(name)
+        bar.update(1)
+
+    kd = kind.data(rec)
+    meta = dict(rec.meta)
+    meta.setdefault("kind", rec.kind)
+    prep = prepare(kd, meta)
+    stage("prepared")
+    limit = int(kind.max_order_limit(prep))
+    if max_order is not None and max_order > limit:
+        raise input_error(
+            f"{kd.where}: --max-order",
+            f"got {max_order}; this record resolves orders up to {limit} "
+            "(half the samples per revolution of its slowest-sampled run, and at most "
+            f"{MAX_PARAM_FRACTION:.0%} of the fitted values as parameters)",
+            f"a max order <= {limit}",
+        )
+    order = min(limit, kind.default_max_order) if max_order is None else max_order
+    prep.consts["max_order"] = order  # type: ignore[index]
+    base_spec, base_info = kind.base(prep, order)
+    base_terms = [make_term(c, prep, st) for c, st in base_spec]
+    for tm in base_terms:
+        for q in tm.cand.params:
+            if q.scale is None:
+                tm.scale[q.name][...] = float(np.mean(prep.sigma))
+    fitter = Fitter(prep)
+    cands = list(kind.candidates(prep.ctx)) + list(extra_candidates)
+    seen: dict[str, Candidate] = {}
+    for c in cands:
+        seen[c.name] = c  # later ones (reference terms, user terms) override by name
+    cands = list(seen.values())
+    scan = int(min(limit, max(order * 2, 24)))
+
+    def log(msg: str) -> None:
+        if verbose:
+            bar.set_postfix_str(msg)
+
+    # alignment: after the base fit, rotation-locked candidates see the aligned angle
+    base_fit = fitter.fit(base_terms)
+    if "align" in base_info:
+        prep.rows["theta"] = base_info["align"](base_fit.terms, prep)
+        prep.ctx.rows["theta"] = prep.rows["theta"][prep.keep]  # type: ignore[index]
+        fitter.clear()
+    # the noise from the base residual's periodogram (structure cannot inflate it); refit
+    # the weights with it
+    sig = noise_spectral(prep, fitter.residual(base_fit.terms))
+    if np.all(np.isfinite(sig)) and np.all(sig > 0):
+        prep.sigma = sig
+        prep.ctx.noise[...] = sig
+        fitter.w_ch = 1.0 / sig**2
+        fitter.clear()
+    stage("base fitted")
+    sel = select(prep, fitter, base_fit.terms, cands, kind.views, scan, max_effects, log)
+    stage("selected")
+    base, final = sel["base"], sel["final"]
+    C = prep.n_channels
+    sig_mean = float(np.mean(prep.sigma))
+    gof = goodness_of_fit(prep, sel["final_resid"], final.n_params)
+    gof_base = sel["gof0"]
+    stage("held-out + goodness of fit")
+    effects = []
+    for s in sel["accepted"]:
+        idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
+        term = final.terms[idx]
+        params = term_params(term, final, idx)
+        derived = {}
+        if term.cand.derived is not None:
+            derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
+        chans = _significant_channels(term, final, idx, C, prep.ctx.n_runs)
+        expl = term.cand.explanation
+        effects.append(
+            {
+                "name": s.name,
+                "params": params,
+                "derived": derived,
+                "channels": [kd.channel_names[k] for k in chans] if chans is not None else None,
+                "rms_after": s.fit.rms(prep),
+                "heldout_rms_after": s.fit.heldout_rms(prep),
+                "delta_bic": float(s.delta_bic),
+                "delta_heldout_chi2": float(s.delta_heldout),
+                "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
+                "share": float(sel["shares"].get(s.name, 0.0)),
+                "size_rms": float(s.term_rms * sig_mean),
+                "notes": s.notes,
+                "explanation": expl,
+            }
+        )
+    unexplained = [
+        {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
+        for f in sel["findings"][:12]
+    ]
+    if effects:
+        verdict = "missing_physics"
+    elif unexplained or not gof["passes"]:
+        verdict = "unexplained"
+    else:
+        verdict = "consistent"
+    nuis_notes = []
+    if prep.excluded:
+        nuis_notes.append(
+            f"{len(prep.excluded)} non-steady segment(s) left out of every fit "
+            f"({sum(e['n_rows'] for e in prep.excluded)} rows)"
+        )
+    base_params = {t.cand.name: term_params(t, base, i) for i, t in enumerate(base.terms)}
+    stage("report")
+    doc = {
+        "format": "encdesign-diagnosis/2",
+        "kind": rec.kind,
+        "recording": str(rec.path) if rec.path is not None else None,
+        "verdict": verdict,
+        "unit": kd.unit,
+        "rms_before": base.rms(prep),
+        "heldout_rms_before": base.heldout_rms(prep),
+        "rms_final": final.rms(prep),
+        "heldout_rms_final": final.heldout_rms(prep),
+        "noise": {
+            "per_channel": [float(s) for s in prep.sigma],
+            "channels": kd.channel_names,
+            "method": "median of the base residual's periodogram per channel (white noise: "
+            "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
+            "differences for the first weights and the glitch scan",
+        },
+        "goodness_of_fit": gof,
+        "goodness_of_fit_base": gof_base,
+        "heldout": prep.fold_design,
+        "excluded_segments": prep.excluded,
+        "glitches": prep.glitches,
+        "count_jumps": [
+            {k: v for k, v in j.items() if k not in ("index", "channel_index")}
+            for j in prep.count_jumps
+        ],
+        "gaps": prep.gaps,
+        "effects": effects,
+        "unexplained": unexplained,
+        "rejected": sel["rejected"],
+        "not_testable": sel["not_testable"],
+        "findings_before": [f.to_json(sig_mean) for f in sel["findings0"][:12]],
+        "base": {
+            "terms": base_params,
+            "max_order": order,
+            "max_order_limit": limit,
+            "max_param_fraction": MAX_PARAM_FRACTION,
+            "n_params": base.n_params,
+            "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
+            "has_theta_ref": prep.ctx.has_ref,
+            **{k: v for k, v in base_info.items() if k not in ("align", "unidentifiable")},
+        },
+        "notes": nuis_notes,
+        "status": "ok"
+        if (base.converged and final.converged)
+        else "a least-squares fit stopped before converging",
+        "time_s": time.perf_counter() - t0,
+    }
+    doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    doc["report"] = report_text(doc)
+    bar.close()
+    doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])
+    return doc
+
+
+def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
+    """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
+    the base and the final residual (least squares over the kept rows)."""
+    keep = prep.keep
+    th = prep.rows["theta"][keep]
+    M = int(min(max_order, 400))
+    out = {"orders": list(range(1, M + 1)), "before": [], "after": []}
+    for r, key in ((r0, "before"), (r1, "after")):
+        x = r[keep]
+        for m in range(1, M + 1):
+            c, s_ = np.cos(m * th), np.sin(m * th)
+            a = 2 * (c @ x) / max(th.size, 1)
+            b = 2 * (s_ @ x) / max(th.size, 1)
+            out[key].append(float(np.mean(np.hypot(a, b))))
+    return out
+
+
+def _significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
+    """Channels whose per-channel parameters differ from zero by more than 3 se (``None``
+    when the term has no per-channel parameter)."""
+    se = _se_dict(term, fit, idx)
+    per = [q for q in term.cand.params if q.shape in ("channels", "runs*channels")]
+    if not per or C == 1:
+        return None
+    z = np.zeros(C)
+    for q in per:
+        v = np.abs(term.values[q.name]) / np.where(se[q.name] > 0, se[q.name], np.inf)
+        v = np.nan_to_num(v)
+        z = np.maximum(z, v.reshape(-1, C).max(0))
+    return [k for k in range(C) if z[k] > 3]
+
+
+def report_text(doc: dict) -> str:
+    """A one-page plain-text report of a diagnosis document."""
+    u = doc["unit"]
+    g = doc["goodness_of_fit"]
+    lines = [
+        f"encdesign diagnose: {doc.get('recording') or 'recording'} ({doc['kind']})",
+        f"verdict: {doc['verdict']}",
+        f"base model residual RMS: {doc['rms_before']:.4g} {u} fitted, "
+        f"{doc['heldout_rms_before']:.4g} {u} held out ({doc['heldout']['k']} folds)",
+        f"noise per channel: {', '.join(f'{s:.4g}' for s in doc['noise']['per_channel'])} {u}",
+        f"goodness of fit: z = {g['statistic_z']:.2f}, p = {g['p_value']:.3g} "
+        f"({'passes' if g['passes'] else 'fails'} at {g['alpha']})",
+    ]
+    for e in doc["excluded_segments"]:
+        lines.append(
+            f"excluded: run {e['run']} t {e['t_start_s']:.4g}..{e['t_end_s']:.4g} s "
+            f"({e['n_rows']} rows): {e['reason']}"
+        )
+    for gl in doc["glitches"]:
+        lines.append(f"glitch: run {gl['run']} t {gl['t_s']:.6g} s channel {gl['channel']}")
+    for j in doc["count_jumps"]:
+        lines.append(
+            f"count jump: run {j['run']} t {j['t_s']:.6g} s channel {j['channel']} "
+            f"size {j['size']:.4g} {u}"
+        )
+    for gp in doc["gaps"]:
+        lines.append(f"gap: run {gp['run']} at t {gp['t_s']:.6g} s for {gp['duration_s']:.3g} s")
+    if doc["base"]["unidentifiable"]:
+        lines.append("unidentifiable from this recording:")
+        lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
+    for i, e in enumerate(doc["effects"], 1):
+        col = e["collinearity"]
+        col_s = "n/a" if col is None else f"{col:.3f}"
+        lines.append(
+            f"effect {i}: {e['name']} (dBIC {e['delta_bic']:.1f}, "
+            f"share {100 * e['share']:.0f}%, collinearity {col_s})"
+        )
+        lines.append(
+            f"  residual RMS -> {e['rms_after']:.4g} {u} fitted, "
+            f"{e['heldout_rms_after']:.4g} {u} held out"
+        )
+        if e["channels"] is not None:
+            lines.append(f"  on channels: {e['channels']}")
+        lines.append(f"  {e['explanation']}")
+        for n in e["notes"]:
+            lines.append(f"  note: {n}")
+    for r in doc["rejected"]:
+        lines.append(f"rejected {r['name']}: {r['reason']}")
+    for r in doc["not_testable"]:
+        lines.append(f"not testable {r['name']}: {r['reason']}")
+    for x in doc["unexplained"]:
+        w = x["where"]
+        loc = ", ".join(f"{k} {[round(v, 4) for v in w[k]][:6]}" for k in w if w[k])
+        lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
+    lines.append(f"status: {doc['status']}; {doc['time_s']:.1f} s")
+    return "\n".join(lines) + "\n"

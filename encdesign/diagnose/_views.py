@@ -1,0 +1,484 @@
+"""Views of a residual: where the model and the recording disagree (engine stage 3).
+
+Each view tests the whitened residual ``r / sigma_c`` (kept rows only) with regressors of
+known shape; under white noise the power they take out is chi-square with as many degrees of
+freedom as regressors, and each view tests at ``ALPHA / n_tests`` (Bonferroni), so a record
+with nothing missing gives no finding.
+
+* ``spectrum``: per run, the periodogram in Hz of every channel (FFT on the run's kept rows,
+  excluded rows set to zero), summed over channels; peaks in Hz and in shaft orders; across
+  runs at different speeds a line stays fixed in Hz or in order.
+* ``orders``: per channel, integer shaft orders ``1..M`` fitted over all runs (rotation
+  locked, the same phase in every run): structure one channel shows and the others do not.
+* ``time``: per channel and run, block means over time (a transient, a step, a drift) and
+  the best single change point.
+* ``drift``: per channel, the driver (``temp_c`` or time).
+* ``line_phase``: per channel, harmonics 1 and 2 of the phase within one signal period.
+* ``direction``: per channel, the mean difference between the two directions of rotation.
+* ``speed``: per channel, a term proportional to the signed steady speed.
+* ``angle_trend``: per channel, a term proportional to the shaft angle within each run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+ALPHA = 1e-3
+"""Family-wise false-alarm level of each view and of the goodness-of-fit test."""
+
+
+@dataclasses.dataclass
+class Finding:
+    """One located mismatch (``where``: orders, frequencies_hz, heads, runs, times_s)."""
+
+    view: str
+    where: dict[str, list]
+    power: float  # whitened chi-square it carries
+    dof: int
+    log10_p: float
+    variance_share: float = 0.0
+    detail: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def to_json(self, sigma_mean: float) -> dict:
+        """JSON form (rms in the unit of the residual)."""
+        n = max(self.detail.get("n_values", 1), 1)
+        return {
+            "view": self.view,
+            "where": self.where,
+            "rms": float(sigma_mean * math.sqrt(max(self.power - self.dof, 0.0) / n)),
+            "variance_share": float(self.variance_share),
+            "log10_p": float(self.log10_p),
+            "detail": self.detail,
+        }
+
+
+def _logp(chi2: float, dof: int) -> float:
+    """log10 of the chi-square tail probability (floored at -999 where it underflows)."""
+    v = float(stats.chi2.logsf(chi2, dof) / math.log(10))
+    if not math.isfinite(v):
+        z = (chi2 - dof) / math.sqrt(2.0 * max(dof, 1))
+        v = float(stats.norm.logsf(z) / math.log(10))
+    return max(v, -999.0) if math.isfinite(v) else -999.0
+
+
+def _thr(dof: int, n_tests: int) -> float:
+    return float(stats.chi2.isf(ALPHA / max(n_tests, 1), dof))
+
+
+def _ls_power(rw: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Power (chi-square) of regressors ``X`` (m, q) in each column of ``rw`` (m, C)."""
+    if X.shape[0] <= X.shape[1]:
+        return np.zeros(rw.shape[1])
+    Q, _ = np.linalg.qr(X)
+    proj = Q.T @ rw
+    return np.sum(proj**2, axis=0)
+
+
+def view_orders(prep, rw, max_order: int) -> list[Finding]:
+    """Integer shaft orders per channel, rotation locked over all runs."""
+    keep = prep.keep
+    th = prep.rows["theta_eff"][keep] if "theta_eff" in prep.rows else prep.rows["theta"][keep]
+    r = rw[keep]
+    C = r.shape[1]
+    out = []
+    n_tests = max_order * C
+    thr = _thr(2, n_tests)
+    for m in range(1, max_order + 1):
+        X = np.stack([np.cos(m * th), np.sin(m * th)], 1)
+        pw = _ls_power(r, X)
+        if pw.max() > thr:
+            ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+            out.append(
+                Finding(
+                    "orders",
+                    _where(orders=[float(m)], heads=ch, runs=prep.run_ids.tolist()),
+                    float(pw[ch].sum()),
+                    2 * len(ch),
+                    _logp(float(pw.max()), 2),
+                    detail={
+                        "integer_order": True,
+                        "n_values": int(r.shape[0]),
+                        "power_per_channel": pw.tolist(),
+                    },
+                )
+            )
+    return out
+
+
+def view_spectrum(prep, rw) -> list[Finding]:
+    """Periodogram per run (channels summed), peaks in Hz and shaft order."""
+    keep = prep.keep
+    C = rw.shape[1]
+    dof_ch = C - 1 if prep.kd.project and C > 1 else C
+    peaks = []
+    n_tests = 0
+    per_run = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero(prep.run == r)
+        if rows.size < 32:
+            continue
+        t = prep.rows["t"][rows]
+        dt = float(np.median(np.diff(t)))
+        kr = keep[rows]
+        x = np.where(kr[:, None], rw[rows], 0.0)
+        nk = int(kr.sum())
+        if nk < 32:
+            continue
+        X = np.fft.rfft(x, axis=0)
+        P = 2.0 * np.abs(X) ** 2 / nk  # ~ chi2(2) per channel
+        P[0] = 0.0
+        if x.shape[0] % 2 == 0:
+            P[-1] = 0.0
+        f = np.fft.rfftfreq(x.shape[0], dt)
+        th = prep.rows["theta"][rows][kr]
+        revs_per_s = abs(th[-1] - th[0]) / (2 * np.pi) / max(t[kr][-1] - t[kr][0], 1e-12)
+        per_run.append((r, P, f, revs_per_s, nk))
+        n_tests += P.shape[0]
+    out: list[Finding] = []
+    if not per_run:
+        return out
+    thr = _thr(2 * dof_ch, n_tests)
+    for r, P, f, frev, nk in per_run:
+        Ps = P.sum(1)
+        # power of each line: three bins (leakage), tested on the centre
+        idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
+        for i in idx[np.argsort(-Ps[idx])][:6]:
+            lo, hi = max(i - 1, 1), min(i + 2, Ps.size)
+            band = P[lo:hi].sum(0)
+            # parabolic interpolation of the frequency
+            if 0 < i < Ps.size - 1:
+                a, b, c = Ps[i - 1], Ps[i], Ps[i + 1]
+                den = a - 2 * b + c
+                di = 0.5 * (a - c) / den if den != 0 else 0.0
+            else:
+                di = 0.0
+            fr = float(f[1] * (i + di)) if f.size > 1 else 0.0
+            peaks.append(
+                dict(
+                    run=r,
+                    f_hz=fr,
+                    order=fr / frev if frev > 0 else float("nan"),
+                    power=float(band.sum()),
+                    band=band,
+                    bin_hz=float(f[1]),
+                    bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
+                    nk=nk,
+                    logp=_logp(float(Ps[i]), 2 * dof_ch),
+                )
+            )
+    # group peaks across runs: fixed in Hz or in order
+    used = [False] * len(peaks)
+    peaks.sort(key=lambda p: -p["power"])
+    speeds = {r: frev for r, _, _, frev, _ in per_run}
+    multi_speed = len(per_run) > 1 and (
+        max(speeds.values()) > 1.05 * max(min(speeds.values()), 1e-12)
+    )
+    for i, p in enumerate(peaks):
+        if used[i]:
+            continue
+        grp_hz = [
+            j
+            for j, q in enumerate(peaks)
+            if not used[j] and abs(q["f_hz"] - p["f_hz"]) <= 2.5 * max(p["bin_hz"], q["bin_hz"])
+        ]
+        grp_ord = [
+            j
+            for j, q in enumerate(peaks)
+            if not used[j]
+            and abs(q["order"] - p["order"]) <= 2.5 * max(p["bin_order"], q["bin_order"])
+        ]
+        runs_hz = {peaks[j]["run"] for j in grp_hz}
+        runs_ord = {peaks[j]["run"] for j in grp_ord}
+        if not multi_speed or len(runs_hz) == len(runs_ord):
+            fixed = (
+                "single_run"
+                if len(runs_ord) == 1 and len(per_run) > 1 and multi_speed
+                else ("undetermined")
+            )
+            grp = grp_ord if len(grp_ord) >= len(grp_hz) else grp_hz
+        elif len(runs_hz) > len(runs_ord):
+            fixed, grp = "hz", grp_hz
+        else:
+            fixed, grp = "order", grp_ord
+        for j in grp:
+            used[j] = True
+        sel = [peaks[j] for j in grp]
+        band = np.sum([q["band"] for q in sel], 0)
+        orders = [q["order"] for q in sel]
+        integer = all(
+            abs(o - round(o)) <= max(1.5 * q["bin_order"], 0.02)
+            for o, q in zip(orders, sel)
+            if np.isfinite(o)
+        ) and all(round(o) >= 1 for o in orders)
+        thr_ch = _thr(2, n_tests)
+        ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
+        out.append(
+            Finding(
+                "spectrum",
+                _where(
+                    orders=[float(o) for o in orders],
+                    frequencies_hz=[float(q["f_hz"]) for q in sel],
+                    heads=ch or [int(np.argmax(band))],
+                    runs=[int(prep.run_ids[q["run"]]) for q in sel],
+                ),
+                float(band.sum()),
+                2 * 3 * C * len(sel),
+                float(min(q["logp"] for q in sel)),
+                detail={
+                    "fixed_in": fixed,
+                    "integer_order": bool(integer),
+                    "n_values": int(sum(q["nk"] for q in sel)),
+                },
+            )
+        )
+    return out[:8]
+
+
+def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
+    """Broadband excess: periodogram power per run, channel and frequency band (1/16 of the
+    band to Nyquist), for structure spread over many bins (a chirp, a wideband noise)."""
+    keep = prep.keep
+    C = rw.shape[1]
+    found = []
+    tests = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero(prep.run == r)
+        kr = keep[rows]
+        nk = int(kr.sum())
+        if nk < 64:
+            continue
+        x = np.where(kr[:, None], rw[rows], 0.0)
+        P = 2.0 * np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
+        dt = float(np.median(np.diff(prep.rows["t"][rows])))
+        f = np.fft.rfftfreq(x.shape[0], dt)
+        edges = np.linspace(1, P.shape[0] - 1, n_bands + 1).astype(int)
+        for b in range(n_bands):
+            lo, hi = edges[b], edges[b + 1]
+            if hi - lo < 4:
+                continue
+            pw = P[lo:hi].sum(0) * (nk / x.shape[0])
+            tests.append((r, lo, hi, pw, f, nk))
+    if not tests:
+        return found
+    n_tests = len(tests) * C
+    for r, lo, hi, pw, f, nk in tests:
+        dof = 2 * (hi - lo)
+        thr = _thr(dof, n_tests)
+        ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
+        if not ch:
+            continue
+        found.append(
+            Finding(
+                "band",
+                _where(
+                    frequencies_hz=[float(f[lo]), float(f[hi - 1])],
+                    heads=ch,
+                    runs=[int(prep.run_ids[r])],
+                ),
+                float(pw[ch].sum()),
+                dof * len(ch),
+                _logp(float(pw[ch].max()), dof),
+                detail={"n_values": int(nk)},
+            )
+        )
+    return found
+
+
+def view_time(prep, rw) -> list[Finding]:
+    """Block means over time per channel and run; and the best change point."""
+    keep = prep.keep
+    C = rw.shape[1]
+    out = []
+    blocks_all = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero((prep.run == r) & keep)
+        nb = int(min(32, max(2, rows.size // 32)))
+        if rows.size < 2 * nb:
+            continue
+        parts = np.array_split(rows, nb)
+        means = np.stack([rw[p].sum(0) / math.sqrt(p.size) for p in parts])  # ~N(0,1) each
+        blocks_all.append((r, parts, means))
+    n_tests = max(1, len(blocks_all) * C)
+    for r, parts, means in blocks_all:
+        nb = len(parts)
+        chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
+        thr = _thr(nb - 1, n_tests)
+        for k in range(C):
+            if chi[k] <= thr:
+                continue
+            # where: the block farthest from the mean, and the best step
+            dev = np.abs(means[:, k] - means[:, k].mean())
+            b = int(np.argmax(dev))
+            cs = np.cumsum(means[:, k] - means[:, k].mean())
+            jb = int(np.argmax(np.abs(cs[:-1]))) + 1 if nb > 2 else 1
+            t0 = float(prep.rows["t"][parts[b][0]])
+            t1 = float(prep.rows["t"][parts[b][-1]])
+            tstep = float(prep.rows["t"][parts[jb][0]])
+            # step vs transient: power a single step takes out of the block means
+            x = np.arange(nb) >= jb
+            xm = x - x.mean()
+            step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
+            out.append(
+                Finding(
+                    "time",
+                    _where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
+                    float(chi[k]),
+                    nb - 1,
+                    _logp(float(chi[k]), nb - 1),
+                    detail={
+                        "shape": "step" if step_pw > 0.7 * chi[k] else "transient_or_drift",
+                        "step_time_s": tstep,
+                        "global_step_time_s": float(prep.rows["tau"][parts[jb][0]]),
+                        "n_values": int(sum(p.size for p in parts)),
+                    },
+                )
+            )
+    # merge channels that share a run and a time (report a structure on several heads once)
+    merged: list[Finding] = []
+    for f in sorted(out, key=lambda f: -f.power):
+        for g in merged:
+            if (
+                g.where["runs"] == f.where["runs"]
+                and abs(g.detail["step_time_s"] - f.detail["step_time_s"])
+                < 1e-9 + 0.1 * abs(g.where["times_s"][1] - g.where["times_s"][0]) + 1e-3
+            ):
+                if f.power >= 0.25 * g.power:
+                    g.where["heads"] = sorted(set(g.where["heads"]) | set(f.where["heads"]))
+                g.power += f.power
+                g.dof += f.dof
+                break
+        else:
+            merged.append(f)
+    return merged
+
+
+def _regress_view(prep, rw, name: str, cols: list[np.ndarray], extra: dict | None = None):
+    keep = prep.keep
+    r = rw[keep]
+    X = np.stack([c[keep] for c in cols], 1)
+    # less a constant per run (the base model has one)
+    oh = prep.rows["run_onehot"][keep]
+    Xo = X - oh @ np.linalg.lstsq(oh, X, rcond=None)[0]
+    if np.all(np.abs(Xo) < 1e-12 * (np.abs(X).max() + 1e-300)):
+        return []
+    pw = _ls_power(r - oh @ np.linalg.lstsq(oh, r, rcond=None)[0], Xo)
+    C = r.shape[1]
+    q = X.shape[1]
+    thr = _thr(q, C)
+    if pw.max() <= thr:
+        return []
+    ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+    return [
+        Finding(
+            name,
+            _where(heads=ch, runs=prep.run_ids.tolist()),
+            float(pw[ch].sum()),
+            q * len(ch),
+            _logp(float(pw.max()), q),
+            detail={"n_values": int(r.shape[0]), **(extra or {})},
+        )
+    ]
+
+
+def view_drift(prep, rw):
+    """Correlation with the driver (temperature or time)."""
+    return _regress_view(
+        prep, rw, "drift", [prep.rows["driver"]], {"driver": prep.consts.get("driver_name")}
+    )
+
+
+def view_line_phase(prep, rw):
+    """Harmonics 1 and 2 of the phase within a signal period, per channel."""
+    if prep.ctx.signal_periods <= 0:
+        return []
+    out = []
+    keep = prep.keep
+    psi = prep.rows["psi"]
+    C = rw.shape[1]
+    thr = _thr(4, C)
+    pw = np.zeros(C)
+    for k in range(C):
+        X = np.stack(
+            [
+                np.cos(psi[keep, k]),
+                np.sin(psi[keep, k]),
+                np.cos(2 * psi[keep, k]),
+                np.sin(2 * psi[keep, k]),
+            ],
+            1,
+        )
+        pw[k] = _ls_power(rw[keep][:, k : k + 1], X)[0]
+    if pw.max() > thr:
+        ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+        L = prep.ctx.signal_periods
+        out.append(
+            Finding(
+                "line_phase",
+                _where(orders=[float(L), float(2 * L)], heads=ch, runs=prep.run_ids.tolist()),
+                float(pw[ch].sum()),
+                4 * len(ch),
+                _logp(float(pw.max()), 4),
+                detail={"n_values": int(keep.sum())},
+            )
+        )
+    return out
+
+
+def view_direction(prep, rw):
+    """Mean difference between the directions of rotation."""
+    d = prep.rows["direction"]
+    if np.all(d[prep.keep] == d[prep.keep][0]):
+        return []
+    return _regress_view(prep, rw, "direction", [d])
+
+
+def view_speed(prep, rw):
+    """A term proportional to the signed steady speed (needs two speeds or directions)."""
+    w = prep.rows["omega"]
+    if np.ptp(w[prep.keep]) <= 0.05 * np.max(np.abs(w[prep.keep])):
+        return []
+    return _regress_view(prep, rw, "speed", [w])
+
+
+def view_angle_trend(prep, rw):
+    """A term growing linearly with the shaft angle within each run."""
+    th = prep.rows["theta"]
+    return _regress_view(prep, rw, "angle_trend", [th])
+
+
+VIEWS = {
+    "spectrum": lambda prep, rw, M: view_spectrum(prep, rw),
+    "orders": lambda prep, rw, M: view_orders(prep, rw, M),
+    "time": lambda prep, rw, M: view_time(prep, rw),
+    "band": lambda prep, rw, M: view_band(prep, rw),
+    "drift": lambda prep, rw, M: view_drift(prep, rw),
+    "line_phase": lambda prep, rw, M: view_line_phase(prep, rw),
+    "direction": lambda prep, rw, M: view_direction(prep, rw),
+    "speed": lambda prep, rw, M: view_speed(prep, rw),
+    "angle_trend": lambda prep, rw, M: view_angle_trend(prep, rw),
+}
+
+
+def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
+    """Run ``views`` on the residual; findings strongest first, with variance shares."""
+    rw = resid / prep.sigma[None, :]
+    tot = float(np.sum(rw[prep.keep] ** 2))
+    out: list[Finding] = []
+    for v in views:
+        out += VIEWS[v](prep, rw, scan_order)
+    for f in out:
+        f.variance_share = float(max(f.power - f.dof, 0.0) / max(tot, 1e-300))
+    out.sort(key=lambda f: f.log10_p)
+    return out
+
+
+def _where(**kw) -> dict[str, list]:
+    base = {"orders": [], "frequencies_hz": [], "heads": [], "runs": [], "times_s": []}
+    for k, v in kw.items():
+        base[k] = [x.item() if hasattr(x, "item") else x for x in v]
+    return base
