@@ -237,6 +237,16 @@ def test_no_lattice_in_continuous_readings(seed):
     assert "no lattice" in lat.note or "only" in lat.note
 
 
+def test_dominant_orders():
+    a = np.array([0.0, 3.0, 0.0, 0.5])
+    b = np.array([1.0, 4.0, 0.0, 0.0])
+    d = rt.dominant_orders(a, b, np.full(4, 0.1), np.full(4, 0.1), n=3)
+    assert [x["order"] for x in d] == [2, 1, 4]
+    assert d[0]["amplitude_rad"] == pytest.approx(5.0)
+    assert d[0]["share"] == pytest.approx(25.0 / 26.25)
+    assert d[0]["se_rad"] == pytest.approx(0.1)
+
+
 # ----------------------------------------------------------------------------- recovery
 
 
@@ -351,6 +361,10 @@ def _context(cols, truth):
     run = cols.get("run", np.zeros(th.size, dtype=np.int64))
     R = int(run.max()) + 1
     w = rt.reference_velocity_rad_s(cols["t"], th, run)
+    for r in range(R):  # the engine's omega: the steady speed of each direction's segment
+        for sign in (-1.0, 1.0):
+            m = (run == r) & (np.sign(w) == sign)
+            w[m] = np.median(w[m]) if m.any() else 0.0
     P = truth["signal_periods_per_rev"]
     rows = {
         "t": cols["t"],
@@ -462,6 +476,13 @@ def test_candidates_say_when_they_cannot_apply():
     assert _CAND["scale_error"].applies(ctx) is None
     big = {"hysteresis_rad": np.asarray(1.0)}
     assert "not backlash" in _CAND["direction_hysteresis"].plausible(ctx, big)
+    # one speed in both directions: a delay is a direction offset
+    cols, truth, _ = _bench("direction_hysteresis", SEEDS[0])
+    ctx, _ = _context(cols, truth)
+    assert "one speed in both directions" in _CAND["reading_delay"].applies(ctx)
+    d = _CAND["direction_hysteresis"].derived(ctx, {"hysteresis_rad": np.asarray(2e-3)}, {})
+    w = 2 * np.pi * 1.0  # the bench's speed, rad/s
+    assert d["equivalent_delay_s"]["value"] == pytest.approx(-2e-3 / (2 * w), rel=0.02)
 
 
 # ----------------------------------------------------------------------------- the engine

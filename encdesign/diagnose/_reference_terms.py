@@ -83,6 +83,7 @@ __all__ = [
     "Lattice",
     "detect_lsb",
     "reference_summary",
+    "dominant_orders",
     "CANDIDATES",
 ]
 
@@ -455,6 +456,41 @@ def reference_summary(
     return out
 
 
+def dominant_orders(
+    cos_rad: np.ndarray,
+    sin_rad: np.ndarray,
+    se_cos_rad: np.ndarray | None = None,
+    se_sin_rad: np.ndarray | None = None,
+    n: int = 5,
+) -> list[dict]:
+    """The ``n`` largest orders of a Fourier error function ``sum a_m cos m th + b_m sin m th``.
+
+    Returns ``[{"order", "amplitude_rad", "se_rad", "share"}, ...]`` by decreasing amplitude
+    ``sqrt(a^2 + b^2)``; ``share`` is the order's part of the function's mean square
+    (``amp^2 / sum amp^2``); ``se_rad`` the amplitude's standard error (linear propagation,
+    ``None`` without standard errors).
+    """
+    a = np.asarray(cos_rad, dtype=np.float64)
+    b = np.asarray(sin_rad, dtype=np.float64)
+    amp = np.hypot(a, b)
+    tot = float(np.sum(amp**2))
+    out = []
+    for i in np.argsort(amp)[::-1][:n]:
+        se = None
+        if se_cos_rad is not None and se_sin_rad is not None and amp[i] > 0:
+            sa, sb = float(np.asarray(se_cos_rad)[i]), float(np.asarray(se_sin_rad)[i])
+            se = float(np.hypot(a[i] * sa, b[i] * sb) / amp[i])
+        out.append(
+            {
+                "order": int(i + 1),
+                "amplitude_rad": float(amp[i]),
+                "se_rad": se,
+                "share": float(amp[i] ** 2 / tot) if tot > 0 else 0.0,
+            }
+        )
+    return out
+
+
 # ----------------------------------------------------------------------------- candidates
 # The engine's registration API (``encdesign.diagnose._candidates``): each term above as a
 # :class:`Candidate` of the multihead kind, tried on a sensor against a reference.
@@ -506,6 +542,16 @@ def _hyst_plausible(ctx: Context, p: dict) -> str | None:
     return None
 
 
+def _hyst_derived(ctx: Context, p: dict, se: dict) -> dict:
+    w = np.abs(np.asarray(ctx.rows["omega"], dtype=np.float64))
+    if w.size == 0 or np.max(w) <= 0 or np.ptp(w) > 0.2 * np.max(w):
+        return {}
+    h = float(np.asarray(p["hysteresis_rad"]))
+    s_h = float(np.asarray(se.get("hysteresis_rad", np.nan)))
+    wm = float(np.median(w))
+    return {"equivalent_delay_s": {"value": -h / (2 * wm), "se": s_h / (2 * wm), "unit": "s"}}
+
+
 def _delay_fn(p: dict, x: dict) -> Array:
     return reading_delay_rad(x["omega"], p["delay_s"])[:, None]
 
@@ -514,9 +560,19 @@ def _delay_applies(ctx: Context) -> str | None:
     why = _need_ref(ctx)
     if why:
         return why
-    for w in _by_run(ctx, "omega"):
-        if w.size and np.ptp(w) > 0.2 * np.max(np.abs(w)):
+    runs = [np.abs(w) for w in _by_run(ctx, "omega") if w.size]
+    within = any(np.ptp(w) > 0.2 * np.max(w) for w in runs if np.max(w) > 0)
+    if within:
+        return None
+    allw = np.concatenate(runs) if runs else np.zeros(0)
+    vary = allw.size > 0 and np.ptp(allw) > 0.2 * np.max(allw)
+    if _both_directions(ctx):
+        if vary:
             return None
+        return (
+            "one speed in both directions: a delay -omega*tau is the same as a direction "
+            "offset h = -2|omega|tau (see direction_hysteresis); two speeds separate them"
+        )
     return "the speed is the same throughout every run: -omega*tau is a run constant"
 
 
@@ -705,10 +761,13 @@ def _candidates() -> tuple:
         signature=("direction",),
         explanation=(
             "the error profile moves by a constant when the direction of rotation reverses "
-            "(backlash in the coupling or drive, magnetic hysteresis of the sensor)"
+            "(backlash in the coupling or drive, magnetic hysteresis of the sensor); at one "
+            "speed it is also what a reading delay tau = -h / (2|omega|) gives "
+            "(equivalent_delay_s)"
         ),
         applies=_hyst_applies,
         plausible=_hyst_plausible,
+        derived=_hyst_derived,
     )
     delay = Candidate(
         name="reading_delay",
