@@ -284,17 +284,27 @@ def random_reference_bench(
     (:func:`effect_rms_params`). Effects that need a direction change within a run
     (``direction_hysteresis``, ``reading_delay``) get ``both``; ``reading_delay`` gets two or
     three speeds, so that it is not the same as a direction offset.
-    ``interpolation_error`` on a one-period magnet is moved to a magnet of 2 to 7 pole
-    pairs (at ``P = 1`` it is the base model's orders 1 and 2).
+    ``scale_error`` gets ``both`` directions (in one direction at one speed it is the same
+    as a drift in time). ``interpolation_error`` is drawn on a multipole magnetic ring (16 to
+    40 pole pairs) or a capacitive encoder (32 periods), with at least 8 samples per signal
+    period: at small ``P`` its orders are the base model's (the sensor's error function) and
+    cannot be told apart, which is physics, not a benchmark case.
     """
     rng = _rng(key)
     k_sim = jax.random.fold_in(key, 1)
-    sensor = sensor or str(rng.choice(list(SENSORS)))
+    unknown = sorted(set(effects) - set(rt.CATALOG_REFERENCE))
+    if unknown:
+        raise input_error("effects", f"unknown {unknown}", f"some of {rt.CATALOG_REFERENCE}")
+    interp = "interpolation_error" in effects
+    if sensor is None:
+        # interpolation_error is drawn where it can be told from the base orders: a
+        # multipole magnetic ring or a capacitive encoder with P well above them
+        sensor = str(rng.choice(["magnetic", "capacitive"] if interp else list(SENSORS)))
     if sensor not in SENSORS:
         raise input_error("sensor", f"got {sensor!r}", f"one of {list(SENSORS)}")
     P = int(SENSORS[sensor]["periods_per_rev"])
-    if sensor == "magnetic" and "interpolation_error" in effects:
-        P = int(rng.integers(2, 8))
+    if sensor == "magnetic" and interp:
+        P = int(rng.integers(16, 41))  # a multipole ring (pole pairs)
     span = float(np.exp(rng.uniform(np.log(0.3), np.log(20.0))))
     n_runs = int(rng.integers(1, 4))
     directions = str(rng.choice(["forward", "backward", "both"]))
@@ -302,9 +312,14 @@ def random_reference_bench(
         directions = "both"
     if "reading_delay" in effects:
         n_runs = max(n_runs, 2)
-    if "interpolation_error" in effects or "scale_error" in effects:
-        # enough samples per signal period and a sweep long enough to see the ramp
-        span = max(span, 1.0)
+    if "scale_error" in effects:
+        # in one direction at one speed s*theta is a drift in time: both directions
+        directions = "both"
+        span = max(span, 2.0)  # over one turn a ramp is mostly a base order-1 error
+    if interp:
+        # at least 8 samples per signal period and one turn
+        n_dir = 2 if directions == "both" else 1
+        span = float(np.clip(span, 1.0, max(1.0, samples_per_run / (8.0 * P * n_dir))))
     speeds = np.sort(rng.uniform(0.2, 3.0, n_runs))
     if n_runs > 1:
         speeds = np.geomspace(0.3, 3.0, n_runs) * rng.uniform(0.8, 1.25)

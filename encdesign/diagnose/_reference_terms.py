@@ -585,7 +585,17 @@ def _delay_plausible(ctx: Context, p: dict) -> str | None:
 
 
 def _scale_fn(p: dict, x: dict) -> Array:
-    return scale_error_rad(x["theta"], p["scale"])[:, None]
+    # about each run's mid angle (the run constants take the rest): the term's own size is
+    # then the ramp's, not s times the angle's distance from zero
+    th = x["theta"] - x["run_onehot"] @ p["center_rad"]
+    return scale_error_rad(th, p["scale"])[:, None]
+
+
+def _scale_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
+    th = np.asarray(ctx.rows["theta"], dtype=np.float64)
+    onehot = np.asarray(ctx.rows["run_onehot"], dtype=np.float64)
+    n = np.maximum(onehot.sum(0), 1.0)
+    return [{"center_rad": (onehot.T @ th) / n, "scale": np.asarray(0.0)}]
 
 
 def _scale_plausible(ctx: Context, p: dict) -> str | None:
@@ -789,6 +799,14 @@ def _candidates() -> tuple:
         fn=_scale_fn,
         params=(
             Param("scale", "1", scale=1e-4, description="sensor turns per reference turn - 1"),
+            Param(
+                "center_rad",
+                "rad",
+                shape="runs",
+                linear=False,
+                fit=False,
+                description="mid angle of each run (held)",
+            ),
         ),
         signature=("angle_trend",),
         explanation=(
@@ -796,6 +814,7 @@ def _candidates() -> tuple:
             "turn, a stepper's steps): an error growing linearly with the reference angle"
         ),
         applies=_need_ref,
+        start=_scale_start,
         plausible=_scale_plausible,
     )
     interp = Candidate(
