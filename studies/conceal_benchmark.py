@@ -1,23 +1,22 @@
 """Conceal benchmark: the discrepancy finder run blind on recordings with hidden effects.
 
-Simulated benches (``encdesign.diagnose._conceal``: 3+1 and 2+1 multihead encoders, three runs at
-different speeds, read noise, ``temp_c``, with and without ``theta_ref``), each carrying one
-catalog effect hidden near the noise, masked by larger base errors at the same order,
-aliased by coarse sampling or present in only part of the record; plus clean recordings
-and out-of-catalog effects (``count_jump``, ``chirp``). ``encdesign.diagnose`` never sees
-the truth. Scored: % of hidden effects named correctly, % of clean recordings with no claim,
-out-of-catalog effects reported as ``unexplained`` at the right place, held-out RMS
-improvement whenever an effect is named; a confusion table truth x verdict/name.
+Benches are drawn and simulated by ``encdesign.diagnose._conceal_bench`` (its own physics,
+not the finder's terms): ``multihead`` encoders (2-6 heads, radii 10-100 mm, 1,000-100,000
+lines, less than one turn to 50 turns, with and without ``theta_ref``), one ``sensor``
+against a reference (magnetic, resolver, capacitive, optical; one or both directions) and
+``motion`` (a 7-pole-pair, 12-slot motor). Every bench may carry per-run zeros, a non-steady
+start (start-up ramp or return move, shaking the heads while it lasts) and single-sample
+glitches. Cases: ``clean``; ``single`` (one effect at 1x the noise); ``weak`` (0.5x);
+``compound`` (2-3 effects); ``out_of_catalog`` (an integer order, a step or a chirp on one
+head). ``encdesign.diagnose`` never sees the truth. ``--kinds`` adds ``sds`` (the SDS finder's
+concealed benches, ``diagnose._conceal_sds``).
 
-SDS instruments (``diagnose._conceal_sds``: 2 fixed + 3 moving sensors, 24 platform positions
-stepped by the golden angle, 5 revolutions each, 1 ns jitter, 100 MHz clock) are scored the
-same way in a separate ``sds`` block of the JSON (own confusion table and rates; the finder is
-``encdesign.diagnose._sds.diagnose_sds``). ``--kinds sds`` (or ``multihead``) runs one part only;
-the JSON adds ``per_kind`` and ``overall`` (pooled) rates, and the confusion figure shows both
-kinds. The multihead keys at the top level are unchanged.
+Scored per kind and overall: single effects at >= 1x noise named correctly (the named set is
+exactly the truth), effects of compound records found, clean records ``consistent``,
+out-of-catalog structure located (right head, and order / time / frequency), held-out RMS
+improved whenever an effect is named; a confusion table truth x first name (or verdict).
 
-Outputs (``--out``): ``conceal-benchmark.json``, ``confusion.png``, ``heldout.png`` and the
-recordings under ``recordings/``.
+Outputs (``--out``): ``conceal-benchmark.json``, ``confusion.png``.
 """
 
 from __future__ import annotations
@@ -28,87 +27,24 @@ import time
 import jax
 import numpy as np
 
-from encdesign.diagnose._conceal import write_concealed
+from encdesign.diagnose._conceal_bench import draw_plan, simulate
 from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
-from encdesign.diagnose._effects import CATALOG_MULTIHEAD
-from encdesign.diagnose._multihead import diagnose
+from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._sds import diagnose_sds
 from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
 NAME = "conceal-benchmark"
-
-PLAN = {
-    "beam_tilt_axial": [
-        ("near_noise", "3+1", True),
-        ("masked", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("masked", "3+1", False),
-        ("near_noise", "2+1", False),
-    ],
-    "bearing_wobble": [
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("near_noise", "3+1", False),
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", False),
-    ],
-    "vibration": [
-        ("near_noise", "3+1", True),
-        ("aliased", "3+1", True),
-        ("partial", "3+1", True),
-        ("aliased", "2+1", False),
-        ("partial", "2+1", True),
-    ],
-    "thermal_drift": [
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("masked", "3+1", True),
-        ("near_noise", "3+1", False),
-        ("near_noise", "2+1", False),
-    ],
-    "interpolation_error": [
-        ("aliased", "3+1", True),
-        ("aliased", "2+1", True),
-        ("aliased", "3+1", False),
-        ("aliased", "3+1", True),
-        ("aliased", "2+1", False),
-    ],
-    "eccentricity_shift": [
-        ("partial", "3+1", True),
-        ("partial", "2+1", True),
-        ("partial", "3+1", False),
-        ("partial", "3+1", True),
-        ("partial", "2+1", False),
-    ],
-    None: [
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("near_noise", "3+1", False),
-        ("near_noise", "2+1", False),
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("near_noise", "3+1", True),
-        ("near_noise", "3+1", False),
-    ],
-    "count_jump": [
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("near_noise", "3+1", False),
-    ],
-    "chirp": [
-        ("near_noise", "3+1", True),
-        ("near_noise", "2+1", True),
-        ("near_noise", "3+1", False),
-    ],
+CASES = {
+    "multihead": {"clean": 6, "single": 8, "weak": 4, "compound": 3, "out_of_catalog": 3},
+    "sensor": {"clean": 4, "single": 6, "weak": 2, "compound": 2, "out_of_catalog": 2},
+    "motion": {"clean": 3, "single": 4, "weak": 1, "compound": 1, "out_of_catalog": 1},
 }
 QUICK = {
-    None: [("near_noise", "3+1", True)],
-    "vibration": [("near_noise", "3+1", True)],
-    "count_jump": [("near_noise", "3+1", True)],
+    "multihead": {"clean": 1, "single": 1},
+    "sensor": {"single": 1},
+    "motion": {"clean": 1},
 }
 
-
-# sds: (concealment, phi_ref) per case
 SDS_PLAN = {
     "axis_tilt": [("near_noise", True), ("near_noise", True), ("clear", True)],
     "thermal_drift": [("near_noise", True), ("partial", True), ("near_noise", False)],
@@ -221,157 +157,194 @@ def _sds_block(args, plan) -> dict:
     )
 
 
-def _located(truth: dict, unexplained: list[dict]) -> bool:
-    w = truth.get("where", {})
-    for u in unexplained:
+def _located(truth: dict, doc: dict) -> bool:
+    """Out-of-catalog structure reported where it is: the right head (and at most one more),
+    and the right order, time or frequency band."""
+    w = truth.get("where") or {}
+    if doc["verdict"] == "consistent":
+        return False
+    heads = w.get("heads", [])
+    for u in doc["unexplained"]:
         uw = u["where"]
-        if not set(w.get("heads", [])) & set(uw["heads"]):
+        if heads and not (set(heads) <= set(uw["heads"]) and len(uw["heads"]) <= len(heads) + 1):
             continue
-        if truth["effect"] == "count_jump":
-            if (
-                any(abs(t - w["times_s"][0]) < 0.5 for t in uw["times_s"])
-                and w["runs"][0] in uw["runs"]
-            ):
+        if "orders" in w and any(abs(o - w["orders"][0]) < 0.15 for o in uw["orders"] if o):
+            return True
+        if "times_s" in w and uw["times_s"]:
+            t0, t1 = min(uw["times_s"]), max(uw["times_s"])
+            if t0 - 0.5 <= w["times_s"][0] <= t1 + 0.5 and w["runs"][0] in uw["runs"]:
                 return True
-        elif truth["effect"] == "chirp":
-            lo, hi = w["frequencies_hz"]
-            if any(lo - 2 <= f <= hi + 2 for f in uw["frequencies_hz"]):
+        if "frequencies_hz" in w and uw["frequencies_hz"]:
+            f0, f1 = w["frequencies_hz"]
+            if any(0.8 * f0 <= f <= 1.2 * f1 for f in uw["frequencies_hz"]):
                 return True
+    for j in doc.get("count_jumps", []):  # a big step is reported as a count jump
+        if "times_s" in w and abs(j["t_s"] - w["times_s"][0]) < 0.05:
+            return True
     return False
 
 
-def _rates(rows: list[dict], catalog) -> dict:
-    """Named-correct, clean-no-claim, out-of-catalog-located rates (%) of a set of rows."""
-    cat = [r for r in rows if r["truth"] in catalog]
-    clean = [r for r in rows if r["truth"] == "clean"]
-    ooc = [r for r in rows if r["truth"] not in catalog and r["truth"] != "clean"]
-    fitted = [r for r in rows if r.get("fitted", r["named"])]
-    return dict(
-        n_recordings=len(rows),
-        n_hidden_catalog=len(cat),
-        n_clean=len(clean),
-        n_out_of_catalog=len(ooc),
-        named_correctly_pct=100 * float(np.mean([r["correct"] for r in cat])) if cat else None,
-        clean_no_claim_pct=100 * float(np.mean([r["correct"] for r in clean])) if clean else None,
-        out_of_catalog_located_pct=100 * float(np.mean([r["correct"] for r in ooc]))
-        if ooc
-        else None,
-        heldout_improved_whenever_named=bool(
-            all(r["heldout_rms_after"] < r["heldout_rms_before"] for r in fitted)
-        ),
-        median_heldout_improvement_pct=100
-        * float(np.median([r["heldout_improvement"] for r in fitted]))
-        if fitted
-        else None,
-    )
-
-
-def _multihead_block(args, plan) -> tuple[dict, list[dict]]:
-    spr = 600 if args.quick else 2000
+def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
     rows = []
+    rng = np.random.default_rng([seed, sum(map(ord, kind))])
     i = 0
-    total = sum(len(v) for v in plan.values())
-    for effect, cases in plan.items():
-        for conc, layout, ref in cases:
-            seed = args.seed * 1000 + i
-            path = args.out / "recordings" / f"rec{i:03d}.toml"
-            rec, truth = write_concealed(
-                path,
-                key=jax.random.key(seed),
-                effect=effect,
-                concealment=conc,
-                layout=layout,
-                theta_ref=ref,
-                samples_per_run=spr,
-            )
+    for case, k in counts.items():
+        for j in range(k):
+            plan = draw_plan(rng, kind, case)
+            if case in ("single", "weak") and plan["effects"]:
+                from encdesign.diagnose import _conceal_bench as cb
+
+                pool = {
+                    "multihead": cb.MULTIHEAD_EFFECTS,
+                    "sensor": cb.SENSOR_EFFECTS,
+                    "motion": cb.MOTION_EFFECTS,
+                }[kind]
+                plan = dict(plan, effects=[pool[(j + 3 * seed) % len(pool)]])
+                plan = _fix(plan, rng)
+            rec, truth = simulate(rng, plan)
             t0 = time.perf_counter()
-            d = diagnose(rec)
+            try:
+                d = diagnose(rec).doc
+            except Exception as ex:  # scored as a miss, never hidden
+                d = {
+                    "verdict": f"error: {ex!r}"[:200],
+                    "effects": [],
+                    "unexplained": [],
+                    "heldout_rms_before": None,
+                    "heldout_rms_final": None,
+                    "excluded_segments": [],
+                    "glitches": [],
+                    "count_jumps": [],
+                }
             dt = time.perf_counter() - t0
-            named = d.effects[0].name if d.effects else None
-            label = named or d.verdict
+            named = [e["name"] for e in d["effects"]]
+            eff = truth["effects"]
             row = dict(
-                recording=str(path),
+                kind=kind,
+                case=case,
                 seed=seed,
-                truth=effect or "clean",
-                concealment=conc,
-                layout=layout,
-                theta_ref=ref,
-                verdict=d.verdict,
-                named=[e.name for e in d.effects],
-                label=label,
-                heldout_rms_before=d.heldout_rms_before,
-                heldout_rms_after=d.heldout_rms_final,
-                heldout_improvement=1 - d.heldout_rms_final / d.heldout_rms_before,
+                truth=eff,
+                named=named,
+                verdict=d["verdict"],
+                heldout_rms_before=d["heldout_rms_before"],
+                heldout_rms_after=d["heldout_rms_final"],
                 time_s=dt,
+                excluded=len(d["excluded_segments"]),
+                glitches_found=len(d["glitches"]),
+                glitches_true=len(truth["glitch_rows"]),
+                plan={k_: v for k_, v in plan.items() if k_ != "effects"},
             )
-            if effect in CATALOG_MULTIHEAD:
-                row["correct"] = named == effect
-            elif effect is None:
-                row["correct"] = d.verdict == "consistent"
+            if case == "clean":
+                row["correct"] = d["verdict"] == "consistent"
+                row["label_truth"] = "clean"
+            elif case in ("single", "weak"):
+                row["correct"] = set(named) == set(eff)
+                row["label_truth"] = eff[0]
+            elif case == "compound":
+                row["found"] = len(set(named) & set(eff))
+                row["n_true"] = len(eff)
+                row["false_names"] = sorted(set(named) - set(eff))
+                row["correct"] = set(named) == set(eff)
+                row["label_truth"] = "compound"
             else:
-                row["correct"] = d.verdict == "unexplained" and _located(truth, d.unexplained)
+                row["correct"] = not named and _located(truth, d)
+                row["label_truth"] = f"ooc:{eff[0]}"
+            row["label"] = named[0] if named else d["verdict"]
+            if not row["correct"] and not args.quick:  # keep the misses to look at
+                from encdesign import write_recording
+
+                wpath = args.out / "misses" / f"{kind}-s{seed}-{i:03d}.toml"
+                write_recording(
+                    wpath,
+                    rec.kind,
+                    rec.columns,
+                    encoder=rec.meta.get("encoder"),
+                    motor=rec.meta.get("motor"),
+                )
+                row["saved"] = str(wpath)
             rows.append(row)
             i += 1
-            print(
-                f"[{NAME}] {i}/{total} {row['truth']:20s} {conc:10s} {layout} "
-                f"ref={int(ref)} -> {label:20s} {'ok' if row['correct'] else 'WRONG'} "
-                f"({dt:.1f} s)",
-                file=sys.stderr,
-                flush=True,
+            log(
+                f"{kind} {i} {case:14s} {','.join(eff) or '-':40s} -> "
+                f"{','.join(named) or d['verdict']:40s} {'ok' if row['correct'] else 'WRONG'} "
+                f"({dt:.1f} s)"
             )
-    cat = [r for r in rows if r["truth"] in CATALOG_MULTIHEAD]
-    clean = [r for r in rows if r["truth"] == "clean"]
-    ooc = [r for r in rows if r["truth"] not in CATALOG_MULTIHEAD and r["truth"] != "clean"]
+    return rows
+
+
+def _fix(plan: dict, rng) -> dict:
+    """Re-apply the settings an effect needs after the effect was chosen."""
+    e = plan["effects"]
+    if "reading_delay" in e:
+        plan["n_runs"] = max(plan.get("n_runs", 1), 2)
+    if "direction_hysteresis" in e:
+        plan["both_directions"] = True
+    if "bearing_wobble" in e:
+        plan["turns"] = max(plan["turns"], 10.0)
+    if "thermal_drift" in e:
+        plan["turns"] = max(plan["turns"], 2.0)
+    del rng
+    return plan
+
+
+def _rates(rows: list[dict]) -> dict:
+    def pct(xs):
+        return 100 * float(np.mean(xs)) if xs else None
+
+    single = [r["correct"] for r in rows if r["case"] == "single"]
+    weak = [r["correct"] for r in rows if r["case"] == "weak"]
+    comp = [r for r in rows if r["case"] == "compound"]
+    clean = [r["correct"] for r in rows if r["case"] == "clean"]
+    clean_tr = [r["correct"] for r in rows if r["case"] == "clean" and r["excluded"]]
+    ooc = [r["correct"] for r in rows if r["case"] == "out_of_catalog"]
     named_rows = [r for r in rows if r["named"]]
-    truths = list(dict.fromkeys(r["truth"] for r in rows))
+    truths = sorted({r["label_truth"] for r in rows})
     labels = sorted({r["label"] for r in rows})
-    confusion = {
-        t: {lab: sum(1 for r in rows if r["truth"] == t and r["label"] == lab) for lab in labels}
-        for t in truths
-    }
-    summary = dict(
+    return dict(
         n_recordings=len(rows),
-        named_correctly_pct=100 * np.mean([r["correct"] for r in cat]) if cat else None,
-        clean_no_claim_pct=100 * np.mean([r["correct"] for r in clean]) if clean else None,
-        clean_false_positive_pct=100 - 100 * np.mean([r["correct"] for r in clean])
-        if clean
+        single_named_correctly_pct=pct(single),
+        weak_named_correctly_pct=pct(weak),
+        compound_found_pct=100
+        * sum(r["found"] for r in comp)
+        / max(sum(r["n_true"] for r in comp), 1)
+        if comp
         else None,
-        out_of_catalog_located_pct=100 * np.mean([r["correct"] for r in ooc]) if ooc else None,
+        compound_false_names=sum(len(r["false_names"]) for r in comp),
+        clean_consistent_pct=pct(clean),
+        clean_with_transient_consistent_pct=pct(clean_tr),
+        out_of_catalog_located_pct=pct(ooc),
         heldout_improved_whenever_named=bool(
             all(r["heldout_rms_after"] < r["heldout_rms_before"] for r in named_rows)
         ),
-        median_heldout_improvement_pct=100
-        * float(np.median([r["heldout_improvement"] for r in named_rows]))
-        if named_rows
-        else None,
-        per_effect_correct_pct={
-            t: 100 * np.mean([r["correct"] for r in rows if r["truth"] == t]) for t in truths
+        errors=sum(1 for r in rows if str(r["verdict"]).startswith("error")),
+        confusion={
+            t: {
+                lab: sum(1 for r in rows if r["label_truth"] == t and r["label"] == lab)
+                for lab in labels
+            }
+            for t in truths
         },
-        confusion=confusion,
-        median_time_s=float(np.median([r["time_s"] for r in rows])),
-        rows=rows,
+        median_time_s=float(np.median([r["time_s"] for r in rows])) if rows else None,
     )
-    return summary, rows
 
 
-def _confusion_figure(args, rows: list[dict]):
-    truths = list(dict.fromkeys(r["truth_label"] for r in rows))
-    labels = sorted({r["label"] for r in rows})
-    mat = np.array(
-        [[sum(1 for r in rows if r["truth_label"] == t and r["label"] == lab) for lab in labels]
-         for t in truths]
-    )  # fmt: skip
-    fig, ax = new_figure(figsize=(8.5, 0.9 + 0.28 * len(truths)))
-    ax.imshow(mat, cmap="Blues", aspect="auto")
-    ax.set_xticks(range(len(labels)), labels, rotation=40, ha="right", fontsize=7)
-    ax.set_yticks(range(len(truths)), truths, fontsize=7)
-    for a in range(len(truths)):
-        for b in range(len(labels)):
-            if mat[a, b]:
-                ax.text(b, a, str(mat[a, b]), ha="center", va="center", fontsize=8)
-    ax.set_xlabel("finder's verdict / first named effect")
-    ax.set_ylabel("hidden truth (kind: effect)")
-    ax.set_title("conceal benchmark: confusion table")
+def _confusion_figure(args, kinds: dict) -> object:
+    ks = [k for k in kinds if kinds[k]["confusion"]]
+    fig, axes = new_figure(1, len(ks), figsize=(5.2 * len(ks), 4.6))
+    axes = np.atleast_1d(axes)
+    for ax, k in zip(axes, ks):
+        conf = kinds[k]["confusion"]
+        truths = list(conf)
+        labels = sorted({lab for row in conf.values() for lab in row})
+        M = np.array([[conf[t].get(lab, 0) for lab in labels] for t in truths])
+        ax.imshow(M, cmap="Blues")
+        ax.set_xticks(range(len(labels)), labels, rotation=60, ha="right", fontsize=6)
+        ax.set_yticks(range(len(truths)), truths, fontsize=6)
+        for a in range(M.shape[0]):
+            for b in range(M.shape[1]):
+                if M[a, b]:
+                    ax.text(b, a, str(M[a, b]), ha="center", va="center", fontsize=6)
+        ax.set_title(k, fontsize=9)
     return save_figure(fig, args.out, "confusion.png")
 
 
@@ -380,66 +353,49 @@ def main(argv: list[str] | None = None) -> int:
     parser = study_parser(NAME, __doc__)
     parser.add_argument(
         "--kinds",
-        default="multihead,sds",
-        help="comma-separated recording kinds to run: multihead, sds (default both)",
+        default="multihead,sensor,motion",
+        help="comma list of multihead, sensor, motion, sds",
     )
+    parser.add_argument("--seeds", type=int, default=3, help="seeds (each a full plan)")
     args = parser.parse_args(argv)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("multihead", "sds")]
+    bad = [k for k in kinds if k not in ("multihead", "sensor", "motion", "sds")]
     if bad or not kinds:
-        parser.error(f"--kinds: got {args.kinds!r}, expected a comma list of multihead, sds")
+        parser.error(f"--kinds: got {args.kinds!r}")
+
+    def log(msg: str) -> None:
+        print(f"[{NAME}] {msg}", file=sys.stderr, flush=True)
+
     t_all = time.perf_counter()
-    summary: dict = {"kinds": kinds}
-    all_rows: list[dict] = []
-    per_kind = {}
-    if "multihead" in kinds:
-        mh, rows = _multihead_block(args, QUICK if args.quick else PLAN)
-        summary.update(mh)
-        per_kind["multihead"] = _rates(rows, CATALOG_MULTIHEAD)
-        all_rows += [dict(r, kind="multihead", truth_label=r["truth"]) for r in rows]
+    seeds = [args.seed + s for s in range(1 if args.quick else args.seeds)]
+    rows: list[dict] = []
+    for seed in seeds:
+        for kind in kinds:
+            if kind == "sds":
+                continue
+            counts = (
+                (QUICK if args.quick else CASES)[kind]
+                if kind in (QUICK if args.quick else CASES)
+                else {}
+            )
+            rows += _run_kind(args, kind, counts, seed, log)
+    per_kind = {k: _rates([r for r in rows if r["kind"] == k]) for k in kinds if k != "sds"}
+    summary: dict = {"kinds": per_kind, "seeds": seeds, "n_recordings": len(rows)}
+    summary["overall"] = _rates(rows)
     if "sds" in kinds:
         summary["sds"] = _sds_block(args, SDS_QUICK if args.quick else SDS_PLAN)
-        srows = summary["sds"]["rows"]
-        per_kind["sds"] = _rates(srows, SDS_CATALOG)
-        all_rows += [dict(r, kind="sds", truth_label=f"sds: {r['truth']}") for r in srows]
-    summary["per_kind"] = per_kind
-    # overall: every kind's rows pooled (catalog membership judged per kind)
-    pooled = [
-        dict(r, truth=f"{r['kind']}:{r['truth']}" if r["truth"] != "clean" else "clean")
-        for r in all_rows
-    ]
-    catalog = {f"multihead:{e}" for e in CATALOG_MULTIHEAD} | {f"sds:{e}" for e in SDS_CATALOG}
-    summary["overall"] = _rates(pooled, catalog)
+        summary["n_recordings"] += summary["sds"]["n_recordings"]
+    summary["rows"] = rows
     summary["total_time_s"] = time.perf_counter() - t_all
-    figs = []
-    if not args.no_plots and all_rows:
-        figs.append(_confusion_figure(args, all_rows))
-        fig, ax = new_figure(figsize=(6, 3.5))
-        for r in all_rows:
-            c = "tab:green" if r["correct"] else "tab:red"
-            mk = "o" if r["kind"] == "multihead" else "s"
-            ax.scatter(r["heldout_rms_before"], r["heldout_rms_after"], c=c, s=14, marker=mk)
-        lim = max(r["heldout_rms_before"] for r in all_rows) * 1.05
-        ax.plot([0, lim], [0, lim], "k:", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("held-out RMS, base model (rad)")
-        ax.set_ylabel("held-out RMS, final model (rad)")
-        ax.set_title("held-out residual (green: correct; o multihead, s sds)")
-        figs.append(save_figure(fig, args.out, "heldout.png"))
+    figs = [] if args.no_plots else [_confusion_figure(args, per_kind)]
     write_results(args, NAME, summary, figs)
-    for kind, r in per_kind.items():
-        print(
-            f"{kind}: named correctly {r['named_correctly_pct']}%, clean without claim "
-            f"{r['clean_no_claim_pct']}%, out-of-catalog located "
-            f"{r['out_of_catalog_located_pct']}%, median held-out improvement "
-            f"{r['median_heldout_improvement_pct']}%"
+    for k, r in per_kind.items():
+        log(
+            f"{k}: single named {r['single_named_correctly_pct']}%, "
+            f"weak {r['weak_named_correctly_pct']}%, compound found {r['compound_found_pct']}%, "
+            f"clean consistent {r['clean_consistent_pct']}%, "
+            f"out-of-catalog located {r['out_of_catalog_located_pct']}%"
         )
-    o = summary["overall"]
-    print(
-        f"overall: named correctly {o['named_correctly_pct']}%, clean without claim "
-        f"{o['clean_no_claim_pct']}%, out-of-catalog located {o['out_of_catalog_located_pct']}%"
-    )
     return 0
 
 

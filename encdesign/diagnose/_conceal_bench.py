@@ -96,7 +96,7 @@ def draw_plan(rng: np.random.Generator, kind: str, case: str) -> dict[str, Any]:
     if "direction_hysteresis" in plan["effects"]:
         plan["both_directions"] = True
     if "bearing_wobble" in plan["effects"]:
-        plan["turns"] = max(plan["turns"], 4.0)
+        plan["turns"] = max(plan["turns"], 10.0)
     if "thermal_drift" in plan["effects"] and kind == "multihead":
         plan["turns"] = max(plan["turns"], 2.0)
     return plan
@@ -109,7 +109,8 @@ def _shaft(rng, n: int, turns: float, both: bool, transient: bool, rate_hz: floa
     dt = 1.0 / rate_hz
     t = np.arange(n) * dt * (1.0 + 0.02 * rng.uniform(-1, 1))
     span = turns * 2 * np.pi
-    n_tr = int(0.12 * n) if transient else 0
+    kind_tr = ("startup" if rng.random() < 0.5 else "return") if transient else None
+    n_tr = int((0.12 if kind_tr == "startup" else 0.05) * n) if transient else 0
     steady = np.ones(n, bool)
     th = np.empty(n)
     m = n - n_tr
@@ -123,13 +124,12 @@ def _shaft(rng, n: int, turns: float, both: bool, transient: bool, rate_hz: floa
         w = span / (m * dt)
         prof = np.arange(m) * dt * w
     if n_tr:
-        if rng.random() < 0.5:  # start-up: accelerate from rest
+        if kind_tr == "startup":  # accelerate from rest
             s = np.arange(n_tr) / n_tr
-            v = w * s
-            pre = np.cumsum(v) * dt
+            pre = np.cumsum(w * s) * dt
             pre = pre - pre[-1] - w * dt
-        else:  # return move: backwards at 3x speed, then stop
-            pre = 3 * w * dt * np.arange(n_tr)[::-1] * 0.3
+        else:  # a return move: backwards at 3x the steady speed, into the start position
+            pre = 3 * w * dt * (n_tr - np.arange(n_tr))
         th[:n_tr] = pre
         th[n_tr:] = prof
         steady[:n_tr] = False
@@ -319,9 +319,12 @@ def _simulate_motion(rng, plan):
     if plan["transient"]:
         extra[~steady] += 20 * noise * np.sin(2 * np.pi * 5.0 * t[~steady])
     theta = th + extra + rng.normal(0, noise, n)
+    truth["glitch_rows"] = []
     for _ in range(plan["glitches"]):
         i = int(np.flatnonzero(steady)[int(rng.integers(5, steady.sum() - 5))])
         theta[i] += rng.choice([-1, 1]) * 60 * noise
+        truth["glitch_rows"].append(i)
+    truth["transient_rows"] = int((~steady).sum())
     meta = {
         "format": "encdesign-recording/1",
         "kind": "motion",

@@ -1248,6 +1248,67 @@ def _collinearity(fit: FitResult, n_base_terms: int) -> float:
     return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
 
 
+def _collinear_columns(fit: FitResult, n_base_terms: int) -> np.ndarray:
+    """Local indices (in the last term's free vector) to hold so that the rest of the term
+    has a canonical correlation with the base model's columns of at most
+    ``COLLINEAR_REFUSE``: greedily, the column best explained by the base and the columns
+    kept so far first."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    if s1 <= s0 or base_n == 0:
+        return np.zeros(0, int)
+    A = fit.A
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    Lb = np.linalg.pinv(An[np.ix_(b, b)], rcond=1e-10, hermitian=True)
+    keep = list(range(s0, s1))
+    held: list[int] = []
+    for _ in range(s1 - s0):
+        e = np.asarray(keep)
+        Aee, Abe = An[np.ix_(e, e)], An[np.ix_(b, e)]
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+        ev = np.linalg.eigvals(Le @ Abe.T @ Lb @ Abe).real
+        if ev.size == 0 or ev.max() <= COLLINEAR_REFUSE**2:
+            break
+        r2 = np.einsum("bj,bc,cj->j", Abe, Lb, Abe)
+        j = int(np.argmax(r2))
+        held.append(keep.pop(j) - s0)
+        if not keep:
+            break
+    return np.asarray(sorted(held), int)
+
+
+def _hold(term: Term, local: np.ndarray) -> Term:
+    """``term`` with the free scalars at ``local`` (free-vector indices) held at zero."""
+    t2 = term.copy()
+    pos = 0
+    local = set(int(i) for i in local)
+    for q in t2.cand.params:
+        m = t2.free[q.name]
+        flat = m.ravel()
+        v = t2.values[q.name].ravel()
+        for j in np.flatnonzero(flat):
+            if pos in local:
+                flat[j] = False
+                v[j] = 0.0
+            pos += 1
+        t2.free[q.name] = flat.reshape(m.shape)
+        t2.values[q.name] = v.reshape(m.shape)
+    return t2
+
+
+def _local_names(held_term: Term, local: np.ndarray, fitted: Term) -> list[str]:
+    del fitted
+    names = []
+    for q in held_term.cand.params:
+        m = held_term.free[q.name]
+        for ij in np.argwhere(~m):
+            names.append(f"{q.name}{[int(v) for v in ij] if ij.size else ''}")
+    del local
+    return names
+
+
 def _frozen(terms: list[Term]) -> list[Term]:
     """Copies with the nonlinear parameters held (trial fits: one matrix product each)."""
     out = []
@@ -1309,6 +1370,7 @@ def select(
         else:
             applicable.append(c)
     gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
+    held_notes: dict[str, list[str]] = {}
     for _ in range(max_effects):
         seen = {f.view for f in findings}
         gof = goodness_of_fit(prep, cur_resid, current.n_params)
@@ -1353,7 +1415,14 @@ def select(
                 if screened[0][2] is not None:
                     term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
                 log(f"trying {cand.name}")
-                best = fitter.fit([*_frozen(current.terms), term])
+                best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
+                # columns of the candidate the base model already spans are held at zero
+                # (reported), so the rest of it can still be tested
+                held = _collinear_columns(best, n_base_terms)
+                if held.size and held.size < best.terms[-1].n_free():
+                    t2 = _hold(best.terms[-1], held)
+                    best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
+                    held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
             if best is None:
                 continue
             dchi = current.chi2 - best.chi2
@@ -1363,8 +1432,18 @@ def select(
             trials.append((dbic, cand, best, dho, dchi, k))
         trials.sort(key=lambda x: x[0])
         chosen = None
-        for dbic, cand, fr, dho, dchi, _k in trials:
+        for dbic, cand, fr, dho, dchi, k_new in trials:
             reasons = []
+            if k_new == 0:
+                rejected.append(
+                    {
+                        "name": cand.name,
+                        "reason": "confounded: all its parameters are already taken by the base "
+                        f"model or by {', '.join(s.name for s in accepted) or 'nothing else'} "
+                        "(shared orders go to the effect accepted first)",
+                    }
+                )
+                continue
             if dbic > -BIC_MIN:
                 reasons.append(f"information criterion not lowered enough (dBIC {dbic:.1f})")
             if dho < HELDOUT_MIN:
@@ -1420,6 +1499,11 @@ def select(
                     )
                     continue
             notes = []
+            if held_notes.get(cand.name):
+                notes.append(
+                    "held at zero, already spanned by the base model (canonical correlation "
+                    f"> {COLLINEAR_REFUSE}): {', '.join(held_notes[cand.name][:12])}"
+                )
             if col > COLLINEAR_NOTE:
                 notes.append(
                     f"nearly collinear with the base model (canonical correlation "
@@ -1437,11 +1521,14 @@ def select(
         log(f"named {cand.name}")
         current, cur_resid = fr, resid
         findings = locate(prep, cur_resid, views, scan_order)
-    # backward check: each named effect must still earn its place on held-out data
+    # backward check: each named effect must still earn its place on held-out data (the
+    # others held at their nonlinear values: one linear refit each)
+    without: dict[str, FitResult] = {}
     if len(accepted) > 1:
         for s in list(accepted):
-            others = [t for t in current.terms if t.cand.name != s.name]
+            others = _frozen([t for t in current.terms if t.cand.name != s.name])
             fr = fitter.fit(others)
+            without[s.name] = fr
             if fr.heldout_chi2 - current.heldout_chi2 < HELDOUT_MIN:
                 accepted.remove(s)
                 rejected.append(
@@ -1451,15 +1538,20 @@ def select(
                         "named effects it no longer lowers the held-out residual",
                     }
                 )
-                current = fr
-                cur_resid = fitter.residual(fr.terms)
+                current = fitter.fit(
+                    _unfrozen(fr.terms, [t for t in current.terms if t.cand.name != s.name])
+                )
+                cur_resid = fitter.residual(current.terms)
                 findings = locate(prep, cur_resid, views, scan_order)
+                without = {}
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2
     for s in accepted:
-        others = [t for t in current.terms if t.cand.name != s.name]
-        fr = fitter.fit(others) if len(accepted) > 1 else base
+        fr = without.get(s.name)
+        if fr is None:
+            others = _frozen([t for t in current.terms if t.cand.name != s.name])
+            fr = fitter.fit(others) if len(accepted) > 1 else base
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
     return dict(
         base=base,

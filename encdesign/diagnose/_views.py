@@ -210,11 +210,15 @@ def view_spectrum(prep, rw) -> list[Finding]:
         sel = [peaks[j] for j in grp]
         band = np.sum([q["band"] for q in sel], 0)
         orders = [q["order"] for q in sel]
-        integer = all(
-            abs(o - round(o)) <= max(1.5 * q["bin_order"], 0.02)
-            for o, q in zip(orders, sel)
-            if np.isfinite(o)
-        ) and all(round(o) >= 1 for o in orders)
+        integer = (
+            all(
+                abs(o - round(o)) <= max(1.5 * q["bin_order"], 0.02)
+                for o, q in zip(orders, sel)
+                if np.isfinite(o)
+            )
+            and all(round(o) >= 1 for o in orders if np.isfinite(o))
+            and any(np.isfinite(o) for o in orders)
+        )
         thr_ch = _thr(2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
         out.append(
