@@ -275,15 +275,18 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
 def _fix(plan: dict, rng) -> dict:
     """Re-apply the settings an effect needs after the effect was chosen."""
     e = plan["effects"]
-    if "reading_delay" in e:
-        plan["n_runs"] = max(plan.get("n_runs", 1), 2)
+    if "reading_delay" in e:  # one direction: a delay is a constant per run
+        plan["both_directions"] = True
+    if "scale_error" in e:  # over part of a turn it is an order-1 error
+        plan["turns"] = max(plan["turns"], 2.0)
+    if plan["kind"] == "sensor" and "interpolation_error" in e:
+        plan["periods"] = int(rng.choice([16, 21, 2048]))  # above the base model's orders
     if "direction_hysteresis" in e:
         plan["both_directions"] = True
     if "bearing_wobble" in e:
         plan["turns"] = max(plan["turns"], 10.0)
     if "thermal_drift" in e:
         plan["turns"] = max(plan["turns"], 2.0)
-    del rng
     return plan
 
 

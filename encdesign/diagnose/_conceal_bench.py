@@ -91,8 +91,12 @@ def draw_plan(rng: np.random.Generator, kind: str, case: str) -> dict[str, Any]:
             plan["effects"] = ["order_one_head"]
     plan["amplitude"] = 0.5 if case == "weak" else 1.0
     # effects needing a setting
-    if "reading_delay" in plan["effects"]:
-        plan["n_runs"] = max(plan.get("n_runs", 1), 2)
+    if "reading_delay" in plan["effects"]:  # one direction: a delay is a constant per run
+        plan["both_directions"] = True
+    if "scale_error" in plan["effects"]:  # over part of a turn it is an order-1 error
+        plan["turns"] = max(plan["turns"], 2.0)
+    if kind == "sensor" and "interpolation_error" in plan["effects"]:
+        plan["periods"] = int(rng.choice([16, 21, 2048]))  # above the base model's orders
     if "direction_hysteresis" in plan["effects"]:
         plan["both_directions"] = True
     if "bearing_wobble" in plan["effects"]:

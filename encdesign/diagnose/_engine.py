@@ -50,6 +50,7 @@ BIC_MIN = 10.0
 HELDOUT_MIN = 10.0
 PLAUSIBLE_RATIO = 4.0
 LOCATED_SHARE_MIN = 0.2
+SIGNATURE_LEFT_MAX = 0.5
 COLLINEAR_REFUSE = 0.995
 COLLINEAR_NOTE = 0.95
 CHUNK_ROWS = 8192
@@ -1488,6 +1489,21 @@ def select(
             if p0 > 0:
                 after = locate(prep, fitter.residual(fr.terms), views, scan_order)
                 p1 = sum(f.power - f.dof for f in after)
+                # and clear the places its own signature located (not a larger structure
+                # there that it only dents, e.g. a step fitted by a drift)
+                sig = set(cand.signature) or {f.view for f in findings}
+                m0 = sum(f.power - f.dof for f in findings if f.view in sig)
+                m1 = sum(f.power - f.dof for f in after if f.view in sig)
+                if m0 > 0 and m1 > SIGNATURE_LEFT_MAX * m0:
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": f"leaves {100 * m1 / m0:.0f}% of the structure its "
+                            f"signature views ({', '.join(sorted(sig))}) located in place",
+                            "delta_bic": float(dbic),
+                        }
+                    )
+                    continue
                 if p1 > (1.0 - LOCATED_SHARE_MIN) * p0:
                     rejected.append(
                         {
