@@ -117,6 +117,8 @@ class Kind:
         candidates: ``candidates(ctx) -> tuple[Candidate, ...]``.
         views: names of the views run on the residual.
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
+        default_max_order: the base model's order when the user gives none.
+        summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
     """
 
     name: str
@@ -126,6 +128,7 @@ class Kind:
     views: tuple[str, ...]
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
+    summary: Callable[[Any, dict], dict] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -1801,6 +1804,8 @@ def run_engine(
         "time_s": time.perf_counter() - t0,
     }
     doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    if kind.summary is not None:
+        doc.update(kind.summary(prep, base_params))
     doc["report"] = report_text(doc)
     bar.close()
     doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])

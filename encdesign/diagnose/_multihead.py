@@ -441,6 +441,16 @@ def _vb_plausible(ctx, v):
     f = float(v["frequency_hz"])
     if f <= 0:
         return "frequency is not positive"
+    w = np.abs(ctx.rows["omega"])
+    w = w[w > 0]
+    if w.size and np.ptp(w) <= 0.05 * np.max(w):
+        order = f / (float(np.median(w)) / (2 * np.pi))
+        res = max(0.02, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
+        if abs(order - round(order)) < res and round(order) >= 1:
+            return (
+                f"at one speed a line at {f:.4g} Hz is shaft order {order:.3f}: a "
+                "rotation-locked error fits as well (needs two speeds)"
+            )
     T = float(np.max(_run_durations(ctx)))
     if f * T < 3.0:
         return (
@@ -596,6 +606,30 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
     return tuple(out)
 
 
+def multihead_summary(prep: Prepared, base_params: dict) -> dict:
+    """For one sensor against a reference: what the record is (span, directions, speeds,
+    the sensor's and the reference's value lattices, i.e. quantization) and the dominant
+    orders of the sensor's error function (``_reference_terms``)."""
+    if not (prep.ctx.has_ref and prep.n_channels == 1):
+        return {}
+    try:
+        from . import _reference_terms as rt
+    except ImportError:
+        return {}
+    kd = prep.kd
+    out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, kd.reading[:, 0], prep.run)}
+    b = base_params.get("base", {})
+    if "fourier_cos_rad" in b:
+        c, s_ = b["fourier_cos_rad"], b["fourier_sin_rad"]
+        out["sensor"]["dominant_orders"] = rt.dominant_orders(
+            np.asarray(c["value"], float),
+            np.asarray(s_["value"], float),
+            np.asarray([np.nan if v is None else v for v in c["se"]], float),
+            np.asarray([np.nan if v is None else v for v in s_["se"]], float),
+        )
+    return out
+
+
 MULTIHEAD = Kind(
     name="multihead",
     data=multihead_data,
@@ -613,4 +647,5 @@ MULTIHEAD = Kind(
         "angle_trend",
     ),
     max_order_limit=max_order_limit,
+    summary=multihead_summary,
 )

@@ -135,8 +135,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
         if x.shape[0] % 2 == 0:
             P[-1] = 0.0
         f = np.fft.rfftfreq(x.shape[0], dt)
-        th = prep.rows["theta"][rows][kr]
-        revs_per_s = abs(th[-1] - th[0]) / (2 * np.pi) / max(t[kr][-1] - t[kr][0], 1e-12)
+        # revolutions per second from the steady speeds (a record that turns back and
+        # forth has no net advance)
+        revs_per_s = float(np.median(np.abs(prep.rows["omega"][rows][kr]))) / (2 * np.pi)
         per_run.append((r, P, f, revs_per_s, nk))
         n_tests += P.shape[0]
     out: list[Finding] = []
