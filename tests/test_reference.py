@@ -229,6 +229,17 @@ def test_lsb_found_from_the_value_lattice(bits, seed):
 
 
 @pytest.mark.parametrize("seed", SEEDS)
+def test_lsb_of_a_fast_sweep(seed):
+    # every gap is ~250 LSB: the step is far below the smallest gap
+    rng = np.random.default_rng(seed)
+    q = 2 * np.pi / 2**17
+    x = 0.3 + np.arange(2000) * 250.37 * q + rng.normal(0, 0.2 * q, 2000)
+    lat = rt.detect_lsb(q * np.round(x / q))
+    assert lat.lsb_rad == pytest.approx(q, rel=1e-9)
+    assert not lat.single_step
+
+
+@pytest.mark.parametrize("seed", SEEDS)
 def test_no_lattice_in_continuous_readings(seed):
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.uniform(0.0, 1e-3, 2000)) + rng.normal(0, 1e-5, 2000)
@@ -520,6 +531,39 @@ def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effec
         assert 0.7 <= val["amplitude"] <= 1.3
         assert val["bits_per_turn"] == pytest.approx(np.log2(2 * np.pi / params["lsb_rad"]))
     assert e["heldout_rms_after"] < doc["heldout_rms_before"]
+
+
+def _plain_direction_offset(rec, max_order):
+    """Independent check: least squares of run constant + orders 1..M + (h/2) sign(omega)."""
+    th = rec.columns["theta_ref"]
+    w = rt.reference_velocity_rad_s(rec.columns["t"], th)
+    X = [np.ones_like(th), 0.5 * np.sign(w)]
+    for m in range(1, max_order + 1):
+        X += [np.cos(m * th), np.sin(m * th)]
+    c, *_ = scipy.linalg.lstsq(np.stack(X, 1), rec.columns["h0"] - th)
+    return float(c[1])
+
+
+@pytest.mark.parametrize("name", ["moteus_cal"])
+def test_engine_on_the_measured_sensors(name):
+    from encdesign import diagnose
+
+    pytest.importorskip("encdesign.diagnose._engine")
+    rec = load_recording(DATA / f"{name}.toml")
+    doc = diagnose(rec).doc
+    b = doc["base"]["terms"]["base"]
+    dom = rt.dominant_orders(b["fourier_cos_rad"]["value"], b["fourier_sin_rad"]["value"], n=2)
+    named = {e["name"]: e for e in doc["effects"]}
+    if name == "moteus_cal":
+        # the magnet sensor's once- and twice-per-turn error, 0.21 and 0.18 degree
+        assert sorted(d["order"] for d in dom) == [1, 2]
+        h = named["direction_hysteresis"]["params"]["hysteresis_rad"]["value"]
+        assert h == pytest.approx(_plain_direction_offset(rec, 12), rel=0.1)
+        assert np.rad2deg(h) == pytest.approx(-0.33, abs=0.03)
+        assert doc["excluded_segments"]  # the reversal
+    else:
+        assert [d["order"] for d in dom] == [2, 4]  # 3.4 and 1.7 degree
+        assert "direction_hysteresis" not in named
 
 
 # ----------------------------------------------------------------------------- simulator

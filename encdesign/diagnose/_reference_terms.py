@@ -314,6 +314,22 @@ def _unique_sorted(v: np.ndarray, eps: float) -> np.ndarray:
     return u[keep]
 
 
+def _approximate_gcd(x: np.ndarray, tol: float, max_iter: int = 200) -> float | None:
+    """Largest ``g`` of which every ``x`` is an integer multiple within ``tol`` (Euclid)."""
+    S = np.unique(x[x > tol])
+    for _ in range(max_iter):
+        if S.size == 0:
+            return None
+        g = float(S[0])
+        r = np.mod(S, g)
+        r = np.minimum(r, g - r)
+        r = r[r > tol]
+        if r.size == 0:
+            return g
+        S = np.unique(np.concatenate([[g], r]))
+    return None
+
+
 def detect_lsb(
     values_rad: np.ndarray,
     run: np.ndarray | None = None,
@@ -327,12 +343,18 @@ def detect_lsb(
 
     Values of one run lie on ``c_r + q k`` (integers ``k``; each run may have its own zero
     ``c_r``). The smallest gap ``d_min`` between distinct values of a run is ``q`` or a
-    multiple of it; the step is the largest ``d_min / j`` (``j = 1 … max_divisor``) of which
-    at least ``min_fraction`` of all gaps are integer multiples within ``tolerance * q``. It
-    is refined by least squares over the gaps. A record without a lattice (continuous
-    values) fails that test: the fractional parts of its gaps are spread uniformly, so only
-    about ``2 tolerance`` of them pass. Values that step evenly by one gap and never repeat
-    are a uniform sweep sampled evenly, not a quantized reading: no lattice then.
+    multiple of it: the step is the largest ``d_min / j`` (``j = 1 … max_divisor``) of which
+    at least ``min_fraction`` of all gaps are integer multiples within ``tolerance * q``
+    (values printed with a few digits pass). When that fails, or finds only an even sweep,
+    readings computed from integer counts still sit on their lattice to rounding error: the
+    step is then the approximate greatest common divisor of the gaps (Euclid's algorithm
+    with an absolute tolerance of ``1e-12`` of the largest value), even when every gap is
+    hundreds of steps (a fast sweep); a "step" of the size of that tolerance (continuous
+    values) or over 1e4 times below the typical gap (a file's printed decimals) is refused.
+    Either step is refined by least squares over the gaps. A record without a lattice
+    (continuous values) fails the first test: the fractional parts of its gaps are spread
+    uniformly, so only about ``2 tolerance`` of them pass. Values that step evenly by one gap
+    and never repeat are a uniform sweep sampled evenly, not a quantized reading: no lattice.
 
     Args:
         values_rad: the readings, rad (any unwrapped angle).
@@ -363,12 +385,26 @@ def detect_lsb(
     d = np.concatenate(gaps)
     d_min = float(d.min())
     q = None
+    # 1) a lattice seen through rounded numbers (printed with a few digits): the largest
+    #    d_min / j of which the gaps are multiples within ``tolerance`` steps
     for j in range(1, max_divisor + 1):
         cand = d_min / j
         r = d / cand
         if np.mean(np.abs(r - np.round(r)) <= tolerance) >= min_fraction:
             q = cand
             break
+    repeats = int(v.size) - sum(g.size + 1 for g in gaps)
+    even = q is not None and bool(np.all(np.round(d / q) == 1)) and repeats == 0
+    if q is None or even:
+        # 2) an exact lattice (readings computed from integer counts): Euclid's algorithm on
+        #    the gaps with an absolute tolerance finds a step far below the smallest gap (a
+        #    fast sweep whose gaps are all ~250 LSB). Continuous values only reach a "step"
+        #    of the size of the tolerance; a step over 1e4 times below the typical gap (the
+        #    decimal digits a file was printed with) is not a reading's resolution either
+        exact_tol = 1e-12 * max(scale, 1.0)
+        g = _approximate_gcd(d, exact_tol)
+        if g is not None and g > 1e3 * exact_tol and np.median(d) / g <= 1e4:
+            q, tolerance = g, 10 * exact_tol / g  # tolerance in steps
     if q is None:
         return dataclasses.replace(
             none,
@@ -480,6 +516,7 @@ def dominant_orders(
         if se_cos_rad is not None and se_sin_rad is not None and amp[i] > 0:
             sa, sb = float(np.asarray(se_cos_rad)[i]), float(np.asarray(se_sin_rad)[i])
             se = float(np.hypot(a[i] * sa, b[i] * sb) / amp[i])
+            se = se if np.isfinite(se) else None
         out.append(
             {
                 "order": int(i + 1),
@@ -660,6 +697,8 @@ def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
 
 QUANT_SMOOTH_ORDERS = 48
 """Fourier orders of the smooth (unquantized) reading the quantization term rebuilds."""
+QUANT_POLY_DEGREE = 8
+"""Degree of the per-run Legendre polynomials in the angle (part of a turn, drifts)."""
 
 
 def _smooth_basis(theta: Array, n_orders: int) -> Array:
@@ -668,15 +707,39 @@ def _smooth_basis(theta: Array, n_orders: int) -> Array:
     return jnp.concatenate([jnp.cos(arg), jnp.sin(arg)], axis=1)
 
 
-def _quant_fn(p: dict, x: dict) -> Array:
+def _legendre(u: Array, degree: int) -> Array:
+    """``P_0 … P_degree`` at ``u`` (Bonnet's recursion), shape ``(n, degree + 1)``."""
+    out = [jnp.ones_like(u), u]
+    for k in range(1, degree):
+        out.append(((2 * k + 1) * u * out[k] - k * out[k - 1]) / (k + 1))
+    return jnp.stack(out[: degree + 1], axis=1)
+
+
+def _poly_basis(theta: Array, onehot: Array, mid: Array, half: Array) -> Array:
+    """Per-run Legendre polynomials of the angle scaled to ``[-1, 1]`` over the run,
+    shape ``(n, R * (degree + 1))`` (run-major)."""
+    u = (theta - onehot @ mid) / (onehot @ half)
+    L = _legendre(u, QUANT_POLY_DEGREE)
+    return (onehot[:, :, None] * L[:, None, :]).reshape(theta.shape[0], -1)
+
+
+_POLY = tuple(f"poly{k}_rad" for k in range(QUANT_POLY_DEGREE + 1))
+
+
+def _quant_smooth(p: dict, x: dict) -> Array:
     th = x["theta"]
-    smooth = (
+    oh = x["run_onehot"]
+    poly = jnp.stack([p[k] for k in _POLY], axis=1)  # (R, degree + 1)
+    return (
         th
         + _smooth_basis(th, QUANT_SMOOTH_ORDERS) @ p["smooth_rad"]
-        + x["run_onehot"] @ p["zero_rad"]
+        + _poly_basis(th, oh, p["run_mid_rad"], p["run_half_rad"]) @ poly.ravel()
     )
+
+
+def _quant_fn(p: dict, x: dict) -> Array:
     off = x["run_onehot"] @ p["lattice_offset_rad"]
-    e = quantization_rad(smooth, p["lsb_rad"], off, p["blur_rad"])
+    e = quantization_rad(_quant_smooth(p, x), p["lsb_rad"], off, p["blur_rad"])
     return (p["amplitude"] * e)[:, None]
 
 
@@ -697,42 +760,50 @@ def _quant_applies(ctx: Context) -> str | None:
 
 
 def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
-    """Rebuild the unquantized reading (reading - residual, smoothed by a Fourier fit of
-    ``QUANT_SMOOTH_ORDERS`` orders and run constants) and take the lattice of the readings;
-    the blur (noise ahead of the quantizer) is the best of a grid of ``0 … q`` by least
-    squares of the residual on the staircase."""
+    """Rebuild the unquantized reading as a smooth least-squares fit of the reading itself
+    (``QUANT_SMOOTH_ORDERS`` Fourier orders of the angle and per-run Legendre polynomials of
+    degree ``QUANT_POLY_DEGREE``, for part of a turn; the staircase, about white, averages
+    out), take the lattice of the readings, and pick the blur (noise ahead of the quantizer)
+    on a grid ``0 … q`` by least squares of the engine's residual on the staircase."""
     rows = ctx.rows
     lat = _quant_lattice(ctx)
     q = float(lat.lsb_rad)
     th = np.asarray(rows["theta"], dtype=np.float64)
     onehot = np.asarray(rows["run_onehot"], dtype=np.float64)
     reading = np.asarray(rows["reading"], dtype=np.float64)[:, 0]
-    model = reading - np.asarray(residual, dtype=np.float64).reshape(reading.size, -1)[:, 0]
-    B = np.concatenate([np.asarray(_smooth_basis(jnp.asarray(th), QUANT_SMOOTH_ORDERS)), onehot], 1)
-    coef, *_ = np.linalg.lstsq(B, model - th, rcond=None)
-    smooth_c = coef[: 2 * QUANT_SMOOTH_ORDERS]
-    zero = coef[2 * QUANT_SMOOTH_ORDERS :]
-    smooth = th + B @ coef
     n_runs = onehot.shape[1]
-    offs = np.array([lat.offset_rad.get(r, 0.0) for r in range(n_runs)])
+    lo, hi = np.zeros(n_runs), np.ones(n_runs)
+    for r in range(n_runs):
+        m = onehot[:, r] > 0.5
+        if m.sum() > 1:
+            lo[r], hi[r] = th[m].min(), th[m].max()
+    mid, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+    F = np.asarray(_smooth_basis(jnp.asarray(th), QUANT_SMOOTH_ORDERS))
+    Pb = np.asarray(_poly_basis(*(jnp.asarray(v) for v in (th, onehot, mid, half))))
+    coef, *_ = np.linalg.lstsq(np.concatenate([F, Pb], 1), reading - th, rcond=None)
+    nf = 2 * QUANT_SMOOTH_ORDERS
+    poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
+    p0 = {
+        "lsb_rad": np.asarray(q),
+        "lattice_offset_rad": np.array([lat.offset_rad.get(r, 0.0) for r in range(n_runs)]),
+        "smooth_rad": coef[:nf],
+        "run_mid_rad": mid,
+        "run_half_rad": half,
+        "blur_rad": np.asarray(0.0),
+        "amplitude": np.asarray(1.0),
+    }
+    p0.update({k: poly[:, i] for i, k in enumerate(_POLY)})
+    x = {k: jnp.asarray(v) for k, v in rows.items()}
     r = np.asarray(residual, dtype=np.float64).reshape(reading.size, -1)[:, 0]
     best = (np.inf, 0.0)
     for b in np.linspace(0.0, 1.0, 21) * q:
-        col = np.asarray(quantization_rad(smooth, q, onehot @ offs, b))
+        col = np.asarray(_quant_fn({**p0, "blur_rad": np.asarray(b)}, x))[:, 0]
         a = float(col @ r / max(col @ col, 1e-300))
         sse = float(np.sum((r - a * col) ** 2))
         if sse < best[0]:
             best = (sse, b)
-    return [
-        {
-            "lsb_rad": np.asarray(q),
-            "lattice_offset_rad": offs,
-            "smooth_rad": smooth_c,
-            "zero_rad": zero,
-            "blur_rad": np.asarray(best[1]),
-            "amplitude": np.asarray(1.0),
-        }
-    ]
+    p0["blur_rad"] = np.asarray(best[1])
+    return [p0]
 
 
 def _quant_plausible(ctx: Context, p: dict) -> str | None:
@@ -852,7 +923,12 @@ def _candidates() -> tuple:
             ),
             Param("lattice_offset_rad", "rad", shape="runs", linear=False, fit=False),
             Param("smooth_rad", "rad", shape=(2 * QUANT_SMOOTH_ORDERS,), linear=False, fit=False),
-            Param("zero_rad", "rad", shape="runs", linear=False, fit=False),
+            *(
+                Param(k, "rad", shape="runs", linear=False, fit=False, description="smooth")
+                for k in _POLY
+            ),
+            Param("run_mid_rad", "rad", shape="runs", linear=False, fit=False),
+            Param("run_half_rad", "rad", shape="runs", linear=False, fit=False),
             Param(
                 "blur_rad",
                 "rad",
