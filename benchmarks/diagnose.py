@@ -73,8 +73,10 @@ def _child(n_rows: int, heads: int, effect: bool) -> dict:
     t1 = time.perf_counter()
     d = diagnose(rec, verbose=False)
     t2 = time.perf_counter()
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    rss = ru.ru_maxrss * 1024
     return dict(
+        cpu_s_total=ru.ru_utime + ru.ru_stime,
         n_rows=rec.n_rows,
         n_heads=heads,
         verdict=d.verdict,

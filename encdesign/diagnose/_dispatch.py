@@ -185,7 +185,10 @@ def conform(doc: dict[str, Any], rec: Recording) -> dict[str, Any]:
         }
     doc.setdefault("goodness_of_fit", None)
     doc.setdefault("excluded_segments", [])
-    doc.setdefault("heldout", None)
+    if not isinstance(doc.get("heldout"), dict):
+        if doc.get("heldout") is not None:
+            doc["heldout_scheme"] = str(doc["heldout"])
+        doc["heldout"] = None
     doc.setdefault("unexplained", [])
     doc.setdefault("notes", [])
     doc["notes"] = list(doc["notes"]) + [
