@@ -227,6 +227,12 @@ def find_motion_segments(
                 continue
             med = np.median(w[a:b])
             ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
+            # a piece starts and ends where the speed first / last comes within 10 % of its
+            # steady speed (a ramp is not steady even where it is inside a loose tolerance)
+            near = np.flatnonzero(np.abs(w[a:b] - med) <= 0.1 * abs(med))
+            if near.size:
+                ok[: near[0]] = False
+                ok[near[-1] + 1 :] = False
             for c, d in _runs_of(ok):
                 if d - c >= min(min_len, 20):
                     seg[a + c : a + d] = sid
