@@ -317,7 +317,7 @@ def _simulate_motion(rng, plan):
             for m in orders[eff]:
                 extra += 3 * A * np.sin(m * th + rng.uniform(0, 2 * np.pi))
         elif eff == "order_one_head":
-            m = int(rng.choice([5, 11, 43]))
+            m = int(rng.choice([11, 43, 53]))  # not a multiple of 7 or 12, above 7
             extra += 4 * A * np.sin(m * th + rng.uniform(0, 2 * np.pi))
             truth["where"] = {"heads": [0], "orders": [m]}
     if plan["transient"]:
