@@ -6,10 +6,10 @@ to their own finders (``encdesign.diagnose._dispatch``)."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
+
+from ._main import guard_outputs, int_arg
 
 HELP = "find where a recording and the model disagree, name the missing physics, fit it"
 
@@ -20,31 +20,36 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, required=True, help="write the diagnosis here")
     parser.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     parser.add_argument("--report", type=Path, default=None, help="write the text report here")
-    parser.add_argument("--max-order", type=int, default=12, help="base model's highest order")
+    parser.add_argument(
+        "--max-order",
+        type=int_arg(1, 100_000),
+        default=12,
+        help="base model's highest order (at most (samples per head - 1) / 2)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
-def _write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".txt")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+def max_order_limit(n_rows: int) -> int:
+    """Highest base-model order ``n_rows`` samples support: a Fourier series of order ``K``
+    has ``2K + 1`` coefficients per head, so ``K <= (n_rows - 1) // 2``."""
+    return max((int(n_rows) - 1) // 2, 0)
 
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose; exit 0 with the JSON written (bad input raises -> exit 2)."""
-    from .._errors import input_error
-    from ..diagnose._multihead import diagnose, report_text, write_plots
-    from ..io._study import write_json
+    from ..io._paths import recording_input_files
 
-    if args.max_order < 1:
-        raise input_error("--max-order", f"got {args.max_order}", "a positive integer")
-    from ..io._recording import load_recording
+    inputs = [("recording", p) for p in recording_input_files(args.recording)]
+    outputs = [("--json", args.json), ("--report", args.report)]
+    with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .._errors import input_error
+    from ..io._paths import atomic_write_text
+    from ..io._recording import check_runs_contiguous, load_recording
+    from ..io._study import write_json
 
     rec = load_recording(args.recording)
     if rec.kind in ("quadrature", "motion", "sds"):
@@ -54,18 +59,29 @@ def run(args: argparse.Namespace) -> int:
         doc = diagnose_any(rec, plots=args.plots)
         write_json(args.json, doc)
         if args.report is not None and "report" in doc:
-            _write_text(args.report, doc["report"])
+            atomic_write_text(args.report, doc["report"])
         print(f"verdict: {doc['verdict']}")
         print(f"wrote {args.json}", file=sys.stderr)
         return 0
+    limit = max_order_limit(rec.n_rows)
+    if args.max_order > limit:
+        raise input_error(
+            "--max-order",
+            f"{args.max_order} needs at least {2 * args.max_order + 1} samples per head but "
+            f"{args.recording} has {rec.n_rows}",
+            f"--max-order <= {limit} for this recording",
+        )
+    check_runs_contiguous(rec)
+    from ..diagnose._multihead import diagnose, report_text, write_plots
+
     d = diagnose(rec, max_order=args.max_order, verbose=not args.quiet)
     doc = d.to_json()
+    text = report_text(d)
     if args.plots is not None:
         doc["plots"] = [str(p) for p in write_plots(d, args.plots)]
     write_json(args.json, doc)
-    text = report_text(d)
     if args.report is not None:
-        _write_text(args.report, text)
+        atomic_write_text(args.report, text)
     print(text, end="")
     print(f"wrote {args.json}", file=sys.stderr)
     return 0

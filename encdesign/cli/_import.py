@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..io import _realdata
+from ._main import guard_outputs
 
 HELP = "convert measured data (NmmQuad CSV, ODrive .npy, or the whole realdata folder)"
 
@@ -21,11 +21,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .._errors import input_error
+    from ..io import _realdata
+    from ..io._paths import recording_output_files
+
     if args.source == "realdata":
-        for p in _realdata.import_realdata_folder(args.src, args.out):
+        if not args.src.is_dir():
+            raise input_error(f"SRC {args.src}", "not a folder", "the realdata folder")
+        jobs = _realdata.realdata_jobs(args.src, args.out)
+        inputs = [("SRC", src) for _, src, _ in jobs]
+        outputs = [("--out", p) for _, _, dst in jobs for p in recording_output_files(dst)]
+        with guard_outputs(inputs, outputs, folders=[("--out", args.out)]):
+            written = _realdata.import_realdata_folder(args.src, args.out)
+        for p in written:
             print(f"wrote {p}")
         return 0
+    outputs = [("--out", p) for p in recording_output_files(args.out)]
     fn = _realdata.import_nmm if args.source == "nmm" else _realdata.import_odrive
-    rec = fn(args.src, args.out)
+    with guard_outputs([("SRC", args.src)], outputs):
+        rec = fn(args.src, args.out)
     print(f"wrote {rec.path} ({rec.kind}, {rec.n_rows} rows)")
     return 0
