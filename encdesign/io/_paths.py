@@ -25,6 +25,7 @@ import gzip
 import os
 import stat
 import tempfile
+import tomllib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any
@@ -133,13 +134,12 @@ def recording_input_files(path: str | os.PathLike) -> list[Path]:
     Used to protect every file of an input recording; a TOML that cannot be read is
     refused later by the loader with its own message.
     """
-    from ._recording import read_toml
-
     path = Path(path)
     files = [path]
     try:
-        meta = read_toml(path)
-    except Exception:  # the loader reports it properly
+        with open(path, "rb") as fh:
+            meta = tomllib.loads(fh.read(1 << 24).decode("utf-8-sig"))
+    except (OSError, ValueError, RecursionError):  # the loader reports it properly
         return files
     data = meta.get("data") if isinstance(meta, dict) else None
     if isinstance(data, str) and data:
