@@ -293,6 +293,8 @@ def parse_design(raw: Mapping[str, Any], where: str = "design") -> Design:
     lines = disk.get("grating_lines")
     if lines is not None:
         lines = _int(w + "grating_lines", lines, 1)
+        if lines > 10**9:
+            raise input_error(w + "grating_lines", f"got {lines}", "an integer 1 … 1000000000")
 
     w = f"{where}: [heads]."
     angles_raw = heads["angles_deg"]

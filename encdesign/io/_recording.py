@@ -163,6 +163,17 @@ def _nonneg_int(where: str, v: Any) -> int:
     return int(v)
 
 
+def int_in(lower: int, upper: int):
+    """A checker for an integer in ``[lower, upper]`` (bools refused)."""
+
+    def check(where: str, v: Any) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or not lower <= v <= upper:
+            raise input_error(where, f"got {show(v)[:40]}", f"an integer {lower} … {upper}")
+        return int(v)
+
+    return check
+
+
 def _angle_list(where: str, v: Any) -> list[float]:
     if not isinstance(v, list) or len(v) == 0 or len(v) > 1000:
         raise input_error(where, f"got {show(v)[:80]}", "a list of 1 … 1000 angles in degrees")
@@ -339,8 +350,8 @@ KINDS: dict[str, KindSpec] = {
         encoder_keys={
             "optical_radius_m": _RADIUS_M,
             "head_angles_deg": _angle_list,
-            "reference_head": _nonneg_int,
-            "grating_lines": _positive_int,
+            "reference_head": int_in(0, 999),
+            "grating_lines": int_in(1, 10**9),
         },
         required_encoder=("optical_radius_m", "head_angles_deg"),
         required_columns=_multihead_required,
@@ -349,12 +360,12 @@ KINDS: dict[str, KindSpec] = {
     ),
     "sds": KindSpec(
         encoder_keys={
-            "marks_per_rev": _positive_int,
+            "marks_per_rev": int_in(1, 10**8),
             "fixed_sensor_angles_deg": _angle_list,
             "moving_sensor_angles_deg": _angle_list,
-            "pole_pairs": _positive_int,
-            "stator_coils": _positive_int,
-            "commutation_states": _positive_int,
+            "pole_pairs": int_in(1, 1000),
+            "stator_coils": int_in(1, 10_000),
+            "commutation_states": int_in(1, 1000),
             "clock_hz": number_in(0.0, 1e15, "Hz"),
             # extension of the spec: the read radius turns fitted angles into lengths
             "optical_radius_m": _RADIUS_M,
@@ -373,11 +384,11 @@ KINDS: dict[str, KindSpec] = {
         check=_quadrature_check,
     ),
     "motion": KindSpec(
-        encoder_keys={"counts_per_rev": _positive_int},
+        encoder_keys={"counts_per_rev": int_in(1, 2**48)},
         motor_keys={
-            "pole_pairs": _positive_int,
-            "stator_slots": _positive_int,
-            "commutation_states": _positive_int,
+            "pole_pairs": int_in(1, 1000),
+            "stator_slots": int_in(1, 10_000),
+            "commutation_states": int_in(1, 1000),
         },
         required_columns=_motion_required,
         optional_columns=lambda meta: ["current_a", "run"],
@@ -402,7 +413,7 @@ def validate_meta(meta: dict, where: str) -> dict:
     if fmt != FORMAT:
         raise input_error(f"{where}: format", f"got {fmt!r}", repr(FORMAT))
     kind = meta.get("kind")
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise input_error(f"{where}: kind", f"got {kind!r}", f"one of {sorted(KINDS)}")
     spec = KINDS[kind]
     out = dict(meta)
