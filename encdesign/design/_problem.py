@@ -78,6 +78,7 @@ UNITS: dict[str, tuple[str, float]] = {
 }
 
 SEED_MAX = 2**63 - 1  # JAX keys take a 64-bit seed
+MAX_GRID_POINTS = 10_000_000  # a grid beyond this does not fit in memory as one array
 
 DRIVER_KINDS = ("bfgs", "lbfgsb", "lm", "grid", "lhs")
 _TOP_KEYS = {"problem", "model", "variables", "constraints", "yield", "driver", "sweep"}
@@ -387,6 +388,17 @@ def parse_problem(
     sweep = dict(data.get("sweep", {}))
     sweep.setdefault("kind", "grid")
     _check_driver(sweep, _where(src, "sweep"), ("grid", "lhs"))
+    n_cont = sum(not v.discrete for v in variables)
+    for table, label in ((driver, "driver"), (sweep, "sweep")):
+        if table["kind"] == "grid" and n_cont:
+            ppd = int(table.get("points_per_dim", 11))
+            if ppd**n_cont > MAX_GRID_POINTS:
+                raise input_error(
+                    _where(src, label, "points_per_dim"),
+                    f"{ppd}^{n_cont} = {ppd**n_cont:.3g} grid points",
+                    f"at most {MAX_GRID_POINTS} points "
+                    f"(points_per_dim <= {int(MAX_GRID_POINTS ** (1 / n_cont) + 1e-9)})",
+                )
     if driver["kind"] == "lm" and "residuals" not in spec.outputs:
         raise input_error(
             _where(src, "driver", "kind"),
