@@ -27,6 +27,7 @@ import importlib
 import importlib.util
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -211,8 +212,12 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2,
 """Exit statuses of every command (the README states the contract)."""
 
 
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+_NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool_|str_)\w*\(([^()]*)\)")
+
+
+def _one_line(text: object) -> str:
+    """A message on one line, NumPy scalar reprs (``np.float64(0.5)``) shown as plain values."""
+    return _NUMPY_REPR.sub(r"\1", " ".join(str(text).split()))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -20,6 +20,13 @@ import numpy as np
 from ._paths import atomic_output, atomic_write_text
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line on stderr and exit status 2 (the CLI's contract)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
     """An argument parser with the flags every study has.
 
@@ -27,7 +34,7 @@ def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
     there), ``--seed N`` (PRNG seed, default 0), ``--quick`` (smaller sizes for tests).
     """
     title = (doc or name).strip().splitlines()[0]
-    p = argparse.ArgumentParser(prog=f"encdesign study run {name}", description=title)
+    p = _OneLineParser(prog=f"encdesign study run {name}", description=title)
     p.add_argument("--out", type=Path, default=Path("results") / name, help="output folder")
     p.add_argument("--json", type=Path, default=None, help="also write the summary JSON here")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
