@@ -69,7 +69,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the action; 0 on success (bad input raises EncdesignInputError -> exit 2)."""
-
     from .._errors import input_error
     from ..io._paths import recording_input_files, recording_output_files
 
@@ -96,33 +95,30 @@ def _simulate(args: argparse.Namespace) -> int:
     from ..physics._sds import reference_design, reference_errors
     from ..physics._sds_errors import SDSErrors
 
-    if True:
-        key = jax.random.PRNGKey(args.seed)
-        k_disk, k_noise = jax.random.split(key)
-        design = reference_design(
-            args.fixed,
-            args.moving,
-            pole_pairs=args.pole_pairs,
-            marks_per_rev=args.marks,
-            key=k_disk,
-        )
-        errors = reference_errors() if args.errors == "reference" else SDSErrors()
-        phis = [math.radians(p) for p in args.phi_deg]
-        rec = simulate_sds_recording(
-            args.out,
-            design,
-            phis,
-            args.revs,
-            errors,
-            key=k_noise,
-            compress=args.gzip,
-            description=f"simulated SDS reference device, {args.pole_pairs} pole pairs, "
-            f"{args.fixed}+{args.moving} sensors, errors={args.errors}",
-        )
-        print(
-            f"wrote {args.out} ({rec.n_rows} edges, {len(phis)} run(s); table {rec.meta['data']})"
-        )
-        return 0
+    key = jax.random.PRNGKey(args.seed)
+    k_disk, k_noise = jax.random.split(key)
+    design = reference_design(
+        args.fixed,
+        args.moving,
+        pole_pairs=args.pole_pairs,
+        marks_per_rev=args.marks,
+        key=k_disk,
+    )
+    errors = reference_errors() if args.errors == "reference" else SDSErrors()
+    phis = [math.radians(p) for p in args.phi_deg]
+    rec = simulate_sds_recording(
+        args.out,
+        design,
+        phis,
+        args.revs,
+        errors,
+        key=k_noise,
+        compress=args.gzip,
+        description=f"simulated SDS reference device, {args.pole_pairs} pole pairs, "
+        f"{args.fixed}+{args.moving} sensors, errors={args.errors}",
+    )
+    print(f"wrote {args.out} ({rec.n_rows} edges, {len(phis)} run(s); table {rec.meta['data']})")
+    return 0
 
 
 def _measure(args: argparse.Namespace) -> int:
