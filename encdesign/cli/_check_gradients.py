@@ -9,6 +9,7 @@ from pathlib import Path
 from ..design._problem import load_problem
 from ..design._solve import check_gradients
 from ..io._study import write_json
+from ._main import float_arg, guard_outputs
 
 HELP = "compare AD gradients of a problem's outputs with central finite differences"
 
@@ -17,13 +18,34 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("problem", type=Path, help="problem file (TOML)")
     parser.add_argument("--json", type=Path, default=None, help="write the table as JSON here")
     parser.add_argument(
-        "--rel-step", type=float, default=1e-5, help="FD step relative to the variable's scale"
+        "--rel-step",
+        type=float_arg(0.0, 0.1, lower_open=True),
+        default=1e-5,
+        help="FD step relative to the variable's scale (0 < step <= 0.1)",
     )
-    parser.add_argument("--rtol", type=float, default=1e-4, help="relative tolerance for 'ok'")
+    parser.add_argument(
+        "--rtol",
+        type=float_arg(0.0, 1.0, lower_open=True),
+        default=1e-4,
+        help="relative tolerance for 'ok' (0 < rtol <= 1)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
+    with guard_outputs([("problem", args.problem)], [("--json", args.json)]):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .._errors import input_error
+
     problem = load_problem(args.problem)
+    if not problem.continuous:
+        raise input_error(
+            str(args.problem),
+            "the problem has no continuous variables: there is no gradient to check",
+            "at least one [variables.NAME] with start/lower/upper",
+        )
     rows = check_gradients(problem, rel_step=args.rel_step, rtol=args.rtol)
     print(f"problem {problem.name}: d(output)/d(variable), output units per SI unit")
     head = f"{'output':22s} {'variable':20s} {'at':>12s} {'AD':>14s} {'FD':>14s} {'rel err':>9s}"

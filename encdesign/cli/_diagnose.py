@@ -6,10 +6,10 @@ the JSON follows ``encdesign/diagnose/diagnosis.schema.json``."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
+
+from ._main import guard_outputs, int_arg
 
 HELP = "find where a recording and the model disagree, name the missing physics, fit it"
 
@@ -22,7 +22,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", type=Path, default=None, help="write the text report here")
     parser.add_argument(
         "--max-order",
-        type=int,
+        type=int_arg(1, 100_000),
         default=None,
         help="base model's highest order (default: the kind's, capped at what the record "
         "resolves; beyond that it is refused with the limit)",
@@ -33,35 +33,36 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="a Python file defining CANDIDATES = [Candidate(...), ...]: your own effects",
     )
-    parser.add_argument("--max-effects", type=int, default=3, help="most effects to name")
+    parser.add_argument(
+        "--max-effects", type=int_arg(0, 100), default=3, help="most effects to name"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".txt")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def run(args: argparse.Namespace) -> int:
-    """Diagnose; exit 0 with the JSON written (bad input raises -> exit 2)."""
-    from .._errors import input_error
+    """Diagnose; exit 0 with the JSON written (bad input raises -> exit 2).
+
+    Inputs and outputs are checked before any work: no output may be an input (by path or
+    resolved identity), and outputs are written atomically."""
+    from ..io._paths import recording_input_files
+
+    inputs = [("recording", p) for p in recording_input_files(args.recording)]
+    if args.candidates is not None:
+        inputs.append(("--candidates", args.candidates))
+    outputs = [("--json", args.json), ("--report", args.report)]
+    with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from ..diagnose._dispatch import diagnose, load_candidates
-    from ..io._recording import load_recording
+    from ..io._paths import atomic_write_text
+    from ..io._recording import check_runs_contiguous, load_recording
     from ..io._study import write_json
 
-    if args.max_order is not None and args.max_order < 1:
-        raise input_error("--max-order", f"got {args.max_order}", "a positive integer")
-    if args.max_effects < 0:
-        raise input_error("--max-effects", f"got {args.max_effects}", "0 or more")
     cands = load_candidates(args.candidates) if args.candidates is not None else ()
     rec = load_recording(args.recording)
+    check_runs_contiguous(rec)
     d = diagnose(
         rec,
         max_order=args.max_order,
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     write_json(args.json, doc)
     text = doc.get("report", "")
     if args.report is not None:
-        _write_text(args.report, text)
+        atomic_write_text(args.report, text)
     print(text if text else f"verdict: {doc['verdict']}", end="" if text.endswith("\n") else "\n")
     print(f"wrote {args.json}", file=sys.stderr)
     return 0

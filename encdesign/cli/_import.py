@@ -5,19 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..io import _realdata
+from ._main import guard_outputs
 
 HELP = (
     "convert measured data (NmmQuad CSV, ODrive .npy, moteus encoder sweep, MagAlpha CSV, "
     "or the whole realdata folder)"
 )
 
-IMPORTERS = {
-    "nmm": _realdata.import_nmm,
-    "odrive": _realdata.import_odrive,
-    "moteus": _realdata.import_moteus,
-    "magalpha": _realdata.import_magalpha,
-}
+IMPORTERS = ("nmm", "odrive", "moteus", "magalpha")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -31,10 +26,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .._errors import input_error
+    from ..io import _realdata
+    from ..io._paths import recording_output_files
+
     if args.source == "realdata":
-        for p in _realdata.import_realdata_folder(args.src, args.out):
+        if not args.src.is_dir():
+            raise input_error(f"SRC {args.src}", "not a folder", "the realdata folder")
+        jobs = _realdata.realdata_jobs(args.src, args.out)
+        inputs = [("SRC", src) for _, src, _ in jobs]
+        outputs = [("--out", p) for _, _, dst in jobs for p in recording_output_files(dst)]
+        with guard_outputs(inputs, outputs, folders=[("--out", args.out)]):
+            written = _realdata.import_realdata_folder(args.src, args.out)
+        for p in written:
             print(f"wrote {p}")
         return 0
-    rec = IMPORTERS[args.source](args.src, args.out)
+    outputs = [("--out", p) for p in recording_output_files(args.out)]
+    fn = getattr(_realdata, f"import_{args.source}")
+    with guard_outputs([("SRC", args.src)], outputs):
+        rec = fn(args.src, args.out)
     print(f"wrote {rec.path} ({rec.kind}, {rec.n_rows} rows)")
     return 0

@@ -6,8 +6,18 @@ line), ``configure(parser)`` and ``run(args) -> int``. ``study`` is built in:
 ``encdesign study list`` and ``encdesign study run NAME [study flags]`` run
 ``studies/NAME.py``'s ``main(argv)``.
 
-Bad input (:class:`~encdesign.EncdesignInputError`) becomes one line on stderr and exit
-status 2.
+Shared by the commands: checked argument types (:func:`int_arg`, :func:`float_arg`,
+:data:`SEED`) that refuse out-of-range, non-finite and absurd values while arguments are
+parsed, and :func:`guard_outputs`, which checks every output path against the command's
+inputs and other outputs (by path and resolved identity, :mod:`encdesign.io._paths`)
+before any work and removes what a failed command created.
+
+Exit status (a contract, see the README): ``0`` success; ``1`` a solve or check that ran
+but failed (its status is printed); ``2`` bad input (a usage error or an
+:class:`~encdesign.EncdesignInputError`: one line on stderr naming the file, key or flag);
+``3`` an internal error (one line saying so; ``--debug`` anywhere on the command line, or
+``ENCDESIGN_DEBUG=1``, shows the traceback instead); ``130`` interrupted. No traceback
+reaches the user otherwise.
 """
 
 from __future__ import annotations
@@ -15,14 +25,112 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import math
+import os
+import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .._errors import EncdesignInputError
+from ..io._paths import OutputGuard, check_output_folder, check_outputs
 
 _CLI = Path(__file__).resolve().parent
 _PKG = _CLI.parent
+
+
+# ----------------------------------------------------------------------------- shared by commands
+
+SEED_MAX = 2**63 - 1
+"""Largest PRNG seed (JAX keys take a 64-bit integer)."""
+
+
+def int_arg(lower: int | None = None, upper: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type`` for an integer in ``[lower, upper]``."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if lower is not None and v < lower:
+            raise argparse.ArgumentTypeError(f"{v} is below {lower} ({_range(lower, upper)})")
+        if upper is not None and v > upper:
+            raise argparse.ArgumentTypeError(f"{v} is above {upper} ({_range(lower, upper)})")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def float_arg(
+    lower: float | None = None,
+    upper: float | None = None,
+    *,
+    lower_open: bool = False,
+) -> Callable[[str], float]:
+    """An argparse ``type`` for a finite number in ``[lower, upper]`` (``(lower, …`` with
+    ``lower_open``)."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{text!r} is not finite")
+        rng = _range(lower, upper, lower_open)
+        if lower is not None and (v < lower or (lower_open and v == lower)):
+            raise argparse.ArgumentTypeError(f"{text} is out of range ({rng})")
+        if upper is not None and v > upper:
+            raise argparse.ArgumentTypeError(f"{text} is out of range ({rng})")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+def _range(lower, upper, lower_open: bool = False) -> str:
+    lo = "" if lower is None else f"{lower:g} {'<' if lower_open else '<='} "
+    hi = "" if upper is None else f" <= {upper:g}"
+    return f"expected {lo}value{hi}"
+
+
+SEED = int_arg(0, SEED_MAX)
+"""argparse ``type`` of a PRNG seed: an integer ``0 … 2^63-1``."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line on stderr and exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def guard_outputs(
+    inputs: Sequence[tuple[str, str | os.PathLike]],
+    outputs: Sequence[tuple[str, str | os.PathLike | None]],
+    folders: Sequence[tuple[str, str | os.PathLike | None]] = (),
+) -> OutputGuard:
+    """Check outputs against inputs (refusing before any work) and guard them.
+
+    Args:
+        inputs: ``(label, path)`` of every file read, derived files included.
+        outputs: ``(label, path)`` of every file written (``None`` paths are skipped).
+        folders: ``(label, path)`` of output folders (``--plots DIR``).
+
+    Returns:
+        The guard to use as a context manager around the computation and writing.
+    """
+    outs = [(lab, p) for lab, p in outputs if p is not None]
+    dirs = [(lab, p) for lab, p in folders if p is not None]
+    check_outputs(inputs, outs)
+    for lab, d in dirs:
+        check_output_folder(lab, d, inputs, outs)
+    return OutputGuard([p for _, p in outs], [d for _, d in dirs])
+
+
+# ----------------------------------------------------------------------------- dispatch
 
 
 def _command_modules() -> dict[str, str]:
@@ -74,7 +182,7 @@ def _study_title(path: Path) -> str:
 
 
 def _run_study(argv: Sequence[str]) -> int:
-    p = argparse.ArgumentParser(prog="encdesign study", description="Run reproducible studies.")
+    p = OneLineParser(prog="encdesign study", description="Run reproducible studies.")
     sub = p.add_subparsers(dest="action", required=True)
     sub.add_parser("list", help="list the studies")
     r = sub.add_parser("run", help="run a study: encdesign study run NAME [flags]")
@@ -100,39 +208,83 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+"""Exit statuses of every command (the README states the contract)."""
+
+
+_NUMPY_REPR = re.compile(r"np\.(?:float|int|uint|complex|bool_|str_)\w*\(([^()]*)\)")
+
+
+def _one_line(text: object) -> str:
+    """A message on one line, NumPy scalar reprs (``np.float64(0.5)``) shown as plain values."""
+    return _NUMPY_REPR.sub(r"\1", " ".join(str(text).split()))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console entry point; returns the exit status (0 ok, 2 bad input)."""
+    """Console entry point; returns the exit status (0 ok, 1 failed, 2 bad input, 3 internal).
+
+    ``--debug`` (anywhere in ``argv``) or ``ENCDESIGN_DEBUG=1`` lets internal errors raise
+    with their traceback instead of the one-line message.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = os.environ.get("ENCDESIGN_DEBUG", "") not in ("", "0")
+    if "--debug" in argv:
+        debug = True
+        argv = [a for a in argv if a != "--debug"]
     if argv[:1] in (["--version"], ["-V"]):
         print(f"encdesign {_version()}")
-        return 0
+        return EXIT_OK
     commands = _command_modules()
     if not argv or argv[0] in ("-h", "--help"):
-        print("usage: encdesign [--version] COMMAND [...]\n\ncommands:")
+        print("usage: encdesign [--version] [--debug] COMMAND [...]\n\ncommands:")
         print(f"  {'study':16s} run or list the reproducible studies (studies/*.py)")
         for name, modname in commands.items():
             mod = importlib.import_module(modname)
             print(f"  {name:16s} {getattr(mod, 'HELP', '')}")
-        return 0 if argv else 2
+        return EXIT_OK if argv else EXIT_BAD_INPUT
     cmd, rest = argv[0], argv[1:]
     try:
         if cmd == "study":
             return _run_study(rest)
         if cmd not in commands:
             print(
-                f"encdesign: unknown command '{cmd}' "
+                f"encdesign: error: unknown command '{cmd}' "
                 f"(expected one of study, {', '.join(commands)})",
                 file=sys.stderr,
             )
-            return 2
+            return EXIT_BAD_INPUT
         mod = importlib.import_module(commands[cmd])
-        parser = argparse.ArgumentParser(prog=f"encdesign {cmd}", description=mod.HELP)
+        parser = OneLineParser(prog=f"encdesign {cmd}", description=mod.HELP)
         mod.configure(parser)
         args = parser.parse_args(rest)
         return int(mod.run(args) or 0)
     except EncdesignInputError as exc:
-        print(f"encdesign {cmd}: error: {exc}", file=sys.stderr)
-        return 2
+        print(f"encdesign {cmd}: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2, one line printed)
+        code = exc.code
+        return code if isinstance(code, int) else (EXIT_OK if code is None else EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        print(f"encdesign {cmd}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except MemoryError:
+        if debug:
+            raise
+        print(
+            f"encdesign {cmd}: error: out of memory (internal error; rerun with --debug "
+            "for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
+    except Exception as exc:
+        if debug:
+            raise
+        print(
+            f"encdesign {cmd}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} "
+            "(a bug; rerun with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

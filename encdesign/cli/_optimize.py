@@ -11,6 +11,7 @@ from ..design._cases import CaseRecorder
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
 from ..io._study import write_json
+from ._main import guard_outputs
 
 HELP = "solve a design problem (TOML): variables, objective, constraints, driver"
 
@@ -53,9 +54,16 @@ def print_result(summary: dict, stream=None) -> None:
 def run_and_report(args: argparse.Namespace, solve) -> int:
     """Load ``args.problem``, run ``solve(problem, recorder=, progress=)``, record the cases,
     print the result and write the ``--json`` summary; exit 0 on success, else 1."""
-    problem = load_problem(args.problem)
-    with CaseRecorder(args.cases) as rec:
-        result = solve(problem, recorder=rec, progress=not args.quiet)
+    with guard_outputs(
+        [("problem", args.problem)], [("--json", args.json), ("--cases", args.cases)]
+    ):
+        problem = load_problem(args.problem)
+        with CaseRecorder(args.cases) as rec:
+            result = solve(problem, recorder=rec, progress=not args.quiet)
+        return _report(args, result, rec)
+
+
+def _report(args: argparse.Namespace, result, rec: CaseRecorder) -> int:
     summary = result.summary()
     summary["n_cases"] = len(rec.cases)
     summary["cases_file"] = None if args.cases is None else str(args.cases)

@@ -15,6 +15,11 @@ import argparse
 import math
 from pathlib import Path
 
+from ._main import SEED, float_arg, guard_outputs, int_arg
+
+MAX_EDGES = 20_000_000
+"""Most edges ``sds simulate`` writes (sensors x marks x (revs + 1) x runs)."""
+
 HELP = "shifted-delta-sum recordings: simulate the reference device, or measure phi from edges"
 
 
@@ -23,73 +28,103 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", required=True)
     s = sub.add_parser("simulate", help="simulate an sds recording of the reference device")
     s.add_argument("--out", type=Path, required=True, help="output recording NAME.toml")
-    s.add_argument("--pole-pairs", type=int, default=6, help="motor pole pairs (3·p coils)")
-    s.add_argument("--fixed", type=int, default=2, help="fixed sensors, equally spaced")
-    s.add_argument("--moving", type=int, default=2, help="moving sensors, equally spaced")
-    s.add_argument("--marks", type=int, default=10_000, help="marks (edges) per revolution")
+    s.add_argument(
+        "--pole-pairs", type=int_arg(1, 1000), default=6, help="motor pole pairs (3·p coils)"
+    )
+    s.add_argument("--fixed", type=int_arg(1, 64), default=2, help="fixed sensors, equally spaced")
+    s.add_argument(
+        "--moving", type=int_arg(1, 64), default=2, help="moving sensors, equally spaced"
+    )
+    s.add_argument(
+        "--marks", type=int_arg(2, 10_000_000), default=10_000, help="marks (edges) per revolution"
+    )
     s.add_argument(
         "--phi-deg",
-        type=float,
+        type=float_arg(-1e6, 1e6),
         nargs="+",
         default=[0.0, 90.0, 180.0, 270.0],
         help="platform angles, one run each (deg)",
     )
-    s.add_argument("--revs", type=int, default=3, help="revolutions (readings) per run")
+    s.add_argument(
+        "--revs", type=int_arg(1, 100_000), default=3, help="revolutions (readings) per run"
+    )
     s.add_argument(
         "--errors",
         choices=["none", "reference"],
         default="reference",
         help="error physics besides ripple and mark errors (reference_errors())",
     )
-    s.add_argument("--seed", type=int, default=0, help="PRNG seed of disks and jitter")
+    s.add_argument("--seed", type=SEED, default=0, help="PRNG seed of disks and jitter")
     s.add_argument("--gzip", action="store_true", help="write the table as .csv.gz")
     m = sub.add_parser("measure", help="measure phi per run from an sds recording")
     m.add_argument("recording", type=Path, help="recording NAME.toml of kind sds")
-    m.add_argument("--revs-per-reading", type=int, default=1, help="revolutions per reading")
+    m.add_argument(
+        "--revs-per-reading",
+        type=int_arg(1, 100_000),
+        default=1,
+        help="revolutions per reading",
+    )
     m.add_argument("--json", type=Path, default=None, help="also write the result as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the action; 0 on success (bad input raises EncdesignInputError -> exit 2)."""
-    import jax
-
     from .._errors import input_error
-    from ..io._recording import load_recording
-    from ..io._sds_recording import sds_readings_from_recording, simulate_sds_recording
-    from ..physics._sds import reference_design, reference_errors
-    from ..physics._sds_errors import ARCSEC, SDSErrors
+    from ..io._paths import recording_input_files, recording_output_files
 
     if args.action == "simulate":
-        for name in ("pole_pairs", "fixed", "moving", "marks", "revs"):
-            v = getattr(args, name)
-            if v < 1:
-                raise input_error(f"--{name.replace('_', '-')}", f"got {v}", ">= 1")
-        key = jax.random.PRNGKey(args.seed)
-        k_disk, k_noise = jax.random.split(key)
-        design = reference_design(
-            args.fixed,
-            args.moving,
-            pole_pairs=args.pole_pairs,
-            marks_per_rev=args.marks,
-            key=k_disk,
-        )
-        errors = reference_errors() if args.errors == "reference" else SDSErrors()
-        phis = [math.radians(p) for p in args.phi_deg]
-        rec = simulate_sds_recording(
-            args.out,
-            design,
-            phis,
-            args.revs,
-            errors,
-            key=k_noise,
-            compress=args.gzip,
-            description=f"simulated SDS reference device, {args.pole_pairs} pole pairs, "
-            f"{args.fixed}+{args.moving} sensors, errors={args.errors}",
-        )
-        print(
-            f"wrote {args.out} ({rec.n_rows} edges, {len(phis)} run(s); table {rec.meta['data']})"
-        )
-        return 0
+        n_edges = (args.fixed + args.moving) * args.marks * (args.revs + 1) * len(args.phi_deg)
+        if n_edges > MAX_EDGES:
+            raise input_error(
+                "--fixed/--moving/--marks/--revs/--phi-deg",
+                f"{n_edges} edges",
+                f"at most {MAX_EDGES} edges ((fixed + moving) x marks x (revs + 1) x runs)",
+            )
+        outputs = [("--out", p) for p in recording_output_files(args.out, compress=args.gzip)]
+        with guard_outputs([], outputs):
+            return _simulate(args)
+    inputs = [("recording", p) for p in recording_input_files(args.recording)]
+    with guard_outputs(inputs, [("--json", args.json)]):
+        return _measure(args)
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    import jax
+
+    from ..io._sds_recording import simulate_sds_recording
+    from ..physics._sds import reference_design, reference_errors
+    from ..physics._sds_errors import SDSErrors
+
+    key = jax.random.PRNGKey(args.seed)
+    k_disk, k_noise = jax.random.split(key)
+    design = reference_design(
+        args.fixed,
+        args.moving,
+        pole_pairs=args.pole_pairs,
+        marks_per_rev=args.marks,
+        key=k_disk,
+    )
+    errors = reference_errors() if args.errors == "reference" else SDSErrors()
+    phis = [math.radians(p) for p in args.phi_deg]
+    rec = simulate_sds_recording(
+        args.out,
+        design,
+        phis,
+        args.revs,
+        errors,
+        key=k_noise,
+        compress=args.gzip,
+        description=f"simulated SDS reference device, {args.pole_pairs} pole pairs, "
+        f"{args.fixed}+{args.moving} sensors, errors={args.errors}",
+    )
+    print(f"wrote {args.out} ({rec.n_rows} edges, {len(phis)} run(s); table {rec.meta['data']})")
+    return 0
+
+
+def _measure(args: argparse.Namespace) -> int:
+    from ..io._recording import load_recording
+    from ..io._sds_recording import sds_readings_from_recording
+    from ..physics._sds_errors import ARCSEC
 
     res = sds_readings_from_recording(
         load_recording(args.recording), revs_per_reading=args.revs_per_reading

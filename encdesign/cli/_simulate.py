@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._main import SEED, guard_outputs
+
 HELP = "simulate a bench recording (multihead) from a design file"
 
 
@@ -12,7 +14,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Add the sub-command's arguments."""
     parser.add_argument("design", type=Path, help="design file (TOML, docs/design-file.md)")
     parser.add_argument("--out", type=Path, required=True, help="output recording NAME.toml")
-    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the read noise")
+    parser.add_argument("--seed", type=SEED, default=0, help="PRNG seed of the read noise")
     parser.add_argument(
         "--like",
         type=Path,
@@ -24,13 +26,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Load the design, simulate, write the recording; 0 on success."""
-    from ..design._design import load_design, simulate_recording
+    import numpy as np
 
-    design = load_design(args.design)
-    rec = simulate_recording(design, args.out, seed=args.seed, like=args.like, compress=args.gzip)
+    from ..design._design import load_design, simulate_recording
+    from ..io._paths import recording_input_files, recording_output_files
+
+    inputs = [("design", args.design)]
+    if args.like is not None:
+        inputs += [("--like", p) for p in recording_input_files(args.like)]
+    outputs = [("--out", p) for p in recording_output_files(args.out, compress=args.gzip)]
+    with guard_outputs(inputs, outputs):
+        design = load_design(args.design)
+        rec = simulate_recording(
+            design, args.out, seed=args.seed, like=args.like, compress=args.gzip
+        )
     data = rec.meta["data"]
     print(
         f"wrote {args.out} ({rec.n_rows} samples, {design.n_heads} heads, "
-        f"{len(set(rec.runs.tolist()))} run(s); table {data})"
+        f"{np.unique(rec.runs).size} run(s); table {data})"
     )
     return 0

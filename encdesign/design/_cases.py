@@ -21,14 +21,14 @@ import io
 import json
 import math
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._errors import input_error
+from .._errors import EncdesignInputError, input_error
+from ..io._paths import atomic_write_text
 
 FORMATS = (".jsonl", ".csv")
 
@@ -83,15 +83,7 @@ def _fmt(path: Path) -> str:
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    atomic_write_text(path, text, newline="")
 
 
 def cases_text(cases: Iterable[Case], fmt: str) -> str:
@@ -242,5 +234,9 @@ class CaseRecorder:
     def __enter__(self) -> CaseRecorder:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        # a refusal (bad input) leaves no case file behind; any other failure keeps the
+        # cases recorded so far
+        if exc_type is not None and issubclass(exc_type, EncdesignInputError):
+            return
         self.close()

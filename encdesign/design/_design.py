@@ -11,6 +11,7 @@ writes it as an ``encdesign-recording/1`` multihead recording.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,6 +28,7 @@ from ..io._recording import (
     _positive_number,
     load_recording,
     read_toml,
+    show,
     write_recording,
 )
 from ..physics._kinematics import EncoderModel, make_model, noisy_head_readings
@@ -129,8 +131,29 @@ _positive = _positive_number
 def _nonneg(where: str, v: Any) -> float:
     x = _number(where, v)
     if x < 0:
-        raise input_error(where, f"got {v!r}", "a non-negative number")
+        raise input_error(where, f"got {show(v)}", "a non-negative number")
     return x
+
+
+def _within(where: str, v: Any, limit: float, units: str, *, nonneg: bool = False) -> float:
+    """A finite number with ``|v| <= limit`` (and ``>= 0`` with ``nonneg``)."""
+    x = _number(where, v)
+    if abs(x) > limit or (nonneg and x < 0):
+        rng = f"0 <= value <= {limit:g}" if nonneg else f"|value| <= {limit:g}"
+        raise input_error(where, f"got {show(v)}", f"{rng} {units}".strip())
+    return x
+
+
+# Documented ranges (docs/design-file.md): beyond them a value cannot be physical.
+MAX_RADIUS_M = 10.0
+MAX_SPEED_REV_PER_S = 1e4  # 600,000 rpm
+MAX_TIME_S = 1e9  # 32 years
+MAX_SAMPLE_RATE_HZ = 1e9
+MAX_ANGLE_RAD = 1e6
+MAX_FREQ_HZ = 1e6
+MAX_NOISE_RAD = 0.1
+MAX_GRATING_RAD = 0.1
+MAX_GAP_M = 1.0
 
 
 def _int(where: str, v: Any, low: int = 0) -> int:
@@ -139,33 +162,51 @@ def _int(where: str, v: Any, low: int = 0) -> int:
     return int(v)
 
 
-def _list(where: str, v: Any, length: int | None = None, what: str = "") -> list[float]:
+def _list(
+    where: str,
+    v: Any,
+    length: int | None = None,
+    what: str = "",
+    limit: float | None = None,
+    units: str = "",
+) -> list[float]:
     if not isinstance(v, list):
-        raise input_error(where, f"got {v!r}", "a list of numbers")
+        raise input_error(where, f"got {show(v)}", "a list of numbers")
+    if length is None and len(v) > 10_000:
+        raise input_error(where, f"{len(v)} values", "at most 10000")
     if length is not None and len(v) != length:
         raise input_error(
             where, f"{len(v)} values", f"{length}, one per {what}" if what else str(length)
         )
+    if limit is not None:
+        return [_within(f"{where}[{i}]", x, limit, units) for i, x in enumerate(v)]
     return [_number(f"{where}[{i}]", x) for i, x in enumerate(v)]
 
 
-def _per_head(where: str, v: Any, n_heads: int, nonneg: bool = False) -> list[float]:
+def _per_head(
+    where: str,
+    v: Any,
+    n_heads: int,
+    nonneg: bool = False,
+    limit: float = math.pi,
+    units: str = "rad",
+) -> list[float]:
     """A list with one value per head, or one number applied to every head."""
     if isinstance(v, list):
         vals = _list(where, v, n_heads, "head in [heads].angles_deg")
+        wheres = [f"{where}[{i}]" for i in range(n_heads)]
     else:
         vals = [_number(where, v)] * n_heads
-    if nonneg:
-        for i, x in enumerate(vals):
-            if x < 0:
-                raise input_error(f"{where}[{i}]", f"got {x!r}", "a non-negative number")
+        wheres = [where] * n_heads
+    for w, x in zip(wheres, vals):
+        _within(w, x, limit, units, nonneg=nonneg)
     return vals
 
 
 def _table(where: str, raw: Mapping[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:
     tab = raw.get(name, {})
     if not isinstance(tab, dict):
-        raise input_error(f"{where}: {name}", f"got {tab!r}", f"a [{name}] table")
+        raise input_error(f"{where}: {name}", f"got {show(tab)}", f"a [{name}] table")
     unknown = sorted(set(tab) - allowed)
     if unknown:
         raise input_error(
@@ -232,22 +273,38 @@ def parse_design(raw: Mapping[str, Any], where: str = "design") -> Design:
 
     w = f"{where}: [disk]."
     radius = _positive(w + "optical_radius_m", disk["optical_radius_m"])
+    if radius > MAX_RADIUS_M:
+        raise input_error(
+            w + "optical_radius_m", f"got {show(radius)}", f"0 < value <= {MAX_RADIUS_M:g} m"
+        )
     ecc = _list(w + "eccentricity_m", disk.get("eccentricity_m", [0.0, 0.0]), 2, "axis (x, y)")
+    for i, e in enumerate(ecc):
+        _within(f"{w}eccentricity_m[{i}]", e, radius, "m (the radius)")
     tilt = _list(w + "tilt_rad", disk.get("tilt_rad", [0.0, 0.0]), 2, "axis (x, y)")
     for i, t in enumerate(tilt):
         if abs(t) >= 0.5:
-            raise input_error(f"{w}tilt_rad[{i}]", f"got {t!r}", "|tilt| < 0.5 rad")
-    gs = _list(w + "grating_sin_rad", disk.get("grating_sin_rad", []))
-    gc = _list(w + "grating_cos_rad", disk.get("grating_cos_rad", []))
+            raise input_error(f"{w}tilt_rad[{i}]", f"got {show(t)}", "|tilt| < 0.5 rad")
+    gs = _list(
+        w + "grating_sin_rad", disk.get("grating_sin_rad", []), limit=MAX_GRATING_RAD, units="rad"
+    )
+    gc = _list(
+        w + "grating_cos_rad", disk.get("grating_cos_rad", []), limit=MAX_GRATING_RAD, units="rad"
+    )
     lines = disk.get("grating_lines")
     if lines is not None:
         lines = _int(w + "grating_lines", lines, 1)
+        if lines > 10**9:
+            raise input_error(w + "grating_lines", f"got {lines}", "an integer 1 … 1000000000")
 
     w = f"{where}: [heads]."
     angles_raw = heads["angles_deg"]
     if not isinstance(angles_raw, list) or not angles_raw:
-        raise input_error(w + "angles_deg", f"got {angles_raw!r}", "a non-empty list of degrees")
-    angles = _list(w + "angles_deg", angles_raw)
+        raise input_error(
+            w + "angles_deg", f"got {show(angles_raw)}", "a non-empty list of degrees"
+        )
+    if len(angles_raw) > 1000:
+        raise input_error(w + "angles_deg", f"{len(angles_raw)} heads", "at most 1000 heads")
+    angles = _list(w + "angles_deg", angles_raw, limit=360.0, units="deg")
     n_heads = len(angles)
     ref = heads.get("reference_head")
     if ref is not None:
@@ -256,31 +313,43 @@ def parse_design(raw: Mapping[str, Any], where: str = "design") -> Design:
             raise input_error(
                 w + "reference_head", f"got {ref}", f"an index < {n_heads} (number of angles_deg)"
             )
-    placement = _per_head(w + "placement_error_rad", heads.get("placement_error_rad", 0.0), n_heads)
+    placement = _per_head(
+        w + "placement_error_rad", heads.get("placement_error_rad", 0.0), n_heads, limit=0.1
+    )
     beam = _per_head(w + "beam_tilt_rad", heads.get("beam_tilt_rad", 0.0), n_heads)
     for i, b in enumerate(beam):
         if abs(b) >= 1.0:
-            raise input_error(f"{w}beam_tilt_rad[{i}]", f"got {b!r}", "|tilt| < 1 rad")
+            raise input_error(f"{w}beam_tilt_rad[{i}]", f"got {show(b)}", "|tilt| < 1 rad")
     gap = _positive(w + "gap_m", heads.get("gap_m", 1e-3))
-    noise = _per_head(w + "noise_rad", heads.get("noise_rad", 0.0), n_heads, nonneg=True)
+    if gap > MAX_GAP_M:
+        raise input_error(w + "gap_m", f"got {show(gap)}", f"0 < value <= {MAX_GAP_M:g} m")
+    noise = _per_head(
+        w + "noise_rad", heads.get("noise_rad", 0.0), n_heads, nonneg=True, limit=MAX_NOISE_RAD
+    )
 
     w = f"{where}: [motion]."
-    ac = _list(w + "axial_cos_m", motion.get("axial_cos_m", []))
-    asn = _list(w + "axial_sin_m", motion.get("axial_sin_m", []))
-    runout = _nonneg(w + "runout_amplitude_m", motion.get("runout_amplitude_m", 0.0))
-    ratio = _number(w + "runout_ratio", motion.get("runout_ratio", 0.0))
-    rphase = _number(w + "runout_phase_rad", motion.get("runout_phase_rad", 0.0))
-    rfreq = _number(w + "runout_freq_hz", motion.get("runout_freq_hz", 0.0))
+    ac = _list(w + "axial_cos_m", motion.get("axial_cos_m", []), limit=radius, units="m")
+    asn = _list(w + "axial_sin_m", motion.get("axial_sin_m", []), limit=radius, units="m")
+    runout = _within(
+        w + "runout_amplitude_m", motion.get("runout_amplitude_m", 0.0), radius, "m", nonneg=True
+    )
+    ratio = _within(w + "runout_ratio", motion.get("runout_ratio", 0.0), 1e3, "")
+    rphase = _within(
+        w + "runout_phase_rad", motion.get("runout_phase_rad", 0.0), MAX_ANGLE_RAD, "rad"
+    )
+    rfreq = _within(w + "runout_freq_hz", motion.get("runout_freq_hz", 0.0), MAX_FREQ_HZ, "Hz")
 
     runs_raw = bench.get("runs", [{}])
     if not isinstance(runs_raw, list) or not runs_raw:
-        raise input_error(f"{where}: [bench].runs", f"got {runs_raw!r}", "[[bench.runs]] tables")
+        raise input_error(
+            f"{where}: [bench].runs", f"got {show(runs_raw)[:80]}", "[[bench.runs]] tables"
+        )
     runs = []
     total = 0
     for i, r in enumerate(runs_raw):
         wr = f"{where}: [[bench.runs]] #{i}"
         if not isinstance(r, dict):
-            raise input_error(wr, f"got {r!r}", "a table")
+            raise input_error(wr, f"got {show(r)[:80]}", "a table")
         unknown = sorted(set(r) - _RUN)
         if unknown:
             raise input_error(wr, f"unknown key(s) {', '.join(unknown)}", f"only {sorted(_RUN)}")
@@ -298,14 +367,28 @@ def parse_design(raw: Mapping[str, Any], where: str = "design") -> Design:
                 f"{wr}.start_angle_rad", r.get("start_angle_rad", d.start_angle_rad)
             ),
         )
+        for key, limit, units in (
+            ("speed_rev_per_s", MAX_SPEED_REV_PER_S, "rev/s"),
+            ("start_time_s", MAX_TIME_S, "s"),
+            ("end_time_s", MAX_TIME_S, "s"),
+            ("sample_rate_hz", MAX_SAMPLE_RATE_HZ, "Hz"),
+            ("start_angle_rad", MAX_ANGLE_RAD, "rad"),
+        ):
+            _within(f"{wr}.{key}", getattr(run, key), limit, units)
         if run.speed_rev_per_s == 0:
             raise input_error(f"{wr}.speed_rev_per_s", "got 0", "a non-zero speed in rev/s")
         if run.end_time_s <= run.start_time_s:
             raise input_error(
                 f"{wr}.end_time_s",
-                f"time goes backwards or stands still (start_time_s {run.start_time_s!r}, "
-                f"end_time_s {run.end_time_s!r})",
+                f"time goes backwards or stands still (start_time_s {show(run.start_time_s)}, "
+                f"end_time_s {show(run.end_time_s)})",
                 "end_time_s > start_time_s",
+            )
+        if (run.end_time_s - run.start_time_s) * run.sample_rate_hz > MAX_SAMPLES:
+            raise input_error(
+                wr,
+                f"{(run.end_time_s - run.start_time_s) * run.sample_rate_hz:.4g} samples",
+                f"at most {MAX_SAMPLES} samples in all runs together",
             )
         if run.n_samples < 2:
             raise input_error(wr, f"{run.n_samples} sample(s)", "at least 2 samples per run")
@@ -386,9 +469,7 @@ def simulate_bench(
         raise ValueError("simulate_bench: theta_rad is needed with t_s")
     if run is None:
         run = np.zeros(len(t_s), dtype=np.int64)
-    readings = np.asarray(
-        _simulate_jit(design.model, jnp.asarray(theta_rad), jnp.asarray(t_s), key)
-    )
+    readings = _simulate_chunked(design.model, np.asarray(theta_rad), np.asarray(t_s), key)
     if not np.all(np.isfinite(readings)):
         raise input_error(
             str(design.path or "design"),
@@ -405,6 +486,39 @@ def simulate_bench(
 @jax.jit
 def _simulate_jit(model: EncoderModel, theta: jax.Array, t: jax.Array, key: jax.Array):
     return noisy_head_readings(model, theta, t, key=key)
+
+
+SIMULATE_CHUNK = 65_536
+"""Samples simulated per compiled call: memory stays bounded by the chunk, not the bench."""
+
+
+def _simulate_chunked(
+    model: EncoderModel, theta: np.ndarray, t: np.ndarray, key: jax.Array
+) -> np.ndarray:
+    """Noisy head readings ``(n, H)`` in chunks of :data:`SIMULATE_CHUNK` samples.
+
+    A bench of at most one chunk uses ``key`` as is; longer benches draw chunk ``i``'s noise
+    from ``fold_in(key, i)``. The last chunk is padded to the chunk length so that every
+    call reuses one compilation.
+    """
+    n = theta.shape[0]
+    if n <= SIMULATE_CHUNK:
+        return np.asarray(_simulate_jit(model, jnp.asarray(theta), jnp.asarray(t), key))
+    out = None
+    for i, a in enumerate(range(0, n, SIMULATE_CHUNK)):
+        b = min(n, a + SIMULATE_CHUNK)
+        th, tt = theta[a:b], t[a:b]
+        if b - a < SIMULATE_CHUNK:
+            pad = SIMULATE_CHUNK - (b - a)
+            th = np.concatenate([th, np.full(pad, th[-1])])
+            tt = np.concatenate([tt, np.full(pad, tt[-1])])
+        r = np.asarray(
+            _simulate_jit(model, jnp.asarray(th), jnp.asarray(tt), jax.random.fold_in(key, i))
+        )
+        if out is None:
+            out = np.empty((n, r.shape[1]))
+        out[a:b] = r[: b - a]
+    return out
 
 
 def simulate_recording(
@@ -466,4 +580,5 @@ def simulate_recording(
         description=desc,
         provenance=provenance,
         compress=compress,
+        source=str(design.path or "design"),
     )

@@ -44,7 +44,7 @@ from ..physics._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
 from ._drivers import build_normals, map_builds
-from ._spec import ProblemObjective, VariableInfo
+from ._spec import ModelLimit, ProblemObjective, VariableInfo
 from ._tolerance import tolerance_cost
 
 __all__ = [
@@ -716,6 +716,8 @@ PROBLEM_OBJECTIVES: dict[str, ProblemObjective] = {
         },
         outputs=("sensitivity",),
         build=_build_sensitivity,
+        # n_builds = 0: the nominal sensitivity, without placement-error builds
+        model_limits={"n_builds": ModelLimit(0, 10_000_000)},
     ),
     "residual": ProblemObjective(
         name="residual",

@@ -52,10 +52,11 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import input_error
-from ..io._recording import read_toml
+from ..io._recording import read_toml, show
 from ._objectives import PROBLEM_OBJECTIVES
 from ._spec import ProblemObjective as ProblemObjective
 from ._spec import VariableInfo as VariableInfo
+from ._spec import model_limit
 
 # unit name -> (SI unit, factor to SI)
 UNITS: dict[str, tuple[str, float]] = {
@@ -75,6 +76,9 @@ UNITS: dict[str, tuple[str, float]] = {
     "ns": ("s", 1e-9),
     "1": ("1", 1.0),
 }
+
+SEED_MAX = 2**63 - 1  # JAX keys take a 64-bit seed
+MAX_GRID_POINTS = 10_000_000  # a grid beyond this does not fit in memory as one array
 
 DRIVER_KINDS = ("bfgs", "lbfgsb", "lm", "grid", "lhs")
 _TOP_KEYS = {"problem", "model", "variables", "constraints", "yield", "driver", "sweep"}
@@ -196,9 +200,9 @@ def _where(path: Path | str, *keys: str) -> str:
 
 def _num(value: Any, where: str, what: str = "a number") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise input_error(where, f"{value!r} is not a number", what)
+        raise input_error(where, f"{show(value)[:60]} is not a number", what)
     if not math.isfinite(float(value)):
-        raise input_error(where, f"{value!r} is not finite", what)
+        raise input_error(where, f"{show(value)} is not finite", what)
     return float(value)
 
 
@@ -279,7 +283,14 @@ def parse_problem(
     if registry is None:
         registry = PROBLEM_OBJECTIVES
     src = str(source)
+    if not isinstance(data, Mapping):
+        raise input_error(src, "not a TOML table")
     _check_keys(data, _TOP_KEYS, src)
+    for key in _TOP_KEYS:
+        if key in data and not isinstance(data[key], Mapping):
+            raise input_error(
+                _where(src, key), f"{show(data[key])[:60]} is not a table", f"a [{key}] table"
+            )
     head = data.get("problem")
     if not isinstance(head, Mapping):
         raise input_error(src, "no [problem] table", "[problem] with name and objective")
@@ -296,8 +307,10 @@ def parse_problem(
     if sense not in ("minimize", "maximize"):
         raise input_error(_where(src, "problem", "sense"), f"{sense!r}", "minimize or maximize")
     seed = head.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise input_error(_where(src, "problem", "seed"), f"{seed!r}", "an integer >= 0")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
+        raise input_error(
+            _where(src, "problem", "seed"), f"{show(seed)}", f"an integer 0 … {SEED_MAX} (2^63-1)"
+        )
     model = dict(spec.model)
     for k, v in dict(data.get("model", {})).items():
         if k not in spec.model:
@@ -320,10 +333,25 @@ def parse_problem(
         if not ok:
             raise input_error(
                 _where(src, "model", k),
-                f"{v!r}",
+                f"{show(v)[:60]}",
                 f"a value like {default!r} ({type(default).__name__})",
             )
+        if isinstance(v, float) and not math.isfinite(v):
+            raise input_error(
+                _where(src, "model", k), f"{show(v)} is not finite", "a finite number"
+            )
+        limit = model_limit(k, spec)
+        if limit is not None and not isinstance(v, bool | list | tuple) and not limit.admits(v):
+            raise input_error(_where(src, "model", k), f"{show(v)}", limit.describe())
         model[k] = float(v) if isinstance(default, float) else v
+    if "n_angles" in model and "max_order" in model:
+        n_ang, order = int(model["n_angles"]), int(model["max_order"])
+        if n_ang < 2 * order + 1:
+            raise input_error(
+                _where(src, "model", "n_angles"),
+                f"{n_ang} angles cannot resolve max_order = {order}",
+                f"n_angles >= 2 * max_order + 1 = {2 * order + 1}",
+            )
     vtables = data.get("variables", {})
     if not isinstance(vtables, Mapping) or not vtables:
         raise input_error(src, "no [variables.*] tables", "at least one design variable")
@@ -351,7 +379,7 @@ def parse_problem(
         constraints.append(Constraint(out, lo, hi))
     ytarget = None
     if "yield" in data:
-        ytarget = _yield(data["yield"], src)
+        ytarget = _yield(data["yield"], src, spec.yield_units)
     elif spec.requires_yield:
         raise input_error(src, f"objective {obj_name!r} needs a [yield] table")
     driver = dict(data.get("driver", {}))
@@ -360,6 +388,17 @@ def parse_problem(
     sweep = dict(data.get("sweep", {}))
     sweep.setdefault("kind", "grid")
     _check_driver(sweep, _where(src, "sweep"), ("grid", "lhs"))
+    n_cont = sum(not v.discrete for v in variables)
+    for table, label in ((driver, "driver"), (sweep, "sweep")):
+        if table["kind"] == "grid" and n_cont:
+            ppd = int(table.get("points_per_dim", 11))
+            if ppd**n_cont > MAX_GRID_POINTS:
+                raise input_error(
+                    _where(src, label, "points_per_dim"),
+                    f"{ppd}^{n_cont} = {ppd**n_cont:.3g} grid points",
+                    f"at most {MAX_GRID_POINTS} points "
+                    f"(points_per_dim <= {int(MAX_GRID_POINTS ** (1 / n_cont) + 1e-9)})",
+                )
     if driver["kind"] == "lm" and "residuals" not in spec.outputs:
         raise input_error(
             _where(src, "driver", "kind"),
@@ -382,7 +421,7 @@ def parse_problem(
     )
 
 
-def _yield(table: Any, src: str) -> YieldTarget:
+def _yield(table: Any, src: str, si_units: str = "rad") -> YieldTarget:
     where = _where(src, "yield")
     if not isinstance(table, Mapping):
         raise input_error(where, f"{table!r} is not a table", "target, spec, n_builds")
@@ -407,9 +446,11 @@ def _yield(table: Any, src: str) -> YieldTarget:
             f"failing build is allowed, so the target cannot be told apart from 100 %",
             f"n_builds >= {math.ceil(1.0 / (1.0 - target))} or a lower target",
         )
-    units = table.get("spec_units", "rad")
+    units = table.get("spec_units", si_units)
+    if not isinstance(units, str):
+        raise input_error(f"{where}.spec_units", f"{show(units)} is not a string", "a unit name")
     spec = _num(table["spec"], f"{where}.spec")
-    spec_si = to_si(spec, units, f"{where}.spec_units")
+    spec_si = to_si(spec, units, f"{where}.spec_units", si_units)
     if spec_si <= 0.0:
         raise input_error(f"{where}.spec", f"{spec!r}", "a positive accuracy spec")
     return YieldTarget(target, spec_si, int(n))
@@ -420,16 +461,17 @@ def _check_driver(table: dict[str, Any], where: str, kinds: tuple[str, ...]) -> 
     if kind not in kinds:
         raise input_error(f"{where}.kind", f"unknown driver {kind!r}", f"one of {', '.join(kinds)}")
     ints = {"max_steps": 1, "n": 1, "points_per_dim": 2, "chunk_size": 1}
+    int_max = 10_000_000
     floats = {"gtol", "rtol", "atol", "penalty"}
     _check_keys(table, {"kind", *ints, *floats}, where)
     for k, lo in ints.items():
         if k in table:
             v = table[k]
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise input_error(f"{where}.{k}", f"{v!r}", f"an integer >= {lo}")
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= int_max:
+                raise input_error(f"{where}.{k}", f"{show(v)[:60]}", f"an integer {lo} … {int_max}")
     for k in floats:
         if k in table and _num(table[k], f"{where}.{k}") <= 0:
-            raise input_error(f"{where}.{k}", f"{table[k]!r}", "a positive number")
+            raise input_error(f"{where}.{k}", f"{show(table[k])}", "a positive number")
 
 
 def load_problem(

@@ -49,6 +49,9 @@ class ProblemObjective:
             scalar (SI) to output name -> JAX value (scalars; a ``"residuals"`` vector for
             the ``lm`` driver). ``evaluate`` must be differentiable in ``x``.
         requires_yield: the problem must have a ``[yield]`` table.
+        model_limits: ``[model]`` key -> :class:`ModelLimit` (documented range), overriding
+            :data:`DEFAULT_MODEL_LIMITS` for this objective.
+        yield_units: SI unit of the error metric a ``[yield]`` spec bounds.
     """
 
     name: str
@@ -58,3 +61,88 @@ class ProblemObjective:
     outputs: tuple[str, ...]
     build: Callable[[Any, dict[str, Any]], Callable[[dict[str, Any]], dict[str, Any]]]
     requires_yield: bool = False
+    model_limits: Mapping[str, ModelLimit] = dataclasses.field(default_factory=dict)
+    yield_units: str = "rad"
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelLimit:
+    """The documented range of one ``[model]`` setting (SI).
+
+    Attributes:
+        lower, upper: allowed range (``lower_open``: ``lower`` itself excluded).
+        units: SI unit of the value (for messages), ``"1"`` when dimensionless.
+        choices: allowed values of a string setting.
+    """
+
+    lower: float = -math.inf
+    upper: float = math.inf
+    lower_open: bool = False
+    units: str = "1"
+    choices: tuple[str, ...] = ()
+
+    def describe(self) -> str:
+        """The range in words, e.g. ``"0 < value <= 10 m"``."""
+        if self.choices:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        unit = "" if self.units == "1" else f" {self.units}"
+        lo = (
+            "" if self.lower == -math.inf else f"{self.lower:g} {'<' if self.lower_open else '<='} "
+        )
+        hi = "" if self.upper == math.inf else f" <= {self.upper:g}"
+        return f"{lo}value{hi}{unit}".strip()
+
+    def admits(self, v: Any) -> bool:
+        """Whether ``v`` lies in the range (or among the choices)."""
+        if self.choices:
+            return v in self.choices
+        x = float(v)
+        if not math.isfinite(x):
+            return False
+        if x < self.lower or (self.lower_open and x == self.lower):
+            return False
+        return x <= self.upper
+
+
+_SIGMA_RAD = ModelLimit(lower=0.0, upper=1.0, units="rad")
+
+DEFAULT_MODEL_LIMITS: dict[str, ModelLimit] = {
+    "radius_m": ModelLimit(0.0, 10.0, lower_open=True, units="m"),
+    "reference_angle_rad": ModelLimit(-2 * math.pi, 2 * math.pi, units="rad"),
+    "tilt_rad": ModelLimit(-0.5, 0.5, units="rad"),
+    "gap_m": ModelLimit(0.0, 1.0, lower_open=True, units="m"),
+    "n_heads": ModelLimit(2, 1000),
+    "max_order": ModelLimit(1, 10_000),
+    "grating_orders": ModelLimit(0, 10_000),
+    "axial_orders": ModelLimit(0, 10_000),
+    "n_angles": ModelLimit(4, 10_000_000),
+    "n_builds": ModelLimit(1, 10_000_000),
+    "metric": ModelLimit(choices=("rms", "peak")),
+    "percentile": ModelLimit(0.0, 100.0, lower_open=True),
+    "smooth_width": ModelLimit(0.0, 10.0, lower_open=True),
+    "chunk_size": ModelLimit(1, 1_000_000),
+    "pole_pairs": ModelLimit(1, 1000),
+    "n_sensors": ModelLimit(1, 1000),
+    "marks_per_rev": ModelLimit(2, 100_000_000),
+    "n_phi": ModelLimit(1, 1_000_000),
+    "speed_ripple": ModelLimit(0.0, 1.0),
+    "sigma_placement": _SIGMA_RAD,
+}
+"""Ranges of the ``[model]`` settings of the built-in objectives, by name. Settings named
+``sigma_*`` (a standard deviation), ``cost_ref_*`` (a cost reference) and ``*_rad`` / ``*_m``
+tolerances without an entry must be finite and >= 0; every other number finite."""
+
+
+def model_limit(name: str, objective: ProblemObjective | None = None) -> ModelLimit | None:
+    """The range of ``[model]`` setting ``name`` (objective's own, then the defaults)."""
+    if objective is not None and name in objective.model_limits:
+        return objective.model_limits[name]
+    if name in DEFAULT_MODEL_LIMITS:
+        return DEFAULT_MODEL_LIMITS[name]
+    if name.startswith("sigma_"):
+        return ModelLimit(lower=0.0, upper=1.0)
+    if name.startswith("cost_ref_"):
+        return ModelLimit(lower=0.0, upper=1e6)
+    if name.endswith("_rad"):
+        return ModelLimit(lower=0.0, upper=1.0, units="rad")
+    return None

@@ -43,6 +43,7 @@ import numpy as np
 
 from .._errors import input_error
 from ._recording import Recording, write_recording
+from ._table import read_columns, row_line
 
 NMM_PROVENANCE = {
     "source": "github.com/matusm/NmmQuad, TestData/results/test01_XYZ_f_quad_{X,Y}_raw.csv",
@@ -62,33 +63,43 @@ ODRIVE_STATOR_SLOTS = 12
 ODRIVE_COUNTS_PER_REV = 8192
 
 
+NMM_COLUMNS = ["Phase (deg)", "Radius", "Roundness deviation"]
+
+
 def read_nmm_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read an NmmQuad ``*_raw.csv``; return ``(phase_rad, radius_counts)``.
 
+    Read by the recordings' CSV reader (:func:`encdesign.io._table.read_columns`): a BOM,
+    CRLF, blank lines, trailing commas and gzip are read; binary data, a bad cell or a
+    short row is refused naming its line.
+
     Raises:
-        EncdesignInputError: wrong header, non-numeric or non-finite values, negative radius.
+        EncdesignInputError: wrong header, non-numeric or non-finite values, radius <= 0.
     """
     path = Path(path)
     where = str(path)
-    if not path.exists():
-        raise input_error(where, "file not found")
-    with open(path, encoding="utf-8") as fh:
-        header = [h.strip() for h in fh.readline().split(",")]
-    expected = ["Phase (deg)", "Radius", "Roundness deviation"]
-    if header != expected:
-        raise input_error(where, f"header {header}", f"the NmmQuad columns {expected}")
-    try:
-        a = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    except ValueError as exc:
-        raise input_error(where, f"non-numeric data ({exc})", "three numeric columns") from None
-    if a.shape[1] != 3 or a.shape[0] < 3:
-        raise input_error(where, f"table of shape {a.shape}", "at least 3 rows of 3 columns")
-    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
-    if bad.size:
-        raise input_error(f"{where}, line {int(bad[0]) + 2}", "non-finite value", "finite")
+    header, cols, ref = read_columns(path, int_columns=())
+    if header != NMM_COLUMNS:
+        raise input_error(where, f"header {header}", f"the NmmQuad columns {NMM_COLUMNS}")
+    a = np.stack([cols[c] for c in NMM_COLUMNS], axis=1)
+    if a.shape[0] < 3:
+        raise input_error(where, f"{a.shape[0]} data row(s)", "at least 3 rows")
+    for j, name in enumerate(NMM_COLUMNS):
+        bad = np.flatnonzero(~(np.abs(a[:, j]) <= 1e100))
+        if bad.size:
+            i = int(bad[0])
+            raise input_error(
+                f"{where}, line {row_line(ref, i)}, column '{name}'",
+                f"non-finite value {a[i, j].item()!r}",
+                "a finite number",
+            )
     if np.any(a[:, 1] <= 0):
-        row = int(np.flatnonzero(a[:, 1] <= 0)[0]) + 2
-        raise input_error(f"{where}, line {row}, column 'Radius'", "radius <= 0", "> 0")
+        i = int(np.flatnonzero(a[:, 1] <= 0)[0])
+        raise input_error(
+            f"{where}, line {row_line(ref, i)}, column 'Radius'",
+            f"radius {a[i, 1].item()!r}",
+            "> 0",
+        )
     return np.deg2rad(a[:, 0]), a[:, 1]
 
 
@@ -115,25 +126,66 @@ def import_nmm(
         {"sa": r * np.cos(phase), "sb": r * np.sin(phase)},
         description=f"NMM-1 {axis} interferometer Lissajous capture (ADC counts, phase-sorted)",
         provenance=NMM_PROVENANCE,
+        source=str(src),
     )
 
 
+_NPY_MAGIC = b"\x93NUMPY"
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+
+
 def read_odrive_npy(path: str | os.PathLike) -> np.ndarray:
-    """Read an ODrive ``slow2`` record: float64 ``[3, N]`` (t s, position counts, Iq A)."""
+    """Read an ODrive ``slow2`` record: float64 ``[3, N]`` (t s, position counts, Iq A).
+
+    The file is memory-mapped (read only), so its size does not count against memory until
+    it is converted. Refused in one line: a ``.npz`` archive, a file that is not ``.npy``
+    (binary garbage, text, a pickle), a truncated array, the wrong shape or dtype,
+    non-finite values, time that does not increase.
+    """
     path = Path(path)
     where = str(path)
     if not path.exists():
         raise input_error(where, "file not found")
+    if path.is_dir():
+        raise input_error(where, "is a folder", "a NumPy .npy file")
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    if magic.startswith(_ZIP_MAGIC):
+        raise input_error(
+            where,
+            "a .npz archive (a zip of arrays), not a .npy array",
+            "a .npy file: save the [3, N] array with numpy.save",
+        )
+    if magic != _NPY_MAGIC:
+        raise input_error(where, "not a NumPy .npy file (no .npy header)", "a .npy float array")
     try:
-        a = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise input_error(where, f"cannot read ({exc})", "a NumPy .npy float array") from None
+        a = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise input_error(
+            where, f"cannot read ({_one_line(exc)})", "a complete NumPy .npy float array"
+        ) from None
     if a.ndim != 2 or a.shape[0] != 3 or a.shape[1] < 3 or a.dtype.kind != "f":
         raise input_error(where, f"array {a.dtype}{list(a.shape)}", "float array of shape [3, N]")
-    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=0))
-    if bad.size:
-        raise input_error(f"{where}, sample {int(bad[0])}", "non-finite value", "finite")
+    chunk = 1 << 20
+    for s0 in range(0, a.shape[1], chunk):
+        blk = np.asarray(a[:, s0 : s0 + chunk], dtype=np.float64)
+        bad = np.flatnonzero(~np.all(np.abs(blk) <= 1e100, axis=0))
+        if bad.size:
+            raise input_error(f"{where}, sample {s0 + int(bad[0])}", "non-finite value", "finite")
+    t = np.asarray(a[0], dtype=np.float64)
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise input_error(
+            f"{where}, sample {k}",
+            f"time goes backwards or repeats ({t[k - 1].item()!r} then {t[k].item()!r} s)",
+            "strictly increasing time in row 0",
+        )
     return a
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def import_odrive(
@@ -150,28 +202,51 @@ def import_odrive(
         motor={"pole_pairs": ODRIVE_POLE_PAIRS, "stator_slots": ODRIVE_STATOR_SLOTS},
         description=f"ODrive brushless motor at 0.1 rev/s, velocity control ({label})",
         provenance=ODRIVE_PROVENANCE,
+        source=str(src),
     )
+
+
+REALDATA_JOBS = (
+    ("nmm", "nmm_X_raw.csv", "nmm_x.toml"),
+    ("nmm", "nmm_Y_raw.csv", "nmm_y.toml"),
+    ("odrive", "odrive_slow2_nocomp_0.npy", "odrive_nocomp.toml"),
+    ("odrive", "odrive_slow2_comp_0.npy", "odrive_comp.toml"),
+    ("odrive", "odrive_slow2_nocomp_1.npy", "odrive_nocomp_1.toml"),
+    ("odrive", "odrive_slow2_comp_1.npy", "odrive_comp_1.toml"),
+    ("moteus", "moteus_encoder_cal.txt", "moteus_cal.toml"),
+    ("magalpha", "magalpha_calibration_example.csv", "magalpha_cal.toml"),
+)
+"""The shared recordings :func:`import_realdata_folder` converts: (source, file, output)."""
+
+
+def realdata_jobs(src_dir: str | os.PathLike, out_dir: str | os.PathLike) -> list[tuple]:
+    """``(source, input path, output TOML path)`` of every conversion of the folder."""
+    src_dir, out_dir = Path(src_dir), Path(out_dir)
+    return [(kind, src_dir / src, out_dir / dst) for kind, src, dst in REALDATA_JOBS]
 
 
 def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLike) -> list[Path]:
     """Convert the shared recordings found in ``src_dir`` into ``out_dir``.
 
+    Every source is read and checked before anything is written, so a bad source leaves
+    ``out_dir`` as it was.
+
     Returns the TOML paths written: ``nmm_x``, ``nmm_y``, ``odrive_nocomp``, ``odrive_comp``,
-    ``moteus_cal``, ``magalpha_cal``.
+    ``odrive_nocomp_1``, ``odrive_comp_1``, ``moteus_cal``, ``magalpha_cal``.
     """
-    src_dir, out_dir = Path(src_dir), Path(out_dir)
-    jobs = [
-        (import_nmm, "nmm_X_raw.csv", "nmm_x.toml"),
-        (import_nmm, "nmm_Y_raw.csv", "nmm_y.toml"),
-        (import_odrive, "odrive_slow2_nocomp_0.npy", "odrive_nocomp.toml"),
-        (import_odrive, "odrive_slow2_comp_0.npy", "odrive_comp.toml"),
-        (import_moteus, "moteus_encoder_cal.txt", "moteus_cal.toml"),
-        (import_magalpha, "magalpha_calibration_example.csv", "magalpha_cal.toml"),
-    ]
+    jobs = realdata_jobs(src_dir, out_dir)
+    for kind, src, _ in jobs:  # read and check all first
+        _READERS[kind](src)
     written = []
-    for fn, src, dst in jobs:
-        fn(src_dir / src, out_dir / dst)
-        written.append(out_dir / dst)
+    importers = {
+        "nmm": import_nmm,
+        "odrive": import_odrive,
+        "moteus": import_moteus,
+        "magalpha": import_magalpha,
+    }
+    for kind, src, dst in jobs:
+        importers[kind](src, dst)
+        written.append(dst)
     return written
 
 
@@ -338,3 +413,12 @@ def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Reco
         description="MagAlpha magnetic angle sensor against a reference angle, one turn",
         provenance=prov,
     )
+
+
+_READERS = {
+    "nmm": read_nmm_csv,
+    "odrive": read_odrive_npy,
+    "moteus": read_moteus_cal,
+    "magalpha": read_magalpha_csv,
+}
+"""Source kind -> the reader that checks a file without writing anything."""

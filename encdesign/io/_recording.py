@@ -19,12 +19,9 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import gzip
-import io
 import math
 import os
 import re
-import tempfile
 import tomllib
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -33,10 +30,13 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from .._errors import input_error
+from .._errors import EncdesignInputError, input_error
+from ._paths import atomic_output
 from ._sds_format import check_sds_columns
+from ._table import read_columns, row_line
 
 FORMAT = "encdesign-recording/1"
+MAX_TOML_BYTES = 16 * 2**20  # a recording, design or problem TOML is metadata only
 TOP_LEVEL_KEYS = {"format", "kind", "data", "description", "encoder", "motor", "provenance"}
 
 
@@ -50,12 +50,15 @@ class Recording:
         columns: column name -> 1-D numpy array, all of one length. Numeric columns are
             float64 (``run`` and ``mark`` are int64); the ``sds`` ``sensor`` column is str.
         path: the TOML file it came from (``None`` when built in memory).
+        table: the data table's file name, mapping rows to file lines
+            (:class:`~encdesign.io._table.TableRef`; ``None`` when built in memory).
     """
 
     kind: str
     meta: dict[str, Any]
     columns: dict[str, np.ndarray]
     path: Path | None = None
+    table: str | None = None
 
     @property
     def encoder(self) -> dict[str, Any]:
@@ -132,10 +135,37 @@ class KindSpec:
 # ----------------------------------------------------------------------------- checkers
 
 
+def show(v: Any) -> str:
+    """``repr`` of a value for messages, NumPy scalars as plain numbers (no ``np.float64(…)``)."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    return repr(v)
+
+
 def _finite_number(where: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise input_error(where, f"got {v!r}", "a finite number")
+        raise input_error(where, f"got {show(v)}", "a finite number")
     return float(v)
+
+
+def number_in(lower: float, upper: float, units: str = "", *, lower_open: bool = True):
+    """A checker for a finite number in ``(lower, upper]`` (``[lower, upper]`` when not
+    ``lower_open``); ``units`` only for the message."""
+    u = f" {units}" if units else ""
+    if lower == 0.0 and lower_open:
+        rng = f"a positive number <= {upper:g}{u}"
+    else:
+        rng = f"{lower:g} {'<' if lower_open else '<='} value <= {upper:g}{u}"
+
+    def check(where: str, v: Any) -> float:
+        x = _finite_number(where, v)
+        if x < lower or (lower_open and x == lower) or x > upper:
+            raise input_error(where, f"got {show(v)}", rng)
+        return x
+
+    return check
 
 
 def _positive_number(where: str, v: Any) -> float:
@@ -157,10 +187,21 @@ def _nonneg_int(where: str, v: Any) -> int:
     return int(v)
 
 
+def int_in(lower: int, upper: int):
+    """A checker for an integer in ``[lower, upper]`` (bools refused)."""
+
+    def check(where: str, v: Any) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or not lower <= v <= upper:
+            raise input_error(where, f"got {show(v)[:40]}", f"an integer {lower} … {upper}")
+        return int(v)
+
+    return check
+
+
 def _angle_list(where: str, v: Any) -> list[float]:
-    if not isinstance(v, list) or len(v) == 0:
-        raise input_error(where, f"got {v!r}", "a non-empty list of angles in degrees")
-    return [_finite_number(f"{where}[{i}]", x) for i, x in enumerate(v)]
+    if not isinstance(v, list) or len(v) == 0 or len(v) > 1000:
+        raise input_error(where, f"got {show(v)[:80]}", "a list of 1 … 1000 angles in degrees")
+    return [_ANGLE_DEG(f"{where}[{i}]", x) for i, x in enumerate(v)]
 
 
 def _string(where: str, v: Any) -> str:
@@ -185,12 +226,51 @@ def _table(where: str, v: Any) -> dict:
     return v
 
 
+_ANGLE_DEG = number_in(-360.0, 360.0, "deg", lower_open=False)
+_RADIUS_M = number_in(0.0, 10.0, "m")
+
+# Largest magnitude of a cell, by column: beyond it a value cannot be physical (a time of
+# 1e12 s is 30,000 years; an unwrapped angle of 1e12 rad is 1.6e11 turns) and sums of
+# squares of the rest stay finite. Columns of any unit (quadrature signals) get 1e100.
+COLUMN_LIMITS: dict[str, tuple[float, str]] = {
+    "t": (1e12, "s"),
+    "theta": (1e12, "rad"),
+    "theta_ref": (1e12, "rad"),
+    "phi_ref": (1e12, "rad"),
+    "counts": (1e18, "counts"),
+    "current_a": (1e6, "A"),
+    "temp_c": (1e4, "degC"),
+}
+_HEAD_LIMIT = (1e12, "rad")
+_ANY_UNIT_LIMIT = (1e100, "")
+
+
+def _column_limit(name: str) -> tuple[float, str]:
+    if name in COLUMN_LIMITS:
+        return COLUMN_LIMITS[name]
+    if re.fullmatch(r"h\d+", name):
+        return _HEAD_LIMIT
+    return _ANY_UNIT_LIMIT
+
+
 # ----------------------------------------------------------------------------- kinds
 
 
 def _multihead_required(meta: dict) -> list[str]:
     n = len(meta.get("encoder", {}).get("head_angles_deg", []))
     return ["t"] + [f"h{k}" for k in range(n)]
+
+
+def _multihead_meta_check(where: str, meta: dict) -> None:
+    enc = meta["encoder"]
+    n = len(enc["head_angles_deg"])
+    ref = enc.get("reference_head")
+    if ref is not None and ref >= n:
+        raise input_error(
+            f"{where}: [encoder].reference_head",
+            f"got {ref}",
+            f"an index < {n} (number of head_angles_deg)",
+        )
 
 
 def _multihead_check(where: str, meta: dict, cols: dict) -> None:
@@ -201,13 +281,6 @@ def _multihead_check(where: str, meta: dict, cols: dict) -> None:
             where,
             "one head needs a theta_ref column (head_angles_deg lists 1 head)",
             "a theta_ref column (one sensor against a reference) or at least two heads",
-        )
-    ref = enc.get("reference_head")
-    if ref is not None and ref >= n:
-        raise input_error(
-            f"{where}: [encoder].reference_head",
-            f"got {ref}",
-            f"an index < {n} (number of head_angles_deg)",
         )
     extra = sorted(c for c in cols if re.fullmatch(r"h\d+", c) and int(c[1:]) >= n)
     if extra:
@@ -220,22 +293,59 @@ def _multihead_check(where: str, meta: dict, cols: dict) -> None:
 
 
 def _check_time_increasing(where: str, cols: dict, tcol: str) -> None:
+    """Time strictly increasing within each run (vectorised: one stable sort by run)."""
     if tcol not in cols:
         return
     t = cols[tcol]
-    run = cols.get("run", np.zeros(len(t), dtype=np.int64))
-    for r in np.unique(run):
-        idx = np.flatnonzero(run == r)
-        dt = np.diff(t[idx])
-        bad = np.flatnonzero(dt <= 0)
-        if bad.size:
-            row = int(idx[bad[0] + 1]) + 2  # header is line 1
+    if len(t) < 2:
+        return
+    run = cols.get("run")
+    if run is None or bool(np.all(run[1:] >= run[:-1])):
+        order = None
+        same = np.ones(len(t) - 1, bool) if run is None else run[1:] == run[:-1]
+        bad = np.flatnonzero(same & (np.diff(t) <= 0))
+    else:
+        order = np.argsort(run, kind="stable")
+        rs = run[order]
+        bad = np.flatnonzero((rs[1:] == rs[:-1]) & (np.diff(t[order]) <= 0))
+    if bad.size:
+        a, b = int(bad[0]), int(bad[0]) + 1
+        if order is not None:
+            a, b = int(order[a]), int(order[b])
+        r = 0 if run is None else int(run[b])
+        raise input_error(
+            f"{where}, line {row_line(where, b)}, column '{tcol}'",
+            f"time goes backwards or repeats ({show(t[a])} at line {row_line(where, a)}, "
+            f"then {show(t[b])}) within run {r}",
+            "strictly increasing time within each run",
+        )
+
+
+def check_runs_contiguous(rec: Recording) -> None:
+    """Refuse a recording whose runs' rows are interleaved (run 0, then 1, then 0 again).
+
+    Raises:
+        EncdesignInputError: naming the table and the line where a run resumes.
+    """
+    run = rec.runs
+    if run.size < 2:
+        return
+    change = np.flatnonzero(run[1:] != run[:-1]) + 1
+    starts = run[np.concatenate([[0], change])]
+    _, first = np.unique(starts, return_index=True)
+    if first.size == starts.size:
+        return
+    seen: set[int] = set()
+    for k, r in enumerate(starts.tolist()):
+        if r in seen:
+            i = int(np.concatenate([[0], change])[k])
+            where = rec.table or str(rec.path or "<recording>")
             raise input_error(
-                f"{where}, line {row}, column '{tcol}'",
-                f"time goes backwards or repeats ({t[idx[bad[0]]]!r} then "
-                f"{t[idx[bad[0] + 1]]!r}) within run {int(r)}",
-                "strictly increasing time within each run",
+                f"{where}, line {row_line(where, i)}, column 'run'",
+                f"rows of the runs are interleaved: run {r} resumes here after other runs",
+                "each run's rows together, in time order",
             )
+        seen.add(r)
 
 
 def _sds_required(meta: dict) -> list[str]:
@@ -278,12 +388,12 @@ def register_check(kind: str, check: Callable[[str, dict, dict], None]) -> None:
 KINDS: dict[str, KindSpec] = {
     "multihead": KindSpec(
         encoder_keys={
-            "optical_radius_m": _positive_number,
+            "optical_radius_m": _RADIUS_M,
             "head_angles_deg": _angle_list,
-            "reference_head": _nonneg_int,
-            "grating_lines": _positive_int,
+            "reference_head": int_in(0, 999),
+            "grating_lines": int_in(1, 10**9),
             "sensor": _sensor,
-            "signal_periods_per_rev": _positive_int,
+            "signal_periods_per_rev": int_in(1, 10**9),
         },
         required_encoder=("head_angles_deg",),
         required_columns=_multihead_required,
@@ -292,15 +402,15 @@ KINDS: dict[str, KindSpec] = {
     ),
     "sds": KindSpec(
         encoder_keys={
-            "marks_per_rev": _positive_int,
+            "marks_per_rev": int_in(1, 10**8),
             "fixed_sensor_angles_deg": _angle_list,
             "moving_sensor_angles_deg": _angle_list,
-            "pole_pairs": _positive_int,
-            "stator_coils": _positive_int,
-            "commutation_states": _positive_int,
-            "clock_hz": _positive_number,
+            "pole_pairs": int_in(1, 1000),
+            "stator_coils": int_in(1, 10_000),
+            "commutation_states": int_in(1, 1000),
+            "clock_hz": number_in(0.0, 1e15, "Hz"),
             # extension of the spec: the read radius turns fitted angles into lengths
-            "optical_radius_m": _positive_number,
+            "optical_radius_m": _RADIUS_M,
         },
         required_encoder=("marks_per_rev", "fixed_sensor_angles_deg", "moving_sensor_angles_deg"),
         required_columns=_sds_required,
@@ -310,17 +420,17 @@ KINDS: dict[str, KindSpec] = {
         check=_sds_check,
     ),
     "quadrature": KindSpec(
-        encoder_keys={"signal_period_m": _positive_number},
+        encoder_keys={"signal_period_m": number_in(0.0, 1.0, "m")},
         required_columns=lambda meta: ["sa", "sb"],
         optional_columns=lambda meta: ["t", "run"],
         check=_quadrature_check,
     ),
     "motion": KindSpec(
-        encoder_keys={"counts_per_rev": _positive_int},
+        encoder_keys={"counts_per_rev": int_in(1, 2**48)},
         motor_keys={
-            "pole_pairs": _positive_int,
-            "stator_slots": _positive_int,
-            "commutation_states": _positive_int,
+            "pole_pairs": int_in(1, 1000),
+            "stator_slots": int_in(1, 10_000),
+            "commutation_states": int_in(1, 1000),
         },
         required_columns=_motion_required,
         optional_columns=lambda meta: ["current_a", "run"],
@@ -345,7 +455,7 @@ def validate_meta(meta: dict, where: str) -> dict:
     if fmt != FORMAT:
         raise input_error(f"{where}: format", f"got {fmt!r}", repr(FORMAT))
     kind = meta.get("kind")
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise input_error(f"{where}: kind", f"got {kind!r}", f"one of {sorted(KINDS)}")
     spec = KINDS[kind]
     out = dict(meta)
@@ -375,47 +485,43 @@ def validate_meta(meta: dict, where: str) -> dict:
             if key not in tab:
                 raise input_error(f"{where}: [{table}]", f"missing key '{key}'")
         out[table] = {k: allowed[k](f"{where}: [{table}].{k}", v) for k, v in tab.items()}
+    if kind == "multihead":
+        _multihead_meta_check(where, out)
     return out
 
 
 # ----------------------------------------------------------------------------- table
 
 
-def _open_text(path: Path):
-    if path.suffix == ".gz":
-        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8", newline="")
-    return open(path, encoding="utf-8", newline="")
+def _names(cols: list[str]) -> str:
+    """Column names for messages: plain, quoted when empty or padded (so they show)."""
+    return ", ".join(c if c and c.strip() == c and "," not in c else repr(c) for c in cols)
 
 
-def _convert(where: str, name: str, values: list[str], kind: str, spec: KindSpec) -> np.ndarray:
+def _bad_cell(where: str, name: str, i: int, problem: str, expected: str):
+    return input_error(f"{where}, line {row_line(where, i)}, column '{name}'", problem, expected)
+
+
+def _convert(where: str, name: str, values: Any, kind: str, spec: KindSpec) -> np.ndarray:
+    """Column ``values`` (strings or numbers) -> a typed, checked array."""
     if name in spec.string_columns:
-        arr = np.asarray([v.strip() for v in values], dtype=str)
-        return arr
+        arr = np.asarray(values)
+        if arr.dtype.kind != "U":
+            arr = np.asarray([str(v) for v in values], dtype=str)
+        return np.char.strip(arr)
+    if isinstance(values, np.ndarray) and values.dtype.kind in "fiu":
+        return _convert_array(where, name, values, spec)
+    vals = [str(v) for v in values]
     try:
-        arr = np.asarray(values, dtype=np.float64)
+        arr = np.asarray(vals, dtype=np.float64)
     except ValueError:
-        for i, v in enumerate(values):
+        for i, v in enumerate(vals):
             try:
                 float(v)
             except ValueError:
-                raise input_error(
-                    f"{where}, line {i + 2}, column '{name}'", f"got {v!r}", "a number"
-                ) from None
+                raise _bad_cell(where, name, i, f"non-numeric value {v!r}", "a number") from None
         raise
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        i = int(bad[0])
-        raise input_error(
-            f"{where}, line {i + 2}, column '{name}'", f"got {values[i]!r}", "a finite number"
-        )
-    if name in spec.int_columns:
-        if np.any(arr != np.round(arr)):
-            i = int(np.flatnonzero(arr != np.round(arr))[0])
-            raise input_error(
-                f"{where}, line {i + 2}, column '{name}'", f"got {values[i]!r}", "an integer"
-            )
-        arr = arr.astype(np.int64)
-    return arr
+    return _convert_array(where, name, arr, spec)
 
 
 def validate_columns(where: str, kind: str, meta: dict, columns: Mapping[str, Any]) -> dict:
@@ -427,12 +533,16 @@ def validate_columns(where: str, kind: str, meta: dict, columns: Mapping[str, An
     missing = [c for c in required if c not in columns]
     if missing:
         raise input_error(
-            where, f"missing column(s) {', '.join(missing)}", f"columns {required} at least"
+            where,
+            f"missing column(s) {_names(missing)}",
+            f"columns {required} at least (header has {names})",
         )
     unknown = [c for c in names if c not in allowed]
     if unknown:
         raise input_error(
-            where, f"unknown column(s) {', '.join(unknown)} for kind '{kind}'", f"{sorted(allowed)}"
+            where,
+            f"unknown column(s) {_names(unknown)} for kind '{kind}'",
+            f"only {sorted(allowed)}",
         )
     lengths = {len(v) for v in columns.values()}
     if len(lengths) > 1:
@@ -441,65 +551,36 @@ def validate_columns(where: str, kind: str, meta: dict, columns: Mapping[str, An
         raise input_error(where, "the data table has no rows", "at least one row")
     out: dict[str, np.ndarray] = {}
     for name in names:
-        vals = columns[name]
-        if (
-            isinstance(vals, np.ndarray)
-            and vals.dtype.kind in "fiu"
-            and name not in (spec.string_columns)
-        ):
-            out[name] = _convert_array(where, name, vals, spec)
-        else:
-            out[name] = _convert(where, name, [str(v) for v in vals], kind, spec)
+        out[name] = _convert(where, name, columns[name], kind, spec)
     if spec.check is not None:
         spec.check(where, meta, out)
     return out
 
 
 def _convert_array(where: str, name: str, vals: np.ndarray, spec: KindSpec) -> np.ndarray:
+    if name in spec.int_columns:
+        if vals.dtype.kind in "iu":
+            if vals.dtype.kind == "u" and vals.size and int(vals.max()) > 2**63 - 1:
+                i = int(np.argmax(vals))
+                raise _bad_cell(where, name, i, f"got {show(vals[i])}", "an integer < 2^63")
+            return np.asarray(vals, dtype=np.int64)
+        arr = np.asarray(vals, dtype=np.float64)
+        bad = np.flatnonzero(~np.isfinite(arr) | (arr != np.round(arr)) | (np.abs(arr) >= 2**53))
+        if bad.size:
+            i = int(bad[0])
+            raise _bad_cell(where, name, i, f"got {show(arr[i])}", "an integer below 2^53")
+        return arr.astype(np.int64)
     arr = np.asarray(vals, dtype=np.float64)
-    bad = np.flatnonzero(~np.isfinite(arr))
+    limit, units = _column_limit(name)
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(~(np.abs(arr) <= limit))
     if bad.size:
         i = int(bad[0])
-        raise input_error(f"{where}, line {i + 2}, column '{name}'", f"got {arr[i]!r}", "finite")
-    if name in spec.int_columns:
-        if np.any(arr != np.round(arr)):
-            i = int(np.flatnonzero(arr != np.round(arr))[0])
-            raise input_error(
-                f"{where}, line {i + 2}, column '{name}'", f"got {arr[i]!r}", "an integer"
-            )
-        return arr.astype(np.int64)
+        u = f" {units}" if units else ""
+        if not np.isfinite(arr[i]):
+            raise _bad_cell(where, name, i, f"non-finite value {show(arr[i])}", "a finite number")
+        raise _bad_cell(where, name, i, f"got {show(arr[i])}", f"|value| <= {limit:g}{u}")
     return arr
-
-
-def read_table(path: Path) -> dict[str, list[str]]:
-    """Read a CSV (or .csv.gz) file into column name -> list of str. Raises on bad shape."""
-    where = str(path)
-    if not path.exists():
-        raise input_error(where, "data file not found")
-    try:
-        with _open_text(path) as fh:
-            reader = csv.reader(fh)
-            try:
-                header = [h.strip() for h in next(reader)]
-            except StopIteration:
-                raise input_error(where, "empty file", "a header row") from None
-            if len(set(header)) != len(header):
-                raise input_error(where, f"duplicate column names in header {header}")
-            rows = []
-            for i, row in enumerate(reader):
-                if not row:
-                    continue
-                if len(row) != len(header):
-                    raise input_error(
-                        f"{where}, line {i + 2}",
-                        f"{len(row)} fields",
-                        f"{len(header)} fields as in the header",
-                    )
-                rows.append(row)
-    except (OSError, UnicodeDecodeError, csv.Error, EOFError) as exc:
-        raise input_error(where, f"cannot read ({exc})", "a UTF-8 CSV file") from None
-    cols = list(zip(*rows)) if rows else [() for _ in header]
-    return {h: list(c) for h, c in zip(header, cols)}
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:
@@ -512,13 +593,29 @@ def read_toml(path: str | os.PathLike) -> dict[str, Any]:
     where = str(path)
     if not path.exists():
         raise input_error(where, "file not found")
+    if path.is_dir():
+        raise input_error(where, "is a folder", "a TOML file")
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_TOML_BYTES + 1)
+    except OSError as exc:
+        raise input_error(where, f"cannot read ({exc.strerror or exc})") from None
+    if len(data) > MAX_TOML_BYTES:
+        raise input_error(where, f"larger than {MAX_TOML_BYTES} bytes", "a small TOML file")
+    if b"\x00" in data:
+        line = data.count(b"\n", 0, data.index(b"\x00")) + 1
+        raise input_error(f"{where}, line {line}", "binary data (a NUL byte)", "a TOML text file")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise input_error(f"{where}, line {line}", "not UTF-8 text", "a UTF-8 TOML file") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise input_error(where, f"not valid TOML ({exc})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise input_error(where, f"cannot read ({exc})") from None
+    except RecursionError:
+        raise input_error(where, "not valid TOML (nested too deeply)") from None
 
 
 def load_recording(path: str | os.PathLike) -> Recording:
@@ -539,16 +636,25 @@ def load_recording(path: str | os.PathLike) -> Recording:
     meta = validate_meta(read_toml(path), where)
     if "data" not in meta:
         raise input_error(where, "missing key 'data'", "the name of the CSV data table")
-    data_path = (path.parent / meta["data"]).resolve()
-    table = read_table(data_path)
-    columns = validate_columns(str(data_path), meta["kind"], meta, table)
-    return Recording(kind=meta["kind"], meta=meta, columns=columns, path=path)
+    if not meta["data"].strip():
+        raise input_error(f"{where}: data", "is empty", "the name of the CSV data table")
+    data_path = path.parent / meta["data"]
+    spec = KINDS[meta["kind"]]
+    _, table, ref = read_columns(
+        data_path, string_columns=spec.string_columns, int_columns=spec.int_columns
+    )
+    columns = validate_columns(ref, meta["kind"], meta, table)
+    return Recording(kind=meta["kind"], meta=meta, columns=columns, path=path, table=ref)
 
 
-def _fmt(x: Any) -> str:
-    if isinstance(x, float | np.floating):
-        return repr(float(x))
-    return str(x)
+WRITE_CHUNK_ROWS = 65_536  # rows formatted at a time: memory stays bounded by the chunk
+
+
+def _format_column(a: np.ndarray) -> list[str]:
+    """Cells of one column chunk: floats as the shortest repr that reads back exactly."""
+    if a.dtype.kind == "f":
+        return list(map(repr, a.tolist()))
+    return list(map(str, a.tolist()))
 
 
 def write_recording(
@@ -562,6 +668,7 @@ def write_recording(
     provenance: Mapping[str, Any] | None = None,
     data_name: str | None = None,
     compress: bool = False,
+    source: str | None = None,
 ) -> Recording:
     """Validate and write a recording (``path`` = the TOML file; the CSV goes beside it).
 
@@ -572,6 +679,8 @@ def write_recording(
         encoder, motor, description, provenance: TOML content.
         data_name: file name of the data table (default ``<stem>.csv[.gz]``).
         compress: gzip the table.
+        source: the input the columns were made from (a design, an imported file): a
+            validation error then names it instead of the output file.
 
     Returns:
         The :class:`Recording` as it would be loaded back.
@@ -591,36 +700,24 @@ def write_recording(
             meta[name] = {
                 k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in tab.items()
             }
-    meta = validate_meta(meta, str(path))
-    cols = {k: np.asarray(v) for k, v in columns.items()}
-    conv = validate_columns(str(path.parent / data_name), kind, meta, cols)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        meta = validate_meta(meta, str(path))
+        cols = {k: np.asarray(v) for k, v in columns.items()}
+        conv = validate_columns(str(path.parent / data_name), kind, meta, cols)
+    except EncdesignInputError as exc:
+        if source is None:
+            raise
+        raise input_error(source, f"gives an invalid {kind} recording: {exc}") from None
     data_path = path.parent / data_name
     names = list(conv)
-    tmp_files = []
-    try:
-        fd, tmp_data = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".csv")
-        os.close(fd)
-        tmp_files.append(tmp_data)
-        opener = gzip.open if data_name.endswith(".gz") else open
-        with opener(tmp_data, "wt", encoding="utf-8", newline="") as fh:
-            w = csv.writer(fh)
+    # the table first, then the TOML that names it: each renamed into place when whole
+    with atomic_output(path, "wb") as toml_fh:
+        with atomic_output(data_path, "w", newline="", compress=data_name.endswith(".gz")) as fh:
+            w = csv.writer(fh, lineterminator="\n")
             w.writerow(names)
-            str_cols = [[_fmt(x) for x in conv[n].tolist()] for n in names]
-            w.writerows(zip(*str_cols))
-        fd, tmp_toml = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".toml")
-        os.close(fd)
-        tmp_files.append(tmp_toml)
-        with open(tmp_toml, "wb") as fh:
-            tomli_w.dump(meta, fh)
-        umask = os.umask(0)
-        os.umask(umask)
-        for tmp in tmp_files:
-            os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp_data, data_path)
-        os.replace(tmp_toml, path)
-    finally:
-        for f in tmp_files:
-            if os.path.exists(f):
-                os.remove(f)
+            n = len(conv[names[0]])
+            for a in range(0, n, WRITE_CHUNK_ROWS):
+                b = min(n, a + WRITE_CHUNK_ROWS)
+                w.writerows(zip(*[_format_column(conv[c][a:b]) for c in names]))
+        tomli_w.dump(meta, toml_fh)
     return Recording(kind=kind, meta=meta, columns=conv, path=path)

@@ -12,6 +12,7 @@ import re
 import numpy as np
 
 from .._errors import input_error
+from ._table import row_line
 
 # ----------------------------------------------------------------------------- checks
 
@@ -49,7 +50,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     if not np.all(ok):
         i = int(np.flatnonzero(~ok)[0])
         raise input_error(
-            f"{where}, line {i + 2}, column 'sensor'",
+            f"{where}, line {row_line(where, i)}, column 'sensor'",
             f"sensor {str(sensors[i])!r} is not declared in the TOML",
             f"one of {', '.join(allowed)} (fixed_sensor_angles_deg lists {n_fixed}, "
             f"moving_sensor_angles_deg lists {n_moving})",
@@ -59,7 +60,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     if bad.size:
         i = int(bad[0])
         raise input_error(
-            f"{where}, line {i + 2}, column 'mark'",
+            f"{where}, line {row_line(where, i)}, column 'mark'",
             f"mark index {int(mark[i])} out of range",
             f"0 … {n_marks - 1} (marks_per_rev = {n_marks})",
         )
@@ -76,9 +77,10 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     if badt.size:
         a, b = int(order[badt[0]]), int(order[badt[0] + 1])
         raise input_error(
-            f"{where}, line {b + 2}, column 't'",
-            f"time of sensor {sensors[b]} goes backwards or repeats ({t[badt[0]]!r} at line "
-            f"{a + 2}, then {t[badt[0] + 1]!r}) within run {int(run[b])}",
+            f"{where}, line {row_line(where, b)}, column 't'",
+            f"time of sensor {sensors[b]} goes backwards or repeats "
+            f"({float(t[badt[0]])!r} at line {row_line(where, a)}, "
+            f"then {float(t[badt[0] + 1])!r}) within run {int(run[b])}",
             "strictly increasing edge times for each sensor within a run",
         )
     mk = mark[order]
@@ -88,8 +90,9 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
         a, b = int(order[badm[0]]), int(order[badm[0] + 1])
         missing = int((step[badm[0]] - 1) % n_marks)
         raise input_error(
-            f"{where}, line {b + 2}, column 'mark'",
-            f"sensor {sensors[b]} jumps from mark {int(mk[badm[0]])} (line {a + 2}) to mark "
+            f"{where}, line {row_line(where, b)}, column 'mark'",
+            f"sensor {sensors[b]} jumps from mark {int(mk[badm[0]])} "
+            f"(line {row_line(where, a)}) to mark "
             f"{int(mk[badm[0] + 1])} in run {int(run[b])}: {missing} edge(s) missing"
             if missing
             else f"sensor {sensors[b]} repeats mark {int(mk[badm[0]])} in run {int(run[b])}",
@@ -103,7 +106,8 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
             if np.any(vals != vals[0]):
                 j = int(idx[np.flatnonzero(vals != vals[0])[0]])
                 raise input_error(
-                    f"{where}, line {j + 2}, column 'phi_ref'",
-                    f"phi_ref changes within run {int(r)} ({vals[0]!r} then {phi[j]!r})",
+                    f"{where}, line {row_line(where, j)}, column 'phi_ref'",
+                    f"phi_ref changes within run {int(r)} "
+                    f"({float(vals[0])!r} then {float(phi[j])!r})",
                     "one platform angle per run (the platform is at rest during a run)",
                 )

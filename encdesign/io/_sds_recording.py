@@ -100,7 +100,8 @@ def simulate_sds_recording(
         cols["mark"].append(mark[order])
         cols["run"].append(np.full(t.size, i, dtype=np.int64))
         cols["phi_ref"].append(np.full(t.size, float(np.mod(phi, 2 * np.pi))))
-    data = {k: np.concatenate(v) for k, v in cols.items()}
+    # one column at a time, each run's pieces freed as soon as they are joined
+    data = {k: np.concatenate(cols.pop(k)) for k in list(cols)}
     deg = 180.0 / math.pi
     encoder: dict[str, Any] = {
         "marks_per_rev": n_marks,

@@ -11,12 +11,20 @@ import argparse
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ._paths import atomic_output, atomic_write_text
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line on stderr and exit status 2 (the CLI's contract)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
@@ -26,7 +34,7 @@ def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
     there), ``--seed N`` (PRNG seed, default 0), ``--quick`` (smaller sizes for tests).
     """
     title = (doc or name).strip().splitlines()[0]
-    p = argparse.ArgumentParser(prog=f"encdesign study run {name}", description=title)
+    p = _OneLineParser(prog=f"encdesign study run {name}", description=title)
     p.add_argument("--out", type=Path, default=Path("results") / name, help="output folder")
     p.add_argument("--json", type=Path, default=None, help="also write the summary JSON here")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
@@ -60,21 +68,8 @@ def to_jsonable(x: Any) -> Any:
 
 def write_json(path: str | os.PathLike, data: Mapping[str, Any]) -> Path:
     """Write ``data`` as indented JSON atomically (temporary file renamed into place)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(to_jsonable(data), indent=2, sort_keys=False)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    return atomic_write_text(path, text + "\n")
 
 
 def write_results(
@@ -115,9 +110,11 @@ def save_figure(fig: Any, out: str | os.PathLike, filename: str) -> Path:
     import matplotlib.pyplot as plt
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     path = out / filename
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        with atomic_output(path, "wb") as fh:
+            fig.savefig(fh, dpi=120, format="png")
+    finally:
+        plt.close(fig)
     return path
