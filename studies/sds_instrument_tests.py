@@ -242,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
         "lateral_shift_inch": 1e-4,
         "distance_ft": 10.0,
         "angle_arcsec": math.atan(1e-4 * INCH / (10 * 12 * INCH)) / ARCSEC,
+        # the seed's other two length/angle conversions
+        "shaft_shift_0.0001in_at_1in_radius_arcsec": 1e-4 / 1.0 / ARCSEC,
+        "settling_50mas_at_1.75in_radius_uin": 50 * MAS * 1.75 * 1e6,
     }
     summary = {
         "study": NAME,
