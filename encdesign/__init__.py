@@ -195,4 +195,17 @@ from .diagnose import (
     write_diagnosis_plots as write_diagnosis_plots,
 )
 
+# --- calibration: dual closure, calibration curves, reference mapping (issue 13) ---
+from .calibrate import (
+    CalibrationCurve as CalibrationCurve,
+    ClosureResult as ClosureResult,
+    closure_from_recording as closure_from_recording,
+    compare_maps as compare_maps,
+    compare_maps_on_recording as compare_maps_on_recording,
+    fit_curve as fit_curve,
+    reference_map as reference_map,
+    solve_closure as solve_closure,
+    write_correction_table as write_correction_table,
+)
+
 __version__ = "0.1.0"

@@ -24,6 +24,7 @@ LAYERS = {
     "io": 2,
     "design": 3,
     "diagnose": 3,
+    "calibrate": 3,
     "cli": 4,
     "__init__": 5,
     "__main__": 5,

@@ -20,3 +20,5 @@ from ._sds_recording import (
 from ._sds_recording import (
     simulate_sds_recording as simulate_sds_recording,
 )
+
+from . import _closure_recording as _closure_recording  # noqa: F401 (registers kind "closure")
