@@ -24,6 +24,16 @@ class VariableInfo:
         integer: values must be integers (pole pairs, head counts).
         lower, upper: physical limits in SI (a problem's bounds must lie inside).
         doc: one line of description.
+        values: the allowed values of a discrete variable (``None``: any); a problem lists
+            a subset.
+        start: default start (SI) when a problem's table gives none (a sequence for a
+            vector variable).
+        size: ``None`` for a scalar; for a vector variable (e.g. ``head_angles``) its
+            length, ``0`` for any length ``>= 1``. A vector reaches the objective as one
+            1-D array; drivers and case files see its elements ``name[i]``.
+        check: ``check(start_si, where)`` raising
+            :class:`~encdesign.EncdesignInputError` on an invalid start (e.g. coincident
+            head azimuths); ``start_si`` is a float or, for a vector, a 1-D array.
     """
 
     units: str
@@ -32,6 +42,10 @@ class VariableInfo:
     lower: float = -math.inf
     upper: float = math.inf
     doc: str = ""
+    values: tuple[Any, ...] | None = None
+    start: Any = None
+    size: int | None = None
+    check: Callable[[Any, str], None] | None = dataclasses.field(default=None, compare=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +63,11 @@ class ProblemObjective:
             scalar (SI) to output name -> JAX value (scalars; a ``"residuals"`` vector for
             the ``lm`` driver). ``evaluate`` must be differentiable in ``x``.
         requires_yield: the problem must have a ``[yield]`` table.
+        check: ``check(problem, discrete, x)`` run once before a driver evaluates the
+            objective at the start point ``x`` (continuous variable -> SI value/array):
+            raises :class:`~encdesign.EncdesignInputError` naming the objective when it
+            cannot be evaluated or differentiated (user objectives,
+            :mod:`encdesign.design._user`). ``None``: no check.
     """
 
     name: str
@@ -58,3 +77,6 @@ class ProblemObjective:
     outputs: tuple[str, ...]
     build: Callable[[Any, dict[str, Any]], Callable[[dict[str, Any]], dict[str, Any]]]
     requires_yield: bool = False
+    check: Callable[[Any, dict[str, Any], dict[str, Any]], None] | None = dataclasses.field(
+        default=None, compare=False
+    )
