@@ -34,6 +34,7 @@ Every metric evaluation is a build and is counted (``n_builds_total``), FORM inc
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -44,11 +45,30 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import ndtr
 
-from ._drivers import SUCCESS, values_of_normals
+from ._drivers import SUCCESS, VECTOR_BUILDS, values_of_normals
+
+VECTOR = VECTOR_BUILDS
 
 __all__ = ["RareEventResult", "form_design_points", "importance_yield"]
 
 NO_FAILURE = "no_failure_found"
+
+
+@functools.lru_cache(maxsize=32)
+def _compiled(metric_z: Callable[..., jax.Array], vector: int) -> dict[str, Any]:
+    """Jitted pieces for ``metric_z`` (cached: repeated calls with the same function, e.g. an
+    allocation's bisection passing new tolerances as ``args``, compile once)."""
+
+    def m(z, a):
+        return metric_z(z) if a is None else metric_z(z, a)
+
+    return {
+        "vg": jax.jit(jax.value_and_grad(lambda z, a, spec: (spec - m(z, a)) / spec)),
+        "ray": jax.jit(jax.vmap(lambda r, d, a: m(r * d, a), in_axes=(0, None, None))),
+        "point": jax.jit(m),
+        "hess": jax.jit(jax.hessian(lambda z, a: m(z, a) ** 2)),
+        "batch": jax.jit(lambda zc, a: values_of_normals(lambda zi: m(zi, a), zc, vector)),
+    }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +163,7 @@ def form_design_points(
     beta_window: float = 1.0,
     n_deflations: int = 2,
     tol: float = 1e-5,
+    args: Any = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """FORM design points of ``metric_z(z) > spec`` (module docstring).
 
@@ -164,14 +185,23 @@ def form_design_points(
             of an RMS metric); each is also mirrored.
         tol: convergence of a point (step length, in standard deviations) and of the limit
             state ``|G| = |spec - m| / spec``.
+        args: when given, the metric is ``metric_z(z, args)`` (e.g. the tolerances), so the
+            same function compiles once for many ``args``.
 
     Returns:
         ``(points [K, dim], betas [K], n_evaluations)``; ``K = 0`` when no start reached the
         failure region.
     """
     spec = float(spec)
-    g_vg = jax.jit(jax.value_and_grad(lambda z: (spec - metric_z(z)) / spec))
-    ray = jax.jit(jax.vmap(lambda r, d: metric_z(r * d), in_axes=(0, None)))
+    fns = _compiled(metric_z, VECTOR)
+    spec_j = jnp.asarray(spec)
+
+    def g_vg(z):
+        return fns["vg"](z, args, spec_j)
+
+    def ray(r, d):
+        return fns["ray"](r, d, args)
+
     n_eval = 0
     dirs = np.array(jax.random.normal(key, (n_starts, dim)))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -214,7 +244,7 @@ def form_design_points(
         for _ in range(20):  # bisection along the ray to the limit-state surface
             mid = 0.5 * (lo + hi)
             used += 1
-            if float(metric_z(jnp.asarray(mid * d))) > spec:
+            if float(fns["point"](jnp.asarray(mid * d), args)) > spec:
                 hi = mid
             else:
                 lo = mid
@@ -233,7 +263,7 @@ def form_design_points(
         # curvature of m^2 at the nominal build: for an RMS metric m^2 is nearly a quadratic
         # form z' Q z whose leading eigenvectors point at the nearest failures (random
         # directions in many dimensions mostly miss them)
-        hess = np.asarray(jax.hessian(lambda z: metric_z(z) ** 2)(jnp.zeros(dim)))
+        hess = np.asarray(fns["hess"](jnp.zeros(dim), args))
         n_eval += dim
         evals, evecs = np.linalg.eigh(0.5 * (hess + hess.T))
         for k in np.argsort(-evals)[: min(n_hessian, dim)]:
@@ -276,11 +306,11 @@ def importance_yield(
     sigmas: Sequence[float] | None = None,
     names: Sequence[str] | None = None,
     chunk_size: int = 512,
-    vector: int = 8,
     r_max: float = 12.0,
     n_deflations: int = 2,
     beta_window: float = 1.0,
     n_hessian: int = 8,
+    args: Any = None,
 ) -> RareEventResult:
     """Failure probability ``P(metric_z(z) > spec)``, ``z ~ N(0, I_dim)``, by
     defensive-mixture importance sampling around FORM design points (module docstring).
@@ -297,9 +327,10 @@ def importance_yield(
             likelihood-ratio gradient.
         sigmas: the groups' standard deviations (SI), indexed by group.
         names: the groups' names.
-        chunk_size: builds evaluated per jitted call (memory bound).
-        vector: builds vectorised together within a call.
-        r_max, n_deflations, beta_window, n_hessian: see :func:`form_design_points`.
+        chunk_size: builds evaluated per jitted call (memory bound; builds are vectorised
+            :data:`~encdesign.design._drivers.VECTOR_BUILDS` at a time within a call).
+        r_max, n_deflations, beta_window, n_hessian, args: see
+            :func:`form_design_points`.
 
     Returns:
         :class:`RareEventResult`.
@@ -308,37 +339,47 @@ def importance_yield(
         raise ValueError(f"defensive: {defensive!r}, expected 0 < alpha < 1")
     t0 = time.perf_counter()
     k_form, k_comp, k_z = jax.random.split(key, 3)
-    pts, betas, n_form = form_design_points(
-        metric_z, dim, spec, key=k_form, n_starts=n_starts, r_max=r_max,
-        n_deflations=n_deflations, beta_window=beta_window, n_hessian=n_hessian,
-    )  # fmt: skip
-    if pts.shape[0] == 0:
+    nominal_fails = float(_compiled(metric_z, VECTOR)["point"](jnp.zeros(dim), args)) > spec
+    if nominal_fails:  # not a rare event: the nominal build fails; plain sampling
+        pts, betas, n_form = np.zeros((0, dim)), np.zeros(0), 1
+    else:
+        pts, betas, n_form = form_design_points(
+            metric_z, dim, spec, key=k_form, n_starts=n_starts, r_max=r_max,
+            n_deflations=n_deflations, beta_window=beta_window, n_hessian=n_hessian,
+            args=args,
+        )  # fmt: skip
+    if pts.shape[0] == 0 and not nominal_fails:
         return RareEventResult(
             0.0, 0.0, 0, n_form, pts, betas, float(ndtr(-r_max)), None, None, None, 0,
             defensive, time.perf_counter() - t0, NO_FAILURE,
             f"no start direction reached the spec within {r_max} standard deviations "
             f"(P_f < {float(ndtr(-r_max)):.3g})",
         )  # fmt: skip
-    logpi = np.log(np.maximum(ndtr(-betas), 1e-300))
-    pi = np.exp(logpi - logpi.max())
-    pi /= pi.sum()
-    n_nom = int(np.sum(np.asarray(jax.random.uniform(k_comp, (n,))) < defensive))
-    comp = np.asarray(
-        jax.random.choice(jax.random.fold_in(k_comp, 1), pts.shape[0], (n - n_nom,), p=pi)
-    )
     zn = np.asarray(jax.random.normal(k_z, (n, dim)))
-    shift = np.zeros((n, dim))
-    shift[n_nom:] = pts[comp]
-    z = zn + shift
-    # w = phi(z) / q(z) = 1 / (alpha + (1 - alpha) sum_k pi_k exp(z . z_k - |z_k|^2 / 2))
-    expo = z @ pts.T - 0.5 * np.sum(pts * pts, axis=1)[None, :] + np.log(pi)[None, :]
-    m = np.max(expo, axis=1, keepdims=True)
-    lse = (m[:, 0] + np.log(np.sum(np.exp(expo - m), axis=1))) + math.log(1.0 - defensive)
-    logw = -np.logaddexp(math.log(defensive), lse)
-    w = np.exp(logw)
-    vector = int(max(1, min(vector, chunk_size)))
-    size = -(-chunk_size // vector) * vector
-    f = jax.jit(lambda zc: values_of_normals(metric_z, zc, vector))
+    if nominal_fails:
+        z, w = zn, np.ones(n)
+    else:
+        logpi = np.log(np.maximum(ndtr(-betas), 1e-300))
+        pi = np.exp(logpi - logpi.max())
+        pi /= pi.sum()
+        n_nom = int(np.sum(np.asarray(jax.random.uniform(k_comp, (n,))) < defensive))
+        comp = np.asarray(
+            jax.random.choice(jax.random.fold_in(k_comp, 1), pts.shape[0], (n - n_nom,), p=pi)
+        )
+        shift = np.zeros((n, dim))
+        shift[n_nom:] = pts[comp]
+        z = zn + shift
+        # w = phi(z) / q(z) = 1 / (alpha + (1 - alpha) sum_k pi_k exp(z.z_k - |z_k|^2 / 2))
+        expo = z @ pts.T - 0.5 * np.sum(pts * pts, axis=1)[None, :] + np.log(pi)[None, :]
+        m = np.max(expo, axis=1, keepdims=True)
+        lse = (m[:, 0] + np.log(np.sum(np.exp(expo - m), axis=1))) + math.log(1.0 - defensive)
+        w = np.exp(-np.logaddexp(math.log(defensive), lse))
+    size = -(-chunk_size // VECTOR) * VECTOR
+    batch = _compiled(metric_z, VECTOR)["batch"]
+
+    def f(zc):
+        return batch(zc, args)
+
     vals = np.empty(n)
     for s in range(0, n, size):
         zc = z[s : s + size]
@@ -348,8 +389,9 @@ def importance_yield(
     if not np.all(np.isfinite(vals)):
         bad = int(np.sum(~np.isfinite(vals)))
         return RareEventResult(
-            math.nan, math.nan, n, n_form, pts, betas, float(ndtr(-betas[0])), None, None,
-            None, 0, defensive, time.perf_counter() - t0, "nonfinite",
+            math.nan, math.nan, n, n_form, pts, betas,
+            (float(ndtr(-betas[0])) if betas.size else math.nan), None, None, None, 0,
+            defensive, time.perf_counter() - t0, "nonfinite",
             f"{bad} of {n} importance samples gave a non-finite metric",
         )  # fmt: skip
     fail = vals > spec
@@ -383,7 +425,7 @@ def importance_yield(
         n_form,
         pts,
         betas,
-        float(ndtr(-betas[0])),
+        (float(ndtr(-betas[0])) if betas.size else math.nan),
         grad,
         grad_se,
         gnames,
@@ -391,5 +433,9 @@ def importance_yield(
         defensive,
         time.perf_counter() - t0,
         SUCCESS,
-        f"{pts.shape[0]} design point(s), beta_min = {betas[0]:.3f}",
+        (
+            f"{pts.shape[0]} design point(s), beta_min = {betas[0]:.3f}"
+            if betas.size
+            else "the nominal build fails: plain Monte Carlo (not a rare event)"
+        ),
     )
