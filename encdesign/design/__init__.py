@@ -165,3 +165,9 @@ from ._user import (
 from ._user import (
     variable as variable,
 )
+from ._tolerance import (
+    SobolIndices as SobolIndices,
+)
+from ._tolerance import (
+    sobol_indices as sobol_indices,
+)
