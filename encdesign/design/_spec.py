@@ -12,6 +12,10 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
+SI_UNITS = ("rad", "m", "s", "1")
+"""The SI units a variable is declared in (problem files may use any unit of the same
+dimension, :data:`encdesign.design._problem.UNITS`)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class VariableInfo:

@@ -57,8 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import EncdesignInputError, input_error
-from ._problem import UNITS
-from ._spec import ProblemObjective, VariableInfo
+from ._spec import SI_UNITS, ProblemObjective, VariableInfo
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -97,7 +96,7 @@ def variable(
         size: for a vector variable, its length (``0``: any length >= 1).
         doc: one line of description.
     """
-    if units not in {si for si, _ in UNITS.values()}:
+    if units not in SI_UNITS:
         raise ValueError(f"variable units {units!r}: expected an SI unit (rad, m, s or 1)")
     vals = None if values is None else tuple(values)
     if integer is None:
