@@ -182,6 +182,21 @@ from .design import (
     Tolerances as Tolerances,
 )
 
+# --- free head layouts, user objectives, rare-event yield (issue 14) ---
+from .design import (
+    LayoutDesign as LayoutDesign,
+    RareEventResult as RareEventResult,
+    importance_yield as importance_yield,
+    layout_metrics as layout_metrics,
+    objective_function as objective_function,
+    variable as variable,
+)
+from .physics import (
+    least_squares_compensate as least_squares_compensate,
+    layout_noise_amplification as layout_noise_amplification,
+    unobservable_orders as unobservable_orders,
+)
+
 # --- discrepancy finder (issue 5) ---
 from .diagnose import (
     simulate_concealed_bench as simulate_concealed_bench,

@@ -17,6 +17,9 @@ from .design._objectives import (
     EncoderDesign as EncoderDesign,
 )
 from .design._objectives import (
+    LayoutDesign as LayoutDesign,
+)
+from .design._objectives import (
     SDSTolerances as SDSTolerances,
 )
 from .design._objectives import (
@@ -45,6 +48,18 @@ from .design._objectives import (
 )
 from .design._objectives import (
     expected_sensitivity as expected_sensitivity,
+)
+from .design._objectives import (
+    layout_metric as layout_metric,
+)
+from .design._objectives import (
+    layout_metrics as layout_metrics,
+)
+from .design._objectives import (
+    layout_noise_ms as layout_noise_ms,
+)
+from .design._objectives import (
+    layout_residual as layout_residual,
 )
 from .design._objectives import (
     n_build_normals as n_build_normals,
@@ -97,5 +112,10 @@ __all__ = [
     "SDSTolerances",
     "sds_design",
     "sds_residuals",
+    "LayoutDesign",
+    "layout_residual",
+    "layout_noise_ms",
+    "layout_metric",
+    "layout_metrics",
     "PROBLEM_OBJECTIVES",
 ]

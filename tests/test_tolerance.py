@@ -145,6 +145,12 @@ def test_tolerance_budget_quick(tmp_path):
     assert sum(d["contributions"].values()) == pytest.approx(1.0, abs=1e-9)
     assert set(d["tolerances"]) == set(d["contributions"])
     assert all(v > 0 for v in d["tolerances"].values())
+    # Sobol indices beside the shares (issue 14): one per tolerance, noise not sampled
+    assert set(d["sobol_first"]) == set(d["contributions"]) == set(d["sobol_total"])
+    assert d["sobol_first"]["noise"] is None
+    for n, v in d["sobol_first"].items():
+        if v is not None:
+            assert v <= d["sobol_total"][n] + 0.1  # first <= total up to estimator noise
 
 
 def test_pole_sensor_opt_quick(tmp_path):

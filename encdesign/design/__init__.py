@@ -75,6 +75,21 @@ from ._objectives import (
 from ._objectives import (
     Tolerances as Tolerances,
 )
+from ._objectives import (
+    LayoutDesign as LayoutDesign,
+)
+from ._objectives import (
+    layout_metric as layout_metric,
+)
+from ._objectives import (
+    layout_metrics as layout_metrics,
+)
+from ._objectives import (
+    layout_noise_ms as layout_noise_ms,
+)
+from ._objectives import (
+    layout_residual as layout_residual,
+)
 from ._problem import (
     Problem as Problem,
 )
@@ -89,6 +104,15 @@ from ._problem import (
 )
 from ._problem import (
     parse_problem as parse_problem,
+)
+from ._rare import (
+    RareEventResult as RareEventResult,
+)
+from ._rare import (
+    form_design_points as form_design_points,
+)
+from ._rare import (
+    importance_yield as importance_yield,
 )
 from ._solve import (
     ProblemResult as ProblemResult,
@@ -125,4 +149,25 @@ from ._tolerance import (
 )
 from ._tolerance import (
     tolerance_cost as tolerance_cost,
+)
+from ._user import (
+    ENTRY_POINT_GROUP as ENTRY_POINT_GROUP,
+)
+from ._user import (
+    check_user_objective as check_user_objective,
+)
+from ._user import (
+    load_user_objective as load_user_objective,
+)
+from ._user import (
+    objective_function as objective_function,
+)
+from ._user import (
+    variable as variable,
+)
+from ._tolerance import (
+    SobolIndices as SobolIndices,
+)
+from ._tolerance import (
+    sobol_indices as sobol_indices,
 )

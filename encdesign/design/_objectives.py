@@ -32,6 +32,7 @@ amplification (:func:`calibration_noise_ms`). Population metrics: :func:`residua
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import equinox as eqx
@@ -39,7 +40,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._errors import EncdesignInputError
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
+from ..physics._layout import (
+    check_layout,
+    layout_map,
+    layout_noise_amplification,
+    least_squares_compensate,
+)
 from ..physics._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
@@ -70,6 +78,11 @@ __all__ = [
     "SDSTolerances",
     "sds_design",
     "sds_residuals",
+    "LayoutDesign",
+    "layout_residual",
+    "layout_noise_ms",
+    "layout_metric",
+    "layout_metrics",
     "PROBLEM_OBJECTIVES",
 ]
 
@@ -247,7 +260,7 @@ def expected_sensitivity(
 
 def _deviation_sizes(design: EncoderDesign) -> dict[str, int]:
     """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
-    h = design.n_heads + 1
+    h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
     return {
         "eccentricity": 2,
@@ -292,7 +305,7 @@ def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Encoder
 
 def _model_of(design: EncoderDesign, tol: Tolerances, u: dict[str, Array]) -> EncoderModel:
     """:func:`build_model` from the unit deviations ``u`` of :func:`_unit_deviations`."""
-    h = design.n_heads + 1
+    h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
     ecc = tol.eccentricity * u["eccentricity"]
     tilt = tol.tilt * u["tilt"] + jnp.array([1.0, 0.0]) * design.tilt_rad
@@ -472,6 +485,145 @@ def build_yield(
     if smooth_width_rad is None:
         return jnp.mean((vals <= spec_rad).astype(jnp.float64))
     return smooth_yield(vals, spec_rad, smooth_width_rad)
+
+
+# ----------------------------------------------------------------------------- free layouts
+
+
+class LayoutDesign(eqx.Module):
+    """An encoder whose heads sit at arbitrary azimuths (free head placement).
+
+    Self-compensation recovers the disk's error function from all head differences by least
+    squares per order (:func:`encdesign.physics.least_squares_compensate`); the encoder's
+    output is the weighted average of all heads (``weights``, equal by default) corrected by
+    its map. Cramer's ``N + 1`` layout is the special case ``head_angles_rad = [0, 2 pi/N,
+    …, reference]``.
+
+    Attributes:
+        radius_m: optical radius, m.
+        head_angles_rad: nominal azimuths of all ``H >= 2`` heads, rad (a design variable).
+        tilt_rad: nominal disk tilt about x, rad.
+        gap_m: head-to-disk distance, m.
+        weights: weights of the heads in the output (``None``: equal).
+        max_order: highest order ``M`` self-compensation determines (static).
+        grating_orders: orders ``1 … grating_orders`` of the grating error (static).
+        axial_orders: orders of the axial runout (static).
+        n_angles: samples per revolution (static).
+    """
+
+    radius_m: Array = eqx.field(converter=_f64)
+    head_angles_rad: Array = eqx.field(converter=_f64)
+    tilt_rad: Array = eqx.field(converter=_f64, default=0.0)
+    gap_m: Array = eqx.field(converter=_f64, default=1e-3)
+    weights: Array | None = None
+    max_order: int = eqx.field(static=True, default=16)
+    grating_orders: int = eqx.field(static=True, default=16)
+    axial_orders: int = eqx.field(static=True, default=2)
+    n_angles: int = eqx.field(static=True, default=256)
+
+    def __check_init__(self) -> None:
+        a = self.head_angles_rad
+        if a.ndim != 1 or a.shape[0] < 2:
+            raise ValueError(f"LayoutDesign.head_angles_rad: shape {a.shape}, expected (H >= 2,)")
+        if self.weights is not None and jnp.shape(self.weights) != a.shape:
+            raise ValueError(
+                f"LayoutDesign.weights: shape {jnp.shape(self.weights)}, expected {a.shape}"
+            )
+        if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
+            raise ValueError("LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0")
+        if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
+            raise ValueError(
+                f"LayoutDesign.n_angles: {self.n_angles} cannot resolve order "
+                f"{max(self.max_order, self.grating_orders)}"
+            )
+        if not isinstance(a, jax.core.Tracer):
+            try:
+                check_layout(a, where="LayoutDesign.head_angles_rad")
+            except EncdesignInputError as exc:
+                raise ValueError(str(exc)) from None
+
+    @property
+    def n_heads(self) -> int:
+        """Number of heads ``H``."""
+        return int(self.head_angles_rad.shape[0])
+
+    @property
+    def theta_rad(self) -> Array:
+        """The ``n_angles`` equally spaced shaft angles of one revolution, rad."""
+        return jnp.arange(self.n_angles, dtype=jnp.float64) * (2 * jnp.pi / self.n_angles)
+
+    @staticmethod
+    def symmetric(
+        n_heads: int, reference_angle_rad: ArrayLike, radius_m: ArrayLike, **kw: Any
+    ) -> LayoutDesign:
+        """Cramer's ``N + 1`` layout: ``n_heads`` equally spaced heads plus a reference head
+        at ``reference_angle_rad``, all averaged."""
+        ang = jnp.concatenate([symmetric_angles(n_heads), _f64(reference_angle_rad)[None]])
+        return LayoutDesign(radius_m=radius_m, head_angles_rad=ang, **kw)
+
+
+def layout_residual(design: LayoutDesign, tol: Tolerances, z: ArrayLike) -> Array:
+    """Residual error of one build of a free layout after least-squares self-compensation,
+    rad, at :attr:`LayoutDesign.theta_rad` (mean removed). The build's deviations follow
+    :func:`build_model` (``z`` of length :func:`n_build_normals`); the builder knows only
+    the nominal azimuths."""
+    u = _unit_deviations(design, z)
+    model = _model_of(design, tol, u)
+    theta = design.theta_rad
+    err = errors_scaled_grating(model, theta, tol.grating, u["grating_sin"], u["grating_cos"])
+    comp = least_squares_compensate(theta, err, design.head_angles_rad, design.max_order)
+    avg = averaged_error(err, design.weights)
+    res = avg - layout_map(comp, design.weights)(theta)
+    return res - jnp.mean(res)
+
+
+def layout_noise_ms(design: LayoutDesign, tol: Tolerances) -> Array:
+    """Expected mean square (rad²) that read noise during self-compensation leaves in the
+    map of a free layout: ``sum_j |T_j|^2 A_j^2 sigma_c^2``, ``sigma_c^2 = 2 noise^2 /
+    n_angles`` (:func:`encdesign.physics.layout_noise_amplification`)."""
+    _, gain, _ = layout_noise_amplification(
+        design.head_angles_rad, design.max_order, design.weights
+    )
+    return jnp.sum(gain**2) * tol.noise**2 * 2.0 / design.n_angles
+
+
+def layout_metric(
+    design: LayoutDesign, tol: Tolerances, z: ArrayLike, metric: str = "rms"
+) -> Array:
+    """``"rms"`` (with the calibration-noise term), ``"peak"`` (noise-free) or ``"ms"``
+    (rad²) of one build of a free layout."""
+    r = layout_residual(design, tol, z)
+    if metric == "peak":
+        return jnp.max(jnp.abs(r))
+    ms = jnp.mean(r * r) + layout_noise_ms(design, tol)
+    if metric == "ms":
+        return ms
+    if metric == "rms":
+        return jnp.sqrt(ms)
+    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
+
+
+def layout_metrics(
+    design: LayoutDesign,
+    tol: Tolerances,
+    *,
+    key: Array,
+    n_builds: int,
+    metric: str = "rms",
+    chunk_size: int = 256,
+    first_build: int = 0,
+) -> Array:
+    """Per-build :func:`layout_metric` of builds ``first_build …`` of ``key`` (common random
+    numbers, chunked like :func:`build_metrics`); differentiable in the azimuths and
+    tolerances."""
+    return map_builds(
+        lambda zi: layout_metric(design, tol, zi, metric),
+        key,
+        n_builds,
+        n_build_normals(design),
+        first=first_build,
+        block=chunk_size,
+    )
 
 
 # ----------------------------------------------------------------------------- SDS
@@ -760,3 +912,89 @@ PROBLEM_OBJECTIVES: dict[str, ProblemObjective] = {
     ),
 }
 """Objectives that problem files can name (``[problem] objective``)."""
+
+
+def _check_head_angles(start: Any, where: str) -> None:
+    check_layout(start, where=where)
+
+
+def _build_layout(problem: Any, discrete: dict[str, Any]):
+    m = dict(problem.model)
+    m.update(discrete)
+    key = jax.random.key(problem.seed)
+    yt = problem.yield_target
+    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
+    q = float(m["percentile"])
+    ref = jnp.array([m[f"cost_ref_{n}"] for n in TOLERANCE_NAMES])
+    default_angles = jnp.asarray(m["head_angles_rad"], dtype=jnp.float64)
+    check_layout(default_angles, where=f"{problem.path or problem.name}: model.head_angles_rad")
+
+    def evaluate(x):
+        angles = x.get("head_angles", default_angles)
+        design = LayoutDesign(
+            radius_m=m["radius_m"],
+            head_angles_rad=angles,
+            tilt_rad=m["tilt_rad"],
+            gap_m=m["gap_m"],
+            max_order=int(m["max_order"]),
+            grating_orders=int(m["grating_orders"]),
+            axial_orders=int(m["axial_orders"]),
+            n_angles=int(m["n_angles"]),
+        )
+        tol = _tolerances_from(m, x)
+        ms = layout_metrics(
+            design, tol, key=key, n_builds=n_builds, metric="ms", chunk_size=int(m["chunk_size"])
+        )
+        vals = jnp.sqrt(ms) if m["metric"] == "rms" else layout_metrics(
+            design, tol, key=key, n_builds=n_builds, metric=m["metric"],
+            chunk_size=int(m["chunk_size"]),
+        )  # fmt: skip
+        _, _, amp = layout_noise_amplification(angles, design.max_order)
+        out = {
+            "residual_rms": jnp.sqrt(jnp.mean(ms)),
+            "residual_percentile": jnp.percentile(vals, q),
+            "residual_mean": jnp.mean(vals),
+            "noise_amplification": amp,
+            "cost": tolerance_cost(tol.vector(), ref),
+        }
+        if yt is not None:
+            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
+            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
+        return out
+
+    return evaluate
+
+
+_LAYOUT_MODEL = {
+    k: v for k, v in _DESIGN_MODEL.items() if k not in ("reference_angle_rad", "n_heads")
+}
+_LAYOUT_MODEL["head_angles_rad"] = [0.0, 2.0943951023931953, 4.1887902047863905, 0.3157]
+
+_HEAD_LAYOUT = ProblemObjective(
+    name="head_layout",
+    doc="RMS residual over builds of a free head layout (least-squares self-compensation)",
+    variables={
+        "head_angles": VariableInfo(
+            "rad",
+            lower=-2 * math.pi,
+            upper=4 * math.pi,
+            size=0,
+            check=_check_head_angles,
+            doc="azimuth of every head",
+        ),
+        **_TOL_VARS,
+    },
+    model=_LAYOUT_MODEL,
+    outputs=(
+        "residual_rms",
+        "residual_percentile",
+        "residual_mean",
+        "noise_amplification",
+        "cost",
+        "yield_smooth",
+        "yield",
+    ),
+    build=_build_layout,
+)
+
+PROBLEM_OBJECTIVES["head_layout"] = _HEAD_LAYOUT

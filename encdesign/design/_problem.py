@@ -51,6 +51,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .._errors import input_error
 from ..io._recording import read_toml, show
 from ._objectives import PROBLEM_OBJECTIVES
@@ -106,6 +108,10 @@ class Variable:
         lower, upper: bounds, SI (``±inf`` when not given).
         values: allowed values of a discrete variable (``None`` for continuous), SI.
         integer: values are integers.
+        group: for an element ``name[i]`` of a vector variable, the vector's name (the
+            objective receives the elements stacked into one 1-D array); ``None`` for a
+            scalar.
+        index: the element's position in its vector.
     """
 
     name: str
@@ -116,6 +122,8 @@ class Variable:
     upper: float = math.inf
     values: tuple[float, ...] | None = None
     integer: bool = False
+    group: str | None = None
+    index: int = 0
 
     @property
     def discrete(self) -> bool:
@@ -243,10 +251,22 @@ def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
             out.append(int(x) if info.integer else xs)
         if len(set(out)) != len(out):
             raise input_error(f"{where}.values", f"{vals!r} has repeated values", "distinct")
+        if info.values is not None:
+            allowed = [float(a) for a in info.values]
+            for i, x in enumerate(out):
+                if not any(math.isclose(float(x), a, rel_tol=1e-12, abs_tol=0.0) for a in allowed):
+                    raise input_error(
+                        f"{where}.values[{i}]",
+                        f"{vals[i]!r} is not a declared value of {name!r}",
+                        f"one of {', '.join(str(v) for v in info.values)} (SI)",
+                    )
         return Variable(name, units, info.units, out[0], values=tuple(out), integer=info.integer)
-    if "start" not in table:
+    if "start" not in table and info.start is None:
         raise input_error(where, "no 'start'", "a start value")
-    start = _num(table["start"], f"{where}.start") * factor
+    if "start" in table:
+        start = _num(table["start"], f"{where}.start") * factor
+    else:
+        start = float(info.start)
     lower = _num(table["lower"], f"{where}.lower") * factor if "lower" in table else info.lower
     upper = _num(table["upper"], f"{where}.upper") * factor if "upper" in table else info.upper
     if not lower < upper:
@@ -263,7 +283,74 @@ def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
             f"[{table.get('lower', lower / factor)}, {table.get('upper', upper / factor)}] {units}",
             "lower <= start <= upper",
         )
+    if info.check is not None:
+        info.check(start, f"{where}.start")
     return Variable(name, units, info.units, start, lower, upper)
+
+
+def _vector_variable(name: str, table: Any, info: VariableInfo, src: str) -> list[Variable]:
+    """The elements ``name[i]`` of a vector variable (``start`` a list; ``lower``/``upper``
+    a number or a list of the same length), each checked like a scalar variable, then the
+    whole start vector by ``info.check``."""
+    where = _where(src, "variables", name)
+    if not isinstance(table, Mapping):
+        raise input_error(where, f"{table!r} is not a table", "a [variables.NAME] table")
+    _check_keys(table, {"units", "start", "lower", "upper"}, where)
+    units = table.get("units", info.units)
+    if not isinstance(units, str):
+        raise input_error(f"{where}.units", f"{units!r} is not a string")
+    to_si(1.0, units, f"{where}.units", info.units)
+    factor = UNITS[units][1]
+    if "start" in table:
+        start = table["start"]
+    elif info.start is not None:  # the declared default is SI
+        start = [float(v) / factor for v in info.start]
+    else:
+        raise input_error(where, "no 'start'", "a list of start values")
+    if not isinstance(start, list | tuple) or not start:
+        raise input_error(f"{where}.start", f"{start!r}", "a non-empty list of start values")
+    n = len(start)
+    if info.size and n != info.size:
+        raise input_error(f"{where}.start", f"{n} values", f"{info.size} values")
+    per: dict[str, list[Any]] = {}
+    for k in ("lower", "upper"):
+        v = table.get(k)
+        if isinstance(v, list | tuple):
+            if len(v) != n:
+                raise input_error(f"{where}.{k}", f"{len(v)} values", f"{n} (one per element)")
+            per[k] = list(v)
+        elif v is not None:
+            per[k] = [v] * n
+    scalar_info = dataclasses.replace(info, size=None, start=None, check=None)
+    elems = []
+    for i in range(n):
+        sub = {"units": units, "start": start[i], **{k: per[k][i] for k in per}}
+        v = _variable(f"{name}[{i}]", sub, scalar_info, src)
+        elems.append(dataclasses.replace(v, group=name, index=i))
+    if info.check is not None:
+        info.check(np.array([e.start for e in elems]), f"{where}.start")
+    return elems
+
+
+def _user_objective(obj_name: Any, registry: Mapping[str, ProblemObjective], where: str):
+    """A user objective (``package.module:function`` or an entry-point name)."""
+    from ._user import load_user_objective, registered_names
+
+    expected = (
+        f"one of {', '.join(sorted(registry))}, a 'package.module:function' path, or a name "
+        f"registered under the entry-point group 'encdesign.objectives'"
+    )
+    if not isinstance(obj_name, str) or not obj_name:
+        raise input_error(where, f"unknown objective {obj_name!r}", expected)
+    try:
+        return load_user_objective(obj_name, where)
+    except KeyError:
+        names = registered_names()
+        raise input_error(
+            where,
+            f"unknown objective {obj_name!r}",
+            expected + (f" (registered: {', '.join(names)})" if names else ""),
+        ) from None
 
 
 def parse_problem(
@@ -296,13 +383,10 @@ def parse_problem(
         raise input_error(src, "no [problem] table", "[problem] with name and objective")
     _check_keys(head, {"name", "objective", "sense", "seed", "description"}, f"{src}: problem")
     obj_name = head.get("objective")
-    if obj_name not in registry:
-        raise input_error(
-            _where(src, "problem", "objective"),
-            f"unknown objective {obj_name!r}",
-            f"one of {', '.join(sorted(registry))}",
-        )
-    spec = registry[obj_name]
+    if isinstance(obj_name, str) and obj_name in registry:
+        spec = registry[obj_name]
+    else:
+        spec = _user_objective(obj_name, registry, _where(src, "problem", "objective"))
     sense = head.get("sense", "minimize")
     if sense not in ("minimize", "maximize"):
         raise input_error(_where(src, "problem", "sense"), f"{sense!r}", "minimize or maximize")
@@ -361,9 +445,13 @@ def parse_problem(
             raise input_error(
                 _where(src, "variables", name),
                 f"unknown variable {name!r} for objective {obj_name!r}",
-                f"one of {', '.join(spec.variables)}",
+                f"one of {', '.join(spec.variables)} (the variables it declares)",
             )
-        variables.append(_variable(name, table, spec.variables[name], src))
+        info = spec.variables[name]
+        if info.size is not None:
+            variables.extend(_vector_variable(name, table, info, src))
+        else:
+            variables.append(_variable(name, table, info, src))
     constraints = []
     for out, table in dict(data.get("constraints", {})).items():
         where = _where(src, "constraints", out)

@@ -105,6 +105,21 @@ def _finite_or_none(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (v if math.isfinite(v) else None) for k, v in d.items()}
 
 
+def _assemble(variables: tuple, flat: dict[str, Any]) -> dict[str, Any]:
+    """Objective inputs from per-element values: the elements ``name[i]`` of a vector
+    variable are stacked into one 1-D array ``name`` (scalars pass through)."""
+    out: dict[str, Any] = {}
+    groups: dict[str, list[Any]] = {}
+    for v in variables:
+        if v.group is None:
+            out[v.name] = flat[v.name]
+        else:
+            groups.setdefault(v.group, []).append(flat[v.name])
+    for g, parts in groups.items():
+        out[g] = jnp.stack([jnp.asarray(p, dtype=jnp.float64) for p in parts])
+    return out
+
+
 class _Evaluator:
     """Normalised view of a problem for one discrete combination."""
 
@@ -116,7 +131,11 @@ class _Evaluator:
         self.scale = np.array([v.scale for v in self.vars], dtype=np.float64)
         self.lower = np.array([v.lower for v in self.vars], dtype=np.float64)
         self.upper = np.array([v.upper for v in self.vars], dtype=np.float64)
-        self.evaluate = problem.objective.build(problem, dict(discrete))
+        raw = problem.objective.build(problem, dict(discrete))
+        self.evaluate = lambda flat: raw(_assemble(self.vars, flat))
+        if problem.objective.check is not None:
+            start = {v.name: float(v.start) for v in self.vars}
+            problem.objective.check(problem, dict(discrete), _assemble(self.vars, start))
         self.name = problem.objective.outputs[0]
         self.sign = -1.0 if problem.sense == "maximize" else 1.0
 

@@ -12,6 +12,10 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
+SI_UNITS = ("rad", "m", "s", "1")
+"""The SI units a variable is declared in (problem files may use any unit of the same
+dimension, :data:`encdesign.design._problem.UNITS`)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class VariableInfo:
@@ -24,6 +28,16 @@ class VariableInfo:
         integer: values must be integers (pole pairs, head counts).
         lower, upper: physical limits in SI (a problem's bounds must lie inside).
         doc: one line of description.
+        values: the allowed values of a discrete variable (``None``: any); a problem lists
+            a subset.
+        start: default start (SI) when a problem's table gives none (a sequence for a
+            vector variable).
+        size: ``None`` for a scalar; for a vector variable (e.g. ``head_angles``) its
+            length, ``0`` for any length ``>= 1``. A vector reaches the objective as one
+            1-D array; drivers and case files see its elements ``name[i]``.
+        check: ``check(start_si, where)`` raising
+            :class:`~encdesign.EncdesignInputError` on an invalid start (e.g. coincident
+            head azimuths); ``start_si`` is a float or, for a vector, a 1-D array.
     """
 
     units: str
@@ -32,6 +46,10 @@ class VariableInfo:
     lower: float = -math.inf
     upper: float = math.inf
     doc: str = ""
+    values: tuple[Any, ...] | None = None
+    start: Any = None
+    size: int | None = None
+    check: Callable[[Any, str], None] | None = dataclasses.field(default=None, compare=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +70,11 @@ class ProblemObjective:
         model_limits: ``[model]`` key -> :class:`ModelLimit` (documented range), overriding
             :data:`DEFAULT_MODEL_LIMITS` for this objective.
         yield_units: SI unit of the error metric a ``[yield]`` spec bounds.
+        check: ``check(problem, discrete, x)`` run once before a driver evaluates the
+            objective at the start point ``x`` (continuous variable -> SI value/array):
+            raises :class:`~encdesign.EncdesignInputError` naming the objective when it
+            cannot be evaluated or differentiated (user objectives,
+            :mod:`encdesign.design._user`). ``None``: no check.
     """
 
     name: str
@@ -63,6 +86,9 @@ class ProblemObjective:
     requires_yield: bool = False
     model_limits: Mapping[str, ModelLimit] = dataclasses.field(default_factory=dict)
     yield_units: str = "rad"
+    check: Callable[[Any, dict[str, Any], dict[str, Any]], None] | None = dataclasses.field(
+        default=None, compare=False
+    )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -250,6 +250,8 @@ class Allocation:
         status: ``"success"`` or the failing driver status.
         message: account of the status.
         n_steps: optimiser iterations (all penalty rounds).
+        rare: with ``rare_metric``: the importance-sampling estimate at ``sigmas``
+            (:meth:`~encdesign.design.RareEventResult.as_dict`), else ``None``.
     """
 
     sigmas: np.ndarray
@@ -261,6 +263,7 @@ class Allocation:
     status: str
     message: str
     n_steps: int
+    rare: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
@@ -283,6 +286,10 @@ def allocate(
     penalties: Sequence[float] = (1e2, 1e4, 1e6),
     max_steps: int = 200,
     throw: bool = False,
+    rare_metric: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
+    rare_dim: int | None = None,
+    rare_key: jax.Array | None = None,
+    rare_n: int = 4000,
 ) -> Allocation:
     """Cheapest tolerances with ``target`` of the training builds within ``spec``.
 
@@ -303,6 +310,17 @@ def allocate(
         penalties: increasing penalty weights (relative to the reference cost).
         max_steps: BFGS iterations per penalty round.
         throw: raise :class:`~encdesign.design._drivers.OptimisationError` on failure.
+        rare_metric: ``rare_metric(z, sigmas)``, the per-build metric of a standard-normal
+            vector ``z [rare_dim]`` at tolerances ``sigmas``. When given, the yield goal is
+            shown by importance sampling (:func:`~encdesign.design.importance_yield`,
+            ``rare_n`` samples, key ``rare_key``) rather than by the training builds, so
+            targets such as 99.99 % are practical: the optimiser shapes the tolerances on
+            the training builds at the highest target they can show (``1 - 10/n``), then the
+            common scale is bisected until the importance-sampling yield minus two standard
+            errors meets ``target``. Raises :class:`~encdesign.EncdesignInputError` when
+            importance sampling cannot reach the target within the bounds, or its standard
+            error is too large to show it.
+        rare_dim, rare_key, rare_n: see ``rare_metric``.
     """
     if not 0.0 < target < 1.0:
         raise input_error(
@@ -316,6 +334,11 @@ def allocate(
         raise input_error("allocate.reference", "no tolerance to design", "some ref_i > 0")
     cref = float(tolerance_cost(ref, np.where(design, ref, 0.0), weights))
     n = int(np.asarray(jax.eval_shape(values_fn, jnp.asarray(ref)).shape[0]))
+    final_target = target
+    if rare_metric is not None:
+        if rare_dim is None or rare_key is None:
+            raise input_error("allocate.rare_metric", "given without rare_dim and rare_key")
+        target = min(target, 1.0 - 10.0 / n)  # what the training builds can show
     if margin is None:
         margin = 2.0 * math.sqrt(target * (1.0 - target) / n)
     goal = min(target + margin, 1.0 - 0.5 / n)
@@ -358,7 +381,13 @@ def allocate(
         return yield_stats(np.asarray(f(jnp.asarray(s))), spec)[0]
 
     scale = 1.0
-    if status == SUCCESS:
+    rare_out = None
+    if status == SUCCESS and rare_metric is not None:
+        scale, rare_out = _rare_scale(
+            rare_metric, rare_dim, rare_key, rare_n, lambda fac: np.asarray(
+                sig_of(jnp.asarray(u + math.log(fac)))), spec, final_target,
+        )  # fmt: skip
+    elif status == SUCCESS:
         a, b = 1e-3, 1.5
         if exact(a) < goal:
             status, msg = "infeasible", f"yield target {goal:.4g} unreachable within bounds"
@@ -378,12 +407,66 @@ def allocate(
     sig = np.asarray(sig_of(jnp.asarray(u + math.log(scale))))
     train_y = yield_stats(np.asarray(f(jnp.asarray(sig))), spec)[0]
     cost = float(tolerance_cost(sig, np.where(design, ref, 0.0), weights))
-    res = Allocation(sig, tuple(names), cost, train_y, ys_opt, scale, status, msg, steps)
+    res = Allocation(sig, tuple(names), cost, train_y, ys_opt, scale, status, msg, steps, rare_out)
     if throw and status != SUCCESS:
         from ._drivers import OptimisationError
 
         raise OptimisationError(f"allocate: {status}: {msg}")
     return res
+
+
+def _rare_scale(
+    metric: Callable[[jax.Array, jax.Array], jax.Array],
+    dim: int,
+    key: jax.Array,
+    n: int,
+    sig_at: Callable[[float], np.ndarray],
+    spec: float,
+    target: float,
+) -> tuple[float, dict[str, Any]]:
+    """Largest common factor (``1e-3 … 1.5``) whose importance-sampling yield, minus two
+    standard errors, meets ``target``; and the estimate there."""
+    from ._rare import importance_yield
+
+    def shown(fac: float):
+        r = importance_yield(metric, dim, spec, key=key, n=n, args=jnp.asarray(sig_at(fac)))
+        if r.status == "no_failure_found":
+            return True, r
+        if not r.ok:
+            return False, r
+        return r.failure_prob + 2.0 * r.failure_stderr <= 1.0 - target, r
+
+    a, b = 1e-3, 1.5
+    ok, r = shown(a)
+    if not ok:
+        raise input_error(
+            "allocate.target",
+            f"yield target {target!r} unreachable by importance sampling: with every "
+            f"tolerance at 1e-3 of the allocation the estimate is "
+            f"{1.0 - r.failure_prob:.6g} +- {r.failure_stderr:.2g} ({r.status}: {r.message})",
+            "a lower target, a looser spec or a lower bound below 1e-3",
+        )
+    ok, rb = shown(b)
+    if ok:
+        a, r = b, rb
+    else:
+        for _ in range(12):
+            mid = math.sqrt(a * b)
+            ok, rm = shown(mid)
+            if ok:
+                a, r = mid, rm
+            else:
+                b = mid
+            if b / a < 1 + 1e-2:
+                break
+    if r.ok and r.failure_stderr > 0.5 * (1.0 - target):
+        raise input_error(
+            "allocate.rare_n",
+            f"importance sampling cannot show yield target {target!r}: standard error "
+            f"{r.failure_stderr:.2g} with {n} samples",
+            "more samples (rare_n)",
+        )
+    return a, r.as_dict()
 
 
 def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0) -> dict[str, Any]:
@@ -396,3 +479,105 @@ def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0
         "n_builds": int(np.asarray(values).size),
         "meets_target": bool(p + n_sigma * max(se, 1e-12) >= target),
     }
+
+
+@dataclasses.dataclass(frozen=True)
+class SobolIndices:
+    """Sobol first-order and total indices of a per-build output, per tolerance group.
+
+    Attributes:
+        names: group names.
+        first: first-order index ``S_g`` (share of the variance explained by group ``g``
+            alone), variance-weighted over the output's components.
+        total: total index ``S_Tg`` (share involving group ``g``, interactions included).
+        n: base samples (``n (d + 2)`` builds were evaluated).
+        n_builds: builds evaluated.
+    """
+
+    names: tuple[str, ...]
+    first: np.ndarray
+    total: np.ndarray
+    n: int
+    n_builds: int
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        """``{"first": {name: S}, "total": {name: S_T}}``."""
+        return {
+            "first": {k: float(v) for k, v in zip(self.names, self.first)},
+            "total": {k: float(v) for k, v in zip(self.names, self.total)},
+        }
+
+
+def sobol_indices(
+    outputs_z: Callable[[jax.Array], jax.Array],
+    groups: Sequence[int],
+    names: Sequence[str],
+    *,
+    key: jax.Array,
+    n: int = 512,
+    chunk_size: int = 256,
+) -> SobolIndices:
+    """Sobol indices of ``outputs_z(z)`` (a per-build vector, e.g. the residual at every
+    shaft angle, rad) with respect to tolerance groups, by :func:`scipy.stats.sobol_indices`.
+
+    The group ``g`` of a build is the set of components ``z_c`` with ``groups[c] == g``
+    (``-1``: none); the Saltelli matrices are built per group (``AB_g`` = ``A`` with group
+    ``g``'s columns from ``B``), evaluated with encdesign's vectorised builds and handed to
+    scipy as precomputed evaluations. Indices of the output's components are combined
+    weighted by their variances, so for an output linear in the deviations the first-order
+    index equals the variance share of :func:`contributions` (``V = E[mean-square]``);
+    interactions make ``first < total``.
+
+    Args:
+        outputs_z: per-build outputs ``[s]`` of a standard-normal vector ``z [dim]`` (JAX).
+        groups: group index of each component of ``z``.
+        names: group names (``len = d``).
+        key: PRNG key of ``A`` and ``B``.
+        n: base samples, a power of two (scipy's requirement).
+        chunk_size: builds per jitted call.
+    """
+    from scipy.stats import sobol_indices as _scipy_sobol
+
+    from ._drivers import build_normals
+
+    gidx = np.asarray(groups, dtype=int)
+    dim, d = gidx.size, len(names)
+    if n < 2 or n & (n - 1):
+        raise input_error("sobol_indices.n", f"{n!r}", "a power of two >= 2")
+    ka, kb = jax.random.split(key)
+    a = np.asarray(build_normals(ka, jnp.arange(n), dim))
+    b = np.asarray(build_normals(kb, jnp.arange(n), dim))
+    vec = 8
+    size = -(-chunk_size // vec) * vec
+    f = jax.jit(lambda zc: values_of_normals_vec(outputs_z, zc, vec))
+
+    def run(z: np.ndarray) -> np.ndarray:  # -> (s, n)
+        out = []
+        for s0 in range(0, z.shape[0], size):
+            zc = z[s0 : s0 + size]
+            pad = size - zc.shape[0]
+            zc = np.concatenate([zc, np.zeros((pad, dim))]) if pad else zc
+            out.append(np.asarray(f(jnp.asarray(zc)))[: size - pad])
+        return np.concatenate(out).T
+
+    f_a, f_b = run(a), run(b)
+    f_ab = []
+    for g in range(d):
+        ab = a.copy()
+        cols = gidx == g
+        ab[:, cols] = b[:, cols]
+        f_ab.append(run(ab))
+    res = _scipy_sobol(func={"f_A": f_a, "f_B": f_b, "f_AB": np.stack(f_ab)}, n=n)
+    var = np.var(np.concatenate([f_a, f_b], axis=1), axis=1)  # (s,)
+    wts = var / np.sum(var)
+    first = np.asarray(res.first_order).reshape(-1, d)
+    total = np.asarray(res.total_order).reshape(-1, d)
+    return SobolIndices(tuple(names), wts @ first, wts @ total, n, n * (d + 2))
+
+
+def values_of_normals_vec(fn_z: Callable[[jax.Array], jax.Array], z: jax.Array, vector: int):
+    """Vector-valued :func:`~encdesign.design._drivers.values_of_normals`: ``fn_z`` on every
+    row of ``z [B, dim]``, ``lax.map`` over groups of ``vector`` rows; returns ``[B, s]``."""
+    groups = z.reshape(-1, vector, z.shape[-1])
+    out = jax.lax.map(jax.vmap(fn_z), groups)
+    return out.reshape(-1, out.shape[-1])

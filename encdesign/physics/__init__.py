@@ -66,6 +66,30 @@ from ._kinematics import (
 from ._kinematics import (
     stack_models as stack_models,
 )
+from ._layout import (
+    LayoutCompensation as LayoutCompensation,
+)
+from ._layout import (
+    check_layout as check_layout,
+)
+from ._layout import (
+    layout_gain as layout_gain,
+)
+from ._layout import (
+    layout_map as layout_map,
+)
+from ._layout import (
+    layout_noise_amplification as layout_noise_amplification,
+)
+from ._layout import (
+    layout_phases as layout_phases,
+)
+from ._layout import (
+    least_squares_compensate as least_squares_compensate,
+)
+from ._layout import (
+    unobservable_orders as unobservable_orders,
+)
 from ._motor import (
     Motor as Motor,
 )

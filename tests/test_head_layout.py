@@ -1,0 +1,255 @@
+"""Free head layouts: least-squares self-compensation for arbitrary azimuths (issue 14).
+
+Checks the generalisation against closed forms and against Cramer's cotangent equations,
+which are its N + 1 special case, then the Monte Carlo objective and its gradient, the
+problem-file variable ``head_angles`` and its bad input, and the study ``head-layout-opt``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import encdesign
+from encdesign import EncdesignInputError
+from encdesign.design import parse_problem, solve_problem
+from encdesign.objectives import (
+    EncoderDesign,
+    LayoutDesign,
+    Tolerances,
+    build_metrics,
+    layout_metrics,
+    layout_residual,
+    n_build_normals,
+    symmetric_angles,
+)
+from encdesign.physics import (
+    check_layout,
+    cotangent_sensitivity,
+    encoder_map,
+    layout_map,
+    layout_noise_amplification,
+    least_squares_compensate,
+    self_compensate,
+    unobservable_orders,
+)
+
+M = 12
+N_SAMPLES = 64
+
+
+def _disk(seed: int, m: int = M):
+    rng = np.random.default_rng(seed)
+    return rng.normal(size=m) * 1e-6, rng.normal(size=m) * 1e-6
+
+
+def _readings(angles, s, c, noise=0.0, seed=0):
+    """Readings of heads at ``angles`` of the error ``e(theta - alpha_k)`` (plus constants
+    and optional white noise), rad ``(n, H)``."""
+    th = np.arange(N_SAMPLES) * 2 * np.pi / N_SAMPLES
+    j = np.arange(1, s.size + 1)
+    cols = []
+    for k, a in enumerate(angles):
+        arg = np.multiply.outer(th - a, j)
+        cols.append(np.sin(arg) @ s + np.cos(arg) @ c + 1e-3 * k)
+    y = np.stack(cols, axis=1)
+    if noise:
+        y = y + np.random.default_rng(seed).normal(size=y.shape) * noise
+    return th, y
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("n_heads", [2, 3, 5])
+def test_least_squares_recovers_the_disk_error_for_random_layouts(seed, n_heads):
+    rng = np.random.default_rng(100 * seed + n_heads)
+    angles = np.sort(rng.uniform(0, 2 * np.pi, n_heads))
+    s, c = _disk(seed)
+    th, y = _readings(angles, s, c)
+    comp = least_squares_compensate(th, jnp.asarray(y), jnp.asarray(angles), M)
+    assert unobservable_orders(angles, M) == []
+    assert bool(jnp.all(comp.observable))
+    np.testing.assert_allclose(comp.sin_rad, s, atol=1e-15)
+    np.testing.assert_allclose(comp.cos_rad, c, atol=1e-15)
+    assert float(jnp.max(comp.fit_residual_rad)) < 1e-15
+
+
+@pytest.mark.parametrize("n_sym", [2, 3, 4])
+@pytest.mark.parametrize("seed", [0, 7])
+def test_cotangent_equations_are_the_n_plus_1_special_case(n_sym, seed):
+    rng = np.random.default_rng(seed + 10 * n_sym)
+    ref = rng.uniform(0.05, np.pi / n_sym - 0.05)
+    angles = np.concatenate([np.asarray(symmetric_angles(n_sym)), [ref]])
+    s, c = _disk(seed)
+    w = np.r_[np.full(n_sym, 1.0 / n_sym), 0.0]  # Cramer averages the symmetric heads only
+    for noise in (0.0, 1e-7):
+        th, y = _readings(angles, s, c, noise=noise, seed=seed)
+        cot = encoder_map(self_compensate(th, jnp.asarray(y), angles, n_sym, M), angles[:n_sym])
+        ls = layout_map(least_squares_compensate(th, jnp.asarray(y), jnp.asarray(angles), M), w)
+        # with or without noise the two maps are the same linear function of the readings
+        np.testing.assert_allclose(ls(th), cot(th), rtol=0, atol=1e-18)
+    amp, _, agg = layout_noise_amplification(angles, M, w)
+    amp_c, agg_c = cotangent_sensitivity(ref, symmetric_angles(n_sym), M)
+    deg = np.arange(1, M + 1) % n_sym == 0
+    np.testing.assert_allclose(np.asarray(amp)[deg], np.asarray(amp_c)[deg], rtol=1e-12)
+    np.testing.assert_allclose(float(agg), float(agg_c), rtol=1e-12)
+    # least squares uses every head difference: never noisier than the pairwise average
+    assert np.all(np.asarray(amp) <= np.asarray(amp_c) * (1 + 1e-12))
+
+
+def test_noise_amplification_matches_a_monte_carlo_of_read_noise():
+    angles = np.radians([0.0, 71.0, 160.0, 250.0])
+    s, c = np.zeros(M), np.zeros(M)
+    sigma = 1e-6
+    ests = []
+    for seed in range(400):
+        th, y = _readings(angles, s, c, noise=sigma, seed=seed)
+        comp = least_squares_compensate(th, jnp.asarray(y), jnp.asarray(angles), M)
+        ests.append(np.asarray(comp.sin_rad))
+    sigma_c = sigma * math.sqrt(2.0 / N_SAMPLES)  # std of one Fourier coefficient of noise
+    measured = np.std(np.stack(ests), axis=0) / sigma_c
+    amp, _, _ = layout_noise_amplification(angles, M)
+    # 400 draws: the sample std is within ~4 * 3.5 % of the truth
+    np.testing.assert_allclose(measured, np.asarray(amp), rtol=0.15)
+
+
+def test_unobservable_orders_and_their_noise():
+    assert unobservable_orders(np.asarray(symmetric_angles(3)), 9) == [3, 6, 9]
+    assert unobservable_orders(np.radians([0.0, 180.0]), 6) == [2, 4, 6]
+    amp, gain, agg = layout_noise_amplification(jnp.radians(jnp.array([0.0, 180.0])), 6)
+    assert np.all(np.isinf(np.asarray(amp)[1::2]))
+    assert np.all(np.asarray(gain)[1::2] == 0.0)  # not in the map: no calibration noise
+    assert math.isinf(float(agg))  # the output carries an order nobody can calibrate
+    assert unobservable_orders(np.radians([0.0, 100.0, 230.0]), 16) == []
+
+
+def _layout(angles, **kw):
+    kw = {"max_order": 8, "grating_orders": 8, "n_angles": 64, "tilt_rad": 6e-3, **kw}
+    return LayoutDesign(radius_m=0.0254, head_angles_rad=angles, **kw)
+
+
+TOL = Tolerances(
+    eccentricity=5e-6,
+    tilt=1e-3,
+    placement=2e-4,
+    grating=5e-6,
+    beam_tilt=1e-3,
+    axial_runout=2e-6,
+    noise=2e-7,
+)
+
+
+def test_layout_residual_equals_cramer_pipeline_on_the_n_plus_1_layout():
+    ref = math.radians(18.09)
+    cramer = EncoderDesign(
+        radius_m=0.0254,
+        reference_angle_rad=ref,
+        tilt_rad=6e-3,
+        n_heads=3,
+        max_order=8,
+        grating_orders=8,
+        n_angles=64,
+    )
+    lay = _layout(cramer.head_angles_rad, weights=jnp.array([1.0, 1.0, 1.0, 0.0]))
+    key = jax.random.key(3)
+    a = build_metrics(cramer, TOL, key=key, n_builds=6)
+    b = layout_metrics(lay, TOL, key=key, n_builds=6)
+    np.testing.assert_allclose(b, a, rtol=1e-10)
+
+
+def test_grating_only_build_is_compensated():
+    lay = _layout(jnp.radians(jnp.array([0.0, 97.0, 211.0])))
+    z = jax.random.normal(jax.random.key(0), (n_build_normals(lay),))
+    r = layout_residual(lay, Tolerances(grating=5e-6), z)
+    assert float(jnp.max(jnp.abs(r))) < 1e-10  # 5 urad grating modes, removed to 2e-5
+
+
+def test_layout_objective_gradient_matches_finite_differences():
+    key = jax.random.key(1)
+
+    def f(a):
+        ms = layout_metrics(_layout(a, n_angles=32, max_order=4, grating_orders=4), TOL,
+                            key=key, n_builds=4, metric="ms")  # fmt: skip
+        return jnp.sqrt(jnp.mean(ms))
+
+    a0 = np.radians([3.0, 100.0, 230.0, 300.0])
+    g = np.asarray(jax.grad(f)(jnp.asarray(a0)))
+    h = 1e-4
+    fd = [
+        (float(f(jnp.asarray(a0 + h * e))) - float(f(jnp.asarray(a0 - h * e)))) / (2 * h)
+        for e in np.eye(a0.size)
+    ]
+    np.testing.assert_allclose(g, fd, rtol=1e-4)
+    _, _, agg = layout_noise_amplification(jnp.asarray(a0), 8)
+    ga = np.asarray(jax.grad(lambda a: layout_noise_amplification(a, 8)[2])(jnp.asarray(a0)))
+    fda = [
+        (
+            float(layout_noise_amplification(jnp.asarray(a0 + h * e), 8)[2])
+            - float(layout_noise_amplification(jnp.asarray(a0 - h * e), 8)[2])
+        )
+        / (2 * h)
+        for e in np.eye(a0.size)
+    ]
+    assert math.isfinite(float(agg))
+    np.testing.assert_allclose(ga, fda, rtol=1e-5)
+
+
+def test_coincident_heads_are_refused():
+    with pytest.raises(EncdesignInputError, match="heads 0 and 2 coincide"):
+        check_layout(np.radians([10.0, 100.0, 370.0]))
+    with pytest.raises(ValueError, match="coincide"):
+        _layout(jnp.radians(jnp.array([0.0, 0.0, 120.0])))
+
+
+def _layout_problem(start, lower=-10.0, upper=370.0):
+    return {
+        "problem": {"name": "free", "objective": "head_layout"},
+        "model": {"n_angles": 32, "max_order": 4, "grating_orders": 4, "n_builds": 4,
+                  "sigma_placement": 1e-4, "sigma_grating": 5e-6, "sigma_noise": 2e-7},
+        "variables": {"head_angles": {"units": "deg", "start": start, "lower": lower,
+                                      "upper": upper}},
+        "driver": {"kind": "bfgs", "max_steps": 30},
+    }  # fmt: skip
+
+
+def test_head_angles_bad_input_names_the_element():
+    with pytest.raises(EncdesignInputError, match=r"variables\.head_angles\[2\]\.start.*400"):
+        parse_problem(_layout_problem([0.0, 100.0, 400.0]), source="p.toml")
+    with pytest.raises(EncdesignInputError, match=r"head_angles\.start.*heads 1 and 2 coincide"):
+        parse_problem(_layout_problem([0.0, 100.0, 100.0]), source="p.toml")
+    with pytest.raises(EncdesignInputError, match=r"head_angles\.lower: 2 values"):
+        parse_problem(_layout_problem([0.0, 100.0, 200.0], lower=[0.0, 0.0]), source="p.toml")
+    with pytest.raises(EncdesignInputError, match="outside the bounds"):
+        parse_problem(_layout_problem([0.0, 100.0, 200.0], upper=150.0), source="p.toml")
+
+
+def test_head_layout_problem_optimises_the_vector_variable():
+    p = parse_problem(_layout_problem([0.0, 100.0, 250.0]), source="p.toml")
+    assert [v.name for v in p.continuous] == ["head_angles[0]", "head_angles[1]",
+                                              "head_angles[2]"]  # fmt: skip
+    res = solve_problem(p)
+    assert res.best is not None and res.best.status in ("success", "max_steps_reached")
+    ev0 = p.objective.build(p, {})({"head_angles": jnp.radians(jnp.array([0.0, 100.0, 250.0]))})
+    assert res.best.outputs["residual_rms"] <= float(ev0["residual_rms"])
+
+
+def test_head_layout_study_quick(tmp_path):
+    from encdesign.cli import main
+
+    out = tmp_path / "hlo"
+    rc = main(["study", "run", "head-layout-opt", "--quick", "--heads", "3", "--out", str(out),
+               "--json", str(out / "s.json"), "--no-plots"])  # fmt: skip
+    assert rc == 0
+    s = json.loads((out / "s.json").read_text())
+    (h3,) = s["head_counts"]
+    for which in ("optimum", "best_symmetric"):
+        for k in ("head_angles_deg", "residual_urad", "noise_amplification"):
+            assert k in h3[which]
+        assert len(h3[which]["head_angles_deg"]) == 3
+    assert h3["optimum"]["residual_urad"] <= h3["best_symmetric"]["residual_urad"] * (1 + 1e-12)
+    assert h3["gradient_check"]["ok"]
+    assert encdesign.unobservable_orders(np.radians(h3["optimum"]["head_angles_deg"]), 4) == []
