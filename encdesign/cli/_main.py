@@ -129,6 +129,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = argparse.ArgumentParser(prog=f"encdesign {cmd}", description=mod.HELP)
         mod.configure(parser)
         args = parser.parse_args(rest)
+        args.command_argv = [cmd, *rest]  # to re-run the command (--processes N)
         return int(mod.run(args) or 0)
     except EncdesignInputError as exc:
         print(f"encdesign {cmd}: error: {exc}", file=sys.stderr)
