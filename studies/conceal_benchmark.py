@@ -28,6 +28,7 @@ import time
 import jax
 import numpy as np
 
+from encdesign.design._distributed import allgather_objects, is_my_task
 from encdesign.diagnose._conceal import write_concealed
 from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
 from encdesign.diagnose._effects import CATALOG_MULTIHEAD
@@ -140,6 +141,9 @@ def _sds_block(args, plan) -> dict:
     i = 0
     for effect, cases in plan.items():
         for conc, ref in cases:
+            if not is_my_task(i):  # one recording per task, dealt over the processes
+                i += 1
+                continue
             seed = args.seed * 1000 + 500 + i
             path = args.out / "recordings" / f"sds{i:03d}.toml"
             rec, truth = write_concealed_sds(
@@ -185,6 +189,7 @@ def _sds_block(args, plan) -> dict:
                 file=sys.stderr,
                 flush=True,
             )
+    rows = sorted(allgather_objects(rows), key=lambda r: r["seed"])  # all processes' shares
     cat = [r for r in rows if r["truth"] in SDS_CATALOG]
     clean = [r for r in rows if r["truth"] == "clean"]
     ooc = [r for r in rows if r["truth"] not in SDS_CATALOG and r["truth"] != "clean"]
@@ -273,6 +278,9 @@ def _multihead_block(args, plan) -> tuple[dict, list[dict]]:
     total = sum(len(v) for v in plan.values())
     for effect, cases in plan.items():
         for conc, layout, ref in cases:
+            if not is_my_task(i):  # one recording per task, dealt over the processes
+                i += 1
+                continue
             seed = args.seed * 1000 + i
             path = args.out / "recordings" / f"rec{i:03d}.toml"
             rec, truth = write_concealed(
@@ -319,6 +327,7 @@ def _multihead_block(args, plan) -> tuple[dict, list[dict]]:
                 file=sys.stderr,
                 flush=True,
             )
+    rows = sorted(allgather_objects(rows), key=lambda r: r["seed"])  # all processes' shares
     cat = [r for r in rows if r["truth"] in CATALOG_MULTIHEAD]
     clean = [r for r in rows if r["truth"] == "clean"]
     ooc = [r for r in rows if r["truth"] not in CATALOG_MULTIHEAD and r["truth"] != "clean"]

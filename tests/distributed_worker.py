@@ -33,10 +33,12 @@ def main() -> int:
     from encdesign.design._drivers import monte_carlo
     from encdesign.objectives import (
         EncoderDesign,
+        SDSTolerances,
         Tolerances,
         build_metric,
         build_metrics,
         n_build_normals,
+        sds_residuals,
     )
 
     if args.die:
@@ -63,7 +65,11 @@ def main() -> int:
 
     sig = jnp.asarray(list(SCALE_TOLERANCES.values()))
     grad = jax.jit(jax.grad(mean_metric))(sig)
+    sds = sds_residuals(3, 2, SDSTolerances(), key=key, n_builds=5, marks_per_rev=60, n_phi=8)
+    tasks = [{"task": i, "by": dist.process_index()} for i in range(5) if dist.is_my_task(i)]
     out = {
+        "tasks": sorted(dist.allgather_objects(tasks), key=lambda t: t["task"]),
+        "sds": np.asarray(sds).tolist(),
         "devices": jax.device_count(),
         "processes": jax.process_count(),
         "values": mc.values.tolist(),

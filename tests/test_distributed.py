@@ -52,6 +52,8 @@ def _agree(a: dict, b: dict) -> None:
     assert b["mean"] == pytest.approx(a["mean"], rel=RTOL, abs=0)
     assert b["yield"] == a["yield"] and b["spec"] == pytest.approx(a["spec"], rel=RTOL)
     np.testing.assert_allclose(b["grad"], a["grad"], rtol=RTOL, atol=0)
+    np.testing.assert_allclose(b["sds"], a["sds"], rtol=RTOL, atol=0)
+    assert len(set(a["sds"])) == len(a["sds"])  # distinct builds, not one repeated
 
 
 def test_four_cpu_devices_agree_with_one(single, tmp_path):
@@ -71,6 +73,9 @@ def test_two_processes_on_localhost_agree_with_one(single, tmp_path):
     r = json.loads(out.read_text())
     assert r["devices"] == 2 and r["processes"] == 2
     _agree(single, r)
+    # tasks (e.g. benchmark recordings) dealt round-robin and gathered
+    assert r["tasks"] == [{"task": i, "by": i % 2} for i in range(5)]
+    assert single["tasks"] == [{"task": i, "by": 0} for i in range(5)]
 
 
 def test_a_dead_process_stops_the_run_in_bounded_time(tmp_path, capsys):

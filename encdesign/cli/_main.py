@@ -86,8 +86,20 @@ def _run_study(argv: Sequence[str]) -> int:
             print(f"{name:22s} {_study_title(path)}")
         return 0
     mod = _load_study(args.name)
-    rc = mod.main(list(args.flags))
-    return int(rc or 0)
+    from ..design import _distributed as dist
+
+    launch_p = argparse.ArgumentParser(prog=f"encdesign study run {args.name}", add_help=False)
+    dist.add_launch_flags(launch_p)
+    launch, flags = launch_p.parse_known_args(list(args.flags))
+    argv = ["study", "run", args.name, *flags]
+    if launch.processes is not None:
+        argv += ["--processes", str(launch.processes)]
+
+    def body() -> int:
+        with dist.quiet_unless_main():
+            return int(mod.main(dist.study_argv_for_this_process(args.name, flags)) or 0)
+
+    return dist.run_launched(launch, argv, body)
 
 
 def _version() -> str:

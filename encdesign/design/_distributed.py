@@ -43,6 +43,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -339,6 +340,41 @@ def allgather_rows(rows: np.ndarray, n_total: int) -> np.ndarray:
     return got.reshape(-1, *rows.shape[1:])[:n_total]
 
 
+def allgather_objects(items: Sequence[Any]) -> list[Any]:
+    """Every process's list of JSON-able ``items`` (its share of tasks, e.g. benchmark rows),
+    concatenated in process order on every process (two collectives: lengths, then bytes).
+    NumPy scalars and arrays become Python numbers and lists."""
+    items = list(items)
+    if jax.process_count() == 1:
+        return items
+    import json
+
+    from jax.experimental import multihost_utils
+
+    def plain(x: Any) -> Any:
+        if isinstance(x, np.ndarray):
+            return x.tolist()
+        if isinstance(x, np.generic):
+            return x.item()
+        raise TypeError(f"not JSON-able: {type(x).__name__}")
+
+    data = np.frombuffer(json.dumps(items, default=plain).encode("utf-8"), dtype=np.uint8)
+    sizes = np.asarray(multihost_utils.process_allgather(np.array([data.size], np.int64)))
+    pad = np.zeros(int(sizes.max()), np.uint8)
+    pad[: data.size] = data
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    out: list[Any] = []
+    for row, size in zip(got, sizes.reshape(-1)):
+        out += json.loads(bytes(row[: int(size)]).decode("utf-8"))
+    return out
+
+
+def is_my_task(i: int) -> bool:
+    """True when task ``i`` (of a list every process enumerates in the same order) is this
+    process's: tasks are dealt round-robin, ``i mod process_count == process_index``."""
+    return int(i) % jax.process_count() == jax.process_index()
+
+
 def barrier(name: str) -> None:
     """Wait until every process reaches the barrier ``name`` (no-op for one process)."""
     if jax.process_count() > 1:
@@ -524,6 +560,28 @@ def run_launched(args: Any, argv: Sequence[str], body: Callable[[], int]) -> int
     rc = body()
     shutdown()
     return rc
+
+
+def study_argv_for_this_process(name: str, flags: Sequence[str]) -> list[str]:
+    """A study's flags for this process: unchanged on process 0; on the others ``--json`` is
+    dropped, ``--no-plots`` added and ``--out DIR`` becomes ``DIR/.process-K`` (their
+    duplicate summaries and, for the conceal benchmark, the recordings of their share)."""
+    if is_main_process():
+        return list(flags)
+    out, it, out_dir = [], iter(flags), str(Path("results") / name)
+    for a in it:
+        if a == "--json":
+            next(it, None)
+        elif a.startswith("--json="):
+            continue
+        elif a == "--out":
+            out_dir = next(it, out_dir)
+        elif a.startswith("--out="):
+            out_dir = a.split("=", 1)[1]
+        elif a != "--no-plots":
+            out.append(a)
+    k = process_index()
+    return [*out, "--out", str(Path(out_dir) / f".process-{k}"), "--no-plots"]
 
 
 @contextlib.contextmanager
