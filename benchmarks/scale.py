@@ -16,6 +16,9 @@ Configurations (each a fresh set of processes; the compile is excluded by a warm
   thread limit, not pinned;
 * 1 process, unrestricted (XLA's default threads, all cores).
 
+Each process's CPU time over the timed run is recorded too (``cpu_s_per_process``): CPU / wall
+above 1 means it used more than one core; well below 1 means other load took the core.
+
 Reported per configuration: wall time of the run (slowest process), builds/s, peak
 resident memory of each process (``ru_maxrss``), speedup over the 1-process one-core run,
 parallel efficiency (speedup / workers, and speedup / cores used), and the agreement of
@@ -104,11 +107,12 @@ def _worker(argv: list[str]) -> int:
     per_chunk = args.chunk * dist.n_build_shards()
     monte_carlo(fn, tol, key=key, n=min(per_chunk, args.builds), dim=dim, chunk_size=args.chunk)
     dist.barrier("bench-start")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), os.times()
     mc = monte_carlo(fn, tol, key=key, n=args.builds, dim=dim, chunk_size=args.chunk)
-    wall = time.perf_counter() - t0
+    wall, c1 = time.perf_counter() - t0, os.times()
+    cpu = (c1.user + c1.system) - (c0.user + c0.system)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    rows = dist.allgather_rows(np.array([[wall, rss_mb]]), dist.process_count())
+    rows = dist.allgather_rows(np.array([[wall, rss_mb, cpu]]), dist.process_count())
     if dist.is_main_process():
         y, y_se = mc.yield_fraction(SPEC_RAD)
         args.out.write_text(
@@ -118,6 +122,7 @@ def _worker(argv: list[str]) -> int:
                     "devices": jax.device_count(),
                     "wall_s_per_process": rows[:, 0].tolist(),
                     "peak_rss_mb_per_process": rows[:, 1].tolist(),
+                    "cpu_s_per_process": rows[:, 2].tolist(),
                     "mean_rms_rad": mc.mean,
                     "yield": y,
                     "yield_stderr": y_se,
