@@ -4,7 +4,8 @@ The workload is the Monte Carlo yield of ``benchmarks/optimize.py`` (3+1 heads, 
 nominal tilt 6 mrad, orders 1-16, its tolerance set; ``--angles`` samples per revolution,
 default 512) over ``--builds`` builds (default 100,000), through
 :func:`encdesign.design.monte_carlo`: the builds axis is sharded over the ``"builds"`` mesh
-(``jax.shard_map``), the per-build values gathered with a collective.
+(one slice per device, partitioned by XLA's SPMD partitioner), the per-build values
+gathered with a collective.
 
 Configurations (each a fresh set of processes; the compile is excluded by a warm-up chunk):
 

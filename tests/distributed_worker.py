@@ -65,6 +65,8 @@ def main() -> int:
 
     sig = jnp.asarray(list(SCALE_TOLERANCES.values()))
     grad = jax.jit(jax.grad(mean_metric))(sig)
+    # a solver step: the next point is computed from an output that lives on the mesh
+    again = jax.jit(mean_metric)(sig * (1.0 + 1e3 * grad * sig))
     sds = sds_residuals(3, 2, SDSTolerances(), key=key, n_builds=5, marks_per_rev=60, n_phi=8)
     tasks = [{"task": i, "by": dist.process_index()} for i in range(5) if dist.is_my_task(i)]
     out = {
@@ -78,6 +80,7 @@ def main() -> int:
         "yield": y,
         "yield_stderr": y_se,
         "grad": np.asarray(grad).tolist(),
+        "again": float(again),
     }
     if dist.is_main_process():
         args.out.write_text(json.dumps(out))

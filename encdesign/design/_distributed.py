@@ -6,12 +6,16 @@ encdesign does not run a task farm of its own. It uses
   (:func:`~encdesign.design.map_builds` and everything built on it: ``monte_carlo``,
   ``expected_value``, ``build_metrics``, ``sds_residuals``, the tolerance sweeps and
   allocation) is split over a one-axis :class:`~jax.sharding.Mesh` named ``"builds"``
-  with :func:`jax.shard_map` (:func:`shard_builds`). Every device evaluates a contiguous
-  slice of builds, chunked as before (memory per device stays bounded), and the per-build
-  values are gathered (an all-gather: 8 bytes per build) so that the reductions that
-  follow (mean, percentile, yield) see the same array in the same order as one device.
+  (:func:`shard_builds`): one slice of builds per device, laid out on the mesh with
+  :func:`jax.lax.with_sharding_constraint` and partitioned by XLA's SPMD partitioner (GSPMD;
+  ``jax.shard_map`` was tried first, but a closed-over design that is itself an output on
+  the mesh, as in every solver step, cannot enter its manual region). Every device
+  evaluates a contiguous slice of builds, chunked as before (memory per device stays
+  bounded), and the per-build values are gathered (an all-gather: 8 bytes per build) so
+  that the reductions that follow (mean, percentile, yield) see the same array in the same
+  order as one device.
   Build ``i`` depends only on ``fold_in(key, i)``, so the values are those of a
-  single-device run; with one device nothing changes (no ``shard_map`` at all).
+  single-device run; with one device nothing changes (no sharding at all).
 * :func:`jax.distributed.initialize` — the multi-controller runtime. With it, the mesh
   spans the devices of all processes and every process runs the same program (SPMD); the
   all-gather crosses processes (gloo on CPU, NCCL on GPU). :func:`initialize` wraps it
@@ -294,28 +298,30 @@ def shard_builds(local_fn: Callable[[jax.Array, int], jax.Array], n: int) -> jax
     (``offset`` a traced integer, ``m`` static). With ``D`` shards each computes
     ``m = ceil(n / D)`` builds (the last ones past ``n`` are discarded), then the values are
     all-gathered so every device holds all ``n`` in build order. With one device this is
-    just ``local_fn(0, n)``. Differentiable (``shard_map`` transposes the gather).
+    just ``local_fn(0, n)``. Differentiable (the gather's transpose is a slice).
     """
     n = int(n)
     am = jax.sharding.get_abstract_mesh()
     if BUILDS_AXIS in am.axis_names:
-        d, mesh, replicated = int(am.shape[BUILDS_AXIS]), None, P()
+        d = int(am.shape[BUILDS_AXIS])
+        sharded, replicated = P(BUILDS_AXIS), P()
     else:
         devices = tuple(jax.devices())
         d = len(devices)
-        mesh = _mesh_of(devices) if d > 1 else None
-        replicated = NamedSharding(mesh, P()) if d > 1 else None
+        if d > 1:
+            mesh = _mesh_of(devices)
+            sharded, replicated = NamedSharding(mesh, P(BUILDS_AXIS)), NamedSharding(mesh, P())
     if d <= 1:
         return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
     m = -(-n // d)
-    offsets = jnp.arange(d, dtype=jnp.int32) * m
-
-    def body(off):
-        return local_fn(off[0], m)
-
-    spec = P(BUILDS_AXIS)
-    out = jax.shard_map(body, mesh=mesh, in_specs=spec, out_specs=spec)(offsets)
-    return jax.lax.with_sharding_constraint(out, replicated)[:n]
+    # one slice of builds per device: the slices are a batch axis (vmap) laid out over the
+    # mesh, and XLA's SPMD partitioner runs each device's slice there (the chunked loop
+    # inside included). No manual region (shard_map): values the function closes over, such
+    # as a design that is itself the output of an earlier sharded step, need no care.
+    offsets = jax.lax.with_sharding_constraint(jnp.arange(d, dtype=jnp.int32) * m, sharded)
+    vals = jax.vmap(lambda off: local_fn(off, m))(offsets)  # [d, m]
+    vals = jax.lax.with_sharding_constraint(vals.reshape(-1), sharded)
+    return jax.lax.with_sharding_constraint(vals, replicated)[:n]
 
 
 def split_range(n: int, parts: int, part: int) -> tuple[int, int]:
