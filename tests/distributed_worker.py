@@ -48,8 +48,12 @@ def main() -> int:
     design = EncoderDesign(**SCALE_DESIGN)
     tol = Tolerances(**SCALE_TOLERANCES)
     key = jax.random.key(7)
+
+    def metric(t, z):
+        return build_metric(design, t, z)
+
     mc = monte_carlo(
-        lambda t, z: build_metric(design, t, z),
+        metric,
         tol,
         key=key,
         n=SCALE_BUILDS,
@@ -67,6 +71,11 @@ def main() -> int:
     grad = jax.jit(jax.grad(mean_metric))(sig)
     # a solver step: the next point is computed from an output that lives on the mesh
     again = jax.jit(mean_metric)(sig * (1.0 + 1e3 * grad * sig))
+    # monte_carlo of a design that lives on the mesh (the output of a sharded step)
+    t_mesh = Tolerances(**dict(zip(SCALE_TOLERANCES, sig * (1.0 + 0.0 * grad))))
+    mc_mesh = monte_carlo(
+        metric, t_mesh, key=key, n=SCALE_BUILDS, dim=n_build_normals(design), chunk_size=32
+    )
     sds = sds_residuals(3, 2, SDSTolerances(), key=key, n_builds=5, marks_per_rev=60, n_phi=8)
     tasks = [{"task": i, "by": dist.process_index()} for i in range(5) if dist.is_my_task(i)]
     out = {
@@ -81,6 +90,7 @@ def main() -> int:
         "yield_stderr": y_se,
         "grad": np.asarray(grad).tolist(),
         "again": float(again),
+        "mean_mesh_input": mc_mesh.mean,
     }
     if dist.is_main_process():
         args.out.write_text(json.dumps(out))

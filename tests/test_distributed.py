@@ -53,6 +53,7 @@ def _agree(a: dict, b: dict) -> None:
     assert b["yield"] == a["yield"] and b["spec"] == pytest.approx(a["spec"], rel=RTOL)
     np.testing.assert_allclose(b["grad"], a["grad"], rtol=RTOL, atol=0)
     assert b["again"] == pytest.approx(a["again"], rel=RTOL, abs=0)
+    assert b["mean_mesh_input"] == pytest.approx(a["mean"], rel=RTOL, abs=0)
     np.testing.assert_allclose(b["sds"], a["sds"], rtol=RTOL, atol=0)
     assert len(set(a["sds"])) == len(a["sds"])  # distinct builds, not one repeated
 

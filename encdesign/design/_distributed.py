@@ -291,7 +291,9 @@ def n_build_shards() -> int:
     return len(jax.devices())
 
 
-def shard_builds(local_fn: Callable[[jax.Array, int], jax.Array], n: int) -> jax.Array:
+def shard_builds(
+    local_fn: Callable[[jax.Array, int], jax.Array], n: int, *, manual: bool = False
+) -> jax.Array:
     """Traceable per-build values ``[n]``, the builds split over the ``"builds"`` mesh.
 
     ``local_fn(offset, m)`` returns the values ``[m]`` of builds ``offset … offset + m - 1``
@@ -299,6 +301,12 @@ def shard_builds(local_fn: Callable[[jax.Array, int], jax.Array], n: int) -> jax
     ``m = ceil(n / D)`` builds (the last ones past ``n`` are discarded), then the values are
     all-gathered so every device holds all ``n`` in build order. With one device this is
     just ``local_fn(0, n)``. Differentiable (the gather's transpose is a slice).
+
+    ``manual=True`` uses ``jax.shard_map`` (each device runs only its slice: the fast path,
+    used by :func:`~encdesign.design.monte_carlo`); it requires that ``local_fn`` closes
+    over no array already laid out on a mesh. The default partitions a vmapped slice axis
+    with GSPMD, which works for any closure (solver steps) but may communicate inside the
+    loop.
     """
     n = int(n)
     am = jax.sharding.get_abstract_mesh()
@@ -314,11 +322,23 @@ def shard_builds(local_fn: Callable[[jax.Array, int], jax.Array], n: int) -> jax
     if d <= 1:
         return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
     m = -(-n // d)
-    # one slice of builds per device: the slices are a batch axis (vmap) laid out over the
-    # mesh, and XLA's SPMD partitioner runs each device's slice there (the chunked loop
-    # inside included). No manual region (shard_map): values the function closes over, such
-    # as a design that is itself the output of an earlier sharded step, need no care.
-    offsets = jax.lax.with_sharding_constraint(jnp.arange(d, dtype=jnp.int32) * m, sharded)
+    offsets = jnp.arange(d, dtype=jnp.int32) * m
+    if manual:
+        # shard_map: each device runs exactly its slice; nothing but the final gather
+        # crosses devices or processes. Only for functions that close over no array
+        # already laid out on the mesh (monte_carlo makes its inputs host arrays first).
+        out = jax.shard_map(
+            lambda off: local_fn(off[0], m),
+            mesh=None if isinstance(sharded, P) else sharded.mesh,
+            in_specs=P(BUILDS_AXIS),
+            out_specs=P(BUILDS_AXIS),
+        )(offsets)
+        return jax.lax.with_sharding_constraint(out, replicated)[:n]
+    # traceable anywhere (inside solvers, whose designs are outputs on the mesh): the slices
+    # are a batch axis laid out on the mesh and XLA's SPMD partitioner splits them. Same
+    # values; but the partitioner may place collectives inside the build loop (seen around
+    # the batched linear solve of self-compensation), which costs much across processes.
+    offsets = jax.lax.with_sharding_constraint(offsets, sharded)
     vals = jax.vmap(lambda off: local_fn(off, m))(offsets)  # [d, m]
     vals = jax.lax.with_sharding_constraint(vals.reshape(-1), sharded)
     return jax.lax.with_sharding_constraint(vals, replicated)[:n]

@@ -261,6 +261,7 @@ def map_builds(
     first: int = 0,
     block: int = 512,
     vector: int = VECTOR_BUILDS,
+    manual: bool = False,
 ) -> jax.Array:
     """Traceable per-build values ``fn_z(z_i)`` for builds ``first … first + n - 1`` of
     ``key`` (:func:`build_normals`), ``[n]``.
@@ -278,9 +279,13 @@ def map_builds(
     consecutive builds in the same blocks, and the values are gathered in build order.
     Build ``i`` depends only on ``fold_in(key, first + i)``, so the result is that of one
     device (to rounding in the compiled code). With one device nothing changes.
+    ``manual``: the ``shard_map`` path of :func:`~encdesign.design.shard_builds` (only when
+    ``fn_z`` closes over no array that lives on a mesh).
     """
     return shard_builds(
-        lambda offset, m: _local_builds(fn_z, key, m, dim, first + offset, block, vector), n
+        lambda offset, m: _local_builds(fn_z, key, m, dim, first + offset, block, vector),
+        n,
+        manual=manual,
     )
 
 
@@ -360,7 +365,9 @@ def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int, b
 
     @jax.jit
     def run_chunk(key, c, th):
-        return map_builds(lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=block)
+        return map_builds(
+            lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=block, manual=True
+        )
 
     return run_chunk
 
@@ -389,6 +396,15 @@ def monte_carlo(
         from .._errors import input_error
 
         raise input_error("monte_carlo", f"n={n}, dim={dim}", "n >= 1 and dim >= 1")
+    # host copies of the inputs: the chunks take the shard_map path, which needs inputs
+    # that are not laid out on a mesh (theta may be the output of a sharded solver)
+    theta = jax.tree.map(lambda x: np.asarray(x) if isinstance(x, jax.Array) else x, theta)
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.wrap_key_data(
+            np.asarray(jax.random.key_data(key)), impl=jax.random.key_impl(key)
+        )
+    else:
+        key = np.asarray(key)
     block = int(min(chunk_size, n))
     chunk = int(min(block * n_build_shards(), n))
     run_chunk = _mc_chunk(fn, chunk, int(dim), block)
