@@ -27,6 +27,7 @@ import time
 import jax
 import numpy as np
 
+from encdesign.design._distributed import allgather_objects, is_my_task
 from encdesign.diagnose._conceal_bench import draw_plan, simulate
 from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
 from encdesign.diagnose._dispatch import diagnose
@@ -76,6 +77,9 @@ def _sds_block(args, plan) -> dict:
     i = 0
     for effect, cases in plan.items():
         for conc, ref in cases:
+            if not is_my_task(i):  # one recording per task, dealt over the processes
+                i += 1
+                continue
             seed = args.seed * 1000 + 500 + i
             path = args.out / "recordings" / f"sds{i:03d}.toml"
             rec, truth = write_concealed_sds(
@@ -121,6 +125,7 @@ def _sds_block(args, plan) -> dict:
                 file=sys.stderr,
                 flush=True,
             )
+    rows = sorted(allgather_objects(rows), key=lambda r: r["seed"])  # all processes' shares
     cat = [r for r in rows if r["truth"] in SDS_CATALOG]
     clean = [r for r in rows if r["truth"] == "clean"]
     ooc = [r for r in rows if r["truth"] not in SDS_CATALOG and r["truth"] != "clean"]
@@ -188,6 +193,7 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
     rows = []
     rng = np.random.default_rng([seed, sum(map(ord, kind))])
     i = 0
+    task = 0
     for case, k in counts.items():
         for j in range(k):
             plan = draw_plan(rng, kind, case)
@@ -201,7 +207,11 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
                 }[kind]
                 plan = dict(plan, effects=[pool[(j + 3 * seed) % len(pool)]])
                 plan = _fix(plan, rng)
-            rec, truth = simulate(rng, plan)
+            rec, truth = simulate(rng, plan)  # every process draws every plan (same rng)
+            if not is_my_task(task):  # one recording per task, dealt over the processes
+                task += 1
+                continue
+            task += 1
             t0 = time.perf_counter()
             try:
                 d = diagnose(rec).doc
@@ -233,6 +243,7 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
                 glitches_found=len(d["glitches"]),
                 glitches_true=len(truth["glitch_rows"]),
                 plan={k_: v for k_, v in plan.items() if k_ != "effects"},
+                task=task - 1,
             )
             if case == "clean":
                 row["correct"] = d["verdict"] == "consistent"
@@ -253,7 +264,7 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
             if not row["correct"] and not args.quick:  # keep the misses to look at
                 from encdesign import write_recording
 
-                wpath = args.out / "misses" / f"{kind}-s{seed}-{i:03d}.toml"
+                wpath = args.out / "misses" / f"{kind}-s{seed}-{task - 1:03d}.toml"
                 write_recording(
                     wpath,
                     rec.kind,
@@ -269,7 +280,8 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
                 f"{','.join(named) or d['verdict']:40s} {'ok' if row['correct'] else 'WRONG'} "
                 f"({dt:.1f} s)"
             )
-    return rows
+    # all processes' shares, in task order (one process: the rows as they are)
+    return sorted(allgather_objects(rows), key=lambda r: r["task"])
 
 
 def _fix(plan: dict, rng) -> dict:

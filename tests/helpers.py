@@ -86,3 +86,28 @@ def closure_instrument_error(phi_rad):
 
     phi = np.asarray(phi_rad, dtype=float)
     return CLOSURE_ARCSEC * (0.2 * np.sin(phi + 0.4) + 0.58 * np.cos(2 * phi + 1.1))
+
+
+# --- scale-out (issue 15) ---
+# A small 3+1 build (coarse angles, low orders: compiles in seconds) and the tolerance set
+# of benchmarks/optimize.py, for the distributed Monte Carlo agreement tests.
+SCALE_DESIGN = dict(
+    radius_m=0.0254,
+    reference_angle_rad=0.3157,
+    tilt_rad=6e-3,
+    n_heads=3,
+    max_order=4,
+    grating_orders=4,
+    axial_orders=2,
+    n_angles=32,
+)
+SCALE_TOLERANCES = dict(
+    eccentricity=5e-6,
+    tilt=1e-3,
+    placement=2e-4,
+    grating=5e-6,
+    beam_tilt=1e-3,
+    axial_runout=2e-6,
+    noise=2e-7,
+)
+SCALE_BUILDS = 203  # not a multiple of 2 or 4: the last shard is short

@@ -194,8 +194,20 @@ def _run_study(argv: Sequence[str]) -> int:
             print(f"{name:22s} {_study_title(path)}")
         return 0
     mod = _load_study(args.name)
-    rc = mod.main(list(args.flags))
-    return int(rc or 0)
+    from ..design import _distributed as dist
+
+    launch_p = argparse.ArgumentParser(prog=f"encdesign study run {args.name}", add_help=False)
+    dist.add_launch_flags(launch_p)
+    launch, flags = launch_p.parse_known_args(list(args.flags))
+    argv = ["study", "run", args.name, *flags]
+    if launch.processes is not None:
+        argv += ["--processes", str(launch.processes)]
+
+    def body() -> int:
+        with dist.quiet_unless_main():
+            return int(mod.main(dist.study_argv_for_this_process(args.name, flags)) or 0)
+
+    return dist.run_launched(launch, argv, body)
 
 
 def _version() -> str:
@@ -257,6 +269,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = OneLineParser(prog=f"encdesign {cmd}", description=mod.HELP)
         mod.configure(parser)
         args = parser.parse_args(rest)
+        args.command_argv = [cmd, *rest]  # to re-run the command (--processes N)
         return int(mod.run(args) or 0)
     except EncdesignInputError as exc:
         print(f"encdesign {cmd}: error: {_one_line(exc)}", file=sys.stderr)

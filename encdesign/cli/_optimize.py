@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from ..design._cases import CaseRecorder
+from ..design._distributed import add_launch_flags, is_main_process, process_index, run_launched
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
 from ..io._study import write_json
@@ -24,6 +25,7 @@ def add_common(parser: argparse.ArgumentParser) -> None:
         "--cases", type=Path, default=None, help="record every case here (.jsonl or .csv)"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress line")
+    add_launch_flags(parser)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -51,25 +53,44 @@ def print_result(summary: dict, stream=None) -> None:
         print(f"best      {disc} {ins}".rstrip(), file=out)
 
 
-def run_and_report(args: argparse.Namespace, solve) -> int:
+def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = None) -> int:
     """Load ``args.problem``, run ``solve(problem, recorder=, progress=)``, record the cases,
-    print the result and write the ``--json`` summary; exit 0 on success, else 1."""
+    print the result and write the ``--json`` summary; exit 0 on success, else 1.
+
+    Output paths are checked against the inputs before any work (``guard_outputs``).
+
+    With the launch flags (``--processes``, ``--coordinator``…, ``docs/scale.md``) the run is
+    distributed: every process runs it, process 0 prints and writes the files. ``resume``:
+    the case file to resume from (cases recorded there are not evaluated again).
+    """
+    cases = resume if resume is not None else args.cases
     with guard_outputs(
-        [("problem", args.problem)], [("--json", args.json), ("--cases", args.cases)]
+        [("problem", args.problem)],
+        [("--json", args.json), ("--cases" if resume is None else "--resume", cases)],
     ):
-        problem = load_problem(args.problem)
-        with CaseRecorder(args.cases) as rec:
-            result = solve(problem, recorder=rec, progress=not args.quiet)
-        return _report(args, result, rec)
+        return run_launched(
+            args, getattr(args, "command_argv", None), lambda: _report(args, solve, resume)
+        )
 
 
-def _report(args: argparse.Namespace, result, rec: CaseRecorder) -> int:
+def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
+    problem = load_problem(args.problem)
+    cases = resume if resume is not None else args.cases
+    main = is_main_process()
+    rec = CaseRecorder(cases, resume=resume is not None, write=main, process=process_index())
+    with rec:
+        result = solve(problem, recorder=rec, progress=not args.quiet)
+    if not main:
+        return 0 if result.status == "success" else 1
     summary = result.summary()
     summary["n_cases"] = len(rec.cases)
-    summary["cases_file"] = None if args.cases is None else str(args.cases)
+    summary["cases_file"] = None if cases is None else str(cases)
+    if resume is not None:
+        summary["n_cases_reused"] = rec.n_reused
     print_result(summary)
-    if args.cases is not None:
-        print(f"wrote {args.cases} ({len(rec.cases)} cases)")
+    if cases is not None:
+        extra = f", {rec.n_reused} reused from the earlier run" if resume is not None else ""
+        print(f"wrote {cases} ({len(rec.all_cases())} cases{extra})")
     if args.json is not None:
         print(f"wrote {write_json(args.json, summary)}")
     return 0 if result.status == "success" else 1

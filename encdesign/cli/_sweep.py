@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+from .._errors import input_error
 from ..design._solve import sweep_problem
 from ._optimize import add_common, run_and_report
 
@@ -15,7 +17,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--kind", choices=["grid", "lhs"], default=None, help="override [sweep] kind"
     )
+    parser.add_argument(
+        "--resume",
+        type=Path,
+        default=None,
+        metavar="CASES",
+        help="continue an interrupted sweep: cases already in CASES (same inputs and seed) "
+        "are not evaluated again; the final CASES is that of an uninterrupted run",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
-    return run_and_report(args, lambda problem, **kw: sweep_problem(problem, kind=args.kind, **kw))
+    if args.resume is not None and args.cases is not None and args.cases != args.resume:
+        raise input_error(
+            "--resume", f"{args.resume} differs from --cases {args.cases}", "one case file"
+        )
+    return run_and_report(
+        args,
+        lambda problem, **kw: sweep_problem(problem, kind=args.kind, **kw),
+        resume=args.resume,
+    )

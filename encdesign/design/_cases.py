@@ -188,19 +188,76 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
     return out
 
 
+def case_key(inputs: Mapping[str, Any], seed: int | None) -> str:
+    """The identity of a case for ``--resume``: its inputs (as recorded, names sorted) and
+    its seed. Recorded floats round-trip exactly, so a recomputed design point matches."""
+    plain = {str(k): _plain(_restore(_plain(v))) for k, v in inputs.items()}
+    return json.dumps({"inputs": plain, "seed": seed}, sort_keys=True, allow_nan=False)
+
+
+def part_path(path: str | os.PathLike, process: int) -> Path:
+    """The shard file of process ``process`` beside the case file ``path``
+    (``cases.jsonl`` -> ``.cases.part-1.jsonl``): the cases that process evaluated so far,
+    rewritten atomically after every chunk."""
+    p = Path(path)
+    return p.with_name(f".{p.stem}.part-{int(process)}{p.suffix}")
+
+
+def _part_files(path: Path) -> list[Path]:
+    return sorted(path.parent.glob(f".{path.stem}.part-*{path.suffix}"))
+
+
 class CaseRecorder:
     """Collects cases and writes them to ``path`` (atomically, every ``flush_every`` cases
     and on :meth:`close`). Use as a context manager.
 
     ``path=None`` keeps the cases in memory only (``recorder.cases``).
+
+    With ``resume=True`` the cases already in ``path`` (and in shard files left by an
+    interrupted distributed run, :func:`part_path`) are read first; :meth:`lookup` finds
+    one by inputs and seed, so a driver can skip it and :meth:`record` it again with its
+    recorded outputs. Until the run has recorded them again, the earlier cases stay in the
+    file after the new ones, so an interrupted resume loses nothing.
+
+    Under a distributed run every process records the same cases (the drivers gather the
+    outputs), but only the process with ``write=True`` (process 0) writes ``path``; each
+    process keeps its own shard file of the cases it evaluated (:meth:`record_part`),
+    removed when the run closes cleanly.
     """
 
-    def __init__(self, path: str | os.PathLike | None, flush_every: int = 100):
+    def __init__(
+        self,
+        path: str | os.PathLike | None,
+        flush_every: int = 100,
+        *,
+        resume: bool = False,
+        write: bool = True,
+        process: int = 0,
+    ):
         self.path = None if path is None else Path(path)
         if self.path is not None:
             _fmt(self.path)
         self.flush_every = int(flush_every)
+        self.write = bool(write)
+        self.process = int(process)
         self.cases: list[Case] = []
+        self.previous: dict[str, Case] = {}
+        self._reused: set[str] = set()
+        self._part: list[Case] = []
+        if resume and self.path is not None:
+            files = [self.path] if self.path.exists() else []
+            for f in files + _part_files(self.path):
+                for c in read_cases(f):
+                    self.previous.setdefault(case_key(c.inputs, c.seed), c)
+
+    @property
+    def n_reused(self) -> int:
+        """Cases recorded again from the earlier file (``resume``)."""
+        return len(self._reused)
+
+    def lookup(self, inputs: Mapping[str, Any], seed: int | None) -> Case | None:
+        """The recorded case with these inputs and seed (``resume``), else ``None``."""
+        return self.previous.get(case_key(inputs, seed))
 
     def record(
         self,
@@ -218,25 +275,63 @@ class CaseRecorder:
             None if seed is None else int(seed),
         )
         self.cases.append(c)
+        k = case_key(c.inputs, c.seed)
+        if k in self.previous:
+            self._reused.add(k)
         if self.path is not None and len(self.cases) % self.flush_every == 0:
             self.flush()
         return c
 
-    def flush(self) -> None:
-        """Write all cases so far (atomic replace)."""
+    def record_part(self, cases: Iterable[tuple[Mapping[str, Any], Mapping[str, Any], str, Any]]):
+        """Add ``(inputs, outputs, status, seed)`` evaluated by this process to its shard
+        file (rewritten atomically)."""
+        for inputs, outputs, status, seed in cases:
+            self._part.append(
+                Case(
+                    len(self._part),
+                    {k: _restore(_plain(v)) for k, v in inputs.items()},
+                    {k: _restore(_plain(v)) for k, v in outputs.items()},
+                    str(status),
+                    None if seed is None else int(seed),
+                )
+            )
         if self.path is not None:
-            write_cases(self.path, self.cases)
+            write_cases(part_path(self.path, self.process), self._part)
+
+    def all_cases(self) -> list[Case]:
+        """What :meth:`flush` writes: the cases recorded, then (``resume``) the earlier
+        cases not recorded again."""
+        rest = [c for k, c in self.previous.items() if k not in self._reused]
+        n = len(self.cases)
+        return self.cases + [dataclasses.replace(c, case=n + i) for i, c in enumerate(rest)]
+
+    def flush(self) -> None:
+        """Write all cases so far (atomic replace; process 0 only)."""
+        if self.path is not None and self.write:
+            write_cases(self.path, self.all_cases())
 
     def close(self) -> None:
-        """Flush and finish."""
+        """Flush, then (all processes done) remove this process's shard file."""
         self.flush()
+        from ._distributed import barrier
+
+        barrier("encdesign-cases-closed")
+        if self.path is not None:
+            part = part_path(self.path, self.process)
+            if part.exists():
+                part.unlink()
+            if self.write:  # shards left by an interrupted run are now merged
+                for f in _part_files(self.path):
+                    f.unlink(missing_ok=True)
 
     def __enter__(self) -> CaseRecorder:
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        # a refusal (bad input) leaves no case file behind; any other failure keeps the
-        # cases recorded so far
-        if exc_type is not None and issubclass(exc_type, EncdesignInputError):
+    def __exit__(self, exc_type: Any, *exc: Any) -> None:
+        if exc_type is None:
+            self.close()
+        elif issubclass(exc_type, EncdesignInputError):
+            # a refusal (bad input) leaves no case file behind
             return
-        self.close()
+        else:  # any other failure keeps what was recorded (and the shard files) for --resume
+            self.flush()

@@ -33,6 +33,7 @@ import numpy as np
 import optimistix as optx
 
 from .._progress import progress_bar
+from ._distributed import is_main_process, n_build_shards, shard_builds
 
 with warnings.catch_warnings():
     warnings.filterwarnings(
@@ -260,6 +261,7 @@ def map_builds(
     first: int = 0,
     block: int = 512,
     vector: int = VECTOR_BUILDS,
+    manual: bool = False,
 ) -> jax.Array:
     """Traceable per-build values ``fn_z(z_i)`` for builds ``first … first + n - 1`` of
     ``key`` (:func:`build_normals`), ``[n]``.
@@ -270,7 +272,26 @@ def map_builds(
     values and gradients alike). Drawing the numbers per block rather than inside the
     innermost loop matters: XLA compiles that loop markedly slower (1.8x) when it also
     draws random numbers.
+
+    The builds are split over the devices of the ``"builds"`` mesh (all devices of all
+    processes, or the one set with :func:`jax.set_mesh`;
+    :func:`encdesign.design.shard_builds`): each device evaluates ``ceil(n / D)``
+    consecutive builds in the same blocks, and the values are gathered in build order.
+    Build ``i`` depends only on ``fold_in(key, first + i)``, so the result is that of one
+    device (to rounding in the compiled code). With one device nothing changes.
+    ``manual``: the ``shard_map`` path of :func:`~encdesign.design.shard_builds` (only when
+    ``fn_z`` closes over no array that lives on a mesh).
     """
+    return shard_builds(
+        lambda offset, m: _local_builds(fn_z, key, m, dim, first + offset, block, vector),
+        n,
+        manual=manual,
+    )
+
+
+def _local_builds(fn_z, key, n: int, dim: int, first: Any, block: int, vector: int):
+    """:func:`map_builds` on one device: builds ``first … first + n - 1`` (``first`` may be
+    traced)."""
     vector = int(max(1, min(vector, n)))
     n_groups = -(-n // vector)
     per_block = int(max(1, min(n_groups, -(-int(block) // vector))))
@@ -339,12 +360,14 @@ class MonteCarloResult:
 
 
 @functools.lru_cache(maxsize=64)
-def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int):
+def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int, block: int):
     """Jitted values of one chunk of builds (cached per ``fn``: reruns don't recompile)."""
 
     @jax.jit
     def run_chunk(key, c, th):
-        return map_builds(lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=chunk)
+        return map_builds(
+            lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=block, manual=True
+        )
 
     return run_chunk
 
@@ -365,17 +388,30 @@ def monte_carlo(
     ``fn`` maps the design ``theta`` (any pytree) and one build's standard-normal vector
     ``z`` (``[dim]``) to a scalar. The builds come from :func:`build_normals` (common random
     numbers: the same ``key`` gives the same builds for every ``theta``). Work is done in
-    jitted chunks of ``chunk_size`` builds; with ``progress`` a progress line is shown.
+    jitted chunks of ``chunk_size`` builds per device, each chunk split over the devices of
+    the ``"builds"`` mesh (:func:`map_builds`); with ``progress`` a progress line is shown
+    (by process 0 only, for the whole run, when several processes share the work).
     """
     if n < 1 or dim < 1:
         from .._errors import input_error
 
         raise input_error("monte_carlo", f"n={n}, dim={dim}", "n >= 1 and dim >= 1")
-    chunk = int(min(chunk_size, n))
-    run_chunk = _mc_chunk(fn, chunk, int(dim))
+    # host copies of the inputs: the chunks take the shard_map path, which needs inputs
+    # that are not laid out on a mesh (theta may be the output of a sharded solver)
+    theta = jax.tree.map(lambda x: np.asarray(x) if isinstance(x, jax.Array) else x, theta)
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.wrap_key_data(
+            np.asarray(jax.random.key_data(key)), impl=jax.random.key_impl(key)
+        )
+    else:
+        key = np.asarray(key)
+    block = int(min(chunk_size, n))
+    chunk = int(min(block * n_build_shards(), n))
+    run_chunk = _mc_chunk(fn, chunk, int(dim), block)
     n_chunks = -(-n // chunk)
     out = []
-    with progress_bar("monte carlo", n_chunks, enabled=progress) as bar:
+    show = progress and is_main_process()
+    with progress_bar("monte carlo", n_chunks, enabled=show) as bar:
         for c in range(n_chunks):
             out.append(np.asarray(run_chunk(key, c, theta)))
             bar.update()

@@ -51,6 +51,7 @@ from ..physics._layout import (
 from ..physics._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
+from ._distributed import shard_builds
 from ._drivers import build_normals, map_builds
 from ._spec import ModelLimit, ProblemObjective, VariableInfo
 from ._tolerance import tolerance_cost
@@ -696,7 +697,9 @@ def sds_residuals(
 ) -> Array:
     """SDS residual over the platform turn (RMS of the φ error minus its mean, rad;
     :func:`encdesign.physics._sds.sds_residual`) of ``n_builds`` Monte Carlo builds. Build ``i``
-    draws its disks from ``fold_in(key, i)`` (common random numbers across designs)."""
+    draws its disks from ``fold_in(key, i)`` (common random numbers across designs); the
+    builds are split over the devices of the ``"builds"`` mesh
+    (:func:`encdesign.design.shard_builds`)."""
     from ..physics._sds import sds_residual
     from ..physics._sds_errors import SDSErrors
 
@@ -708,7 +711,7 @@ def sds_residuals(
         )
         return sds_residual(d, errors, n_phi=n_phi)
 
-    return jax.lax.map(one, jnp.arange(n_builds))
+    return shard_builds(lambda offset, m: jax.lax.map(one, offset + jnp.arange(m)), n_builds)
 
 
 # ----------------------------------------------------------------------------- registry

@@ -10,6 +10,7 @@ driver reports is recorded as a case (:mod:`encdesign.design._cases`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 import math
@@ -22,6 +23,14 @@ import numpy as np
 from .._errors import input_error
 from .._progress import progress_bar
 from ._cases import CaseRecorder
+from ._distributed import (
+    allgather_rows,
+    is_main_process,
+    process_count,
+    process_index,
+    split_range,
+    use_local_devices,
+)
 from ._drivers import (
     FAILED,
     INFEASIBLE,
@@ -280,26 +289,11 @@ def _doe_combo(
         pts = latin_hypercube(
             jax.random.fold_in(jax.random.key(problem.seed), 1), ulo, uhi, int(drv.get("n", 64))
         )
-    scalar_names = None
-    f = jax.jit(jax.vmap(lambda u: ev.outputs(u)))
-    rows = []
-    chunk = int(drv.get("chunk_size", 256))
-    with progress_bar(f"{kind} {ev.discrete or ''}".strip(), len(pts), enabled=progress) as bar:
-        for s in range(0, len(pts), chunk):
-            out = f(jnp.asarray(pts[s : s + chunk]))
-            if scalar_names is None:
-                scalar_names = [k for k, v in out.items() if jnp.ndim(v) == 1]
-            arr = {k: np.asarray(out[k]) for k in scalar_names}
-            for i in range(len(next(iter(arr.values())))):
-                rows.append({k: float(arr[k][i]) for k in scalar_names})
-            bar.update(min(chunk, len(pts) - s))
+    rows = _doe_rows(ev, pts, int(drv.get("chunk_size", 256)), recorder, progress, kind)
     best_i, best_val = -1, math.inf
     for i, (u, outs) in enumerate(zip(pts, rows)):
         val = ev.sign * outs[ev.name]
-        finite = all(math.isfinite(v) for v in outs.values())
-        status = SUCCESS if finite else NONFINITE
-        if finite and ev.violation(outs) > 1e-6:
-            status = INFEASIBLE
+        status = _point_status(ev, outs)
         if recorder is not None:
             recorder.record({**ev.discrete, **ev.inputs_of(u)}, outs, status, seed=problem.seed)
         if status == SUCCESS and val < best_val:
@@ -318,6 +312,73 @@ def _doe_combo(
         len(pts),
         f"best of {len(pts)} {kind} points",
     )
+
+
+def _point_status(ev: _Evaluator, outs: dict[str, float]) -> str:
+    if not all(math.isfinite(v) for v in outs.values()):
+        return NONFINITE
+    return INFEASIBLE if ev.violation(outs) > 1e-6 else SUCCESS
+
+
+def _doe_rows(
+    ev: _Evaluator,
+    pts: np.ndarray,
+    chunk: int,
+    recorder: CaseRecorder | None,
+    progress: bool,
+    kind: str,
+) -> list[dict[str, float]]:
+    """Scalar outputs of every DOE point, skipping points the ``recorder`` already holds
+    (``--resume``: their recorded outputs are used).
+
+    Under a distributed run the points still to evaluate are split between the processes
+    (:func:`~encdesign.design.split_range`); each evaluates its share on its own devices
+    (Monte Carlo builds sharded over them), records it in its shard file, and the outputs
+    are gathered so that every process holds the whole table.
+    """
+    problem = ev.problem
+    f = jax.jit(jax.vmap(lambda u: ev.outputs(u)))
+    shapes = jax.eval_shape(f, jax.ShapeDtypeStruct((1, pts.shape[1]), jnp.float64))
+    names = [k for k, v in shapes.items() if len(v.shape) == 1]
+    inputs = [{**ev.discrete, **ev.inputs_of(u)} for u in pts]
+    rows: list[dict[str, float] | None] = [None] * len(pts)
+    todo = []
+    for i, x in enumerate(inputs):
+        prev = None if recorder is None else recorder.lookup(x, problem.seed)
+        if prev is not None:
+            rows[i] = {k: float(prev.outputs.get(k, math.nan)) for k in names}
+        else:
+            todo.append(i)
+    nproc, pid = process_count(), process_index()
+    start, stop = split_range(len(todo), nproc, pid)
+    mine = todo[start:stop]
+    chunk = max(1, min(chunk, len(pts)))
+    vals = np.zeros((len(mine), len(names)))
+    label = f"{kind} {ev.discrete or ''}".strip()
+    scope = use_local_devices() if nproc > 1 else contextlib.nullcontext()
+    with (
+        scope,
+        progress_bar(label, len(todo), enabled=progress and is_main_process()) as bar,
+    ):
+        for s in range(0, len(mine), chunk):
+            idx = mine[s : s + chunk]
+            # always a full chunk (the last point repeated): one compiled shape, so a
+            # point's outputs do not depend on which others share its chunk (--resume)
+            padded = pts[idx + [idx[-1]] * (chunk - len(idx))]
+            out = f(jnp.asarray(padded))
+            block = np.stack([np.asarray(out[k], dtype=np.float64) for k in names], axis=1)
+            block = block[: len(idx)]
+            vals[s : s + len(idx)] = block
+            if recorder is not None and nproc > 1:
+                recorder.record_part(
+                    (inputs[i], o, _point_status(ev, o), problem.seed)
+                    for i, o in ((i, dict(zip(names, r))) for i, r in zip(idx, block.tolist()))
+                )
+            bar.update(min(len(idx) * nproc, len(todo) - bar.n))
+    everything = allgather_rows(vals, len(todo))
+    for i, r in zip(todo, everything.tolist()):
+        rows[i] = dict(zip(names, r))
+    return rows  # type: ignore[return-value]
 
 
 def _record(recorder: CaseRecorder | None, problem: Problem, r: DesignResult) -> None:

@@ -178,7 +178,7 @@ def _scatter(u: Array, w: Array, chunk: int) -> Array:
     return jnp.sum(jax.lax.map(one, (up, wp, mask)), axis=0)
 
 
-_C1_INV = jnp.array([[0.0, 0.0, 0.5], [0.0, -1.0, 0.0], [0.5, 0.0, 0.0]])
+_C1_INV = np.array([[0.0, 0.0, 0.5], [0.0, -1.0, 0.0], [0.5, 0.0, 0.0]])
 
 
 def _conic_direct(s: Array) -> Array:

@@ -1,0 +1,620 @@
+"""Scale-out on JAX's own distributed runtime: devices, processes and hosts.
+
+encdesign does not run a task farm of its own. It uses
+
+* :mod:`jax.sharding` — the builds axis of every Monte Carlo driver
+  (:func:`~encdesign.design.map_builds` and everything built on it: ``monte_carlo``,
+  ``expected_value``, ``build_metrics``, ``sds_residuals``, the tolerance sweeps and
+  allocation) is split over a one-axis :class:`~jax.sharding.Mesh` named ``"builds"``
+  (:func:`shard_builds`): one slice of builds per device, laid out on the mesh with
+  :func:`jax.lax.with_sharding_constraint` and partitioned by XLA's SPMD partitioner (GSPMD;
+  ``jax.shard_map`` was tried first, but a closed-over design that is itself an output on
+  the mesh, as in every solver step, cannot enter its manual region). Every device
+  evaluates a contiguous slice of builds, chunked as before (memory per device stays
+  bounded), and the per-build values are gathered (an all-gather: 8 bytes per build) so
+  that the reductions that follow (mean, percentile, yield) see the same array in the same
+  order as one device.
+  Build ``i`` depends only on ``fold_in(key, i)``, so the values are those of a
+  single-device run; with one device nothing changes (no sharding at all).
+* :func:`jax.distributed.initialize` — the multi-controller runtime. With it, the mesh
+  spans the devices of all processes and every process runs the same program (SPMD); the
+  all-gather crosses processes (gloo on CPU, NCCL on GPU). :func:`initialize` wraps it
+  with checks: a coordinator address that does not parse, a process id outside
+  ``0 … N-1`` or a process count below 1 are input errors; a coordinator that cannot be
+  reached is a :class:`DistributedError` within ``timeout_s``; a process that dies is
+  detected by the runtime's heartbeat (``heartbeat_s``) and the others stop.
+* :func:`spawn_local` — ``--processes N`` on one machine: N copies of the same command
+  with a coordinator on localhost (for tests and many-core boxes). A child that fails
+  stops the others at once.
+
+Which mesh is used: the one set with :func:`jax.set_mesh` when it has a ``"builds"``
+axis (:func:`use_local_devices` sets one over this process's devices, for work that
+each process does on its own, such as its share of sweep cases); otherwise all devices
+of all processes (:func:`builds_mesh`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import functools
+import ipaddress
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from .._errors import input_error
+
+BUILDS_AXIS = "builds"
+"""Name of the mesh axis the Monte Carlo builds are split over."""
+
+
+class DistributedError(RuntimeError):
+    """The distributed runtime could not start or lost a process (CLI exit status 1)."""
+
+
+# ---------------------------------------------------------------------------------------
+# launch settings
+
+
+@dataclasses.dataclass(frozen=True)
+class Launch:
+    """Validated launch settings of one process (see :func:`check_launch`).
+
+    Attributes:
+        processes: local processes to spawn (``--processes``); 1 = no spawning.
+        coordinator: ``"HOST:PORT"``, ``"auto"`` (JAX's cluster auto-detection, e.g.
+            SLURM) or ``None`` (a single process, no runtime).
+        num_processes: processes in the run (``None`` with ``"auto"``).
+        process_id: this process's index ``0 … num_processes - 1`` (``None`` with
+            ``"auto"``).
+    """
+
+    processes: int = 1
+    coordinator: str | None = None
+    num_processes: int | None = None
+    process_id: int | None = None
+
+    @property
+    def spawns(self) -> bool:
+        """True when this invocation only spawns local processes."""
+        return self.processes > 1 and self.coordinator is None
+
+    @property
+    def distributed(self) -> bool:
+        """True when this process joins a distributed runtime."""
+        return self.coordinator is not None
+
+
+def parse_coordinator(text: str) -> tuple[str, int]:
+    """``"HOST:PORT"`` (IPv6 as ``"[ADDR]:PORT"``) -> ``(host, port)``; an input error
+    naming ``--coordinator`` when it does not parse."""
+    where = "--coordinator"
+    expected = "HOST:PORT with PORT in 1…65535 (IPv6 as [ADDR]:PORT), or 'auto'"
+    s = str(text).strip()
+    if s.startswith("["):
+        host, sep, rest = s[1:].partition("]")
+        if not sep or not rest.startswith(":"):
+            raise input_error(where, f"cannot parse {text!r}", expected)
+        port_s = rest[1:]
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise input_error(where, f"{host!r} is not an IPv6 address", expected) from None
+    else:
+        host, sep, port_s = s.rpartition(":")
+        if not sep or not host or ":" in host:
+            raise input_error(where, f"cannot parse {text!r}", expected)
+        ok = all(c.isalnum() or c in "-._" for c in host)
+        if not ok:
+            raise input_error(where, f"bad host name {host!r} in {text!r}", expected)
+    if not port_s.isdigit() or not 1 <= int(port_s) <= 65535:
+        raise input_error(where, f"bad port {port_s!r} in {text!r}", expected)
+    return host, int(port_s)
+
+
+def check_launch(
+    processes: int | None = None,
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
+) -> Launch:
+    """Validate the launch flags (input errors: exit status 2 at the CLI).
+
+    ``processes`` (``--processes N``) spawns N local processes; ``coordinator``,
+    ``num_processes``, ``process_id`` join a run on a cluster (all three, or
+    ``coordinator="auto"`` alone for JAX's auto-detection, e.g. under SLURM).
+    """
+    procs = 1 if processes is None else processes
+    if isinstance(procs, bool) or not isinstance(procs, int) or procs < 1:
+        raise input_error("--processes", f"{processes!r}", "an integer >= 1")
+    if coordinator is None:
+        if num_processes is not None or process_id is not None:
+            raise input_error(
+                "--num-processes/--process-id", "given without --coordinator", "--coordinator"
+            )
+        return Launch(procs)
+    if procs > 1:
+        raise input_error(
+            "--processes", "given together with --coordinator", "one of the two, not both"
+        )
+    if str(coordinator).strip().lower() == "auto":
+        if num_processes is not None or process_id is not None:
+            raise input_error(
+                "--coordinator auto", "given with --num-processes/--process-id", "neither"
+            )
+        return Launch(1, "auto")
+    parse_coordinator(coordinator)
+    if num_processes is None or process_id is None:
+        raise input_error(
+            "--coordinator", "needs --num-processes N and --process-id I", "both flags"
+        )
+    if isinstance(num_processes, bool) or not isinstance(num_processes, int) or num_processes < 1:
+        raise input_error("--num-processes", f"{num_processes!r}", "an integer >= 1")
+    if not isinstance(process_id, int) or not 0 <= process_id < num_processes:
+        raise input_error("--process-id", f"{process_id!r}", f"an integer in 0…{num_processes - 1}")
+    return Launch(1, str(coordinator).strip(), num_processes, process_id)
+
+
+def _wait_for_coordinator(host: str, port: int, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            socket.getaddrinfo(host, port)
+        except socket.gaierror as exc:
+            raise input_error(
+                "--coordinator", f"host {host!r} does not resolve ({exc})", "a reachable host"
+            ) from None
+        try:
+            with socket.create_connection((host, port), timeout=1.0):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise DistributedError(
+                    f"coordinator {host}:{port} not reachable within {timeout_s:g} s "
+                    "(is process 0 running, and the port open?)"
+                ) from None
+            time.sleep(0.2)
+
+
+def _check_port_free(port: int) -> None:
+    for family, addr in ((socket.AF_INET6, "::"), (socket.AF_INET, "0.0.0.0")):
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as s:
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                s.bind((addr, port))
+            return
+        except OSError as exc:
+            if family == socket.AF_INET6 and exc.errno in (97, 99):  # no IPv6 here
+                continue
+            raise DistributedError(f"coordinator port {port} is in use ({exc.strerror})") from None
+
+
+def initialize(launch: Launch, *, timeout_s: float = 60.0, heartbeat_s: int = 20) -> None:
+    """Join the distributed runtime described by ``launch`` (nothing for one process).
+
+    Must run before any JAX computation. On CPU the collectives are gloo
+    (``jax_cpu_collectives_implementation``). Process 0 hosts the coordinator; the others
+    wait for it at most ``timeout_s`` (then :class:`DistributedError`). A process that
+    stops sending heartbeats for ``heartbeat_s`` seconds makes the others stop.
+    """
+    if not launch.distributed:
+        return
+    if jax.distributed.is_initialized():
+        return
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    if launch.coordinator == "auto":
+        try:
+            jax.distributed.initialize(
+                initialization_timeout=int(timeout_s), heartbeat_timeout_seconds=heartbeat_s
+            )
+        except (ValueError, RuntimeError) as exc:
+            raise DistributedError(f"cluster auto-detection failed: {exc}") from None
+        return
+    host, port = parse_coordinator(launch.coordinator)
+    if launch.process_id == 0:
+        _check_port_free(port)
+    else:
+        _wait_for_coordinator(host, port, timeout_s)
+    try:
+        jax.distributed.initialize(
+            coordinator_address=f"{host}:{port}" if ":" not in host else f"[{host}]:{port}",
+            num_processes=launch.num_processes,
+            process_id=launch.process_id,
+            initialization_timeout=int(timeout_s),
+            heartbeat_timeout_seconds=int(heartbeat_s),
+        )
+    except RuntimeError as exc:
+        raise DistributedError(f"jax.distributed.initialize: {exc}") from None
+
+
+def shutdown() -> None:
+    """Leave the distributed runtime (a barrier: every process calls it)."""
+    if jax.distributed.is_initialized():
+        jax.distributed.shutdown()
+
+
+def process_index() -> int:
+    """This process's index (0 without a runtime)."""
+    return jax.process_index()
+
+
+def process_count() -> int:
+    """Processes in the run (1 without a runtime)."""
+    return jax.process_count()
+
+
+def is_main_process() -> bool:
+    """True on process 0: the one that prints, shows progress and writes files."""
+    return jax.process_index() == 0
+
+
+# ---------------------------------------------------------------------------------------
+# meshes and the sharded builds axis
+
+
+@functools.lru_cache(maxsize=8)
+def _mesh_of(devices: tuple[Any, ...]) -> Mesh:
+    return Mesh(np.array(devices, dtype=object), (BUILDS_AXIS,))
+
+
+def builds_mesh(local: bool = False) -> Mesh:
+    """A one-axis mesh ``"builds"`` over all devices of all processes (``local``: of this
+    process only)."""
+    return _mesh_of(tuple(jax.local_devices() if local else jax.devices()))
+
+
+def use_local_devices() -> contextlib.AbstractContextManager:
+    """Context in which :func:`shard_builds` uses this process's devices only (for work
+    each process does on its own, e.g. its share of sweep cases)."""
+    return jax.set_mesh(builds_mesh(local=True))
+
+
+def n_build_shards() -> int:
+    """How many shards :func:`shard_builds` splits the builds into here and now."""
+    am = jax.sharding.get_abstract_mesh()
+    if BUILDS_AXIS in am.axis_names:
+        return int(am.shape[BUILDS_AXIS])
+    return len(jax.devices())
+
+
+def shard_builds(
+    local_fn: Callable[[jax.Array, int], jax.Array], n: int, *, manual: bool = False
+) -> jax.Array:
+    """Traceable per-build values ``[n]``, the builds split over the ``"builds"`` mesh.
+
+    ``local_fn(offset, m)`` returns the values ``[m]`` of builds ``offset … offset + m - 1``
+    (``offset`` a traced integer, ``m`` static). With ``D`` shards each computes
+    ``m = ceil(n / D)`` builds (the last ones past ``n`` are discarded), then the values are
+    all-gathered so every device holds all ``n`` in build order. With one device this is
+    just ``local_fn(0, n)``. Differentiable (the gather's transpose is a slice).
+
+    ``manual=True`` uses ``jax.shard_map`` (each device runs only its slice: the fast path,
+    used by :func:`~encdesign.design.monte_carlo`); it requires that ``local_fn`` closes
+    over no array already laid out on a mesh. The default partitions a vmapped slice axis
+    with GSPMD, which works for any closure (solver steps) but may communicate inside the
+    loop.
+    """
+    n = int(n)
+    am = jax.sharding.get_abstract_mesh()
+    if BUILDS_AXIS in am.axis_names:
+        d = int(am.shape[BUILDS_AXIS])
+        sharded, replicated = P(BUILDS_AXIS), P()
+    else:
+        devices = tuple(jax.devices())
+        d = len(devices)
+        if d > 1:
+            mesh = _mesh_of(devices)
+            sharded, replicated = NamedSharding(mesh, P(BUILDS_AXIS)), NamedSharding(mesh, P())
+    if d <= 1:
+        return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
+    m = -(-n // d)
+    offsets = jnp.arange(d, dtype=jnp.int32) * m
+    if manual:
+        # shard_map: each device runs exactly its slice; nothing but the final gather
+        # crosses devices or processes. Only for functions that close over no array
+        # already laid out on the mesh (monte_carlo makes its inputs host arrays first).
+        out = jax.shard_map(
+            lambda off: local_fn(off[0], m),
+            mesh=None if isinstance(sharded, P) else sharded.mesh,
+            in_specs=P(BUILDS_AXIS),
+            out_specs=P(BUILDS_AXIS),
+        )(offsets)
+        return jax.lax.with_sharding_constraint(out, replicated)[:n]
+    # traceable anywhere (inside solvers, whose designs are outputs on the mesh): the slices
+    # are a batch axis laid out on the mesh and XLA's SPMD partitioner splits them. Same
+    # values; but the partitioner may place collectives inside the build loop (seen around
+    # the batched linear solve of self-compensation), which costs much across processes.
+    offsets = jax.lax.with_sharding_constraint(offsets, sharded)
+    vals = jax.vmap(lambda off: local_fn(off, m))(offsets)  # [d, m]
+    vals = jax.lax.with_sharding_constraint(vals.reshape(-1), sharded)
+    return jax.lax.with_sharding_constraint(vals, replicated)[:n]
+
+
+def split_range(n: int, parts: int, part: int) -> tuple[int, int]:
+    """Contiguous share ``[start, stop)`` of ``0 … n-1`` for ``part`` of ``parts``."""
+    size = -(-int(n) // max(int(parts), 1))
+    start = min(part * size, n)
+    return start, min(start + size, n)
+
+
+def allgather_rows(rows: np.ndarray, n_total: int) -> np.ndarray:
+    """Concatenate every process's ``rows [m_p, k]`` (its :func:`split_range` share, in
+    process order) into ``[n_total, k]`` on every process (one collective)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    if jax.process_count() == 1:
+        return rows
+    from jax.experimental import multihost_utils
+
+    size = -(-int(n_total) // jax.process_count())
+    pad = np.full((size, *rows.shape[1:]), np.nan)
+    pad[: rows.shape[0]] = rows
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    return got.reshape(-1, *rows.shape[1:])[:n_total]
+
+
+def allgather_objects(items: Sequence[Any]) -> list[Any]:
+    """Every process's list of JSON-able ``items`` (its share of tasks, e.g. benchmark rows),
+    concatenated in process order on every process (two collectives: lengths, then bytes).
+    NumPy scalars and arrays become Python numbers and lists."""
+    items = list(items)
+    if jax.process_count() == 1:
+        return items
+    import json
+
+    from jax.experimental import multihost_utils
+
+    def plain(x: Any) -> Any:
+        if isinstance(x, np.ndarray):
+            return x.tolist()
+        if isinstance(x, np.generic):
+            return x.item()
+        raise TypeError(f"not JSON-able: {type(x).__name__}")
+
+    data = np.frombuffer(json.dumps(items, default=plain).encode("utf-8"), dtype=np.uint8)
+    sizes = np.asarray(multihost_utils.process_allgather(np.array([data.size], np.int64)))
+    pad = np.zeros(int(sizes.max()), np.uint8)
+    pad[: data.size] = data
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    out: list[Any] = []
+    for row, size in zip(got, sizes.reshape(-1)):
+        out += json.loads(bytes(row[: int(size)]).decode("utf-8"))
+    return out
+
+
+def is_my_task(i: int) -> bool:
+    """True when task ``i`` (of a list every process enumerates in the same order) is this
+    process's: tasks are dealt round-robin, ``i mod process_count == process_index``."""
+    return int(i) % jax.process_count() == jax.process_index()
+
+
+def barrier(name: str) -> None:
+    """Wait until every process reaches the barrier ``name`` (no-op for one process)."""
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        multihost_utils.sync_global_devices(name)
+
+
+# ---------------------------------------------------------------------------------------
+# local spawning (--processes N)
+
+
+def free_port() -> int:
+    """A TCP port free on localhost right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def spawn_local(
+    argv: Sequence[str],
+    processes: int,
+    *,
+    env: dict[str, str] | None = None,
+    grace_s: float = 30.0,
+    timeout_s: float | None = None,
+    program: Sequence[str] | None = None,
+) -> int:
+    """Run ``python -m encdesign ARGV --coordinator localhost:PORT --num-processes N
+    --process-id I`` for ``I = 0 … N-1`` and wait for them.
+
+    Process 0's output is shown; the others' stderr is kept and shown when they fail. When
+    a process exits with a crash (status other than 0, 1, 2) every other process is stopped
+    at once; after an ordinary failure (1, 2) the others get ``grace_s`` to finish. Returns
+    process 0's exit status, or 1 after a crash or ``timeout_s``. ``program`` replaces
+    ``python -m encdesign`` (any program that takes the launch flags).
+    """
+    port = free_port()
+    prog = [sys.executable, "-m", "encdesign"] if program is None else list(program)
+    base = [*prog, *argv]
+    extra = ["--coordinator", f"localhost:{port}", "--num-processes", str(processes)]
+    penv = dict(os.environ if env is None else env)
+    penv.setdefault("PYTHONUNBUFFERED", "1")
+    logs, procs = [], []
+    try:
+        for i in range(processes):
+            log = tempfile.TemporaryFile(mode="w+b")
+            logs.append(log)
+            procs.append(
+                subprocess.Popen(
+                    [*base, *extra, "--process-id", str(i)],
+                    env=penv,
+                    stdout=None if i == 0 else subprocess.DEVNULL,
+                    stderr=None if i == 0 else log,
+                    start_new_session=True,
+                )
+            )
+        return _wait_all(procs, logs, grace_s, timeout_s)
+    finally:
+        for p in procs:
+            _stop(p)
+        for log in logs:
+            log.close()
+
+
+def _stop(p: subprocess.Popen) -> None:
+    if p.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGTERM)
+        try:
+            p.wait(5)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def _wait_all(procs, logs, grace_s: float, timeout_s: float | None) -> int:
+    t0 = time.monotonic()
+    deadline = None
+    crashed: tuple[int, int] | None = None
+    while True:
+        codes = [p.poll() for p in procs]
+        if all(c is not None for c in codes):
+            break
+        for i, c in enumerate(codes):
+            if c is not None and c not in (0, 1, 2) and crashed is None:
+                crashed = (i, c)
+            elif c is not None and c != 0 and deadline is None:
+                deadline = time.monotonic() + grace_s
+        now = time.monotonic()
+        late = deadline is not None and now > deadline
+        if crashed is not None or late or (timeout_s is not None and now - t0 > timeout_s):
+            break
+        time.sleep(0.05)
+    for p in procs:
+        _stop(p)
+    codes = [p.returncode for p in procs]
+    if crashed is None:
+        bad = [(i, c) for i, c in enumerate(codes) if c not in (0, 1, 2)]
+        crashed = bad[0] if bad else None
+    if crashed is not None:
+        i, c = crashed
+        why = f"signal {-c}" if c < 0 else f"status {c}"
+        print(
+            f"encdesign: process {i} of {len(procs)} failed ({why}); stopped the others",
+            file=sys.stderr,
+        )
+        if i > 0:
+            logs[i].seek(0)
+            tail = logs[i].read()[-4000:].decode("utf-8", "replace")
+            print(f"--- process {i} stderr (tail) ---\n{tail}", file=sys.stderr)
+        return 1
+    if timeout_s is not None and any(c is None for c in codes):
+        print(f"encdesign: processes did not finish within {timeout_s:g} s", file=sys.stderr)
+        return 1
+    return int(codes[0])
+
+
+# ---------------------------------------------------------------------------------------
+# CLI glue
+
+
+def add_launch_flags(parser: Any) -> None:
+    """The ``--processes`` / ``--coordinator`` / ``--num-processes`` / ``--process-id`` flags
+    (``docs/scale.md``)."""
+    g = parser.add_argument_group("scale-out (docs/scale.md)")
+    g.add_argument(
+        "--processes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="spawn N local processes with a coordinator on localhost",
+    )
+    g.add_argument(
+        "--coordinator",
+        default=None,
+        metavar="HOST:PORT",
+        help="join a distributed run (process 0 listens there); 'auto': JAX's cluster "
+        "auto-detection (SLURM, Open MPI, ...)",
+    )
+    g.add_argument("--num-processes", type=int, default=None, metavar="N")
+    g.add_argument("--process-id", type=int, default=None, metavar="I")
+
+
+def launch_from_args(args: Any) -> Launch:
+    """Validated :class:`Launch` from parsed :func:`add_launch_flags` flags."""
+    return check_launch(
+        getattr(args, "processes", None),
+        getattr(args, "coordinator", None),
+        getattr(args, "num_processes", None),
+        getattr(args, "process_id", None),
+    )
+
+
+def strip_launch_flags(argv: Sequence[str]) -> list[str]:
+    """``argv`` without ``--processes N`` (also ``--processes=N``)."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        if a == "--processes":
+            skip = True
+            continue
+        if a.startswith("--processes="):
+            continue
+        out.append(a)
+    return out
+
+
+def run_launched(args: Any, argv: Sequence[str], body: Callable[[], int]) -> int:
+    """Run a CLI command's ``body`` as its launch flags say: spawn ``--processes`` local
+    copies of ``argv``, or join the runtime, run ``body`` and leave it."""
+    launch = launch_from_args(args)
+    if launch.spawns:
+        return spawn_local(strip_launch_flags(argv), launch.processes)
+    try:
+        initialize(launch)
+    except DistributedError as exc:
+        print(f"encdesign: error: {exc}", file=sys.stderr)
+        return 1
+    rc = body()
+    shutdown()
+    return rc
+
+
+def study_argv_for_this_process(name: str, flags: Sequence[str]) -> list[str]:
+    """A study's flags for this process: unchanged on process 0; on the others ``--json`` is
+    dropped, ``--no-plots`` added and ``--out DIR`` becomes ``DIR/.process-K`` (their
+    duplicate summaries and, for the conceal benchmark, the recordings of their share)."""
+    if is_main_process():
+        return list(flags)
+    out, it, out_dir = [], iter(flags), str(Path("results") / name)
+    for a in it:
+        if a == "--json":
+            next(it, None)
+        elif a.startswith("--json="):
+            continue
+        elif a == "--out":
+            out_dir = next(it, out_dir)
+        elif a.startswith("--out="):
+            out_dir = a.split("=", 1)[1]
+        elif a != "--no-plots":
+            out.append(a)
+    k = process_index()
+    return [*out, "--out", str(Path(out_dir) / f".process-{k}"), "--no-plots"]
+
+
+@contextlib.contextmanager
+def quiet_unless_main() -> Iterator[None]:
+    """Silence stdout on processes other than 0 (they compute, process 0 reports)."""
+    if is_main_process():
+        yield
+        return
+    with open(os.devnull, "w") as null, contextlib.redirect_stdout(null):
+        yield

@@ -1,0 +1,238 @@
+"""Scale-out on jax.distributed + jax.sharding: launch flags, sharded builds, processes.
+
+The agreement tests run the same Monte Carlo yield (``tests/distributed_worker.py``) in
+this process (one CPU device), in a process with 4 CPU devices
+(``--xla_force_host_platform_device_count``) and as 2 processes on localhost (gloo
+collectives), and compare per-build values, yield and gradient.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from encdesign import EncdesignInputError
+from encdesign.cli import main
+from encdesign.design import _distributed as dist
+from encdesign.design._cases import CaseRecorder, part_path, read_cases
+
+WORKER = Path(__file__).resolve().parent / "distributed_worker.py"
+RTOL = 1e-12
+
+
+def _worker(out: Path, *flags: str, env: dict | None = None) -> None:
+    subprocess.run(
+        [sys.executable, str(WORKER), str(out), *flags],
+        check=True,
+        env=env,
+        timeout=600,
+        capture_output=True,
+    )
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory):
+    out = tmp_path_factory.mktemp("single") / "one.json"
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    _worker(out, env=env)
+    r = json.loads(out.read_text())
+    assert r["devices"] == 1 and r["processes"] == 1
+    return r
+
+
+def _agree(a: dict, b: dict) -> None:
+    va, vb = np.asarray(a["values"]), np.asarray(b["values"])
+    assert va.shape == vb.shape == (len(a["values"]),)
+    np.testing.assert_allclose(vb, va, rtol=RTOL, atol=0)
+    assert b["mean"] == pytest.approx(a["mean"], rel=RTOL, abs=0)
+    assert b["yield"] == a["yield"] and b["spec"] == pytest.approx(a["spec"], rel=RTOL)
+    np.testing.assert_allclose(b["grad"], a["grad"], rtol=RTOL, atol=0)
+    assert b["again"] == pytest.approx(a["again"], rel=RTOL, abs=0)
+    assert b["mean_mesh_input"] == pytest.approx(a["mean"], rel=RTOL, abs=0)
+    np.testing.assert_allclose(b["sds"], a["sds"], rtol=RTOL, atol=0)
+    assert len(set(a["sds"])) == len(a["sds"])  # distinct builds, not one repeated
+
+
+def test_four_cpu_devices_agree_with_one(single, tmp_path):
+    out = tmp_path / "four.json"
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    _worker(out, env=env)
+    r = json.loads(out.read_text())
+    assert r["devices"] == 4 and r["processes"] == 1
+    _agree(single, r)
+
+
+def test_two_processes_on_localhost_agree_with_one(single, tmp_path):
+    out = tmp_path / "two.json"
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    rc = dist.spawn_local([str(out)], 2, env=env, program=[sys.executable, str(WORKER)])
+    assert rc == 0
+    r = json.loads(out.read_text())
+    assert r["devices"] == 2 and r["processes"] == 2
+    _agree(single, r)
+    # tasks (e.g. benchmark recordings) dealt round-robin and gathered
+    assert r["tasks"] == [{"task": i, "by": i % 2} for i in range(5)]
+    assert single["tasks"] == [{"task": i, "by": 0} for i in range(5)]
+
+
+def test_a_dead_process_stops_the_run_in_bounded_time(tmp_path, capsys):
+    t0 = time.monotonic()
+    rc = dist.spawn_local(
+        [str(tmp_path / "x.json"), "--die"], 2, program=[sys.executable, str(WORKER)]
+    )
+    elapsed = time.monotonic() - t0
+    assert rc == 1 and not (tmp_path / "x.json").exists()
+    assert "process 1 of 2 failed (status 7)" in capsys.readouterr().err
+    assert elapsed < 120  # the survivor is stopped at once, not after a heartbeat timeout
+
+
+def test_unreachable_coordinator_is_a_clear_error_in_bounded_time():
+    port = dist.free_port()
+    launch = dist.check_launch(None, f"127.0.0.1:{port}", 2, 1)
+    t0 = time.monotonic()
+    with pytest.raises(dist.DistributedError, match="not reachable within 1 s"):
+        dist.initialize(launch, timeout_s=1.0)
+    assert time.monotonic() - t0 < 10
+
+
+@pytest.mark.parametrize(
+    "text, host, port",
+    [("localhost:1234", "localhost", 1234), ("10.0.0.7:80", "10.0.0.7", 80), ("[::1]:9", "::1", 9)],
+)
+def test_coordinator_addresses_parse(text, host, port):
+    assert dist.parse_coordinator(text) == (host, port)
+
+
+@pytest.mark.parametrize(
+    "flags, where",
+    [
+        (["--processes", "0"], "--processes"),
+        (["--processes", "-3"], "--processes"),
+        (["--coordinator", "localhost"], "--coordinator"),
+        (["--coordinator", "host:port"], "--coordinator"),
+        (["--coordinator", "localhost:70000"], "--coordinator"),
+        (["--coordinator", "a b:12", "--num-processes", "2", "--process-id", "0"], "--coord"),
+        (["--coordinator", "localhost:1234", "--num-processes", "2", "--process-id", "2"], "-id"),
+        (["--coordinator", "localhost:1234", "--num-processes", "2", "--process-id", "-1"], "-id"),
+        (["--coordinator", "localhost:1234", "--num-processes", "0", "--process-id", "0"], "-num"),
+        (["--coordinator", "localhost:1234"], "--coordinator"),
+        (["--num-processes", "2"], "--num-processes"),
+    ],
+)
+@pytest.mark.parametrize("command", ["sweep", "optimize"])
+def test_bad_launch_flags_exit_2(command, flags, where, capsys):
+    rc = main([command, "examples/residual_3p1.toml", *flags])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert where in err and "expected" in err
+
+
+def test_launch_checks_raise_input_errors():
+    with pytest.raises(EncdesignInputError, match="0…3"):
+        dist.check_launch(None, "localhost:5", 4, 4)
+    assert dist.check_launch(3).spawns and not dist.check_launch(3).distributed
+    assert dist.check_launch(None, "auto").coordinator == "auto"
+
+
+SWEEP_TOML = """
+[problem]
+name = "scale sweep"
+objective = "residual"
+seed = {seed}
+
+[model]
+radius_m = 0.0254
+tilt_rad = 6e-3
+n_heads = 3
+max_order = 4
+grating_orders = 4
+n_angles = 32
+n_builds = 40
+chunk_size = 8
+sigma_eccentricity = 5e-6
+sigma_tilt = 1e-3
+sigma_placement = 2e-4
+sigma_grating = 5e-6
+
+[variables.reference_angle]
+units = "deg"
+start = 20.0
+lower = 14.0
+upper = 28.0
+
+[sweep]
+kind = "grid"
+points_per_dim = 9
+chunk_size = 2
+"""
+
+
+def _sweep_file(tmp_path: Path, seed: int = 1) -> Path:
+    p = tmp_path / f"sweep{seed}.toml"
+    p.write_text(SWEEP_TOML.format(seed=seed))
+    return p
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweep")
+    cases = d / "full.jsonl"
+    assert main(["sweep", str(_sweep_file(d)), "--cases", str(cases), "--quiet"]) == 0
+    return read_cases(cases)
+
+
+@pytest.mark.parametrize("kept", [0, 4, 8])
+def test_sweep_resume_gives_the_uninterrupted_table(uninterrupted, tmp_path, kept, capsys):
+    """An interrupted case file (the first ``kept`` cases, or the last ones) is completed;
+    the cases recorded are not evaluated again; the final file equals the full run's."""
+    from encdesign.design._cases import write_cases
+
+    part = tmp_path / "part.jsonl"
+    write_cases(part, uninterrupted[:kept] if kept < 8 else uninterrupted[1:])
+    assert main(["sweep", str(_sweep_file(tmp_path)), "--resume", str(part), "--quiet"]) == 0
+    assert read_cases(part) == uninterrupted
+    reused = kept if kept < 8 else 8
+    assert f"{reused} reused from the earlier run" in capsys.readouterr().out
+
+
+def test_sweep_resume_checks_the_seed(uninterrupted, tmp_path, capsys):
+    from encdesign.design._cases import write_cases
+
+    part = tmp_path / "other-seed.jsonl"
+    write_cases(part, uninterrupted[:5])
+    assert main(["sweep", str(_sweep_file(tmp_path, seed=2)), "--resume", str(part)]) == 0
+    out = read_cases(part)
+    assert "0 reused" in capsys.readouterr().out
+    assert [c.seed for c in out[:9]] == [2] * 9 and len(out) == 14  # seed-1 cases kept after
+
+
+def test_sweep_on_two_processes_writes_the_same_case_file(uninterrupted, tmp_path):
+    cases = tmp_path / "two.jsonl"
+    argv = ["sweep", str(_sweep_file(tmp_path)), "--cases", str(cases), "--processes", "2"]
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    rc = dist.spawn_local(dist.strip_launch_flags(argv), 2, env=env)
+    assert rc == 0
+    got = read_cases(cases)
+    assert [c.inputs for c in got] == [c.inputs for c in uninterrupted]
+    for a, b in zip(got, uninterrupted):
+        assert a.status == b.status and a.seed == b.seed
+        for k in a.outputs:
+            assert a.outputs[k] == pytest.approx(b.outputs[k], rel=RTOL, abs=0)
+    assert not list(tmp_path.glob(".two.part-*"))  # shard files merged and removed
+
+
+def test_interrupted_recorder_keeps_its_cases_and_shard(tmp_path):
+    path = tmp_path / "c.jsonl"
+    with pytest.raises(KeyboardInterrupt), CaseRecorder(path, process=1, write=True) as rec:
+        rec.record({"x": 0.25}, {"f": 1.0}, "success", 3)
+        rec.record_part([({"x": 0.5}, {"f": 2.0}, "success", 3)])
+        raise KeyboardInterrupt
+    assert [c.inputs for c in read_cases(path)] == [{"x": 0.25}]
+    assert part_path(path, 1).exists()
+    resumed = CaseRecorder(path, resume=True)
+    assert resumed.lookup({"x": 0.5}, 3) is not None and resumed.lookup({"x": 0.5}, 4) is None
