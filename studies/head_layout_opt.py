@@ -255,7 +255,9 @@ def main(argv: list[str] | None = None) -> int:
             (opt_angles, "o-", "free optimum"),
             (sym_best, "s--", f"best {n_sym}+1"),
         ):
-            ax.plot(np.cos(ang), np.sin(ang), style, ms=8, label=lab, alpha=0.8)
+            ring = np.sort(np.mod(ang, 2 * np.pi))
+            ring = np.r_[ring, ring[:1]]  # the heads in azimuth order, closed
+            ax.plot(np.cos(ring), np.sin(ring), style, ms=8, label=lab, alpha=0.8)
         circle = np.linspace(0, 2 * np.pi, 200)
         ax.plot(np.cos(circle), np.sin(circle), "k-", lw=0.5)
         ax.set_aspect("equal")

@@ -232,9 +232,11 @@ def test_head_layout_problem_optimises_the_vector_variable():
     assert [v.name for v in p.continuous] == ["head_angles[0]", "head_angles[1]",
                                               "head_angles[2]"]  # fmt: skip
     res = solve_problem(p)
-    assert res.best is not None and res.best.status in ("success", "max_steps_reached")
+    (r,) = res.results  # 30 BFGS steps: converged or stopped by the step limit
+    assert r.status in ("success", "max_steps_reached"), r.message
+    assert set(r.inputs) == {"head_angles[0]", "head_angles[1]", "head_angles[2]"}
     ev0 = p.objective.build(p, {})({"head_angles": jnp.radians(jnp.array([0.0, 100.0, 250.0]))})
-    assert res.best.outputs["residual_rms"] <= float(ev0["residual_rms"])
+    assert r.outputs["residual_rms"] < 0.99 * float(ev0["residual_rms"])
 
 
 def test_head_layout_study_quick(tmp_path):
