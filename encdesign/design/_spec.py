@@ -154,9 +154,10 @@ DEFAULT_MODEL_LIMITS: dict[str, ModelLimit] = {
     "speed_ripple": ModelLimit(0.0, 1.0),
     "sigma_placement": _SIGMA_RAD,
 }
-"""Ranges of the ``[model]`` settings of the built-in objectives, by name. Settings named
-``sigma_*`` (a standard deviation), ``cost_ref_*`` (a cost reference) and ``*_rad`` / ``*_m``
-tolerances without an entry must be finite and >= 0; every other number finite."""
+"""Ranges of the ``[model]`` settings of the built-in objectives, by name. Settings without
+an entry: ``sigma_*`` (a standard deviation) and ``cost_ref_*`` (a cost reference) must be
+finite and >= 0; ``*_rad`` (an angle: an azimuth may be anywhere on the circle, or beyond
+for a multi-turn setting) within +-1000 rad; every other number finite."""
 
 
 def model_limit(name: str, objective: ProblemObjective | None = None) -> ModelLimit | None:
@@ -169,6 +170,6 @@ def model_limit(name: str, objective: ProblemObjective | None = None) -> ModelLi
         return ModelLimit(lower=0.0, upper=1.0)
     if name.startswith("cost_ref_"):
         return ModelLimit(lower=0.0, upper=1e6)
-    if name.endswith("_rad"):
-        return ModelLimit(lower=0.0, upper=1.0, units="rad")
+    if name.endswith("_rad"):  # an angle (an azimuth, a tilt): finite and not absurd
+        return ModelLimit(lower=-1e3, upper=1e3, units="rad")
     return None

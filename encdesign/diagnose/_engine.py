@@ -1650,10 +1650,11 @@ def run_engine(
         EncdesignInputError: a recording the kind cannot diagnose, or ``max_order`` beyond
             what the record resolves.
     """
-    from tqdm import tqdm
+    from .._progress import progress_bar
 
     t0 = time.perf_counter()
-    bar = tqdm(total=6, desc="diagnose", disable=not verbose, leave=False, unit="stage")
+    # a tqdm bar on a terminal only (quiet in pipes, logs and tests), through every stage
+    bar = progress_bar("diagnose", 6, enabled=verbose, unit="stage")
 
     def stage(name: str) -> None:
         bar.set_postfix_str(name)
