@@ -54,6 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
+from encdesign.design import _distributed as dist
 from encdesign.design._drivers import VECTOR_BUILDS, build_normals, values_of_normals
 from encdesign.design._objectives import _deviation_sizes
 from encdesign.design._rare import importance_yield
@@ -67,7 +68,7 @@ from encdesign.objectives import (
 )
 
 SPEC_RAD = 1e-6
-TOL = Tolerances(
+TOL_SI = dict(
     eccentricity=5e-6,
     tilt=1e-3,
     placement=2e-4,
@@ -76,6 +77,13 @@ TOL = Tolerances(
     axial_runout=2e-6,
     noise=2e-7,
 )
+"""The benchmark's tolerances (SI); made into :class:`Tolerances` only inside ``main``, after
+the distributed runtime is joined (a JAX array at import would start the backend first)."""
+
+
+def tolerances() -> Tolerances:
+    """The benchmark's :class:`Tolerances` (standard deviations, SI)."""
+    return Tolerances(**TOL_SI)
 
 
 def peak_rss_mb() -> float:
@@ -200,13 +208,14 @@ RARE_CHUNK = 4096
 
 def rare_event(args: argparse.Namespace) -> dict:
     """Importance-sampling yield against crude Monte Carlo (module docstring)."""
+    tol = tolerances()
     d = design(args.rare_angles)
     dim = n_build_normals(d)
     spec = args.rare_spec_rad
     ckey = jax.random.key(RARE_CRUDE_KEY)
     chunk = jax.jit(
         lambda first: build_metrics(
-            d, TOL, key=ckey, n_builds=RARE_CHUNK, first_build=first, chunk_size=512
+            d, tol, key=ckey, n_builds=RARE_CHUNK, first_build=first, chunk_size=512
         )
     )
     n = args.rare_crude_builds
@@ -239,13 +248,13 @@ def rare_event(args: argparse.Namespace) -> dict:
                 "grating_cos": 3, "beam_tilt": 4, "axial_cos": 5, "axial_sin": 5}  # fmt: skip
     groups = [group_of[k] for k, m in _deviation_sizes(d).items() for _ in range(m)]
     res = importance_yield(
-        lambda z: residual_rms(d, TOL, z),
+        lambda z: residual_rms(d, tol, z),
         dim,
         spec,
         key=jax.random.key(RARE_IS_KEY),
         n=args.rare_is_builds,
         groups=groups,
-        sigmas=np.asarray(TOL.vector()),
+        sigmas=np.asarray(tol.vector()),
         names=TOLERANCE_NAMES,
     )
     is_d = res.as_dict()
@@ -301,9 +310,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rare-is-builds", type=int, default=8000)
     p.add_argument("--rare-crude-values", type=Path, default=None)
     p.add_argument("--rare-save-values", type=Path, default=None)
+    dist.add_launch_flags(p)
     args = p.parse_args(argv)
     if args.vector < 1 or args.chunk % args.vector:
         p.error(f"--chunk {args.chunk} must be a multiple of --vector {args.vector} (>= 1)")
+    # scale-out (docs/scale.md): the yield's chunks are dealt over the processes, and the
+    # counts summed; the gradient, NumPy and rare-event parts run in one process only
+    launch = dist.launch_from_args(args)
+    if launch.spawns:
+        argv_list = list(sys.argv[1:] if argv is None else argv)
+        return dist.spawn_local(
+            dist.strip_launch_flags(argv_list),
+            launch.processes,
+            program=[sys.executable, str(Path(__file__).resolve())],
+        )
+    dist.initialize(launch)
+    tol = tolerances()
+    if dist.process_count() > 1 and not (args.skip_gradient and not args.rare):
+        p.error("on several processes only the yield part runs: add --skip-gradient (no --rare)")
     d = design(args.angles)
     dim = n_build_normals(d)
     key = jax.random.key(0)
@@ -339,23 +363,24 @@ def main(argv: list[str] | None = None) -> int:
             jnp.sum(live & ~jnp.isfinite(v)),
         )
 
-    tv = TOL.vector()
+    tv = tol.vector()
     if not args.skip_yield:
         t0 = time.perf_counter()
         jax.block_until_ready(chunk_counts(tv, 0))
         compile_s = time.perf_counter() - t0
         n_chunks = -(-args.builds // args.chunk)
-        passed, total, bad = 0, 0.0, 0
+        passed, total, bad, n_mine = 0, 0.0, 0, 0
         t0 = time.perf_counter()
-        done = 0
         for c in range(n_chunks):
             if args.time_limit_s and time.perf_counter() - t0 > args.time_limit_s:
                 break
-            done = c + 1
+            if not dist.is_my_task(c):  # chunk c belongs to process c mod N
+                continue
             a, s, nb = chunk_counts(tv, c * args.chunk)
             passed += int(a)
             total += float(s)
             bad += int(nb)
+            n_mine += min(args.chunk, args.builds - c * args.chunk)
             if c % 10 == 0 or c == n_chunks - 1:
                 el = time.perf_counter() - t0
                 print(
@@ -367,10 +392,21 @@ def main(argv: list[str] | None = None) -> int:
                 )
         print(file=sys.stderr)
         wall = time.perf_counter() - t0
-        n = min(done * args.chunk, args.builds)
+        # one collective: every process's counts, summed (one process: its own)
+        rows = dist.allgather_rows(
+            np.array([[passed, total, bad, n_mine, wall]]), dist.process_count()
+        )
+        passed, total, bad, n = (
+            int(rows[:, 0].sum()),
+            float(rows[:, 1].sum()),
+            int(rows[:, 2].sum()),
+            int(rows[:, 3].sum()),
+        )
+        wall = float(rows[:, 4].max())  # the slowest process
         y = passed / n
         out["yield"] = {
             "builds_requested": args.builds,
+            "processes": dist.process_count(),
             "builds": n,
             "complete": n == args.builds,
             "wall_s_extrapolated_to_requested": wall * args.builds / n,
@@ -435,12 +471,19 @@ def main(argv: list[str] | None = None) -> int:
         out["rare_event"] = rare_event(args)
         print(json.dumps(out["rare_event"], indent=1), file=sys.stderr)
 
+    if dist.process_count() > 1:  # the yield was the distributed part; process 0 reports
+        if dist.is_main_process() and args.json is not None:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(out, indent=2) + "\n")
+            print(f"wrote {args.json}")
+        return 0
+
     # plain NumPy implementation of the same physics
     zn = np.asarray(build_normals(key, jnp.arange(args.numpy_builds), dim))
     t0 = time.perf_counter()
-    v_np = numpy_rms(d, TOL, zn)
+    v_np = numpy_rms(d, tol, zn)
     t_np = time.perf_counter() - t0
-    v_jax = np.asarray(jax.jit(jax.vmap(lambda zi: residual_rms(d, TOL, zi)))(jnp.asarray(zn)))
+    v_jax = np.asarray(jax.jit(jax.vmap(lambda zi: residual_rms(d, tol, zi)))(jnp.asarray(zn)))
     out["numpy"] = {
         "builds": args.numpy_builds,
         "us_per_build": t_np / args.numpy_builds * 1e6,
