@@ -44,9 +44,7 @@ def _modules() -> dict[str, Path]:
 
 def _resolve(mod: str, node: ast.ImportFrom) -> list[str]:
     """Absolute module names (under ``encdesign``) an ``ImportFrom`` node refers to."""
-    parts = mod.split(".")
-    is_pkg = parts[-1] == "__init__"
-    base = parts[:-1] if not is_pkg else parts[:-1]
+    base = mod.split(".")[:-1]  # the package the module sits in (for __init__: itself)
     if node.level:
         up = node.level - 1
         base = base[: len(base) - up] if up else base
