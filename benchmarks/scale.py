@@ -3,22 +3,29 @@
 The workload is the Monte Carlo yield of ``benchmarks/optimize.py`` (3+1 heads, r = 2.54 cm,
 nominal tilt 6 mrad, orders 1-16, its tolerance set; ``--angles`` samples per revolution,
 default 512) over ``--builds`` builds (default 100,000), through
-:func:`encdesign.design.monte_carlo`: the builds axis is sharded over the ``"builds"`` mesh
-(one slice per device, partitioned by XLA's SPMD partitioner), the per-build values
-gathered with a collective.
+:func:`encdesign.design.monte_carlo`: every chunk is split over the ``"builds"`` mesh (all
+devices of all processes; ``jax.shard_map``, one block of builds per device) and the
+per-build values stay where they were computed until the last chunk is done; then one
+all-gather per chunk collects them. No process waits for another while it computes.
 
 Configurations (each a fresh set of processes; the compile is excluded by a warm-up chunk):
 
 * 1, 2 and 4 processes on localhost (``jax.distributed`` with gloo CPU collectives), each
   held to one core: pinned with ``sched_setaffinity`` to core ``process_id mod cores`` and
-  XLA's CPU thread pool limited to one thread
-  (``--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``);
+  XLA's CPU thread pool limited to one thread (``--xla_cpu_multi_thread_eigen=false``;
+  XLA sizes its pool by the cores a process may use, so the pinned process runs one compute
+  thread);
 * 1 process with 4 CPU devices (``--xla_force_host_platform_device_count=4``), same XLA
   thread limit, not pinned;
 * 1 process, unrestricted (XLA's default threads, all cores).
 
 Each process's CPU time over the timed run is recorded too (``cpu_s_per_process``): CPU / wall
 above 1 means it used more than one core; well below 1 means other load took the core.
+``other_load_cores`` is the CPU the rest of the machine used during the timed run (all of
+``/proc/stat``'s busy time less this run's processes), in cores: on a machine that nothing
+else uses it is near 0. It matters most where every core is in use (2 processes on 2
+cores): there the other load cannot go to a free core, and each pinned process it lands on
+falls behind (its ``core_share_per_process``, CPU / wall, drops below 1).
 ``cpu_speedup_vs_1p`` (1-process CPU time over the busiest process's) is the speedup with a
 dedicated core per process, which a shared machine cannot show in wall time.
 
@@ -47,7 +54,10 @@ import sys
 import time
 from pathlib import Path
 
-ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+# Eigen's own threads off. (``intra_op_parallelism_threads=1``, often quoted, is not an XLA
+# flag: XLA ignores the bare token.) XLA sizes its CPU thread pool by the cores the process
+# may use, so a process pinned to one core before JAX starts runs one compute thread.
+ONE_THREAD = "--xla_cpu_multi_thread_eigen=false"
 CONFIGS = {
     # name: (processes, devices per process, one XLA thread, pinned)
     "1p": (1, 1, True, True),
@@ -57,6 +67,18 @@ CONFIGS = {
     "1p-unrestricted": (1, 1, False, False),
 }
 SPEC_RAD = 1e-6
+
+
+def _machine_busy_s() -> float:
+    """Seconds of CPU the whole machine has spent busy (all cores, every process) since
+    boot, from ``/proc/stat`` (NaN where there is none)."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(x) for x in f.readline().split()[1:8]]
+    except (OSError, ValueError):
+        return math.nan
+    user, nice, system, idle, iowait, irq, softirq = fields
+    return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
 
 
 def _worker(argv: list[str]) -> int:
@@ -79,7 +101,7 @@ def _worker(argv: list[str]) -> int:
     import jax
     import numpy as np
 
-    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._drivers import VECTOR_BUILDS, monte_carlo
     from encdesign.objectives import EncoderDesign, Tolerances, build_metric, n_build_normals
 
     design = EncoderDesign(
@@ -107,15 +129,18 @@ def _worker(argv: list[str]) -> int:
     def fn(t, z):
         return build_metric(design, t, z)
 
-    per_chunk = args.chunk * dist.n_build_shards()
-    monte_carlo(fn, tol, key=key, n=min(per_chunk, args.builds), dim=dim, chunk_size=args.chunk)
+    # warm-up: one chunk of exactly the timed run's shape (compiles it and its gather)
+    shards = dist.n_build_shards()
+    block, n_chunks = dist.chunk_plan(args.builds, args.chunk, shards, VECTOR_BUILDS)
+    monte_carlo(fn, tol, key=key, n=block * shards, dim=dim, chunk_size=args.chunk)
     dist.barrier("bench-start")
-    t0, c0 = time.perf_counter(), os.times()
+    t0, c0, m0 = time.perf_counter(), os.times(), _machine_busy_s()
     mc = monte_carlo(fn, tol, key=key, n=args.builds, dim=dim, chunk_size=args.chunk)
-    wall, c1 = time.perf_counter() - t0, os.times()
+    wall, c1, m1 = time.perf_counter() - t0, os.times(), _machine_busy_s()
     cpu = (c1.user + c1.system) - (c0.user + c0.system)
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    rows = dist.allgather_rows(np.array([[wall, rss_mb, cpu]]), dist.process_count())
+    row = [wall, rss_mb, cpu, m1 - m0, block, n_chunks]
+    rows = dist.allgather_rows(np.array([row]), dist.process_count())
     if dist.is_main_process():
         y, y_se = mc.yield_fraction(SPEC_RAD)
         args.out.write_text(
@@ -126,6 +151,9 @@ def _worker(argv: list[str]) -> int:
                     "wall_s_per_process": rows[:, 0].tolist(),
                     "peak_rss_mb_per_process": rows[:, 1].tolist(),
                     "cpu_s_per_process": rows[:, 2].tolist(),
+                    "machine_busy_cpu_s": float(rows[0, 3]),
+                    "builds_per_device_and_chunk": int(rows[0, 4]),
+                    "chunks": int(rows[0, 5]),
                     "mean_rms_rad": mc.mean,
                     "yield": y,
                     "yield_stderr": y_se,
@@ -141,11 +169,12 @@ def _run_config(name: str, builds: int, angles: int, tmp: Path) -> dict:
 
     procs, devices, one_thread, pinned = CONFIGS[name]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    flags = []  # the device count first: XLA stops reading flags at the bare thread token
+    flags = []
     if devices > 1:
         flags.append(f"--xla_force_host_platform_device_count={devices}")
     if one_thread:
         flags.append(ONE_THREAD)
+        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")  # NumPy's BLAS too
     if flags:
         env["XLA_FLAGS"] = " ".join(flags)
     out = tmp / f"{name}.json"
@@ -167,6 +196,11 @@ def _run_config(name: str, builds: int, angles: int, tmp: Path) -> dict:
     r["total_wall_s_with_startup"] = time.perf_counter() - t0
     r["wall_s"] = max(r["wall_s_per_process"])
     r["builds_per_s"] = builds / r["wall_s"]
+    r["core_share_per_process"] = [
+        c / w for c, w in zip(r["cpu_s_per_process"], r["wall_s_per_process"])
+    ]
+    # CPU the rest of the machine used meanwhile, in cores: the load this run competed with
+    r["other_load_cores"] = (r["machine_busy_cpu_s"] - sum(r["cpu_s_per_process"])) / r["wall_s"]
     return r
 
 
@@ -202,7 +236,9 @@ def main(argv: list[str] | None = None) -> int:
                     f"[{rep + 1}/{args.repeats}] {n:16s} {r['processes']} proc x "
                     f"{r['devices'] // r['processes']} dev  {r['wall_s']:8.2f} s  "
                     f"{r['builds_per_s']:9.0f} builds/s  peak RSS/process "
-                    f"{max(r['peak_rss_mb_per_process']):7.1f} MB  load {os.getloadavg()[0]:.1f}",
+                    f"{max(r['peak_rss_mb_per_process']):7.1f} MB  CPU/wall "
+                    f"{min(r['core_share_per_process']):.2f}  other load "
+                    f"{r['other_load_cores']:.2f} cores",
                     flush=True,
                 )
     for n in names:  # the fastest repetition: the least disturbed by other load

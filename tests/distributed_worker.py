@@ -1,9 +1,11 @@
-"""A Monte Carlo yield run as one process of a distributed run (driven by
-``tests/test_distributed.py``): ``python tests/distributed_worker.py OUT.json [launch flags]``.
+"""A Monte Carlo yield and the traced (differentiable) builds path, run on the devices and
+processes at hand (driven by ``tests/test_distributed.py``).
 
-Process 0 writes the per-build values, the yield and the gradient of the mean metric with
-respect to the tolerances to ``OUT.json``. ``--die`` makes process 1 exit with status 7
-right after joining, while process 0 waits for it in a collective.
+``python tests/distributed_worker.py OUT.json [--sds] [launch flags]``: process 0 writes
+:func:`run_checks`'s results to ``OUT.json``. The test module also calls
+:func:`run_checks` in its own process, on one device, for the reference. ``--die`` makes
+process 1 exit with status 7 right after joining, while process 0 waits for it in a
+collective.
 """
 
 import argparse
@@ -19,69 +21,67 @@ from helpers import SCALE_BUILDS, SCALE_DESIGN, SCALE_TOLERANCES  # noqa: E402
 from encdesign.design import _distributed as dist  # noqa: E402
 
 
-def main() -> int:
-    p = argparse.ArgumentParser()
-    p.add_argument("out", type=Path)
-    p.add_argument("--die", action="store_true")
-    dist.add_launch_flags(p)
-    args = p.parse_args()
-    dist.initialize(dist.launch_from_args(args), timeout_s=60, heartbeat_s=10)
+def run_checks(sds: bool = False) -> dict:
+    """Results of the checks on the ``"builds"`` mesh in use (JSON-able):
+
+    * ``values``, ``mean``, ``spec``, ``yield``: :func:`monte_carlo` of the 3+1 model's
+      build metric (``SCALE_BUILDS`` builds: the last shard is short), its median as the
+      spec, the yield at that spec;
+    * ``grad``: the gradient of a differentiable Monte Carlo mean
+      (:func:`expected_value`, the traced path partitioned by XLA) with respect to 7 scales.
+      The function is a small smooth one of the scales and a build's normals, not the
+      encoder model: it checks the partitioning and its transpose at a fraction of the
+      model's compile time (the model's values are checked by ``values``);
+    * ``again``: that mean at a point computed from ``grad`` (an output that lives on the
+      mesh, as in every solver step); ``mean_mesh_input``: :func:`monte_carlo` of
+      tolerances that live on the mesh;
+    * ``sds`` (with ``sds``): :func:`sds_residuals` of 5 builds;
+    * ``tasks``: 5 tasks dealt round-robin over the processes and gathered.
+    """
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._drivers import expected_value, monte_carlo
     from encdesign.objectives import (
         EncoderDesign,
         SDSTolerances,
         Tolerances,
         build_metric,
-        build_metrics,
         n_build_normals,
         sds_residuals,
     )
 
-    if args.die:
-        if dist.process_index() == 1:
-            os._exit(7)
-        dist.barrier("never-complete")
     design = EncoderDesign(**SCALE_DESIGN)
     tol = Tolerances(**SCALE_TOLERANCES)
     key = jax.random.key(7)
+    dim = n_build_normals(design)
 
     def metric(t, z):
         return build_metric(design, t, z)
 
-    mc = monte_carlo(
-        metric,
-        tol,
-        key=key,
-        n=SCALE_BUILDS,
-        dim=n_build_normals(design),
-        chunk_size=32,
-    )
+    mc = monte_carlo(metric, tol, key=key, n=SCALE_BUILDS, dim=dim, chunk_size=32)
     spec = float(np.median(mc.values))
     y, y_se = mc.yield_fraction(spec)
 
-    def mean_metric(s):
-        t = Tolerances(**dict(zip(SCALE_TOLERANCES, s)))
-        return jnp.mean(build_metrics(design, t, key=key, n_builds=101, chunk_size=16))
+    sig0 = np.asarray(list(SCALE_TOLERANCES.values()))
 
-    sig = jnp.asarray(list(SCALE_TOLERANCES.values()))
-    grad = jax.jit(jax.grad(mean_metric))(sig)
-    # a solver step: the next point is computed from an output that lives on the mesh
-    again = jax.jit(mean_metric)(sig * (1.0 + 1e3 * grad * sig))
-    # monte_carlo of a design that lives on the mesh (the output of a sharded step)
+    def toy(s, z):
+        r = s / sig0
+        return jnp.sum(jnp.log1p((r * z[:7]) ** 2)) + 0.1 * jnp.sin(r[0] * z[7])
+
+    def mean_toy(s):
+        return expected_value(toy, s, key=key, n=101, dim=8, chunk_size=16)
+
+    sig = jnp.asarray(sig0)
+    grad = jax.jit(jax.grad(mean_toy))(sig)
+    again = jax.jit(mean_toy)(sig * (1.0 + 0.1 * jnp.tanh(grad * sig)))
     t_mesh = Tolerances(**dict(zip(SCALE_TOLERANCES, sig * (1.0 + 0.0 * grad))))
-    mc_mesh = monte_carlo(
-        metric, t_mesh, key=key, n=SCALE_BUILDS, dim=n_build_normals(design), chunk_size=32
-    )
-    sds = sds_residuals(3, 2, SDSTolerances(), key=key, n_builds=5, marks_per_rev=60, n_phi=8)
+    mc_mesh = monte_carlo(metric, t_mesh, key=key, n=SCALE_BUILDS, dim=dim, chunk_size=32)
     tasks = [{"task": i, "by": dist.process_index()} for i in range(5) if dist.is_my_task(i)]
     out = {
         "tasks": sorted(dist.allgather_objects(tasks), key=lambda t: t["task"]),
-        "sds": np.asarray(sds).tolist(),
-        "devices": jax.device_count(),
+        "devices": dist.n_build_shards(),
         "processes": jax.process_count(),
         "values": mc.values.tolist(),
         "mean": mc.mean,
@@ -92,6 +92,25 @@ def main() -> int:
         "again": float(again),
         "mean_mesh_input": mc_mesh.mean,
     }
+    if sds:
+        s = sds_residuals(3, 2, SDSTolerances(), key=key, n_builds=5, marks_per_rev=60, n_phi=8)
+        out["sds"] = np.asarray(s).tolist()
+    return out
+
+
+def main() -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("out", type=Path)
+    p.add_argument("--die", action="store_true")
+    p.add_argument("--sds", action="store_true")
+    dist.add_launch_flags(p)
+    args = p.parse_args()
+    dist.initialize(dist.launch_from_args(args), timeout_s=60, heartbeat_s=10)
+    if args.die:
+        if dist.process_index() == 1:
+            os._exit(7)
+        dist.barrier("never-complete")
+    out = run_checks(sds=args.sds)
     if dist.is_main_process():
         args.out.write_text(json.dumps(out))
     dist.shutdown()

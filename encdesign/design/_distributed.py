@@ -292,7 +292,11 @@ def n_build_shards() -> int:
 
 
 def shard_builds(
-    local_fn: Callable[[jax.Array, int], jax.Array], n: int, *, manual: bool = False
+    local_fn: Callable[[jax.Array, int], jax.Array],
+    n: int,
+    *,
+    manual: bool = False,
+    gather: bool = True,
 ) -> jax.Array:
     """Traceable per-build values ``[n]``, the builds split over the ``"builds"`` mesh.
 
@@ -307,6 +311,10 @@ def shard_builds(
     over no array already laid out on a mesh. The default partitions a vmapped slice axis
     with GSPMD, which works for any closure (solver steps) but may communicate inside the
     loop.
+
+    ``gather=False`` (``manual`` only, ``n`` a multiple of the shard count): no gather at
+    all; the values stay where they were computed, an array ``[n]`` laid out over the
+    mesh (:func:`gather_chunks` collects such arrays later, in one go).
     """
     n = int(n)
     am = jax.sharding.get_abstract_mesh()
@@ -322,6 +330,8 @@ def shard_builds(
     if d <= 1:
         return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
     m = -(-n // d)
+    if not gather and (not manual or m * d != n):
+        raise ValueError(f"gather=False needs manual=True and n={n} a multiple of {d} shards")
     offsets = jnp.arange(d, dtype=jnp.int32) * m
     if manual:
         # shard_map: each device runs exactly its slice; nothing but the final gather
@@ -333,6 +343,8 @@ def shard_builds(
             in_specs=P(BUILDS_AXIS),
             out_specs=P(BUILDS_AXIS),
         )(offsets)
+        if not gather:
+            return out
         return jax.lax.with_sharding_constraint(out, replicated)[:n]
     # traceable anywhere (inside solvers, whose designs are outputs on the mesh): the slices
     # are a batch axis laid out on the mesh and XLA's SPMD partitioner splits them. Same
@@ -342,6 +354,48 @@ def shard_builds(
     vals = jax.vmap(lambda off: local_fn(off, m))(offsets)  # [d, m]
     vals = jax.lax.with_sharding_constraint(vals.reshape(-1), sharded)
     return jax.lax.with_sharding_constraint(vals, replicated)[:n]
+
+
+def chunk_plan(n: int, chunk_size: int, shards: int, multiple: int = 1) -> tuple[int, int]:
+    """``(block, n_chunks)`` for ``n`` builds on ``shards`` devices, at most ``chunk_size``
+    builds per device and chunk: as few chunks as that allows, and the builds spread evenly
+    over them (``block`` rounded up to a ``multiple`` when larger, never above
+    ``chunk_size``), so that the padding costs at most ``multiple`` builds per device and
+    chunk rather than up to a whole chunk (with one chunk size for every ``n``, 2 processes
+    computed 2.4 % more builds than one at 100,000 builds, 4 processes 6.5 %)."""
+    n, shards = int(n), max(int(shards), 1)
+    cap = max(int(chunk_size), 1)
+    n_chunks = max(-(-n // (shards * cap)), 1)
+    block = -(-n // (n_chunks * shards))
+    m = max(int(multiple), 1)
+    if block > m:
+        block = min(-(-block // m) * m, cap)
+    return int(block), int(n_chunks)
+
+
+@functools.lru_cache(maxsize=16)
+def _replicate_on(mesh: Mesh) -> Callable[[jax.Array], jax.Array]:
+    return jax.jit(lambda x: x, out_shardings=NamedSharding(mesh, P()))
+
+
+def gather_chunks(chunks: Sequence[jax.Array]) -> np.ndarray:
+    """Host copy of the concatenated ``chunks`` (each a 1-D array laid out over a mesh, as
+    :func:`shard_builds` returns them with ``gather=False``), on every process.
+
+    Called once, after every chunk has been dispatched: the processes then never wait for
+    each other while they compute (a gather inside every chunk made each chunk wait for the
+    slowest process, so any other load on either core slowed both), and the only
+    collective is one all-gather per chunk at the end (8 bytes per build; a chunk's shape
+    is fixed, so it is compiled once). Arrays this process holds entirely (one process, or
+    a mesh of its own devices) are copied without any collective."""
+    out = []
+    for x in chunks:
+        if x.is_fully_addressable:
+            out.append(np.asarray(x))
+        else:
+            rep = _replicate_on(x.sharding.mesh)(x)
+            out.append(np.asarray(rep.addressable_data(0)))
+    return np.concatenate(out) if out else np.zeros((0,))
 
 
 def split_range(n: int, parts: int, part: int) -> tuple[int, int]:

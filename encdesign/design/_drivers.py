@@ -33,7 +33,7 @@ import numpy as np
 import optimistix as optx
 
 from .._progress import progress_bar
-from ._distributed import is_main_process, n_build_shards, shard_builds
+from ._distributed import chunk_plan, gather_chunks, is_main_process, n_build_shards, shard_builds
 
 with warnings.catch_warnings():
     warnings.filterwarnings(
@@ -361,12 +361,19 @@ class MonteCarloResult:
 
 @functools.lru_cache(maxsize=64)
 def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int, block: int):
-    """Jitted values of one chunk of builds (cached per ``fn``: reruns don't recompile)."""
+    """Jitted values of one chunk of builds, left on the devices that computed them (no
+    collective: :func:`gather_chunks` collects them at the end). Cached per ``fn``: reruns
+    don't recompile."""
 
     @jax.jit
     def run_chunk(key, c, th):
-        return map_builds(
-            lambda zi: fn(th, zi), key, chunk, dim, first=c * chunk, block=block, manual=True
+        return shard_builds(
+            lambda off, m: _local_builds(
+                lambda zi: fn(th, zi), key, m, dim, c * chunk + off, block, VECTOR_BUILDS
+            ),
+            chunk,
+            manual=True,
+            gather=False,
         )
 
     return run_chunk
@@ -388,34 +395,49 @@ def monte_carlo(
     ``fn`` maps the design ``theta`` (any pytree) and one build's standard-normal vector
     ``z`` (``[dim]``) to a scalar. The builds come from :func:`build_normals` (common random
     numbers: the same ``key`` gives the same builds for every ``theta``). Work is done in
-    jitted chunks of ``chunk_size`` builds per device, each chunk split over the devices of
-    the ``"builds"`` mesh (:func:`map_builds`); with ``progress`` a progress line is shown
-    (by process 0 only, for the whole run, when several processes share the work).
+    jitted chunks of at most ``chunk_size`` builds per device, the builds spread evenly over
+    the chunks (``chunk_plan`` in :mod:`encdesign.design._distributed`), each chunk split
+    over the devices of the ``"builds"`` mesh. The values stay on the devices that computed
+    them until the last chunk is done; then one gather collects them (``gather_chunks``):
+    processes never wait for each other while they compute. With ``progress`` a progress
+    line is shown (by process 0 only, for the whole run, when several processes share the
+    work).
     """
     if n < 1 or dim < 1:
         from .._errors import input_error
 
         raise input_error("monte_carlo", f"n={n}, dim={dim}", "n >= 1 and dim >= 1")
     # host copies of the inputs: the chunks take the shard_map path, which needs inputs
-    # that are not laid out on a mesh (theta may be the output of a sharded solver)
-    theta = jax.tree.map(lambda x: np.asarray(x) if isinstance(x, jax.Array) else x, theta)
+    # that are not laid out on a mesh (theta may be the output of a sharded solver); plain
+    # numbers become arrays too, so a design given as floats and the same design as arrays
+    # (a solver's output) share one compiled chunk
+    theta = jax.tree.map(
+        lambda x: np.asarray(x) if isinstance(x, (jax.Array, np.generic, float, int)) else x,
+        theta,
+    )
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
         key = jax.random.wrap_key_data(
             np.asarray(jax.random.key_data(key)), impl=jax.random.key_impl(key)
         )
     else:
         key = np.asarray(key)
-    block = int(min(chunk_size, n))
-    chunk = int(min(block * n_build_shards(), n))
-    run_chunk = _mc_chunk(fn, chunk, int(dim), block)
-    n_chunks = -(-n // chunk)
+    # every device of every process evaluates its block of each chunk; nothing crosses
+    # devices or processes until all chunks are done (gather_chunks), so no process waits
+    # for another while it computes
+    shards = n_build_shards()
+    block, n_chunks = chunk_plan(n, chunk_size, shards, VECTOR_BUILDS)
+    run_chunk = _mc_chunk(fn, block * shards, int(dim), block)
     out = []
     show = progress and is_main_process()
     with progress_bar("monte carlo", n_chunks, enabled=show) as bar:
         for c in range(n_chunks):
-            out.append(np.asarray(run_chunk(key, c, theta)))
-            bar.update()
-    values = np.concatenate(out)[:n].astype(np.float64)
+            out.append(run_chunk(key, c, theta))  # dispatched; runs while the next is queued
+            if c:
+                out[c - 1].block_until_ready()
+                bar.update()
+        out[-1].block_until_ready()
+        bar.update()
+    values = gather_chunks(out)[:n].astype(np.float64)
     bad = int(np.sum(~np.isfinite(values)))
     mean = float(np.mean(values))
     std = float(np.std(values, ddof=1)) if n > 1 else 0.0
