@@ -13,7 +13,9 @@ encdesign does not run a task farm of its own. It uses
   evaluates a contiguous slice of builds, chunked as before (memory per device stays
   bounded), and the per-build values are gathered (an all-gather: 8 bytes per build) so
   that the reductions that follow (mean, percentile, yield) see the same array in the same
-  order as one device.
+  order as one device. :func:`~encdesign.design.monte_carlo` (host inputs, so it can use
+  ``jax.shard_map``) leaves each chunk's values on their devices and gathers them only at
+  the end (:func:`gather_chunks`), so the processes never wait for each other mid-run.
   Build ``i`` depends only on ``fold_in(key, i)``, so the values are those of a
   single-device run; with one device nothing changes (no sharding at all).
 * :func:`jax.distributed.initialize` — the multi-controller runtime. With it, the mesh
