@@ -127,6 +127,10 @@ class Kind:
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
+        noise: optional ``noise(prep, base_resid) -> (C,)``: a second noise estimate that the
+            kind's own structure cannot inflate (e.g. differences of neighbours in signal
+            phase for a quadrature capture in time order); the engine takes, per channel,
+            the smaller of it and the periodogram median.
     """
 
     name: str
@@ -137,6 +141,7 @@ class Kind:
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
     summary: Callable[[Any, dict], dict] | None = None
+    noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -1732,7 +1737,10 @@ def run_engine(
         fitter.clear()
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it
-    sig = noise_spectral(prep, fitter.residual(base_fit.terms))
+    r_base = fitter.residual(base_fit.terms)
+    sig = noise_spectral(prep, r_base)
+    if kind.noise is not None:  # the kind's second estimate: the smaller of the two
+        sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
         prep.ctx.noise[...] = sig

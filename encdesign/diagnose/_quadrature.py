@@ -72,8 +72,14 @@ def ellipse_start(sa: np.ndarray, sb: np.ndarray) -> np.ndarray:
     Raises:
         ValueError: the points do not lie near an ellipse (a degenerate conic).
     """
-    X = np.column_stack([sa**2, sb**2, sa * sb, sa, sb])
-    A, B, C, D, E = np.linalg.lstsq(X, np.ones_like(sa), rcond=None)[0]
+    # centred and scaled first (raw detector signals may sit far from the origin)
+    ma, mb = float(np.mean(sa)), float(np.mean(sb))
+    sc = float(np.sqrt(np.var(sa) + np.var(sb)))
+    if not sc > 0:
+        raise ValueError("the signals do not vary")
+    x, y = (sa - ma) / sc, (sb - mb) / sc
+    X = np.column_stack([x**2, y**2, x * y, x, y])
+    A, B, C, D, E = np.linalg.lstsq(X, np.ones_like(x), rcond=None)[0]
     den = 4 * A * B - C**2
     if not (den > 0 and A > 0 and B > 0):
         raise ValueError("the signals do not draw an ellipse")
@@ -85,7 +91,7 @@ def ellipse_start(sa: np.ndarray, sb: np.ndarray) -> np.ndarray:
     a = math.sqrt(k / A / (1 - C**2 / (4 * A * B)))
     b = math.sqrt(k / B / (1 - C**2 / (4 * A * B)))
     alpha = math.asin(float(np.clip(-C / (2 * math.sqrt(A * B)), -1.0, 1.0)))
-    return np.array([p, q, a, b, alpha])
+    return np.array([ma + sc * p, mb + sc * q, sc * a, sc * b, alpha])
 
 
 def ray_radius(p, q, a, b, alpha, psi):
@@ -155,36 +161,55 @@ def _signals(rec: Recording) -> tuple[np.ndarray, np.ndarray, str]:
 
 
 def quadrature_start(rec: Recording) -> dict[str, Any]:
-    """Checks, the conic start, clipping and the relative radius of a quadrature recording.
+    """Checks, the conic start, clipping and the centred radius of a quadrature recording.
+
+    The rays start at the centre ``(p0, q0)`` of the conic fitted to the unclipped samples
+    (raw detector signals may sit on large DC levels), so ``psi`` and ``r`` are measured
+    about it and the base model's offsets are corrections to it.
 
     Raises:
-        EncdesignInputError: the signals do not go round a Lissajous figure.
+        EncdesignInputError: the signals do not draw an ellipse that covers a signal period.
     """
     sa, sb, where = _signals(rec)
-    psi = np.arctan2(sb, sa)
-    r = np.hypot(sa, sb)
-    bad = "the signals do not go round a Lissajous figure about the origin"
-    if sa.size < 32 or np.ptp(psi) < np.pi or r.mean() <= 0 or np.std(r) > 0.5 * r.mean():
+    bad = "the signals do not draw a Lissajous ellipse"
+    if sa.size < 32 or np.ptp(sa) <= 0 or np.ptp(sb) <= 0:
         raise input_error(f"{where}: columns sa, sb", bad, "sa, sb covering a signal period")
     try:
-        e0 = ellipse_start(sa, sb)
-        clip = detect_clipping(sa, sb, e0)
+        e_all = ellipse_start(sa, sb)
+        clip = detect_clipping(sa, sb, e_all)
         keep = ~clip["mask"]
-        e1 = ellipse_start(sa[keep], sb[keep]) if keep.sum() >= 32 else e0
+        e1 = ellipse_start(sa[keep], sb[keep]) if keep.sum() >= 32 else e_all
     except ValueError as ex:
         raise input_error(f"{where}: columns sa, sb", f"{bad} ({ex})", "an ellipse") from ex
-    if math.hypot(e1[0] / e1[2], e1[1] / e1[3]) >= 0.5 or abs(e1[4]) >= 1.2:
+    centre = (float(e1[0]), float(e1[1]))
+    xa, xb = sa - centre[0], sb - centre[1]
+    psi = np.arctan2(xb, xa)
+    r = np.hypot(xa, xb)
+    cover = np.unique(np.floor((psi[keep] + np.pi) / (2 * np.pi) * 16))
+    if abs(e1[4]) >= 1.2 or cover.size < 12 or np.std(r[keep]) > 0.5 * np.mean(r[keep]):
         raise input_error(
             f"{where}: columns sa, sb",
-            f"offsets {e1[0]:.4g}, {e1[1]:.4g} or phase error {e1[4]:.3g} rad too large",
-            "an ellipse around the origin (offsets below half the amplitude)",
+            f"{bad} (phase error {e1[4]:.3g} rad, {cover.size} of 16 phase sectors covered, "
+            f"radius spread {np.std(r[keep]) / max(np.mean(r[keep]), 1e-300):.2f})",
+            "two signals in quadrature over at least 3/4 of a signal period",
         )
+    e0 = np.array([0.0, 0.0, e1[2], e1[3], e1[4]])
     a0 = float(0.5 * (e1[2] + e1[3]))
-    r0 = ray_radius(*e1, psi)
+    r0 = ray_radius(*e0, psi)
     m = clip["mask"]
     clip_rms = float(np.sqrt(np.mean(((r[m] - r0[m]) / a0) ** 2))) if m.any() else 0.0
     return dict(
-        sa=sa, sb=sb, psi=psi, r=r, e0=e1, a0=a0, r0=r0, clip=clip, clip_rms=clip_rms, where=where
+        sa=sa,
+        sb=sb,
+        psi=psi,
+        r=r,
+        centre=centre,
+        e0=e0,
+        a0=a0,
+        r0=r0,
+        clip=clip,
+        clip_rms=clip_rms,
+        where=where,
     )
 
 
@@ -412,21 +437,23 @@ def quadrature_base(prep: Prepared, M: int, st: dict[str, Any]):
 
 
 def _signals_rows(prep: Prepared, st: dict[str, Any]):
-    """``sa, sb, psi, r`` in the engine's row order (from y and the phase)."""
+    """``sa, sb`` (about the rays' centre), ``psi, r`` in the engine's row order (from y and
+    the phase)."""
     psi = prep.rows["psi"][:, 0]
     rel = prep.consts["ellipse_start"]
     r = st["a0"] * (prep.y[:, 0] + ray_radius(*rel, psi))
     return r * np.cos(psi), r * np.sin(psi), psi, r
 
 
-def _ellipse_summary(prep: Prepared, base_params: dict, a0: float) -> dict:
+def _ellipse_summary(base_params: dict, a0: float, centre: tuple[float, float]) -> dict:
+    """The ellipse in signal units (offsets include the rays' centre), with se."""
     bp = base_params["ellipse"]
     out: dict[str, Any] = {}
-    for k in ELLIPSE_NAMES:
+    for n, k in enumerate(ELLIPSE_NAMES):
         v, se = bp[k]["value"], bp[k]["se"]
         f = 1.0 if k == "phase_error_rad" else a0
         out[k] = {
-            "value": v * f,
+            "value": v * f + (centre[n] if n < 2 else 0.0),
             "se": None if se is None else se * f,
             "unit": "rad" if k == "phase_error_rad" else "signal unit",
         }
@@ -443,7 +470,7 @@ def _ellipse_summary(prep: Prepared, base_params: dict, a0: float) -> dict:
 def _heydemann(prep: Prepared, st: dict[str, Any]) -> dict:
     """Plain Heydemann (conic fit) on the kept rows: fitted and K-fold held-out RMS of the
     relative radius along the ray, in the engine's folds."""
-    sa, sb, psi, r = _signals_rows(prep, st)
+    sa, sb, psi, r = _signals_rows(prep, st)  # about the centre
     a0 = st["a0"]
     keep = prep.keep
     e = ellipse_start(sa[keep], sb[keep])
@@ -455,6 +482,8 @@ def _heydemann(prep: Prepared, st: dict[str, Any]) -> dict:
         ef = ellipse_start(sa[tr], sb[tr])
         held[ho] = (r[ho] - ray_radius(*ef, psi[ho])) / a0
     params = dict(zip(ELLIPSE_NAMES, (float(x) for x in e)))
+    params["offset_a"] += st["centre"][0]
+    params["offset_b"] += st["centre"][1]
     params["amplitude_ratio"] = float(e[3] / e[2])
     return {
         **params,
@@ -468,7 +497,7 @@ def _heydemann(prep: Prepared, st: dict[str, Any]) -> dict:
 def quadrature_summary(prep: Prepared, base_params: dict, st: dict[str, Any]) -> dict:
     """Kind-specific keys: ``ellipse`` (signal units, with se), ``heydemann``, ``clipping``."""
     out = {
-        "ellipse": _ellipse_summary(prep, base_params, st["a0"]),
+        "ellipse": _ellipse_summary(base_params, st["a0"], st["centre"]),
         "heydemann": _heydemann(prep, st),
         "clipping": {
             "channels": st["clip"]["channels"],
@@ -483,6 +512,19 @@ def quadrature_summary(prep: Prepared, base_params: dict, st: dict[str, Any]) ->
     if "signal_period_m" in enc:
         out["signal_period_m"] = enc["signal_period_m"]
     return out
+
+
+def quadrature_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
+    """Noise std from second differences of the residual between neighbours in signal
+    phase (kept rows: glitches are already out): structure that is a function of the phase cancels
+    (it is smooth over the phase step between neighbours), whatever the motion was."""
+    keep = prep.keep
+    psi = np.mod(prep.rows["psi"][keep, 0], 2 * np.pi)
+    r = resid[keep, 0][np.argsort(psi, kind="stable")]
+    if r.size < 16:
+        return np.full(1, np.nan)
+    d2 = r[2:] - 2 * r[1:-1] + r[:-2]
+    return np.array([math.sqrt(float(np.mean(d2**2)) / 6.0)])
 
 
 def quadrature_kind(st: dict[str, Any]) -> Kind:
@@ -501,6 +543,7 @@ def quadrature_kind(st: dict[str, Any]) -> Kind:
         max_order_limit=quadrature_limit,
         default_max_order=12,
         summary=lambda prep, bp: quadrature_summary(prep, bp, st),
+        noise=quadrature_noise,
     )
 
 
@@ -522,6 +565,9 @@ def run_quadrature(rec: Recording, **kw) -> dict[str, Any]:
 def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
     """Clipping as unexplained structure (the verdict is then never ``consistent``); the
     report gets the ellipse in signal units and plain Heydemann."""
+    doc["ellipse_with_effects"] = _ellipse_summary(
+        doc["base"]["terms_with_effects"], st["a0"], st["centre"]
+    )
     clip = st["clip"]
     if clip["channels"]:
         doc["unexplained"].insert(
@@ -561,11 +607,19 @@ def quadrature_report_lines(doc: dict) -> str:
 
     h = doc["heydemann"]
     lines = [
-        f"ellipse: offsets {f('offset_a')}, {f('offset_b')}; amplitudes {f('amplitude_a')}, "
-        f"{f('amplitude_b')} (signal units); ratio {f('amplitude_ratio')}; phase error "
+        f"ellipse (base fit): offsets {f('offset_a')}, {f('offset_b')}; amplitudes "
+        f"{f('amplitude_a')}, {f('amplitude_b')} (signal units); ratio {f('amplitude_ratio')}; "
+        "phase error "
         f"{f('phase_error_rad', 1e3, ' mrad')}",
         f"plain Heydemann: {h['rms']:.4g} fitted, {h['heldout_rms']:.4g} held out",
     ]
+    if doc["effects"]:
+        e = doc["ellipse_with_effects"]
+        lines.insert(
+            1,
+            f"ellipse (with the named effects): offsets {f('offset_a')}, {f('offset_b')}; "
+            f"ratio {f('amplitude_ratio')}; phase error {f('phase_error_rad', 1e3, ' mrad')}",
+        )
     for u in doc["unexplained"]:
         if u.get("view") == "clipping":
             lines.append(
