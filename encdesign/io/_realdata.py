@@ -434,7 +434,8 @@ SERVO_PROVENANCE = {
     "license": "CC BY 3.0 US, Adam Bäckström (ServoProject); attribution required",
     "notes": "raw capture of a two-channel reflective optical encoder on a small DC motor. "
     "Source lines 't A B position cost' (whitespace separated): t in s (4.2 ms steps, "
-    "29 pauses of ~1.1-7.8 s between bursts), A and B the two channels' raw ADC values "
+    "25 bursts: a 0.115 s pause after the first line, then 23 pauses of 1.1-1.2 s and one "
+    "of 7.8 s), A and B the two channels' raw ADC values "
     "(integers 4,935-14,641 and 9,814-15,677: below 16,384, no clipped plateau), the "
     "device's own position estimate (integers 0-2047 per motor turn, from its lookup table of "
     "A, B: not an independent reference) and that estimate's fit cost (integers 0-84). "
