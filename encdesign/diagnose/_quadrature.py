@@ -185,7 +185,7 @@ def quadrature_start(rec: Recording) -> dict[str, Any]:
     xa, xb = sa - centre[0], sb - centre[1]
     psi = np.arctan2(xb, xa)
     r = np.hypot(xa, xb)
-    cover = np.unique(np.floor((psi[keep] + np.pi) / (2 * np.pi) * 16))
+    cover = np.unique(np.floor((psi + np.pi) / (2 * np.pi) * 16))
     if abs(e1[4]) >= 1.2 or cover.size < 12 or np.std(r[keep]) > 0.5 * np.mean(r[keep]):
         raise input_error(
             f"{where}: columns sa, sb",
