@@ -131,6 +131,10 @@ def diagnose(
             from ._plots import engine_plots
 
             doc["plots"] = [str(p) for p in engine_plots(d, plots)]
+            if rec.kind == "quadrature":
+                from ._quadrature import quadrature_plots
+
+                doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
     else:
         if candidates:
             raise input_error(

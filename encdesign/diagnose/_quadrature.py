@@ -627,3 +627,56 @@ def quadrature_report_lines(doc: dict) -> str:
                 f"{u['where']['phase_deg']} deg, left out of every fit"
             )
     return "\n".join(lines) + "\n"
+
+
+def quadrature_plots(d: Any, folder: Any) -> list:
+    """Lissajous figure (kept and excluded samples, base ellipse) and the radial residual
+    against the signal phase (base and final model), plus the order spectrum."""
+    from pathlib import Path
+
+    from ..io._study import new_figure, save_figure
+
+    pd = d.plot_data
+    prep, r0, r1 = pd["prep"], pd["base_resid"], pd["final_resid"]
+    doc = d.doc
+    e = doc["ellipse"]
+    a0 = e["signal_scale_A0"]
+    c0 = (doc["ellipse"]["offset_a"]["value"], doc["ellipse"]["offset_b"]["value"])
+    psi = prep.rows["psi"][:, 0]
+    keep = prep.keep
+    rel = prep.consts["ellipse_start"]
+    r = a0 * (prep.y[:, 0] + ray_radius(*rel, psi))
+    # the rays start at the conic centre: the base fit's offsets are small corrections to it
+    centre = (
+        c0[0] - a0 * doc["base"]["terms"]["ellipse"]["offset_a"]["value"],
+        c0[1] - a0 * doc["base"]["terms"]["ellipse"]["offset_b"]["value"],
+    )
+    sa, sb = centre[0] + r * np.cos(psi), centre[1] + r * np.sin(psi)
+    fig, ax = new_figure(1, 3, figsize=(15, 4.6))
+    if (~keep).any():
+        ax[0].plot(sa[~keep], sb[~keep], ",", color="tab:red", label="excluded")
+    ax[0].plot(sa[keep], sb[keep], ",", color="0.3", label="kept")
+    ph = np.linspace(0, 2 * np.pi, 721)
+    ax[0].plot(
+        e["offset_a"]["value"] + e["amplitude_a"]["value"] * np.cos(ph),
+        e["offset_b"]["value"]
+        + e["amplitude_b"]["value"] * np.sin(ph + e["phase_error_rad"]["value"]),
+        lw=1,
+        color="tab:blue",
+        label="ellipse (base)",
+    )
+    ax[0].set(aspect="equal", xlabel="sa", ylabel="sb", title="Lissajous figure")
+    ax[0].legend(fontsize=7)
+    o = np.argsort(psi[keep])
+    ph_deg = np.degrees(psi[keep][o])
+    ax[1].plot(ph_deg, r0[keep, 0][o], ",", color="tab:red", label="base")
+    ax[1].plot(ph_deg, r1[keep, 0][o], ",", color="tab:blue", label="final")
+    ax[1].set(xlabel="signal phase (deg)", ylabel="radial residual (relative to A0)")
+    ax[1].set_title(f"verdict: {doc['verdict']}")
+    ax[1].legend(fontsize=7)
+    sp = doc["spectrum"]
+    ax[2].semilogy(sp["orders"], np.asarray(sp["before"]) + 1e-30, "o-", ms=3, label="base")
+    ax[2].semilogy(sp["orders"], np.asarray(sp["after"]) + 1e-30, "o-", ms=3, label="final")
+    ax[2].set(xlabel="order (cycles per signal period)", ylabel="radial amplitude (1)")
+    ax[2].legend(fontsize=7)
+    return [save_figure(fig, Path(folder), "lissajous.png")]
