@@ -565,6 +565,11 @@ def run_quadrature(rec: Recording, **kw) -> dict[str, Any]:
 def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
     """Clipping as unexplained structure (the verdict is then never ``consistent``); the
     report gets the ellipse in signal units and plain Heydemann."""
+    doc["noise"]["method"] = (
+        "the smaller of the median of the base residual's periodogram (rows in time or phase "
+        "order) and the second differences of the base residual between neighbours in signal "
+        "phase (structure that is a function of the phase cancels there)"
+    )
     doc["ellipse_with_effects"] = _ellipse_summary(
         doc["base"]["terms_with_effects"], st["a0"], st["centre"]
     )
