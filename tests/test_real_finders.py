@@ -282,3 +282,15 @@ def test_real_recordings_study_quick_json(tmp_path):
         for e in r["effects"]:
             assert e["heldout_rms_after"] <= 0.8 * r["heldout_rms_before"]
     assert (tmp_path / "real-recordings-summary.png").exists()
+
+
+def test_conceal_benchmark_quadrature_quick(tmp_path):
+    import json
+
+    out = tmp_path / "cb.json"
+    argv = ["study", "run", "conceal-benchmark", "--kinds", "quadrature", "--quick"]
+    assert main([*argv, "--out", str(tmp_path), "--json", str(out), "--no-plots"]) == 0
+    s = json.loads(out.read_text())
+    q = s["kinds"]["quadrature"]
+    assert q["n_recordings"] == 2 and q["errors"] == 0
+    assert set(q["confusion"]) == {"clean", "signal_shape"}
