@@ -65,7 +65,7 @@ def test_motion_out_of_catalog_order_is_unexplained(tmp_path):
     assert d["unexplained"][0]["where"]["orders"] == [43]
 
 
-def _quad(tmp_path, h3=0.0, clip=None, n=3000, seed=1, timed=False, radial=None):
+def _quad(tmp_path, h3=0.0, clip=None, n=3000, seed=1, timed=False, radial=None, h2=0.0):
     """Ellipse (offsets 0.02, -0.01; ratio 0.97; 10 mrad) plus a 3rd harmonic ``h3`` of both
     signals, clipping at ``clip``, ``radial = (order, amplitude)``: the radius modulated at
     that order of the phase (out of catalog when above 12). ``timed``: 7.3 periods/s."""
@@ -77,7 +77,7 @@ def _quad(tmp_path, h3=0.0, clip=None, n=3000, seed=1, timed=False, radial=None)
         phi = 2 * np.pi * 7.3 * cols["t"] + 0.2
 
     def shape(x):
-        return np.cos(x) + h3 * np.cos(3 * x)
+        return np.cos(x) + h2 * np.cos(2 * x) + h3 * np.cos(3 * x)
 
     g = 1.0 if radial is None else 1.0 + radial[1] * np.cos(radial[0] * phi + 0.4)
     sa = 0.02 + g * shape(phi) + rng.normal(0, 1e-3, n)
@@ -142,6 +142,20 @@ def test_quadrature_names_signal_shape_with_engine_numbers(tmp_path):
     assert e["delta_bic"] < -10 and 0 <= e["collinearity"] < 0.95
     assert isinstance(e["notes"], list)
     assert d["ellipse"]["amplitude_ratio"]["value"] == pytest.approx(0.97, rel=1e-3)
+
+
+def test_quadrature_even_harmonic_flags_the_offsets_it_biases(tmp_path):
+    """A 2nd harmonic moves the radius at orders 1 and 3: order 1 is taken by the offsets
+    (not separable); the effect says so and bounds the offsets' error."""
+    d = diagnose(_quad(tmp_path, h2=0.01)).doc
+    validate_diagnosis(d)
+    e = d["effects"][0]
+    assert e["name"] == "signal_shape"
+    assert any("even signal harmonics" in n for n in e["notes"])
+    ell = d["ellipse_with_effects"]
+    bound = ell["offsets_confounded_with_even_harmonics"]
+    assert abs(ell["offset_a"]["value"] - 0.02) <= 1.2 * bound
+    assert abs(ell["offset_a"]["value"] - 0.02) > 5 * ell["offset_a"]["se"]  # why it is said
 
 
 def test_quadrature_clipping_is_unexplained_not_signal_shape(tmp_path):

@@ -573,6 +573,26 @@ def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
     doc["ellipse_with_effects"] = _ellipse_summary(
         doc["base"]["terms_with_effects"], st["a0"], st["centre"]
     )
+    for e in doc["effects"]:
+        if e["name"] != "signal_shape":
+            continue
+        amp = e["derived"]["radial_amplitude"]
+        odd = [
+            float(v)
+            for k, v in amp["value"].items()
+            if int(k) % 2 and v > 3 * (amp["se"].get(k) or 0.0)
+        ]
+        if odd:  # an even signal harmonic moves the radius at order 1 too: the offsets take it
+            bound = max(odd) * st["a0"]
+            msg = (
+                "odd radial orders (even signal harmonics) are present: an even harmonic also "
+                "moves the radius at order 1, which no fit can tell from the offsets; the "
+                f"offsets are uncertain by about +-{bound:.4g} signal units (the largest odd "
+                "radial amplitude times A0), beyond their standard errors"
+            )
+            e["notes"] = list(e["notes"]) + [msg]
+            doc["ellipse_with_effects"]["offsets_confounded_with_even_harmonics"] = bound
+            doc["ellipse"]["offsets_confounded_with_even_harmonics"] = bound
     clip = st["clip"]
     if clip["channels"]:
         doc["unexplained"].insert(
