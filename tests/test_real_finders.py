@@ -159,8 +159,9 @@ def test_quadrature_even_harmonic_flags_the_offsets_it_biases(tmp_path):
 
 
 def test_quadrature_clipping_is_unexplained_not_signal_shape(tmp_path):
-    d = diagnose(_quad(tmp_path, clip=0.93)).doc
+    d = diagnose(_quad(tmp_path, clip=0.93), plots=tmp_path / "fig").doc
     validate_diagnosis(d)
+    assert (tmp_path / "fig" / "lissajous.png").exists()
     assert d["unexplained"], d["report"]
     assert d["unexplained"][0]["view"] == "clipping"
     assert "clipping" in d["unexplained"][0]["note"]
