@@ -356,7 +356,7 @@ def test_diagnose_example_study_quick(tmp_path):
 
 
 def test_quadrature_json_follows_the_same_contract(tmp_path):
-    """The quadrature finder is not on the engine yet; its JSON is conformed and valid."""
+    """The quadrature kind is on the engine: its JSON has the goodness of fit and folds."""
     rng = np.random.default_rng(1)
     phi = rng.uniform(0, 2 * np.pi, 800)
     sa = 0.02 + np.cos(phi) + rng.normal(0, 1e-3, 800)
@@ -365,4 +365,5 @@ def test_quadrature_json_follows_the_same_contract(tmp_path):
     d = diagnose(rec)
     validate_diagnosis(d.doc)
     assert d.verdict == "consistent"
-    assert any("not yet routed" in n for n in d.doc["notes"])
+    assert d.doc["goodness_of_fit"]["passes"] and d.doc["heldout"]["k"] >= 4
+    assert not any("not yet routed" in n for n in d.doc["notes"])

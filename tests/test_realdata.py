@@ -7,7 +7,7 @@ import pytest
 
 from encdesign import EncdesignInputError, load_recording
 from encdesign.cli import main
-from encdesign.io._realdata import import_nmm, import_odrive
+from encdesign.io._realdata import import_nmm, import_odrive, import_servo
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
 
@@ -84,3 +84,54 @@ def test_odrive_refusals(tmp_path):
 def test_cli_import_bad_file_exits_2(tmp_path, capsys):
     assert main(["import", "odrive", str(tmp_path / "missing.npy"), "--out", "x.toml"]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_shipped_servo_capture_loads_with_attribution():
+    rec = load_recording(DATA / "servo_optical.toml")
+    assert rec.kind == "quadrature" and rec.n_rows == 26168
+    prov = rec.meta["provenance"]
+    assert "CC BY 3.0 US" in prov["license"] and "Bäckström" in prov["license"]
+    assert "ServoProject" in prov["source"]
+    # raw ADC counts of a 14-bit range, no plateau at the extremes, t in s at 4.2 ms
+    for c in ("sa", "sb"):
+        x = rec.columns[c]
+        assert np.all(x == np.round(x)) and 0 < x.min() < x.max() < 16384
+        assert np.sum(x == x.max()) < 5 and np.sum(x == x.min()) < 5
+    assert np.median(np.diff(rec.columns["t"])) == pytest.approx(0.0042, abs=1e-6)
+
+
+def _servo_src(tmp_path, lines):
+    src = tmp_path / "servo.txt"
+    src.write_text("\n".join(lines) + "\n")
+    return src
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ("0.1 5702 14721 30", "number of columns"),
+        ("0.1 5702.5 14721 30 5", "ADC count"),
+        ("0.1 5702 70000 30 5", "ADC count"),
+        ("0.0 5702 14721 30 5", "not increasing"),
+        ("0.1 x 14721 30 5", "non-numeric"),
+    ],
+)
+def test_servo_refusals(tmp_path, bad, message):
+    good = [f"{0.01 * (i + 1):.4f} {5000 + i} {9000 + i} {i} 3" for i in range(40)]
+    lines = good[:10] + [bad] + good[11:]
+    if "not increasing" in message:
+        lines = good[:10] + [f"{0.01 * 9:.4f} 5702 14721 30 5"] + good[11:]
+    with pytest.raises(EncdesignInputError, match=message):
+        import_servo(_servo_src(tmp_path, lines), tmp_path / "out.toml")
+    assert not (tmp_path / "out.toml").exists()
+
+
+def test_servo_import_round_trip(tmp_path):
+    lines = [
+        f"{0.0042 * (i + 1):.4f} {5000 + 7 * i} {9000 + 3 * i} {i % 2048} 3" for i in range(40)
+    ]
+    rec = import_servo(_servo_src(tmp_path, lines), tmp_path / "s.toml")
+    back = load_recording(tmp_path / "s.toml")
+    assert sorted(back.columns) == ["sa", "sb", "t"]
+    np.testing.assert_array_equal(back.columns["sa"], rec.columns["sa"])
+    assert back.columns["sb"][-1] == 9000 + 3 * 39

@@ -9,10 +9,10 @@ from ._main import guard_outputs
 
 HELP = (
     "convert measured data (NmmQuad CSV, ODrive .npy, moteus encoder sweep, MagAlpha CSV, "
-    "or the whole realdata folder)"
+    "ServoProject optical-encoder capture, or the whole realdata folder)"
 )
 
-IMPORTERS = ("nmm", "odrive", "moteus", "magalpha")
+IMPORTERS = ("nmm", "odrive", "moteus", "magalpha", "servo")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

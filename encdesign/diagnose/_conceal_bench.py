@@ -10,7 +10,11 @@ functions, so a wrong term in the finder cannot agree with itself):
   head placements), with or without ``theta_ref``;
 * ``sensor``: one sensor against a reference (``theta_ref``), magnetic / resolver /
   capacitive / optical, its error function of a few orders, one or two directions;
-* ``motion``: a 7-pole-pair, 12-slot motor turning at constant speed (``theta`` against t).
+* ``motion``: a 7-pole-pair, 12-slot motor turning at constant speed (``theta`` against t);
+* ``quadrature``: the two signals of one head (:func:`simulate_quadrature`): sorted by phase
+  or in time order (with a dwell or a reversal), ellipse errors, optionally on DC levels;
+  ``signal_shape`` (1 or, compound, 3 signal harmonics), out of catalog: a radial order above
+  12, an amplitude step, clipping.
 
 Nuisances (any bench): per-run zeros of every head and of ``theta_ref`` (whole turns or any
 amount), a non-steady segment at the start of a run (start-up ramp or a return move, with
@@ -50,6 +54,8 @@ OUT_OF_CATALOG = ("order_one_head", "step_one_head", "chirp_one_head")
 def draw_plan(rng: np.random.Generator, kind: str, case: str) -> dict[str, Any]:
     """A bench plan: ``case`` is ``clean``, ``single``, ``weak`` (0.5x noise), ``compound``
     or ``out_of_catalog``."""
+    if kind == "quadrature":
+        return draw_quadrature_plan(rng, case)
     plan: dict[str, Any] = {"kind": kind, "case": case}
     plan["per_run_zeros"] = bool(rng.random() < 0.7)
     plan["transient"] = bool(rng.random() < 0.5)
@@ -148,6 +154,8 @@ def simulate(rng: np.random.Generator, plan: dict[str, Any]) -> tuple[Recording,
     kind = plan["kind"]
     if kind == "motion":
         return _simulate_motion(rng, plan)
+    if kind == "quadrature":
+        return simulate_quadrature(rng, plan)
     sensor = kind == "sensor"
     H = 1 if sensor else plan["n_heads"]
     R = plan["n_runs"]
@@ -336,3 +344,123 @@ def _simulate_motion(rng, plan):
     }
     truth["noise"] = noise
     return Recording("motion", meta, {"t": t, "theta": theta}), truth
+
+
+# ----------------------------------------------------------------------------- quadrature
+
+QUADRATURE_EFFECTS = ("signal_shape",)
+"""The quadrature catalog effects the bench conceals (``vibration`` is not testable from the
+two signals alone: the finder lists it as such)."""
+QUADRATURE_OUT_OF_CATALOG = ("radial_order", "amplitude_step", "clipping")
+
+
+def draw_quadrature_plan(rng: np.random.Generator, case: str) -> dict[str, Any]:
+    """A quadrature bench plan (``case`` as in :func:`draw_plan`): a capture sorted by phase
+    (no ``t``) or in time order (aliased or well sampled, with a dwell or a reversal), an
+    ellipse with offsets (optionally on large DC levels, as raw detector signals), amplitude
+    mismatch and phase error, 1,500-6,000 samples."""
+    plan: dict[str, Any] = {"kind": "quadrature", "case": case}
+    plan["timed"] = bool(rng.random() < 0.6)
+    plan["transient"] = bool(plan["timed"] and rng.random() < 0.5)
+    plan["glitches"] = int(rng.integers(1, 3)) if rng.random() < 0.3 else 0
+    plan["n"] = int(rng.integers(1500, 6001))
+    plan["scale"] = float(10 ** rng.uniform(-1, 4))
+    plan["dc_levels"] = bool(rng.random() < 0.3)
+    plan["noise_rel"] = float(10 ** rng.uniform(-4, -2.5))
+    plan["samples_per_period"] = float(rng.choice([5.3, 13.7, 40.0, 250.0]))
+    if case == "clean":
+        plan["effects"] = []
+    elif case in ("single", "weak", "compound"):
+        plan["effects"] = ["signal_shape"]
+    else:
+        ooc = [e for e in QUADRATURE_OUT_OF_CATALOG if plan["timed"] or e != "amplitude_step"]
+        plan["effects"] = [str(rng.choice(ooc))]
+    # compound: several harmonics at once (the catalog's only testable quadrature effect)
+    plan["harmonics"] = (
+        [int(h) for h in rng.choice([2, 3, 4, 5, 7], size=3, replace=False)]
+        if case == "compound"
+        else [int(rng.choice([2, 3, 5, 7]))]
+    )
+    plan["amplitude"] = 0.5 if case == "weak" else 1.0
+    return plan
+
+
+def simulate_quadrature(
+    rng: np.random.Generator, plan: dict[str, Any]
+) -> tuple[Recording, dict[str, Any]]:
+    """Simulate a quadrature bench (seed 002 eq. 1: ``sa = p + a F(phi)``,
+    ``sb = q + b F(phi + alpha - pi/2)`` with one shape ``F`` for both channels); the effect
+    size is the RMS of the radial error it adds, at ``amplitude`` x the per-sample noise."""
+    n = plan["n"]
+    s = plan["scale"]
+    noise = plan["noise_rel"]
+    truth: dict[str, Any] = {"plan": plan, "effects": list(plan["effects"]), "where": None}
+    cols: dict[str, np.ndarray] = {}
+    steady = np.ones(n, bool)
+    if plan["timed"]:
+        f_sig = 40.0  # signal periods per s
+        rate = f_sig * plan["samples_per_period"]
+        t = np.arange(n) / rate * (1 + 0.001 * rng.standard_normal(n).cumsum() / np.sqrt(n))
+        t = np.sort(t)
+        u = t * f_sig
+        if plan["transient"]:
+            a0, a1 = int(0.3 * n), int(0.38 * n)
+            if rng.random() < 0.5:  # a dwell: the scale stops
+                u = np.where(t < t[a0], u, np.where(t < t[a1], u[a0], u - (u[a1] - u[a0])))
+            else:  # a reversal and back
+                back = np.clip((t - t[a0]) / (t[a1] - t[a0]), 0, 1)
+                u = u - 2 * np.minimum(back, 1 - back) * (u[a1] - u[a0])
+            steady[a0:a1] = False
+        phi = 2 * np.pi * u + rng.uniform(0, 2 * np.pi)
+        cols["t"] = t
+    else:
+        phi = rng.uniform(0, 2 * np.pi, n)
+    p = rng.uniform(-0.05, 0.05) + (rng.uniform(1.2, 3.0) if plan["dc_levels"] else 0.0)
+    q = rng.uniform(-0.05, 0.05) + (rng.uniform(1.2, 3.0) if plan["dc_levels"] else 0.0)
+    ratio = rng.uniform(0.9, 1.1)
+    alpha = rng.uniform(-0.05, 0.05)
+    coef: dict[int, complex] = {}
+    if "signal_shape" in plan["effects"]:
+        size = plan["amplitude"] * noise / np.sqrt(0.5 * len(plan["harmonics"]))
+        for h in plan["harmonics"]:
+            coef[h] = size * np.exp(1j * rng.uniform(0, 2 * np.pi))
+
+    def shape(x):
+        f = np.cos(x)
+        for h, c in coef.items():
+            f = f + c.real * np.cos(h * x) + c.imag * np.sin(h * x)
+        return f
+
+    gain = np.ones(n)
+    if "radial_order" in plan["effects"]:
+        m = int(rng.choice([14, 17, 19, 23]))  # above signal_shape's default orders
+        gain = 1 + 4 * noise * np.cos(m * phi + rng.uniform(0, 2 * np.pi))
+        truth["where"] = {"orders": [m]}
+    if "amplitude_step" in plan["effects"]:
+        i0 = int(rng.uniform(0.5, 0.8) * n)
+        gain = np.where(np.arange(n) >= i0, 1 + 6 * noise, 1.0)
+        truth["where"] = {"times_s": [float(cols["t"][i0])], "runs": [0]}
+    sa = p + gain * shape(phi)
+    sb = q + ratio * gain * shape(phi + alpha - np.pi / 2)
+    sa = sa + rng.normal(0, noise, n)
+    sb = sb + rng.normal(0, noise, n)
+    if "clipping" in plan["effects"]:
+        lev = rng.uniform(0.9, 0.96)
+        sa = np.clip(sa, p - lev, p + lev)
+        sb = np.clip(sb, q - lev * ratio, q + lev * ratio)
+        truth["where"] = {"view": "clipping"}
+    truth["glitch_rows"] = []
+    for _ in range(plan["glitches"]):
+        i = int(rng.integers(5, n - 5))
+        sa[i] += rng.choice([-1, 1]) * 0.3
+        truth["glitch_rows"].append(i)
+    truth["transient_rows"] = int((~steady).sum())
+    truth["noise"] = noise
+    truth["ellipse"] = dict(p=p * s, q=q * s, ratio=ratio, alpha=alpha)
+    if not plan["timed"]:
+        o = np.argsort(np.arctan2(sb - q, sa - p))
+        sa, sb = sa[o], sb[o]
+    cols["sa"] = sa * s
+    cols["sb"] = sb * s
+    meta = {"format": "encdesign-recording/1", "kind": "quadrature"}
+    return Recording("quadrature", meta, cols), truth

@@ -1,10 +1,10 @@
 """One entry for the discrepancy finder over every recording kind: :func:`diagnose`.
 
-``multihead`` (including one sensor against a reference) and ``motion`` recordings go through
-the engine (:mod:`encdesign.diagnose._engine`) with their kind
-(:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`); ``sds`` and
-``quadrature`` recordings still go to their own finders (:mod:`encdesign.diagnose._sds`,
-:mod:`encdesign.diagnose._quadrature`), whose JSON is brought to the same contract
+``multihead`` (including one sensor against a reference), ``motion`` and ``quadrature``
+recordings go through the engine (:mod:`encdesign.diagnose._engine`) with their kind
+(:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
+:mod:`encdesign.diagnose._quadrature`); ``sds`` recordings still go to their own finder
+(:mod:`encdesign.diagnose._sds`), whose JSON is brought to the same contract
 (``diagnosis.schema.json``).
 """
 
@@ -21,7 +21,7 @@ from .._errors import input_error
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
 
-ENGINE_KINDS = ("multihead", "motion")
+ENGINE_KINDS = ("multihead", "motion", "quadrature")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,39 +109,42 @@ def diagnose(
     if rec.kind in ENGINE_KINDS:
         from ._engine import run_engine
 
-        if rec.kind == "multihead":
-            from ._multihead import MULTIHEAD as kind
-        else:
-            from ._motion import MOTION as kind
-        doc = run_engine(
-            kind,
-            rec,
+        opts = dict(
             max_order=max_order,
             max_effects=max_effects,
             extra_candidates=candidates,
             verbose=verbose,
         )
+        if rec.kind == "quadrature":
+            from ._quadrature import run_quadrature
+
+            doc = run_quadrature(rec, **opts)
+        else:
+            if rec.kind == "multihead":
+                from ._multihead import MULTIHEAD as kind
+            else:
+                from ._motion import MOTION as kind
+            doc = run_engine(kind, rec, **opts)
         plot_data = doc.pop("_plot")
         d = Diagnosis(doc, doc["status"], plot_data)
         if plots is not None:
             from ._plots import engine_plots
 
             doc["plots"] = [str(p) for p in engine_plots(d, plots)]
+            if rec.kind == "quadrature":
+                from ._quadrature import quadrature_plots
+
+                doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
     else:
         if candidates:
             raise input_error(
                 "candidates",
                 f"user candidates are not supported for kind {rec.kind!r} yet",
-                "a multihead or motion recording",
+                "a multihead, motion or quadrature recording",
             )
-        if rec.kind == "sds":
-            from ._sds import diagnose_sds
+        from ._sds import diagnose_sds
 
-            doc = diagnose_sds(rec, plots=plots)
-        else:
-            from ._quadrature import diagnose_quadrature
-
-            doc = diagnose_quadrature(rec, plots=plots)
+        doc = diagnose_sds(rec, plots=plots)
         doc = conform(doc, rec)
         d = Diagnosis(doc, doc.get("status", "ok"))
     if throw and d.status != "ok":

@@ -84,6 +84,12 @@ class KindData:
         steady_tolerance: relative speed deviation beyond which a sample is non-steady.
         speed_window: the speed is measured over this fraction of the run (at least 5 rows;
             longer for a motor whose own ripple is large).
+        segments: optional steady-segment id per row (>= 0), given by the kind instead of
+            being found from the shaft motion (e.g. a quadrature capture sorted by phase
+            has no motion to segment); ``None``: found by :func:`find_motion_segments`.
+        masked: optional ``(mask (n,) bool, reason)`` pairs: rows the kind knows to leave out
+            of every fit (e.g. clipped signals); each is reported as one excluded segment
+            (first to last masked row) with its reason and the number of stretches.
     """
 
     y: np.ndarray
@@ -103,6 +109,8 @@ class KindData:
     where: str
     steady_tolerance: float = 0.1
     speed_window: float = 0.01
+    segments: np.ndarray | None = None
+    masked: tuple[tuple[np.ndarray, str], ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +127,10 @@ class Kind:
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
+        noise: optional ``noise(prep, base_resid) -> (C,)``: a second noise estimate that the
+            kind's own structure cannot inflate (e.g. differences of neighbours in signal
+            phase for a quadrature capture in time order); the engine takes, per channel,
+            the smaller of it and the periodogram median.
     """
 
     name: str
@@ -129,6 +141,7 @@ class Kind:
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
     summary: Callable[[Any, dict], dict] | None = None
+    noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -447,6 +460,8 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
             reading=kd.reading[sort],
             theta_ref=None if kd.theta_ref is None else kd.theta_ref[sort],
             temp=None if kd.temp is None else kd.temp[sort],
+            segments=None if kd.segments is None else kd.segments[sort],
+            masked=tuple((m[sort], why) for m, why in kd.masked),
         )
         run = run[sort]
     t = kd.t
@@ -483,9 +498,14 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
                     )
                 )
                 continue
-            s_id, bad = find_motion_segments(
-                kd.shaft[sub], t[sub], kd.steady_tolerance, kd.speed_window
-            )
+            if kd.segments is not None:  # given by the kind (no motion to segment)
+                s_id = np.asarray(kd.segments[sub], dtype=int)
+                s_id = np.unique(s_id, return_inverse=True)[1].reshape(s_id.shape)
+                bad = []
+            else:
+                s_id, bad = find_motion_segments(
+                    kd.shaft[sub], t[sub], kd.steady_tolerance, kd.speed_window
+                )
             for sid in np.unique(s_id[s_id >= 0]):
                 m = sub[s_id == sid]
                 seg[m] = nseg
@@ -506,6 +526,21 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
                         reason=e["reason"],
                     )
                 )
+    for mask, why in kd.masked:  # rows the kind leaves out (e.g. clipped signals)
+        mask = np.asarray(mask, bool) & (seg >= 0)
+        if mask.any():
+            idx = np.flatnonzero(mask)
+            excluded.append(
+                dict(
+                    run=int(order_runs[run[idx[0]]]),
+                    t_start_s=float(t[idx[0]]),
+                    t_end_s=float(t[idx[-1]]),
+                    n_rows=int(idx.size),
+                    reason=why,
+                    stretches=len(_runs_of(mask)),
+                )
+            )
+            seg[mask] = -1
     keep = seg >= 0
     if keep.sum() < 32:
         raise input_error(
@@ -1702,7 +1737,10 @@ def run_engine(
         fitter.clear()
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it
-    sig = noise_spectral(prep, fitter.residual(base_fit.terms))
+    r_base = fitter.residual(base_fit.terms)
+    sig = noise_spectral(prep, r_base)
+    if kind.noise is not None:  # the kind's second estimate: the smaller of the two
+        sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
         prep.ctx.noise[...] = sig
@@ -1761,6 +1799,12 @@ def run_engine(
             f"({sum(e['n_rows'] for e in prep.excluded)} rows)"
         )
     base_params = {t.cand.name: term_params(t, base, i) for i, t in enumerate(base.terms)}
+    # the base terms as refitted with the named effects (kinds report e.g. their ellipse)
+    final_base = {
+        t.cand.name: term_params(t, final, i)
+        for i, t in enumerate(final.terms)
+        if t.cand.name in base_params
+    }
     stage("report")
     doc = {
         "format": "encdesign-diagnosis/2",
@@ -1802,6 +1846,7 @@ def run_engine(
             "n_params": base.n_params,
             "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
             "has_theta_ref": prep.ctx.has_ref,
+            "terms_with_effects": final_base,
             **{k: v for k, v in base_info.items() if k not in ("align", "unidentifiable")},
         },
         "notes": nuis_notes,

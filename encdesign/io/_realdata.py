@@ -1,6 +1,6 @@
 """Converters from the public measured data in ``shared/realdata`` to recordings.
 
-Four sources (see ``data/real/README.md`` for the licenses, which travel with every
+Five sources (see ``data/real/README.md`` for the licenses, which travel with every
 converted file as the recording's ``[provenance]`` table):
 
 * NmmQuad (M. Matus, MIT): Lissajous captures of the X and Y homodyne laser
@@ -22,6 +22,14 @@ converted file as the recording's ``[provenance]`` table):
   one turn, 200 rows in degrees, both angles on a 360/512 degree lattice. Converted to a
   sensor-against-reference ``multihead`` recording after putting the rows near the 0/360
   wrap in sweep order (the moved lines are listed in the provenance).
+* ServoProject (A. Bäckström, CC BY 3.0 US, attribution required): a raw capture of a
+  two-channel reflective optical encoder on a small DC motor, lines ``t A B position cost``.
+  Converted to kind ``quadrature`` with ``t`` (s), ``sa`` = A, ``sb`` = B (ADC counts). Read
+  from the data: A and B are integers (4,935-14,641 and 9,814-15,677, no clipped plateau);
+  the signal phase advances one period per motor turn (monotone in the device's own
+  position, 0-2047 per turn); the position and its fit cost are not carried (the format has
+  no column for them, and the position comes from the device's lookup table of A and B, so
+  it is not an independent reference).
 
 Neither sensor source has time stamps: ``t`` is the sample index (1 per sample), so speeds
 and delays found in them are per sample, not per second.
@@ -215,6 +223,7 @@ REALDATA_JOBS = (
     ("odrive", "odrive_slow2_comp_1.npy", "odrive_comp_1.toml"),
     ("moteus", "moteus_encoder_cal.txt", "moteus_cal.toml"),
     ("magalpha", "magalpha_calibration_example.csv", "magalpha_cal.toml"),
+    ("servo", "servo_optical_encoder_capture.txt", "servo_optical.toml"),
 )
 """The shared recordings :func:`import_realdata_folder` converts: (source, file, output)."""
 
@@ -232,7 +241,8 @@ def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLik
     ``out_dir`` as it was.
 
     Returns the TOML paths written: ``nmm_x``, ``nmm_y``, ``odrive_nocomp``, ``odrive_comp``,
-    ``odrive_nocomp_1``, ``odrive_comp_1``, ``moteus_cal``, ``magalpha_cal``.
+    ``odrive_nocomp_1``, ``odrive_comp_1``, ``moteus_cal``, ``magalpha_cal``,
+    ``servo_optical``.
     """
     jobs = realdata_jobs(src_dir, out_dir)
     for kind, src, _ in jobs:  # read and check all first
@@ -243,6 +253,7 @@ def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLik
         "odrive": import_odrive,
         "moteus": import_moteus,
         "magalpha": import_magalpha,
+        "servo": import_servo,
     }
     for kind, src, dst in jobs:
         importers[kind](src, dst)
@@ -415,7 +426,82 @@ def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Reco
     )
 
 
+# ----------------------------------------------------------------------------- servo
+
+
+SERVO_PROVENANCE = {
+    "source": "github.com/adamb314/ServoProject, Python/tests/dataFiles/optEncTestData.txt",
+    "license": "CC BY 3.0 US, Adam Bäckström (ServoProject); attribution required",
+    "notes": "raw capture of a two-channel reflective optical encoder on a small DC motor. "
+    "Source lines 't A B position cost' (whitespace separated): t in s (4.2 ms steps, "
+    "25 bursts: a 0.115 s pause after the first line, then 23 pauses of 1.1-1.2 s and one "
+    "of 7.8 s), A and B the two channels' raw ADC values "
+    "(integers 4,935-14,641 and 9,814-15,677: below 16,384, no clipped plateau), the "
+    "device's own position estimate (integers 0-2047 per motor turn, from its lookup table of "
+    "A, B: not an independent reference) and that estimate's fit cost (integers 0-84). "
+    "sa = A, sb = B (ADC counts); position and cost are not carried (the quadrature format "
+    "has no column for them). The signal phase atan2(B - centre, A - centre) advances one "
+    "period per motor turn (monotone in the device's position); ~14 samples per period at "
+    "~17 turns/s, the direction reversing every few seconds",
+}
+SERVO_COLUMNS = ("t", "A", "B", "position", "cost")
+
+
+def read_servo_capture(path: str | os.PathLike) -> np.ndarray:
+    """Read a ServoProject optical-encoder capture: float64 ``(n, 5)`` (t s, A, B, position,
+    cost; see :data:`SERVO_PROVENANCE`).
+
+    Raises:
+        EncdesignInputError: not 5 numeric columns, non-finite values, A or B not integers
+            in ``0 … 65535``, ``t`` not increasing, fewer than 32 rows.
+    """
+    path = Path(path)
+    where = str(path)
+    if not path.exists():
+        raise input_error(where, "file not found")
+    try:
+        a = np.loadtxt(path, comments="#", ndmin=2)
+    except ValueError as exc:
+        raise input_error(
+            where, f"non-numeric data ({exc})", "lines 't A B position cost'"
+        ) from None
+    if a.shape[1] != 5 or a.shape[0] < 32:
+        raise input_error(where, f"table of shape {a.shape}", "at least 32 lines of 5 numbers")
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+    if bad.size:
+        raise input_error(f"{where}, data row {int(bad[0]) + 1}", "non-finite value", "finite")
+    for j in (1, 2):
+        x = a[:, j]
+        bad = np.flatnonzero((x != np.round(x)) | (x < 0) | (x > 65535))
+        if bad.size:
+            raise input_error(
+                f"{where}, data row {int(bad[0]) + 1}, column '{SERVO_COLUMNS[j]}'",
+                f"got {x[bad[0]]!r}",
+                "an ADC count (integer 0 … 65535)",
+            )
+    bad = np.flatnonzero(np.diff(a[:, 0]) <= 0)
+    if bad.size:
+        raise input_error(f"{where}, data row {int(bad[0]) + 2}, column 't'", "time not increasing")
+    return a
+
+
+def import_servo(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recording:
+    """Convert a ServoProject optical-encoder capture to a ``quadrature`` recording
+    (``t`` s, ``sa`` = channel A, ``sb`` = channel B in ADC counts; one run: the pauses
+    between bursts are gaps the diagnosis reports)."""
+    a = read_servo_capture(src)
+    return write_recording(
+        out_toml,
+        "quadrature",
+        {"t": a[:, 0], "sa": a[:, 1], "sb": a[:, 2]},
+        description="ServoProject: raw two-channel optical encoder on a DC motor (ADC counts), "
+        "one signal period per motor turn, bursts in both directions",
+        provenance=SERVO_PROVENANCE,
+    )
+
+
 _READERS = {
+    "servo": read_servo_capture,
     "nmm": read_nmm_csv,
     "odrive": read_odrive_npy,
     "moteus": read_moteus_cal,
