@@ -79,6 +79,43 @@ def _ls_power(rw: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.sum(proj**2, axis=0)
 
 
+def _heads(prep, Z: np.ndarray, ch: list[int]) -> tuple[list[int], str | None]:
+    """Heads that carry a structure, from its whitened coefficients ``Z`` (values x channels).
+
+    With a reference (or one channel) each channel is seen on its own: ``ch`` (the channels
+    where it is significant) stands. Without one, the heads are seen relative to their mean,
+    so a structure on head ``k`` alone shows on every head as ``P e_k`` (``P`` removes the
+    mean). Each one-head pattern is fitted; it is reported on head ``k`` only when that
+    pattern leaves no significant power (chi-square over ``values x (C - 2)`` degrees of
+    freedom at ``ALPHA``) and fits significantly better than every other head's. Otherwise
+    the structure is reported on ``ch`` with a note that it is shared or cannot be told."""
+    C = Z.shape[1]
+    if not prep.kd.project or C < 2:
+        return ch, None
+    names = prep.kd.channel_names
+    if C == 2:
+        return [0, 1], (
+            "two heads without a reference: a structure on one of them shows on both (relative "
+            "to their mean); which one cannot be told"
+        )
+    tot = float(np.sum(Z**2))
+    res = []
+    for k in range(C):
+        u = -np.ones(C) / C
+        u[k] += 1.0
+        u /= np.linalg.norm(u)
+        res.append(tot - float(np.sum((Z @ u) ** 2)))
+    order = np.argsort(res)
+    k1, k2 = int(order[0]), int(order[1])
+    m = Z.shape[0]
+    if res[k1] <= _thr(m * (C - 2), 1) and res[k2] - res[k1] > _thr(m, 1):
+        return [k1], (
+            f"on {names[k1]} alone: without a reference the other heads show it through the "
+            "heads' mean"
+        )
+    return ch, "on several heads (no single head's pattern explains it)"
+
+
 def view_orders(prep, rw, max_order: int) -> list[Finding]:
     """Integer shaft orders per channel, rotation locked over all runs."""
     keep = prep.keep
@@ -93,18 +130,23 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
         pw = _ls_power(r, X)
         if pw.max() > thr:
             ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+            Q, _ = np.linalg.qr(X)
+            heads, note = _heads(prep, Q.T @ r, ch)
+            detail = {
+                "integer_order": True,
+                "n_values": int(r.shape[0]),
+                "power_per_channel": pw.tolist(),
+            }
+            if note:
+                detail["heads_note"] = note
             out.append(
                 Finding(
                     "orders",
-                    _where(orders=[float(m)], heads=ch, runs=prep.run_ids.tolist()),
+                    _where(orders=[float(m)], heads=heads, runs=prep.run_ids.tolist()),
                     float(pw[ch].sum()),
                     2 * len(ch),
                     _logp(float(pw.max()), 2),
-                    detail={
-                        "integer_order": True,
-                        "n_values": int(r.shape[0]),
-                        "power_per_channel": pw.tolist(),
-                    },
+                    detail=detail,
                 )
             )
     return out
@@ -138,13 +180,13 @@ def view_spectrum(prep, rw) -> list[Finding]:
         # revolutions per second from the steady speeds (a record that turns back and
         # forth has no net advance)
         revs_per_s = float(np.median(np.abs(prep.rows["omega"][rows][kr]))) / (2 * np.pi)
-        per_run.append((r, P, f, revs_per_s, nk))
+        per_run.append((r, P, f, revs_per_s, nk, X))
         n_tests += P.shape[0]
     out: list[Finding] = []
     if not per_run:
         return out
     thr = _thr(2 * dof_ch, n_tests)
-    for r, P, f, frev, nk in per_run:
+    for r, P, f, frev, nk, X in per_run:
         Ps = P.sum(1)
         # power of each line: three bins (leakage), tested on the centre
         idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
@@ -166,6 +208,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     order=fr / frev if frev > 0 else float("nan"),
                     power=float(band.sum()),
                     band=band,
+                    z=X[lo:hi] * math.sqrt(2.0 / nk),
                     bin_hz=float(f[1]),
                     bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
                     nk=nk,
@@ -175,7 +218,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     # group peaks across runs: fixed in Hz or in order
     used = [False] * len(peaks)
     peaks.sort(key=lambda p: -p["power"])
-    speeds = {r: frev for r, _, _, frev, _ in per_run}
+    speeds = {r: frev for r, _, _, frev, _, _ in per_run}
     multi_speed = len(per_run) > 1 and (
         max(speeds.values()) > 1.05 * max(min(speeds.values()), 1e-12)
     )
@@ -222,6 +265,8 @@ def view_spectrum(prep, rw) -> list[Finding]:
         )
         thr_ch = _thr(2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
+        zs = np.concatenate([q["z"] for q in sel], 0)
+        ch, note = _heads(prep, np.concatenate([zs.real, zs.imag], 0), ch)
         out.append(
             Finding(
                 "spectrum",
@@ -238,6 +283,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     "fixed_in": fixed,
                     "integer_order": bool(integer),
                     "n_values": int(sum(q["nk"] for q in sel)),
+                    **({"heads_note": note} if note else {}),
                 },
             )
         )
@@ -267,28 +313,30 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
             if hi - lo < 4:
                 continue
             pw = P[lo:hi].sum(0) * (nk / x.shape[0])
-            tests.append((r, lo, hi, pw, f, nk))
+            tests.append((r, lo, hi, pw, f, nk, x))
     if not tests:
         return found
     n_tests = len(tests) * C
-    for r, lo, hi, pw, f, nk in tests:
+    for r, lo, hi, pw, f, nk, x in tests:
         dof = 2 * (hi - lo)
         thr = _thr(dof, n_tests)
         ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
         if not ch:
             continue
+        Xb = np.fft.rfft(x, axis=0)[lo:hi] * math.sqrt(2.0 / x.shape[0])
+        heads, note = _heads(prep, np.concatenate([Xb.real, Xb.imag], 0), ch)
         found.append(
             Finding(
                 "band",
                 _where(
                     frequencies_hz=[float(f[lo]), float(f[hi - 1])],
-                    heads=ch,
+                    heads=heads,
                     runs=[int(prep.run_ids[r])],
                 ),
                 float(pw[ch].sum()),
                 dof * len(ch),
                 _logp(float(pw[ch].max()), dof),
-                detail={"n_values": int(nk)},
+                detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
             )
         )
     return found
@@ -359,6 +407,14 @@ def view_time(prep, rw) -> list[Finding]:
                 break
         else:
             merged.append(f)
+    # which heads: without a reference, one head's step shows on all of them
+    zrun = {r: means - means.mean(0) for r, _, means in blocks_all}
+    for g in merged:
+        r = int(np.flatnonzero(prep.run_ids == g.where["runs"][0])[0])
+        heads, note = _heads(prep, zrun[r], g.where["heads"])
+        g.where["heads"] = heads
+        if note:
+            g.detail["heads_note"] = note
     return merged
 
 
