@@ -79,41 +79,77 @@ def _ls_power(rw: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.sum(proj**2, axis=0)
 
 
-def _heads(prep, Z: np.ndarray, ch: list[int]) -> tuple[list[int], str | None]:
-    """Heads that carry a structure, from its whitened coefficients ``Z`` (values x channels).
+def _heads(
+    prep, W: np.ndarray, ch: list[int], order: float | None = None
+) -> tuple[list[int], str | None]:
+    """Heads that carry a structure, from its whitened coefficients ``W`` (values x channels;
+    complex: Fourier coefficients, real: block means).
 
-    With a reference (or one channel) each channel is seen on its own: ``ch`` (the channels
-    where it is significant) stands. Without one, the heads are seen relative to their mean,
-    so a structure on head ``k`` alone shows on every head as ``P e_k`` (``P`` removes the
-    mean). Each one-head pattern is fitted; it is reported on head ``k`` only when that
-    pattern leaves no significant power (chi-square over ``values x (C - 2)`` degrees of
-    freedom at ``ALPHA``) and fits significantly better than every other head's. Otherwise
-    the structure is reported on ``ch`` with a note that it is shared or cannot be told."""
-    C = Z.shape[1]
-    if not prep.kd.project or C < 2:
+    Each channel is seen through what the base model cannot take: without a reference the
+    heads' mean is removed (``P``), and at an integer order ``m <= M`` the base model's disk
+    error takes the pattern ``b_k = exp(-i m alpha_k)`` (one disk seen by every head). A
+    structure on head ``k`` alone therefore shows on every head as ``u_k``, ``e_k`` less those
+    parts. Each one-head pattern is fitted; the structure is reported on head ``k`` only when
+    ``u_k`` leaves no significant power (chi-square at ``ALPHA``, or 5 % of a strong
+    structure's power) and fits significantly
+    better than every other head's pattern. When the patterns cannot be told apart (too few
+    heads for what the base takes) or none fits, the structure is reported on ``ch`` (the
+    channels where it is significant) with a note saying so."""
+    W = np.asarray(W)
+    if W.ndim == 1:
+        W = W[None, :]
+    C = W.shape[1]
+    if C < 2:
         return ch, None
     names = prep.kd.channel_names
-    if C == 2:
-        return [0, 1], (
-            "two heads without a reference: a structure on one of them shows on both (relative "
-            "to their mean); which one cannot be told"
+    proj = bool(prep.kd.project)
+    M = int(prep.consts.get("max_order", 0)) if hasattr(prep, "consts") else 0
+    base = (
+        order is not None
+        and np.iscomplexobj(W)
+        and abs(order - round(order)) < 1e-9
+        and 1 <= round(order) <= M
+    )
+    B = []
+    if proj:
+        B.append(np.ones(C, complex) / math.sqrt(C))
+    if base:
+        alpha = np.asarray(prep.consts["alpha"], float)
+        B.append(np.exp(-1j * round(order) * alpha))
+    if B:
+        Qb, _ = np.linalg.qr(np.stack(B, 1))
+    else:
+        Qb = np.zeros((C, 0), complex)
+    free = C - Qb.shape[1]  # complex (or real) dimensions the base model leaves
+    if not B:
+        return ch, None
+    what = " and ".join(
+        (["the heads' mean (no reference)"] if proj else [])
+        + ([f"the base model's disk error at order {round(order)}"] if base else [])
+    )
+    if free < 2:
+        return sorted(set(ch) | set(range(C))) if proj else ch, (
+            f"confounded: with {C} heads, {what} leave too little to tell which head carries it"
         )
-    tot = float(np.sum(Z**2))
     res = []
     for k in range(C):
-        u = -np.ones(C) / C
-        u[k] += 1.0
-        u /= np.linalg.norm(u)
-        res.append(tot - float(np.sum((Z @ u) ** 2)))
-    order = np.argsort(res)
-    k1, k2 = int(order[0]), int(order[1])
-    m = Z.shape[0]
-    if res[k1] <= _thr(m * (C - 2), 1) and res[k2] - res[k1] > _thr(m, 1):
-        return [k1], (
-            f"on {names[k1]} alone: without a reference the other heads show it through the "
-            "heads' mean"
-        )
-    return ch, "on several heads (no single head's pattern explains it)"
+        u = np.zeros(C, complex)
+        u[k] = 1.0
+        u = u - Qb @ (Qb.conj().T @ u)
+        nu = np.linalg.norm(u)
+        u = u / nu if nu > 0 else u
+        res.append(float(np.sum(np.abs(W) ** 2) - np.sum(np.abs(W @ u.conj()) ** 2)))
+    order_k = np.argsort(res)
+    k1, k2 = int(order_k[0]), int(order_k[1])
+    f = 2 if np.iscomplexobj(W) else 1
+    rows = W.shape[0]
+    tot = float(np.sum(np.abs(W) ** 2))
+    # what the pattern leaves: noise, or at most 5 % of the power (a strong structure is not
+    # seen through exactly equal heads: sensitivities, placements, per-head noise weights)
+    left_ok = res[k1] <= max(_thr(f * rows * (free - 1), 1), 0.05 * tot)
+    if left_ok and res[k2] - res[k1] > _thr(f * rows, 1):
+        return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
+    return ch, f"on several heads, or not told apart from {what}"
 
 
 def view_orders(prep, rw, max_order: int) -> list[Finding]:
@@ -130,8 +166,8 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
         pw = _ls_power(r, X)
         if pw.max() > thr:
             ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
-            Q, _ = np.linalg.qr(X)
-            heads, note = _heads(prep, Q.T @ r, ch)
+            Z = np.linalg.lstsq(X, r, rcond=None)[0] * math.sqrt(0.5 * r.shape[0])
+            heads, note = _heads(prep, Z[0] - 1j * Z[1], ch, order=float(m))
             detail = {
                 "integer_order": True,
                 "n_values": int(r.shape[0]),
@@ -180,6 +216,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
         # revolutions per second from the steady speeds (a record that turns back and
         # forth has no net advance)
         revs_per_s = float(np.median(np.abs(prep.rows["omega"][rows][kr]))) / (2 * np.pi)
+        # a run turning backwards sees exp(+i m alpha_k) at positive frequencies
+        if np.median(prep.rows["omega"][rows][kr]) < 0:
+            X = X.conj()
         per_run.append((r, P, f, revs_per_s, nk, X))
         n_tests += P.shape[0]
     out: list[Finding] = []
@@ -266,7 +305,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
         thr_ch = _thr(2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
         zs = np.concatenate([q["z"] for q in sel], 0)
-        ch, note = _heads(prep, np.concatenate([zs.real, zs.imag], 0), ch)
+        ints = {round(o) for o in orders if np.isfinite(o)}
+        o0 = ints.pop() if integer and len(ints) == 1 else None  # one integer order
+        ch, note = _heads(prep, zs, ch, order=float(round(o0)) if o0 is not None else None)
         out.append(
             Finding(
                 "spectrum",
@@ -324,7 +365,7 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
         if not ch:
             continue
         Xb = np.fft.rfft(x, axis=0)[lo:hi] * math.sqrt(2.0 / x.shape[0])
-        heads, note = _heads(prep, np.concatenate([Xb.real, Xb.imag], 0), ch)
+        heads, note = _heads(prep, Xb, ch)
         found.append(
             Finding(
                 "band",
@@ -532,6 +573,19 @@ def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> 
     out: list[Finding] = []
     for v in views:
         out += VIEWS[v](prep, rw, scan_order)
+    # a spectrum line at an integer order takes its heads from the rotation-locked fit of
+    # that order (the orders view), which sees every run at once
+    by_order = {
+        round(f.where["orders"][0]): f for f in out if f.view == "orders" and f.where["orders"]
+    }
+    for f in out:
+        if f.view == "spectrum" and f.detail.get("integer_order") and f.where["orders"]:
+            ints = {round(o) for o in f.where["orders"] if math.isfinite(o)}
+            g = by_order.get(ints.pop()) if len(ints) == 1 else None
+            if g is not None:
+                f.where["heads"] = list(g.where["heads"])
+                if "heads_note" in g.detail:
+                    f.detail["heads_note"] = g.detail["heads_note"]
     for f in out:
         f.variance_share = float(max(f.power - f.dof, 0.0) / max(tot, 1e-300))
     out.sort(key=lambda f: f.log10_p)
