@@ -282,9 +282,13 @@ def find_motion_segments(
             # a piece starts and ends where the speed first / last comes within 10 % of its
             # steady speed (a ramp is not steady even where it is inside a loose tolerance)
             near = np.flatnonzero(np.abs(w[a:b] - med) <= 0.1 * abs(med))
+            # (a stretch shorter than the speed window is not resolved as a ramp: at a run's
+            # end the window is one-sided and the estimate there leans on the last rows)
             if near.size:
-                ok[: near[0]] = False
-                ok[near[-1] + 1 :] = False
+                if near[0] >= win // 2 or a > 0:
+                    ok[: near[0]] = False
+                if (b - a) - 1 - near[-1] >= win // 2 or b < n:
+                    ok[near[-1] + 1 :] = False
             for c, d in _runs_of(ok):
                 if d - c >= min(min_len, 20):
                     seg[a + c : a + d] = sid
