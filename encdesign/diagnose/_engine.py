@@ -1592,32 +1592,6 @@ def select(
                 sig = set(cand.signature) or {f.view for f in findings}
                 m0 = sum(f.power - f.dof for f in findings if f.view in sig)
                 m1 = sum(f.power - f.dof for f in after if f.view in sig)
-                # a step in time (one change point takes most of the block means' power)
-                # that a smooth term does not remove is not that term's: a drift, a scale
-                # error or a vibration cannot make a step
-                steps0 = [
-                    f for f in findings if f.view == "time" and f.detail.get("shape") == "step"
-                ]
-                left = [
-                    g
-                    for f in steps0
-                    for g in after
-                    if g.view == "time"
-                    and g.where["runs"] == f.where["runs"]
-                    and g.power - g.dof > LOCATED_SHARE_MIN * (f.power - f.dof)
-                ]
-                if left:
-                    rejected.append(
-                        {
-                            "name": cand.name,
-                            "reason": "leaves structure in time where a step was located "
-                            f"(run {left[0].where['runs'][0]}, near "
-                            f"{left[0].detail['step_time_s']:.4g} s): a smooth term cannot "
-                            "make a step",
-                            "delta_bic": float(dbic),
-                        }
-                    )
-                    continue
                 if m0 > 0 and m1 > SIGNATURE_LEFT_MAX * m0:
                     rejected.append(
                         {
