@@ -9,7 +9,7 @@ held-out revolutions. The wall time (compilation included) is recorded.
 
 Outputs (``--out``): ``diagnose-example.json`` (the CLI's JSON plus timing), the recording
 under ``recording/``, ``report.txt`` and the figures ``rms_before_after.png``,
-``residual_spectra.png`` and ``head_residuals.png``.
+``residual_spectra.png`` and ``residuals.png`` (and the same under ``sensor/``).
 """
 
 from __future__ import annotations

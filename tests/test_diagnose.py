@@ -38,6 +38,9 @@ def _bench(
     gap: bool = False,
     vibration_hz: float = 0.0,
     drift_rad_per_k: float = 0.0,
+    one_head_order: tuple[int, int] | None = None,
+    beam_tilt_order: int = 0,
+    wobble: bool = False,
     path: Path | None = None,
 ):
     """A small multihead bench: disk errors of orders 1-5, ``R`` runs of ``n`` rows at
@@ -69,6 +72,18 @@ def _bench(
     if drift_rad_per_k:
         kap = drift_rad_per_k * np.array([1.0, -0.5, 0.3][:H])
         err += (temp - temp.mean())[:, None] * kap[None, :]
+    if one_head_order:  # an out-of-catalog order on one head only, 6x the noise
+        k, m = one_head_order
+        err[:, k] += 6 * NOISE * np.sin(m * th + rng.uniform(0, 6.28))
+    if beam_tilt_order:  # axial runout through tilted beams: one phase, a size per head
+        beta = np.array([1.0, -0.6, 0.35, -0.8][:H])
+        if not ref:
+            beta = beta - beta.mean()
+        m = beam_tilt_order
+        err += 6 * NOISE * np.sin(m * th + rng.uniform(0, 6.28))[:, None] * beta[None, :]
+    if wobble:  # bearing cage wobble at 0.4 of the shaft, seen at each head's azimuth
+        ph = rng.uniform(0, 6.28, R)[run]
+        err += 6 * NOISE * np.sin(0.4 * th[:, None] + ph[:, None] - alpha[None, :])
     if bump:  # a transient error during steady motion: a 0.3 s decaying bump on head 1
         i0 = n // 3
         tt = t[i0 : i0 + 60] - t[i0]
@@ -238,6 +253,41 @@ def test_thermal_drift_recovered_within_10_percent():
     assert [e["name"] for e in d.effects] == ["thermal_drift"]
     got = np.asarray(d.effects[0]["params"]["rate"]["value"])
     np.testing.assert_allclose(got, kap * np.array([1.0, -0.5, 0.3]), rtol=0.1, atol=0.1 * kap)
+
+
+@pytest.mark.parametrize("ref", [True, False])
+def test_out_of_catalog_order_on_one_head_is_located_on_that_head_only(ref):
+    """The issue's case: an order no candidate has (7), on head 2 of 4, with and without
+    theta_ref: unexplained, at order 7, on head 2 only (without a reference the other heads
+    show it through the heads' mean, and the base model's disk error takes a part)."""
+    rec, _ = _bench(11 if ref else 12, H=4, ref=ref, one_head_order=(2, 7))
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert d.verdict == "unexplained" and not d.effects, d.doc["report"]
+    at7 = [u for u in d.doc["unexplained"] if any(abs(o - 7) < 0.15 for o in u["where"]["orders"])]
+    assert at7 and all(u["where"]["heads"] == [2] for u in at7), d.doc["unexplained"]
+
+
+@pytest.mark.parametrize("ref", [True, False])
+def test_axial_beam_tilt_at_order_1_is_named(ref):
+    """The issue's case: axial beam tilt at order 1 (a head-specific size, one phase), with
+    and without theta_ref, is named beam_tilt_axial (not unexplained)."""
+    rec, _ = _bench(13 if ref else 14, H=4, ref=ref, beam_tilt_order=1)
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert [e["name"] for e in d.effects] == ["beam_tilt_axial"], d.doc["report"]
+    assert d.effects[0]["heldout_rms_after"] < d.doc["heldout_rms_before"]
+
+
+def test_bearing_wobble_without_a_reference_is_named():
+    """The issue's case: a bearing wobble (0.4 of the shaft) without theta_ref is named
+    bearing_wobble with its frequency ratio within 10 %."""
+    rec, _ = _bench(15, H=3, R=2, n=1500, ref=False, wobble=True)
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert [e["name"] for e in d.effects] == ["bearing_wobble"], d.doc["report"]
+    nu = d.effects[0]["params"]["frequency_ratio"]["value"]
+    assert float(np.asarray(nu).ravel()[0]) == pytest.approx(0.4, rel=0.1)
 
 
 def test_one_sensor_against_a_reference_both_directions():

@@ -487,10 +487,11 @@ def test_candidates_say_when_they_cannot_apply():
     assert _CAND["scale_error"].applies(ctx) is None
     big = {"hysteresis_rad": np.asarray(1.0)}
     assert "not backlash" in _CAND["direction_hysteresis"].plausible(ctx, big)
-    # one speed in both directions: a delay is a direction offset
+    # one speed in both directions: a delay is a direction offset; it is tried, and the
+    # engine reports the two as confounded (test_engine_names_and_recovers_...)
     cols, truth, _ = _bench("direction_hysteresis", SEEDS[0])
     ctx, _ = _context(cols, truth)
-    assert "one speed in both directions" in _CAND["reading_delay"].applies(ctx)
+    assert _CAND["reading_delay"].applies(ctx) is None
     d = _CAND["direction_hysteresis"].derived(ctx, {"hysteresis_rad": np.asarray(2e-3)}, {})
     w = 2 * np.pi * 1.0  # the bench's speed, rad/s
     assert d["equivalent_delay_s"]["value"] == pytest.approx(-2e-3 / (2 * w), rel=0.02)
@@ -518,6 +519,18 @@ def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effec
     pytest.importorskip("encdesign.diagnose._engine")
     doc, named, params = _diagnosed(tmp_path, effect, SEEDS[0])
     assert doc["verdict"] != "consistent"
+    if effect == "direction_hysteresis":
+        # one speed in both directions: a reading delay is the same column; the two are
+        # reported as confounded, whichever carries the name
+        pair = [{e["name"], *(c["name"] for c in e["confounded_with"])} for e in named.values()]
+        assert {"direction_hysteresis", "reading_delay"} in pair, (list(named), doc["rejected"])
+        if effect not in named:
+            e = next(iter(named.values()))
+            c = next(c for c in e["confounded_with"] if c["name"] == effect)
+            assert float(c["params"]["hysteresis_rad"]) == pytest.approx(
+                params["hysteresis_rad"], rel=0.1
+            )
+            return
     assert effect in named, (list(named), doc["rejected"])
     e = named[effect]
     val = {k: v["value"] for k, v in e["params"].items()}
@@ -544,7 +557,7 @@ def _plain_direction_offset(rec, max_order):
     return float(c[1])
 
 
-@pytest.mark.parametrize("name", ["moteus_cal"])
+@pytest.mark.parametrize("name", ["moteus_cal", "magalpha_cal"])
 def test_engine_on_the_measured_sensors(name):
     from encdesign import diagnose
 
@@ -554,16 +567,31 @@ def test_engine_on_the_measured_sensors(name):
     b = doc["base"]["terms"]["base"]
     dom = rt.dominant_orders(b["fourier_cos_rad"]["value"], b["fourier_sin_rad"]["value"], n=2)
     named = {e["name"]: e for e in doc["effects"]}
+    # the quantization is reported from the value lattice: 14 bits (moteus), 9 bits (MagAlpha)
+    bits = doc["sensor"]["sensor_lattice"]["bits_per_turn"]
+    assert bits == pytest.approx(14 if name == "moteus_cal" else 9, abs=0.01)
     if name == "moteus_cal":
         # the magnet sensor's once- and twice-per-turn error, 0.21 and 0.18 degree
         assert sorted(d["order"] for d in dom) == [1, 2]
-        h = named["direction_hysteresis"]["params"]["hysteresis_rad"]["value"]
+        # one speed in both directions: a reading delay is confounded with the offset
+        e = named.get("direction_hysteresis") or named["reading_delay"]
+        others = {c["name"]: c for c in e["confounded_with"]}
+        assert {e["name"], *others} >= {"direction_hysteresis", "reading_delay"}
+        if e["name"] == "direction_hysteresis":
+            h = e["params"]["hysteresis_rad"]["value"]
+        else:
+            h = float(others["direction_hysteresis"]["params"]["hysteresis_rad"])
         assert h == pytest.approx(_plain_direction_offset(rec, 12), rel=0.1)
         assert np.rad2deg(h) == pytest.approx(-0.33, abs=0.03)
         assert doc["excluded_segments"]  # the reversal
     else:
         assert [d["order"] for d in dom] == [2, 4]  # 3.4 and 1.7 degree
+        assert np.rad2deg(dom[0]["amplitude_rad"]) == pytest.approx(3.4, abs=0.15)
         assert "direction_hysteresis" not in named
+        # one direction: the offset is reported as not testable, not silently absent
+        assert any(x["name"] == "direction_hysteresis" for x in doc["not_testable"])
+        # the coarse (9-bit) reference steps 1-4 LSB per sample: most rows are steady
+        assert sum(e["n_rows"] for e in doc["excluded_segments"]) < 0.2 * len(rec.columns["t"])
 
 
 # ----------------------------------------------------------------------------- simulator

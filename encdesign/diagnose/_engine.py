@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg as sla
+import scipy.signal
 from scipy import stats
 
 from .._errors import input_error
@@ -53,6 +54,10 @@ LOCATED_SHARE_MIN = 0.2
 SIGNATURE_LEFT_MAX = 0.5
 COLLINEAR_REFUSE = 0.995
 COLLINEAR_NOTE = 0.95
+# two candidates the data cannot tell apart: chi-square within TIE_CHI2 of each other and
+# fitted errors correlated above TIE_CORR (over the kept rows, noise-whitened)
+TIE_CHI2 = 10.0
+TIE_CORR = 0.9
 CHUNK_ROWS = 8192
 D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
 """Variance of log(residual variance / second-difference variance) times N (white noise)."""
@@ -186,16 +191,28 @@ class Prepared:
 
 
 def _smooth_speed(shaft: np.ndarray, t: np.ndarray, win: int) -> np.ndarray:
-    """Speed (rad/s) by a centred difference over ``win`` samples, then a running median."""
+    """Speed (rad/s): the least-squares slope of the angle over ``win`` rows centred on each
+    row, as ``sum_k k theta_(i+k) / sum_k k t_(i+k)`` (k = -h..h; exact for a steady turn on
+    any time grid, and it averages a quantized angle's rounding over the whole window rather
+    than reading it at two ends). The run's ends are padded with their first / last row, which
+    keeps the ratio exact there too."""
     n = shaft.size
     if n < 3:
         return np.zeros(n)
     h = max(1, win // 2)
-    i0 = np.clip(np.arange(n) - h, 0, n - 1)
-    i1 = np.clip(np.arange(n) + h, 0, n - 1)
-    dt = t[i1] - t[i0]
-    dt[dt <= 0] = np.inf
-    return (shaft[i1] - shaft[i0]) / dt
+    k = np.arange(h, -h - 1, -1, dtype=float)  # reversed: convolution is a correlation
+    # subtract the mean line first (precision on long records)
+    w0 = (shaft[-1] - shaft[0]) / (t[-1] - t[0]) if t[-1] != t[0] else 0.0
+    tc = t - t[0]
+    y = shaft - shaft[0] - w0 * tc
+    yp = np.concatenate([np.full(h, y[0]), y, np.full(h, y[-1])])
+    tp = np.concatenate([np.full(h, tc[0]), tc, np.full(h, tc[-1])])
+    num = scipy.signal.oaconvolve(yp, k, mode="valid")
+    den = scipy.signal.oaconvolve(tp, k, mode="valid")
+    out = np.zeros(n)
+    ok = den > 0
+    out[ok] = num[ok] / den[ok] + w0
+    return out
 
 
 def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -204,6 +221,41 @@ def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
         return []
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+def speed_window_rows(
+    shaft: np.ndarray, t: np.ndarray, tolerance: float = 0.1, window: float = 0.01
+) -> int:
+    """Rows over which the speed is measured when judging steadiness.
+
+    At least ``window`` of the run (and 5 rows), and long enough that the shaft angle's own
+    sample-to-sample scatter cannot move the speed estimate out of the ``tolerance``: the
+    window slope (:func:`_smooth_speed`, ``w = 2 h + 1`` rows) of an angle with per-sample
+    scatter ``s`` (rad) has a speed error ``s / (dt sqrt(S))``, ``S = h (h + 1) (2 h + 1) / 3``,
+    held to ``tolerance / 3`` of the typical speed. The scatter is read from second
+    differences (``s^2 = mean(d2^2) / 6`` over the smallest 95 %, so a reversal or a glitch
+    does not count): a reference quantized to a step ``q`` scatters by about ``q / sqrt(12)``
+    plus any sampling jitter, so a coarse reference gets a wider window instead of being read
+    as unsteady. Capped at a quarter of the run (and 2001 rows).
+    """
+    n = shaft.size
+    win = max(5, int(window * n))
+    if n >= 16:
+        a2 = np.sort(np.abs(np.diff(shaft, 2)))
+        # mean square of the smallest 95 % (a reversal or a glitch does not count; a MAD
+        # would read 0 on a quantized ramp whose second differences are mostly 0 and +-q)
+        s = math.sqrt(float(np.mean(a2[: max(1, int(0.95 * a2.size))] ** 2)) / 6.0)
+        dt = np.diff(t)
+        dt_med = float(np.median(dt)) if dt.size else 0.0
+        step = float(np.median(np.abs(np.diff(shaft))))  # typical angle advance per row
+        if s > 0 and step > 0 and dt_med > 0:
+            need_s = (3.0 * s / (tolerance * step)) ** 2  # S = sum k^2 needed
+            h = 1
+            while h * (h + 1) * (2 * h + 1) / 3.0 < need_s and h < n:
+                h += 1
+            win = max(win, 2 * h + 1)
+        win = min(win, max(5, n // 4))
+    return int(min(win, 2001))
 
 
 def find_motion_segments(
@@ -221,7 +273,7 @@ def find_motion_segments(
         ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
     """
     n = shaft.size
-    win = int(min(max(5, int(window * n)), 2001))
+    win = speed_window_rows(shaft, t, tolerance, window)
     w = _smooth_speed(shaft, t, win)
     seg = -np.ones(n, dtype=int)
     out: list[dict] = []
@@ -243,9 +295,13 @@ def find_motion_segments(
             # a piece starts and ends where the speed first / last comes within 10 % of its
             # steady speed (a ramp is not steady even where it is inside a loose tolerance)
             near = np.flatnonzero(np.abs(w[a:b] - med) <= 0.1 * abs(med))
+            # (a stretch shorter than the speed window is not resolved as a ramp: at a run's
+            # end the window is one-sided and the estimate there leans on the last rows)
             if near.size:
-                ok[: near[0]] = False
-                ok[near[-1] + 1 :] = False
+                if near[0] >= win // 2 or a > 0:
+                    ok[: near[0]] = False
+                if (b - a) - 1 - near[-1] >= win // 2 or b < n:
+                    ok[near[-1] + 1 :] = False
             for c, d in _runs_of(ok):
                 if d - c >= min(min_len, 20):
                     seg[a + c : a + d] = sid
@@ -1267,6 +1323,22 @@ class Step:
     notes: list[str]
     term_rms: float
     explained_rms: float
+    confounded: list[dict] = dataclasses.field(default_factory=list)
+
+
+def _tie(
+    fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
+) -> tuple[float, float]:
+    """``(chi-square gap, correlation)`` of two alternative fits ``a`` (chosen) and ``b``:
+    how much better ``a`` fits, and the correlation of what each takes out of the current
+    residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
+    keep = prep.keep
+    w = 1.0 / prep.sigma[None, :]
+    ca = ((cur_resid - fitter.residual(a.terms)) * w)[keep].ravel()
+    cb = ((cur_resid - fitter.residual(b.terms)) * w)[keep].ravel()
+    den = float(np.linalg.norm(ca) * np.linalg.norm(cb))
+    corr = float(abs(ca @ cb) / den) if den > 0 else 0.0
+    return float(b.chi2 - a.chi2), corr
 
 
 def _collinearity(fit: FitResult, n_base_terms: int) -> float:
@@ -1518,6 +1590,23 @@ def select(
                 )
                 continue
             if chosen is not None:
+                gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
+                if gap < TIE_CHI2 and corr > TIE_CORR:
+                    # not decided by the criterion: reported with the chosen one
+                    chosen[8].append(
+                        {
+                            "name": cand.name,
+                            "reason": f"the data cannot tell it from {chosen[0].name}: it "
+                            f"fits as well (chi-square {gap:+.1f}, needs {TIE_CHI2:.0f} to "
+                            f"decide) and its fitted error is the same (correlation "
+                            f"{corr:.3f})",
+                            "delta_bic": float(dbic),
+                            "params": {
+                                q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params
+                            },
+                        }
+                    )
+                    continue
                 rejected.append(
                     {
                         "name": cand.name,
@@ -1569,15 +1658,23 @@ def select(
                     f"nearly collinear with the base model (canonical correlation "
                     f"{col:.3f}): part of it could be absorbed by base parameters"
                 )
-            chosen = (cand, fr, dbic, dho, col, notes, trms, erms)
+            chosen = (cand, fr, dbic, dho, col, notes, trms, erms, [])
         if chosen is None:
             break
-        cand, fr, dbic, dho, col, notes, trms, erms = chosen
+        cand, fr, dbic, dho, col, notes, trms, erms, confounded = chosen
+        if confounded:
+            notes = [
+                *notes,
+                "confounded with "
+                + ", ".join(c["name"] for c in confounded)
+                + ": this recording cannot tell them apart; the name is only the one with "
+                "the lower information criterion",
+            ]
         full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
         if full.chi2 <= fr.chi2:
             fr = full
         resid = fitter.residual(fr.terms)
-        accepted.append(Step(cand.name, fr, resid, dbic, dho, col, notes, trms, erms))
+        accepted.append(Step(cand.name, fr, resid, dbic, dho, col, notes, trms, erms, confounded))
         log(f"named {cand.name}")
         current, cur_resid = fr, resid
         findings = locate(prep, cur_resid, views, scan_order)
@@ -1780,6 +1877,7 @@ def run_engine(
                 "size_rms": float(s.term_rms * sig_mean),
                 "notes": s.notes,
                 "explanation": expl,
+                "confounded_with": s.confounded,
             }
         )
     unexplained = [

@@ -79,6 +79,79 @@ def _ls_power(rw: np.ndarray, X: np.ndarray) -> np.ndarray:
     return np.sum(proj**2, axis=0)
 
 
+def _heads(
+    prep, W: np.ndarray, ch: list[int], order: float | None = None
+) -> tuple[list[int], str | None]:
+    """Heads that carry a structure, from its whitened coefficients ``W`` (values x channels;
+    complex: Fourier coefficients, real: block means).
+
+    Each channel is seen through what the base model cannot take: without a reference the
+    heads' mean is removed (``P``), and at an integer order ``m <= M`` the base model's disk
+    error takes the pattern ``b_k = exp(-i m alpha_k)`` (one disk seen by every head). A
+    structure on head ``k`` alone therefore shows on every head as ``u_k``, ``e_k`` less those
+    parts. Each one-head pattern is fitted; the structure is reported on head ``k`` only when
+    ``u_k`` leaves no significant power (chi-square at ``ALPHA``, or 5 % of a strong
+    structure's power) and fits significantly
+    better than every other head's pattern. When the patterns cannot be told apart (too few
+    heads for what the base takes) or none fits, the structure is reported on ``ch`` (the
+    channels where it is significant) with a note saying so."""
+    W = np.asarray(W)
+    if W.ndim == 1:
+        W = W[None, :]
+    C = W.shape[1]
+    if C < 2:
+        return ch, None
+    names = prep.kd.channel_names
+    proj = bool(prep.kd.project)
+    M = int(prep.consts.get("max_order", 0)) if hasattr(prep, "consts") else 0
+    base = (
+        order is not None
+        and np.iscomplexobj(W)
+        and abs(order - round(order)) < 1e-9
+        and 1 <= round(order) <= M
+    )
+    B = []
+    if proj:
+        B.append(np.ones(C, complex) / math.sqrt(C))
+    if base:
+        alpha = np.asarray(prep.consts["alpha"], float)
+        B.append(np.exp(-1j * round(order) * alpha))
+    if B:
+        Qb, _ = np.linalg.qr(np.stack(B, 1))
+    else:
+        Qb = np.zeros((C, 0), complex)
+    free = C - Qb.shape[1]  # complex (or real) dimensions the base model leaves
+    if not B:
+        return ch, None
+    what = " and ".join(
+        (["the heads' mean (no reference)"] if proj else [])
+        + ([f"the base model's disk error at order {round(order)}"] if base else [])
+    )
+    if free < 2:
+        return sorted(set(ch) | set(range(C))) if proj else ch, (
+            f"confounded: with {C} heads, {what} leave too little to tell which head carries it"
+        )
+    res = []
+    for k in range(C):
+        u = np.zeros(C, complex)
+        u[k] = 1.0
+        u = u - Qb @ (Qb.conj().T @ u)
+        nu = np.linalg.norm(u)
+        u = u / nu if nu > 0 else u
+        res.append(float(np.sum(np.abs(W) ** 2) - np.sum(np.abs(W @ u.conj()) ** 2)))
+    order_k = np.argsort(res)
+    k1, k2 = int(order_k[0]), int(order_k[1])
+    f = 2 if np.iscomplexobj(W) else 1
+    rows = W.shape[0]
+    tot = float(np.sum(np.abs(W) ** 2))
+    # what the pattern leaves: noise, or at most 5 % of the power (a strong structure is not
+    # seen through exactly equal heads: sensitivities, placements, per-head noise weights)
+    left_ok = res[k1] <= max(_thr(f * rows * (free - 1), 1), 0.05 * tot)
+    if left_ok and res[k2] - res[k1] > _thr(f * rows, 1):
+        return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
+    return ch, f"on several heads, or not told apart from {what}"
+
+
 def view_orders(prep, rw, max_order: int) -> list[Finding]:
     """Integer shaft orders per channel, rotation locked over all runs."""
     keep = prep.keep
@@ -93,18 +166,23 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
         pw = _ls_power(r, X)
         if pw.max() > thr:
             ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+            Z = np.linalg.lstsq(X, r, rcond=None)[0] * math.sqrt(0.5 * r.shape[0])
+            heads, note = _heads(prep, Z[0] - 1j * Z[1], ch, order=float(m))
+            detail = {
+                "integer_order": True,
+                "n_values": int(r.shape[0]),
+                "power_per_channel": pw.tolist(),
+            }
+            if note:
+                detail["heads_note"] = note
             out.append(
                 Finding(
                     "orders",
-                    _where(orders=[float(m)], heads=ch, runs=prep.run_ids.tolist()),
+                    _where(orders=[float(m)], heads=heads, runs=prep.run_ids.tolist()),
                     float(pw[ch].sum()),
                     2 * len(ch),
                     _logp(float(pw.max()), 2),
-                    detail={
-                        "integer_order": True,
-                        "n_values": int(r.shape[0]),
-                        "power_per_channel": pw.tolist(),
-                    },
+                    detail=detail,
                 )
             )
     return out
@@ -138,13 +216,16 @@ def view_spectrum(prep, rw) -> list[Finding]:
         # revolutions per second from the steady speeds (a record that turns back and
         # forth has no net advance)
         revs_per_s = float(np.median(np.abs(prep.rows["omega"][rows][kr]))) / (2 * np.pi)
-        per_run.append((r, P, f, revs_per_s, nk))
+        # a run turning backwards sees exp(+i m alpha_k) at positive frequencies
+        if np.median(prep.rows["omega"][rows][kr]) < 0:
+            X = X.conj()
+        per_run.append((r, P, f, revs_per_s, nk, X))
         n_tests += P.shape[0]
     out: list[Finding] = []
     if not per_run:
         return out
     thr = _thr(2 * dof_ch, n_tests)
-    for r, P, f, frev, nk in per_run:
+    for r, P, f, frev, nk, X in per_run:
         Ps = P.sum(1)
         # power of each line: three bins (leakage), tested on the centre
         idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
@@ -166,6 +247,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     order=fr / frev if frev > 0 else float("nan"),
                     power=float(band.sum()),
                     band=band,
+                    z=X[lo:hi] * math.sqrt(2.0 / nk),
                     bin_hz=float(f[1]),
                     bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
                     nk=nk,
@@ -175,7 +257,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     # group peaks across runs: fixed in Hz or in order
     used = [False] * len(peaks)
     peaks.sort(key=lambda p: -p["power"])
-    speeds = {r: frev for r, _, _, frev, _ in per_run}
+    speeds = {r: frev for r, _, _, frev, _, _ in per_run}
     multi_speed = len(per_run) > 1 and (
         max(speeds.values()) > 1.05 * max(min(speeds.values()), 1e-12)
     )
@@ -222,6 +304,10 @@ def view_spectrum(prep, rw) -> list[Finding]:
         )
         thr_ch = _thr(2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
+        zs = np.concatenate([q["z"] for q in sel], 0)
+        ints = {round(o) for o in orders if np.isfinite(o)}
+        o0 = ints.pop() if integer and len(ints) == 1 else None  # one integer order
+        ch, note = _heads(prep, zs, ch, order=float(round(o0)) if o0 is not None else None)
         out.append(
             Finding(
                 "spectrum",
@@ -238,6 +324,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     "fixed_in": fixed,
                     "integer_order": bool(integer),
                     "n_values": int(sum(q["nk"] for q in sel)),
+                    **({"heads_note": note} if note else {}),
                 },
             )
         )
@@ -267,28 +354,30 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
             if hi - lo < 4:
                 continue
             pw = P[lo:hi].sum(0) * (nk / x.shape[0])
-            tests.append((r, lo, hi, pw, f, nk))
+            tests.append((r, lo, hi, pw, f, nk, x))
     if not tests:
         return found
     n_tests = len(tests) * C
-    for r, lo, hi, pw, f, nk in tests:
+    for r, lo, hi, pw, f, nk, x in tests:
         dof = 2 * (hi - lo)
         thr = _thr(dof, n_tests)
         ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
         if not ch:
             continue
+        Xb = np.fft.rfft(x, axis=0)[lo:hi] * math.sqrt(2.0 / x.shape[0])
+        heads, note = _heads(prep, Xb, ch)
         found.append(
             Finding(
                 "band",
                 _where(
                     frequencies_hz=[float(f[lo]), float(f[hi - 1])],
-                    heads=ch,
+                    heads=heads,
                     runs=[int(prep.run_ids[r])],
                 ),
                 float(pw[ch].sum()),
                 dof * len(ch),
                 _logp(float(pw[ch].max()), dof),
-                detail={"n_values": int(nk)},
+                detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
             )
         )
     return found
@@ -359,6 +448,14 @@ def view_time(prep, rw) -> list[Finding]:
                 break
         else:
             merged.append(f)
+    # which heads: without a reference, one head's step shows on all of them
+    zrun = {r: means - means.mean(0) for r, _, means in blocks_all}
+    for g in merged:
+        r = int(np.flatnonzero(prep.run_ids == g.where["runs"][0])[0])
+        heads, note = _heads(prep, zrun[r], g.where["heads"])
+        g.where["heads"] = heads
+        if note:
+            g.detail["heads_note"] = note
     return merged
 
 
@@ -476,6 +573,19 @@ def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> 
     out: list[Finding] = []
     for v in views:
         out += VIEWS[v](prep, rw, scan_order)
+    # a spectrum line at an integer order takes its heads from the rotation-locked fit of
+    # that order (the orders view), which sees every run at once
+    by_order = {
+        round(f.where["orders"][0]): f for f in out if f.view == "orders" and f.where["orders"]
+    }
+    for f in out:
+        if f.view == "spectrum" and f.detail.get("integer_order") and f.where["orders"]:
+            ints = {round(o) for o in f.where["orders"] if math.isfinite(o)}
+            g = by_order.get(ints.pop()) if len(ints) == 1 else None
+            if g is not None:
+                f.where["heads"] = list(g.where["heads"])
+                if "heads_note" in g.detail:
+                    f.detail["heads_note"] = g.detail["heads_note"]
     for f in out:
         f.variance_share = float(max(f.power - f.dof, 0.0) / max(tot, 1e-300))
     out.sort(key=lambda f: f.log10_p)
