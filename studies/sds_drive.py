@@ -21,9 +21,10 @@ same plant is integrated in time (exact exponential step, torque held over a ste
   sensors (``6 · pole_pairs`` = 36 edges/rev, edge placement errors σ 0.3° from magnet
   boundaries and sensor placement, 1 µs timer, 0.2 µs jitter) or a 1,024-line encoder
   (4,096 edges/rev, 20 µrad, 10 ns). The drive's torque command is quantised (10-bit PWM
-  over 4× the mean torque). Gains from the loop bandwidth ``f_bw``: ``K_p = 2π f_bw/ω_c``,
-  ``ω_i = 2π f_bw/4``; the loop's actual crossover and phase margin (with the edge-interval
-  averaging and the hold) are computed from the loop transfer function and reported.
+  over 4× the mean torque). Gains from the loop bandwidth ``f_bw``: ``ω_i = 2π f_bw/4`` and
+  ``K_p`` for unit loop gain at ``f_bw`` (:func:`loop_gains`); the loop's actual crossover
+  and phase margin (with the edge-interval averaging and the hold) are computed from the
+  loop transfer function and reported.
 
 The SDS reading of every revolution is computed from the simulated motion with the
 project's SDS (``mark_angles``, ``sds_from_edges``, the reference design's disks with their
@@ -65,9 +66,15 @@ FEEDBACK = {
 
 
 def loop_gains(bandwidth_hz: float, corner_rad_s: float) -> tuple[float, float]:
-    """``(K_p, ω_i rad/s)`` of the PI speed loop for a nominal bandwidth (Hz)."""
+    """``(K_p, ω_i rad/s)`` of the PI speed loop for a nominal bandwidth (Hz).
+
+    ``ω_i = ω_bw/4`` and ``K_p`` such that PI × plant has unit gain at ``ω_bw``:
+    ``K_p = 1/|(1 + ω_i/jω_bw) ω_c/(jω_bw + ω_c)|`` (≈ ω_bw/ω_c above the inertia
+    corner, ≈ 1 below it).
+    """
     w = 2 * math.pi * bandwidth_hz
-    return w / corner_rad_s, w / 4
+    wi = w / 4
+    return 1.0 / abs((1 + wi / (1j * w)) * corner_rad_s / (1j * w + corner_rad_s)), wi
 
 
 def loop_transfer(f_hz, bandwidth_hz, corner_rad_s, edges_per_rev, speed_rad_s):
@@ -84,7 +91,8 @@ def crossover(bandwidth_hz, corner_rad_s, edges_per_rev, speed_rad_s):
     """Crossover frequency (Hz) and phase margin (deg) of :func:`loop_transfer`."""
     f = np.logspace(-1, 4, 20001)
     mag = np.abs(loop_transfer(f, bandwidth_hz, corner_rad_s, edges_per_rev, speed_rad_s))
-    i = int(np.flatnonzero(mag < 1)[0]) if np.any(mag < 1) else len(f) - 1
+    above = np.flatnonzero(mag >= 1)
+    i = min(int(above[-1]) + 1, len(f) - 1) if above.size else 0
     lt = loop_transfer(f[i], bandwidth_hz, corner_rad_s, edges_per_rev, speed_rad_s)
     return float(f[i]), float(180 + np.degrees(np.angle(lt)))
 
