@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # ---- step 2: stepped-sine shaker test per direction ----------------------------
     f_lut = np.arange(200.0, 2001.0, 200.0 if args.quick else 50.0)
-    repeats = 3 if args.quick else 10
+    repeats = 4 if args.quick else 10
     n2 = 1024 if args.quick else 2048
     luts, luts_plain, lut_rows = {}, {}, {}
     for d in MOUNTS:

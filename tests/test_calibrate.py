@@ -392,7 +392,7 @@ def test_compare_maps_on_recording(tmp_path):
 def test_studies_quick(tmp_path, name, keys):
     flags = ["--quick", "--no-plots", "--out", str(tmp_path), "--json", str(tmp_path / "s.json")]
     if name == "closure":
-        flags += ["--instruments", "first_two_pairs", "--trials", "2"]
+        flags += ["--instruments", "first_two_pairs", "--trials", "2", "--marks", "80"]
     assert main(["study", "run", name, *flags]) == 0
     d = json.loads((tmp_path / "s.json").read_text())
     for k in keys:
@@ -406,6 +406,7 @@ def test_studies_quick(tmp_path, name, keys):
 def test_seed002_results_quick(tmp_path):
     out = tmp_path / "s.json"
     flags = ["--quick", "--no-plots", "--offsets-bin", "0.5", "--out", str(tmp_path)]
+    flags += ["--cases", "700Hz_0.8mm_s", "1400Hz_0.8mm_s"]
     assert main(["study", "run", "seed002-results", *flags, "--json", str(out)]) == 0
     rows = json.loads(out.read_text())["rows"]
     # off the bin, the FFT-resolution f_exc costs compensation; the refined one does not
@@ -416,7 +417,7 @@ def test_seed002_results_quick(tmp_path):
 
 LUT_PITCH_M = 20e-6
 LUT_FS_HZ = 16384.0
-LUT_FREQ_HZ = np.arange(200.0, 2001.0, 300.0)  # 7 steps
+LUT_FREQ_HZ = np.arange(200.0, 2001.0, 200.0)  # 10 steps (the vibration-lut --quick sizes)
 # injected mounts per direction: (natural frequency Hz, damping ratio)
 LUT_MOUNTS = {"x": (1500.0, 0.05), "y": (900.0, 0.08)}
 LUT_SIGNAL_ERRORS = (0.04, -0.03, 0.94, 0.07)
@@ -429,13 +430,13 @@ def _mount(direction):
 
 @pytest.fixture(scope="module")
 def lut_bench():
-    """One stepped-sine test per direction (7 frequencies x 4 repeats, 512 samples each)."""
+    """One stepped-sine test per direction (10 frequencies x 4 repeats, 1,024 samples each)."""
     import jax.numpy as jnp
 
     import encdesign as ed
 
     err = ed.SignalErrors(*LUT_SIGNAL_ERRORS)
-    t1 = np.arange(2048) / LUT_FS_HZ
+    t1 = np.arange(4096) / LUT_FS_HZ
     sa, sb = ed.quadrature_signals(jnp.asarray(2 * np.pi * 4e-3 * t1 / LUT_PITCH_M), err, 0.5)
     params = ed.fit_ellipse(sa, sb, method="direct").params
     steps, luts = {}, {}
@@ -448,7 +449,7 @@ def lut_bench():
             errors=err,
             signal_period_m=LUT_PITCH_M,
             sample_rate_hz=LUT_FS_HZ,
-            n_samples=512,
+            n_samples=1024,
             amplitude=0.5,
             noise_std=0.003,
             position_m=0.3 * LUT_PITCH_M,
@@ -526,7 +527,7 @@ def test_combined_luts_per_direction(lut_bench):
     import jax.numpy as jnp
 
     luts = lut_bench[2]
-    f = LUT_FREQ_HZ[3]  # 1,100 Hz: between the two resonances, the responses differ in phase
+    f = LUT_FREQ_HZ[4]  # 1,000 Hz: between the two resonances, the responses differ in phase
     amp, ph = {"x": 60.0, "y": 25.0}, {"x": 0.3, "y": 2.0}
     levels = AccelerometerLevels(
         jnp.asarray(f),
@@ -553,7 +554,7 @@ def test_combined_luts_per_direction(lut_bench):
 
 def test_combined_lut_gradient_matches_finite_differences(lut_bench):
     luts = lut_bench[2]
-    f = float(LUT_FREQ_HZ[3])
+    f = float(LUT_FREQ_HZ[4])
 
     def g(ax):
         return combine_luts(luts, {"x": ax, "y": 25.0}, f).delta_gm_phasor_m
@@ -618,3 +619,53 @@ def test_vibration_lut_study_quick(tmp_path):
     assert abs(v["phasor_combined"]["delta_gm_relative_error"]) < 0.05
     assert v["seed_combined"]["delta_gm_relative_error"] > 0
     assert v["phasor_combined"]["error_area_reduction"] > v["x_lut_scaled"]["error_area_reduction"]
+
+
+# ----------------------------------------------------------------------------- drive study
+
+
+@pytest.fixture(scope="module")
+def drive():
+    import encdesign as ed
+    from encdesign.cli._main import _load_study
+
+    mod = _load_study("sds-drive")
+    return mod, ed.reference_design(2, 2, marks_per_rev=240)
+
+
+def test_drive_simulation_reproduces_the_project_motor_model(drive):
+    import jax.numpy as jnp
+
+    import encdesign as ed
+
+    mod, design = drive
+    motion = mod.simulate_motion(
+        design.motor, jax.random.PRNGKey(0), n_revs=2, steps_per_rev=1024, ripple_in_time=True
+    )
+    phis = (0.3, 3.4)
+    ours = np.array([mod.sds_errors(design, motion, p, [1]).mean() for p in phis])
+    ref = np.asarray(ed.sds_phi_error(design, jnp.asarray(phis)))
+    assert np.max(np.abs(ref)) > 0.05 * ARCSEC  # the ripple x mark-error term is there
+    assert np.max(np.abs(ours - ref)) < 1e-3 * np.max(np.abs(ref))
+
+
+def test_closed_loop_on_hall_feedback_varies_more_than_open_loop(drive):
+    mod, design = drive
+    key = jax.random.PRNGKey(1)
+    common = dict(n_revs=8, warm=6, steps_per_rev=512)
+    ol = mod.run_case(design, key, dict(wander_std=2e-4), **common)
+    cl = mod.run_case(
+        design, key, dict(wander_std=2e-4, closed_loop=True, bandwidth_hz=20.0), **common
+    )
+    # seed: closed loop speed control, "much larger variation … on successive revolutions"
+    ratio = cl["rev_to_rev_std_arcsec_all_pairs"] / ol["rev_to_rev_std_arcsec_all_pairs"]
+    assert ratio > 2
+    # the loop follows its sensitivity on the repeatable ripple (ideal feedback)
+    ideal = dict(closed_loop=True, bandwidth_hz=20.0, placement=False, timer=False, pwm_step=0.0)
+    cl0 = mod.run_case(design, key, ideal, **common)
+    w0 = float(design.motor.speed_rad_s)
+    wc = float(design.motor.corner_order) * w0
+    for n in (1, 2, 6):
+        got = cl0["speed_ripple_by_order"][n - 1] / ol["speed_ripple_by_order"][n - 1]
+        s_pred = abs(1 / (1 + mod.loop_transfer(n * w0 / (2 * np.pi), 20.0, wc, 36, w0)))
+        assert got == pytest.approx(s_pred, rel=0.15)
