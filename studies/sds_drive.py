@@ -248,14 +248,12 @@ def run_case(design, key, cfg, n_revs, warm, steps_per_rev):
     # repeatable speed ripple: mean over revolutions of each revolution's spectrum
     per_rev = eps[: n_revs * steps_per_rev].reshape(n_revs, steps_per_rev)
     spec = np.fft.rfft(per_rev.mean(axis=0)) * 2 / steps_per_rev
-    nonrep = per_rev - per_rev.mean(axis=0)
     return {
         "rev_to_rev_std_arcsec_all_pairs": float(np.mean(np.std(allp, axis=1, ddof=1))) / ARCSEC,
         "rev_to_rev_pp_arcsec_all_pairs": float(np.mean(np.ptp(allp, axis=1))) / ARCSEC,
         "rev_to_rev_std_arcsec_one_pair": float(np.mean(np.std(one, axis=1, ddof=1))) / ARCSEC,
         "systematic_pp_arcsec_all_pairs": float(np.ptp(allp.mean(axis=1))) / ARCSEC,
         "speed_ripple_rms": float(np.std(eps)),
-        "speed_nonrepeatable_rms": float(np.std(nonrep)),
         "speed_ripple_by_order": np.abs(spec[1:97]),
         "mean_speed_error": float(np.mean(eps)),
         "_trace_all_pairs_arcsec": allp[0] / ARCSEC,
@@ -374,6 +372,25 @@ def main(argv: list[str] | None = None) -> int:
         sweep.append(row)
         progress(f"wander {wd:g}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()))
     out["wander_sweep_rev_to_rev_std_arcsec"] = sweep
+    # wander at which each loop matches the open loop (log-log interpolation of the sweep)
+    cross = {}
+    for name in ("hall_20Hz", "encoder_80Hz"):
+        if name not in sweep[0]:
+            continue
+        lw = np.log([r["wander_std"] for r in sweep])
+        g = np.log([r[name] for r in sweep]) - np.log([r["open_loop"] for r in sweep])
+        sign = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0))
+        cross[name] = (
+            float(
+                np.exp(
+                    lw[sign[0]]
+                    + (lw[sign[0] + 1] - lw[sign[0]]) * g[sign[0]] / (g[sign[0]] - g[sign[0] + 1])
+                )
+            )
+            if sign.size
+            else None
+        )
+    out["closed_loop_wins_above_wander_std"] = cross
 
     ol_std = results["open_loop"]["rev_to_rev_std_arcsec_all_pairs"]
     hall = {k: v for k, v in results.items() if k.startswith("hall_") and k.endswith("Hz")}
