@@ -135,13 +135,46 @@ def simulate_motion(
     if not timer:
         tick, jit = 0.0, 0.0
     kp, wi = loop_gains(bandwidth_hz, wc)
-    a = math.exp(-wc * dt)
+    n_steps = -(-n_steps // CHUNK) * CHUNK  # whole chunks (one compilation for all cases)
+    xi_j = jax.random.normal(kj, (n_steps // CHUNK, CHUNK))
+    xi_d = jax.random.normal(kd, (n_steps // CHUNK, CHUNK))
     rho = math.exp(-dt / wander_time_s)
-    xi_j = jax.random.normal(kj, (n_steps,))
-    xi_d = jax.random.normal(kd, (n_steps,))
+    prm = jnp.asarray(
+        [
+            w0,
+            wc,
+            dt,
+            math.exp(-wc * dt),
+            rho,
+            wander_std * math.sqrt(1 - rho**2),
+            kp,
+            wi,
+            tick,
+            jit,
+            pwm_step,
+            float(closed_loop),
+            float(ripple_in_time),
+        ]
+    )
+    om0 = float(motor.omega(0.0)) if ripple_in_time else w0
+    carry = (0.0, om0, 0.0, 0.0, float(beta[0]) / w0, 1.0, 0.0, 0.0)
+    carry = tuple(jnp.asarray(v, dtype=float) for v in carry)
+    outs = []
+    for c in range(n_steps // CHUNK):
+        carry, out = _motion_chunk(carry, prm, orders, tc, ts, beta, xi_j[c], xi_d[c])
+        outs.append(out)
+    th, om, winf = (jnp.concatenate([o[k] for o in outs]) for k in range(3))
+    return dt, th, om, winf, wc
 
-    def ripple(x):
-        return jnp.sum(tc * jnp.cos(orders * x) + ts * jnp.sin(orders * x))
+
+CHUNK = 512  # time steps per compiled chunk
+
+
+@jax.jit
+def _motion_chunk(carry, prm, orders, tc, ts, beta, xi_j, xi_d):
+    """``CHUNK`` steps of the shaft motion (parameters as values: one compilation)."""
+    w0, wc, dt, a, rho, wstep, kp, wi, tick, jit, pwm, closed, in_time = prm
+    n_fb = beta.shape[0]
 
     def within(th, om, winf, target):
         s = (target - th) / om
@@ -155,39 +188,39 @@ def simulate_motion(
         th, om, u, integ, t_last, idx, d, n = carry
         xj, xd = xs
         t = n * dt
-        x = w0 * (t + 0.5 * dt) if ripple_in_time else th + 0.5 * om * dt
-        winf = w0 * (1 + ripple(x) + d + u)
+        x = jnp.where(in_time > 0, w0 * (t + 0.5 * dt), th + 0.5 * om * dt)
+        winf = w0 * (1 + jnp.sum(tc * jnp.cos(orders * x) + ts * jnp.sin(orders * x)) + d + u)
         om1 = winf + (om - winf) * a
         th1 = th + winf * dt + (om - winf) * (1 - a) / wc
         # feedback edge in this step?
         ang = 2 * jnp.pi * jnp.floor(idx / n_fb) + beta[jnp.mod(idx, n_fb).astype(int)]
-        hit = closed_loop & (th1 >= ang)
+        hit = (closed > 0) & (th1 >= ang)
         t_c = t + within(th, om, winf, ang)
-        t_m = jnp.where(tick > 0, jnp.ceil(t_c / max(tick, 1e-30)) * tick, t_c) + jit * xj
+        t_m = jnp.where(tick > 0, jnp.ceil(t_c / jnp.maximum(tick, 1e-30)) * tick, t_c)
+        t_m = t_m + jit * xj
         dt_m = t_m - t_last
         eps_hat = (2 * jnp.pi / n_fb) / (dt_m * w0) - 1
         integ1 = integ + eps_hat * dt_m
         u1 = -kp * (eps_hat + wi * integ1)
-        if pwm_step > 0:
-            u1 = pwm_step * jnp.round(u1 / pwm_step)
+        u1 = jnp.where(pwm > 0, pwm * jnp.round(u1 / jnp.maximum(pwm, 1e-30)), u1)
         u = jnp.where(hit, u1, u)
         integ = jnp.where(hit, integ1, integ)
         t_last = jnp.where(hit, t_m, t_last)
         idx = jnp.where(hit, idx + 1, idx)
-        d1 = rho * d + wander_std * math.sqrt(1 - rho**2) * xd
+        d1 = rho * d + wstep * xd
         return (th1, om1, u, integ, t_last, idx, d1, n + 1), (th, om, winf)
 
-    om0 = float(motor.omega(0.0)) if ripple_in_time else w0
-    init = (0.0, om0, 0.0, 0.0, float(beta[0]) / w0, 1.0, 0.0, 0.0)
-    init = tuple(jnp.asarray(v, dtype=float) for v in init)
-    _, (th, om, winf) = jax.lax.scan(step, init, (xi_j, xi_d))
-    return dt, th, om, winf, wc
+    return jax.lax.scan(step, carry, (xi_j, xi_d))
 
 
 def edge_times(motion, target_rad):
     """Times (s) at which the simulated shaft reaches ``target_rad`` (any shape)."""
     dt, th, om, winf, wc = motion
-    tgt = jnp.asarray(target_rad)
+    return _invert(th, om, winf, jnp.asarray(dt), jnp.asarray(wc), jnp.asarray(target_rad))
+
+
+@jax.jit
+def _invert(th, om, winf, dt, wc, tgt):
     j = jnp.clip(jnp.searchsorted(th, tgt, side="right") - 1, 0, th.shape[0] - 1)
     th0, om0, wi0 = th[j], om[j], winf[j]
     s = (tgt - th0) / om0
