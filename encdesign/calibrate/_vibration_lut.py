@@ -50,8 +50,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike
 
 from .._errors import input_error
-from ..physics import EllipseParams, SignalErrors, Vibration, VibrationLUT, quadrature_signals
-from ..physics._ellipse import corrected_phase_rad
+from ..physics import (
+    EllipseParams,
+    SignalErrors,
+    Vibration,
+    VibrationLUT,
+    corrected_phase_rad,
+    quadrature_signals,
+)
 
 __all__ = [
     "AccelerometerLevels",
