@@ -222,5 +222,10 @@ from .calibrate import (
     solve_closure as solve_closure,
     write_correction_table as write_correction_table,
 )
+from .calibrate import (
+    SteppedLUT as SteppedLUT,
+    build_stepped_lut as build_stepped_lut,
+    combine_luts as combine_luts,
+)
 
 __version__ = "0.1.0"

@@ -45,6 +45,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="excitation offsets from the FFT bin, in bins",
     )
+    p.add_argument(
+        "--cases",
+        nargs="+",
+        default=None,
+        help="subset of the quadrature study's cases, e.g. 700Hz_0.8mm_s 1000Hz_0.8mm_s",
+    )
     args = p.parse_args(argv)
     t0 = time.time()
     bin_hz = FS_HZ / (2048 if args.quick else 4096)
@@ -54,6 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     for off in offsets:
         mod = _load_study("quadrature")
         base = list(mod.CASES)
+        if args.cases:
+            names = {f"{fe:.0f}Hz_{v * 1e3:.1f}mm_s": (fe, v) for fe, v in base}
+            unknown = sorted(set(args.cases) - set(names))
+            if unknown:
+                p.error(f"--cases: unknown {unknown} (expected some of {sorted(names)})")
+            base = [names[c] for c in args.cases]
         # offset from the nearest bin (with --quick's 8 Hz bins 700 Hz is itself off-bin)
         mod.CASES = [(bin_hz * round(fe / bin_hz) + off * bin_hz, v) for fe, v in base]
         with tempfile.TemporaryDirectory() as tmp:

@@ -1,5 +1,6 @@
 """Calibration procedures: dual-closure polygon tests, calibration curves and correction
-tables, reference mapping against self-compensation (``docs/calibration.md``).
+tables, reference mapping against self-compensation, vibration LUTs from stepped shaker
+tests (``docs/calibration.md``).
 May import physics and io; never design or diagnose.
 """
 
@@ -68,4 +69,31 @@ from ._reference import (
 )
 from ._reference import (
     reference_map as reference_map,
+)
+from ._vibration_lut import (
+    AccelerometerLevels as AccelerometerLevels,
+)
+from ._vibration_lut import (
+    CombinedLUT as CombinedLUT,
+)
+from ._vibration_lut import (
+    ShakerSteps as ShakerSteps,
+)
+from ._vibration_lut import (
+    SteppedLUT as SteppedLUT,
+)
+from ._vibration_lut import (
+    accelerometer_levels as accelerometer_levels,
+)
+from ._vibration_lut import (
+    build_stepped_lut as build_stepped_lut,
+)
+from ._vibration_lut import (
+    combine_luts as combine_luts,
+)
+from ._vibration_lut import (
+    mount_relative_displacement_m as mount_relative_displacement_m,
+)
+from ._vibration_lut import (
+    simulate_shaker_steps as simulate_shaker_steps,
 )
