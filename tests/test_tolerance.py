@@ -16,6 +16,7 @@ from encdesign.design._tolerance import (
     check_yield,
     contributions,
     pareto_front,
+    plot_pareto,
     sweep_scales,
     tolerance_cost,
     yield_stats,
@@ -95,7 +96,7 @@ def test_allocation_meets_target_on_fresh_builds_and_beats_uniform_scaling():
     assert al.sigmas[1] < al.sigmas[0] < al.sigmas[2]
 
 
-def test_pareto_front_is_monotone_checked_and_warm_started():
+def test_pareto_front_is_monotone_checked_and_warm_started(tmp_path):
     """Cost against yield: each point re-allocated from its neighbour (warm start), the cost
     rising with the target, each point's yield confirmed on fresh builds within its error."""
     ref = np.array([0.3, 0.3, 0.3])
@@ -130,6 +131,7 @@ def test_pareto_front_is_monotone_checked_and_warm_started():
     assert cold.ok
     assert rows[-1]["n_steps"] < cold.n_steps
     assert rows[-1]["cost"] == pytest.approx(cold.cost, rel=0.02)
+    assert plot_pareto(front, tmp_path, "front.png").stat().st_size > 0
     # an anchor (an allocation already made) is reused as its point on the front
     two = pareto_front(values_fn, ref, NAMES, spec, [0.9], anchor=cold, anchor_target=0.98)
     assert two.allocations[1] is cold and two.warm_from == (0.98, None)
@@ -225,3 +227,20 @@ def test_pole_sensor_opt_quick(tmp_path):
     # seed 001: the pole count should not be a multiple of the sensor count
     assert not best["pole_multiple_of_sensors"]
     assert best["residual_mean_rad"] == min(r["residual_mean_rad"] for r in d["table"])
+    # second stage (issue 14 item 2): moving-sensor azimuths optimised from random layouts
+    opt = {(r["pole_pairs"], r["n_sensors"]): r for r in d["optimised"]}
+    assert set(opt) == {(5, 3), (6, 3)}
+    for r in opt.values():
+        assert r["status"] in ("success", "max_steps_reached")
+        assert r["residual_mean_rad"] < 0.1 * r["residual_start_rad"]
+        # the optimiser finds the equally spaced layout by itself (starts are random)
+        assert r["max_gap_deviation_from_equal_deg"] < 1.0, r["moving_gaps_deg"]
+    # ... and the pole-count rule from the optimised residuals, not from the enumeration
+    assert d["rule_from_optimiser"]["3"]["holds"]
+    assert opt[(6, 3)]["residual_mean_rad"] > 2 * opt[(5, 3)]["residual_mean_rad"]
+    assert not d["best_optimised"]["pole_multiple_of_sensors"]
+    g = d["gradient_check"]
+    assert g["max_rel_error"] < 1e-3
+    assert max(abs(v) for v in g["grad_fixed_per_rad"]) < 1e-6 * max(
+        abs(v) for v in g["grad_moving_per_rad"]
+    )
