@@ -18,12 +18,13 @@ by BFGS (:func:`encdesign.design._drivers.optimise`, gradient by JAX through the
 solve) on ``log`` of the mean residual, from ``--starts`` *random* layouts (never from the
 equally spaced one). The fixed sensors stay equally spaced: they see every mark at the
 same shaft angles for every φ, so they add a constant that the zeroing removes (their
-gradient is reported, about 1e-8 of the moving ones'). The pole-count rule is then read off
-the optimised residuals: for each sensor count S >= 3, ``rule_from_optimiser`` says whether
-every pole count that is a multiple of S ends worse than every pole count that is not,
-and ``best_optimised`` is the optimiser's best combination. With S = 2 the order-2
-(ellipticity × coil-mismatch ripple) term, which no two-sensor layout can cancel together
-with order 1, dominates, so the rule is not expected there.
+gradient is reported: ~1e-12 of the moving ones in the quick run). The pole-count rule is
+then read off the optimised residuals: for each sensor count S >= 3,
+``rule_from_optimiser`` says whether every pole count that is a multiple of S ends worse
+than every pole count that is not, and ``best_optimised`` is the optimiser's best
+combination. With S = 2 the order-2 (ellipticity × coil-mismatch ripple) term, which no
+two-sensor layout can cancel together with order 1, dominates, so the rule is not
+expected there.
 
 Outputs: ``pole-sensor-opt.json`` (``table``, ``best``, ``optimised``,
 ``rule_from_optimiser``, ``best_optimised``, ``gradient_check``), ``pole_sensor_opt.png``
