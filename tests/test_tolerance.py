@@ -15,6 +15,8 @@ from encdesign.design._tolerance import (
     allocate,
     check_yield,
     contributions,
+    pareto_front,
+    plot_pareto,
     sweep_scales,
     tolerance_cost,
     yield_stats,
@@ -94,6 +96,49 @@ def test_allocation_meets_target_on_fresh_builds_and_beats_uniform_scaling():
     assert al.sigmas[1] < al.sigmas[0] < al.sigmas[2]
 
 
+def test_pareto_front_is_monotone_checked_and_warm_started(tmp_path):
+    """Cost against yield: each point re-allocated from its neighbour (warm start), the cost
+    rising with the target, each point's yield confirmed on fresh builds within its error."""
+    ref = np.array([0.3, 0.3, 0.3])
+    spec, targets = 1.0, [0.8, 0.9, 0.95, 0.98]
+    z_check = _z(78, 20000)
+    front = pareto_front(
+        values_fn,
+        ref,
+        NAMES,
+        spec,
+        targets,
+        check_fn=lambda s: values_fn(s, z_check),
+        max_steps=150,
+    )
+    assert front.ok and front.monotone
+    rows = front.rows()
+    costs = [r["cost"] for r in rows]
+    assert all(b > a for a, b in zip(costs, costs[1:]))  # strictly: a higher yield costs more
+    assert rows[0]["warm_start_from_target"] is None
+    assert [r["warm_start_from_target"] for r in rows[1:]] == targets[:-1]
+    for r in rows:
+        assert r["status"] == "success" and r["train_yield"] >= r["target_yield"]
+        # independent Monte Carlo: meets the target within 2 s.e., and agrees with the
+        # training yield within 3 combined standard errors
+        assert r["meets_target"], r
+        se_train = math.sqrt(r["train_yield"] * (1 - r["train_yield"]) / Z_TRAIN.shape[0])
+        se = math.hypot(se_train, r["checked_yield_stderr"])
+        assert abs(r["checked_yield"] - r["train_yield"]) <= 3 * se + 1e-12, r
+    # the warm start is used: a cold allocation at the same target takes more steps to the
+    # same cost
+    cold = allocate(values_fn, ref, NAMES, spec, targets[-1], max_steps=150)
+    assert cold.ok
+    assert rows[-1]["n_steps"] < cold.n_steps
+    assert rows[-1]["cost"] == pytest.approx(cold.cost, rel=0.02)
+    assert plot_pareto(front, tmp_path, "front.png").stat().st_size > 0
+    # an anchor (an allocation already made) is reused as its point on the front
+    two = pareto_front(values_fn, ref, NAMES, spec, [0.9], anchor=cold, anchor_target=0.98)
+    assert two.allocations[1] is cold and two.warm_from == (0.98, None)
+    with pytest.raises(EncdesignInputError, match="yield target"):
+        pareto_front(values_fn, ref, NAMES, spec, [0.9, 1.0])
+
+
 def test_infeasible_targets_are_refused():
     with pytest.raises(EncdesignInputError, match="infeasible yield target"):
         allocate(values_fn, np.ones(3), NAMES, 1.0, 1.0)
@@ -151,6 +196,14 @@ def test_tolerance_budget_quick(tmp_path):
     for n, v in d["sobol_first"].items():
         if v is not None:
             assert v <= d["sobol_total"][n] + 0.1  # first <= total up to estimator noise
+    # Pareto front of cost against yield target (issue 14 item 6), warm-started
+    front = d["pareto"]
+    assert [r["target_yield"] for r in front] == [0.95, 0.99]
+    assert d["pareto_monotone"] and all(r["status"] == "success" for r in front)
+    assert front[0]["cost"] < front[1]["cost"] == pytest.approx(d["cost"])
+    assert [r["warm_start_from_target"] for r in front] == [0.99, None]
+    for r in front:
+        assert r["checked_yield"] + 2 * r["checked_yield_stderr"] >= r["target_yield"], r
 
 
 def test_pole_sensor_opt_quick(tmp_path):
@@ -174,3 +227,20 @@ def test_pole_sensor_opt_quick(tmp_path):
     # seed 001: the pole count should not be a multiple of the sensor count
     assert not best["pole_multiple_of_sensors"]
     assert best["residual_mean_rad"] == min(r["residual_mean_rad"] for r in d["table"])
+    # second stage (issue 14 item 2): moving-sensor azimuths optimised from random layouts
+    opt = {(r["pole_pairs"], r["n_sensors"]): r for r in d["optimised"]}
+    assert set(opt) == {(5, 3), (6, 3)}
+    for r in opt.values():
+        assert r["status"] in ("success", "max_steps_reached")
+        assert r["residual_mean_rad"] < 0.1 * r["residual_start_rad"]
+        # the optimiser finds the equally spaced layout by itself (starts are random)
+        assert r["max_gap_deviation_from_equal_deg"] < 1.0, r["moving_gaps_deg"]
+    # ... and the pole-count rule from the optimised residuals, not from the enumeration
+    assert d["rule_from_optimiser"]["3"]["holds"]
+    assert opt[(6, 3)]["residual_mean_rad"] > 2 * opt[(5, 3)]["residual_mean_rad"]
+    assert not d["best_optimised"]["pole_multiple_of_sensors"]
+    g = d["gradient_check"]
+    assert g["max_rel_error"] < 1e-3
+    assert max(abs(v) for v in g["grad_fixed_per_rad"]) < 1e-6 * max(
+        abs(v) for v in g["grad_moving_per_rad"]
+    )

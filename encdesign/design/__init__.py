@@ -171,3 +171,9 @@ from ._tolerance import (
 from ._tolerance import (
     sobol_indices as sobol_indices,
 )
+from ._tolerance import (
+    ParetoFront as ParetoFront,
+)
+from ._tolerance import (
+    pareto_front as pareto_front,
+)

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from .._errors import EncdesignInputError
+from .._errors import EncdesignInputError, input_error
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
 from ..physics._layout import (
     check_layout,
@@ -659,11 +659,23 @@ def sds_design(
     key: Array,
     marks_per_rev: int = 1000,
     n_harmonics: int = 16,
+    fixed_azimuths_rad: Any = None,
+    moving_azimuths_rad: Any = None,
 ) -> Any:
     """One SDS build: motor with ``pole_pairs`` (3-phase, six-step drive, coil-mismatch
     ripple ``tol.speed_ripple``), two disks whose mark errors are drawn from ``key`` with
-    the amplitudes of ``tol``, ``n_sensors`` equally spaced fixed and moving sensors."""
+    the amplitudes of ``tol``, ``n_sensors`` fixed and moving sensors: equally spaced, or at
+    ``fixed_azimuths_rad`` / ``moving_azimuths_rad`` (rad, ``n_sensors`` each; may be
+    traced: the build is differentiable in the azimuths and in the tolerances)."""
     from ..physics._sds import SDSDesign, equally_spaced, reference_disk, reference_motor
+
+    fixed = equally_spaced(n_sensors) if fixed_azimuths_rad is None else fixed_azimuths_rad
+    moving = equally_spaced(n_sensors) if moving_azimuths_rad is None else moving_azimuths_rad
+    for name, a in (("fixed_azimuths_rad", fixed), ("moving_azimuths_rad", moving)):
+        if jnp.shape(a) != (n_sensors,):
+            raise input_error(
+                f"sds_design.{name}", f"shape {jnp.shape(a)}", f"({n_sensors},) = n_sensors"
+            )
 
     ka, kb = jax.random.split(key)
     motor = reference_motor(
@@ -680,8 +692,8 @@ def sds_design(
         motor,
         reference_disk(ka, marks_per_rev, **kw),
         reference_disk(kb, marks_per_rev, **kw),
-        equally_spaced(n_sensors),
-        equally_spaced(n_sensors),
+        fixed,
+        moving,
     )
 
 
@@ -694,12 +706,16 @@ def sds_residuals(
     n_builds: int,
     marks_per_rev: int = 1000,
     n_phi: int = 32,
+    fixed_azimuths_rad: Any = None,
+    moving_azimuths_rad: Any = None,
 ) -> Array:
     """SDS residual over the platform turn (RMS of the φ error minus its mean, rad;
     :func:`encdesign.physics._sds.sds_residual`) of ``n_builds`` Monte Carlo builds. Build ``i``
     draws its disks from ``fold_in(key, i)`` (common random numbers across designs); the
     builds are split over the devices of the ``"builds"`` mesh
-    (:func:`encdesign.design.shard_builds`)."""
+    (:func:`encdesign.design.shard_builds`). Sensors equally spaced unless
+    ``fixed_azimuths_rad`` / ``moving_azimuths_rad`` are given (:func:`sds_design`);
+    differentiable in the azimuths and in the tolerances ``tol``."""
     from ..physics._sds import sds_residual
     from ..physics._sds_errors import SDSErrors
 
@@ -707,7 +723,13 @@ def sds_residuals(
 
     def one(i):
         d = sds_design(
-            pole_pairs, n_sensors, tol, key=jax.random.fold_in(key, i), marks_per_rev=marks_per_rev
+            pole_pairs,
+            n_sensors,
+            tol,
+            key=jax.random.fold_in(key, i),
+            marks_per_rev=marks_per_rev,
+            fixed_azimuths_rad=fixed_azimuths_rad,
+            moving_azimuths_rad=moving_azimuths_rad,
         )
         return sds_residual(d, errors, n_phi=n_phi)
 
@@ -1001,3 +1023,93 @@ _HEAD_LAYOUT = ProblemObjective(
 )
 
 PROBLEM_OBJECTIVES["head_layout"] = _HEAD_LAYOUT
+
+
+_SDS_MARK_TOLS = ("eccentricity_rad", "ellipticity_rad", "harmonic_rad", "random_rad")
+
+
+def _build_sds_layout(problem: Any, discrete: dict[str, Any]):
+    from ..physics._sds import equally_spaced
+
+    m = dict(problem.model)
+    m.update(discrete)
+    key = jax.random.key(problem.seed)
+    yt = problem.yield_target
+    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
+    pp, ns = int(m["pole_pairs"]), int(m["n_sensors"])
+    q = float(m["percentile"])
+    ref = jnp.array([float(m[f"cost_ref_{k}"]) for k in _SDS_MARK_TOLS])
+
+    def evaluate(x):
+        tol = SDSTolerances(**{k: x.get(k, float(m[k])) for k in _SDS_TOL_KEYS})
+        vals = sds_residuals(
+            pp,
+            ns,
+            tol,
+            key=key,
+            n_builds=n_builds,
+            marks_per_rev=int(m["marks_per_rev"]),
+            n_phi=int(m["n_phi"]),
+            fixed_azimuths_rad=x.get("fixed_azimuths", equally_spaced(ns)),
+            moving_azimuths_rad=x.get("moving_azimuths", equally_spaced(ns)),
+        )
+        sig = jnp.stack([jnp.asarray(getattr(tol, k), dtype=jnp.float64) for k in _SDS_MARK_TOLS])
+        out = {
+            "sds_residual": jnp.mean(vals),
+            "sds_residual_percentile": jnp.percentile(vals, q),
+            "sds_residual_max": jnp.max(vals),
+            "cost": tolerance_cost(sig, ref),
+        }
+        if yt is not None:
+            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
+            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
+        return out
+
+    return evaluate
+
+
+def _check_sensor_azimuths(start: Any, where: str) -> None:
+    a = jnp.asarray(start, dtype=jnp.float64).reshape(-1)
+    if a.shape[0] >= 2:
+        check_layout(a, where=where)
+
+
+PROBLEM_OBJECTIVES["sds_layout"] = ProblemObjective(
+    name="sds_layout",
+    doc="SDS residual over the platform turn (mean, percentile, yield) of Monte Carlo builds: "
+    "sensor azimuths and mark tolerances continuous, pole pairs and sensors discrete",
+    variables={
+        "pole_pairs": VariableInfo("1", discrete=True, integer=True, lower=1),
+        "n_sensors": VariableInfo("1", discrete=True, integer=True, lower=1),
+        "moving_azimuths": VariableInfo(
+            "rad", size=0, check=_check_sensor_azimuths, doc="moving sensors' azimuths at phi=0"
+        ),
+        "fixed_azimuths": VariableInfo(
+            "rad", size=0, check=_check_sensor_azimuths, doc="fixed sensors' azimuths"
+        ),
+        **{
+            k: VariableInfo("rad", lower=0.0, doc=f"mark-error tolerance {k}")
+            for k in _SDS_MARK_TOLS
+        },
+    },
+    model={
+        "pole_pairs": 5,
+        "n_sensors": 3,
+        "n_builds": 2,
+        "marks_per_rev": 500,
+        "n_phi": 16,
+        "percentile": 99.0,
+        "smooth_width": 0.05,
+        **{k: float(getattr(SDSTolerances(), k)) for k in _SDS_TOL_KEYS},
+        **{f"cost_ref_{k}": float(getattr(SDSTolerances(), k)) for k in _SDS_MARK_TOLS},
+    },
+    outputs=(
+        "sds_residual",
+        "sds_residual_percentile",
+        "sds_residual_max",
+        "cost",
+        "yield_smooth",
+        "yield",
+    ),
+    build=_build_sds_layout,
+)

@@ -290,6 +290,7 @@ def allocate(
     rare_dim: int | None = None,
     rare_key: jax.Array | None = None,
     rare_n: int = 4000,
+    start: Any | None = None,
 ) -> Allocation:
     """Cheapest tolerances with ``target`` of the training builds within ``spec``.
 
@@ -321,6 +322,9 @@ def allocate(
             importance sampling cannot reach the target within the bounds, or its standard
             error is too large to show it.
         rare_dim, rare_key, rare_n: see ``rare_metric``.
+        start: tolerances (SI) to start the optimiser from (a warm start, e.g. the
+            allocation at a neighbouring target, as :func:`pareto_front` does); default
+            the reference (the middle of the box, in ``ln sigma``).
     """
     if not 0.0 < target < 1.0:
         raise input_error(
@@ -361,6 +365,15 @@ def allocate(
         return c + mu * jax.nn.relu(goal - ys) ** 2
 
     v = np.full(didx.size, math.log(-lo / hi)) if lo < 0 < hi else np.zeros(didx.size)
+    if start is not None:
+        s0 = np.asarray(start, dtype=np.float64)
+        if s0.shape != ref.shape or not np.all(np.isfinite(s0)) or np.any(s0[didx] <= 0):
+            raise input_error(
+                "allocate.start", f"{s0!r}", f"{k} finite tolerances > 0 where designed"
+            )
+        frac = (np.log(s0[didx] / ref[didx]) - lo) / (hi - lo)  # position in the box
+        frac = np.clip(frac, 1e-9, 1.0 - 1e-9)
+        v = np.log(frac) - np.log1p(-frac)  # inverse of the sigmoid in u_of
     steps, status, msg = 0, SUCCESS, "converged"
     for mu in penalties:
         sol = optimise(
@@ -479,6 +492,165 @@ def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0
         "n_builds": int(np.asarray(values).size),
         "meets_target": bool(p + n_sigma * max(se, 1e-12) >= target),
     }
+
+
+@dataclasses.dataclass(frozen=True)
+class ParetoFront:
+    """Cost against yield target: one :func:`allocate` per target (:func:`pareto_front`).
+
+    Attributes:
+        targets: yield targets, increasing.
+        allocations: the :class:`Allocation` at each target.
+        warm_from: per point, the target whose allocation it started from (``None``: cold,
+            from the reference tolerances).
+        checked: per point, the independent check (:func:`check_yield` of fresh builds)
+            or ``None`` when no ``check_fn`` was given.
+    """
+
+    targets: tuple[float, ...]
+    allocations: tuple[Allocation, ...]
+    warm_from: tuple[float | None, ...]
+    checked: tuple[dict[str, Any] | None, ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when every point's allocation succeeded."""
+        return all(a.ok for a in self.allocations)
+
+    @property
+    def monotone(self) -> bool:
+        """True when the cost does not fall as the target rises (over successful points)."""
+        c = [a.cost for a in self.allocations if a.ok]
+        return all(b >= a * (1.0 - 1e-9) for a, b in zip(c, c[1:]))
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per point: target, cost, yields, status, steps, warm start, tolerances."""
+        out = []
+        for t, a, w, c in zip(self.targets, self.allocations, self.warm_from, self.checked):
+            r = {
+                "target_yield": t,
+                "cost": a.cost,
+                "train_yield": a.train_yield,
+                "status": a.status,
+                "message": a.message,
+                "n_steps": a.n_steps,
+                "warm_start_from_target": w,
+                "tolerances": {n: float(v) for n, v in zip(a.names, a.sigmas)},
+            }
+            if c is not None:
+                r.update(
+                    checked_yield=c["checked_yield"],
+                    checked_yield_stderr=c["checked_yield_stderr"],
+                    n_check=c["n_builds"],
+                    meets_target=c["meets_target"],
+                )
+            out.append(r)
+        return out
+
+
+def pareto_front(
+    values_fn: ValuesFn,
+    reference: Any,
+    names: Sequence[str],
+    spec: float,
+    targets: Sequence[float],
+    *,
+    anchor: Allocation | None = None,
+    anchor_target: float | None = None,
+    check_fn: ValuesFn | None = None,
+    warm: bool = True,
+    progress: bool = False,
+    **allocate_kw: Any,
+) -> ParetoFront:
+    """Pareto front of tolerance cost against yield target by re-allocating along it.
+
+    Each target gets its own :func:`allocate` (same ``values_fn``, ``reference``, ``spec``
+    and keywords). With ``warm`` the allocation at a target starts from the tolerances of its
+    neighbour on the front (the points are solved outward from the first one, or from
+    ``anchor``, an allocation already made at ``anchor_target``), so each solve begins close
+    to its answer and runs only the last (stiffest) penalty round of :func:`allocate`
+    instead of the whole sequence; the anchor itself is reused as the point at
+    ``anchor_target``. A failed
+    point is kept with its status and the next one starts from the last good point.
+
+    Args:
+        values_fn, reference, names, spec: as for :func:`allocate`.
+        targets: yield targets (0 < t < 1); sorted and de-duplicated.
+        anchor, anchor_target: an existing allocation and its target (optional).
+        check_fn: ``check_fn(sigmas) -> values`` of *fresh* builds (another seed): each point
+            is checked with :func:`check_yield` (binomial standard error).
+        warm: start each point from its neighbour (``False``: every point cold).
+        progress: progress bar.
+        allocate_kw: passed to :func:`allocate` (not ``start``).
+    """
+    if "start" in allocate_kw:
+        raise input_error("pareto_front", "'start' given", "warm starts chosen by the front")
+    ts = sorted({float(t) for t in targets} | ({float(anchor_target)} if anchor else set()))
+    if not ts:
+        raise input_error("pareto_front.targets", "empty", "at least one yield target")
+    for t in ts:
+        if not 0.0 < t < 1.0:
+            raise input_error("pareto_front.targets", f"yield target {t!r}", "0 < target < 1")
+    if anchor is not None and anchor_target is None:
+        raise input_error("pareto_front.anchor", "given without anchor_target", "both")
+    allocs: dict[float, Allocation] = {}
+    warm_from: dict[float, float | None] = {}
+    i0 = ts.index(float(anchor_target)) if anchor is not None else 0
+    order = [i0, *range(i0 + 1, len(ts)), *range(i0 - 1, -1, -1)]
+    with progress_bar("pareto front", len(ts), enabled=progress) as bar:
+        for i in order:
+            t = ts[i]
+            if anchor is not None and i == i0:
+                allocs[t], warm_from[t] = anchor, None
+                bar.update()
+                continue
+            # neighbour towards the first point: the last good allocation on that side
+            side = range(i - 1, i0 - 1, -1) if i > i0 else range(i + 1, i0 + 1)
+            prev = next((ts[j] for j in side if ts[j] in allocs and allocs[ts[j]].ok), None)
+            start = allocs[prev].sigmas if (warm and prev is not None) else None
+            kw = dict(allocate_kw)
+            if start is not None:  # already near the front: only the final (stiff) penalty
+                kw["penalties"] = tuple(kw.get("penalties", (1e2, 1e4, 1e6)))[-1:]
+            allocs[t] = allocate(values_fn, reference, names, spec, t, start=start, **kw)
+            warm_from[t] = prev if start is not None else None
+            bar.update()
+    checked = []
+    for t in ts:
+        a = allocs[t]
+        if check_fn is None or not a.ok:
+            checked.append(None)
+        else:
+            checked.append(check_yield(np.asarray(check_fn(jnp.asarray(a.sigmas))), spec, t))
+    return ParetoFront(
+        tuple(ts), tuple(allocs[t] for t in ts), tuple(warm_from[t] for t in ts), tuple(checked)
+    )
+
+
+def plot_pareto(front: ParetoFront, out: str | Path, filename: str) -> Path:
+    """Cost against yield (training and independently checked, with 2-s.e. bars); PNG."""
+    from ..io._study import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(6, 4))
+    rows = [r for r in front.rows() if r["status"] == SUCCESS]
+    loss = [1.0 - r["target_yield"] for r in rows]
+    ax.plot(loss, [r["cost"] for r in rows], "o-", label="allocation (target)")
+    chk = [r for r in rows if "checked_yield" in r]
+    if chk:
+        ax.errorbar(
+            [max(1.0 - r["checked_yield"], 1e-6) for r in chk],
+            [r["cost"] for r in chk],
+            xerr=[2 * r["checked_yield_stderr"] for r in chk],
+            fmt="s",
+            mfc="none",
+            label="independent check (2 s.e.)",
+        )
+    ax.set_xscale("log")
+    ax.invert_xaxis()
+    ax.set_xlabel("1 - yield")
+    ax.set_ylabel("tolerance cost")
+    ax.set_title("Cost against yield (Pareto front)")
+    ax.legend()
+    return save_figure(fig, out, filename)
 
 
 @dataclasses.dataclass(frozen=True)
