@@ -1,10 +1,10 @@
 """One entry for the discrepancy finder over every recording kind: :func:`diagnose`.
 
-``multihead`` (including one sensor against a reference) and ``motion`` recordings go through
-the engine (:mod:`encdesign.diagnose._engine`) with their kind
-(:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`); ``sds`` and
-``quadrature`` recordings still go to their own finders (:mod:`encdesign.diagnose._sds`,
-:mod:`encdesign.diagnose._quadrature`), whose JSON is brought to the same contract
+``multihead`` (including one sensor against a reference), ``motion`` and ``sds`` recordings go
+through the engine (:mod:`encdesign.diagnose._engine`) with their kind
+(:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
+:mod:`encdesign.diagnose._sds`); ``quadrature`` recordings still go to their own finder
+(:mod:`encdesign.diagnose._quadrature`), whose JSON is brought to the same contract
 (``diagnosis.schema.json``).
 """
 
@@ -21,7 +21,7 @@ from .._errors import input_error
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
 
-ENGINE_KINDS = ("multihead", "motion")
+ENGINE_KINDS = ("multihead", "motion", "sds")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,6 +111,8 @@ def diagnose(
 
         if rec.kind == "multihead":
             from ._multihead import MULTIHEAD as kind
+        elif rec.kind == "sds":
+            from ._sds import SDS as kind
         else:
             from ._motion import MOTION as kind
         doc = run_engine(
@@ -122,6 +124,10 @@ def diagnose(
             verbose=verbose,
         )
         plot_data = doc.pop("_plot")
+        if rec.kind == "sds":
+            from ._sds import finish_sds
+
+            doc = finish_sds(doc)
         d = Diagnosis(doc, doc["status"], plot_data)
         if plots is not None:
             from ._plots import engine_plots
@@ -134,14 +140,9 @@ def diagnose(
                 f"user candidates are not supported for kind {rec.kind!r} yet",
                 "a multihead or motion recording",
             )
-        if rec.kind == "sds":
-            from ._sds import diagnose_sds
+        from ._quadrature import diagnose_quadrature
 
-            doc = diagnose_sds(rec, plots=plots)
-        else:
-            from ._quadrature import diagnose_quadrature
-
-            doc = diagnose_quadrature(rec, plots=plots)
+        doc = diagnose_quadrature(rec, plots=plots)
         doc = conform(doc, rec)
         d = Diagnosis(doc, doc.get("status", "ok"))
     if throw and d.status != "ok":

@@ -119,6 +119,12 @@ class Kind:
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
+        prepare: ``prepare(kind_data, meta) -> Prepared`` replacing :func:`prepare` for a
+            kind whose rows are not a time series of a turning shaft (``sds``: one row per
+            platform position); ``None``: the engine's.
+        noise: ``noise(prep, base_residual) -> sigma (C,)`` replacing
+            :func:`noise_spectral` for a kind whose noise has a known structure (``sds``:
+            levels by degrees of freedom); ``None``: the engine's.
     """
 
     name: str
@@ -129,6 +135,8 @@ class Kind:
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
     summary: Callable[[Any, dict], dict] | None = None
+    prepare: Callable[[KindData, dict], Any] | None = None
+    noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -1663,7 +1671,7 @@ def run_engine(
     kd = kind.data(rec)
     meta = dict(rec.meta)
     meta.setdefault("kind", rec.kind)
-    prep = prepare(kd, meta)
+    prep = (kind.prepare or prepare)(kd, meta)
     stage("prepared")
     limit = int(kind.max_order_limit(prep))
     if max_order is not None and max_order > limit:
@@ -1702,7 +1710,7 @@ def run_engine(
         fitter.clear()
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it
-    sig = noise_spectral(prep, fitter.residual(base_fit.terms))
+    sig = (kind.noise or noise_spectral)(prep, fitter.residual(base_fit.terms))
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
         prep.ctx.noise[...] = sig

@@ -475,7 +475,8 @@ def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> 
     tot = float(np.sum(rw[prep.keep] ** 2))
     out: list[Finding] = []
     for v in views:
-        out += VIEWS[v](prep, rw, scan_order)
+        # a kind may supply its own view: a callable ``view(prep, rw, scan_order)``
+        out += (VIEWS[v] if isinstance(v, str) else v)(prep, rw, scan_order)
     for f in out:
         f.variance_share = float(max(f.power - f.dof, 0.0) / max(tot, 1e-300))
     out.sort(key=lambda f: f.log10_p)
