@@ -311,3 +311,28 @@ def test_optical_radius_from_the_recording(sds_bench, tmp_path):
     bad.write_text(text)
     with pytest.raises(encdesign.EncdesignInputError, match="optical_radius_m"):
         load_recording(bad)
+
+
+def test_conceal_benchmark_sds_quick(tmp_path):
+    """The benchmark's sds block on the engine (one clean recording), with its confusion
+    table."""
+    rc = cli_main(
+        [
+            "study",
+            "run",
+            "conceal-benchmark",
+            "--kinds",
+            "sds",
+            "--quick",
+            "--sds-runs",
+            "8",
+            "--out",
+            str(tmp_path / "b"),
+            "--json",
+            str(tmp_path / "s.json"),
+            "--no-plots",
+        ]
+    )
+    assert rc == 0
+    s = json.loads((tmp_path / "s.json").read_text())["sds"]
+    assert s["n_recordings"] == 1 and s["confusion"] == {"clean": {"consistent": 1}}

@@ -577,7 +577,7 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
     )
     consts["base_orders"] = orders
     X, _ = _saturating_columns(rows, consts, orders)
-    sigma = _level_sigma(kd.y, kd.n_revs, X)
+    sigma = _level_sigma(kd.y, kd.n_revs, X, float(consts["proj"]) > 0)
     ctx = Context(
         kind="sds",
         n_channels=C,
@@ -647,27 +647,57 @@ def _saturating_columns(rows: dict, consts: dict, orders_base: list[int]) -> tup
     return X, L
 
 
-def _level_sigma(resid: np.ndarray, K: int, X: np.ndarray) -> np.ndarray:
+def _level_sigma(resid: np.ndarray, K: int, X: np.ndarray, proj: bool = False) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
 
     Run means: the residual of a saturated least-squares fit (:func:`_saturating_columns`:
     every smooth pattern in the platform angle up to order ``L``, so no catalog effect and
-    no low order can inflate it), robust scale 1.4826 MAD (structure on a minority of runs,
-    a step or an outlier, cannot inflate it either) times ``sqrt(n / (n - rank))``.
+    no low order can inflate it; plus, per sensor, the strongest change point over the runs
+    when it is significant, so a step over many runs cannot either), robust scale 1.4826
+    MAD (an outlier run cannot inflate it) times ``sqrt(n / (n - rank))``.
     Contrasts: the robust scale of the contrasts themselves (nothing constant within a run
     reaches them)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
     ym = resid[:, :M].ravel()
-    coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
-    e = ym - X @ coef
-    rank = int(np.linalg.matrix_rank(X))
-    n = ym.size
-    s = 1.4826 * float(np.median(np.abs(e)))
-    s = s if s > 0 else float(np.sqrt(np.mean(e**2)))
-    out[:M] = s * math.sqrt(n / max(n - rank, 1))
+
+    def scale(X, extra=0):
+        coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
+        e = ym - X @ coef
+        rank = int(np.linalg.matrix_rank(X)) + extra
+        s = 1.4826 * float(np.median(np.abs(e)))
+        s = s if s > 0 else float(np.sqrt(np.mean(e**2)))
+        return s * math.sqrt(ym.size / max(ym.size - rank, 1)), e.reshape(R, M)
+
+    s, e = scale(X)
+    # a step on one sensor over many runs (a changed delay) is not smooth in the platform
+    # angle: the strongest significant change point per sensor joins the saturated fit
+    steps = []
+    thr = _thr(1, max(1, 2 * M * (R - 1)))
+
+    def ssr(X):
+        coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
+        return float(np.sum((ym - X @ coef) ** 2))
+
+    ssr0 = ssr(X)
+    for m in range(M):
+        best = (0.0, None)
+        for k in range(1, R):
+            col = np.zeros((R, M))
+            col[k:, m] = 1.0
+            if proj:
+                col -= col.mean(1, keepdims=True)
+            pw = (ssr0 - ssr(np.concatenate([X, col.reshape(-1, 1)], 1))) / s**2
+            if pw > best[0]:
+                best = (pw, col)
+        if best[0] > thr:
+            steps.append(best[1].reshape(-1, 1))
+    if steps:
+        # the change point was searched for: count it as one more degree of freedom
+        s, e = scale(np.concatenate([X, *steps], 1), extra=len(steps))
+    out[:M] = s
     if C > M:
         x = resid[:, M:].ravel()
         s = 1.4826 * float(np.median(np.abs(x)))
@@ -682,7 +712,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
     the base residual's common-order powers (:func:`common_order_power`) for the
     plausibility of ``beam_tilt_axial``."""
     X, _ = _saturating_columns(prep.rows, prep.consts, prep.consts.get("base_orders", []))
-    sig = _level_sigma(resid[prep.keep], prep.kd.n_revs, X)
+    sig = _level_sigma(resid[prep.keep], prep.kd.n_revs, X, float(prep.consts["proj"]) > 0)
     M = prep.consts["psi_m"].size
     # a tuple, not an array: arrays in consts are passed to every term
     prep.ctx.consts["common_order_power"] = tuple(  # type: ignore[index]
@@ -753,6 +783,19 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
         return (
             f"its main order {n} is common to the moving sensors, but the common structure "
             f"peaks at order {top} of the platform angle (chi-square {pw[top - 1]:.0f})"
+        )
+    return None
+
+
+def _delay_plausible(ctx: Context, params: dict) -> str | None:
+    """A delay step is one sensor's (its electronics, its cable): refused when another
+    moving sensor carries more than half of the largest step (a pattern common to the
+    moving sensors, e.g. a drift or a platform-angle order, is not a sensor's delay)."""
+    d = np.sort(np.abs(np.asarray(params["delay_s"], float)))[::-1]
+    if d.size > 1 and d[1] > 0.5 * d[0]:
+        return (
+            f"the step is shared by several moving sensors ({d[1] / d[0]:.0%} of the largest "
+            "on the next one): not one sensor's delay"
         )
     return None
 
@@ -1151,6 +1194,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             kinds=("sds",),
             explanation=EXPLANATIONS["sensor_delay_step"],
             start=_delay_start,
+            plausible=_delay_plausible,
             derived=_delay_derived,
         ),
     ]
@@ -1260,8 +1304,20 @@ def _matched_view(name: str):
     return view
 
 
+def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """The engine's ``orders`` view on the run-mean channels only (a pattern in the platform
+    angle is constant within a run: it cannot reach the revolution contrasts, whose
+    scan would only add false alarms)."""
+    from ._views import view_orders
+
+    M = prep.consts["psi_m"].size
+    r = np.zeros_like(rw)
+    r[:, :M] = rw[:, :M]
+    return view_orders(prep, r, min(scan_order, sds_limit(prep)))
+
+
 SDS_VIEWS = (
-    "orders",
+    view_mean_orders,
     view_common_orders,
     view_run_step,
     _matched_view("axis_tilt"),
