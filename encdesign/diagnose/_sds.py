@@ -55,6 +55,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy import stats
 
 from .._errors import input_error
 from ..io._recording import Recording
@@ -675,24 +676,29 @@ def _level_sigma(resid: np.ndarray, K: int, X: np.ndarray, proj: bool = False) -
     # a step on one sensor over many runs (a changed delay) is not smooth in the platform
     # angle: the strongest significant change point per sensor joins the saturated fit
     steps = []
-    thr = _thr(1, max(1, 2 * M * (R - 1)))
+    n_tests = max(1, 2 * M * (R - 1))
 
     def ssr(X):
         coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
-        return float(np.sum((ym - X @ coef) ** 2))
+        return float(np.sum((ym - X @ coef) ** 2)), int(np.linalg.matrix_rank(X))
 
-    ssr0 = ssr(X)
     for m in range(M):
+        Xc = np.concatenate([X, *steps], 1) if steps else X
+        ssr0, _ = ssr(Xc)
         best = (0.0, None)
         for k in range(1, R):
             col = np.zeros((R, M))
             col[k:, m] = 1.0
             if proj:
                 col -= col.mean(1, keepdims=True)
-            pw = (ssr0 - ssr(np.concatenate([X, col.reshape(-1, 1)], 1))) / s**2
-            if pw > best[0]:
-                best = (pw, col)
-        if best[0] > thr:
+            s1, rk = ssr(np.concatenate([Xc, col.reshape(-1, 1)], 1))
+            dof = ym.size - rk
+            if dof < 3 or s1 <= 0:
+                continue
+            f = (ssr0 - s1) / (s1 / dof)  # F(1, dof): the step against what is left
+            if f > best[0] and f > stats.f.isf(1e-3 / n_tests, 1, dof):
+                best = (f, col)
+        if best[1] is not None:
             steps.append(best[1].reshape(-1, 1))
     if steps:
         # the change point was searched for: count it as one more degree of freedom
