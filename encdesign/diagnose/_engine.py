@@ -115,7 +115,8 @@ class Kind:
         base: ``base(prep, max_order) -> ([(Candidate, start), ...], info)``: base-model
             terms for this record (``info``: ``{"unidentifiable": [...], "align": fn}``).
         candidates: ``candidates(ctx) -> tuple[Candidate, ...]``.
-        views: names of the views run on the residual.
+        views: names of the views run on the residual (or the kind's own view functions,
+            ``view(prep, whitened_residual, scan_order) -> [Finding, ...]``).
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
@@ -131,7 +132,7 @@ class Kind:
     data: Callable[[Any], KindData]
     base: Callable[[Any, int], tuple[list, dict]]
     candidates: Callable[[Context], tuple[Candidate, ...]]
-    views: tuple[str, ...]
+    views: tuple[str | Callable[..., Any], ...]
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
     summary: Callable[[Any, dict], dict] | None = None
