@@ -8,10 +8,12 @@ against a reference (magnetic, resolver, capacitive, optical; one or both direct
 start (start-up ramp or return move, shaking the heads while it lasts) and single-sample
 glitches. Cases: ``clean``; ``single`` (one effect at 1x the noise); ``weak`` (0.5x);
 ``compound`` (2-3 effects); ``out_of_catalog`` (an integer order, a step or a chirp on one
-head). ``encdesign.diagnose`` never sees the truth. ``--kinds`` adds ``sds`` (the SDS finder's
-concealed benches, ``diagnose._conceal_sds``) and ``quadrature`` (two signals of one head:
-``signal_shape`` of 1 or 3 harmonics; a radial order above 12, an amplitude step or clipping
-out of catalog; captures sorted by phase or in time order with a dwell or a reversal).
+head). ``encdesign.diagnose`` never sees the truth. ``--kinds`` adds ``sds`` (the engine's
+``sds`` kind on the concealed SDS benches of ``diagnose._conceal_sds``: 12 platform positions
+each, to keep them cheap; ``--sds-runs`` sets another count) and ``quadrature`` (two signals of
+one head: ``signal_shape`` of 1 or 3 harmonics; a radial order above 12, an amplitude step or
+clipping out of catalog; captures sorted by phase or in time order with a dwell or a reversal);
+their confusion tables are in ``confusion.png``.
 
 Scored per kind and overall: single effects at >= 1x noise named correctly (the named set is
 exactly the truth), effects of compound records found, clean records ``consistent``,
@@ -33,7 +35,6 @@ from encdesign.design._distributed import allgather_objects, is_my_task
 from encdesign.diagnose._conceal_bench import draw_plan, simulate
 from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._sds import diagnose_sds
 from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 
 NAME = "conceal-benchmark"
@@ -57,6 +58,7 @@ SDS_PLAN = {
     "beam_tilt_axial": [("near_noise", True), ("near_noise", True), ("clear", True)],
     "coil_mismatch": [("near_noise", True), ("near_noise", False), ("clear", True)],
     "timing_quantization": [("near_noise", True), ("near_noise", False), ("clear", True)],
+    "sensor_delay_step": [("clear", True), ("clear", False), ("partial", True)],
     None: [("near_noise", True)] * 4 + [("near_noise", False)] * 2,
     "run_step": [("near_noise", True), ("near_noise", True)],
     "order_5": [("near_noise", True), ("near_noise", True)],
@@ -68,67 +70,75 @@ def _sds_located(truth: dict, unexplained: list[dict]) -> bool:
     w = truth.get("where", {})
     for u in unexplained:
         uw = u["where"]
-        if truth["effect"] == "run_step" and w["runs"][0] in uw["runs"] and len(uw["runs"]) == 1:
+        if (
+            truth["effect"] == "run_step"
+            and w["runs"][0] in uw["runs"]
+            and len(uw["runs"]) == 1
+            and (not uw["heads"] or uw["heads"] == [1])  # the step is on m1
+        ):
             return True
         if truth["effect"] == "order_5" and set(w["orders"]) & set(uw["orders"]):
             return True
     return False
 
 
-def _sds_block(args, plan) -> dict:
+def _sds_block(args, plan, seeds) -> dict:
     rows = []
-    total = sum(len(v) for v in plan.values())
+    total = sum(len(v) for v in plan.values()) * len(seeds)
     i = 0
-    for effect, cases in plan.items():
-        for conc, ref in cases:
-            if not is_my_task(i):  # one recording per task, dealt over the processes
-                i += 1
-                continue
-            seed = args.seed * 1000 + 500 + i
-            path = args.out / "recordings" / f"sds{i:03d}.toml"
-            rec, truth = write_concealed_sds(
-                path, key=jax.random.key(seed), effect=effect, concealment=conc, phi_ref=ref
-            )
-            t0 = time.perf_counter()
-            d = diagnose_sds(rec)
-            dt = time.perf_counter() - t0
-            named = d["effects"][0]["name"] if d["effects"] else None
-            label = named or d["verdict"]
-            fitted = [e for e in d["effects"] if e["name"] != "timing_quantization"]
-            after = fitted[-1]["heldout_rms_after"] if fitted else d["heldout_rms_before"]
-            row = dict(
-                recording=str(path),
-                seed=seed,
-                truth=effect or "clean",
-                concealment=conc,
-                phi_ref=ref,
-                verdict=d["verdict"],
-                named=[e["name"] for e in d["effects"]],
-                fitted=[e["name"] for e in d["effects"] if e["name"] != "timing_quantization"],
-                label=label,
-                heldout_rms_before=d["heldout_rms_before"],
-                heldout_rms_after=after,
-                heldout_improvement=1 - after / d["heldout_rms_before"],
-                time_s=dt,
-                truth_params=truth["params"],
-                fitted_params=d["effects"][0]["params"] if d["effects"] else None,
-            )
-            if effect in SDS_CATALOG:
-                row["correct"] = named == effect
-            elif effect is None:
-                row["correct"] = d["verdict"] == "consistent"
-            else:
-                row["correct"] = d["verdict"] == "unexplained" and _sds_located(
-                    truth, d["unexplained"]
-                )
-            rows.append(row)
+    todo = [(s, e, c, r) for s in seeds for e, cases in plan.items() for c, r in cases]
+    for base_seed, effect, conc, ref in todo:
+        if not is_my_task(i):  # one recording per task, dealt over the processes
             i += 1
-            print(
-                f"[{NAME}] sds {i}/{total} {row['truth']:20s} {conc:10s} ref={int(ref)} -> "
-                f"{label:20s} {'ok' if row['correct'] else 'WRONG'} ({dt:.1f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
+            continue
+        seed = base_seed * 1000 + 500 + i
+        path = args.out / "recordings" / f"sds{i:03d}.toml"
+        rec, truth = write_concealed_sds(
+            path,
+            key=jax.random.key(seed),
+            effect=effect,
+            concealment=conc,
+            phi_ref=ref,
+            n_runs=args.sds_runs,
+        )
+        t0 = time.perf_counter()
+        d = diagnose(rec).doc
+        dt = time.perf_counter() - t0
+        named = d["effects"][0]["name"] if d["effects"] else None
+        label = named or d["verdict"]
+        fitted = [e for e in d["effects"] if e["name"] != "timing_quantization"]
+        after = fitted[-1]["heldout_rms_after"] if fitted else d["heldout_rms_before"]
+        row = dict(
+            recording=str(path),
+            seed=seed,
+            truth=effect or "clean",
+            concealment=conc,
+            phi_ref=ref,
+            verdict=d["verdict"],
+            named=[e["name"] for e in d["effects"]],
+            fitted=[e["name"] for e in d["effects"] if e["name"] != "timing_quantization"],
+            label=label,
+            heldout_rms_before=d["heldout_rms_before"],
+            heldout_rms_after=after,
+            heldout_improvement=1 - after / d["heldout_rms_before"],
+            time_s=dt,
+            truth_params=truth["params"],
+            fitted_params=d["effects"][0]["params"] if d["effects"] else None,
+        )
+        if effect in SDS_CATALOG:
+            row["correct"] = named == effect
+        elif effect is None:
+            row["correct"] = d["verdict"] == "consistent"
+        else:
+            row["correct"] = d["verdict"] == "unexplained" and _sds_located(truth, d["unexplained"])
+        rows.append(row)
+        i += 1
+        print(
+            f"[{NAME}] sds {i}/{total} {row['truth']:20s} {conc:10s} ref={int(ref)} -> "
+            f"{label:20s} {'ok' if row['correct'] else 'WRONG'} ({dt:.1f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
     rows = sorted(allgather_objects(rows), key=lambda r: r["seed"])  # all processes' shares
     cat = [r for r in rows if r["truth"] in SDS_CATALOG]
     clean = [r for r in rows if r["truth"] == "clean"]
@@ -391,6 +401,9 @@ def main(argv: list[str] | None = None) -> int:
         help="comma list of multihead, sensor, motion, quadrature, sds",
     )
     parser.add_argument("--seeds", type=int, default=3, help="seeds (each a full plan)")
+    parser.add_argument(
+        "--sds-runs", type=int, default=12, help="platform positions per sds recording"
+    )
     args = parser.parse_args(argv)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
     bad = [k for k in kinds if k not in ("multihead", "sensor", "motion", "quadrature", "sds")]
@@ -417,11 +430,12 @@ def main(argv: list[str] | None = None) -> int:
     summary: dict = {"kinds": per_kind, "seeds": seeds, "n_recordings": len(rows)}
     summary["overall"] = _rates(rows)
     if "sds" in kinds:
-        summary["sds"] = _sds_block(args, SDS_QUICK if args.quick else SDS_PLAN)
+        summary["sds"] = _sds_block(args, SDS_QUICK if args.quick else SDS_PLAN, seeds)
         summary["n_recordings"] += summary["sds"]["n_recordings"]
     summary["rows"] = rows
     summary["total_time_s"] = time.perf_counter() - t_all
-    figs = [] if args.no_plots else [_confusion_figure(args, per_kind)]
+    conf_kinds = {**per_kind, **({"sds": summary["sds"]} if "sds" in summary else {})}
+    figs = [] if args.no_plots else [_confusion_figure(args, conf_kinds)]
     write_results(args, NAME, summary, figs)
     for k, r in per_kind.items():
         log(

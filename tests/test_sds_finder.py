@@ -1,4 +1,5 @@
-"""Discrepancy finder for sds recordings (``encdesign.diagnose._sds``)."""
+"""Discrepancy finder for sds recordings: the ``sds`` kind of the engine
+(``encdesign.diagnose._sds``)."""
 
 from __future__ import annotations
 
@@ -11,11 +12,20 @@ import pytest
 
 import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
+from encdesign.diagnose import diagnose
 from encdesign.diagnose._conceal_sds import write_concealed_sds
-from encdesign.diagnose._sds import _Fitter, diagnose_sds, sds_pair_table, sds_terms
+from encdesign.diagnose._sds import (
+    _axis_tilt_fn,
+    _wobble_fn,
+    finish_sds,
+    sds_data,
+    sds_prepare,
+    stamp_lattice,
+)
 from encdesign.io._recording import load_recording, write_recording
+from tests.helpers import validate_diagnosis
 
-N_RUNS = 12  # platform positions per test recording (as in the benchmark)
+N_RUNS = 12  # platform positions per test recording
 
 
 @pytest.fixture(scope="module")
@@ -24,10 +34,10 @@ def sds_bench(tmp_path_factory):
     cache: dict = {}
     folder = tmp_path_factory.mktemp("sds")
 
-    def make(effect, concealment="clear", phi_ref=True):
-        k = (effect, concealment, phi_ref)
+    def make(effect, concealment="clear", phi_ref=True, **kw):
+        k = (effect, concealment, phi_ref, tuple(sorted(kw.items())))
         if k not in cache:
-            path = folder / f"{effect}-{concealment}-{int(phi_ref)}.toml"
+            path = folder / f"{effect}-{concealment}-{int(phi_ref)}-{len(cache)}.toml"
             cache[k] = write_concealed_sds(
                 path,
                 key=jax.random.key(7),
@@ -35,24 +45,36 @@ def sds_bench(tmp_path_factory):
                 concealment=concealment,
                 phi_ref=phi_ref,
                 n_runs=N_RUNS,
+                **kw,
             )
         return cache[k]
 
     return make
 
 
+def _diag(rec):
+    d = diagnose(rec).doc
+    validate_diagnosis(d)
+    json.dumps(d, allow_nan=False)  # no non-finite number anywhere
+    return d
+
+
 def _param(d, name, key):
     e = next(e for e in d["effects"] if e["name"] == name)
-    return e["params"][key]["value"]
+    got = e["params"].get(key) or e["derived"][key]
+    return got["value"], got["se"]
 
 
 def test_clean_recording_is_consistent(sds_bench):
     rec, _ = sds_bench(None)
-    d = diagnose_sds(rec)
+    d = _diag(rec)
     assert d["verdict"] == "consistent", d["report"]
     assert d["effects"] == [] and d["unexplained"] == []
     assert d["heldout_rms_before"] > 0 and d["rms_before"] > 0
+    assert d["goodness_of_fit"]["passes"] and d["heldout"]["k"] >= 4
     assert any("constant offset" in u for u in d["base"]["unidentifiable"])
+    # the declared clock is the stamps' lattice
+    assert d["clock"]["ratio_to_declared"] == pytest.approx(1.0, rel=1e-3)
 
 
 @pytest.mark.parametrize(
@@ -61,83 +83,166 @@ def test_clean_recording_is_consistent(sds_bench):
         ("axis_tilt", "tilt_rad", "tilt_rad"),
         ("thermal_drift", "drift_rate_rad_per_s", "drift_rate_rad_per_s"),
         ("bearing_wobble", "amplitude_rad", "amplitude_rad"),
+        ("beam_tilt_axial", "order_1_amplitude_rad", "order_1_amplitude_rad"),
+        ("coil_mismatch", "speed_ripple_relative_order_1", "speed_ripple_order_1"),
     ],
 )
 def test_effect_named_and_recovered(sds_bench, effect, key, truth_key):
     rec, truth = sds_bench(effect)
-    d = diagnose_sds(rec)
+    d = _diag(rec)
     assert d["verdict"] == "missing_physics", d["report"]
     assert d["effects"][0]["name"] == effect, d["report"]
-    got = _param(d, effect, key)
+    got, se = _param(d, effect, key)
     want = truth["params"][truth_key]
     assert abs(abs(got) - want) < 0.1 * want, (got, want)
     e = d["effects"][0]
     assert e["heldout_rms_after"] < d["heldout_rms_before"]
-    assert e["explanation"]
+    assert e["explanation"] and e["delta_bic"] < -10 and e["collinearity"] is not None
 
 
-def test_beam_tilt_named_and_recovered(sds_bench):
-    rec, truth = sds_bench("beam_tilt_axial")
-    d = diagnose_sds(rec)
-    assert d["effects"][0]["name"] == "beam_tilt_axial", d["report"]
-    p = d["effects"][0]["params"]
-    got = p["order_1"]["error_amplitude_rad"]["value"]
-    want = truth["params"]["order_1_amplitude_rad"]
-    assert abs(got - want) < 0.1 * want
+def test_axis_tilt_standard_errors_are_honest(sds_bench):
+    """The tilt and its azimuth (seen modulo pi) within 5 se of the truth, with se from the
+    Gauss-Newton covariance at the noise level (not 1e-12 rad)."""
+    rec, truth = sds_bench("axis_tilt")
+    d = _diag(rec)
+    b, sb = _param(d, "axis_tilt", "tilt_rad")
+    chi, sc = _param(d, "axis_tilt", "azimuth_rad")
+    tb, tc = truth["params"]["tilt_rad"], truth["params"]["azimuth_rad"]
+    assert sb > 1e-3 * tb and sc > 1e-6
+    assert abs(b - tb) < 5 * sb
+    dchi = (chi - tc + np.pi / 2) % np.pi - np.pi / 2
+    assert abs(dchi) < 5 * sc
+    assert 0 <= chi < np.pi
 
 
-def test_coil_mismatch_named_and_speed_ripple_recovered(sds_bench):
-    rec, truth = sds_bench("coil_mismatch")
-    d = diagnose_sds(rec)
+def test_unresolved_tilt_azimuth_is_unidentifiable():
+    doc = {
+        "effects": [
+            {
+                "name": "axis_tilt",
+                "params": {
+                    "tilt_rad": {"value": -2e-6, "se": 1e-5, "unit": "rad"},
+                    "azimuth_rad": {"value": 4.0, "se": 1e-12, "unit": "rad"},
+                },
+                "notes": [],
+            }
+        ],
+        "goodness_of_fit": {"variance_ratio": 4.0},
+        "notes": [],
+        "verdict": "missing_physics",
+        "clock": {},
+    }
+    out = finish_sds(doc)
+    p = out["effects"][0]["params"]
+    assert p["azimuth_rad"]["se"] is None
+    assert any("unidentifiable" in n for n in out["effects"][0]["notes"])
+    # se scaled by the square root of the final variance ratio
+    assert p["tilt_rad"]["se"] == pytest.approx(2e-5)
+    assert p["tilt_rad"]["value"] == 2e-6 and 0 <= p["azimuth_rad"]["value"] < np.pi
+
+
+def test_coarse_clock_is_noticed(sds_bench):
+    """Stamps on a 25 ns lattice while 10 ns is declared (2.5x, not a 1-2-5 multiple)."""
+    rec, truth = sds_bench("timing_quantization", clock_factor=2.5)
+    d = _diag(rec)
+    assert d["clock"]["lattice_period_s"] == pytest.approx(2.5e-8, rel=1e-3)
+    assert d["clock"]["ratio_to_declared"] == pytest.approx(2.5, rel=1e-3)
+    assert d["grid_period_s"] == pytest.approx(2.5e-8, rel=1e-3)
+    got, _ = _param(d, "timing_quantization", "clock_period_s")
+    assert got == pytest.approx(2.5e-8, rel=1e-3)
+    q = d["goodness_of_fit"]["quantization"]
+    assert q["lattice_period_s"] == pytest.approx(2.5e-8, rel=1e-3) and q["predicted_floor_rad"]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_stamp_lattice_any_clock(seed):
+    rng = np.random.default_rng(seed)
+    period = rng.uniform(3e-9, 40e-9)
+    t0 = rng.uniform(0, 1e-6)
+    n = np.cumsum(rng.integers(200, 2400, 5000))
+    t = t0 + n * period
+    got = stamp_lattice(t)["period_s"]
+    assert got == pytest.approx(period, rel=1e-6)
+    # written with 12 significant digits, and 3 stray stamps off the lattice
+    tw = np.asarray([float(f"{v:.12g}") for v in t])
+    tw[[100, 2000, 4000]] += 0.37 * period
+    assert stamp_lattice(tw)["period_s"] == pytest.approx(period, rel=1e-5)
+    # any multiple of a declared clock, not only 1-2-5 steps: 2.5 x 10 ns
+    assert stamp_lattice(n * 25e-9)["period_s"] == pytest.approx(25e-9, rel=1e-6)
+    # continuous times: no lattice
+    tc = np.cumsum(rng.uniform(1e-6, 2e-5, 5000))
+    assert stamp_lattice(tc)["period_s"] is None
+
+
+def test_sensor_delay_step_located_and_named(sds_bench):
+    rec, truth = sds_bench("sensor_delay_step")
+    d = _diag(rec)
+    assert d["effects"][0]["name"] == "sensor_delay_step", d["report"]
+    der = d["effects"][0]["derived"]
+    assert der["sensor"]["value"] == truth["where"]["heads"][0]
+    assert der["first_run"]["value"] == truth["where"]["runs"][0]
+    want = truth["params"]["delay_step_s"]
+    assert abs(der["delay_step_s"]["value"] - want) < 0.1 * want
+    assert any(f["view"] == "run_step" for f in d["findings_before"])
+
+
+def test_no_phi_ref_diagnoses(sds_bench, tmp_path):
+    """Without phi_ref: a document (no NaN), common terms held and listed."""
+    rec, _ = sds_bench(None, "clear", False)
+    out = tmp_path / "d.json"
+    assert cli_main(["diagnose", str(rec.path), "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent", d["report"]
+    assert any("no phi_ref" in u for u in d["base"]["unidentifiable"])
+    assert any(r["name"] == "beam_tilt_axial" for r in d["not_testable"])
+
+
+def test_common_only_coil_order_is_unidentifiable_without_phi_ref(sds_bench):
+    rec, _ = sds_bench("coil_mismatch", "clear", False)
+    d = _diag(rec)
     assert d["effects"][0]["name"] == "coil_mismatch", d["report"]
-    got = d["effects"][0]["params"]["speed_ripple_relative"]["order_1"]["value"]
-    want = truth["params"]["speed_ripple_order_1"]
-    assert abs(got - want) < 0.1 * want
+    # three equally spaced moving sensors: order 3 has one phase at all of them
+    assert any("orders [3]" in u for u in d["base"]["unidentifiable"]), d["report"]
 
 
-def test_timing_quantization_named(sds_bench):
-    rec, truth = sds_bench("timing_quantization")
-    d = diagnose_sds(rec)
-    names = [e["name"] for e in d["effects"]]
-    assert "timing_quantization" in names, d["report"]
-    got = _param(d, "timing_quantization", "clock_period_s")
-    assert abs(got - truth["params"]["clock_period_s"]) < 0.1 * truth["params"]["clock_period_s"]
-
-
-def test_out_of_catalog_is_unexplained(tmp_path):
-    rec, _ = write_concealed_sds(
-        tmp_path / "o5.toml", key=jax.random.key(7), effect="order_5", concealment="clear"
-    )  # 12 runs: order 5 must not alias onto the candidates' orders 1-3
-    d = diagnose_sds(rec)
+def test_out_of_catalog_is_unexplained(sds_bench):
+    """One moving sensor's bracket shifted in one run: located on that sensor and run."""
+    rec, truth = sds_bench("run_step")
+    d = _diag(rec)
     assert d["verdict"] == "unexplained", d["report"]
-    assert any(5 in u["where"]["orders"] for u in d["unexplained"])
+    f = d["unexplained"][0]
+    assert f["view"] == "run_step"
+    assert f["where"]["runs"] == truth["where"]["runs"] and f["where"]["heads"] == [1]
 
 
 def test_candidate_term_gradients_match_finite_differences(sds_bench):
     rec, _ = sds_bench(None)
-    tab = sds_pair_table(rec)
-    f = _Fitter(tab, [6], (1, 2))
-    lay = f.layout
-    p = np.zeros(lay.size)
-    p[lay.sl("axis_tilt")] = [1e-3, 0.4]
-    p[lay.sl("bearing_wobble")] = [0.41, 3e-7, -2e-7]
-    p[lay.sl("thermal_drift")] = [1e-8]
-    p[lay.sl("beam_tilt_axial")] = 1e-7
-    p[lay.sl("coil_mismatch")] = 5e-8
-    w = jnp.asarray(np.random.default_rng(0).normal(size=tab.value_rad.size))
+    kd = sds_data(rec)
+    prep = sds_prepare(kd, dict(rec.meta, kind="sds"))
+    x = {k: jnp.asarray(v) for k, v in prep.rows.items()}
+    x.update({k: jnp.asarray(v) for k, v in prep.consts.items() if isinstance(v, np.ndarray)})
+    w = jnp.asarray(np.random.default_rng(0).normal(size=prep.y.shape))
+    cases = [
+        (_axis_tilt_fn, {"tilt_rad": 1e-3, "azimuth_rad": 0.4}, ["tilt_rad", "azimuth_rad"]),
+        (_wobble_fn, {"frequency_ratio": 0.41, "sin_rad": 3e-7, "cos_rad": -2e-7}, None),
+    ]
+    for fn, p0, names in cases:
+        names = names or list(p0)
+        p0 = {k: jnp.asarray(v, float) for k, v in p0.items()}
 
-    def obj(q):
-        terms = sds_terms(q, f.data, lay)
-        return 1e6 * sum(jnp.dot(w, terms[k]) for k in terms if k not in ("pair_const",))
+        def obj(p, fn=fn):
+            return 1e6 * jnp.sum(w * fn(p, x))
 
-    g = np.asarray(jax.grad(obj)(jnp.asarray(p)))
-    for idx in [lay.sl("axis_tilt").start, lay.sl("axis_tilt").start + 1]:
-        h = 1e-5
-        for i, hh in ((idx, h), (lay.sl("bearing_wobble").start, 1e-6)):
-            e = np.zeros_like(p)
-            e[i] = hh
-            fd = (float(obj(jnp.asarray(p + e))) - float(obj(jnp.asarray(p - e)))) / (2 * hh)
-            assert abs(g[i] - fd) <= 1e-4 * max(abs(fd), 1e-3), (i, g[i], fd)
+        g = jax.grad(obj)(p0)
+        for k in names:
+            # the terms are small differences of O(1) angles: a step of 1e-4 relative keeps
+            # round-off below the truncation error
+            h = 1e-4 * max(abs(float(p0[k])), 1e-3)
+            hi = {**p0, k: p0[k] + h}
+            lo = {**p0, k: p0[k] - h}
+            fd = (float(obj(hi)) - float(obj(lo))) / (2 * h)
+            assert abs(float(g[k]) - fd) <= 1e-3 * max(abs(fd), 1e-3), (k, float(g[k]), fd)
 
 
 def test_cli_sds_contract_and_refusal(sds_bench, tmp_path, capsys):
@@ -146,11 +251,10 @@ def test_cli_sds_contract_and_refusal(sds_bench, tmp_path, capsys):
     rc = cli_main(["diagnose", str(rec.path), "--json", str(out), "--plots", str(tmp_path / "p")])
     assert rc == 0
     doc = json.loads(out.read_text())
+    validate_diagnosis(doc)
     for key in ("verdict", "rms_before", "heldout_rms_before", "effects", "unexplained"):
         assert key in doc
-    assert {"name", "params", "rms_after", "heldout_rms_after", "explanation"} <= set(
-        doc["effects"][0]
-    )
+    assert doc["goodness_of_fit"]["statistic_z"] is not None
     assert len(list((tmp_path / "p").glob("*.png"))) == 3
     # malformed: a missing edge in one sensor's sequence -> exit 2, clear message
     full = load_recording(rec.path)
@@ -169,7 +273,7 @@ def test_cli_sds_contract_and_refusal(sds_bench, tmp_path, capsys):
     few = {k: v[cols["run"] < 2] for k, v in cols.items()}
     rec2 = write_recording(tmp_path / "few.toml", "sds", few, encoder=full.encoder)
     with pytest.raises(encdesign.EncdesignInputError, match="runs"):
-        diagnose_sds(rec2)
+        diagnose(rec2)
 
 
 def test_readings_windows_aligned_in_time(sds_bench):
@@ -187,23 +291,18 @@ def test_readings_windows_aligned_in_time(sds_bench):
     assert np.max(np.abs(dev)) < 6e-8, dev
 
 
-def test_common_only_coil_order_is_unidentifiable_without_phi_ref(sds_bench):
-    rec, _ = sds_bench("coil_mismatch", "clear", False)
-    d = diagnose_sds(rec)
-    assert d["effects"][0]["name"] == "coil_mismatch", d["report"]
-    # three equally spaced moving sensors: order 3 has one phase at all of them
-    assert any("orders [3]" in u for u in d["base"]["unidentifiable"]), d["report"]
-
-
 def test_optical_radius_from_the_recording(sds_bench, tmp_path):
-    rec, _ = sds_bench("bearing_wobble")
-    base = diagnose_sds(rec)
+    rec, truth = sds_bench("bearing_wobble")
+    base = _diag(rec)
     enc = dict(rec.encoder, optical_radius_m=0.05)
     path = tmp_path / "r.toml"
     write_recording(path, "sds", dict(rec.columns), encoder=enc)
-    d = diagnose_sds(load_recording(path))
+    d = _diag(load_recording(path))
     assert base["base"]["radius_m"] == pytest.approx(0.0254)
     assert d["base"]["radius_m"] == pytest.approx(0.05)
+    r0, _ = _param(base, "bearing_wobble", "runout_m")
+    r1, _ = _param(d, "bearing_wobble", "runout_m")
+    assert r1 == pytest.approx(r0 * 0.05 / 0.0254, rel=1e-6)
     bad = tmp_path / "bad.toml"
     with pytest.raises(encdesign.EncdesignInputError, match="optical_radius_m"):
         write_recording(bad, "sds", dict(rec.columns), encoder=dict(enc, optical_radius_m=-1.0))
@@ -212,3 +311,28 @@ def test_optical_radius_from_the_recording(sds_bench, tmp_path):
     bad.write_text(text)
     with pytest.raises(encdesign.EncdesignInputError, match="optical_radius_m"):
         load_recording(bad)
+
+
+def test_conceal_benchmark_sds_quick(tmp_path):
+    """The benchmark's sds block on the engine (one clean recording), with its confusion
+    table."""
+    rc = cli_main(
+        [
+            "study",
+            "run",
+            "conceal-benchmark",
+            "--kinds",
+            "sds",
+            "--quick",
+            "--sds-runs",
+            "8",
+            "--out",
+            str(tmp_path / "b"),
+            "--json",
+            str(tmp_path / "s.json"),
+            "--no-plots",
+        ]
+    )
+    assert rc == 0
+    s = json.loads((tmp_path / "s.json").read_text())["sds"]
+    assert s["n_recordings"] == 1 and s["confusion"] == {"clean": {"consistent": 1}}

@@ -18,7 +18,9 @@ the later runs (``partial``):
   orders 1 and 3;
 * ``coil_mismatch``: torque ripple at orders 1 … 5 (unequal coils);
 * ``timing_quantization``: the bench stamps on a clock 5× (near_noise) or 20× (clear)
-  coarser than the 100 MHz the TOML declares.
+  coarser than the 100 MHz the TOML declares (``clock_factor`` sets another ratio, e.g. 2.5);
+* ``sensor_delay_step``: moving sensor ``m1``'s edges delayed by amplitude / Ω from one run
+  on (a changed cable or comparator delay).
 
 Out of catalog (reported ``unexplained`` by a correct finder): ``run_step`` (one moving
 sensor's bracket shifted in one run) and ``order_5`` (an error 5 times per platform turn,
@@ -50,6 +52,7 @@ SDS_CATALOG = (
     "beam_tilt_axial",
     "coil_mismatch",
     "timing_quantization",
+    "sensor_delay_step",
 )
 SDS_OUT_OF_CATALOG = ("run_step", "order_5")
 SDS_HIDDEN = (*SDS_CATALOG, *SDS_OUT_OF_CATALOG)
@@ -110,6 +113,7 @@ def write_concealed_sds(
     n_revs: int = 5,
     marks_per_rev: int = 500,
     n_moving: int = 3,
+    clock_factor: float | None = None,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -127,6 +131,8 @@ def write_concealed_sds(
         n_moving: moving sensors (equally spaced). With two opposed moving sensors an axis
             tilt (order 2 in φ + ψ_m) and a beam tilt × axial runout at order 2 in φ give
             the same pattern; three or more separate them.
+        clock_factor: ``timing_quantization`` only: the bench clock period over the declared
+            one (default 5 for ``near_noise`` / ``partial``, 20 for ``clear``).
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -201,12 +207,14 @@ def write_concealed_sds(
         truth["params"]["speed_ripple_order_1"] = float(jnp.hypot(eps_c[o], eps_s[o]))
     elif effect == "timing_quantization":
         k = {"near_noise": 5, "partial": 5, "clear": 20}[concealment]
+        if clock_factor is not None:
+            k = float(clock_factor)
         kw.update(clock_period_s=CLOCK_S * k)
         truth["params"] = {"clock_period_s": CLOCK_S * k}
     base_kw = dict(clock_period_s=CLOCK_S, jitter_s=1e-9)
     if effect == "bearing_wobble":
         base_kw.update(bearing_amplitude_m=[0.0], bearing_ratio=[0.4], bearing_phase_rad=[0.0])
-    if effect in ("order_5", "run_step"):
+    if effect in ("order_5", "run_step", "sensor_delay_step"):
         # the shift is added to the exact edge times, which are then stamped once
         kw["clock_period_s"] = base_kw["clock_period_s"] = 0.0
     errors_on = SDSErrors(**kw)
@@ -233,7 +241,9 @@ def write_concealed_sds(
             truth["params"] = {"order": 5, "amplitude_rad": amp}
         if effect == "run_step" and i == step_run:
             m[1] = m[1] + 8 * amp / SPEED_RAD_S
-        if effect in ("order_5", "run_step"):
+        if effect == "sensor_delay_step" and i >= step_run:
+            m[1] = m[1] + amp / SPEED_RAD_S
+        if effect in ("order_5", "run_step", "sensor_delay_step"):
             f, m = np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
         times = np.concatenate([f, m], axis=0)
         s_count, r_count, n = times.shape
@@ -248,6 +258,9 @@ def write_concealed_sds(
         truth["where"] = {"runs": [step_run], "heads": ["m1"]}
     if effect == "order_5":
         truth["where"] = {"orders": [5]}
+    if effect == "sensor_delay_step":
+        truth["where"] = {"runs": [step_run], "heads": ["m1"]}
+        truth["params"] = {"delay_step_s": amp / SPEED_RAD_S, "first_run": step_run}
     data = {k: np.concatenate(v) for k, v in cols.items()}
     if not phi_ref:
         del data["phi_ref"]

@@ -1,10 +1,10 @@
 """One entry for the discrepancy finder over every recording kind: :func:`diagnose`.
 
-``multihead`` (including one sensor against a reference), ``motion`` and ``quadrature``
-recordings go through the engine (:mod:`encdesign.diagnose._engine`) with their kind
-(:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
-:mod:`encdesign.diagnose._quadrature`); ``sds`` recordings still go to their own finder
-(:mod:`encdesign.diagnose._sds`), whose JSON is brought to the same contract
+``multihead`` (including one sensor against a reference), ``motion``, ``sds`` and
+``quadrature`` recordings all go through the engine (:mod:`encdesign.diagnose._engine`) with
+their kind (:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
+:mod:`encdesign.diagnose._sds`, :mod:`encdesign.diagnose._quadrature`); every diagnosis
+follows one contract
 (``diagnosis.schema.json``).
 """
 
@@ -21,7 +21,7 @@ from .._errors import input_error
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
 
-ENGINE_KINDS = ("multihead", "motion", "quadrature")
+ENGINE_KINDS = ("multihead", "motion", "sds", "quadrature")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,96 +106,44 @@ def diagnose(
         EncdesignInputError: a recording that cannot be diagnosed.
     """
     rec = recording if isinstance(recording, Recording) else load_recording(recording)
-    if rec.kind in ENGINE_KINDS:
-        from ._engine import run_engine
-
-        opts = dict(
-            max_order=max_order,
-            max_effects=max_effects,
-            extra_candidates=candidates,
-            verbose=verbose,
+    if rec.kind not in ENGINE_KINDS:
+        raise input_error(
+            "kind", f"no finder for recording kind {rec.kind!r}", f"one of {ENGINE_KINDS}"
         )
-        if rec.kind == "quadrature":
-            from ._quadrature import run_quadrature
+    from ._engine import run_engine
 
-            doc = run_quadrature(rec, **opts)
-        else:
-            if rec.kind == "multihead":
-                from ._multihead import MULTIHEAD as kind
-            else:
-                from ._motion import MOTION as kind
-            doc = run_engine(kind, rec, **opts)
-        plot_data = doc.pop("_plot")
-        d = Diagnosis(doc, doc["status"], plot_data)
-        if plots is not None:
-            from ._plots import engine_plots
+    opts = dict(
+        max_order=max_order,
+        max_effects=max_effects,
+        extra_candidates=candidates,
+        verbose=verbose,
+    )
+    if rec.kind == "quadrature":
+        from ._quadrature import run_quadrature
 
-            doc["plots"] = [str(p) for p in engine_plots(d, plots)]
-            if rec.kind == "quadrature":
-                from ._quadrature import quadrature_plots
-
-                doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
+        doc = run_quadrature(rec, **opts)
     else:
-        if candidates:
-            raise input_error(
-                "candidates",
-                f"user candidates are not supported for kind {rec.kind!r} yet",
-                "a multihead, motion or quadrature recording",
-            )
-        from ._sds import diagnose_sds
+        if rec.kind == "multihead":
+            from ._multihead import MULTIHEAD as kind
+        elif rec.kind == "sds":
+            from ._sds import SDS as kind
+        else:
+            from ._motion import MOTION as kind
+        doc = run_engine(kind, rec, **opts)
+    plot_data = doc.pop("_plot")
+    if rec.kind == "sds":
+        from ._sds import finish_sds
 
-        doc = diagnose_sds(rec, plots=plots)
-        doc = conform(doc, rec)
-        d = Diagnosis(doc, doc.get("status", "ok"))
+        doc = finish_sds(doc)
+    d = Diagnosis(doc, doc["status"], plot_data)
+    if plots is not None:
+        from ._plots import engine_plots
+
+        doc["plots"] = [str(p) for p in engine_plots(d, plots)]
+        if rec.kind == "quadrature":
+            from ._quadrature import quadrature_plots
+
+            doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
     if throw and d.status != "ok":
         raise RuntimeError(f"diagnose: {d.status}")
     return d
-
-
-def _unit_of(name: str) -> str:
-    for suffix, unit in (
-        ("_rad", "rad"),
-        ("_m", "m"),
-        ("_s", "s"),
-        ("_hz", "Hz"),
-        ("_arcsec", "arcsec"),
-        ("_urad", "urad"),
-    ):
-        if name.endswith(suffix):
-            return unit
-    return "1"
-
-
-def conform(doc: dict[str, Any], rec: Recording) -> dict[str, Any]:
-    """Bring a finder's JSON that is not (yet) from the engine to the common contract:
-    every effect gets ``delta_bic``, ``collinearity``, ``notes``, ``params`` as given; the
-    document gets ``goodness_of_fit``, ``excluded_segments``, ``heldout`` where the finder
-    had none (``null`` / empty, with a note)."""
-    doc.setdefault("format", "encdesign-diagnosis/2")
-    doc.setdefault("kind", rec.kind)
-    doc.setdefault("recording", str(rec.path) if rec.path is not None else None)
-    doc.setdefault("unit", "rad")
-    for e in doc.get("effects", []):
-        e.setdefault("delta_bic", None)
-        e.setdefault("collinearity", None)
-        e.setdefault("notes", [])
-        e.setdefault("explanation", "")
-        e["params"] = {
-            k: v
-            if isinstance(v, dict) and {"value", "se", "unit"} <= set(v)
-            else {"value": v, "se": None, "unit": _unit_of(k)}
-            for k, v in (e.get("params") or {}).items()
-        }
-    doc.setdefault("goodness_of_fit", None)
-    doc.setdefault("excluded_segments", [])
-    if not isinstance(doc.get("heldout"), dict):
-        if doc.get("heldout") is not None:
-            doc["heldout_scheme"] = str(doc["heldout"])
-        doc["heldout"] = None
-    doc.setdefault("unexplained", [])
-    doc.setdefault("notes", [])
-    doc["notes"] = list(doc["notes"]) + [
-        f"the {rec.kind} finder is not yet routed through the common engine: no "
-        "goodness-of-fit test, no non-steady segment detection"
-    ]
-    return doc

@@ -128,25 +128,33 @@ class Kind:
         base: ``base(prep, max_order) -> ([(Candidate, start), ...], info)``: base-model
             terms for this record (``info``: ``{"unidentifiable": [...], "align": fn}``).
         candidates: ``candidates(ctx) -> tuple[Candidate, ...]``.
-        views: names of the views run on the residual.
+        views: names of the views run on the residual (or the kind's own view functions,
+            ``view(prep, whitened_residual, scan_order) -> [Finding, ...]``).
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
+        prepare: ``prepare(kind_data, meta) -> Prepared`` replacing :func:`prepare` for a
+            kind whose rows are not a time series of a turning shaft (``sds``: one row per
+            platform position); ``None``: the engine's.
         noise: optional ``noise(prep, base_resid) -> (C,)``: a second noise estimate that the
             kind's own structure cannot inflate (e.g. differences of neighbours in signal
             phase for a quadrature capture in time order); the engine takes, per channel,
             the smaller of it and the periodogram median.
+        noise_replaces: ``True``: the kind's ``noise`` replaces the periodogram median
+            (``sds``: levels by degrees of freedom, rows are platform positions, not time).
     """
 
     name: str
     data: Callable[[Any], KindData]
     base: Callable[[Any, int], tuple[list, dict]]
     candidates: Callable[[Context], tuple[Candidate, ...]]
-    views: tuple[str, ...]
+    views: tuple[str | Callable[..., Any], ...]
     max_order_limit: Callable[[Any], int]
     default_max_order: int = 12
     summary: Callable[[Any, dict], dict] | None = None
+    prepare: Callable[[KindData, dict], Any] | None = None
     noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
+    noise_replaces: bool = False
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -1880,7 +1888,7 @@ def run_engine(
     kd = kind.data(rec)
     meta = dict(rec.meta)
     meta.setdefault("kind", rec.kind)
-    prep = prepare(kd, meta)
+    prep = (kind.prepare or prepare)(kd, meta)
     stage("prepared")
     limit = int(kind.max_order_limit(prep))
     if max_order is not None and max_order > limit:
@@ -1928,9 +1936,12 @@ def run_engine(
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it
     r_base = fitter.residual(base_fit.terms)
-    sig = noise_spectral(prep, r_base)
-    if kind.noise is not None:  # the kind's second estimate: the smaller of the two
-        sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
+    if kind.noise is not None and kind.noise_replaces:
+        sig = np.asarray(kind.noise(prep, r_base), float)
+    else:
+        sig = noise_spectral(prep, r_base)
+        if kind.noise is not None:  # the kind's second estimate: the smaller of the two
+            sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
         prep.ctx.noise[...] = sig

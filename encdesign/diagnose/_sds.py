@@ -1,46 +1,48 @@
-"""Discrepancy finder for ``sds`` recordings (edge times of a shifted-delta-sum instrument).
+"""``sds`` kind of the discrepancy-finder engine (edge times of a shifted-delta-sum bench).
 
 Data (:func:`sds_pair_table`): every run (one platform position φ_r) and every complete
 revolution gives one shifted delta sum per fixed × moving sensor pair (seed 001 eqs. 23–24,
-pair constants from the nominal sensor azimuths of the TOML), with the mid-time of its
-window. The datum is ``y = wrap(SDS − φ_ref)`` (with ``phi_ref``) or ``wrap(SDS − φ̂_r)``
-(without; φ̂_r is the run's mean reading and a free offset per run is fitted). Beside it,
-the edge intervals of the moving sensors give the shaft speed harmonics
-(:func:`sds_speed_harmonics`) and the raw time stamps give the clock grid.
+pair constants from the nominal sensor azimuths of the TOML), with the mean time of each
+sensor's window. The engine sees **one row per run** and, per moving sensor ``m``, ``K``
+channels: the run mean over the ``K`` revolutions (channel ``m<i>``, the pair values averaged
+over the fixed sensors, minus ``φ_ref``) and ``K − 1`` orthonormal (Helmert) contrasts over the
+revolutions (channels ``m<i>.d<k>``), so that the two noise levels of an SDS bench (run to
+run, e.g. clock ticks locked to the revolution, and revolution to revolution) are separate
+channels with their own noise, and rows (runs) are independent. Every term is computed per
+pair and revolution and mapped the same way, so it stays one differentiable function.
 
 Base model (what the design includes), per pair (f, m), with ``x = φ_r + ψ_m``:
 
-    y = c_fm [+ u_r] + Σ_{n ∈ design orders} a_n cos n x + b_n sin n x + noise
+    y = c_m + Σ_{n ∈ design orders} a_n cos n x + b_n sin n x
 
-the pair constants ``c_fm`` (fixed-sensor terms, azimuth errors, mean mark errors; the common
-constant is the instrument zero and is never identifiable), the product of the design's
-speed ripple with the mark errors of disk B at the orders of the design's motor (multiples
-of ``pole_pairs``, of ``pole_pairs·commutation_states`` and the cogging order; seed 001
-eqs. 46–53: a speed harmonic of order n and the disk-B mark error of order n give an error
-of order n in ``φ + ψ_m``), and white noise at two levels (revolution to revolution within
-a run, ``s_w``, and run to run per pair, ``τ``, e.g. clock ticks locked to the revolution).
+the pair constants averaged over the fixed sensors ``c_m`` and the product of the design's
+speed ripple with disk B's mark errors at the design motor's orders (multiples of
+``pole_pairs``, of ``pole_pairs·commutation_states`` and the cogging order, up to
+``R·M/2 − 1``; seed 001 eqs. 46–53). Without ``phi_ref`` the datum is ``wrap(SDS − φ̂_r)``
+with φ̂_r the run's mean reading, and every term is projected on the differences between the
+moving sensors of a run (the per-run offset is a nuisance that takes everything common to
+the moving sensors): the absolute angle per run, the common constant, what is common to the
+moving sensors (beam tilt × axial runout, coil orders at multiples of M, a common drift
+across runs) are unidentifiable and listed.
 
-Candidates (catalog names, ``docs/effects.md`` "SDS timing model"), each a differentiable term:
+Candidates (``docs/effects.md``, "SDS timing model"), each a differentiable term:
 
 * ``axis_tilt``: ``T(φ+ψ_m) − T(ψ_f)``, ``T(ψ) = atan2(sin(ψ−χ), cos(ψ−χ) cos β) − (ψ−χ)``
-  (seed eq. 26), parameters β (rad), χ (rad);
-* ``thermal_drift``: ``k (t − t̄)``, k in rad/s (no temperature column in sds: time drives);
-* ``bearing_wobble``: ``w(t, φ+ψ_m) − w(t, ψ_f)`` with
-  ``w = sinc(ρ) [A sin(ρΩt − ψ) + B cos(ρΩt − ψ)]`` (window mean of the runout shift over
-  one revolution), parameters ρ (ratio to the shaft speed, seen modulo 1), A, B (rad);
-* ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors
-  (tangential beam tilt γ × platform axial runout z_n / R);
-* ``coil_mismatch``: Fourier terms in ``x`` at the coil orders 1 … pole_pairs−1 whose speed
-  harmonic is significant in the edge intervals (both views must agree);
-* ``timing_quantization``: time stamps on a grid coarser than the design clock
-  (``clock_hz``); a noise floor, named by the grid test, not by a fit.
+  (seed eq. 26), parameters β (rad), χ (rad); χ is unidentifiable when β is not resolved;
+* ``thermal_drift``: ``k (t_m − t̄)`` (no temperature column in sds: time drives);
+* ``bearing_wobble``: ``w(t_m, φ+ψ_m) − w(t_f, ψ_f)``,
+  ``w = sinc(ρ) [A sin(ρΩt − ψ) + B cos(ρΩt − ψ)]`` (window mean over one revolution);
+* ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors;
+* ``coil_mismatch``: Fourier terms in ``x`` at the coil orders ``1 … pole_pairs − 1``;
+* ``sensor_delay_step``: one moving sensor's edges delayed by ``τ_m`` from one run on
+  (electronics, cable, a re-plugged connector): ``+Ω τ_m`` on that sensor's pairs;
+* ``timing_quantization``: the time stamps lie on a lattice coarser than the declared clock
+  (:func:`stamp_lattice`, found from the data for any clock); a noise floor, named from the
+  lattice, not fitted.
 
-Selection: candidates are added one at a time and refitted (optimistix Levenberg–Marquardt);
-a candidate is accepted when its χ² drop (two-level whitened residual) is significant at
-``1e-3`` (Bonferroni over the candidates), the held-out RMS (two folds of alternate runs; each
-fold fitted on the other) falls, and its BIC is the lowest. What stays significant in the
-residual views (orders in ``φ+ψ_m`` and in φ, run outliers, time trends, speed harmonics
-outside the motor's orders) is reported as ``unexplained`` with its location.
+Views: the engine's ``orders`` (per channel, in φ), a run-step view (per moving sensor, the
+best change point over the runs in time order, and single-run outliers) and one matched
+view per candidate (the power its columns take out of the whitened residual).
 """
 
 from __future__ import annotations
@@ -48,37 +50,32 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import time
-from pathlib import Path
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from scipy import stats
 
 from .._errors import input_error
 from ..io._recording import Recording
+from ._candidates import Candidate, Context, Param
+from ._engine import Kind, KindData, Prepared, _valjac_fn
+from ._views import Finding, _logp, _thr, _where
 
 __all__ = [
+    "SDS",
     "SDSPairTable",
-    "diagnose_sds",
     "sds_pair_table",
     "sds_speed_harmonics",
-    "sds_terms",
+    "stamp_lattice",
 ]
 
-ALPHA = 1e-3
 REFERENCE_RADIUS_M = 0.0254
-CANDIDATES = (
-    "axis_tilt",
-    "thermal_drift",
-    "bearing_wobble",
-    "beam_tilt_axial",
-    "coil_mismatch",
-)
 BEAM_ORDERS = (1, 2, 3)
+N_FOLDS = 5
+LATTICE_COARSER = 1.05
+"""A stamp lattice this much coarser than the declared clock is reported."""
 
 EXPLANATIONS = {
     "axis_tilt": (
@@ -102,14 +99,19 @@ EXPLANATIONS = {
         "platform angle common to all moving sensors. Only the product tilt × runout is seen."
     ),
     "coil_mismatch": (
-        "Unequal stator coils make the shaft speed ripple at orders below the pole-pair count "
-        "(seen directly in the edge intervals); with the disk's mark errors at the same "
-        "orders it biases the shifted delta sum (seed 001 eqs. 46-53). The design's motor "
-        "had no such ripple."
+        "Unequal stator coils make the shaft speed ripple at orders below the pole-pair count; "
+        "with the disk's mark errors at the same orders it biases the shifted delta sum "
+        "(seed 001 eqs. 46-53). The design's motor had no such ripple."
+    ),
+    "sensor_delay_step": (
+        "One moving sensor's edges arrive later (or earlier) from one run on: a delay in its "
+        "electronics or cable changed (a re-plugged connector, a thermal step in a "
+        "comparator). Its pairs read +Omega*tau from then on. The design has fixed delays."
     ),
     "timing_quantization": (
-        "The edges are stamped on a coarser clock than the design's, which adds a noise floor "
-        "to every reading (it cannot be fitted away, only made smaller with a faster clock)."
+        "The edges are stamped on a coarser clock than the declared one, which adds a noise "
+        "floor to every reading (it cannot be fitted away, only made smaller with a faster "
+        "clock)."
     ),
 }
 
@@ -328,431 +330,86 @@ def sds_speed_harmonics(
     }
 
 
-def clock_grid(rec: Recording, design_period_s: float | None) -> float | None:
-    """Coarsest period P (s) of a grid that all sampled time stamps lie on, or ``None``.
+def stamp_lattice(t: np.ndarray, max_samples: int = 200_000) -> dict[str, Any]:
+    """The lattice the time stamps lie on, found from the data (any clock).
 
-    Candidates: multiples 1…10⁵ (1-2-5 steps) of the design clock period, or a 1-2-5
-    series from 0.1 ns to 1 ms without one. A grid fits when every stamp is within
-    ``1e-3 P`` of a multiple of P.
+    Stamps on a clock of period ``P`` (and any offset) are ``t = t0 + n P``: the differences of
+    consecutive stamps are integer multiples of ``P`` and their distinct values are spaced by
+    multiples of ``P``. The candidate ``P`` is the smallest gap between distinct differences
+    (gaps below 1e-6 of the median difference are floating-point noise of the file, merged;
+    the median and lower quantiles of the gaps too, as a few stray stamps make odd gaps),
+    divided by 1 ... 10; the coarsest that puts the differences within 2 % of ``P`` of a
+    multiple of it (at most 0.5 % of them may miss: stray stamps) wins. ``None`` when no
+    lattice coarser than 1e-6 of the median difference explains the stamps (free-running,
+    continuous times).
+
+    Returns:
+        ``period_s`` (or ``None``), ``fraction_on_lattice``, ``n_differences``, ``method``.
     """
-    t = np.asarray(rec.columns["t"], dtype=float)
-    if t.size > 20000:
-        t = t[:: t.size // 20000]
-    steps = [1, 2, 4, 5, 8, 10]
-    mult = sorted({s * 10**d for d in range(6) for s in steps})
-    if design_period_s:
-        cands = [design_period_s * k for k in mult]
-    else:
-        cands = [s * 10.0**d for d in range(-10, -2) for s in (1, 2, 5)]
-    best = None
-    for p in sorted(cands):
-        q = t / p
-        err = np.abs(q - np.round(q))
-        tol = 1e-3 + 4 * np.finfo(float).eps * np.abs(q)
-        if np.all(err < tol):
-            best = p
-    return best
-
-
-# ----------------------------------------------------------------------------- model
-
-
-@dataclasses.dataclass(frozen=True)
-class Layout:
-    """Static parameter layout: block name -> (start, size)."""
-
-    blocks: tuple[tuple[str, int, int], ...]
-    base_orders: tuple[int, ...]
-    coil_orders: tuple[int, ...]
-    n_pairs: int
-    n_runs: int
-
-    def sl(self, name: str) -> slice:
-        for n, a, k in self.blocks:
-            if n == name:
-                return slice(a, a + k)
-        raise KeyError(name)
-
-    @property
-    def size(self) -> int:
-        return self.blocks[-1][1] + self.blocks[-1][2]
-
-
-def make_layout(n_pairs: int, n_runs: int, base_orders, coil_orders) -> Layout:
-    sizes = [
-        ("pair_const", n_pairs),
-        ("run_offset", n_runs),
-        ("ripple", 2 * len(base_orders)),
-        ("coil_mismatch", 2 * len(coil_orders)),
-        ("axis_tilt", 2),
-        ("thermal_drift", 1),
-        ("bearing_wobble", 3),
-        ("beam_tilt_axial", 2 * len(BEAM_ORDERS)),
-    ]
-    blocks, a = [], 0
-    for n, k in sizes:
-        blocks.append((n, a, k))
-        a += k
-    return Layout(tuple(blocks), tuple(base_orders), tuple(coil_orders), n_pairs, n_runs)
-
-
-def _fourier(x, orders):
-    if not orders:
-        return jnp.zeros(x.shape + (0,))
-    o = jnp.asarray(orders, dtype=float)
-    mx = x[:, None] * o
-    return jnp.stack([jnp.cos(mx), jnp.sin(mx)], axis=-1).reshape(x.shape[0], -1)
-
-
-def _tilt(psi, beta, chi):
-    a = psi - chi
-    d = jnp.arctan2(jnp.sin(a), jnp.cos(a) * jnp.cos(beta)) - a
-    return jnp.mod(d + jnp.pi, 2 * jnp.pi) - jnp.pi
-
-
-def sds_terms(p: jax.Array, data: dict, layout: Layout) -> dict[str, jax.Array]:
-    """Every model term of the sds finder at parameters ``p`` (rad per datum). jit/grad-able.
-
-    ``data`` holds per datum: ``pair``, ``run`` (int), ``x`` (φ_r + ψ_m), ``phi`` (φ_r),
-    ``psi_f``, ``tf``, ``tm`` (window mean times of the fixed and moving sensor, s,
-    absolute), ``tc`` (``tm`` centred, s), and the scalar ``omega`` (rad/s).
-    """
-    x, phi = data["x"], data["phi"]
-    out = {
-        "pair_const": p[layout.sl("pair_const")][data["pair"]],
-        "run_offset": p[layout.sl("run_offset")][data["run"]],
-        "ripple": _fourier(x, layout.base_orders) @ p[layout.sl("ripple")],
-        "coil_mismatch": _fourier(x, layout.coil_orders) @ p[layout.sl("coil_mismatch")],
+    t = np.asarray(t, dtype=float)
+    d = np.diff(np.sort(t))
+    d = d[d > 0]
+    if d.size > max_samples:
+        d = d[:: d.size // max_samples]
+    out: dict[str, Any] = {
+        "period_s": None,
+        "fraction_on_lattice": None,
+        "n_differences": int(d.size),
+        "method": "gaps between distinct stamp differences (quantiles 0-0.5) divided by "
+        "1..10; the coarsest period with >= 99.5 % of the differences within 2 % of a "
+        "multiple wins",
     }
-    beta, chi = p[layout.sl("axis_tilt")]
-    out["axis_tilt"] = _tilt(x, beta, chi) - _tilt(data["psi_f"], beta, chi)
-    out["thermal_drift"] = p[layout.sl("thermal_drift")][0] * data["tc"]
-    rho, amp_a, amp_b = p[layout.sl("bearing_wobble")]
-    att = jnp.sinc(rho)  # window mean over one revolution: sin(πρ)/(πρ)
-
-    def w(t, psi):
-        arg = rho * data["omega"] * t - psi
-        return att * (amp_a * jnp.sin(arg) + amp_b * jnp.cos(arg))
-
-    out["bearing_wobble"] = w(data["tm"], x) - w(data["tf"], data["psi_f"])
-    out["beam_tilt_axial"] = _fourier(phi, BEAM_ORDERS) @ p[layout.sl("beam_tilt_axial")]
+    if d.size < 16:
+        return out
+    med = float(np.median(d))
+    floor = 1e-6 * med
+    u = np.unique(d)
+    gaps = np.diff(u)
+    # merge float noise: distinct values closer than the floor are one value
+    gaps = gaps[gaps > floor]
+    # candidates: gaps between distinct differences at several quantiles (a few stray
+    # stamps make odd small gaps; the lattice makes most gaps one period), each divided by
+    # 1..10; the coarsest period that fits wins
+    base = {float(u[0])}
+    if gaps.size:
+        base |= {float(np.quantile(gaps, q)) for q in (0.5, 0.25, 0.1, 0.0)}
+    cands = sorted({b / k for b in base for k in range(1, 11) if b / k > floor}, reverse=True)
+    for p in cands:
+        q = d / p
+        n = np.round(q)
+        on = np.abs(q - n) < 0.02
+        frac = float(np.mean(on))
+        if frac >= 0.995:
+            # refine the period from the integer multiples (least squares through 0)
+            p = float(np.sum(n[on] * d[on]) / np.sum(n[on] * n[on]))
+            out.update(period_s=p, fraction_on_lattice=frac)
+            return out
     return out
 
 
-def _predict(p, data, layout):
-    return sum(sds_terms(p, data, layout).values())
+def _helmert(K: int) -> np.ndarray:
+    """Row 0: the mean (weights 1/K); rows 1..K-1: orthonormal contrasts."""
+    H = np.zeros((K, K))
+    H[0] = 1.0 / K
+    for k in range(1, K):
+        H[k, :k] = 1.0
+        H[k, k] = -k
+        H[k] /= math.sqrt(k * (k + 1))
+    return H
 
 
-@functools.partial(jax.jit, static_argnames=("layout",))
-def _lm(p0, scale, pin, w, data, layout: Layout):
-    y_s = data["y_scale"]
+@dataclasses.dataclass
+class SDSKindData(KindData):
+    """:class:`~encdesign.diagnose._engine.KindData` plus the SDS pair table and clock."""
 
-    def fn(z, _):
-        p = p0 + scale * z
-        r = jnp.sqrt(w) * (data["y"] - _predict(p, data, layout)) / y_s
-        return jnp.concatenate([r, pin * z])
-
-    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
-    sol = optx.least_squares(fn, solver, jnp.zeros_like(p0), max_steps=60, throw=False)
-    p = p0 + scale * sol.value
-    return p, sol.result == optx.RESULTS.successful
-
-
-@functools.partial(jax.jit, static_argnames=("layout",))
-def _jac(p, data, layout: Layout):
-    return jax.jacfwd(lambda q: _predict(q, data, layout))(p)
-
-
-# ----------------------------------------------------------------------------- statistics
-
-
-def _two_level(resid, cell, n_cells, k_params):
-    """Noise levels (s_w within cells, τ between) and whitened χ² of a residual."""
-    cnt = np.bincount(cell, minlength=n_cells).astype(float)
-    mean = np.bincount(cell, weights=resid, minlength=n_cells) / np.maximum(cnt, 1)
-    dev = resid - mean[cell]
-    dof_w = max(resid.size - n_cells, 1)
-    s_w2 = max(float(dev @ dev) / dof_w, 1e-300)
-    dof_b = max(n_cells - k_params, 1)
-    tau2 = max(float(np.sum(mean**2)) / dof_b - float(np.mean(s_w2 / cnt)), 0.0)
-    return s_w2, tau2
-
-
-def _chi2(resid, cell, n_cells, s_w2, tau2, deff=1.0):
-    cnt = np.bincount(cell, minlength=n_cells).astype(float)
-    mean = np.bincount(cell, weights=resid, minlength=n_cells) / np.maximum(cnt, 1)
-    dev = resid - mean[cell]
-    return float(np.sum(mean**2 / (tau2 + s_w2 / cnt)) + dev @ dev / s_w2) / deff
-
-
-def _design_effect(resid, tab: SDSPairTable) -> float:
-    """``1 + ρ (P − 1)``: ρ the mean correlation of the residuals of different pairs in the
-    same revolution (P = F·M pairs; pairs share the fixed and the moving sensors' windows,
-    hence their timing noise). Exact for a term that is the same for every pair of a
-    revolution (a time trend), conservative for the others."""
-    nf, nm = len(tab.psi_fixed_rad), len(tab.psi_moving_rad)
-    n_pairs = nf * nm
-    if n_pairs < 2:
-        return 1.0
-    key = tab.run * (tab.rev.max() + 1) + tab.rev
-    _, inv = np.unique(key, return_inverse=True)
-    mat = np.zeros((inv.max() + 1, n_pairs))
-    mat[inv, tab.fixed * nm + tab.moving] = resid
-    mat = mat - mat.mean(axis=0)
-    c = np.cov(mat.T)
-    off = (c.sum() - np.trace(c)) / (n_pairs * (n_pairs - 1))
-    rho = off / max(np.trace(c) / n_pairs, 1e-300)
-    return 1.0 + max(float(rho), 0.0) * (n_pairs - 1)
-
-
-def _rank(a: np.ndarray, rtol: float = 1e-8) -> int:
-    if a.size == 0:
-        return 0
-    sv = np.linalg.svd(a, compute_uv=False)
-    return int(np.sum(sv > rtol * max(sv.max(initial=0.0), 1e-300)))
-
-
-def _rms(x) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else float("nan")
-
-
-# ----------------------------------------------------------------------------- finder
-
-
-class _Fitter:
-    """Holds the data of one recording and fits any set of active blocks."""
-
-    def __init__(self, tab: SDSPairTable, base_orders, coil_orders):
-        self.tab = tab
-        nf, nm = len(tab.psi_fixed_rad), len(tab.psi_moving_rad)
-        self.has_ref = tab.phi_ref_rad is not None
-        phi_r = tab.phi_ref_rad if self.has_ref else tab.phi_meas_rad
-        self.phi_run = phi_r
-        y = _wrap(tab.value_rad - phi_r[tab.run])
-        self.y = y
-        n_runs = len(tab.run_ids)
-        self.n_runs = n_runs
-        self.layout = make_layout(nf * nm, n_runs, base_orders, coil_orders)
-        pair = tab.fixed * nm + tab.moving
-        # noise cells: (run, moving sensor); clock ticks locked to the revolution give each
-        # moving sensor one error per run, shared by its pairs with every fixed sensor
-        self.cell = tab.run * nm + tab.moving
-        self.n_cells = n_runs * nm
-        t = tab.t_mid_s
-        self.omega = 2 * np.pi / tab.period_s
-        y_scale = max(float(np.std(y)), 1e-12)
-        self.t_span = max(float(np.ptp(t)), tab.period_s)
-        self.data = {
-            "y": jnp.asarray(y),
-            "y_scale": jnp.asarray(y_scale),
-            "pair": jnp.asarray(pair),
-            "run": jnp.asarray(tab.run),
-            "x": jnp.asarray(phi_r[tab.run] + tab.psi_moving_rad[tab.moving]),
-            "phi": jnp.asarray(phi_r[tab.run]),
-            "psi_f": jnp.asarray(tab.psi_fixed_rad[tab.fixed]),
-            "tf": jnp.asarray(tab.t_fixed_s),
-            "tm": jnp.asarray(tab.t_moving_s),
-            "tc": jnp.asarray(tab.t_moving_s - t.mean()),
-            "omega": jnp.asarray(self.omega),
-        }
-        lay = self.layout
-        scale = np.full(lay.size, y_scale)
-        scale[lay.sl("axis_tilt")] = [1e-3, 1.0]
-        scale[lay.sl("thermal_drift")] = y_scale / self.t_span
-        scale[lay.sl("bearing_wobble")] = [0.01, y_scale, y_scale]
-        self.scale = scale
-        self.init = np.zeros(lay.size)
-        self.init[lay.sl("bearing_wobble")] = [0.4, 0.0, 0.0]
-
-    def base_blocks(self) -> tuple[str, ...]:
-        b = ("pair_const", "ripple")
-        return b + (() if self.has_ref else ("run_offset",))
-
-    def fit(self, blocks, train_runs=None, p_init=None) -> dict:
-        lay = self.layout
-        active = np.zeros(lay.size, bool)
-        for b in blocks:
-            active[lay.sl(b)] = True
-        if not self.has_ref:
-            active[lay.sl("pair_const").start] = False  # the common constant: run offsets
-        w = np.ones(self.y.size)
-        if train_runs is not None:
-            w = np.isin(self.tab.run, train_runs).astype(float)
-            off = lay.sl("run_offset")
-            held = np.setdiff1d(np.arange(self.n_runs), train_runs)
-            active[off.start + held] = False
-        p0 = self.init.copy() if p_init is None else np.asarray(p_init).copy()
-        for b in lay.blocks:
-            if b[0] not in blocks:
-                p0[b[1] : b[1] + b[2]] = self.init[b[1] : b[1] + b[2]]
-        if "axis_tilt" in blocks and abs(p0[lay.sl("axis_tilt").start]) < 1e-9:
-            p0[lay.sl("axis_tilt")] = [1e-4, 0.3]  # β = 0 is a stationary point of β²
-        p0 = self._linear_start(p0, active, w)
-        if not {"axis_tilt", "bearing_wobble"} & set(blocks):
-            # every active term is linear: the Gauss–Newton step is the least-squares fit
-            resid = self.y - np.asarray(_predict(jnp.asarray(p0), self.data, lay))
-            return {"p": p0, "resid": resid, "ok": True, "active": active, "blocks": blocks}
-        pin = np.where(active, 0.0, 1e6)
-        p, ok = _lm(
-            jnp.asarray(p0),
-            jnp.asarray(self.scale),
-            jnp.asarray(pin),
-            jnp.asarray(w),
-            self.data,
-            lay,
-        )
-        p = np.asarray(p)
-        resid = self.y - np.asarray(_predict(jnp.asarray(p), self.data, lay))
-        return {"p": p, "resid": resid, "ok": bool(ok), "active": active, "blocks": blocks}
-
-    def _linear_start(self, p0, active, w):
-        """One Gauss–Newton step from p0 (exact for the linear parameters)."""
-        J = np.asarray(_jac(jnp.asarray(p0), self.data, self.layout))
-        r = self.y - np.asarray(_predict(jnp.asarray(p0), self.data, self.layout))
-        lin = active.copy()
-        lay = self.layout
-        for b in ("axis_tilt",):
-            lin[lay.sl(b)] = False
-        lin[lay.sl("bearing_wobble").start] = False
-        A = J[:, lin] * self.scale[lin] * np.sqrt(w)[:, None]
-        dz, *_ = np.linalg.lstsq(A, r * np.sqrt(w), rcond=1e-12)
-        out = p0.copy()
-        out[lin] += self.scale[lin] * dz
-        return out
-
-    def heldout(self, blocks, p_init=None) -> float:
-        """RMS of held-out residuals: two folds of alternate runs, each fitted on the other."""
-        runs = np.arange(self.n_runs)
-        parts = []
-        for k in (0, 1):
-            held = runs[runs % 2 == k]
-            f = self.fit(blocks, train_runs=runs[runs % 2 != k], p_init=p_init)
-            for r in held:
-                e = f["resid"][self.tab.run == r]
-                if not self.has_ref:
-                    e = e - e.mean()  # the run offset is refitted on held-out runs
-                parts.append(e)
-        return _rms(np.concatenate(parts))
-
-    def stats(self, fit) -> tuple[float, float]:
-        k = int(np.sum(fit["active"]))
-        return _two_level(fit["resid"], self.cell, self.n_cells, k)
-
-    def cell_means(self, v: np.ndarray) -> np.ndarray:
-        """Means of a per-datum array (or of each column) over the (run, moving) cells,
-        shape (n_runs, M[, k])."""
-        nm = len(self.tab.psi_moving_rad)
-        cnt = np.bincount(self.cell, minlength=self.n_cells).astype(float)
-        cnt = np.maximum(cnt, 1)
-        if v.ndim == 1:
-            return (np.bincount(self.cell, weights=v, minlength=self.n_cells) / cnt).reshape(
-                self.n_runs, nm
-            )
-        out = np.zeros((self.n_cells, v.shape[1]))
-        np.add.at(out, self.cell, v)
-        return (out / cnt[:, None]).reshape(self.n_runs, nm, -1)
-
-    def noise(self, fit) -> dict:
-        """Noise of a fit's residual in three independent views (seed 001's timing noise).
-
-        * ``common``: the mean over the moving sensors of a run's cell means. Clock ticks
-          commensurate with the mark spacing leave one error per run shared by every pair
-          (it does not average over revolutions), so this view has its own, larger level;
-        * ``diff``: the cell means minus their run's common part (M − 1 contrasts per run);
-        * ``within``: deviations of the pair readings from their cell mean (revolution to
-          revolution), with the design effect of the moving sensors' shared windows.
-
-        Each level is the residual sum of squares over its degrees of freedom (the data of
-        the view less the rank of the active parameters' Jacobian seen in it).
-        """
-        nm = len(self.tab.psi_moving_rad)
-        c = self.cell_means(fit["resid"])
-        u = c.mean(axis=1)
-        e = c - u[:, None]
-        J = self._jac_active(fit)
-        Jc = self.cell_means(J)  # (R, M, k)
-        Ju = Jc.mean(axis=1)
-        Je = (Jc - Ju[:, None, :]).reshape(self.n_runs * nm, -1)
-        r_c, r_d = _rank(Ju), _rank(Je)
-        dof_c = self.n_runs - r_c
-        dof_d = self.n_runs * (nm - 1) - r_d
-        dev_r, dev_p = self._within(fit["resid"])
-        n_rev = dev_r.size
-        dof_wr = max(n_rev - self.n_runs, 1)
-        dof_wp = max(fit["resid"].size - self.n_cells - dof_wr, 1)
-        return {
-            "s_c": max(nm * float(u @ u) / dof_c, 1e-300) if dof_c > 0 else None,
-            "s_d": max(float(np.sum(e**2)) / dof_d, 1e-300) if dof_d > 0 else None,
-            "s_wr": max(float(dev_r @ dev_r) / dof_wr, 1e-300),
-            "s_wp": max(float(dev_p @ dev_p) / dof_wp, 1e-300),
-            "deff": _design_effect(fit["resid"], self.tab),
-            "dof": {"common": dof_c, "diff": dof_d, "within": dof_wr, "within_pairs": dof_wp},
-        }
-
-    def _within(self, resid):
-        """Revolution-to-revolution deviations from the cell means, split into the mean over
-        the pairs of each revolution (shared timing noise of the windows) and the rest."""
-        tab = self.tab
-        c = self.cell_means(resid)
-        dev = resid - c.reshape(-1)[self.cell]
-        key = tab.run * (tab.rev.max() + 1) + tab.rev
-        _, inv = np.unique(key, return_inverse=True)
-        cnt = np.bincount(inv).astype(float)
-        dev_r = np.bincount(inv, weights=dev) / cnt
-        return dev_r, dev - dev_r[inv]
-
-    def chi2_parts(self, fit, noise: dict) -> dict[str, float]:
-        """Whitened χ² of a fit's residual in the three views of :meth:`noise`."""
-        nm = len(self.tab.psi_moving_rad)
-        c = self.cell_means(fit["resid"])
-        u = c.mean(axis=1)
-        e = c - u[:, None]
-        dev_r, dev_p = self._within(fit["resid"])
-        return {
-            "common": nm * float(u @ u) / noise["s_c"] if noise["s_c"] else 0.0,
-            "diff": float(np.sum(e**2)) / noise["s_d"] if noise["s_d"] else 0.0,
-            "within": float(dev_r @ dev_r) / noise["s_wr"],
-            "within_pairs": float(dev_p @ dev_p) / noise["s_wp"] / noise["deff"],
-        }
-
-    def _jac_active(self, fit) -> np.ndarray:
-        J = np.asarray(_jac(jnp.asarray(fit["p"]), self.data, self.layout))[:, fit["active"]]
-        norm = np.linalg.norm(J, axis=0)
-        return J[:, norm > 0] / norm[norm > 0]
-
-    def chi2(self, fit, s_w2, tau2, deff=1.0) -> float:
-        return _chi2(fit["resid"], self.cell, self.n_cells, s_w2, tau2, deff)
-
-    def stderr(self, fit) -> np.ndarray:
-        s_w2, tau2 = self.stats(fit)
-        J = np.asarray(_jac(jnp.asarray(fit["p"]), self.data, self.layout))
-        act = fit["active"]
-        cnt = np.bincount(self.cell, minlength=self.n_cells)
-        # per-datum variance of a cell-mean-dominated residual: τ² n_c + s_w² (approx.)
-        var = tau2 * cnt[self.cell] + s_w2
-        Ja = J[:, act] / np.sqrt(var)[:, None]
-        cov = np.linalg.pinv(Ja.T @ Ja)
-        se = np.full(act.size, np.nan)
-        se[act] = np.sqrt(np.clip(np.diag(cov), 0, None))
-        return se
-
-    def collinearity(self, fit, block) -> float:
-        """Largest canonical correlation of a block's Jacobian columns with the base's."""
-        J = np.asarray(_jac(jnp.asarray(fit["p"]), self.data, self.layout))
-        lay = self.layout
-        base = np.zeros(lay.size, bool)
-        for b in self.base_blocks():
-            base[lay.sl(b)] = True
-        cand = np.zeros(lay.size, bool)
-        cand[lay.sl(block)] = True
-        if block == "coil_mismatch" and not lay.coil_orders:
-            return 0.0
-        qa, _ = np.linalg.qr(J[:, base][:, np.linalg.norm(J[:, base], axis=0) > 0])
-        bc = J[:, cand][:, np.linalg.norm(J[:, cand], axis=0) > 0]
-        if bc.shape[1] == 0:
-            return 1.0
-        qb, _ = np.linalg.qr(bc)
-        return float(np.clip(np.linalg.svd(qa.T @ qb, compute_uv=False).max(initial=0.0), 0, 1))
+    table: Any = None
+    n_revs: int = 0
+    lattice: dict | None = None
+    declared_clock_s: float | None = None
+    rows_extra: dict | None = None
+    consts_extra: dict | None = None
+    dropped_revs: int = 0
+    speed: dict | None = None
 
 
 def _design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
@@ -765,850 +422,1106 @@ def _design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
     return sorted(o for o in orders if o <= cap)
 
 
-def _whitener(fitter: _Fitter, noise: dict):
-    """Map (run, moving) cell values to independent unit-variance coordinates.
-
-    Per run: the common coordinate ``√M · mean_m`` over ``√s_c`` (dropped without a common
-    noise level, e.g. when run offsets are fitted) and M − 1 orthonormal contrasts over
-    ``√s_d``. Returns ``(w, view)``: ``w(cells (R, M[, k])) -> (n[, k])`` and the view
-    ("common" / "diff") of each coordinate.
-    """
-    nm = len(fitter.tab.psi_moving_rad)
-    q, _ = np.linalg.qr(np.column_stack([np.ones(nm), np.eye(nm)[:, : nm - 1]]))
-    basis = q.T  # row 0: common (±1/√M), rows 1…: contrasts
-    use = []
-    scale = []
-    if noise["s_c"]:
-        use.append(0)
-        scale.append(1 / math.sqrt(noise["s_c"]))
-    if noise["s_d"]:
-        use += list(range(1, nm))
-        scale += [1 / math.sqrt(noise["s_d"])] * (nm - 1)
-    basis = basis[use] * np.asarray(scale)[:, None]
-    view = np.tile(np.asarray(["common" if i == 0 else "diff" for i in use]), fitter.n_runs)
-
-    def w(c):
-        out = np.einsum("km,rm...->rk...", basis, c)
-        return out.reshape((-1,) + c.shape[2:])
-
-    return w, view
-
-
-def _fit_base(tab: SDSPairTable, base_orders, coil_orders, alpha_keep: float = 0.01):
-    """Fit the base model, dropping design orders the data do not resolve.
-
-    The motor's orders (multiples of the pole pairs, commutation and cogging) give an error
-    only where the disk-B mark errors share them (seed 001 eqs. 46–53); most are far below
-    the noise, and each costs two parameters of the few values per platform position (with
-    equally spaced moving sensors, multiples of M live only in the common view). Backward
-    elimination: the order with the smallest F statistic (its two coefficients against the
-    whitened residual, given the other terms) is dropped while it is below the
-    ``alpha_keep`` critical value.
-
-    Returns:
-        ``(fitter, base fit, dropped orders)``.
-    """
-    orders = list(base_orders)
-    dropped: list[int] = []
-    while True:
-        fitter = _Fitter(tab, orders, coil_orders)
-        base = fitter.fit(fitter.base_blocks())
-        if not orders:
-            return fitter, base, dropped
-        nz = fitter.noise(base)
-        w, view = _whitener(fitter, nz)
-        lay = fitter.layout
-        J = np.asarray(_jac(jnp.asarray(base["p"]), fitter.data, lay))
-        act = base["active"].copy()
-        rip = lay.sl("ripple")
-        worst = None
-        for k, n in enumerate(orders):
-            cols = np.arange(rip.start + 2 * k, rip.start + 2 * k + 2)
-            others = act.copy()
-            others[cols] = False
-            X = w(fitter.cell_means(J[:, cols]))
-            O = w(fitter.cell_means(J[:, others]))
-            O = O[:, np.linalg.norm(O, axis=0) > 0]
-            qo, _ = np.linalg.qr(O)
-            Xp = X - qo @ (qo.T @ X)
-            share_c = float(np.sum(Xp[view == "common"] ** 2)) / max(float(np.sum(Xp**2)), 1e-300)
-            v = "common" if share_c > 0.5 else "diff"
-            dof = max(int(nz["dof"][v]), 1)
-            beta = base["p"][cols]
-            f_stat = float(np.sum((Xp @ beta) ** 2)) / 2
-            crit = float(stats.f.isf(alpha_keep, 2, dof))
-            if f_stat < crit and (worst is None or f_stat / crit < worst[1]):
-                worst = (n, f_stat / crit)
-        if worst is None:
-            return fitter, base, dropped
-        orders.remove(worst[0])
-        dropped.append(worst[0])
-
-
-def _order_findings(fitter: _Fitter, resid, noise: dict, skip_rot, skip_common) -> list[dict]:
-    """Orders in φ+ψ_m (rotating) and in φ (common) left in the cell means of a residual.
-
-    Whitened per view (:func:`_whitener`); each order's two-parameter drop is an F test
-    against the degrees of freedom of the view it lives in (Bonferroni over the orders).
-    """
-    tab = fitter.tab
-    nm = len(tab.psi_moving_rad)
-    w, view = _whitener(fitter, noise)
-    if view.size == 0:
-        return []
-    z = w(fitter.cell_means(resid))
-    run = np.repeat(np.arange(fitter.n_runs), nm).reshape(fitter.n_runs, nm)
-    m = np.tile(np.arange(nm), (fitter.n_runs, 1))
-    phi = fitter.phi_run[run]
-    x = phi + tab.psi_moving_rad[m]
-    # nuisance: the pair constants seen in (run, moving sensor) means (+ run offsets)
-    nuis = [np.eye(nm)[m]]
-    if not fitter.has_ref:
-        nuis.append(np.eye(fitter.n_runs)[run])
-    N = w(np.concatenate(nuis, axis=-1))
-    qn, _ = np.linalg.qr(N[:, np.linalg.norm(N, axis=0) > 0])
-    zp = z - qn @ (qn.T @ z)
-    max_rot = max(1, min((fitter.n_runs * nm - 1) // 2, 60))
-    max_com = max(1, min((fitter.n_runs - 1) // 2, 30)) if noise["s_c"] else 0
-    tests = []
-    for kind, arg, top, skip in (
-        ("rotating", x, max_rot, skip_rot),
-        ("common", phi, max_com, skip_common),
-    ):
-        for n in range(1, top + 1):
-            if n in skip:
-                continue
-            X = w(np.stack([np.cos(n * arg), np.sin(n * arg)], axis=-1))
-            if np.linalg.norm(X) < 1e-9:
-                continue
-            tests.append((kind, n, X))
-    n_tests = max(len(tests), 1)
-    out = []
-    seen = set()
-    found = 0
-    for _ in range(6):
-        # strongest order first
-        best = None
-        for kind, n, X in tests:
-            if (n, kind) in seen:
-                continue
-            Xp = X - qn @ (qn.T @ X)
-            coef, *_ = np.linalg.lstsq(Xp, zp, rcond=None)
-            drop = float(zp @ zp - np.sum((zp - Xp @ coef) ** 2))
-            if best is None or drop > best[2]:
-                best = (kind, n, drop, Xp)
-        if best is None:
-            break
-        kind, n, drop, Xp = best
-        share_c = float(np.sum(Xp[view == "common"] ** 2)) / max(float(np.sum(Xp**2)), 1e-300)
-        v = "common" if share_c > 0.5 else "diff"
-        # F test with the view's noise re-estimated without this order (and the orders found
-        # before): a strong line must not hide in the noise level it inflates
-        dof = max(int(noise["dof"][v]) - 2 * found - 2, 1)
-        rss_v = float(np.sum(zp[view == v] ** 2))
-        f_stat = (drop / 2) / max((rss_v - drop) / dof, 1e-12)
-        thr = float(stats.f.isf(ALPHA / n_tests, 2, dof))
-        if f_stat <= thr:
-            break
-        same = nm == 2 and n % 2 == 0 and abs(np.ptp(tab.psi_moving_rad) - np.pi) < 1e-6
-        seen |= {(n, "rotating"), (n, "common")} if same else {(n, kind)}
-        found += 1
-        q, _ = np.linalg.qr(Xp)
-        zp = zp - q @ (q.T @ zp)
-        # amplitude (rad) from an unweighted fit of the order to the cell means
-        arg = x if kind == "rotating" else phi
-        c = fitter.cell_means(resid).reshape(-1)
-        A = np.column_stack([np.cos(n * arg).ravel(), np.sin(n * arg).ravel()])
-        amp_rad = float(np.hypot(*np.linalg.lstsq(A, c, rcond=None)[0]))
-        out.append(
-            {
-                "view": f"orders_{'rotating_or_common' if same else kind}",
-                "order": n,
-                "chi2": drop,
-                "f_stat": f_stat,
-                "threshold": thr,
-                "amplitude_rad": amp_rad,
-            }
+def sds_data(rec: Recording) -> SDSKindData:
+    """Rows (runs) and channels (moving sensor × {run mean, revolution contrasts})."""
+    tab = sds_pair_table(rec)
+    where = str(rec.path) if rec.path is not None else "recording"
+    R = tab.run_ids.size
+    F, M = tab.psi_fixed_rad.size, tab.psi_moving_rad.size
+    if R < 4:
+        raise input_error(where, f"{R} runs (platform positions)", "at least 4 runs")
+    counts = np.bincount(tab.run, minlength=R) // (F * M)
+    K = int(counts.min())
+    if K < 2:
+        raise input_error(
+            where, f"a run with {K} complete revolution(s)", "at least 2 per run (noise)"
         )
+    has_ref = tab.phi_ref_rad is not None
+    phi = tab.phi_ref_rad if has_ref else tab.phi_meas_rad
+    # (R, K, F, M) arrays; extra revolutions beyond the shortest run's are left out
+    v = np.zeros((R, K, F, M))
+    tf = np.zeros((R, K, F))
+    tm = np.zeros((R, K, M))
+    tmid = np.zeros((R, K))
+    dropped = 0
+    for r in range(R):
+        s = np.flatnonzero(tab.run == r)
+        n_rev = s.size // (F * M)
+        dropped += n_rev - K
+        s = s[: K * F * M].reshape(K, F, M)
+        v[r] = _wrap(tab.value_rad[s] - phi[r])
+        tf[r] = tab.t_fixed_s[s][:, :, 0]
+        tm[r] = tab.t_moving_s[s][:, 0, :]
+        tmid[r] = tab.t_mid_s[s][:, 0, 0]
+    if not has_ref:
+        # the run's mean reading is the reference: residual values are small and centred
+        v = _wrap(v - _wrap(np.mean(v, axis=(1, 2, 3), keepdims=True)))
+    H = _helmert(K)
+    y = np.einsum("kr,nrm->nkm", H, v.mean(axis=2))
+    if not has_ref:
+        y[:, 0, :] -= y[:, 0, :].mean(axis=1, keepdims=True)
+    y = y.reshape(R, K * M)
+    names = [f"m{m}" if k == 0 else f"m{m}.d{k}" for k in range(K) for m in range(M)]
+    t_run = tmid.mean(axis=1)
+    t_mean = float(tmid.mean())
+    omega = 2 * np.pi / tab.period_s
+    enc = rec.encoder
+    clock_hz = enc.get("clock_hz")
+    lattice = stamp_lattice(np.asarray(rec.columns["t"], float))
+    rows_extra = dict(
+        phi=np.asarray(phi, float),
+        tf_c=tf - t_mean,
+        tm_c=tm - t_mean,
+        tmid_c=tmid - t_mean,
+        run_index=np.arange(R, dtype=float),
+    )
+    consts_extra = dict(
+        psi_f=np.asarray(tab.psi_fixed_rad, float),
+        psi_m=np.asarray(tab.psi_moving_rad, float),
+        helmert=H,
+        proj=np.asarray(0.0 if has_ref else 1.0),
+        omega=np.asarray(omega),
+        t_mean=np.asarray(t_mean),
+    )
+    radius = enc.get("optical_radius_m")
+    pp = int(enc.get("pole_pairs", 0) or 0)
+    speed = (
+        sds_speed_harmonics(rec, phi_rad=np.asarray(phi, float), max_order=max(pp - 1, 1))
+        if pp > 1
+        else None
+    )
+    return SDSKindData(
+        y=y,
+        shaft=np.asarray(phi, float),
+        t=t_run,
+        run=np.asarray(tab.run_ids),
+        reading=np.zeros_like(y),
+        theta_ref=np.asarray(phi, float) if has_ref else None,
+        temp=None,
+        alpha=np.zeros(K * M),
+        radius_m=float(radius) if radius else None,
+        signal_periods=0,
+        project=False,
+        unit="rad",
+        channel_names=names,
+        sensor="sds",
+        where=where,
+        table=tab,
+        n_revs=K,
+        lattice=lattice,
+        declared_clock_s=1.0 / float(clock_hz) if clock_hz else None,
+        rows_extra=rows_extra,
+        consts_extra=consts_extra,
+        dropped_revs=int(dropped),
+        speed=speed,
+    )
+
+
+def _folds_by_run(R: int, k: int, seed: int = 0) -> tuple[np.ndarray, dict]:
+    """Whole runs (platform positions) dealt at random into ``k`` balanced folds."""
+    rng = np.random.default_rng(seed)
+    fold = np.empty(R, dtype=int)
+    fold[rng.permutation(R)] = np.arange(R) % k
+    design = {
+        "k": int(k),
+        "scheme": "whole runs (platform positions) dealt at random into balanced folds "
+        f"(seed {seed}); a fold's runs are predicted from the model fitted on the others",
+        "block": "run",
+        "seed": seed,
+        "folds": [[int(r) for r in np.flatnonzero(fold == f)] for f in range(k)],
+    }
+    return fold, design
+
+
+def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
+    """Stage 1 for sds: one row per run, every run kept (an SDS run is a platform at rest:
+    there is no shaft motion to segment), folds of whole runs, first noise levels."""
+    from ._engine import Prepared
+
+    R, C = kd.y.shape
+    if not np.all(np.isfinite(kd.y)):
+        raise input_error(kd.where, "non-finite SDS readings", "finite edge times")
+    k = int(min(N_FOLDS, R))
+    if k < 4:
+        raise input_error(kd.where, f"{R} runs", "at least 4 runs for the held-out folds")
+    fold, design = _folds_by_run(R, k)
+    onehot = np.eye(R)
+    t = np.asarray(kd.t, float)
+    rows = dict(
+        t=t,
+        tau=t - t[0],
+        theta=kd.shaft,
+        theta_ref=kd.theta_ref if kd.theta_ref is not None else np.zeros(R),
+        reading=kd.reading,
+        run_onehot=onehot,
+        omega=np.zeros(R),
+        direction=np.ones(R),
+        driver=t - t.mean(),
+        psi=np.zeros_like(kd.y),
+        **kd.rows_extra,
+    )
+    consts = dict(
+        step_width_s=np.asarray(1e-3),
+        alpha=np.asarray(kd.alpha, float),
+        radius_m=np.asarray(kd.radius_m or REFERENCE_RADIUS_M, float),
+        signal_periods=np.asarray(0.0),
+        n_runs=np.asarray(float(R)),
+        **kd.consts_extra,
+    )
+    enc = meta.get("encoder", {})
+    pp = int(enc.get("pole_pairs", 0) or 0)
+    lim = max(1, R * kd.consts_extra["psi_m"].size // 2 - 1)
+    orders = (
+        _design_orders(pp, enc.get("stator_coils"), enc.get("commutation_states"), lim)
+        if pp > 0
+        else []
+    )
+    consts["base_orders"] = orders
+    X, _ = _saturating_columns(rows, consts, orders)
+    sigma = _level_sigma(kd.y, kd.n_revs, X, float(consts["proj"]) > 0)
+    ctx = Context(
+        kind="sds",
+        n_channels=C,
+        n_runs=R,
+        has_ref=kd.theta_ref is not None,
+        sensor="sds",
+        signal_periods=0,
+        radius_m=kd.radius_m,
+        rows=rows,
+        consts=consts,
+        noise=sigma.copy(),
+        revolutions=np.full(R, float(kd.n_revs)),
+        meta=meta,
+    )
+    ctx.consts["driver_name"] = "time"  # type: ignore[index]
+    ctx.consts["kd"] = kd  # type: ignore[index]
+    return Prepared(
+        kd=kd,
+        ctx=ctx,
+        y=kd.y.copy(),
+        rows=rows,
+        consts=consts,
+        keep=np.ones(R, bool),
+        fold=fold,
+        seg=np.arange(R),
+        sigma=sigma,
+        excluded=[],
+        glitches=[],
+        count_jumps=[],
+        gaps=[],
+        fold_design=design,
+        run_ids=np.asarray(sorted(set(kd.run.tolist()), key=kd.run.tolist().index)),
+        run=np.arange(R),
+    )
+
+
+SATURATE_FRACTION = 0.6
+"""The saturated noise fit of the run means uses at most this fraction of their values."""
+
+
+def _saturating_columns(rows: dict, consts: dict, orders_base: list[int]) -> tuple:
+    """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
+    platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
+    and the design orders in ``x = φ + ψ_m``, common orders ``1..L`` in ``φ``, a drift in
+    time; ``L`` as large as ``SATURATE_FRACTION`` of the values allows. Projected on the
+    moving-sensor differences without ``phi_ref``."""
+    phi = np.asarray(rows["phi"], float)
+    psi_m = np.asarray(consts["psi_m"], float)
+    R, M = phi.size, psi_m.size
+    x = phi[:, None] + psi_m[None, :]
+    ph = np.broadcast_to(phi[:, None], (R, M))
+    t = np.broadcast_to(np.asarray(rows["tmid_c"]).mean(1)[:, None], (R, M))
+    cols = [np.eye(M)[None, :, :].repeat(R, 0).reshape(R * M, M)]
+    n0 = M + 1 + 2 * len(orders_base)
+    L = int(max(0, (SATURATE_FRACTION * R * M - n0) // 4))
+    L = min(L, max(1, (R - 1) // 2))
+    rot = sorted(set(range(1, L + 1)) | set(orders_base))
+    for n in rot:
+        cols += [np.cos(n * x).reshape(-1, 1), np.sin(n * x).reshape(-1, 1)]
+    for n in range(1, L + 1):
+        cols += [np.cos(n * ph).reshape(-1, 1), np.sin(n * ph).reshape(-1, 1)]
+    cols.append((t / max(np.ptp(t), 1e-12)).reshape(-1, 1))
+    X = np.concatenate(cols, 1)
+    if float(consts["proj"]) > 0:
+        X3 = X.reshape(R, M, -1)
+        X = (X3 - X3.mean(1, keepdims=True)).reshape(R * M, -1)
+    return X, L
+
+
+def _level_sigma(resid: np.ndarray, K: int, X: np.ndarray, proj: bool = False) -> np.ndarray:
+    """Noise per channel: one level for the run means, one for the revolution contrasts
+    (each pooled over the moving sensors, which see the same clock and marks).
+
+    Run means: the residual of a saturated least-squares fit (:func:`_saturating_columns`:
+    every smooth pattern in the platform angle up to order ``L``, so no catalog effect and
+    no low order can inflate it; plus, per sensor, the strongest change point over the runs
+    when it is significant, so a step over many runs cannot either), robust scale 1.4826
+    MAD (an outlier run cannot inflate it) times ``sqrt(n / (n - rank))``.
+    Contrasts: the robust scale of the contrasts themselves (nothing constant within a run
+    reaches them)."""
+    R, C = resid.shape
+    M = C // K
+    out = np.empty(C)
+    ym = resid[:, :M].ravel()
+
+    def scale(X, extra=0):
+        coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
+        e = ym - X @ coef
+        rank = int(np.linalg.matrix_rank(X)) + extra
+        s = 1.4826 * float(np.median(np.abs(e)))
+        s = s if s > 0 else float(np.sqrt(np.mean(e**2)))
+        return s * math.sqrt(ym.size / max(ym.size - rank, 1)), e.reshape(R, M)
+
+    s, e = scale(X)
+    # a step on one sensor over many runs (a changed delay) is not smooth in the platform
+    # angle: the strongest significant change point per sensor joins the saturated fit
+    steps = []
+    n_tests = max(1, 2 * M * (R - 1))
+
+    def ssr(X):
+        coef, *_ = np.linalg.lstsq(X, ym, rcond=None)
+        return float(np.sum((ym - X @ coef) ** 2)), int(np.linalg.matrix_rank(X))
+
+    for m in range(M):
+        Xc = np.concatenate([X, *steps], 1) if steps else X
+        ssr0, _ = ssr(Xc)
+        best = (0.0, None)
+        for k in range(1, R):
+            col = np.zeros((R, M))
+            col[k:, m] = 1.0
+            if proj:
+                col -= col.mean(1, keepdims=True)
+            s1, rk = ssr(np.concatenate([Xc, col.reshape(-1, 1)], 1))
+            dof = ym.size - rk
+            if dof < 3 or s1 <= 0:
+                continue
+            f = (ssr0 - s1) / (s1 / dof)  # F(1, dof): the step against what is left
+            if f > best[0] and f > stats.f.isf(1e-3 / n_tests, 1, dof):
+                best = (f, col)
+        if best[1] is not None:
+            steps.append(best[1].reshape(-1, 1))
+    if steps:
+        # the change point was searched for: count it as one more degree of freedom
+        s, e = scale(np.concatenate([X, *steps], 1), extra=len(steps))
+    out[:M] = s
+    if C > M:
+        x = resid[:, M:].ravel()
+        s = 1.4826 * float(np.median(np.abs(x)))
+        out[M:] = s if s > 0 else float(np.sqrt(np.mean(x**2)))
+    if not np.all(np.isfinite(out)) or np.any(out <= 0):
+        out = np.full(C, float(np.std(resid)) or 1e-12)
     return out
 
 
-def _run_findings(fitter: _Fitter, resid, noise: dict) -> list[dict]:
-    """Runs whose cell means stand out (whitened χ² over the run's coordinates, F test)."""
-    nm = len(fitter.tab.psi_moving_rad)
-    w, view = _whitener(fitter, noise)
-    if view.size == 0:
+def sds_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
+    """Noise hook: the two levels of :func:`_level_sigma` on the base residual. Also keeps
+    the base residual's common-order powers (:func:`common_order_power`) for the
+    plausibility of ``beam_tilt_axial``."""
+    X, _ = _saturating_columns(prep.rows, prep.consts, prep.consts.get("base_orders", []))
+    sig = _level_sigma(resid[prep.keep], prep.kd.n_revs, X, float(prep.consts["proj"]) > 0)
+    M = prep.consts["psi_m"].size
+    # a tuple, not an array: arrays in consts are passed to every term
+    prep.ctx.consts["common_order_power"] = tuple(  # type: ignore[index]
+        float(v) for v in common_order_power(prep, resid[:, :M] / sig[None, :M])
+    )
+    return sig
+
+
+def _common_max_order(R: int) -> int:
+    return int(max(1, (R - 1) // 2))
+
+
+def common_order_power(prep: Prepared, rwm: np.ndarray) -> np.ndarray:
+    """Chi-square (2 dof) of orders ``1..(R-1)//2`` in the platform angle φ, one coefficient
+    pair for all moving sensors (a pattern common to them), in the whitened run means
+    ``rwm`` (R, M), less a constant per sensor."""
+    phi = np.asarray(prep.rows["phi"], float)
+    R, M = rwm.shape
+    y = (rwm - rwm.mean(0, keepdims=True)).ravel()
+    out = []
+    for n in range(1, _common_max_order(R) + 1):
+        c = np.repeat(np.cos(n * phi), M).reshape(R, M)
+        sn = np.repeat(np.sin(n * phi), M).reshape(R, M)
+        X = np.stack([(c - c.mean(0)).ravel(), (sn - sn.mean(0)).ravel()], 1)
+        if float(prep.consts["proj"]) > 0:
+            X = np.zeros_like(X)  # common to the moving sensors: taken by the run offsets
+        out.append(_ls_power_flat(y[:, None], X[:, None, :]))
+    return np.asarray(out)
+
+
+def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """Orders in φ common to every moving sensor (platform gear, axial runout, a reference
+    error), 2 dof each, Bonferroni over the orders; nothing without ``phi_ref``."""
+    M = prep.consts["psi_m"].size
+    if float(prep.consts["proj"]) > 0:
         return []
-    mean = fitter.cell_means(resid)
-    z = w(mean).reshape(fitter.n_runs, -1)
-    k = z.shape[1]
-    c2 = np.sum(z**2, axis=1)
-    # F test: the run's χ² against the noise of the other runs
-    dof_all = sum(int(noise["dof"][v]) for v in set(view.tolist()))
-    dof = max(dof_all - k, 1)
-    f_stat = (c2 / k) / np.maximum((float(np.sum(c2)) - c2) / dof, 1e-12)
-    thr = float(stats.f.isf(ALPHA / fitter.n_runs, k, dof))
+    pw = common_order_power(prep, rw[:, :M])
+    thr = _thr(2, pw.size)
     out = []
-    tab = fitter.tab
-    for r in np.flatnonzero(f_stat > thr):
-        zr = mean[r] - (0 if noise["s_c"] else mean[r].mean())
-        worst = np.argsort(-np.abs(zr))[: max(1, nm // 2)]
-        heads = [f"m{k}" for k in sorted(worst)]
-        sel = tab.run == r
+    for i in np.flatnonzero(pw > thr):
         out.append(
-            {
-                "view": "run_outlier",
-                "run": int(tab.run_ids[r]),
-                "chi2": float(c2[r]),
-                "f_stat": float(f_stat[r]),
-                "threshold": float(thr),
-                "heads": heads,
-                "times_s": [float(tab.t_mid_s[sel].min()), float(tab.t_mid_s[sel].max())],
-                "rms_rad": float(np.sqrt(np.mean(zr**2))),
-            }
-        )
-    return out
-
-
-def _trend_findings(fitter: _Fitter, resid, s_w2, tau2) -> list[dict]:
-    """A linear trend in time within runs (F test on the revolution means)."""
-    tab = fitter.tab
-    t = tab.t_mid_s
-    cnt = np.bincount(fitter.cell, minlength=fitter.n_cells).astype(float)
-    tm = np.bincount(fitter.cell, weights=t, minlength=fitter.n_cells) / np.maximum(cnt, 1)
-    dev_t = t - tm[fitter.cell]
-    mean = np.bincount(fitter.cell, weights=resid, minlength=fitter.n_cells) / np.maximum(cnt, 1)
-    dev = resid - mean[fitter.cell]
-    out = []
-    # on revolution means (a trend is the same for every pair of a revolution, and the
-    # pairs share their windows' timing noise), with the noise of those means
-    key = tab.run * (tab.rev.max() + 1) + tab.rev
-    _, inv = np.unique(key, return_inverse=True)
-    nr = np.bincount(inv).astype(float)
-    tr, er = np.bincount(inv, weights=dev_t) / nr, np.bincount(inv, weights=dev) / nr
-    den = float(tr @ tr)
-    dof = max(tr.size - fitter.n_runs - 1, 1)
-    if den > 0:
-        s_r2 = max((float(er @ er) - float(tr @ er) ** 2 / den) / dof, 1e-300)
-        c2 = float((tr @ er) ** 2 / den / s_r2)
-        thr = float(stats.f.isf(ALPHA / 2, 1, dof))
-        if c2 > thr:
-            out.append(
-                {
-                    "view": "trend_within_runs",
-                    "chi2": c2,
-                    "threshold": float(thr),
-                    "rate_rad_per_s": float(dev_t @ dev / den),
-                }
+            Finding(
+                "common_orders",
+                _where(orders=[float(i + 1)], heads=list(range(M)), runs=prep.run_ids.tolist()),
+                float(pw[i]),
+                2,
+                _logp(float(pw[i]), 2),
+                detail={"n_values": int(rw.shape[0] * M), "common_to_moving_sensors": True},
             )
+        )
     return out
 
 
-def _wobble_start(fitter: _Fitter, resid) -> float:
-    """Frequency ratio (0.02…0.98) of the strongest coherent oscillation of the pair pattern."""
-    d = fitter.data
-    x, psi_f = np.asarray(d["x"]), np.asarray(d["psi_f"])
-    tf, tm = np.asarray(d["tf"]), np.asarray(d["tm"])
-    span_rev = max(fitter.t_span * fitter.omega / (2 * np.pi), 1.0)
-    grid = np.arange(0.02, 0.98, 1 / (8 * span_rev))
-    best, val = 0.4, -1.0
-    cell = fitter.cell
-    cnt = np.bincount(cell, minlength=fitter.n_cells).astype(float)
-    for rho in grid:
-        am, af = rho * fitter.omega * tm - x, rho * fitter.omega * tf - psi_f
-        cols = np.column_stack([np.sin(am) - np.sin(af), np.cos(am) - np.cos(af)])
-        coef, *_ = np.linalg.lstsq(cols, resid, rcond=None)
-        drop = float(np.sum((cols @ coef) ** 2))
-        if drop > val:
-            best, val = float(rho), drop
-    del cnt
+def _coil_plausible(ctx: Context, params: dict) -> str | None:
+    """Coil orders that are multiples of the moving-sensor count are a pattern common to
+    the moving sensors: refused when that is the fitted effect's main part and the base
+    residual's common structure peaks at another order (aliased through the platform
+    positions)."""
+    M = int(ctx.consts["psi_m"].size)
+    amp = np.hypot(np.asarray(params["cos_rad"]), np.asarray(params["sin_rad"]))
+    n = int(np.argmax(amp)) + 1
+    pw = np.asarray(ctx.consts.get("common_order_power", ()), float)
+    if M < 2 or n % M or pw.size == 0:
+        return None
+    top = int(np.argmax(pw)) + 1
+    own = pw[min(n, pw.size) - 1]
+    if top != n and pw[top - 1] > 2 * own:
+        return (
+            f"its main order {n} is common to the moving sensors, but the common structure "
+            f"peaks at order {top} of the platform angle (chi-square {pw[top - 1]:.0f})"
+        )
+    return None
+
+
+def _delay_plausible(ctx: Context, params: dict) -> str | None:
+    """A delay step is one sensor's (its electronics, its cable): refused when another
+    moving sensor carries more than half of the largest step (a pattern common to the
+    moving sensors, e.g. a drift or a platform-angle order, is not a sensor's delay)."""
+    d = np.sort(np.abs(np.asarray(params["delay_s"], float)))[::-1]
+    if d.size > 1 and d[1] > 0.5 * d[0]:
+        return (
+            f"the step is shared by several moving sensors ({d[1] / d[0]:.0%} of the largest "
+            "on the next one): not one sensor's delay"
+        )
+    return None
+
+
+def _beam_plausible(ctx: Context, params: dict) -> str | None:
+    """Beam tilt x axial runout lives at orders 1..3 of φ: refused when the base residual's
+    strongest common order is another one (an out-of-catalog order that orders 1..3 take in
+    part through the sparse platform positions)."""
+    pw = np.asarray(ctx.consts.get("common_order_power", ()), float)
+    if pw.size == 0:
+        return None
+    top = int(np.argmax(pw)) + 1
+    if top not in BEAM_ORDERS and pw[top - 1] > 2 * max(
+        pw[n - 1] for n in BEAM_ORDERS if n <= pw.size
+    ):
+        return (
+            f"the common structure peaks at order {top} of the platform angle (chi-square "
+            f"{pw[top - 1]:.0f}), not at the beam-tilt orders {list(BEAM_ORDERS)}"
+        )
+    return None
+
+
+# ----------------------------------------------------------------------------- terms
+
+
+def _to_channels(vp, x):
+    """Pair values ``(n, K, F, M)`` -> channels ``(n, K*M)``: mean over the fixed sensors,
+    Helmert over the revolutions, projection on the moving-sensor differences without
+    ``phi_ref``."""
+    v = jnp.mean(vp, axis=2)  # (n, K, M)
+    out = jnp.einsum("kr,nrm->nkm", x["helmert"], v)
+    m0 = out[:, :1, :]
+    m0 = m0 - x["proj"] * jnp.mean(m0, axis=2, keepdims=True)
+    out = jnp.concatenate([m0, out[:, 1:, :]], axis=1)
+    return out.reshape(out.shape[0], -1)
+
+
+def _xk(x):
+    """``x = φ_r + ψ_m`` broadcast to ``(n, K, F, M)``; ψ_f likewise; shape helpers."""
+    n, K, F = x["tf_c"].shape
+    M = x["psi_m"].shape[0]
+    xm = (x["phi"][:, None] + x["psi_m"][None, :])[:, None, None, :]
+    xm = jnp.broadcast_to(xm, (n, K, F, M))
+    pf = jnp.broadcast_to(x["psi_f"][None, None, :, None], (n, K, F, M))
+    return xm, pf, (n, K, F, M)
+
+
+def _fourier_terms(orders, a, b, ang):
+    o = jnp.asarray(orders, dtype=float)
+    arg = ang[..., None] * o
+    return jnp.sum(jnp.cos(arg) * a + jnp.sin(arg) * b, axis=-1)
+
+
+def _tilt(psi, beta, chi):
+    a = psi - chi
+    d = jnp.arctan2(jnp.sin(a), jnp.cos(a) * jnp.cos(beta)) - a
+    return jnp.mod(d + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+@functools.lru_cache(maxsize=32)
+def _const_term(M: int) -> Candidate:
+    def fn(p, x):
+        xm, _, shp = _xk(x)
+        vp = jnp.broadcast_to(p["const_rad"][None, None, None, :], shp)
+        return _to_channels(vp, x)
+
+    return Candidate(
+        "pair_constants",
+        fn,
+        (Param("const_rad", "rad", (M,), description="pair constant per moving sensor"),),
+        kinds=("sds",),
+        explanation="base model: pair constants (azimuth errors, mean mark errors)",
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _ripple_term(orders: tuple[int, ...], name: str = "design_ripple", expl: str = "") -> Candidate:
+    k = len(orders)
+
+    def fn(p, x):
+        xm, _, _ = _xk(x)
+        return _to_channels(_fourier_terms(orders, p["cos_rad"], p["sin_rad"], xm), x)
+
+    return Candidate(
+        name,
+        fn,
+        (Param("cos_rad", "rad", (k,)), Param("sin_rad", "rad", (k,))),
+        signature=(f"sds_{name}",) if name != "design_ripple" else (),
+        kinds=("sds",),
+        explanation=expl
+        or "base model: the design's speed ripple times disk B's mark errors (orders in x)",
+        derived=_ripple_derived(orders),
+    )
+
+
+def _ripple_derived(orders):
+    def derived(ctx, v, se):
+        amp = np.hypot(v["cos_rad"], v["sin_rad"])
+        sa = np.hypot(se["cos_rad"], se["sin_rad"]) / math.sqrt(2)
+        out = {
+            f"order_{o}_amplitude_rad": {
+                "value": float(amp[i]),
+                "se": float(sa[i]) if np.isfinite(sa[i]) else None,
+                "unit": "rad",
+            }
+            for i, o in enumerate(orders)
+        }
+        kd = ctx.consts.get("kd")
+        sp = getattr(kd, "speed", None)
+        if sp is not None:
+            # the shaft speed ripple itself, from the moving sensors' edge intervals
+            for o in orders:
+                if o in sp["orders"]:
+                    j = int(np.flatnonzero(sp["orders"] == o)[0])
+                    out[f"speed_ripple_relative_order_{o}"] = {
+                        "value": float(sp["amplitude"][j]),
+                        "se": float(sp["stderr"][j]),
+                        "unit": "1",
+                    }
+        return out
+
+    return derived
+
+
+def _axis_tilt_fn(p, x):
+    xm, pf, _ = _xk(x)
+    beta, chi = p["tilt_rad"], p["azimuth_rad"]
+    return _to_channels(_tilt(xm, beta, chi) - _tilt(pf, beta, chi), x)
+
+
+def _drift_fn(p, x):
+    xm, _, shp = _xk(x)
+    tm = jnp.broadcast_to(x["tm_c"][:, :, None, :], shp)
+    return _to_channels(p["drift_rate_rad_per_s"] * tm, x)
+
+
+def _wobble_fn(p, x):
+    xm, pf, shp = _xk(x)
+    rho, a, b = p["frequency_ratio"], p["sin_rad"], p["cos_rad"]
+    att = jnp.sinc(rho)
+    t0 = x["t_mean"]
+    tm = jnp.broadcast_to(x["tm_c"][:, :, None, :], shp) + t0
+    tf = jnp.broadcast_to(x["tf_c"][:, :, :, None], shp) + t0
+
+    def w(t, psi):
+        arg = rho * x["omega"] * t - psi
+        return att * (a * jnp.sin(arg) + b * jnp.cos(arg))
+
+    return _to_channels(w(tm, xm) - w(tf, pf), x)
+
+
+def _beam_fn(p, x):
+    xm, _, shp = _xk(x)
+    ph = jnp.broadcast_to(x["phi"][:, None, None, None], shp)
+    return _to_channels(_fourier_terms(BEAM_ORDERS, p["cos_rad"], p["sin_rad"], ph), x)
+
+
+def _delay_fn(p, x):
+    xm, _, shp = _xk(x)
+    on = (x["run_index"] >= p["first_run"] - 0.5).astype(float)  # held: no derivative
+    # a later edge of the moving sensor reads a larger angle: +Omega tau
+    d = x["omega"] * p["delay_s"][None, :] * on[:, None]  # (n, M)
+    return _to_channels(jnp.broadcast_to(d[:, None, None, :], shp), x)
+
+
+def _tilt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
+    M = ctx.consts["psi_m"].size
+    x = ctx.rows["phi"][:, None] + ctx.consts["psi_m"][None, :]
+    r = resid[:, :M] / ctx.noise[None, :M]
+    X = np.stack([np.cos(2 * x).ravel(), np.sin(2 * x).ravel(), np.ones(x.size)], 1)
+    (a, b, _), *_ = np.linalg.lstsq(X, (r * ctx.noise[None, :M]).ravel(), rcond=None)
+    amp = max(math.hypot(a, b), 1e-15)
+    chi = math.atan2(-a, b) / 2
+    beta = 2 * math.sqrt(amp)
+    return [
+        {"tilt_rad": np.asarray(beta), "azimuth_rad": np.asarray(c)} for c in (chi, chi + np.pi / 2)
+    ]
+
+
+def _wobble_grid(ctx: Context) -> np.ndarray:
+    kd = ctx.consts["kd"]
+    t = ctx.rows["tmid_c"]
+    span_rev = max(float(np.ptp(t)) * float(ctx.consts["omega"]) / (2 * np.pi), 1.0)
+    step = min(1 / (8 * span_rev), 0.01)
+    del kd
+    return np.arange(0.02, 0.98, step)
+
+
+@jax.jit
+def _wobble_cols_jit(rho, x):
+    one, zero = jnp.ones(()), jnp.zeros(())
+    a = _wobble_fn({"frequency_ratio": rho, "sin_rad": one, "cos_rad": zero}, x)
+    b = _wobble_fn({"frequency_ratio": rho, "sin_rad": zero, "cos_rad": one}, x)
+    return jnp.stack([a, b], -1)
+
+
+_wobble_cols_grid = jax.jit(jax.vmap(_wobble_cols_jit, in_axes=(0, None)))
+
+
+def _jx(ctx: Context) -> dict:
+    x = {k: jnp.asarray(v) for k, v in ctx.rows.items()}
+    x.update({k: jnp.asarray(v) for k, v in ctx.consts.items() if isinstance(v, np.ndarray)})
+    return x
+
+
+def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
+    """Power (chi-square) the columns ``(n, C, q)`` take out of ``rw`` (n, C)."""
+    X = cols.reshape(-1, cols.shape[-1])
+    keep = np.any(np.abs(X) > 0, axis=0)
+    X = X[:, keep]
+    if X.shape[1] == 0:
+        return 0.0
+    Q, Rm = np.linalg.qr(X)
+    ok = np.abs(np.diag(Rm)) > 1e-10 * np.abs(np.diag(Rm)).max()
+    Q = Q[:, ok]
+    return float(np.sum((Q.T @ rw.ravel()) ** 2))
+
+
+def _wobble_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
+    rw = resid / ctx.noise[None, :]
+    grid = _wobble_grid(ctx)
+    allc = np.asarray(_wobble_cols_grid(jnp.asarray(grid), _jx(ctx)))  # (G, n, C, 2)
+    best = []
+    for rho, cols in zip(grid, allc):
+        best.append((_ls_power_flat(rw, cols / ctx.noise[None, :, None]), float(rho)))
+    best.sort(reverse=True)
+    out, seen = [], []
+    for _, rho in best:
+        if all(abs(rho - s) > 0.03 for s in seen):
+            seen.append(rho)
+            out.append({"frequency_ratio": np.asarray(rho)})
+        if len(out) == 3:
+            break
+    return out
+
+
+def _delay_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
+    firsts = []
+    for f in findings:
+        if f.view == "run_step" and f.detail.get("shape") == "step":
+            firsts.append(int(f.detail["first_run_index"]))
+    if not firsts:
+        firsts = [_best_step(ctx, resid)[1]]
+    out = []
+    for k in dict.fromkeys(firsts):
+        out.append({"first_run": np.asarray(float(k))})
+    return out[:3]
+
+
+def _best_step(ctx: Context, resid: np.ndarray) -> tuple[float, int, int]:
+    """(power, first run index, moving sensor) of the strongest step over runs."""
+    M = ctx.consts["psi_m"].size
+    r = resid[:, :M] / ctx.noise[None, :M]
+    R = r.shape[0]
+    best = (0.0, R // 2, 0)
+    for k in range(1, R):
+        s = (np.arange(R) >= k).astype(float)
+        s -= s.mean()
+        pw = (s @ r) ** 2 / (s @ s)
+        m = int(np.argmax(pw))
+        if pw[m] > best[0]:
+            best = (float(pw[m]), k, m)
     return best
 
 
-def _block_params(name, p, se, fitter: _Fitter, radius_m):
-    lay = fitter.layout
-    v, s = p[lay.sl(name)], se[lay.sl(name)]
-    if name == "axis_tilt":
-        beta, chi = abs(float(v[0])), float(np.mod(v[1], np.pi))
-        return {
-            "tilt_rad": {"value": beta, "stderr": float(s[0]), "unit": "rad"},
-            "tilt_arcsec": {"value": beta / (math.pi / 648000), "unit": "arcsec"},
-            "azimuth_rad": {"value": chi, "stderr": float(s[1]), "unit": "rad"},
-            "order2_amplitude_rad": {"value": beta**2 / 4, "unit": "rad"},
-        }
-    if name == "thermal_drift":
-        return {
-            "drift_rate_rad_per_s": {"value": float(v[0]), "stderr": float(s[0]), "unit": "rad/s"},
-            "drift_over_record_rad": {"value": float(v[0]) * fitter.t_span, "unit": "rad"},
-            "note": "no temperature column in sds recordings: the rate per kelvin needs one",
-        }
-    if name == "bearing_wobble":
-        rho = float(v[0])
-        amp = math.hypot(v[1], v[2])
-        amp_se = math.hypot(s[1], s[2]) / math.sqrt(2)
-        return {
-            "frequency_ratio": {"value": rho, "stderr": float(s[0]), "unit": "1"},
-            "frequency_hz": {"value": rho * fitter.omega / (2 * np.pi), "unit": "Hz"},
-            "amplitude_rad": {"value": amp, "stderr": amp_se, "unit": "rad"},
-            "runout_m": {
-                "value": amp * radius_m,
-                "stderr": amp_se * radius_m,
-                "unit": "m",
-                "radius_m": radius_m,
-            },
-            "phase_rad": {"value": math.atan2(v[2], v[1]), "unit": "rad"},
-            "note": "one reading per revolution: the ratio is seen modulo 1 (and as 1 − ρ)",
-        }
-    if name == "beam_tilt_axial":
-        out = {}
-        for i, n in enumerate(BEAM_ORDERS):
-            a = math.hypot(v[2 * i], v[2 * i + 1])
-            se_a = math.hypot(s[2 * i], s[2 * i + 1]) / math.sqrt(2)
-            out[f"order_{n}"] = {
-                "error_amplitude_rad": {"value": a, "stderr": se_a, "unit": "rad"},
-                "tilt_runout_product_m_rad": {
-                    "value": a * radius_m,
-                    "stderr": se_a * radius_m,
-                    "unit": "m·rad",
-                },
-            }
-        return out
-    if name == "coil_mismatch":
-        out = {}
-        for i, n in enumerate(lay.coil_orders):
-            a = math.hypot(v[2 * i], v[2 * i + 1])
-            out[f"order_{n}"] = {
-                "error_amplitude_rad": {
-                    "value": a,
-                    "stderr": math.hypot(s[2 * i], s[2 * i + 1]) / math.sqrt(2),
-                    "unit": "rad",
-                }
-            }
-        return out
-    raise KeyError(name)
-
-
-def diagnose_sds(
-    rec: Recording, *, plots: str | Path | None = None, radius_m: float | None = None
-) -> dict[str, Any]:
-    """Diagnose an ``sds`` recording; returns the diagnose JSON contract as a dict.
-
-    Args:
-        rec: the recording (``[encoder]`` with ``pole_pairs``, ``stator_coils``,
-            ``commutation_states`` for the design's motor orders; ``clock_hz`` for the
-            design clock).
-        plots: folder for PNG figures (``None``: no plots).
-        radius_m: read radius for converting angles to lengths, m (default: the
-            recording's optional ``[encoder] optical_radius_m``, else the seed's 25.4 mm;
-            the report says which).
-
-    Returns:
-        ``verdict``, ``rms_before``, ``heldout_rms_before`` (rad), ``effects``,
-        ``unexplained``, ``base`` (parameters with standard errors, ``unidentifiable``),
-        ``rejected``, ``confounding``, ``findings_before``, ``speed_harmonics``, ``report``.
-    """
-    t_start = time.perf_counter()
-    tab = sds_pair_table(rec)
-    enc = rec.encoder
-    where = str(rec.path) if rec.path is not None else "<recording>"
-    if radius_m is None:
-        radius_m = enc.get("optical_radius_m", REFERENCE_RADIUS_M)
-    radius_m = float(radius_m)
-    n_runs = len(tab.run_ids)
-    if n_runs < 4:
-        raise input_error(
-            where, f"{n_runs} run(s)", "at least 4 runs (platform positions) to hold runs out"
-        )
-    if "pole_pairs" not in enc:
-        raise input_error(f"{where}: [encoder]", "missing pole_pairs", "the motor's pole pairs")
-    pp = int(enc["pole_pairs"])
-    q = int(enc["stator_coils"]) if "stator_coils" in enc else None
-    cs = int(enc["commutation_states"]) if "commutation_states" in enc else None
-    nm = len(tab.psi_moving_rad)
-    nf = len(tab.psi_fixed_rad)
-    cap = max(1, min((n_runs * nm) // 2 - 1, 48))
-    base_orders = _design_orders(pp, q, cs, cap)
-
-    # speed harmonics from the edge intervals
-    phi_for_speed = tab.phi_ref_rad if tab.phi_ref_rad is not None else tab.phi_meas_rad
-    sp = sds_speed_harmonics(rec, phi_for_speed)
-    n_sp = len(sp["orders"])
-    thr_sp = stats.chi2.isf(ALPHA / n_sp, 2)
-    sig_speed = [int(o) for o, c in zip(sp["orders"], sp["chi2"]) if c > thr_sp]
-    design_all = set(_design_orders(pp, q, cs, int(sp["orders"][-1])))
-    coil_set = set(range(1, pp))
-    if q:
-        coil_set |= {o for o in range(q, int(sp["orders"][-1]) + 1, q) if o not in design_all}
-    coil_orders = tuple(o for o in sig_speed if o in coil_set and o <= cap)
-    coil_hidden: list[int] = []
-    if tab.phi_ref_rad is None:
-        # without phi_ref the run offsets take every term common to the moving sensors: an
-        # order at which all of them have the same phase (multiples of M for M equally
-        # spaced sensors) cannot be seen in φ + ψ_m
-        same = [
-            o for o in coil_orders if abs(np.mean(np.exp(1j * o * tab.psi_moving_rad))) > 1 - 1e-9
-        ]
-        coil_hidden = same
-        coil_orders = tuple(o for o in coil_orders if o not in same)
-
-    fitter, base, dropped_orders = _fit_base(tab, base_orders, coil_orders)
-    base_orders = list(fitter.layout.base_orders)
-    lay = fitter.layout
-    base_blocks = fitter.base_blocks()
-    ho_base = fitter.heldout(base_blocks)
-    s_w2, tau2 = fitter.stats(base)
-    nz_base = fitter.noise(base)
-    findings_before = (
-        _order_findings(fitter, base["resid"], nz_base, base_orders, ())
-        + _run_findings(fitter, base["resid"], nz_base)
-        + _trend_findings(fitter, base["resid"], s_w2, tau2)
+def _no_ref_beam(ctx: Context) -> str | None:
+    if ctx.has_ref:
+        return None
+    return (
+        "without phi_ref the per-run offset takes everything common to the moving "
+        "sensors; beam_tilt_axial (common to them) is unidentifiable"
     )
 
-    cands = list(CANDIDATES)
-    unidentifiable = ["constant offset (instrument zero: mean mark errors of both disks)"]
-    if not fitter.has_ref:
-        unidentifiable += [
-            "absolute platform angle per run (no phi_ref): only differences between pairs "
-            "and within runs are seen",
-            "beam_tilt_axial common to all moving sensors (absorbed by the run offsets)",
-            "thermal drift across runs (only its slope within runs is seen)",
-        ]
-        cands.remove("beam_tilt_axial")
-    if coil_hidden:
-        unidentifiable.append(
-            f"coil_mismatch at orders {coil_hidden} (speed ripple seen in the edge intervals): "
-            "the same phase at every moving sensor, absorbed by the run offsets"
-        )
-    if not coil_orders:
-        cands.remove("coil_mismatch")
-    rejected: list[dict] = []
-    # candidates the data cannot see at all (e.g. axis tilt with opposed sensors, no phi_ref)
-    for c in list(cands):
-        probe = fitter.fit(base_blocks + (c,))
-        col = fitter.collinearity(probe, c)
-        if col > 1 - 1e-9:  # in the span of the base model to rounding
-            cands.remove(c)
-            unidentifiable.append(f"{c}: its term lies in the span of the base model")
-            rejected.append(
-                {"name": c, "reason": "not identifiable with this recording", "collinearity": col}
-            )
 
-    current, cur_blocks, cur_ho = base, base_blocks, ho_base
-    steps = []
-    wobble_rho = _wobble_start(fitter, base["resid"])
-    last_try: dict[str, dict] = {}
-    while cands:
-        tries = {}
-        for c in cands:
-            p_init = current["p"].copy()
-            if c == "bearing_wobble":
-                p_init[lay.sl("bearing_wobble")] = [
-                    _wobble_start(fitter, current["resid"]),
-                    0.0,
-                    0.0,
-                ]
-            if c == "axis_tilt":
-                p_init[lay.sl("axis_tilt")] = _tilt_start(fitter, current["resid"])
-            blocks = cur_blocks + (c,)
-            f = fitter.fit(blocks, p_init=p_init)
-            nz = fitter.noise(f)
-            before, after = fitter.chi2_parts(current, nz), fitter.chi2_parts(f, nz)
-            drops = {view: before[view] - after[view] for view in before}
-            drop = sum(drops.values())
-            k = int(lay.sl(c).stop - lay.sl(c).start)
-            if c == "coil_mismatch":
-                k = 2 * len(coil_orders)
-            # F test: the noise level of the view carrying most of the drop is itself
-            # estimated from few degrees of freedom (e.g. one common value per run)
-            view = max(drops, key=lambda v: drops[v])
-            dof = max(int(nz["dof"][view]), 1)
-            thr = k * float(stats.f.isf(ALPHA / len(CANDIDATES), k, dof))
-            ho = fitter.heldout(blocks, p_init=f["p"])
-            tries[c] = dict(
-                fit=f,
-                drop=drop,
-                k=k,
-                thr=thr,
-                view=view,
-                heldout=ho,
-                bic=-drop + k * math.log(fitter.n_cells),
-            )
-        last_try.update(tries)
-        # rank with one noise level for all (that of the best-fitting candidate)
-        ref = min(tries, key=lambda c: float(tries[c]["fit"]["resid"] @ tries[c]["fit"]["resid"]))
-        nz = fitter.noise(tries[ref]["fit"])
-        chi_cur = sum(fitter.chi2_parts(current, nz).values())
-        for v in tries.values():
-            chi_v = sum(fitter.chi2_parts(v["fit"], nz).values())
-            v["bic"] = -(chi_cur - chi_v) + v["k"] * math.log(fitter.n_cells)
-        ok = {c: v for c, v in tries.items() if v["drop"] > v["thr"] and v["heldout"] < cur_ho}
-        if not ok:
-            break
-        best = min(ok, key=lambda c: ok[c]["bic"])
-        v = ok[best]
-        cur_blocks = cur_blocks + (best,)
-        steps.append((best, v, cur_ho))
-        current, cur_ho = v["fit"], v["heldout"]
-        cands.remove(best)
-    for c in cands:
-        v = last_try.get(c)
-        if v is None:
-            continue
-        why = []
-        if v["drop"] <= v["thr"]:
-            why.append(f"chi2 drop {v['drop']:.1f} below {v['thr']:.1f} (not significant)")
-        if v["heldout"] >= cur_ho:
-            why.append("held-out RMS not lowered")
-        rejected.append(
-            {
-                "name": c,
-                "reason": "; ".join(why) or "another candidate explained the same structure",
-                "chi2_drop": float(v["drop"]),
-                "heldout_rms": float(v["heldout"]),
-            }
-        )
-    if "coil_mismatch" not in [s[0] for s in steps] and not coil_orders:
-        rejected.append(
-            {
-                "name": "coil_mismatch",
-                "reason": "no significant speed harmonic at orders 1 … pole_pairs−1 in the "
-                "edge intervals",
-            }
-        )
-    del wobble_rho
-
-    se = fitter.stderr(current)
-    effects = []
-    for name, v, ho_prev in steps:
-        f = v["fit"]
-        params = _block_params(name, current["p"], se, fitter, radius_m)
-        if name == "coil_mismatch":
-            params["speed_ripple_relative"] = {
-                f"order_{o}": {
-                    "value": float(sp["amplitude"][o - 1]),
-                    "stderr": float(sp["stderr"][o - 1]),
-                    "unit": "1",
-                }
-                for o in coil_orders
-            }
-        col = fitter.collinearity(f, name)
-        notes = []
-        if col > 0.95:
-            notes.append(
-                f"nearly collinear with the base model (canonical correlation {col:.3f}): "
-                "part of it may be attributed to the base terms"
-            )
-        effects.append(
-            {
-                "name": name,
-                "params": params,
-                "rms_after": _rms(f["resid"]),
-                "heldout_rms_after": v["heldout"],
-                "heldout_improvement": 1 - v["heldout"] / ho_prev,
-                "chi2_drop": float(v["drop"]),
-                "delta_bic": float(v["bic"]),
-                "collinearity": col,
-                "notes": notes,
-                "explanation": EXPLANATIONS[name],
-            }
-        )
-
-    # timing quantization: the clock grid
-    design_p = 1.0 / float(enc["clock_hz"]) if "clock_hz" in enc else None
-    grid = clock_grid(rec, design_p)
-    s_w2f, tau2f = fitter.stats(current)
-    floor = None
-    clock = {"design_period_s": design_p, "grid_period_s": grid}
-    if grid is not None:
-        floor = 2 * np.pi * grid / (tab.period_s * math.sqrt(6 * tab.n_marks))
-        clock["predicted_floor_rad"] = floor
-        coarser = design_p is None or grid > 1.5 * design_p
-        if coarser and floor > 0.1 * _rms(current["resid"]):
-            effects.append(
-                {
-                    "name": "timing_quantization",
-                    "params": {
-                        "clock_period_s": {"value": grid, "unit": "s"},
-                        "design_clock_period_s": {"value": design_p, "unit": "s"},
-                        "predicted_floor_rad": {"value": floor, "unit": "rad"},
-                        "jitter_s": {
-                            "value": _jitter(s_w2f, floor, tab),
-                            "unit": "s",
-                            "note": "from the revolution-to-revolution scatter beyond the "
-                            "quantization floor",
-                        },
-                    },
-                    "rms_after": _rms(current["resid"]),
-                    "heldout_rms_after": cur_ho,
-                    "heldout_improvement": 0.0,
-                    "notes": [
-                        "a noise floor: named from the time-stamp grid, not from a fit; the "
-                        "residual cannot shrink"
-                    ],
-                    "explanation": EXPLANATIONS["timing_quantization"]
-                    + f" Stamps lie on a {grid:.3g} s grid (design {design_p} s).",
-                }
-            )
-
-    final_orders = design_all | (set(coil_orders) if "coil_mismatch" in cur_blocks else set())
-    skip_rot = final_orders | ({2} if "axis_tilt" in cur_blocks else set())
-    skip_com = set(BEAM_ORDERS) if "beam_tilt_axial" in cur_blocks else set()
-    nz_final = fitter.noise(current)
-    left = _order_findings(fitter, current["resid"], nz_final, skip_rot, skip_com)
-    left += _run_findings(fitter, current["resid"], nz_final)
-    if "thermal_drift" not in cur_blocks:
-        left += _trend_findings(fitter, current["resid"], s_w2f, tau2f)
-    f_rev = 1.0 / tab.period_s
-    unexplained = []
-    all_runs = [int(r) for r in tab.run_ids]
-    orders_left = [f for f in left if f["view"].startswith("orders")]
-    if orders_left:
-        unexplained.append(
-            {
-                "where": {
-                    "orders": sorted({f["order"] for f in orders_left}),
-                    "frequencies_hz": [],
-                    "heads": [f"m{i}" for i in range(nm)],
-                    "runs": all_runs,
-                    "times_s": [],
-                },
-                "rms": float(np.sqrt(sum(f["amplitude_rad"] ** 2 / 2 for f in orders_left))),
-                "view": sorted({f["view"] for f in orders_left}),
-                "note": "repeatable error at these orders of the platform angle (rotating: in "
-                "φ + ψ_m; common: in φ) that no catalog effect explains",
-            }
-        )
-    for f in left:
-        if f["view"] == "run_outlier":
-            unexplained.append(
-                {
-                    "where": {
-                        "orders": [],
-                        "frequencies_hz": [],
-                        "heads": f["heads"],
-                        "runs": [f["run"]],
-                        "times_s": f["times_s"],
-                    },
-                    "rms": float(
-                        _rms(current["resid"][tab.run == list(tab.run_ids).index(f["run"])])
-                    ),
-                    "view": "run_outlier",
-                    "note": "this run's pair readings are offset against the others",
-                }
-            )
-        elif f["view"] == "trend_within_runs":
-            unexplained.append(
-                {
-                    "where": {
-                        "orders": [],
-                        "frequencies_hz": [],
-                        "heads": [],
-                        "runs": all_runs,
-                        "times_s": [float(tab.t_mid_s.min()), float(tab.t_mid_s.max())],
-                    },
-                    "rms": abs(f["rate_rad_per_s"]) * fitter.t_span / math.sqrt(12),
-                    "view": "trend_within_runs",
-                    "note": "a trend in time not explained by the accepted effects",
-                }
-            )
-    # dynamic range of the interval view: products of the strong design harmonics with mark
-    # errors leak ~1e-3 of their amplitude into other orders
-    floor_sp = 1e-3 * float(np.max(sp["amplitude"]))
-    odd_speed = [
-        o
-        for o in sig_speed
-        if o not in design_all and o not in coil_set and sp["amplitude"][o - 1] > floor_sp
-    ]
-    if odd_speed:
-        unexplained.append(
-            {
-                "where": {
-                    "orders": odd_speed,
-                    "frequencies_hz": [o * f_rev for o in odd_speed],
-                    "heads": [f"m{i}" for i in range(nm)],
-                    "runs": all_runs,
-                    "times_s": [],
-                },
-                "rms": float(np.sqrt(np.sum(sp["amplitude"][np.asarray(odd_speed) - 1] ** 2 / 2))),
-                "unit": "relative speed ripple",
-                "view": "speed_harmonics",
-                "note": "shaft speed harmonics (relative units) at orders the motor's design, "
-                "magnets, commutation, cogging and coils do not produce",
-            }
-        )
-    verdict = "missing_physics" if effects else ("unexplained" if unexplained else "consistent")
-
-    se_base = fitter.stderr(base)
-    bp = base["p"]
-    base_out = {
-        "model": "pair constants + design ripple × disk-B mark errors at the motor's orders"
-        + ("" if fitter.has_ref else " + a platform angle per run (no phi_ref)"),
-        "design_orders": base_orders,
-        "design_orders_not_resolved": sorted(dropped_orders),
-        "pair_constants_rad": {
-            f"f{i // nm}-m{i % nm}": {
-                "value": float(bp[lay.sl("pair_const")][i]),
-                "stderr": float(se_base[lay.sl("pair_const")][i]),
-                "unit": "rad",
-            }
-            for i in range(nf * nm)
-        },
-        "ripple_error_rad": {
-            f"order_{o}": {
-                "value": float(math.hypot(*bp[lay.sl("ripple")][2 * k : 2 * k + 2])),
-                "stderr": float(
-                    math.hypot(*se_base[lay.sl("ripple")][2 * k : 2 * k + 2]) / math.sqrt(2)
-                ),
-                "unit": "rad",
-            }
-            for k, o in enumerate(base_orders)
-        },
-        "motor_velocity_ripple": {
-            f"order_{o}": {
-                "value": float(sp["amplitude"][o - 1]),
-                "stderr": float(sp["stderr"][o - 1]),
-                "unit": "1 (relative speed)",
-            }
-            for o in sorted(design_all)
-            if o <= len(sp["orders"])
-        },
-        "noise_within_runs_rad": math.sqrt(s_w2),
-        "noise_between_runs_rad": math.sqrt(tau2),
-        "clock": clock,
-        "unidentifiable": unidentifiable,
-        "heldout": "two folds of alternate runs, each fitted on the other"
-        + ("" if fitter.has_ref else "; run offsets refitted on held-out runs"),
-        "n_runs": n_runs,
-        "n_data": int(tab.value_rad.size),
-        "period_s": tab.period_s,
-        "radius_m": radius_m,
-        "fit_converged": base["ok"],
-    }
-    confounding = []
-    for a_, b_ in (("axis_tilt", "beam_tilt_axial"), ("axis_tilt", "coil_mismatch")):
-        note = {
-            ("axis_tilt", "beam_tilt_axial"): "both give order 2 in φ; with two opposed "
-            "moving sensors the order-2 patterns are identical",
-            ("axis_tilt", "coil_mismatch"): "coil mismatch at order 2 gives order 2 in φ+ψ_m "
-            "like the tilt; the edge intervals decide (speed ripple or not)",
-        }[(a_, b_)]
-        confounding.append({"effects": [a_, b_], "note": note})
-    out = {
-        "recording": str(rec.path) if rec.path else None,
-        "kind": "sds",
-        "verdict": verdict,
-        "rms_before": _rms(base["resid"]),
-        "heldout_rms_before": ho_base,
-        "effects": effects,
-        "unexplained": unexplained,
-        "base": base_out,
-        "rejected": rejected,
-        "confounding": confounding,
-        "findings_before": findings_before,
-        "findings_after": left,
-        "speed_harmonics": {
-            "orders": sp["orders"].tolist(),
-            "amplitude": sp["amplitude"].tolist(),
-            "significant": sig_speed,
-            "threshold_chi2": float(thr_sp),
-        },
-        "noise_rad": math.sqrt(s_w2f + tau2f),
-        "time_s": time.perf_counter() - t_start,
-    }
-    out["report"] = sds_report(out)
-    if plots is not None:
-        out["plots"] = [str(p) for p in plot_sds(out, fitter, base, current, plots)]
+def _tilt_derived(ctx, v, se):
+    beta, sb = abs(float(v["tilt_rad"])), se["tilt_rad"]
+    sb = float(sb) if np.isfinite(sb) else float("inf")
+    out = {"tilt_squared_over_4_rad": {"value": beta**2 / 4, "se": None, "unit": "rad"}}
+    if not beta > 3 * sb:
+        out["azimuth_identifiable"] = {
+            "value": False,
+            "se": None,
+            "unit": "1",
+        }
     return out
 
 
-def _tilt_start(fitter: _Fitter, resid) -> list[float]:
-    x = np.asarray(fitter.data["x"])
-    X = np.column_stack([np.cos(2 * x), np.sin(2 * x), np.ones_like(x)])
-    (a, b, _), *_ = np.linalg.lstsq(X, resid, rcond=None)
-    amp = max(math.hypot(a, b), 1e-12)
-    return [2 * math.sqrt(amp), math.atan2(-a, b) / 2]
+def _wobble_derived(ctx, v, se):
+    amp = math.hypot(float(v["sin_rad"]), float(v["cos_rad"]))
+    s = math.hypot(float(se["sin_rad"]), float(se["cos_rad"])) / math.sqrt(2)
+    s = s if math.isfinite(s) else None
+    r = float(ctx.consts["radius_m"])
+    return {
+        "amplitude_rad": {"value": amp, "se": s, "unit": "rad"},
+        "runout_m": {"value": amp * r, "se": None if s is None else s * r, "unit": "m"},
+    }
 
 
-def _jitter(s_w2, floor, tab) -> float:
-    extra = max(s_w2 - floor**2, 0.0)
-    # per-pair reading noise from white jitter σ_t: 2π σ_t sqrt(2/N) / T
-    return math.sqrt(extra) * tab.period_s / (2 * np.pi * math.sqrt(2 / tab.n_marks))
+def _beam_derived(ctx, v, se):
+    out = {}
+    for i, n in enumerate(BEAM_ORDERS):
+        a = math.hypot(float(v["cos_rad"][i]), float(v["sin_rad"][i]))
+        s = math.hypot(float(se["cos_rad"][i]), float(se["sin_rad"][i])) / math.sqrt(2)
+        out[f"order_{n}_amplitude_rad"] = {
+            "value": a,
+            "se": s if math.isfinite(s) else None,
+            "unit": "rad",
+        }
+    return out
 
 
-def sds_report(d: dict) -> str:
-    """One-page plain-text report of an sds diagnosis."""
-    b = d["base"]
-    lines = [
-        f"Diagnosis of {d['recording']} (sds)",
-        f"verdict: {d['verdict']}",
-        f"base model: {b['model']}; design orders {b['design_orders']}",
-        f"residual RMS before: {d['rms_before'] * 1e9:.3f} nrad fitted, "
-        f"{d['heldout_rms_before'] * 1e9:.3f} nrad held out ({b['heldout']})",
-        f"noise: {b['noise_within_runs_rad'] * 1e9:.3f} nrad within runs, "
-        f"{b['noise_between_runs_rad'] * 1e9:.3f} nrad between runs",
+def _delay_derived(ctx, v, se):
+    d = np.asarray(v["delay_s"], float)
+    s = np.asarray(se["delay_s"], float)
+    m = int(np.argmax(np.abs(d) / np.where(np.isfinite(s) & (s > 0), s, np.inf)))
+    rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
+    return {
+        "sensor": {"value": f"m{m}", "se": None, "unit": "1"},
+        "first_run": {"value": rid, "se": None, "unit": "1"},
+        "delay_step_s": {
+            "value": float(d[m]),
+            "se": float(s[m]) if np.isfinite(s[m]) else None,
+            "unit": "s",
+        },
+    }
+
+
+def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
+    """The SDS catalog candidates for this record."""
+    M = ctx.consts["psi_m"].size
+    pp = int(ctx.meta.get("encoder", {}).get("pole_pairs", 0) or 0)
+    return _catalog(M, pp)
+
+
+@functools.lru_cache(maxsize=16)
+def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
+    """One set of candidate objects per layout (one compiled Jacobian each)."""
+    out = [
+        Candidate(
+            "axis_tilt",
+            _axis_tilt_fn,
+            (
+                Param("tilt_rad", "rad", linear=False, scale=1e-3),
+                Param("azimuth_rad", "rad", linear=False, scale=0.3),
+            ),
+            signature=("sds_axis_tilt", "orders"),
+            kinds=("sds",),
+            explanation=EXPLANATIONS["axis_tilt"],
+            start=_tilt_start,
+            derived=_tilt_derived,
+        ),
+        Candidate(
+            "thermal_drift",
+            _drift_fn,
+            (Param("drift_rate_rad_per_s", "rad/s"),),
+            signature=("sds_thermal_drift", "run_step"),
+            kinds=("sds",),
+            explanation=EXPLANATIONS["thermal_drift"],
+        ),
+        Candidate(
+            "bearing_wobble",
+            _wobble_fn,
+            (
+                Param("frequency_ratio", "1", linear=False, scale=0.01),
+                Param("sin_rad", "rad"),
+                Param("cos_rad", "rad"),
+            ),
+            signature=("sds_bearing_wobble",),
+            kinds=("sds",),
+            explanation=EXPLANATIONS["bearing_wobble"],
+            start=_wobble_start,
+            derived=_wobble_derived,
+        ),
+        Candidate(
+            "beam_tilt_axial",
+            _beam_fn,
+            (
+                Param("cos_rad", "rad", (len(BEAM_ORDERS),)),
+                Param("sin_rad", "rad", (len(BEAM_ORDERS),)),
+            ),
+            signature=("sds_beam_tilt_axial", "common_orders"),
+            kinds=("sds",),
+            explanation=EXPLANATIONS["beam_tilt_axial"],
+            applies=_no_ref_beam,
+            plausible=_beam_plausible,
+            derived=_beam_derived,
+        ),
+        Candidate(
+            "sensor_delay_step",
+            _delay_fn,
+            (
+                Param("delay_s", "s", (M,), scale=1e-10),
+                Param("first_run", "1", linear=False, fit=False),
+            ),
+            signature=("run_step",),
+            kinds=("sds",),
+            explanation=EXPLANATIONS["sensor_delay_step"],
+            start=_delay_start,
+            plausible=_delay_plausible,
+            derived=_delay_derived,
+        ),
     ]
-    for e in d["effects"]:
-        lines.append(
-            f"  + {e['name']}: RMS {e['rms_after'] * 1e9:.3f} nrad fitted, "
-            f"{e['heldout_rms_after'] * 1e9:.3f} nrad held out; {e['explanation']}"
-        )
-    for r in d["rejected"]:
-        lines.append(f"  - {r['name']} rejected: {r['reason']}")
-    for u in d["unexplained"]:
-        w = u["where"]
-        lines.append(
-            f"  ? unexplained ({u['view']}): orders {w['orders'][:10]}, runs {w['runs'][:10]}, "
-            f"heads {w['heads']}, {u['rms'] * 1e9:.3f} nrad"
-        )
-    for x in b["unidentifiable"]:
-        lines.append(f"  . unidentifiable: {x}")
-    return "\n".join(lines) + "\n"
+    if pp > 1:
+        orders = tuple(range(1, pp))
+        coil = _ripple_term(orders, "coil_mismatch", EXPLANATIONS["coil_mismatch"])
+        out.append(dataclasses.replace(coil, plausible=_coil_plausible))
+    return tuple(out)
 
 
-def plot_sds(d: dict, fitter: _Fitter, base: dict, final: dict, folder: str | Path) -> list:
-    """Residual vs φ before/after, residual spectra before/after, per-pair residuals (PNG)."""
-    from ..io._study import new_figure, save_figure
-    from ._plots import rms_bars, rms_steps
+# ----------------------------------------------------------------------------- views
 
-    folder = Path(folder)
-    tab = fitter.tab
-    nm = len(tab.psi_moving_rad)
-    phi = np.degrees(np.mod(fitter.phi_run[tab.run], 2 * np.pi))
-    files = []
-    fig, ax = new_figure(2, 1, figsize=(8, 6))
-    ax[0].plot(phi, base["resid"] * 1e9, ".", ms=3, label="base model")
-    ax[0].plot(phi, final["resid"] * 1e9, ".", ms=3, label="with named effects")
-    ax[0].set(xlabel="platform angle φ (deg)", ylabel="residual (nrad)", title="residual vs φ")
-    ax[0].legend()
-    rms_bars(ax[1], *rms_steps(d), scale=1e9)
-    ax[1].set(ylabel="RMS (nrad)")
-    ax[1].legend()
-    files.append(save_figure(fig, folder, "rms_before_after.png"))
 
-    fig, ax = new_figure(2, 1, figsize=(8, 6))
-    xr = np.asarray(fitter.data["x"])
-    orders = np.arange(1, max(2, min(len(tab.run_ids) * nm // 2, 40)))
-    for lab, r in (("base model", base["resid"]), ("with named effects", final["resid"])):
-        amp = [
-            np.hypot(*np.linalg.lstsq(np.column_stack([np.cos(n * xr), np.sin(n * xr)]), r)[0])
-            for n in orders
+def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """Per moving sensor (run-mean channels), the best step over the runs in time order and
+    the strongest single-run outlier; 1 dof each, Bonferroni over sensors x positions."""
+    M = prep.consts["psi_m"].size
+    r = rw[:, :M]
+    R = r.shape[0]
+    n_tests = max(1, 2 * M * (R - 1))
+    thr = _thr(1, n_tests)
+    out = []
+    for m in range(M):
+        x = r[:, m] - r[:, m].mean()
+        best = (0.0, 1, "step")
+        for k in range(1, R):
+            s = (np.arange(R) >= k).astype(float)
+            s -= s.mean()
+            pw = float((s @ x) ** 2 / (s @ s))
+            if pw > best[0]:
+                best = (pw, k, "step")
+        j = int(np.argmax(np.abs(x)))
+        pw_out = float(x[j] ** 2 * R / (R - 1))
+        if pw_out > best[0]:
+            best = (pw_out, j, "run_outlier")
+        if best[0] > thr:
+            k = best[1]
+            out.append(
+                Finding(
+                    "run_step",
+                    _where(
+                        heads=[m],
+                        runs=[int(prep.run_ids[k])],
+                        times_s=[float(prep.rows["t"][k])],
+                    ),
+                    best[0],
+                    1,
+                    _logp(best[0], 1),
+                    detail={
+                        "shape": best[2],
+                        "first_run_index": int(k),
+                        "sensor": f"m{m}",
+                        "n_values": int(R),
+                    },
+                )
+            )
+    return out
+
+
+def _matched_view(name: str):
+    """A view: the power the candidate's columns (at its start) take out of the residual."""
+
+    def view(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+        ctx = prep.ctx
+        cands = {c.name: c for c in sds_candidates(ctx)}
+        if name not in cands:
+            return []
+        cand = cands[name]
+        if cand.applies is not None and cand.applies(ctx):
+            return []
+        x = _jx(ctx)
+        resid = rw * prep.sigma[None, :]
+        starts = cand.start(ctx, resid, []) if cand.start else [{}]
+        best = (0.0, 0)
+        for st in starts:
+            p = {}
+            for q in cand.params:
+                shp = q.resolved_shape(ctx.n_channels, ctx.n_runs)
+                v0 = st.get(q.name)
+                p[q.name] = jnp.asarray(np.zeros(shp) if v0 is None else v0, float)
+            free = [q.name for q in cand.params if q.fit]
+            _, J = _valjac_fn(cand)(p, x)
+            cols = (
+                np.concatenate([np.asarray(J[k]).reshape(*rw.shape, -1) for k in free], axis=-1)
+                / prep.sigma[None, :, None]
+            )
+            pw = _ls_power_flat(rw, cols)
+            q_eff = int(np.linalg.matrix_rank(cols.reshape(-1, cols.shape[-1]), tol=None))
+            if pw > best[0]:
+                best = (pw, max(q_eff, 1))
+        pw, q = best
+        n_starts = len(_wobble_grid(ctx)) if name == "bearing_wobble" else max(len(starts), 1)
+        thr = _thr(q, 6 * n_starts)
+        if pw <= thr:
+            return []
+        return [
+            Finding(
+                f"sds_{name}",
+                _where(heads=list(range(prep.n_channels)), runs=prep.run_ids.tolist()),
+                pw,
+                q,
+                _logp(pw, q),
+                detail={"n_values": int(rw.size), "candidate": name},
+            )
         ]
-        ax[0].semilogy(orders, np.asarray(amp) * 1e9 + 1e-6, "o-", ms=3, label=lab)
-    ax[0].set(xlabel="order in φ+ψ_m", ylabel="amplitude (nrad)", title="residual spectrum")
-    ax[0].legend()
-    sp = d["speed_harmonics"]
-    ax[1].semilogy(sp["orders"], np.asarray(sp["amplitude"]) + 1e-12, ".-", ms=3)
-    for o in sp["significant"]:
-        ax[1].axvline(o, color="tab:red", lw=0.5)
-    ax[1].set(xlabel="order (cycles/rev)", ylabel="relative speed ripple", title="edge intervals")
-    files.append(save_figure(fig, folder, "residual_spectra.png"))
 
-    fig, ax = new_figure(1, 1, figsize=(8, 4))
-    pair = tab.fixed * nm + tab.moving
-    for k in np.unique(pair):
-        s = pair == k
-        ax.plot(phi[s], final["resid"][s] * 1e9, ".", ms=3, label=f"f{k // nm}-m{k % nm}")
-    ax.set(xlabel="platform angle φ (deg)", ylabel="final residual (nrad)", title="per pair")
-    ax.legend(fontsize=7)
-    files.append(save_figure(fig, folder, "pair_residuals.png"))
-    return files
+    return view
+
+
+def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """The engine's ``orders`` view on the run-mean channels only (a pattern in the platform
+    angle is constant within a run: it cannot reach the revolution contrasts, whose
+    scan would only add false alarms)."""
+    from ._views import view_orders
+
+    M = prep.consts["psi_m"].size
+    r = np.zeros_like(rw)
+    r[:, :M] = rw[:, :M]
+    return view_orders(prep, r, min(scan_order, sds_limit(prep)))
+
+
+SDS_VIEWS = (
+    view_mean_orders,
+    view_common_orders,
+    view_run_step,
+    _matched_view("axis_tilt"),
+    _matched_view("thermal_drift"),
+    _matched_view("bearing_wobble"),
+    _matched_view("beam_tilt_axial"),
+    _matched_view("coil_mismatch"),
+)
+
+
+# ----------------------------------------------------------------------------- base
+
+
+def sds_limit(prep: Prepared) -> int:
+    """Highest order in ``x = φ + ψ_m`` the record resolves: ``R·M/2 − 1``."""
+    M = prep.consts["psi_m"].size
+    return int(max(1, prep.ctx.n_runs * M // 2 - 1))
+
+
+def sds_base(prep: Prepared, max_order: int):
+    """Pair constants plus the design's ripple orders (see module doc)."""
+    enc = prep.ctx.meta.get("encoder", {})
+    M = prep.consts["psi_m"].size
+    p = int(enc.get("pole_pairs", 0) or 0)
+    orders = (
+        _design_orders(p, enc.get("stator_coils"), enc.get("commutation_states"), max_order)
+        if p > 0
+        else []
+    )
+    terms = [(_const_term(M), {})]
+    if orders:
+        terms.append((_ripple_term(tuple(orders)), {}))
+    has_ref = prep.ctx.has_ref
+    prep.consts["base_orders"] = orders  # type: ignore[index]
+    unid = [
+        "the constant offset (instrument zero): its physical causes cannot be told apart",
+    ]
+    if not has_ref:
+        unid += [
+            "no phi_ref: the absolute platform angle of each run (a per-run offset is "
+            "taken out), so the common constant of the moving sensors is held",
+            "no phi_ref: anything common to the moving sensors of a run (beam tilt x axial "
+            f"runout, orders that are multiples of {M} in x, a common drift across runs)",
+        ]
+        common = [n for n in range(1, p) if n % M == 0 and M > 1]
+        if common:
+            unid.append(
+                f"no phi_ref: coil_mismatch orders {common} have one phase at every moving "
+                "sensor (multiples of the moving-sensor count): held as unidentifiable"
+            )
+    info = {
+        "design_orders": orders,
+        "pole_pairs": p,
+        "n_revolutions_per_run": int(prep.kd.n_revs),
+        "revolutions_left_out": int(prep.kd.dropped_revs),
+        "radius_m": float(prep.kd.radius_m or REFERENCE_RADIUS_M),
+        "unidentifiable": unid,
+    }
+    return terms, info
+
+
+def sds_summary(prep: Prepared, base_params: dict) -> dict:
+    """The clock block: the stamp lattice found in the data against the declared clock."""
+    kd = prep.kd
+    lat = dict(kd.lattice or {})
+    P = lat.get("period_s")
+    T = kd.table.period_s
+    N = kd.table.n_marks
+    floor = None
+    if P is not None:
+        # uniform stamp error (var P^2/12) on the 2N window edges of a pair: seed 001 eq. 23
+        floor = 2 * math.pi * P / (T * math.sqrt(6 * N))
+    ratio = P / kd.declared_clock_s if (P is not None and kd.declared_clock_s) else None
+    return {
+        "clock": {
+            "declared_period_s": kd.declared_clock_s,
+            "lattice_period_s": P,
+            "ratio_to_declared": ratio,
+            "fraction_on_lattice": lat.get("fraction_on_lattice"),
+            "predicted_floor_rad": floor,
+            "method": lat.get("method"),
+        },
+        "grid_period_s": P,
+    }
+
+
+SDS = Kind(
+    name="sds",
+    data=sds_data,
+    base=sds_base,
+    candidates=sds_candidates,
+    views=SDS_VIEWS,
+    max_order_limit=sds_limit,
+    default_max_order=60,
+    summary=sds_summary,
+    prepare=sds_prepare,
+    noise=sds_noise,
+    noise_replaces=True,
+)
+
+
+# ----------------------------------------------------------------------------- finish
+
+
+def finish_sds(doc: dict) -> dict:
+    """SDS additions to the engine's document: ``timing_quantization`` named from the stamp
+    lattice (a floor, not a fitted term), the quantization floor in the goodness of fit,
+    honest standard errors (scaled by the final variance ratio when it exceeds 1; the
+    azimuth of an unresolved tilt is unidentifiable), and no non-finite number anywhere."""
+    clock = doc.get("clock", {})
+    gof = doc.get("goodness_of_fit") or {}
+    vr = float(gof.get("variance_ratio", 1.0) or 1.0)
+    scale = math.sqrt(max(vr, 1.0))
+    noise = doc.get("noise", {}).get("per_channel", [])
+    floor = clock.get("predicted_floor_rad")
+    if isinstance(gof, dict):
+        gof["quantization"] = {
+            "lattice_period_s": clock.get("lattice_period_s"),
+            "predicted_floor_rad": floor,
+            "noise_run_means_rad": noise[0] if noise else None,
+            "note": "the noise levels are estimated from the data and so include the "
+            "quantization of the stamps on the lattice found; the predicted floor "
+            "2 pi P / (T sqrt(6 N)) is what a perfect bench on that lattice would show",
+        }
+    for e in doc.get("effects", []):
+        for q in e.get("params", {}).values():
+            if isinstance(q.get("se"), list | float | int) and scale > 1:
+                q["se"] = _scale(q["se"], scale)
+        if e["name"] == "axis_tilt":
+            p = e["params"]
+            # (tilt, azimuth) and (-tilt, azimuth + pi) are one tilt: report tilt >= 0 and
+            # the azimuth in [0, pi)
+            if p["tilt_rad"]["value"] < 0:
+                p["tilt_rad"]["value"] = -p["tilt_rad"]["value"]
+            p["azimuth_rad"]["value"] = float(np.mod(p["azimuth_rad"]["value"], np.pi))
+            b, sb = abs(p["tilt_rad"]["value"]), p["tilt_rad"]["se"]
+            if sb is None or not b > 3 * sb:
+                p["azimuth_rad"]["se"] = None
+                e["notes"] = [
+                    *e.get("notes", []),
+                    "the tilt is not resolved (|tilt| <= 3 se): its azimuth is unidentifiable",
+                ]
+    ratio = clock.get("ratio_to_declared")
+    if ratio is not None and ratio > LATTICE_COARSER:
+        rms = doc.get("rms_final", doc.get("rms_before"))
+        doc["effects"].append(
+            {
+                "name": "timing_quantization",
+                "params": {
+                    "clock_period_s": {
+                        "value": clock["lattice_period_s"],
+                        "se": None,
+                        "unit": "s",
+                    },
+                    "declared_period_s": {
+                        "value": clock["declared_period_s"],
+                        "se": None,
+                        "unit": "s",
+                    },
+                    "predicted_floor_rad": {"value": floor, "se": None, "unit": "rad"},
+                },
+                "derived": {},
+                "channels": None,
+                "rms_after": rms,
+                "heldout_rms_after": doc.get("heldout_rms_final"),
+                "delta_bic": None,
+                "collinearity": None,
+                "share": 0.0,
+                "notes": [
+                    f"every stamp lies on a {clock['lattice_period_s']:.4g} s lattice, "
+                    f"{ratio:.3g} x the declared clock period; named from the lattice, not "
+                    "fitted (a noise floor): delta_bic and collinearity do not apply"
+                ],
+                "explanation": EXPLANATIONS["timing_quantization"],
+            }
+        )
+        if doc["verdict"] == "consistent":
+            doc["verdict"] = "missing_physics"
+    elif clock.get("lattice_period_s") is None and clock.get("declared_period_s"):
+        doc["notes"].append(
+            "no stamp lattice found in the data although a clock is declared: the stamps "
+            "look continuous (interpolated or free-running time)"
+        )
+    return _finite(doc)
+
+
+def _scale(v, s):
+    if isinstance(v, list):
+        return [_scale(x, s) for x in v]
+    return None if v is None else float(v) * s
+
+
+def _finite(v):
+    """Non-finite numbers become ``None`` (the JSON has no NaN)."""
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite(x) for x in v]
+    if isinstance(v, float | np.floating) and not math.isfinite(float(v)):
+        return None
+    return v

@@ -572,7 +572,8 @@ def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> 
     tot = float(np.sum(rw[prep.keep] ** 2))
     out: list[Finding] = []
     for v in views:
-        out += VIEWS[v](prep, rw, scan_order)
+        # a kind may supply its own view: a callable ``view(prep, rw, scan_order)``
+        out += (VIEWS[v] if isinstance(v, str) else v)(prep, rw, scan_order)
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of
     # that order (the orders view), which sees every run at once
     by_order = {
