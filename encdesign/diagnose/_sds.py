@@ -60,7 +60,7 @@ from scipy import stats
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._engine import Kind, KindData, Prepared, _valjac_fn
+from ._engine import Kind, KindData, Prepared, RowColumns, _valjac_fn
 from ._views import Finding, _logp, _thr, _where
 
 __all__ = [
@@ -545,20 +545,23 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
     if k < 4:
         raise input_error(kd.where, f"{R} runs", "at least 4 runs for the held-out folds")
     fold, design = _folds_by_run(R, k)
-    onehot = np.eye(R)
     t = np.asarray(kd.t, float)
-    rows = dict(
-        t=t,
-        tau=t - t[0],
-        theta=kd.shaft,
-        theta_ref=kd.theta_ref if kd.theta_ref is not None else np.zeros(R),
-        reading=kd.reading,
-        run_onehot=onehot,
-        omega=np.zeros(R),
-        direction=np.ones(R),
-        driver=t - t.mean(),
-        psi=np.zeros_like(kd.y),
-        **kd.rows_extra,
+    # one row per run: the engine's row columns, its run one-hot made on access (identity)
+    rows = RowColumns(
+        dict(
+            t=t,
+            tau=t - t[0],
+            theta=kd.shaft,
+            theta_ref=kd.theta_ref if kd.theta_ref is not None else np.zeros(R),
+            reading=kd.reading,
+            omega=np.zeros(R),
+            direction=np.ones(R),
+            driver=t - t.mean(),
+            psi=np.zeros_like(kd.y),
+            **kd.rows_extra,
+        ),
+        np.arange(R),
+        R,
     )
     consts = dict(
         step_width_s=np.asarray(1e-3),
