@@ -298,12 +298,16 @@ def _unwrap_counts(x: np.ndarray, per_turn: int) -> np.ndarray:
     return x[0] + np.concatenate([[0], np.cumsum(d)])
 
 
-def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
-    """Read a moteus ``dir phase encoder`` sweep; return int64 ``(n, 3)``.
+def _whitespace_table(
+    path: str | os.PathLike, lines: str, n_cols: int, min_rows: int, cells: str
+) -> tuple[np.ndarray, str]:
+    """Read a whitespace-separated numeric table (``#`` comments) of ``n_cols`` columns and
+    at least ``min_rows`` rows; return it (float64) and the path for messages.
 
     Raises:
-        EncdesignInputError: not three integer columns, ``dir`` not 1 or 2, ``phase`` or
-            ``encoder`` outside ``0 … 65535``, fewer than 3 rows.
+        EncdesignInputError: a missing file, non-numeric data or the wrong shape; the
+            message says what was expected (``lines``: the line layout; ``cells``: what
+            each column holds, e.g. "integers").
     """
     path = Path(path)
     where = str(path)
@@ -312,9 +316,22 @@ def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
     try:
         a = np.loadtxt(path, comments="#", ndmin=2)
     except ValueError as exc:
-        raise input_error(where, f"non-numeric data ({exc})", "lines 'dir phase encoder'") from None
-    if a.shape[1] != 3 or a.shape[0] < 3:
-        raise input_error(where, f"table of shape {a.shape}", "at least 3 lines of 3 integers")
+        raise input_error(where, f"non-numeric data ({exc})", lines) from None
+    if a.shape[1] != n_cols or a.shape[0] < min_rows:
+        raise input_error(
+            where, f"table of shape {a.shape}", f"at least {min_rows} lines of {n_cols} {cells}"
+        )
+    return a, where
+
+
+def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
+    """Read a moteus ``dir phase encoder`` sweep; return int64 ``(n, 3)``.
+
+    Raises:
+        EncdesignInputError: not three integer columns, ``dir`` not 1 or 2, ``phase`` or
+            ``encoder`` outside ``0 … 65535``, fewer than 3 rows.
+    """
+    a, where = _whitespace_table(path, "lines 'dir phase encoder'", 3, 3, "integers")
     bad = np.flatnonzero(~np.all(np.isfinite(a) & (a == np.round(a)), axis=1))
     if bad.size:
         raise input_error(f"{where}, data row {int(bad[0]) + 1}", "not integers", "integers")
@@ -455,18 +472,7 @@ def read_servo_capture(path: str | os.PathLike) -> np.ndarray:
         EncdesignInputError: not 5 numeric columns, non-finite values, A or B not integers
             in ``0 … 65535``, ``t`` not increasing, fewer than 32 rows.
     """
-    path = Path(path)
-    where = str(path)
-    if not path.exists():
-        raise input_error(where, "file not found")
-    try:
-        a = np.loadtxt(path, comments="#", ndmin=2)
-    except ValueError as exc:
-        raise input_error(
-            where, f"non-numeric data ({exc})", "lines 't A B position cost'"
-        ) from None
-    if a.shape[1] != 5 or a.shape[0] < 32:
-        raise input_error(where, f"table of shape {a.shape}", "at least 32 lines of 5 numbers")
+    a, where = _whitespace_table(path, "lines 't A B position cost'", 5, 32, "numbers")
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
     if bad.size:
         raise input_error(f"{where}, data row {int(bad[0]) + 1}", "non-finite value", "finite")
