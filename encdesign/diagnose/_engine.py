@@ -41,7 +41,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Candidate, Context
-from ._views import ALPHA, locate
+from ._views import ALPHA, locate, order_sums
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
 MAX_PARAM_FRACTION = 0.1
@@ -59,6 +59,9 @@ COLLINEAR_NOTE = 0.95
 TIE_CHI2 = 10.0
 TIE_CORR = 0.9
 CHUNK_ROWS = 8192
+CACHE_BYTES = 6.0e7
+"""Budget of each of the fitter's two caches (Jacobians of linear terms, processed static
+blocks): what does not fit is recomputed, so memory stays bounded on long records."""
 D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
 """Variance of log(residual variance / second-difference variance) times N (white noise)."""
 MEDIAN_VAR = 2.0 / math.log(2.0) ** 2
@@ -77,7 +80,9 @@ class KindData:
             theta_ref), in ``unit``.
         shaft: shaft angle per row (rad), used to find non-steady motion and revolutions.
         t: time within the run, s. run: run id per row (any ints).
-        reading: each channel's reading ``(n, C)`` (rad) for line-phase terms.
+        reading: each channel's reading ``(n, C)`` (rad) for line-phase terms; ``None``:
+            read per chunk from ``reading_cols`` (the recording's own columns, one per
+            channel: no copy per row).
         theta_ref: reference angle or ``None``. temp: ``temp_c`` or ``None``.
         alpha: channel azimuths (rad). radius_m: optical radius or ``None``.
         signal_periods: signal periods per revolution (0: unknown).
@@ -101,7 +106,7 @@ class KindData:
     shaft: np.ndarray
     t: np.ndarray
     run: np.ndarray
-    reading: np.ndarray
+    reading: np.ndarray | None
     theta_ref: np.ndarray | None
     temp: np.ndarray | None
     alpha: np.ndarray
@@ -116,6 +121,11 @@ class KindData:
     speed_window: float = 0.01
     segments: np.ndarray | None = None
     masked: tuple[tuple[np.ndarray, str], ...] = ()
+    reading_cols: tuple[np.ndarray, ...] = ()
+
+    def __post_init__(self):
+        if self.reading is None and len(self.reading_cols) != self.y.shape[1]:
+            raise ValueError("KindData: reading is None and reading_cols is not one per channel")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,11 +171,24 @@ class Kind:
 
 
 class RowColumns(MutableMapping):
-    """Row columns of a prepared record; ``run_onehot`` (n, R) is made on access from the run
-    index instead of being stored (R float64 per row saved; the fit builds it per chunk)."""
+    """Row columns of a prepared record.
 
-    def __init__(self, cols: dict[str, np.ndarray], run: np.ndarray, n_runs: int):
+    Stored columns are arrays (often the recording's own, not copies). ``run_onehot`` (n, R)
+    is made on access from the run index; *lazy* columns are functions ``fn(lo, hi)`` of a row
+    range, computed on access (whole column) or per chunk by :meth:`column`, so that a
+    column that follows from others (time across runs, the segment speed, a signal phase)
+    costs no memory per row. Assigning an array stores it; :meth:`set_lazy` assigns a
+    function."""
+
+    def __init__(
+        self,
+        cols: dict[str, np.ndarray],
+        run: np.ndarray,
+        n_runs: int,
+        lazy: dict[str, Callable[[int, int | None], np.ndarray]] | None = None,
+    ):
         self._d = dict(cols)
+        self._lazy = dict(lazy or {})
         self.run = run
         self.n_runs = n_runs
 
@@ -176,28 +199,53 @@ class RowColumns(MutableMapping):
         out[np.arange(r.size), r] = 1.0
         return out
 
+    def column(self, k: str, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Rows ``lo:hi`` of column ``k`` (a lazy column computes only those rows)."""
+        if k in self._d:
+            return self._d[k][lo:hi]
+        if k in self._lazy:
+            return self._lazy[k](lo, hi)
+        if k == "run_onehot":
+            return self.onehot(lo, hi)
+        raise KeyError(k)
+
+    def set_lazy(self, k: str, fn: Callable[[int, int | None], np.ndarray]) -> None:
+        """Make ``k`` a lazy column ``fn(lo, hi)``."""
+        self._d.pop(k, None)
+        self._lazy[k] = fn
+
     def __getitem__(self, k: str) -> np.ndarray:
-        if k == "run_onehot" and k not in self._d:
-            return self.onehot()
-        return self._d[k]
+        return self.column(k)
 
     def __setitem__(self, k: str, v: np.ndarray) -> None:
+        self._lazy.pop(k, None)
         self._d[k] = v
 
     def __delitem__(self, k: str) -> None:
-        del self._d[k]
+        if k in self._d:
+            del self._d[k]
+        else:
+            del self._lazy[k]
+
+    def __contains__(self, k: object) -> bool:
+        return k in self._d or k in self._lazy or k == "run_onehot"
 
     def __iter__(self):
         yield from self._d
-        if "run_onehot" not in self._d:
+        yield from (k for k in self._lazy if k not in self._d)
+        if "run_onehot" not in self._d and "run_onehot" not in self._lazy:
             yield "run_onehot"
 
     def __len__(self) -> int:
-        return len(self._d) + ("run_onehot" not in self._d)
+        return sum(1 for _ in self)
 
     def stored(self):
-        """The stored columns (without the derived one-hot)."""
+        """The stored columns (without the derived one-hot and the lazy columns)."""
         return self._d.items()
+
+    def names(self) -> list[str]:
+        """Every column a term can read, ``run_onehot`` last."""
+        return [k for k in self if k != "run_onehot"] + ["run_onehot"]
 
 
 class KeptRows(MutableMapping):
@@ -413,22 +461,53 @@ def find_motion_segments(
     return seg, out
 
 
+SCAN_BLOCK = 1 << 18
+"""Rows per block of the whole-record scans (noise, glitches, views): their temporaries are
+bounded by the block, not by the record."""
+
+
+def _run_bounds(run: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each stretch of equal run index (rows sorted run by run)."""
+    if run.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(run)) + 1
+    edges = [0, *cut.tolist(), run.size]
+    return list(zip(edges[:-1], edges[1:]))
+
+
 def _noise_d2(r: np.ndarray, seg: np.ndarray, t: np.ndarray | None = None):
     """Second differences of ``r`` (n, C) within segments, on any time grid: each value less
     the straight line through its two neighbours, scaled so that white noise of std sigma
     gives ``6 sigma^2`` (as the plain second difference on a uniform grid). A straight line
-    gives exactly zero on any grid. Returns (values (m, C), index of the centre row)."""
+    gives exactly zero on any grid. Returns (values (m, C), index of the centre row).
+
+    Computed in blocks of :data:`SCAN_BLOCK` rows (temporaries bounded by the block)."""
+    n, C = r.shape
+    if n < 3:
+        return np.zeros((0, C)), np.zeros(0, dtype=np.int64)
     ok = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2]) & (seg[1:-1] >= 0)
-    if t is None:
-        d2 = r[2:] - 2 * r[1:-1] + r[:-2]
-    else:
-        h1 = t[1:-1] - t[:-2]
-        h2 = t[2:] - t[1:-1]
-        hs = np.where(h1 + h2 > 0, h1 + h2, 1.0)
-        w1, w2 = h2 / hs, h1 / hs
-        e = r[1:-1] - (w1[:, None] * r[:-2] + w2[:, None] * r[2:])
-        d2 = -2.0 * e * np.sqrt(1.5 / (1.0 + w1**2 + w2**2))[:, None]
-    return d2[ok], np.flatnonzero(ok) + 1
+    centre = np.flatnonzero(ok) + 1
+    out = np.empty((centre.size, C))
+    pos = 0
+    for a in range(1, n - 1, SCAN_BLOCK):
+        b = min(n - 1, a + SCAN_BLOCK)  # centres a..b-1
+        okb = ok[a - 1 : b - 1]
+        m = int(okb.sum())
+        if m == 0:
+            continue
+        rm, r0, rp = r[a - 1 : b - 1], r[a:b], r[a + 1 : b + 1]
+        if t is None:
+            d2 = rp - 2 * r0 + rm
+        else:
+            h1 = t[a:b] - t[a - 1 : b - 1]
+            h2 = t[a + 1 : b + 1] - t[a:b]
+            hs = np.where(h1 + h2 > 0, h1 + h2, 1.0)
+            w1, w2 = h2 / hs, h1 / hs
+            e = r0 - (w1[:, None] * rm + w2[:, None] * rp)
+            d2 = -2.0 * e * np.sqrt(1.5 / (1.0 + w1**2 + w2**2))[:, None]
+        out[pos : pos + m] = d2[okb]
+        pos += m
+    return out, centre
 
 
 def noise_sigma(
@@ -441,8 +520,11 @@ def noise_sigma(
     if d2.shape[0] < 4:
         return np.full(r.shape[1], np.nan)
     if robust:
-        return 1.4826 * np.median(np.abs(d2 - np.median(d2, 0)), 0) / math.sqrt(6.0)
-    return np.sqrt(np.mean(d2**2, 0) / 6.0)
+        med = np.median(d2, 0)
+        d2 -= med[None, :]
+        np.abs(d2, out=d2)
+        return 1.4826 * np.median(d2, 0) / math.sqrt(6.0)
+    return np.sqrt(np.einsum("ij,ij->j", d2, d2) / d2.shape[0] / 6.0)
 
 
 def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
@@ -498,10 +580,18 @@ def find_glitches(
         return out_g, out_j
     s = 1.4826 * np.median(np.abs(d2), axis=0)
     s = np.where(s > 0, s, np.inf)
-    z = d2 / s
     thr = stats.norm.isf(1e-4 / max(n, 1) / 2)
-    pos = {int(c): i for i, c in enumerate(centre)}
-    hit_rows = sorted({int(centre[i]) for i in np.flatnonzero(np.any(np.abs(z) > thr, 1))})
+    hit = np.zeros(d2.shape[0], bool)
+    for a in range(0, d2.shape[0], SCAN_BLOCK):
+        hit[a : a + SCAN_BLOCK] = np.any(np.abs(d2[a : a + SCAN_BLOCK]) > thr * s, 1)
+    hit_idx = np.flatnonzero(hit)
+    del hit
+    # the centres near a hit (row -> index into d2), and their z values
+    near = np.unique(np.concatenate([hit_idx + d for d in (-2, -1, 0, 1, 2)]))
+    near = near[(near >= 0) & (near < d2.shape[0])]
+    pos = {int(centre[i]): int(i) for i in near}
+    z = {int(i): d2[i] / s for i in near}
+    hit_rows = sorted({int(centre[i]) for i in hit_idx})
     done: set[int] = set()
     for row in hit_rows:
         if row in done:
@@ -510,11 +600,11 @@ def find_glitches(
         k = int(np.argmax(np.abs(z[i])))
         # the strongest centre in the neighbourhood
         cands = [pos[q] for q in (row - 1, row, row + 1) if q in pos]
-        i = max(cands, key=lambda j: abs(z[j, k]))
+        i = max(cands, key=lambda j: abs(z[j][k]))
         row = int(centre[i])
-        zi = z[i, k]
-        zl = z[pos[row - 1], k] if row - 1 in pos else 0.0
-        zr = z[pos[row + 1], k] if row + 1 in pos else 0.0
+        zi = z[i][k]
+        zl = z[pos[row - 1]][k] if row - 1 in pos else 0.0
+        zr = z[pos[row + 1]][k] if row + 1 in pos else 0.0
         kk = -1 if (project and C == 2) else k
         if (
             np.sign(zl) == -np.sign(zi)
@@ -544,7 +634,7 @@ def find_glitches(
 def _fold_blocks(prep_keep: np.ndarray, run: np.ndarray, k: int, seed: int = 0):
     """K folds of contiguous blocks of kept rows, blocks assigned at random (balanced) per run:
     random assignment cannot alias with any periodic structure."""
-    fold = -np.ones(run.size, dtype=int)
+    fold = -np.ones(run.size, dtype=np.int8)
     rng = np.random.default_rng(seed)
     block_rows = []
     for r in np.unique(run):
@@ -577,21 +667,28 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         raise input_error(where, f"only {n} rows", "at least 32 rows to diagnose")
     if not np.all(np.isfinite(kd.y)):
         raise input_error(where, "non-finite readings", "finite values")
-    run_ids, first = np.unique(kd.run, return_index=True)
+    run_ids, first, inv = np.unique(kd.run, return_index=True, return_inverse=True)
     order_runs = run_ids[np.argsort(first)]
-    run = np.empty(n, dtype=int)
-    for i, r in enumerate(order_runs):
-        run[kd.run == r] = i
+    # run index 0..R-1 in file order, 4 bytes a row
+    rank = np.empty(run_ids.size, dtype=np.int32)
+    rank[np.argsort(first)] = np.arange(run_ids.size, dtype=np.int32)
+    run = rank[inv.reshape(-1)]
+    del inv
     R = order_runs.size
-    sort = np.lexsort((kd.t, run))
-    if not np.all(sort == np.arange(n)):
+    # rows sorted run by run in time (most records already are: then nothing is copied)
+    in_order = bool(np.all(np.diff(run) >= 0)) and all(
+        np.all(np.diff(kd.t[a:b]) >= 0) for a, b in _run_bounds(run)
+    )
+    sort = None if in_order else np.lexsort((kd.t, run))  # prepared row -> file row
+    if sort is not None:
         kd = dataclasses.replace(
             kd,
             y=kd.y[sort],
             shaft=kd.shaft[sort],
             t=kd.t[sort],
             run=kd.run[sort],
-            reading=kd.reading[sort],
+            reading=(kd.reading if kd.reading is not None else np.stack(kd.reading_cols, 1))[sort],
+            reading_cols=(),
             theta_ref=None if kd.theta_ref is None else kd.theta_ref[sort],
             temp=None if kd.temp is None else kd.temp[sort],
             segments=None if kd.segments is None else kd.segments[sort],
@@ -600,11 +697,9 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         run = run[sort]
     t = kd.t
     # gaps and segments
-    seg = -np.ones(n, dtype=int)
+    seg = -np.ones(n, dtype=np.int32)
     excluded: list[dict] = []
     gaps: list[dict] = []
-    omega = np.zeros(n)
-    direction = np.ones(n)
     nseg = 0
     revs = np.zeros(R)
     seg_speed: list[float] = []
@@ -644,8 +739,6 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
                 m = sub[s_id == sid]
                 seg[m] = nseg
                 w = np.polyfit(t[m] - t[m].mean(), kd.shaft[m], 1)[0] if m.size > 2 else 0.0
-                omega[m] = w
-                direction[m] = 1.0 if w >= 0 else -1.0
                 seg_speed.append(float(w))
                 revs[r] += abs(kd.shaft[m[-1]] - kd.shaft[m[0]]) / (2 * np.pi)
                 nseg += 1
@@ -660,6 +753,8 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
                         reason=e["reason"],
                     )
                 )
+    # the steady segments of the motion (their speeds give omega and the direction)
+    seg_motion = seg.copy() if kd.masked else seg
     for mask, why in kd.masked:  # rows the kind leaves out (e.g. clipped signals)
         mask = np.asarray(mask, bool) & (seg >= 0)
         if mask.any():
@@ -683,6 +778,8 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
     # noise (robust first), glitches and count jumps on a first detrended residual
     # kd.y is the kind's own array (never the user's columns) and is not modified: no copy
     y = kd.y - kd.y.mean(1, keepdims=True) if kd.project else kd.y
+    if y is not kd.y:  # one (n, C) array held, not two
+        kd = dataclasses.replace(kd, y=y)
     glitches_raw, jumps_raw = find_glitches(_detrend(y, seg), seg, kd.project, t)
     glitches, count_jumps = [], []
     for i, k in glitches_raw:
@@ -691,7 +788,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
             dict(
                 run=int(order_runs[run[i]]),
                 t_s=float(t[i]),
-                row=int(sort[i]),
+                row=int(i if sort is None else sort[i]),
                 channel=None if k < 0 else kd.channel_names[k],
             )
         )
@@ -700,7 +797,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
             dict(
                 run=int(order_runs[run[i]]),
                 t_s=float(t[i]),
-                row=int(sort[i]),
+                row=int(i if sort is None else sort[i]),
                 channel=None if k < 0 else kd.channel_names[k],
                 channel_index=k,
                 size=size,
@@ -710,49 +807,92 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
                 + ("; two channels without a reference: which one cannot be told" if k < 0 else ""),
             )
         )
-    seg_eff = np.where(keep, seg, -1)
-    seg_noise = seg_eff.copy()
+    seg_eff = seg if np.array_equal(keep, seg >= 0) else np.where(keep, seg, -1).astype(np.int32)
+    seg_noise = seg_eff.copy() if jumps_raw else seg_eff
     for i, _, _ in jumps_raw:  # the step itself is not noise
         seg_noise[max(i - 1, 0) : i + 1] = -1
     yd = _detrend(y, seg_eff)
     sigma = noise_sigma(yd, seg_noise, robust=False, t=t)
     sigma_r = noise_sigma(yd, seg_noise, robust=True, t=t)
+    del yd
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, sigma_r)
     if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         raise input_error(where, "the noise cannot be estimated", "readings that vary")
     fold, design = _fold_blocks(keep, run, N_FOLDS)
     fold[~keep] = -1
-    # row columns
-    tau = np.empty(n)
+    # row columns: the recording's own arrays, or lazy (computed per chunk from them)
+    bounds = _run_bounds(run)
+    t0_run = np.zeros(R)
+    off_run = np.zeros(R)
     off = 0.0
-    for r in range(R):
-        rows = np.flatnonzero(run == r)
-        tr = t[rows]
-        dtm = float(np.median(np.diff(tr))) if rows.size > 1 else 1.0
-        tau[rows] = tr - tr[0] + off
-        off = tau[rows][-1] + dtm
+    for r, (a, b) in enumerate(bounds):
+        tr = t[a:b]
+        dtm = float(np.median(np.diff(tr))) if b - a > 1 else 1.0
+        t0_run[r] = tr[0]
+        off_run[r] = off
+        off = tr[-1] - tr[0] + off + dtm
+
+    def tau_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Time across the runs, each run after the previous one (s)."""
+        ru = run[lo:hi]
+        return t[lo:hi] - t0_run[ru] + off_run[ru]
+
+    speeds = np.asarray([*seg_speed, 0.0])  # index -1: no steady segment
+
+    def omega_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Steady speed of the row's segment (rad/s; 0 outside segments)."""
+        return speeds[seg_motion[lo:hi]]
+
+    def direction_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        return np.where(speeds[seg_motion[lo:hi]] >= 0, 1.0, -1.0)
+
     theta = kd.theta_ref if kd.theta_ref is not None else kd.shaft
     if kd.temp is not None and np.ptp(kd.temp[keep]) > 0:
-        driver = kd.temp - kd.temp[keep].mean()
+        temp, t_mean = kd.temp, float(kd.temp[keep].mean())
         driver_name = "temp_c"
+
+        def driver_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+            return temp[lo:hi] - t_mean
     else:
-        driver = tau - tau[keep].mean()
+        tau_mean = float(np.mean(tau_rows()[keep]))
         driver_name = "time"
+
+        def driver_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+            return tau_rows(lo, hi) - tau_mean
+
     L = kd.signal_periods
-    # no signal periods: psi is zero (a read-only broadcast, no memory)
-    psi = np.mod(L * kd.reading, 2 * np.pi) if L > 0 else np.broadcast_to(0.0, kd.reading.shape)
-    rows = dict(
+
+    def reading_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Each channel's reading (rad)."""
+        if kd.reading is not None:
+            return kd.reading[lo:hi]
+        return np.stack([c[lo:hi] for c in kd.reading_cols], 1)
+
+    def psi_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """Signal phase of each channel's reading (rad); zero without signal periods."""
+        if L > 0:
+            return np.mod(L * reading_rows(lo, hi), 2 * np.pi)
+        m = (hi if hi is not None else n) - lo
+        return np.broadcast_to(0.0, (max(m, 0), C))
+
+    stored = dict(
         t=t,
-        tau=tau,
         theta=theta,
-        theta_ref=kd.theta_ref if kd.theta_ref is not None else np.zeros(n),
-        reading=kd.reading,
-        omega=omega,
-        direction=direction,
-        driver=driver,
-        psi=psi,
+        # no reference: zero (a read-only broadcast, no memory)
+        theta_ref=kd.theta_ref if kd.theta_ref is not None else np.broadcast_to(0.0, (n,)),
     )
-    rows = RowColumns(rows, run, R)
+    lazy = dict(
+        tau=tau_rows,
+        omega=omega_rows,
+        direction=direction_rows,
+        driver=driver_rows,
+        psi=psi_rows,
+        reading=reading_rows,
+    )
+    if kd.reading is not None:
+        stored["reading"] = kd.reading
+        del lazy["reading"]
+    rows = RowColumns(stored, run, R, lazy)
     dt_med = float(np.median(np.diff(t))) if n > 1 else 1.0
     consts = dict(
         step_width_s=np.asarray(0.5 * abs(dt_med) if dt_med > 0 else 1e-3),
@@ -785,7 +925,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         consts=consts,
         keep=keep,
         fold=fold,
-        seg=np.where(keep, seg, -1),
+        seg=seg_eff,
         sigma=sigma,
         excluded=excluded,
         glitches=glitches,
@@ -798,14 +938,43 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
 
 
 def _detrend(y: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """``y`` less a per-segment quadratic (for the noise and glitch scans only)."""
+    """``y`` less a per-segment quadratic in the row's rank within its segment, mapped to
+    [-1, 1] (for the noise and glitch scans only). Normal equations accumulated in blocks:
+    the temporaries are bounded by :data:`SCAN_BLOCK` rows, not by the segment."""
     out = np.zeros_like(y)
-    for s in np.unique(seg[seg >= 0]):
-        m = seg == s
-        x = np.linspace(-1, 1, int(m.sum()))
-        X = np.stack([np.ones_like(x), x, x**2], 1)
-        coef, *_ = np.linalg.lstsq(X, y[m], rcond=None)
-        out[m] = y[m] - X @ coef
+    ids = np.flatnonzero(seg >= 0)
+    if ids.size == 0:
+        return out
+    order = ids[np.argsort(seg[ids], kind="stable")]  # rows grouped by segment, in order
+    del ids
+    sv = seg[order]
+    cut = np.flatnonzero(np.diff(sv)) + 1
+    edges = [0, *cut.tolist(), order.size]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        cnt = hi - lo
+        den = max(cnt - 1, 1)
+
+        def design(a: int, b: int, lo=lo, den=den, cnt=cnt) -> np.ndarray:
+            x = (
+                -1.0 + 2.0 * (np.arange(a - lo, b - lo, dtype=float) / den)
+                if cnt > 1
+                else np.full(b - a, -1.0)
+            )
+            return np.stack([np.ones_like(x), x, x**2], 1)
+
+        G = np.zeros((3, 3))
+        h = np.zeros((3, y.shape[1]))
+        for a in range(lo, hi, SCAN_BLOCK):
+            b = min(hi, a + SCAN_BLOCK)
+            X = design(a, b)
+            yb = y[order[a:b]]
+            G += X.T @ X
+            h += X.T @ yb
+        coef = np.linalg.lstsq(G, h, rcond=None)[0]
+        for a in range(lo, hi, SCAN_BLOCK):
+            b = min(hi, a + SCAN_BLOCK)
+            rows = order[a:b]
+            out[rows] = y[rows] - design(a, b) @ coef
     return out
 
 
@@ -930,8 +1099,8 @@ class Fitter:
             b = min(n, a + c)
             pad = c - (b - a)
             x = {}
-            for k, v in [*prep.rows.stored(), ("run_onehot", prep.rows.onehot(a, b))]:
-                s = v[a:b] if k != "run_onehot" else v
+            for k in prep.rows.names():
+                s = prep.rows.column(k, a, b)
                 if pad:
                     s = np.concatenate([s, np.repeat(s[-1:], pad, axis=0)], axis=0)
                 x[k] = s
@@ -973,7 +1142,7 @@ class Fitter:
                 Jt = self._gather(term, J, b - a, v0.shape[1])
                 hit = (v0, Jt)
                 nbytes = Jt.nbytes + v0.nbytes
-                if self._jbytes + nbytes < 4e8:
+                if self._jbytes + nbytes < CACHE_BYTES:
                     self._jcache[key] = hit
                     self._jbytes += nbytes
             v0, Jt = hit
@@ -1009,10 +1178,10 @@ class Fitter:
             cols.append(Jp[:, :, term.free[par.name].ravel()])
         return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
 
-    def residual(self, terms: Sequence[Term]) -> np.ndarray:
-        """Residual ``(n, C)`` (projected when the kind says so), all rows."""
+    def iter_residual(self, terms: Sequence[Term]):
+        """``(a, b, residual of rows a:b)`` chunk by chunk (projected when the kind says so):
+        statistics of a residual without holding it whole."""
         prep = self.prep
-        out = np.empty_like(prep.y)
         for a, b, x in self._chunks():
             pred = np.zeros((b - a, prep.n_channels))
             for tm in terms:
@@ -1020,6 +1189,12 @@ class Fitter:
             r = prep.y[a:b] - pred
             if prep.kd.project:
                 r = r - r.mean(1, keepdims=True)
+            yield a, b, r
+
+    def residual(self, terms: Sequence[Term]) -> np.ndarray:
+        """Residual ``(n, C)`` (projected when the kind says so), all rows."""
+        out = np.empty_like(self.prep.y)
+        for a, b, r in self.iter_residual(terms):
             out[a:b] = r
         return out
 
@@ -1097,7 +1272,7 @@ class Fitter:
                 ]
                 del lin
                 hit = J0
-                if self._pbytes + J0[1].nbytes < 4e8:
+                if self._pbytes + J0[1].nbytes < CACHE_BYTES:
                     self._pcache[ck] = J0
                     self._pbytes += J0[1].nbytes
             _, Js_, order, edges = hit
@@ -1334,6 +1509,16 @@ def _names_of(terms: list[Term], idx: np.ndarray) -> list[str]:
 # ----------------------------------------------------------------------------- goodness of fit
 
 
+def _row_chi2(resid: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``sum_c (resid / sigma_c)^2`` per row (n,), in blocks (no (n, C) temporary)."""
+    out = np.empty(resid.shape[0])
+    w = 1.0 / np.asarray(sigma, float) ** 2
+    for a in range(0, resid.shape[0], SCAN_BLOCK):
+        r = resid[a : a + SCAN_BLOCK]
+        out[a : a + SCAN_BLOCK] = (r * r) @ w
+    return out
+
+
 def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
     """Variance-ratio test of the residual against the noise level.
 
@@ -1346,12 +1531,12 @@ def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
     (Bonferroni); ``p`` is the smaller of the two (times 2).
     """
     keep = prep.keep
-    rw = resid / prep.sigma[None, :]
+    q = _row_chi2(resid, prep.sigma)  # whitened chi-square per row (n,)
     C = prep.n_channels
     eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
     N = float(keep.sum() * C * eff)
     v = 2.0 + 2.0 * MEDIAN_VAR / eff
-    sr = float(np.sum(rw[keep] ** 2)) / max(N - n_params, 1.0)
+    sr = float(np.sum(q, where=keep)) / max(N - n_params, 1.0)
     z = math.log(sr) / math.sqrt(v / max(N, 1.0))
     p_global = float(stats.norm.sf(z))
     blocks = []
@@ -1362,7 +1547,7 @@ def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
             if part.size < 16:
                 continue
             Nb = part.size * C * eff
-            srb = float(np.sum(rw[part] ** 2)) / max(Nb * (1 - n_params / max(N, 1)), 1.0)
+            srb = float(np.sum(q[part])) / max(Nb * (1 - n_params / max(N, 1)), 1.0)
             zb = math.log(max(srb, 1e-300)) / math.sqrt(2.0 / Nb + (v - 2.0) / N)
             blocks.append(
                 (
@@ -1408,7 +1593,6 @@ class Step:
 
     name: str
     fit: FitResult
-    resid: np.ndarray
     delta_bic: float
     delta_heldout: float
     collinearity: float
@@ -1426,10 +1610,17 @@ def _tie(
     residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
     keep = prep.keep
     w = 1.0 / prep.sigma[None, :]
-    ca = ((cur_resid - fitter.residual(a.terms)) * w)[keep].ravel()
-    cb = ((cur_resid - fitter.residual(b.terms)) * w)[keep].ravel()
-    den = float(np.linalg.norm(ca) * np.linalg.norm(cb))
-    corr = float(abs(ca @ cb) / den) if den > 0 else 0.0
+    saa = sbb = sab = 0.0
+    pairs = zip(fitter.iter_residual(a.terms), fitter.iter_residual(b.terms))
+    for (lo, hi, ra), (_, _, rb) in pairs:
+        k = keep[lo:hi]
+        ca = ((cur_resid[lo:hi] - ra) * w)[k]
+        cb = ((cur_resid[lo:hi] - rb) * w)[k]
+        saa += float(np.sum(ca * ca))
+        sbb += float(np.sum(cb * cb))
+        sab += float(np.sum(ca * cb))
+    den = math.sqrt(saa * sbb)
+    corr = float(abs(sab) / den) if den > 0 else 0.0
     return float(b.chi2 - a.chi2), corr
 
 
@@ -1542,12 +1733,15 @@ def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
 
 def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
     """RMS of one term's own contribution (projected, whitened by the noise)."""
-    v = fitter.residual([term])
-    yk = prep.y - prep.y.mean(1, keepdims=True) if prep.kd.project else prep.y
-    pr = (yk - v)[prep.keep] / prep.sigma[None, :]
+    tot = 0.0
+    for a, b, x in fitter._chunks():  # chunk by chunk: nothing per row is held
+        v = fitter._eval_term(term, a, b, x, jac=False)[0]
+        if prep.kd.project:
+            v = v - v.mean(1, keepdims=True)
+        tot += float(np.sum((v[prep.keep[a:b]] / prep.sigma[None, :]) ** 2))
     C = prep.n_channels
     eff = (C - 1) / C if prep.kd.project else 1.0
-    return float(np.sqrt(np.sum(pr**2) / max(prep.keep.sum() * C * eff, 1)))
+    return float(np.sqrt(tot / max(prep.keep.sum() * C * eff, 1)))
 
 
 def select(
@@ -1562,10 +1756,10 @@ def select(
 ):
     """Forward selection with refits, then a backward held-out check (stage 4)."""
     base = fitter.fit(base_terms)
-    base_resid = fitter.residual(base.terms)
-    findings0 = locate(prep, base_resid, views, scan_order)
+    cur_resid = fitter.residual(base.terms)
+    findings0 = locate(prep, cur_resid, views, scan_order)
     N = prep.n_values
-    current, cur_resid, findings = base, base_resid, findings0
+    current, findings = base, findings0
     accepted: list[Step] = []
     rejected: list[dict] = []
     not_testable: list[dict] = []
@@ -1586,6 +1780,7 @@ def select(
         if not findings and gof["passes"]:
             break
         trials = []
+        kept_resid = None  # the current residual over the kept rows, made once per round
         for cand in applicable:
             if cand.name in {s.name for s in accepted}:
                 continue
@@ -1594,7 +1789,9 @@ def select(
             if not cand.signature and gof["passes"]:
                 continue
             tried_names.add(cand.name)
-            starts = cand.start(prep.ctx, cur_resid[prep.keep], findings) if cand.start else [{}]
+            if cand.start and kept_resid is None:
+                kept_resid = cur_resid if prep.keep.all() else cur_resid[prep.keep]
+            starts = cand.start(prep.ctx, kept_resid, findings) if cand.start else [{}]
             best = None
             # screen the starts with the nonlinear parameters held (one linear pass each),
             # then run the full fit from the best one
@@ -1640,6 +1837,15 @@ def select(
             dho = current.heldout_chi2 - best.heldout_chi2
             trials.append((dbic, cand, best, dho, dchi, k))
         trials.sort(key=lambda x: x[0])
+        # candidates equal to rounding (the same fitted error, e.g. an offset per direction
+        # and a delay at one speed): the catalog's order decides, not the last digit
+        if len(trials) > 1:
+            tol = 1e-7 * max(1.0, abs(trials[0][0]))
+            n_tied = sum(1 for x in trials if x[0] - trials[0][0] <= tol)
+            if n_tied > 1:
+                rank = {c.name: i for i, c in enumerate(applicable)}
+                trials[:n_tied] = sorted(trials[:n_tied], key=lambda x: rank[x[1].name])
+        kept_resid = None
         chosen = None
         for dbic, cand, fr, dho, dchi, k_new in trials:
             reasons = []
@@ -1765,8 +1971,9 @@ def select(
         full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
         if full.chi2 <= fr.chi2:
             fr = full
+        del cur_resid  # (one residual held at a time)
         resid = fitter.residual(fr.terms)
-        accepted.append(Step(cand.name, fr, resid, dbic, dho, col, notes, trms, erms, confounded))
+        accepted.append(Step(cand.name, fr, dbic, dho, col, notes, trms, erms, confounded))
         log(f"named {cand.name}")
         current, cur_resid = fr, resid
         findings = locate(prep, cur_resid, views, scan_order)
@@ -1804,7 +2011,8 @@ def select(
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
     return dict(
         base=base,
-        base_resid=base_resid,
+        # the base residual again (one pass): not held through the selection
+        base_resid=cur_resid if current is base else fitter.residual(base.terms),
         findings0=findings0,
         gof0=gof0,
         final=current,
@@ -1930,8 +2138,13 @@ def run_engine(
     # alignment: after the base fit, rotation-locked candidates see the aligned angle
     base_fit = fitter.fit(base_terms)
     if "align" in base_info:
-        prep.rows["theta"] = base_info["align"](base_fit.terms, prep)
-        prep.ctx.rows["theta"] = prep.rows["theta"][prep.keep]  # type: ignore[index]
+        aligned = base_info["align"](base_fit.terms, prep)
+        if callable(aligned):  # a lazy column fn(lo, hi)
+            prep.rows.set_lazy("theta", aligned)
+        else:
+            prep.rows["theta"] = aligned
+        if "theta" in getattr(prep.ctx.rows, "_own", {}):  # the kept rows read through
+            del prep.ctx.rows["theta"]  # type: ignore[attr-defined]
         fitter.clear()
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it
@@ -1942,6 +2155,7 @@ def run_engine(
         sig = noise_spectral(prep, r_base)
         if kind.noise is not None:  # the kind's second estimate: the smaller of the two
             sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
+    del r_base
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
         prep.ctx.noise[...] = sig
@@ -2070,17 +2284,14 @@ def run_engine(
 def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
     """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
     the base and the final residual (least squares over the kept rows)."""
-    keep = prep.keep
-    th = prep.rows["theta"][keep]
+
     M = int(min(max_order, 400))
     out = {"orders": list(range(1, M + 1)), "before": [], "after": []}
-    for r, key in ((r0, "before"), (r1, "after")):
-        x = r[keep]
-        for m in range(1, M + 1):
-            c, s_ = np.cos(m * th), np.sin(m * th)
-            a = 2 * (c @ x) / max(th.size, 1)
-            b = 2 * (s_ @ x) / max(th.size, 1)
-            out[key].append(float(np.mean(np.hypot(a, b))))
+    N, _, _, _, sums = order_sums(prep, "theta", [r0, r1], np.arange(1, M + 1))
+    for (Bc, Bs), key in zip(sums, ("before", "after")):
+        a = 2 * Bc / max(N, 1)
+        b = 2 * Bs / max(N, 1)
+        out[key] = [float(v) for v in np.mean(np.hypot(a, b), axis=1)]
     return out
 
 

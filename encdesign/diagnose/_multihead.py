@@ -56,12 +56,18 @@ def multihead_data(rec: Recording) -> KindData:
             f"{H} head and no theta_ref column",
             "at least 2 heads, or one head with a theta_ref column",
         )
-    reading = rec.heads()
+    # y (n, C) is the only array per row this kind makes: the readings are the recording's
+    # own columns (read per chunk), the shaft is theta_ref itself or the heads' mean
     ref = np.asarray(rec.columns["theta_ref"], float) if has_ref else None
-    shaft = ref if has_ref else reading.mean(1)
-    y = reading - shaft[:, None] if has_ref else reading - reading[:, :1].mean()
-    if not has_ref:
-        y = reading - shaft[:, None]
+    if has_ref:
+        shaft = ref
+        y = np.empty((rec.n_rows, H))
+        for k, h in enumerate(rec.head_columns):
+            np.subtract(np.asarray(rec.columns[h], float), shaft, out=y[:, k])
+    else:
+        y = rec.heads()
+        shaft = y.mean(1)
+        y -= shaft[:, None]
     radius = enc.get("optical_radius_m")
     L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
     return KindData(
@@ -69,7 +75,8 @@ def multihead_data(rec: Recording) -> KindData:
         shaft=shaft,
         t=np.asarray(rec.columns["t"], float),
         run=np.asarray(rec.runs),
-        reading=reading,
+        reading=None,
+        reading_cols=tuple(np.asarray(rec.columns[h], float) for h in rec.head_columns),
         theta_ref=ref,
         temp=np.asarray(rec.columns["temp_c"], float) if "temp_c" in rec.columns else None,
         alpha=np.deg2rad(np.asarray(enc["head_angles_deg"], float)),
@@ -163,23 +170,37 @@ def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     alpha = prep.consts["alpha"]
     Mz = int(min(M, 6))
     Z = []
+    P = 2 * Mz + C
+    run = np.asarray(prep.run)
+    cut = [0, *(np.flatnonzero(np.diff(run)) + 1).tolist(), run.size]
+    spans = {int(run[a0]): (a0, b0) for a0, b0 in zip(cut[:-1], cut[1:]) if b0 > a0}
     for r in range(R):
-        m = (prep.run == r) & prep.keep
-        th = prep.rows["theta_raw"][m]
-        y = prep.y[m]
-        cols = []
-        for k in range(C):
-            ck = []
-            for mm in range(1, Mz + 1):
-                ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
-            cols.append(np.stack(ck, 1))
-        X = np.stack(cols, 1)  # (n, C, 2Mz)
-        const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
-        X = np.concatenate([X, const], 2)
-        if prep.kd.project:
-            X = X - X.mean(1, keepdims=True)
-            y = y - y.mean(1, keepdims=True)
-        coef = np.linalg.lstsq(X.reshape(-1, X.shape[2]), y.ravel(), rcond=None)[0]
+        # least squares on the normal equations, accumulated in blocks of rows (the design
+        # (rows, C, 2 Mz + C) is never built whole)
+        G = np.zeros((P, P))
+        h = np.zeros(P)
+        a0, b0 = spans.get(r, (0, 0))
+        for a in range(a0, b0, 1 << 16):
+            b = min(b0, a + (1 << 16))
+            kb = prep.keep[a:b]
+            th = prep.rows.column("theta_raw", a, b)[kb]
+            y = prep.y[a:b][kb]
+            cols = []
+            for k in range(C):
+                ck = []
+                for mm in range(1, Mz + 1):
+                    ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
+                cols.append(np.stack(ck, 1))
+            X = np.stack(cols, 1)  # (n, C, 2Mz)
+            const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
+            X = np.concatenate([X, const], 2)
+            if prep.kd.project:
+                X = X - X.mean(1, keepdims=True)
+                y = y - y.mean(1, keepdims=True)
+            Xf = X.reshape(-1, P)
+            G += Xf.T @ Xf
+            h += Xf.T @ y.ravel()
+        coef = np.linalg.lstsq(G, h, rcond=None)[0]
         a, b = coef[0 : 2 * Mz : 2], coef[1 : 2 * Mz : 2]
         Z.append(a - 1j * b)
     grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
@@ -193,20 +214,26 @@ def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     return np.asarray(out)
 
 
-def _align(terms, prep: Prepared) -> np.ndarray:
-    """Shaft angle with the fitted run offsets applied (for rotation-locked candidates)."""
-    th = prep.rows["theta_raw"].copy()
+def _align(terms, prep: Prepared):
+    """Shaft angle with the fitted run offsets applied (for rotation-locked candidates): a
+    lazy row column ``fn(lo, hi)`` (rad), computed per chunk from ``theta_raw``."""
+    d = np.zeros(prep.ctx.n_runs)
     for t in terms:
         if t.cand.name == "base" and "run_angle_offset_rad" in t.values:
-            d = np.concatenate([[0.0], t.values["run_angle_offset_rad"]])
-            th = th + d[prep.run]
-    return th
+            d = d + np.concatenate([[0.0], t.values["run_angle_offset_rad"]])
+    raw, run = prep.rows["theta_raw"], prep.run
+
+    def theta(lo: int = 0, hi: int | None = None) -> np.ndarray:
+        return raw[lo:hi] + d[run[lo:hi]]
+
+    return theta
 
 
 def multihead_base(prep: Prepared, M: int):
     """Base terms (with starts) and the report info for a multihead record."""
     C, R = prep.n_channels, prep.ctx.n_runs
-    prep.rows.setdefault("theta_raw", prep.rows["theta"].copy())
+    if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
+        prep.rows["theta_raw"] = prep.rows["theta"]
     cand = _base_candidate(C, R, M)
     start = {}
     if R > 1:
@@ -617,7 +644,7 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     except ImportError:
         return {}
     kd = prep.kd
-    out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, kd.reading[:, 0], prep.run)}
+    out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, prep.rows["reading"][:, 0], prep.run)}
     b = base_params.get("base", {})
     if "fourier_cos_rad" in b:
         c, s_ = b["fourier_cos_rad"], b["fourier_sin_rad"]

@@ -70,13 +70,59 @@ def _thr(dof: int, n_tests: int) -> float:
     return float(stats.chi2.isf(ALPHA / max(n_tests, 1), dof))
 
 
-def _ls_power(rw: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """Power (chi-square) of regressors ``X`` (m, q) in each column of ``rw`` (m, C)."""
-    if X.shape[0] <= X.shape[1]:
-        return np.zeros(rw.shape[1])
-    Q, _ = np.linalg.qr(X)
-    proj = Q.T @ rw
-    return np.sum(proj**2, axis=0)
+SCAN_BLOCK = 1 << 18
+"""Rows per block of the views' accumulations (temporaries bounded by the block)."""
+
+
+def _blocks(n: int, size: int = SCAN_BLOCK):
+    for a in range(0, n, size):
+        yield a, min(n, a + size)
+
+
+def _col(prep, name: str, a: int, b: int) -> np.ndarray:
+    """Rows ``a:b`` of a row column (lazy columns computed for those rows only)."""
+    rows = prep.rows
+    return rows.column(name, a, b) if hasattr(rows, "column") else rows[name][a:b]
+
+
+def _gram_power(G: np.ndarray, B: np.ndarray, n_rows: int, q: int) -> np.ndarray:
+    """Power ``B_c^T G^+ B_c`` per column of ``B`` (q, C): the chi-square regressors with
+    Gram matrix ``G`` (q, q) take out of each channel (its projection, as a QR would give)."""
+    if n_rows <= q:
+        return np.zeros(B.shape[1])
+    coef = np.linalg.lstsq(G, B, rcond=None)[0]
+    return np.maximum(np.sum(B * coef, axis=0), 0.0)
+
+
+def order_sums(prep, theta_name: str, resids, orders) -> tuple:
+    """Sums over the kept rows, in blocks, for integer shaft orders ``m``: ``(N, Scc, Sss,
+    Scs, [(Bc, Bs) per residual])`` with ``c = cos(m theta)``, ``s = sin(m theta)``,
+    ``Scc = sum c^2`` (M,), ``Bc = sum c r`` (M, C). Memory: one block of rows."""
+    m = np.asarray(orders, float)
+    M = m.size
+    keep = prep.keep
+    n = keep.size
+    Scc, Sss, Scs = np.zeros(M), np.zeros(M), np.zeros(M)
+    Bs = [(np.zeros((M, r.shape[1])), np.zeros((M, r.shape[1]))) for r in resids]
+    N = 0
+    step = max(1024, SCAN_BLOCK // max(M, 1))
+    for a, b in _blocks(n, step):
+        kb = keep[a:b]
+        if not kb.any():
+            continue
+        th = _col(prep, theta_name, a, b)[kb]
+        ang = th[:, None] * m[None, :]
+        c, s_ = np.cos(ang), np.sin(ang)
+        del ang
+        N += th.size
+        Scc += np.einsum("ij,ij->j", c, c)
+        Sss += np.einsum("ij,ij->j", s_, s_)
+        Scs += np.einsum("ij,ij->j", c, s_)
+        for (bc, bs), r in zip(Bs, resids):
+            rb = r[a:b][kb]
+            bc += c.T @ rb
+            bs += s_.T @ rb
+    return N, Scc, Sss, Scs, Bs
 
 
 def _heads(
@@ -153,24 +199,29 @@ def _heads(
 
 
 def view_orders(prep, rw, max_order: int) -> list[Finding]:
-    """Integer shaft orders per channel, rotation locked over all runs."""
-    keep = prep.keep
-    th = prep.rows["theta_eff"][keep] if "theta_eff" in prep.rows else prep.rows["theta"][keep]
-    r = rw[keep]
-    C = r.shape[1]
+    """Integer shaft orders per channel, rotation locked over all runs (least squares of
+    cos / sin of each order, from sums accumulated in blocks of rows)."""
+    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+    C = rw.shape[1]
     out = []
     n_tests = max_order * C
     thr = _thr(2, n_tests)
-    for m in range(1, max_order + 1):
-        X = np.stack([np.cos(m * th), np.sin(m * th)], 1)
-        pw = _ls_power(r, X)
+    orders = np.arange(1, max_order + 1)
+    N, Scc, Sss, Scs, ((Bc, Bs),) = order_sums(prep, name, [rw], orders)
+    for i, m in enumerate(orders):
+        G = np.array([[Scc[i], Scs[i]], [Scs[i], Sss[i]]])
+        B = np.stack([Bc[i], Bs[i]])  # (2, C)
+        if N <= 2:
+            continue
+        coef = np.linalg.lstsq(G, B, rcond=None)[0]  # (2, C): the cos / sin amplitudes
+        pw = np.maximum(np.sum(B * coef, axis=0), 0.0)
         if pw.max() > thr:
             ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
-            Z = np.linalg.lstsq(X, r, rcond=None)[0] * math.sqrt(0.5 * r.shape[0])
+            Z = coef * math.sqrt(0.5 * N)
             heads, note = _heads(prep, Z[0] - 1j * Z[1], ch, order=float(m))
             detail = {
                 "integer_order": True,
-                "n_values": int(r.shape[0]),
+                "n_values": int(N),
                 "power_per_channel": pw.tolist(),
             }
             if note:
@@ -194,38 +245,39 @@ def view_spectrum(prep, rw) -> list[Finding]:
     C = rw.shape[1]
     dof_ch = C - 1 if prep.kd.project and C > 1 else C
     peaks = []
-    n_tests = 0
+    # the runs tested and the number of bins (the threshold), before any transform: then
+    # one run's transform at a time (memory of one run, not of the record)
+    runs = []
+    for r, (a, b) in _run_slices(prep):
+        nk = int(keep[a:b].sum())
+        if b - a >= 32 and nk >= 32:
+            runs.append((r, a, b, nk))
+    out: list[Finding] = []
+    if not runs:
+        return out
+    n_tests = sum((b - a) // 2 + 1 for _, a, b, _ in runs)
+    thr = _thr(2 * dof_ch, n_tests)
     per_run = []
-    for r in range(prep.ctx.n_runs):
-        rows = np.flatnonzero(prep.run == r)
-        if rows.size < 32:
-            continue
-        t = prep.rows["t"][rows]
+    for r, a, b, nk in runs:
+        t = _col(prep, "t", a, b)
         dt = float(np.median(np.diff(t)))
-        kr = keep[rows]
-        x = np.where(kr[:, None], rw[rows], 0.0)
-        nk = int(kr.sum())
-        if nk < 32:
-            continue
+        kr = keep[a:b]
+        x = np.where(kr[:, None], rw[a:b], 0.0)
         X = np.fft.rfft(x, axis=0)
+        del x
         P = 2.0 * np.abs(X) ** 2 / nk  # ~ chi2(2) per channel
         P[0] = 0.0
-        if x.shape[0] % 2 == 0:
+        if (b - a) % 2 == 0:
             P[-1] = 0.0
-        f = np.fft.rfftfreq(x.shape[0], dt)
+        f = np.fft.rfftfreq(b - a, dt)
         # revolutions per second from the steady speeds (a record that turns back and
         # forth has no net advance)
-        revs_per_s = float(np.median(np.abs(prep.rows["omega"][rows][kr]))) / (2 * np.pi)
+        om = _col(prep, "omega", a, b)[kr]
+        frev = float(np.median(np.abs(om))) / (2 * np.pi)
         # a run turning backwards sees exp(+i m alpha_k) at positive frequencies
-        if np.median(prep.rows["omega"][rows][kr]) < 0:
-            X = X.conj()
-        per_run.append((r, P, f, revs_per_s, nk, X))
-        n_tests += P.shape[0]
-    out: list[Finding] = []
-    if not per_run:
-        return out
-    thr = _thr(2 * dof_ch, n_tests)
-    for r, P, f, frev, nk, X in per_run:
+        if np.median(om) < 0:
+            np.conj(X, out=X)
+        per_run.append((r, frev))
         Ps = P.sum(1)
         # power of each line: three bins (leakage), tested on the centre
         idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
@@ -234,9 +286,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
             band = P[lo:hi].sum(0)
             # parabolic interpolation of the frequency
             if 0 < i < Ps.size - 1:
-                a, b, c = Ps[i - 1], Ps[i], Ps[i + 1]
-                den = a - 2 * b + c
-                di = 0.5 * (a - c) / den if den != 0 else 0.0
+                pl, pc, pr = Ps[i - 1], Ps[i], Ps[i + 1]
+                den = pl - 2 * pc + pr
+                di = 0.5 * (pl - pr) / den if den != 0 else 0.0
             else:
                 di = 0.0
             fr = float(f[1] * (i + di)) if f.size > 1 else 0.0
@@ -257,7 +309,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     # group peaks across runs: fixed in Hz or in order
     used = [False] * len(peaks)
     peaks.sort(key=lambda p: -p["power"])
-    speeds = {r: frev for r, _, _, frev, _, _ in per_run}
+    speeds = dict(per_run)
     multi_speed = len(per_run) > 1 and (
         max(speeds.values()) > 1.05 * max(min(speeds.values()), 1e-12)
     )
@@ -331,55 +383,66 @@ def view_spectrum(prep, rw) -> list[Finding]:
     return out[:8]
 
 
+def _run_slices(prep):
+    """``(run index, start, stop)`` of each run's rows (prepared rows are sorted by run)."""
+    run = np.asarray(prep.run)
+    cut = np.flatnonzero(np.diff(run)) + 1
+    edges = [0, *cut.tolist(), run.size]
+    return [(int(run[a]), (a, b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
 def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
     """Broadband excess: periodogram power per run, channel and frequency band (1/16 of the
     band to Nyquist), for structure spread over many bins (a chirp, a wideband noise)."""
     keep = prep.keep
     C = rw.shape[1]
-    found = []
-    tests = []
-    for r in range(prep.ctx.n_runs):
-        rows = np.flatnonzero(prep.run == r)
-        kr = keep[rows]
-        nk = int(kr.sum())
-        if nk < 64:
-            continue
-        x = np.where(kr[:, None], rw[rows], 0.0)
-        P = 2.0 * np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
-        dt = float(np.median(np.diff(prep.rows["t"][rows])))
-        f = np.fft.rfftfreq(x.shape[0], dt)
-        edges = np.linspace(1, P.shape[0] - 1, n_bands + 1).astype(int)
-        for b in range(n_bands):
-            lo, hi = edges[b], edges[b + 1]
-            if hi - lo < 4:
-                continue
-            pw = P[lo:hi].sum(0) * (nk / x.shape[0])
-            tests.append((r, lo, hi, pw, f, nk, x))
-    if not tests:
+    found: list[Finding] = []
+
+    def bands(m: int) -> list[tuple[int, int]]:
+        n_bins = m // 2 + 1
+        edges = np.linspace(1, n_bins - 1, n_bands + 1).astype(int)
+        return [(lo, hi) for lo, hi in zip(edges[:-1], edges[1:]) if hi - lo >= 4]
+
+    runs = []
+    for r, (a, b) in _run_slices(prep):
+        nk = int(keep[a:b].sum())
+        if nk >= 64:
+            runs.append((r, a, b, nk))
+    n_tests = sum(len(bands(b - a)) for _, a, b, _ in runs) * C
+    if not n_tests:
         return found
-    n_tests = len(tests) * C
-    for r, lo, hi, pw, f, nk, x in tests:
-        dof = 2 * (hi - lo)
-        thr = _thr(dof, n_tests)
-        ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
-        if not ch:
-            continue
-        Xb = np.fft.rfft(x, axis=0)[lo:hi] * math.sqrt(2.0 / x.shape[0])
-        heads, note = _heads(prep, Xb, ch)
-        found.append(
-            Finding(
-                "band",
-                _where(
-                    frequencies_hz=[float(f[lo]), float(f[hi - 1])],
-                    heads=heads,
-                    runs=[int(prep.run_ids[r])],
-                ),
-                float(pw[ch].sum()),
-                dof * len(ch),
-                _logp(float(pw[ch].max()), dof),
-                detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
+    for r, a, b, nk in runs:  # one run's transform at a time
+        kr = keep[a:b]
+        x = np.where(kr[:, None], rw[a:b], 0.0)
+        m = x.shape[0]
+        Xf = np.fft.rfft(x, axis=0)
+        del x
+        P = 2.0 * np.abs(Xf) ** 2 / nk
+        dt = float(np.median(np.diff(_col(prep, "t", a, b))))
+        f = np.fft.rfftfreq(m, dt)
+        for lo, hi in bands(m):
+            pw = P[lo:hi].sum(0) * (nk / m)
+            dof = 2 * (hi - lo)
+            thr = _thr(dof, n_tests)
+            ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
+            if not ch:
+                continue
+            Xb = Xf[lo:hi] * math.sqrt(2.0 / m)
+            heads, note = _heads(prep, Xb, ch)
+            found.append(
+                Finding(
+                    "band",
+                    _where(
+                        frequencies_hz=[float(f[lo]), float(f[hi - 1])],
+                        heads=heads,
+                        runs=[int(prep.run_ids[r])],
+                    ),
+                    float(pw[ch].sum()),
+                    dof * len(ch),
+                    _logp(float(pw[ch].max()), dof),
+                    detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
+                )
             )
-        )
     return found
 
 
@@ -459,18 +522,47 @@ def view_time(prep, rw) -> list[Finding]:
     return merged
 
 
-def _regress_view(prep, rw, name: str, cols: list[np.ndarray], extra: dict | None = None):
+def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
+    """Least squares of the whitened residual on ``cols`` (names of row columns, or arrays),
+    less a constant per run (the base model has one): sums accumulated run by run in blocks
+    (two passes: run means, then centred products), so nothing per row is held."""
     keep = prep.keep
-    r = rw[keep]
-    X = np.stack([c[keep] for c in cols], 1)
-    # less a constant per run (the base model has one)
-    oh = prep.rows["run_onehot"][keep]
-    Xo = X - oh @ np.linalg.lstsq(oh, X, rcond=None)[0]
-    if np.all(np.abs(Xo) < 1e-12 * (np.abs(X).max() + 1e-300)):
+    C = rw.shape[1]
+    q = len(cols)
+
+    def X_of(a: int, b: int) -> np.ndarray:
+        return np.stack(
+            [(_col(prep, c, a, b) if isinstance(c, str) else np.asarray(c)[a:b]) for c in cols],
+            1,
+        )
+
+    G = np.zeros((q, q))
+    B = np.zeros((q, C))
+    xmax = 0.0
+    n_kept = 0
+    for _, (a0, b0) in _run_slices(prep):
+        nk = int(keep[a0:b0].sum())
+        if nk == 0:
+            continue
+        sx, sr = np.zeros(q), np.zeros(C)
+        for a, b in _blocks(b0 - a0):
+            kb = keep[a0 + a : a0 + b]
+            sx += X_of(a0 + a, a0 + b)[kb].sum(0)
+            sr += rw[a0 + a : a0 + b][kb].sum(0)
+        mx, mr = sx / nk, sr / nk
+        for a, b in _blocks(b0 - a0):
+            kb = keep[a0 + a : a0 + b]
+            X = X_of(a0 + a, a0 + b)[kb]
+            if X.size:
+                xmax = max(xmax, float(np.abs(X).max()))
+            Xc = X - mx
+            G += Xc.T @ Xc
+            B += Xc.T @ (rw[a0 + a : a0 + b][kb] - mr)
+        n_kept += nk
+    # nothing left after the run constants (e.g. one speed per run)
+    if np.trace(G) <= (1e-12 * (xmax + 1e-300)) ** 2 * max(n_kept, 1):
         return []
-    pw = _ls_power(r - oh @ np.linalg.lstsq(oh, r, rcond=None)[0], Xo)
-    C = r.shape[1]
-    q = X.shape[1]
+    pw = _gram_power(G, B, n_kept, q)
     thr = _thr(q, C)
     if pw.max() <= thr:
         return []
@@ -482,16 +574,14 @@ def _regress_view(prep, rw, name: str, cols: list[np.ndarray], extra: dict | Non
             float(pw[ch].sum()),
             q * len(ch),
             _logp(float(pw.max()), q),
-            detail={"n_values": int(r.shape[0]), **(extra or {})},
+            detail={"n_values": int(n_kept), **(extra or {})},
         )
     ]
 
 
 def view_drift(prep, rw):
     """Correlation with the driver (temperature or time)."""
-    return _regress_view(
-        prep, rw, "drift", [prep.rows["driver"]], {"driver": prep.consts.get("driver_name")}
-    )
+    return _regress_view(prep, rw, "drift", ["driver"], {"driver": prep.consts.get("driver_name")})
 
 
 def view_line_phase(prep, rw):
@@ -500,21 +590,24 @@ def view_line_phase(prep, rw):
         return []
     out = []
     keep = prep.keep
-    psi = prep.rows["psi"]
     C = rw.shape[1]
     thr = _thr(4, C)
-    pw = np.zeros(C)
-    for k in range(C):
-        X = np.stack(
-            [
-                np.cos(psi[keep, k]),
-                np.sin(psi[keep, k]),
-                np.cos(2 * psi[keep, k]),
-                np.sin(2 * psi[keep, k]),
-            ],
-            1,
-        )
-        pw[k] = _ls_power(rw[keep][:, k : k + 1], X)[0]
+    G = np.zeros((C, 4, 4))
+    B = np.zeros((C, 4))
+    n_kept = 0
+    for a, b in _blocks(keep.size):
+        kb = keep[a:b]
+        if not kb.any():
+            continue
+        psi = np.asarray(_col(prep, "psi", a, b))[kb]
+        r = rw[a:b][kb]
+        n_kept += int(kb.sum())
+        for k in range(C):
+            ph = psi[:, k]
+            X = np.stack([np.cos(ph), np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)], 1)
+            G[k] += X.T @ X
+            B[k] += X.T @ r[:, k]
+    pw = np.array([_gram_power(G[k], B[k][:, None], n_kept, 4)[0] for k in range(C)])
     if pw.max() > thr:
         ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
         L = prep.ctx.signal_periods
@@ -533,24 +626,25 @@ def view_line_phase(prep, rw):
 
 def view_direction(prep, rw):
     """Mean difference between the directions of rotation."""
-    d = prep.rows["direction"]
-    if np.all(d[prep.keep] == d[prep.keep][0]):
+    d = prep.rows["direction"][prep.keep]
+    if np.all(d == d[0]):
         return []
-    return _regress_view(prep, rw, "direction", [d])
+    del d
+    return _regress_view(prep, rw, "direction", ["direction"])
 
 
 def view_speed(prep, rw):
     """A term proportional to the signed steady speed (needs two speeds or directions)."""
-    w = prep.rows["omega"]
-    if np.ptp(w[prep.keep]) <= 0.05 * np.max(np.abs(w[prep.keep])):
+    w = prep.rows["omega"][prep.keep]
+    if np.ptp(w) <= 0.05 * np.max(np.abs(w)):
         return []
-    return _regress_view(prep, rw, "speed", [w])
+    del w
+    return _regress_view(prep, rw, "speed", ["omega"])
 
 
 def view_angle_trend(prep, rw):
     """A term growing linearly with the shaft angle within each run."""
-    th = prep.rows["theta"]
-    return _regress_view(prep, rw, "angle_trend", [th])
+    return _regress_view(prep, rw, "angle_trend", ["theta"])
 
 
 VIEWS = {
@@ -566,14 +660,44 @@ VIEWS = {
 }
 
 
+class Whitened:
+    """The whitened residual ``resid / sigma`` (n, C), whitened where it is indexed: the
+    engine's views read it by row ranges or row indices, so no whitened copy of the whole
+    residual is made (``np.asarray`` makes one, for a kind's own views)."""
+
+    def __init__(self, resid: np.ndarray, sigma: np.ndarray):
+        self.resid = resid
+        self.inv = 1.0 / np.asarray(sigma, float)[None, :]
+        self.shape = resid.shape
+        self.ndim = resid.ndim
+        self.dtype = resid.dtype
+
+    def __getitem__(self, idx):
+        if isinstance(idx, tuple):
+            return (self.resid[idx[0]] * self.inv)[(slice(None), *idx[1:])]
+        return self.resid[idx] * self.inv
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.resid * self.inv
+        return out if dtype is None else out.astype(dtype)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+
 def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
     """Run ``views`` on the residual; findings strongest first, with variance shares."""
-    rw = resid / prep.sigma[None, :]
-    tot = float(np.sum(rw[prep.keep] ** 2))
+    rw = Whitened(resid, prep.sigma)
+    tot = float(sum(np.sum(rw[a:b][prep.keep[a:b]] ** 2) for a, b in _blocks(rw.shape[0])))
     out: list[Finding] = []
+    rw_array = None
     for v in views:
-        # a kind may supply its own view: a callable ``view(prep, rw, scan_order)``
-        out += (VIEWS[v] if isinstance(v, str) else v)(prep, rw, scan_order)
+        if isinstance(v, str):
+            out += VIEWS[v](prep, rw, scan_order)
+        else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
+            if rw_array is None:
+                rw_array = np.asarray(rw)
+            out += v(prep, rw_array, scan_order)
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of
     # that order (the orders view), which sees every run at once
     by_order = {
