@@ -961,11 +961,21 @@ def _drift_plausible(ctx: Context, params: dict) -> str | None:
     return None
 
 
+def _delay_gauge(ctx: Context, delay) -> np.ndarray:
+    """The fitted delays per moving sensor; without phi_ref a delay common to every moving
+    sensor is taken by the per-run offset, so the delays are known up to a common value:
+    the median is taken out (one sensor's step then shows on that sensor alone)."""
+    d = np.asarray(delay, float)
+    if float(np.asarray(ctx.consts["proj"])) > 0 and d.size > 2:
+        d = d - np.median(d)
+    return d
+
+
 def _delay_plausible(ctx: Context, params: dict) -> str | None:
     """A delay step is one sensor's (its electronics, its cable): refused when another
     moving sensor carries more than half of the largest step (a pattern common to the
     moving sensors, e.g. a drift or a platform-angle order, is not a sensor's delay)."""
-    dd = np.abs(np.asarray(params["delay_s"], float))
+    dd = np.abs(_delay_gauge(ctx, params["delay_s"]))
     d = np.sort(dd)[::-1]
     if d.size > 1 and d[1] > 0.5 * d[0]:
         return (
@@ -1257,6 +1267,16 @@ def _no_ref_beam(ctx: Context) -> str | None:
     )
 
 
+def _no_ref_drift(ctx: Context) -> str | None:
+    if ctx.has_ref:
+        return None
+    return (
+        "without phi_ref the per-run offset takes everything common to the moving sensors "
+        "of a run; a drift in time moves them alike (their window times differ by less "
+        "than a revolution: a constant per sensor), so thermal_drift is unidentifiable"
+    )
+
+
 def _tilt_derived(ctx, v, se):
     beta, sb = abs(float(v["tilt_rad"])), se["tilt_rad"]
     sb = float(sb) if np.isfinite(sb) else float("inf")
@@ -1295,7 +1315,7 @@ def _beam_derived(ctx, v, se):
 
 
 def _delay_derived(ctx, v, se):
-    d = np.asarray(v["delay_s"], float)
+    d = _delay_gauge(ctx, v["delay_s"])
     s = np.asarray(se["delay_s"], float)
     m = int(np.argmax(np.abs(d) / np.where(np.isfinite(s) & (s > 0), s, np.inf)))
     rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
@@ -1319,13 +1339,10 @@ def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
 
 @functools.lru_cache(maxsize=16)
 def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
-    """One set of candidate objects per layout (one compiled Jacobian each).
-
-    Every candidate's signature includes the ``run_step`` view: each effect shows in the
-    run means of the sensors, so where that view located a change (a step or one run's
-    outlier on one sensor), the effect must clear it too (the engine refuses a candidate
-    that leaves over half of its signature's structure in place): a smooth pattern in the
-    platform angle that takes a part of a one-run transient is not named."""
+    """One set of candidate objects per layout (one compiled Jacobian each). Every
+    candidate but the delay step is refused when one run's deviation on one sensor
+    dominates the base residual (:func:`_transient`): a smooth pattern in the platform
+    angle or in time would only take a part of that transient."""
     out = [
         Candidate(
             "axis_tilt",
@@ -1334,7 +1351,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
                 Param("tilt_rad", "rad", linear=False, scale=1e-3),
                 Param("azimuth_rad", "rad", linear=False, scale=0.3),
             ),
-            signature=("sds_axis_tilt", "orders", "run_step"),
+            signature=("sds_axis_tilt", "orders"),
             kinds=("sds",),
             explanation=EXPLANATIONS["axis_tilt"],
             start=_tilt_start,
@@ -1348,6 +1365,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             signature=("sds_thermal_drift", "run_step"),
             kinds=("sds",),
             explanation=EXPLANATIONS["thermal_drift"],
+            applies=_no_ref_drift,
             plausible=_no_transient(_drift_plausible),
         ),
         Candidate(
@@ -1358,7 +1376,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
                 Param("sin_rad", "rad"),
                 Param("cos_rad", "rad"),
             ),
-            signature=("sds_bearing_wobble", "run_step"),
+            signature=("sds_bearing_wobble",),
             kinds=("sds",),
             explanation=EXPLANATIONS["bearing_wobble"],
             start=_wobble_start,
@@ -1372,7 +1390,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
                 Param("cos_rad", "rad", (len(BEAM_ORDERS),)),
                 Param("sin_rad", "rad", (len(BEAM_ORDERS),)),
             ),
-            signature=("sds_beam_tilt_axial", "common_orders", "run_step"),
+            signature=("sds_beam_tilt_axial", "common_orders"),
             kinds=("sds",),
             explanation=EXPLANATIONS["beam_tilt_axial"],
             applies=_no_ref_beam,
@@ -1541,6 +1559,20 @@ def sds_limit(prep: Prepared) -> int:
     return int(max(1, prep.ctx.n_runs * M // 2 - 1))
 
 
+def _common_x_orders(prep: Prepared, orders) -> list[int]:
+    """Orders ``n`` in ``x = φ + ψ_m`` whose columns vanish on the moving-sensor differences
+    (``n ψ_m`` equal mod 2π for every sensor) when the record is projected (no phi_ref)."""
+    if float(prep.consts["proj"]) <= 0:
+        return []
+    psi = np.asarray(prep.consts["psi_m"], float)
+    out = []
+    for n in orders:
+        z = np.exp(1j * n * psi)
+        if np.max(np.abs(z - z.mean())) < 1e-9:
+            out.append(int(n))
+    return out
+
+
 def sds_base(prep: Prepared, max_order: int):
     """Pair constants plus the design's ripple orders (see module doc)."""
     enc = prep.ctx.meta.get("encoder", {})
@@ -1552,6 +1584,12 @@ def sds_base(prep: Prepared, max_order: int):
         else []
     )
     terms = [(_const_term(M), {})]
+    common_x = _common_x_orders(prep, orders)
+    if common_x:
+        # without phi_ref an order with one phase at every moving sensor is taken by the
+        # per-run offset: its projected columns are zero up to rounding, which a normalised
+        # solve would fit as if they carried information; left out and listed
+        orders = [o for o in orders if o not in common_x]
     if orders:
         terms.append((_ripple_term(tuple(orders)), {}))
     has_ref = prep.ctx.has_ref
@@ -1572,6 +1610,11 @@ def sds_base(prep: Prepared, max_order: int):
                 f"no phi_ref: coil_mismatch orders {common} have one phase at every moving "
                 "sensor (multiples of the moving-sensor count): held as unidentifiable"
             )
+    if common_x:
+        unid.append(
+            f"no phi_ref: design orders {common_x} have one phase at every moving sensor "
+            "(taken by the per-run offset): left out of the base model"
+        )
     info = {
         "design_orders": orders,
         "pole_pairs": p,
