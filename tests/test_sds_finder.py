@@ -177,6 +177,19 @@ def test_stamp_lattice_any_clock(seed):
     assert stamp_lattice(tc)["period_s"] is None
 
 
+def test_bearing_wobble_from_a_later_run_is_named(sds_bench):
+    """A wobble only in the later half of the runs (``partial``): a stationary wobble leaves
+    most of it in place (refused); the onset tried from a quarter, half or three quarters of
+    the runs on names it, with the onset run."""
+    rec, truth = sds_bench("bearing_wobble", "partial")
+    d = _diag(rec)
+    assert [e["name"] for e in d["effects"]] == ["bearing_wobble"], d["report"]
+    e = d["effects"][0]
+    assert e["derived"]["first_run"]["value"] == N_RUNS // 2
+    rho = e["params"]["frequency_ratio"]["value"] % 1.0
+    assert abs(rho - truth["params"]["frequency_ratio"]) < 0.02
+
+
 @pytest.mark.parametrize("phi_ref", [True, False])
 def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     """Named on the right sensor and run, within 10 %. Without phi_ref the delays are known

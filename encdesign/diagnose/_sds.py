@@ -1141,7 +1141,16 @@ def _wobble_fn(p, x):
         arg = rho * x["omega"] * t - psi
         return att * (a * jnp.sin(arg) + b * jnp.cos(arg))
 
-    return _to_channels(w(tm, xm) - w(tf, pf), x)
+    # from run first_run on (held, no derivative): a bearing that began to wobble during
+    # the record (0: every run)
+    on = (x["run_index"] >= p.get("first_run", 0.0) - 0.5).astype(float)
+    return _to_channels((w(tm, xm) - w(tf, pf)) * on[:, None, None, None], x)
+
+
+def _wobble_onsets(R: int) -> list[int]:
+    """Onsets tried for the bearing wobble: every run, or from a quarter, half or three
+    quarters of the runs on (Bonferroni over them in its matched view)."""
+    return sorted({0, *(int(round(R * f)) for f in (0.25, 0.5, 0.75))} - {R})
 
 
 def _beam_fn(p, x):
@@ -1215,17 +1224,33 @@ def _wobble_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
     rw = resid / ctx.noise[None, :]
     grid = _wobble_grid(ctx)
     allc = np.asarray(_wobble_cols_grid(jnp.asarray(grid), _jx(ctx)))  # (G, n, C, 2)
+    run_index = np.asarray(ctx.rows["run_index"], float)
+    onsets = _wobble_onsets(int(ctx.n_runs))
+    # power of the two columns per (ratio, onset) from per-row normal equations summed over
+    # the rows from the onset on (one pass, no QR per pair)
+    c = allc / ctx.noise[None, None, :, None]
+    a_row = np.einsum("gnci,gncj->gnij", c, c)
+    g_row = np.einsum("gnci,nc->gni", c, rw)
     best = []
-    for rho, cols in zip(grid, allc):
-        best.append((_ls_power_flat(rw, cols / ctx.noise[None, :, None]), float(rho)))
+    for k in onsets:
+        on = run_index >= k - 0.5
+        A = a_row[:, on].sum(1)
+        g = g_row[:, on].sum(1)
+        A = A + 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(2)
+        pw = np.einsum("gi,gi->g", g, np.linalg.solve(A, g[..., None])[..., 0])
+        best += [(float(pw[i]), float(grid[i]), k) for i in range(grid.size)]
     best.sort(reverse=True)
     out, seen = [], []
-    for _, rho in best:
+    for _, rho, k in best:
         if all(abs(rho - s) > 0.03 for s in seen):
             seen.append(rho)
-            out.append({"frequency_ratio": np.asarray(rho)})
+            out.append({"frequency_ratio": np.asarray(rho), "first_run": np.asarray(float(k))})
         if len(out) == 3:
             break
+    if all(float(o["first_run"]) > 0 for o in out):
+        # the stationary wobble at its best ratio stays among the starts
+        _, rho, _ = max(b for b in best if b[2] == 0)
+        out.append({"frequency_ratio": np.asarray(rho), "first_run": np.asarray(0.0)})
     return out
 
 
@@ -1295,9 +1320,12 @@ def _wobble_derived(ctx, v, se):
     s = math.hypot(float(se["sin_rad"]), float(se["cos_rad"])) / math.sqrt(2)
     s = s if math.isfinite(s) else None
     r = float(ctx.consts["radius_m"])
+    k = int(round(float(v.get("first_run", 0.0))))
+    rid = int(ctx.consts["kd"].table.run_ids[min(max(k, 0), int(ctx.n_runs) - 1)])
     return {
         "amplitude_rad": {"value": amp, "se": s, "unit": "rad"},
         "runout_m": {"value": amp * r, "se": None if s is None else s * r, "unit": "m"},
+        "first_run": {"value": rid, "se": None, "unit": "1"},
     }
 
 
@@ -1375,6 +1403,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
                 Param("frequency_ratio", "1", linear=False, scale=0.01),
                 Param("sin_rad", "rad"),
                 Param("cos_rad", "rad"),
+                Param("first_run", "1", linear=False, fit=False),
             ),
             signature=("sds_bearing_wobble",),
             kinds=("sds",),
@@ -1506,7 +1535,11 @@ def _matched_view(name: str):
             if pw > best[0]:
                 best = (pw, max(q_eff, 1))
         pw, q = best
-        n_starts = len(_wobble_grid(ctx)) if name == "bearing_wobble" else max(len(starts), 1)
+        n_starts = (
+            len(_wobble_grid(ctx)) * len(_wobble_onsets(int(ctx.n_runs)))
+            if name == "bearing_wobble"
+            else max(len(starts), 1)
+        )
         thr = _thr(q, 6 * n_starts)
         if pw <= thr:
             return []
