@@ -125,7 +125,14 @@ def _sds_block(args, plan, seeds) -> dict:
             truth_params=truth["params"],
             fitted_params=d["effects"][0]["params"] if d["effects"] else None,
         )
-        if effect in SDS_CATALOG:
+        untestable = [n["name"] for n in d.get("not_testable", [])]
+        row["not_testable"] = untestable
+        if effect in SDS_CATALOG and effect in untestable:
+            # the record cannot show it (e.g. a drift common to the moving sensors without
+            # phi_ref): right when the finder says so and claims nothing else
+            row["correct"] = d["verdict"] == "consistent"
+            row["label"] = label = "not_testable" if d["verdict"] == "consistent" else label
+        elif effect in SDS_CATALOG:
             row["correct"] = named == effect
         elif effect is None:
             row["correct"] = d["verdict"] == "consistent"
@@ -162,6 +169,10 @@ def _sds_block(args, plan, seeds) -> dict:
         * float(np.median([r["heldout_improvement"] for r in fitted_rows]))
         if fitted_rows
         else None,
+        catalog_not_testable=sum(1 for r in cat if r["truth"] in r.get("not_testable", [])),
+        catalog_not_testable_note="catalog effects the record cannot show (the finder lists "
+        "them as not testable, with the reason); counted correct when the verdict is "
+        "consistent and nothing else is named",
         per_effect_correct_pct={
             t: 100 * float(np.mean([r["correct"] for r in rows if r["truth"] == t])) for t in truths
         },

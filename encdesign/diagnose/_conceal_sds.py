@@ -23,8 +23,12 @@ the later runs (``partial``):
   on (a changed cable or comparator delay).
 
 Out of catalog (reported ``unexplained`` by a correct finder): ``run_step`` (one moving
-sensor's bracket shifted in one run) and ``order_5`` (an error 5 times per platform turn,
-common to the moving sensors, e.g. a platform gear).
+sensor's bracket shifted in one run only, restored in the next: a one-run transient; a
+change that persists from a run on is the catalog's ``sensor_delay_step``, so naming a
+``run_step`` a delay step is wrong physics, and the benchmark scores it so) and ``order_5``
+(an error 5 times per platform turn, common to the moving sensors, e.g. a platform gear;
+with golden-angle steps it is nearly a trend over the runs, so a finder must not call it a
+drift in time without saying that the two are confounded).
 """
 
 from __future__ import annotations
