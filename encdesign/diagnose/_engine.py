@@ -40,7 +40,7 @@ import scipy.signal
 from scipy import stats
 
 from .._errors import input_error
-from ._candidates import Candidate, Context
+from ._candidates import Candidate, Context, Param
 from ._views import ALPHA, locate
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
@@ -1550,6 +1550,117 @@ def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
     return float(np.sqrt(np.sum(pr**2) / max(prep.keep.sum() * C * eff, 1)))
 
 
+def _step_fn(p: dict, x: dict):
+    on = jnp.where(x["tau"] >= p["tau_s"], 1.0, 0.0) * (x["run_onehot"] @ p["run_sel"])
+    return p["size"] * on[:, None] * p["channel_sel"][None, :]
+
+
+STEP_NUISANCE = Candidate(
+    name="located_step",
+    fn=_step_fn,
+    params=(
+        Param("size", "unit of y", scale=None, description="size of the step"),
+        Param("tau_s", "s", linear=False, fit=False, description="global time of the step"),
+        Param("run_sel", "1", shape="runs", linear=False, fit=False),
+        Param("channel_sel", "1", shape="channels", linear=False, fit=False),
+    ),
+    explanation="a step located in time (no catalog effect: the alternative a candidate "
+    "must beat where the time view located a step)",
+)
+"""A step of one size on the channels of a located step, from its row on within its run."""
+STEP_CATALOG_CORR2 = 0.5
+"""A located step whose column correlates (squared, within its run) above this with the
+direction or the speed of rotation is one the catalog's direction/speed terms can make."""
+
+
+def _free_steps(prep: Prepared, findings: list) -> list[dict]:
+    """Steps the time view located at a time where nothing the catalog knows changes.
+
+    A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
+    step where the speed changes: a located step whose indicator correlates (squared, over
+    its run's kept rows, run constant removed) above ``STEP_CATALOG_CORR2`` with the
+    direction or the steady speed is left to those terms. The others are steps no smooth
+    term (a drift, a scale error, an order) can make; each is returned with its time, run
+    and channels."""
+    out = []
+    keep = prep.keep
+    for f in findings:
+        if f.view != "time" or f.detail.get("shape") != "step":
+            continue
+        r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+        rows = np.flatnonzero((prep.run == r) & keep)
+        tau0 = float(f.detail["global_step_time_s"])
+        s = (prep.rows["tau"][rows] >= tau0).astype(float)
+        s -= s.mean()
+        if s @ s <= 0:
+            continue
+        made = False
+        for name in ("direction", "omega"):
+            v = np.asarray(prep.rows[name][rows], float)
+            v = v - v.mean()
+            if v @ v > 1e-12 * max(float(np.abs(prep.rows[name][rows]).max()) ** 2, 1e-300):
+                made |= (s @ v) ** 2 / ((s @ s) * (v @ v)) > STEP_CATALOG_CORR2
+        if made:
+            continue
+        ch = np.zeros(prep.n_channels)
+        ch[list(f.where["heads"])] = 1.0
+        sel = np.zeros(prep.ctx.n_runs)
+        sel[r] = 1.0
+        out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
+    return out
+
+
+def _step_term(prep: Prepared, step: dict) -> Term:
+    tm = make_term(
+        STEP_NUISANCE,
+        prep,
+        {"tau_s": step["tau_s"], "run_sel": step["run_sel"], "channel_sel": step["channels"]},
+    )
+    tm.scale["size"][...] = float(np.mean(prep.sigma))
+    return tm
+
+
+def _beaten_by_step(
+    fitter: Fitter,
+    prep: Prepared,
+    current: FitResult,
+    fr: FitResult,
+    steps: list[dict],
+    cache: dict,
+) -> str | None:
+    """Why a candidate ``fr`` (current model plus the candidate) is refused for a located
+    step it cannot make, or ``None``: fitted together with the step, the step still earns
+    its place and the candidate no longer does (information criterion or held-out)."""
+    if not steps:
+        return None
+    N = prep.n_values
+    logn = math.log(max(N, 2))
+    k = max(fr.n_determined(len(fr.terms) - 1), 0)
+    base_terms = _frozen(current.terms)
+    cand = _frozen(fr.terms[-1:])
+    for i, st in enumerate(steps):
+        if i not in cache:
+            cache[i] = fitter.fit([*base_terms, _step_term(prep, st)])
+        fs = cache[i]
+        both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
+        if fr.chi2 - both.chi2 < BIC_MIN + logn:
+            continue  # with the candidate there is no step left: it makes it
+        dchi = fs.chi2 - both.chi2
+        dbic = -(dchi - k * logn)
+        dho = fs.heldout_chi2 - both.heldout_chi2
+        if dbic > -BIC_MIN or dho < HELDOUT_MIN:
+            f = st["finding"]
+            heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
+            return (
+                f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
+                f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: fitted "
+                f"with that step it lowers chi-square by {dchi:.1f} only (dBIC {dbic:.1f}, "
+                f"held-out {dho:.1f}); it cannot make a step there (no reversal, no change "
+                "of speed at that time)"
+            )
+    return None
+
+
 def select(
     prep: Prepared,
     fitter: Fitter,
@@ -1586,6 +1697,8 @@ def select(
         if not findings and gof["passes"]:
             break
         trials = []
+        free_steps = _free_steps(prep, findings)
+        step_fits: dict = {}
         for cand in applicable:
             if cand.name in {s.name for s in accepted}:
                 continue
@@ -1739,6 +1852,12 @@ def select(
                         }
                     )
                     continue
+            # a step located where nothing in the catalog changes (no reversal, no change of
+            # speed) is the alternative it must beat: a drift or a scale error only dents it
+            why = _beaten_by_step(fitter, prep, current, fr, free_steps, step_fits)
+            if why:
+                rejected.append({"name": cand.name, "reason": why, "delta_bic": float(dbic)})
+                continue
             notes = []
             if held_notes.get(cand.name):
                 notes.append(
