@@ -1585,8 +1585,12 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
     out = []
     keep = prep.keep
     for f in findings:
-        if f.view != "time" or f.detail.get("shape") != "step":
+        if f.view != "time" or not (
+            f.detail.get("shape") == "step" or f.detail.get("step_significant")
+        ):
             continue
+        if len(out) >= 2:
+            break
         r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
         rows = np.flatnonzero((prep.run == r) & keep)
         tau0 = float(f.detail["global_step_time_s"])
@@ -1627,10 +1631,11 @@ def _beaten_by_step(
     fr: FitResult,
     steps: list[dict],
     cache: dict,
-) -> str | None:
-    """Why a candidate ``fr`` (current model plus the candidate) is refused for a located
-    step it cannot make, or ``None``: fitted together with the step, the step still earns
-    its place and the candidate no longer does (information criterion or held-out)."""
+) -> tuple[str, Any] | None:
+    """``(why, the step's finding)`` when a candidate ``fr`` (current model plus the
+    candidate) is refused for a located step it cannot make, or ``None``: fitted together
+    with the step, the step still earns its place and the candidate no longer does
+    (information criterion or held-out)."""
     if not steps:
         return None
     N = prep.n_values
@@ -1638,10 +1643,11 @@ def _beaten_by_step(
     k = max(fr.n_determined(len(fr.terms) - 1), 0)
     base_terms = _frozen(current.terms)
     cand = _frozen(fr.terms[-1:])
-    for i, st in enumerate(steps):
-        if i not in cache:
-            cache[i] = fitter.fit([*base_terms, _step_term(prep, st)])
-        fs = cache[i]
+    for st in steps:
+        key = (st["tau_s"], st["run"], tuple(st["channels"]))
+        if key not in cache:
+            cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
+        fs = cache[key]
         both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
         if fr.chi2 - both.chi2 < BIC_MIN + logn:
             continue  # with the candidate there is no step left: it makes it
@@ -1656,9 +1662,46 @@ def _beaten_by_step(
                 f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: fitted "
                 f"with that step it lowers chi-square by {dchi:.1f} only (dBIC {dbic:.1f}, "
                 f"held-out {dho:.1f}); it cannot make a step there (no reversal, no change "
-                "of speed at that time)"
+                "of speed at that time)",
+                f,
             )
     return None
+
+
+def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
+    """Move a located step's time (``f``, a ``time`` finding) to the row where the model
+    ``terms`` plus a step fits best: the time view's change point is read off a residual
+    from which the base model has taken part of the step. A scan of 24 rows over the
+    blocks either side, then of every row between the best one's neighbours."""
+    r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+    rows = np.flatnonzero((prep.run == r) & prep.keep)
+    tau = prep.rows["tau"][rows]
+    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
+    width = max(int(2 * rows.size / 32), 4)
+    ch = np.zeros(prep.n_channels)
+    ch[list(f.where["heads"])] = 1.0
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[r] = 1.0
+    held = _frozen(terms)
+
+    def chi2(i: int) -> float:
+        st = dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)
+        return fitter.fit([*held, _step_term(prep, st)]).chi2
+
+    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
+    grid = np.unique(np.linspace(lo, hi, 24).astype(int))
+    best = min(grid, key=chi2)
+    k = int(np.searchsorted(grid, best))
+    a = int(grid[max(k - 1, 0)])
+    b = int(grid[min(k + 1, grid.size - 1)])
+    fine = np.arange(a, b + 1)
+    if fine.size > 48:
+        fine = np.unique(np.linspace(a, b, 48).astype(int))
+    best = int(min(fine, key=chi2))
+    t = prep.rows["t"]
+    f.detail["step_time_s"] = float(t[rows[best]])
+    f.detail["global_step_time_s"] = float(tau[best])
+    f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
 
 
 def select(
@@ -1691,6 +1734,7 @@ def select(
             applicable.append(c)
     gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
     held_notes: dict[str, list[str]] = {}
+    step_refusals: list[tuple[str, Any]] = []
     for _ in range(max_effects):
         seen = {f.view for f in findings}
         gof = goodness_of_fit(prep, cur_resid, current.n_params)
@@ -1824,8 +1868,11 @@ def select(
             # it must explain a fair share of everything located, so that a larger
             # structure it cannot explain is not pinned on it through a small part of it
             p0 = sum(f.power - f.dof for f in findings)
+            steps_left: list[dict] = []
             if p0 > 0:
                 after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+                # steps it leaves (a smooth model fitted to a step moves its change point)
+                steps_left = _free_steps(prep, after)
                 p1 = sum(f.power - f.dof for f in after)
                 # and clear the places its own signature located (not a larger structure
                 # there that it only dents, e.g. a step fitted by a drift)
@@ -1854,9 +1901,12 @@ def select(
                     continue
             # a step located where nothing in the catalog changes (no reversal, no change of
             # speed) is the alternative it must beat: a drift or a scale error only dents it
-            why = _beaten_by_step(fitter, prep, current, fr, free_steps, step_fits)
+            why = _beaten_by_step(
+                fitter, prep, current, fr, free_steps + steps_left, step_fits
+            )
             if why:
-                rejected.append({"name": cand.name, "reason": why, "delta_bic": float(dbic)})
+                rejected.append({"name": cand.name, "reason": why[0], "delta_bic": float(dbic)})
+                step_refusals.append((cand.name, why[1]))
                 continue
             notes = []
             if held_notes.get(cand.name):
@@ -1912,6 +1962,31 @@ def select(
                 cur_resid = fitter.residual(current.terms)
                 findings = locate(prep, cur_resid, views, scan_order)
                 without = {}
+    # a step that refused a candidate is reported where it was located (a smooth base or
+    # effect fitted to it moves the change point the final residual's time view sees)
+    refined: set[int] = set()
+    for name, f in step_refusals:
+        ts = f.detail["step_time_s"]
+        seen = [
+            g
+            for g in findings
+            if g.view == "time"
+            and g.where["runs"] == f.where["runs"]
+            and min(g.where["times_s"]) - g.detail["block_s"]
+            <= ts
+            <= max(g.where["times_s"]) + g.detail["block_s"]
+        ]
+        g = seen[0] if seen else f
+        if id(g) in refined:
+            continue
+        refined.add(id(g))
+        _refine_step(fitter, prep, current.terms, g)
+        if g.detail.get("shape") == "step" or not seen:
+            g.where["times_s"] = list(g.detail["step_times_s"])
+        if not seen:
+            f.detail["shape"] = "step"
+            f.detail["located_with"] = f"located in the residual of the model with {name}"
+            findings = sorted([*findings, f], key=lambda g: g.log10_p)
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2

@@ -427,13 +427,15 @@ def view_time(prep, rw) -> list[Finding]:
                 "step_time_s": tstep,
                 "global_step_time_s": float(prep.rows["tau"][rows_r[i_step]]),
                 "block_s": float(t1 - t0),
+                # the best single step alone is significant (a step a smooth model dents
+                # shows as a transient)
+                "step_significant": bool(step_pw > _thr(1, n_tests)),
                 "n_values": int(sum(p.size for p in parts)),
             }
+            # where the step is: between the last row before it and the first row after it
+            detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
             if is_step:
-                # a step is reported where it is: between the last row before it and the
-                # first row after it
-                t0 = float(prep.rows["t"][rows_r[max(i_step - 1, 0)]])
-                t1 = tstep
+                t0, t1 = detail["step_times_s"]
             out.append(
                 Finding(
                     "time",
