@@ -1568,20 +1568,20 @@ STEP_NUISANCE = Candidate(
     "must beat where the time view located a step)",
 )
 """A step of one size on the channels of a located step, from its row on within its run."""
-STEP_CATALOG_CORR2 = 0.5
-"""A located step whose column correlates (squared, within its run) above this with the
-direction or the speed of rotation is one the catalog's direction/speed terms can make."""
+STEP_CHANGE_ROWS = 3
+"""A located step within this many kept rows (or half a time-view block) of a change of
+direction or speed is one the catalog's direction / speed terms can make."""
 
 
 def _free_steps(prep: Prepared, findings: list) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
     A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
-    step where the speed changes: a located step whose indicator correlates (squared, over
-    its run's kept rows, run constant removed) above ``STEP_CATALOG_CORR2`` with the
-    direction or the steady speed is left to those terms. The others are steps no smooth
-    term (a drift, a scale error, an order) can make; each is returned with its time, run
-    and channels."""
+    step where the speed changes: a located step within ``STEP_CHANGE_ROWS`` kept rows (or
+    half a time-view block, 1/64 of the run) of a kept row where the direction or the
+    steady speed changes is left to those terms. The others are steps no smooth term (a
+    drift, a scale error, an order) can make; each is returned with its time, run and
+    channels."""
     out = []
     keep = prep.keep
     for f in findings:
@@ -1594,17 +1594,22 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
         r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
         rows = np.flatnonzero((prep.run == r) & keep)
         tau0 = float(f.detail["global_step_time_s"])
-        s = (prep.rows["tau"][rows] >= tau0).astype(float)
-        s -= s.mean()
-        if s @ s <= 0:
+        i = int(np.searchsorted(prep.rows["tau"][rows], tau0))
+        if i <= 0 or i >= rows.size:
             continue
-        made = False
-        for name in ("direction", "omega"):
-            v = np.asarray(prep.rows[name][rows], float)
-            v = v - v.mean()
-            if v @ v > 1e-12 * max(float(np.abs(prep.rows[name][rows]).max()) ** 2, 1e-300):
-                made |= (s @ v) ** 2 / ((s @ s) * (v @ v)) > STEP_CATALOG_CORR2
-        if made:
+        # kept rows where the direction or the steady speed changes (a reversal or a speed
+        # change, with the non-steady rows between them left out)
+        d = np.asarray(prep.rows["direction"][rows], float)
+        w = np.asarray(prep.rows["omega"][rows], float)
+        ch_rows = (
+            np.flatnonzero(
+                (d[1:] != d[:-1])
+                | (np.abs(w[1:] - w[:-1]) > 0.05 * np.maximum(np.abs(w[1:]), np.abs(w[:-1])))
+            )
+            + 1
+        )
+        near = max(STEP_CHANGE_ROWS, rows.size // 64)
+        if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
             continue
         ch = np.zeros(prep.n_channels)
         ch[list(f.where["heads"])] = 1.0
@@ -1901,9 +1906,7 @@ def select(
                     continue
             # a step located where nothing in the catalog changes (no reversal, no change of
             # speed) is the alternative it must beat: a drift or a scale error only dents it
-            why = _beaten_by_step(
-                fitter, prep, current, fr, free_steps + steps_left, step_fits
-            )
+            why = _beaten_by_step(fitter, prep, current, fr, free_steps + steps_left, step_fits)
             if why:
                 rejected.append({"name": cand.name, "reason": why[0], "delta_bic": float(dbic)})
                 step_refusals.append((cand.name, why[1]))
