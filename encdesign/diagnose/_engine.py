@@ -1676,13 +1676,12 @@ def _beaten_by_step(
 def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     """Move a located step's time (``f``, a ``time`` finding) to the row where the model
     ``terms`` plus a step fits best: the time view's change point is read off a residual
-    from which the base model has taken part of the step. A scan of 24 rows over the
-    blocks either side, then of every row between the best one's neighbours."""
+    from which the base model has taken part of the step (and moved its change point). A
+    scan of 64 rows over the run, then of the rows between the best one's neighbours (at
+    most 48)."""
     r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
     rows = np.flatnonzero((prep.run == r) & prep.keep)
     tau = prep.rows["tau"][rows]
-    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
-    width = max(int(2 * rows.size / 32), 4)
     ch = np.zeros(prep.n_channels)
     ch[list(f.where["heads"])] = 1.0
     sel = np.zeros(prep.ctx.n_runs)
@@ -1693,8 +1692,7 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
         st = dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)
         return fitter.fit([*held, _step_term(prep, st)]).chi2
 
-    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
-    grid = np.unique(np.linspace(lo, hi, 24).astype(int))
+    grid = np.unique(np.linspace(1, rows.size - 1, 64).astype(int))
     best = min(grid, key=chi2)
     k = int(np.searchsorted(grid, best))
     a = int(grid[max(k - 1, 0)])
@@ -1986,10 +1984,18 @@ def select(
         _refine_step(fitter, prep, current.terms, g)
         if g.detail.get("shape") == "step" or not seen:
             g.where["times_s"] = list(g.detail["step_times_s"])
-        if not seen:
+        dup = any(
+            h is not g
+            and h.view == "time"
+            and h.where["runs"] == g.where["runs"]
+            and h.detail.get("step_time_s") == g.detail["step_time_s"]
+            for h in findings
+        )
+        if not seen and not dup:
             f.detail["shape"] = "step"
-            f.detail["located_with"] = f"located in the residual of the model with {name}"
-            findings = sorted([*findings, f], key=lambda g: g.log10_p)
+            if not any(h is f for h in findings):  # a finding of the final residual already
+                f.detail["located_with"] = f"located in the residual of the model with {name}"
+                findings = sorted([*findings, f], key=lambda g: g.log10_p)
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2
