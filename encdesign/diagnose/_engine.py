@@ -1677,8 +1677,8 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     """Move a located step's time (``f``, a ``time`` finding) to the row where the model
     ``terms`` plus a step fits best: the time view's change point is read off a residual
     from which the base model has taken part of the step (and moved its change point). A
-    scan of 64 rows over the run, then of the rows between the best one's neighbours (at
-    most 48)."""
+    scan of 32 rows over 4 time-view blocks (1/8 of the run) either side, then of the rows
+    between the best one's neighbours (at most 48)."""
     r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
     rows = np.flatnonzero((prep.run == r) & prep.keep)
     tau = prep.rows["tau"][rows]
@@ -1692,7 +1692,13 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
         st = dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)
         return fitter.fit([*held, _step_term(prep, st)]).chi2
 
-    grid = np.unique(np.linspace(1, rows.size - 1, 64).astype(int))
+    # within 4 time-view blocks of the located row: a step and its mirror image about a
+    # reversal differ by a function of the angle, which the base model takes (the two
+    # times cannot be told apart over a turn back and forth); the located one is kept
+    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
+    width = max(int(4 * rows.size / 32), 4)
+    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
+    grid = np.unique(np.linspace(lo, hi, 32).astype(int))
     best = min(grid, key=chi2)
     k = int(np.searchsorted(grid, best))
     a = int(grid[max(k - 1, 0)])
@@ -1965,37 +1971,33 @@ def select(
                 without = {}
     # a step that refused a candidate is reported where it was located (a smooth base or
     # effect fitted to it moves the change point the final residual's time view sees)
-    refined: set[int] = set()
+    done: set = set()
     for name, f in step_refusals:
+        key = (tuple(f.where["runs"]), tuple(f.where["heads"]))
+        if key in done:  # one refined step per run and heads: the first refusal's
+            continue
+        done.add(key)
         ts = f.detail["step_time_s"]
         seen = [
             g
             for g in findings
             if g.view == "time"
+            and g.detail.get("shape") == "step"
             and g.where["runs"] == f.where["runs"]
             and min(g.where["times_s"]) - g.detail["block_s"]
             <= ts
             <= max(g.where["times_s"]) + g.detail["block_s"]
         ]
-        g = seen[0] if seen else f
-        if id(g) in refined:
+        if seen:  # the final residual's own step: refined with the final model
+            _refine_step(fitter, prep, current.terms, seen[0])
+            seen[0].where["times_s"] = list(seen[0].detail["step_times_s"])
             continue
-        refined.add(id(g))
-        _refine_step(fitter, prep, current.terms, g)
-        if g.detail.get("shape") == "step" or not seen:
-            g.where["times_s"] = list(g.detail["step_times_s"])
-        dup = any(
-            h is not g
-            and h.view == "time"
-            and h.where["runs"] == g.where["runs"]
-            and h.detail.get("step_time_s") == g.detail["step_time_s"]
-            for h in findings
-        )
-        if not seen and not dup:
-            f.detail["shape"] = "step"
-            if not any(h is f for h in findings):  # a finding of the final residual already
-                f.detail["located_with"] = f"located in the residual of the model with {name}"
-                findings = sorted([*findings, f], key=lambda g: g.log10_p)
+        _refine_step(fitter, prep, current.terms, f)
+        f.where["times_s"] = list(f.detail["step_times_s"])
+        f.detail["shape"] = "step"
+        if not any(h is f for h in findings):  # else a finding of the final residual
+            f.detail["located_with"] = f"located in the residual of the model with {name}"
+            findings = sorted([*findings, f], key=lambda g: g.log10_p)
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2
