@@ -445,7 +445,8 @@ def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float
     integer order (the same phase in every run: ``cos m theta, sin m theta`` per channel).
     A line at a non-integer order that the record resolves beats it clearly; a
     rotation-locked error (any number of turns) or a line that the span cannot tell from
-    one (``|order - m| * turns`` small) does not. ``1e9`` when not at one speed."""
+    one (``|order - m| * turns`` small) does not. ``1e9`` when not at one speed; ``-1e9``
+    when the base model has order ``m`` (the residual is then not the locked error's)."""
     t = np.asarray(ctx.rows["t"], float)
     th = np.asarray(ctx.rows["theta"], float)
     oh = np.asarray(ctx.rows["run_onehot"], float)
@@ -459,6 +460,10 @@ def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float
     m = round(f_hz / frev)
     if m < 1:
         return f_hz, 1e9
+    if m <= int(ctx.consts.get("max_order", 0)):
+        # the base model has that order: the residual no longer shows the locked error, so
+        # the margin cannot be read from it (the span's resolution decides, as before)
+        return f_hz, -1e9
     N = rw.size
     best = (-math.inf, f_hz)
     for f in f_hz + np.linspace(-0.5, 0.5, 11) / T:
