@@ -1652,24 +1652,42 @@ def _beaten_by_step(
         key = (st["tau_s"], st["run"], tuple(st["channels"]))
         if key not in cache:
             cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
-        fs = cache[key]
-        both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
-        if fr.chi2 - both.chi2 < BIC_MIN + logn:
-            continue  # with the candidate there is no step left: it makes it
-        dchi = fs.chi2 - both.chi2
-        dbic = -(dchi - k * logn)
-        dho = fs.heldout_chi2 - both.heldout_chi2
-        if dbic > -BIC_MIN or dho < HELDOUT_MIN:
-            f = st["finding"]
-            heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
-            return (
-                f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
-                f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: fitted "
-                f"with that step it lowers chi-square by {dchi:.1f} only (dBIC {dbic:.1f}, "
-                f"held-out {dho:.1f}); it cannot make a step there (no reversal, no change "
-                "of speed at that time)",
-                f,
-            )
+        f = st["finding"]
+        for attempt in range(2):
+            fs = cache[key]
+            both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
+            if fr.chi2 - both.chi2 < BIC_MIN + logn:
+                break  # with the candidate there is no step left: it makes it
+            dchi = fs.chi2 - both.chi2
+            dbic = -(dchi - k * logn)
+            dho = fs.heldout_chi2 - both.heldout_chi2
+            if dbic > -BIC_MIN or dho < HELDOUT_MIN:
+                heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
+                return (
+                    f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
+                    f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
+                    f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
+                    f"{dbic:.1f}, held-out {dho:.1f}); it cannot make a step there (no "
+                    "reversal, no change of speed at that time)",
+                    f,
+                )
+            if attempt:
+                break
+            # the step still leaves it something: a step placed a few rows off leaves a box
+            # a smooth term takes part of; the step's row from base + step fits, once
+            rkey = ("refined", key)
+            if rkey not in cache:
+                g = dataclasses.replace(f, where=dict(f.where), detail=dict(f.detail))
+                _refine_step(fitter, prep, current.terms, g)
+                st2 = dict(st, tau_s=g.detail["global_step_time_s"], finding=g)
+                cache[rkey] = st2
+            st2 = cache[rkey]
+            if st2["tau_s"] == st["tau_s"]:
+                break
+            st, f = st2, st2["finding"]
+            key = (st["tau_s"], st["run"], tuple(st["channels"]))
+            if key not in cache:
+                cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
     return None
 
 
@@ -1984,9 +2002,9 @@ def select(
             if g.view == "time"
             and g.detail.get("shape") == "step"
             and g.where["runs"] == f.where["runs"]
-            and min(g.where["times_s"]) - g.detail["block_s"]
+            and min(g.where["times_s"]) - 4 * g.detail["block_s"]
             <= ts
-            <= max(g.where["times_s"]) + g.detail["block_s"]
+            <= max(g.where["times_s"]) + 4 * g.detail["block_s"]
         ]
         if seen:  # the final residual's own step: refined with the final model
             _refine_step(fitter, prep, current.terms, seen[0])
