@@ -594,6 +594,104 @@ def test_engine_on_the_measured_sensors(name):
         assert sum(e["n_rows"] for e in doc["excluded_segments"]) < 0.2 * len(rec.columns["t"])
 
 
+def _sensor_plus(tmp_path, name, seed, add, **kw):
+    """A simulated sensor against a reference with ``add(cols, truth)`` added to ``h0``."""
+    from encdesign import diagnose
+
+    cols, enc, truth = cr.simulate_sensor_reference(key=jax.random.key(seed), **kw)
+    cols["h0"] = cols["h0"] + add(cols, truth)
+    rec = write_recording(tmp_path / f"{name}.toml", "multihead", cols, encoder=enc)
+    return diagnose(rec).doc, truth
+
+
+@pytest.mark.parametrize(
+    "sensor, span, directions, at",
+    [("resolver", 2.0, "forward", 0.6), ("magnetic", 1.0, "both", 0.22)],
+)
+def test_a_step_no_catalog_effect_makes_is_located_not_named(
+    tmp_path, sensor, span, directions, at
+):
+    """A 4-sigma step in the reading where the shaft neither reverses nor changes speed: a
+    drift, a scale error or a direction offset only dents it (before: scale_error /
+    thermal_drift named), so nothing is named and the step is reported at its row."""
+    t_step = {}
+
+    def step(cols, truth):
+        i = int(at * cols["t"].size)
+        t_step["t"] = cols["t"][i]
+        return np.where(np.arange(cols["t"].size) >= i, 4 * truth["noise_rad"], 0.0)
+
+    doc, _ = _sensor_plus(
+        tmp_path,
+        "step",
+        3,
+        step,
+        sensor=sensor,
+        span_turns=span,
+        directions=directions,
+        speeds_rev_s=(1.0,),
+        samples_per_run=1500,
+    )
+    assert doc["verdict"] == "unexplained", [e["name"] for e in doc["effects"]]
+    assert any(
+        u["view"] == "time"
+        and min(u["where"]["times_s"]) <= t_step["t"] <= max(u["where"]["times_s"])
+        for u in doc["unexplained"]
+    ), [u["where"] for u in doc["unexplained"]]
+    assert any("cannot make a step there" in r["reason"] for r in doc["rejected"])
+
+
+def test_a_direction_offset_is_still_the_step_at_the_reversal(tmp_path):
+    """The step rule leaves a step at a reversal to the direction terms."""
+    doc, truth = _sensor_plus(
+        tmp_path,
+        "hyst",
+        5,
+        lambda c, tr: 0.0,
+        sensor="resolver",
+        span_turns=1.0,
+        directions="both",
+        speeds_rev_s=(0.5, 1.5),
+        samples_per_run=1000,
+        effects={"direction_hysteresis": {"hysteresis_rad": 8e-4}},
+    )
+    named = {e["name"]: e for e in doc["effects"]}
+    assert "direction_hysteresis" in named, (list(named), doc["rejected"])
+    h = named["direction_hysteresis"]["params"]["hysteresis_rad"]["value"]
+    assert h == pytest.approx(8e-4, rel=0.1)
+
+
+@pytest.mark.parametrize("locked", [False, True])
+def test_a_line_near_an_integer_order_at_one_speed(tmp_path, locked):
+    """At one speed a line 0.4 / turns off an integer order over 10 turns is a vibration
+    (it beats the rotation-locked order on the data; before: refused as within the span's
+    resolution); exactly at the order it is not named vibration and stays located there."""
+    m, span = 37, 10.0
+    order = m if locked else m + 0.4 / span
+
+    def line(cols, truth):
+        w = 2 * np.pi * truth["speeds_rev_s"][0]
+        return 1.4 * truth["noise_rad"] * np.sin(order * w * cols["t"] + 0.3)
+
+    doc, _ = _sensor_plus(
+        tmp_path,
+        "line",
+        7,
+        line,
+        sensor="capacitive",
+        span_turns=span,
+        directions="forward",
+        speeds_rev_s=(1.0,),
+        samples_per_run=2000,
+    )
+    named = [e["name"] for e in doc["effects"]]
+    if locked:
+        assert "vibration" not in named
+        assert any(abs(o - m) < 0.15 for u in doc["unexplained"] for o in u["where"]["orders"])
+    else:
+        assert named == ["vibration"], (named, doc["rejected"])
+
+
 # ----------------------------------------------------------------------------- simulator
 
 

@@ -120,6 +120,16 @@ def fix_plan(plan: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
         plan["periods"] = int(rng.choice([16, 21, 2048]))  # above the base model's orders
     if "direction_hysteresis" in plan["effects"]:
         plan["both_directions"] = True
+    if plan["kind"] == "sensor" and "step_one_head" in plan["effects"]:
+        # over less than a turn in one direction a step in time is a step of the angle: part
+        # of the sensor's own error function (the base model), like an integer order
+        if not plan.get("both_directions"):
+            plan["turns"] = max(plan["turns"], 2.0)
+    if "vibration" in plan["effects"]:
+        # at one speed a line fixed in Hz is a rotation-locked error at a shaft order unless
+        # the span resolves its order from an integer (1 / turns): over a turn or two it never
+        # does (the engine then reports that it cannot tell them)
+        plan["turns"] = max(plan["turns"], 5.0)
     if "bearing_wobble" in plan["effects"]:
         plan["turns"] = max(plan["turns"], 10.0)
     if "thermal_drift" in plan["effects"] and plan["kind"] == "multihead":

@@ -448,13 +448,71 @@ def _vb_fn(p, x):
     )
 
 
+def _one_speed(ctx) -> float | None:
+    """The steady speed (rad/s) when every kept row turns at one |speed|, else ``None``."""
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    if w.size and np.ptp(w) <= 0.05 * np.max(w):
+        return float(np.median(w))
+    return None
+
+
+def _gain(rw: np.ndarray, X: np.ndarray) -> float:
+    """Whitened chi-square that regressors ``X`` (n, q) take out of ``rw`` (n, C)."""
+    if X.shape[0] <= X.shape[1]:
+        return 0.0
+    Q, _ = np.linalg.qr(X)
+    return float(np.sum((Q.T @ rw) ** 2))
+
+
+def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
+    """At one speed, ``(frequency, margin)``: the line's frequency refined on a grid of
+    +-half a Rayleigh bin, and by how much (whitened chi-square less ``k ln N`` for its
+    parameters) a line fixed in time at it beats a rotation-locked error at the nearest
+    integer order (the same phase in every run: ``cos m theta, sin m theta`` per channel).
+    A line at a non-integer order that the record resolves beats it clearly; a
+    rotation-locked error (any number of turns) or a line that the span cannot tell from
+    one (``|order - m| * turns`` small) does not. ``1e9`` when not at one speed; ``-1e9``
+    when the base model has order ``m`` (the residual is then not the locked error's)."""
+    t = np.asarray(ctx.rows["t"], float)
+    th = np.asarray(ctx.rows["theta"], float)
+    oh = np.asarray(ctx.rows["run_onehot"], float)
+    rw = np.asarray(resid, float).reshape(t.size, -1) / np.asarray(ctx.noise)[None, :]
+    rw = rw - oh @ np.linalg.lstsq(oh, rw, rcond=None)[0]  # the run constants are the base's
+    w = _one_speed(ctx)
+    T = float(np.max(_run_durations(ctx)))
+    if w is None or T <= 0:
+        return f_hz, 1e9
+    frev = w / (2 * np.pi)
+    m = round(f_hz / frev)
+    if m < 1:
+        return f_hz, 1e9
+    if m <= int(ctx.consts.get("max_order", 0)):
+        # the base model has that order: the residual no longer shows the locked error, so
+        # the margin cannot be read from it (the span's resolution decides, as before)
+        return f_hz, -1e9
+    N = rw.size
+    best = (-math.inf, f_hz)
+    for f in f_hz + np.linspace(-0.5, 0.5, 11) / T:
+        c, s_ = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
+        g = sum(_gain(rw, np.stack([c * oh[:, r], s_ * oh[:, r]], 1)) for r in range(oh.shape[1]))
+        best = max(best, (g, float(f)))
+    g_vib, f_best = best
+    k_vib = 2 * oh.shape[1] * rw.shape[1]
+    g_lock = _gain(rw, np.stack([np.cos(m * th), np.sin(m * th)], 1))
+    k_lock = 2 * rw.shape[1]
+    margin = (g_vib - k_vib * math.log(N)) - (g_lock - k_lock * math.log(N))
+    return f_best, float(margin)
+
+
 def _vb_start(ctx, resid, findings):
     out = []
     for f in findings:
         if f.view == "spectrum" and f.detail.get("fixed_in") != "order":
             fr = [v for v in f.where["frequencies_hz"] if v > 0]
             if fr:
-                out.append({"frequency_hz": float(np.median(fr))})
+                f0, margin = _vb_locked_margin(ctx, resid, float(np.median(fr)))
+                out.append({"frequency_hz": f0, "locked_margin": margin})
     return out[:3]
 
 
@@ -464,19 +522,27 @@ def _run_durations(ctx: Context) -> np.ndarray:
     return np.array([np.ptp(t[oh[:, r]]) if oh[:, r].any() else 0.0 for r in range(oh.shape[1])])
 
 
+LOCKED_MARGIN = 10.0
+"""Chi-square (less k ln N) by which a line at one speed near an integer order must beat a
+rotation-locked error there to be a vibration (the information criterion's BIC_MIN)."""
+
+
 def _vb_plausible(ctx, v):
     f = float(v["frequency_hz"])
     if f <= 0:
         return "frequency is not positive"
-    w = np.abs(ctx.rows["omega"])
-    w = w[w > 0]
-    if w.size and np.ptp(w) <= 0.05 * np.max(w):
-        order = f / (float(np.median(w)) / (2 * np.pi))
+    w = _one_speed(ctx)
+    if w is not None:
+        order = f / (w / (2 * np.pi))
         res = max(0.02, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
-        if abs(order - round(order)) < res and round(order) >= 1:
+        margin = float(np.asarray(v.get("locked_margin", 0.0)))
+        # within the span's resolution of an integer order, the data must show that it is
+        # not rotation locked (the line beats the locked order by LOCKED_MARGIN)
+        if abs(order - round(order)) < res and round(order) >= 1 and margin < LOCKED_MARGIN:
             return (
                 f"at one speed a line at {f:.4g} Hz is shaft order {order:.3f}: a "
-                "rotation-locked error fits as well (needs two speeds)"
+                f"rotation-locked error at order {round(order)} fits as well (chi-square "
+                f"margin {margin:.1f}, needs {LOCKED_MARGIN:.0f}; two speeds separate them)"
             )
     T = float(np.max(_run_durations(ctx)))
     if f * T < 3.0:
@@ -494,6 +560,14 @@ VIBRATION = Candidate(
         Param("frequency_hz", "Hz", "1", linear=False, scale=1e-3),
         Param("cos_rad", "rad", "runs*channels"),
         Param("sin_rad", "rad", "runs*channels"),
+        Param(
+            "locked_margin",
+            "1",
+            linear=False,
+            fit=False,
+            description="at one speed: whitened chi-square (less k ln N) by which a line fixed "
+            "in time beats a rotation-locked error at the nearest integer order (held)",
+        ),
     ),
     signature=("spectrum",),
     explanation="Relative oscillation of head and scale at a structural frequency "

@@ -475,11 +475,30 @@ def view_time(prep, rw) -> list[Finding]:
             jb = int(np.argmax(np.abs(cs[:-1]))) + 1 if nb > 2 else 1
             t0 = float(prep.rows["t"][parts[b][0]])
             t1 = float(prep.rows["t"][parts[b][-1]])
-            tstep = float(prep.rows["t"][parts[jb][0]])
             # step vs transient: power a single step takes out of the block means
             x = np.arange(nb) >= jb
             xm = x - x.mean()
             step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
+            is_step = step_pw > 0.7 * chi[k]
+            # the step's row: the single change point of largest likelihood near the block
+            # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
+            i_step = _change_row(rw[np.concatenate(parts), k], parts, jb)
+            rows_r = np.concatenate(parts)
+            tstep = float(prep.rows["t"][rows_r[i_step]])
+            detail = {
+                "shape": "step" if is_step else "transient_or_drift",
+                "step_time_s": tstep,
+                "global_step_time_s": float(prep.rows["tau"][rows_r[i_step]]),
+                "block_s": float(t1 - t0),
+                # the best single step alone is significant (a step a smooth model dents
+                # shows as a transient)
+                "step_significant": bool(step_pw > _thr(1, n_tests)),
+                "n_values": int(sum(p.size for p in parts)),
+            }
+            # where the step is: between the last row before it and the first row after it
+            detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
+            if is_step:
+                t0, t1 = detail["step_times_s"]
             out.append(
                 Finding(
                     "time",
@@ -487,12 +506,7 @@ def view_time(prep, rw) -> list[Finding]:
                     float(chi[k]),
                     nb - 1,
                     _logp(float(chi[k]), nb - 1),
-                    detail={
-                        "shape": "step" if step_pw > 0.7 * chi[k] else "transient_or_drift",
-                        "step_time_s": tstep,
-                        "global_step_time_s": float(prep.rows["tau"][parts[jb][0]]),
-                        "n_values": int(sum(p.size for p in parts)),
-                    },
+                    detail=detail,
                 )
             )
     # merge channels that share a run and a time (report a structure on several heads once)
@@ -502,7 +516,7 @@ def view_time(prep, rw) -> list[Finding]:
             if (
                 g.where["runs"] == f.where["runs"]
                 and abs(g.detail["step_time_s"] - f.detail["step_time_s"])
-                < 1e-9 + 0.1 * abs(g.where["times_s"][1] - g.where["times_s"][0]) + 1e-3
+                < 1e-9 + 0.1 * g.detail["block_s"] + 1e-3
             ):
                 if f.power >= 0.25 * g.power:
                     g.where["heads"] = sorted(set(g.where["heads"]) | set(f.where["heads"]))
@@ -520,6 +534,19 @@ def view_time(prep, rw) -> list[Finding]:
         if note:
             g.detail["heads_note"] = note
     return merged
+
+
+def _change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> int:
+    """Row index (into the run's kept rows ``x``) of the most likely single step in ``x``,
+    searched over the blocks next to block edge ``jb``: the first row after the step."""
+    n = x.size
+    lo = int(sum(p.size for p in parts[: max(jb - 1, 0)]))
+    hi = int(sum(p.size for p in parts[: min(jb + 1, len(parts))]))
+    cs = np.cumsum(x - x.mean())[:-1]  # S_i: sum of the first i + 1 rows
+    i = np.arange(1, n, dtype=float)
+    stat = cs**2 * n / (i * (n - i))
+    lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
+    return int(lo + np.argmax(stat[lo - 1 : hi - 1]))
 
 
 def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
