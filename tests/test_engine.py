@@ -136,6 +136,9 @@ def test_prepared_record_holds_little_per_row_and_lazy_columns_are_exact(ref):
         whole = np.asarray(prep.rows[k])
         parts = np.concatenate([prep.rows.column(k, a, min(n, a + 777)) for a in range(0, n, 777)])
         np.testing.assert_array_equal(parts, whole)
+        idx = np.array([5, n - 1, 17, 17, 1200])  # any rows, any order: the span is computed
+        np.testing.assert_array_equal(prep.rows.take(k, idx), whole[idx])
+        np.testing.assert_array_equal(prep.rows.take(k, 33), whole[33])
     for h, col in enumerate(rec.head_columns):
         np.testing.assert_array_equal(prep.rows["reading"][:, h], rec.columns[col])
     t, run = prep.rows["t"], prep.run

@@ -41,7 +41,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Candidate, Context, Param
-from ._views import ALPHA, locate, order_sums
+from ._views import ALPHA, SCAN_BLOCK, locate, order_sums, run_spans
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
 MAX_PARAM_FRACTION = 0.1
@@ -208,6 +208,15 @@ class RowColumns(MutableMapping):
         if k == "run_onehot":
             return self.onehot(lo, hi)
         raise KeyError(k)
+
+    def take(self, k: str, idx) -> np.ndarray:
+        """Column ``k`` at row indices ``idx`` (an int or an array): a lazy column is
+        computed over the span of those rows only."""
+        idx = np.asarray(idx)
+        if idx.size == 0:
+            return self.column(k, 0, 0)
+        lo, hi = int(idx.min()), int(idx.max()) + 1
+        return self.column(k, lo, hi)[idx - lo]
 
     def set_lazy(self, k: str, fn: Callable[[int, int | None], np.ndarray]) -> None:
         """Make ``k`` a lazy column ``fn(lo, hi)``."""
@@ -461,20 +470,6 @@ def find_motion_segments(
     return seg, out
 
 
-SCAN_BLOCK = 1 << 18
-"""Rows per block of the whole-record scans (noise, glitches, views): their temporaries are
-bounded by the block, not by the record."""
-
-
-def _run_bounds(run: np.ndarray) -> list[tuple[int, int]]:
-    """``(start, stop)`` of each stretch of equal run index (rows sorted run by run)."""
-    if run.size == 0:
-        return []
-    cut = np.flatnonzero(np.diff(run)) + 1
-    edges = [0, *cut.tolist(), run.size]
-    return list(zip(edges[:-1], edges[1:]))
-
-
 def _noise_d2(r: np.ndarray, seg: np.ndarray, t: np.ndarray | None = None):
     """Second differences of ``r`` (n, C) within segments, on any time grid: each value less
     the straight line through its two neighbours, scaled so that white noise of std sigma
@@ -677,7 +672,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
     R = order_runs.size
     # rows sorted run by run in time (most records already are: then nothing is copied)
     in_order = bool(np.all(np.diff(run) >= 0)) and all(
-        np.all(np.diff(kd.t[a:b]) >= 0) for a, b in _run_bounds(run)
+        np.all(np.diff(kd.t[a:b]) >= 0) for _, (a, b) in run_spans(run)
     )
     sort = None if in_order else np.lexsort((kd.t, run))  # prepared row -> file row
     if sort is not None:
@@ -821,11 +816,10 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
     fold, design = _fold_blocks(keep, run, N_FOLDS)
     fold[~keep] = -1
     # row columns: the recording's own arrays, or lazy (computed per chunk from them)
-    bounds = _run_bounds(run)
     t0_run = np.zeros(R)
     off_run = np.zeros(R)
     off = 0.0
-    for r, (a, b) in enumerate(bounds):
+    for r, (a, b) in run_spans(run):
         tr = t[a:b]
         dtm = float(np.median(np.diff(tr))) if b - a > 1 else 1.0
         t0_run[r] = tr[0]
@@ -844,7 +838,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         return speeds[seg_motion[lo:hi]]
 
     def direction_rows(lo: int = 0, hi: int | None = None) -> np.ndarray:
-        return np.where(speeds[seg_motion[lo:hi]] >= 0, 1.0, -1.0)
+        return np.where(omega_rows(lo, hi) >= 0, 1.0, -1.0)
 
     theta = kd.theta_ref if kd.theta_ref is not None else kd.shaft
     if kd.temp is not None and np.ptp(kd.temp[keep]) > 0:
@@ -1178,18 +1172,23 @@ class Fitter:
             cols.append(Jp[:, :, term.free[par.name].ravel()])
         return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
 
-    def iter_residual(self, terms: Sequence[Term]):
-        """``(a, b, residual of rows a:b)`` chunk by chunk (projected when the kind says so):
-        statistics of a residual without holding it whole."""
+    def chunk_residual(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
+        """Residual of rows ``a:b`` (projected when the kind says so), from the chunk's row
+        columns ``x`` (as :meth:`_chunks` yields them)."""
         prep = self.prep
+        pred = np.zeros((b - a, prep.n_channels))
+        for tm in terms:
+            pred += self._eval_term(tm, a, b, x, jac=False)[0]
+        r = prep.y[a:b] - pred
+        if prep.kd.project:
+            r = r - r.mean(1, keepdims=True)
+        return r
+
+    def iter_residual(self, terms: Sequence[Term]):
+        """``(a, b, residual of rows a:b)`` chunk by chunk: statistics of a residual without
+        holding it whole."""
         for a, b, x in self._chunks():
-            pred = np.zeros((b - a, prep.n_channels))
-            for tm in terms:
-                pred += self._eval_term(tm, a, b, x, jac=False)[0]
-            r = prep.y[a:b] - pred
-            if prep.kd.project:
-                r = r - r.mean(1, keepdims=True)
-            yield a, b, r
+            yield a, b, self.chunk_residual(terms, a, b, x)
 
     def residual(self, terms: Sequence[Term]) -> np.ndarray:
         """Residual ``(n, C)`` (projected when the kind says so), all rows."""
@@ -1611,8 +1610,9 @@ def _tie(
     keep = prep.keep
     w = 1.0 / prep.sigma[None, :]
     saa = sbb = sab = 0.0
-    pairs = zip(fitter.iter_residual(a.terms), fitter.iter_residual(b.terms))
-    for (lo, hi, ra), (_, _, rb) in pairs:
+    for lo, hi, x in fitter._chunks():  # one pass: both fits on each chunk
+        ra = fitter.chunk_residual(a.terms, lo, hi, x)
+        rb = fitter.chunk_residual(b.terms, lo, hi, x)
         k = keep[lo:hi]
         ca = ((cur_resid[lo:hi] - ra) * w)[k]
         cb = ((cur_resid[lo:hi] - rb) * w)[k]
@@ -1788,13 +1788,13 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
         r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
         rows = np.flatnonzero((prep.run == r) & keep)
         tau0 = float(f.detail["global_step_time_s"])
-        i = int(np.searchsorted(prep.rows["tau"][rows], tau0))
+        i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
         if i <= 0 or i >= rows.size:
             continue
         # kept rows where the direction or the steady speed changes (a reversal or a speed
         # change, with the non-steady rows between them left out)
-        d = np.asarray(prep.rows["direction"][rows], float)
-        w = np.asarray(prep.rows["omega"][rows], float)
+        d = np.asarray(prep.rows.take("direction", rows), float)
+        w = np.asarray(prep.rows.take("omega", rows), float)
         ch_rows = (
             np.flatnonzero(
                 (d[1:] != d[:-1])
@@ -1893,7 +1893,7 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     between the best one's neighbours (at most 48)."""
     r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
     rows = np.flatnonzero((prep.run == r) & prep.keep)
-    tau = prep.rows["tau"][rows]
+    tau = prep.rows.take("tau", rows)
     ch = np.zeros(prep.n_channels)
     ch[list(f.where["heads"])] = 1.0
     sel = np.zeros(prep.ctx.n_runs)
@@ -2366,8 +2366,6 @@ def run_engine(
             prep.rows.set_lazy("theta", aligned)
         else:
             prep.rows["theta"] = aligned
-        if "theta" in getattr(prep.ctx.rows, "_own", {}):  # the kept rows read through
-            del prep.ctx.rows["theta"]  # type: ignore[attr-defined]
         fitter.clear()
     # the noise from the base residual's periodogram (structure cannot inflate it); refit
     # the weights with it

@@ -34,6 +34,7 @@ from ..io._recording import Recording
 from . import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._engine import MAX_PARAM_FRACTION, Kind, KindData, Prepared
+from ._views import run_spans
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)
 
@@ -171,9 +172,7 @@ def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     Mz = int(min(M, 6))
     Z = []
     P = 2 * Mz + C
-    run = np.asarray(prep.run)
-    cut = [0, *(np.flatnonzero(np.diff(run)) + 1).tolist(), run.size]
-    spans = {int(run[a0]): (a0, b0) for a0, b0 in zip(cut[:-1], cut[1:]) if b0 > a0}
+    spans = dict(run_spans(prep.run))
     for r in range(R):
         # least squares on the normal equations, accumulated in blocks of rows (the design
         # (rows, C, 2 Mz + C) is never built whole)

@@ -383,12 +383,18 @@ def view_spectrum(prep, rw) -> list[Finding]:
     return out[:8]
 
 
-def _run_slices(prep):
-    """``(run index, start, stop)`` of each run's rows (prepared rows are sorted by run)."""
-    run = np.asarray(prep.run)
+def run_spans(run: np.ndarray) -> list[tuple[int, tuple[int, int]]]:
+    """``(run index, (start, stop))`` of each stretch of rows with one run index (prepared
+    rows are sorted run by run, so one stretch per run)."""
+    run = np.asarray(run)
     cut = np.flatnonzero(np.diff(run)) + 1
     edges = [0, *cut.tolist(), run.size]
     return [(int(run[a]), (a, b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _run_slices(prep):
+    """:func:`run_spans` of a prepared record."""
+    return run_spans(prep.run)
 
 
 def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
@@ -482,13 +488,13 @@ def view_time(prep, rw) -> list[Finding]:
             is_step = step_pw > 0.7 * chi[k]
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
-            i_step = _change_row(rw[np.concatenate(parts), k], parts, jb)
             rows_r = np.concatenate(parts)
+            i_step = _change_row(rw[rows_r, k], parts, jb)
             tstep = float(prep.rows["t"][rows_r[i_step]])
             detail = {
                 "shape": "step" if is_step else "transient_or_drift",
                 "step_time_s": tstep,
-                "global_step_time_s": float(prep.rows["tau"][rows_r[i_step]]),
+                "global_step_time_s": float(prep.rows.take("tau", rows_r[i_step])),
                 "block_s": float(t1 - t0),
                 # the best single step alone is significant (a step a smooth model dents
                 # shows as a transient)
