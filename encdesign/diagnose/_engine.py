@@ -2022,13 +2022,17 @@ def select(
             trials.append((dbic, cand, best, dho, dchi, k))
         trials.sort(key=lambda x: x[0])
         # candidates equal to rounding (the same fitted error, e.g. an offset per direction
-        # and a delay at one speed): the catalog's order decides, not the last digit
-        if len(trials) > 1:
-            tol = 1e-7 * max(1.0, abs(trials[0][0]))
-            n_tied = sum(1 for x in trials if x[0] - trials[0][0] <= tol)
-            if n_tied > 1:
-                rank = {c.name: i for i, c in enumerate(applicable)}
-                trials[:n_tied] = sorted(trials[:n_tied], key=lambda x: rank[x[1].name])
+        # and a delay at one speed), wherever they stand in the order: the catalog's order
+        # decides, not the last digit
+        rank = {c.name: i for i, c in enumerate(applicable)}
+        g0 = 0
+        while g0 < len(trials):
+            tol = 1e-7 * max(1.0, abs(trials[g0][0]))
+            g1 = g0 + 1
+            while g1 < len(trials) and trials[g1][0] - trials[g0][0] <= tol:
+                g1 += 1
+            trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x[1].name])
+            g0 = g1
         kept_resid = None
         chosen = None
         for dbic, cand, fr, dho, dchi, k_new in trials:
