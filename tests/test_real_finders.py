@@ -216,6 +216,27 @@ def test_shipped_motor_record_names_pole_pair_orders():
     assert d["effects"][0]["heldout_rms_after"] < 0.8 * d["heldout_rms_before"]
 
 
+@pytest.mark.parametrize(
+    ("name", "names"),
+    [
+        ("odrive_nocomp_1", ["magnet_asymmetry", "coil_mismatch"]),
+        ("odrive_comp_1", ["magnet_asymmetry"]),
+    ],
+)
+def test_second_motor_records_name_what_the_first_name(name, names):
+    """The ``_1`` ODrive records begin with a return-to-zero move: it is excluded and
+    reported, and the effects named are those of the ``_0`` twin (``odrive_nocomp``:
+    magnet asymmetry and coil mismatch; ``odrive_comp``, anti-cogging on: magnet asymmetry)."""
+    from encdesign import load_recording
+
+    d = diagnose(load_recording(DATA / f"{name}.toml")).doc
+    validate_diagnosis(d)
+    assert [e["name"] for e in d["effects"]] == names, d["report"]
+    start = [x for x in d["excluded_segments"] if x["t_start_s"] < 0.1]
+    assert start and 0.5 < start[0]["t_end_s"] < 1.5, d["excluded_segments"]
+    assert d["heldout_rms_final"] < 0.6 * d["heldout_rms_before"]
+
+
 def test_cli_diagnose_refuses_malformed_motion(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(
         'format = "encdesign-recording/1"\nkind = "motion"\ndata = "m.csv"\n'

@@ -19,6 +19,8 @@ DATA = Path(__file__).resolve().parent.parent / "data" / "real"
         ("nmm_y", "quadrature", 16511),
         ("odrive_nocomp", "motion", 4306),
         ("odrive_comp", "motion", 4377),
+        ("odrive_nocomp_1", "motion", 4267),
+        ("odrive_comp_1", "motion", 4367),
     ],
 )
 def test_shipped_recordings_load_with_provenance(name, kind, rows):
