@@ -161,3 +161,68 @@ def test_shuffled_rows_give_the_same_diagnosis():
     assert a["verdict"] == b["verdict"]
     np.testing.assert_allclose(b["rms_before"], a["rms_before"], rtol=1e-9)
     np.testing.assert_allclose(b["noise"]["per_channel"], a["noise"]["per_channel"], rtol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("spr", "revs", "limit"),
+    [(10.0, 20.0, 4), (10.37, 20.0, 40), (10.37, 3.0, 15), (200.0, 0.5, 1)],
+)
+def test_coverage_resolves_orders_above_the_per_revolution_nyquist(spr, revs, limit):
+    """A whole number of samples per revolution aliases order spr/2 onto lower ones;
+    many revolutions at a rate that is not one fill the circle (all orders to 40 resolved);
+    half a turn cannot tell order 2 from order 1 and a constant."""
+    from encdesign.diagnose._multihead import coverage_limit
+
+    n = int(spr * revs)
+    th = np.arange(n) * 2 * np.pi / spr + 0.3
+    assert coverage_limit(th, np.zeros(n, int), 1, 40) == limit
+
+
+def _clean_bench(seed, heads, ref, n_run, turns, rate_hz, orders, amp_over_noise, noise):
+    """A clean encoder (one disk error function of ``orders`` orders seen through every head,
+    per-run zeros, two runs at two speeds), as an independent program would write it."""
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, heads - 1))])
+    ts, ths, runs = [], [], []
+    for r in range(2):
+        t = np.arange(n_run) / rate_hz
+        ths.append((1 + 0.4 * r) * turns * 2 * np.pi * t / t[-1] + rng.uniform(0, 6))
+        ts.append(t + r * (t[-1] + 1.0))
+        runs.append(np.full(n_run, r))
+    t, th, run = map(np.concatenate, (ts, ths, runs))
+    y = np.repeat(th[:, None], heads, 1)
+    for m in range(1, orders + 1):
+        a, ph = amp_over_noise * noise / m, rng.uniform(0, 6.3)
+        y += a * np.sin(m * (th[:, None] - alpha[None, :]) + ph)
+    y += rng.normal(0, noise, y.shape) + rng.uniform(-3, 3, (2, heads))[run]
+    cols = {"t": t, "run": run, **{f"h{k}": y[:, k] for k in range(heads)}}
+    if ref:
+        cols["theta_ref"] = th + rng.uniform(-3, 3, 2)[run]
+    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "optical_radius_m": 0.02}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
+@pytest.mark.parametrize(
+    ("case", "kw"),
+    [
+        # 12.4 samples per revolution, 40-56 turns, disk orders to 9: orders above the
+        # per-revolution Nyquist limit (5) are resolved by the many revolutions together
+        ("sparse", dict(heads=2, ref=True, n_run=600, turns=40.0, rate_hz=300.0, orders=9)),
+        # no theta_ref and a disk error of 300x the noise: the heads' mean reading carries the
+        # error's head mean, and the error at that angle has second-order harmonics
+        ("large", dict(heads=3, ref=False, n_run=2500, turns=8.0, rate_hz=300.0, orders=6)),
+    ],
+)
+def test_clean_benches_beyond_the_simple_regime_are_consistent(case, kw):
+    from encdesign.diagnose import diagnose
+
+    amp = 300.0 if case == "large" else 30.0
+    d = diagnose(_clean_bench(11, amp_over_noise=amp, noise=2e-5, **kw)).doc
+    assert d["verdict"] == "consistent", d["report"]
+    if case == "large":
+        assert "heads' mean reading" in d["base"]["refined"]
+    else:
+        assert d["base"]["max_order"] >= 9

@@ -2364,6 +2364,13 @@ def run_engine(
 
     # alignment: after the base fit, rotation-locked candidates see the aligned angle
     base_fit = fitter.fit(base_terms)
+    refined = base_info["refine"](base_fit.terms, prep) if "refine" in base_info else None
+    if refined:
+        # the kind moved the angle its base model is evaluated at (e.g. the shaft from the
+        # heads' mean less the fitted error's mean): refit from the fitted values
+        base_info["refined"] = refined
+        fitter.clear()
+        base_fit = fitter.fit(base_fit.terms)
     if "align" in base_info:
         aligned = base_info["align"](base_fit.terms, prep)
         if callable(aligned):  # a lazy column fn(lo, hi)
@@ -2488,7 +2495,9 @@ def run_engine(
             "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
             "has_theta_ref": prep.ctx.has_ref,
             "terms_with_effects": final_base,
-            **{k: v for k, v in base_info.items() if k not in ("align", "unidentifiable")},
+            **{
+                k: v for k, v in base_info.items() if k not in ("align", "refine", "unidentifiable")
+            },
         },
         "notes": nuis_notes,
         "status": "ok"

@@ -91,9 +91,74 @@ def multihead_data(rec: Recording) -> KindData:
     )
 
 
+COVERAGE_MIN = 0.05
+"""Smallest eigenvalue of the correlation matrix of the base model's columns (orders 1..M
+and the run constants, over the kept samples) for which orders 1..M count as resolved: 1 when
+the samples cover the circle evenly, 0 when an order aliases exactly onto lower ones."""
+
+COVERAGE_ORDER_MAX = 48
+"""Orders the coverage test looks at (the engine's default base order and its scan of the
+residual stay below this)."""
+
+COVERAGE_ROWS = 200_000
+"""Kept rows (drawn at random, fixed seed) the coverage moments are summed over."""
+
+
+def coverage_limit(theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int) -> int:
+    """Highest order ``M <= m_max`` such that ``cos m theta, sin m theta`` (m = 1..M) and one
+    constant per run are well conditioned over the samples (``COVERAGE_MIN``).
+
+    Many revolutions sampled at a rate that is not a whole number of samples per
+    revolution fill the circle although each revolution has few samples: orders far above
+    the per-revolution Nyquist limit are then resolved (and a disk's error has them).
+    ``theta`` (rad) and ``run`` are the kept rows. From the moments
+    ``mu_{r,k} = sum_{rows of run r} exp(i k theta)`` for ``k <= 2 m_max``."""
+    n = theta.size
+    if n < 4 or m_max < 1:
+        return 0
+    K = 2 * m_max
+    k = np.arange(K + 1)
+    mu = np.zeros((n_runs, K + 1), complex)
+    for a in range(0, n, 1 << 14):
+        z = np.exp(1j * theta[a : a + (1 << 14), None] * k[None, :])
+        np.add.at(mu, run[a : a + (1 << 14)], z)
+    w = mu[:, 0].real
+    tot = mu.sum(0) / n
+    best = 0
+    for M in range(1, m_max + 1):
+        m = np.arange(1, M + 1)
+        d = m[:, None] - m[None, :]
+        s_ = m[:, None] + m[None, :]
+        mu_d = tot[np.abs(d)]
+        mu_d = np.where(d < 0, np.conj(mu_d), mu_d)
+        mu_s = tot[s_]
+        cc = 0.5 * (mu_d.real + mu_s.real)
+        ss = 0.5 * (mu_d.real - mu_s.real)
+        cs = 0.5 * (mu_s.imag - mu_d.imag)
+        live = w > 0
+        wr = w[live] / n
+        c0 = (mu[live][:, m] / n).real  # (runs, M): sum over the run of cos m theta / n
+        s0 = (mu[live][:, m] / n).imag
+        G = np.block(
+            [
+                [np.diag(wr), c0, s0],
+                [c0.T, cc, cs],
+                [s0.T, cs.T, ss],
+            ]
+        )
+        dg = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        lam = float(np.linalg.eigvalsh(G / dg[:, None] / dg[None, :])[0])
+        if lam < COVERAGE_MIN:
+            break
+        best = M
+    return best
+
+
 def max_order_limit(prep: Prepared) -> int:
-    """Highest order the record resolves: below half the samples per revolution of the
-    sparsest-sampled run, and ``2 M + constants <= MAX_PARAM_FRACTION`` of the values."""
+    """Highest order the record resolves, and ``2 M + constants <= MAX_PARAM_FRACTION`` of
+    the values: below half the samples per revolution of the sparsest-sampled run, or higher
+    where the samples of all runs together cover the circle well enough that orders 1..M
+    are well conditioned (:func:`coverage_limit`)."""
     keep = prep.keep
     spr = []
     for r in range(prep.ctx.n_runs):
@@ -104,6 +169,13 @@ def max_order_limit(prep: Prepared) -> int:
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
     C, R = prep.n_channels, prep.ctx.n_runs
     budget = int((MAX_PARAM_FRACTION * prep.n_values - R * C - C - R) // 2)
+    want = min(budget, COVERAGE_ORDER_MAX)
+    if nyq < want:
+        idx = np.flatnonzero(keep)
+        if idx.size > COVERAGE_ROWS:
+            idx = np.sort(np.random.default_rng(0).choice(idx, COVERAGE_ROWS, replace=False))
+        th = prep.rows.take("theta", idx) if hasattr(prep.rows, "take") else prep.rows["theta"][idx]
+        nyq = max(nyq, coverage_limit(th, prep.run[idx], R, want))
     return int(max(1, min(nyq, budget)))
 
 
@@ -220,12 +292,76 @@ def _align(terms, prep: Prepared):
     for t in terms:
         if t.cand.name == "base" and "run_angle_offset_rad" in t.values:
             d = d + np.concatenate([[0.0], t.values["run_angle_offset_rad"]])
-    raw, run = prep.rows["theta_raw"], prep.run
+    rows, run = prep.rows, prep.run
 
     def theta(lo: int = 0, hi: int | None = None) -> np.ndarray:
-        return raw[lo:hi] + d[run[lo:hi]]
+        return rows.column("theta_raw", lo, hi) + d[run[lo:hi]]
 
     return theta
+
+
+SHAFT_ITERATIONS = 3
+"""Fixed-point passes of the shaft angle without ``theta_ref`` (each one order of the disk
+error's size smaller)."""
+
+
+def _head_mean_error(v: dict, alpha: np.ndarray, th: np.ndarray, run: np.ndarray):
+    """The base model's disk error averaged over the heads at shaft angle ``th`` (rad),
+    from the base term's values ``v``; and its largest slope over the heads (1)."""
+    R_off = np.concatenate([[0.0], np.asarray(v.get("run_angle_offset_rad", []))])
+    pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", []))])
+    a, b = np.asarray(v["fourier_cos_rad"]), np.asarray(v["fourier_sin_rad"])
+    m = np.arange(1, a.size + 1)
+    x = th + R_off[run]
+    mean = np.zeros(th.size)
+    slope = np.zeros(th.size)
+    for k in range(alpha.size):
+        arg = m[None, :] * (x[:, None] - alpha[k] - pl[k])
+        mean += np.cos(arg) @ a + np.sin(arg) @ b
+        slope = np.maximum(slope, np.abs((-np.sin(arg) * m) @ a + (np.cos(arg) * m) @ b))
+    return mean / alpha.size, slope
+
+
+def _refine_shaft(terms, prep: Prepared) -> str | None:
+    """Without ``theta_ref`` the shaft angle is the heads' mean reading, which carries the
+    mean of the disk error seen by the heads: the model's error evaluated there differs from
+    the error at the true angle by about ``e'(theta) * mean_k e_k`` (second order in the disk
+    error; it matters for large errors, e.g. magnetic or capacitive heads, and makes
+    harmonics no catalog effect has). The angle becomes ``shaft - mean_k e_k(angle)`` (fixed
+    point, ``SHAFT_ITERATIONS`` passes, a lazy column computed per chunk) when that moves
+    the fitted readings by more than a tenth of the noise; returns a note saying so when it
+    did (the caller refits the base), else None."""
+    if prep.ctx.has_ref or prep.n_channels < 2:
+        return None
+    base = next((t for t in terms if t.cand.name == "base"), None)
+    if base is None:
+        return None
+    v = {k: np.array(x, float) for k, x in base.values.items()}
+    alpha = np.asarray(prep.consts["alpha"], float)
+    shaft, run, keep = prep.kd.shaft, prep.run, prep.keep
+
+    def corrected(lo: int = 0, hi: int | None = None, with_size: bool = False):
+        sh, rn = shaft[lo:hi], run[lo:hi]
+        corr = np.zeros(sh.size)
+        for _ in range(SHAFT_ITERATIONS):
+            corr, slope = _head_mean_error(v, alpha, sh - corr, rn)
+        return (sh - corr, slope * corr) if with_size else sh - corr
+
+    ss, nk = 0.0, 0
+    for lo in range(0, shaft.size, 1 << 16):
+        hi = min(shaft.size, lo + (1 << 16))
+        _, moved = corrected(lo, hi, True)
+        kb = keep[lo:hi]
+        ss += float(np.sum(moved[kb] ** 2))
+        nk += int(kb.sum())
+    size = math.sqrt(ss / max(nk, 1))
+    if not math.isfinite(size) or size < 0.1 * float(np.min(prep.sigma)):
+        return None
+    prep.rows.set_lazy("theta_raw", corrected)
+    return (
+        "shaft angle: the heads' mean reading less the fitted disk error's head mean "
+        f"(it moved the fitted readings by {size:.3g} rad RMS, second order in the disk error)"
+    )
 
 
 def multihead_base(prep: Prepared, M: int):
@@ -240,7 +376,7 @@ def multihead_base(prep: Prepared, M: int):
     terms = [(cand, start)]
     if prep.count_jumps:
         terms.append((_jump_candidate(prep), {}))
-    info: dict = {"align": _align, "unidentifiable": []}
+    info: dict = {"align": _align, "refine": _refine_shaft, "unidentifiable": []}
     if not prep.ctx.has_ref:
         alpha = prep.consts["alpha"]
         bad = []
