@@ -213,7 +213,9 @@ def _clean_bench(seed, heads, ref, n_run, turns, rate_hz, orders, amp_over_noise
         ("sparse", dict(heads=2, ref=True, n_run=600, turns=40.0, rate_hz=300.0, orders=9)),
         # no theta_ref and a disk error of 300x the noise: the heads' mean reading carries the
         # error's head mean, and the error at that angle has second-order harmonics
-        ("large", dict(heads=3, ref=False, n_run=2500, turns=8.0, rate_hz=300.0, orders=6)),
+        ("large", dict(heads=3, ref=False, n_run=1500, turns=8.0, rate_hz=300.0, orders=6)),
+        # a disk error with orders to 18 (above the default base order 12): they join the base
+        ("high", dict(heads=3, ref=True, n_run=1500, turns=5.0, rate_hz=300.0, orders=18)),
     ],
 )
 def test_clean_benches_beyond_the_simple_regime_are_consistent(case, kw):
@@ -224,5 +226,7 @@ def test_clean_benches_beyond_the_simple_regime_are_consistent(case, kw):
     assert d["verdict"] == "consistent", d["report"]
     if case == "large":
         assert "heads' mean reading" in d["base"]["refined"]
+    elif case == "high":
+        assert set(range(13, 19)) <= set(d["base"]["grown_orders"]), d["base"]
     else:
         assert d["base"]["max_order"] >= 9

@@ -152,6 +152,9 @@ class Kind:
             the smaller of it and the periodogram median.
         noise_replaces: ``True``: the kind's ``noise`` replaces the periodogram median
             (``sds``: levels by degrees of freedom, rows are platform positions, not time).
+        grows_orders: ``True``: integer orders above ``default_max_order`` that the base
+            residual shows (up to what the record resolves) join the base model (a disk's
+            error function has every order; :func:`_grow_base_order`).
     """
 
     name: str
@@ -165,6 +168,7 @@ class Kind:
     prepare: Callable[[KindData, dict], Any] | None = None
     noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
     noise_replaces: bool = False
+    grows_orders: bool = False
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -2294,6 +2298,61 @@ def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
+def _grow_base_order(
+    kind: Kind,
+    prep: Prepared,
+    fitter: Fitter,
+    fit: FitResult,
+    order: int,
+    limit: int,
+    base_info: dict,
+):
+    """Integer orders above ``order`` that the base residual shows significantly (the
+    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
+    error function has every order, and one left out would be reported as structure no
+    effect explains. Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s)
+    stay out. Returns ``(order, fit)``, grown and refitted from the fitted values, or ``None``."""
+    hi = int(min(limit, max(2 * order, 24)))
+    if hi <= order:
+        return None
+    L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
+    found = [
+        round(f.where["orders"][0])
+        for f in locate(prep, fitter.residual(fit.terms), ("orders",), hi)
+        if f.where["orders"] and round(f.where["orders"][0]) > order
+    ]
+    found = [m for m in found if not (L > 0 and m in (L, 2 * L))]
+    if not found:
+        return None
+    M = int(max(found))
+    spec, info = kind.base(prep, M)
+    old = {t.cand.name: t for t in fit.terms}
+    terms = []
+    for cand, start in spec:
+        prev = old.get(cand.name)
+        st = dict(start)
+        if prev is not None:
+            for q in cand.params:
+                v = prev.values.get(q.name)
+                if v is None:
+                    continue
+                shp = q.resolved_shape(prep.n_channels, prep.ctx.n_runs)
+                if v.shape == shp:
+                    st[q.name] = v
+                elif v.ndim == 1 and len(shp) == 1 and v.size < shp[0]:
+                    st[q.name] = np.concatenate([v, np.zeros(shp[0] - v.size)])
+        tm = make_term(cand, prep, st)
+        for q in cand.params:
+            if q.scale is None:
+                tm.scale[q.name][...] = float(np.mean(prep.sigma))
+        terms.append(tm)
+    prep.consts["max_order"] = M  # type: ignore[index]
+    base_info.update({k: v for k, v in info.items() if k not in ("refine",)})
+    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
+    fitter.clear()
+    return M, fitter.fit(terms)
+
+
 def run_engine(
     kind: Kind,
     rec,
@@ -2378,21 +2437,39 @@ def run_engine(
         else:
             prep.rows["theta"] = aligned
         fitter.clear()
-    # the noise from the base residual's periodogram (structure cannot inflate it); refit
-    # the weights with it
-    r_base = fitter.residual(base_fit.terms)
-    if kind.noise is not None and kind.noise_replaces:
-        sig = np.asarray(kind.noise(prep, r_base), float)
-    else:
-        sig = noise_spectral(prep, r_base)
-        if kind.noise is not None:  # the kind's second estimate: the smaller of the two
-            sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
-    del r_base
-    if np.all(np.isfinite(sig)) and np.all(sig > 0):
-        prep.sigma = sig
-        prep.ctx.noise[...] = sig
-        fitter.w_ch = 1.0 / sig**2
-        fitter.clear()
+
+    def estimate_noise(fit: FitResult) -> None:
+        # the noise from the base residual's periodogram (structure cannot inflate it);
+        # refit the weights with it
+        r_base = fitter.residual(fit.terms)
+        if kind.noise is not None and kind.noise_replaces:
+            sig = np.asarray(kind.noise(prep, r_base), float)
+        else:
+            sig = noise_spectral(prep, r_base)
+            if kind.noise is not None:  # the kind's second estimate: the smaller of the two
+                sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
+        del r_base
+        if np.all(np.isfinite(sig)) and np.all(sig > 0):
+            prep.sigma = sig
+            prep.ctx.noise[...] = sig
+            fitter.w_ch = 1.0 / sig**2
+            fitter.clear()
+
+    estimate_noise(base_fit)
+    for _ in range(2 if kind.grows_orders and max_order is None else 0):
+        grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
+        if grown is None:
+            break
+        order, base_fit = grown
+        scan = int(min(limit, max(order * 2, 24)))
+        if "align" in base_info:  # the refit moved the run offsets a little
+            aligned = base_info["align"](base_fit.terms, prep)
+            if callable(aligned):
+                prep.rows.set_lazy("theta", aligned)
+            else:
+                prep.rows["theta"] = aligned
+            fitter.clear()
+        estimate_noise(base_fit)  # the orders it left out were in the residual
     stage("base fitted")
     sel = select(prep, fitter, base_fit.terms, cands, kind.views, scan, max_effects, log)
     stage("selected")

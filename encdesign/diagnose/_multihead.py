@@ -884,4 +884,5 @@ MULTIHEAD = Kind(
     ),
     max_order_limit=max_order_limit,
     summary=multihead_summary,
+    grows_orders=True,
 )
