@@ -1,7 +1,8 @@
 """Motion kind for the engine: shaft angle against time (``docs/effects.md``, "Shaft motion").
 
-Base model per steady segment's run ``r``: a cubic in time (start angle, constant speed and a
-slow drift of the speed loop) plus the motor's design ripple (with ``commutation_states``:
+Base model per steady segment's run ``r``: a polynomial in time (start angle, constant speed
+and a slow drift of the speed loop; a cubic, of higher degree over many revolutions,
+:func:`drift_degree`) plus the motor's design ripple (with ``commutation_states``:
 position harmonics at multiples of ``commutation_states * pole_pairs`` per revolution).
 A speed ripple of relative amplitude ``q`` at order ``m`` moves the angle by ``q / m`` rad,
 so every candidate is a set of Fourier orders of the angle (``p`` pole pairs, ``s`` slots):
@@ -139,20 +140,44 @@ def _fourier(name: str, orders: tuple[int, ...], explanation: str, signature=("o
 
 
 @functools.lru_cache(maxsize=16)
-def _poly_candidate(R: int) -> Candidate:
+def _poly_candidate(R: int, D: int = 3) -> Candidate:
+    """Per run a polynomial of degree ``D`` in normalised time (Legendre basis: start angle,
+    speed and the speed loop's slow drift)."""
+
     def fn(p, x):
         tn = x["t_norm"]
-        X = jnp.stack([jnp.ones_like(tn), tn, tn**2, tn**3], 1)  # (n, 4)
-        coef = x["run_onehot"] @ p["poly_rad"]  # (n, 4)
+        cols = [jnp.ones_like(tn), tn]
+        for k in range(2, D + 1):  # Bonnet's recursion
+            cols.append(((2 * k - 1) * tn * cols[-1] - (k - 1) * cols[-2]) / k)
+        X = jnp.stack(cols[: D + 1], 1)  # (n, D + 1)
+        coef = x["run_onehot"] @ p["poly_rad"]  # (n, D + 1)
         return jnp.sum(X * coef, 1)[:, None]
 
     return Candidate(
         "base",
         fn,
-        (Param("poly_rad", "rad", (R, 4), description="per run: angle, speed, drift (cubic)"),),
+        (
+            Param(
+                "poly_rad",
+                "rad",
+                (R, D + 1),
+                description=f"per run: angle, speed, drift (Legendre degree {D})",
+            ),
+        ),
         kinds=("motion",),
-        explanation="base model: constant speed and a cubic speed drift per run",
+        explanation=f"base model: constant speed and a slow speed drift per run (degree {D})",
     )
+
+
+DRIFT_TURNS_PER_DEGREE = 3.0
+"""Revolutions per degree of the drift polynomial above 3: a speed loop's wander slower than
+about a sixth of the revolution rate is base, not ripple (a degree ``D`` polynomial follows
+about ``D / 2`` cycles over the run, the revolution rate is ``turns`` cycles)."""
+
+
+def drift_degree(revolutions: float) -> int:
+    """Degree of the drift polynomial of a run of ``revolutions`` turns (3 to 15)."""
+    return int(min(15, 3 + max(0.0, revolutions - 3.0) // DRIFT_TURNS_PER_DEGREE))
 
 
 def motion_limit(prep: Prepared) -> int:
@@ -164,7 +189,8 @@ def motion_limit(prep: Prepared) -> int:
         if prep.ctx.revolutions[r] > 0
     ]
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
-    budget = int((MAX_PARAM_FRACTION * prep.n_values - 4 * prep.ctx.n_runs) // 2)
+    D = drift_degree(float(np.min(prep.ctx.revolutions)))
+    budget = int((MAX_PARAM_FRACTION * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2)
     return int(max(1, min(nyq, budget)))
 
 
@@ -180,7 +206,8 @@ def motion_base(prep: Prepared, M: int):
     prep.rows["t_norm"] = tn
     motor = prep.ctx.meta.get("motor", {})
     p = int(motor["pole_pairs"])
-    terms = [(_poly_candidate(prep.ctx.n_runs), {})]
+    D = drift_degree(float(np.min(prep.ctx.revolutions)))
+    terms = [(_poly_candidate(prep.ctx.n_runs, D), {})]
     design = []
     if "commutation_states" in motor:
         step = int(motor["commutation_states"]) * p
@@ -191,6 +218,7 @@ def motion_base(prep: Prepared, M: int):
         "design_ripple_orders": design,
         "pole_pairs": p,
         "stator_slots": motor.get("stator_slots"),
+        "drift_degree": D,
         "unidentifiable": [],
     }
     return terms, info
