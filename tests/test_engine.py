@@ -230,3 +230,26 @@ def test_clean_benches_beyond_the_simple_regime_are_consistent(case, kw):
         assert set(range(13, 19)) <= set(d["base"]["grown_orders"]), d["base"]
     else:
         assert d["base"]["max_order"] >= 9
+
+
+def test_clean_motor_with_a_slow_speed_wander_is_consistent():
+    """A motor at 10 turns whose speed loop wanders by 0.1 % over the record (0.3 cycle, an
+    angle excursion 2,000x the noise): slower than the revolutions, it is base (the drift
+    polynomial's degree grows with the turns; a cubic left it as structure)."""
+    from encdesign import Recording
+    from encdesign.diagnose import diagnose
+
+    rng = np.random.default_rng(5)
+    t = np.arange(10000) / 2000.0
+    w = 10 * 2 * np.pi / t[-1]
+    f = 0.3 / t[-1]
+    th = w * t + 0.001 * w / (2 * np.pi * f) * np.sin(2 * np.pi * f * t + 1.0)
+    th += rng.normal(0, 1.5e-5, t.size)
+    meta = {
+        "format": "encdesign-recording/1",
+        "kind": "motion",
+        "motor": {"pole_pairs": 11, "stator_slots": 24},
+    }
+    d = diagnose(Recording("motion", meta, {"t": t, "theta": th})).doc
+    assert d["verdict"] == "consistent", d["report"]
+    assert d["base"]["drift_degree"] == 5
