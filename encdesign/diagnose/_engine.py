@@ -2308,18 +2308,31 @@ def _grow_base_order(
     base_info: dict,
 ):
     """Integer orders above ``order`` that the base residual shows significantly (the
-    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
-    error function has every order, and one left out would be reported as structure no
-    effect explains. Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s)
+    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model, unless it
+    also shows a signal-period line, a line off the integer orders or structure tied to the
+    direction or speed (the candidates' to explain): a disk's error
+    function has every order, and one left out would be reported as structure no effect
+    explains. Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s)
     stay out. Returns ``(order, fit)``, grown and refitted from the fitted values, or ``None``."""
     hi = int(min(limit, max(2 * order, 24)))
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
+    findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
+    # not when the residual shows a line at the signal period (aliased, it can pose as
+    # integer orders), a line off the integer orders, or structure tied to the direction or
+    # the speed: those are the candidates' to explain (block means and drifts are left:
+    # strong integer orders leak into them)
+    if any(
+        f.view in ("line_phase", "direction", "speed", "angle_trend")
+        or (f.view == "spectrum" and not f.detail.get("integer_order"))
+        for f in findings
+    ):
+        return None
     found = [
         round(f.where["orders"][0])
-        for f in locate(prep, fitter.residual(fit.terms), ("orders",), hi)
-        if f.where["orders"] and round(f.where["orders"][0]) > order
+        for f in findings
+        if f.view == "orders" and f.where["orders"] and round(f.where["orders"][0]) > order
     ]
     found = [m for m in found if not (L > 0 and m in (L, 2 * L))]
     if not found:
