@@ -372,17 +372,27 @@ def _bt_make(project: bool) -> Candidate:
 
 
 def _bt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
-    """The runout orders (1-3) the orders or spectrum view located at an integer order; all
-    three when none is."""
-    on = np.zeros(3)
-    for f in findings:
-        if f.view == "orders" or (f.view == "spectrum" and f.detail.get("integer_order")):
-            for o in f.where["orders"]:
-                if np.isfinite(o) and round(o) in (1, 2, 3) and abs(o - round(o)) < 0.1:
-                    on[round(o) - 1] = 1.0
+    """The runout orders (1-3) the rotation-locked orders view located (else the spectrum's
+    lines within 0.02 of an integer order), with at least a tenth of the strongest one's
+    power (a strong order leaks a little into its neighbours over a few turns); all three
+    when none is."""
+
+    def located(views, tol):
+        pw = np.zeros(3)
+        for f in findings:
+            if f.view in views and (f.view == "orders" or f.detail.get("integer_order")):
+                for o in f.where["orders"]:
+                    if np.isfinite(o) and round(o) in (1, 2, 3) and abs(o - round(o)) < tol:
+                        j = int(round(o)) - 1
+                        pw[j] = max(pw[j], f.power - f.dof)
+        return (pw > 0) & (pw >= 0.1 * pw.max())
+
+    on = located(("orders",), 0.5)
     if not on.any():
-        on[:] = 1.0
-    return [{"orders_on": on}]
+        on = located(("spectrum",), 0.02)
+    if not on.any():
+        on[:] = True
+    return [{"orders_on": on.astype(float)}]
 
 
 def _bt_derived(ctx: Context, v: dict, se: dict) -> dict:
