@@ -789,6 +789,8 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     keep = prep.keep
     kidx = np.flatnonzero(keep)
     C, R = prep.n_channels, prep.ctx.n_runs
+    if C == 1 and prep.ctx.has_ref:  # a sensor against a reference: no disk on a hub
+        return []
     if kidx.size < 64 or float(np.sum(prep.ctx.revolutions)) < 1.0:
         return []
     P = R * C + 2
