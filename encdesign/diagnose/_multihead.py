@@ -806,10 +806,12 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     for lo in range(0, kidx.size, step):
         hi = min(kidx.size, lo + step)
         _, ai, Gi, XBi, BBc, Brc = _order_step_sums(prep, rw, kidx[lo:hi], P)
+        # the kept rows are in time order, so a chunk's bins are contiguous and ascending
         bi = pos_bin[lo:hi]
-        np.add.at(a, bi, ai)
-        np.add.at(G, bi, Gi)
-        np.add.at(XB, bi, XBi)
+        st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
+        a[bi[st]] += np.add.reduceat(ai, st, axis=0)
+        G[bi[st]] += np.add.reduceat(Gi, st, axis=0)
+        XB[bi[st]] += np.add.reduceat(XBi, st, axis=0)
         BB += BBc
         Br += Brc
     BBi = np.linalg.pinv(BB)
