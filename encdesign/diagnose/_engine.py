@@ -2320,11 +2320,11 @@ def _grow_base_order(
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
     # not when the residual shows a line at the signal period (aliased, it can pose as
-    # integer orders), a line off the integer orders, or structure tied to the direction or
-    # the speed: those are the candidates' to explain (block means and drifts are left:
+    # integer orders), a line off the integer orders, structure tied to the direction or
+    # the speed, or an order-1 change at one instant: those are the candidates' to explain (block means and drifts are left:
     # strong integer orders leak into them)
     if any(
-        f.view in ("line_phase", "direction", "speed", "angle_trend")
+        f.view in ("line_phase", "direction", "speed", "angle_trend", "order_step")
         or (f.view == "spectrum" and not f.detail.get("integer_order"))
         for f in findings
     ):
