@@ -2298,6 +2298,11 @@ def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
+GROWTH_LEFT_MAX = 0.2
+"""The grown base must leave at most this share of the structure the views located (excess
+chi-square over their degrees of freedom) in the base residual, or the growth is undone."""
+
+
 def _grow_base_order(
     kind: Kind,
     prep: Prepared,
@@ -2308,23 +2313,22 @@ def _grow_base_order(
     base_info: dict,
 ):
     """Integer orders above ``order`` that the base residual shows significantly (the
-    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model, unless it
-    also shows a signal-period line, a line off the integer orders or structure tied to the
-    direction or speed (the candidates' to explain): a disk's error
-    function has every order, and one left out would be reported as structure no effect
-    explains. Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s)
-    stay out. Returns ``(order, fit)``, grown and refitted from the fitted values, or ``None``."""
+    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
+    error function has every order, and one left out would be reported as structure no
+    effect explains. Not when the residual also shows a line at the signal period (aliased,
+    it can pose as integer orders), a line off the integer orders or structure tied to the
+    direction or speed (the candidates' to explain); and the grown base must leave at most
+    ``GROWTH_LEFT_MAX`` of what every view located (a step or a drift that only leaks into
+    high orders stays the candidates'). Orders ``L`` and ``2 L`` of the signal period
+    (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
+    the fitted values, or ``None`` (nothing changed)."""
     hi = int(min(limit, max(2 * order, 24)))
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
-    # not when the residual shows a line at the signal period (aliased, it can pose as
-    # integer orders), a line off the integer orders, structure tied to the direction or
-    # the speed, or an order-1 change at one instant: those are the candidates' to explain (block means and drifts are left:
-    # strong integer orders leak into them)
     if any(
-        f.view in ("line_phase", "direction", "speed", "angle_trend", "order_step")
+        f.view in ("line_phase", "direction", "speed", "angle_trend")
         or (f.view == "spectrum" and not f.detail.get("integer_order"))
         for f in findings
     ):
@@ -2360,10 +2364,18 @@ def _grow_base_order(
                 tm.scale[q.name][...] = float(np.mean(prep.sigma))
         terms.append(tm)
     prep.consts["max_order"] = M  # type: ignore[index]
+    fitter.clear()
+    grown = fitter.fit(terms)
+    p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
+    after = locate(prep, fitter.residual(grown.terms), kind.views, int(min(limit, max(2 * M, 24))))
+    p1 = sum(max(f.power - f.dof, 0.0) for f in after)
+    if p1 > GROWTH_LEFT_MAX * p0:
+        prep.consts["max_order"] = order  # type: ignore[index]
+        fitter.clear()
+        return None
     base_info.update({k: v for k, v in info.items() if k not in ("refine",)})
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
-    fitter.clear()
-    return M, fitter.fit(terms)
+    return M, grown
 
 
 def run_engine(
