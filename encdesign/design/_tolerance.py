@@ -226,13 +226,18 @@ def contributions(
         q: percentile level (0–100).
     """
     s = jnp.asarray(sigmas, dtype=jnp.float64)
-    ev, g = jax.value_and_grad(lambda x: jnp.mean(ms_fn(x)))(s)
+
+    def both(x):  # one compiled program (eagerly, every loop or scan in it compiles anew)
+        ev_g = jax.value_and_grad(lambda y: jnp.mean(ms_fn(y)))(x)
+        return ev_g, jax.grad(lambda y: jnp.percentile(values_fn(y), q))(x)
+
+    (ev, g), g_p = jax.jit(both)(s)
     el = np.asarray(s * g)
     total = float(np.sum(el))
     if not (math.isfinite(total) and total > 0):
         raise FloatingPointError(f"contributions: total elasticity {total} (expected > 0)")
     share = el / total
-    gp = np.asarray(jax.grad(lambda x: jnp.percentile(values_fn(x), q))(s)) * np.asarray(s)
+    gp = np.asarray(g_p) * np.asarray(s)
     order = tuple(int(i) for i in np.argsort(-share))
     return Contributions(tuple(names), share, gp, float(ev), order)
 
