@@ -59,13 +59,13 @@ class _Eval(NamedTuple):
     values: tuple[float, ...]
 
 
-def _log_residual(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
-    """``f(y, args)``: log of the mean SDS residual (rad) with moving sensors at
-    ``[0, *y]`` rad and fixed sensors equally spaced (``args``: their azimuths, rad)."""
+def _residuals(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
+    """``r(y, fixed)``: the SDS residuals (rad) of the builds with moving sensors at
+    ``[0, *y]`` rad and fixed sensors at ``fixed`` (rad)."""
 
-    def f(y, fixed):
+    def r(y, fixed):
         moving = jnp.concatenate([jnp.zeros(1), y])
-        vals = sds_residuals(
+        return sds_residuals(
             pole_pairs,
             n_sensors,
             tol,
@@ -76,9 +76,19 @@ def _log_residual(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
             fixed_azimuths_rad=fixed,
             moving_azimuths_rad=moving,
         )
-        return jnp.log(jnp.mean(vals))
 
-    return f
+    return r
+
+
+def _log_residual(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
+    """``f(y, args)``: log of the mean SDS residual (rad) with moving sensors at
+    ``[0, *y]`` rad and fixed sensors equally spaced (``args``: their azimuths, rad)."""
+    r = _residuals(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi)
+    return lambda y, fixed: jnp.log(jnp.mean(r(y, fixed)))
+
+
+def _log_mean(vals) -> float:
+    return math.log(float(np.mean(np.asarray(vals))))
 
 
 def _gaps_deg(moving_rad: np.ndarray) -> list[float]:
@@ -86,8 +96,9 @@ def _gaps_deg(moving_rad: np.ndarray) -> list[float]:
     return [float(g) for g in np.degrees(np.diff(np.append(a, a[0] + 2 * math.pi)))]
 
 
-def _optimise_azimuths(c, tol, key, n_builds, marks, n_phi, starts, max_steps, seed):
-    """Best of ``starts`` BFGS runs from random moving-sensor layouts for one combination."""
+def _optimise_azimuths(c, rj, tol, key, n_builds, marks, n_phi, starts, max_steps, seed):
+    """Best of ``starts`` BFGS runs from random moving-sensor layouts for one combination
+    (``rj``: its residuals compiled, :func:`_residuals`, for the start values)."""
     pp, ns = c["pole_pairs"], c["n_sensors"]
     fixed = np.asarray(equally_spaced(ns))
     f = _log_residual(pp, ns, tol, key, n_builds, marks, n_phi)
@@ -97,7 +108,8 @@ def _optimise_azimuths(c, tol, key, n_builds, marks, n_phi, starts, max_steps, s
         y0 = rng.uniform(0.0, 2 * math.pi, ns - 1)
         sol = optimise(f, "bfgs", y0, jnp.asarray(fixed), max_steps=max_steps, rtol=1e-7,
                        atol=1e-10)  # fmt: skip
-        runs.append((float(sol.objective), sol, y0, float(f(jnp.asarray(y0), fixed))))
+        f0 = _log_mean(rj(jnp.asarray(y0), jnp.asarray(fixed)))
+        runs.append((float(sol.objective), sol, y0, f0))
     ok = [r for r in runs if math.isfinite(r[0])]
     best = min(ok, key=lambda r: r[0]) if ok else runs[0]
     obj, sol, y0, f0 = best
@@ -124,15 +136,20 @@ def _optimise_azimuths(c, tol, key, n_builds, marks, n_phi, starts, max_steps, s
     }, (f, sol.value, fixed)
 
 
-def _gradient_check(f, y, fixed, h: float = 1e-5) -> dict[str, float]:
+def _gradient_check(f, rj, y, fixed, h: float = 1e-5) -> dict[str, float]:
     """AD gradient of ``f`` (log residual) in the moving and fixed azimuths against
-    central differences (step ``h`` rad)."""
-    fm = jax.jit(f)
-    g_m = np.asarray(jax.grad(f)(jnp.asarray(y), jnp.asarray(fixed)))
-    g_f = np.asarray(jax.grad(f, argnums=1)(jnp.asarray(y), jnp.asarray(fixed)))
+    central differences (step ``h`` rad) of the log mean of ``rj`` (the residuals,
+    compiled)."""
+    g_m, g_f = (
+        np.asarray(g)
+        for g in jax.jit(jax.grad(f, argnums=(0, 1)))(jnp.asarray(y), jnp.asarray(fixed))
+    )
     fd = np.array(
         [
-            (float(fm(jnp.asarray(y + h * e), fixed)) - float(fm(jnp.asarray(y - h * e), fixed)))
+            (
+                _log_mean(rj(jnp.asarray(y + h * e), jnp.asarray(fixed)))
+                - _log_mean(rj(jnp.asarray(y - h * e), jnp.asarray(fixed)))
+            )
             / (2 * h)
             for e in np.eye(y.size)
         ]
@@ -164,19 +181,18 @@ def main(argv: list[str] | None = None) -> int:
     tol = SDSTolerances()
     key = jax.random.key(args.seed)
     rec = CaseRecorder(args.out / "cases.jsonl")
+    compiled = {}  # (pole pairs, sensors) -> residuals, compiled once for both stages
+
+    def residuals_of(c):
+        k = (c["pole_pairs"], c["n_sensors"])
+        if k not in compiled:
+            compiled[k] = jax.jit(_residuals(*k, tol, key, n_builds, marks, n_phi))
+        return compiled[k]
 
     def solve(c):
-        vals = np.asarray(
-            sds_residuals(
-                c["pole_pairs"],
-                c["n_sensors"],
-                tol,
-                key=key,
-                n_builds=n_builds,
-                marks_per_rev=marks,
-                n_phi=n_phi,
-            )
-        )
+        # a strong float64 array, as in the second stage: one compilation serves both
+        eq = jnp.asarray(np.asarray(equally_spaced(c["n_sensors"])))
+        vals = np.asarray(residuals_of(c)(eq[1:], eq))
         ok = bool(np.all(np.isfinite(vals)))
         mean = float(np.mean(vals)) if ok else math.nan
         rec.record(
@@ -219,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
         combos = [c for c in res.choices if c["n_sensors"] >= 2]
         for i, c in enumerate(combos):
             row, (f, y, fixed) = _optimise_azimuths(
-                c, tol, key, n_builds, marks, n_phi, starts, max_steps, args.seed
+                c, residuals_of(c), tol, key, n_builds, marks, n_phi, starts, max_steps, args.seed
             )
             row["residual_mean_arcsec"] = row["residual_mean_rad"] / ARCSEC
             row["residual_equal_spacing_rad"] = eq[(c["pole_pairs"], c["n_sensors"])]
@@ -233,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
             if grad_check is None:  # one combination: AD against central differences
-                grad_check = {**c, **_gradient_check(f, np.asarray(y), fixed)}
+                grad_check = {**c, **_gradient_check(f, residuals_of(c), np.asarray(y), fixed)}
     rule, best_opt = {}, None
     good = [r for r in optimised if math.isfinite(r["residual_mean_rad"])]
     for ns in sorted({r["n_sensors"] for r in good}):

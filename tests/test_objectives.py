@@ -55,8 +55,9 @@ def _check(f, x, rel_h=1e-4, rtol=2e-5):
     """AD gradient of scalar ``f`` at ``x`` against central finite differences."""
     x = jnp.asarray(x, dtype=jnp.float64)
     flat = x.reshape(-1)
-    fx = lambda v: f(v.reshape(x.shape))
-    g = np.asarray(jax.grad(fx)(flat))
+    # compiled once each (eagerly, a Monte Carlo objective's scans compile on every call)
+    fx = jax.jit(lambda v: f(v.reshape(x.shape)))
+    g = np.asarray(jax.jit(jax.grad(fx))(flat))
     scale = abs(float(fx(flat)))
     for i in range(flat.size):
         h = rel_h * max(abs(float(flat[i])), 1e-12)

@@ -27,6 +27,7 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -108,10 +109,45 @@ def _scalar_fn(fn: Callable[[jax.Array, Any], jax.Array]) -> Callable[[jax.Array
 
 @functools.lru_cache(maxsize=128)
 def _lbfgsb(fn: Callable[[jax.Array, Any], jax.Array], max_steps: int, gtol: float):
-    # The value-and-gradient is jitted once per ``fn`` and cached; the L-BFGS-B loop itself
-    # runs in Python (jit=False), so new bounds, starts or ``args`` never recompile.
-    vg = jax.jit(jax.value_and_grad(fn))
-    return jaxopt.LBFGSB(fun=vg, value_and_grad=True, maxiter=max_steps, tol=gtol)
+    """The L-BFGS-B solve of ``fn`` and ``fn`` at its solution, compiled as one program
+    once per ``fn`` and cached: new bounds, starts or ``args`` (of the same shapes) never
+    recompile (run eagerly, jaxopt's while-loop is compiled again on every run, and an
+    eager evaluation of ``fn`` compiles its loops and scans again on every call)."""
+    solver = jaxopt.LBFGSB(
+        fun=jax.value_and_grad(fn), value_and_grad=True, maxiter=max_steps, tol=gtol
+    )
+
+    def run(y0, bounds, args):
+        value, state = solver.run(y0, bounds, args)
+        return value, state, fn(value, args)
+
+    return jax.jit(run)
+
+
+@functools.lru_cache(maxsize=128)
+def _optx(fn: Callable[[jax.Array, Any], jax.Array], solver: str, rtol, atol, max_steps: int):
+    """The optimistix solve of ``fn`` and ``fn`` at its solution, compiled as one program
+    once per ``fn`` and settings and cached (``equinox.filter_jit``: non-array ``args``
+    are static, as in ``optimistix``)."""
+
+    @eqx.filter_jit
+    def run(y0, args):
+        if solver == "bfgs":
+            sol = optx.minimise(
+                fn, optx.BFGS(rtol=rtol, atol=atol), y0, args, max_steps=max_steps, throw=False
+            )
+        else:
+            sol = optx.least_squares(
+                fn,
+                optx.LevenbergMarquardt(rtol=rtol, atol=atol),
+                y0,
+                args,
+                max_steps=max_steps,
+                throw=False,
+            )
+        return sol, fn(sol.value, args)
+
+    return run
 
 
 def optimise(
@@ -166,8 +202,8 @@ def optimise(
         fn = _scalar_fn(fn)
     if solver == "lbfgsb":
         y0c = jnp.clip(y0, lo, hi)
-        lbfgsb = _lbfgsb(fn, int(max_steps), float(gtol))
-        value, state = lbfgsb.run(y0c, (jnp.asarray(lo), jnp.asarray(hi)), args)
+        run = _lbfgsb(fn, int(max_steps), float(gtol))
+        value, state, out = run(y0c, (jnp.asarray(lo), jnp.asarray(hi)), args)
         n_steps = int(state.iter_num)
         err = float(state.error)
         if not math.isfinite(err):
@@ -176,19 +212,7 @@ def optimise(
             status = MAX_STEPS
             message = f"{n_steps} steps, projected-gradient norm {err:.3g} > gtol {gtol:.3g}"
     else:
-        if solver == "bfgs":
-            sol = optx.minimise(
-                fn, optx.BFGS(rtol=rtol, atol=atol), y0, args, max_steps=max_steps, throw=False
-            )
-        else:
-            sol = optx.least_squares(
-                fn,
-                optx.LevenbergMarquardt(rtol=rtol, atol=atol),
-                y0,
-                args,
-                max_steps=max_steps,
-                throw=False,
-            )
+        sol, out = _optx(fn, solver, float(rtol), float(atol), int(max_steps))(y0, args)
         value = sol.value
         n_steps = int(sol.stats.get("num_steps", -1))
         if sol.result != optx.RESULTS.successful:
@@ -214,7 +238,6 @@ def optimise(
             }.get(name, FAILED)
             message = f"optimistix: {name or 'failed'} after {n_steps} steps"
     value_np = np.asarray(value, dtype=np.float64)
-    out = fn(jnp.asarray(value_np), args)
     objective = float(0.5 * jnp.sum(out**2)) if solver == "lm" else float(out)
     if status == SUCCESS or status == MAX_STEPS:
         if not (np.all(np.isfinite(value_np)) and math.isfinite(objective)):

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import itertools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -155,11 +157,17 @@ class _Evaluator:
     def outputs(self, u: jax.Array) -> dict[str, jax.Array]:
         return self.evaluate(self.x_of(u))
 
+    @functools.cached_property
+    def compiled_outputs(self) -> Callable[[jax.Array], dict[str, jax.Array]]:
+        """:meth:`outputs` compiled once (the start and the solution are evaluated with it:
+        an eager call compiles the objective's loops and scans anew on every call)."""
+        return jax.jit(self.outputs)
+
     def u_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return (self.lower - self.start) / self.scale, (self.upper - self.start) / self.scale
 
     def scalar_outputs(self, u: jax.Array) -> dict[str, float]:
-        out = self.outputs(jnp.asarray(u))
+        out = self.compiled_outputs(jnp.asarray(u, dtype=jnp.float64))
         return {k: float(v) for k, v in out.items() if jnp.ndim(v) == 0}
 
     def inputs_of(self, u: np.ndarray) -> dict[str, float]:
@@ -176,10 +184,14 @@ class _Evaluator:
         return worst
 
 
-def _penalised(ev: _Evaluator, weight: float):
+def _penalised(ev: _Evaluator):
+    """``f(u, (weight, fscale))``: the penalised objective over ``fscale``; the weight and
+    the scale are arguments, so that the rounds of increasing weight reuse one compiled
+    solver."""
     cons = ev.problem.constraints
 
-    def f(u: jax.Array, _args: Any) -> jax.Array:
+    def f(u: jax.Array, args: Any) -> jax.Array:
+        weight, fscale = args[0], args[1]
         out = ev.outputs(u)
         val = ev.sign * out[ev.name]
         pen = 0.0
@@ -189,13 +201,9 @@ def _penalised(ev: _Evaluator, weight: float):
                 pen = pen + (jax.nn.relu(g - c.upper) / max(abs(c.upper), 1e-300)) ** 2
             if math.isfinite(c.lower):
                 pen = pen + (jax.nn.relu(c.lower - g) / max(abs(c.lower), 1e-300)) ** 2
-        return val + weight * pen
+        return (val + weight * pen) / fscale
 
     return f
-
-
-def _scaled(f, fscale: float):
-    return lambda u, a: f(u, a) / fscale
 
 
 def _finish_design(
@@ -228,7 +236,7 @@ def _solve_combo(
     if kind in ("grid", "lhs"):
         return _doe_combo(ev, kind, drv, recorder, progress)
     u0 = np.zeros(n_cont)
-    f0 = float(ev.sign * ev.outputs(jnp.asarray(u0))[ev.name])
+    f0 = float(ev.sign * ev.compiled_outputs(jnp.asarray(u0))[ev.name])
     if not math.isfinite(f0):
         res = _finish_design(ev, u0, NONFINITE, 0, "objective not finite at the start point")
         _record(recorder, problem, res)
@@ -250,12 +258,13 @@ def _solve_combo(
         # quadratic penalty with increasing weight (one round without constraints)
         weights = [weight] if not problem.constraints else [weight * 10.0**k for k in (-2, 0, 2, 4)]
         u, n_steps = u0, 0
+        f = _penalised(ev)
         for w in weights:
-            f = _penalised(ev, w)
             sol = optimise(
-                _scaled(f, fscale),
+                f,
                 kind,
                 u,
+                jnp.array([w, fscale]),
                 lower=ulo,
                 upper=uhi,
                 max_steps=int(drv.get("max_steps", 256)),
@@ -473,19 +482,27 @@ def check_gradients(
     x = {v.name: v.start for v in ev.vars}
     x.update(at or {})
     x0 = np.array([x[v.name] for v in ev.vars], dtype=np.float64)
+
+    def f(xv):  # the checked outputs stacked; compiled once, with its Jacobian
+        out = ev.evaluate({v.name: xv[i] for i, v in enumerate(ev.vars)})
+        return jnp.stack([jnp.reshape(out[name], ()) for name in names])
+
+    fj, jac = jax.jit(f), jax.jit(jax.jacrev(f))
+    vals = np.asarray(fj(jnp.asarray(x0)))
+    grads = np.asarray(jac(jnp.asarray(x0)))
+    fds = []
+    for i in range(len(ev.vars)):
+        h = rel_step * ev.scale[i]
+        e = np.zeros_like(x0)
+        e[i] = h
+        fds.append(
+            (np.asarray(fj(jnp.asarray(x0 + e))) - np.asarray(fj(jnp.asarray(x0 - e)))) / (2 * h)
+        )
     rows = []
-    for name in names:
-
-        def f(xv, name=name):
-            return ev.evaluate({v.name: xv[i] for i, v in enumerate(ev.vars)})[name]
-
-        val = float(f(jnp.asarray(x0)))
-        g = np.asarray(jax.grad(f)(jnp.asarray(x0)))
+    for k, name in enumerate(names):
+        val, g = float(vals[k]), grads[k]
         for i, v in enumerate(ev.vars):
-            h = rel_step * ev.scale[i]
-            e = np.zeros_like(x0)
-            e[i] = h
-            fd = (float(f(jnp.asarray(x0 + e))) - float(f(jnp.asarray(x0 - e)))) / (2 * h)
+            fd = float(fds[i][k])
             err = abs(g[i] - fd)
             atol = 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
             rel = err / max(abs(g[i]), abs(fd), 1e-300)

@@ -26,6 +26,7 @@ JAX-differentiable in ``sigmas``; :func:`encdesign.objectives.build_metrics` pro
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -139,7 +140,7 @@ def sweep_scales(
     sb = None if not gb else np.asarray(scales_b, dtype=np.float64)
     shape = (len(sa),) if sb is None else (len(sa), len(sb))
     y, ye, pc = np.zeros(shape), np.zeros(shape), np.zeros(shape)
-    f = jax.jit(values_fn)
+    f = _jitted_values(values_fn)
     with progress_bar("tolerance sweep", int(np.prod(shape)), enabled=progress) as bar:
         for idx in np.ndindex(shape):
             fac = 1.0 + ma * (sa[idx[0]] - 1.0)
@@ -225,13 +226,18 @@ def contributions(
         q: percentile level (0–100).
     """
     s = jnp.asarray(sigmas, dtype=jnp.float64)
-    ev, g = jax.value_and_grad(lambda x: jnp.mean(ms_fn(x)))(s)
+
+    def both(x):  # one compiled program (eagerly, every loop or scan in it compiles anew)
+        ev_g = jax.value_and_grad(lambda y: jnp.mean(ms_fn(y)))(x)
+        return ev_g, jax.grad(lambda y: jnp.percentile(values_fn(y), q))(x)
+
+    (ev, g), g_p = jax.jit(both)(s)
     el = np.asarray(s * g)
     total = float(np.sum(el))
     if not (math.isfinite(total) and total > 0):
         raise FloatingPointError(f"contributions: total elasticity {total} (expected > 0)")
     share = el / total
-    gp = np.asarray(jax.grad(lambda x: jnp.percentile(values_fn(x), q))(s)) * np.asarray(s)
+    gp = np.asarray(g_p) * np.asarray(s)
     order = tuple(int(i) for i in np.argsort(-share))
     return Contributions(tuple(names), share, gp, float(ev), order)
 
@@ -269,6 +275,32 @@ class Allocation:
     def ok(self) -> bool:
         """True when ``status == "success"``."""
         return self.status == SUCCESS
+
+
+@functools.lru_cache(maxsize=64)
+def _jitted_values(values_fn: ValuesFn) -> ValuesFn:
+    """``values_fn`` compiled, once per function (the allocations of a Pareto front share
+    it)."""
+    if callable(getattr(values_fn, "lower", None)):  # compiled already
+        return values_fn
+    return jax.jit(values_fn)
+
+
+@functools.lru_cache(maxsize=64)
+def _allocation_objective(values_fn: ValuesFn, didx: tuple[int, ...]):
+    """:func:`allocate`'s penalised objective ``f(v, a)``, the same function for every
+    allocation of one ``values_fn`` (the settings and the target are in ``a``), so the
+    allocations of a Pareto front share one compiled solver."""
+    idx = np.asarray(didx, dtype=np.int64)
+
+    def objective(v: jax.Array, a: dict[str, jax.Array]) -> jax.Array:
+        u = a["lo"] + (a["hi"] - a["lo"]) * jax.nn.sigmoid(v)  # box through a sigmoid
+        s = a["ref"].at[idx].set(a["ref"][idx] * jnp.exp(u))
+        c = tolerance_cost(s, a["cost_ref"], a["weights"]) / a["cref"]
+        ys = smooth_yield(values_fn(s), a["spec"], a["width"])
+        return c + a["mu"] * jax.nn.relu(a["goal"] - ys) ** 2
+
+    return objective
 
 
 def allocate(
@@ -358,11 +390,18 @@ def allocate(
     def sig_of(u: jax.Array) -> jax.Array:
         return jnp.asarray(ref).at[didx].set(jnp.asarray(ref[didx]) * jnp.exp(u))
 
-    def objective(v: jax.Array, mu: jax.Array) -> jax.Array:
-        s = sig_of(u_of(v))
-        c = tolerance_cost(s, np.where(design, ref, 0.0), weights) / cref
-        ys = smooth_yield(values_fn(s), spec, width)
-        return c + mu * jax.nn.relu(goal - ys) ** 2
+    objective = _allocation_objective(values_fn, tuple(int(i) for i in didx))
+    obj_args = {
+        "lo": lo,
+        "hi": hi,
+        "ref": ref,
+        "cost_ref": np.where(design, ref, 0.0),
+        "weights": np.ones(k) if weights is None else np.asarray(weights, dtype=np.float64),
+        "cref": cref,
+        "spec": float(spec),
+        "width": float(width),
+        "goal": float(goal),
+    }
 
     v = np.full(didx.size, math.log(-lo / hi)) if lo < 0 < hi else np.zeros(didx.size)
     if start is not None:
@@ -376,18 +415,17 @@ def allocate(
         v = np.log(frac) - np.log1p(-frac)  # inverse of the sigmoid in u_of
     steps, status, msg = 0, SUCCESS, "converged"
     for mu in penalties:
-        sol = optimise(
-            objective, "bfgs", v, jnp.asarray(mu), max_steps=max_steps, rtol=1e-6, atol=1e-9
-        )
+        a = jax.tree.map(lambda x: jnp.asarray(x, dtype=jnp.float64), {**obj_args, "mu": mu})
+        sol = optimise(objective, "bfgs", v, a, max_steps=max_steps, rtol=1e-6, atol=1e-9)
         steps += sol.n_steps
         if sol.status not in (SUCCESS, "max_steps_reached"):
             status, msg = sol.status, f"penalty {mu:g}: {sol.message}"
             break
         v = sol.value
     u = np.asarray(u_of(jnp.asarray(v)))
-    ys_opt = float(smooth_yield(values_fn(sig_of(jnp.asarray(u))), spec, width))
     # final common scale: largest factor (<= 1.5) whose exact training yield meets the goal
-    f = jax.jit(lambda s: values_fn(s))
+    f = _jitted_values(values_fn)
+    ys_opt = float(smooth_yield(f(sig_of(jnp.asarray(u))), spec, width))
 
     def exact(fac: float) -> float:
         s = np.asarray(sig_of(jnp.asarray(u + math.log(fac))))

@@ -299,10 +299,33 @@ def check_user_objective(problem: Any, discrete: dict[str, Any], x: dict[str, An
     returns no dict or misses an output, returns a non-finite or non-scalar value, or when
     ``jax.grad`` of its first output fails or is not finite.
     """
-    name = problem.objective.name
-    where = f"objective {name!r}"
     evaluate = problem.objective.build(problem, dict(discrete))
     xj = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in x.items()}
+    first = problem.objective.outputs[0]
+    if xj:
+        # the usual case in one compiled pass (an eager evaluation and an eager gradient
+        # compile the objective's loops and scans anew, seconds for a Monte Carlo
+        # objective); anything it refuses is looked at again eagerly below, which names it
+        # in the user's terms (a traced value's type would be a JAX tracer's)
+
+        def first_and_all(xx):
+            out = evaluate(xx)
+            return out[first], out
+
+        try:
+            (_, out), g = jax.jit(jax.value_and_grad(first_and_all, has_aux=True))(xj)
+        except Exception:  # noqa: BLE001 - named by the eager look below
+            pass
+        else:
+            if all(np.ndim(v) == 0 or k == "residuals" for k, v in out.items()) and all(
+                np.all(np.isfinite(np.asarray(v))) for v in [*out.values(), *g.values()]
+            ):
+                return
+    _check_eagerly(problem, evaluate, x, xj, first)
+
+
+def _check_eagerly(problem: Any, evaluate: Callable, x: dict, xj: dict, first: str) -> None:
+    where = f"objective {problem.objective.name!r}"
     try:
         out = evaluate(xj)
     except EncdesignInputError:
@@ -322,7 +345,6 @@ def check_user_objective(problem: Any, discrete: dict[str, Any], x: dict[str, An
             )
     if not xj:
         return
-    first = problem.objective.outputs[0]
     try:
         g = jax.grad(lambda xx: evaluate(xx)[first])(xj)
     except EncdesignInputError:
