@@ -848,3 +848,32 @@ def test_cli_import_sensor_files(tmp_path, source, capsys):
     assert (
         main(["import", source, str(tmp_path / "missing"), "--out", str(tmp_path / "x.toml")]) == 2
     )
+
+
+def test_a_coarse_lattice_is_named_quantization_next_to_a_fitted_effect(tmp_path):
+    """A reading quantized to 4.2 sigma with a direction offset: the offset is fitted and the
+    quantization, dithered by the noise (no staircase to fit), is named from the value
+    lattice with its LSB, not fitted (delta_bic null); before it was only in the sensor
+    block, and a compound's quantization was never counted."""
+    from encdesign import diagnose
+
+    sigma = cr.SENSORS["magnetic"]["noise_rad"]
+    lsb = 4.2 * sigma
+    eff = {"direction_hysteresis": {"hysteresis_rad": 6 * sigma}, "quantization": {"lsb_rad": lsb}}
+    cols, enc, _ = cr.simulate_sensor_reference(
+        key=jax.random.key(5),
+        sensor="magnetic",
+        directions="both",
+        speeds_rev_s=(1.0,),
+        samples_per_run=800,
+        effects=eff,
+    )
+    doc = diagnose(write_recording(tmp_path / "q.toml", "multihead", cols, encoder=enc)).doc
+    named = {e["name"]: e for e in doc["effects"]}
+    assert "quantization" in named, (list(named), doc["rejected"])
+    assert {"direction_hysteresis", "reading_delay"} & set(named)
+    q = named["quantization"]
+    assert q["params"]["lsb_rad"]["value"] == pytest.approx(lsb, rel=0.01)
+    if q["delta_bic"] is None:  # named from the lattice: nothing fitted
+        assert q["derived"]["noise_share"]["value"] >= 0.25
+    assert doc["verdict"] == "missing_physics"

@@ -298,4 +298,5 @@ MOTION = Kind(
     views=("orders", "spectrum", "band", "time"),
     max_order_limit=motion_limit,
     default_max_order=200,
+    reading_lattice=True,
 )

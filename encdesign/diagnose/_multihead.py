@@ -748,4 +748,5 @@ MULTIHEAD = Kind(
     ),
     max_order_limit=max_order_limit,
     summary=multihead_summary,
+    reading_lattice=True,
 )
