@@ -2550,6 +2550,39 @@ def run_engine(
     return doc
 
 
+SWEEP_WINDOW = 9
+"""Rows of the centred moving mean of :func:`_sweep_grid` (odd)."""
+SWEEP_COHERENCE = 0.5
+"""Above it, the moving mean's phase on the lattice is locked: a sampled sweep, not a
+quantized reading."""
+
+
+def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
+    """Whether a value lattice is only the time grid of a steady sweep.
+
+    An evenly sampled steady sweep advances a fixed number of "steps" per sample: its values
+    sit on a lattice without any quantizer (then the reading is not coarse, the sampling is).
+    The tell is the unquantized signal: the centred moving mean over ``SWEEP_WINDOW`` rows of a
+    quantized reading follows the signal between the levels (its phase ``u`` on the lattice
+    spreads over the step, dithered or not), while that of a sampled sweep stays on the lattice
+    (``|mean exp(2 pi i u)| > SWEEP_COHERENCE``)."""
+    q = float(lat.lsb_rad)
+    z, n = 0j, 0
+    for r, (a, b) in run_spans(run):
+        idx = np.flatnonzero(keep[a:b]) + a
+        if idx.size < SWEEP_WINDOW:
+            continue
+        cut = np.flatnonzero(np.diff(idx) > 1) + 1  # contiguous kept stretches
+        for part in np.split(idx, cut):
+            if part.size < SWEEP_WINDOW:
+                continue
+            ma = np.convolve(v[part], np.ones(SWEEP_WINDOW) / SWEEP_WINDOW, mode="valid")
+            u = (ma - lat.offset_rad.get(int(r), 0.0)) / q
+            z += np.sum(np.exp(2j * np.pi * u))
+            n += ma.size
+    return n > 0 and abs(z) / n > SWEEP_COHERENCE
+
+
 def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None) -> dict | None:
     """``quantization`` named from the value lattice of the readings, not fitted.
 
@@ -2570,7 +2603,7 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     chans, lsb, share, offsets = [], [], [], []
     for k in range(reading.shape[1]):
         lat = detect_lsb(reading[keep, k], prep.run[keep])
-        if lat.lsb_rad is None:
+        if lat.lsb_rad is None or _sweep_grid(reading[:, k], keep, prep.run, lat):
             continue
         sh = (lat.lsb_rad**2 / 12.0) / float(prep.sigma[k]) ** 2
         if sh >= LATTICE_NOISE_SHARE:

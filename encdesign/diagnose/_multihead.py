@@ -703,6 +703,8 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
             pass
         else:
             out += list(getattr(_reference_terms, "CANDIDATES", ()))
+            if ctx.n_runs > 1:  # one set of signal harmonics per run (per-run zeros)
+                out.append(_reference_terms.interpolation_candidate(ctx.n_runs))
     return tuple(out)
 
 

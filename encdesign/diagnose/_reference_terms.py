@@ -56,6 +56,7 @@ Physics and closed forms (tests check each against finite differences and the cl
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import jax.numpy as jnp
@@ -642,9 +643,14 @@ def _scale_plausible(ctx: Context, p: dict) -> str | None:
 
 
 def _interp_fn(p: dict, x: dict) -> Array:
+    # the sensor interpolates its own signals: their phase is P times the angle the sensor
+    # sees, theta_ref plus its own error function (the reading less its run's zero, held),
+    # not P times the reference angle: at P = 2048 an error of 1 mrad is 2 rad of phase
     P = x["signal_periods"]
-    psi = P * x["theta"]
+    psi = P * (x["reading"][:, 0] - x["run_onehot"] @ p["zero_rad"])
     c = p["coef"]
+    if c.ndim == 2:  # (4, R): one set per run (a re-zeroed reading moves the signal phase)
+        c = (x["run_onehot"] @ c.T).T
     e = (
         c[0] * jnp.cos(psi)
         + c[1] * jnp.sin(psi)
@@ -652,6 +658,12 @@ def _interp_fn(p: dict, x: dict) -> Array:
         + c[3] * jnp.sin(2.0 * psi)
     ) / jnp.maximum(P, 1.0)
     return e[:, None]
+
+
+INTERP_SPREAD_MIN = 0.1
+"""Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin 2psi``
+over the kept rows; 0.5 for phases spread over the period) for the harmonics to be told
+apart: below it the sampled phases sit on a few points of the signal period."""
 
 
 def _interp_applies(ctx: Context) -> str | None:
@@ -665,13 +677,27 @@ def _interp_applies(ctx: Context) -> str | None:
     turns = float(np.sum(ctx.revolutions))
     if turns <= 0 or th.size < 8:
         return "the record does not turn"
-    per_rev = th.size / turns
-    if 2 * P >= per_rev / 2:
+    # each sample's signal phase is known from its own reading, so orders P and 2P beyond
+    # the sampling's Nyquist order are no obstacle (they alias in time, not in phase); what
+    # is needed is that the sampled phases cover the signal period
+    psi = P * np.asarray(ctx.rows["reading"], dtype=np.float64)[:, 0]
+    X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
+    lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
+    if lam < INTERP_SPREAD_MIN:
         return (
-            f"order 2P = {2 * P} is beyond the {per_rev / 2:.0f} orders per turn the sampling "
-            "resolves (aliased)"
+            f"the sampled signal phases sit on a few points of the period (smallest "
+            f"eigenvalue {lam:.3f} of the harmonics' mean square, needs {INTERP_SPREAD_MIN})"
         )
     return None
+
+
+def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
+    """The reading's zero per run (mean of reading - theta over the run's kept rows, held):
+    the signal phase is then ``P`` times the reference angle plus the sensor's own error."""
+    rows = ctx.rows
+    oh = np.asarray(rows["run_onehot"], dtype=np.float64)
+    d = np.asarray(rows["reading"], dtype=np.float64)[:, 0] - np.asarray(rows["theta"])
+    return [{"zero_rad": (oh.T @ d) / np.maximum(oh.sum(0), 1.0)}]
 
 
 def _interp_plausible(ctx: Context, p: dict) -> str | None:
@@ -683,7 +709,9 @@ def _interp_plausible(ctx: Context, p: dict) -> str | None:
 
 def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     c = np.asarray(p["coef"], dtype=np.float64)
-    s = np.asarray(se.get("coef", np.full(4, np.nan)), dtype=np.float64)
+    s = np.asarray(se.get("coef", np.full(c.shape, np.nan)), dtype=np.float64)
+    if c.ndim == 2:  # one set per run: the signal errors at run 0's zero of the reading
+        c, s = c[:, 0], s.reshape(c.shape)[:, 0]
     v = interpolation_params_from_harmonics(c)
     err = {"offset_a": s[0], "offset_b": s[1], "amplitude_ratio": 2 * s[3]}
     err["phase_error_rad"] = 2 * s[2]
@@ -898,6 +926,14 @@ def _candidates() -> tuple:
                 scale=1e-3,
                 description="(c1, s1, c2, s2) of the signal phase at orders P and 2P",
             ),
+            Param(
+                "zero_rad",
+                "rad",
+                shape="runs",
+                linear=False,
+                fit=False,
+                description="the reading's zero per run (held)",
+            ),
         ),
         signature=("orders", "spectrum", "line_phase"),
         explanation=(
@@ -905,6 +941,7 @@ def _candidates() -> tuple:
             "(signal_periods_per_rev periods per turn) give orders P and 2P of the shaft"
         ),
         applies=_interp_applies,
+        start=_interp_start,
         plausible=_interp_plausible,
         derived=_interp_derived,
     )
@@ -953,3 +990,17 @@ def _candidates() -> tuple:
 
 CANDIDATES = _candidates()
 """The sensor-against-reference candidates, for the engine (multihead kind, one head)."""
+
+
+@functools.lru_cache(maxsize=8)
+def interpolation_candidate(n_runs: int) -> Candidate:
+    """``interpolation_error`` with one coefficient set per run (``coef`` of shape
+    ``(4, R)``): a reading re-zeroed by any amount between runs moves its signal phase by
+    ``P`` times that amount, so the harmonics keep their sizes but not their phases; one run:
+    the catalog's candidate."""
+    base = next(c for c in CANDIDATES if c.name == "interpolation_error")
+    if n_runs <= 1:
+        return base
+    q, *rest = base.params
+    per_run = dataclasses.replace(q, shape=(4, int(n_runs)))
+    return dataclasses.replace(base, params=(per_run, *rest))
