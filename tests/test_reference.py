@@ -877,3 +877,36 @@ def test_a_coarse_lattice_is_named_quantization_next_to_a_fitted_effect(tmp_path
     if q["delta_bic"] is None:  # named from the lattice: nothing fitted
         assert q["derived"]["noise_share"]["value"] >= 0.25
     assert doc["verdict"] == "missing_physics"
+
+
+def test_interpolation_error_beyond_the_sampling_nyquist_order_is_named(tmp_path):
+    """A 2048-period optical sensor sampled 500 times a turn: orders P and 2P alias in time,
+    but each sample's signal phase is known from its own reading, so the harmonics are fitted
+    in that phase (before: not testable, 'aliased', and the record unexplained)."""
+    from encdesign import diagnose
+
+    P = 2048
+    sigma = cr.SENSORS["optical"]["noise_rad"]
+    params = cr.effect_rms_params(
+        "interpolation_error",
+        2.0 * sigma,
+        speeds_rev_s=(1.0,),
+        span_turns=2.0,
+        periods_per_rev=P,
+        rng=np.random.default_rng(2),
+    )
+    cols, enc, _ = cr.simulate_sensor_reference(
+        key=jax.random.key(8),
+        sensor="optical",
+        periods_per_rev=P,
+        directions="forward",
+        span_turns=2.0,
+        samples_per_run=1000,
+        effects={"interpolation_error": params},
+    )
+    doc = diagnose(write_recording(tmp_path / "i.toml", "multihead", cols, encoder=enc)).doc
+    named = {e["name"]: e for e in doc["effects"]}
+    assert set(named) == {"interpolation_error"}, (list(named), doc["not_testable"])
+    e = named["interpolation_error"]
+    assert e["derived"]["orders"]["value"] == [P, 2 * P]
+    assert e["heldout_rms_after"] < 0.8 * doc["heldout_rms_before"]
