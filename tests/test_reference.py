@@ -910,3 +910,33 @@ def test_interpolation_error_beyond_the_sampling_nyquist_order_is_named(tmp_path
     e = named["interpolation_error"]
     assert e["derived"]["orders"]["value"] == [P, 2 * P]
     assert e["heldout_rms_after"] < 0.8 * doc["heldout_rms_before"]
+
+
+def test_a_vibration_near_a_base_order_at_one_speed_both_ways_is_named(tmp_path):
+    """A line fixed in time at shaft order 8.04 (one speed, up and back): the base model has
+    order 8, so what the line leaves in its residual cannot be a rotation-locked error there
+    (before: refused with a margin of -1e9), and its frequency start is refined over +-1 bin
+    (the zero-filled spectrum around the reversal splits the line; before, the fit started
+    between the two peaks and lost it)."""
+    f_hz = {}
+
+    def line(cols, truth):
+        w = np.abs(np.gradient(cols["theta_ref"], cols["t"]))
+        f_hz["f"] = 8.04 * float(np.median(w)) / (2 * np.pi)
+        return 2.0 * truth["noise_rad"] * np.sin(2 * np.pi * f_hz["f"] * cols["t"] + 0.4)
+
+    doc, _ = _sensor_plus(
+        tmp_path,
+        "vib",
+        4,
+        line,
+        sensor="magnetic",
+        span_turns=5.0,
+        directions="both",
+        speeds_rev_s=(1.5,),
+        samples_per_run=1400,
+    )
+    named = {e["name"]: e for e in doc["effects"]}
+    assert set(named) == {"vibration"}, (list(named), [r["reason"][:90] for r in doc["rejected"]])
+    f = named["vibration"]["params"]["frequency_hz"]["value"]
+    assert f == pytest.approx(f_hz["f"], rel=2e-3)
