@@ -644,10 +644,11 @@ def _scale_plausible(ctx: Context, p: dict) -> str | None:
 
 def _interp_fn(p: dict, x: dict) -> Array:
     # the sensor interpolates its own signals: their phase is P times the angle the sensor
-    # sees, theta_ref plus its own error function (the reading less its run's zero, held),
-    # not P times the reference angle: at P = 2048 an error of 1 mrad is 2 rad of phase
+    # sees, theta_ref plus its own error function (held: a smooth fit of the reading, so
+    # neither its noise nor its quantization enters the phase), not P times the reference
+    # angle: at P = 2048 an error of 1 mrad is 2 rad of phase
     P = x["signal_periods"]
-    psi = P * (x["reading"][:, 0] - x["run_onehot"] @ p["zero_rad"])
+    psi = P * _sensor_angle(p, x)
     c = p["coef"]
     if c.ndim == 2:  # (4, R): one set per run (a re-zeroed reading moves the signal phase)
         c = (x["run_onehot"] @ c.T).T
@@ -658,6 +659,30 @@ def _interp_fn(p: dict, x: dict) -> Array:
         + c[3] * jnp.sin(2.0 * psi)
     ) / jnp.maximum(P, 1.0)
     return e[:, None]
+
+
+INTERP_SMOOTH_ORDERS = 12
+"""Fourier orders of the sensor's own error function in its angle (held, for the phase)."""
+
+
+def _sensor_angle(p: dict, x: dict) -> Array:
+    """The angle the sensor sees, ``theta + e(theta)`` (the held smooth fit; its zero per
+    run is the reference's: a re-zeroed reading's offset is not a signal phase)."""
+    th = x["theta"]
+    return th + _smooth_basis(th, INTERP_SMOOTH_ORDERS) @ p["smooth_rad"]
+
+
+def _sensor_angle_fit(ctx: Context) -> dict:
+    """Least squares of ``reading - theta`` on a constant per run and orders
+    ``1..INTERP_SMOOTH_ORDERS`` of ``theta`` over the kept rows: ``smooth_rad``."""
+    rows = ctx.rows
+    th = np.asarray(rows["theta"], dtype=np.float64)
+    oh = np.asarray(rows["run_onehot"], dtype=np.float64)
+    d = np.asarray(rows["reading"], dtype=np.float64)[:, 0] - th
+    F = np.asarray(_smooth_basis(jnp.asarray(th), INTERP_SMOOTH_ORDERS))
+    coef, *_ = np.linalg.lstsq(np.concatenate([oh, F], 1), d, rcond=None)
+    R = oh.shape[1]
+    return {"smooth_rad": coef[R:]}
 
 
 INTERP_SPREAD_MIN = 0.1
@@ -680,7 +705,8 @@ def _interp_applies(ctx: Context) -> str | None:
     # each sample's signal phase is known from its own reading, so orders P and 2P beyond
     # the sampling's Nyquist order are no obstacle (they alias in time, not in phase); what
     # is needed is that the sampled phases cover the signal period
-    psi = P * np.asarray(ctx.rows["reading"], dtype=np.float64)[:, 0]
+    x = {k: jnp.asarray(ctx.rows[k]) for k in ("theta", "run_onehot")}
+    psi = P * np.asarray(_sensor_angle({**_sensor_angle_fit(ctx)}, x))
     X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
     lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
     if lam < INTERP_SPREAD_MIN:
@@ -692,12 +718,9 @@ def _interp_applies(ctx: Context) -> str | None:
 
 
 def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
-    """The reading's zero per run (mean of reading - theta over the run's kept rows, held):
-    the signal phase is then ``P`` times the reference angle plus the sensor's own error."""
-    rows = ctx.rows
-    oh = np.asarray(rows["run_onehot"], dtype=np.float64)
-    d = np.asarray(rows["reading"], dtype=np.float64)[:, 0] - np.asarray(rows["theta"])
-    return [{"zero_rad": (oh.T @ d) / np.maximum(oh.sum(0), 1.0)}]
+    """The angle the sensor sees, held (:func:`_sensor_angle_fit`): the signal phase is then
+    ``P`` times the reference angle plus the sensor's own error function."""
+    return [_sensor_angle_fit(ctx)]
 
 
 def _interp_plausible(ctx: Context, p: dict) -> str | None:
@@ -927,12 +950,12 @@ def _candidates() -> tuple:
                 description="(c1, s1, c2, s2) of the signal phase at orders P and 2P",
             ),
             Param(
-                "zero_rad",
+                "smooth_rad",
                 "rad",
-                shape="runs",
+                shape=(2 * INTERP_SMOOTH_ORDERS,),
                 linear=False,
                 fit=False,
-                description="the reading's zero per run (held)",
+                description="the sensor's own error function, for its signal phase (held)",
             ),
         ),
         signature=("orders", "spectrum", "line_phase"),
