@@ -539,8 +539,13 @@ MAX_DELAY_ANGLE_RAD = 0.35
 """Largest lag angle ``|omega| tau`` accepted as a reading delay, rad."""
 MAX_SCALE = 0.1
 """Largest relative scale error accepted (10 %: beyond it the declared ratio is wrong)."""
-MAX_SIGNAL_ERROR = 0.3
-"""Largest signal offset / amplitude / phase error (relative, rad) of a first-order fit."""
+MAX_SIGNAL_ERROR = 0.5 * math.pi
+"""Largest harmonic (rad of signal phase) of an interpolation error: an arctangent reading is
+off by less than a quarter period for any signal error that leaves the quadrature readable."""
+FIRST_ORDER_SIGNAL_ERROR = 0.3
+"""Above it (rad of signal phase) the first-order conversion of the harmonics into offsets,
+amplitude ratio and phase error is approximate (second-order terms ~ c^2 / 2); the
+harmonics themselves are still the fitted error."""
 
 
 def _by_run(ctx: Context, name: str) -> list[np.ndarray]:
@@ -726,7 +731,10 @@ def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[di
 def _interp_plausible(ctx: Context, p: dict) -> str | None:
     c = np.abs(np.asarray(p["coef"], dtype=np.float64))
     if np.max(c) > MAX_SIGNAL_ERROR:
-        return f"signal errors of {np.max(c):.3g} are beyond a first-order interpolation error"
+        return (
+            f"a harmonic of {np.max(c):.3g} rad of signal phase is beyond what an arctangent "
+            "interpolation of readable signals gives"
+        )
     return None
 
 
@@ -742,6 +750,16 @@ def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     out = {k: {"value": v[k], "se": float(err[k]), "unit": units[k]} for k in v}
     P = int(ctx.signal_periods)
     out["orders"] = {"value": [P, 2 * P], "se": None, "unit": "1"}
+    big = float(np.max(np.abs(c)))
+    if big > FIRST_ORDER_SIGNAL_ERROR:
+        out["first_order_note"] = {
+            "value": big,
+            "se": None,
+            "unit": "rad",
+            "note": f"a harmonic of {big:.3g} rad of signal phase: beyond first order, the "
+            "offsets, amplitude ratio and phase error are approximate (the fitted harmonics "
+            "at orders P and 2P are not)",
+        }
     return out
 
 
