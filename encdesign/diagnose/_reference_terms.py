@@ -707,11 +707,11 @@ def _interp_applies(ctx: Context) -> str | None:
     turns = float(np.sum(ctx.revolutions))
     if turns <= 0 or th.size < 8:
         return "the record does not turn"
-    # each sample's signal phase is known from its own reading, so orders P and 2P beyond
-    # the sampling's Nyquist order are no obstacle (they alias in time, not in phase); what
-    # is needed is that the sampled phases cover the signal period
+    # each sample's signal phase is known (P times the angle the sensor sees), so orders P
+    # and 2P beyond the sampling's Nyquist order are no obstacle (they alias in time, not in
+    # phase); what is needed is that the sampled phases cover the signal period
     x = {k: jnp.asarray(ctx.rows[k]) for k in ("theta", "run_onehot")}
-    psi = P * np.asarray(_sensor_angle({**_sensor_angle_fit(ctx)}, x))
+    psi = P * np.asarray(_sensor_angle(_sensor_angle_fit(ctx), x))
     X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
     lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
     if lam < INTERP_SPREAD_MIN:
@@ -741,7 +741,7 @@ def _interp_plausible(ctx: Context, p: dict) -> str | None:
 def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     c = np.asarray(p["coef"], dtype=np.float64)
     s = np.asarray(se.get("coef", np.full(c.shape, np.nan)), dtype=np.float64)
-    if c.ndim == 2:  # one set per run: the signal errors at run 0's zero of the reading
+    if c.ndim == 2:  # one set per run: the signal errors at run 0's zero of the reference
         c, s = c[:, 0], s.reshape(c.shape)[:, 0]
     v = interpolation_params_from_harmonics(c)
     err = {"offset_a": s[0], "offset_b": s[1], "amplitude_ratio": 2 * s[3]}
