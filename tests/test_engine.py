@@ -253,3 +253,24 @@ def test_clean_motor_with_a_slow_speed_wander_is_consistent():
     d = diagnose(Recording("motion", meta, {"t": t, "theta": th})).doc
     assert d["verdict"] == "consistent", d["report"]
     assert d["base"]["drift_degree"] == 5
+
+
+def test_a_quantized_reading_is_not_read_as_glitches_or_count_jumps():
+    """Second differences of a reading on a lattice (LSB = 4 sigma) are mostly exactly 0:
+    their MAD is 0, and before every step of the staircase read as a glitch or a count
+    jump (595 on a concealed bench). The trimmed-RMS scale sees the lattice; a real glitch
+    of 60 sigma is still found."""
+    from encdesign.diagnose._engine import find_glitches, robust_scale
+
+    rng = np.random.default_rng(4)
+    n, sigma = 3000, 1e-4
+    t = np.arange(n) * 5e-3
+    x = 0.3 * t + 2e-3 * np.sin(2 * np.pi * 0.2 * t)
+    q = 4 * sigma
+    y = np.round((x + rng.normal(0, sigma, n)) / q) * q - 0.3 * t
+    y[1700] += 60 * sigma
+    glitches, jumps = find_glitches(y[:, None], np.zeros(n, int), False, t)
+    assert [g[0] for g in glitches] == [1700] and jumps == []
+    # Gaussian noise: the scale is sigma (the MAD and the trimmed RMS agree)
+    z = rng.normal(0, 1.0, (20000, 1))
+    assert robust_scale(z)[0] == pytest.approx(1.0, rel=0.03)

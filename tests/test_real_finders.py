@@ -15,10 +15,10 @@ from tests.helpers import validate_diagnosis
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
 
 
-def _motion(tmp_path, ripple: dict[int, float], noise_rad=2e-4, seed=0):
+def _motion(tmp_path, ripple: dict[int, float], noise_rad=2e-4, seed=0, n=3000):
     """One turn at 0.6 rad/s; ``ripple``: order -> relative speed ripple."""
     rng = np.random.default_rng(seed)
-    t = np.sort(rng.uniform(0, 10.0, 3000))
+    t = np.sort(rng.uniform(0, 10.0, n))
     omega = 2 * np.pi / 10.2
     theta = omega * t
     for _ in range(3):  # angle ripple r/m at order m, as a function of the angle itself
@@ -37,6 +37,41 @@ def test_candidate_orders_of_a_14_pole_12_slot_motor():
     assert c["cogging"] == [84, 168]
     assert c["magnet_asymmetry"][:3] == [7, 14, 21]
     assert c["coil_mismatch"][:8] == [1, 2, 3, 4, 5, 6, 7, 12]
+
+
+def test_shared_motor_orders_go_to_the_lowest_harmonic():
+    """84 = lcm(14, 12) is cogging's fundamental, the 12th multiple of p and the 7th of s:
+    credited to cogging, reported as shared with the other two; 7 = p goes to the magnets."""
+    from encdesign.diagnose._motion import assigned_orders
+
+    orders, shared = assigned_orders(7, 12, 200)
+    assert orders["cogging"] == [84, 168]
+    assert 84 not in orders["magnet_asymmetry"] and 84 not in orders["coil_mismatch"]
+    assert 7 in orders["magnet_asymmetry"] and 7 not in orders["coil_mismatch"]
+    assert 12 in orders["coil_mismatch"] and orders["coil_mismatch"][:3] == [1, 2, 3]
+    assert set(shared["cogging"][84]) == {"magnet_asymmetry", "coil_mismatch"}
+
+
+@pytest.mark.parametrize(
+    "ripple, n, names",
+    [
+        # coil mismatch (orders 1, 3, 12) with cogging at 84: before, the coil's slot
+        # multiples took order 84 and cogging was refused as confounded
+        ({1: 0.002, 3: 0.006, 12: 0.024, 84: 0.05}, 3000, {"coil_mismatch", "cogging"}),
+        # 1,200 samples: the parameter budget caps max_order at 58, below the cogging
+        # fundamental that the sampling resolves (before: no cogging candidate, unexplained)
+        ({84: 0.05}, 1200, {"cogging"}),
+    ],
+)
+def test_motion_finds_cogging_at_its_fundamental(tmp_path, ripple, n, names):
+    d = diagnose(_motion(tmp_path, ripple, n=n)).doc
+    got = {e["name"] for e in d["effects"]}
+    assert got == names, (got, [r["reason"][:80] for r in d["rejected"]])
+    cog = next(e for e in d["effects"] if e["name"] == "cogging")
+    assert set(cog["derived"]["orders_shared_with"]["value"]["84"]) == {
+        "magnet_asymmetry",
+        "coil_mismatch",
+    }
 
 
 def test_motion_names_magnet_asymmetry_with_amplitudes(tmp_path):

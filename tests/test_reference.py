@@ -848,3 +848,95 @@ def test_cli_import_sensor_files(tmp_path, source, capsys):
     assert (
         main(["import", source, str(tmp_path / "missing"), "--out", str(tmp_path / "x.toml")]) == 2
     )
+
+
+def test_a_coarse_lattice_is_named_quantization_next_to_a_fitted_effect(tmp_path):
+    """A reading quantized to 4.2 sigma with a direction offset: the offset is fitted and the
+    quantization, dithered by the noise (no staircase to fit), is named from the value
+    lattice with its LSB, not fitted (delta_bic null); before it was only in the sensor
+    block, and a compound's quantization was never counted."""
+    from encdesign import diagnose
+
+    sigma = cr.SENSORS["magnetic"]["noise_rad"]
+    lsb = 4.2 * sigma
+    eff = {"direction_hysteresis": {"hysteresis_rad": 6 * sigma}, "quantization": {"lsb_rad": lsb}}
+    cols, enc, _ = cr.simulate_sensor_reference(
+        key=jax.random.key(5),
+        sensor="magnetic",
+        directions="both",
+        speeds_rev_s=(1.0,),
+        samples_per_run=800,
+        effects=eff,
+    )
+    doc = diagnose(write_recording(tmp_path / "q.toml", "multihead", cols, encoder=enc)).doc
+    named = {e["name"]: e for e in doc["effects"]}
+    assert "quantization" in named, (list(named), doc["rejected"])
+    assert {"direction_hysteresis", "reading_delay"} & set(named)
+    q = named["quantization"]
+    assert q["params"]["lsb_rad"]["value"] == pytest.approx(lsb, rel=0.01)
+    if q["delta_bic"] is None:  # named from the lattice: nothing fitted
+        assert q["derived"]["noise_share"]["value"] >= 0.25
+    assert doc["verdict"] == "missing_physics"
+
+
+def test_interpolation_error_beyond_the_sampling_nyquist_order_is_named(tmp_path):
+    """A 2048-period optical sensor sampled 500 times a turn: orders P and 2P alias in time,
+    but each sample's signal phase is known from its own reading, so the harmonics are fitted
+    in that phase (before: not testable, 'aliased', and the record unexplained)."""
+    from encdesign import diagnose
+
+    P = 2048
+    sigma = cr.SENSORS["optical"]["noise_rad"]
+    params = cr.effect_rms_params(
+        "interpolation_error",
+        2.0 * sigma,
+        speeds_rev_s=(1.0,),
+        span_turns=2.0,
+        periods_per_rev=P,
+        rng=np.random.default_rng(2),
+    )
+    cols, enc, _ = cr.simulate_sensor_reference(
+        key=jax.random.key(8),
+        sensor="optical",
+        periods_per_rev=P,
+        directions="forward",
+        span_turns=2.0,
+        samples_per_run=1000,
+        effects={"interpolation_error": params},
+    )
+    doc = diagnose(write_recording(tmp_path / "i.toml", "multihead", cols, encoder=enc)).doc
+    named = {e["name"]: e for e in doc["effects"]}
+    assert set(named) == {"interpolation_error"}, (list(named), doc["not_testable"])
+    e = named["interpolation_error"]
+    assert e["derived"]["orders"]["value"] == [P, 2 * P]
+    assert e["heldout_rms_after"] < 0.8 * doc["heldout_rms_before"]
+
+
+def test_a_vibration_near_a_base_order_at_one_speed_both_ways_is_named(tmp_path):
+    """A line fixed in time at shaft order 8.04 (one speed, up and back): the base model has
+    order 8, so what the line leaves in its residual cannot be a rotation-locked error there
+    (before: refused with a margin of -1e9), and its frequency start is refined over +-1 bin
+    (the zero-filled spectrum around the reversal splits the line; before, the fit started
+    between the two peaks and lost it)."""
+    f_hz = {}
+
+    def line(cols, truth):
+        w = np.abs(np.gradient(cols["theta_ref"], cols["t"]))
+        f_hz["f"] = 8.04 * float(np.median(w)) / (2 * np.pi)
+        return 2.0 * truth["noise_rad"] * np.sin(2 * np.pi * f_hz["f"] * cols["t"] + 0.4)
+
+    doc, _ = _sensor_plus(
+        tmp_path,
+        "vib",
+        4,
+        line,
+        sensor="magnetic",
+        span_turns=5.0,
+        directions="both",
+        speeds_rev_s=(1.5,),
+        samples_per_run=1400,
+    )
+    named = {e["name"]: e for e in doc["effects"]}
+    assert set(named) == {"vibration"}, (list(named), [r["reason"][:90] for r in doc["rejected"]])
+    f = named["vibration"]["params"]["frequency_hz"]["value"]
+    assert f == pytest.approx(f_hz["f"], rel=2e-3)

@@ -58,6 +58,11 @@ COLLINEAR_NOTE = 0.95
 # fitted errors correlated above TIE_CORR (over the kept rows, noise-whitened)
 TIE_CHI2 = 10.0
 TIE_CORR = 0.9
+LATTICE_NOISE_SHARE = 0.25
+"""``quantization`` is named from the readings' value lattice (a floor, not a fitted term)
+when its floor ``LSB^2 / 12`` is at least this share of the channel's measured noise
+variance: the LSB is then coarser than about twice the noise ahead of the quantizer, and the
+reading's resolution, not the sensor's noise, sets the floor."""
 CHUNK_ROWS = 8192
 CACHE_BYTES = 6.0e7
 """Budget of each of the fitter's two caches (Jacobians of linear terms, processed static
@@ -155,6 +160,9 @@ class Kind:
         grows_orders: ``True``: integer orders above ``default_max_order`` that the base
             residual shows (up to what the record resolves) join the base model (a disk's
             error function has every order; :func:`_grow_base_order`).
+        reading_lattice: ``True``: the channels are angle readings; one on a value lattice
+            whose floor is a material part of its noise names ``quantization`` from the
+            lattice (:func:`lattice_effect`).
     """
 
     name: str
@@ -169,6 +177,7 @@ class Kind:
     noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
     noise_replaces: bool = False
     grows_orders: bool = False
+    reading_lattice: bool = False
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -509,6 +518,38 @@ def _noise_d2(r: np.ndarray, seg: np.ndarray, t: np.ndarray | None = None):
     return out, centre
 
 
+TRIM_QUANTILE = 0.99
+"""Share of the smallest ``|d2|`` kept by the trimmed-RMS scale of :func:`robust_scale`."""
+_TRIM_RMS = math.sqrt(
+    1.0
+    - 2.0
+    * stats.norm.isf((1 - TRIM_QUANTILE) / 2)
+    * stats.norm.pdf(stats.norm.isf((1 - TRIM_QUANTILE) / 2))
+    / TRIM_QUANTILE
+)
+"""RMS of a unit Gaussian within its central ``TRIM_QUANTILE`` (0.962 at 99 %)."""
+
+
+def robust_scale(d: np.ndarray) -> np.ndarray:
+    """Robust std per column of ``d`` (m, C), centred at zero: the larger of 1.4826 MAD and
+    the RMS of the central ``TRIM_QUANTILE`` of ``|d|`` (scaled to a Gaussian's std).
+
+    The MAD alone collapses on values that sit on a lattice: the second differences of a
+    quantized reading are mostly exactly 0 (then +-1 LSB), so their MAD is 0 and every step
+    of the staircase would read as a glitch or a count jump. The trimmed RMS sees the
+    lattice's spread, and a few glitches (under 1 % of the values) cannot inflate it; for
+    Gaussian noise both read sigma."""
+    a = np.abs(d)
+    mad = 1.4826 * np.median(a, axis=0)
+    if a.shape[0] < 8:
+        return mad
+    cut = np.quantile(a, TRIM_QUANTILE, axis=0)
+    inner = np.where(a <= cut[None, :], a, 0.0)
+    cnt = np.maximum(np.sum(a <= cut[None, :], axis=0), 1)
+    trim = np.sqrt(np.einsum("ij,ij->j", inner, inner) / cnt) / _TRIM_RMS
+    return np.maximum(mad, trim)
+
+
 def noise_sigma(
     r: np.ndarray, seg: np.ndarray, robust: bool = False, t: np.ndarray | None = None
 ) -> np.ndarray:
@@ -521,8 +562,7 @@ def noise_sigma(
     if robust:
         med = np.median(d2, 0)
         d2 -= med[None, :]
-        np.abs(d2, out=d2)
-        return 1.4826 * np.median(d2, 0) / math.sqrt(6.0)
+        return robust_scale(d2) / math.sqrt(6.0)
     return np.sqrt(np.einsum("ij,ij->j", d2, d2) / d2.shape[0] / 6.0)
 
 
@@ -577,7 +617,7 @@ def find_glitches(
     out_j: list[tuple[int, int, float]] = []
     if d2.shape[0] < 8:
         return out_g, out_j
-    s = 1.4826 * np.median(np.abs(d2), axis=0)
+    s = robust_scale(d2)  # not the bare MAD: it collapses on a quantized reading
     s = np.where(s > 0, s, np.inf)
     thr = stats.norm.isf(1e-4 / max(n, 1) / 2)
     hit = np.zeros(d2.shape[0], bool)
@@ -2536,6 +2576,10 @@ def run_engine(
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
         for f in sel["findings"][:12]
     ]
+    if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
+        q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
+        if q_eff is not None:
+            effects.append(q_eff)
     if effects:
         verdict = "missing_physics"
     elif unexplained or not gof["passes"]:
@@ -2617,6 +2661,114 @@ def run_engine(
     return doc
 
 
+SWEEP_WINDOW = 9
+"""Rows of the centred moving mean of :func:`_sweep_grid` (odd)."""
+SWEEP_COHERENCE = 0.5
+"""Above it, the moving mean's phase on the lattice is locked: a sampled sweep, not a
+quantized reading."""
+
+
+def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
+    """Whether a value lattice is only the time grid of a steady sweep.
+
+    An evenly sampled steady sweep advances a fixed number of "steps" per sample: its values
+    sit on a lattice without any quantizer (then the reading is not coarse, the sampling is).
+    The tell is the unquantized signal: the centred moving mean over ``SWEEP_WINDOW`` rows of a
+    quantized reading follows the signal between the levels (its phase ``u`` on the lattice
+    spreads over the step, dithered or not), while that of a sampled sweep stays on the lattice
+    (``|mean exp(2 pi i u)| > SWEEP_COHERENCE``)."""
+    q = float(lat.lsb_rad)
+    z, n = 0j, 0
+    for r, (a, b) in run_spans(run):
+        idx = np.flatnonzero(keep[a:b]) + a
+        if idx.size < SWEEP_WINDOW:
+            continue
+        cut = np.flatnonzero(np.diff(idx) > 1) + 1  # contiguous kept stretches
+        for part in np.split(idx, cut):
+            if part.size < SWEEP_WINDOW:
+                continue
+            ma = np.convolve(v[part], np.ones(SWEEP_WINDOW) / SWEEP_WINDOW, mode="valid")
+            u = (ma - lat.offset_rad.get(int(r), 0.0)) / q
+            z += np.sum(np.exp(2j * np.pi * u))
+            n += ma.size
+    return n > 0 and abs(z) / n > SWEEP_COHERENCE
+
+
+def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None) -> dict | None:
+    """``quantization`` named from the value lattice of the readings, not fitted.
+
+    Per channel, the readings of the kept rows (each run with its own zero) are tested for a
+    lattice ``c_r + q k`` (``_reference_terms.detect_lsb``); a channel whose floor
+    ``q^2 / 12`` is at least ``LATTICE_NOISE_SHARE`` of its measured noise variance (which,
+    estimated from the data, includes the quantization) carries the effect. A dithered
+    staircase (noise ahead of the quantizer above about ``q / 2``) leaves nothing for a
+    model of the reading to fit: the finding is the LSB itself, so ``delta_bic``,
+    ``collinearity`` and the held-out change are ``None`` (no parameter was fitted), and the
+    residual RMS are the final model's. ``None`` when no channel qualifies."""
+    from ._reference_terms import detect_lsb
+
+    keep = prep.keep
+    reading = np.asarray(prep.rows["reading"], float)
+    if reading.ndim == 1:
+        reading = reading[:, None]
+    chans, lsb, share, offsets = [], [], [], []
+    for k in range(reading.shape[1]):
+        lat = detect_lsb(reading[keep, k], prep.run[keep])
+        if lat.lsb_rad is None or _sweep_grid(reading[:, k], keep, prep.run, lat):
+            continue
+        sh = (lat.lsb_rad**2 / 12.0) / float(prep.sigma[k]) ** 2
+        if sh >= LATTICE_NOISE_SHARE:
+            chans.append(k)
+            lsb.append(float(lat.lsb_rad))
+            share.append(float(min(sh, 1.0)))
+            offsets.append([float(lat.offset_rad[r]) for r in sorted(lat.offset_rad)])
+    if not chans:
+        return None
+    one = len(chans) == 1
+
+    def val(v):
+        return v[0] if one else v
+
+    u = prep.kd.unit
+    q = np.asarray(lsb)
+    names = [prep.kd.channel_names[k] for k in chans]
+    return {
+        "name": "quantization",
+        "params": {"lsb_rad": {"value": val(lsb), "se": None, "unit": u}},
+        "derived": {
+            "counts_per_turn": {"value": val((2 * np.pi / q).tolist()), "se": None, "unit": "1"},
+            "bits_per_turn": {
+                "value": val(np.log2(2 * np.pi / q).tolist()),
+                "se": None,
+                "unit": "bit",
+            },
+            "floor_rms_rad": {"value": val((q / math.sqrt(12.0)).tolist()), "se": None, "unit": u},
+            "noise_share": {"value": val(share), "se": None, "unit": "1"},
+            "lattice_offset_rad": {"value": val(offsets), "se": None, "unit": u},
+        },
+        "channels": names,
+        "rms_after": rms_final,
+        "heldout_rms_after": heldout_final,
+        "delta_bic": None,
+        "delta_heldout_chi2": None,
+        "collinearity": None,
+        "share": 0.0,
+        "size_rms": float(np.mean(q) / math.sqrt(12.0)),
+        "notes": [
+            f"every reading of {', '.join(names)} lies on a lattice of "
+            + ", ".join(f"{x:.4g}" for x in lsb)
+            + f" {u} (one LSB); its floor LSB/sqrt(12) is "
+            + ", ".join(f"{100 * x:.0f}%" for x in share)
+            + " of the measured noise variance: named from the lattice, not fitted (the "
+            "staircase, dithered by the noise ahead of the quantizer, leaves no structure to "
+            "fit), so delta_bic, collinearity and the held-out change do not apply"
+        ],
+        "explanation": "a reading of finite resolution: the readings lie on a value lattice of "
+        "one LSB, a uniform error of +-LSB/2 (RMS LSB/sqrt(12)) that sets the noise floor",
+        "confounded_with": [],
+    }
+
+
 def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
     """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
     the base and the final residual (least squares over the kept rows)."""
@@ -2679,13 +2831,16 @@ def report_text(doc: dict) -> str:
     for i, e in enumerate(doc["effects"], 1):
         col = e["collinearity"]
         col_s = "n/a" if col is None else f"{col:.3f}"
+        dbic = "not fitted" if e["delta_bic"] is None else f"{e['delta_bic']:.1f}"
         lines.append(
-            f"effect {i}: {e['name']} (dBIC {e['delta_bic']:.1f}, "
+            f"effect {i}: {e['name']} (dBIC {dbic}, "
             f"share {100 * e['share']:.0f}%, collinearity {col_s})"
         )
+        ho = e["heldout_rms_after"]
         lines.append(
             f"  residual RMS -> {e['rms_after']:.4g} {u} fitted, "
-            f"{e['heldout_rms_after']:.4g} {u} held out"
+            + ("n/a" if ho is None else f"{ho:.4g} {u}")
+            + " held out"
         )
         if e["channels"] is not None:
             lines.append(f"  on channels: {e['channels']}")

@@ -13,8 +13,14 @@ so every candidate is a set of Fourier orders of the angle (``p`` pole pairs, ``
 * ``speed_control_loop``: ripple fixed in Hz rather than in order: not modelled (listed as
   not testable).
 
-Orders shared between candidates go to the one accepted first (the engine holds the shared
-columns as undetermined in the later one), and the overlap is reported as confounding.
+An order shared by two candidates is one column of the data: it is credited to the
+candidate whose lowest harmonic it is (``assigned_orders``: ``lcm(2p, s)`` is cogging's
+fundamental but ``lcm / p``-th multiple of ``p`` and ``lcm / s``-th multiple of ``s``; ties go
+in catalog order) and the effect reports the other candidates that order also belongs to
+(``derived.orders_shared_with``): the record cannot tell them apart there. Each candidate's
+orders reach its fundamental whenever the sampling resolves it (``nyquist_order``), even
+when the base model's parameter budget sets a lower ``max_order`` (a cogging fundamental at
+order 84 costs two parameters).
 """
 
 from __future__ import annotations
@@ -68,6 +74,39 @@ def candidate_orders(pole_pairs: int, slots: int | None, max_order: int) -> dict
     return {k: v for k, v in out.items() if v}
 
 
+def _harmonic_index(name: str, m: int, p: int, s: int | None) -> float:
+    """Which harmonic of ``name``'s family order ``m`` is (1: its fundamental)."""
+    if name == "cogging":
+        return m / (2 * p * s // math.gcd(2 * p, s))
+    if name == "magnet_asymmetry":
+        return m / p
+    return 1.0 if m <= p else m / s  # coil_mismatch: the low orders 1..p, then slot multiples
+
+
+def assigned_orders(
+    pole_pairs: int, slots: int | None, max_order: int
+) -> tuple[dict[str, list[int]], dict[str, dict[int, list[str]]]]:
+    """The catalog's orders (:func:`candidate_orders`) with every shared order credited to
+    one candidate only, the one whose lowest harmonic it is (ties in catalog order).
+
+    Returns ``(orders, shared)``: ``orders[name]`` the orders it fits, ``shared[name][m]``
+    the other candidates order ``m`` also belongs to (confounded there)."""
+    cat = candidate_orders(pole_pairs, slots, max_order)
+    names = list(cat)
+    owners: dict[int, list[str]] = {}
+    for n in names:
+        for m in cat[n]:
+            owners.setdefault(m, []).append(n)
+    orders: dict[str, list[int]] = {n: [] for n in names}
+    shared: dict[str, dict[int, list[str]]] = {n: {} for n in names}
+    for m, own in sorted(owners.items()):
+        best = min(own, key=lambda n: (_harmonic_index(n, m, pole_pairs, slots), names.index(n)))
+        orders[best].append(m)
+        if len(own) > 1:
+            shared[best][m] = [n for n in own if n != best]
+    return {n: v for n, v in orders.items() if v}, shared
+
+
 def _motor(rec: Recording) -> dict:
     where = str(rec.path) if rec.path is not None else "recording"
     motor = rec.meta.get("motor", {})
@@ -102,8 +141,15 @@ def motion_data(rec: Recording) -> KindData:
 
 
 @functools.lru_cache(maxsize=64)
-def _fourier(name: str, orders: tuple[int, ...], explanation: str, signature=("orders",)):
-    """Fourier terms of the angle at ``orders`` (one object per order set: one compile)."""
+def _fourier(
+    name: str,
+    orders: tuple[int, ...],
+    explanation: str,
+    signature=("orders", "spectrum"),
+    shared: tuple[tuple[int, tuple[str, ...]], ...] = (),
+):
+    """Fourier terms of the angle at ``orders`` (one object per order set: one compile);
+    ``shared``: ``(order, other candidates it belongs to)``, reported with the effect."""
     orders = list(orders)
     m = jnp.asarray(orders, dtype=float)
 
@@ -114,7 +160,7 @@ def _fourier(name: str, orders: tuple[int, ...], explanation: str, signature=("o
     def derived(ctx, v, se):
         amp = np.hypot(v["cos_rad"], v["sin_rad"])
         top = np.argsort(-amp)[:8]
-        return {
+        out = {
             "orders": {"value": [int(o) for o in orders], "se": None, "unit": "1"},
             "angle_amplitude_rad": {
                 "value": {str(orders[i]): float(amp[i]) for i in top},
@@ -127,6 +173,17 @@ def _fourier(name: str, orders: tuple[int, ...], explanation: str, signature=("o
                 "unit": "1",
             },
         }
+        if shared:
+            # the same column belongs to other candidates too: confounded at those orders
+            out["orders_shared_with"] = {
+                "value": {str(m): list(o) for m, o in shared},
+                "se": None,
+                "unit": "1",
+                "note": "these orders are also the other candidates' (the same Fourier "
+                "column): credited to this one, whose lowest harmonic they are; the record "
+                "cannot tell them apart there",
+            }
+        return out
 
     return Candidate(
         name,
@@ -191,6 +248,7 @@ def motion_limit(prep: Prepared) -> int:
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
     D = drift_degree(float(np.min(prep.ctx.revolutions)))
     budget = int((MAX_PARAM_FRACTION * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2)
+    prep.consts["nyquist_order"] = int(max(1, nyq))  # the candidates' fundamentals reach it
     return int(max(1, min(nyq, budget)))
 
 
@@ -229,15 +287,20 @@ def motion_candidates(ctx: Context) -> tuple[Candidate, ...]:
     motor = ctx.meta.get("motor", {})
     p, s = int(motor["pole_pairs"]), motor.get("stator_slots")
     M = int(ctx.consts.get("max_order", 200))
+    nyq = int(ctx.consts.get("nyquist_order", M))
     design = set()
     if "commutation_states" in motor:
         step = int(motor["commutation_states"]) * p
-        design = set(range(step, M + 1, step))
+        design = set(range(step, nyq + 1, step))
     out = []
-    for name, orders in candidate_orders(p, s, M).items():
+    cat, shared = assigned_orders(p, s, nyq)
+    for name, orders in cat.items():
+        # up to max_order, and at least the candidate's lowest order the sampling resolves
         orders = [m for m in orders if m not in design]
+        orders = [m for i, m in enumerate(orders) if m <= M or i == 0]
         if orders:
-            out.append(_fourier(name, tuple(orders), EXPLANATIONS[name]))
+            sh = tuple((m, tuple(shared[name][m])) for m in orders if m in shared[name])
+            out.append(_fourier(name, tuple(orders), EXPLANATIONS[name], shared=sh))
     out.append(
         Candidate(
             "speed_control_loop",
@@ -263,4 +326,5 @@ MOTION = Kind(
     views=("orders", "spectrum", "band", "time"),
     max_order_limit=motion_limit,
     default_max_order=200,
+    reading_lattice=True,
 )

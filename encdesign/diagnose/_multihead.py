@@ -676,41 +676,49 @@ def _gain(rw: np.ndarray, X: np.ndarray) -> float:
 
 
 def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
-    """At one speed, ``(frequency, margin)``: the line's frequency refined on a grid of
-    +-half a Rayleigh bin, and by how much (whitened chi-square less ``k ln N`` for its
-    parameters) a line fixed in time at it beats a rotation-locked error at the nearest
-    integer order (the same phase in every run: ``cos m theta, sin m theta`` per channel).
-    A line at a non-integer order that the record resolves beats it clearly; a
-    rotation-locked error (any number of turns) or a line that the span cannot tell from
-    one (``|order - m| * turns`` small) does not. ``1e9`` when not at one speed; ``-1e9``
-    when the base model has order ``m`` (the residual is then not the locked error's)."""
+    """``(frequency, margin)``: the line's frequency refined on a grid of +-2 Rayleigh bins
+    (the spectrum's peak of a record with excluded stretches, set to zero, can split in two
+    and sit a bin off: a frequency fit started there does not find the line), and at one
+    speed by how much (whitened chi-square less ``k ln N`` for its parameters) a line fixed
+    in time at it beats a rotation-locked error at the nearest integer order (the same phase
+    in every run: ``cos m theta, sin m theta`` per channel). A line at a non-integer order
+    that the record resolves beats it clearly; a rotation-locked error (any number of turns)
+    or a line that the span cannot tell from one (``|order - m| * turns`` small) does not.
+    When the base model has order ``m`` the locked error is already fitted, so what the line
+    takes out of this residual is all its own (the locked alternative gains nothing).
+    ``1e9`` when not at one speed."""
     t = np.asarray(ctx.rows["t"], float)
     th = np.asarray(ctx.rows["theta"], float)
     oh = np.asarray(ctx.rows["run_onehot"], float)
     rw = np.asarray(resid, float).reshape(t.size, -1) / np.asarray(ctx.noise)[None, :]
     rw = rw - oh @ np.linalg.lstsq(oh, rw, rcond=None)[0]  # the run constants are the base's
-    w = _one_speed(ctx)
     T = float(np.max(_run_durations(ctx)))
-    if w is None or T <= 0:
+    if T <= 0:
         return f_hz, 1e9
-    frev = w / (2 * np.pi)
-    m = round(f_hz / frev)
-    if m < 1:
-        return f_hz, 1e9
-    if m <= int(ctx.consts.get("max_order", 0)):
-        # the base model has that order: the residual no longer shows the locked error, so
-        # the margin cannot be read from it (the span's resolution decides, as before)
-        return f_hz, -1e9
     N = rw.size
+    w = _one_speed(ctx)
+    m = round(f_hz / (w / (2 * np.pi))) if w is not None else 0
+    in_base = 1 <= m <= int(ctx.consts.get("max_order", 0))
+    locked = np.stack([np.cos(m * th), np.sin(m * th)], 1)
+    # at one speed near a base order the base's order m is refitted with the line (as the
+    # engine's trial fit does): the line's gain is over it (the base residual alone shows
+    # the line less the base's share of it, split around a reversal)
+    g0 = _gain(rw, locked) if in_base else 0.0
     best = (-math.inf, f_hz)
-    for f in f_hz + np.linspace(-0.5, 0.5, 11) / T:
+    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
         c, s_ = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
-        g = sum(_gain(rw, np.stack([c * oh[:, r], s_ * oh[:, r]], 1)) for r in range(oh.shape[1]))
+        X = np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
+        g = _gain(rw, np.concatenate([X, locked], 1)) - g0 if in_base else _gain(rw, X)
         best = max(best, (g, float(f)))
     g_vib, f_best = best
+    if w is None or m < 1:
+        return f_best, 1e9
     k_vib = 2 * oh.shape[1] * rw.shape[1]
-    g_lock = _gain(rw, np.stack([np.cos(m * th), np.sin(m * th)], 1))
     k_lock = 2 * rw.shape[1]
+    if in_base:
+        g_lock = 0.0  # in the base model: what the line takes beyond it is its own
+    else:
+        g_lock = _gain(rw, locked)
     margin = (g_vib - k_vib * math.log(N)) - (g_lock - k_lock * math.log(N))
     return f_best, float(margin)
 
@@ -1094,6 +1102,8 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
             pass
         else:
             out += list(getattr(_reference_terms, "CANDIDATES", ()))
+            if ctx.n_runs > 1:  # one set of signal harmonics per run (per-run zeros)
+                out.append(_reference_terms.interpolation_candidate(ctx.n_runs))
     return tuple(out)
 
 
@@ -1141,4 +1151,5 @@ MULTIHEAD = Kind(
     max_order_limit=max_order_limit,
     summary=multihead_summary,
     grows_orders=True,
+    reading_lattice=True,
 )

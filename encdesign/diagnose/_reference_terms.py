@@ -56,6 +56,7 @@ Physics and closed forms (tests check each against finite differences and the cl
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import jax.numpy as jnp
@@ -538,8 +539,13 @@ MAX_DELAY_ANGLE_RAD = 0.35
 """Largest lag angle ``|omega| tau`` accepted as a reading delay, rad."""
 MAX_SCALE = 0.1
 """Largest relative scale error accepted (10 %: beyond it the declared ratio is wrong)."""
-MAX_SIGNAL_ERROR = 0.3
-"""Largest signal offset / amplitude / phase error (relative, rad) of a first-order fit."""
+MAX_SIGNAL_ERROR = 0.5 * math.pi
+"""Largest harmonic (rad of signal phase) of an interpolation error: an arctangent reading is
+off by less than a quarter period for any signal error that leaves the quadrature readable."""
+FIRST_ORDER_SIGNAL_ERROR = 0.3
+"""Above it (rad of signal phase) the first-order conversion of the harmonics into offsets,
+amplitude ratio and phase error is approximate (second-order terms ~ c^2 / 2); the
+harmonics themselves are still the fitted error."""
 
 
 def _by_run(ctx: Context, name: str) -> list[np.ndarray]:
@@ -642,9 +648,15 @@ def _scale_plausible(ctx: Context, p: dict) -> str | None:
 
 
 def _interp_fn(p: dict, x: dict) -> Array:
+    # the sensor interpolates its own signals: their phase is P times the angle the sensor
+    # sees, theta_ref plus its own error function (held: a smooth fit of the reading, so
+    # neither its noise nor its quantization enters the phase), not P times the reference
+    # angle: at P = 2048 an error of 1 mrad is 2 rad of phase
     P = x["signal_periods"]
-    psi = P * x["theta"]
+    psi = P * _sensor_angle(p, x)
     c = p["coef"]
+    if c.ndim == 2:  # (4, R): one set per run (a re-zeroed reading moves the signal phase)
+        c = (x["run_onehot"] @ c.T).T
     e = (
         c[0] * jnp.cos(psi)
         + c[1] * jnp.sin(psi)
@@ -652,6 +664,36 @@ def _interp_fn(p: dict, x: dict) -> Array:
         + c[3] * jnp.sin(2.0 * psi)
     ) / jnp.maximum(P, 1.0)
     return e[:, None]
+
+
+INTERP_SMOOTH_ORDERS = 12
+"""Fourier orders of the sensor's own error function in its angle (held, for the phase)."""
+
+
+def _sensor_angle(p: dict, x: dict) -> Array:
+    """The angle the sensor sees, ``theta + e(theta)`` (the held smooth fit; its zero per
+    run is the reference's: a re-zeroed reading's offset is not a signal phase)."""
+    th = x["theta"]
+    return th + _smooth_basis(th, INTERP_SMOOTH_ORDERS) @ p["smooth_rad"]
+
+
+def _sensor_angle_fit(ctx: Context) -> dict:
+    """Least squares of ``reading - theta`` on a constant per run and orders
+    ``1..INTERP_SMOOTH_ORDERS`` of ``theta`` over the kept rows: ``smooth_rad``."""
+    rows = ctx.rows
+    th = np.asarray(rows["theta"], dtype=np.float64)
+    oh = np.asarray(rows["run_onehot"], dtype=np.float64)
+    d = np.asarray(rows["reading"], dtype=np.float64)[:, 0] - th
+    F = np.asarray(_smooth_basis(jnp.asarray(th), INTERP_SMOOTH_ORDERS))
+    coef, *_ = np.linalg.lstsq(np.concatenate([oh, F], 1), d, rcond=None)
+    R = oh.shape[1]
+    return {"smooth_rad": coef[R:]}
+
+
+INTERP_SPREAD_MIN = 0.1
+"""Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin 2psi``
+over the kept rows; 0.5 for phases spread over the period) for the harmonics to be told
+apart: below it the sampled phases sit on a few points of the signal period."""
 
 
 def _interp_applies(ctx: Context) -> str | None:
@@ -665,25 +707,42 @@ def _interp_applies(ctx: Context) -> str | None:
     turns = float(np.sum(ctx.revolutions))
     if turns <= 0 or th.size < 8:
         return "the record does not turn"
-    per_rev = th.size / turns
-    if 2 * P >= per_rev / 2:
+    # each sample's signal phase is known (P times the angle the sensor sees), so orders P
+    # and 2P beyond the sampling's Nyquist order are no obstacle (they alias in time, not in
+    # phase); what is needed is that the sampled phases cover the signal period
+    x = {k: jnp.asarray(ctx.rows[k]) for k in ("theta", "run_onehot")}
+    psi = P * np.asarray(_sensor_angle(_sensor_angle_fit(ctx), x))
+    X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
+    lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
+    if lam < INTERP_SPREAD_MIN:
         return (
-            f"order 2P = {2 * P} is beyond the {per_rev / 2:.0f} orders per turn the sampling "
-            "resolves (aliased)"
+            f"the sampled signal phases sit on a few points of the period (smallest "
+            f"eigenvalue {lam:.3f} of the harmonics' mean square, needs {INTERP_SPREAD_MIN})"
         )
     return None
+
+
+def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
+    """The angle the sensor sees, held (:func:`_sensor_angle_fit`): the signal phase is then
+    ``P`` times the reference angle plus the sensor's own error function."""
+    return [_sensor_angle_fit(ctx)]
 
 
 def _interp_plausible(ctx: Context, p: dict) -> str | None:
     c = np.abs(np.asarray(p["coef"], dtype=np.float64))
     if np.max(c) > MAX_SIGNAL_ERROR:
-        return f"signal errors of {np.max(c):.3g} are beyond a first-order interpolation error"
+        return (
+            f"a harmonic of {np.max(c):.3g} rad of signal phase is beyond what an arctangent "
+            "interpolation of readable signals gives"
+        )
     return None
 
 
 def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     c = np.asarray(p["coef"], dtype=np.float64)
-    s = np.asarray(se.get("coef", np.full(4, np.nan)), dtype=np.float64)
+    s = np.asarray(se.get("coef", np.full(c.shape, np.nan)), dtype=np.float64)
+    if c.ndim == 2:  # one set per run: the signal errors at run 0's zero of the reference
+        c, s = c[:, 0], s.reshape(c.shape)[:, 0]
     v = interpolation_params_from_harmonics(c)
     err = {"offset_a": s[0], "offset_b": s[1], "amplitude_ratio": 2 * s[3]}
     err["phase_error_rad"] = 2 * s[2]
@@ -691,6 +750,16 @@ def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     out = {k: {"value": v[k], "se": float(err[k]), "unit": units[k]} for k in v}
     P = int(ctx.signal_periods)
     out["orders"] = {"value": [P, 2 * P], "se": None, "unit": "1"}
+    big = float(np.max(np.abs(c)))
+    if big > FIRST_ORDER_SIGNAL_ERROR:
+        out["first_order_note"] = {
+            "value": big,
+            "se": None,
+            "unit": "rad",
+            "note": f"a harmonic of {big:.3g} rad of signal phase: beyond first order, the "
+            "offsets, amplitude ratio and phase error are approximate (the fitted harmonics "
+            "at orders P and 2P are not)",
+        }
     return out
 
 
@@ -898,6 +967,14 @@ def _candidates() -> tuple:
                 scale=1e-3,
                 description="(c1, s1, c2, s2) of the signal phase at orders P and 2P",
             ),
+            Param(
+                "smooth_rad",
+                "rad",
+                shape=(2 * INTERP_SMOOTH_ORDERS,),
+                linear=False,
+                fit=False,
+                description="the sensor's own error function, for its signal phase (held)",
+            ),
         ),
         signature=("orders", "spectrum", "line_phase"),
         explanation=(
@@ -905,6 +982,7 @@ def _candidates() -> tuple:
             "(signal_periods_per_rev periods per turn) give orders P and 2P of the shaft"
         ),
         applies=_interp_applies,
+        start=_interp_start,
         plausible=_interp_plausible,
         derived=_interp_derived,
     )
@@ -953,3 +1031,17 @@ def _candidates() -> tuple:
 
 CANDIDATES = _candidates()
 """The sensor-against-reference candidates, for the engine (multihead kind, one head)."""
+
+
+@functools.lru_cache(maxsize=8)
+def interpolation_candidate(n_runs: int) -> Candidate:
+    """``interpolation_error`` with one coefficient set per run (``coef`` of shape
+    ``(4, R)``): a reading re-zeroed by any amount between runs moves its signal phase by
+    ``P`` times that amount, so the harmonics keep their sizes but not their phases; one run:
+    the catalog's candidate."""
+    base = next(c for c in CANDIDATES if c.name == "interpolation_error")
+    if n_runs <= 1:
+        return base
+    q, *rest = base.params
+    per_run = dataclasses.replace(q, shape=(4, int(n_runs)))
+    return dataclasses.replace(base, params=(per_run, *rest))
