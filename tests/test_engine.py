@@ -274,3 +274,26 @@ def test_a_quantized_reading_is_not_read_as_glitches_or_count_jumps():
     # Gaussian noise: the scale is sigma (the MAD and the trimmed RMS agree)
     z = rng.normal(0, 1.0, (20000, 1))
     assert robust_scale(z)[0] == pytest.approx(1.0, rel=0.03)
+
+
+def test_three_motor_effects_at_once_are_all_named():
+    """Coil mismatch, magnet asymmetry and cogging on one 7-pole-pair, 12-slot motor: each
+    candidate alone leaves the others' orders in the views they share, which is not
+    structure it only dents (the signature rule counts the orders it touches)."""
+    from encdesign.diagnose import diagnose
+    from encdesign.diagnose._conceal_bench import simulate
+
+    plan = {
+        "kind": "motion",
+        "case": "compound",
+        "effects": ["coil_mismatch", "cogging", "magnet_asymmetry"],
+        "per_run_zeros": False,
+        "transient": False,
+        "glitches": 0,
+        "n_runs": 1,
+        "turns": 2.0,
+        "amplitude": 1.0,
+    }
+    rec, truth = simulate(np.random.default_rng(7), plan)
+    d = diagnose(rec).doc
+    assert sorted(e["name"] for e in d["effects"]) == sorted(truth["effects"]), d["report"]

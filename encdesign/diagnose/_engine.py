@@ -1969,6 +1969,32 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
 
 
+UNTOUCHED_SHARE = 0.8
+"""An integer order whose located power a candidate leaves at this share or more is not
+the candidate's (the signature rule of :func:`select` does not count it)."""
+
+
+def _order_key(f) -> int | None:
+    """The integer order a finding is at (the ``orders`` view, or a spectrum line at an
+    integer order), else None."""
+    integer = f.view == "orders" or (f.view == "spectrum" and f.detail.get("integer_order"))
+    ints = {round(o) for o in f.where.get("orders", []) if math.isfinite(o)}
+    return ints.pop() if integer and len(ints) == 1 else None
+
+
+def _untouched_orders(before, after) -> set:
+    """Integer orders located before a candidate's fit that keep at least
+    ``UNTOUCHED_SHARE`` of their excess power after it."""
+    p0: dict = {}
+    p1: dict = {}
+    for fs, acc in ((before, p0), (after, p1)):
+        for f in fs:
+            k = _order_key(f)
+            if k is not None:
+                acc[k] = acc.get(k, 0.0) + max(f.power - f.dof, 0.0)
+    return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= UNTOUCHED_SHARE * v}
+
+
 def select(
     prep: Prepared,
     fitter: Fitter,
@@ -2158,8 +2184,15 @@ def select(
                 # and clear the places its own signature located (not a larger structure
                 # there that it only dents, e.g. a step fitted by a drift)
                 sig = set(cand.signature) or {f.view for f in findings}
-                m0 = sum(f.power - f.dof for f in findings if f.view in sig)
-                m1 = sum(f.power - f.dof for f in after if f.view in sig)
+                # an integer order it leaves untouched is another effect's (several
+                # effects at once share the views), not structure it only dents
+                left = _untouched_orders(findings, after)
+                m0 = sum(
+                    f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left
+                )
+                m1 = sum(
+                    f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left
+                )
                 if m0 > 0 and m1 > SIGNATURE_LEFT_MAX * m0:
                     rejected.append(
                         {
