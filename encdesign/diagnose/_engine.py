@@ -530,6 +530,10 @@ _TRIM_RMS = math.sqrt(
 """RMS of a unit Gaussian within its central ``TRIM_QUANTILE`` (0.962 at 99 %)."""
 
 
+ROBUST_ROWS = 1 << 18
+"""Rows :func:`robust_scale` reads at most."""
+
+
 def robust_scale(d: np.ndarray) -> np.ndarray:
     """Robust std per column of ``d`` (m, C), centred at zero: the larger of 1.4826 MAD and
     the RMS of the central ``TRIM_QUANTILE`` of ``|d|`` (scaled to a Gaussian's std).
@@ -538,7 +542,10 @@ def robust_scale(d: np.ndarray) -> np.ndarray:
     quantized reading are mostly exactly 0 (then +-1 LSB), so their MAD is 0 and every step
     of the staircase would read as a glitch or a count jump. The trimmed RMS sees the
     lattice's spread, and a few glitches (under 1 % of the values) cannot inflate it; for
-    Gaussian noise both read sigma."""
+    Gaussian noise both read sigma. Over ``ROBUST_ROWS`` rows, from that many rows drawn at
+    random (fixed seed: the scale to a few parts per thousand, memory bounded)."""
+    if d.shape[0] > ROBUST_ROWS:
+        d = d[np.sort(np.random.default_rng(0).integers(0, d.shape[0], ROBUST_ROWS))]
     a = np.abs(d)
     mad = 1.4826 * np.median(a, axis=0)
     if a.shape[0] < 8:
@@ -2727,6 +2734,11 @@ def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
     return n > 0 and abs(z) / n > SWEEP_COHERENCE
 
 
+LATTICE_ROWS = 1 << 14
+"""Rows of each run (from its start) that the value-lattice test of :func:`lattice_effect`
+reads."""
+
+
 def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None) -> dict | None:
     """``quantization`` named from the value lattice of the readings, not fitted.
 
@@ -2740,14 +2752,18 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     residual RMS are the final model's. ``None`` when no channel qualifies."""
     from ._reference_terms import detect_lsb
 
-    keep = prep.keep
-    reading = np.asarray(prep.rows["reading"], float)
-    if reading.ndim == 1:
-        reading = reading[:, None]
+    # the first LATTICE_ROWS rows of each run: a lattice holds in any stretch of the
+    # readings, and the test's sorts and gaps then stay bounded (10^7 rows: +1.5 GB)
+    pieces = [(a, min(b, a + LATTICE_ROWS)) for _, (a, b) in run_spans(prep.run)]
+    reading = np.concatenate(
+        [np.asarray(prep.rows.column("reading", a, b), float).reshape(b - a, -1) for a, b in pieces]
+    )
+    keep = np.concatenate([prep.keep[a:b] for a, b in pieces])
+    run = np.concatenate([prep.run[a:b] for a, b in pieces])
     chans, lsb, share, offsets = [], [], [], []
     for k in range(reading.shape[1]):
-        lat = detect_lsb(reading[keep, k], prep.run[keep])
-        if lat.lsb_rad is None or _sweep_grid(reading[:, k], keep, prep.run, lat):
+        lat = detect_lsb(reading[keep, k], run[keep])
+        if lat.lsb_rad is None or _sweep_grid(reading[:, k], keep, run, lat):
             continue
         sh = (lat.lsb_rad**2 / 12.0) / float(prep.sigma[k]) ** 2
         if sh >= LATTICE_NOISE_SHARE:
