@@ -2396,10 +2396,11 @@ def _grow_base_order(
     ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
     error function has every order, and one left out would be reported as structure no
     effect explains. Not when the residual also shows a line at the signal period (aliased,
-    it can pose as integer orders), a line off the integer orders or structure tied to the
-    direction or speed (the candidates' to explain); and the grown base must leave at most
-    ``GROWTH_LEFT_MAX`` of what every view located (a step or a drift that only leaks into
-    high orders stays the candidates'). Orders ``L`` and ``2 L`` of the signal period
+    it can pose as integer orders) or structure tied to the direction or speed (the
+    candidates' to explain); and the grown base must leave at most ``GROWTH_LEFT_MAX`` of
+    what every view located (a line in Hz, a step or a drift that only leaks into high orders
+    stays the candidates'; a strong order's leakage into lines off the integers goes with it).
+    Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
     the fitted values, or ``None`` (nothing changed)."""
     hi = int(min(limit, max(2 * order, 24)))
@@ -2407,11 +2408,7 @@ def _grow_base_order(
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
-    if any(
-        f.view in ("line_phase", "direction", "speed", "angle_trend")
-        or (f.view == "spectrum" and not f.detail.get("integer_order"))
-        for f in findings
-    ):
+    if any(f.view in ("line_phase", "direction", "speed", "angle_trend") for f in findings):
         return None
     found = [
         round(f.where["orders"][0])
