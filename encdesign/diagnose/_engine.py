@@ -2378,6 +2378,12 @@ def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
+def _scan_order(limit: int, order: int) -> int:
+    """Highest order the views scan for a base of ``order``: twice it, at least 24, within
+    what the record resolves."""
+    return int(min(limit, max(2 * order, 24)))
+
+
 GROWTH_LEFT_MAX = 0.2
 """The grown base must leave at most this share of the structure the views located (excess
 chi-square over their degrees of freedom) in the base residual, or the growth is undone."""
@@ -2403,7 +2409,7 @@ def _grow_base_order(
     Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
     the fitted values, or ``None`` (nothing changed)."""
-    hi = int(min(limit, max(2 * order, 24)))
+    hi = _scan_order(limit, order)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
@@ -2444,7 +2450,7 @@ def _grow_base_order(
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views, int(min(limit, max(2 * M, 24))))
+    after = locate(prep, fitter.residual(grown.terms), kind.views, _scan_order(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > GROWTH_LEFT_MAX * p0:
         prep.consts["max_order"] = order  # type: ignore[index]
@@ -2517,7 +2523,7 @@ def run_engine(
     for c in cands:
         seen[c.name] = c  # later ones (reference terms, user terms) override by name
     cands = list(seen.values())
-    scan = int(min(limit, max(order * 2, 24)))
+    scan = _scan_order(limit, order)
 
     def log(msg: str) -> None:
         if verbose:
@@ -2532,13 +2538,17 @@ def run_engine(
         base_info["refined"] = refined
         fitter.clear()
         base_fit = fitter.fit(base_fit.terms)
-    if "align" in base_info:
-        aligned = base_info["align"](base_fit.terms, prep)
-        if callable(aligned):  # a lazy column fn(lo, hi)
-            prep.rows.set_lazy("theta", aligned)
-        else:
-            prep.rows["theta"] = aligned
-        fitter.clear()
+
+    def align(fit: FitResult) -> None:
+        if "align" in base_info:
+            aligned = base_info["align"](fit.terms, prep)
+            if callable(aligned):  # a lazy column fn(lo, hi)
+                prep.rows.set_lazy("theta", aligned)
+            else:
+                prep.rows["theta"] = aligned
+            fitter.clear()
+
+    align(base_fit)
 
     def estimate_noise(fit: FitResult) -> None:
         # the noise from the base residual's periodogram (structure cannot inflate it);
@@ -2563,14 +2573,8 @@ def run_engine(
         if grown is None:
             break
         order, base_fit = grown
-        scan = int(min(limit, max(order * 2, 24)))
-        if "align" in base_info:  # the refit moved the run offsets a little
-            aligned = base_info["align"](base_fit.terms, prep)
-            if callable(aligned):
-                prep.rows.set_lazy("theta", aligned)
-            else:
-                prep.rows["theta"] = aligned
-            fitter.clear()
+        scan = _scan_order(limit, order)
+        align(base_fit)  # the refit moved the run offsets a little
         estimate_noise(base_fit)  # the orders it left out were in the residual
     stage("base fitted")
     sel = select(prep, fitter, base_fit.terms, cands, kind.views, scan, max_effects, log)

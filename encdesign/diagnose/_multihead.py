@@ -305,21 +305,26 @@ SHAFT_ITERATIONS = 3
 error's size smaller)."""
 
 
-def _head_mean_error(v: dict, alpha: np.ndarray, th: np.ndarray, run: np.ndarray):
+def _head_mean_error(
+    v: dict, alpha: np.ndarray, th: np.ndarray, run: np.ndarray, slope: bool = False
+):
     """The base model's disk error averaged over the heads at shaft angle ``th`` (rad),
-    from the base term's values ``v``; and its largest slope over the heads (1)."""
+    from the base term's values ``v``; with ``slope``, also its largest slope over the heads
+    (1), as ``(mean, slope)``."""
     R_off = np.concatenate([[0.0], np.asarray(v.get("run_angle_offset_rad", []))])
     pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", []))])
     a, b = np.asarray(v["fourier_cos_rad"]), np.asarray(v["fourier_sin_rad"])
     m = np.arange(1, a.size + 1)
     x = th + R_off[run]
     mean = np.zeros(th.size)
-    slope = np.zeros(th.size)
+    top = np.zeros(th.size)
     for k in range(alpha.size):
         arg = m[None, :] * (x[:, None] - alpha[k] - pl[k])
-        mean += np.cos(arg) @ a + np.sin(arg) @ b
-        slope = np.maximum(slope, np.abs((-np.sin(arg) * m) @ a + (np.cos(arg) * m) @ b))
-    return mean / alpha.size, slope
+        c, s_ = np.cos(arg), np.sin(arg)
+        mean += c @ a + s_ @ b
+        if slope:
+            top = np.maximum(top, np.abs(c @ (m * b) - s_ @ (m * a)))
+    return (mean / alpha.size, top) if slope else mean / alpha.size
 
 
 def _refine_shaft(terms, prep: Prepared) -> str | None:
@@ -343,9 +348,12 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     def corrected(lo: int = 0, hi: int | None = None, with_size: bool = False):
         sh, rn = shaft[lo:hi], run[lo:hi]
         corr = np.zeros(sh.size)
-        for _ in range(SHAFT_ITERATIONS):
-            corr, slope = _head_mean_error(v, alpha, sh - corr, rn)
-        return (sh - corr, slope * corr) if with_size else sh - corr
+        for _ in range(SHAFT_ITERATIONS - 1):
+            corr = _head_mean_error(v, alpha, sh - corr, rn)
+        if not with_size:
+            return sh - _head_mean_error(v, alpha, sh - corr, rn)
+        corr, slope = _head_mean_error(v, alpha, sh - corr, rn, slope=True)
+        return sh - corr, slope * corr
 
     ss, nk = 0.0, 0
     for lo in range(0, shaft.size, 1 << 16):
