@@ -116,7 +116,7 @@ def numpy_base(p: dict, theta, alpha, onehot) -> np.ndarray:
 def _terms_vs_numpy(repeats: int) -> dict:
     import jax.numpy as jnp
 
-    from encdesign.diagnose._engine import _val_fn
+    from encdesign.diagnose._fit import _val_fn
     from encdesign.diagnose._multihead import _base_candidate
 
     rng = np.random.default_rng(0)

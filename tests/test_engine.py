@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.diagnose._engine import KeptRows, RowColumns, _valjac_fn
+from encdesign.diagnose._fit import _valjac_fn
 from encdesign.diagnose._multihead import _base_candidate
+from encdesign.diagnose._protocol import KeptRows, RowColumns
 
 
 @pytest.mark.parametrize("all_kept", [True, False])
@@ -108,8 +109,8 @@ def test_prepared_record_holds_little_per_row_and_lazy_columns_are_exact(ref):
     small indices per row (and the heads' mean without a reference); every other row column is
     the recording's own array or
     lazy, and a lazy column read per chunk equals the whole column."""
-    from encdesign.diagnose._engine import prepare
     from encdesign.diagnose._multihead import multihead_data
+    from encdesign.diagnose._prepare import prepare
 
     rec = _bench(2000, 3, ref)
     kd = multihead_data(rec)
@@ -260,7 +261,7 @@ def test_a_quantized_reading_is_not_read_as_glitches_or_count_jumps():
     their MAD is 0, and before every step of the staircase read as a glitch or a count
     jump (595 on a concealed bench). The trimmed-RMS scale sees the lattice; a real glitch
     of 60 sigma is still found."""
-    from encdesign.diagnose._engine import find_glitches, robust_scale
+    from encdesign.diagnose._prepare import find_glitches, robust_scale
 
     rng = np.random.default_rng(4)
     n, sigma = 3000, 1e-4

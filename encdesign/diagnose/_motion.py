@@ -34,7 +34,8 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._engine import MAX_PARAM_FRACTION, Kind, KindData, Prepared
+from ._protocol import Kind, KindData, Prepared
+from ._settings import MAX_PARAM_FRACTION
 
 EXPLANATIONS = {
     "cogging": (

@@ -33,7 +33,8 @@ from .._errors import input_error
 from ..io._recording import Recording
 from . import _effects as fx
 from ._candidates import Candidate, Context, Param
-from ._engine import MAX_PARAM_FRACTION, Kind, KindData, Prepared
+from ._protocol import Kind, KindData, Prepared
+from ._settings import MAX_PARAM_FRACTION
 from ._views import Finding, _logp, _thr, run_spans
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)

@@ -47,7 +47,9 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._engine import MAX_PARAM_FRACTION, Kind, KindData, Prepared, report_text
+from ._document import report_text
+from ._protocol import Kind, KindData, Prepared
+from ._settings import MAX_PARAM_FRACTION
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
 

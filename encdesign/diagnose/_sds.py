@@ -60,7 +60,8 @@ from scipy import stats
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._engine import Kind, KindData, Prepared, RowColumns, _valjac_fn
+from ._fit import _valjac_fn
+from ._protocol import Kind, KindData, Prepared, RowColumns
 from ._views import Finding, _logp, _thr, _where
 
 __all__ = [
@@ -400,7 +401,7 @@ def _helmert(K: int) -> np.ndarray:
 
 @dataclasses.dataclass
 class SDSKindData(KindData):
-    """:class:`~encdesign.diagnose._engine.KindData` plus the SDS pair table and clock."""
+    """:class:`~encdesign.diagnose._protocol.KindData` plus the SDS pair table and clock."""
 
     table: Any = None
     n_revs: int = 0
@@ -536,7 +537,7 @@ def _folds_by_run(R: int, k: int, seed: int = 0) -> tuple[np.ndarray, dict]:
 def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
     """Stage 1 for sds: one row per run, every run kept (an SDS run is a platform at rest:
     there is no shaft motion to segment), folds of whole runs, first noise levels."""
-    from ._engine import Prepared
+    from ._protocol import Prepared
 
     R, C = kd.y.shape
     if not np.all(np.isfinite(kd.y)):

@@ -1,0 +1,732 @@
+"""Stage 4 of the engine, **select**: forward selection of candidates with nuisance steps,
+ties and the backward check."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._candidates import Candidate, Param
+from ._document import _jsonable
+from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._protocol import Prepared
+from ._settings import (
+    BIC_MIN,
+    COLLINEAR_NOTE,
+    COLLINEAR_REFUSE,
+    HELDOUT_MIN,
+    LOCATED_SHARE_MIN,
+    MAX_PARAM_FRACTION,
+    PLAUSIBLE_RATIO,
+    SIGNATURE_LEFT_MAX,
+    TIE_CHI2,
+    TIE_CORR,
+)
+from ._views import locate
+
+# ----------------------------------------------------------------------------- selection
+
+
+@dataclasses.dataclass
+class Step:
+    """One accepted (or tried) candidate."""
+
+    name: str
+    fit: FitResult
+    delta_bic: float
+    delta_heldout: float
+    collinearity: float
+    notes: list[str]
+    term_rms: float
+    explained_rms: float
+    confounded: list[dict] = dataclasses.field(default_factory=list)
+
+
+def _tie(
+    fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
+) -> tuple[float, float]:
+    """``(chi-square gap, correlation)`` of two alternative fits ``a`` (chosen) and ``b``:
+    how much better ``a`` fits, and the correlation of what each takes out of the current
+    residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
+    keep = prep.keep
+    w = 1.0 / prep.sigma[None, :]
+    saa = sbb = sab = 0.0
+    for lo, hi, x in fitter._chunks():  # one pass: both fits on each chunk
+        ra = fitter.chunk_residual(a.terms, lo, hi, x)
+        rb = fitter.chunk_residual(b.terms, lo, hi, x)
+        k = keep[lo:hi]
+        ca = ((cur_resid[lo:hi] - ra) * w)[k]
+        cb = ((cur_resid[lo:hi] - rb) * w)[k]
+        saa += float(np.sum(ca * ca))
+        sbb += float(np.sum(cb * cb))
+        sab += float(np.sum(ca * cb))
+    den = math.sqrt(saa * sbb)
+    corr = float(abs(sab) / den) if den > 0 else 0.0
+    return float(b.chi2 - a.chi2), corr
+
+
+def _collinearity(fit: FitResult, n_base_terms: int) -> float:
+    """Largest canonical correlation between the last term's columns and the base's."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    A = fit.A
+    p = A.shape[0]
+    if s1 <= s0 or base_n == 0:
+        return 0.0
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    e = np.arange(s0, s1)
+    Abb, Aee, Abe = An[np.ix_(b, b)], An[np.ix_(e, e)], An[np.ix_(b, e)]
+    try:
+        Lb = np.linalg.pinv(Abb, rcond=1e-10, hermitian=True)
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    M = Le @ Abe.T @ Lb @ Abe
+    ev = np.linalg.eigvals(M).real
+    del p
+    return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
+
+
+def _collinear_columns(fit: FitResult, n_base_terms: int) -> np.ndarray:
+    """Local indices (in the last term's free vector) to hold so that the rest of the term
+    has a canonical correlation with the base model's columns of at most
+    ``COLLINEAR_REFUSE``: greedily, the column best explained by the base and the columns
+    kept so far first."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    if s1 <= s0 or base_n == 0:
+        return np.zeros(0, int)
+    A = fit.A
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    Lb = np.linalg.pinv(An[np.ix_(b, b)], rcond=1e-10, hermitian=True)
+    keep = list(range(s0, s1))
+    held: list[int] = []
+    for _ in range(s1 - s0):
+        e = np.asarray(keep)
+        Aee, Abe = An[np.ix_(e, e)], An[np.ix_(b, e)]
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+        ev = np.linalg.eigvals(Le @ Abe.T @ Lb @ Abe).real
+        if ev.size == 0 or ev.max() <= COLLINEAR_REFUSE**2:
+            break
+        r2 = np.einsum("bj,bc,cj->j", Abe, Lb, Abe)
+        j = int(np.argmax(r2))
+        held.append(keep.pop(j) - s0)
+        if not keep:
+            break
+    return np.asarray(sorted(held), int)
+
+
+def _hold(term: Term, local: np.ndarray) -> Term:
+    """``term`` with the free scalars at ``local`` (free-vector indices) held at zero."""
+    t2 = term.copy()
+    pos = 0
+    local = set(int(i) for i in local)
+    for q in t2.cand.params:
+        m = t2.free[q.name]
+        flat = m.ravel()
+        v = t2.values[q.name].ravel()
+        for j in np.flatnonzero(flat):
+            if pos in local:
+                flat[j] = False
+                v[j] = 0.0
+            pos += 1
+        t2.free[q.name] = flat.reshape(m.shape)
+        t2.values[q.name] = v.reshape(m.shape)
+    return t2
+
+
+def _local_names(held_term: Term, local: np.ndarray, fitted: Term) -> list[str]:
+    del fitted
+    names = []
+    for q in held_term.cand.params:
+        m = held_term.free[q.name]
+        for ij in np.argwhere(~m):
+            names.append(f"{q.name}{[int(v) for v in ij] if ij.size else ''}")
+    del local
+    return names
+
+
+def _frozen(terms: list[Term]) -> list[Term]:
+    """Copies with the nonlinear parameters held (trial fits: one matrix product each)."""
+    out = []
+    for t in terms:
+        t2 = t.copy()
+        for q in t.cand.params:
+            if not q.linear:
+                t2.free[q.name][...] = False
+        out.append(t2)
+    return out
+
+
+def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
+    """``terms`` with the free masks of ``like`` (same order and names)."""
+    out = []
+    for t, l in zip(terms, like):
+        t2 = t.copy()
+        t2.free = {k: v.copy() for k, v in l.free.items()}
+        out.append(t2)
+    return out
+
+
+def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
+    """RMS of one term's own contribution (projected, whitened by the noise)."""
+    tot = 0.0
+    for a, b, x in fitter._chunks():  # chunk by chunk: nothing per row is held
+        v = fitter._eval_term(term, a, b, x, jac=False)[0]
+        if prep.kd.project:
+            v = v - v.mean(1, keepdims=True)
+        tot += float(np.sum((v[prep.keep[a:b]] / prep.sigma[None, :]) ** 2))
+    C = prep.n_channels
+    eff = (C - 1) / C if prep.kd.project else 1.0
+    return float(np.sqrt(tot / max(prep.keep.sum() * C * eff, 1)))
+
+
+def _step_fn(p: dict, x: dict):
+    on = jnp.where(x["tau"] >= p["tau_s"], 1.0, 0.0) * (x["run_onehot"] @ p["run_sel"])
+    return p["size"] * on[:, None] * p["channel_sel"][None, :]
+
+
+STEP_NUISANCE = Candidate(
+    name="located_step",
+    fn=_step_fn,
+    params=(
+        Param("size", "unit of y", scale=None, description="size of the step"),
+        Param("tau_s", "s", linear=False, fit=False, description="global time of the step"),
+        Param("run_sel", "1", shape="runs", linear=False, fit=False),
+        Param("channel_sel", "1", shape="channels", linear=False, fit=False),
+    ),
+    explanation="a step located in time (no catalog effect: the alternative a candidate "
+    "must beat where the time view located a step)",
+)
+"""A step of one size on the channels of a located step, from its row on within its run."""
+STEP_CHANGE_ROWS = 3
+"""A located step within this many kept rows (or half a time-view block) of a change of
+direction or speed is one the catalog's direction / speed terms can make."""
+
+
+def _free_steps(prep: Prepared, findings: list) -> list[dict]:
+    """Steps the time view located at a time where nothing the catalog knows changes.
+
+    A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
+    step where the speed changes: a located step within ``STEP_CHANGE_ROWS`` kept rows (or
+    half a time-view block, 1/64 of the run) of a kept row where the direction or the
+    steady speed changes is left to those terms. The others are steps no smooth term (a
+    drift, a scale error, an order) can make; each is returned with its time, run and
+    channels."""
+    out = []
+    keep = prep.keep
+    for f in findings:
+        if f.view != "time" or not (
+            f.detail.get("shape") == "step" or f.detail.get("step_significant")
+        ):
+            continue
+        if len(out) >= 2:
+            break
+        r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+        rows = np.flatnonzero((prep.run == r) & keep)
+        tau0 = float(f.detail["global_step_time_s"])
+        i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
+        if i <= 0 or i >= rows.size:
+            continue
+        # kept rows where the direction or the steady speed changes (a reversal or a speed
+        # change, with the non-steady rows between them left out)
+        d = np.asarray(prep.rows.take("direction", rows), float)
+        w = np.asarray(prep.rows.take("omega", rows), float)
+        ch_rows = (
+            np.flatnonzero(
+                (d[1:] != d[:-1])
+                | (np.abs(w[1:] - w[:-1]) > 0.05 * np.maximum(np.abs(w[1:]), np.abs(w[:-1])))
+            )
+            + 1
+        )
+        near = max(STEP_CHANGE_ROWS, rows.size // 64)
+        if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
+            continue
+        ch = np.zeros(prep.n_channels)
+        ch[list(f.where["heads"])] = 1.0
+        sel = np.zeros(prep.ctx.n_runs)
+        sel[r] = 1.0
+        out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
+    return out
+
+
+def _step_term(prep: Prepared, step: dict) -> Term:
+    tm = make_term(
+        STEP_NUISANCE,
+        prep,
+        {"tau_s": step["tau_s"], "run_sel": step["run_sel"], "channel_sel": step["channels"]},
+    )
+    tm.scale["size"][...] = float(np.mean(prep.sigma))
+    return tm
+
+
+def _beaten_by_step(
+    fitter: Fitter,
+    prep: Prepared,
+    current: FitResult,
+    fr: FitResult,
+    steps: list[dict],
+    cache: dict,
+) -> tuple[str, Any] | None:
+    """``(why, the step's finding)`` when a candidate ``fr`` (current model plus the
+    candidate) is refused for a located step it cannot make, or ``None``: fitted together
+    with the step, the step still earns its place and the candidate no longer does
+    (information criterion or held-out)."""
+    if not steps:
+        return None
+    N = prep.n_values
+    logn = math.log(max(N, 2))
+    k = max(fr.n_determined(len(fr.terms) - 1), 0)
+    base_terms = _frozen(current.terms)
+    cand = _frozen(fr.terms[-1:])
+    for st in steps:
+        key = (st["tau_s"], st["run"], tuple(st["channels"]))
+        if key not in cache:
+            cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
+        f = st["finding"]
+        for attempt in range(2):
+            fs = cache[key]
+            both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
+            if fr.chi2 - both.chi2 < BIC_MIN + logn:
+                break  # with the candidate there is no step left: it makes it
+            dchi = fs.chi2 - both.chi2
+            dbic = -(dchi - k * logn)
+            dho = fs.heldout_chi2 - both.heldout_chi2
+            if dbic > -BIC_MIN or dho < HELDOUT_MIN:
+                heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
+                return (
+                    f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
+                    f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
+                    f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
+                    f"{dbic:.1f}, held-out {dho:.1f}); it cannot make a step there (no "
+                    "reversal, no change of speed at that time)",
+                    f,
+                )
+            if attempt:
+                break
+            # the step still leaves it something: a step placed a few rows off leaves a box
+            # a smooth term takes part of; the step's row from base + step fits, once
+            rkey = ("refined", key)
+            if rkey not in cache:
+                g = dataclasses.replace(f, where=dict(f.where), detail=dict(f.detail))
+                _refine_step(fitter, prep, current.terms, g)
+                st2 = dict(st, tau_s=g.detail["global_step_time_s"], finding=g)
+                cache[rkey] = st2
+            st2 = cache[rkey]
+            if st2["tau_s"] == st["tau_s"]:
+                break
+            st, f = st2, st2["finding"]
+            key = (st["tau_s"], st["run"], tuple(st["channels"]))
+            if key not in cache:
+                cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
+    return None
+
+
+def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
+    """Move a located step's time (``f``, a ``time`` finding) to the row where the model
+    ``terms`` plus a step fits best: the time view's change point is read off a residual
+    from which the base model has taken part of the step (and moved its change point). A
+    scan of 32 rows over 4 time-view blocks (1/8 of the run) either side, then of the rows
+    between the best one's neighbours (at most 48)."""
+    r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+    rows = np.flatnonzero((prep.run == r) & prep.keep)
+    tau = prep.rows.take("tau", rows)
+    ch = np.zeros(prep.n_channels)
+    ch[list(f.where["heads"])] = 1.0
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[r] = 1.0
+    held = _frozen(terms)
+
+    def chi2(i: int) -> float:
+        st = dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)
+        return fitter.fit([*held, _step_term(prep, st)]).chi2
+
+    # within 4 time-view blocks of the located row: a step and its mirror image about a
+    # reversal differ by a function of the angle, which the base model takes (the two
+    # times cannot be told apart over a turn back and forth); the located one is kept
+    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
+    width = max(int(4 * rows.size / 32), 4)
+    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
+    grid = np.unique(np.linspace(lo, hi, 32).astype(int))
+    best = min(grid, key=chi2)
+    k = int(np.searchsorted(grid, best))
+    a = int(grid[max(k - 1, 0)])
+    b = int(grid[min(k + 1, grid.size - 1)])
+    fine = np.arange(a, b + 1)
+    if fine.size > 48:
+        fine = np.unique(np.linspace(a, b, 48).astype(int))
+    best = int(min(fine, key=chi2))
+    t = prep.rows["t"]
+    f.detail["step_time_s"] = float(t[rows[best]])
+    f.detail["global_step_time_s"] = float(tau[best])
+    f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
+
+
+UNTOUCHED_SHARE = 0.8
+"""An integer order whose located power a candidate leaves at this share or more is not
+the candidate's (the signature rule of :func:`select` does not count it)."""
+
+
+def _order_key(f) -> int | None:
+    """The integer order a finding is at (the ``orders`` view, or a spectrum line at an
+    integer order), else None."""
+    integer = f.view == "orders" or (f.view == "spectrum" and f.detail.get("integer_order"))
+    ints = {round(o) for o in f.where.get("orders", []) if math.isfinite(o)}
+    return ints.pop() if integer and len(ints) == 1 else None
+
+
+def _untouched_orders(before, after) -> set:
+    """Integer orders located before a candidate's fit that keep at least
+    ``UNTOUCHED_SHARE`` of their excess power after it."""
+    p0: dict = {}
+    p1: dict = {}
+    for fs, acc in ((before, p0), (after, p1)):
+        for f in fs:
+            k = _order_key(f)
+            if k is not None:
+                acc[k] = acc.get(k, 0.0) + max(f.power - f.dof, 0.0)
+    return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= UNTOUCHED_SHARE * v}
+
+
+def select(
+    prep: Prepared,
+    fitter: Fitter,
+    base_terms: list[Term],
+    candidates: Sequence[Candidate],
+    views: tuple[str, ...],
+    scan_order: int,
+    max_effects: int = 3,
+    log: Callable[[str], None] = lambda s: None,
+):
+    """Forward selection with refits, then a backward held-out check (stage 4)."""
+    base = fitter.fit(base_terms)
+    cur_resid = fitter.residual(base.terms)
+    findings0 = locate(prep, cur_resid, views, scan_order)
+    N = prep.n_values
+    current, findings = base, findings0
+    accepted: list[Step] = []
+    rejected: list[dict] = []
+    not_testable: list[dict] = []
+    n_base_terms = len(base.terms)
+    tried_names: set[str] = set()
+    applicable = []
+    for c in candidates:
+        why = c.applies(prep.ctx) if c.applies else None
+        if why:
+            not_testable.append({"name": c.name, "reason": why})
+        else:
+            applicable.append(c)
+    gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
+    held_notes: dict[str, list[str]] = {}
+    step_refusals: list[tuple[str, Any]] = []
+    for _ in range(max_effects):
+        seen = {f.view for f in findings}
+        gof = goodness_of_fit(prep, cur_resid, current.n_params)
+        if not findings and gof["passes"]:
+            break
+        trials = []
+        kept_resid = None  # the current residual over the kept rows, made once per round
+        free_steps = _free_steps(prep, findings)
+        step_fits: dict = {}
+        for cand in applicable:
+            if cand.name in {s.name for s in accepted}:
+                continue
+            if cand.signature and not (set(cand.signature) & seen):
+                continue
+            if not cand.signature and gof["passes"]:
+                continue
+            tried_names.add(cand.name)
+            if cand.start and kept_resid is None:
+                kept_resid = cur_resid if prep.keep.all() else cur_resid[prep.keep]
+            starts = cand.start(prep.ctx, kept_resid, findings) if cand.start else [{}]
+            best = None
+            # screen the starts with the nonlinear parameters held (one linear pass each),
+            # then run the full fit from the best one
+            screened = []
+            for st in starts[:4]:
+                term = make_term(cand, prep, st)
+                if prep.n_values - current.n_params - term.n_free() < 0 or (
+                    current.n_params + term.n_free() > MAX_PARAM_FRACTION * N
+                ):
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": "more parameters than "
+                            f"{MAX_PARAM_FRACTION:.0%} of the fitted values",
+                        }
+                    )
+                    break
+                if len(starts) > 1:
+                    held = _frozen([term])[0]
+                    fr0 = fitter.fit([*_frozen(current.terms), held])
+                    screened.append((fr0.chi2, term, fr0))
+                else:
+                    screened.append((0.0, term, None))
+            if screened:
+                screened.sort(key=lambda z: z[0])
+                term = screened[0][1]
+                if screened[0][2] is not None:
+                    term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
+                log(f"trying {cand.name}")
+                best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
+                # columns of the candidate the base model already spans are held at zero
+                # (reported), so the rest of it can still be tested
+                held = _collinear_columns(best, n_base_terms)
+                if held.size and held.size < best.terms[-1].n_free():
+                    t2 = _hold(best.terms[-1], held)
+                    best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
+                    held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
+            if best is None:
+                continue
+            dchi = current.chi2 - best.chi2
+            k = best.n_determined(len(best.terms) - 1)
+            dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
+            dho = current.heldout_chi2 - best.heldout_chi2
+            trials.append((dbic, cand, best, dho, dchi, k))
+        trials.sort(key=lambda x: x[0])
+        # candidates equal to rounding (the same fitted error, e.g. an offset per direction
+        # and a delay at one speed), wherever they stand in the order: the catalog's order
+        # decides, not the last digit
+        rank = {c.name: i for i, c in enumerate(applicable)}
+        g0 = 0
+        while g0 < len(trials):
+            tol = 1e-7 * max(1.0, abs(trials[g0][0]))
+            g1 = g0 + 1
+            while g1 < len(trials) and trials[g1][0] - trials[g0][0] <= tol:
+                g1 += 1
+            trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x[1].name])
+            g0 = g1
+        kept_resid = None
+        chosen = None
+        for dbic, cand, fr, dho, dchi, k_new in trials:
+            reasons = []
+            if k_new == 0:
+                rejected.append(
+                    {
+                        "name": cand.name,
+                        "reason": "confounded: all its parameters are already taken by the base "
+                        f"model or by {', '.join(s.name for s in accepted) or 'nothing else'} "
+                        "(shared orders go to the effect accepted first)",
+                    }
+                )
+                continue
+            if dbic > -BIC_MIN:
+                reasons.append(f"information criterion not lowered enough (dBIC {dbic:.1f})")
+            if dho < HELDOUT_MIN:
+                reasons.append(
+                    f"held-out chi-square lowered by {dho:.1f} only (needs {HELDOUT_MIN:.0f})"
+                )
+            term = fr.terms[-1]
+            trms = _term_rms(fitter, term, prep)
+            erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
+            if trms > PLAUSIBLE_RATIO * max(erms, 1e-300) and trms > 1.0:
+                reasons.append(
+                    f"implausible: its own size ({trms:.3g} noise units RMS) is over "
+                    f"{PLAUSIBLE_RATIO:.0f}x the residual it explains ({erms:.3g})"
+                )
+            col = _collinearity(fr, n_base_terms)
+            if np.isfinite(col) and col > COLLINEAR_REFUSE:
+                reasons.append(
+                    f"ill-conditioned against the base model (canonical correlation {col:.4f})"
+                )
+            if cand.plausible is not None:
+                why = cand.plausible(prep.ctx, term.values)
+                if why:
+                    reasons.append(f"implausible: {why}")
+            if reasons:
+                rejected.append(
+                    {"name": cand.name, "reason": "; ".join(reasons), "delta_bic": float(dbic)}
+                )
+                continue
+            if chosen is not None:
+                gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
+                if gap < TIE_CHI2 and corr > TIE_CORR:
+                    # not decided by the criterion: reported with the chosen one
+                    chosen[8].append(
+                        {
+                            "name": cand.name,
+                            "reason": f"the data cannot tell it from {chosen[0].name}: it "
+                            f"fits as well (chi-square {gap:+.1f}, needs {TIE_CHI2:.0f} to "
+                            f"decide) and its fitted error is the same (correlation "
+                            f"{corr:.3f})",
+                            "delta_bic": float(dbic),
+                            "params": {
+                                q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params
+                            },
+                        }
+                    )
+                    continue
+                rejected.append(
+                    {
+                        "name": cand.name,
+                        "reason": f"{chosen[0].name} lowers the "
+                        f"criterion more (dBIC {chosen[2]:.1f} vs {dbic:.1f})",
+                        "delta_bic": float(dbic),
+                    }
+                )
+                continue
+            # it must explain a fair share of everything located, so that a larger
+            # structure it cannot explain is not pinned on it through a small part of it
+            p0 = sum(f.power - f.dof for f in findings)
+            steps_left: list[dict] = []
+            if p0 > 0:
+                after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+                # steps it leaves (a smooth model fitted to a step moves its change point)
+                steps_left = _free_steps(prep, after)
+                p1 = sum(f.power - f.dof for f in after)
+                # and clear the places its own signature located (not a larger structure
+                # there that it only dents, e.g. a step fitted by a drift)
+                sig = set(cand.signature) or {f.view for f in findings}
+                # an integer order it leaves untouched is another effect's (several
+                # effects at once share the views), not structure it only dents
+                left = _untouched_orders(findings, after)
+                m0 = sum(
+                    f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left
+                )
+                m1 = sum(
+                    f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left
+                )
+                if m0 > 0 and m1 > SIGNATURE_LEFT_MAX * m0:
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": f"leaves {100 * m1 / m0:.0f}% of the structure its "
+                            f"signature views ({', '.join(sorted(sig))}) located in place",
+                            "delta_bic": float(dbic),
+                        }
+                    )
+                    continue
+                if p1 > (1.0 - LOCATED_SHARE_MIN) * p0:
+                    rejected.append(
+                        {
+                            "name": cand.name,
+                            "reason": f"explains only {100 * (1 - p1 / p0):.0f}% of the located "
+                            f"structure (needs {100 * LOCATED_SHARE_MIN:.0f}%)",
+                            "delta_bic": float(dbic),
+                        }
+                    )
+                    continue
+            # a step located where nothing in the catalog changes (no reversal, no change of
+            # speed) is the alternative it must beat: a drift or a scale error only dents it
+            why = _beaten_by_step(fitter, prep, current, fr, free_steps + steps_left, step_fits)
+            if why:
+                rejected.append({"name": cand.name, "reason": why[0], "delta_bic": float(dbic)})
+                step_refusals.append((cand.name, why[1]))
+                continue
+            notes = []
+            if held_notes.get(cand.name):
+                notes.append(
+                    "held at zero, already spanned by the base model (canonical correlation "
+                    f"> {COLLINEAR_REFUSE}): {', '.join(held_notes[cand.name][:12])}"
+                )
+            if col > COLLINEAR_NOTE:
+                notes.append(
+                    f"nearly collinear with the base model (canonical correlation "
+                    f"{col:.3f}): part of it could be absorbed by base parameters"
+                )
+            chosen = (cand, fr, dbic, dho, col, notes, trms, erms, [])
+        if chosen is None:
+            break
+        cand, fr, dbic, dho, col, notes, trms, erms, confounded = chosen
+        if confounded:
+            notes = [
+                *notes,
+                "confounded with "
+                + ", ".join(c["name"] for c in confounded)
+                + ": this recording cannot tell them apart; the name is only the one with "
+                "the lower information criterion",
+            ]
+        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
+        if full.chi2 <= fr.chi2:
+            fr = full
+        del cur_resid  # (one residual held at a time)
+        resid = fitter.residual(fr.terms)
+        accepted.append(Step(cand.name, fr, dbic, dho, col, notes, trms, erms, confounded))
+        log(f"named {cand.name}")
+        current, cur_resid = fr, resid
+        findings = locate(prep, cur_resid, views, scan_order)
+    # backward check: each named effect must still earn its place on held-out data (the
+    # others held at their nonlinear values: one linear refit each)
+    without: dict[str, FitResult] = {}
+    if len(accepted) > 1:
+        for s in list(accepted):
+            others = _frozen([t for t in current.terms if t.cand.name != s.name])
+            fr = fitter.fit(others)
+            without[s.name] = fr
+            if fr.heldout_chi2 - current.heldout_chi2 < HELDOUT_MIN:
+                accepted.remove(s)
+                rejected.append(
+                    {
+                        "name": s.name,
+                        "reason": "backward check: with the other "
+                        "named effects it no longer lowers the held-out residual",
+                    }
+                )
+                current = fitter.fit(
+                    _unfrozen(fr.terms, [t for t in current.terms if t.cand.name != s.name])
+                )
+                cur_resid = fitter.residual(current.terms)
+                findings = locate(prep, cur_resid, views, scan_order)
+                without = {}
+    # a step that refused a candidate is reported where it was located (a smooth base or
+    # effect fitted to it moves the change point the final residual's time view sees)
+    done: set = set()
+    for name, f in step_refusals:
+        key = (tuple(f.where["runs"]), tuple(f.where["heads"]))
+        if key in done:  # one refined step per run and heads: the first refusal's
+            continue
+        done.add(key)
+        ts = f.detail["step_time_s"]
+        seen = [
+            g
+            for g in findings
+            if g.view == "time"
+            and g.detail.get("shape") == "step"
+            and g.where["runs"] == f.where["runs"]
+            and min(g.where["times_s"]) - 4 * g.detail["block_s"]
+            <= ts
+            <= max(g.where["times_s"]) + 4 * g.detail["block_s"]
+        ]
+        if seen:  # the final residual's own step: refined with the final model
+            _refine_step(fitter, prep, current.terms, seen[0])
+            seen[0].where["times_s"] = list(seen[0].detail["step_times_s"])
+            continue
+        _refine_step(fitter, prep, current.terms, f)
+        f.where["times_s"] = list(f.detail["step_times_s"])
+        f.detail["shape"] = "step"
+        if not any(h is f for h in findings):  # else a finding of the final residual
+            f.detail["located_with"] = f"located in the residual of the model with {name}"
+            findings = sorted([*findings, f], key=lambda g: g.log10_p)
+    # shares: what each effect explains given the others
+    shares = {}
+    total = base.chi2 - current.chi2
+    for s in accepted:
+        fr = without.get(s.name)
+        if fr is None:
+            others = _frozen([t for t in current.terms if t.cand.name != s.name])
+            fr = fitter.fit(others) if len(accepted) > 1 else base
+        shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
+    return dict(
+        base=base,
+        # the base residual again (one pass): not held through the selection
+        base_resid=cur_resid if current is base else fitter.residual(base.terms),
+        findings0=findings0,
+        gof0=gof0,
+        final=current,
+        final_resid=cur_resid,
+        findings=findings,
+        accepted=accepted,
+        rejected=rejected,
+        not_testable=not_testable,
+        shares=shares,
+        tried=sorted(tried_names),
+    )
