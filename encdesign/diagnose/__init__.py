@@ -23,6 +23,11 @@ from ._dispatch import (
     load_candidates as load_candidates,
 )
 from ._plots import engine_plots as write_diagnosis_plots
+from ._settings import (
+    DEFAULT_SETTINGS as DEFAULT_SETTINGS,
+    FinderSettings as FinderSettings,
+    settings_table as settings_table,
+)
 
 
 def diagnosis_report_text(d: Diagnosis) -> str:

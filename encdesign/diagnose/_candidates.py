@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from ._settings import DEFAULT_SETTINGS, FinderSettings
+
 ROW_COLUMNS = {
     "t": "time within the run, s",
     "tau": "global time (runs end to end in file order), s",
@@ -112,6 +114,8 @@ class Context:
         noise: noise std per channel (difference-based estimate), residual unit.
         revolutions: revolutions covered per run.
         meta: the recording's TOML content.
+        settings: the finder's thresholds (:class:`~encdesign.diagnose.FinderSettings`)
+            this diagnosis runs with (a candidate's ``plausible`` rule may read them).
     """
 
     kind: str
@@ -126,6 +130,7 @@ class Context:
     noise: np.ndarray
     revolutions: np.ndarray
     meta: Mapping[str, Any]
+    settings: FinderSettings = DEFAULT_SETTINGS
 
 
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]

@@ -20,6 +20,7 @@ from typing import Any
 from .._errors import input_error
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
+from ._settings import FinderSettings
 
 ENGINE_KINDS = ("multihead", "motion", "sds", "quadrature")
 
@@ -89,6 +90,7 @@ def diagnose(
     verbose: bool = False,
     plots: str | os.PathLike | None = None,
     throw: bool = False,
+    settings: FinderSettings | None = None,
 ) -> Diagnosis:
     """Diagnose a recording of any kind.
 
@@ -101,6 +103,8 @@ def diagnose(
         verbose: a progress bar on stderr.
         plots: folder for PNG figures.
         throw: raise ``RuntimeError`` when a fit did not converge (else ``status`` says so).
+        settings: the finder's decision thresholds (:class:`FinderSettings`; default: the
+            tuned defaults).
 
     Raises:
         EncdesignInputError: a recording that cannot be diagnosed.
@@ -117,6 +121,7 @@ def diagnose(
         max_effects=max_effects,
         extra_candidates=candidates,
         verbose=verbose,
+        settings=settings,
     )
     if rec.kind == "quadrature":
         from ._quadrature import run_quadrature
@@ -131,10 +136,6 @@ def diagnose(
             from ._motion import MOTION as kind
         doc = run_engine(kind, rec, **opts)
     plot_data = doc.pop("_plot")
-    if rec.kind == "sds":
-        from ._sds import finish_sds
-
-        doc = finish_sds(doc)
     d = Diagnosis(doc, doc["status"], plot_data)
     if plots is not None:
         from ._plots import engine_plots

@@ -9,7 +9,6 @@ import numpy as np
 
 from ._fit import FitResult, Term
 from ._protocol import Prepared
-from ._settings import LATTICE_NOISE_SHARE
 from ._views import order_sums, run_spans
 
 # ----------------------------------------------------------------------------- run + JSON
@@ -61,12 +60,9 @@ def _scan_order(limit: int, order: int) -> int:
 
 SWEEP_WINDOW = 9
 """Rows of the centred moving mean of :func:`_sweep_grid` (odd)."""
-SWEEP_COHERENCE = 0.5
-"""Above it, the moving mean's phase on the lattice is locked: a sampled sweep, not a
-quantized reading."""
 
 
-def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
+def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat, coherence: float) -> bool:
     """Whether a value lattice is only the time grid of a steady sweep.
 
     An evenly sampled steady sweep advances a fixed number of "steps" per sample: its values
@@ -74,7 +70,7 @@ def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
     The tell is the unquantized signal: the centred moving mean over ``SWEEP_WINDOW`` rows of a
     quantized reading follows the signal between the levels (its phase ``u`` on the lattice
     spreads over the step, dithered or not), while that of a sampled sweep stays on the lattice
-    (``|mean exp(2 pi i u)| > SWEEP_COHERENCE``)."""
+    (``|mean exp(2 pi i u)| > prep.settings.sweep_coherence``)."""
     q = float(lat.lsb_rad)
     z, n = 0j, 0
     for r, (a, b) in run_spans(run):
@@ -89,7 +85,7 @@ def _sweep_grid(v: np.ndarray, keep: np.ndarray, run: np.ndarray, lat) -> bool:
             u = (ma - lat.offset_rad.get(int(r), 0.0)) / q
             z += np.sum(np.exp(2j * np.pi * u))
             n += ma.size
-    return n > 0 and abs(z) / n > SWEEP_COHERENCE
+    return n > 0 and abs(z) / n > coherence
 
 
 LATTICE_ROWS = 1 << 14
@@ -102,7 +98,7 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
 
     Per channel, the readings of the kept rows (each run with its own zero) are tested for a
     lattice ``c_r + q k`` (``_reference_terms.detect_lsb``); a channel whose floor
-    ``q^2 / 12`` is at least ``LATTICE_NOISE_SHARE`` of its measured noise variance (which,
+    ``q^2 / 12`` is at least ``settings.lattice_noise_share`` of its measured noise variance (which,
     estimated from the data, includes the quantization) carries the effect. A dithered
     staircase (noise ahead of the quantizer above about ``q / 2``) leaves nothing for a
     model of the reading to fit: the finding is the LSB itself, so ``delta_bic``,
@@ -121,10 +117,12 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     chans, lsb, share, offsets = [], [], [], []
     for k in range(reading.shape[1]):
         lat = detect_lsb(reading[keep, k], run[keep])
-        if lat.lsb_rad is None or _sweep_grid(reading[:, k], keep, run, lat):
+        if lat.lsb_rad is None or _sweep_grid(
+            reading[:, k], keep, run, lat, prep.settings.sweep_coherence
+        ):
             continue
         sh = (lat.lsb_rad**2 / 12.0) / float(prep.sigma[k]) ** 2
-        if sh >= LATTICE_NOISE_SHARE:
+        if sh >= prep.settings.lattice_noise_share:
             chans.append(k)
             lsb.append(float(lat.lsb_rad))
             share.append(float(min(sh, 1.0)))

@@ -46,12 +46,8 @@ from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._prepare import noise_spectral, prepare
 from ._protocol import Kind, Prepared
 from ._select import select
-from ._settings import MAX_PARAM_FRACTION
+from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._views import locate
-
-GROWTH_LEFT_MAX = 0.2
-"""The grown base must leave at most this share of the structure the views located (excess
-chi-square over their degrees of freedom) in the base residual, or the growth is undone."""
 
 
 def _grow_base_order(
@@ -68,7 +64,7 @@ def _grow_base_order(
     error function has every order, and one left out would be reported as structure no
     effect explains. Not when the residual also shows a line at the signal period (aliased,
     it can pose as integer orders) or structure tied to the direction or speed (the
-    candidates' to explain); and the grown base must leave at most ``GROWTH_LEFT_MAX`` of
+    candidates' to explain); and the grown base must leave at most ``settings.growth_left_max`` of
     what every view located (a line in Hz, a step or a drift that only leaks into high orders
     stays the candidates'; a strong order's leakage into lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period
@@ -117,7 +113,7 @@ def _grow_base_order(
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
     after = locate(prep, fitter.residual(grown.terms), kind.views, _scan_order(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
-    if p1 > GROWTH_LEFT_MAX * p0:
+    if p1 > prep.settings.growth_left_max * p0:
         prep.consts["max_order"] = order  # type: ignore[index]
         fitter.clear()
         return None
@@ -126,47 +122,59 @@ def _grow_base_order(
     return M, grown
 
 
-def run_engine(
-    kind: Kind,
-    rec,
-    *,
-    max_order: int | None = None,
-    max_effects: int = 3,
-    extra_candidates: Sequence[Candidate] = (),
-    verbose: bool = False,
-) -> dict[str, Any]:
-    """Diagnose ``rec`` with ``kind``; returns the diagnosis JSON document (a dict).
+class _Progress:
+    """The two tqdm bars of a diagnosis (stages, rows of each chunked pass); quiet unless
+    ``verbose`` on a terminal."""
 
-    Raises:
-        EncdesignInputError: a recording the kind cannot diagnose, or ``max_order`` beyond
-            what the record resolves.
-    """
-    from .._progress import progress_bar
+    def __init__(self, verbose: bool):
+        from .._progress import progress_bar
 
-    t0 = time.perf_counter()
-    # a tqdm bar on a terminal only (quiet in pipes, logs and tests), through every stage
-    bar = progress_bar("diagnose", 6, enabled=verbose, unit="stage")
+        self.verbose = verbose
+        self.bar = progress_bar("diagnose", 6, enabled=verbose, unit="stage")
+        self.rows = None
+        self.bar.set_postfix_str("preparing")
 
-    def stage(name: str) -> None:
-        bar.set_postfix_str(name)
-        bar.update(1)
+    def stage(self, name: str) -> None:
+        self.bar.set_postfix_str(name)
+        self.bar.update(1)
 
-    bar.set_postfix_str("preparing")
-    kd = kind.data(rec)
-    meta = dict(rec.meta)
-    meta.setdefault("kind", rec.kind)
-    prep = (kind.prepare or prepare)(kd, meta)
-    stage("prepared")
+    def log(self, msg: str) -> None:
+        if self.verbose:
+            self.bar.set_postfix_str(msg)
+
+    def chunk_done(self, a: int, b: int, n: int) -> None:
+        if self.rows is None:
+            from .._progress import progress_bar
+
+            self.rows = progress_bar("  pass", n, enabled=self.verbose, unit="row")
+        if a == 0:
+            self.rows.reset(total=n)
+        self.rows.update(b - a)
+
+    def close(self) -> None:
+        if self.rows is not None:
+            self.rows.close()
+        self.bar.close()
+
+
+def _order_of(kd, prep: Prepared, kind: Kind, max_order: int | None) -> tuple[int, int]:
+    """``(order, limit)``: the base order to start from and the highest the record
+    resolves. Raises EncdesignInputError for a ``max_order`` beyond the limit."""
     limit = int(kind.max_order_limit(prep))
     if max_order is not None and max_order > limit:
         raise input_error(
             f"{kd.where}: --max-order",
             f"got {max_order}; this record resolves orders up to {limit} "
             "(half the samples per revolution of its slowest-sampled run, and at most "
-            f"{MAX_PARAM_FRACTION:.0%} of the fitted values as parameters)",
+            f"{prep.settings.max_param_fraction:.0%} of the fitted values as parameters)",
             f"a max order <= {limit}",
         )
     order = min(limit, kind.default_max_order) if max_order is None else max_order
+    return order, limit
+
+
+def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
+    """The kind's base terms at ``order`` (scales from the noise) and its base info."""
     prep.consts["max_order"] = order  # type: ignore[index]
     base_spec, base_info = kind.base(prep, order)
     base_terms = [make_term(c, prep, st) for c, st in base_spec]
@@ -174,27 +182,41 @@ def run_engine(
         for q in tm.cand.params:
             if q.scale is None:
                 tm.scale[q.name][...] = float(np.mean(prep.sigma))
-    # a second bar moves through every chunked pass over the rows (fits, residuals)
-    rows_bar = progress_bar("  pass", prep.n, enabled=verbose, unit="row")
+    return base_terms, base_info
 
-    def chunk_done(a: int, b: int, n: int) -> None:
-        if a == 0:
-            rows_bar.reset(total=n)
-        rows_bar.update(b - a)
 
-    fitter = Fitter(prep, progress=chunk_done)
-    cands = list(kind.candidates(prep.ctx)) + list(extra_candidates)
-    seen: dict[str, Candidate] = {}
-    for c in cands:
-        seen[c.name] = c  # later ones (reference terms, user terms) override by name
-    cands = list(seen.values())
-    scan = _scan_order(limit, order)
+def _align(prep: Prepared, fitter: Fitter, base_info: dict, fit: FitResult) -> None:
+    """Rotation-locked candidates see the aligned angle (the kind's ``align`` hook)."""
+    if "align" in base_info:
+        aligned = base_info["align"](fit.terms, prep)
+        if callable(aligned):  # a lazy column fn(lo, hi)
+            prep.rows.set_lazy("theta", aligned)
+        else:
+            prep.rows["theta"] = aligned
+        fitter.clear()
 
-    def log(msg: str) -> None:
-        if verbose:
-            bar.set_postfix_str(msg)
 
-    # alignment: after the base fit, rotation-locked candidates see the aligned angle
+def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) -> None:
+    """The noise from the base residual's periodogram (structure cannot inflate it), or the
+    kind's own estimate; the fitter's weights follow."""
+    r_base = fitter.residual(fit.terms)
+    if kind.noise is not None and kind.noise_replaces:
+        sig = np.asarray(kind.noise(prep, r_base), float)
+    else:
+        sig = noise_spectral(prep, r_base)
+        if kind.noise is not None:  # the kind's second estimate: the smaller of the two
+            sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
+    del r_base
+    if np.all(np.isfinite(sig)) and np.all(sig > 0):
+        prep.sigma = sig
+        prep.ctx.noise[...] = sig
+        fitter.w_ch = 1.0 / sig**2
+        fitter.clear()
+
+
+def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
+    """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
+    growth. Returns ``(base_fit, order)``."""
     base_fit = fitter.fit(base_terms)
     refined = base_info["refine"](base_fit.terms, prep) if "refine" in base_info else None
     if refined:
@@ -203,81 +225,63 @@ def run_engine(
         base_info["refined"] = refined
         fitter.clear()
         base_fit = fitter.fit(base_fit.terms)
-
-    def align(fit: FitResult) -> None:
-        if "align" in base_info:
-            aligned = base_info["align"](fit.terms, prep)
-            if callable(aligned):  # a lazy column fn(lo, hi)
-                prep.rows.set_lazy("theta", aligned)
-            else:
-                prep.rows["theta"] = aligned
-            fitter.clear()
-
-    align(base_fit)
-
-    def estimate_noise(fit: FitResult) -> None:
-        # the noise from the base residual's periodogram (structure cannot inflate it);
-        # refit the weights with it
-        r_base = fitter.residual(fit.terms)
-        if kind.noise is not None and kind.noise_replaces:
-            sig = np.asarray(kind.noise(prep, r_base), float)
-        else:
-            sig = noise_spectral(prep, r_base)
-            if kind.noise is not None:  # the kind's second estimate: the smaller of the two
-                sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
-        del r_base
-        if np.all(np.isfinite(sig)) and np.all(sig > 0):
-            prep.sigma = sig
-            prep.ctx.noise[...] = sig
-            fitter.w_ch = 1.0 / sig**2
-            fitter.clear()
-
-    estimate_noise(base_fit)
-    for _ in range(2 if kind.grows_orders and max_order is None else 0):
+    _align(prep, fitter, base_info, base_fit)
+    _estimate_noise(kind, prep, fitter, base_fit)
+    for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
         order, base_fit = grown
-        scan = _scan_order(limit, order)
-        align(base_fit)  # the refit moved the run offsets a little
-        estimate_noise(base_fit)  # the orders it left out were in the residual
-    stage("base fitted")
-    sel = select(prep, fitter, base_fit.terms, cands, kind.views, scan, max_effects, log)
-    stage("selected")
+        _align(prep, fitter, base_info, base_fit)  # the refit moved the run offsets a little
+        _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
+    return base_fit, order
+
+
+def _effect_json(prep: Prepared, sel: dict, s) -> dict:
+    """One named effect of the selection as its JSON entry."""
+    final = sel["final"]
+    idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
+    term = final.terms[idx]
+    derived = {}
+    if term.cand.derived is not None:
+        derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
+    chans = _significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
+    names = prep.kd.channel_names
+    return {
+        "name": s.name,
+        "params": term_params(term, final, idx),
+        "derived": derived,
+        "channels": [names[k] for k in chans] if chans is not None else None,
+        "rms_after": s.fit.rms(prep),
+        "heldout_rms_after": s.fit.heldout_rms(prep),
+        "delta_bic": float(s.delta_bic),
+        "delta_heldout_chi2": float(s.delta_heldout),
+        "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
+        "share": float(sel["shares"].get(s.name, 0.0)),
+        "size_rms": float(s.term_rms * float(np.mean(prep.sigma))),
+        "notes": s.notes,
+        "explanation": term.cand.explanation,
+        "confounded_with": s.confounded,
+    }
+
+
+def decide_verdict(doc: dict) -> str:
+    """The verdict, decided once from the finished document: ``missing_physics`` when an
+    effect is named, ``unexplained`` when structure is located that none explains or the
+    goodness-of-fit test fails, else ``consistent``."""
+    if doc["effects"]:
+        return "missing_physics"
+    if doc["unexplained"] or not (doc.get("goodness_of_fit") or {}).get("passes", True):
+        return "unexplained"
+    return "consistent"
+
+
+def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
+    """The diagnosis document before the kind's additions, the verdict and the report."""
+    kd = prep.kd
     base, final = sel["base"], sel["final"]
-    C = prep.n_channels
     sig_mean = float(np.mean(prep.sigma))
-    gof = goodness_of_fit(prep, sel["final_resid"], final.n_params)
-    gof_base = sel["gof0"]
-    stage("held-out + goodness of fit")
-    effects = []
-    for s in sel["accepted"]:
-        idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
-        term = final.terms[idx]
-        params = term_params(term, final, idx)
-        derived = {}
-        if term.cand.derived is not None:
-            derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
-        chans = _significant_channels(term, final, idx, C, prep.ctx.n_runs)
-        expl = term.cand.explanation
-        effects.append(
-            {
-                "name": s.name,
-                "params": params,
-                "derived": derived,
-                "channels": [kd.channel_names[k] for k in chans] if chans is not None else None,
-                "rms_after": s.fit.rms(prep),
-                "heldout_rms_after": s.fit.heldout_rms(prep),
-                "delta_bic": float(s.delta_bic),
-                "delta_heldout_chi2": float(s.delta_heldout),
-                "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
-                "share": float(sel["shares"].get(s.name, 0.0)),
-                "size_rms": float(s.term_rms * sig_mean),
-                "notes": s.notes,
-                "explanation": expl,
-                "confounded_with": s.confounded,
-            }
-        )
+    effects = [_effect_json(prep, sel, s) for s in sel["accepted"]]
     unexplained = [
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
         for f in sel["findings"][:12]
@@ -286,12 +290,6 @@ def run_engine(
         q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
         if q_eff is not None:
             effects.append(q_eff)
-    if effects:
-        verdict = "missing_physics"
-    elif unexplained or not gof["passes"]:
-        verdict = "unexplained"
-    else:
-        verdict = "consistent"
     nuis_notes = []
     if prep.excluded:
         nuis_notes.append(
@@ -305,12 +303,11 @@ def run_engine(
         for i, t in enumerate(final.terms)
         if t.cand.name in base_params
     }
-    stage("report")
     doc = {
         "format": "encdesign-diagnosis/2",
         "kind": rec.kind,
         "recording": str(rec.path) if rec.path is not None else None,
-        "verdict": verdict,
+        "verdict": None,  # decided once, after the kind's additions (decide_verdict)
         "unit": kd.unit,
         "rms_before": base.rms(prep),
         "heldout_rms_before": base.heldout_rms(prep),
@@ -323,8 +320,8 @@ def run_engine(
             "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
             "differences for the first weights and the glitch scan",
         },
-        "goodness_of_fit": gof,
-        "goodness_of_fit_base": gof_base,
+        "goodness_of_fit": goodness_of_fit(prep, sel["final_resid"], final.n_params),
+        "goodness_of_fit_base": sel["gof0"],
         "heldout": prep.fold_design,
         "excluded_segments": prep.excluded,
         "glitches": prep.glitches,
@@ -342,7 +339,7 @@ def run_engine(
             "terms": base_params,
             "max_order": order,
             "max_order_limit": limit,
-            "max_param_fraction": MAX_PARAM_FRACTION,
+            "max_param_fraction": prep.settings.max_param_fraction,
             "n_params": base.n_params,
             "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
             "has_theta_ref": prep.ctx.has_ref,
@@ -355,13 +352,74 @@ def run_engine(
         "status": "ok"
         if (base.converged and final.converged)
         else "a least-squares fit stopped before converging",
-        "time_s": time.perf_counter() - t0,
+        "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
     doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
     if kind.summary is not None:
         doc.update(kind.summary(prep, base_params))
-    doc["report"] = report_text(doc)
-    rows_bar.close()
-    bar.close()
+    return doc
+
+
+def run_engine(
+    kind: Kind,
+    rec,
+    *,
+    max_order: int | None = None,
+    max_effects: int = 3,
+    extra_candidates: Sequence[Candidate] = (),
+    verbose: bool = False,
+    settings: FinderSettings | None = None,
+) -> dict[str, Any]:
+    """Diagnose ``rec`` with ``kind``; returns the diagnosis JSON document (a dict, with
+    ``_plot`` for the plots).
+
+    The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
+    before the verdict, which :func:`decide_verdict` decides once, and before the report,
+    built once from the finished document.
+
+    Raises:
+        EncdesignInputError: a recording the kind cannot diagnose, or ``max_order`` beyond
+            what the record resolves.
+    """
+    settings = DEFAULT_SETTINGS if settings is None else settings
+    t0 = time.perf_counter()
+    pg = _Progress(verbose)
+    try:
+        kd = kind.data(rec)
+        meta = dict(rec.meta)
+        meta.setdefault("kind", rec.kind)
+        prep = (kind.prepare or prepare)(kd, meta, settings)
+        pg.stage("prepared")
+        order, limit = _order_of(kd, prep, kind, max_order)
+        base_terms, base_info = _base_terms(kind, prep, order)
+        fitter = Fitter(prep, progress=pg.chunk_done)
+        seen: dict[str, Candidate] = {}
+        for c in [*kind.candidates(prep.ctx), *extra_candidates]:
+            seen[c.name] = c  # later ones (reference terms, user terms) override by name
+        grow = kind.grows_orders and max_order is None
+        base_fit, order = _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow)
+        scan = _scan_order(limit, order)
+        pg.stage("base fitted")
+        sel = select(
+            prep,
+            fitter,
+            base_fit.terms,
+            list(seen.values()),
+            kind.views,
+            scan,
+            max_effects,
+            pg.log,
+        )
+        pg.stage("selected")
+        pg.stage("held-out + goodness of fit")
+        doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
+        pg.stage("report")
+        if kind.finish is not None:
+            doc = kind.finish(doc, settings)
+        doc["verdict"] = decide_verdict(doc)
+        doc["time_s"] = time.perf_counter() - t0
+        doc["report"] = report_text(doc) + (kind.report_lines(doc) if kind.report_lines else "")
+    finally:
+        pg.close()
     doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])
     return doc

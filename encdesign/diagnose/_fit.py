@@ -15,8 +15,8 @@ from scipy import stats
 
 from ._candidates import Candidate
 from ._protocol import Prepared
-from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR, N_FOLDS
-from ._views import ALPHA, SCAN_BLOCK
+from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
+from ._views import SCAN_BLOCK
 
 # ----------------------------------------------------------------------------- fitting
 
@@ -263,7 +263,7 @@ class Fitter:
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]
         order = np.argsort(f, kind="stable")
-        edges = np.searchsorted(f[order], np.arange(N_FOLDS + 1) - 0.5)
+        edges = np.searchsorted(f[order], np.arange(self.prep.settings.n_folds + 1) - 0.5)
         return order, edges
 
     def stats(self, terms: Sequence[Term], jac: bool = True):
@@ -273,7 +273,7 @@ class Fitter:
         Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
         costs the products with the candidate's columns only."""
         prep = self.prep
-        K = N_FOLDS
+        K = prep.settings.n_folds
         terms = list(terms)
         static = [t for t in terms if self._linear_only(t)]
         dyn = [t for t in terms if not self._linear_only(t)]
@@ -624,6 +624,6 @@ def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
         },
         "n_values": N,
         "n_params": n_params,
-        "alpha": ALPHA,
-        "passes": bool(p >= ALPHA),
+        "alpha": prep.settings.alpha,
+        "passes": bool(p >= prep.settings.alpha),
     }

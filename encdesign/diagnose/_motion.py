@@ -35,7 +35,6 @@ from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
 from ._protocol import Kind, KindData, Prepared
-from ._settings import MAX_PARAM_FRACTION
 
 EXPLANATIONS = {
     "cogging": (
@@ -227,15 +226,9 @@ def _poly_candidate(R: int, D: int = 3) -> Candidate:
     )
 
 
-DRIFT_TURNS_PER_DEGREE = 3.0
-"""Revolutions per degree of the drift polynomial above 3: a speed loop's wander slower than
-about a sixth of the revolution rate is base, not ripple (a degree ``D`` polynomial follows
-about ``D / 2`` cycles over the run, the revolution rate is ``turns`` cycles)."""
-
-
-def drift_degree(revolutions: float) -> int:
+def drift_degree(revolutions: float, turns_per_degree: float = 3.0) -> int:
     """Degree of the drift polynomial of a run of ``revolutions`` turns (3 to 15)."""
-    return int(min(15, 3 + max(0.0, revolutions - 3.0) // DRIFT_TURNS_PER_DEGREE))
+    return int(min(15, 3 + max(0.0, revolutions - 3.0) // turns_per_degree))
 
 
 def motion_limit(prep: Prepared) -> int:
@@ -247,8 +240,10 @@ def motion_limit(prep: Prepared) -> int:
         if prep.ctx.revolutions[r] > 0
     ]
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
-    D = drift_degree(float(np.min(prep.ctx.revolutions)))
-    budget = int((MAX_PARAM_FRACTION * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2)
+    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings.drift_turns_per_degree)
+    budget = int(
+        (prep.settings.max_param_fraction * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2
+    )
     prep.consts["nyquist_order"] = int(max(1, nyq))  # the candidates' fundamentals reach it
     return int(max(1, min(nyq, budget)))
 
@@ -265,7 +260,7 @@ def motion_base(prep: Prepared, M: int):
     prep.rows["t_norm"] = tn
     motor = prep.ctx.meta.get("motor", {})
     p = int(motor["pole_pairs"])
-    D = drift_degree(float(np.min(prep.ctx.revolutions)))
+    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings.drift_turns_per_degree)
     terms = [(_poly_candidate(prep.ctx.n_runs, D), {})]
     design = []
     if "commutation_states" in motor:

@@ -34,7 +34,6 @@ from ..io._recording import Recording
 from . import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._protocol import Kind, KindData, Prepared
-from ._settings import MAX_PARAM_FRACTION
 from ._views import Finding, _logp, _thr, run_spans
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)
@@ -92,11 +91,6 @@ def multihead_data(rec: Recording) -> KindData:
     )
 
 
-COVERAGE_MIN = 0.05
-"""Smallest eigenvalue of the correlation matrix of the base model's columns (orders 1..M
-and the run constants, over the kept samples) for which orders 1..M count as resolved: 1 when
-the samples cover the circle evenly, 0 when an order aliases exactly onto lower ones."""
-
 COVERAGE_ORDER_MAX = 48
 """Orders the coverage test looks at (the engine's default base order and its scan of the
 residual stay below this)."""
@@ -105,9 +99,11 @@ COVERAGE_ROWS = 200_000
 """Kept rows (drawn at random, fixed seed) the coverage moments are summed over."""
 
 
-def coverage_limit(theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int) -> int:
+def coverage_limit(
+    theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int, coverage_min: float = 0.05
+) -> int:
     """Highest order ``M <= m_max`` such that ``cos m theta, sin m theta`` (m = 1..M) and one
-    constant per run are well conditioned over the samples (``COVERAGE_MIN``).
+    constant per run are well conditioned over the samples (``FinderSettings.coverage_min``).
 
     Many revolutions sampled at a rate that is not a whole number of samples per
     revolution fill the circle although each revolution has few samples: orders far above
@@ -149,7 +145,7 @@ def coverage_limit(theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int) 
         )
         dg = np.sqrt(np.maximum(np.diag(G), 1e-300))
         lam = float(np.linalg.eigvalsh(G / dg[:, None] / dg[None, :])[0])
-        if lam < COVERAGE_MIN:
+        if lam < coverage_min:
             break
         best = M
     return best
@@ -169,14 +165,14 @@ def max_order_limit(prep: Prepared) -> int:
             spr.append(m.sum() / revs)
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
     C, R = prep.n_channels, prep.ctx.n_runs
-    budget = int((MAX_PARAM_FRACTION * prep.n_values - R * C - C - R) // 2)
+    budget = int((prep.settings.max_param_fraction * prep.n_values - R * C - C - R) // 2)
     want = min(budget, COVERAGE_ORDER_MAX)
     if nyq < want:
         idx = np.flatnonzero(keep)
         if idx.size > COVERAGE_ROWS:
             idx = np.sort(np.random.default_rng(0).choice(idx, COVERAGE_ROWS, replace=False))
         th = prep.rows.take("theta", idx) if hasattr(prep.rows, "take") else prep.rows["theta"][idx]
-        nyq = max(nyq, coverage_limit(th, prep.run[idx], R, want))
+        nyq = max(nyq, coverage_limit(th, prep.run[idx], R, want, prep.settings.coverage_min))
     return int(max(1, min(nyq, budget)))
 
 
@@ -749,11 +745,6 @@ def _run_durations(ctx: Context) -> np.ndarray:
     return np.array([np.ptp(t[oh[:, r]]) if oh[:, r].any() else 0.0 for r in range(oh.shape[1])])
 
 
-LOCKED_MARGIN = 10.0
-"""Chi-square (less k ln N) by which a line at one speed near an integer order must beat a
-rotation-locked error there to be a vibration (the information criterion's BIC_MIN)."""
-
-
 def _vb_plausible(ctx, v):
     f = float(v["frequency_hz"])
     if f <= 0:
@@ -764,12 +755,17 @@ def _vb_plausible(ctx, v):
         res = max(0.02, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
         margin = float(np.asarray(v.get("locked_margin", 0.0)))
         # within the span's resolution of an integer order, the data must show that it is
-        # not rotation locked (the line beats the locked order by LOCKED_MARGIN)
-        if abs(order - round(order)) < res and round(order) >= 1 and margin < LOCKED_MARGIN:
+        # not rotation locked (the line beats the locked order by FinderSettings.locked_margin)
+        if (
+            abs(order - round(order)) < res
+            and round(order) >= 1
+            and margin < ctx.settings.locked_margin
+        ):
             return (
                 f"at one speed a line at {f:.4g} Hz is shaft order {order:.3f}: a "
                 f"rotation-locked error at order {round(order)} fits as well (chi-square "
-                f"margin {margin:.1f}, needs {LOCKED_MARGIN:.0f}; two speeds separate them)"
+                f"margin {margin:.1f}, needs {ctx.settings.locked_margin:.0f}; two speeds "
+                "separate them)"
             )
     T = float(np.max(_run_durations(ctx)))
     if f * T < 3.0:
@@ -983,7 +979,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     j = int(np.argmax(gain))
     chi = float(gain[j])
     n_tests = int(e.size)
-    if chi <= _thr(2, n_tests):
+    if chi <= _thr(prep.settings.alpha, 2, n_tests):
         return []
     # refine to the row: the rows of the bins either side of the best edge
     eb = int(e[j])

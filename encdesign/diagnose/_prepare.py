@@ -12,7 +12,7 @@ from scipy import stats
 from .._errors import input_error
 from ._candidates import Context
 from ._protocol import KeptRows, KindData, Prepared, RowColumns
-from ._settings import N_FOLDS
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import SCAN_BLOCK, run_spans
 
 
@@ -383,7 +383,7 @@ def _fold_blocks(prep_keep: np.ndarray, run: np.ndarray, k: int, seed: int = 0):
     return fold, design
 
 
-def prepare(kd: KindData, meta: dict) -> Prepared:
+def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> Prepared:
     """Stage 1: nuisances, noise, folds (see module doc). Raises EncdesignInputError."""
     n, C = kd.y.shape
     where = kd.where
@@ -542,7 +542,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, sigma_r)
     if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         raise input_error(where, "the noise cannot be estimated", "readings that vary")
-    fold, design = _fold_blocks(keep, run, N_FOLDS)
+    fold, design = _fold_blocks(keep, run, settings.n_folds)
     fold[~keep] = -1
     # row columns: the recording's own arrays, or lazy (computed per chunk from them)
     t0_run = np.zeros(R)
@@ -638,6 +638,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         noise=sigma,
         revolutions=revs,
         meta=meta,
+        settings=settings,
     )
     ctx.consts["driver_name"] = driver_name  # type: ignore[index]
     return Prepared(
@@ -657,6 +658,7 @@ def prepare(kd: KindData, meta: dict) -> Prepared:
         fold_design=design,
         run_ids=order_runs,
         run=run,
+        settings=settings,
     )
 
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate, Context
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 # ----------------------------------------------------------------------------- kind data
 
@@ -86,7 +87,7 @@ class Kind:
         max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
         default_max_order: the base model's order when the user gives none.
         summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
-        prepare: ``prepare(kind_data, meta) -> Prepared`` replacing :func:`prepare` for a
+        prepare: ``prepare(kind_data, meta, settings) -> Prepared`` replacing :func:`prepare` for a
             kind whose rows are not a time series of a turning shaft (``sds``: one row per
             platform position); ``None``: the engine's.
         noise: optional ``noise(prep, base_resid) -> (C,)``: a second noise estimate that the
@@ -101,6 +102,11 @@ class Kind:
         reading_lattice: ``True``: the channels are angle readings; one on a value lattice
             whose floor is a material part of its noise names ``quantization`` from the
             lattice (:func:`lattice_effect`).
+        finish: optional ``finish(doc, settings) -> doc``: the kind's additions to the
+            engine's document (effects named from a lattice, located structure no term
+            models, notes); the engine then decides the verdict and builds the report once.
+        report_lines: optional ``report_lines(doc) -> str``: the kind's lines appended to the
+            plain-text report.
     """
 
     name: str
@@ -116,6 +122,8 @@ class Kind:
     noise_replaces: bool = False
     grows_orders: bool = False
     reading_lattice: bool = False
+    finish: Callable[[dict, Any], dict] | None = None
+    report_lines: Callable[[dict], str] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -258,6 +266,7 @@ class Prepared:
     fold_design: dict
     run_ids: np.ndarray
     run: np.ndarray  # run index 0..R-1
+    settings: FinderSettings = DEFAULT_SETTINGS  # the thresholds of this diagnosis
 
     @property
     def n(self) -> int:

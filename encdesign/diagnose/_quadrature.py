@@ -47,9 +47,7 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._document import report_text
 from ._protocol import Kind, KindData, Prepared
-from ._settings import MAX_PARAM_FRACTION
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
 
@@ -419,7 +417,7 @@ def quadrature_limit(prep: Prepared) -> int:
     """Highest radial order the record resolves: an eighth of the kept samples (the phase
     is sampled irregularly), within the parameter budget."""
     n = int(prep.keep.sum())
-    budget = int((MAX_PARAM_FRACTION * prep.n_values - 5) // 2)
+    budget = int((prep.settings.max_param_fraction * prep.n_values - 5) // 2)
     return int(max(3, min(n // 8, budget, 400)))
 
 
@@ -546,6 +544,8 @@ def quadrature_kind(st: dict[str, Any]) -> Kind:
         default_max_order=12,
         summary=lambda prep, bp: quadrature_summary(prep, bp, st),
         noise=quadrature_noise,
+        finish=lambda doc, settings: finish(doc, st),
+        report_lines=quadrature_report_lines,
     )
 
 
@@ -560,13 +560,12 @@ def run_quadrature(rec: Recording, **kw) -> dict[str, Any]:
 
     st = quadrature_start(rec)
     st["has_t"] = "t" in rec.columns
-    doc = run_engine(quadrature_kind(st), rec, **kw)
-    return finish(doc, st)
+    return run_engine(quadrature_kind(st), rec, **kw)
 
 
 def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
-    """Clipping as unexplained structure (the verdict is then never ``consistent``); the
-    report gets the ellipse in signal units and plain Heydemann."""
+    """The kind's additions before the engine's verdict: clipping as unexplained structure
+    (the verdict is then never ``consistent``), the ellipse with the named effects."""
     doc["noise"]["method"] = (
         "the smaller of the median of the base residual's periodogram (rows in time or phase "
         "order) and the second differences of the base residual between neighbours in signal "
@@ -617,9 +616,6 @@ def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
                 "clipped samples were left out of every fit",
             },
         )
-        if doc["verdict"] == "consistent":
-            doc["verdict"] = "unexplained"
-    doc["report"] = report_text(doc) + quadrature_report_lines(doc)
     return doc
 
 

@@ -62,6 +62,7 @@ from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
 from ._fit import _valjac_fn
 from ._protocol import Kind, KindData, Prepared, RowColumns
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import Finding, _logp, _thr, _where
 
 __all__ = [
@@ -74,9 +75,6 @@ __all__ = [
 
 REFERENCE_RADIUS_M = 0.0254
 BEAM_ORDERS = (1, 2, 3)
-N_FOLDS = 5
-LATTICE_COARSER = 1.05
-"""A stamp lattice this much coarser than the declared clock is reported."""
 
 EXPLANATIONS = {
     "axis_tilt": (
@@ -534,7 +532,9 @@ def _folds_by_run(R: int, k: int, seed: int = 0) -> tuple[np.ndarray, dict]:
     return fold, design
 
 
-def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
+def sds_prepare(
+    kd: SDSKindData, meta: dict, settings: FinderSettings = DEFAULT_SETTINGS
+) -> Prepared:
     """Stage 1 for sds: one row per run, every run kept (an SDS run is a platform at rest:
     there is no shaft motion to segment), folds of whole runs, first noise levels."""
     from ._protocol import Prepared
@@ -542,7 +542,7 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
     R, C = kd.y.shape
     if not np.all(np.isfinite(kd.y)):
         raise input_error(kd.where, "non-finite SDS readings", "finite edge times")
-    k = int(min(N_FOLDS, R))
+    k = int(min(settings.n_folds, R))
     if k < 4:
         raise input_error(kd.where, f"{R} runs", "at least 4 runs for the held-out folds")
     fold, design = _folds_by_run(R, k)
@@ -581,8 +581,10 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
         else []
     )
     consts["base_orders"] = orders
-    X, _ = _saturating_columns(rows, consts, orders)
-    sigma = _level_sigma(kd.y, kd.n_revs, X, float(consts["proj"]) > 0)
+    X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
+    sigma = _level_sigma(
+        kd.y, kd.n_revs, X, float(consts["proj"]) > 0, test_p=settings.sds_sigma_test_p
+    )
     ctx = Context(
         kind="sds",
         n_channels=C,
@@ -596,6 +598,7 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
         noise=sigma.copy(),
         revolutions=np.full(R, float(kd.n_revs)),
         meta=meta,
+        settings=settings,
     )
     ctx.consts["driver_name"] = "time"  # type: ignore[index]
     ctx.consts["kd"] = kd  # type: ignore[index]
@@ -616,18 +619,18 @@ def sds_prepare(kd: SDSKindData, meta: dict) -> Prepared:
         fold_design=design,
         run_ids=np.asarray(sorted(set(kd.run.tolist()), key=kd.run.tolist().index)),
         run=np.arange(R),
+        settings=settings,
     )
 
 
-SATURATE_FRACTION = 0.6
-"""The saturated noise fit of the run means uses at most this fraction of their values."""
-
-
-def _saturating_columns(rows: dict, consts: dict, orders_base: list[int]) -> tuple:
+def _saturating_columns(
+    rows: dict, consts: dict, orders_base: list[int], fraction: float = 0.6
+) -> tuple:
     """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
     platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
     and the design orders in ``x = φ + ψ_m``, common orders ``1..L`` in ``φ``, a drift in
-    time; ``L`` as large as ``SATURATE_FRACTION`` of the values allows. Projected on the
+    time; ``L`` as large as ``fraction`` (``FinderSettings.sds_saturate_fraction``) of the values
+    allows. Projected on the
     moving-sensor differences without ``phi_ref``."""
     phi = np.asarray(rows["phi"], float)
     psi_m = np.asarray(consts["psi_m"], float)
@@ -637,7 +640,7 @@ def _saturating_columns(rows: dict, consts: dict, orders_base: list[int]) -> tup
     t = np.broadcast_to(np.asarray(rows["tmid_c"]).mean(1)[:, None], (R, M))
     cols = [np.eye(M)[None, :, :].repeat(R, 0).reshape(R * M, M)]
     n0 = M + 1 + 2 * len(orders_base)
-    L = int(max(0, (SATURATE_FRACTION * R * M - n0) // 4))
+    L = int(max(0, (fraction * R * M - n0) // 4))
     L = min(L, max(1, (R - 1) // 2))
     rot = sorted(set(range(1, L + 1)) | set(orders_base))
     for n in rot:
@@ -652,12 +655,7 @@ def _saturating_columns(rows: dict, consts: dict, orders_base: list[int]) -> tup
     return X, L
 
 
-SIGMA_TEST_P = 1e-4
-"""Tail probability at which the run-mean noise level is widened for its estimation error
-(:func:`dof_widening`)."""
-
-
-def dof_widening(nu: float, q: int = 2, p: float = SIGMA_TEST_P) -> float:
+def dof_widening(nu: float, q: int = 2, p: float = 1e-4) -> float:
     """Factor ``c`` on a noise level estimated with ``nu`` degrees of freedom so that the
     engine's tests, which treat the level as known (chi-square thresholds), keep their
     false-alarm rate: ``c² = q F⁻¹(1 − p; q, nu) / χ²⁻¹(1 − p; q)``, the ratio of the
@@ -683,7 +681,12 @@ def _sensor_helmert(M: int) -> np.ndarray:
 
 
 def _level_sigma(
-    resid: np.ndarray, K: int, X: np.ndarray, proj: bool = False, info: dict | None = None
+    resid: np.ndarray,
+    K: int,
+    X: np.ndarray,
+    proj: bool = False,
+    info: dict | None = None,
+    test_p: float = 1e-4,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -753,7 +756,7 @@ def _level_sigma(
     ssr0, rk0 = float(e @ e), Q.shape[1]
     nu = max(n_ind - rk0, 1)
     s_raw = math.sqrt(ssr0 / nu) if ssr0 > 0 else 0.0
-    c = dof_widening(nu)
+    c = dof_widening(nu, p=test_p)
     out[:M] = s_raw * c
     if C > M:
         H = _sensor_helmert(M)
@@ -782,10 +785,20 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
     """Noise hook: the two levels of :func:`_level_sigma` on the base residual. Also keeps
     the base residual's common-order powers (:func:`common_order_power`) for the
     plausibility of ``beam_tilt_axial``."""
-    X, _ = _saturating_columns(prep.rows, prep.consts, prep.consts.get("base_orders", []))
+    X, _ = _saturating_columns(
+        prep.rows,
+        prep.consts,
+        prep.consts.get("base_orders", []),
+        prep.settings.sds_saturate_fraction,
+    )
     info: dict = {}
     sig = _level_sigma(
-        resid[prep.keep], prep.kd.n_revs, X, float(prep.consts["proj"]) > 0, info=info
+        resid[prep.keep],
+        prep.kd.n_revs,
+        X,
+        float(prep.consts["proj"]) > 0,
+        info=info,
+        test_p=prep.settings.sds_sigma_test_p,
     )
     prep.ctx.consts["noise_info"] = info  # type: ignore[index]
     M = prep.consts["psi_m"].size
@@ -878,7 +891,7 @@ def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[
     if float(prep.consts["proj"]) > 0:
         return []
     pw = common_order_power(prep, rw[:, :M])
-    thr = _thr(2, pw.size)
+    thr = _thr(prep.settings.alpha, 2, pw.size)
     out = []
     for i in np.flatnonzero(pw > thr):
         out.append(
@@ -924,7 +937,7 @@ def _transient(ctx: Context) -> str | None:
     if not ch:
         return None
     R = int(ctx.n_runs)
-    thr = _thr(1, 2 * len(ch) * max(R - 1, 1))
+    thr = _thr(ctx.settings.alpha, 1, 2 * len(ch) * max(R - 1, 1))
     for m, (ps, _, po, jo, tot) in enumerate(ch):
         if po > thr and po > ps and po > 0.5 * tot:
             return (
@@ -1465,7 +1478,7 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
     r = rw[:, :M]
     R = r.shape[0]
     n_tests = max(1, 2 * M * (R - 1))
-    thr = _thr(1, n_tests)
+    thr = _thr(prep.settings.alpha, 1, n_tests)
     out = []
     for m in range(M):
         x = r[:, m] - r[:, m].mean()
@@ -1541,7 +1554,7 @@ def _matched_view(name: str):
             if name == "bearing_wobble"
             else max(len(starts), 1)
         )
-        thr = _thr(q, 6 * n_starts)
+        thr = _thr(prep.settings.alpha, q, 6 * n_starts)
         if pw <= thr:
             return []
         return [
@@ -1699,6 +1712,7 @@ SDS = Kind(
     prepare=sds_prepare,
     noise=sds_noise,
     noise_replaces=True,
+    finish=lambda doc, settings: finish_sds(doc, settings),
 )
 
 
@@ -1715,7 +1729,7 @@ NOISE_METHOD = (
 )
 
 
-def finish_sds(doc: dict) -> dict:
+def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
     """SDS additions to the engine's document: ``timing_quantization`` named from the stamp
     lattice (a floor, not a fitted term), the quantization floor in the goodness of fit,
     honest standard errors (scaled by the final variance ratio when it exceeds 1; the
@@ -1784,7 +1798,7 @@ def finish_sds(doc: dict) -> dict:
                     "the tilt is not resolved (|tilt| <= 3 se): its azimuth is unidentifiable",
                 ]
     ratio = clock.get("ratio_to_declared")
-    if ratio is not None and ratio > LATTICE_COARSER:
+    if ratio is not None and ratio > settings.sds_lattice_coarser:
         rms = doc.get("rms_final", doc.get("rms_before"))
         doc["effects"].append(
             {
@@ -1817,8 +1831,6 @@ def finish_sds(doc: dict) -> dict:
                 "explanation": EXPLANATIONS["timing_quantization"],
             }
         )
-        if doc["verdict"] == "consistent":
-            doc["verdict"] = "missing_physics"
     elif clock.get("lattice_period_s") is None and clock.get("declared_period_s"):
         doc["notes"].append(
             "no stamp lattice found in the data although a clock is declared: the stamps "

@@ -15,18 +15,6 @@ from ._candidates import Candidate, Param
 from ._document import _jsonable
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._protocol import Prepared
-from ._settings import (
-    BIC_MIN,
-    COLLINEAR_NOTE,
-    COLLINEAR_REFUSE,
-    HELDOUT_MIN,
-    LOCATED_SHARE_MIN,
-    MAX_PARAM_FRACTION,
-    PLAUSIBLE_RATIO,
-    SIGNATURE_LEFT_MAX,
-    TIE_CHI2,
-    TIE_CORR,
-)
 from ._views import locate
 
 # ----------------------------------------------------------------------------- selection
@@ -94,10 +82,10 @@ def _collinearity(fit: FitResult, n_base_terms: int) -> float:
     return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
 
 
-def _collinear_columns(fit: FitResult, n_base_terms: int) -> np.ndarray:
+def _collinear_columns(fit: FitResult, n_base_terms: int, refuse: float) -> np.ndarray:
     """Local indices (in the last term's free vector) to hold so that the rest of the term
     has a canonical correlation with the base model's columns of at most
-    ``COLLINEAR_REFUSE``: greedily, the column best explained by the base and the columns
+    ``settings.collinear_refuse``: greedily, the column best explained by the base and the columns
     kept so far first."""
     s0, s1 = fit.slices[-1]
     base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
@@ -115,7 +103,7 @@ def _collinear_columns(fit: FitResult, n_base_terms: int) -> np.ndarray:
         Aee, Abe = An[np.ix_(e, e)], An[np.ix_(b, e)]
         Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
         ev = np.linalg.eigvals(Le @ Abe.T @ Lb @ Abe).real
-        if ev.size == 0 or ev.max() <= COLLINEAR_REFUSE**2:
+        if ev.size == 0 or ev.max() <= refuse**2:
             break
         r2 = np.einsum("bj,bc,cj->j", Abe, Lb, Abe)
         j = int(np.argmax(r2))
@@ -208,16 +196,13 @@ STEP_NUISANCE = Candidate(
     "must beat where the time view located a step)",
 )
 """A step of one size on the channels of a located step, from its row on within its run."""
-STEP_CHANGE_ROWS = 3
-"""A located step within this many kept rows (or half a time-view block) of a change of
-direction or speed is one the catalog's direction / speed terms can make."""
 
 
 def _free_steps(prep: Prepared, findings: list) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
     A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
-    step where the speed changes: a located step within ``STEP_CHANGE_ROWS`` kept rows (or
+    step where the speed changes: a located step within ``settings.step_change_rows`` kept rows (or
     half a time-view block, 1/64 of the run) of a kept row where the direction or the
     steady speed changes is left to those terms. The others are steps no smooth term (a
     drift, a scale error, an order) can make; each is returned with its time, run and
@@ -248,7 +233,7 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
             )
             + 1
         )
-        near = max(STEP_CHANGE_ROWS, rows.size // 64)
+        near = max(prep.settings.step_change_rows, rows.size // 64)
         if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
             continue
         ch = np.zeros(prep.n_channels)
@@ -296,12 +281,12 @@ def _beaten_by_step(
         for attempt in range(2):
             fs = cache[key]
             both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
-            if fr.chi2 - both.chi2 < BIC_MIN + logn:
+            if fr.chi2 - both.chi2 < prep.settings.bic_min + logn:
                 break  # with the candidate there is no step left: it makes it
             dchi = fs.chi2 - both.chi2
             dbic = -(dchi - k * logn)
             dho = fs.heldout_chi2 - both.heldout_chi2
-            if dbic > -BIC_MIN or dho < HELDOUT_MIN:
+            if dbic > -prep.settings.bic_min or dho < prep.settings.heldout_min:
                 heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
                 return (
                     f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
@@ -371,11 +356,6 @@ def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
 
 
-UNTOUCHED_SHARE = 0.8
-"""An integer order whose located power a candidate leaves at this share or more is not
-the candidate's (the signature rule of :func:`select` does not count it)."""
-
-
 def _order_key(f) -> int | None:
     """The integer order a finding is at (the ``orders`` view, or a spectrum line at an
     integer order), else None."""
@@ -384,9 +364,9 @@ def _order_key(f) -> int | None:
     return ints.pop() if integer and len(ints) == 1 else None
 
 
-def _untouched_orders(before, after) -> set:
+def _untouched_orders(before, after, share: float) -> set:
     """Integer orders located before a candidate's fit that keep at least
-    ``UNTOUCHED_SHARE`` of their excess power after it."""
+    ``settings.untouched_share`` of their excess power after it."""
     p0: dict = {}
     p1: dict = {}
     for fs, acc in ((before, p0), (after, p1)):
@@ -394,7 +374,7 @@ def _untouched_orders(before, after) -> set:
             k = _order_key(f)
             if k is not None:
                 acc[k] = acc.get(k, 0.0) + max(f.power - f.dof, 0.0)
-    return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= UNTOUCHED_SHARE * v}
+    return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= share * v}
 
 
 def select(
@@ -455,13 +435,13 @@ def select(
             for st in starts[:4]:
                 term = make_term(cand, prep, st)
                 if prep.n_values - current.n_params - term.n_free() < 0 or (
-                    current.n_params + term.n_free() > MAX_PARAM_FRACTION * N
+                    current.n_params + term.n_free() > prep.settings.max_param_fraction * N
                 ):
                     rejected.append(
                         {
                             "name": cand.name,
                             "reason": "more parameters than "
-                            f"{MAX_PARAM_FRACTION:.0%} of the fitted values",
+                            f"{prep.settings.max_param_fraction:.0%} of the fitted values",
                         }
                     )
                     break
@@ -480,7 +460,7 @@ def select(
                 best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
                 # columns of the candidate the base model already spans are held at zero
                 # (reported), so the rest of it can still be tested
-                held = _collinear_columns(best, n_base_terms)
+                held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
                 if held.size and held.size < best.terms[-1].n_free():
                     t2 = _hold(best.terms[-1], held)
                     best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
@@ -519,22 +499,23 @@ def select(
                     }
                 )
                 continue
-            if dbic > -BIC_MIN:
+            if dbic > -prep.settings.bic_min:
                 reasons.append(f"information criterion not lowered enough (dBIC {dbic:.1f})")
-            if dho < HELDOUT_MIN:
+            if dho < prep.settings.heldout_min:
                 reasons.append(
-                    f"held-out chi-square lowered by {dho:.1f} only (needs {HELDOUT_MIN:.0f})"
+                    f"held-out chi-square lowered by {dho:.1f} only "
+                    f"(needs {prep.settings.heldout_min:.0f})"
                 )
             term = fr.terms[-1]
             trms = _term_rms(fitter, term, prep)
             erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
-            if trms > PLAUSIBLE_RATIO * max(erms, 1e-300) and trms > 1.0:
+            if trms > prep.settings.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
                 reasons.append(
                     f"implausible: its own size ({trms:.3g} noise units RMS) is over "
-                    f"{PLAUSIBLE_RATIO:.0f}x the residual it explains ({erms:.3g})"
+                    f"{prep.settings.plausible_ratio:.0f}x the residual it explains ({erms:.3g})"
                 )
             col = _collinearity(fr, n_base_terms)
-            if np.isfinite(col) and col > COLLINEAR_REFUSE:
+            if np.isfinite(col) and col > prep.settings.collinear_refuse:
                 reasons.append(
                     f"ill-conditioned against the base model (canonical correlation {col:.4f})"
                 )
@@ -549,13 +530,14 @@ def select(
                 continue
             if chosen is not None:
                 gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
-                if gap < TIE_CHI2 and corr > TIE_CORR:
+                if gap < prep.settings.tie_chi2 and corr > prep.settings.tie_corr:
                     # not decided by the criterion: reported with the chosen one
                     chosen[8].append(
                         {
                             "name": cand.name,
                             "reason": f"the data cannot tell it from {chosen[0].name}: it "
-                            f"fits as well (chi-square {gap:+.1f}, needs {TIE_CHI2:.0f} to "
+                            f"fits as well (chi-square {gap:+.1f}, needs "
+                            f"{prep.settings.tie_chi2:.0f} to "
                             f"decide) and its fitted error is the same (correlation "
                             f"{corr:.3f})",
                             "delta_bic": float(dbic),
@@ -588,14 +570,14 @@ def select(
                 sig = set(cand.signature) or {f.view for f in findings}
                 # an integer order it leaves untouched is another effect's (several
                 # effects at once share the views), not structure it only dents
-                left = _untouched_orders(findings, after)
+                left = _untouched_orders(findings, after, prep.settings.untouched_share)
                 m0 = sum(
                     f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left
                 )
                 m1 = sum(
                     f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left
                 )
-                if m0 > 0 and m1 > SIGNATURE_LEFT_MAX * m0:
+                if m0 > 0 and m1 > prep.settings.signature_left_max * m0:
                     rejected.append(
                         {
                             "name": cand.name,
@@ -605,12 +587,12 @@ def select(
                         }
                     )
                     continue
-                if p1 > (1.0 - LOCATED_SHARE_MIN) * p0:
+                if p1 > (1.0 - prep.settings.located_share_min) * p0:
                     rejected.append(
                         {
                             "name": cand.name,
                             "reason": f"explains only {100 * (1 - p1 / p0):.0f}% of the located "
-                            f"structure (needs {100 * LOCATED_SHARE_MIN:.0f}%)",
+                            f"structure (needs {100 * prep.settings.located_share_min:.0f}%)",
                             "delta_bic": float(dbic),
                         }
                     )
@@ -626,9 +608,9 @@ def select(
             if held_notes.get(cand.name):
                 notes.append(
                     "held at zero, already spanned by the base model (canonical correlation "
-                    f"> {COLLINEAR_REFUSE}): {', '.join(held_notes[cand.name][:12])}"
+                    f"> {prep.settings.collinear_refuse}): {', '.join(held_notes[cand.name][:12])}"
                 )
-            if col > COLLINEAR_NOTE:
+            if col > prep.settings.collinear_note:
                 notes.append(
                     f"nearly collinear with the base model (canonical correlation "
                     f"{col:.3f}): part of it could be absorbed by base parameters"
@@ -662,7 +644,7 @@ def select(
             others = _frozen([t for t in current.terms if t.cand.name != s.name])
             fr = fitter.fit(others)
             without[s.name] = fr
-            if fr.heldout_chi2 - current.heldout_chi2 < HELDOUT_MIN:
+            if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
                 accepted.remove(s)
                 rejected.append(
                     {

@@ -1,29 +1,154 @@
-"""The finder's decision thresholds and fixed constants."""
+"""The finder's decision thresholds, in one frozen :class:`FinderSettings`, and its fixed
+numerical constants (not decisions: chunk sizes, cache budgets, the variances of noise
+estimators).
+
+``diagnose(rec, settings=FinderSettings(bic_min=20.0))`` changes a threshold for one call;
+the defaults are the finder's tuned behaviour. Every field's docstring says what it controls
+and what evidence set it (the commit that introduced or moved it); ``docs/diagnose.md``'s
+threshold table is generated from these docstrings (:func:`settings_table`) and a test fails
+when the two differ.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
+import equinox as eqx
+
 VERDICTS = ("consistent", "missing_physics", "unexplained")
-MAX_PARAM_FRACTION = 0.1
-"""The model never has more parameters than this fraction of the fitted values."""
-N_FOLDS = 5
-BIC_MIN = 10.0
-HELDOUT_MIN = 10.0
-PLAUSIBLE_RATIO = 4.0
-LOCATED_SHARE_MIN = 0.2
-SIGNATURE_LEFT_MAX = 0.5
-COLLINEAR_REFUSE = 0.995
-COLLINEAR_NOTE = 0.95
-# two candidates the data cannot tell apart: chi-square within TIE_CHI2 of each other and
-# fitted errors correlated above TIE_CORR (over the kept rows, noise-whitened)
-TIE_CHI2 = 10.0
-TIE_CORR = 0.9
-LATTICE_NOISE_SHARE = 0.25
-"""``quantization`` is named from the readings' value lattice (a floor, not a fitted term)
-when its floor ``LSB^2 / 12`` is at least this share of the channel's measured noise
-variance: the LSB is then coarser than about twice the noise ahead of the quantizer, and the
-reading's resolution, not the sensor's noise, sets the floor."""
+
+
+class FinderSettings(eqx.Module):
+    """Every decision threshold of the finder (dimensionless unless the name says).
+
+    Thresholds on chi-square are in units of the noise-whitened chi-square; shares and
+    correlations are fractions in (0, 1]. A rule that refuses a candidate names its field
+    in the refusal (``rejected[].rule`` in the JSON).
+    """
+
+    max_param_fraction: float = eqx.field(default=0.1, static=True)
+    """The model never has more parameters than this fraction of the fitted values (rule
+    ``max_param_fraction``); also caps the base order (``max_order_limit``). Set with the
+    first engine (96be348) so that a fit always keeps 90 % of its values as degrees of
+    freedom for the noise and goodness-of-fit tests."""
+
+    n_folds: int = eqx.field(default=5, static=True)
+    """K of the blocked K-fold held-out proof (``heldout``). 5 from the first engine
+    (96be348): each fold holds 20 % of the kept rows in contiguous blocks."""
+
+    bic_min: float = eqx.field(default=10.0, static=True)
+    """A candidate must lower the information criterion (BIC) by more than this (rule
+    ``bic_min``); a step that beats a candidate by this much refuses it. 10 (\"very strong\"
+    on Kass & Raftery's scale) from the first engine (96be348); concealed benchmark
+    100 % at seed 0 with it."""
+
+    heldout_min: float = eqx.field(default=10.0, static=True)
+    """A candidate must lower the K-fold held-out chi-square by at least this (rule
+    ``heldout_min``), and keep doing so with the others named (backward check). From the
+    first engine (96be348), paired with ``bic_min``."""
+
+    plausible_ratio: float = eqx.field(default=4.0, static=True)
+    """Rule ``plausible_ratio``: a candidate whose own RMS is over this many times the
+    residual RMS it explains (and over one noise unit) is an implausible cancellation of
+    base terms. From the first engine (96be348)."""
+
+    located_share_min: float = eqx.field(default=0.2, static=True)
+    """Rule ``located_share_min``: a candidate must explain at least this share of the
+    excess chi-square every view located, so that a larger structure is not pinned on it
+    through a small part of it. From the first engine (96be348)."""
+
+    signature_left_max: float = eqx.field(default=0.5, static=True)
+    """Rule ``signature_left_max``: a candidate may leave at most this share of what its own
+    signature views located (a drift denting a step is refused). 362be7c (half the
+    structure its signature views located; concealed benches)."""
+
+    untouched_share: float = eqx.field(default=0.8, static=True)
+    """An integer order a candidate leaves at this share or more of its located power is
+    another effect's and does not count against ``signature_left_max``. 6ffd81a (three motor
+    effects at once were each refused for leaving the others' orders)."""
+
+    collinear_refuse: float = eqx.field(default=0.995, static=True)
+    """Rule ``collinear_refuse``: canonical correlation with the base model above which a
+    candidate is ill-conditioned and refused; its columns above it are held at zero first.
+    From the first engine (96be348)."""
+
+    collinear_note: float = eqx.field(default=0.95, static=True)
+    """Above this canonical correlation with the base model a named effect carries a note
+    (part of it could be absorbed by base parameters). Not a refusal. 96be348."""
+
+    tie_chi2: float = eqx.field(default=10.0, static=True)
+    """Two candidates within this chi-square of each other ... (with ``tie_corr``) are one
+    confounded pair, not decided by the criterion. daa8c51 (MagAlpha: an offset per
+    direction and a delay at one speed fit the same)."""
+
+    tie_corr: float = eqx.field(default=0.9, static=True)
+    """... and whose fitted errors correlate above this (kept rows, noise-whitened) are
+    confounded (``confounded_with``). daa8c51, with ``tie_chi2``."""
+
+    step_change_rows: int = eqx.field(default=3, static=True)
+    """A located step is left to the direction / speed terms only within this many kept
+    rows of a change of direction or speed (rule ``step``: otherwise a free step is the
+    alternative a candidate must beat). 8b1c946 (a step 0.85 s after a reversal had been
+    exempted)."""
+
+    growth_left_max: float = eqx.field(default=0.2, static=True)
+    """The base model's order growth is undone unless the grown base leaves at most this
+    share of what every view located. 1af4a3c (strong high orders leak into the time,
+    drift and order-step views)."""
+
+    lattice_noise_share: float = eqx.field(default=0.25, static=True)
+    """``quantization`` is named from the readings' value lattice when its floor
+    ``LSB^2 / 12`` is at least this share of the channel's noise variance (the LSB then is
+    coarser than about twice the noise ahead of the quantizer). cdf1843."""
+
+    sweep_coherence: float = eqx.field(default=0.5, static=True)
+    """Above this phase coherence of the moving mean on the value lattice, the lattice is a
+    steady sweep's time grid, not a quantizer. 67bc926."""
+
+    alpha: float = eqx.field(default=1e-3, static=True)
+    """Family-wise false-alarm rate of each view (Bonferroni over its tests) and of the
+    goodness-of-fit test (``consistent`` needs p >= alpha). From the first engine
+    (96be348); clean generated records: no false finding over the variation seeds."""
+
+    coverage_min: float = eqx.field(default=0.05, static=True)
+    """multihead / sensor: an order joins the base model only when its columns against a
+    constant per run have at least this smallest eigenvalue share over the samples (the
+    circle's coverage over all revolutions). 6d1ca40 (12 samples per turn over 40 turns)."""
+
+    locked_margin: float = eqx.field(default=10.0, static=True)
+    """multihead: a vibration near an integer order at one speed must beat the
+    rotation-locked order there by this chi-square (rule ``locked_margin``). c0988bd."""
+
+    drift_turns_per_degree: float = eqx.field(default=3.0, static=True)
+    """motion: the speed-drift polynomial gains one degree per this many revolutions beyond
+    3 (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 % speed wander came back
+    unexplained at orders 1-3)."""
+
+    sds_saturate_fraction: float = eqx.field(default=0.6, static=True)
+    """sds: the saturating base columns use at most this share of the values. 8e334ac."""
+
+    sds_sigma_test_p: float = eqx.field(default=1e-4, static=True)
+    """sds: the level at which a noise estimate is widened for its degrees of freedom
+    (F vs chi-square). fc0e1ba."""
+
+    sds_lattice_coarser: float = eqx.field(default=1.05, static=True)
+    """sds: ``timing_quantization`` is named when the stamps' lattice is coarser than the
+    declared clock period by more than this ratio. 8e334ac."""
+
+    def __check_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"FinderSettings.{f.name}: got {v!r}, expected a number > 0")
+        if self.n_folds < 2:
+            raise ValueError(f"FinderSettings.n_folds: got {self.n_folds}, expected >= 2")
+
+
+DEFAULT_SETTINGS = FinderSettings()
+
+SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
+
 CHUNK_ROWS = 8192
 CACHE_BYTES = 6.0e7
 """Budget of each of the fitter's two caches (Jacobians of linear terms, processed static
@@ -32,3 +157,39 @@ D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
 """Variance of log(residual variance / second-difference variance) times N (white noise)."""
 MEDIAN_VAR = 2.0 / math.log(2.0) ** 2
 """Variance of log(median periodogram level) times the number of periodogram bins."""
+
+
+def _field_docs() -> dict[str, str]:
+    """Each field's docstring (the string literal after its annotation), from this file."""
+    import ast
+    from pathlib import Path
+
+    tree = ast.parse(Path(__file__).read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "FinderSettings")
+    out, last = {}, None
+    for node in cls.body:
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            last = node.target.id
+        elif (
+            last
+            and isinstance(node, ast.Expr)
+            and isinstance(node.value, ast.Constant)
+            and isinstance(node.value.value, str)
+        ):
+            out[last] = " ".join(node.value.value.split())
+            last = None
+        else:
+            last = None
+    return out
+
+
+def settings_table(settings: FinderSettings = DEFAULT_SETTINGS) -> str:
+    """The Markdown table of every threshold (field, default, what it controls and what
+    evidence set it) that ``docs/diagnose.md`` carries between its
+    ``<!-- settings-table -->`` markers."""
+    docs = _field_docs()
+    lines = ["| setting | default | what it controls; evidence |", "| --- | --- | --- |"]
+    for name in SETTINGS_FIELDS:
+        doc = docs.get(name, "").replace("|", "\\|")
+        lines.append(f"| `{name}` | {getattr(settings, name)!r} | {doc} |")
+    return "\n".join(lines) + "\n"

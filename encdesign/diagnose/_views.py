@@ -2,7 +2,7 @@
 
 Each view tests the whitened residual ``r / sigma_c`` (kept rows only) with regressors of
 known shape; under white noise the power they take out is chi-square with as many degrees of
-freedom as regressors, and each view tests at ``ALPHA / n_tests`` (Bonferroni), so a record
+freedom as regressors, and each view tests at ``alpha / n_tests`` (Bonferroni), so a record
 with nothing missing gives no finding.
 
 * ``spectrum``: per run, the periodogram in Hz of every channel (FFT on the run's kept rows,
@@ -27,9 +27,6 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
-
-ALPHA = 1e-3
-"""Family-wise false-alarm level of each view and of the goodness-of-fit test."""
 
 
 @dataclasses.dataclass
@@ -66,8 +63,8 @@ def _logp(chi2: float, dof: int) -> float:
     return max(v, -999.0) if math.isfinite(v) else -999.0
 
 
-def _thr(dof: int, n_tests: int) -> float:
-    return float(stats.chi2.isf(ALPHA / max(n_tests, 1), dof))
+def _thr(alpha: float, dof: int, n_tests: int) -> float:
+    return float(stats.chi2.isf(alpha / max(n_tests, 1), dof))
 
 
 SCAN_BLOCK = 1 << 18
@@ -136,7 +133,7 @@ def _heads(
     error takes the pattern ``b_k = exp(-i m alpha_k)`` (one disk seen by every head). A
     structure on head ``k`` alone therefore shows on every head as ``u_k``, ``e_k`` less those
     parts. Each one-head pattern is fitted; the structure is reported on head ``k`` only when
-    ``u_k`` leaves no significant power (chi-square at ``ALPHA``, or 5 % of a strong
+    ``u_k`` leaves no significant power (chi-square at ``FinderSettings.alpha``, or 5 % of a strong
     structure's power) and fits significantly
     better than every other head's pattern. When the patterns cannot be told apart (too few
     heads for what the base takes) or none fits, the structure is reported on ``ch`` (the
@@ -192,8 +189,8 @@ def _heads(
     tot = float(np.sum(np.abs(W) ** 2))
     # what the pattern leaves: noise, or at most 5 % of the power (a strong structure is not
     # seen through exactly equal heads: sensitivities, placements, per-head noise weights)
-    left_ok = res[k1] <= max(_thr(f * rows * (free - 1), 1), 0.05 * tot)
-    if left_ok and res[k2] - res[k1] > _thr(f * rows, 1):
+    left_ok = res[k1] <= max(_thr(prep.settings.alpha, f * rows * (free - 1), 1), 0.05 * tot)
+    if left_ok and res[k2] - res[k1] > _thr(prep.settings.alpha, f * rows, 1):
         return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
     return ch, f"on several heads, or not told apart from {what}"
 
@@ -205,7 +202,7 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
     C = rw.shape[1]
     out = []
     n_tests = max_order * C
-    thr = _thr(2, n_tests)
+    thr = _thr(prep.settings.alpha, 2, n_tests)
     orders = np.arange(1, max_order + 1)
     N, Scc, Sss, Scs, ((Bc, Bs),) = order_sums(prep, name, [rw], orders)
     for i, m in enumerate(orders):
@@ -256,7 +253,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     if not runs:
         return out
     n_tests = sum((b - a) // 2 + 1 for _, a, b, _ in runs)
-    thr = _thr(2 * dof_ch, n_tests)
+    thr = _thr(prep.settings.alpha, 2 * dof_ch, n_tests)
     per_run = []
     for r, a, b, nk in runs:
         t = _col(prep, "t", a, b)
@@ -354,7 +351,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
             and all(round(o) >= 1 for o in orders if np.isfinite(o))
             and any(np.isfinite(o) for o in orders)
         )
-        thr_ch = _thr(2, n_tests)
+        thr_ch = _thr(prep.settings.alpha, 2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
         zs = np.concatenate([q["z"] for q in sel], 0)
         ints = {round(o) for o in orders if np.isfinite(o)}
@@ -429,7 +426,7 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
         for lo, hi in bands(m):
             pw = P[lo:hi].sum(0) * (nk / m)
             dof = 2 * (hi - lo)
-            thr = _thr(dof, n_tests)
+            thr = _thr(prep.settings.alpha, dof, n_tests)
             ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
             if not ch:
                 continue
@@ -470,7 +467,7 @@ def view_time(prep, rw) -> list[Finding]:
     for r, parts, means in blocks_all:
         nb = len(parts)
         chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
-        thr = _thr(nb - 1, n_tests)
+        thr = _thr(prep.settings.alpha, nb - 1, n_tests)
         for k in range(C):
             if chi[k] <= thr:
                 continue
@@ -498,7 +495,7 @@ def view_time(prep, rw) -> list[Finding]:
                 "block_s": float(t1 - t0),
                 # the best single step alone is significant (a step a smooth model dents
                 # shows as a transient)
-                "step_significant": bool(step_pw > _thr(1, n_tests)),
+                "step_significant": bool(step_pw > _thr(prep.settings.alpha, 1, n_tests)),
                 "n_values": int(sum(p.size for p in parts)),
             }
             # where the step is: between the last row before it and the first row after it
@@ -596,7 +593,7 @@ def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
     if np.trace(G) <= (1e-12 * (xmax + 1e-300)) ** 2 * max(n_kept, 1):
         return []
     pw = _gram_power(G, B, n_kept, q)
-    thr = _thr(q, C)
+    thr = _thr(prep.settings.alpha, q, C)
     if pw.max() <= thr:
         return []
     ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
@@ -624,7 +621,7 @@ def view_line_phase(prep, rw):
     out = []
     keep = prep.keep
     C = rw.shape[1]
-    thr = _thr(4, C)
+    thr = _thr(prep.settings.alpha, 4, C)
     G = np.zeros((C, 4, 4))
     B = np.zeros((C, 4))
     n_kept = 0
