@@ -383,14 +383,10 @@ def _fold_blocks(prep_keep: np.ndarray, run: np.ndarray, k: int, seed: int = 0):
     return fold, design
 
 
-def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> Prepared:
-    """Stage 1: nuisances, noise, folds (see module doc). Raises EncdesignInputError."""
-    n, C = kd.y.shape
-    where = kd.where
-    if n < 32:
-        raise input_error(where, f"only {n} rows", "at least 32 rows to diagnose")
-    if not np.all(np.isfinite(kd.y)):
-        raise input_error(where, "non-finite readings", "finite values")
+def _runs_in_order(kd: KindData):
+    """Run index 0..R-1 in file order per row (4 bytes a row) and the rows sorted run by run
+    in time (most records already are: then nothing is copied). Returns ``(kd, run,
+    run_ids in file order, sort)`` (``sort``: prepared row -> file row, or ``None``)."""
     run_ids, first, inv = np.unique(kd.run, return_index=True, return_inverse=True)
     order_runs = run_ids[np.argsort(first)]
     # run index 0..R-1 in file order, 4 bytes a row
@@ -398,7 +394,6 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     rank[np.argsort(first)] = np.arange(run_ids.size, dtype=np.int32)
     run = rank[inv.reshape(-1)]
     del inv
-    R = order_runs.size
     # rows sorted run by run in time (most records already are: then nothing is copied)
     in_order = bool(np.all(np.diff(run) >= 0)) and all(
         np.all(np.diff(kd.t[a:b]) >= 0) for _, (a, b) in run_spans(run)
@@ -419,6 +414,14 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
             masked=tuple((m[sort], why) for m, why in kd.masked),
         )
         run = run[sort]
+    return kd, run, order_runs, sort
+
+
+def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
+    """Gaps in ``t`` and the steady segments of each run. Returns ``(seg, excluded, gaps,
+    revolutions per run, speed per segment)``."""
+    n = kd.y.shape[0]
+    R = order_runs.size
     t = kd.t
     # gaps and segments
     seg = -np.ones(n, dtype=np.int32)
@@ -477,7 +480,13 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
                         reason=e["reason"],
                     )
                 )
-    # the steady segments of the motion (their speeds give omega and the direction)
+    return seg, excluded, gaps, revs, seg_speed
+
+
+def _mask_rows(kd: KindData, seg, run, order_runs, excluded) -> np.ndarray:
+    """Rows the kind leaves out (``kd.masked``) leave ``seg`` (in place); returns the steady
+    segments of the motion before the masks (their speeds give omega and the direction)."""
+    t = kd.t
     seg_motion = seg.copy() if kd.masked else seg
     for mask, why in kd.masked:  # rows the kind leaves out (e.g. clipped signals)
         mask = np.asarray(mask, bool) & (seg >= 0)
@@ -494,11 +503,14 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
                 )
             )
             seg[mask] = -1
-    keep = seg >= 0
-    if keep.sum() < 32:
-        raise input_error(
-            where, "no steady segment of at least 32 rows", "a shaft turning steadily"
-        )
+    return seg_motion
+
+
+def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort):
+    """Glitches and count jumps on a first detrended residual (``keep`` updated in place),
+    and the noise per channel (robust first). Returns ``(kd, glitches, count_jumps, seg_eff,
+    sigma)``."""
+    where, t = kd.where, kd.t
     # noise (robust first), glitches and count jumps on a first detrended residual
     # kd.y is the kind's own array (never the user's columns) and is not modified: no copy
     y = kd.y - kd.y.mean(1, keepdims=True) if kd.project else kd.y
@@ -542,9 +554,14 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, sigma_r)
     if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         raise input_error(where, "the noise cannot be estimated", "readings that vary")
-    fold, design = _fold_blocks(keep, run, settings.n_folds)
-    fold[~keep] = -1
-    # row columns: the recording's own arrays, or lazy (computed per chunk from them)
+    return kd, glitches, count_jumps, seg_eff, sigma
+
+
+def _row_columns(kd: KindData, run, R: int, seg_motion, seg_speed, keep):
+    """The row columns: the recording's own arrays, or lazy (computed per chunk from them).
+    Returns ``(rows, driver_name)``."""
+    n, C = kd.y.shape
+    t = kd.t
     t0_run = np.zeros(R)
     off_run = np.zeros(R)
     off = 0.0
@@ -615,7 +632,35 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     if kd.reading is not None:
         stored["reading"] = kd.reading
         del lazy["reading"]
-    rows = RowColumns(stored, run, R, lazy)
+    return RowColumns(stored, run, R, lazy), driver_name
+
+
+def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> Prepared:
+    """Stage 1: nuisances, noise, folds (see module doc). Raises EncdesignInputError."""
+    n, C = kd.y.shape
+    where = kd.where
+    if n < 32:
+        raise input_error(where, f"only {n} rows", "at least 32 rows to diagnose")
+    if not np.all(np.isfinite(kd.y)):
+        raise input_error(where, "non-finite readings", "finite values")
+    kd, run, order_runs, sort = _runs_in_order(kd)
+    R = order_runs.size
+    t = kd.t
+    seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs)
+    seg_motion = _mask_rows(kd, seg, run, order_runs, excluded)
+    keep = seg >= 0
+    if keep.sum() < 32:
+        raise input_error(
+            where, "no steady segment of at least 32 rows", "a shaft turning steadily"
+        )
+    kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
+        kd, seg, keep, run, order_runs, sort
+    )
+    y = kd.y
+    fold, design = _fold_blocks(keep, run, settings.n_folds)
+    fold[~keep] = -1
+    rows, driver_name = _row_columns(kd, run, R, seg_motion, seg_speed, keep)
+    L = kd.signal_periods
     dt_med = float(np.median(np.diff(t))) if n > 1 else 1.0
     consts = dict(
         step_width_s=np.asarray(0.5 * abs(dt_med) if dt_med > 0 else 1e-3),

@@ -377,290 +377,268 @@ def _untouched_orders(before, after, share: float) -> set:
     return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= share * v}
 
 
-def select(
-    prep: Prepared,
-    fitter: Fitter,
-    base_terms: list[Term],
-    candidates: Sequence[Candidate],
-    views: tuple[str, ...],
-    scan_order: int,
-    max_effects: int = 3,
-    log: Callable[[str], None] = lambda s: None,
-):
-    """Forward selection with refits, then a backward held-out check (stage 4)."""
-    base = fitter.fit(base_terms)
-    cur_resid = fitter.residual(base.terms)
-    findings0 = locate(prep, cur_resid, views, scan_order)
-    N = prep.n_values
-    current, findings = base, findings0
-    accepted: list[Step] = []
-    rejected: list[dict] = []
-    not_testable: list[dict] = []
-    n_base_terms = len(base.terms)
-    tried_names: set[str] = set()
-    applicable = []
+def _refusal(name: str, rules: list[tuple[str, str]], dbic: float | None = None) -> dict:
+    """A refused candidate's JSON entry: the reasons, and the name of every acceptance rule
+    (a :class:`~encdesign.diagnose.FinderSettings` field or a named rule) that refused it."""
+    out = {"name": name, "reason": "; ".join(r for _, r in rules), "rule": rules[0][0]}
+    out["rules"] = [k for k, _ in rules]
+    if dbic is not None:
+        out["delta_bic"] = float(dbic)
+    return out
+
+
+def _applicable(prep: Prepared, candidates: Sequence[Candidate], not_testable: list) -> list:
+    out = []
     for c in candidates:
         why = c.applies(prep.ctx) if c.applies else None
         if why:
-            not_testable.append({"name": c.name, "reason": why})
+            not_testable.append({"name": c.name, "reason": why, "rule": "applies"})
         else:
-            applicable.append(c)
-    gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
-    held_notes: dict[str, list[str]] = {}
-    step_refusals: list[tuple[str, Any]] = []
-    for _ in range(max_effects):
-        seen = {f.view for f in findings}
-        gof = goodness_of_fit(prep, cur_resid, current.n_params)
-        if not findings and gof["passes"]:
+            out.append(c)
+    return out
+
+
+def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
+    """The full fit of one candidate from the best of its (screened) starts, or ``None``."""
+    prep, fitter = st["prep"], st["fitter"]
+    N = prep.n_values
+    starts = cand.start(prep.ctx, st["kept_resid"](), st["findings"]) if cand.start else [{}]
+    # screen the starts with the nonlinear parameters held (one linear pass each), then run
+    # the full fit from the best one
+    screened = []
+    for s0 in starts[:4]:
+        term = make_term(cand, prep, s0)
+        frac = prep.settings.max_param_fraction
+        if prep.n_values - current.n_params - term.n_free() < 0 or (
+            current.n_params + term.n_free() > frac * N
+        ):
+            reason = f"more parameters than {frac:.0%} of the fitted values"
+            rejected.append(_refusal(cand.name, [("max_param_fraction", reason)]))
             break
-        trials = []
-        kept_resid = None  # the current residual over the kept rows, made once per round
-        free_steps = _free_steps(prep, findings)
-        step_fits: dict = {}
-        for cand in applicable:
-            if cand.name in {s.name for s in accepted}:
+        if len(starts) > 1:
+            held = _frozen([term])[0]
+            fr0 = fitter.fit([*_frozen(current.terms), held])
+            screened.append((fr0.chi2, term, fr0))
+        else:
+            screened.append((0.0, term, None))
+    if not screened:
+        return None
+    screened.sort(key=lambda z: z[0])
+    term = screened[0][1]
+    if screened[0][2] is not None:
+        term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
+    log(f"trying {cand.name}")
+    best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
+    # columns of the candidate the base model already spans are held at zero (reported),
+    # so the rest of it can still be tested
+    held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
+    if held.size and held.size < best.terms[-1].n_free():
+        t2 = _hold(best.terms[-1], held)
+        best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
+        held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
+    return best
+
+
+def _sort_trials(trials: list, applicable: list) -> None:
+    """By dBIC; candidates equal to rounding (the same fitted error, e.g. an offset per
+    direction and a delay at one speed), wherever they stand: the catalog's order decides,
+    not the last digit."""
+    trials.sort(key=lambda x: x[0])
+    rank = {c.name: i for i, c in enumerate(applicable)}
+    g0 = 0
+    while g0 < len(trials):
+        tol = 1e-7 * max(1.0, abs(trials[g0][0]))
+        g1 = g0 + 1
+        while g1 < len(trials) and trials[g1][0] - trials[g0][0] <= tol:
+            g1 += 1
+        trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x[1].name])
+        g0 = g1
+
+
+def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
+    """The rules on the criterion, the held-out gain, plausibility and conditioning:
+    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
+    s = prep.settings
+    N = prep.n_values
+    reasons = []
+    if dbic > -s.bic_min:
+        reasons.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
+    if dho < s.heldout_min:
+        reasons.append(
+            (
+                "heldout_min",
+                f"held-out chi-square lowered by {dho:.1f} only (needs {s.heldout_min:.0f})",
+            )
+        )
+    term = fr.terms[-1]
+    trms = _term_rms(fitter, term, prep)
+    erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
+    if trms > s.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
+        reasons.append(
+            (
+                "plausible_ratio",
+                f"implausible: its own size ({trms:.3g} noise units RMS) is over "
+                f"{s.plausible_ratio:.0f}x the residual it explains ({erms:.3g})",
+            )
+        )
+    col = _collinearity(fr, n_base_terms)
+    if np.isfinite(col) and col > s.collinear_refuse:
+        reasons.append(
+            (
+                "collinear_refuse",
+                f"ill-conditioned against the base model (canonical correlation {col:.4f})",
+            )
+        )
+    if cand.plausible is not None:
+        why = cand.plausible(prep.ctx, term.values)
+        if why:
+            reasons.append((f"{cand.name}.plausible", f"implausible: {why}"))
+    return reasons, trms, erms, col
+
+
+def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
+    """The rules on what the candidate leaves of the located structure: ``(rule or None,
+    steps it leaves)``."""
+    s = prep.settings
+    p0 = sum(f.power - f.dof for f in findings)
+    if p0 <= 0:
+        return None, []
+    after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+    # steps it leaves (a smooth model fitted to a step moves its change point)
+    steps_left = _free_steps(prep, after)
+    p1 = sum(f.power - f.dof for f in after)
+    # and clear the places its own signature located (not a larger structure there that it
+    # only dents, e.g. a step fitted by a drift)
+    sig = set(cand.signature) or {f.view for f in findings}
+    # an integer order it leaves untouched is another effect's (several effects at once
+    # share the views), not structure it only dents
+    left = _untouched_orders(findings, after, s.untouched_share)
+    m0 = sum(f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left)
+    m1 = sum(f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left)
+    if m0 > 0 and m1 > s.signature_left_max * m0:
+        return (
+            "signature_left_max",
+            f"leaves {100 * m1 / m0:.0f}% of the structure its signature views "
+            f"({', '.join(sorted(sig))}) located in place",
+        ), steps_left
+    if p1 > (1.0 - s.located_share_min) * p0:
+        return (
+            "located_share_min",
+            f"explains only {100 * (1 - p1 / p0):.0f}% of the located structure (needs "
+            f"{100 * s.located_share_min:.0f}%)",
+        ), steps_left
+    return None, steps_left
+
+
+def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
+    """A candidate the data cannot tell from the chosen one (``tie_chi2``, ``tie_corr``):
+    its ``confounded_with`` entry, else ``None``."""
+    s = prep.settings
+    gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
+    if not (gap < s.tie_chi2 and corr > s.tie_corr):
+        return None
+    return {
+        "name": cand.name,
+        "reason": f"the data cannot tell it from {chosen[0].name}: it fits as well "
+        f"(chi-square {gap:+.1f}, needs {s.tie_chi2:.0f} to decide) and its fitted error is "
+        f"the same (correlation {corr:.3f})",
+        "rule": "tie_chi2",
+        "delta_bic": float(dbic),
+        "params": {q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+    }
+
+
+def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals):
+    """Stage 4's decision for one round: the best trial every rule accepts (with the ties
+    it cannot be told from), or ``None``; every other trial is a named refusal."""
+    prep, fitter = st["prep"], st["fitter"]
+    s = prep.settings
+    chosen = None
+    step_fits: dict = {}
+    for dbic, cand, fr, dho, dchi, k_new in trials:
+        if k_new == 0:
+            reason = (
+                "confounded: all its parameters are already taken by the base model or by "
+                f"{', '.join(a.name for a in accepted) or 'nothing else'} (shared orders go "
+                "to the effect accepted first)"
+            )
+            rejected.append(_refusal(cand.name, [("identifiable", reason)]))
+            continue
+        reasons, trms, erms, col = _criterion_rules(
+            prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms
+        )
+        if reasons:
+            rejected.append(_refusal(cand.name, reasons, dbic))
+            continue
+        if chosen is not None:
+            tie = _tie_entry(prep, fitter, st["cur_resid"], chosen, cand, fr, dbic)
+            if tie is not None:  # not decided by the criterion: reported with the chosen
+                chosen[8].append(tie)
                 continue
-            if cand.signature and not (set(cand.signature) & seen):
-                continue
-            if not cand.signature and gof["passes"]:
-                continue
-            tried_names.add(cand.name)
-            if cand.start and kept_resid is None:
-                kept_resid = cur_resid if prep.keep.all() else cur_resid[prep.keep]
-            starts = cand.start(prep.ctx, kept_resid, findings) if cand.start else [{}]
-            best = None
-            # screen the starts with the nonlinear parameters held (one linear pass each),
-            # then run the full fit from the best one
-            screened = []
-            for st in starts[:4]:
-                term = make_term(cand, prep, st)
-                if prep.n_values - current.n_params - term.n_free() < 0 or (
-                    current.n_params + term.n_free() > prep.settings.max_param_fraction * N
-                ):
-                    rejected.append(
-                        {
-                            "name": cand.name,
-                            "reason": "more parameters than "
-                            f"{prep.settings.max_param_fraction:.0%} of the fitted values",
-                        }
-                    )
-                    break
-                if len(starts) > 1:
-                    held = _frozen([term])[0]
-                    fr0 = fitter.fit([*_frozen(current.terms), held])
-                    screened.append((fr0.chi2, term, fr0))
-                else:
-                    screened.append((0.0, term, None))
-            if screened:
-                screened.sort(key=lambda z: z[0])
-                term = screened[0][1]
-                if screened[0][2] is not None:
-                    term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
-                log(f"trying {cand.name}")
-                best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
-                # columns of the candidate the base model already spans are held at zero
-                # (reported), so the rest of it can still be tested
-                held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
-                if held.size and held.size < best.terms[-1].n_free():
-                    t2 = _hold(best.terms[-1], held)
-                    best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
-                    held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
-            if best is None:
-                continue
-            dchi = current.chi2 - best.chi2
-            k = best.n_determined(len(best.terms) - 1)
-            dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
-            dho = current.heldout_chi2 - best.heldout_chi2
-            trials.append((dbic, cand, best, dho, dchi, k))
-        trials.sort(key=lambda x: x[0])
-        # candidates equal to rounding (the same fitted error, e.g. an offset per direction
-        # and a delay at one speed), wherever they stand in the order: the catalog's order
-        # decides, not the last digit
-        rank = {c.name: i for i, c in enumerate(applicable)}
-        g0 = 0
-        while g0 < len(trials):
-            tol = 1e-7 * max(1.0, abs(trials[g0][0]))
-            g1 = g0 + 1
-            while g1 < len(trials) and trials[g1][0] - trials[g0][0] <= tol:
-                g1 += 1
-            trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x[1].name])
-            g0 = g1
-        kept_resid = None
-        chosen = None
-        for dbic, cand, fr, dho, dchi, k_new in trials:
-            reasons = []
-            if k_new == 0:
-                rejected.append(
-                    {
-                        "name": cand.name,
-                        "reason": "confounded: all its parameters are already taken by the base "
-                        f"model or by {', '.join(s.name for s in accepted) or 'nothing else'} "
-                        "(shared orders go to the effect accepted first)",
-                    }
-                )
-                continue
-            if dbic > -prep.settings.bic_min:
-                reasons.append(f"information criterion not lowered enough (dBIC {dbic:.1f})")
-            if dho < prep.settings.heldout_min:
-                reasons.append(
-                    f"held-out chi-square lowered by {dho:.1f} only "
-                    f"(needs {prep.settings.heldout_min:.0f})"
-                )
-            term = fr.terms[-1]
-            trms = _term_rms(fitter, term, prep)
-            erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
-            if trms > prep.settings.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
-                reasons.append(
-                    f"implausible: its own size ({trms:.3g} noise units RMS) is over "
-                    f"{prep.settings.plausible_ratio:.0f}x the residual it explains ({erms:.3g})"
-                )
-            col = _collinearity(fr, n_base_terms)
-            if np.isfinite(col) and col > prep.settings.collinear_refuse:
-                reasons.append(
-                    f"ill-conditioned against the base model (canonical correlation {col:.4f})"
-                )
-            if cand.plausible is not None:
-                why = cand.plausible(prep.ctx, term.values)
-                if why:
-                    reasons.append(f"implausible: {why}")
-            if reasons:
-                rejected.append(
-                    {"name": cand.name, "reason": "; ".join(reasons), "delta_bic": float(dbic)}
-                )
-                continue
-            if chosen is not None:
-                gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
-                if gap < prep.settings.tie_chi2 and corr > prep.settings.tie_corr:
-                    # not decided by the criterion: reported with the chosen one
-                    chosen[8].append(
-                        {
-                            "name": cand.name,
-                            "reason": f"the data cannot tell it from {chosen[0].name}: it "
-                            f"fits as well (chi-square {gap:+.1f}, needs "
-                            f"{prep.settings.tie_chi2:.0f} to "
-                            f"decide) and its fitted error is the same (correlation "
-                            f"{corr:.3f})",
-                            "delta_bic": float(dbic),
-                            "params": {
-                                q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params
-                            },
-                        }
-                    )
-                    continue
-                rejected.append(
-                    {
-                        "name": cand.name,
-                        "reason": f"{chosen[0].name} lowers the "
-                        f"criterion more (dBIC {chosen[2]:.1f} vs {dbic:.1f})",
-                        "delta_bic": float(dbic),
-                    }
-                )
-                continue
-            # it must explain a fair share of everything located, so that a larger
-            # structure it cannot explain is not pinned on it through a small part of it
-            p0 = sum(f.power - f.dof for f in findings)
-            steps_left: list[dict] = []
-            if p0 > 0:
-                after = locate(prep, fitter.residual(fr.terms), views, scan_order)
-                # steps it leaves (a smooth model fitted to a step moves its change point)
-                steps_left = _free_steps(prep, after)
-                p1 = sum(f.power - f.dof for f in after)
-                # and clear the places its own signature located (not a larger structure
-                # there that it only dents, e.g. a step fitted by a drift)
-                sig = set(cand.signature) or {f.view for f in findings}
-                # an integer order it leaves untouched is another effect's (several
-                # effects at once share the views), not structure it only dents
-                left = _untouched_orders(findings, after, prep.settings.untouched_share)
-                m0 = sum(
-                    f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left
-                )
-                m1 = sum(
-                    f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left
-                )
-                if m0 > 0 and m1 > prep.settings.signature_left_max * m0:
-                    rejected.append(
-                        {
-                            "name": cand.name,
-                            "reason": f"leaves {100 * m1 / m0:.0f}% of the structure its "
-                            f"signature views ({', '.join(sorted(sig))}) located in place",
-                            "delta_bic": float(dbic),
-                        }
-                    )
-                    continue
-                if p1 > (1.0 - prep.settings.located_share_min) * p0:
-                    rejected.append(
-                        {
-                            "name": cand.name,
-                            "reason": f"explains only {100 * (1 - p1 / p0):.0f}% of the located "
-                            f"structure (needs {100 * prep.settings.located_share_min:.0f}%)",
-                            "delta_bic": float(dbic),
-                        }
-                    )
-                    continue
-            # a step located where nothing in the catalog changes (no reversal, no change of
-            # speed) is the alternative it must beat: a drift or a scale error only dents it
-            why = _beaten_by_step(fitter, prep, current, fr, free_steps + steps_left, step_fits)
-            if why:
-                rejected.append({"name": cand.name, "reason": why[0], "delta_bic": float(dbic)})
-                step_refusals.append((cand.name, why[1]))
-                continue
-            notes = []
-            if held_notes.get(cand.name):
-                notes.append(
-                    "held at zero, already spanned by the base model (canonical correlation "
-                    f"> {prep.settings.collinear_refuse}): {', '.join(held_notes[cand.name][:12])}"
-                )
-            if col > prep.settings.collinear_note:
-                notes.append(
-                    f"nearly collinear with the base model (canonical correlation "
-                    f"{col:.3f}): part of it could be absorbed by base parameters"
-                )
-            chosen = (cand, fr, dbic, dho, col, notes, trms, erms, [])
-        if chosen is None:
-            break
-        cand, fr, dbic, dho, col, notes, trms, erms, confounded = chosen
-        if confounded:
-            notes = [
-                *notes,
-                "confounded with "
-                + ", ".join(c["name"] for c in confounded)
-                + ": this recording cannot tell them apart; the name is only the one with "
-                "the lower information criterion",
-            ]
-        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
-        if full.chi2 <= fr.chi2:
-            fr = full
-        del cur_resid  # (one residual held at a time)
-        resid = fitter.residual(fr.terms)
-        accepted.append(Step(cand.name, fr, dbic, dho, col, notes, trms, erms, confounded))
-        log(f"named {cand.name}")
-        current, cur_resid = fr, resid
-        findings = locate(prep, cur_resid, views, scan_order)
-    # backward check: each named effect must still earn its place on held-out data (the
-    # others held at their nonlinear values: one linear refit each)
+            reason = (
+                f"{chosen[0].name} lowers the criterion more (dBIC {chosen[2]:.1f} vs {dbic:.1f})"
+            )
+            rejected.append(_refusal(cand.name, [("better_candidate", reason)], dbic))
+            continue
+        # it must explain a fair share of everything located, so that a larger structure it
+        # cannot explain is not pinned on it through a small part of it
+        rule, steps_left = _located_rule(
+            prep, fitter, cand, fr, st["findings"], st["views"], st["scan_order"]
+        )
+        if rule is not None:
+            rejected.append(_refusal(cand.name, [rule], dbic))
+            continue
+        # a step located where nothing in the catalog changes (no reversal, no change of
+        # speed) is the alternative it must beat: a drift or a scale error only dents it
+        why = _beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
+        if why:
+            rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
+            step_refusals.append((cand.name, why[1]))
+            continue
+        notes = []
+        if held_notes.get(cand.name):
+            notes.append(
+                "held at zero, already spanned by the base model (canonical correlation "
+                f"> {s.collinear_refuse}): {', '.join(held_notes[cand.name][:12])}"
+            )
+        if col > s.collinear_note:
+            notes.append(
+                f"nearly collinear with the base model (canonical correlation {col:.3f}): "
+                "part of it could be absorbed by base parameters"
+            )
+        chosen = (cand, fr, dbic, dho, col, notes, trms, erms, [])
+    return chosen
+
+
+def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan):
+    """Each named effect must still earn its place on held-out data (the others held at
+    their nonlinear values: one linear refit each)."""
     without: dict[str, FitResult] = {}
-    if len(accepted) > 1:
-        for s in list(accepted):
-            others = _frozen([t for t in current.terms if t.cand.name != s.name])
-            fr = fitter.fit(others)
-            without[s.name] = fr
-            if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
-                accepted.remove(s)
-                rejected.append(
-                    {
-                        "name": s.name,
-                        "reason": "backward check: with the other "
-                        "named effects it no longer lowers the held-out residual",
-                    }
-                )
-                current = fitter.fit(
-                    _unfrozen(fr.terms, [t for t in current.terms if t.cand.name != s.name])
-                )
-                cur_resid = fitter.residual(current.terms)
-                findings = locate(prep, cur_resid, views, scan_order)
-                without = {}
-    # a step that refused a candidate is reported where it was located (a smooth base or
-    # effect fitted to it moves the change point the final residual's time view sees)
+    if len(accepted) <= 1:
+        return current, cur_resid, findings, without
+    for s in list(accepted):
+        others = _frozen([t for t in current.terms if t.cand.name != s.name])
+        fr = fitter.fit(others)
+        without[s.name] = fr
+        if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
+            accepted.remove(s)
+            reason = (
+                "backward check: with the other named effects it no longer lowers the "
+                "held-out residual"
+            )
+            rejected.append(_refusal(s.name, [("heldout_min", reason)]))
+            current = fitter.fit(
+                _unfrozen(fr.terms, [t for t in current.terms if t.cand.name != s.name])
+            )
+            cur_resid = fitter.residual(current.terms)
+            findings = locate(prep, cur_resid, views, scan)
+            without = {}
+    return current, cur_resid, findings, without
+
+
+def _place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
+    """A step that refused a candidate is reported where it was located (a smooth base or
+    effect fitted to it moves the change point the final residual's time view sees)."""
     done: set = set()
     for name, f in step_refusals:
         key = (tuple(f.where["runs"]), tuple(f.where["heads"]))
@@ -688,6 +666,102 @@ def select(
         if not any(h is f for h in findings):  # else a finding of the final residual
             f.detail["located_with"] = f"located in the residual of the model with {name}"
             findings = sorted([*findings, f], key=lambda g: g.log10_p)
+    return findings
+
+
+def select(
+    prep: Prepared,
+    fitter: Fitter,
+    base_terms: list[Term],
+    candidates: Sequence[Candidate],
+    views: tuple[str, ...],
+    scan_order: int,
+    max_effects: int = 3,
+    log: Callable[[str], None] = lambda s: None,
+):
+    """Forward selection with refits, then a backward held-out check (stage 4)."""
+    base = fitter.fit(base_terms)
+    cur_resid = fitter.residual(base.terms)
+    findings0 = locate(prep, cur_resid, views, scan_order)
+    N = prep.n_values
+    current, findings = base, findings0
+    accepted: list[Step] = []
+    rejected: list[dict] = []
+    not_testable: list[dict] = []
+    n_base_terms = len(base.terms)
+    tried_names: set[str] = set()
+    applicable = _applicable(prep, candidates, not_testable)
+    gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
+    held_notes: dict[str, list[str]] = {}
+    step_refusals: list[tuple[str, Any]] = []
+    for _ in range(max_effects):
+        seen = {f.view for f in findings}
+        gof = goodness_of_fit(prep, cur_resid, current.n_params)
+        if not findings and gof["passes"]:
+            break
+        kept: list = []  # the current residual over the kept rows, made once per round
+
+        def kept_resid(kept=kept, r=cur_resid):
+            if not kept:
+                kept.append(r if prep.keep.all() else r[prep.keep])
+            return kept[0]
+
+        st = dict(
+            prep=prep,
+            fitter=fitter,
+            findings=findings,
+            kept_resid=kept_resid,
+            cur_resid=cur_resid,
+            views=views,
+            scan_order=scan_order,
+            free_steps=_free_steps(prep, findings),
+        )
+        trials = []
+        for cand in applicable:
+            if cand.name in {s.name for s in accepted}:
+                continue
+            if cand.signature and not (set(cand.signature) & seen):
+                continue
+            if not cand.signature and gof["passes"]:
+                continue
+            tried_names.add(cand.name)
+            best = _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log)
+            if best is None:
+                continue
+            dchi = current.chi2 - best.chi2
+            k = best.n_determined(len(best.terms) - 1)
+            dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
+            dho = current.heldout_chi2 - best.heldout_chi2
+            trials.append((dbic, cand, best, dho, dchi, k))
+        _sort_trials(trials, applicable)
+        del kept[:]
+        chosen = _choose(
+            st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals
+        )
+        if chosen is None:
+            break
+        cand, fr, dbic, dho, col, notes, trms, erms, confounded = chosen
+        if confounded:
+            notes = [
+                *notes,
+                "confounded with "
+                + ", ".join(c["name"] for c in confounded)
+                + ": this recording cannot tell them apart; the name is only the one with "
+                "the lower information criterion",
+            ]
+        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
+        if full.chi2 <= fr.chi2:
+            fr = full
+        del cur_resid, st  # (one residual held at a time)
+        resid = fitter.residual(fr.terms)
+        accepted.append(Step(cand.name, fr, dbic, dho, col, notes, trms, erms, confounded))
+        log(f"named {cand.name}")
+        current, cur_resid = fr, resid
+        findings = locate(prep, cur_resid, views, scan_order)
+    current, cur_resid, findings, without = _backward(
+        prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan_order
+    )
+    findings = _place_step_refusals(prep, fitter, current, step_refusals, findings)
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2
