@@ -298,3 +298,62 @@ def test_three_motor_effects_at_once_are_all_named():
     rec, truth = simulate(np.random.default_rng(7), plan)
     d = diagnose(rec).doc
     assert sorted(e["name"] for e in d["effects"]) == sorted(truth["effects"]), d["report"]
+
+
+def test_settings_table_in_the_docs_is_generated_from_the_settings():
+    """``docs/diagnose.md``'s threshold table is ``settings_table()`` verbatim."""
+    import re
+    from pathlib import Path
+
+    from encdesign.diagnose import FinderSettings, settings_table
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "diagnose.md").read_text()
+    m = re.search(r"<!-- settings-table -->\n(.*?)<!-- /settings-table -->", text, re.S)
+    assert m is not None, "docs/diagnose.md has no settings-table markers"
+    assert m.group(1) == settings_table(), "regenerate the table: settings_table()"
+    # every field is documented, and a changed default would change the table
+    rows = [r for r in settings_table().splitlines() if r.startswith("| `")]
+    assert len(rows) == len(FinderSettings.__dataclass_fields__)
+    assert all(r.rstrip(" |").split("|")[-1].strip() for r in rows)
+    assert settings_table(FinderSettings(bic_min=20.0)) != settings_table()
+
+
+def test_finder_settings_invariants():
+    from encdesign.diagnose import FinderSettings
+
+    with pytest.raises(ValueError, match="bic_min"):
+        FinderSettings(bic_min=-1.0)
+    with pytest.raises(ValueError, match="n_folds"):
+        FinderSettings(n_folds=1)
+
+
+def test_settings_change_the_decision_and_a_refusal_names_its_rule():
+    """A generated motor record with cogging: named with the default settings; with a
+    criterion no effect can meet it is refused, the refusal names ``bic_min``, and the
+    verdict (decided once, after the kind's additions) is not ``missing_physics``."""
+    from encdesign.diagnose import FinderSettings, diagnose
+    from encdesign.diagnose._conceal_bench import simulate
+    from tests.helpers import validate_diagnosis
+
+    plan = {
+        "kind": "motion",
+        "case": "single",
+        "effects": ["cogging"],
+        "per_run_zeros": False,
+        "transient": False,
+        "glitches": 0,
+        "n_runs": 1,
+        "turns": 2.0,
+        "amplitude": 1.0,
+    }
+    rec, truth = simulate(np.random.default_rng(11), plan)
+    d0 = diagnose(rec).doc
+    assert [e["name"] for e in d0["effects"]] == ["cogging"], d0["report"]
+    assert d0["settings"]["bic_min"] == FinderSettings().bic_min
+    d1 = diagnose(rec, settings=FinderSettings(bic_min=1e12)).doc
+    validate_diagnosis(d1)
+    assert not any(e["name"] == "cogging" for e in d1["effects"]), d1["report"]
+    refused = [r for r in d1["rejected"] if r["name"] == "cogging"]
+    assert refused and "bic_min" in refused[0]["rules"], d1["rejected"]
+    assert d1["verdict"] != "missing_physics" or d1["effects"]
+    assert d1["verdict"] in d1["report"]

@@ -14,17 +14,10 @@ import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
 from encdesign.diagnose import diagnose
 from encdesign.diagnose._conceal_sds import write_concealed_sds
-from encdesign.diagnose._sds import (
-    _axis_tilt_fn,
-    _level_sigma,
-    _saturating_columns,
-    _wobble_fn,
-    dof_widening,
-    finish_sds,
-    sds_data,
-    sds_prepare,
-    stamp_lattice,
-)
+from encdesign.diagnose._sds import finish_sds
+from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
+from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
+from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn
 from encdesign.io._recording import load_recording, write_recording
 from tests.helpers import validate_diagnosis
 

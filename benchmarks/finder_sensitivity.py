@@ -1,0 +1,160 @@
+"""Benchmark: how much the finder's verdicts depend on each decision threshold.
+
+Every field of :class:`~encdesign.diagnose.FinderSettings` (or those given with
+``--thresholds``) is moved to x0.5 and x2 of its default (integers rounded, ``n_folds`` at
+least 2), one at a time, and every recording is diagnosed again. A verdict *flips* when the
+verdict or the set of named effects differs from the one with the defaults. The recordings:
+``--n`` concealed-benchmark recordings of each of ``--kinds`` (``draw_plan`` / ``simulate``
+of :mod:`encdesign.diagnose._conceal_bench`, cases cycling over clean, single, weak,
+compound) and ``--n-variations`` records of ``benchmarks/finder_variations.py`` (clean and
+single effects). Prints one line per threshold and factor, and how many thresholds flip
+more than ``--flip`` (default 5 %) of the verdicts::
+
+    python benchmarks/finder_sensitivity.py --kinds motion,multihead --n 2 \\
+        --n-variations 2 --thresholds bic_min,heldout_min --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from encdesign.diagnose import FinderSettings
+from encdesign.diagnose._conceal_bench import draw_plan, simulate
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose._settings import SETTINGS_FIELDS
+
+CASES = ("clean", "single", "weak", "compound")
+KINDS = ("multihead", "sensor", "motion", "quadrature")
+
+
+def moved(settings: FinderSettings, name: str, factor: float) -> FinderSettings:
+    """``settings`` with threshold ``name`` times ``factor`` (integers rounded, >= 1;
+    ``n_folds`` >= 2)."""
+    v = getattr(settings, name)
+    if isinstance(v, int):
+        nv = max(2 if name == "n_folds" else 1, int(round(v * factor)))
+    else:
+        nv = float(v) * factor
+    return dataclasses.replace(settings, **{name: nv})
+
+
+def recordings(kinds, n: int, n_var: int, seed: int) -> list[tuple[str, object]]:
+    """``(label, Recording)`` pairs: benchmark recordings of each kind, then variations."""
+    out = []
+    for kind in kinds:
+        for i in range(n):
+            rng = np.random.default_rng([seed, KINDS.index(kind), i])
+            plan = draw_plan(rng, kind, CASES[i % len(CASES)])
+            rec, _ = simulate(rng, plan)
+            out.append((f"{kind}/{plan['case']}/{i}", rec))
+    if n_var:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import finder_variations as fv
+
+        for i in range(n_var):
+            if i % 2:
+                eff = fv.EFFECTS[(i // 2) % len(fv.EFFECTS)]
+                rec, _ = fv.effect_record(np.random.default_rng([seed, 99, i]), eff)
+                out.append((f"variation/{eff}/{i}", rec))
+            else:
+                rec, _ = fv.clean_record(np.random.default_rng([seed, i]))
+                out.append((f"variation/clean/{i}", rec))
+    return out
+
+
+def outcome(rec, settings: FinderSettings) -> tuple[str, tuple[str, ...]]:
+    d = diagnose(rec, settings=settings).doc
+    return d["verdict"], tuple(sorted(e["name"] for e in d["effects"]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the sweep; returns 0."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--kinds", default="multihead,sensor,motion,quadrature")
+    ap.add_argument("--n", type=int, default=4, help="benchmark recordings per kind")
+    ap.add_argument("--n-variations", type=int, default=4)
+    ap.add_argument("--thresholds", default="", help="comma-separated fields (default: all)")
+    ap.add_argument("--factors", default="0.5,2")
+    ap.add_argument("--flip", type=float, default=0.05, help="share of verdicts that flip")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    kinds = [k for k in args.kinds.split(",") if k]
+    bad = [k for k in kinds if k not in KINDS]
+    names = [t for t in args.thresholds.split(",") if t] or list(SETTINGS_FIELDS)
+    bad += [t for t in names if t not in SETTINGS_FIELDS]
+    if bad:
+        ap.error(
+            f"unknown kinds or thresholds: {bad} (kinds {KINDS}, thresholds "
+            f"{SETTINGS_FIELDS})"
+        )
+    factors = [float(f) for f in args.factors.split(",")]
+    t0 = time.perf_counter()
+    recs = recordings(kinds, args.n, args.n_variations, args.seed)
+    base = FinderSettings()
+    ref = {}
+    for label, rec in recs:
+        ref[label] = outcome(rec, base)
+        print(f"default {label}: {ref[label][0]} {list(ref[label][1])}", flush=True)
+    rows = []
+    for name in names:
+        for fac in factors:
+            st = moved(base, name, fac)
+            flips = []
+            for label, rec in recs:
+                got = outcome(rec, st)
+                if got != ref[label]:
+                    flips.append(dict(recording=label, default=ref[label], moved=got))
+            share = len(flips) / max(len(recs), 1)
+            rows.append(
+                dict(
+                    threshold=name,
+                    factor=fac,
+                    value=getattr(st, name),
+                    flipped=len(flips),
+                    share=share,
+                    flips=flips,
+                )
+            )
+            print(
+                f"{name} x{fac:g} = {getattr(st, name)!r}: {len(flips)} / {len(recs)} "
+                f"verdicts change"
+                + "".join(f"\n    {f['recording']}: {f['default']} -> {f['moved']}" for f in flips),
+                flush=True,
+            )
+    over = sorted({r["threshold"] for r in rows if r["share"] > args.flip})
+    print(
+        f"{len(over)} of {len(names)} thresholds flip more than {100 * args.flip:.0f} % of "
+        f"{len(recs)} verdicts at x{' or x'.join(f'{f:g}' for f in factors)}: {over} "
+        f"({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(
+                dict(
+                    kinds=kinds,
+                    n=args.n,
+                    n_variations=args.n_variations,
+                    seed=args.seed,
+                    recordings=[lab for lab, _ in recs],
+                    default={k: [v[0], list(v[1])] for k, v in ref.items()},
+                    rows=rows,
+                    over=over,
+                ),
+                f,
+                indent=1,
+                default=str,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
