@@ -92,8 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     bad += [t for t in names if t not in SETTINGS_FIELDS]
     if bad:
         ap.error(
-            f"unknown kinds or thresholds: {bad} (kinds {KINDS}, thresholds "
-            f"{SETTINGS_FIELDS})"
+            f"unknown kinds or thresholds: {bad} (kinds {KINDS}, thresholds {SETTINGS_FIELDS})"
         )
     factors = [float(f) for f in args.factors.split(",")]
     t0 = time.perf_counter()
