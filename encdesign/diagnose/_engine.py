@@ -43,8 +43,9 @@ from ._document import (
     term_params,
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
-from ._prepare import noise_spectral, prepare
-from ._protocol import Kind, Prepared
+from ._kind import AbstractKind as Kind
+from ._prepare import noise_spectral
+from ._protocol import Prepared
 from ._select import select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._views import locate
@@ -185,27 +186,29 @@ def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
     return base_terms, base_info
 
 
-def _align(prep: Prepared, fitter: Fitter, base_info: dict, fit: FitResult) -> None:
-    """Rotation-locked candidates see the aligned angle (the kind's ``align`` hook)."""
-    if "align" in base_info:
-        aligned = base_info["align"](fit.terms, prep)
-        if callable(aligned):  # a lazy column fn(lo, hi)
-            prep.rows.set_lazy("theta", aligned)
-        else:
-            prep.rows["theta"] = aligned
-        fitter.clear()
+def _align(kind, prep: Prepared, fitter: Fitter, base_info: dict, fit: FitResult) -> None:
+    """Rotation-locked candidates see the aligned angle (the kind's ``align``)."""
+    aligned = kind.align(fit.terms, prep, base_info)
+    if aligned is None:
+        return
+    if callable(aligned):  # a lazy column fn(lo, hi)
+        prep.rows.set_lazy("theta", aligned)
+    else:
+        prep.rows["theta"] = aligned
+    fitter.clear()
 
 
 def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) -> None:
     """The noise from the base residual's periodogram (structure cannot inflate it), or the
     kind's own estimate; the fitter's weights follow."""
     r_base = fitter.residual(fit.terms)
-    if kind.noise is not None and kind.noise_replaces:
-        sig = np.asarray(kind.noise(prep, r_base), float)
+    own = kind.noise(prep, r_base)
+    if own is not None and kind.noise_replaces:
+        sig = np.asarray(own, float)
     else:
         sig = noise_spectral(prep, r_base)
-        if kind.noise is not None:  # the kind's second estimate: the smaller of the two
-            sig = np.fmin(sig, np.asarray(kind.noise(prep, r_base), float))
+        if own is not None:  # the kind's second estimate: the smaller of the two
+            sig = np.fmin(sig, np.asarray(own, float))
     del r_base
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
         prep.sigma = sig
@@ -218,21 +221,21 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
     growth. Returns ``(base_fit, order)``."""
     base_fit = fitter.fit(base_terms)
-    refined = base_info["refine"](base_fit.terms, prep) if "refine" in base_info else None
+    refined = kind.refine(base_fit.terms, prep, base_info)
     if refined:
         # the kind moved the angle its base model is evaluated at (e.g. the shaft from the
         # heads' mean less the fitted error's mean): refit from the fitted values
         base_info["refined"] = refined
         fitter.clear()
         base_fit = fitter.fit(base_fit.terms)
-    _align(prep, fitter, base_info, base_fit)
+    _align(kind, prep, fitter, base_info, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
         order, base_fit = grown
-        _align(prep, fitter, base_info, base_fit)  # the refit moved the run offsets a little
+        _align(kind, prep, fitter, base_info, base_fit)  # the refit moved the run offsets a little
         _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
     return base_fit, order
 
@@ -355,8 +358,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
     doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
-    if kind.summary is not None:
-        doc.update(kind.summary(prep, base_params))
+    doc.update(kind.summary(prep, base_params))
     return doc
 
 
@@ -388,7 +390,7 @@ def run_engine(
         kd = kind.data(rec)
         meta = dict(rec.meta)
         meta.setdefault("kind", rec.kind)
-        prep = (kind.prepare or prepare)(kd, meta, settings)
+        prep = kind.prepare(kd, meta, settings)
         pg.stage("prepared")
         order, limit = _order_of(kd, prep, kind, max_order)
         base_terms, base_info = _base_terms(kind, prep, order)
@@ -414,11 +416,10 @@ def run_engine(
         pg.stage("held-out + goodness of fit")
         doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
         pg.stage("report")
-        if kind.finish is not None:
-            doc = kind.finish(doc, settings)
+        doc = kind.finish(doc, settings)
         doc["verdict"] = decide_verdict(doc)
         doc["time_s"] = time.perf_counter() - t0
-        doc["report"] = report_text(doc) + (kind.report_lines(doc) if kind.report_lines else "")
+        doc["report"] = report_text(doc) + kind.report_lines(doc)
     finally:
         pg.close()
     doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
@@ -34,7 +35,8 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._protocol import Kind, KindData, Prepared
+from ._kind import AbstractKind
+from ._protocol import KindData, Prepared
 
 EXPLANATIONS = {
     "cogging": (
@@ -314,13 +316,25 @@ def motion_candidates(ctx: Context) -> tuple[Candidate, ...]:
     return tuple(out)
 
 
-MOTION = Kind(
-    name="motion",
-    data=motion_data,
-    base=motion_base,
-    candidates=motion_candidates,
-    views=("orders", "spectrum", "band", "time"),
-    max_order_limit=motion_limit,
-    default_max_order=200,
-    reading_lattice=True,
-)
+class MotionKind(AbstractKind):
+    """``motion``: a motor's shaft angle in time (speed ripple, cogging, ...)."""
+
+    name: ClassVar[str] = "motion"
+    views: ClassVar[tuple] = ("orders", "spectrum", "band", "time")
+    default_max_order: ClassVar[int] = 200
+    reading_lattice: ClassVar[bool] = True
+
+    def data(self, rec):
+        return motion_data(rec)
+
+    def base(self, prep, max_order):
+        return motion_base(prep, max_order)
+
+    def candidates(self, ctx):
+        return motion_candidates(ctx)
+
+    def max_order_limit(self, prep):
+        return motion_limit(prep)
+
+
+MOTION = MotionKind()

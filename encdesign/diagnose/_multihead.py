@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
@@ -33,6 +34,7 @@ from .._errors import input_error
 from ..io._recording import Recording
 from . import _effects as fx
 from ._candidates import Candidate, Context, Param
+from ._kind import AbstractKind
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -43,7 +45,7 @@ from ._multihead_terms import (
     VIBRATION,
     view_order_step,
 )
-from ._protocol import Kind, KindData, Prepared
+from ._protocol import KindData, Prepared
 from ._views import run_spans
 
 
@@ -485,12 +487,11 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     return out
 
 
-MULTIHEAD = Kind(
-    name="multihead",
-    data=multihead_data,
-    base=multihead_base,
-    candidates=multihead_candidates,
-    views=(
+class MultiheadKind(AbstractKind):
+    """``multihead``: 2-6 heads on one disk, or one sensor against ``theta_ref``."""
+
+    name: ClassVar[str] = "multihead"
+    views: ClassVar[tuple] = (
         "spectrum",
         "band",
         "orders",
@@ -501,9 +502,24 @@ MULTIHEAD = Kind(
         "speed",
         "angle_trend",
         view_order_step,
-    ),
-    max_order_limit=max_order_limit,
-    summary=multihead_summary,
-    grows_orders=True,
-    reading_lattice=True,
-)
+    )
+    grows_orders: ClassVar[bool] = True
+    reading_lattice: ClassVar[bool] = True
+
+    def data(self, rec):
+        return multihead_data(rec)
+
+    def base(self, prep, max_order):
+        return multihead_base(prep, max_order)
+
+    def candidates(self, ctx):
+        return multihead_candidates(ctx)
+
+    def max_order_limit(self, prep):
+        return max_order_limit(prep)
+
+    def summary(self, prep, base_params):
+        return multihead_summary(prep, base_params)
+
+
+MULTIHEAD = MultiheadKind()

@@ -1,5 +1,5 @@
-"""What a kind hands the engine (:class:`KindData`), the kind itself (:class:`Kind`) and the
-prepared record (:class:`Prepared`, its row columns)."""
+"""What a kind hands the engine (:class:`KindData`) and the prepared record (:class:`Prepared`,
+its row columns); the kind itself is :class:`~encdesign.diagnose._kind.AbstractKind`."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ._candidates import Candidate, Context
+from ._candidates import Context
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 # ----------------------------------------------------------------------------- kind data
@@ -70,60 +70,6 @@ class KindData:
     def __post_init__(self):
         if self.reading is None and len(self.reading_cols) != self.y.shape[1]:
             raise ValueError("KindData: reading is None and reading_cols is not one per channel")
-
-
-@dataclasses.dataclass(frozen=True)
-class Kind:
-    """A recording kind: how to read it, its base model, its views and its candidates.
-
-    Attributes:
-        name: kind name.
-        data: ``data(rec) -> KindData``.
-        base: ``base(prep, max_order) -> ([(Candidate, start), ...], info)``: base-model
-            terms for this record (``info``: ``{"unidentifiable": [...], "align": fn}``).
-        candidates: ``candidates(ctx) -> tuple[Candidate, ...]``.
-        views: names of the views run on the residual (or the kind's own view functions,
-            ``view(prep, whitened_residual, scan_order) -> [Finding, ...]``).
-        max_order_limit: ``limit(prep) -> int``: the highest order this record resolves.
-        default_max_order: the base model's order when the user gives none.
-        summary: ``summary(prep, base_params) -> dict`` of kind-specific keys for the JSON.
-        prepare: ``prepare(kind_data, meta, settings) -> Prepared`` replacing :func:`prepare` for a
-            kind whose rows are not a time series of a turning shaft (``sds``: one row per
-            platform position); ``None``: the engine's.
-        noise: optional ``noise(prep, base_resid) -> (C,)``: a second noise estimate that the
-            kind's own structure cannot inflate (e.g. differences of neighbours in signal
-            phase for a quadrature capture in time order); the engine takes, per channel,
-            the smaller of it and the periodogram median.
-        noise_replaces: ``True``: the kind's ``noise`` replaces the periodogram median
-            (``sds``: levels by degrees of freedom, rows are platform positions, not time).
-        grows_orders: ``True``: integer orders above ``default_max_order`` that the base
-            residual shows (up to what the record resolves) join the base model (a disk's
-            error function has every order; :func:`_grow_base_order`).
-        reading_lattice: ``True``: the channels are angle readings; one on a value lattice
-            whose floor is a material part of its noise names ``quantization`` from the
-            lattice (:func:`lattice_effect`).
-        finish: optional ``finish(doc, settings) -> doc``: the kind's additions to the
-            engine's document (effects named from a lattice, located structure no term
-            models, notes); the engine then decides the verdict and builds the report once.
-        report_lines: optional ``report_lines(doc) -> str``: the kind's lines appended to the
-            plain-text report.
-    """
-
-    name: str
-    data: Callable[[Any], KindData]
-    base: Callable[[Any, int], tuple[list, dict]]
-    candidates: Callable[[Context], tuple[Candidate, ...]]
-    views: tuple[str | Callable[..., Any], ...]
-    max_order_limit: Callable[[Any], int]
-    default_max_order: int = 12
-    summary: Callable[[Any, dict], dict] | None = None
-    prepare: Callable[[KindData, dict], Any] | None = None
-    noise: Callable[[Any, np.ndarray], np.ndarray] | None = None
-    noise_replaces: bool = False
-    grows_orders: bool = False
-    reading_lattice: bool = False
-    finish: Callable[[dict, Any], dict] | None = None
-    report_lines: Callable[[dict], str] | None = None
 
 
 # ----------------------------------------------------------------------------- prepared

@@ -39,7 +39,7 @@ capture, time blocks otherwise).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import jax.numpy as jnp
 import numpy as np
@@ -47,7 +47,8 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
-from ._protocol import Kind, KindData, Prepared
+from ._kind import AbstractKind
+from ._protocol import KindData, Prepared
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
 
@@ -527,26 +528,49 @@ def quadrature_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
     return np.array([math.sqrt(float(np.mean(d2**2)) / 6.0)])
 
 
-def quadrature_kind(st: dict[str, Any]) -> Kind:
-    """The quadrature kind for one recording (its conic start ``st`` in the closures):
-    views orders (of the phase), and with ``t`` also time and spectrum (Hz)."""
-    has_t = bool(st["has_t"])
-    return Kind(
-        name="quadrature",
-        data=lambda rec: quadrature_data(rec, st),
-        base=lambda prep, M: quadrature_base(prep, M, st),
-        candidates=lambda ctx: (
+class QuadratureKind(AbstractKind):
+    """``quadrature``: one pair of sin/cos signals, for one recording (its conic start
+    ``st``): views orders (of the phase), and with ``t`` also time and spectrum (Hz)."""
+
+    st: dict[str, Any]
+    name: ClassVar[str] = "quadrature"
+    default_max_order: ClassVar[int] = 12
+
+    @property
+    def views(self) -> tuple:  # type: ignore[override]
+        return ("orders", "time", "spectrum") if self.st["has_t"] else ("orders",)
+
+    def data(self, rec):
+        return quadrature_data(rec, self.st)
+
+    def base(self, prep, max_order):
+        return quadrature_base(prep, max_order, self.st)
+
+    def candidates(self, ctx):
+        return (
             signal_shape_candidate(int(ctx.consts.get("max_order", 12))),
-            VIBRATION[has_t],
-        ),
-        views=("orders", "time", "spectrum") if has_t else ("orders",),
-        max_order_limit=quadrature_limit,
-        default_max_order=12,
-        summary=lambda prep, bp: quadrature_summary(prep, bp, st),
-        noise=quadrature_noise,
-        finish=lambda doc, settings: finish(doc, st),
-        report_lines=quadrature_report_lines,
-    )
+            VIBRATION[bool(self.st["has_t"])],
+        )
+
+    def max_order_limit(self, prep):
+        return quadrature_limit(prep)
+
+    def noise(self, prep, base_resid):
+        return quadrature_noise(prep, base_resid)
+
+    def summary(self, prep, base_params):
+        return quadrature_summary(prep, base_params, self.st)
+
+    def finish(self, doc, settings):
+        return finish(doc, self.st)
+
+    def report_lines(self, doc):
+        return quadrature_report_lines(doc)
+
+
+def quadrature_kind(st: dict[str, Any]) -> QuadratureKind:
+    """The quadrature kind for one recording (its conic start ``st``)."""
+    return QuadratureKind(st)
 
 
 def run_quadrature(rec: Recording, **kw) -> dict[str, Any]:

@@ -48,12 +48,14 @@ view per candidate (the power its columns take out of the whitened residual).
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
 
 from ._fit import _valjac_fn
-from ._protocol import Kind, Prepared
+from ._kind import AbstractKind
+from ._protocol import Prepared
 from ._sds_data import (
     SDSPairTable,
     _design_orders,
@@ -321,20 +323,40 @@ def sds_summary(prep: Prepared, base_params: dict) -> dict:
     }
 
 
-SDS = Kind(
-    name="sds",
-    data=sds_data,
-    base=sds_base,
-    candidates=sds_candidates,
-    views=SDS_VIEWS,
-    max_order_limit=sds_limit,
-    default_max_order=60,
-    summary=sds_summary,
-    prepare=sds_prepare,
-    noise=sds_noise,
-    noise_replaces=True,
-    finish=lambda doc, settings: finish_sds(doc, settings),
-)
+class SDSKind(AbstractKind):
+    """``sds``: the shifted-delta-sum timing instrument, one row per run."""
+
+    name: ClassVar[str] = "sds"
+    views: ClassVar[tuple] = SDS_VIEWS
+    default_max_order: ClassVar[int] = 60
+    noise_replaces: ClassVar[bool] = True
+
+    def data(self, rec):
+        return sds_data(rec)
+
+    def base(self, prep, max_order):
+        return sds_base(prep, max_order)
+
+    def candidates(self, ctx):
+        return sds_candidates(ctx)
+
+    def max_order_limit(self, prep):
+        return sds_limit(prep)
+
+    def prepare(self, kd, meta, settings):
+        return sds_prepare(kd, meta, settings)
+
+    def noise(self, prep, base_resid):
+        return sds_noise(prep, base_resid)
+
+    def summary(self, prep, base_params):
+        return sds_summary(prep, base_params)
+
+    def finish(self, doc, settings):
+        return finish_sds(doc, settings)
+
+
+SDS = SDSKind()
 
 
 # ----------------------------------------------------------------------------- finish
