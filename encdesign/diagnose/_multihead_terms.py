@@ -197,13 +197,23 @@ def _wb_plausible(ctx, v):
         return f"frequency ratio {nu:.3g} is not positive"
     if abs(nu - round(nu)) < 0.01:
         return f"frequency ratio {nu:.4f} is an integer: synchronous, not a wobble"
+    st = ctx.settings
     revs = float(np.max(ctx.revolutions))
-    if nu * revs < 3.0:
-        return (
-            f"{nu * revs:.1f} wobble cycles in the longest run: a slow drift or a step "
-            "fits as well (needs 3)"
-        )
-    return None
+    if nu * revs >= st.wobble_cycles_min:
+        return None
+    # fewer cycles than the rule asks in every run: a slow drift or a step could pose as
+    # it, unless the record tells them apart: runs at clearly different speeds that share
+    # one order (not one frequency) over enough cycles in all
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    total = nu * float(np.sum(ctx.revolutions))
+    if w.size and np.max(w) >= st.speed_ratio_min * np.min(w) and total >= st.wobble_cycles_min:
+        return None
+    return (
+        f"{nu * revs:.1f} wobble cycles in the longest run: a slow drift or a step fits as "
+        f"well (needs {st.wobble_cycles_min:g}, or runs at speeds {st.speed_ratio_min:g}x "
+        f"apart showing the same order over {st.wobble_cycles_min:g} cycles in all)"
+    )
 
 
 def _wb_derived(ctx, v, se):

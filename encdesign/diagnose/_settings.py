@@ -120,6 +120,17 @@ class FinderSettings(eqx.Module):
     """multihead: a vibration near an integer order at one speed must beat the
     rotation-locked order there by this chi-square (rule ``locked_margin``). c0988bd."""
 
+    wobble_cycles_min: float = eqx.field(default=3.0, static=True)
+    """multihead: ``bearing_wobble`` needs this many cycles of its fractional order in the
+    longest run (rule ``bearing_wobble.plausible``: with fewer, a slow drift or a step fits
+    as well), unless runs at speeds ``speed_ratio_min`` apart show the same order over this
+    many cycles in all (an order, not a frequency: a drift in time cannot do that). From the
+    first wobble candidate; the two-speed exemption from issue 22 (order 0.4 in 4-turn runs)."""
+
+    speed_ratio_min: float = eqx.field(default=1.5, static=True)
+    """Runs whose steady speeds differ by this ratio count as two speeds when a record is
+    asked to tell an order from a frequency (``wobble_cycles_min``). Issue 22."""
+
     drift_turns_per_degree: float = eqx.field(default=3.0, static=True)
     """motion: the speed-drift polynomial gains one degree per this many revolutions beyond
     3 (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 % speed wander came back
