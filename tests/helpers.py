@@ -111,3 +111,31 @@ SCALE_TOLERANCES = dict(
     noise=2e-7,
 )
 SCALE_BUILDS = 203  # not a multiple of 2 or 4: the last shard is short
+
+
+def slow_wobble_bench(speeds_rev_s=(0.7, 1.2, 1.7), nu: float = 0.4, n_per_run: int = 4000, seed=0):
+    """Three heads, one run per speed (4 s each at 1 kHz, 0.5 urad noise, a 3 urad order-2
+    disk error, per-run zeros) with a 3 urad shaft wobble at the fractional order ``nu``:
+    at order 0.4 fewer than 3 cycles in every run (issue 22's example)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    alpha = np.array([0.0, 2.1, 4.2])
+    cols: dict[str, list] = {"t": [], "run": [], "theta_ref": [], "h0": [], "h1": [], "h2": []}
+    for r, f in enumerate(speeds_rev_s):
+        t = np.arange(n_per_run) / 1000.0
+        th = 2 * np.pi * f * t + rng.uniform(0, 6)
+        ph = rng.uniform(0, 6.3)
+        cols["t"].append(t)
+        cols["run"].append(np.full(n_per_run, r))
+        cols["theta_ref"].append(th + rng.uniform(-3, 3))
+        for k in range(3):
+            e = 3e-6 * np.sin(2 * (th - alpha[k])) + 3e-6 * np.sin(nu * th + ph - alpha[k])
+            e = e + rng.normal(0, 0.5e-6, n_per_run)
+            cols[f"h{k}"].append(th + e + rng.uniform(-3, 3))
+    cols = {k: np.concatenate(v) for k, v in cols.items()}
+    enc = {"optical_radius_m": 0.02, "head_angles_deg": np.degrees(alpha).tolist()}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)

@@ -357,3 +357,44 @@ def test_settings_change_the_decision_and_a_refusal_names_its_rule():
     assert refused and "bic_min" in refused[0]["rules"], d1["rejected"]
     assert d1["verdict"] != "missing_physics" or d1["effects"]
     assert d1["verdict"] in d1["report"]
+
+
+def test_slow_wobble_is_named_when_two_speeds_show_one_order():
+    """Issue 22's example: a wobble at order 0.4 gives fewer than 3 cycles in every run;
+    runs at different speeds show one order (not one frequency), so the record tells it
+    from a slow drift: named, nothing unexplained (it was refused, "could be a slow
+    drift", and the record came back unexplained)."""
+    from encdesign.diagnose import diagnose
+    from tests.helpers import slow_wobble_bench, validate_diagnosis
+
+    d = diagnose(slow_wobble_bench()).doc
+    validate_diagnosis(d)
+    assert [e["name"] for e in d["effects"]] == ["bearing_wobble"], d["report"]
+    nu = d["effects"][0]["params"]["frequency_ratio"]["value"]
+    assert abs(nu - 0.4) < 0.02
+    assert all(r.get("rule") for r in d["rejected"]), d["rejected"]
+
+
+@pytest.mark.parametrize(
+    "speeds, revs, refused",
+    [
+        ((1.0, 1.0), (3.0, 3.0), True),  # one speed: a drift in time could pose as it
+        ((1.0, 2.0), (3.0, 6.0), False),  # two speeds, 3.6 cycles in all: an order
+        ((1.0, 2.0), (1.0, 2.0), True),  # two speeds but 1.2 cycles in all
+    ],
+)
+def test_wobble_rule_needs_few_cycles_only_at_two_speeds(speeds, revs, refused):
+    from types import SimpleNamespace
+
+    from encdesign.diagnose import FinderSettings
+    from encdesign.diagnose._multihead_terms import _wb_plausible
+
+    omega = np.concatenate([np.full(10, 2 * np.pi * s) for s in speeds])
+    ctx = SimpleNamespace(
+        settings=FinderSettings(), revolutions=np.asarray(revs), rows={"omega": omega}
+    )
+    why = _wb_plausible(ctx, {"frequency_ratio": np.asarray(0.4)})
+    assert (why is not None) == refused, why
+    # the thresholds are the settings' (a stricter cycle count refuses the two-speed case)
+    strict = SimpleNamespace(**{**vars(ctx), "settings": FinderSettings(wobble_cycles_min=9.0)})
+    assert _wb_plausible(strict, {"frequency_ratio": np.asarray(0.4)}) is not None
