@@ -22,6 +22,8 @@ from .design import (
     Design as Design,
     load_design as load_design,
     parse_design as parse_design,
+)
+from .simulate import (
     simulate_bench as simulate_bench,
     simulate_recording as simulate_recording,
 )
@@ -89,11 +91,11 @@ from .physics import (
     SpeedMarkPrediction as SpeedMarkPrediction,
     predict_speed_mark_error as predict_speed_mark_error,
 )
-from .io import (
+from .diagnose import (
     SDSRecordingResult as SDSRecordingResult,
     sds_readings_from_recording as sds_readings_from_recording,
-    simulate_sds_recording as simulate_sds_recording,
 )
+from .simulate import simulate_sds_recording as simulate_sds_recording
 
 # --- quadrature signal layer (issue 6) ---
 from .physics import (
@@ -198,7 +200,7 @@ from .physics import (
 )
 
 # --- discrepancy finder (issue 5) ---
-from .diagnose import (
+from .simulate import (
     simulate_concealed_bench as simulate_concealed_bench,
     write_concealed as write_concealed,
 )

@@ -35,12 +35,12 @@ from encdesign.calibrate import (
     curve_from_closure,
     fit_curve,
     read_correction_table,
-    simulate_closure_readings,
     solve_closure,
     write_correction_table,
 )
 from encdesign.io._study import new_figure, save_figure, study_parser, write_results
 from encdesign.physics._sds_errors import ARCSEC
+from encdesign.simulate import simulate_closure_readings
 
 NAME = "calibration-curve"
 CHUNK = 128

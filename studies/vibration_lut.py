@@ -9,7 +9,7 @@ the relative level of accelerations detected by the accelerometer between each o
 axis". The seed's results are all at the LUT's own 100 m/s², so its scaling step is never
 exercised there.
 
-Simulated here (``encdesign.calibrate``: :func:`simulate_shaker_steps`,
+Simulated here (``encdesign.simulate``: :func:`simulate_shaker_steps`,
 :func:`build_stepped_lut`, :func:`accelerometer_levels`, :func:`combine_luts`; the
 ``quadrature`` study's encoder, signal errors drifting along the travel and its
 compensation pipeline):
@@ -42,10 +42,10 @@ from encdesign.calibrate import (
     build_stepped_lut,
     combine_luts,
     mount_relative_displacement_m,
-    simulate_shaker_steps,
 )
 from encdesign.cli._main import _load_study
 from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.simulate import simulate_shaker_steps
 
 NAME = "vibration-lut"
 LUT_ACCEL_M_S2 = 100.0

@@ -281,7 +281,7 @@ def test_three_motor_effects_at_once_are_all_named():
     candidate alone leaves the others' orders in the views they share, which is not
     structure it only dents (the signature rule counts the orders it touches)."""
     from encdesign.diagnose import diagnose
-    from encdesign.diagnose._conceal_bench import simulate
+    from encdesign.simulate import simulate_plan as simulate
 
     plan = {
         "kind": "motion",

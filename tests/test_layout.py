@@ -1,8 +1,10 @@
 """The package's layout: imports point one way between subpackages and never form a circle.
 
 Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_progress``);
-``physics``; ``io``; the tools ``design``, ``diagnose`` (and any later tool subpackage),
-which never import each other; ``cli``; the public facades (``__init__``, ``objectives``).
+``physics``; ``io``; the tools ``design``, ``diagnose``, ``calibrate`` (and any later tool
+subpackage), which never import each other; ``simulate`` (the bench simulators: may use the
+tools' types, e.g. a ``Design``, and none of them imports it); ``cli``; the public facades
+(``__init__``, ``objectives``).
 A module may import its own subpackage and any lower layer. Every import counts, including
 those inside functions: a lazy import hides a circle, it does not remove it.
 """
@@ -25,10 +27,11 @@ LAYERS = {
     "design": 3,
     "diagnose": 3,
     "calibrate": 3,
-    "cli": 4,
-    "__init__": 5,
-    "__main__": 5,
-    "objectives": 5,
+    "simulate": 4,
+    "cli": 5,
+    "__init__": 6,
+    "__main__": 6,
+    "objectives": 6,
 }
 
 
@@ -182,3 +185,32 @@ def test_old_circles_would_be_caught():
     src = "def f():\n    from ._sds import mark_angles\n"
     node = next(n for n in ast.walk(ast.parse(src)) if isinstance(n, ast.ImportFrom))
     assert _resolve("physics._sds_errors", node) == ["physics._sds", "physics._sds.mark_angles"]
+
+
+def test_io_imports_no_physics():
+    """Files in and out know nothing of the models: the simulators that write recordings
+    from the physics are in ``simulate``, the readout of an ``sds`` record in ``diagnose``."""
+    graph = _imports(_modules())
+    bad = sorted(
+        f"{m} imports {d}"
+        for m, deps in graph.items()
+        if _layer(m) == "io"
+        for d in deps
+        if _layer(d) == "physics"
+    )
+    assert not bad, "\n".join(bad)
+
+
+def test_simulate_is_imported_by_no_tool():
+    """The tools (design, diagnose, calibrate) never import the bench simulators; the CLI
+    and the studies, which may use both, generate the finder's concealed benches."""
+    graph = _imports(_modules())
+    tools = {"design", "diagnose", "calibrate", "physics", "io"}
+    bad = sorted(
+        f"{m} imports {d}"
+        for m, deps in graph.items()
+        if _layer(m) in tools
+        for d in deps
+        if _layer(d) == "simulate"
+    )
+    assert not bad, "\n".join(bad)

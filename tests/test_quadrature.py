@@ -174,7 +174,7 @@ def test_bad_signal_errors_and_signals():
 
 
 def test_matches_discrepancy_finder_convention():
-    eff = pytest.importorskip("encdesign.diagnose._effects")
+    eff = pytest.importorskip("encdesign.physics._effects")
     lines = 100
     r = jnp.linspace(0.0, 0.2, 500)[:, None]
     oa, ob, eps, d = 0.02, -0.01, 0.03, 0.04

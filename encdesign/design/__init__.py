@@ -27,12 +27,6 @@ from ._design import (
 from ._design import (
     parse_design as parse_design,
 )
-from ._design import (
-    simulate_bench as simulate_bench,
-)
-from ._design import (
-    simulate_recording as simulate_recording,
-)
 from ._drivers import (
     DOEResult as DOEResult,
 )

@@ -31,7 +31,7 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import Recording
-from . import _effects as fx
+from ..physics import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._engine import MAX_PARAM_FRACTION, Kind, KindData, Prepared
 from ._views import Finding, _logp, _thr, run_spans
@@ -1122,7 +1122,7 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     if not (prep.ctx.has_ref and prep.n_channels == 1):
         return {}
     try:
-        from . import _reference_terms as rt
+        from . import _reference_data as rt
     except ImportError:
         return {}
     kd = prep.kd
