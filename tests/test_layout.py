@@ -21,6 +21,7 @@ PKG = Path(__file__).resolve().parent.parent / "encdesign"
 # subpackage (or top-level module) -> layer rank
 LAYERS = {
     "_errors": 0,
+    "_array": 0,
     "_progress": 0,
     "physics": 1,
     "io": 2,

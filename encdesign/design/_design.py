@@ -22,8 +22,8 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import (
-    _finite_number,
-    _positive_number,
+    finite_number,
+    positive_number,
     read_toml,
     show,
 )
@@ -118,8 +118,8 @@ class Design:
 # ----------------------------------------------------------------------------- checkers
 
 
-_number = _finite_number
-_positive = _positive_number
+_number = finite_number
+_positive = positive_number
 
 
 def _nonneg(where: str, v: Any) -> float:

@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
 from .._errors import EncdesignInputError, input_error
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
 from ..physics._layout import (
@@ -110,10 +111,6 @@ TOLERANCE_UNITS = {
 """SI unit of each tolerance's standard deviation."""
 
 
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
-
-
 class Tolerances(eqx.Module):
     """Standard deviations of the build-to-build deviations (all SI, all ``>= 0``).
 
@@ -143,9 +140,9 @@ class Tolerances(eqx.Module):
         for name in TOLERANCE_NAMES:
             v = getattr(self, name)
             if hasattr(v, "shape") and v.shape != ():
-                raise ValueError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
+                raise EncdesignInputError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
             if not isinstance(v, jax.core.Tracer) and hasattr(v, "shape") and float(v) < 0:
-                raise ValueError(f"Tolerances.{name}: {float(v)}, expected >= 0")
+                raise EncdesignInputError(f"Tolerances.{name}: {float(v)}, expected >= 0")
 
     def vector(self) -> Array:
         """The standard deviations in :data:`TOLERANCE_NAMES` order (SI)."""
@@ -194,17 +191,19 @@ class EncoderDesign(eqx.Module):
 
     def __check_init__(self) -> None:
         if self.n_heads < 2:
-            raise ValueError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
+            raise EncdesignInputError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
         if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise ValueError("EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0")
+            raise EncdesignInputError(
+                "EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0"
+            )
         if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"EncoderDesign.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
         r = self.radius_m
         if not isinstance(r, jax.core.Tracer) and hasattr(r, "shape") and not float(r) > 0:
-            raise ValueError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
+            raise EncdesignInputError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
 
     @property
     def head_angles_rad(self) -> Array:
@@ -408,7 +407,7 @@ def build_metric(
     if metric == "ms":
         r = build_residual(design, tol, z)
         return jnp.mean(r * r) + calibration_noise_ms(design, tol)
-    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
+    raise EncdesignInputError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
 
 
 def build_metrics(
@@ -525,15 +524,19 @@ class LayoutDesign(eqx.Module):
     def __check_init__(self) -> None:
         a = self.head_angles_rad
         if a.ndim != 1 or a.shape[0] < 2:
-            raise ValueError(f"LayoutDesign.head_angles_rad: shape {a.shape}, expected (H >= 2,)")
+            raise EncdesignInputError(
+                f"LayoutDesign.head_angles_rad: shape {a.shape}, expected (H >= 2,)"
+            )
         if self.weights is not None and jnp.shape(self.weights) != a.shape:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"LayoutDesign.weights: shape {jnp.shape(self.weights)}, expected {a.shape}"
             )
         if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise ValueError("LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0")
+            raise EncdesignInputError(
+                "LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0"
+            )
         if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"LayoutDesign.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
@@ -541,7 +544,7 @@ class LayoutDesign(eqx.Module):
             try:
                 check_layout(a, where="LayoutDesign.head_angles_rad")
             except EncdesignInputError as exc:
-                raise ValueError(str(exc)) from None
+                raise EncdesignInputError(str(exc)) from None
 
     @property
     def n_heads(self) -> int:
@@ -601,7 +604,7 @@ def layout_metric(
         return ms
     if metric == "rms":
         return jnp.sqrt(ms)
-    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
+    raise EncdesignInputError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
 
 
 def layout_metrics(

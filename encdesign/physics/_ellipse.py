@@ -30,8 +30,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+from .._array import is_traced as _is_traced
 from .._errors import input_error
-from ._quadrature import SignalErrors, _f64, _is_traced, check_signals, phase_error_eq4_rad
+from ._quadrature import SignalErrors, check_signals, phase_error_eq4_rad
 
 __all__ = [
     "EllipseParams",

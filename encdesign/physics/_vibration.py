@@ -35,8 +35,10 @@ import numpy as np
 from jaxtyping import Array, ArrayLike
 from scipy.optimize import minimize_scalar
 
+from .._array import f64 as _f64
+from .._array import is_traced as _is_traced
 from .._errors import input_error
-from ._quadrature import SignalErrors, _f64, _is_traced, check_signals, quadrature_signals
+from ._quadrature import SignalErrors, check_signals, quadrature_signals
 
 __all__ = [
     "Vibration",
