@@ -31,9 +31,9 @@ import time
 import jax
 import numpy as np
 
-from encdesign.design._distributed import allgather_objects, is_my_task
-from encdesign.diagnose._dispatch import diagnose
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.design import allgather_objects, is_my_task
+from encdesign.diagnose import diagnose
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 from encdesign.simulate import SDS_CATALOG, draw_plan, simulate_plan, write_concealed_sds
 
 NAME = "conceal-benchmark"

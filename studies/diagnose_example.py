@@ -20,9 +20,8 @@ import time
 import jax
 import numpy as np
 
-from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._plots import engine_plots
-from encdesign.io._study import study_parser, write_results
+from encdesign.diagnose import diagnose, write_diagnosis_plots
+from encdesign.io import study_parser, write_results
 from encdesign.simulate import draw_plan, simulate_plan, write_concealed
 
 NAME = "diagnose-example"
@@ -69,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     figs = []
     if not args.no_plots:
-        figs = engine_plots(d, args.out)
-        figs += engine_plots(ds, args.out / "sensor")
+        figs = write_diagnosis_plots(d, args.out)
+        figs += write_diagnosis_plots(ds, args.out / "sensor")
     summary = dict(
         diagnosis=d.doc,
         truth=truth,

@@ -503,7 +503,7 @@ def test_candidates_say_when_they_cannot_apply():
 
 
 def _diagnosed(tmp_path, effect, seed):
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     cols, truth, params = _bench(effect, seed)
     enc = {
@@ -561,7 +561,7 @@ def _plain_direction_offset(rec, max_order):
 
 @pytest.mark.parametrize("name", ["moteus_cal", "magalpha_cal"])
 def test_engine_on_the_measured_sensors(name):
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     pytest.importorskip("encdesign.diagnose._engine")
     rec = load_recording(DATA / f"{name}.toml")
@@ -598,7 +598,7 @@ def test_engine_on_the_measured_sensors(name):
 
 def _sensor_plus(tmp_path, name, seed, add, **kw):
     """A simulated sensor against a reference with ``add(cols, truth)`` added to ``h0``."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     cols, enc, truth = cr.simulate_sensor_reference(key=jax.random.key(seed), **kw)
     cols["h0"] = cols["h0"] + add(cols, truth)
@@ -857,7 +857,7 @@ def test_a_coarse_lattice_is_named_quantization_next_to_a_fitted_effect(tmp_path
     quantization, dithered by the noise (no staircase to fit), is named from the value
     lattice with its LSB, not fitted (delta_bic null); before it was only in the sensor
     block, and a compound's quantization was never counted."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     sigma = cr.SENSORS["magnetic"]["noise_rad"]
     lsb = 4.2 * sigma
@@ -885,7 +885,7 @@ def test_interpolation_error_beyond_the_sampling_nyquist_order_is_named(tmp_path
     """A 2048-period optical sensor sampled 500 times a turn: orders P and 2P alias in time,
     but each sample's signal phase is known from its own reading, so the harmonics are fitted
     in that phase (before: not testable, 'aliased', and the record unexplained)."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     P = 2048
     sigma = cr.SENSORS["optical"]["noise_rad"]

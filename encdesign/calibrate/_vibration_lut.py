@@ -232,7 +232,7 @@ class SteppedLUT(eqx.Module):
         return re + 1j * im
 
     def as_vibration_lut(self, acceleration_m_s2: float | None = None) -> VibrationLUT:
-        """The physics :class:`~encdesign.VibrationLUT` (used by the compensation signal),
+        """The physics :class:`~encdesign.physics.VibrationLUT` (used by the compensation signal),
         scaled to ``acceleration_m_s2`` (m/s²; default the table's severity)."""
         a = self.acceleration_m_s2 if acceleration_m_s2 is None else float(acceleration_m_s2)
         return VibrationLUT(self.frequency_hz, self.delta_gm_lut_m * a / self.acceleration_m_s2, a)

@@ -171,3 +171,27 @@ from ._tolerance import (
 from ._tolerance import (
     pareto_front as pareto_front,
 )
+from ._distributed import (
+    allgather_objects as allgather_objects,
+)
+from ._distributed import (
+    is_my_task as is_my_task,
+)
+from ._drivers import (
+    NONFINITE as NONFINITE,
+)
+from ._drivers import (
+    STATUSES as STATUSES,
+)
+from ._drivers import (
+    SUCCESS as SUCCESS,
+)
+from ._objectives import (
+    deviation_sizes as deviation_sizes,
+)
+from ._tolerance import (
+    plot_pareto as plot_pareto,
+)
+from ._tolerance import (
+    plot_sweep as plot_sweep,
+)

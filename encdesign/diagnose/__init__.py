@@ -18,6 +18,7 @@ from ._dispatch import (
     diagnose as diagnose,
     load_candidates as load_candidates,
 )
+from ._motion import candidate_orders as candidate_orders
 from ._plots import engine_plots as write_diagnosis_plots
 from ._sds_readout import (
     SDSRecordingResult as SDSRecordingResult,

@@ -25,7 +25,7 @@ live in :class:`~encdesign.Motor` and :class:`~encdesign.DiskMarks`). Every sour
 * ``timing_quantization``: edges stamped at the next tick of a clock of period
   ``clock_period_s`` (0 = off), plus white jitter of std ``jitter_s`` (needs a ``key``).
 
-:func:`~encdesign.predict_speed_mark_error` (:mod:`encdesign.physics._sds_prediction`) is the
+:func:`~encdesign.physics.predict_speed_mark_error` (``physics._sds_prediction``) is the
 seed's analysis of how the speed error and the mark errors interact (eqs. 46–53).
 """
 

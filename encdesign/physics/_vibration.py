@@ -275,7 +275,7 @@ def estimate_excitation(
     ``f_exc -+ f`` (the doublet). ``f``, then ``f_exc``, are refined by least squares on
     the time signal, and the line phases come from the same fit. The vibration phase is
     made unambiguous with the fundamental's phase (see :class:`ExcitationEstimate`) instead
-    of the seed's eq. 7 rule (:func:`~encdesign.seed_eq7_choice`).
+    of the seed's eq. 7 rule (:func:`~encdesign.physics.seed_eq7_choice`).
 
     Args:
         t_s: uniform sample times (s).

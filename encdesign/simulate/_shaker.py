@@ -80,7 +80,7 @@ def simulate_shaker_steps(
     fk = jnp.broadcast_to(jnp.asarray(f)[:, None], shape)
     x_amp, x_phase = response(fk, a_true)
     # the gratings' relative motion (Vibration, broadcast over steps and repeats) read
-    # through the quadrature model (eq. 1), as :func:`~encdesign.vibrating_signals` does
+    # through the quadrature model (eq. 1), as :func:`~encdesign.physics.vibrating_signals` does
     vib = Vibration(x_amp[..., None], fk[..., None], (a_phase + x_phase)[..., None])
     psi = 2 * jnp.pi * (position_m + vib.displacement_m(t)) / signal_period_m
     sa, sb = quadrature_signals(psi, errors, amplitude)
