@@ -5,7 +5,7 @@ Every field of :class:`~encdesign.diagnose.FinderSettings` (or those given with
 least 2), one at a time, and every recording is diagnosed again. A verdict *flips* when the
 verdict or the set of named effects differs from the one with the defaults. The recordings:
 ``--n`` concealed-benchmark recordings of each of ``--kinds`` (``draw_plan`` / ``simulate``
-of :mod:`encdesign.diagnose._conceal_bench`, cases cycling over clean, single, weak,
+of :mod:`encdesign.simulate._conceal_bench`, cases cycling over clean, single, weak,
 compound) and ``--n-variations`` records of ``benchmarks/finder_variations.py`` (clean and
 single effects). Prints one line per threshold and factor, and how many thresholds flip
 more than ``--flip`` (default 5 %) of the verdicts::
@@ -26,9 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from encdesign.diagnose import FinderSettings
-from encdesign.diagnose._conceal_bench import draw_plan, simulate
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._settings import SETTINGS_FIELDS
+from encdesign.simulate import draw_plan
+from encdesign.simulate import simulate_plan as simulate
 
 CASES = ("clean", "single", "weak", "compound")
 KINDS = ("multihead", "sensor", "motion", "quadrature")

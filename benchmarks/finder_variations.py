@@ -1,5 +1,5 @@
 """Benchmark: the finder on recordings from a generator written apart from the concealed
-benchmark (``encdesign.diagnose._conceal_bench``), over wider ranges.
+benchmark (``encdesign.simulate._conceal_bench``), over wider ranges.
 
 ``--set clean``: clean multihead / sensor records, 1-7 heads (1 = a sensor with
 ``theta_ref``), 400-20,000 samples, 1-3 runs, noise 5e-8..3e-5 rad, 0.5-63 turns, one or

@@ -3,7 +3,7 @@
 A Monte Carlo batch of encoder builds (default 1,000 designs x 4 heads x 2,048 angles,
 grating orders 1-8, with eccentricity, tilt, placement errors, beam tilts, axial motion
 and non-synchronous runout all switched on) is evaluated by
-:func:`encdesign.head_errors_batch` (jit, chunked ``lax.map``) and by a plain NumPy
+:func:`encdesign.physics.head_errors_batch` (jit, chunked ``lax.map``) and by a plain NumPy
 implementation of the same equations in this file (vectorised, chunked; the fastest of a
 few chunk sizes is reported).
 Both results are compared, then timed (best of ``--repeats``; JAX after a warm-up

@@ -24,7 +24,7 @@ Measured:
 
 * ``--rare``: rare-event yield of a 3+1 case near 99.9 % (``--rare-angles`` 256 samples per
   revolution, RMS residual spec ``--rare-spec-rad`` 7.3 urad, the same tolerances) by
-  FORM + defensive-mixture importance sampling (:func:`encdesign.importance_yield`,
+  FORM + defensive-mixture importance sampling (:func:`encdesign.design.importance_yield`,
   ``--rare-is-builds`` samples) against crude Monte Carlo of ``--rare-crude-builds``
   (10^6) builds: both estimates, standard errors, builds used (FORM evaluations included),
   wall times, the z-score of their difference, and the likelihood-ratio gradient of the

@@ -84,7 +84,7 @@ def make_jax_pipeline(n: int):
             x_m, PITCH_M, errors, amplitude=AMP, noise_std=NOISE, key=key
         )
         fit = ed.fit_ellipse(sa, sb, method="direct", throw=False, chunk_size=1 << 16)
-        pos = ed.position_from_signals_m(sa, sb, PITCH_M, fit.params)
+        pos = ed.physics.position_from_signals_m(sa, sb, PITCH_M, fit.params)
         p = fit.params
         return pos, jnp.stack([p.offset_a, p.offset_b, p.amplitude_a, p.amplitude_b, p.phase_rad])
 

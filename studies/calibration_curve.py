@@ -35,12 +35,12 @@ from encdesign.calibrate import (
     curve_from_closure,
     fit_curve,
     read_correction_table,
-    simulate_closure_readings,
     solve_closure,
     write_correction_table,
 )
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._sds_errors import ARCSEC
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import ARCSEC
+from encdesign.simulate import simulate_closure_readings
 
 NAME = "calibration-curve"
 CHUNK = 128
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         clock_period_s=0.0,
         jitter_s=0.0,
     )
-    m6, m5 = ed.reference_motor(6), ed.reference_motor(5)
+    m6, m5 = ed.physics.reference_motor(6), ed.physics.reference_motor(5)
     devices = {
         "first_one_pair": (ed.reference_design(1, 1, marks_per_rev=n_marks, key=key, motor=m6), 15),
         "first_two_pairs": (

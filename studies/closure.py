@@ -43,8 +43,8 @@ from encdesign.calibrate import (
     harmonic_amplitudes,
     solve_closure,
 )
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._sds_errors import ARCSEC
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import ARCSEC
 
 NAME = "closure"
 CHUNK = 128  # platform angles per SDS evaluation
@@ -89,8 +89,8 @@ def _instruments(n_marks: int, key) -> dict:
         clock_period_s=0.0,
         jitter_s=0.0,
     )
-    motor6 = ed.reference_motor(6)
-    motor5 = ed.reference_motor(5)
+    motor6 = ed.physics.reference_motor(6)
+    motor5 = ed.physics.reference_motor(5)
     return {
         "first_one_pair": (
             ed.reference_design(1, 1, marks_per_rev=n_marks, key=key, motor=motor6),

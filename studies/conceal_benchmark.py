@@ -1,6 +1,6 @@
 """Conceal benchmark: the discrepancy finder run blind on recordings with hidden effects.
 
-Benches are drawn and simulated by ``encdesign.diagnose._conceal_bench`` (its own physics,
+Benches are drawn and simulated by ``encdesign.simulate`` (its own physics,
 not the finder's terms): ``multihead`` encoders (2-6 heads, radii 10-100 mm, 1,000-100,000
 lines, less than one turn to 50 turns, with and without ``theta_ref``), one ``sensor``
 against a reference (magnetic, resolver, capacitive, optical; one or both directions) and
@@ -9,7 +9,7 @@ start (start-up ramp or return move, shaking the heads while it lasts) and singl
 glitches. Cases: ``clean``; ``single`` (one effect at 1x the noise); ``weak`` (0.5x);
 ``compound`` (2-3 effects); ``out_of_catalog`` (an integer order, a step or a chirp on one
 head). ``encdesign.diagnose`` never sees the truth. ``--kinds`` adds ``sds`` (the engine's
-``sds`` kind on the concealed SDS benches of ``diagnose._conceal_sds``: 12 platform positions
+``sds`` kind on the concealed SDS benches of ``encdesign.simulate``: 12 platform positions
 each, to keep them cheap; ``--sds-runs`` sets another count) and ``quadrature`` (two signals of
 one head: ``signal_shape`` of 1 or 3 harmonics; a radial order above 12, an amplitude step or
 clipping out of catalog; captures sorted by phase or in time order with a dwell or a reversal);
@@ -31,11 +31,10 @@ import time
 import jax
 import numpy as np
 
-from encdesign.design._distributed import allgather_objects, is_my_task
-from encdesign.diagnose._conceal_bench import draw_plan, simulate
-from encdesign.diagnose._conceal_sds import SDS_CATALOG, write_concealed_sds
-from encdesign.diagnose._dispatch import diagnose
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.design import allgather_objects, is_my_task
+from encdesign.diagnose import diagnose
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.simulate import SDS_CATALOG, draw_plan, simulate_plan, write_concealed_sds
 
 NAME = "conceal-benchmark"
 CASES = {
@@ -236,7 +235,7 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
         for j in range(k):
             plan = draw_plan(rng, kind, case)
             if case in ("single", "weak") and plan["effects"]:
-                from encdesign.diagnose import _conceal_bench as cb
+                from encdesign import simulate as cb
 
                 pool = {
                     "multihead": cb.MULTIHEAD_EFFECTS,
@@ -246,7 +245,7 @@ def _run_kind(args, kind: str, counts: dict, seed: int, log) -> list[dict]:
                 }[kind]
                 plan = dict(plan, effects=[pool[(j + 3 * seed) % len(pool)]])
                 plan = cb.fix_plan(plan, rng)
-            rec, truth = simulate(rng, plan)  # every process draws every plan (same rng)
+            rec, truth = simulate_plan(rng, plan)  # every process draws every plan (same rng)
             if not is_my_task(task):  # one recording per task, dealt over the processes
                 task += 1
                 continue

@@ -26,13 +26,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._kinematics import head_errors, head_readings, make_model
-from encdesign.physics._selfcomp import apply_map, encoder_map, self_compensate
-from encdesign.physics._theorem import (
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import (
+    apply_map,
     averaged_error,
+    encoder_map,
+    head_errors,
+    head_readings,
+    make_model,
     mode_amplitudes,
     model_mode_transfer,
+    self_compensate,
     surviving_orders,
 )
 

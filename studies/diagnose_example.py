@@ -20,11 +20,9 @@ import time
 import jax
 import numpy as np
 
-from encdesign.diagnose._conceal import write_concealed
-from encdesign.diagnose._conceal_bench import draw_plan, simulate
-from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._plots import engine_plots
-from encdesign.io._study import study_parser, write_results
+from encdesign.diagnose import diagnose, write_diagnosis_plots
+from encdesign.io import study_parser, write_results
+from encdesign.simulate import draw_plan, simulate_plan, write_concealed
 
 NAME = "diagnose-example"
 
@@ -63,15 +61,15 @@ def main(argv: list[str] | None = None) -> int:
         n_runs=1,
         turns=1.0,
     )
-    srec, struth = simulate(rng, plan)
+    srec, struth = simulate_plan(rng, plan)
     ds = diagnose(srec)
     text += "\n" + ds.doc["report"]
     (args.out / "report.txt").write_text(text, encoding="utf-8")
     print(text)
     figs = []
     if not args.no_plots:
-        figs = engine_plots(d, args.out)
-        figs += engine_plots(ds, args.out / "sensor")
+        figs = write_diagnosis_plots(d, args.out)
+        figs += write_diagnosis_plots(ds, args.out / "sensor")
     summary = dict(
         diagnosis=d.doc,
         truth=truth,

@@ -39,10 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign._progress import progress_bar
-from encdesign.design._cases import CaseRecorder
-from encdesign.design._drivers import optimise
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.design import CaseRecorder, optimise
+from encdesign.io import new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import (
     LayoutDesign,
     Tolerances,

@@ -5,7 +5,7 @@ the motor's speed ripple interacts with the disks' mark errors; the orders the r
 the mark errors share survive the average over equally spaced sensors unless the sensor
 count cancels them, hence the rule "pole count not a multiple of the sensor count". This
 study enumerates pole pairs x sensors per disk (the discrete design variables, with the
-enumeration driver :func:`encdesign.design._drivers.enumerate_designs`), and for each combination
+enumeration driver :func:`encdesign.design.enumerate_designs`), and for each combination
 evaluates the SDS residual over the platform turn
 (:func:`encdesign.objectives.sds_residuals`: RMS of the phi error minus its mean) on Monte
 Carlo builds whose disks draw their mark errors from the tolerance set (common random
@@ -14,7 +14,7 @@ builds; ties within 1 % go to fewer sensors (cheaper).
 
 Second stage, the sensor azimuths as continuous design variables: for every combination
 the moving sensors' azimuths (sensor 0 at 0: a common rotation only shifts φ) are optimised
-by BFGS (:func:`encdesign.design._drivers.optimise`, gradient by JAX through the edge-time
+by BFGS (:func:`encdesign.design.optimise`, gradient by JAX through the edge-time
 solve) on ``log`` of the mean residual, from ``--starts`` *random* layouts (never from the
 equally spaced one). The fixed sensors stay equally spaced: they see every mark at the
 same shaft angles for every φ, so they add a constant that the zeroing removes (their
@@ -43,9 +43,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design._cases import CaseRecorder
-from encdesign.design._drivers import NONFINITE, SUCCESS, enumerate_designs, optimise
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.design import NONFINITE, SUCCESS, CaseRecorder, enumerate_designs, optimise
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 from encdesign.objectives import SDSTolerances, sds_residuals
 from encdesign.physics import equally_spaced
 

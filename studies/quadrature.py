@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 
 NAME = "quadrature"
 PITCH_M = 20e-6
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
         TRUE_ERRORS["amplitude_ratio"],
         TRUE_ERRORS["phase"],
     )
-    reading1 = np.asarray(ed.position_from_signals_m(sa1, sb1, PITCH_M))
+    reading1 = np.asarray(ed.physics.position_from_signals_m(sa1, sb1, PITCH_M))
     err1 = reading1 - x1
     f_line1 = v1 / PITCH_M
     meas = harmonic_amplitudes(t1, err1, [f_line1, 2 * f_line1])
@@ -136,8 +136,8 @@ def main(argv=None) -> int:
         if arc_example is None:
             i = int(np.argmin(np.abs(f_lut - 1400.0)))
             arc_example = (np.asarray(arcs_a[i]), np.asarray(arcs_b[i]), float(f_lut[i]))
-        luts.append(ed.build_vibration_lut(f_lut, t2, arcs_a, arcs_b, fit.params, PITCH_M))
-    lut = ed.VibrationLUT(
+        luts.append(ed.physics.build_vibration_lut(f_lut, t2, arcs_a, arcs_b, fit.params, PITCH_M))
+    lut = ed.physics.VibrationLUT(
         jnp.asarray(f_lut), jnp.mean(jnp.stack([lu.delta_gm_m for lu in luts]), 0), ACCEL_M_S2
     )
     progress(f"LUT built ({len(f_lut)} frequencies x {repeats} repeats)")
@@ -159,12 +159,12 @@ def main(argv=None) -> int:
         x3 = 3e-6 + v * t3
         key, k = jax.random.split(key)
         sa, sb = signals(jnp.asarray(t3), jnp.asarray(x3), vibs, k)
-        reading = np.asarray(ed.position_from_signals_m(sa, sb, PITCH_M))
-        est = ed.estimate_excitation(t3, sa)
+        reading = np.asarray(ed.physics.position_from_signals_m(sa, sb, PITCH_M))
+        est = ed.physics.estimate_excitation(t3, sa)
         delta_gm = float(lut(est.f_exc_hz))
         measured_phase = 2 * np.pi * reading / PITCH_M
         comp = np.asarray(
-            ed.compensation_signal_m(
+            ed.physics.compensation_signal_m(
                 t3,
                 measured_phase,
                 PITCH_M,
@@ -177,15 +177,15 @@ def main(argv=None) -> int:
         err_before = reading - x3
         err_after = reading - comp - x3
         # Heydemann variant: corrected arctangent + eq. 6 vibration term only
-        reading_h = np.asarray(ed.position_from_signals_m(sa, sb, PITCH_M, fit.params))
+        reading_h = np.asarray(ed.physics.position_from_signals_m(sa, sb, PITCH_M, fit.params))
         u_vib = np.asarray(
-            ed.vibration_compensation_m(t3, delta_gm, est.f_exc_hz, est.vibration_phase_rad)
+            ed.physics.vibration_compensation_m(t3, delta_gm, est.f_exc_hz, est.vibration_phase_rad)
         )
         err_h = reading_h - u_vib - x3
         # the seed's frequency resolution: doublet and fundamental at FFT bins, no refinement
-        est_fft = ed.estimate_excitation(t3, sa, refine=False, throw=False)
+        est_fft = ed.physics.estimate_excitation(t3, sa, refine=False, throw=False)
         comp_fft = np.asarray(
-            ed.compensation_signal_m(
+            ed.physics.compensation_signal_m(
                 t3,
                 measured_phase,
                 PITCH_M,
@@ -342,7 +342,7 @@ def make_plots(out, sa1, sb1, fit, arc_example, lut, traces, t3, cases):
 
 def spectrum_plot(out, t3, example):
     name, sa, est = example
-    freq, spec = ed.signal_spectrum(t3, sa)
+    freq, spec = ed.physics.signal_spectrum(t3, sa)
     fig, ax = new_figure(figsize=(8, 4))
     ax.semilogy(freq, spec, lw=0.7)
     for f, lab in (
@@ -363,7 +363,7 @@ def eq4_plot(out, fitted):
     psi = np.linspace(0, 2 * np.pi, 361)
     k = PITCH_M / (2 * np.pi) * 1e6
     exact = np.asarray(ed.phase_error_exact_rad(psi, fitted)) * k
-    terms = ed.phase_error_eq4_rad(psi, fitted)
+    terms = ed.physics.phase_error_eq4_rad(psi, fitted)
     fig, ax = new_figure(figsize=(8, 4))
     ax.plot(np.degrees(psi), exact, "k-", lw=1.5, label="exact arctangent error")
     ax.plot(np.degrees(psi), np.asarray(terms.total) * k, "y--", lw=1.2, label="eq. 4 sum")

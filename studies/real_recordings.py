@@ -28,9 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from encdesign import load_recording
-from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._motion import candidate_orders
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.diagnose import candidate_orders, diagnose
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 
 NAME = "real-recordings"
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"

@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._selfcomp import cotangent_sensitivity, self_compensate
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import cotangent_sensitivity, self_compensate
 
 NAME = "reference-head"
 LAYOUTS = {"2+1": 2, "3+1": 3, "4+1": 4}

@@ -49,7 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 
 NAME = "sds-drive"
 ARCSEC = math.pi / (180 * 3600)
@@ -234,8 +234,8 @@ def _invert(th, om, winf, dt, wc, tgt):
 def sds_errors(design: ed.SDSDesign, motion, phi_rad: float, revs) -> np.ndarray:
     """SDS error per revolution and pair, ``(R, F, M)`` rad (seed eqs. 23–24)."""
     two_pi = 2 * np.pi
-    mu_a = np.asarray(ed.mark_angles(design.disk_a))
-    mu_b = np.asarray(ed.mark_angles(design.disk_b))
+    mu_a = np.asarray(ed.physics.mark_angles(design.disk_a))
+    mu_b = np.asarray(ed.physics.mark_angles(design.disk_b))
     psi_f = np.asarray(design.fixed_azimuths_rad)
     psi_m = np.asarray(design.moving_azimuths_rad) + phi_rad
     zero = np.asarray(design.zero_offsets_rad())

@@ -28,8 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._sds_errors import ARCSEC
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import ARCSEC
 
 NAME = "sds-errors"
 MAS = ARCSEC / 1000
@@ -59,14 +59,14 @@ def main(argv: list[str] | None = None) -> int:
     phi = 2 * jnp.pi * jnp.arange(n_phi) / n_phi
     t0 = time.time()
 
-    motor = ed.reference_motor(6)
+    motor = ed.physics.reference_motor(6)
     layouts = {"single_pair": 1, "two_pairs": 2, "three_sensor": 3}
     designs = {
         name: ed.reference_design(m, m, marks_per_rev=n_marks, key=k_disk, motor=motor)
         for name, m in layouts.items()
     }
     for d in designs.values():
-        ed.validate_design(d)
+        ed.physics.validate_design(d)
     phi_error = jax.jit(ed.sds_phi_error)
 
     # --- layouts: same ripple and marks
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, d in designs.items():
         _progress(f"{name}: {d.n_fixed}+{d.n_moving} sensors, {n_phi} platform angles")
         err = np.asarray(phi_error(d, phi))
-        pred = np.asarray(ed.predict_speed_mark_error(d, phi).phi_error_rad)
+        pred = np.asarray(ed.physics.predict_speed_mark_error(d, phi).phi_error_rad)
         err_c = err - err.mean()
         amp = _orders(err, 12) / ARCSEC
         curves[name] = err_c / ARCSEC
@@ -91,14 +91,14 @@ def main(argv: list[str] | None = None) -> int:
     still = ed.Motor(6, 18, 6, speed_rad_s=motor.speed_rad_s)
     d_tilt = ed.SDSDesign(
         still,
-        ed.perfect_disk(n_marks),
-        ed.perfect_disk(n_marks),
-        ed.equally_spaced(2),
-        ed.equally_spaced(2),
+        ed.physics.perfect_disk(n_marks),
+        ed.physics.perfect_disk(n_marks),
+        ed.physics.equally_spaced(2),
+        ed.physics.equally_spaced(2),
     )
     tilt = 20 * ARCSEC
     err_tilt = np.asarray(phi_error(d_tilt, phi, ed.SDSErrors(axis_tilt_rad=tilt)))
-    formula = np.asarray(ed.axis_tilt_error(phi, tilt))
+    formula = np.asarray(ed.physics.axis_tilt_error(phi, tilt))
 
     # --- budget of the two-pair device
     ref = ed.reference_errors()

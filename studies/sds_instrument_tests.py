@@ -32,9 +32,8 @@ import numpy as np
 import scipy.optimize
 
 import encdesign as ed
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._sds import bearing_noise_default
-from encdesign.physics._sds_errors import ARCSEC
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import ARCSEC, bearing_noise_default
 
 NAME = "sds-instrument-tests"
 MAS = ARCSEC / 1000

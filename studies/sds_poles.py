@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign as ed
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
-from encdesign.physics._sds_errors import ARCSEC
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.physics import ARCSEC
 
 NAME = "sds-poles"
 POLE_PAIRS = tuple(range(3, 13))
@@ -48,12 +48,16 @@ def main(argv: list[str] | None = None) -> int:
     residual = np.zeros((len(POLE_PAIRS), len(SENSORS)))
     rows = []
     for i, pp in enumerate(POLE_PAIRS):
-        motor = ed.reference_motor(pp)
+        motor = ed.physics.reference_motor(pp)
         dense = motor.as_dense(MAX_ORDER)  # same shapes for every p: one compile per M
         orders = [n for n in motor.orders if n <= MAX_ORDER]
         for j, m in enumerate(SENSORS):
             d = ed.SDSDesign(
-                dense, base.disk_a, base.disk_b, ed.equally_spaced(m), ed.equally_spaced(m)
+                dense,
+                base.disk_a,
+                base.disk_b,
+                ed.physics.equally_spaced(m),
+                ed.physics.equally_spaced(m),
             )
             err = np.asarray(phi_error(d, phi))
             err_c = err - err.mean()

@@ -22,8 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from encdesign.cli._main import _load_study
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.cli import load_study
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 
 NAME = "seed002-results"
 FS_HZ = 16384.0  # the quadrature study's records: 4,096 samples (2,048 with --quick)
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     # on the bin (the quadrature study's cases), and a quarter and a half bin off
     offsets = args.offsets_bin or ([0.0, 0.5] if args.quick else [0.0, 0.25, 0.5])
     for off in offsets:
-        mod = _load_study("quadrature")
+        mod = load_study("quadrature")
         base = list(mod.CASES)
         if args.cases:
             names = {f"{fe:.0f}Hz_{v * 1e3:.1f}mm_s": (fe, v) for fe, v in base}

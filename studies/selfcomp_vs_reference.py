@@ -31,7 +31,7 @@ import numpy as np
 
 import encdesign as ed
 from encdesign.calibrate import compare_maps, reference_map
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io import new_figure, save_figure, study_parser, write_results
 
 NAME = "selfcomp-vs-reference"
 URAD = 1e-6

@@ -9,7 +9,7 @@ self-compensation (:func:`encdesign.objectives.residual_rms`).
 
 Steps:
 
-1. *Allocation* (:func:`encdesign.design._tolerance.allocate`): minimise the tolerance cost
+1. *Allocation* (:func:`encdesign.design.allocate`): minimise the tolerance cost
    ``sum_i ref_i / sigma_i`` subject to a smooth yield surrogate on ``n_train`` builds
    reaching 99 % plus a margin; a final common scale makes the exact training yield meet it.
 2. *Independent check*: a fresh seed, ``n_check`` new builds, exact yield with its binomial
@@ -20,7 +20,7 @@ Steps:
 4. *Sweeps*: all tolerances scaled together (yield and P99 table) and a 2-D contour over
    the two largest contributors against the rest.
 5. *Pareto front* of cost against yield target
-   (:func:`encdesign.design._tolerance.pareto_front`): re-allocation at each target, each
+   (:func:`encdesign.design.pareto_front`): re-allocation at each target, each
    warm-started from its neighbour on the front, each point checked on fresh builds.
 
 Outputs: ``tolerance-budget.json`` (with ``pareto``), ``tolerance_sweep.png``,
@@ -38,12 +38,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design._cases import CaseRecorder
-from encdesign.design._objectives import _deviation_sizes
-from encdesign.design._tolerance import (
+from encdesign.design import (
+    CaseRecorder,
     allocate,
     check_yield,
     contributions,
+    deviation_sizes,
     pareto_front,
     plot_pareto,
     plot_sweep,
@@ -51,7 +51,7 @@ from encdesign.design._tolerance import (
     sweep_scales,
     tolerance_cost,
 )
-from encdesign.io._study import study_parser, write_results
+from encdesign.io import study_parser, write_results
 from encdesign.objectives import (
     TOLERANCE_NAMES,
     TOLERANCE_UNITS,
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     group_of = {"eccentricity": 0, "tilt": 1, "placement": 2, "grating_sin": 3,
                 "grating_cos": 3, "beam_tilt": 4, "axial_cos": 5, "axial_sin": 5}  # fmt: skip
     sampled = [n for n in names if n != "noise"]
-    zgroups = [group_of[k] for k, m in _deviation_sizes(design).items() for _ in range(m)]
+    zgroups = [group_of[k] for k, m in deviation_sizes(design).items() for _ in range(m)]
     tol_sig = Tolerances.from_vector(jnp.asarray(sig))
     sob = sobol_indices(
         lambda z: build_residual(design, tol_sig, z), zgroups, sampled,

@@ -9,7 +9,7 @@ the relative level of accelerations detected by the accelerometer between each o
 axis". The seed's results are all at the LUT's own 100 m/s², so its scaling step is never
 exercised there.
 
-Simulated here (``encdesign.calibrate``: :func:`simulate_shaker_steps`,
+Simulated here (``encdesign.simulate``: :func:`simulate_shaker_steps`,
 :func:`build_stepped_lut`, :func:`accelerometer_levels`, :func:`combine_luts`; the
 ``quadrature`` study's encoder, signal errors drifting along the travel and its
 compensation pipeline):
@@ -42,10 +42,10 @@ from encdesign.calibrate import (
     build_stepped_lut,
     combine_luts,
     mount_relative_displacement_m,
-    simulate_shaker_steps,
 )
-from encdesign.cli._main import _load_study
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.cli import load_study
+from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.simulate import simulate_shaker_steps
 
 NAME = "vibration-lut"
 LUT_ACCEL_M_S2 = 100.0
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     t_start = time.time()
-    quad = _load_study("quadrature")
+    quad = load_study("quadrature")
     pitch, fs, amp_v = quad.PITCH_M, quad.FS_HZ, quad.AMPLITUDE_V
     key = jax.random.PRNGKey(args.seed)
     rng = np.random.default_rng(args.seed)
@@ -168,8 +168,8 @@ def main(argv: list[str] | None = None) -> int:
         x3 = 3e-6 + FIELD_SPEED_M_S * t3
         key, k = jax.random.split(key)
         sa, sb = quad.signals(jnp.asarray(t3), jnp.asarray(x3), vibs, k)
-        reading = np.asarray(ed.position_from_signals_m(sa, sb, pitch))
-        est = ed.estimate_excitation(t3, sa)
+        reading = np.asarray(ed.physics.position_from_signals_m(sa, sb, pitch))
+        est = ed.physics.estimate_excitation(t3, sa)
         acc = np.stack(
             [
                 FIELD_ACCEL_M_S2[d] * np.sin(2 * np.pi * fe * t3 + FIELD_PHASE_RAD[d] + base_phase)
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         for name, delta in deltas.items():
             comp = np.asarray(
-                ed.compensation_signal_m(
+                ed.physics.compensation_signal_m(
                     t3,
                     measured_phase,
                     pitch,

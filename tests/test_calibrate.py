@@ -25,8 +25,6 @@ from encdesign.calibrate import (
     mount_relative_displacement_m,
     read_correction_table,
     reference_map,
-    simulate_closure_readings,
-    simulate_shaker_steps,
     solve_closure,
     undetermined_harmonics,
     write_correction_table,
@@ -34,6 +32,7 @@ from encdesign.calibrate import (
 from encdesign.cli._main import main
 from encdesign.io._closure_recording import write_closure_recording
 from encdesign.io._recording import load_recording, write_recording
+from encdesign.simulate import simulate_closure_readings, simulate_shaker_steps
 
 ARCSEC = math.pi / (180 * 3600)
 

@@ -15,11 +15,11 @@ from encdesign import (
     head_readings,
     load_design,
     load_recording,
-    parse_design,
     simulate_recording,
     write_recording,
 )
 from encdesign.cli import main
+from encdesign.design import parse_design
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "design-3plus1.toml"
 

@@ -13,10 +13,10 @@ import pytest
 
 import encdesign
 from encdesign.cli import main as cli_main
-from encdesign.diagnose import _effects as fx
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._fit import _valjac_fn
 from encdesign.diagnose._multihead import VIBRATION, _base_candidate
+from encdesign.physics import _effects as fx
 from tests.helpers import validate_diagnosis
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

@@ -47,8 +47,8 @@ def test_no_error_gives_zero_correction():
         atol=1e-10,
     )
     raw = jnp.arctan2(sa, sb)
-    assert float(jnp.max(jnp.abs(ed.corrected_phase_rad(sa, sb, p) - raw))) < 1e-10
-    comp = ed.compensation_signal_m(
+    assert float(jnp.max(jnp.abs(ed.physics.corrected_phase_rad(sa, sb, p) - raw))) < 1e-10
+    comp = ed.physics.compensation_signal_m(
         jnp.arange(sa.size) * 1e-4, raw, QUADRATURE_PITCH_M, p.to_signal_errors()
     )
     assert float(jnp.max(jnp.abs(comp))) < 1e-15
@@ -59,13 +59,15 @@ def test_correction_removes_metrological_error():
     sa, sb = noisy_signals(noise=0.0)
     x = jnp.linspace(0.0, 37.3 * QUADRATURE_PITCH_M, sa.size)
     fit = ed.fit_ellipse(sa, sb)
-    before = ed.position_from_signals_m(sa, sb, QUADRATURE_PITCH_M) - x
-    after = ed.position_from_signals_m(sa, sb, QUADRATURE_PITCH_M, fit.params) - x
+    before = ed.physics.position_from_signals_m(sa, sb, QUADRATURE_PITCH_M) - x
+    after = ed.physics.position_from_signals_m(sa, sb, QUADRATURE_PITCH_M, fit.params) - x
     assert float(jnp.max(jnp.abs(before))) > 1e-7
     assert float(jnp.max(jnp.abs(after))) < 1e-15 * 1e3
     # the seed's eq.-4 compensation signal removes it to first order
     phase = 2 * np.pi * (before + x) / QUADRATURE_PITCH_M
-    comp = ed.compensation_signal_m(0.0, phase, QUADRATURE_PITCH_M, fit.params.to_signal_errors())
+    comp = ed.physics.compensation_signal_m(
+        0.0, phase, QUADRATURE_PITCH_M, fit.params.to_signal_errors()
+    )
     resid = before - comp
     assert float(jnp.max(jnp.abs(resid))) < 0.1 * float(jnp.max(jnp.abs(before)))
     np.testing.assert_allclose(ed.EllipseParams.from_signal_errors(e, AMP).phase_rad, 0.05)
@@ -114,7 +116,7 @@ def test_lut_from_shaker_arcs():
     freqs = jnp.array([300.0, 700.0, 1500.0])
     amps = jnp.array([0.2e-6, 0.5e-6, 0.35e-6])
     rows = [
-        ed.vibrating_signals(
+        ed.physics.vibrating_signals(
             t,
             0.0,
             QUADRATURE_PITCH_M,
@@ -130,25 +132,27 @@ def test_lut_from_shaker_arcs():
     sa = jnp.stack([r[0] for r in rows])
     sb = jnp.stack([r[1] for r in rows])
     params = ed.EllipseParams.from_signal_errors(e, AMP)
-    lut = ed.build_vibration_lut(freqs, t, sa, sb, params, QUADRATURE_PITCH_M)
+    lut = ed.physics.build_vibration_lut(freqs, t, sa, sb, params, QUADRATURE_PITCH_M)
     np.testing.assert_allclose(lut.delta_gm_m, 2 * amps, rtol=0.02)
-    span = ed.build_vibration_lut(freqs, t, sa, sb, params, QUADRATURE_PITCH_M, method="span")
+    span = ed.physics.build_vibration_lut(
+        freqs, t, sa, sb, params, QUADRATURE_PITCH_M, method="span"
+    )
     assert bool(jnp.all(span.delta_gm_m > 0.95 * 2 * amps))
     np.testing.assert_allclose(lut(500.0), 0.5 * (lut.delta_gm_m[0] + lut.delta_gm_m[1]))
     g = jax.grad(lambda f: lut(f))(500.0)
     np.testing.assert_allclose(g, (lut.delta_gm_m[1] - lut.delta_gm_m[0]) / 400.0)
     with pytest.raises(ed.EncdesignInputError, match="increasing"):
-        ed.VibrationLUT(jnp.array([2.0, 1.0]), jnp.array([1e-6, 1e-6]))
+        ed.physics.VibrationLUT(jnp.array([2.0, 1.0]), jnp.array([1e-6, 1e-6]))
     with pytest.raises(ed.EncdesignInputError, match="frequencies"):
-        ed.build_vibration_lut(freqs[:2], t, sa, sb, params, QUADRATURE_PITCH_M)
+        ed.physics.build_vibration_lut(freqs[:2], t, sa, sb, params, QUADRATURE_PITCH_M)
 
 
 def test_eq6_and_eq7():
     t = jnp.linspace(0, 0.01, 11)
-    u = ed.vibration_compensation_m(t, 1e-6, 700.0, 0.3, 2e-8)
+    u = ed.physics.vibration_compensation_m(t, 1e-6, 700.0, 0.3, 2e-8)
     np.testing.assert_allclose(u, 2e-8 + 0.5e-6 * np.sin(2 * np.pi * 700 * t + 0.3))
-    assert ed.seed_eq7_choice(0.2, 3.0, -0.01) == (0.2, 1)
-    assert ed.seed_eq7_choice(0.2, 3.0, 0.01) == (3.0, -1)
+    assert ed.physics.seed_eq7_choice(0.2, 3.0, -0.01) == (0.2, 1)
+    assert ed.physics.seed_eq7_choice(0.2, 3.0, 0.01) == (3.0, -1)
 
 
 NMM = Path("/work/shared/realdata/nmm_X_raw.csv")

@@ -282,7 +282,7 @@ def test_three_motor_effects_at_once_are_all_named():
     candidate alone leaves the others' orders in the views they share, which is not
     structure it only dents (the signature rule counts the orders it touches)."""
     from encdesign.diagnose import diagnose
-    from encdesign.diagnose._conceal_bench import simulate
+    from encdesign.simulate import simulate_plan as simulate
 
     plan = {
         "kind": "motion",
@@ -332,7 +332,7 @@ def test_settings_change_the_decision_and_a_refusal_names_its_rule():
     criterion no effect can meet it is refused, the refusal names ``bic_min``, and the
     verdict (decided once, after the kind's additions) is not ``missing_physics``."""
     from encdesign.diagnose import FinderSettings, diagnose
-    from encdesign.diagnose._conceal_bench import simulate
+    from encdesign.simulate import simulate_plan as simulate
     from tests.helpers import validate_diagnosis
 
     plan = {

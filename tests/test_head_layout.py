@@ -257,4 +257,6 @@ def test_head_layout_study_quick(tmp_path):
         assert len(h3[which]["head_angles_deg"]) == 3
     assert h3["optimum"]["residual_urad"] <= h3["best_symmetric"]["residual_urad"] * (1 + 1e-12)
     assert h3["gradient_check"]["ok"]
-    assert encdesign.unobservable_orders(np.radians(h3["optimum"]["head_angles_deg"]), 4) == []
+    assert (
+        encdesign.physics.unobservable_orders(np.radians(h3["optimum"]["head_angles_deg"]), 4) == []
+    )

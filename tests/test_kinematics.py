@@ -7,16 +7,8 @@ import pytest
 from helpers import CRAMER_ECCENTRICITY_M, CRAMER_RADIUS_M, CRAMER_TILT_RAD, cramer_model
 
 import encdesign
-from encdesign import (
-    EncoderModel,
-    head_errors,
-    head_errors_batch,
-    head_readings,
-    make_model,
-    mode_amplitudes,
-    noisy_head_readings,
-    stack_models,
-)
+from encdesign import EncoderModel, head_errors, head_readings, make_model, noisy_head_readings
+from encdesign.physics import head_errors_batch, mode_amplitudes, stack_models
 from encdesign.physics._kinematics import _atan
 
 N = 512

@@ -2,7 +2,7 @@
 
 Recovery tests fit the base model (one constant per run, Fourier orders of ``theta_ref``)
 plus one term by plain linear least squares (``scipy.linalg.lstsq``) and compare with what
-the physical simulator (:mod:`encdesign.diagnose._conceal_reference`) put in.
+the physical simulator (:mod:`encdesign.simulate._conceal_reference`) put in.
 """
 
 from pathlib import Path
@@ -15,9 +15,11 @@ import scipy.linalg
 
 from encdesign import EncdesignInputError, load_recording, write_recording
 from encdesign.cli import main
-from encdesign.diagnose import _conceal_reference as cr
+from encdesign.diagnose import _reference_data as rd
 from encdesign.diagnose import _reference_terms as rt
 from encdesign.io._realdata import import_magalpha, import_moteus
+from encdesign.physics import _sensor_effects as se
+from encdesign.simulate import _conceal_reference as cr
 
 REALDATA = Path("/work/shared/realdata")  # the public sources (absent: those tests skip)
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
@@ -102,7 +104,7 @@ def test_bad_file_names_file_and_exits_2(tmp_path, capsys):
 
 def test_hysteresis_is_half_h_each_way():
     w = jnp.array([-3.0, -1.0, 1.0, 3.0])
-    e = np.asarray(rt.direction_hysteresis_rad(w, 2e-3, 0.01))
+    e = np.asarray(se.direction_hysteresis_rad(w, 2e-3, 0.01))
     np.testing.assert_allclose(e, [-1e-3, -1e-3, 1e-3, 1e-3], rtol=1e-12)
 
 
@@ -117,26 +119,26 @@ def test_delay_is_the_lag_of_a_steady_shaft():
         run_zeros="none",
         reference_zeros="none",
     )
-    w = rt.reference_velocity_rad_s(cols["t"], cols["theta_ref"])
+    w = rd.reference_velocity_rad_s(cols["t"], cols["theta_ref"])
     e = cols["h0"] - cols["theta_ref"]
-    np.testing.assert_allclose(e, np.asarray(rt.reading_delay_rad(w, 2e-3)), rtol=1e-9)
+    np.testing.assert_allclose(e, np.asarray(se.reading_delay_rad(w, 2e-3)), rtol=1e-9)
 
 
 def test_scale_error_after_n_turns():
     n_turns = 3.0
-    e = rt.scale_error_rad(jnp.array([0.0, 2 * np.pi * n_turns]), 1e-4)
+    e = se.scale_error_rad(jnp.array([0.0, 2 * np.pi * n_turns]), 1e-4)
     assert float(e[1] - e[0]) == pytest.approx(2 * np.pi * n_turns * 1e-4, rel=1e-12)
 
 
 def test_staircase_sharp_limit_and_dither():
     q = 1e-3
     x = np.linspace(0.0, 0.02, 4001)
-    e = np.asarray(rt.quantization_rad(x, q, 0.0, n_harmonics=256))
-    exact = np.asarray(rt.quantize_rad(x, q)) - x
+    e = np.asarray(se.quantization_rad(x, q, 0.0, n_harmonics=256))
+    exact = np.asarray(se.quantize_rad(x, q)) - x
     assert np.sqrt(np.mean(e**2)) == pytest.approx(q / np.sqrt(12), rel=0.02)
     assert np.median(np.abs(e - exact)) < 0.01 * q
     # Parseval: RMS^2 = q^2 sum_k g_k^2 / (2 pi^2 k^2), g_k = exp(-2 pi^2 k^2 b^2)
-    e64 = np.asarray(rt.quantization_rad(x, q, 0.0))
+    e64 = np.asarray(se.quantization_rad(x, q, 0.0))
     k = np.arange(1, 257)
     rms = q * np.sqrt(np.sum(np.exp(-4 * np.pi**2 * k**2 / 64**2) / (2 * np.pi**2 * k**2)))
     assert np.sqrt(np.mean(e64**2)) == pytest.approx(rms, rel=2e-3)
@@ -145,8 +147,8 @@ def test_staircase_sharp_limit_and_dither():
     xs = np.linspace(0.0, 3 * q, 61)
     sigma = 0.2 * q
     n = rng.normal(0.0, sigma, (20000, 1))
-    mc = np.mean(np.asarray(rt.quantize_rad(xs + n, q)) - xs, axis=0)
-    model = np.asarray(rt.quantization_rad(xs, q, 0.0, sigma))
+    mc = np.mean(np.asarray(se.quantize_rad(xs + n, q)) - xs, axis=0)
+    model = np.asarray(se.quantization_rad(xs, q, 0.0, sigma))
     np.testing.assert_allclose(model, mc, atol=0.01 * q)
 
 
@@ -154,11 +156,11 @@ def test_staircase_sharp_limit_and_dither():
 def test_interpolation_first_order_matches_exact(P):
     th = np.linspace(0.0, 2 * np.pi, 4001)
     ba, bb, rho, phi = 4e-3, -3e-3, 1.005, 2e-3
-    exact = np.asarray(rt.interpolation_exact_rad(th, P, ba, bb, rho, phi))
+    exact = np.asarray(se.interpolation_exact_rad(th, P, ba, bb, rho, phi))
     coef = np.array([ba, -bb, phi / 2, (rho - 1) / 2])
-    lin = np.asarray(rt.interpolation_harmonics_rad(th, P, coef)) + phi / 2 / P
+    lin = np.asarray(se.interpolation_harmonics_rad(th, P, coef)) + phi / 2 / P
     assert np.max(np.abs(exact - lin)) < 0.01 * np.max(np.abs(exact))
-    back = rt.interpolation_params_from_harmonics(coef)
+    back = se.interpolation_params_from_harmonics(coef)
     assert back == pytest.approx(
         {"offset_a": ba, "offset_b": bb, "amplitude_ratio": rho, "phase_error_rad": phi}
     )
@@ -170,21 +172,21 @@ _TH = jnp.linspace(0.1, 9.0, 37)
 _W = jnp.linspace(-4.0, 4.0, 37)
 _TERMS = {
     "direction_hysteresis": (
-        lambda p: rt.direction_hysteresis_rad(p[1] * _W, p[0], 0.5),
+        lambda p: se.direction_hysteresis_rad(p[1] * _W, p[0], 0.5),
         np.array([3e-3, 1.2]),
     ),
-    "reading_delay": (lambda p: rt.reading_delay_rad(p[1] * _W, p[0]), np.array([1e-3, 0.8])),
-    "scale_error": (lambda p: rt.scale_error_rad(p[1] * _TH, p[0]), np.array([2e-4, 1.1])),
+    "reading_delay": (lambda p: se.reading_delay_rad(p[1] * _W, p[0]), np.array([1e-3, 0.8])),
+    "scale_error": (lambda p: se.scale_error_rad(p[1] * _TH, p[0]), np.array([2e-4, 1.1])),
     "quantization": (
-        lambda p: rt.quantization_rad(p[2] * _TH, p[0], p[1], p[3]),
+        lambda p: se.quantization_rad(p[2] * _TH, p[0], p[1], p[3]),
         np.array([0.07, 0.01, 1.0, 0.01]),
     ),
     "interpolation_error": (
-        lambda p: rt.interpolation_exact_rad(_TH, 4, p[0], p[1], p[2], p[3]),
+        lambda p: se.interpolation_exact_rad(_TH, 4, p[0], p[1], p[2], p[3]),
         np.array([0.02, -0.01, 1.03, 0.015]),
     ),
     "interpolation_harmonics": (
-        lambda p: rt.interpolation_harmonics_rad(_TH, 4, p),
+        lambda p: se.interpolation_harmonics_rad(_TH, 4, p),
         np.array([0.02, -0.01, 0.03, 0.015]),
     ),
 }
@@ -219,13 +221,13 @@ def test_lsb_found_from_the_value_lattice(bits, seed):
     x = np.cumsum(rng.uniform(0.0, 3 * q, 1500))  # irregular steps, 0-3 LSB
     run = np.repeat([0, 1, 2], 500)
     xq = q * np.round(x / q) + np.array([0.0, 0.3, -0.7])[run] * q  # each run its zero
-    lat = rt.detect_lsb(xq, run)
+    lat = rd.detect_lsb(xq, run)
     assert lat.lsb_rad == pytest.approx(q, rel=1e-6)
     assert lat.bits_per_turn == pytest.approx(bits, abs=1e-6)
     assert lat.fraction_on_lattice > 0.999
     # printed to 6 significant digits in degrees, as a CSV would carry it
     printed = np.deg2rad(np.array([float(f"{v:.6g}") for v in np.rad2deg(xq)]))
-    assert rt.detect_lsb(printed, run).lsb_rad == pytest.approx(q, rel=2e-3)
+    assert rd.detect_lsb(printed, run).lsb_rad == pytest.approx(q, rel=2e-3)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -234,7 +236,7 @@ def test_lsb_of_a_fast_sweep(seed):
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 2**17
     x = 0.3 + np.arange(2000) * 250.37 * q + rng.normal(0, 0.2 * q, 2000)
-    lat = rt.detect_lsb(q * np.round(x / q))
+    lat = rd.detect_lsb(q * np.round(x / q))
     assert lat.lsb_rad == pytest.approx(q, rel=1e-9)
     assert not lat.single_step
 
@@ -243,7 +245,7 @@ def test_lsb_of_a_fast_sweep(seed):
 def test_no_lattice_in_continuous_readings(seed):
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.uniform(0.0, 1e-3, 2000)) + rng.normal(0, 1e-5, 2000)
-    lat = rt.detect_lsb(x)
+    lat = rd.detect_lsb(x)
     assert lat.lsb_rad is None
     assert "no lattice" in lat.note or "only" in lat.note
 
@@ -251,7 +253,7 @@ def test_no_lattice_in_continuous_readings(seed):
 def test_dominant_orders():
     a = np.array([0.0, 3.0, 0.0, 0.5])
     b = np.array([1.0, 4.0, 0.0, 0.0])
-    d = rt.dominant_orders(a, b, np.full(4, 0.1), np.full(4, 0.1), n=3)
+    d = rd.dominant_orders(a, b, np.full(4, 0.1), np.full(4, 0.1), n=3)
     assert [x["order"] for x in d] == [2, 1, 4]
     assert d[0]["amplitude_rad"] == pytest.approx(5.0)
     assert d[0]["share"] == pytest.approx(25.0 / 26.25)
@@ -309,27 +311,27 @@ def _bench(effect, seed, amplitude=6.0):
 def test_each_effect_alone_recovered_within_10_percent(effect, seed):
     cols, truth, params = _bench(effect, seed)
     run = cols.get("run", np.zeros(cols["t"].size, dtype=np.int64))
-    w = rt.reference_velocity_rad_s(cols["t"], cols["theta_ref"], run)
+    w = rd.reference_velocity_rad_s(cols["t"], cols["theta_ref"], run)
     orders = truth["base"]["orders"]
     if effect == "direction_hysteresis":
-        col = rt.direction_hysteresis_rad(w, 1.0, rt.velocity_width_rad_s(w))
+        col = se.direction_hysteresis_rad(w, 1.0, rd.velocity_width_rad_s(w))
         (h,), _ = _fit(cols, truth, [np.asarray(col)], orders)
         assert h == pytest.approx(params["hysteresis_rad"], rel=0.1)
     elif effect == "reading_delay":
-        (tau,), _ = _fit(cols, truth, [np.asarray(rt.reading_delay_rad(w, 1.0))], orders)
+        (tau,), _ = _fit(cols, truth, [np.asarray(se.reading_delay_rad(w, 1.0))], orders)
         assert tau == pytest.approx(params["delay_s"], rel=0.1)
     elif effect == "scale_error":
         (s,), _ = _fit(
-            cols, truth, [np.asarray(rt.scale_error_rad(cols["theta_ref"], 1.0))], orders
+            cols, truth, [np.asarray(se.scale_error_rad(cols["theta_ref"], 1.0))], orders
         )
         assert s == pytest.approx(params["scale"], rel=0.1)
     else:
         P = truth["signal_periods_per_rev"]
         basis = [
-            np.asarray(rt.interpolation_harmonics_rad(cols["theta_ref"], P, e)) for e in np.eye(4)
+            np.asarray(se.interpolation_harmonics_rad(cols["theta_ref"], P, e)) for e in np.eye(4)
         ]
         coef, _ = _fit(cols, truth, basis, orders)
-        got = rt.interpolation_params_from_harmonics(coef)
+        got = se.interpolation_params_from_harmonics(coef)
         assert got["offset_a"] == pytest.approx(params["offset_a"], rel=0.1)
         assert got["offset_b"] == pytest.approx(params["offset_b"], rel=0.1)
         assert got["phase_error_rad"] == pytest.approx(params["phase_error_rad"], rel=0.1)
@@ -340,14 +342,14 @@ def test_each_effect_alone_recovered_within_10_percent(effect, seed):
 def test_quantization_recovered(seed):
     cols, truth, params = _bench("quantization", seed)
     q = params["lsb_rad"]
-    lat = rt.detect_lsb(cols["h0"], cols.get("run"))
+    lat = rd.detect_lsb(cols["h0"], cols.get("run"))
     assert lat.lsb_rad == pytest.approx(q, rel=0.1)
     # the staircase term, evaluated at the base model's unquantized reading, explains the
     # residual: its fitted amplitude is 1 within 10 %
     _, resid = _fit(cols, truth, [], truth["base"]["orders"])
     smooth = cols["h0"] - resid  # the fitted unquantized reading
     sigma = truth["noise_rad"]
-    col = np.asarray(rt.quantization_rad(smooth, lat.lsb_rad, lat.offset_rad[0], sigma))
+    col = np.asarray(se.quantization_rad(smooth, lat.lsb_rad, lat.offset_rad[0], sigma))
     (a,), res2 = _fit(cols, truth, [col], truth["base"]["orders"])
     assert a == pytest.approx(1.0, rel=0.1)
     assert np.std(res2) < 0.6 * np.std(resid)
@@ -355,9 +357,9 @@ def test_quantization_recovered(seed):
 
 def test_direction_offset_and_delay_are_collinear_at_one_speed():
     cols, truth, params = _bench("direction_hysteresis", SEEDS[0])
-    w = rt.reference_velocity_rad_s(cols["t"], cols["theta_ref"])
-    a = np.asarray(rt.direction_hysteresis_rad(w, 1.0, rt.velocity_width_rad_s(w)))
-    b = np.asarray(rt.reading_delay_rad(w, 1.0))
+    w = rd.reference_velocity_rad_s(cols["t"], cols["theta_ref"])
+    a = np.asarray(se.direction_hysteresis_rad(w, 1.0, rd.velocity_width_rad_s(w)))
+    b = np.asarray(se.reading_delay_rad(w, 1.0))
     assert abs(np.corrcoef(a, b)[0, 1]) > 0.99
 
 
@@ -371,7 +373,7 @@ def _context(cols, truth):
     th = cols["theta_ref"]
     run = cols.get("run", np.zeros(th.size, dtype=np.int64))
     R = int(run.max()) + 1
-    w = rt.reference_velocity_rad_s(cols["t"], th, run)
+    w = rd.reference_velocity_rad_s(cols["t"], th, run)
     for r in range(R):  # the engine's omega: the steady speed of each direction's segment
         for sign in (-1.0, 1.0):
             m = (run == r) & (np.sign(w) == sign)
@@ -452,7 +454,7 @@ _CAND = {c.name: c for c in rt.CANDIDATES}
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("effect", rt.CATALOG_REFERENCE)
+@pytest.mark.parametrize("effect", se.CATALOG_REFERENCE)
 def test_candidates_recover_their_effect_within_10_percent(effect, seed):
     cols, truth, params = _bench(effect, seed)
     ctx, got = _fit_candidate(_CAND[effect], cols, truth)
@@ -501,7 +503,7 @@ def test_candidates_say_when_they_cannot_apply():
 
 
 def _diagnosed(tmp_path, effect, seed):
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     cols, truth, params = _bench(effect, seed)
     enc = {
@@ -514,7 +516,7 @@ def _diagnosed(tmp_path, effect, seed):
     return doc, {e["name"]: e for e in doc["effects"]}, params
 
 
-@pytest.mark.parametrize("effect", rt.CATALOG_REFERENCE)
+@pytest.mark.parametrize("effect", se.CATALOG_REFERENCE)
 def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effect):
     pytest.importorskip("encdesign.diagnose._engine")
     doc, named, params = _diagnosed(tmp_path, effect, SEEDS[0])
@@ -549,7 +551,7 @@ def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effec
 def _plain_direction_offset(rec, max_order):
     """Independent check: least squares of run constant + orders 1..M + (h/2) sign(omega)."""
     th = rec.columns["theta_ref"]
-    w = rt.reference_velocity_rad_s(rec.columns["t"], th)
+    w = rd.reference_velocity_rad_s(rec.columns["t"], th)
     X = [np.ones_like(th), 0.5 * np.sign(w)]
     for m in range(1, max_order + 1):
         X += [np.cos(m * th), np.sin(m * th)]
@@ -559,13 +561,13 @@ def _plain_direction_offset(rec, max_order):
 
 @pytest.mark.parametrize("name", ["moteus_cal", "magalpha_cal"])
 def test_engine_on_the_measured_sensors(name):
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     pytest.importorskip("encdesign.diagnose._engine")
     rec = load_recording(DATA / f"{name}.toml")
     doc = diagnose(rec).doc
     b = doc["base"]["terms"]["base"]
-    dom = rt.dominant_orders(b["fourier_cos_rad"]["value"], b["fourier_sin_rad"]["value"], n=2)
+    dom = rd.dominant_orders(b["fourier_cos_rad"]["value"], b["fourier_sin_rad"]["value"], n=2)
     named = {e["name"]: e for e in doc["effects"]}
     # the quantization is reported from the value lattice: 14 bits (moteus), 9 bits (MagAlpha)
     bits = doc["sensor"]["sensor_lattice"]["bits_per_turn"]
@@ -596,7 +598,7 @@ def test_engine_on_the_measured_sensors(name):
 
 def _sensor_plus(tmp_path, name, seed, add, **kw):
     """A simulated sensor against a reference with ``add(cols, truth)`` added to ``h0``."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     cols, enc, truth = cr.simulate_sensor_reference(key=jax.random.key(seed), **kw)
     cols["h0"] = cols["h0"] + add(cols, truth)
@@ -732,7 +734,7 @@ def test_simulator_refuses_bad_arguments(kw, message):
 
 
 def test_random_benches_cover_the_catalog():
-    for i, effect in enumerate(rt.CATALOG_REFERENCE):
+    for i, effect in enumerate(se.CATALOG_REFERENCE):
         cols, enc, truth = cr.random_reference_bench(
             key=jax.random.key(100 + i), effects=(effect,), samples_per_run=300
         )
@@ -774,7 +776,7 @@ def test_moteus_import(moteus):
     up = slice(0, 1060)
     assert np.ptp(th[up]) / (2 * np.pi) == pytest.approx(1.0, abs=2e-3)
     assert np.ptp(h[up]) / (2 * np.pi) == pytest.approx(1.0, abs=2e-3)
-    lat = rt.detect_lsb(h)
+    lat = rd.detect_lsb(h)
     assert lat.counts_per_turn == pytest.approx(16384, rel=1e-9)  # a 14-bit sensor
 
 
@@ -785,16 +787,16 @@ def test_magalpha_import(magalpha):
     assert rec.meta["provenance"]["reordered_rows"] == [61, 62, 57, 58, 59, 60]
     assert np.all(np.diff(rec.columns["theta_ref"]) > 0)
     assert np.all(np.diff(rec.columns["h0"]) > 0)
-    lat = rt.detect_lsb(rec.columns["h0"])
+    lat = rd.detect_lsb(rec.columns["h0"])
     assert lat.counts_per_turn == pytest.approx(512, rel=1e-4)  # 360/512 degree
 
 
 @pytestmark_real
 def test_reference_summary_of_the_real_sensors(moteus, magalpha):
-    s = rt.reference_summary(moteus.columns["t"], moteus.columns["theta_ref"], moteus.columns["h0"])
+    s = rd.reference_summary(moteus.columns["t"], moteus.columns["theta_ref"], moteus.columns["h0"])
     assert s["directions"] == {"0": "both"}
     assert s["sensor_lattice"]["bits_per_turn"] == pytest.approx(14.0, abs=1e-9)
-    s = rt.reference_summary(
+    s = rd.reference_summary(
         magalpha.columns["t"], magalpha.columns["theta_ref"], magalpha.columns["h0"]
     )
     assert s["directions"] == {"0": "forward"}
@@ -855,7 +857,7 @@ def test_a_coarse_lattice_is_named_quantization_next_to_a_fitted_effect(tmp_path
     quantization, dithered by the noise (no staircase to fit), is named from the value
     lattice with its LSB, not fitted (delta_bic null); before it was only in the sensor
     block, and a compound's quantization was never counted."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     sigma = cr.SENSORS["magnetic"]["noise_rad"]
     lsb = 4.2 * sigma
@@ -883,7 +885,7 @@ def test_interpolation_error_beyond_the_sampling_nyquist_order_is_named(tmp_path
     """A 2048-period optical sensor sampled 500 times a turn: orders P and 2P alias in time,
     but each sample's signal phase is known from its own reading, so the harmonics are fitted
     in that phase (before: not testable, 'aliased', and the record unexplained)."""
-    from encdesign import diagnose
+    from encdesign.diagnose import diagnose
 
     P = 2048
     sigma = cr.SENSORS["optical"]["noise_rad"]

@@ -23,7 +23,7 @@ phi_error = jax.jit(ed.sds_phi_error)
 
 def _rough_disk(key, n=N):
     """A disk with large mark errors of every kind (monotone marks)."""
-    return ed.reference_disk(
+    return ed.physics.reference_disk(
         key, n, eccentricity_rad=1.5e-3, ellipticity_rad=8e-4, harmonic_rad=1e-4, random_rad=2e-4
     )
 
@@ -34,8 +34,8 @@ def _design(motor, n_fixed=2, n_moving=3, key=0, n=N, fixed=None, moving=None):
         motor,
         _rough_disk(ka, n),
         _rough_disk(kb, n),
-        ed.equally_spaced(n_fixed, 0.3) if fixed is None else fixed,
-        ed.equally_spaced(n_moving, 1.1) if moving is None else moving,
+        ed.physics.equally_spaced(n_fixed, 0.3) if fixed is None else fixed,
+        ed.physics.equally_spaced(n_moving, 1.1) if moving is None else moving,
     )
 
 
@@ -62,22 +62,35 @@ def _errs(**kw) -> ed.SDSErrors:
 def _still(n_sensors=1):
     """Constant speed, perfect disks, n equally spaced sensors per disk."""
     motor = ed.Motor(6, 18, 6)
-    az = ed.equally_spaced(n_sensors)
-    return ed.SDSDesign(motor, ed.perfect_disk(N), ed.perfect_disk(N), az, az)
+    az = ed.physics.equally_spaced(n_sensors)
+    return ed.SDSDesign(motor, ed.physics.perfect_disk(N), ed.physics.perfect_disk(N), az, az)
 
 
 # ----------------------------------------------------------------------------- motor
 
 
 def test_motor_orders_follow_construction():
-    src = ed.motor_order_sources(6, 18, 6)
+    src = ed.physics.motor_order_sources(6, 18, 6)
     assert set(range(1, 7)) <= set(src)
     assert "cogging" in src[36] and "commutation" in src[36]  # lcm(12, 18) = 36 = 6·6
     assert "pole_pairs" in src[12]
     assert 7 not in src and 13 not in src
-    assert ed.motor_orders(5, 15, 6, max_order=40) == (1, 2, 3, 4, 5, 10, 15, 20, 25, 30, 35, 40)
+    assert ed.physics.motor_orders(5, 15, 6, max_order=40) == (
+        1,
+        2,
+        3,
+        4,
+        5,
+        10,
+        15,
+        20,
+        25,
+        30,
+        35,
+        40,
+    )
     with pytest.raises(EncdesignInputError, match="pole_pairs"):
-        ed.motor_orders(0, 15, 6)
+        ed.physics.motor_orders(0, 15, 6)
 
 
 def test_inertia_filter_and_speed_integral():
@@ -100,10 +113,10 @@ def test_inertia_filter_and_speed_integral():
 
 
 def test_edge_times_invert_theta_below_a_picosecond():
-    m = ed.reference_motor(6)
+    m = ed.physics.reference_motor(6)
     m = eqx.tree_at(lambda x: x.speed_drift_per_s, m, jnp.asarray(2e-4))
     target = jnp.linspace(0.0, 2 * math.pi * 1000, 20001) + 0.123
-    t = jax.jit(ed.time_at_angle)(m, target)
+    t = jax.jit(ed.physics.time_at_angle)(m, target)
     # residual in time: angle residual / speed, over 1,000 revolutions
     dt = (m.theta(t) - target) / m.omega(t)
     assert float(jnp.max(jnp.abs(dt))) < 1e-13
@@ -116,7 +129,7 @@ def test_constant_speed_is_exact_for_any_mark_errors():
     motor = ed.Motor(6, 18, 6, speed_rad_s=2 * math.pi * 7.3)
     for key in (0, 1):
         d = _design(motor, 2, 3, key=key)
-        ed.validate_design(d)
+        ed.physics.validate_design(d)
         err = phi_error(d, PHI)
         assert float(jnp.max(jnp.abs(err))) < 1e-12
 
@@ -125,8 +138,8 @@ def test_k_shift_identity_from_edge_times():
     """S_k(0) = S_0(0) − k·2π for every shift k (seed eq. 11), measured with times."""
     motor = ed.Motor(6, 18, 6)
     d = _design(motor, 1, 1, fixed=[0.0], moving=[0.0])
-    mu_a = np.asarray(ed.mark_angles(d.disk_a))
-    mu_b = np.asarray(ed.mark_angles(d.disk_b))
+    mu_a = np.asarray(ed.physics.mark_angles(d.disk_a))
+    mu_b = np.asarray(ed.physics.mark_angles(d.disk_b))
     s00 = float(np.sum(mu_b - mu_a))  # S_0(0) = Σ (B_i − A_i)
     om = float(motor.speed_rad_s)
     alpha = mu_a / om  # the fixed window starts at A_0 (position 0)
@@ -153,7 +166,7 @@ def test_axis_tilt_matches_seed_formula():
     tilt = 20 * ARCSEC
     phi = jnp.linspace(0, 2 * math.pi, 49)[:-1]
     err = phi_error(d, phi, _errs(axis_tilt_rad=tilt))
-    expect = ed.axis_tilt_error(phi, tilt)
+    expect = ed.physics.axis_tilt_error(phi, tilt)
     assert float(jnp.max(jnp.abs(err - expect))) < 1e-15
     assert 0.4 * MAS < float(jnp.max(jnp.abs(err))) < 0.5 * MAS
     # nearly pure order 2 of amplitude β²/4
@@ -166,7 +179,7 @@ def test_prediction_eq46_53_agrees_with_simulation():
     d = sds_reference(1, 1)
     phi = jnp.linspace(0, 2 * math.pi, 25)[:-1]
     sim = phi_error(d, phi)
-    pred = ed.predict_speed_mark_error(d, phi)
+    pred = ed.physics.predict_speed_mark_error(d, phi)
     assert float(jnp.max(jnp.abs(sim))) > 1 * ARCSEC  # a real effect, not zero vs zero
     assert float(jnp.max(jnp.abs(sim - pred.phi_error_rad))) < 0.05 * float(jnp.max(jnp.abs(sim)))
     # the Fourier split sums to the total and is dominated by orders 1 and 2
@@ -187,7 +200,7 @@ def test_sensor_count_cancels_orders():
         motor = ed.Motor(3, 9, 6, torque_cos={order: 0.02})
         harm = jnp.zeros(3).at[order - 1].set(5e-4)
         disk = ed.DiskMarks(N, harm, jnp.zeros(3), jnp.zeros(N))
-        d = ed.SDSDesign(motor, disk, disk, [0.0], ed.equally_spaced(3))
+        d = ed.SDSDesign(motor, disk, disk, [0.0], ed.physics.equally_spaced(3))
         e = phi_error(d, phi)
         spread[order] = float(jnp.max(e) - jnp.min(e))
     assert spread[3] > 1e-7
@@ -225,7 +238,7 @@ def test_gradients_match_finite_differences():
 
 def test_residual_objective_is_differentiable():
     d = sds_reference(1, 1)
-    val, g = jax.jit(jax.value_and_grad(lambda m: ed.sds_residual(m, n_phi=4)))(d)
+    val, g = jax.jit(jax.value_and_grad(lambda m: ed.physics.sds_residual(m, n_phi=4)))(d)
     assert float(val) > 0
     for leaf in jax.tree_util.tree_leaves(g):  # ripple, marks, azimuths, radius, speed
         assert np.all(np.isfinite(np.asarray(leaf)))
@@ -237,7 +250,7 @@ def test_residual_objective_is_differentiable():
 
 
 def test_bearing_wobble_cancels_in_opposed_pairs_and_noise_averages():
-    errs = _errs(**ed.bearing_noise(jax.random.PRNGKey(1), 2.5e-6, 6))
+    errs = _errs(**ed.physics.bearing_noise(jax.random.PRNGKey(1), 2.5e-6, 6))
     std = {}
     for n in (1, 2):
         r = simulate(_still(n), 0.5, 8, errs, key=KEY, revs_per_reading=2)
@@ -367,9 +380,15 @@ def test_bad_design_input():
     disk = ed.DiskMarks(20, jnp.zeros(1), jnp.zeros(1), rnd)
     d = ed.SDSDesign(ed.Motor(6, 18, 6), disk, disk, [0.0], [0.0])
     with pytest.raises(EncdesignInputError, match="does not follow"):
-        ed.validate_design(d)
+        ed.physics.validate_design(d)
     with pytest.raises(EncdesignInputError, match="marks_per_rev"):
-        ed.SDSDesign(ed.Motor(6, 18, 6), ed.perfect_disk(20), ed.perfect_disk(30), [0.0], [0.0])
+        ed.SDSDesign(
+            ed.Motor(6, 18, 6),
+            ed.physics.perfect_disk(20),
+            ed.physics.perfect_disk(30),
+            [0.0],
+            [0.0],
+        )
 
 
 # ----------------------------------------------------------------------------- studies

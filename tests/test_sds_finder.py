@@ -13,12 +13,12 @@ import pytest
 import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
 from encdesign.diagnose import diagnose
-from encdesign.diagnose._conceal_sds import write_concealed_sds
 from encdesign.diagnose._sds import finish_sds
 from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
 from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
 from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn
 from encdesign.io._recording import load_recording, write_recording
+from encdesign.simulate import write_concealed_sds
 from tests.helpers import validate_diagnosis
 
 N_RUNS = 12  # platform positions per test recording
@@ -342,7 +342,7 @@ def test_readings_windows_aligned_in_time(sds_bench):
     """Every reading's windows cover the same revolution: a wobble that changes from one
     revolution to the next gives no bias in the first reading of a run (it gave ~300 nrad
     when late-starting sensors read a window one revolution later)."""
-    from encdesign.io._sds_recording import sds_readings_from_recording
+    from encdesign.diagnose import sds_readings_from_recording
 
     rec, truth = sds_bench("bearing_wobble")
     res = sds_readings_from_recording(rec)

@@ -7,16 +7,14 @@ from helpers import CRAMER_HEADS_DEG, CRAMER_REFERENCE_HEAD, cramer_model
 
 from encdesign import (
     apply_map,
-    averaged_error,
-    cotangent_equations,
     cotangent_sensitivity,
     encoder_map,
     head_errors,
     head_readings,
     make_model,
-    mode_amplitudes,
     self_compensate,
 )
+from encdesign.physics import averaged_error, cotangent_equations, mode_amplitudes
 
 N = 256
 THETA = jnp.arange(N) * (2 * np.pi / N)

@@ -6,15 +6,13 @@ import numpy as np
 import pytest
 from helpers import cramer_model
 
-from encdesign import (
+from encdesign import head_errors, make_model, surviving_orders
+from encdesign.physics import (
     averaged_error,
     fourier_coefficients,
-    head_errors,
-    make_model,
     mode_amplitudes,
     mode_transfer,
     model_mode_transfer,
-    surviving_orders,
 )
 
 N = 256

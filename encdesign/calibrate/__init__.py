@@ -26,9 +26,6 @@ from ._closure import (
     harmonic_amplitudes as harmonic_amplitudes,
 )
 from ._closure import (
-    simulate_closure_readings as simulate_closure_readings,
-)
-from ._closure import (
     solve_closure as solve_closure,
 )
 from ._closure import (
@@ -93,7 +90,4 @@ from ._vibration_lut import (
 )
 from ._vibration_lut import (
     mount_relative_displacement_m as mount_relative_displacement_m,
-)
-from ._vibration_lut import (
-    simulate_shaker_steps as simulate_shaker_steps,
 )

@@ -46,10 +46,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
@@ -63,7 +61,6 @@ __all__ = [
     "closure_matrix",
     "closure_null_angles",
     "harmonic_amplitudes",
-    "simulate_closure_readings",
     "solve_closure",
     "undetermined_harmonics",
 ]
@@ -469,32 +466,3 @@ def closure_null_angles(
         )
     j = np.arange(n_faces + 1)
     return 2 * np.pi * (pos[:, None] + j) / n_faces + off[:, None] + f[j % n_faces][None, :]
-
-
-def simulate_closure_readings(
-    instrument_error: Callable[[np.ndarray], np.ndarray],
-    n_faces: int,
-    setting_positions: Sequence[int] | np.ndarray,
-    *,
-    face_error_rad: np.ndarray,
-    setting_offset_rad: np.ndarray,
-    sigma_reading_rad: float,
-    key: jax.Array,
-) -> np.ndarray:
-    """Readings of a simulated dual-closure test, ``(S, N + 1)``, rad in ``[0, 2π)``.
-
-    Each null: the true platform angle (:func:`closure_null_angles`) plus the
-    instrument's error there (``instrument_error(angles_rad) -> error_rad``, any shape)
-    plus white reading noise of standard deviation ``sigma_reading_rad`` drawn from
-    ``key``.
-    """
-    phi = closure_null_angles(n_faces, setting_positions, face_error_rad, setting_offset_rad)
-    err = np.asarray(instrument_error(phi), dtype=float)
-    if err.shape != phi.shape or not np.all(np.isfinite(err)):
-        raise input_error(
-            "simulate_closure_readings instrument_error",
-            f"returned shape {err.shape} (finite: {bool(np.all(np.isfinite(err)))})",
-            f"finite errors of shape {phi.shape}",
-        )
-    noise = np.asarray(jax.random.normal(key, phi.shape, dtype=jnp.float64))
-    return np.mod(phi + err + sigma_reading_rad * noise, 2 * np.pi)

@@ -91,9 +91,9 @@ def run(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     import jax
 
-    from ..io._sds_recording import simulate_sds_recording
     from ..physics._sds import reference_design, reference_errors
     from ..physics._sds_errors import SDSErrors
+    from ..simulate._sds import simulate_sds_recording
 
     key = jax.random.PRNGKey(args.seed)
     k_disk, k_noise = jax.random.split(key)
@@ -122,8 +122,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _measure(args: argparse.Namespace) -> int:
+    from ..diagnose._sds_readout import sds_readings_from_recording
     from ..io._recording import load_recording
-    from ..io._sds_recording import sds_readings_from_recording
     from ..physics._sds_errors import ARCSEC
 
     res = sds_readings_from_recording(

@@ -28,8 +28,9 @@ def run(args: argparse.Namespace) -> int:
     """Load the design, simulate, write the recording; 0 on success."""
     import numpy as np
 
-    from ..design._design import load_design, simulate_recording
+    from ..design._design import load_design
     from ..io._paths import recording_input_files, recording_output_files
+    from ..simulate._multihead import simulate_recording
 
     inputs = [("design", args.design)]
     if args.like is not None:

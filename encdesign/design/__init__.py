@@ -27,12 +27,6 @@ from ._design import (
 from ._design import (
     parse_design as parse_design,
 )
-from ._design import (
-    simulate_bench as simulate_bench,
-)
-from ._design import (
-    simulate_recording as simulate_recording,
-)
 from ._drivers import (
     DOEResult as DOEResult,
 )
@@ -176,4 +170,28 @@ from ._tolerance import (
 )
 from ._tolerance import (
     pareto_front as pareto_front,
+)
+from ._distributed import (
+    allgather_objects as allgather_objects,
+)
+from ._distributed import (
+    is_my_task as is_my_task,
+)
+from ._drivers import (
+    NONFINITE as NONFINITE,
+)
+from ._drivers import (
+    STATUSES as STATUSES,
+)
+from ._drivers import (
+    SUCCESS as SUCCESS,
+)
+from ._objectives import (
+    deviation_sizes as deviation_sizes,
+)
+from ._tolerance import (
+    plot_pareto as plot_pareto,
+)
+from ._tolerance import (
+    plot_sweep as plot_sweep,
 )

@@ -181,7 +181,7 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
                 elif name.startswith("out."):
                     outputs[name[4:]] = val
                 else:
-                    raise ValueError(f"column {name!r} is neither in.* nor out.*")
+                    raise EncdesignInputError(f"column {name!r} is neither in.* nor out.*")
             out.append(Case(int(row[0]), inputs, outputs, row[1], int(row[2]) if row[2] else None))
         except ValueError as exc:
             raise input_error(f"{path}:{lineno}", f"bad case row ({exc})") from None

@@ -58,14 +58,10 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from .._errors import input_error
+from .._errors import DistributedError, EncdesignInputError, input_error
 
 BUILDS_AXIS = "builds"
 """Name of the mesh axis the Monte Carlo builds are split over."""
-
-
-class DistributedError(RuntimeError):
-    """The distributed runtime could not start or lost a process (CLI exit status 1)."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -333,7 +329,9 @@ def shard_builds(
         return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
     m = -(-n // d)
     if not gather and (not manual or m * d != n):
-        raise ValueError(f"gather=False needs manual=True and n={n} a multiple of {d} shards")
+        raise EncdesignInputError(
+            f"gather=False needs manual=True and n={n} a multiple of {d} shards"
+        )
     offsets = jnp.arange(d, dtype=jnp.int32) * m
     if manual:
         # shard_map: each device runs exactly its slice; nothing but the final gather

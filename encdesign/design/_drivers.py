@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._errors import OptimisationError as OptimisationError
 from .._progress import progress_bar
 from ._distributed import chunk_plan, gather_chunks, is_main_process, n_build_shards, shard_builds
 
@@ -50,10 +51,6 @@ INFEASIBLE = "infeasible"
 FAILED = "failed"
 STATUSES = (SUCCESS, MAX_STEPS, NONFINITE, BOUNDS_VIOLATED, INFEASIBLE, FAILED)
 SOLVERS = ("bfgs", "lbfgsb", "lm")
-
-
-class OptimisationError(RuntimeError):
-    """A driver finished without success and was asked to ``throw``."""
 
 
 def _finish(result: Any, throw: bool) -> Any:

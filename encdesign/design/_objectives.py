@@ -26,13 +26,12 @@ amplification (:func:`calibration_noise_ms`). Population metrics: :func:`residua
 (fraction of builds within an accuracy spec, optionally smoothed for gradients) and
 :func:`tolerance_cost` (``sum_i c_i * ref_i / sigma_i``: tighter costs more).
 
-:data:`PROBLEM_OBJECTIVES` registers these for problem files
-(:mod:`encdesign.design._problem`).
+:data:`~encdesign.design._registry.PROBLEM_OBJECTIVES` (``_registry``) registers these for
+problem files (:mod:`encdesign.design._problem`).
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import equinox as eqx
@@ -40,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
 from .._errors import EncdesignInputError, input_error
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
 from ..physics._layout import (
@@ -53,7 +53,6 @@ from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
 from ._distributed import shard_builds
 from ._drivers import build_normals, map_builds
-from ._spec import ModelLimit, ProblemObjective, VariableInfo
 from ._tolerance import tolerance_cost
 
 __all__ = [
@@ -84,7 +83,6 @@ __all__ = [
     "layout_noise_ms",
     "layout_metric",
     "layout_metrics",
-    "PROBLEM_OBJECTIVES",
 ]
 
 TOLERANCE_NAMES = (
@@ -108,10 +106,6 @@ TOLERANCE_UNITS = {
     "noise": "rad",
 }
 """SI unit of each tolerance's standard deviation."""
-
-
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 class Tolerances(eqx.Module):
@@ -143,9 +137,9 @@ class Tolerances(eqx.Module):
         for name in TOLERANCE_NAMES:
             v = getattr(self, name)
             if hasattr(v, "shape") and v.shape != ():
-                raise ValueError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
+                raise EncdesignInputError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
             if not isinstance(v, jax.core.Tracer) and hasattr(v, "shape") and float(v) < 0:
-                raise ValueError(f"Tolerances.{name}: {float(v)}, expected >= 0")
+                raise EncdesignInputError(f"Tolerances.{name}: {float(v)}, expected >= 0")
 
     def vector(self) -> Array:
         """The standard deviations in :data:`TOLERANCE_NAMES` order (SI)."""
@@ -194,17 +188,19 @@ class EncoderDesign(eqx.Module):
 
     def __check_init__(self) -> None:
         if self.n_heads < 2:
-            raise ValueError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
+            raise EncdesignInputError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
         if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise ValueError("EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0")
+            raise EncdesignInputError(
+                "EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0"
+            )
         if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"EncoderDesign.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
         r = self.radius_m
         if not isinstance(r, jax.core.Tracer) and hasattr(r, "shape") and not float(r) > 0:
-            raise ValueError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
+            raise EncdesignInputError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
 
     @property
     def head_angles_rad(self) -> Array:
@@ -259,7 +255,7 @@ def expected_sensitivity(
 # ----------------------------------------------------------------------------- builds
 
 
-def _deviation_sizes(design: EncoderDesign) -> dict[str, int]:
+def deviation_sizes(design: EncoderDesign) -> dict[str, int]:
     """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
     h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
@@ -277,7 +273,7 @@ def _deviation_sizes(design: EncoderDesign) -> dict[str, int]:
 
 def n_build_normals(design: EncoderDesign) -> int:
     """Length of the standard-normal vector ``z`` of one build of ``design``."""
-    return sum(_deviation_sizes(design).values())
+    return sum(deviation_sizes(design).values())
 
 
 def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
@@ -289,7 +285,7 @@ def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
     """
     z = _f64(z)
     out, i = {}, 0
-    for name, n in _deviation_sizes(design).items():
+    for name, n in deviation_sizes(design).items():
         out[name] = z[i : i + n]
         i += n
     j = jnp.arange(1, design.grating_orders + 1, dtype=jnp.float64)
@@ -408,7 +404,7 @@ def build_metric(
     if metric == "ms":
         r = build_residual(design, tol, z)
         return jnp.mean(r * r) + calibration_noise_ms(design, tol)
-    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
+    raise EncdesignInputError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
 
 
 def build_metrics(
@@ -525,15 +521,19 @@ class LayoutDesign(eqx.Module):
     def __check_init__(self) -> None:
         a = self.head_angles_rad
         if a.ndim != 1 or a.shape[0] < 2:
-            raise ValueError(f"LayoutDesign.head_angles_rad: shape {a.shape}, expected (H >= 2,)")
+            raise EncdesignInputError(
+                f"LayoutDesign.head_angles_rad: shape {a.shape}, expected (H >= 2,)"
+            )
         if self.weights is not None and jnp.shape(self.weights) != a.shape:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"LayoutDesign.weights: shape {jnp.shape(self.weights)}, expected {a.shape}"
             )
         if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise ValueError("LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0")
+            raise EncdesignInputError(
+                "LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0"
+            )
         if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise ValueError(
+            raise EncdesignInputError(
                 f"LayoutDesign.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
@@ -541,7 +541,7 @@ class LayoutDesign(eqx.Module):
             try:
                 check_layout(a, where="LayoutDesign.head_angles_rad")
             except EncdesignInputError as exc:
-                raise ValueError(str(exc)) from None
+                raise EncdesignInputError(str(exc)) from None
 
     @property
     def n_heads(self) -> int:
@@ -601,7 +601,7 @@ def layout_metric(
         return ms
     if metric == "rms":
         return jnp.sqrt(ms)
-    raise ValueError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
+    raise EncdesignInputError(f"metric: {metric!r}, expected 'rms', 'peak' or 'ms'")
 
 
 def layout_metrics(
@@ -639,7 +639,7 @@ class SDSTolerances(eqx.Module):
         harmonic_rad: orders ``3 … n_harmonics`` have amplitude ``harmonic_rad / n``, rad.
         random_rad: white mark-position error per mark, rad.
         speed_ripple: relative torque ripple of the motor at orders 1 and 2 (coil mismatch);
-            the motor's own orders follow its pole pairs (:func:`~encdesign.reference_motor`).
+            the motor's own orders follow its pole pairs (``physics.reference_motor``).
         axis_tilt_rad: tilt of the disk axis to the platform axis, rad.
     """
 
@@ -734,382 +734,3 @@ def sds_residuals(
         return sds_residual(d, errors, n_phi=n_phi)
 
     return shard_builds(lambda offset, m: jax.lax.map(one, offset + jnp.arange(m)), n_builds)
-
-
-# ----------------------------------------------------------------------------- registry
-
-_RAD = VariableInfo("rad")
-_TOL_VARS = {
-    f"sigma_{n}": VariableInfo(TOLERANCE_UNITS[n], lower=0.0, doc=f"std of {n}")
-    for n in TOLERANCE_NAMES
-}
-_TOL_MODEL_KEYS = {f"sigma_{n}": 0.0 for n in TOLERANCE_NAMES}
-
-
-def _design_from(model: dict[str, Any], reference_angle: Any) -> EncoderDesign:
-    return EncoderDesign(
-        radius_m=model["radius_m"],
-        reference_angle_rad=reference_angle,
-        tilt_rad=model["tilt_rad"],
-        gap_m=model["gap_m"],
-        n_heads=int(model["n_heads"]),
-        max_order=int(model["max_order"]),
-        grating_orders=int(model["grating_orders"]),
-        axial_orders=int(model["axial_orders"]),
-        n_angles=int(model["n_angles"]),
-    )
-
-
-def _tolerances_from(model: dict[str, Any], x: dict[str, Any]) -> Tolerances:
-    return Tolerances(**{n: x.get(f"sigma_{n}", model[f"sigma_{n}"]) for n in TOLERANCE_NAMES})
-
-
-def _build_sensitivity(problem: Any, discrete: dict[str, Any]):
-    m = problem.model
-    n_heads = int(discrete.get("n_heads", m["n_heads"]))
-    key = jax.random.key(problem.seed)
-
-    def evaluate(x):
-        ang = x.get("reference_angle", m["reference_angle_rad"])
-        sig = x.get("sigma_placement", m["sigma_placement"])
-        if m["n_builds"] > 0 and (float(m["sigma_placement"]) > 0 or "sigma_placement" in x):
-            s = expected_sensitivity(
-                ang, n_heads, int(m["max_order"]), sig, key=key, n_builds=int(m["n_builds"])
-            )
-        else:
-            s = cotangent_sensitivity(ang, n_heads, int(m["max_order"]))
-        return {"sensitivity": s}
-
-    return evaluate
-
-
-def _build_residual(problem: Any, discrete: dict[str, Any]):
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    yt = problem.yield_target
-    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
-    q = float(m["percentile"])
-    ref = jnp.array([m[f"cost_ref_{n}"] for n in TOLERANCE_NAMES])
-
-    def evaluate(x):
-        design = _design_from(m, x.get("reference_angle", m["reference_angle_rad"]))
-        tol = _tolerances_from(m, x)
-        vals = build_metrics(
-            design,
-            tol,
-            key=key,
-            n_builds=n_builds,
-            metric=m["metric"],
-            chunk_size=int(m["chunk_size"]),
-        )
-        out = {
-            "residual_percentile": jnp.percentile(vals, q),
-            "residual_mean": jnp.mean(vals),
-            "cost": tolerance_cost(tol.vector(), ref),
-        }
-        if yt is not None:
-            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
-            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
-        return out
-
-    return evaluate
-
-
-def _build_cost(problem: Any, discrete: dict[str, Any]):
-    inner = _build_residual(problem, discrete)
-
-    def evaluate(x):
-        out = inner(x)
-        return {"cost": out["cost"], **{k: v for k, v in out.items() if k != "cost"}}
-
-    return evaluate
-
-
-def _build_sds(problem: Any, discrete: dict[str, Any]):
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    tol = SDSTolerances(**{k: float(m[k]) for k in _SDS_TOL_KEYS})
-
-    def evaluate(x):
-        vals = sds_residuals(
-            int(m["pole_pairs"]),
-            int(m["n_sensors"]),
-            tol,
-            key=key,
-            n_builds=int(m["n_builds"]),
-            marks_per_rev=int(m["marks_per_rev"]),
-            n_phi=int(m["n_phi"]),
-        )
-        return {"sds_residual": jnp.mean(vals), "sds_residual_max": jnp.max(vals)}
-
-    return evaluate
-
-
-_SDS_TOL_KEYS = (
-    "eccentricity_rad",
-    "ellipticity_rad",
-    "harmonic_rad",
-    "random_rad",
-    "speed_ripple",
-    "axis_tilt_rad",
-)
-
-_DESIGN_MODEL = {
-    "radius_m": 0.0254,
-    "reference_angle_rad": 0.5,
-    "tilt_rad": 0.0,
-    "gap_m": 1e-3,
-    "n_heads": 3,
-    "max_order": 16,
-    "grating_orders": 16,
-    "axial_orders": 2,
-    "n_angles": 128,
-    "n_builds": 200,
-    "metric": "rms",
-    "percentile": 99.0,
-    "smooth_width": 0.05,
-    "chunk_size": 64,
-    **_TOL_MODEL_KEYS,
-    **{f"cost_ref_{n}": 0.0 for n in TOLERANCE_NAMES},
-}
-
-PROBLEM_OBJECTIVES: dict[str, ProblemObjective] = {
-    "cotangent_sensitivity": ProblemObjective(
-        name="cotangent_sensitivity",
-        doc="noise amplification of self-compensation (mean over placement-error builds)",
-        variables={
-            "reference_angle": _RAD,
-            "sigma_placement": _TOL_VARS["sigma_placement"],
-            "n_heads": VariableInfo("1", discrete=True, integer=True, lower=2),
-        },
-        model={
-            "n_heads": 3,
-            "max_order": 16,
-            "reference_angle_rad": 0.5,
-            "sigma_placement": 0.0,
-            "n_builds": 64,
-        },
-        outputs=("sensitivity",),
-        build=_build_sensitivity,
-        # n_builds = 0: the nominal sensitivity, without placement-error builds
-        model_limits={"n_builds": ModelLimit(0, 10_000_000)},
-    ),
-    "residual": ProblemObjective(
-        name="residual",
-        doc="percentile of the per-build residual after averaging and self-compensation",
-        variables={
-            "reference_angle": _RAD,
-            **_TOL_VARS,
-            "n_heads": VariableInfo("1", discrete=True, integer=True, lower=2),
-        },
-        model=_DESIGN_MODEL,
-        outputs=("residual_percentile", "residual_mean", "cost", "yield_smooth", "yield"),
-        build=_build_residual,
-    ),
-    "tolerance_cost": ProblemObjective(
-        name="tolerance_cost",
-        doc="cost sum_i c_i ref_i / sigma_i of the tolerances (constrain yield_smooth)",
-        variables=dict(_TOL_VARS),
-        model=_DESIGN_MODEL,
-        outputs=("cost", "residual_percentile", "residual_mean", "yield_smooth", "yield"),
-        build=_build_cost,
-        requires_yield=True,
-    ),
-    "sds_residual": ProblemObjective(
-        name="sds_residual",
-        doc="mean SDS residual over the platform turn (Monte Carlo disks) per pole/sensor",
-        variables={
-            "pole_pairs": VariableInfo("1", discrete=True, integer=True, lower=1),
-            "n_sensors": VariableInfo("1", discrete=True, integer=True, lower=1),
-        },
-        model={
-            "pole_pairs": 6,
-            "n_sensors": 2,
-            "n_builds": 2,
-            "marks_per_rev": 500,
-            "n_phi": 16,
-            **{k: float(getattr(SDSTolerances(), k)) for k in _SDS_TOL_KEYS},
-        },
-        outputs=("sds_residual", "sds_residual_max"),
-        build=_build_sds,
-    ),
-}
-"""Objectives that problem files can name (``[problem] objective``)."""
-
-
-def _check_head_angles(start: Any, where: str) -> None:
-    check_layout(start, where=where)
-
-
-def _build_layout(problem: Any, discrete: dict[str, Any]):
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    yt = problem.yield_target
-    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
-    q = float(m["percentile"])
-    ref = jnp.array([m[f"cost_ref_{n}"] for n in TOLERANCE_NAMES])
-    default_angles = jnp.asarray(m["head_angles_rad"], dtype=jnp.float64)
-    check_layout(default_angles, where=f"{problem.path or problem.name}: model.head_angles_rad")
-
-    def evaluate(x):
-        angles = x.get("head_angles", default_angles)
-        design = LayoutDesign(
-            radius_m=m["radius_m"],
-            head_angles_rad=angles,
-            tilt_rad=m["tilt_rad"],
-            gap_m=m["gap_m"],
-            max_order=int(m["max_order"]),
-            grating_orders=int(m["grating_orders"]),
-            axial_orders=int(m["axial_orders"]),
-            n_angles=int(m["n_angles"]),
-        )
-        tol = _tolerances_from(m, x)
-        ms = layout_metrics(
-            design, tol, key=key, n_builds=n_builds, metric="ms", chunk_size=int(m["chunk_size"])
-        )
-        vals = jnp.sqrt(ms) if m["metric"] == "rms" else layout_metrics(
-            design, tol, key=key, n_builds=n_builds, metric=m["metric"],
-            chunk_size=int(m["chunk_size"]),
-        )  # fmt: skip
-        _, _, amp = layout_noise_amplification(angles, design.max_order)
-        out = {
-            "residual_rms": jnp.sqrt(jnp.mean(ms)),
-            "residual_percentile": jnp.percentile(vals, q),
-            "residual_mean": jnp.mean(vals),
-            "noise_amplification": amp,
-            "cost": tolerance_cost(tol.vector(), ref),
-        }
-        if yt is not None:
-            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
-            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
-        return out
-
-    return evaluate
-
-
-_LAYOUT_MODEL = {
-    k: v for k, v in _DESIGN_MODEL.items() if k not in ("reference_angle_rad", "n_heads")
-}
-_LAYOUT_MODEL["head_angles_rad"] = [0.0, 2.0943951023931953, 4.1887902047863905, 0.3157]
-
-_HEAD_LAYOUT = ProblemObjective(
-    name="head_layout",
-    doc="RMS residual over builds of a free head layout (least-squares self-compensation)",
-    variables={
-        "head_angles": VariableInfo(
-            "rad",
-            lower=-2 * math.pi,
-            upper=4 * math.pi,
-            size=0,
-            check=_check_head_angles,
-            doc="azimuth of every head",
-        ),
-        **_TOL_VARS,
-    },
-    model=_LAYOUT_MODEL,
-    outputs=(
-        "residual_rms",
-        "residual_percentile",
-        "residual_mean",
-        "noise_amplification",
-        "cost",
-        "yield_smooth",
-        "yield",
-    ),
-    build=_build_layout,
-)
-
-PROBLEM_OBJECTIVES["head_layout"] = _HEAD_LAYOUT
-
-
-_SDS_MARK_TOLS = ("eccentricity_rad", "ellipticity_rad", "harmonic_rad", "random_rad")
-
-
-def _build_sds_layout(problem: Any, discrete: dict[str, Any]):
-    from ..physics._sds import equally_spaced
-
-    m = dict(problem.model)
-    m.update(discrete)
-    key = jax.random.key(problem.seed)
-    yt = problem.yield_target
-    n_builds = int(yt.n_builds if yt is not None else m["n_builds"])
-    pp, ns = int(m["pole_pairs"]), int(m["n_sensors"])
-    q = float(m["percentile"])
-    ref = jnp.array([float(m[f"cost_ref_{k}"]) for k in _SDS_MARK_TOLS])
-
-    def evaluate(x):
-        tol = SDSTolerances(**{k: x.get(k, float(m[k])) for k in _SDS_TOL_KEYS})
-        vals = sds_residuals(
-            pp,
-            ns,
-            tol,
-            key=key,
-            n_builds=n_builds,
-            marks_per_rev=int(m["marks_per_rev"]),
-            n_phi=int(m["n_phi"]),
-            fixed_azimuths_rad=x.get("fixed_azimuths", equally_spaced(ns)),
-            moving_azimuths_rad=x.get("moving_azimuths", equally_spaced(ns)),
-        )
-        sig = jnp.stack([jnp.asarray(getattr(tol, k), dtype=jnp.float64) for k in _SDS_MARK_TOLS])
-        out = {
-            "sds_residual": jnp.mean(vals),
-            "sds_residual_percentile": jnp.percentile(vals, q),
-            "sds_residual_max": jnp.max(vals),
-            "cost": tolerance_cost(sig, ref),
-        }
-        if yt is not None:
-            out["yield_smooth"] = smooth_yield(vals, yt.spec, m["smooth_width"] * yt.spec)
-            out["yield"] = jnp.mean((vals <= yt.spec).astype(jnp.float64))
-        return out
-
-    return evaluate
-
-
-def _check_sensor_azimuths(start: Any, where: str) -> None:
-    a = jnp.asarray(start, dtype=jnp.float64).reshape(-1)
-    if a.shape[0] >= 2:
-        check_layout(a, where=where)
-
-
-PROBLEM_OBJECTIVES["sds_layout"] = ProblemObjective(
-    name="sds_layout",
-    doc="SDS residual over the platform turn (mean, percentile, yield) of Monte Carlo builds: "
-    "sensor azimuths and mark tolerances continuous, pole pairs and sensors discrete",
-    variables={
-        "pole_pairs": VariableInfo("1", discrete=True, integer=True, lower=1),
-        "n_sensors": VariableInfo("1", discrete=True, integer=True, lower=1),
-        "moving_azimuths": VariableInfo(
-            "rad", size=0, check=_check_sensor_azimuths, doc="moving sensors' azimuths at phi=0"
-        ),
-        "fixed_azimuths": VariableInfo(
-            "rad", size=0, check=_check_sensor_azimuths, doc="fixed sensors' azimuths"
-        ),
-        **{
-            k: VariableInfo("rad", lower=0.0, doc=f"mark-error tolerance {k}")
-            for k in _SDS_MARK_TOLS
-        },
-    },
-    model={
-        "pole_pairs": 5,
-        "n_sensors": 3,
-        "n_builds": 2,
-        "marks_per_rev": 500,
-        "n_phi": 16,
-        "percentile": 99.0,
-        "smooth_width": 0.05,
-        **{k: float(getattr(SDSTolerances(), k)) for k in _SDS_TOL_KEYS},
-        **{f"cost_ref_{k}": float(getattr(SDSTolerances(), k)) for k in _SDS_MARK_TOLS},
-    },
-    outputs=(
-        "sds_residual",
-        "sds_residual_percentile",
-        "sds_residual_max",
-        "cost",
-        "yield_smooth",
-        "yield",
-    ),
-    build=_build_sds_layout,
-)

@@ -55,7 +55,7 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import read_toml, show
-from ._objectives import PROBLEM_OBJECTIVES
+from ._registry import PROBLEM_OBJECTIVES
 from ._spec import ProblemObjective as ProblemObjective
 from ._spec import VariableInfo as VariableInfo
 from ._spec import model_limit

@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import ndtr
 
+from .._errors import EncdesignInputError
 from ._drivers import SUCCESS, VECTOR_BUILDS, values_of_normals
 
 VECTOR = VECTOR_BUILDS
@@ -336,7 +337,7 @@ def importance_yield(
         :class:`RareEventResult`.
     """
     if not 0.0 < defensive < 1.0:
-        raise ValueError(f"defensive: {defensive!r}, expected 0 < alpha < 1")
+        raise EncdesignInputError(f"defensive: {defensive!r}, expected 0 < alpha < 1")
     t0 = time.perf_counter()
     k_form, k_comp, k_z = jax.random.split(key, 3)
     nominal_fails = float(_compiled(metric_z, VECTOR)["point"](jnp.zeros(dim), args)) > spec
@@ -403,7 +404,7 @@ def importance_yield(
     if groups is not None:
         gidx = np.asarray(groups, dtype=int)
         if gidx.shape != (dim,):
-            raise ValueError(f"groups: shape {gidx.shape}, expected ({dim},)")
+            raise EncdesignInputError(f"groups: shape {gidx.shape}, expected ({dim},)")
         sig = np.asarray(sigmas, dtype=np.float64)
         n_groups = sig.size
         gnames = tuple(names) if names is not None else tuple(str(i) for i in range(n_groups))

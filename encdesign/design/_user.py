@@ -97,7 +97,7 @@ def variable(
         doc: one line of description.
     """
     if units not in SI_UNITS:
-        raise ValueError(f"variable units {units!r}: expected an SI unit (rad, m, s or 1)")
+        raise EncdesignInputError(f"variable units {units!r}: expected an SI unit (rad, m, s or 1)")
     vals = None if values is None else tuple(values)
     if integer is None:
         integer = vals is not None and all(isinstance(v, int) for v in vals)

@@ -13,20 +13,23 @@ from ._candidates import (
     Context as Context,
     Param as Param,
 )
-from ._conceal import (
-    simulate_concealed_bench as simulate_concealed_bench,
-    write_concealed as write_concealed,
-)
 from ._dispatch import (
     Diagnosis as Diagnosis,
     diagnose as diagnose,
     load_candidates as load_candidates,
 )
+from ._motion import candidate_orders as candidate_orders
 from ._plots import engine_plots as write_diagnosis_plots
 from ._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,
     FinderSettings as FinderSettings,
     settings_table as settings_table,
+)
+from ._sds_readout import (
+    SDSRecordingResult as SDSRecordingResult,
+)
+from ._sds_readout import (
+    sds_readings_from_recording as sds_readings_from_recording,
 )
 
 

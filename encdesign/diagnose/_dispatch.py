@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .._errors import input_error
+from .._errors import DiagnosisError, input_error
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
 from ._settings import FinderSettings
@@ -146,5 +146,5 @@ def diagnose(
 
             doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
     if throw and d.status != "ok":
-        raise RuntimeError(f"diagnose: {d.status}")
+        raise DiagnosisError(f"diagnose: {d.status}")
     return d

@@ -15,7 +15,7 @@ mean and only head differences are fitted (the per-sample head mean is projected
 With one head and ``theta_ref`` this is a sensor against a reference: the error function of
 the sensor, one constant per run.
 
-Candidates are the multihead catalog effects (terms in :mod:`encdesign.diagnose._effects`),
+Candidates are the multihead catalog effects (terms in :mod:`encdesign.physics._effects`),
 plus, for a sensor against a reference, the terms of
 :mod:`encdesign.diagnose._reference_terms` when that module is present.
 """
@@ -32,7 +32,7 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import Recording
-from . import _effects as fx
+from ..physics import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._kind import AbstractKind
 from ._multihead_terms import (
@@ -470,7 +470,7 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     if not (prep.ctx.has_ref and prep.n_channels == 1):
         return {}
     try:
-        from . import _reference_terms as rt
+        from . import _reference_data as rt
     except ImportError:
         return {}
     kd = prep.kd

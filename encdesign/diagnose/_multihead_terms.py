@@ -8,7 +8,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from . import _effects as fx
+from ..physics import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._protocol import Prepared
 from ._views import Finding, _logp, _thr

@@ -61,7 +61,8 @@ def _wrap(x):
 
 
 def _split_runs(rec: Recording):
-    from ..io._sds_recording import _sensor_counts, check_sds_columns
+    from ..io._sds_format import check_sds_columns
+    from ..io._sds_format import sensor_counts as _sensor_counts
 
     where = str(rec.path) if rec.path is not None else "<recording>"
     if rec.kind != "sds":
@@ -93,7 +94,8 @@ def sds_pair_table(rec: Recording) -> SDSPairTable:
         EncdesignInputError: not an ``sds`` recording, malformed table, a run without a
             complete revolution for every sensor.
     """
-    from ..io._sds_recording import _run_windows, _sds_jit
+    from ._sds_readout import run_windows as _run_windows
+    from ._sds_readout import sds_jit as _sds_jit
 
     where, n_marks, nf, nm, runs = _split_runs(rec)
     enc = rec.encoder

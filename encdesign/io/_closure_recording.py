@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import input_error
-from ._recording import KINDS, KindSpec, Recording, _positive_int, write_recording
+from ._recording import KINDS, KindSpec, Recording, positive_int, write_recording
 
 __all__ = ["closure_arrays", "write_closure_recording"]
 
@@ -95,7 +95,7 @@ def _closure_check(where: str, meta: dict, cols: dict) -> None:
 KINDS.setdefault(
     "closure",
     KindSpec(
-        encoder_keys={"faces": _positive_int},
+        encoder_keys={"faces": positive_int},
         required_encoder=("faces",),
         required_columns=lambda meta: ["setting", "face", "reading"],
         optional_columns=lambda meta: ["autocollimator", "t"],

@@ -144,7 +144,7 @@ def show(v: Any) -> str:
     return repr(v)
 
 
-def _finite_number(where: str, v: Any) -> float:
+def finite_number(where: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise input_error(where, f"got {show(v)}", "a finite number")
     return float(v)
@@ -160,7 +160,7 @@ def number_in(lower: float, upper: float, units: str = "", *, lower_open: bool =
         rng = f"{lower:g} {'<' if lower_open else '<='} value <= {upper:g}{u}"
 
     def check(where: str, v: Any) -> float:
-        x = _finite_number(where, v)
+        x = finite_number(where, v)
         if x < lower or (lower_open and x == lower) or x > upper:
             raise input_error(where, f"got {show(v)}", rng)
         return x
@@ -168,14 +168,14 @@ def number_in(lower: float, upper: float, units: str = "", *, lower_open: bool =
     return check
 
 
-def _positive_number(where: str, v: Any) -> float:
-    x = _finite_number(where, v)
+def positive_number(where: str, v: Any) -> float:
+    x = finite_number(where, v)
     if x <= 0:
         raise input_error(where, f"got {v!r}", "a positive number")
     return x
 
 
-def _positive_int(where: str, v: Any) -> int:
+def positive_int(where: str, v: Any) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
         raise input_error(where, f"got {v!r}", "a positive integer")
     return int(v)

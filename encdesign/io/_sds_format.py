@@ -17,7 +17,7 @@ from ._table import row_line
 # ----------------------------------------------------------------------------- checks
 
 
-def _sensor_counts(meta: dict) -> tuple[int, int, int]:
+def sensor_counts(meta: dict) -> tuple[int, int, int]:
     enc = meta["encoder"]
     return (
         int(enc["marks_per_rev"]),
@@ -43,7 +43,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     Raises:
         EncdesignInputError: naming the file, line and column and what was expected.
     """
-    n_marks, n_fixed, n_moving = _sensor_counts(meta)
+    n_marks, n_fixed, n_moving = sensor_counts(meta)
     sensors = cols["sensor"]
     allowed = [f"f{i}" for i in range(n_fixed)] + [f"m{i}" for i in range(n_moving)]
     ok = np.isin(sensors, allowed)

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .._errors import EncdesignInputError
 from ._paths import atomic_output, atomic_write_text
 
 
@@ -59,7 +60,7 @@ def to_jsonable(x: Any) -> Any:
         return [to_jsonable(v) for v in arr.tolist()]
     if isinstance(x, float):
         if not math.isfinite(x):
-            raise ValueError(f"non-finite value {x!r} in study results")
+            raise EncdesignInputError(f"non-finite value {x!r} in study results")
         return x
     if isinstance(x, np.generic):
         return to_jsonable(x.item())

@@ -261,3 +261,9 @@ from ._vibration import (
 from ._vibration import (
     vibration_error_rad as vibration_error_rad,
 )
+from ._sds import (
+    bearing_noise_default as bearing_noise_default,
+)
+from ._sds_errors import (
+    ARCSEC as ARCSEC,
+)

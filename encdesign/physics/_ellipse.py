@@ -30,8 +30,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+from .._array import is_traced as _is_traced
 from .._errors import input_error
-from ._quadrature import SignalErrors, _f64, _is_traced, check_signals, phase_error_eq4_rad
+from ._quadrature import SignalErrors, check_signals, phase_error_eq4_rad
 
 __all__ = [
     "EllipseParams",
@@ -381,7 +383,7 @@ def seed_eq7_choice(
     ``phi = min(phi_1, phi_2)`` and *add* the compensation when ``dPhi_1 < 0``;
     ``phi = max(phi_1, phi_2)`` and *subtract* it when ``dPhi_1 > 0`` (phases taken in
     [0, 2 pi)). Returns ``(phi_rad, sign)`` with ``sign = +1`` for add, ``-1`` for subtract.
-    This is the seed's empirical rule; :func:`~encdesign.estimate_excitation` resolves the
+    This is the seed's empirical rule; :func:`~encdesign.physics.estimate_excitation` resolves the
     half-cycle ambiguity from the phase of the signal's fundamental instead.
     """
     p1 = float(np.mod(phase_lower_rad, 2 * np.pi))

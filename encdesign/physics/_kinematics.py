@@ -40,6 +40,8 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+
 __all__ = [
     "Disk",
     "Heads",
@@ -55,10 +57,6 @@ __all__ = [
 
 _CHUNK_READINGS = 2**15  # default readings per chunk in head_errors_batch
 _GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
-
-
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 def _concrete(x: object) -> bool:

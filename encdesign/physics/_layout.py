@@ -47,6 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+from .._errors import EncdesignInputError
 from ._selfcomp import EncoderMap
 from ._theorem import fourier_coefficients
 
@@ -63,10 +65,6 @@ __all__ = [
 
 MIN_GAIN = 1e-9
 """``1 - |ubar_j|^2`` below which order ``j`` counts as unobservable."""
-
-
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 def _weights(n: int, weights: ArrayLike | None) -> Array:
@@ -231,9 +229,9 @@ def least_squares_compensate(
     a = _f64(head_angles_rad).reshape(-1)
     h = a.shape[0]
     if y.ndim != 2 or y.shape[1] != h:
-        raise ValueError(f"readings_rad: shape {y.shape}, expected (n, {h})")
+        raise EncdesignInputError(f"readings_rad: shape {y.shape}, expected (n, {h})")
     if h < 2:
-        raise ValueError("least_squares_compensate: at least two heads")
+        raise EncdesignInputError("least_squares_compensate: at least two heads")
     d = y - jnp.mean(y, axis=1, keepdims=True)  # the common abscissa term drops out
     _, s, c = fourier_coefficients(theta_rad, d, max_order)  # (M, H)
     yc = c - 1j * s

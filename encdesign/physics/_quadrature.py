@@ -40,6 +40,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+from .._array import is_traced as _is_traced
 from .._errors import input_error
 
 __all__ = [
@@ -57,14 +59,6 @@ __all__ = [
     "synthesize_signals",
     "check_signals",
 ]
-
-
-def _is_traced(x) -> bool:
-    return isinstance(x, jax.core.Tracer)
-
-
-def _f64(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 class SignalErrors(eqx.Module):

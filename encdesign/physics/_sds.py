@@ -37,9 +37,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from .._array import wrap_rad as _wrap
 from .._errors import input_error
 from ._motor import Motor, time_at_angle
-from ._sds_errors import ARCSEC, SDSErrors, _wrap, bearing_noise
+from ._sds_errors import ARCSEC, SDSErrors, bearing_noise
 
 __all__ = [
     "DiskMarks",

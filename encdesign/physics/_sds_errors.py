@@ -25,7 +25,7 @@ live in :class:`~encdesign.Motor` and :class:`~encdesign.DiskMarks`). Every sour
 * ``timing_quantization``: edges stamped at the next tick of a clock of period
   ``clock_period_s`` (0 = off), plus white jitter of std ``jitter_s`` (needs a ``key``).
 
-:func:`~encdesign.predict_speed_mark_error` (:mod:`encdesign.physics._sds_prediction`) is the
+:func:`~encdesign.physics.predict_speed_mark_error` (``physics._sds_prediction``) is the
 seed's analysis of how the speed error and the mark errors interact (eqs. 46–53).
 """
 
@@ -38,6 +38,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f
+from .._array import wrap_rad as _wrap
 from .._errors import input_error
 
 __all__ = [
@@ -47,10 +49,6 @@ __all__ = [
 ]
 
 ARCSEC = math.pi / (180 * 3600)
-
-
-def _f(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=float)
 
 
 class SDSErrors(eqx.Module):
@@ -168,10 +166,6 @@ class SDSErrors(eqx.Module):
     def has_time_shift(self) -> bool:
         """Whether any effect moves the sensors with time (static: array sizes only)."""
         return self.bearing_amplitude_m.shape[0] > 0
-
-
-def _wrap(x: Array) -> Array:
-    return jnp.mod(x + jnp.pi, 2 * jnp.pi) - jnp.pi
 
 
 def axis_tilt_error(phi_rad: ArrayLike, tilt_rad: ArrayLike) -> Array:

@@ -12,8 +12,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f
+from .._array import wrap_rad as _wrap
 from ._sds import SDSDesign, mark_angles
-from ._sds_errors import _f, _wrap
 
 __all__ = ["SpeedMarkPrediction", "predict_speed_mark_error"]
 

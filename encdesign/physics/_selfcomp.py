@@ -35,6 +35,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._array import f64 as _f64
+from .._errors import EncdesignInputError
 from ._theorem import fourier_coefficients
 
 __all__ = [
@@ -46,10 +48,6 @@ __all__ = [
     "apply_map",
     "cotangent_sensitivity",
 ]
-
-
-def _f64(x: ArrayLike) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
 
 
 def cotangent_equations(
@@ -146,9 +144,9 @@ def self_compensate(
     angles = _f64(head_angles_rad).reshape(-1)
     n_heads = angles.shape[0]
     if y.ndim != 2 or y.shape[1] != n_heads:
-        raise ValueError(f"readings_rad: shape {y.shape}, expected (n, {n_heads})")
+        raise EncdesignInputError(f"readings_rad: shape {y.shape}, expected (n, {n_heads})")
     if not 0 <= reference_head < n_heads:
-        raise ValueError(f"reference_head: {reference_head}, expected 0 … {n_heads - 1}")
+        raise EncdesignInputError(f"reference_head: {reference_head}, expected 0 … {n_heads - 1}")
     pairs = tuple(k for k in range(n_heads) if k != reference_head)
     idx = jnp.asarray(pairs)
     diffs = y[:, idx] - y[:, reference_head : reference_head + 1]  # (n, P)

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from .._errors import EncdesignInputError
 from ._kinematics import EncoderModel, head_errors
 
 __all__ = [
@@ -43,7 +44,7 @@ def _weights(n_heads: int, weights: ArrayLike | None) -> Array:
         return jnp.full((n_heads,), 1.0 / n_heads)
     w = jnp.asarray(weights, dtype=jnp.float64).reshape(-1)
     if w.shape[0] != n_heads:
-        raise ValueError(f"weights: {w.shape[0]} values for {n_heads} heads")
+        raise EncdesignInputError(f"weights: {w.shape[0]} values for {n_heads} heads")
     return w / jnp.sum(w)
 
 
@@ -111,7 +112,7 @@ def fourier_coefficients(
     theta = jnp.asarray(theta_rad, dtype=jnp.float64).reshape(-1)
     y = jnp.asarray(values, dtype=jnp.float64)
     if 2 * max_order + 1 > theta.shape[0]:
-        raise ValueError(
+        raise EncdesignInputError(
             f"fourier_coefficients: {theta.shape[0]} samples cannot resolve order {max_order}"
         )
     m = jnp.arange(1, max_order + 1, dtype=jnp.float64)

@@ -35,8 +35,10 @@ import numpy as np
 from jaxtyping import Array, ArrayLike
 from scipy.optimize import minimize_scalar
 
+from .._array import f64 as _f64
+from .._array import is_traced as _is_traced
 from .._errors import input_error
-from ._quadrature import SignalErrors, _f64, _is_traced, check_signals, quadrature_signals
+from ._quadrature import SignalErrors, check_signals, quadrature_signals
 
 __all__ = [
     "Vibration",
@@ -273,7 +275,7 @@ def estimate_excitation(
     ``f_exc -+ f`` (the doublet). ``f``, then ``f_exc``, are refined by least squares on
     the time signal, and the line phases come from the same fit. The vibration phase is
     made unambiguous with the fundamental's phase (see :class:`ExcitationEstimate`) instead
-    of the seed's eq. 7 rule (:func:`~encdesign.seed_eq7_choice`).
+    of the seed's eq. 7 rule (:func:`~encdesign.physics.seed_eq7_choice`).
 
     Args:
         t_s: uniform sample times (s).

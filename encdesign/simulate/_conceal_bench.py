@@ -174,7 +174,9 @@ def _shaft(rng, n: int, turns: float, both: bool, transient: bool, rate_hz: floa
     return t, th, steady
 
 
-def simulate(rng: np.random.Generator, plan: dict[str, Any]) -> tuple[Recording, dict[str, Any]]:
+def simulate_plan(
+    rng: np.random.Generator, plan: dict[str, Any]
+) -> tuple[Recording, dict[str, Any]]:
     """Simulate a bench from a plan; returns the recording (in memory) and the truth."""
     kind = plan["kind"]
     if kind == "motion":

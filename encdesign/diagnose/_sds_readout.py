@@ -1,132 +1,30 @@
-"""``sds`` recordings: simulate edge times into a recording, read them back into φ.
+"""The instrument's readout of an ``sds`` recording: edge times into φ per run.
 
 A recording of kind ``sds`` (``docs/recording-format.md``) holds, per run (one platform
-position), the edge times of every sensor: columns ``run``, ``phi_ref`` (optional),
-``sensor`` (``f0…`` fixed, ``m0…`` moving), ``mark`` (index from the index pulse) and ``t``
-(s). The deeper checks of the kind (:mod:`encdesign.io._sds_format`) run in
-``load_recording`` for every ``sds`` file.
+position), the edge times of every sensor. :func:`sds_readings_from_recording` windows each
+run into complete revolutions (:func:`run_windows`) and applies the shifted delta sum (seed
+eqs. 23-24, :func:`encdesign.physics.sds_from_edges`) per fixed x moving pair. The finder's
+``sds`` kind (``_sds``) and ``encdesign sds read`` both use it; the simulator that writes such
+recordings is :func:`encdesign.simulate.simulate_sds_recording`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import os
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import input_error
-from ..physics._sds import SDSDesign, edge_times, sds_from_edges, validate_design
-from ..physics._sds_errors import SDSErrors
-from ._recording import Recording, write_recording
-from ._sds_format import _sensor_counts, check_sds_columns  # noqa: F401 (re-exported)
+from ..io._recording import Recording
+from ..io._sds_format import check_sds_columns, sensor_counts
+from ..physics._sds import sds_from_edges
 
-__all__ = [
-    "SDSRecordingResult",
-    "check_sds_columns",
-    "sds_readings_from_recording",
-    "simulate_sds_recording",
-]
+__all__ = ["SDSRecordingResult", "run_windows", "sds_jit", "sds_readings_from_recording"]
 
-
-_edge_times_jit = jax.jit(edge_times, static_argnums=(2,), static_argnames=("n_newton",))
-_sds_jit = jax.jit(sds_from_edges)
-
-
-# ----------------------------------------------------------------------------- write
-
-
-def simulate_sds_recording(
-    path: str | os.PathLike,
-    design: SDSDesign,
-    phi_rad: Any,
-    n_revs: int,
-    errors: SDSErrors | None = None,
-    *,
-    key: jax.Array | None = None,
-    description: str | None = None,
-    compress: bool = False,
-    n_newton: int = 2,
-) -> Recording:
-    """Simulate a bench run and write it as an ``sds`` recording (TOML + CSV).
-
-    Each platform angle is one run: ``n_revs + 1`` revolutions of every sensor, all
-    sensors' edges merged in time order. Runs follow each other in time (``n_revs + 2``
-    revolutions apart), so drifts continue across runs.
-
-    Args:
-        path: output TOML path (the CSV goes beside it; written atomically).
-        design, errors: instrument and error physics.
-        phi_rad: platform angles, one per run, rad.
-        n_revs: complete readings wanted per run (>= 1).
-        key: ``jax.random`` key for jitter (``None``: no jitter).
-        description: free text for the TOML.
-        compress: write ``.csv.gz``.
-        n_newton: Newton iterations for the edge times.
-
-    Returns:
-        The :class:`~encdesign.Recording` as written.
-    """
-    errors = SDSErrors() if errors is None else errors
-    validate_design(design, errors)
-    if isinstance(n_revs, bool) or not isinstance(n_revs, int) or n_revs < 1:
-        raise input_error("simulate_sds_recording n_revs", f"got {n_revs!r}", ">= 1")
-    phis = np.atleast_1d(np.asarray(phi_rad, dtype=float))
-    n_marks = design.marks_per_rev
-    names = [f"f{i}" for i in range(design.n_fixed)] + [f"m{i}" for i in range(design.n_moving)]
-    key = jax.random.PRNGKey(0) if key is None else key  # jitter_s = 0: no effect
-    cols: dict[str, list[np.ndarray]] = {c: [] for c in ("run", "phi_ref", "sensor", "mark", "t")}
-    for i, phi in enumerate(phis):
-        f, m = _edge_times_jit(
-            design,
-            jnp.asarray(phi),
-            n_revs + 1,
-            errors,
-            key=jax.random.fold_in(key, i),
-            first_rev=jnp.asarray(i * (n_revs + 2), float),
-            n_newton=n_newton,
-        )
-        times = np.concatenate([np.asarray(f), np.asarray(m)], axis=0)  # (S, R, N)
-        s_count, r_count, _ = times.shape
-        t = times.reshape(-1)
-        sensor = np.repeat(np.asarray(names), r_count * n_marks)
-        mark = np.tile(np.arange(n_marks), s_count * r_count)
-        order = np.argsort(t, kind="stable")
-        cols["t"].append(t[order])
-        cols["sensor"].append(sensor[order])
-        cols["mark"].append(mark[order])
-        cols["run"].append(np.full(t.size, i, dtype=np.int64))
-        cols["phi_ref"].append(np.full(t.size, float(np.mod(phi, 2 * np.pi))))
-    # one column at a time, each run's pieces freed as soon as they are joined
-    data = {k: np.concatenate(cols.pop(k)) for k in list(cols)}
-    deg = 180.0 / math.pi
-    encoder: dict[str, Any] = {
-        "marks_per_rev": n_marks,
-        "fixed_sensor_angles_deg": [float(x) * deg for x in np.asarray(design.fixed_azimuths_rad)],
-        "moving_sensor_angles_deg": [
-            float(x) * deg for x in np.asarray(design.moving_azimuths_rad)
-        ],
-        "pole_pairs": design.pole_pairs,
-        "stator_coils": design.stator_coils,
-        "commutation_states": design.commutation_states,
-    }
-    if float(errors.clock_period_s) > 0:
-        encoder["clock_hz"] = 1.0 / float(errors.clock_period_s)
-    return write_recording(
-        path,
-        "sds",
-        data,
-        encoder=encoder,
-        description=description or "simulated shifted-delta-sum bench run (encdesign)",
-        provenance={"simulated_by": "encdesign.simulate_sds_recording", "n_revs": n_revs},
-        compress=compress,
-    )
-
-
-# ----------------------------------------------------------------------------- read
+sds_jit = jax.jit(sds_from_edges)
+""":func:`~encdesign.physics.sds_from_edges`, jitted once for every caller."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,7 +73,7 @@ def _window(t: np.ndarray, m: np.ndarray, anchor: float, n_marks: int, need_next
     return by_mark, k, period
 
 
-def _run_windows(where: str, run: int, times: dict, marks: dict, n_marks: int, nf: int, nm: int):
+def run_windows(where: str, run: int, times: dict, marks: dict, n_marks: int, nf: int, nm: int):
     """Edge windows of every complete reading of one run, aligned in time.
 
     Readings start at edges of f0 spaced by N edges, beginning at the first f0 edge at or
@@ -236,7 +134,7 @@ def sds_readings_from_recording(rec: Recording, *, revs_per_reading: int = 1) ->
     if isinstance(revs_per_reading, bool) or revs_per_reading < 1:
         raise input_error("revs_per_reading", f"got {revs_per_reading!r}", ">= 1")
     check_sds_columns(where, rec.meta, rec.columns)  # also for in-memory recordings
-    n_marks, nf, nm = _sensor_counts(rec.meta)
+    n_marks, nf, nm = sensor_counts(rec.meta)
     enc = rec.encoder
     psi_f = np.radians(np.asarray(enc["fixed_sensor_angles_deg"], dtype=float))
     psi_m = np.radians(np.asarray(enc["moving_sensor_angles_deg"], dtype=float))
@@ -253,8 +151,8 @@ def sds_readings_from_recording(rec: Recording, *, revs_per_reading: int = 1) ->
             if not np.any(s):
                 raise input_error(f"{where}, run {int(r)}", f"no edges of sensor {name}")
             times[name], marks[name] = t[s], mk[s]
-        alpha, period, k_f, tau, k_m = _run_windows(where, int(r), times, marks, n_marks, nf, nm)
-        pair = np.asarray(_sds_jit(alpha, period, k_f, tau, k_m, offsets))  # (R, F, M)
+        alpha, period, k_f, tau, k_m = run_windows(where, int(r), times, marks, n_marks, nf, nm)
+        pair = np.asarray(sds_jit(alpha, period, k_f, tau, k_m, offsets))  # (R, F, M)
         if not np.all(np.isfinite(pair)):
             raise input_error(f"{where}, run {int(r)}", "non-finite SDS result", "finite times")
         per_rev = _circ_mean(pair.reshape(pair.shape[0], -1), axis=1)

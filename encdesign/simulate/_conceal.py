@@ -6,7 +6,7 @@ different speeds; a slowly varying ``temp_c``; white read noise) carries the bas
 optionally, one hidden effect, at an amplitude of about the per-sample noise:
 
 The base errors come from the kinematic model (``encdesign.physics._kinematics``, seed 000
-section V.A); the hidden effects are the reading-space terms of ``encdesign.diagnose._effects``.
+section V.A); the hidden effects are the reading-space terms of ``encdesign.physics._effects``.
 
 * ``beam_tilt_axial``: axial runout at order 1 (masked by the much larger eccentricity) or
   2..3, seen through tangential beam tilts of a few mrad;
@@ -34,8 +34,8 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import Recording, write_recording
+from ..physics import _effects as fx
 from ..physics._kinematics import head_errors, make_model
-from . import _effects as fx
 
 OUT_OF_CATALOG = ("count_jump", "chirp")
 HIDDEN = (*fx.CATALOG_MULTIHEAD, *OUT_OF_CATALOG)
@@ -280,7 +280,7 @@ def write_concealed(
     """
     cols, enc, truth = simulate_concealed_bench(key=key, **kwargs)
     prov = {
-        "generator": "encdesign.diagnose._conceal",
+        "generator": "encdesign.simulate._conceal",
         "hidden": str(truth["effect"]),
         "concealment": truth["concealment"],
     }

@@ -34,7 +34,7 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import Recording, write_recording
-from . import _reference_terms as rt
+from ..physics import _sensor_effects as rt
 
 SENSORS: dict[str, dict[str, Any]] = {
     # signal periods per turn, read noise (rad), base error amplitudes of orders 1, 2, 3 (rad)
@@ -135,7 +135,7 @@ def simulate_sensor_reference(
         noise_rad: white read noise std, rad (default: the sensor's).
         base_rad: amplitudes (rad) of the sensor's error function at orders 1, 2, …
             (random phases; default: the sensor's).
-        effects: effect name -> parameters (:data:`~._reference_terms.REFERENCE_PARAM_UNITS`):
+        effects: effect name -> parameters (``physics._sensor_effects.REFERENCE_PARAM_UNITS``):
             ``direction_hysteresis`` (``hysteresis_rad``), ``reading_delay`` (``delay_s``),
             ``quantization`` (``lsb_rad``; the lattice is at the sensor's zero),
             ``scale_error`` (``scale``), ``interpolation_error`` (``offset_a``,
@@ -367,7 +367,7 @@ def write_sensor_reference(
         encoder=enc,
         description=f"simulated {truth['sensor']} sensor against a reference",
         provenance={
-            "generator": "encdesign.diagnose._conceal_reference",
+            "generator": "encdesign.simulate._conceal_reference",
             "hidden": ", ".join(names) if names else "none",
         },
     )

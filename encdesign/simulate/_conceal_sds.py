@@ -46,8 +46,16 @@ from ..io._recording import Recording, write_recording
 from ..physics._motor import Motor
 from ..physics._sds import SDSDesign, equally_spaced, reference_disk
 from ..physics._sds_errors import SDSErrors
+from ._sds import RUN_SPACING_REVS, sds_bench_columns, sds_encoder_table
 
-__all__ = ["SDS_HIDDEN", "sds_bench_design", "write_concealed_sds"]
+__all__ = [
+    "SDS_CATALOG",
+    "SDS_CONCEALMENTS",
+    "SDS_HIDDEN",
+    "SDS_OUT_OF_CATALOG",
+    "sds_bench_design",
+    "write_concealed_sds",
+]
 
 SDS_CATALOG = (
     "axis_tilt",
@@ -92,18 +100,6 @@ def sds_bench_design(
         equally_spaced(2),
         equally_spaced(n_moving),
     )
-
-
-_edges = None
-
-
-def _edge_fn():
-    global _edges
-    if _edges is None:
-        from ..physics._sds import edge_times
-
-        _edges = jax.jit(edge_times, static_argnums=(2,), static_argnames=("n_newton",))
-    return _edges
 
 
 def write_concealed_sds(
@@ -163,7 +159,7 @@ def write_concealed_sds(
     phis = golden * np.arange(n_runs) + np.radians(rng.uniform(-2, 2, n_runs))
     phis = np.mod(phis + rng.uniform(0, 2 * np.pi), 2 * np.pi)
     period = 2 * np.pi / SPEED_RAD_S
-    t_end = n_runs * (n_revs + 3) * period
+    t_end = n_runs * (n_revs + 1 + RUN_SPACING_REVS) * period
     kw: dict[str, Any] = dict(clock_period_s=CLOCK_S, jitter_s=1e-9)
     truth: dict[str, Any] = {"effect": effect, "concealment": concealment, "params": {}}
     first_partial = n_runs // 2 if concealment == "partial" else 0
@@ -174,7 +170,7 @@ def write_concealed_sds(
     elif effect == "thermal_drift":
         rate_k_s = 1.0 / t_end  # 1 K over the record
         kappa = amp / 1.0
-        t0 = first_partial * (n_revs + 3) * period
+        t0 = first_partial * (n_revs + 1 + RUN_SPACING_REVS) * period
         kw.update(
             thermal_drift_rad_per_k=kappa,
             temperature_rate_k_per_s=rate_k_s,
@@ -224,40 +220,28 @@ def write_concealed_sds(
     errors_on = SDSErrors(**kw)
     errors_off = SDSErrors(**base_kw)
     step_run = int(rng.integers(1, n_runs - 1))
-    names = ["f0", "f1"] + [f"m{i}" for i in range(n_moving)]
-    cols: dict[str, list[np.ndarray]] = {c: [] for c in ("run", "phi_ref", "sensor", "mark", "t")}
-    edges = _edge_fn()
-    for i, phi in enumerate(phis):
-        err = errors_on if (i >= first_partial or effect == "timing_quantization") else errors_off
-        if effect == "thermal_drift" and i < first_partial:
-            err = errors_off
-        f, m = edges(
-            design,
-            jnp.asarray(phi),
-            n_revs + 1,
-            err,
-            key=jax.random.fold_in(kj, i),
-            first_rev=jnp.asarray(i * (n_revs + 3), float),
-        )
-        f, m = np.array(f), np.array(m)  # writable copies
+    per_run = [
+        errors_on
+        if (i >= first_partial or effect == "timing_quantization")
+        and not (effect == "thermal_drift" and i < first_partial)
+        else errors_off
+        for i in range(n_runs)
+    ]
+
+    def hook(i: int, phi: float, f: np.ndarray, m: np.ndarray):
         if effect == "order_5":
             m = m + amp * math.sin(5 * phi + 0.7) / SPEED_RAD_S
-            truth["params"] = {"order": 5, "amplitude_rad": amp}
         if effect == "run_step" and i == step_run:
             m[1] = m[1] + 8 * amp / SPEED_RAD_S
         if effect == "sensor_delay_step" and i >= step_run:
             m[1] = m[1] + amp / SPEED_RAD_S
         if effect in ("order_5", "run_step", "sensor_delay_step"):
             f, m = np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
-        times = np.concatenate([f, m], axis=0)
-        s_count, r_count, n = times.shape
-        t = times.reshape(-1)
-        order = np.argsort(t, kind="stable")
-        cols["t"].append(t[order])
-        cols["sensor"].append(np.repeat(np.asarray(names), r_count * n)[order])
-        cols["mark"].append(np.tile(np.arange(n), s_count * r_count)[order])
-        cols["run"].append(np.full(t.size, i, dtype=np.int64))
-        cols["phi_ref"].append(np.full(t.size, float(phi)))
+        return f, m
+
+    data = sds_bench_columns(design, phis, n_revs, per_run, key=kj, edge_hook=hook)
+    if effect == "order_5":
+        truth["params"] = {"order": 5, "amplitude_rad": amp}
     if effect == "run_step":
         truth["where"] = {"runs": [step_run], "heads": ["m1"]}
     if effect == "order_5":
@@ -265,21 +249,9 @@ def write_concealed_sds(
     if effect == "sensor_delay_step":
         truth["where"] = {"runs": [step_run], "heads": ["m1"]}
         truth["params"] = {"delay_step_s": amp / SPEED_RAD_S, "first_run": step_run}
-    data = {k: np.concatenate(v) for k, v in cols.items()}
     if not phi_ref:
         del data["phi_ref"]
-    deg = 180.0 / math.pi
-    encoder = {
-        "marks_per_rev": marks_per_rev,
-        "fixed_sensor_angles_deg": [float(x) * deg for x in np.asarray(design.fixed_azimuths_rad)],
-        "moving_sensor_angles_deg": [
-            float(x) * deg for x in np.asarray(design.moving_azimuths_rad)
-        ],
-        "pole_pairs": 6,
-        "stator_coils": 18,
-        "commutation_states": 6,
-        "clock_hz": 1.0 / CLOCK_S,
-    }
+    encoder = sds_encoder_table(design, CLOCK_S)
     rec = write_recording(
         path,
         "sds",
