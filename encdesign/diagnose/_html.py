@@ -397,8 +397,10 @@ def fig_before_after(doc: Mapping[str, Any], rows: Mapping[str, Any] | None) -> 
 
 def _fig_block(fid: str, title: str, img: str | None, caption: str) -> str:
     if img is None:
-        return f'<figure id="{fid}"><figcaption>{_e(title)}: not applicable ({_e(caption)})</figcaption></figure>'
-    return f'<figure id="{fid}"><h3>{_e(title)}</h3>{img}<figcaption>{_e(caption)}</figcaption></figure>'
+        cap = f"{_e(title)}: not applicable ({_e(caption)})"
+        return f'<figure id="{fid}"><figcaption>{cap}</figcaption></figure>'
+    cap = f"<figcaption>{_e(caption)}</figcaption>"
+    return f'<figure id="{fid}"><h3>{_e(title)}</h3>{img}{cap}</figure>'
 
 
 def render_html(d: Any) -> str:
@@ -590,7 +592,8 @@ def render_html(d: Any) -> str:
                 "fig-time",
                 "Residual against time",
                 fig_time(doc, rows),
-                "base (red) and final (blue) residual; grey: rows excluded from every fit; dashed: located times",
+                "base (red) and final (blue) residual; grey: rows excluded from every fit; "
+                "dashed: located times",
             )
         )
     parts.append(
@@ -598,7 +601,8 @@ def render_html(d: Any) -> str:
             "fig-spectrum",
             "Residual spectrum by order",
             fig_spectrum(doc),
-            "amplitude of integer shaft orders in the base and final residual; dashed: orders the finder located",
+            "amplitude of integer shaft orders in the base and final residual; "
+            "dashed: orders the finder located",
         )
     )
     if rows is not None:
@@ -632,7 +636,8 @@ def render_html(d: Any) -> str:
         parts.append(f'<p class="small">note: {_e(n)}</p>')
     if doc.get("report"):
         parts.append(
-            f'<h2 id="text">Text report</h2><details><summary>show</summary><pre>{_e(doc["report"])}</pre></details>'
+            '<h2 id="text">Text report</h2><details><summary>show</summary>'
+            f"<pre>{_e(doc['report'])}</pre></details>"
         )
     parts.append("</body></html>\n")
     return "\n".join(parts)
