@@ -17,9 +17,7 @@ ArrayInput = ArrayLike | Sequence[float]
 """Any array input without a checked shape: an array, a scalar or a sequence of floats."""
 Angles = Float[ArrayLike, "*n"] | Sequence[float]
 """Shaft angles (rad) or times (s): a scalar or ``(n,)``."""
-HeadArrayInput = ArrayLike | Sequence[float]
-"""Any array input without a checked shape: an array, a scalar or a sequence of floats."""
-Angles = Float[ArrayLike, "n_heads"] | Sequence[float]
+HeadAngles = Float[ArrayLike, "n_heads"] | Sequence[float]
 """One value per head, e.g. head azimuths (rad)."""
 HeadWeights = Float[ArrayLike, "n_heads"] | Sequence[float] | None
 """Head weights of an average (``None``: equal)."""
