@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 OUT    ?= results
 
-.PHONY: setup demo test lint format bench clean
+.PHONY: setup demo test lint typecheck format bench clean
 
 $(VENV)/.installed: pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found; run make PYTHON=python3"; exit 1; }
@@ -23,12 +23,17 @@ demo: setup
 test: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks
 	$(VENV)/bin/ruff format --check encdesign studies tests benchmarks
+	$(VENV)/bin/basedpyright --pythonpath $(PY)
 	# single-threaded BLAS: the finders' many small least-squares solves run far slower
 	# with threads competing for 2 cores; two pytest workers (pytest-xdist), one per core
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --durations=25 tests
 
 lint: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks
+
+# static types of the package ([tool.basedpyright] in pyproject.toml, docs/DEVELOPING.md)
+typecheck: setup
+	$(VENV)/bin/basedpyright --pythonpath $(PY)
 
 format: setup
 	$(VENV)/bin/ruff format encdesign studies tests benchmarks

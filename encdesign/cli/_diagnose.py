@@ -1,4 +1,4 @@
-"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE]``.
+"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE] [--html FILE]``.
 
 Every kind goes through :func:`encdesign.diagnose.diagnose` (``encdesign.diagnose._dispatch``);
 the JSON follows ``encdesign/diagnose/diagnosis.schema.json``."""
@@ -20,6 +20,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, required=True, help="write the diagnosis here")
     parser.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     parser.add_argument("--report", type=Path, default=None, help="write the text report here")
+    parser.add_argument(
+        "--html",
+        type=Path,
+        default=None,
+        help="write a self-contained HTML report here (figures embedded, opens offline)",
+    )
     parser.add_argument(
         "--max-order",
         type=int_arg(1, 100_000),
@@ -49,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     inputs = [("recording", p) for p in recording_input_files(args.recording)]
     if args.candidates is not None:
         inputs.append(("--candidates", args.candidates))
-    outputs = [("--json", args.json), ("--report", args.report)]
+    outputs = [("--json", args.json), ("--report", args.report), ("--html", args.html)]
     with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
         return _run(args)
 
@@ -76,6 +82,11 @@ def _run(args: argparse.Namespace) -> int:
     text = doc.get("report", "")
     if args.report is not None:
         atomic_write_text(args.report, text)
+    if args.html is not None:
+        from ..diagnose._html import write_html
+
+        write_html(d, args.html)
+        print(f"wrote {args.html}", file=sys.stderr)
     print(text if text else f"verdict: {doc['verdict']}", end="" if text.endswith("\n") else "\n")
     print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -41,6 +41,7 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, ArrayLike
 
 from .._array import f64 as _f64
+from ._types import Angles, ArrayInput, BatchHeadErrors, HeadErrors
 
 __all__ = [
     "Disk",
@@ -495,15 +496,13 @@ def _geometry(
     return geom, s1, c1, psi
 
 
-def _as_theta(theta_rad: ArrayLike) -> tuple[Array, bool]:
+def _as_theta(theta_rad: ArrayInput) -> tuple[Array, bool]:
     theta = _f64(theta_rad)
     scalar = theta.ndim == 0
     return theta.reshape(-1), scalar
 
 
-def head_errors(
-    model: EncoderModel, theta_rad: ArrayLike, time_s: ArrayLike | None = None
-) -> Array:
+def head_errors(model: EncoderModel, theta_rad: Angles, time_s: Angles | None = None) -> HeadErrors:
     """Error of every head at every shaft angle: ``reading_k - theta``, rad.
 
     Args:
@@ -523,8 +522,8 @@ def head_errors(
 
 
 def head_readings(
-    model: EncoderModel, theta_rad: ArrayLike, time_s: ArrayLike | None = None
-) -> Array:
+    model: EncoderModel, theta_rad: Angles, time_s: Angles | None = None
+) -> HeadErrors:
     """Readings of every head, rad: ``reading_k = theta + error_k(theta, t)``, unwrapped.
 
     Same arguments as :func:`head_errors`; the sign convention is that of
@@ -537,11 +536,11 @@ def head_readings(
 
 def noisy_head_readings(
     model: EncoderModel,
-    theta_rad: ArrayLike,
-    time_s: ArrayLike | None = None,
+    theta_rad: Angles,
+    time_s: Angles | None = None,
     *,
     key: Array,
-) -> Array:
+) -> HeadErrors:
     """:func:`head_readings` plus white read noise of std ``model.heads.noise_rad``, rad.
 
     Args:
@@ -553,11 +552,11 @@ def noisy_head_readings(
 
 def head_errors_batch(
     models: EncoderModel,
-    theta_rad: ArrayLike,
-    time_s: ArrayLike | None = None,
+    theta_rad: Angles,
+    time_s: Angles | None = None,
     *,
     chunk: int | None = None,
-) -> Array:
+) -> BatchHeadErrors:
     """:func:`head_errors` for a batch of designs (every leaf with a leading axis ``B``).
 
     Designs are processed ``chunk`` at a time (``lax.map`` with ``batch_size``), so peak

@@ -28,6 +28,17 @@ from jaxtyping import Array, ArrayLike
 
 from .._errors import EncdesignInputError
 from ._kinematics import EncoderModel, head_errors
+from ._types import (
+    Angles,
+    ArrayInput,
+    Averaged,
+    HeadAngles,
+    HeadErrors,
+    HeadWeights,
+    OrderTransfer,
+    OrderValues,
+    Signals,
+)
 
 __all__ = [
     "averaged_error",
@@ -39,7 +50,7 @@ __all__ = [
 ]
 
 
-def _weights(n_heads: int, weights: ArrayLike | None) -> Array:
+def _weights(n_heads: int, weights: ArrayInput | None) -> Array:
     if weights is None:
         return jnp.full((n_heads,), 1.0 / n_heads)
     w = jnp.asarray(weights, dtype=jnp.float64).reshape(-1)
@@ -48,7 +59,7 @@ def _weights(n_heads: int, weights: ArrayLike | None) -> Array:
     return w / jnp.sum(w)
 
 
-def averaged_error(errors: Array, weights: ArrayLike | None = None) -> Array:
+def averaged_error(errors: HeadErrors, weights: HeadWeights = None) -> Averaged:
     """Symmetry average of head errors (or readings) over the last axis, rad.
 
     Args:
@@ -61,8 +72,8 @@ def averaged_error(errors: Array, weights: ArrayLike | None = None) -> Array:
 
 
 def mode_transfer(
-    head_angles_rad: ArrayLike, max_order: int, weights: ArrayLike | None = None
-) -> Array:
+    head_angles_rad: HeadAngles, max_order: int, weights: HeadWeights = None
+) -> OrderTransfer:
     """Complex transfer ``T_m = sum_k w_k exp(-i m alpha_k)`` for ``m = 1 … max_order``.
 
     Args:
@@ -81,8 +92,8 @@ def mode_transfer(
 
 
 def surviving_orders(
-    head_angles_rad: ArrayLike, max_order: int, weights: ArrayLike | None = None
-) -> Array:
+    head_angles_rad: HeadAngles, max_order: int, weights: HeadWeights = None
+) -> OrderValues:
     """Magnitude ``|T_m|`` of each order ``m = 1 … max_order`` after the head average.
 
     1 for a degenerate mode (survives untouched), 0 for an exactly cancelled mode, in
@@ -93,7 +104,7 @@ def surviving_orders(
 
 @functools.partial(jax.jit, static_argnames="max_order")
 def fourier_coefficients(
-    theta_rad: ArrayLike, values: Array, max_order: int
+    theta_rad: Angles, values: Signals, max_order: int
 ) -> tuple[Array, Array, Array]:
     """Least-squares Fourier fit of ``values`` against ``theta`` over orders ``1 … M``.
 
@@ -126,7 +137,7 @@ def fourier_coefficients(
 
 
 @functools.partial(jax.jit, static_argnames="max_order")
-def mode_amplitudes(theta_rad: ArrayLike, values: Array, max_order: int) -> Array:
+def mode_amplitudes(theta_rad: Angles, values: Signals, max_order: int) -> Array:
     """Amplitude ``sqrt(S_m**2 + C_m**2)`` of orders ``1 … M`` (unit of ``values``)."""
     _, s, c = fourier_coefficients(theta_rad, values, max_order)
     return jnp.sqrt(s * s + c * c)

@@ -1,0 +1,37 @@
+"""Shape-annotated array types of the public physics and design signatures (jaxtyping).
+
+The dimension names are shared across the package, so a static reader (and jaxtyping's
+runtime check in the tests, ``docs/DEVELOPING.md``) sees which axes of two arguments must
+agree: ``n`` samples (angles, times), ``n_heads`` heads (``H``), ``n_designs`` designs of a
+batch (``B``), ``n_orders`` harmonic orders (``M``). ``*batch`` is any leading shape, empty for
+a scalar. Inputs also accept plain sequences of floats (lists), as the functions do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from jaxtyping import Array, ArrayLike, Complex, Float
+
+ArrayInput = ArrayLike | Sequence[float]
+"""Any array input without a checked shape: an array, a scalar or a sequence of floats."""
+Angles = Float[ArrayLike, "*n"] | Sequence[float]
+"""Shaft angles (rad) or times (s): a scalar or ``(n,)``."""
+HeadAngles = Float[ArrayLike, "n_heads"] | Sequence[float]
+"""One value per head, e.g. head azimuths (rad)."""
+HeadWeights = Float[ArrayLike, "n_heads"] | Sequence[float] | None
+"""Head weights of an average (``None``: equal)."""
+HeadErrors = Float[Array, "*n n_heads"]
+"""Per-head errors or readings (rad) at each sample (``(n_heads,)`` for a scalar angle)."""
+BatchHeadErrors = Float[Array, "n_designs n n_heads"]
+"""Per-head errors (rad) of a batch of designs at each sample."""
+OrderValues = Float[Array, "n_orders"]
+"""One real value per harmonic order ``m = 1 … M``."""
+OrderTransfer = Complex[Array, "n_orders"]
+"""One complex transfer per harmonic order ``m = 1 … M``."""
+SampleValues = Float[ArrayLike, "n"] | Sequence[float]
+"""One value per sample (unit of the values)."""
+Signals = Float[Array, "n *signals"]
+"""Samples of one or more signals: ``(n,)`` or ``(n, k)``."""
+Averaged = Float[Array, "*n"]
+"""One value per sample (a scalar for one sample)."""

@@ -1,0 +1,162 @@
+"""The HTML diagnosis report: one recording of each kind (multihead, one sensor against a
+reference, motion, quadrature, sds) rendered; every item is in it, every figure is an
+embedded PNG, nothing refers outside the file; the CLI writes it."""
+
+from __future__ import annotations
+
+import base64
+import re
+from html.parser import HTMLParser
+
+import jax
+import numpy as np
+import pytest
+
+from encdesign.cli import main as cli_main
+from encdesign.simulate import simulate_plan as simulate
+from encdesign.simulate import simulate_quadrature
+from encdesign.simulate import write_concealed_sds
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose._html import render_html, report_inputs
+from encdesign.io._recording import write_recording
+
+PLAN = {"per_run_zeros": True, "transient": True, "glitches": 1, "amplitude": 1.0}
+
+
+def _record(kind: str, tmp_path):
+    """A small recording of ``kind`` with one effect, a transient start and a glitch."""
+    rng = np.random.default_rng(11)
+    if kind == "multihead":
+        plan = dict(PLAN, kind=kind, case="single", effects=["beam_tilt_axial"], n_heads=3)
+        plan.update(radius_m=0.05, lines=5000, theta_ref=True, n_runs=1, turns=1.0)
+        return simulate(rng, plan)[0]
+    if kind == "sensor":
+        plan = dict(PLAN, kind=kind, case="single", effects=["interpolation_error"])
+        plan.update(sensor="magnetic", periods=21, n_runs=1, both_directions=False, turns=1.0)
+        return simulate(rng, plan)[0]
+    if kind == "motion":
+        plan = dict(PLAN, kind=kind, case="single", effects=["cogging"], n_runs=1, turns=2.0)
+        return simulate(rng, plan)[0]
+    if kind == "quadrature":
+        plan = {"case": "single", "effects": ["signal_shape"], "amplitude": 1.0}
+        try:
+            return simulate_quadrature(rng, plan)[0]
+        except (KeyError, TypeError):  # the plan's keys: the generator's own draw
+            from encdesign.simulate._conceal_bench import draw_quadrature_plan
+
+            return simulate_quadrature(rng, draw_quadrature_plan(rng, "single"))[0]
+    rec, _ = write_concealed_sds(
+        tmp_path / "sds.toml",
+        key=jax.random.key(3),
+        effect="sensor_delay_step",
+        concealment="clear",
+        n_runs=8,
+    )
+    return rec
+
+
+class _Parse(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.ids: set[str] = set()
+        self.imgs: list[str] = []
+        self.refs: list[str] = []
+        self.tags: set[str] = set()
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.add(tag)
+        if "id" in a:
+            self.ids.add(a["id"])
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        for k in ("href", "src"):
+            if k in a and tag != "img":
+                self.refs.append(a[k])
+
+
+FIGURES = ("fig-time", "fig-spectrum", "fig-heads", "fig-fitted", "fig-before-after")
+SECTIONS = ("verdict", "summary", "noise", "gof", "effects", "alternatives", "nuisances")
+
+
+@pytest.mark.parametrize("kind", ["multihead", "sensor", "motion", "quadrature", "sds"])
+def test_report_shows_every_item(kind, tmp_path):
+    d = diagnose(_record(kind, tmp_path))
+    text = render_html(d)
+    doc, rows = report_inputs(d)
+    assert rows is not None and rows["base_resid"].shape == rows["final_resid"].shape
+    p = _Parse()
+    p.feed(text)
+    assert set(SECTIONS) <= p.ids and set(FIGURES) <= p.ids, sorted(p.ids)
+    # nothing outside the file: no script, no stylesheet link, no URL anywhere
+    assert "script" not in p.tags and "link" not in p.tags and p.refs == []
+    bare = re.sub(r'src="data:image/png;base64,[A-Za-z0-9+/=]+"', "", text)
+    assert not re.search(r"(https?:)?//[a-z0-9]|url\(|@import", bare, re.I)
+    # each drawn figure is a decodable PNG (the fitted-effect one only with effects)
+    n_fig = len(FIGURES) - (0 if doc["effects"] else 1)
+    assert len(p.imgs) == n_fig
+    for src in p.imgs:
+        head, data = src.split(",", 1)
+        assert head == "data:image/png;base64"
+        assert base64.b64decode(data)[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f'class="verdict v-{doc["verdict"]}"' in text
+    for s in doc["noise"]["per_channel"]:
+        assert f"{s:.4g}" in text
+    assert f"{doc['goodness_of_fit']['p_value']:.4g}" in text
+    # each effect: its parameters with their standard errors, its held-out gain
+    prev = doc["heldout_rms_before"]
+    for e in doc["effects"]:
+        assert f". {e['name']}</h3>" in text
+        for name, q in e["params"].items():
+            assert f"<td>{name}</td>" in text
+            if np.ndim(q["value"]) == 0 and q["se"] is not None:
+                assert f"{q['value']:.6g} ± {q['se']:.3g}" in text
+        assert f"{prev - e['heldout_rms_after']:.4g}" in text
+        prev = e["heldout_rms_after"]
+    # alternatives and refusals, one row each
+    alt = text.split('id="alternatives"', 1)[1].split("<h2", 1)[0]
+    for r in doc["rejected"] + doc["not_testable"]:
+        assert f"<td>{r['name']}</td>" in alt
+    assert (
+        alt.count("<tr>") - 1
+        == len(doc["rejected"])
+        + len(doc["not_testable"])
+        + sum(len(e.get("confounded_with") or []) for e in doc["effects"])
+        or alt.count("<tr>") == 0
+    )
+    if kind in ("multihead", "sensor", "motion"):  # these benches start with a transient
+        assert doc["excluded_segments"] and "excluded" in text
+
+
+def test_cli_writes_the_report(tmp_path, capsys):
+    rng = np.random.default_rng(2)
+    phi = rng.uniform(0, 2 * np.pi, 600)
+    sa = np.cos(phi) + rng.normal(0, 1e-3, 600)
+    sb = 0.98 * np.sin(phi) + rng.normal(0, 1e-3, 600)
+    write_recording(tmp_path / "q.toml", "quadrature", {"sa": sa, "sb": sb})
+    out = tmp_path / "r.html"
+    rc = cli_main(
+        [
+            "diagnose",
+            str(tmp_path / "q.toml"),
+            "--json",
+            str(tmp_path / "d.json"),
+            "--html",
+            str(out),
+            "--quiet",
+        ]
+    )
+    assert rc == 0 and out.read_text().startswith("<!DOCTYPE html>")
+    assert "wrote " + str(out) in capsys.readouterr().err
+    # an output that is the input is refused before any work (exit 2)
+    rc = cli_main(
+        [
+            "diagnose",
+            str(tmp_path / "q.toml"),
+            "--json",
+            str(tmp_path / "e.json"),
+            "--html",
+            str(tmp_path / "q.toml"),
+        ]
+    )
+    assert rc == 2
