@@ -456,6 +456,11 @@ class GradientRow:
     abs_error: float
     rel_error: float
     ok: bool
+    atol: float = 0.0
+    basis: str = "relative"
+    """``"relative"``: judged by ``rtol``; ``"absolute"``: both derivatives are at most
+    ``atol`` (a relative error between two near-zero numbers says nothing), judged by
+    ``|ad - fd| <= atol``."""
 
 
 def check_gradients(
@@ -465,13 +470,18 @@ def check_gradients(
     at: dict[str, float] | None = None,
     rel_step: float = 1e-5,
     rtol: float = 1e-4,
+    atol: float | None = None,
 ) -> list[GradientRow]:
     """Compare AD gradients with central finite differences for the objective and every
     constrained output, at the start point (or ``at``, SI) and the first discrete values.
 
     The FD step of variable ``i`` is ``rel_step * scale_i`` (``scale`` as in the module
-    docstring). A row is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol`` with
-    ``atol = rtol * (|f| + tiny) / scale_i``·1e-3 (a floor for near-zero derivatives).
+    docstring). The absolute tolerance of a row is ``atol`` (output units per SI unit of
+    the variable) or, by default, ``1e-3 * rtol * (|f| + tiny) / scale_i`` (a derivative that
+    small moves the output by less than ``1e-3 * rtol`` of itself over the variable's
+    scale). Where both derivatives are at most that tolerance the row is judged on the
+    absolute error, ``|ad - fd| <= atol``, and says so (``basis = "absolute"``); elsewhere
+    it is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol``.
     """
     combo = {v.name: v.values[0] for v in problem.discrete}
     combo.update(discrete or {})
@@ -504,10 +514,20 @@ def check_gradients(
         for i, v in enumerate(ev.vars):
             fd = float(fds[i][k])
             err = abs(g[i] - fd)
-            atol = 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
-            rel = err / max(abs(g[i]), abs(fd), 1e-300)
-            ok = bool(np.isfinite(g[i]) and err <= rtol * max(abs(g[i]), abs(fd)) + atol)
-            rows.append(GradientRow(name, v.name, float(x0[i]), float(g[i]), fd, err, rel, ok))
+            tol = (
+                float(atol) if atol is not None else 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
+            )
+            big = max(abs(g[i]), abs(fd))
+            rel = err / max(big, 1e-300)
+            if big <= tol:
+                basis, ok = "absolute", bool(np.isfinite(g[i]) and err <= tol)
+            else:
+                basis, ok = "relative", bool(np.isfinite(g[i]) and err <= rtol * big + tol)
+            rows.append(
+                GradientRow(
+                    name, v.name, float(x0[i]), float(g[i]), fd, err, rel, ok, float(tol), basis
+                )
+            )
     return rows
 
 
