@@ -288,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
         rk = np.random.default_rng(args.seed + 100 * h)
         for s in range(n_starts):
             starts.append((f"random_{s}", logit(np.sort(rk.uniform(0.2, 2 * np.pi - 0.2, h - 1)))))
-        best = (np.asarray(sym_best), float(f_rms(jnp.asarray(sym_best))), "best_symmetric")
+        best = (np.asarray(sym_best), float(f_rms(jnp.asarray(sym_best))), "symmetric_kept")
         statuses: list[dict[str, Any]] = []
         with progress_bar(f"[{NAME}] {h} heads", len(starts), unit="start") as bar:
             for s_i, (label, v0) in enumerate(starts):
@@ -340,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         # out of sample: the same fresh builds for the optimum and the symmetric layout
         ms_opt, r_opt = fresh_rms(opt_angles)
         ms_sym, r_sym = fresh_rms(sym_best)
-        same = best[2] == "best_symmetric"
+        same = best[2] == "symmetric_kept"
         if same:  # the free search kept the symmetric layout: nothing to compare
             cmp = None
         else:

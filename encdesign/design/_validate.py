@@ -195,9 +195,8 @@ def _monte_carlo_builds(problem: Any) -> int:
 
 def validate_problem(
     problem: Any,
-    discrete: dict[str, Any],
-    chosen: dict[str, float],
-    baseline: dict[str, float],
+    chosen: tuple[dict[str, Any], dict[str, float]],
+    baseline: tuple[dict[str, Any], dict[str, float]],
     *,
     replicates: int = 8,
     z_threshold: float = Z_SIGNIFICANT,
@@ -215,8 +214,8 @@ def validate_problem(
 
     Args:
         problem: the :class:`~encdesign.Problem`.
-        discrete: the discrete values of the chosen design (the baseline shares them).
-        chosen, baseline: continuous inputs (SI) of the two designs.
+        chosen, baseline: ``(discrete values, continuous inputs (SI))`` of the two designs
+            (a continuous variable missing from the inputs is at its start).
         replicates: fresh replicates (>= 2).
         z_threshold: see :func:`paired_comparison`.
     """
@@ -232,15 +231,23 @@ def validate_problem(
     sign = -1.0 if problem.sense == "maximize" else 1.0
     rows: dict[str, list[dict[str, float]]] = {"chosen": [], "baseline": []}
     for s in seeds:
-        ev = _Evaluator(dataclasses.replace(problem, seed=s), dict(discrete))
-        for label, x in (("chosen", chosen), ("baseline", baseline)):
-            u = (np.array([x[v.name] for v in ev.vars]) - ev.start) / ev.scale
-            rows[label].append(ev.scalar_outputs(u if ev.vars else np.zeros(0)))
+        fresh = dataclasses.replace(problem, seed=s)
+        evs: dict[str, Any] = {}
+        for label, (disc, x) in (("chosen", chosen), ("baseline", baseline)):
+            key = repr(sorted(disc.items()))
+            if key not in evs:  # one evaluator (one compilation) per discrete combination
+                evs[key] = _Evaluator(fresh, dict(disc))
+            ev = evs[key]
+            xv = np.array([x.get(v.name, v.start) for v in ev.vars], dtype=np.float64)
+            u = (xv - ev.start) / ev.scale if ev.vars else np.zeros(0)
+            rows[label].append(ev.scalar_outputs(u))
     va = np.array([sign * r[name] for r in rows["chosen"]])
     vb = np.array([sign * r[name] for r in rows["baseline"]])
     cmp = paired_comparison(va, vb, unit="replicates", z_threshold=z_threshold)
     out = {
         **cmp.as_dict(),
+        "chosen_design": {"discrete": dict(chosen[0]), "inputs": dict(chosen[1])},
+        "baseline_design": {"discrete": dict(baseline[0]), "inputs": dict(baseline[1])},
         "objective": name,
         "sense_adjusted": sign < 0,
         "fresh_seeds": seeds,
