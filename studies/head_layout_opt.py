@@ -21,12 +21,29 @@ For ``H`` heads the study compares
   boxed into ``(0, 360)`` deg through a sigmoid, BFGS from the best symmetric layout and from
   ``--starts`` random layouts; the best is kept, so it is never worse than the symmetric one.
 
+Against overfitting (a sample-average optimum over a few fixed builds looks better on those
+builds than on any others):
+
+* every free start is trained on its **own** builds (``fold_in(key, 100 + s)``), and the
+  candidates are ranked on the study's builds of ``key``, on which none of them was trained
+  (the symmetric layout was, which favours it);
+* ``--min-separation-deg`` (default 5°) keeps every pair of heads apart and
+  ``--max-noise-ratio`` (default off) bounds the noise amplification relative to the best
+  symmetric layout's; both enter the free solve as penalties and are checked on the answer;
+* the chosen optimum **and** the best symmetric layout are evaluated on ``--fresh-builds``
+  fresh builds (an independent key, :func:`encdesign.design.fresh_key`; the same builds for
+  both), and a free layout *wins* only when the paired difference of the fresh RMS residuals
+  exceeds two standard errors (:func:`encdesign.design.paired_comparison`).
+
 The gradient of the objective at the optimum is checked against central finite differences.
 JSON ``head_counts``: per ``H``, ``optimum`` and ``best_symmetric`` (and
-``reference_head_opt``) with ``head_angles_deg``, ``residual_urad``, ``residual_p99_urad``,
+``reference_head_opt``) with ``head_angles_deg``, ``residual_urad`` (on the study's builds),
+``residual_urad_fresh`` and ``residual_urad_fresh_stderr``, ``residual_p99_urad``,
 ``noise_amplification`` (aggregate, :func:`encdesign.physics.layout_noise_amplification`),
-``noise_amplification_per_order`` and ``unobservable_orders``; ``improvement`` (symmetric /
-optimum residual), ``free_wins`` and ``gradient_check``. Figure ``head_layout_opt.png``.
+``noise_amplification_per_order``, ``min_separation_deg`` and ``unobservable_orders``;
+``improvement`` (symmetric / optimum residual on the study's builds), ``improvement_fresh``,
+``fresh`` (the paired comparison), ``win_significant``, ``verdict``, ``free_wins`` (=
+``win_significant``) and ``gradient_check``. Figure ``head_layout_opt.png``.
 """
 
 from __future__ import annotations
@@ -39,7 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design import CaseRecorder, optimise
+from encdesign.design import CaseRecorder, fresh_key, optimise, paired_comparison
 from encdesign.io import new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import (
     LayoutDesign,
@@ -69,10 +86,25 @@ def _design(angles: Any, args: Any) -> LayoutDesign:
     )
 
 
+def _min_separation(angles: Any) -> jax.Array:
+    """Smallest azimuth difference between two heads, modulo 2 pi (rad)."""
+    a = jnp.asarray(angles)
+    d = a[:, None] - a[None, :]
+    d = jnp.abs(jnp.arctan2(jnp.sin(d), jnp.cos(d)))
+    return jnp.min(jnp.where(jnp.eye(a.size, dtype=bool), jnp.inf, d))
+
+
+def _noise(angles: Any, max_order: int) -> jax.Array:
+    """Aggregate noise amplification (large but finite where an order is unobservable)."""
+    agg = layout_noise_amplification(angles, max_order)[2]
+    return jnp.where(jnp.isfinite(agg), agg, 1e6)
+
+
 def _describe(angles: np.ndarray, f_rms, f_p99, args: Any) -> dict[str, Any]:
     amp, _, agg = layout_noise_amplification(jnp.asarray(angles), args.max_order)
     return {
         "head_angles_deg": [float(a) for a in np.degrees(np.mod(angles, 2 * np.pi))],
+        "min_separation_deg": math.degrees(float(_min_separation(jnp.asarray(angles)))),
         "residual_urad": float(f_rms(jnp.asarray(angles))) * 1e6,
         "residual_p99_urad": float(f_p99(jnp.asarray(angles))) * 1e6,
         "noise_amplification": float(agg) if math.isfinite(float(agg)) else None,
@@ -120,7 +152,39 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--heads", type=int, nargs="+", default=list(HEAD_COUNTS), help="head counts (3 4 5)"
     )
+    p.add_argument(
+        "--fresh-builds",
+        type=int,
+        default=None,
+        help="fresh builds for the out-of-sample check of optimum and symmetric (2000; quick 400)",
+    )
+    p.add_argument(
+        "--min-separation-deg",
+        type=float,
+        default=5.0,
+        help="least azimuth between two heads of a free layout, deg (5; 0: none)",
+    )
+    p.add_argument(
+        "--max-noise-ratio",
+        type=float,
+        default=None,
+        help="bound on a free layout's noise amplification relative to the best symmetric "
+        "layout's (default: none)",
+    )
     args = p.parse_args(argv)
+    from encdesign import EncdesignInputError
+
+    def input_error(where, problem, expected):
+        return EncdesignInputError(f"{where}: {problem} (expected {expected})")
+
+    n_fresh = args.fresh_builds or (400 if args.quick else 2000)
+    if n_fresh < 2:
+        raise input_error("--fresh-builds", f"{n_fresh}", "an integer >= 2")
+    if not 0.0 <= args.min_separation_deg < 120.0:
+        raise input_error("--min-separation-deg", f"{args.min_separation_deg}", "0 <= deg < 120")
+    if args.max_noise_ratio is not None and not args.max_noise_ratio > 0:
+        raise input_error("--max-noise-ratio", f"{args.max_noise_ratio}", "a ratio > 0")
+    min_sep = math.radians(args.min_separation_deg)
     n_builds = args.builds or (4 if args.quick else 64)
     n_starts = args.starts if args.starts is not None else (1 if args.quick else 4)
     max_steps = args.max_steps or (15 if args.quick else 150)
@@ -130,10 +194,17 @@ def main(argv: list[str] | None = None) -> int:
     key = jax.random.key(args.seed)
     tol = Tolerances(placement=args.sigma_placement_rad, **REFERENCE_TOL)
 
-    def f_ms(angles):
-        return layout_metrics(_design(angles, args), tol, key=key, n_builds=n_builds, metric="ms")
+    def f_ms(angles, k=key, n=n_builds):
+        return layout_metrics(_design(angles, args), tol, key=k, n_builds=n, metric="ms")
 
     f_rms = jax.jit(lambda a: jnp.sqrt(jnp.mean(f_ms(a))))
+    # per-build mean squares of the fresh builds (independent key, the same for all layouts)
+    f_fresh = jax.jit(lambda a: f_ms(a, fresh_key(key), n_fresh))
+
+    def fresh_rms(angles):
+        ms = np.asarray(f_fresh(jnp.asarray(angles)))
+        return ms, math.sqrt(float(np.mean(ms)))
+
     f_p99 = jax.jit(lambda a: jnp.percentile(jnp.sqrt(f_ms(a)), 99.0))
     rec = CaseRecorder(args.out / "cases.jsonl")
     results, figures = [], []
@@ -184,8 +255,30 @@ def main(argv: list[str] | None = None) -> int:
         def to_angles(v):
             return jnp.concatenate([jnp.zeros(1), 2 * jnp.pi * jax.nn.sigmoid(v)])
 
-        def free_obj(v, _a):
-            return f_rms(to_angles(v)) * 1e6
+        noise_cap = (
+            None
+            if args.max_noise_ratio is None
+            else args.max_noise_ratio * float(_noise(jnp.asarray(sym_best), args.max_order))
+        )
+
+        def free_obj(v, train_key, noise_cap=noise_cap):
+            """RMS residual (urad) on the start's own builds plus the design penalties."""
+            ang = to_angles(v)
+            val = jnp.sqrt(jnp.mean(f_ms(ang, train_key))) * 1e6
+            pen = 0.0
+            if min_sep > 0:
+                pen = pen + (jax.nn.relu(min_sep - _min_separation(ang)) / min_sep) ** 2
+            if noise_cap is not None:
+                pen = pen + (jax.nn.relu(_noise(ang, args.max_order) - noise_cap) / noise_cap) ** 2
+            return val * (1.0 + 1e4 * pen)
+
+        def feasible(ang, noise_cap=noise_cap) -> bool:
+            ok = float(_min_separation(jnp.asarray(ang))) >= min_sep * (1 - 1e-6)
+            if noise_cap is not None:
+                ok = ok and float(_noise(jnp.asarray(ang), args.max_order)) <= noise_cap * (
+                    1 + 1e-6
+                )
+            return ok
 
         def logit(a):
             x = np.clip(np.mod(a, 2 * np.pi) / (2 * np.pi), 1e-6, 1 - 1e-6)
@@ -195,23 +288,33 @@ def main(argv: list[str] | None = None) -> int:
         rk = np.random.default_rng(args.seed + 100 * h)
         for s in range(n_starts):
             starts.append((f"random_{s}", logit(np.sort(rk.uniform(0.2, 2 * np.pi - 0.2, h - 1)))))
-        best = (np.asarray(sym_best), float(f_rms(jnp.asarray(sym_best))), "best_symmetric")
+        best = (np.asarray(sym_best), float(f_rms(jnp.asarray(sym_best))), "symmetric_kept")
+        statuses: list[dict[str, Any]] = []
         with progress_bar(f"[{NAME}] {h} heads", len(starts), unit="start") as bar:
-            for label, v0 in starts:
+            for s_i, (label, v0) in enumerate(starts):
+                # each start trains on its own builds (re-sampled between restarts); the
+                # candidates are ranked on the study's builds, none of them trained on
+                train_key = jax.random.fold_in(key, 100 + s_i)
                 sol = optimise(
-                    free_obj, "bfgs", jnp.asarray(v0), None, max_steps=max_steps, rtol=1e-8,
-                    atol=1e-10,
+                    free_obj, "bfgs", jnp.asarray(v0), train_key, max_steps=max_steps,
+                    rtol=1e-8, atol=1e-10,
                 )  # fmt: skip
                 ang = np.asarray(to_angles(jnp.asarray(sol.value)))
                 val = float(f_rms(jnp.asarray(ang)))
+                status = sol.status
+                if status in ("success", "max_steps_reached") and not feasible(ang):
+                    status = "infeasible"
+                statuses.append({"start": label, "status": status, "n_steps": sol.n_steps,
+                                 "message": sol.message})  # fmt: skip
                 rec.record(
                     {"n_heads": h, "start": label, "start_angles_rad": list(np.asarray(
                         to_angles(jnp.asarray(v0))).tolist())},
                     {"head_angles_rad": ang.tolist(), "residual_rad": val},
-                    sol.status,
+                    status,
                     seed=args.seed,
                 )  # fmt: skip
-                if sol.status in ("success", "max_steps_reached") and math.isfinite(val):
+                # a capped solve is a usable candidate (marked in "starts"), never "success"
+                if status in ("success", "max_steps_reached") and math.isfinite(val):
                     if val < best[1]:
                         best = (ang, val, label)
                 bar.update()
@@ -233,7 +336,35 @@ def main(argv: list[str] | None = None) -> int:
         entry["improvement"] = (
             entry["best_symmetric"]["residual_urad"] / entry["optimum"]["residual_urad"]
         )
-        entry["free_wins"] = bool(entry["improvement"] > 1.0 + 1e-9)
+        entry["starts"] = statuses
+        # out of sample: the same fresh builds for the optimum and the symmetric layout
+        ms_opt, r_opt = fresh_rms(opt_angles)
+        ms_sym, r_sym = fresh_rms(sym_best)
+        same = best[2] == "symmetric_kept"
+        if same:  # the free search kept the symmetric layout: nothing to compare
+            cmp = None
+        else:
+            cmp = paired_comparison(ms_opt, ms_sym, reduce="rms")
+        for which, ms, r in (("optimum", ms_opt, r_opt), ("best_symmetric", ms_sym, r_sym)):
+            entry[which]["residual_urad_fresh"] = r * 1e6
+            entry[which]["residual_urad_fresh_stderr"] = (
+                float(np.std(ms, ddof=1)) / math.sqrt(ms.size) / (2.0 * r) * 1e6
+            )
+        entry["n_fresh_builds"] = n_fresh
+        entry["fresh"] = None if cmp is None else cmp.as_dict()
+        entry["improvement_fresh"] = r_sym / r_opt
+        entry["win_significant"] = bool(cmp is not None and cmp.win_significant)
+        entry["loss_significant"] = bool(cmp is not None and cmp.worse_significant)
+        if cmp is None:
+            entry["verdict"] = "the free search kept the symmetric layout"
+        elif cmp.win_significant:
+            entry["verdict"] = "free layout wins on fresh builds"
+        elif cmp.worse_significant:
+            entry["verdict"] = "free layout loses on fresh builds (in-sample win was overfit)"
+        else:
+            entry["verdict"] = "no significant difference on fresh builds"
+        entry["free_wins"] = entry["win_significant"]
+        entry["free_wins_in_sample"] = bool(entry["improvement"] > 1.0 + 1e-9)
         entry["no_worse_than_symmetric"] = bool(
             entry["optimum"]["residual_urad"]
             <= entry["best_symmetric"]["residual_urad"] * (1 + 1e-12)
@@ -244,10 +375,24 @@ def main(argv: list[str] | None = None) -> int:
             f"[{NAME}] {h} heads: free {entry['optimum']['residual_urad']:.4f} urad at "
             f"{np.round(entry['optimum']['head_angles_deg'], 2).tolist()} deg; best {n_sym}+1 "
             f"{entry['best_symmetric']['residual_urad']:.4f} urad (ref "
-            f"{math.degrees(r_best):.2f} deg); x{entry['improvement']:.3f}; gradient check "
-            f"max rel err {entry['gradient_check']['max_rel_error']:.2e}",
+            f"{math.degrees(r_best):.2f} deg); x{entry['improvement']:.3f} in sample; gradient "
+            f"check max rel err {entry['gradient_check']['max_rel_error']:.2e}",
             file=sys.stderr,
         )
+        print(
+            f"[{NAME}] {h} heads on {n_fresh} fresh builds: free "
+            f"{entry['optimum']['residual_urad_fresh']:.4f} +- "
+            f"{entry['optimum']['residual_urad_fresh_stderr']:.2g} urad, {n_sym}+1 "
+            f"{entry['best_symmetric']['residual_urad_fresh']:.4f} +- "
+            f"{entry['best_symmetric']['residual_urad_fresh_stderr']:.2g} urad, x"
+            f"{entry['improvement_fresh']:.3f}"
+            + ("" if cmp is None else f", paired difference {cmp.difference * 1e6:.3g} +- "
+               f"{cmp.difference_stderr * 1e6:.2g} urad")
+            + f": {entry['verdict']}; noise amplification "
+            f"{entry['optimum']['noise_amplification']} vs "
+            f"{entry['best_symmetric']['noise_amplification']}",
+            file=sys.stderr,
+        )  # fmt: skip
         ax = axes[0, col]
         for ang, style, lab in (
             (opt_angles, "o-", "free optimum"),
@@ -284,7 +429,13 @@ def main(argv: list[str] | None = None) -> int:
         "max_order": args.max_order,
         "n_angles": args.n_angles,
         "n_builds": n_builds,
+        "n_fresh_builds": n_fresh,
+        "fresh_key": "fold_in(fold_in(key(seed), FRESH_TAG), 0) (encdesign.design.fresh_key)",
+        "min_separation_deg": args.min_separation_deg,
+        "max_noise_ratio": args.max_noise_ratio,
+        "significance": "paired difference of fresh RMS residuals > 2 standard errors",
         "head_counts": results,
+        "wins_on_fresh_builds": {str(e["n_heads"]): e["verdict"] for e in results},
         "cases_file": str(rec.path),
         "all_no_worse": all(e["no_worse_than_symmetric"] for e in results),
         "all_gradients_ok": all(e["gradient_check"]["ok"] for e in results),

@@ -44,6 +44,7 @@ from encdesign.design import (
     check_yield,
     contributions,
     deviation_sizes,
+    fresh_vs_reference,
     pareto_front,
     plot_pareto,
     plot_sweep,
@@ -124,7 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     _log(f"allocating on {n_train} builds ...")
     alloc = allocate(train_fn, ref, names, SPEC_RAD, TARGET, max_steps=40 if args.quick else 100)
     _log(f"allocation {alloc.status}: cost {alloc.cost:.4g}, training yield {alloc.train_yield}")
-    if not alloc.ok:
+    if alloc.status == "max_steps_reached":
+        _log(f"allocation NOT converged (kept, marked): {alloc.message}")
+    elif not alloc.ok:
         _log(f"allocation failed: {alloc.message}")
         return 1
     sig = alloc.sigmas
@@ -133,6 +136,16 @@ def main(argv: list[str] | None = None) -> int:
         [np.asarray(vals(jnp.asarray(sig), check_key, i)) for i in range(0, n_check, n_train)]
     )
     chk = check_yield(check_vals, SPEC_RAD, TARGET)
+    ref_check = np.concatenate(
+        [np.asarray(vals(jnp.asarray(ref), check_key, i)) for i in range(0, n_check, n_train)]
+    )
+    fresh = fresh_vs_reference(check_vals, ref_check, SPEC_RAD)
+    _log(
+        f"fresh builds ({n_check}): failure fraction allocation {fresh['chosen']:.4f} +- "
+        f"{fresh['chosen_stderr']:.4f}, reference {fresh['baseline']:.4f} +- "
+        f"{fresh['baseline_stderr']:.4f}, paired difference {fresh['difference']:.4f} +- "
+        f"{fresh['difference_stderr']:.4f} ({fresh['verdict']})"
+    )
     _log(
         f"checked yield {chk['checked_yield']:.5f} +- {chk['checked_yield_stderr']:.5f} "
         f"(target {TARGET})"
@@ -215,6 +228,9 @@ def main(argv: list[str] | None = None) -> int:
         "n_train": n_train,
         "train_yield": alloc.train_yield,
         "allocation_status": alloc.status,
+        "allocation_converged": alloc.ok,
+        "allocation_message": alloc.message,
+        "fresh_vs_reference": fresh,
         "allocation_scale": alloc.scale,
         "checked_yield": chk["checked_yield"],
         "checked_yield_stderr": chk["checked_yield_stderr"],

@@ -247,7 +247,7 @@ def test_head_layout_study_quick(tmp_path):
 
     out = tmp_path / "hlo"
     rc = main(["study", "run", "head-layout-opt", "--quick", "--heads", "3", "--out", str(out),
-               "--json", str(out / "s.json"), "--no-plots"])  # fmt: skip
+               "--json", str(out / "s.json"), "--no-plots", "--fresh-builds", "64"])  # fmt: skip
     assert rc == 0
     s = json.loads((out / "s.json").read_text())
     (h3,) = s["head_counts"]
@@ -257,6 +257,15 @@ def test_head_layout_study_quick(tmp_path):
         assert len(h3[which]["head_angles_deg"]) == 3
     assert h3["optimum"]["residual_urad"] <= h3["best_symmetric"]["residual_urad"] * (1 + 1e-12)
     assert h3["gradient_check"]["ok"]
+    # out of sample (issue 27): both layouts on the same 64 fresh builds, a stated verdict
+    assert s["n_fresh_builds"] == h3["n_fresh_builds"] == 64
+    for which in ("optimum", "best_symmetric"):
+        assert h3[which]["residual_urad_fresh"] > 0 and h3[which]["residual_urad_fresh_stderr"] > 0
+        assert h3[which]["min_separation_deg"] >= 5.0 * (1 - 1e-6)
+    assert isinstance(h3["win_significant"], bool) and h3["free_wins"] == h3["win_significant"]
+    assert h3["verdict"] and s["wins_on_fresh_builds"]["3"] == h3["verdict"]
+    if h3["fresh"] is not None:
+        assert h3["fresh"]["n"] == 64 and h3["fresh"]["reduce"] == "rms"
     assert (
         encdesign.physics.unobservable_orders(np.radians(h3["optimum"]["head_angles_deg"]), 4) == []
     )

@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 
 from encdesign.cli import main as cli_main
-from encdesign.simulate import simulate_plan as simulate
-from encdesign.simulate import simulate_quadrature
-from encdesign.simulate import write_concealed_sds
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._html import render_html, report_inputs
 from encdesign.io._recording import write_recording
+from encdesign.simulate import simulate_plan as simulate
+from encdesign.simulate import simulate_quadrature, write_concealed_sds
 
 PLAN = {"per_run_zeros": True, "transient": True, "glitches": 1, "amplitude": 1.0}
 

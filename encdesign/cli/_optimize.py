@@ -25,6 +25,15 @@ def add_common(parser: argparse.ArgumentParser) -> None:
         "--cases", type=Path, default=None, help="record every case here (.jsonl or .csv)"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress line")
+    parser.add_argument(
+        "--fresh-replicates",
+        type=int,
+        default=8,
+        metavar="R",
+        help="out-of-sample check of a Monte Carlo optimum: the best design and the start "
+        "design on R fresh replicates of the objective's builds (independent seeds, the same "
+        "for both); 0: none (default 8)",
+    )
     add_launch_flags(parser)
 
 
@@ -51,6 +60,17 @@ def print_result(summary: dict, stream=None) -> None:
         disc = " ".join(f"{k}={v}" for k, v in best["discrete"].items())
         ins = " ".join(f"{k}={v:.6g} {units[k]}" for k, v in best["inputs_display"].items())
         print(f"best      {disc} {ins}".rstrip(), file=out)
+    fresh = summary.get("fresh")
+    if fresh is not None:
+        print(
+            f"fresh     {fresh['objective']} on {fresh['n']} fresh replicates x "
+            f"{fresh['builds_per_replicate']} builds (lower is better"
+            f"{', negated' if fresh['sense_adjusted'] else ''}): best {fresh['chosen']:.6g} "
+            f"+- {fresh['chosen_stderr']:.2g}, start {fresh['baseline']:.6g} +- "
+            f"{fresh['baseline_stderr']:.2g}, start - best {fresh['difference']:.3g} +- "
+            f"{fresh['difference_stderr']:.2g}: {fresh['verdict']}",
+            file=out,
+        )
 
 
 def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = None) -> int:
@@ -74,12 +94,17 @@ def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = Non
 
 
 def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
+    from .._errors import input_error
+
+    reps = int(getattr(args, "fresh_replicates", 0) or 0)
+    if reps == 1 or reps < 0:
+        raise input_error("--fresh-replicates", f"{reps}", "0 (no check) or an integer >= 2")
     problem = load_problem(args.problem)
     cases = resume if resume is not None else args.cases
     main = is_main_process()
     rec = CaseRecorder(cases, resume=resume is not None, write=main, process=process_index())
     with rec:
-        result = solve(problem, recorder=rec, progress=not args.quiet)
+        result = solve(problem, recorder=rec, progress=not args.quiet, fresh_replicates=reps)
     if not main:
         return 0 if result.status == "success" else 1
     summary = result.summary()

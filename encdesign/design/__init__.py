@@ -195,3 +195,21 @@ from ._tolerance import (
 from ._tolerance import (
     plot_sweep as plot_sweep,
 )
+from ._tolerance import (
+    fresh_vs_reference as fresh_vs_reference,
+)
+from ._validate import (
+    FreshComparison as FreshComparison,
+)
+from ._validate import (
+    fresh_key as fresh_key,
+)
+from ._validate import (
+    fresh_seeds as fresh_seeds,
+)
+from ._validate import (
+    paired_comparison as paired_comparison,
+)
+from ._validate import (
+    validate_problem as validate_problem,
+)

@@ -80,6 +80,10 @@ class ProblemResult:
     best: DesignResult | None
     status: str
     message: str = ""
+    fresh: dict[str, Any] | None = None
+    """Out-of-sample check of ``best`` against the baseline (the start point at the first
+    discrete values) on fresh builds (:func:`~encdesign.design.validate_problem`), or
+    ``None`` (not asked for, nothing solved, or no Monte Carlo in the objective)."""
 
     def summary(self) -> dict[str, Any]:
         """A JSON-able summary (SI values, plus the file's display units)."""
@@ -109,6 +113,8 @@ class ProblemResult:
             "units": {v.name: v.units for v in p.variables},
             "best": None if self.best is None else one(self.best),
             "results": [one(r) for r in self.results],
+            "fresh": self.fresh,
+            "win_significant": None if self.fresh is None else self.fresh["win_significant"],
         }
 
 
@@ -401,6 +407,7 @@ def solve_problem(
     recorder: CaseRecorder | None = None,
     progress: bool = False,
     throw: bool = False,
+    fresh_replicates: int = 0,
 ) -> ProblemResult:
     """Solve ``problem`` with its ``[driver]``, enumerating discrete variables.
 
@@ -409,6 +416,10 @@ def solve_problem(
         recorder: where to record the cases (``None``: not recorded).
         progress: progress line on stderr.
         throw: raise :class:`~encdesign.design._drivers.OptimisationError` unless successful.
+        fresh_replicates: with ``R >= 2`` and a Monte Carlo objective, the best design and
+            the baseline (every continuous variable at its start, the first discrete
+            values) are evaluated on ``R`` fresh replicates of the objective's builds
+            (:func:`~encdesign.design.validate_problem`, ``ProblemResult.fresh``).
 
     Returns:
         A :class:`ProblemResult`; ``best`` is the successful design with the smallest
@@ -422,7 +433,16 @@ def solve_problem(
         throw=throw,
     )
     best = enum.best_solution if enum.ok else None
-    return ProblemResult(problem, tuple(enum.solutions), best, enum.status, enum.message)
+    fresh = None
+    if best is not None and fresh_replicates:
+        from ._validate import validate_problem
+
+        first = {v.name: v.values[0] for v in problem.discrete}
+        start = {v.name: float(v.start) for v in problem.continuous}
+        fresh = validate_problem(
+            problem, (best.discrete, best.inputs), (first, start), replicates=fresh_replicates
+        )
+    return ProblemResult(problem, tuple(enum.solutions), best, enum.status, enum.message, fresh)
 
 
 def sweep_problem(
@@ -431,16 +451,19 @@ def sweep_problem(
     kind: str | None = None,
     recorder: CaseRecorder | None = None,
     progress: bool = False,
+    fresh_replicates: int = 0,
 ) -> ProblemResult:
     """Evaluate ``problem`` on its ``[sweep]`` design of experiments (no optimisation).
 
     ``kind`` (``"grid"``/``"lhs"``) overrides ``[sweep] kind``. Every point is a case.
+    ``fresh_replicates``: the best point against the start on fresh builds, as for
+    :func:`solve_problem`.
     """
     sweep = dict(problem.sweep)
     if kind is not None:
         sweep["kind"] = kind
     p = dataclasses.replace(problem, driver=sweep)
-    return solve_problem(p, recorder=recorder, progress=progress)
+    return solve_problem(p, recorder=recorder, progress=progress, fresh_replicates=fresh_replicates)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -456,6 +479,11 @@ class GradientRow:
     abs_error: float
     rel_error: float
     ok: bool
+    atol: float = 0.0
+    basis: str = "relative"
+    """``"relative"``: judged by ``rtol``; ``"absolute"``: both derivatives are at most
+    ``atol`` (a relative error between two near-zero numbers says nothing), judged by
+    ``|ad - fd| <= atol``."""
 
 
 def check_gradients(
@@ -465,13 +493,18 @@ def check_gradients(
     at: dict[str, float] | None = None,
     rel_step: float = 1e-5,
     rtol: float = 1e-4,
+    atol: float | None = None,
 ) -> list[GradientRow]:
     """Compare AD gradients with central finite differences for the objective and every
     constrained output, at the start point (or ``at``, SI) and the first discrete values.
 
     The FD step of variable ``i`` is ``rel_step * scale_i`` (``scale`` as in the module
-    docstring). A row is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol`` with
-    ``atol = rtol * (|f| + tiny) / scale_i``·1e-3 (a floor for near-zero derivatives).
+    docstring). The absolute tolerance of a row is ``atol`` (output units per SI unit of
+    the variable) or, by default, ``1e-3 * rtol * (|f| + tiny) / scale_i`` (a derivative that
+    small moves the output by less than ``1e-3 * rtol`` of itself over the variable's
+    scale). Where both derivatives are at most that tolerance the row is judged on the
+    absolute error, ``|ad - fd| <= atol``, and says so (``basis = "absolute"``); elsewhere
+    it is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol``.
     """
     combo = {v.name: v.values[0] for v in problem.discrete}
     combo.update(discrete or {})
@@ -504,10 +537,20 @@ def check_gradients(
         for i, v in enumerate(ev.vars):
             fd = float(fds[i][k])
             err = abs(g[i] - fd)
-            atol = 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
-            rel = err / max(abs(g[i]), abs(fd), 1e-300)
-            ok = bool(np.isfinite(g[i]) and err <= rtol * max(abs(g[i]), abs(fd)) + atol)
-            rows.append(GradientRow(name, v.name, float(x0[i]), float(g[i]), fd, err, rel, ok))
+            tol = (
+                float(atol) if atol is not None else 1e-3 * rtol * (abs(val) + 1e-300) / ev.scale[i]
+            )
+            big = max(abs(g[i]), abs(fd))
+            rel = err / max(big, 1e-300)
+            if big <= tol:
+                basis, ok = "absolute", bool(np.isfinite(g[i]) and err <= tol)
+            else:
+                basis, ok = "relative", bool(np.isfinite(g[i]) and err <= rtol * big + tol)
+            rows.append(
+                GradientRow(
+                    name, v.name, float(x0[i]), float(g[i]), fd, err, rel, ok, float(tol), basis
+                )
+            )
     return rows
 
 

@@ -38,7 +38,7 @@ import numpy as np
 
 from .._errors import input_error
 from .._progress import progress_bar
-from ._drivers import SUCCESS, optimise
+from ._drivers import MAX_STEPS, SUCCESS, optimise
 
 ValuesFn = Callable[[jax.Array], jax.Array]
 
@@ -253,7 +253,9 @@ class Allocation:
         train_yield: exact yield of the training builds at ``sigmas``.
         smooth_yield: surrogate yield at the optimiser's answer (before the final scale).
         scale: common factor applied after the optimiser (``<= 1`` tightens).
-        status: ``"success"`` or the failing driver status.
+        status: ``"success"`` or the failing driver status (``"max_steps_reached"`` when
+            the last penalty round hit ``max_steps``: the tolerances are then scaled to the
+            goal as usual, but the allocation is not converged).
         message: account of the status.
         n_steps: optimiser iterations (all penalty rounds).
         rare: with ``rare_metric``: the importance-sampling estimate at ``sigmas``
@@ -414,14 +416,22 @@ def allocate(
         frac = np.clip(frac, 1e-9, 1.0 - 1e-9)
         v = np.log(frac) - np.log1p(-frac)  # inverse of the sigmoid in u_of
     steps, status, msg = 0, SUCCESS, "converged"
+    capped: list[str] = []
     for mu in penalties:
         a = jax.tree.map(lambda x: jnp.asarray(x, dtype=jnp.float64), {**obj_args, "mu": mu})
         sol = optimise(objective, "bfgs", v, a, max_steps=max_steps, rtol=1e-6, atol=1e-9)
         steps += sol.n_steps
-        if sol.status not in (SUCCESS, "max_steps_reached"):
+        if sol.status == MAX_STEPS:  # go on to the next round from here, but never "success"
+            capped.append(f"penalty {mu:g}: {sol.n_steps} of {max_steps} steps")
+        elif sol.status != SUCCESS:
             status, msg = sol.status, f"penalty {mu:g}: {sol.message}"
             break
         v = sol.value
+    if status == SUCCESS and capped and capped[-1].startswith(f"penalty {penalties[-1]:g}:"):
+        # the last (deciding) round hit its step cap: not converged
+        status, msg = MAX_STEPS, "step cap hit (" + "; ".join(capped) + ")"
+    elif status == SUCCESS and capped:
+        msg = "converged in the last round (step cap hit earlier: " + "; ".join(capped) + ")"
     u = np.asarray(u_of(jnp.asarray(v)))
     # final common scale: largest factor (<= 1.5) whose exact training yield meets the goal
     f = _jitted_values(values_fn)
@@ -433,12 +443,13 @@ def allocate(
 
     scale = 1.0
     rare_out = None
-    if status == SUCCESS and rare_metric is not None:
+    usable = status in (SUCCESS, MAX_STEPS)  # a capped answer is scaled too, but stays marked
+    if usable and rare_metric is not None:
         scale, rare_out = _rare_scale(
             rare_metric, rare_dim, rare_key, rare_n, lambda fac: np.asarray(
                 sig_of(jnp.asarray(u + math.log(fac)))), spec, final_target,
         )  # fmt: skip
-    elif status == SUCCESS:
+    elif usable:
         a, b = 1e-3, 1.5
         if exact(a) < goal:
             status, msg = "infeasible", f"yield target {goal:.4g} unreachable within bounds"
@@ -520,6 +531,20 @@ def _rare_scale(
     return a, r.as_dict()
 
 
+def fresh_vs_reference(values: Any, reference_values: Any, spec: float) -> dict[str, Any]:
+    """An allocation against the reference tolerances on the same fresh builds
+    (:func:`~encdesign.design.paired_comparison`): the failure fraction (builds over
+    ``spec``) of both, with standard errors, and the paired difference (reference minus
+    allocation: positive when the allocation fails less), plus the mean metric of both
+    (``mean_metric``, same form). JSON-able."""
+    from ._validate import paired_comparison
+
+    v, r = np.asarray(values, dtype=np.float64), np.asarray(reference_values, dtype=np.float64)
+    fail = paired_comparison((v > spec).astype(np.float64), (r > spec).astype(np.float64))
+    return {**fail.as_dict(), "figure": "failure fraction", "mean_metric": paired_comparison(
+        v, r).as_dict()}  # fmt: skip
+
+
 def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0) -> dict[str, Any]:
     """Independent check of a yield: fraction within ``spec``, binomial standard error, and
     whether the target is reached within ``n_sigma`` standard errors."""
@@ -570,6 +595,7 @@ class ParetoFront:
                 "cost": a.cost,
                 "train_yield": a.train_yield,
                 "status": a.status,
+                "converged": a.ok,
                 "message": a.message,
                 "n_steps": a.n_steps,
                 "warm_start_from_target": w,
@@ -581,6 +607,7 @@ class ParetoFront:
                     checked_yield_stderr=c["checked_yield_stderr"],
                     n_check=c["n_builds"],
                     meets_target=c["meets_target"],
+                    fresh_vs_reference=c.get("fresh"),
                 )
             out.append(r)
         return out
@@ -616,7 +643,9 @@ def pareto_front(
         targets: yield targets (0 < t < 1); sorted and de-duplicated.
         anchor, anchor_target: an existing allocation and its target (optional).
         check_fn: ``check_fn(sigmas) -> values`` of *fresh* builds (another seed): each point
-            is checked with :func:`check_yield` (binomial standard error).
+            (also one that hit its step cap, marked ``converged = False`` in the rows) is
+            checked with :func:`check_yield` (binomial standard error) and compared with the
+            reference tolerances on the same fresh builds (:func:`fresh_vs_reference`).
         warm: start each point from its neighbour (``False``: every point cold).
         progress: progress bar.
         allocate_kw: passed to :func:`allocate` (not ``start``).
@@ -653,12 +682,16 @@ def pareto_front(
             warm_from[t] = prev if start is not None else None
             bar.update()
     checked = []
+    ref_fresh = None if check_fn is None else np.asarray(check_fn(jnp.asarray(reference)))
     for t in ts:
         a = allocs[t]
-        if check_fn is None or not a.ok:
+        if check_fn is None or a.status not in (SUCCESS, MAX_STEPS):
             checked.append(None)
         else:
-            checked.append(check_yield(np.asarray(check_fn(jnp.asarray(a.sigmas))), spec, t))
+            fresh = np.asarray(check_fn(jnp.asarray(a.sigmas)))
+            checked.append(
+                {**check_yield(fresh, spec, t), "fresh": fresh_vs_reference(fresh, ref_fresh, spec)}
+            )
     return ParetoFront(
         tuple(ts), tuple(allocs[t] for t in ts), tuple(warm_from[t] for t in ts), tuple(checked)
     )
