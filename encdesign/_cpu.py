@@ -24,6 +24,7 @@ per-item program wherever it runs (agreement with one device to 1e-13 relative i
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 
 import jax
 
@@ -31,8 +32,8 @@ ENV = "ENCDESIGN_CPU_DEVICES"
 DEVICES_PER_CORE = 1  # from benchmarks/kinematics_sweep.py (results/kinematics-sweep.json)
 
 
-def _positive_int(name: str) -> int | None:
-    text = os.environ.get(name, "").strip()
+def _positive_int(env: Mapping[str, str], name: str) -> int | None:
+    text = env.get(name, "").strip()
     if not text:
         return None
     if not text.isdigit() or int(text) < 1:
@@ -50,24 +51,31 @@ def cores() -> int:
         return os.cpu_count() or 1
 
 
-def default_cpu_devices() -> int | None:
-    """The CPU device count encdesign asks for, or ``None`` when it leaves JAX alone."""
-    from jax._src import xla_bridge
-
-    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+def choose_cpu_devices(env: Mapping[str, str], n_cores: int) -> int | None:
+    """The CPU device count for environment ``env`` on ``n_cores`` cores, or ``None`` when
+    the user chose already (``XLA_FLAGS``' device count or ``JAX_NUM_CPU_DEVICES``). An
+    ``ENCDESIGN_CPU_DEVICES`` or ``OMP_NUM_THREADS`` that is not an integer >= 1 is an
+    input error naming the variable."""
+    if "xla_force_host_platform_device_count" in env.get("XLA_FLAGS", ""):
         return None
-    if os.environ.get("JAX_NUM_CPU_DEVICES") or jax.config.jax_num_cpu_devices >= 0:
+    if env.get("JAX_NUM_CPU_DEVICES", "").strip():
         return None
-    if xla_bridge.backends_are_initialized():
-        return None
-    chosen = _positive_int(ENV)
+    chosen = _positive_int(env, ENV)
     if chosen is not None:
         return chosen
-    n = cores() * DEVICES_PER_CORE
-    omp = _positive_int("OMP_NUM_THREADS")
-    if omp is not None:
-        n = min(n, omp)
-    return n
+    n = max(int(n_cores), 1) * DEVICES_PER_CORE
+    omp = _positive_int(env, "OMP_NUM_THREADS")
+    return n if omp is None else min(n, omp)
+
+
+def default_cpu_devices() -> int | None:
+    """The CPU device count encdesign asks for here and now, or ``None`` when it leaves JAX
+    alone (the user chose, or the backend has started)."""
+    from jax._src import xla_bridge
+
+    if jax.config.jax_num_cpu_devices >= 0 or xla_bridge.backends_are_initialized():
+        return None
+    return choose_cpu_devices(os.environ, cores())
 
 
 def configure() -> None:
