@@ -16,7 +16,11 @@ fixed before JAX starts: ``ENCDESIGN_CPU_DEVICES``); within it every chunk size 
 The fastest setting of each is printed as ``chosen``; the load average before and after
 each device count is recorded (a loaded machine blurs the differences).
 
-    python benchmarks/kinematics_sweep.py --json benchmarks/kinematics_sweep.json
+    python benchmarks/kinematics_sweep.py --json benchmarks/kinematics_sweep.json \
+        --write-defaults
+
+``--write-defaults`` rewrites ``encdesign/_tuning.json`` (the defaults' one source) from the
+result, only when the load average stayed below the core count (``--force`` otherwise).
 """
 
 from __future__ import annotations
@@ -87,6 +91,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--builds", type=int, default=8192)
     p.add_argument("--yield-angles", type=int, default=256)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument(
+        "--write-defaults",
+        action="store_true",
+        help="write the chosen devices per core and chunk to encdesign/_tuning.json (only "
+        "when the load average stayed below the core count, unless --force)",
+    )
+    p.add_argument("--force", action="store_true", help="write the defaults under load too")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child is not None:
@@ -141,6 +152,25 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.json is not None:
         args.json.write_text(text + "\n")
+    if args.write_defaults:
+        load = max(max(r["load_average_before"], r["load_average_after"]) for r in rows)
+        if load >= cores and not args.force:
+            print(
+                f"not writing the defaults: load average up to {load:.1f} on {cores} cores "
+                "(the machine is not quiet; --force to write anyway)",
+                file=sys.stderr,
+            )
+            return 1
+        from encdesign import _tuning
+
+        tuning = {
+            "devices_per_core": res["chosen"]["devices_per_core"],
+            "chunk_readings": res["chosen"]["forward"]["chunk_readings"],
+            "source": f"benchmarks/kinematics_sweep.py {' '.join(keep)} on {time.ctime()}: "
+            f"the fastest forward pass (load average up to {load:.1f} on {cores} cores)",
+        }
+        _tuning.PATH.write_text(json.dumps(tuning, indent=2) + "\n")
+        print(f"wrote {_tuning.PATH}", file=sys.stderr)
     return 0
 
 

@@ -6,8 +6,8 @@ load). Several CPU devices run the slices of a split program side by side, one p
 the Monte Carlo drivers (:func:`encdesign.design.shard_builds`) and
 :func:`encdesign.head_errors_batch` split their builds or designs over them. So at import,
 before JAX starts its backend, encdesign asks for one CPU device per core this process may
-run on (``os.sched_getaffinity``; ``benchmarks/kinematics_sweep.py`` measured one device
-per core against two and against one device with XLA's threads), unless
+run on (``os.sched_getaffinity``; the number per core is read from ``_tuning.json``,
+written from a measured sweep: ``benchmarks/kinematics_sweep.py``), unless
 
 * the user chose already: ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``,
   ``JAX_NUM_CPU_DEVICES`` or ``jax.config.jax_num_cpu_devices`` set, or the JAX backend
@@ -28,8 +28,10 @@ from collections.abc import Mapping
 
 import jax
 
+from . import _tuning
+
 ENV = "ENCDESIGN_CPU_DEVICES"
-DEVICES_PER_CORE = 1  # from benchmarks/kinematics_sweep.py (results/kinematics-sweep.json)
+DEVICES_PER_CORE = _tuning.DEVICES_PER_CORE  # measured: _tuning.json says where from
 
 
 def _positive_int(env: Mapping[str, str], name: str) -> int | None:
@@ -63,7 +65,7 @@ def choose_cpu_devices(env: Mapping[str, str], n_cores: int) -> int | None:
     chosen = _positive_int(env, ENV)
     if chosen is not None:
         return chosen
-    n = max(int(n_cores), 1) * DEVICES_PER_CORE
+    n = max(1, round(max(int(n_cores), 1) * DEVICES_PER_CORE))
     omp = _positive_int(env, "OMP_NUM_THREADS")
     return n if omp is None else min(n, omp)
 

@@ -23,8 +23,8 @@ RTOL = 1e-13
 
 
 def test_device_count_follows_cores_unless_the_user_chose():
-    assert choose_cpu_devices({}, 2) == 2 * DEVICES_PER_CORE
-    assert choose_cpu_devices({}, 1) == DEVICES_PER_CORE
+    assert choose_cpu_devices({}, 2) == max(1, round(2 * DEVICES_PER_CORE))
+    assert choose_cpu_devices({}, 8) == max(1, round(8 * DEVICES_PER_CORE))
     assert choose_cpu_devices({"OMP_NUM_THREADS": "1"}, 2) == 1  # pytest -n 2, say
     assert choose_cpu_devices({ENV: "3", "OMP_NUM_THREADS": "1"}, 2) == 3
     flags = {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}

@@ -1,8 +1,9 @@
 """The package's layout: imports point one way between subpackages and never form a circle.
 
-Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_progress``);
-``_cpu`` and ``physics``; ``io``; the tools ``design``, ``diagnose`` (and any later tool subpackage),
-which never import each other; ``cli``; the public facades (``__init__``, ``objectives``).
+Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_progress``,
+``_tuning``); ``_cpu`` and ``physics``; ``io``; the tools ``design``, ``diagnose`` (and any
+later tool subpackage), which never import each other; ``cli``; the public facades
+(``__init__``, ``objectives``).
 A module may import its own subpackage and any lower layer. Every import counts, including
 those inside functions: a lazy import hides a circle, it does not remove it.
 """
@@ -20,6 +21,7 @@ PKG = Path(__file__).resolve().parent.parent / "encdesign"
 LAYERS = {
     "_errors": 0,
     "_progress": 0,
+    "_tuning": 0,
     "_cpu": 1,  # the CPU device default; imports _errors
     "physics": 1,
     "io": 2,

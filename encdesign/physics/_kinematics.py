@@ -40,6 +40,8 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, ArrayLike
 
+from .. import _tuning
+
 __all__ = [
     "Disk",
     "Heads",
@@ -53,7 +55,7 @@ __all__ = [
     "stack_models",
 ]
 
-_CHUNK_READINGS = 2**15  # default readings per chunk in head_errors_batch
+_CHUNK_READINGS = _tuning.CHUNK_READINGS  # readings per chunk in head_errors_batch (swept)
 _GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
 
 
