@@ -580,7 +580,9 @@ def head_errors_batch(
     ``shard_map`` region (a driver that splits its builds already) nothing is split again.
 
     Returns:
-        Errors, rad, shape ``(B, n, H)`` (laid out over the devices when split).
+        Errors, rad, shape ``(B, n, H)`` (laid out over the devices when split: it
+        combines with any array JAX placed itself; one put on a single device by hand with
+        ``jax.device_put(x, device)`` needs moving first, or ``devices=1``).
     """
     theta, _ = _as_theta(theta_rad)
     time = None if time_s is None else jnp.broadcast_to(_f64(time_s).reshape(-1), theta.shape)
