@@ -1,13 +1,30 @@
-"""Benchmark: head readings per second of the kinematic model, encdesign (JAX) vs NumPy.
+"""Benchmark: head readings per second of the kinematic model on 1 and all cores, vs NumPy.
 
 A Monte Carlo batch of encoder builds (default 1,000 designs x 4 heads x 2,048 angles,
 grating orders 1-8, with eccentricity, tilt, placement errors, beam tilts, axial motion
 and non-synchronous runout all switched on) is evaluated by
-:func:`encdesign.physics.head_errors_batch` (jit, chunked ``lax.map``) and by a plain NumPy
-implementation of the same equations in this file (vectorised, chunked; the fastest of a
-few chunk sizes is reported).
-Both results are compared, then timed (best of ``--repeats``; JAX after a warm-up
-compile).
+:func:`encdesign.physics.head_errors_batch` and by a plain NumPy implementation of the same
+equations in this file (vectorised, chunked; the fastest of a few chunk sizes is
+reported). One run measures the scaling: each configuration is a subprocess of this
+script, started with its own CPU affinity and XLA settings (they must be fixed before JAX
+starts):
+
+* ``1thread``: pinned to one core (``sched_setaffinity`` before Python starts), XLA's CPU
+  thread pool off (``--xla_cpu_multi_thread_eigen=false``), one CPU device;
+* ``xla-threads``: all cores, one CPU device: XLA's own threading only;
+* ``devices``: all cores, encdesign's default (one CPU device per core, ``docs/scale.md``):
+  the designs split over the devices;
+* ``numpy``: the NumPy baseline, pinned to one core (its agreement with encdesign is
+  checked there).
+
+For each JAX configuration: the forward pass (readings/s), value-and-gradient of the mean
+squared head error with respect to every parameter of every design (time, and its ratio
+to the forward pass of the same scalar), and, in a process of its own, the Monte Carlo
+yield of ``--yield-builds`` builds through :func:`encdesign.design.monte_carlo` with its
+default chunking (3+1 heads, ``--yield-angles`` angles, orders 1-16, the tolerances of
+``benchmarks/optimize.py``): wall time and peak resident memory. Parallel efficiency =
+rate(all cores) / (cores x rate(1thread)). The machine's load average is recorded around
+every child: timings under load are not the model's speed.
 
     python benchmarks/kinematics.py --json results/bench-kinematics.json
 """
@@ -16,9 +33,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
+import resource
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -26,8 +47,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import encdesign  # noqa: F401  (float64 on)
+import encdesign  # noqa: F401  (float64 on; CPU devices chosen before JAX starts)
 from encdesign.physics._kinematics import EncoderModel, head_errors_batch, make_model
+
+CONFIGS = ("1thread", "xla-threads", "devices")
+ONE_THREAD = "--xla_cpu_multi_thread_eigen=false"
 
 
 def make_population(key, n_designs: int, n_heads: int, n_orders: int) -> EncoderModel:
@@ -151,6 +175,147 @@ def _best_time(f, repeats: int) -> float:
     return best
 
 
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _inputs(args):
+    models = make_population(jax.random.key(args.seed), args.designs, args.heads, args.orders)
+    theta = np.arange(args.angles) * (2 * np.pi / args.angles)
+    return models, theta, theta / (2 * np.pi)  # one revolution per second
+
+
+# ----------------------------------------------------------------------------- children
+
+
+def _child_kinematics(args) -> dict:
+    """Forward pass and value-and-gradient in this process's configuration."""
+    models, theta, t_s = _inputs(args)
+    th_j, t_j = jnp.asarray(theta), jnp.asarray(t_s)
+    n_readings = args.designs * args.heads * args.angles
+    fwd = jax.jit(lambda m: head_errors_batch(m, th_j, t_j, chunk=args.chunk))
+    loss = lambda m: jnp.mean(head_errors_batch(m, th_j, t_j, chunk=args.chunk) ** 2)
+    f_loss = jax.jit(loss)
+    f_vg = jax.jit(jax.value_and_grad(loss))
+    t0 = time.perf_counter()
+    jax.block_until_ready((fwd(models), f_loss(models), f_vg(models)))
+    compile_s = time.perf_counter() - t0
+    t_fwd = _best_time(lambda: fwd(models).block_until_ready(), args.repeats)
+    t_loss = _best_time(lambda: f_loss(models).block_until_ready(), args.repeats)
+    t_vg = _best_time(lambda: jax.block_until_ready(f_vg(models)), args.repeats)
+    head = np.asarray(fwd(models)[: args.check_designs])
+    return {
+        "devices": jax.device_count(),
+        "readings": n_readings,
+        "forward_s": t_fwd,
+        "readings_per_s": n_readings / t_fwd,
+        "loss_s": t_loss,
+        "value_and_grad_s": t_vg,
+        "grad_over_forward": t_vg / t_loss,
+        "compile_s": compile_s,
+        "first_designs_errors": head.tolist(),
+        "peak_rss_mb": _peak_rss_mb(),
+    }
+
+
+def _child_yield(args) -> dict:
+    """Monte Carlo yield through the default driver (its own process: the peak memory is
+    the yield's)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from optimize import SPEC_RAD, design, tolerances
+
+    from encdesign.design import monte_carlo
+    from encdesign.objectives import Tolerances, n_build_normals, residual_rms
+
+    d = design(args.yield_angles)
+    tv = tolerances().vector()
+    fn = lambda t, z: residual_rms(d, Tolerances.from_vector(t), z)
+    kw = dict(key=jax.random.key(0), dim=n_build_normals(d))
+    rss0 = _peak_rss_mb()
+    t0 = time.perf_counter()
+    monte_carlo(fn, tv, n=min(args.yield_builds, 4096), **kw)  # compiles the chunk
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = monte_carlo(fn, tv, n=args.yield_builds, **kw)
+    wall = time.perf_counter() - t0
+    y, se = res.yield_fraction(SPEC_RAD)
+    return {
+        "devices": jax.device_count(),
+        "builds": args.yield_builds,
+        "angles": args.yield_angles,
+        "wall_s": wall,
+        "builds_per_s": args.yield_builds / wall,
+        "compile_and_warmup_s": compile_s,
+        "yield": y,
+        "yield_stderr": se,
+        "mean_rms_rad": res.mean,
+        "peak_rss_mb": _peak_rss_mb(),
+        "peak_rss_before_mb": rss0,
+    }
+
+
+def _child_numpy(args) -> dict:
+    """The NumPy baseline (fastest of ``--numpy-chunks``) and its agreement with encdesign."""
+    models, theta, t_s = _inputs(args)
+    params = numpy_params(models)
+    k = args.check_designs
+    e_jax = np.asarray(head_errors_batch(_first(models, k), theta, t_s))
+    np_chunks = [int(c) for c in args.numpy_chunks.split(",")]
+    e_np = numpy_head_errors({n: v[:k] for n, v in params.items()}, theta, t_s, np_chunks[0])
+    times = {}
+    for c in np_chunks:
+        times[c] = _best_time(lambda c=c: numpy_head_errors(params, theta, t_s, c), args.repeats)
+    best = min(times, key=times.get)
+    n_readings = args.designs * args.heads * args.angles
+    return {
+        "numpy_chunk_designs": best,
+        "numpy_seconds_by_chunk": {str(c): v for c, v in times.items()},
+        "seconds": times[best],
+        "readings_per_s": n_readings / times[best],
+        "max_abs_difference_rad": float(np.max(np.abs(e_jax - e_np))),
+    }
+
+
+def _first(models: EncoderModel, k: int) -> EncoderModel:
+    return jax.tree.map(lambda x: x[:k], models)
+
+
+def _env(config: str) -> dict:
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("XLA_FLAGS", "ENCDESIGN_CPU_DEVICES", "OMP_NUM_THREADS", "JAX_NUM_CPU_DEVICES")
+    }
+    if config in ("1thread", "numpy"):
+        env["XLA_FLAGS"] = ONE_THREAD
+        env["ENCDESIGN_CPU_DEVICES"] = "1"
+        env["OMP_NUM_THREADS"] = "1"
+    elif config == "xla-threads":
+        env["ENCDESIGN_CPU_DEVICES"] = "1"
+    return env  # "devices": encdesign's default
+
+
+def _run_child(part: str, config: str, argv: list[str], tmp: Path) -> dict:
+    out = tmp / f"{part}-{config}.json"
+    cmd = [sys.executable, str(Path(__file__).resolve()), *argv, "--child", part, str(out)]
+    pin = config in ("1thread", "numpy")
+    core = min(os.sched_getaffinity(0))
+    print(f"  {part} / {config} ...", file=sys.stderr, flush=True)
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
+    subprocess.run(
+        cmd,
+        env=_env(config),
+        check=True,
+        preexec_fn=(lambda: os.sched_setaffinity(0, {core})) if pin else None,
+    )
+    res = json.loads(out.read_text())
+    res["child_wall_s"] = time.perf_counter() - t0
+    res["load_average_before"] = load0[0]
+    res["load_average_after"] = os.getloadavg()[0]
+    return res
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--json", type=Path, default=None, help="write the results here")
@@ -169,66 +334,111 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--repeats", type=int, default=5, help="timings per version (best kept)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--yield-builds", type=int, default=1_000_000)
+    p.add_argument("--yield-angles", type=int, default=256)
+    p.add_argument("--skip-yield", action="store_true")
+    p.add_argument("--configs", default=",".join(CONFIGS), help=f"subset of {','.join(CONFIGS)}")
+    p.add_argument("--check-designs", type=int, default=16, help="designs compared")
+    p.add_argument("--child", nargs=2, metavar=("PART", "OUT"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-
-    models = make_population(jax.random.key(args.seed), args.designs, args.heads, args.orders)
-    theta = np.arange(args.angles) * (2 * np.pi / args.angles)
-    t_s = theta / (2 * np.pi)  # one revolution per second
-    n_readings = args.designs * args.heads * args.angles
-
-    run_jax = jax.jit(lambda m, th, t: head_errors_batch(m, th, t, chunk=args.chunk))
-    th_j, t_j = jnp.asarray(theta), jnp.asarray(t_s)
-    print("compiling ...", file=sys.stderr, flush=True)
-    e_jax = np.asarray(run_jax(models, th_j, t_j).block_until_ready())
-    params = numpy_params(models)
-    np_chunks = [int(c) for c in args.numpy_chunks.split(",")]
-    e_np = numpy_head_errors(params, theta, t_s, np_chunks[0])
-    max_diff = float(np.max(np.abs(e_jax - e_np)))
-    print(f"max |jax - numpy| = {max_diff:.3e} rad", file=sys.stderr)
-
-    print("timing encdesign (JAX) ...", file=sys.stderr, flush=True)
-    t_jax = _best_time(lambda: run_jax(models, th_j, t_j).block_until_ready(), args.repeats)
-    np_times = {}
-    for c in np_chunks:
-        print(f"timing NumPy, chunk {c} ...", file=sys.stderr, flush=True)
-        np_times[c] = _best_time(lambda c=c: numpy_head_errors(params, theta, t_s, c), args.repeats)
-    np_chunk = min(np_times, key=np_times.get)
-    t_np = np_times[np_chunk]
-
-    res = {
+    if args.child is not None:
+        part, out = args.child
+        fn = {"kin": _child_kinematics, "yield": _child_yield, "numpy": _child_numpy}[part]
+        Path(out).write_text(json.dumps(fn(args)))
+        return 0
+    configs = [c for c in args.configs.split(",") if c]
+    bad = [c for c in configs if c not in CONFIGS]
+    if bad:
+        p.error(f"--configs: unknown {bad}, expected a subset of {','.join(CONFIGS)}")
+    child_argv = list(sys.argv[1:] if argv is None else argv)
+    drop = {"--json", "--configs"}
+    clean, it = [], iter(child_argv)
+    for a in it:
+        if a in drop:
+            next(it, None)
+        elif not any(a.startswith(f"{d}=") for d in drop):
+            clean.append(a)
+    cores = len(os.sched_getaffinity(0))
+    res: dict = {
         "benchmark": "kinematics",
         "designs": args.designs,
         "heads": args.heads,
         "angles": args.angles,
         "grating_orders": args.orders,
-        "chunk_designs": args.chunk or "auto (2**15 readings)",
-        "numpy_chunk_designs": np_chunk,
-        "numpy_seconds_by_chunk": {str(k): v for k, v in np_times.items()},
-        "readings": n_readings,
-        "seconds": t_jax,
-        "numpy_seconds": t_np,
-        "readings_per_s": n_readings / t_jax,
-        "numpy_readings_per_s": n_readings / t_np,
-        "speedup": t_np / t_jax,
-        "max_abs_difference_rad": max_diff,
+        "chunk_designs": args.chunk or "auto",
+        "cores": cores,
         "machine": {
             "cpu_count": os.cpu_count(),
             "platform": platform.platform(),
             "jax": jax.__version__,
             "numpy": np.__version__,
-            "jax_device": str(jax.devices()[0]),
         },
+        "kinematics": {},
+        "yield": {},
     }
-    if max_diff > 1e-12:
-        print("error: JAX and NumPy disagree", file=sys.stderr)
-        return 1
+    with tempfile.TemporaryDirectory() as tmp:
+        res["numpy"] = _run_child("numpy", "numpy", clean, Path(tmp))
+        for c in configs:
+            res["kinematics"][c] = _run_child("kin", c, clean, Path(tmp))
+        if not args.skip_yield:
+            for c in configs:
+                res["yield"][c] = _run_child("yield", c, clean, Path(tmp))
+    kin, npr = res["kinematics"], res["numpy"]
+    ref = np.asarray(next(iter(kin.values()))["first_designs_errors"]) if kin else None
+    agree = {}
+    for c, r in kin.items():
+        e = np.asarray(r.pop("first_designs_errors"))
+        agree[c] = float(np.max(np.abs(e - ref)) / np.max(np.abs(ref)))
+    res["max_relative_difference_between_configs"] = agree
+    summary = {}
+    one = kin.get("1thread")
+    for c, r in kin.items():
+        row = {
+            "readings_per_s": r["readings_per_s"],
+            "vs_numpy": r["readings_per_s"] / npr["readings_per_s"],
+            "grad_over_forward": r["grad_over_forward"],
+            "load_average": r["load_average_after"],
+        }
+        if one is not None and c != "1thread":
+            row["speedup_vs_1thread"] = r["readings_per_s"] / one["readings_per_s"]
+            row["parallel_efficiency"] = row["speedup_vs_1thread"] / cores
+        y = res["yield"].get(c)
+        if y is not None:
+            row["yield_wall_s"] = y["wall_s"]
+            row["yield_peak_rss_mb"] = y["peak_rss_mb"]
+            if "1thread" in res["yield"] and c != "1thread":
+                row["yield_parallel_efficiency"] = (
+                    res["yield"]["1thread"]["wall_s"] / y["wall_s"] / cores
+                )
+        summary[c] = row
+    res["summary"] = summary
+    lines = [
+        f"{'config':<12} {'M readings/s':>13} {'x NumPy':>8} {'grad/fwd':>9} "
+        f"{'efficiency':>10} {'yield s':>8} {'peak MB':>8} {'load':>5}"
+    ]
+    for c, r in summary.items():
+        eff = r.get("parallel_efficiency")
+        lines.append(
+            f"{c:<12} {r['readings_per_s'] / 1e6:13.1f} {r['vs_numpy']:8.1f} "
+            f"{r['grad_over_forward']:9.2f} {'' if eff is None else f'{eff:.0%}':>10} "
+            f"{r.get('yield_wall_s', math.nan):8.1f} {r.get('yield_peak_rss_mb', math.nan):8.0f} "
+            f"{r['load_average']:5.1f}"
+        )
+    lines.append(
+        f"{'numpy':<12} {npr['readings_per_s'] / 1e6:13.1f} {1.0:8.1f}"
+        f"   (max |jax - numpy| = {npr['max_abs_difference_rad']:.2e} rad)"
+    )
+    print("\n".join(lines), file=sys.stderr)
     text = json.dumps(res, indent=2)
     print(text)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.json.with_name(f".tmp-{args.json.name}")
-        tmp.write_text(text + "\n")
-        os.replace(tmp, args.json)
+        tmpf = args.json.with_name(f".tmp-{args.json.name}")
+        tmpf.write_text(text + "\n")
+        os.replace(tmpf, args.json)
+    if npr["max_abs_difference_rad"] > 1e-12 or any(v > 1e-13 for v in agree.values()):
+        print("error: the configurations or NumPy disagree", file=sys.stderr)
+        return 1
     return 0
 
 

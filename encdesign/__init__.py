@@ -16,6 +16,10 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from . import _cpu as _cpu
+
+_cpu.configure()  # one CPU device per core unless the user chose (docs/scale.md)
+
 # --- errors: one root for everything encdesign raises
 from ._errors import (
     DiagnosisError as DiagnosisError,

@@ -1,7 +1,7 @@
 """The package's layout: imports point one way between subpackages and never form a circle.
 
-Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_progress``);
-``physics``; ``io``; the tools ``design``, ``diagnose``, ``calibrate`` (and any later tool
+Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_array``, ``_progress``,
+``_tuning``); ``_cpu`` and ``physics``; ``io``; the tools ``design``, ``diagnose``, ``calibrate`` (and any later tool
 subpackage), which never import each other; ``simulate`` (the bench simulators: may use the
 tools' types, e.g. a ``Design``, and none of them imports it); ``cli``; the public facades
 (``__init__``, ``objectives``).
@@ -23,6 +23,8 @@ LAYERS = {
     "_errors": 0,
     "_array": 0,
     "_progress": 0,
+    "_tuning": 0,
+    "_cpu": 1,  # the CPU device default; imports _errors
     "physics": 1,
     "io": 2,
     "design": 3,

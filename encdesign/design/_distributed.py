@@ -58,6 +58,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from .. import _cpu
 from .._errors import DistributedError, EncdesignInputError, input_error
 
 BUILDS_AXIS = "builds"
@@ -498,6 +499,9 @@ def spawn_local(
     extra = ["--coordinator", f"localhost:{port}", "--num-processes", str(processes)]
     penv = dict(os.environ if env is None else env)
     penv.setdefault("PYTHONUNBUFFERED", "1")
+    if not penv.get(_cpu.ENV) and not penv.get("OMP_NUM_THREADS"):
+        # the cores are shared: each process gets its part of encdesign's CPU devices
+        penv[_cpu.ENV] = str(max(1, _cpu.cores() // processes))
     logs, procs = [], []
     try:
         for i in range(processes):

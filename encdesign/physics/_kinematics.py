@@ -40,6 +40,7 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, ArrayLike
 
+from .. import _tuning
 from .._array import f64 as _f64
 from ._types import Angles, ArrayInput, BatchHeadErrors, HeadErrors
 
@@ -56,7 +57,7 @@ __all__ = [
     "stack_models",
 ]
 
-_CHUNK_READINGS = 2**15  # default readings per chunk in head_errors_batch
+_CHUNK_READINGS = _tuning.CHUNK_READINGS  # readings per chunk in head_errors_batch (swept)
 _GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
 
 
@@ -556,29 +557,92 @@ def head_errors_batch(
     time_s: Angles | None = None,
     *,
     chunk: int | None = None,
+    devices: int | None = None,
 ) -> BatchHeadErrors:
     """:func:`head_errors` for a batch of designs (every leaf with a leading axis ``B``).
 
-    Designs are processed ``chunk`` at a time (``lax.map`` with ``batch_size``), so peak
-    memory is about ``chunk * n * H`` times the few dozen temporaries of the model. The
-    default picks ``chunk`` so that one chunk holds about ``2**15`` readings (small
-    enough for the CPU caches, which is markedly faster than one big batch).
+    The designs are split over ``devices`` devices (default: every local device, one CPU
+    device per core unless the user chose otherwise, ``docs/scale.md``; at most ``B``):
+    each device evaluates a contiguous slice of ``ceil(B / devices)`` designs
+    (``jax.shard_map``; the last slice padded with copies of the last design, which are
+    dropped). Within a device, designs are processed ``chunk`` at a time (``lax.map`` with
+    ``batch_size``), so peak memory is about ``devices * chunk * n * H`` times the few
+    dozen temporaries of the model. The default picks ``chunk`` so that one chunk holds
+    about ``_CHUNK_READINGS`` readings (from the sweep ``benchmarks/kinematics_sweep.py``:
+    small enough for the CPU caches, which is markedly faster than one big batch).
+
+    Every design is computed by the same program on every device, so the values do not
+    depend on ``devices`` (tested to 1e-13 relative); differentiable. Inside a
+    ``shard_map`` region (a driver that splits its builds already) nothing is split again.
 
     Returns:
-        Errors, rad, shape ``(B, n, H)``.
+        Errors, rad, shape ``(B, n, H)`` (laid out over the devices when split: it
+        combines with any array JAX placed itself; one put on a single device by hand with
+        ``jax.device_put(x, device)`` needs moving first, or ``devices=1``).
     """
     theta, _ = _as_theta(theta_rad)
     time = None if time_s is None else jnp.broadcast_to(_f64(time_s).reshape(-1), theta.shape)
     n_designs = jax.tree_util.tree_leaves(models)[0].shape[0]
     if chunk is None:
         chunk = max(1, _CHUNK_READINGS // (theta.shape[0] * models.heads.angles_rad.shape[-1]))
-    chunk = min(chunk, n_designs)
-    return _batch(models, theta, time, chunk)
+    if devices is None:
+        manual = jax.sharding.get_abstract_mesh().manual_axes
+        devices = 1 if manual else len(jax.local_devices())
+    if isinstance(devices, bool) or not isinstance(devices, int) or devices < 1:
+        raise ValueError(f"head_errors_batch: devices={devices!r}, expected an integer >= 1")
+    split = min(devices, n_designs)
+    if split <= 1:
+        return _batch(models, theta, time, min(chunk, n_designs))
+    per = -(-n_designs // split)
+    return _batch_split(models, theta, time, min(chunk, per), split)
 
 
 @functools.partial(jax.jit, static_argnums=3)
 def _batch(models: EncoderModel, theta: Array, time: Array | None, chunk: int) -> Array:
     return jax.lax.map(lambda m: _errors(m, theta, time), models, batch_size=chunk)
+
+
+_SPLIT_AXIS = "designs"
+
+
+@functools.lru_cache(maxsize=8)
+def _split_mesh(n: int) -> jax.sharding.Mesh:
+    import numpy as np
+
+    devs = jax.local_devices()
+    if n > len(devs):
+        raise ValueError(f"head_errors_batch: devices={n}, only {len(devs)} local devices")
+    return jax.sharding.Mesh(np.array(devs[:n], dtype=object), (_SPLIT_AXIS,))
+
+
+@functools.partial(jax.jit, static_argnums=(3, 4))
+def _batch_split(
+    models: EncoderModel, theta: Array, time: Array | None, chunk: int, split: int
+) -> Array:
+    """:func:`_batch` with the designs cut into ``split`` contiguous slices, one per device."""
+    from jax.sharding import PartitionSpec as P
+
+    n = jax.tree_util.tree_leaves(models)[0].shape[0]
+    pad = -(-n // split) * split - n
+    padded = jax.tree.map(
+        lambda x: jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad, *x.shape[1:]))]), models
+    )
+    mesh = _split_mesh(split)
+    if time is None:
+        out = jax.shard_map(
+            lambda m, th: _batch(m, th, None, chunk),
+            mesh=mesh,
+            in_specs=(P(_SPLIT_AXIS), P()),
+            out_specs=P(_SPLIT_AXIS),
+        )(padded, theta)
+    else:
+        out = jax.shard_map(
+            lambda m, th, t: _batch(m, th, t, chunk),
+            mesh=mesh,
+            in_specs=(P(_SPLIT_AXIS), P(), P()),
+            out_specs=P(_SPLIT_AXIS),
+        )(padded, theta, time)
+    return out[:n]
 
 
 def stack_models(models: Sequence[EncoderModel]) -> EncoderModel:
