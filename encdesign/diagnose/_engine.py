@@ -2693,6 +2693,10 @@ def run_engine(
         "time_s": time.perf_counter() - t0,
     }
     doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    # issue 22 item 4 (call site): a record mostly excluded is said so, with the reasons
+    from ._nuisances import excluded_share
+
+    doc["excluded_share"] = excluded_share(prep.n, int(prep.keep.sum()), prep.excluded)
     if kind.summary is not None:
         doc.update(kind.summary(prep, base_params))
     doc["report"] = report_text(doc)
@@ -2861,6 +2865,8 @@ def report_text(doc: dict) -> str:
         f"goodness of fit: z = {g['statistic_z']:.2f}, p = {g['p_value']:.3g} "
         f"({'passes' if g['passes'] else 'fails'} at {g['alpha']})",
     ]
+    if doc.get("excluded_share"):  # issue 22 item 4 (call site): prominent, near the top
+        lines.insert(2, "WARNING: " + doc["excluded_share"]["note"])
     for e in doc["excluded_segments"]:
         lines.append(
             f"excluded: run {e['run']} t {e['t_start_s']:.4g}..{e['t_end_s']:.4g} s "
