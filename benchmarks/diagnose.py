@@ -4,8 +4,11 @@
    every head, placements, run angle offsets, one constant per head and run) evaluated by the
    engine (JAX, jit) and by a plain NumPy implementation of the same equation in this file:
    compared (max abs difference, rad) and timed.
-2. ``encdesign.diagnose`` on a 4-head x 16,000-sample recording with a hidden effect, in a
-   fresh process (compilation included; the issue's target is <= 20 s on a quiet machine).
+2. ``encdesign.diagnose`` on a 4-head x 16,000-sample recording, in a fresh process
+   (compilation included; the issue's target is <= 20 s on a quiet 2-core machine), once
+   clean and once with each effect of the multihead catalog (``CATALOG_MULTIHEAD``, each
+   at about 3x the noise: :func:`_add_effect`); ``--effects`` picks some, ``--effects none``
+   skips them.
 3. Time and peak resident memory against the number of rows (each size in a fresh process:
    a 2-head bench with ``theta_ref`` and per-run zeros, clean), ``--rows`` (default 1e4 1e5
    1e6; add 1e7 by hand: about 10 min on a quiet machine). Targets: 1e6 rows in <= 5 min and
@@ -28,10 +31,39 @@ from pathlib import Path
 
 import numpy as np
 
+LINES = 2048
+"""Signal periods per revolution of the benchmark's heads (``interpolation_error``)."""
 
-def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool):
+
+def _add_effect(name: str, e: np.ndarray, k: int, r: int, t: np.ndarray, th: np.ndarray, ctx):
+    """Add catalog effect ``name`` (rad, about 1.5 urad, i.e. 3x the 0.5 urad noise) to head
+    ``k``'s error ``e`` in run ``r`` (``t`` s, ``th`` shaft angle rad; ``ctx``: per-record
+    random draws). Equations of ``encdesign.diagnose._effects`` written with NumPy."""
+    a = ctx["alpha"][k]
+    A = 1.5e-6
+    if name == "vibration":
+        e += A * np.sin(2 * np.pi * 31.0 * t + ctx["vib_phase"][r, k])
+    elif name == "beam_tilt_axial":  # beta_k z(theta): axial runout of order 2
+        e += A * ctx["beta"][k] * np.sin(2 * th + ctx["phase"])
+    elif name == "bearing_wobble":  # (rho / R) sin(nu theta + phi - alpha_k), nu = 0.4
+        e += A * np.sin(0.4 * th + ctx["phase"] - a)
+    elif name == "thermal_drift":  # no temp_c: kappa_k (tau - tau0), tau across the runs
+        e += A * ctx["beta"][k] * (t + 5.0 * r - 10.0) / 10.0
+    elif name == "interpolation_error":  # orders L and 2 L of the head's reading
+        psi = LINES * th
+        e += A * (np.cos(psi) + 0.5 * np.sin(2 * psi + ctx["phase"]))
+    elif name == "eccentricity_shift":  # the disk centre jumps in run 1 at t = 2 s
+        if r == 1:
+            step = 1.0 / (1.0 + np.exp(-(t - 2.0) / 1e-3))
+            e += A * step * np.sin(th - a + ctx["phase"])
+    elif name not in ("clean", ""):
+        raise ValueError(f"unknown effect {name!r}")
+
+
+def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
     """A bench built in memory (no CSV): ``heads`` heads, 4 runs, 1 kHz, 0.5 urad noise,
-    disk errors of orders 1-5, per-run zeros; ``effect``: a 31 Hz vibration of 1.5 urad.
+    disk errors of orders 1-5, per-run zeros; ``effect``: ``True`` a 31 Hz vibration of
+    1.5 urad, a catalog name: that effect (:func:`_add_effect`), ``False``: clean.
 
     The columns are allocated once and filled run by run in blocks of 2**20 rows, so the
     generator itself adds little to the peak memory being measured."""
@@ -42,13 +74,19 @@ def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool):
     n = n_rows // R
     N = n * R
     alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
+    name = "vibration" if effect is True else (effect or "clean")
+    ctx = dict(
+        alpha=alpha,
+        vib_phase=rng.uniform(0, 6, (R, heads)),
+        beta=np.array([1.0, -0.6, 0.3, -0.8][:heads]),
+        phase=rng.uniform(0, 6),
+    )
     cols = {"t": np.empty(N), "run": np.empty(N, dtype=np.int64), "theta_ref": np.empty(N)}
     for k in range(heads):
         cols[f"h{k}"] = np.empty(N)
     block = 1 << 20
     for r in range(R):
         speed, th0 = 2 * np.pi * (0.6 + 0.4 * r), rng.uniform(0, 6)
-        vib_phase = rng.uniform(0, 6, heads)
         zero = rng.uniform(-3, 3, heads) + 2 * np.pi * rng.integers(-2, 3, heads)
         ref_zero = rng.uniform(-3, 3)
         for a in range(0, n, block):
@@ -63,19 +101,25 @@ def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool):
                 e = np.zeros(b - a)
                 for m in range(1, 6):
                     e += 4e-6 / m * np.sin(m * (th - alpha[k]) + m)
-                if effect:
-                    e += 1.5e-6 * np.sin(2 * np.pi * 31.0 * t + vib_phase[k])
+                _add_effect(name, e, k, r, t, th, ctx)
                 cols[f"h{k}"][sl] = th + e + rng.normal(0, 0.5e-6, b - a) + zero[k]
-    enc = {"optical_radius_m": 0.0254, "head_angles_deg": np.degrees(alpha).tolist()}
+    enc = {
+        "optical_radius_m": 0.0254,
+        "head_angles_deg": np.degrees(alpha).tolist(),
+        "signal_periods_per_rev": LINES,
+    }
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
 
+
+TARGET_4X16000_S = 20.0
+"""Seconds (compilation included) a 4-head x 16,000-sample diagnosis may take (issue 22)."""
 
 TARGET_RSS_BYTES = 2_000_000_000
 """Peak resident memory a diagnosis must stay under, at any number of rows (2 GB)."""
 
 
-def _child(n_rows: int, heads: int, effect: bool) -> dict:
+def _child(n_rows: int, heads: int, effect: bool | str) -> dict:
     """Run one diagnosis in this (fresh) process; report wall time and peak RSS."""
     t0 = time.perf_counter()
     import encdesign  # noqa: F401  (import time counts: a fresh process)
@@ -91,6 +135,7 @@ def _child(n_rows: int, heads: int, effect: bool) -> dict:
         cpu_s_total=ru.ru_utime + ru.ru_stime,
         n_rows=rec.n_rows,
         n_heads=heads,
+        effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
         verdict=d.verdict,
         named=[e["name"] for e in d.effects],
         wall_s_diagnose=t2 - t1,
@@ -158,9 +203,11 @@ def _terms_vs_numpy(repeats: int) -> dict:
     )
 
 
-def _spawn(n_rows: int, heads: int, effect: bool) -> dict:
+def _spawn(n_rows: int, heads: int, effect: bool | str) -> dict:
     cmd = [sys.executable, __file__, "--child", str(n_rows), "--heads", str(heads)]
-    if effect:
+    if isinstance(effect, str):
+        cmd += ["--effect-name", effect]
+    elif effect:
         cmd.append("--effect")
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -175,17 +222,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--heads", type=int, default=2, help=argparse.SUPPRESS)
     ap.add_argument("--effect", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--effect-name", default=None, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--effects",
+        nargs="*",
+        default=None,
+        help="catalog effects for the 4 x 16,000 timing (default: clean and all; 'none': skip)",
+    )
     args = ap.parse_args(argv)
     if args.child is not None:
-        print(json.dumps(_child(args.child, args.heads, args.effect)))
+        eff = args.effect_name if args.effect_name is not None else args.effect
+        print(json.dumps(_child(args.child, args.heads, eff)))
         return 0
+    from encdesign.diagnose._effects import CATALOG_MULTIHEAD
+
+    effects = ["clean", *CATALOG_MULTIHEAD] if args.effects is None else args.effects
+    effects = [] if effects == ["none"] else effects
     out = dict(
         machine=dict(platform=platform.platform(), cpus=os.cpu_count(), load_avg=os.getloadavg()),
         base_term_vs_numpy=_terms_vs_numpy(args.repeats),
     )
-    r16 = _spawn(16000, 4, True)
-    r16["target_s"] = 20.0
-    out["diagnose_4x16000"] = r16
+    out["diagnose_4x16000"] = []
+    for eff in effects:
+        r16 = _spawn(16000, 4, eff)
+        r16["target_s"] = TARGET_4X16000_S
+        r16["within_target_s"] = bool(r16["wall_s_diagnose"] <= TARGET_4X16000_S)
+        out["diagnose_4x16000"].append(r16)
+        print(json.dumps(r16), file=sys.stderr, flush=True)
     out["scaling"] = []
     for n in args.rows:
         r = _spawn(int(n), 2, False)

@@ -139,3 +139,43 @@ def slow_wobble_bench(speeds_rev_s=(0.7, 1.2, 1.7), nu: float = 0.4, n_per_run: 
     enc = {"optical_radius_m": 0.02, "head_angles_deg": np.degrees(alpha).tolist()}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
+
+
+def stepped_sensor_record(
+    seed: int,
+    n_steps: int = 90,
+    turns: float = 3.0,
+    both: bool = True,
+    hysteresis_rad: float = 0.0,
+    lsb_rad: float = 0.0,
+    noise_rad: float = 2e-5,
+):
+    """A static stepped calibration of a sensor against a reference (issue 22, item 5).
+
+    The rig steps the shaft by large, uneven angles (``turns`` turns in ``n_steps`` steps of
+    0.2-1.8x the mean: no steady motion),
+    settles and logs one row per step; ``t`` is the step index. ``both``: the same positions
+    again backwards. The sensor reads ``theta + e(theta) + h d / 2 + noise`` with an error
+    function of orders 1-4 (about 30x the noise), ``d`` the approach direction, quantized to
+    ``lsb_rad`` (0: not). Returns (recording, truth dict)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    step = turns * 2 * np.pi / n_steps
+    fwd = np.cumsum(step * rng.uniform(0.2, 1.8, n_steps)) + rng.uniform(0, 6.3)
+    th = np.concatenate([fwd, fwd[::-1] - 0.3 * step]) if both else fwd
+    d = np.concatenate([np.ones(n_steps), -np.ones(n_steps)]) if both else np.ones(n_steps)
+    amps = 30 * noise_rad * rng.uniform(0.3, 1.0, 4) / np.arange(1, 5)
+    ph = rng.uniform(0, 6.3, 4)
+    e = sum(amps[m - 1] * np.sin(m * th + ph[m - 1]) for m in range(1, 5))
+    h = th + e + 0.5 * hysteresis_rad * d + rng.normal(0, noise_rad, th.size) + 0.7
+    if lsb_rad > 0:
+        h = np.round(h / lsb_rad) * lsb_rad
+    cols = {"t": np.arange(th.size, dtype=float), "run": np.zeros(th.size, int)}
+    cols["theta_ref"] = th
+    cols["h0"] = h
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(amps=amps, hysteresis_rad=hysteresis_rad)

@@ -1,9 +1,10 @@
 """The package's layout: imports point one way between subpackages and never form a circle.
 
-Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_array``, ``_progress``,
-``_tuning``); ``_cpu`` and ``physics``; ``io``; the tools ``design``, ``diagnose``, ``calibrate`` (and any later tool
-subpackage), which never import each other; ``simulate`` (the bench simulators: may use the
-tools' types, e.g. a ``Design``, and none of them imports it); ``cli``; the public facades
+Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_array``,
+``_progress``, ``_tuning``); ``_cpu`` and ``physics``; ``io``; the tools ``design``,
+``diagnose``, ``calibrate`` (and any later tool subpackage), which never import each
+other; ``simulate`` (the bench simulators: may use the tools' types, e.g. a ``Design``, and
+none of them imports it); ``cli``; the public facades
 (``__init__``, ``objectives``).
 A module may import its own subpackage and any lower layer. Every import counts, including
 those inside functions: a lazy import hides a circle, it does not remove it.

@@ -216,6 +216,8 @@ def report_text(doc: dict) -> str:
         f"goodness of fit: z = {g['statistic_z']:.2f}, p = {g['p_value']:.3g} "
         f"({'passes' if g['passes'] else 'fails'} at {g['alpha']})",
     ]
+    if doc.get("excluded_share"):  # issue 22 item 4: prominent, near the top
+        lines.insert(2, "WARNING: " + doc["excluded_share"]["note"])
     for e in doc["excluded_segments"]:
         lines.append(
             f"excluded: run {e['run']} t {e['t_start_s']:.4g}..{e['t_end_s']:.4g} s "

@@ -44,6 +44,7 @@ from ._document import (
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._kind import AbstractKind as Kind
+from ._nuisances import excluded_share
 from ._prepare import noise_spectral
 from ._protocol import Prepared
 from ._select import select
@@ -358,6 +359,8 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
     doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    # issue 22 item 4: a record mostly excluded is said so, with the reasons
+    doc["excluded_share"] = excluded_share(prep.n, int(prep.keep.sum()), prep.excluded)
     doc.update(kind.summary(prep, base_params))
     return doc
 

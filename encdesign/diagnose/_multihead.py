@@ -33,6 +33,7 @@ import numpy as np
 from .._errors import input_error
 from ..io._recording import Recording
 from ..physics import _effects as fx
+from . import _stepped
 from ._candidates import Candidate, Context, Param
 from ._kind import AbstractKind
 from ._multihead_terms import (
@@ -81,7 +82,7 @@ def multihead_data(rec: Recording) -> KindData:
         y -= shaft[:, None]
     radius = enc.get("optical_radius_m")
     L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
-    return KindData(
+    kd = KindData(
         y=y,
         shaft=shaft,
         t=np.asarray(rec.columns["t"], float),
@@ -99,6 +100,15 @@ def multihead_data(rec: Recording) -> KindData:
         sensor=str(enc.get("sensor", "optical")),
         where=where,
     )
+    # issue 22 item 5: a sensor against a reference recorded step by step (no steady
+    # motion) gets one segment per run and approach direction instead of being refused
+    if (
+        H == 1
+        and has_ref
+        and _stepped.is_stepped(kd.shaft, kd.t, kd.run, kd.steady_tolerance, kd.speed_window)
+    ):
+        kd.segments = _stepped.stepped_segments(kd.shaft, kd.t, kd.run)
+    return kd
 
 
 COVERAGE_ORDER_MAX = 48
@@ -384,6 +394,9 @@ def multihead_base(prep: Prepared, M: int):
     C, R = prep.n_channels, prep.ctx.n_runs
     if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
         prep.rows["theta_raw"] = prep.rows["theta"]
+    # issue 22 item 5: a stepped record (segments given by multihead_data) is static; the
+    # flag is read by multihead_candidates and multihead_summary
+    prep.consts["stepped"] = prep.kd.segments is not None  # type: ignore[index]
     cand = _base_candidate(C, R, M)
     start = {}
     if R > 1:
@@ -460,7 +473,8 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
             out += list(getattr(_reference_terms, "CANDIDATES", ()))
             if ctx.n_runs > 1:  # one set of signal harmonics per run (per-run zeros)
                 out.append(_reference_terms.interpolation_candidate(ctx.n_runs))
-    return tuple(out)
+    # issue 22 item 5: no dynamic candidates on a static stepped record
+    return _stepped.static_candidates(tuple(out), bool(ctx.consts.get("stepped", False)))
 
 
 def multihead_summary(prep: Prepared, base_params: dict) -> dict:
@@ -475,6 +489,8 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
         return {}
     kd = prep.kd
     out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, prep.rows["reading"][:, 0], prep.run)}
+    if prep.consts.get("stepped", False):  # issue 22 item 5
+        out["sensor"]["record_type"] = "static stepped calibration (" + _stepped.STATIC_REASON + ")"
     b = base_params.get("base", {})
     if "fourier_cos_rad" in b:
         c, s_ = b["fourier_cos_rad"], b["fourier_sin_rad"]

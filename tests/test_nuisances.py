@@ -1,0 +1,45 @@
+"""Nuisances of measured benches (issue 22, item 4): ``encdesign.diagnose._nuisances``."""
+
+import numpy as np
+import pytest
+
+from encdesign import Recording
+from encdesign.diagnose import _nuisances
+from encdesign.diagnose._dispatch import diagnose
+
+
+def test_excluded_share_lists_the_reasons_above_a_third():
+    ex = [dict(n_rows=300, reason="dwell"), dict(n_rows=100, reason="start-up")]
+    w = _nuisances.excluded_share(1000, 580, ex)
+    assert w["share"] == pytest.approx(0.42)
+    assert list(w["reasons"]) == ["dwell", "start-up", "other (glitches, settling)"]
+    assert w["reasons"]["other (glitches, settling)"] == 20
+    assert _nuisances.excluded_share(1000, 700, ex) is None
+
+
+def _dwell_record(seed: int, dwell_share: float) -> Recording:
+    """Two heads and theta_ref: a steady turn, then the shaft at rest for ``dwell_share``."""
+    rng = np.random.default_rng(seed)
+    n = 1600
+    t = np.arange(n) / 200.0
+    k = int((1 - dwell_share) * n)
+    w = 2 * np.pi * rng.uniform(0.3, 0.8)
+    th = np.where(np.arange(n) < k, w * t, w * t[k - 1]) + rng.uniform(0, 6)
+    cols = {"t": t, "theta_ref": th}
+    for h, a in enumerate((0.0, 2.0)):
+        e = 1e-5 * np.sin(th - a + 1.0) + 4e-6 * np.sin(2 * (th - a))
+        cols[f"h{h}"] = th + e + rng.normal(0, 5e-7, n) + rng.uniform(-1, 1)
+    enc = {"head_angles_deg": [0.0, float(np.degrees(2.0))], "optical_radius_m": 0.02}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_a_record_mostly_at_rest_is_reported_prominently(seed):
+    d = diagnose(_dwell_record(seed, 0.45))
+    w = d.doc["excluded_share"]
+    assert w is not None and w["share"] > 1 / 3
+    assert any("dwell" in r for r in w["reasons"])
+    assert d.doc["report"].splitlines()[2].startswith("WARNING: ")
+    d = diagnose(_dwell_record(seed, 0.1))
+    assert d.doc["excluded_share"] is None
