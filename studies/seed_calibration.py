@@ -1,4 +1,4 @@
-"""The seeds' instruments as calibrated models: unknowns fitted to training figures, the rest predicted.
+"""The seeds' instruments as calibrated models: unknowns fitted to training figures, rest predicted.
 
 For each instrument of the seeds (seed 001's first and second SDS devices, seed 002's shaker
 setup) the unknowns are fitted JOINTLY by Levenberg–Marquardt (``optimistix``) to a declared
@@ -45,8 +45,8 @@ and worst error-area reductions (area taken ∝ rms).
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -687,7 +687,8 @@ def main(argv: list[str] | None = None) -> int:
     }
     for r in results:
         _progress(
-            f"{r['instrument']}: χ² {r['chi2_training']:.3g} ({r['n_training']} figures, dof {r['dof']})"
+            f"{r['instrument']}: χ² {r['chi2_training']:.3g}"
+            f" ({r['n_training']} figures, dof {r['dof']})"
         )
         for x in r["figures"]:
             z = x["residual_sigma"]
