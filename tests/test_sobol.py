@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design._tolerance import contributions, sobol_indices
+from encdesign.design import contributions, sobol_indices
 from encdesign.objectives import EncoderDesign, Tolerances, build_residual, n_build_normals
 
 TH = jnp.arange(16) * (2 * jnp.pi / 16)

@@ -159,10 +159,10 @@ from ._user import (
 from ._user import (
     variable as variable,
 )
-from ._tolerance import (
+from ._sobol import (
     SobolIndices as SobolIndices,
 )
-from ._tolerance import (
+from ._sobol import (
     sobol_indices as sobol_indices,
 )
 from ._tolerance import (
@@ -210,6 +210,6 @@ from ._validate import (
 from ._validate import (
     paired_comparison as paired_comparison,
 )
-from ._validate import (
+from ._solve import (
     validate_problem as validate_problem,
 )

@@ -45,6 +45,7 @@ from ._drivers import (
     optimise,
 )
 from ._problem import Problem
+from ._validate import Z_SIGNIFICANT, fresh_seeds, paired_comparison
 
 
 @dataclasses.dataclass(frozen=True)
@@ -435,8 +436,6 @@ def solve_problem(
     best = enum.best_solution if enum.ok else None
     fresh = None
     if best is not None and fresh_replicates:
-        from ._validate import validate_problem
-
         first = {v.name: v.values[0] for v in problem.discrete}
         start = {v.name: float(v.start) for v in problem.continuous}
         fresh = validate_problem(
@@ -558,3 +557,81 @@ def discrete_combinations(problem: Problem) -> list[dict[str, Any]]:
     """All combinations of the discrete variables' values (``[{}]`` when there are none)."""
     names = [v.name for v in problem.discrete]
     return [dict(zip(names, c)) for c in itertools.product(*(v.values for v in problem.discrete))]
+
+
+def _monte_carlo_builds(problem: Any) -> int:
+    """The problem's Monte Carlo builds per evaluation (0: deterministic)."""
+    yt = problem.yield_target
+    if yt is not None:
+        return int(yt.n_builds)
+    return int(problem.model.get("n_builds", 0) or 0)
+
+
+def validate_problem(
+    problem: Any,
+    chosen: tuple[dict[str, Any], dict[str, float]],
+    baseline: tuple[dict[str, Any], dict[str, float]],
+    *,
+    replicates: int = 8,
+    z_threshold: float = Z_SIGNIFICANT,
+) -> dict[str, Any] | None:
+    """Re-evaluate a problem's chosen design and its baseline on fresh builds.
+
+    The whole estimator (the problem's objective over its own ``n_builds`` builds) is
+    evaluated for ``replicates`` fresh seeds (:func:`fresh_seeds` of ``problem.seed``), the
+    same seeds for both designs; each replicate is one paired sample entry. Returns
+    ``None`` when the objective is not a Monte Carlo one (no ``n_builds`` in its model, or
+    ``n_builds = 0``), else the JSON-able report: :meth:`FreshComparison.as_dict` of the
+    objective (sense-adjusted: ``"lower is better"``), plus ``fresh_seeds``,
+    ``builds_per_replicate``, ``total_fresh_builds`` and per-output means on the fresh
+    replicates of both designs.
+
+    Args:
+        problem: the :class:`~encdesign.Problem`.
+        chosen, baseline: ``(discrete values, continuous inputs (SI))`` of the two designs
+            (a continuous variable missing from the inputs is at its start).
+        replicates: fresh replicates (>= 2).
+        z_threshold: see :func:`paired_comparison`.
+    """
+    n_builds = _monte_carlo_builds(problem)
+    if n_builds <= 0:
+        return None
+    if int(replicates) < 2:
+        raise input_error("fresh replicates", f"{replicates!r}", "an integer >= 2")
+    seeds = fresh_seeds(problem.seed, int(replicates))
+    name = problem.objective.outputs[0]
+    sign = -1.0 if problem.sense == "maximize" else 1.0
+    rows: dict[str, list[dict[str, float]]] = {"chosen": [], "baseline": []}
+    for s in seeds:
+        fresh = dataclasses.replace(problem, seed=s)
+        evs: dict[str, Any] = {}
+        for label, (disc, x) in (("chosen", chosen), ("baseline", baseline)):
+            key = repr(sorted(disc.items()))
+            if key not in evs:  # one evaluator (one compilation) per discrete combination
+                evs[key] = _Evaluator(fresh, dict(disc))
+            ev = evs[key]
+            xv = np.array([x.get(v.name, v.start) for v in ev.vars], dtype=np.float64)
+            u = (xv - ev.start) / ev.scale if ev.vars else np.zeros(0)
+            rows[label].append(ev.scalar_outputs(u))
+    va = np.array([sign * r[name] for r in rows["chosen"]])
+    vb = np.array([sign * r[name] for r in rows["baseline"]])
+    cmp = paired_comparison(va, vb, unit="replicates", z_threshold=z_threshold)
+    out = {
+        **cmp.as_dict(),
+        "chosen_design": {"discrete": dict(chosen[0]), "inputs": dict(chosen[1])},
+        "baseline_design": {"discrete": dict(baseline[0]), "inputs": dict(baseline[1])},
+        "objective": name,
+        "sense_adjusted": sign < 0,
+        "fresh_seeds": seeds,
+        "builds_per_replicate": n_builds,
+        "total_fresh_builds": n_builds * len(seeds),
+        "outputs_fresh": {
+            label: {
+                k: float(np.mean([r[k] for r in rs]))
+                for k in rs[0]
+                if all(math.isfinite(r[k]) for r in rs)
+            }
+            for label, rs in rows.items()
+        },
+    }
+    return out

@@ -403,22 +403,12 @@ def _fig_block(fid: str, title: str, img: str | None, caption: str) -> str:
     return f'<figure id="{fid}"><h3>{_e(title)}</h3>{img}{cap}</figure>'
 
 
-def render_html(d: Any) -> str:
-    """The whole report of a diagnosis as one HTML string (see the module docstring)."""
-    doc, rows = report_inputs(d)
+def _summary_parts(doc: dict) -> list[str]:
+    """The residual, noise and goodness-of-fit sections."""
+    parts: list[str] = []
     u = doc["unit"]
     g = doc.get("goodness_of_fit") or {}
     ho = doc.get("heldout") or {}
-    verdict = doc["verdict"]
-    parts = [
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">',
-        f"<title>encdesign diagnosis: {_e(doc.get('recording') or doc['kind'])}</title>",
-        f"<style>{_CSS}</style></head><body>",
-        f"<h1>Diagnosis of {_e(doc.get('recording') or 'a recording')}</h1>",
-        f'<p id="verdict">kind <b>{_e(doc["kind"])}</b> · verdict '
-        f'<span class="verdict v-{_e(verdict)}">{_e(verdict)}</span> · status '
-        f"{_e(doc.get('status', '-'))} · {_e(doc.get('format', ''))}</p>",
-    ]
     # summary: RMS, noise, goodness of fit
     parts.append('<h2 id="summary">Residual, noise and goodness of fit</h2>')
     parts.append(
@@ -466,6 +456,13 @@ def render_html(d: Any) -> str:
         parts.append(
             f'<p class="small">held out: {_e(ho.get("k"))} folds; {_e(ho.get("scheme", ""))}</p>'
         )
+    return parts
+
+
+def _effect_parts(doc: dict) -> list[str]:
+    """The named effects, and the alternatives and refusals."""
+    parts: list[str] = []
+    u = doc["unit"]
     # effects
     parts.append('<h2 id="effects">Named effects</h2>')
     effects = doc.get("effects") or []
@@ -531,6 +528,13 @@ def render_html(d: Any) -> str:
         if alt
         else "<p>none</p>"
     )
+    return parts
+
+
+def _located_parts(doc: dict) -> list[str]:
+    """Unexplained and located structure, and the nuisances."""
+    parts: list[str] = []
+    u = doc["unit"]
     # located structure
     parts.append('<h2 id="unexplained">Unexplained structure</h2>')
     un = doc.get("unexplained") or []
@@ -582,6 +586,13 @@ def render_html(d: Any) -> str:
         for s in doc.get("gaps") or []
     ]
     parts.append(_table(["what", "run", "t (s)", "detail"], nui) if nui else "<p>none</p>")
+    return parts
+
+
+def _figure_parts(doc: dict, rows: Any) -> list[str]:
+    """The embedded figures."""
+    parts: list[str] = []
+    effects = doc.get("effects") or []
     # figures
     parts.append('<h2 id="figures">Figures</h2>')
     if rows is None:
@@ -639,6 +650,26 @@ def render_html(d: Any) -> str:
             '<h2 id="text">Text report</h2><details><summary>show</summary>'
             f"<pre>{_e(doc['report'])}</pre></details>"
         )
+    return parts
+
+
+def render_html(d: Any) -> str:
+    """The whole report of a diagnosis as one HTML string (see the module docstring)."""
+    doc, rows = report_inputs(d)
+    verdict = doc["verdict"]
+    parts = [
+        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">',
+        f"<title>encdesign diagnosis: {_e(doc.get('recording') or doc['kind'])}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        f"<h1>Diagnosis of {_e(doc.get('recording') or 'a recording')}</h1>",
+        f'<p id="verdict">kind <b>{_e(doc["kind"])}</b> · verdict '
+        f'<span class="verdict v-{_e(verdict)}">{_e(verdict)}</span> · status '
+        f"{_e(doc.get('status', '-'))} · {_e(doc.get('format', ''))}</p>",
+    ]
+    parts += _summary_parts(doc)
+    parts += _effect_parts(doc)
+    parts += _located_parts(doc)
+    parts += _figure_parts(doc, rows)
     parts.append("</body></html>\n")
     return "\n".join(parts)
 

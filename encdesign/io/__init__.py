@@ -13,19 +13,6 @@ from ._recording import (
     write_recording as write_recording,
 )
 
-from ._study import (
-    new_figure as new_figure,
-)
-from ._study import (
-    save_figure as save_figure,
-)
-from ._study import (
-    study_parser as study_parser,
-)
-from ._study import (
-    write_results as write_results,
-)
-
 from . import _closure_recording as _closure_recording  # noqa: F401 (registers kind "closure")
 from .._progress import progress_bar as progress_bar
 from ._study import (
