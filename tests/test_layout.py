@@ -20,6 +20,8 @@ PKG = Path(__file__).resolve().parent.parent / "encdesign"
 LAYERS = {
     "_errors": 0,
     "_progress": 0,
+    "_usercode": 0,
+    "_checks": 0,
     "physics": 1,
     "io": 2,
     "design": 3,
