@@ -73,8 +73,11 @@ def float_arg(
 
 
 def _range(lower, upper, lower_open: bool = False) -> str:
-    lo = "" if lower is None else f"{lower:g} {'<' if lower_open else '<='} "
-    hi = "" if upper is None else f" <= {upper:g}"
+    def fmt(v):
+        return str(v) if isinstance(v, int) else f"{v:g}"
+
+    lo = "" if lower is None else f"{fmt(lower)} {'<' if lower_open else '<='} "
+    hi = "" if upper is None else f" <= {fmt(upper)}"
     return f"expected {lo}value{hi}"
 
 

@@ -32,7 +32,13 @@ import numpy as np
 from encdesign._progress import progress_bar
 from encdesign.design._cases import CaseRecorder
 from encdesign.design._drivers import optimise
-from encdesign.io._study import new_figure, save_figure, study_parser, write_results
+from encdesign.io._study import (
+    int_arg,
+    new_figure,
+    save_figure,
+    study_parser,
+    write_results,
+)
 from encdesign.objectives import expected_sensitivity
 
 NAME = "reference-head-opt"
@@ -68,7 +74,9 @@ def _bounded(v, lo, hi):
 
 def main(argv: list[str] | None = None) -> int:
     p = study_parser(NAME, __doc__)
-    p.add_argument("--max-order", type=int, default=16, help="highest order M (default 16)")
+    p.add_argument(
+        "--max-order", type=int_arg(1, 1000), default=16, help="highest order M (default 16)"
+    )
     p.add_argument(
         "--sigma-placement-rad", type=float, default=1e-4, help="head placement std, rad"
     )

@@ -39,6 +39,12 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+MAX_COUNT = 10_000_000
+"""Largest value of a study's plain integer flag (counts: marks, samples, trials …)."""
+MAX_NUMBER = 1e6
+"""Largest magnitude of a study's plain number flag (in the flag's unit)."""
+
+
 class _StudyParser(_OneLineParser):
     """A study's parser: after parsing, every output is checked before the study computes.
 
@@ -48,6 +54,16 @@ class _StudyParser(_OneLineParser):
     """
 
     study_name: str = ""
+
+    def add_argument(self, *args, **kwargs):  # type: ignore[override]
+        """A plain ``type=int`` becomes a count ``1 … MAX_COUNT``, a plain ``type=float`` a
+        finite number ``-MAX_NUMBER … MAX_NUMBER``; studies give narrower documented
+        ranges with :func:`int_arg` / :func:`float_arg` themselves."""
+        if kwargs.get("type") is int:
+            kwargs["type"] = int_arg(1, MAX_COUNT)
+        elif kwargs.get("type") is float:
+            kwargs["type"] = float_arg(-MAX_NUMBER, MAX_NUMBER)
+        return super().add_argument(*args, **kwargs)
 
     def parse_args(self, args=None, namespace=None):  # type: ignore[override]
         ns = super().parse_args(args, namespace)
