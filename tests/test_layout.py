@@ -20,7 +20,7 @@ PKG = Path(__file__).resolve().parent.parent / "encdesign"
 LAYERS = {
     "_errors": 0,
     "_progress": 0,
-    "_usercode": 0,
+    "_usercode": 0.5,  # base, above _errors (it raises the input error)
     "_checks": 0,
     "physics": 1,
     "io": 2,
