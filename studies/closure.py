@@ -43,7 +43,7 @@ from encdesign.calibrate import (
     harmonic_amplitudes,
     solve_closure,
 )
-from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.io import float_arg, new_figure, save_figure, study_parser, write_results
 from encdesign.physics import ARCSEC
 
 NAME = "closure"
@@ -120,18 +120,28 @@ def _instruments(n_marks: int, key) -> dict:
 def main(argv: list[str] | None = None) -> int:
     p = study_parser(NAME, __doc__)
     p.add_argument("--marks", type=int, default=None, help="marks per revolution")
-    p.add_argument("--face-arcsec", type=float, default=2.0, help="polygon face error RMS")
-    p.add_argument("--ac-noise-arcsec", type=float, default=0.1, help="autocollimator noise")
+    p.add_argument(
+        "--face-arcsec", type=float_arg(0, 3600), default=2.0, help="polygon face error RMS"
+    )
+    p.add_argument(
+        "--ac-noise-arcsec", type=float_arg(0, 3600), default=0.1, help="autocollimator noise"
+    )
     p.add_argument("--ac-samples", type=int, default=100, help="autocollimator samples per null")
     p.add_argument("--sds-samples", type=int, default=2500, help="SDS readings per null")
     p.add_argument("--trials", type=int, default=None, help="noise draws per case")
     p.add_argument(
         "--instruments",
         nargs="+",
+        choices=["first_one_pair", "first_two_pairs", "second", "second_stiff_axial"],
         default=None,
         help="subset of: first_one_pair first_two_pairs second second_stiff_axial",
     )
     args = p.parse_args(argv)
+    if args.instruments and "first_two_pairs" not in args.instruments:
+        p.error(
+            "--instruments: the N = 72 design-rule figure needs first_two_pairs "
+            f"(got {' '.join(args.instruments)})"
+        )
     n_marks = args.marks or (200 if args.quick else 10_000)
     n_trials = args.trials or (3 if args.quick else 20)
     tests = TESTS if not args.quick else {k: TESTS[k] for k in ("N12_complete", "N72_15_settings")}

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.io import int_arg, new_figure, save_figure, study_parser, write_results
 from encdesign.physics import (
     apply_map,
     averaged_error,
@@ -60,7 +60,12 @@ def _log(msg: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the study; returns 0."""
     p = study_parser(NAME, __doc__)
-    p.add_argument("--max-order", type=int, default=12, help="self-compensation order M")
+    p.add_argument(
+        "--max-order",
+        type=int_arg(1, 1000),
+        default=12,
+        help="self-compensation order M (1 … 1000)",
+    )
     args = p.parse_args(argv)
     n = 256 if args.quick else 4096
     t0 = time.perf_counter()

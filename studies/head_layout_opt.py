@@ -57,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from encdesign.design import CaseRecorder, fresh_key, optimise, paired_comparison
-from encdesign.io import new_figure, progress_bar, save_figure, study_parser, write_results
+from encdesign.io import int_arg, new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import (
     LayoutDesign,
     Tolerances,
@@ -144,7 +144,9 @@ def _gradient_check(f, angles: np.ndarray, step_rad: float = 1e-4) -> dict[str, 
 def main(argv: list[str] | None = None) -> int:
     p = study_parser(NAME, __doc__)
     p.add_argument("--sigma-placement-rad", type=float, default=1e-4, help="placement std, rad")
-    p.add_argument("--max-order", type=int, default=None, help="orders 1…M (16; quick 4)")
+    p.add_argument(
+        "--max-order", type=int_arg(1, 1000), default=None, help="orders 1…M (16; quick 4)"
+    )
     p.add_argument("--n-angles", type=int, default=None, help="samples/rev (128; quick 32)")
     p.add_argument("--builds", type=int, default=None, help="Monte Carlo builds (64; quick 4)")
     p.add_argument("--starts", type=int, default=None, help="random free starts (4; quick 1)")

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.io import int_arg, new_figure, save_figure, study_parser, write_results
 from encdesign.physics import cotangent_sensitivity, self_compensate
 
 NAME = "reference-head"
@@ -95,7 +95,9 @@ def _monte_carlo(key, n_sym, ref_rad, max_order, n_samples, n_trials, sigma):
 def main(argv: list[str] | None = None) -> int:
     """Run the study; returns 0."""
     p = study_parser(NAME, __doc__)
-    p.add_argument("--max-order", type=int, default=12, help="highest order M of the map")
+    p.add_argument(
+        "--max-order", type=int_arg(1, 1000), default=12, help="highest order M of the map"
+    )
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     max_order = args.max_order

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from encdesign.design import CaseRecorder, optimise
-from encdesign.io import new_figure, progress_bar, save_figure, study_parser, write_results
+from encdesign.io import int_arg, new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import expected_sensitivity
 
 NAME = "reference-head-opt"
@@ -66,7 +66,9 @@ def _bounded(v, lo, hi):
 
 def main(argv: list[str] | None = None) -> int:
     p = study_parser(NAME, __doc__)
-    p.add_argument("--max-order", type=int, default=16, help="highest order M (default 16)")
+    p.add_argument(
+        "--max-order", type=int_arg(1, 1000), default=16, help="highest order M (default 16)"
+    )
     p.add_argument(
         "--sigma-placement-rad", type=float, default=1e-4, help="head placement std, rad"
     )

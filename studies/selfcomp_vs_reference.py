@@ -31,7 +31,7 @@ import numpy as np
 
 import encdesign as ed
 from encdesign.calibrate import compare_maps, reference_map
-from encdesign.io import new_figure, save_figure, study_parser, write_results
+from encdesign.io import float_arg, new_figure, save_figure, study_parser, write_results
 
 NAME = "selfcomp-vs-reference"
 URAD = 1e-6
@@ -52,10 +52,14 @@ def _trig(theta, orders, amp_rad, phase):
 def main(argv: list[str] | None = None) -> int:
     p = study_parser(NAME, __doc__)
     p.add_argument("--samples", type=int, default=None, help="samples over one turn")
-    p.add_argument("--eccentricity-um", type=float, default=3.8, help="disk eccentricity")
-    p.add_argument("--mode3-urad", type=float, default=15.0, help="grating mode 3")
-    p.add_argument("--placement-urad", type=float, default=20.0, help="head placement RMS")
-    p.add_argument("--noise-urad", type=float, default=1.0, help="read noise per head")
+    p.add_argument(
+        "--eccentricity-um", type=float_arg(0, 1e6), default=3.8, help="disk eccentricity"
+    )
+    p.add_argument("--mode3-urad", type=float_arg(0, 1e6), default=15.0, help="grating mode 3")
+    p.add_argument(
+        "--placement-urad", type=float_arg(0, 1e6), default=20.0, help="head placement RMS"
+    )
+    p.add_argument("--noise-urad", type=float_arg(0, 1e6), default=1.0, help="read noise per head")
     p.add_argument(
         "--coupling-urad",
         type=float,
@@ -63,7 +67,9 @@ def main(argv: list[str] | None = None) -> int:
         default=[3.0, 2.0, 3.0],
         help="coupling error amplitude at orders 1, 2, 3",
     )
-    p.add_argument("--ref-noise-urad", type=float, default=0.5, help="reference read noise")
+    p.add_argument(
+        "--ref-noise-urad", type=float_arg(0, 1e6), default=0.5, help="reference read noise"
+    )
     args = p.parse_args(argv)
     n = args.samples or (1024 if args.quick else 4096)
     rng = np.random.default_rng(args.seed)

@@ -26,6 +26,8 @@ LAYERS = {
     "_progress": 0,
     "_tuning": 0,
     "_cpu": 1,  # the CPU device default; imports _errors
+    "_usercode": 0.5,  # base, above _errors (it raises the input error)
+    "_checks": 0,
     "physics": 1,
     "io": 2,
     "design": 3,

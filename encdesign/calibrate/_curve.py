@@ -166,13 +166,22 @@ def fit_curve(
     fold = np.floor(tm / (2 * np.pi) * n_blocks).astype(int) % n_folds
     n_train_min = min(int(np.sum(fold != f)) for f in range(n_folds))
     k_cap = (n_train_min - 2) // 2
+    if k_cap < 0:
+        raise input_error(
+            "fit_curve", f"{n} samples in {n_folds} folds", "enough samples for order 0"
+        )
+    for key, val in (("max_order", max_order), ("order", order)):
+        if val is not None and (isinstance(val, bool) or not isinstance(val, int) or val < 0):
+            raise input_error(key, f"got {val!r}", "an integer >= 0")
+    if order is not None and order > k_cap:
+        raise input_error(
+            "order",
+            f"{order} is above {k_cap}, the highest order {n} samples in {n_folds} folds resolve",
+            f"0 <= order <= {k_cap}",
+        )
     if max_order is None:
         max_order = min(12, k_cap)
     max_order = min(int(max_order), k_cap)
-    if max_order < 0 or (order is not None and order > k_cap):
-        raise input_error(
-            "fit_curve", f"{n} samples in {n_folds} folds", "enough samples for the order asked"
-        )
     orders = list(range(0, max_order + 1))
     sd = None
     if covariance_rad2 is not None:

@@ -17,9 +17,19 @@ import argparse
 import math
 from pathlib import Path
 
+from ._main import float_arg, guard_outputs, int_arg
+
 HELP = "calibration: dual-closure polygon tests and calibration curves (correction tables)"
 
 ARCSEC = math.pi / (180 * 3600)
+
+MAX_SIGMA_ARCSEC = 3600.0 * 180
+"""Largest ``--sigma-arcsec`` (half a turn: beyond it a reading noise means nothing)."""
+MAX_ORDER = 10_000
+"""Largest ``--order`` / ``--max-order`` (the record's sample count caps it further)."""
+MAX_POINTS = 1_000_000
+"""Most rows of a correction table (``--points``)."""
+MAX_FOLDS = 1000
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -30,7 +40,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--json", type=Path, default=None, help="write the result as JSON")
     c.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
     c.add_argument(
-        "--sigma-arcsec", type=float, default=None, help="known reading noise (default: residual)"
+        "--sigma-arcsec",
+        type=float_arg(0.0, MAX_SIGMA_ARCSEC, lower_open=True),
+        default=None,
+        help=f"known reading noise, arcsec (0 < S <= {MAX_SIGMA_ARCSEC:g}; default: residual)",
     )
     c.add_argument("--weighting", choices=["gls", "ols"], default="gls", help="least squares")
     c.add_argument(
@@ -43,10 +56,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
     k.add_argument("--table", type=Path, required=True, help="correction table CSV to write")
     k.add_argument("--json", type=Path, default=None, help="write the curve as JSON")
     k.add_argument("--plots", type=Path, default=None, help="write PNG figures here")
-    k.add_argument("--max-order", type=int, default=None, help="highest order tried")
-    k.add_argument("--order", type=int, default=None, help="force this order")
-    k.add_argument("--folds", type=int, default=4, help="cross-validation folds")
-    k.add_argument("--points", type=int, default=3600, help="rows of the correction table")
+    k.add_argument(
+        "--max-order",
+        type=int_arg(0, MAX_ORDER),
+        default=None,
+        help=f"highest order tried (0 … {MAX_ORDER}, capped at what the samples resolve)",
+    )
+    k.add_argument(
+        "--order", type=int_arg(0, MAX_ORDER), default=None, help="force this order (>= 0)"
+    )
+    k.add_argument(
+        "--folds", type=int_arg(2, MAX_FOLDS), default=4, help="cross-validation folds (>= 2)"
+    )
+    k.add_argument(
+        "--points",
+        type=int_arg(4, MAX_POINTS),
+        default=3600,
+        help=f"rows of the correction table (4 … {MAX_POINTS})",
+    )
 
 
 def _closure_json(res, path) -> dict:
@@ -95,11 +122,43 @@ def _plot_closure(res, out: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the action; 0 on success (bad input raises EncdesignInputError -> exit 2)."""
+    """Run the action; 0 on success (bad input raises EncdesignInputError -> exit 2).
+
+    Outputs are checked against the recording (its TOML and table) and one another before
+    any work; a failed run leaves none of them behind."""
+    from ..io._paths import recording_input_files
+
+    inputs = [("recording", p) for p in recording_input_files(args.recording)]
+    outputs = [("--json", args.json)]
+    if args.action == "curve":
+        outputs.insert(0, ("--table", args.table))
+    with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
+        return _run(args)
+
+
+_FLAGS = {"order": "--order", "max_order": "--max-order", "fit_curve n_folds": "--folds"}
+
+
+def _curve(rec, args):
+    from .._errors import EncdesignInputError
+    from ..calibrate import curve_from_recording
+
+    try:
+        return curve_from_recording(
+            rec, max_order=args.max_order, order=args.order, n_folds=args.folds
+        )
+    except EncdesignInputError as exc:  # name the flag, not the library's argument
+        msg = str(exc)
+        for key, flag in _FLAGS.items():
+            if msg.startswith(f"{key}:"):
+                raise EncdesignInputError(flag + msg[len(key) :]) from None
+        raise
+
+
+def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .._errors import input_error
-    from ..calibrate import closure_from_recording, curve_from_recording, write_correction_table
+    from ..calibrate import closure_from_recording, write_correction_table
     from ..io._recording import load_recording
     from ..io._study import write_json
 
@@ -107,8 +166,6 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "closure":
         sigma = None
         if args.sigma_arcsec is not None:
-            if not (math.isfinite(args.sigma_arcsec) and args.sigma_arcsec > 0):
-                raise input_error("--sigma-arcsec", f"got {args.sigma_arcsec}", "> 0")
             sigma = args.sigma_arcsec * ARCSEC
         res = closure_from_recording(
             rec,
@@ -143,9 +200,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {_plot_closure(res, args.plots)}")
         return 0
 
-    curve, theta, err, band_src = curve_from_recording(
-        rec, max_order=args.max_order, order=args.order, n_folds=args.folds
-    )
+    curve, theta, err, band_src = _curve(rec, args)
     path = write_correction_table(args.table, curve, args.points)
     resid = err - curve(theta)
     print(

@@ -25,13 +25,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import math
 import os
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
+from .._checks import SEED, SEED_MAX, float_arg, int_arg  # noqa: F401 (used by commands)
 from .._errors import EncdesignInputError
 from ..io._paths import OutputGuard, check_output_folder, check_outputs
 
@@ -40,64 +40,6 @@ _PKG = _CLI.parent
 
 
 # ----------------------------------------------------------------------------- shared by commands
-
-SEED_MAX = 2**63 - 1
-"""Largest PRNG seed (JAX keys take a 64-bit integer)."""
-
-
-def int_arg(lower: int | None = None, upper: int | None = None) -> Callable[[str], int]:
-    """An argparse ``type`` for an integer in ``[lower, upper]``."""
-
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if lower is not None and v < lower:
-            raise argparse.ArgumentTypeError(f"{v} is below {lower} ({_range(lower, upper)})")
-        if upper is not None and v > upper:
-            raise argparse.ArgumentTypeError(f"{v} is above {upper} ({_range(lower, upper)})")
-        return v
-
-    parse.__name__ = "integer"
-    return parse
-
-
-def float_arg(
-    lower: float | None = None,
-    upper: float | None = None,
-    *,
-    lower_open: bool = False,
-) -> Callable[[str], float]:
-    """An argparse ``type`` for a finite number in ``[lower, upper]`` (``(lower, …`` with
-    ``lower_open``)."""
-
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"{text!r} is not finite")
-        rng = _range(lower, upper, lower_open)
-        if lower is not None and (v < lower or (lower_open and v == lower)):
-            raise argparse.ArgumentTypeError(f"{text} is out of range ({rng})")
-        if upper is not None and v > upper:
-            raise argparse.ArgumentTypeError(f"{text} is out of range ({rng})")
-        return v
-
-    parse.__name__ = "number"
-    return parse
-
-
-def _range(lower, upper, lower_open: bool = False) -> str:
-    lo = "" if lower is None else f"{lower:g} {'<' if lower_open else '<='} "
-    hi = "" if upper is None else f" <= {upper:g}"
-    return f"expected {lo}value{hi}"
-
-
-SEED = int_arg(0, SEED_MAX)
-"""argparse ``type`` of a PRNG seed: an integer ``0 … 2^63-1``."""
 
 
 class OneLineParser(argparse.ArgumentParser):

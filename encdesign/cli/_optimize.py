@@ -102,7 +102,9 @@ def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
     problem = load_problem(args.problem)
     cases = resume if resume is not None else args.cases
     main = is_main_process()
-    rec = CaseRecorder(cases, resume=resume is not None, write=main, process=process_index())
+    rec = CaseRecorder(
+        cases, resume=resume is not None, write=main, process=process_index(), problem=problem
+    )
     with rec:
         result = solve(problem, recorder=rec, progress=not args.quiet, fresh_replicates=reps)
     if not main:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import io
 import json
 import math
@@ -50,6 +51,8 @@ class Case:
     outputs: dict[str, Any]
     status: str
     seed: int | None = None
+    check: str | None = dataclasses.field(default=None, compare=False)
+    """The checksum read from the file (:func:`case_check`; ``None`` when it had none)."""
 
 
 def _plain(x: Any) -> Any:
@@ -75,6 +78,23 @@ def _restore(x: Any) -> Any:
     return x
 
 
+def case_check(c: Case) -> str:
+    """The checksum written with every case line: SHA-256 (first 16 hex digits) of its
+    inputs, outputs, status and seed. ``--resume`` refuses a line whose checksum does not
+    match (a value edited by hand, a truncated or corrupted line)."""
+    text = json.dumps(
+        {
+            "inputs": _plain(c.inputs),
+            "outputs": _plain(c.outputs),
+            "status": c.status,
+            "seed": c.seed,
+        },
+        sort_keys=True,
+        allow_nan=False,
+    )
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
 def _fmt(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in FORMATS:
@@ -98,6 +118,7 @@ def cases_text(cases: Iterable[Case], fmt: str) -> str:
                     "seed": c.seed,
                     "inputs": _plain(c.inputs),
                     "outputs": _plain(c.outputs),
+                    "check": case_check(c),
                 },
                 allow_nan=False,
             )
@@ -112,13 +133,15 @@ def cases_text(cases: Iterable[Case], fmt: str) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(
-        ["case", "status", "seed", *[f"in.{k}" for k in in_names]] + [f"out.{k}" for k in out_names]
+        ["case", "status", "seed", *[f"in.{k}" for k in in_names]]
+        + [f"out.{k}" for k in out_names]
+        + ["check"]
     )
     for c in cases:
         row = [str(c.case), c.status, "" if c.seed is None else str(c.seed)]
         row += [json.dumps(_plain(c.inputs[k])) if k in c.inputs else "" for k in in_names]
         row += [json.dumps(_plain(c.outputs[k])) if k in c.outputs else "" for k in out_names]
-        w.writerow(row)
+        w.writerow([*row, case_check(c)])
     return buf.getvalue()
 
 
@@ -140,6 +163,12 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise input_error(str(path), f"cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise input_error(
+            str(path), f"not a text file (byte {exc.start} is not UTF-8)", "a case file"
+        ) from None
+    if "\x00" in text:
+        raise input_error(str(path), "not a text file (NUL bytes)", "a case file")
     out: list[Case] = []
     if fmt == ".jsonl":
         for lineno, line in enumerate(text.splitlines(), start=1):
@@ -154,6 +183,7 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
                         {k: _restore(v) for k, v in d["outputs"].items()},
                         str(d["status"]),
                         None if d.get("seed") is None else int(d["seed"]),
+                        None if d.get("check") is None else str(d["check"]),
                     )
                 )
             except (ValueError, KeyError, TypeError, AttributeError) as exc:
@@ -171,8 +201,11 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
         if len(row) != len(header):
             raise input_error(f"{path}:{lineno}", f"{len(row)} cells", f"{len(header)} cells")
         try:
-            inputs, outputs = {}, {}
+            inputs, outputs, check = {}, {}, None
             for name, cell in zip(header[3:], row[3:]):
+                if name == "check":
+                    check = cell or None
+                    continue
                 if cell == "":
                     continue
                 val = _restore(json.loads(cell))
@@ -182,7 +215,8 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
                     outputs[name[4:]] = val
                 else:
                     raise EncdesignInputError(f"column {name!r} is neither in.* nor out.*")
-            out.append(Case(int(row[0]), inputs, outputs, row[1], int(row[2]) if row[2] else None))
+            seed = int(row[2]) if row[2] else None
+            out.append(Case(int(row[0]), inputs, outputs, row[1], seed, check))
         except ValueError as exc:
             raise input_error(f"{path}:{lineno}", f"bad case row ({exc})") from None
     return out
@@ -193,6 +227,40 @@ def case_key(inputs: Mapping[str, Any], seed: int | None) -> str:
     its seed. Recorded floats round-trip exactly, so a recomputed design point matches."""
     plain = {str(k): _plain(_restore(_plain(v))) for k, v in inputs.items()}
     return json.dumps({"inputs": plain, "seed": seed}, sort_keys=True, allow_nan=False)
+
+
+def verify_case(c: Case, path: str | os.PathLike, problem: Any = None) -> None:
+    """Refuse a case read for ``--resume`` that cannot be trusted.
+
+    Its checksum (:func:`case_check`) must match the line, its inputs must be finite and,
+    with ``problem``, inside the bounds of the problem's continuous variables (SI).
+
+    Raises:
+        EncdesignInputError: naming the file, the case and what failed.
+    """
+    where = f"{path}: case {c.case}"
+    if c.check is None:
+        raise input_error(where, "has no checksum", "a case file written by this encdesign")
+    if c.check != case_check(c):
+        raise input_error(
+            where, "checksum does not match its values (edited or corrupted)", "the file as written"
+        )
+    bounds = {}
+    if problem is not None:
+        bounds = {v.name: (v.lower, v.upper) for v in getattr(problem, "continuous", ())}
+    for k, v in c.inputs.items():
+        vals = np.asarray(v, dtype=object).reshape(-1)
+        for x in vals:
+            if isinstance(x, bool) or not isinstance(x, int | float):
+                continue
+            if not math.isfinite(x):
+                raise input_error(f"{where}: inputs.{k}", f"{x!r} is not finite", "finite inputs")
+            if k in bounds and not bounds[k][0] <= x <= bounds[k][1]:
+                raise input_error(
+                    f"{where}: inputs.{k}",
+                    f"{x!r} outside the problem's bounds [{bounds[k][0]}, {bounds[k][1]}] (SI)",
+                    "a case of this problem",
+                )
 
 
 def part_path(path: str | os.PathLike, process: int) -> Path:
@@ -233,6 +301,7 @@ class CaseRecorder:
         resume: bool = False,
         write: bool = True,
         process: int = 0,
+        problem: Any = None,
     ):
         self.path = None if path is None else Path(path)
         if self.path is not None:
@@ -248,6 +317,7 @@ class CaseRecorder:
             files = [self.path] if self.path.exists() else []
             for f in files + _part_files(self.path):
                 for c in read_cases(f):
+                    verify_case(c, f, problem)
                     self.previous.setdefault(case_key(c.inputs, c.seed), c)
 
     @property

@@ -202,6 +202,11 @@ class Problem:
         return tuple(v for v in self.variables if v.discrete)
 
 
+MAX_MAGNITUDE_SI = 1e12
+"""Largest magnitude of a continuous variable's start or bound, in SI units: beyond it a
+value is a typing slip (``upper = 1e300`` degrees), not a design."""
+
+
 def _where(path: Path | str, *keys: str) -> str:
     return f"{path}: " + ".".join(keys) if keys else str(path)
 
@@ -248,6 +253,9 @@ def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
             xs = x * factor
             if not info.lower <= xs <= info.upper:
                 raise input_error(w, f"{v!r} outside [{info.lower}, {info.upper}] (SI)")
+            limit = model_limit(name)  # a count named like a [model] setting (n_builds …)
+            if limit is not None and not limit.admits(int(xs) if info.integer else xs):
+                raise input_error(w, f"{show(v)}", limit.describe())
             out.append(int(x) if info.integer else xs)
         if len(set(out)) != len(out):
             raise input_error(f"{where}.values", f"{vals!r} has repeated values", "distinct")
@@ -267,6 +275,13 @@ def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
         start = _num(table["start"], f"{where}.start") * factor
     else:
         start = float(info.start)
+    for k in ("start", "lower", "upper"):
+        if k in table and not abs(_num(table[k], f"{where}.{k}") * factor) <= MAX_MAGNITUDE_SI:
+            raise input_error(
+                f"{where}.{k}",
+                f"{show(table[k])} {units}",
+                f"|value| <= {MAX_MAGNITUDE_SI:g} in SI units ({info.units})",
+            )
     lower = _num(table["lower"], f"{where}.lower") * factor if "lower" in table else info.lower
     upper = _num(table["upper"], f"{where}.upper") * factor if "upper" in table else info.upper
     if not lower < upper:
@@ -494,6 +509,10 @@ def parse_problem(
             "bfgs, lbfgsb, grid or lhs",
         )
     name = head.get("name", Path(src).stem)
+    if not isinstance(name, str) or not name.strip():
+        raise input_error(
+            _where(src, "problem", "name"), f"{show(name)[:60]}", "a non-empty string"
+        )
     return Problem(
         str(name),
         spec,

@@ -57,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import EncdesignInputError, input_error
+from .._usercode import user_code
 from ._spec import SI_UNITS, ProblemObjective, VariableInfo
 
 __all__ = [
@@ -180,6 +181,23 @@ def objective_function(
     return wrap
 
 
+_TRACING_ERRORS: tuple[type[BaseException], ...] = tuple(
+    getattr(jax.errors, n)
+    for n in (
+        "ConcretizationTypeError",
+        "TracerArrayConversionError",
+        "TracerBoolConversionError",
+        "TracerIntegerConversionError",
+        "UnexpectedTracerError",
+        "JAXTypeError",
+        "JAXIndexError",
+    )
+    if isinstance(getattr(jax.errors, n, None), type)
+)
+"""JAX's errors about traced values: let through, the checks name them as 'not
+differentiable' in the user's terms."""
+
+
 def _resolve(name: str, where: str) -> tuple[Callable, str]:
     """The function and its ``module:function`` path for ``name``."""
     if ":" in name:
@@ -187,7 +205,10 @@ def _resolve(name: str, where: str) -> tuple[Callable, str]:
         if not mod_name or not attr:
             raise input_error(where, f"objective path {name!r}", "'package.module:function'")
         try:
-            mod = importlib.import_module(mod_name)
+            with user_code(f"{where}: objective module {mod_name!r}", keep=(Exception,)):
+                mod = importlib.import_module(mod_name)
+        except EncdesignInputError:
+            raise
         except Exception as exc:  # any import failure: name the module and the cause
             raise input_error(
                 where,
@@ -205,7 +226,12 @@ def _resolve(name: str, where: str) -> tuple[Callable, str]:
         raise KeyError(name)
     ep = eps[0]
     try:
-        fn = ep.load()
+        with user_code(
+            f"{where}: objective {name!r} (entry point {ep.value!r})", keep=(Exception,)
+        ):
+            fn = ep.load()
+    except EncdesignInputError:
+        raise
     except Exception as exc:
         raise input_error(
             where,
@@ -262,7 +288,8 @@ def load_user_objective(name: str, where: str = "problem.objective") -> ProblemO
         disc = dict(discrete)
 
         def evaluate(x: dict[str, Any]) -> dict[str, Any]:
-            out = fn(dict(x), dict(disc), dict(model), key)
+            with user_code(f"objective {path!r}", keep=_TRACING_ERRORS):
+                out = fn(dict(x), dict(disc), dict(model), key)
             if not isinstance(out, Mapping):
                 raise input_error(
                     f"objective {path!r}",

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import DiagnosisError, input_error
+from .._usercode import user_module_items
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
 from ._settings import FinderSettings
@@ -69,16 +70,13 @@ def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
         raise input_error(f"--candidates {p}", "no such file", "a Python file")
     spec = importlib.util.spec_from_file_location(f"encdesign_user_candidates_{p.stem}", p)
     mod = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(mod)  # type: ignore[union-attr]
-    except Exception as ex:  # the user's file: report it as bad input
-        raise input_error(f"--candidates {p}", f"cannot be imported ({ex!r})") from ex
-    cands = getattr(mod, "CANDIDATES", None)
-    if cands is None or not all(isinstance(c, Candidate) for c in cands):
-        raise input_error(
-            f"--candidates {p}", "no CANDIDATES sequence of Candidate", "CANDIDATES = [...]"
-        )
-    return tuple(cands)
+    return user_module_items(  # the user's file and functions run under the guard
+        f"--candidates {p}",
+        lambda: (spec.loader.exec_module(mod), mod)[1],  # type: ignore[union-attr]
+        "CANDIDATES",
+        Candidate,
+        ("fn", "applies", "start", "plausible", "derived"),
+    )
 
 
 def diagnose(

@@ -16,6 +16,12 @@ from ._recording import (
 from . import _closure_recording as _closure_recording  # noqa: F401 (registers kind "closure")
 from .._progress import progress_bar as progress_bar
 from ._study import (
+    float_arg as float_arg,
+)
+from ._study import (
+    int_arg as int_arg,
+)
+from ._study import (
     new_figure as new_figure,
 )
 from ._study import (

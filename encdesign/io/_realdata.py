@@ -403,6 +403,13 @@ def read_magalpha_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
     if bad.size:
         raise input_error(f"{where}, line {int(bad[0]) + 2}", "non-finite value", "finite")
+    bad = np.flatnonzero(np.any(np.abs(a) > 720.0, axis=1))
+    if bad.size:
+        raise input_error(
+            f"{where}, line {int(bad[0]) + 2}",
+            f"angle {a[bad[0]].tolist()} deg",
+            "angles of one turn in degrees (|angle| <= 720)",
+        )
     return a[:, 0], a[:, 1]
 
 

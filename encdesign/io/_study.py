@@ -17,8 +17,20 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import SEED, float_arg, int_arg
 from .._errors import EncdesignInputError
 from ._paths import atomic_output, atomic_write_text
+
+__all__ = [
+    "float_arg",
+    "int_arg",
+    "new_figure",
+    "save_figure",
+    "study_parser",
+    "to_jsonable",
+    "write_json",
+    "write_results",
+]
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -28,17 +40,75 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+MAX_COUNT = 10_000_000
+"""Largest value of a study's plain integer flag (counts: marks, samples, trials …)."""
+MAX_NUMBER = 1e6
+"""Largest magnitude of a study's plain number flag (in the flag's unit)."""
+
+
+class _StudyParser(_OneLineParser):
+    """A study's parser: after parsing, every output is checked before the study computes.
+
+    ``--out`` must be a folder that can be created or written, ``--json`` and
+    ``OUT/<name>.json`` files that can be written and are none of the study's input files
+    (its other ``Path`` flags); a refusal is exit 2 naming the flag, with nothing written.
+    """
+
+    study_name: str = ""
+
+    def add_argument(self, *args, **kwargs):  # type: ignore[override]
+        """A plain ``type=int`` becomes a count ``1 … MAX_COUNT``, a plain ``type=float`` a
+        finite number ``-MAX_NUMBER … MAX_NUMBER``; studies give narrower documented
+        ranges with :func:`int_arg` / :func:`float_arg` themselves."""
+        if kwargs.get("type") is int:
+            kwargs["type"] = int_arg(1, MAX_COUNT)
+        elif kwargs.get("type") is float:
+            kwargs["type"] = float_arg(-MAX_NUMBER, MAX_NUMBER)
+        return super().add_argument(*args, **kwargs)
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        ns = super().parse_args(args, namespace)
+        from .._errors import EncdesignInputError
+        from ._paths import check_output_folder, check_outputs
+
+        inputs = [
+            (f"--{a.dest.replace('_', '-')}", getattr(ns, a.dest))
+            for a in self._actions
+            if a.type is Path and a.dest not in ("out", "json") and getattr(ns, a.dest, None)
+        ]
+        inputs = [(lab, p) for lab, p in inputs if Path(p).is_file()]
+        outs = [("--out", Path(ns.out) / f"{self.study_name}.json")]
+        if ns.json is not None:
+            outs.append(("--json", Path(ns.json)))
+        try:
+            check_output_folder("--out", ns.out, inputs)
+            if ns.json is not None and _same(Path(ns.json), outs[0][1]):
+                outs.pop()  # the --json copy is OUT/<name>.json: written once
+            check_outputs(inputs, outs)
+        except EncdesignInputError as exc:
+            self.error(str(exc))
+        return ns
+
+
+def _same(a: Path, b: Path) -> bool:
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
 def study_parser(name: str, doc: str | None) -> argparse.ArgumentParser:
     """An argument parser with the flags every study has.
 
     ``--out DIR`` (default ``results/<name>``), ``--json FILE`` (summary also written
     there), ``--seed N`` (PRNG seed, default 0), ``--quick`` (smaller sizes for tests).
+    The outputs are checked when the arguments are parsed, before the study computes.
+    Studies give their numeric flags checked types (:func:`int_arg`, :func:`float_arg`,
+    re-exported here) with their documented range.
     """
     title = (doc or name).strip().splitlines()[0]
-    p = _OneLineParser(prog=f"encdesign study run {name}", description=title)
+    p = _StudyParser(prog=f"encdesign study run {name}", description=title)
+    p.study_name = name
     p.add_argument("--out", type=Path, default=Path("results") / name, help="output folder")
     p.add_argument("--json", type=Path, default=None, help="also write the summary JSON here")
-    p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--seed", type=SEED, default=0, help="PRNG seed, 0 … 2^63-1 (default 0)")
     p.add_argument("--quick", action="store_true", help="smaller sizes (for tests)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     return p

@@ -184,6 +184,11 @@ def _column(
     """Convert one column's strings of a block; ``kind`` is ``"f"``, ``"i"`` or ``"U"``."""
     if kind == "U":
         return np.asarray([v.strip() for v in values], dtype=str)
+    for v, ln in zip(values, lines):  # Python reads "1_0" as 10: a number has no '_'
+        if "_" in v:
+            raise input_error(
+                f"{where}, line {ln}, column '{name}'", f"non-numeric value {v!r}", "a number"
+            )
     if kind == "i":
         try:
             return np.asarray(values, dtype=np.int64)
