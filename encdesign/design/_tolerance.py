@@ -671,9 +671,17 @@ def pareto_front(
                 allocs[t], warm_from[t] = anchor, None
                 bar.update()
                 continue
-            # neighbour towards the first point: the last good allocation on that side
+            # neighbour towards the first point: the last usable allocation on that side (one
+            # that hit its step cap is still scaled to its yield goal: a start, not a result)
             side = range(i - 1, i0 - 1, -1) if i > i0 else range(i + 1, i0 + 1)
-            prev = next((ts[j] for j in side if ts[j] in allocs and allocs[ts[j]].ok), None)
+            prev = next(
+                (
+                    ts[j]
+                    for j in side
+                    if ts[j] in allocs and allocs[ts[j]].status in (SUCCESS, MAX_STEPS)
+                ),
+                None,
+            )
             start = allocs[prev].sigmas if (warm and prev is not None) else None
             kw = dict(allocate_kw)
             if start is not None:  # already near the front: only the final (stiff) penalty
