@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
 
-def f64(x: ArrayLike) -> Array:
-    """``x`` as a float64 JAX array (encdesign computes in float64 throughout)."""
+def f64(x: ArrayLike | Sequence[ArrayLike] | Sequence[Sequence[ArrayLike]]) -> Array:
+    """``x`` as a float64 JAX array (encdesign computes in float64 throughout); ``x`` may be
+    an array, a scalar or a (nested) sequence of numbers."""
     return jnp.asarray(x, dtype=jnp.float64)
 
 

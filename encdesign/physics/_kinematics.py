@@ -42,7 +42,7 @@ from jaxtyping import Array, ArrayLike
 
 from .. import _tuning
 from .._array import f64 as _f64
-from ._types import Angles, ArrayInput, BatchHeadErrors, HeadErrors
+from ._types import Angles, ArrayInput, BatchHeadErrors, HeadAngles, HeadErrors
 
 __all__ = [
     "Disk",
@@ -197,7 +197,7 @@ class EncoderModel(eqx.Module):
     @staticmethod
     def nominal(
         radius_m: float,
-        head_angles_rad: ArrayLike,
+        head_angles_rad: HeadAngles,
         n_orders: int,
         *,
         gap_m: float = 1e-3,
@@ -231,18 +231,18 @@ class EncoderModel(eqx.Module):
 
 def make_model(
     radius_m: float,
-    head_angles_rad: ArrayLike,
+    head_angles_rad: HeadAngles,
     *,
-    eccentricity_m: ArrayLike = (0.0, 0.0),
-    tilt_rad: ArrayLike = (0.0, 0.0),
-    grating_sin_rad: ArrayLike = (),
-    grating_cos_rad: ArrayLike | None = None,
-    placement_error_rad: ArrayLike | None = None,
-    beam_tilt_rad: ArrayLike | None = None,
+    eccentricity_m: ArrayInput = (0.0, 0.0),
+    tilt_rad: ArrayInput = (0.0, 0.0),
+    grating_sin_rad: ArrayInput = (),
+    grating_cos_rad: ArrayInput | None = None,
+    placement_error_rad: ArrayInput | None = None,
+    beam_tilt_rad: ArrayInput | None = None,
     gap_m: float = 1e-3,
-    noise_rad: ArrayLike = 0.0,
-    axial_cos_m: ArrayLike = (),
-    axial_sin_m: ArrayLike | None = None,
+    noise_rad: ArrayInput = 0.0,
+    axial_cos_m: ArrayInput = (),
+    axial_sin_m: ArrayInput | None = None,
     runout_amplitude_m: float = 0.0,
     runout_ratio: float = 0.0,
     runout_phase_rad: float = 0.0,
@@ -313,7 +313,7 @@ _TAN_3PI_8 = 2.41421356237309504880
 
 
 @jax.custom_jvp
-def _atan(x: Array) -> Array:
+def _atan(x: ArrayLike) -> Array:
     """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere.
 
     Its derivative is given in closed form (``1 / (1 + x²)``, :func:`_atan_jvp`) rather than

@@ -51,6 +51,17 @@ from .._array import f64 as _f64
 from .._errors import EncdesignInputError
 from ._selfcomp import EncoderMap
 from ._theorem import fourier_coefficients
+from ._types import (
+    Angles,
+    Averaged,
+    HeadAngles,
+    HeadReadings,
+    HeadWeights,
+    LayoutPhases,
+    OrderValues,
+    SampleValues,
+    ScalarOut,
+)
 
 __all__ = [
     "LayoutCompensation",
@@ -72,14 +83,14 @@ def _weights(n: int, weights: ArrayLike | None) -> Array:
     return w / jnp.sum(w)
 
 
-def layout_phases(head_angles_rad: ArrayLike, max_order: int) -> Array:
+def layout_phases(head_angles_rad: HeadAngles, max_order: int) -> LayoutPhases:
     """``u_kj = exp(-i j alpha_k)``: ``(M, H)`` complex128 for orders ``1 … M``."""
     a = _f64(head_angles_rad).reshape(-1)
     j = jnp.arange(1, max_order + 1, dtype=jnp.float64)
     return jnp.exp(-1j * j[:, None] * a[None, :])
 
 
-def layout_gain(head_angles_rad: ArrayLike, max_order: int) -> Array:
+def layout_gain(head_angles_rad: HeadAngles, max_order: int) -> OrderValues:
     """``G_j = H (1 - |mean_k u_kj|^2)`` for orders ``1 … M`` (dimensionless, ``(M,)``):
     the information the head differences carry about order ``j`` (0: unobservable)."""
     u = layout_phases(head_angles_rad, max_order)
@@ -96,8 +107,8 @@ def _safe_inv_sqrt(g: Array) -> tuple[Array, Array]:
 
 
 def layout_noise_amplification(
-    head_angles_rad: ArrayLike, max_order: int, weights: ArrayLike | None = None
-) -> tuple[Array, Array, Array]:
+    head_angles_rad: HeadAngles, max_order: int, weights: HeadWeights = None
+) -> tuple[OrderValues, OrderValues, ScalarOut]:
     """Noise amplification of least-squares self-compensation (module docstring).
 
     Args:
@@ -132,7 +143,7 @@ def layout_noise_amplification(
 
 
 def unobservable_orders(
-    head_angles_rad: ArrayLike, max_order: int, *, min_gain: float = 1e-6
+    head_angles_rad: HeadAngles, max_order: int, *, min_gain: float = 1e-6
 ) -> list[int]:
     """Orders ``j <= max_order`` the layout cannot observe: ``1 - |mean_k u_kj|^2 <=
     min_gain`` (every head at the same phase ``j alpha_k`` modulo ``2 pi``). Concrete
@@ -144,7 +155,7 @@ def unobservable_orders(
 
 
 def check_layout(
-    head_angles_rad: ArrayLike, *, min_separation_rad: float = 1e-6, where: str = "head_angles"
+    head_angles_rad: HeadAngles, *, min_separation_rad: float = 1e-6, where: str = "head_angles"
 ) -> None:
     """Raise :class:`~encdesign.EncdesignInputError` when the layout has fewer than two heads,
     a non-finite azimuth, or two heads closer than ``min_separation_rad`` (modulo ``2 pi``),
@@ -196,7 +207,7 @@ class LayoutCompensation(eqx.Module):
         """Highest order ``M``."""
         return int(self.sin_rad.shape[0])
 
-    def error_function(self, theta_rad: ArrayLike) -> Array:
+    def error_function(self, theta_rad: Angles) -> Averaged:
         """``e(theta)`` of a head at azimuth 0, rad (unobservable orders left out)."""
         th = _f64(theta_rad)
         j = jnp.arange(1, self.max_order + 1)
@@ -206,9 +217,9 @@ class LayoutCompensation(eqx.Module):
 
 @functools.partial(jax.jit, static_argnames="max_order")
 def least_squares_compensate(
-    theta_rad: ArrayLike,
-    readings_rad: Array,
-    head_angles_rad: ArrayLike,
+    theta_rad: SampleValues,
+    readings_rad: HeadReadings,
+    head_angles_rad: HeadAngles,
     max_order: int,
 ) -> LayoutCompensation:
     """Recover the disk's error function from head differences for any head layout.
@@ -256,7 +267,9 @@ def least_squares_compensate(
 
 
 def layout_map(
-    result: LayoutCompensation, weights: ArrayLike | None = None, head_angles_rad: ArrayLike = None
+    result: LayoutCompensation,
+    weights: HeadWeights = None,
+    head_angles_rad: HeadAngles | None = None,
 ) -> EncoderMap:
     """Map of the weighted head average: order ``j`` is ``T_j â_j``, ``T_j = sum_k w_k
     u_kj`` over the compensation's heads (or ``head_angles_rad`` when given: a subset or

@@ -33,11 +33,24 @@ import functools
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike
+from jaxtyping import Array
 
 from .._array import f64 as _f64
 from .._errors import EncdesignInputError
 from ._theorem import fourier_coefficients
+from ._types import (
+    Angles,
+    Averaged,
+    HeadAngles,
+    HeadReadings,
+    HeadWeights,
+    OrderCoefficients,
+    OrderCoefficientsOut,
+    OrderValues,
+    SampleValues,
+    Scalar,
+    ScalarOut,
+)
 
 __all__ = [
     "cotangent_equations",
@@ -51,11 +64,11 @@ __all__ = [
 
 
 def cotangent_equations(
-    diff_sin_rad: ArrayLike,
-    diff_cos_rad: ArrayLike,
-    head_offset_rad: ArrayLike,
-    orders: ArrayLike | None = None,
-) -> tuple[Array, Array]:
+    diff_sin_rad: OrderCoefficients,
+    diff_cos_rad: OrderCoefficients,
+    head_offset_rad: Scalar,
+    orders: OrderCoefficients | None = None,
+) -> tuple[OrderCoefficientsOut, OrderCoefficientsOut]:
     """Seed eq. 16/35: reference-head error coefficients from one pair's differences.
 
     Args:
@@ -107,7 +120,7 @@ class SelfCompensation(eqx.Module):
         """Highest order ``M``."""
         return int(self.sin_rad.shape[0])
 
-    def error_function(self, theta_rad: ArrayLike) -> Array:
+    def error_function(self, theta_rad: Angles) -> Averaged:
         """The reference head's error ``e_0(theta)``, rad, at angles ``theta`` (rad)."""
         th = _f64(theta_rad)
         j = jnp.arange(1, self.max_order + 1)
@@ -117,9 +130,9 @@ class SelfCompensation(eqx.Module):
 
 @functools.partial(jax.jit, static_argnames=("reference_head", "max_order"))
 def self_compensate(
-    theta_rad: ArrayLike,
-    readings_rad: Array,
-    head_angles_rad: ArrayLike,
+    theta_rad: SampleValues,
+    readings_rad: HeadReadings,
+    head_angles_rad: HeadAngles,
     reference_head: int,
     max_order: int,
     *,
@@ -192,7 +205,7 @@ class EncoderMap(eqx.Module):
     sin_rad: Array
     cos_rad: Array
 
-    def __call__(self, theta_rad: ArrayLike) -> Array:
+    def __call__(self, theta_rad: Angles) -> Averaged:
         """``m(theta)``, rad, at angles ``theta`` (rad), any shape."""
         th = _f64(theta_rad)
         j = jnp.arange(1, self.sin_rad.shape[0] + 1)
@@ -208,8 +221,8 @@ class EncoderMap(eqx.Module):
 
 def encoder_map(
     result: SelfCompensation,
-    head_angles_rad: ArrayLike,
-    weights: ArrayLike | None = None,
+    head_angles_rad: HeadAngles,
+    weights: HeadWeights = None,
 ) -> EncoderMap:
     """Map of the weighted average of the heads at ``head_angles_rad`` (seed eqs. 17-18).
 
@@ -233,7 +246,7 @@ def encoder_map(
     return EncoderMap(sin_rad=-jnp.imag(amp), cos_rad=jnp.real(amp))
 
 
-def apply_map(emap: EncoderMap, reading_rad: ArrayLike) -> Array:
+def apply_map(emap: EncoderMap, reading_rad: Angles) -> Averaged:
     """Correct averaged readings: ``reading - m(reading)``, rad (the map is evaluated at
     the reading itself, since the true angle is unknown; the error this makes is the
     map's slope times the residual, second order)."""
@@ -243,11 +256,11 @@ def apply_map(emap: EncoderMap, reading_rad: ArrayLike) -> Array:
 
 @functools.partial(jax.jit, static_argnames="max_order")
 def cotangent_sensitivity(
-    reference_angle_rad: ArrayLike,
-    head_angles_rad: ArrayLike,
+    reference_angle_rad: Scalar,
+    head_angles_rad: HeadAngles,
     max_order: int,
-    weights: ArrayLike | None = None,
-) -> tuple[Array, Array]:
+    weights: HeadWeights = None,
+) -> tuple[OrderValues, ScalarOut]:
     """Noise amplification of self-compensation for a reference-head angle (seed III.D).
 
     Model: every head's reading carries independent white noise, so each Fourier

@@ -13,13 +13,16 @@ from collections.abc import Sequence
 
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-ArrayInput = ArrayLike | Sequence[float]
-"""Any array input without a checked shape: an array, a scalar or a sequence of floats."""
-Angles = Float[ArrayLike, "*n"] | Sequence[float]
+ArrayInput = ArrayLike | Sequence[ArrayLike]
+"""Any array input without a checked shape: an array, a scalar or a sequence of numbers
+(plain or traced, e.g. ``(e_x, 0.0)`` with ``e_x`` under ``jax.grad``)."""
+Scalar = Float[ArrayLike, ""] | float
+"""One number (a Python float, a 0-d array or a traced scalar), unit as documented."""
+Angles = Float[ArrayLike, "*n"] | Sequence[Scalar]
 """Shaft angles (rad) or times (s): a scalar or ``(n,)``."""
-HeadAngles = Float[ArrayLike, "n_heads"] | Sequence[float]
+HeadAngles = Float[ArrayLike, "n_heads"] | Sequence[Scalar]
 """One value per head, e.g. head azimuths (rad)."""
-HeadWeights = Float[ArrayLike, "n_heads"] | Sequence[float] | None
+HeadWeights = Float[ArrayLike, "n_heads"] | Sequence[Scalar] | None
 """Head weights of an average (``None``: equal)."""
 HeadErrors = Float[Array, "*n n_heads"]
 """Per-head errors or readings (rad) at each sample (``(n_heads,)`` for a scalar angle)."""
@@ -29,9 +32,19 @@ OrderValues = Float[Array, "n_orders"]
 """One real value per harmonic order ``m = 1 … M``."""
 OrderTransfer = Complex[Array, "n_orders"]
 """One complex transfer per harmonic order ``m = 1 … M``."""
-SampleValues = Float[ArrayLike, "n"] | Sequence[float]
+SampleValues = Float[ArrayLike, "n"] | Sequence[Scalar]
 """One value per sample (unit of the values)."""
 Signals = Float[Array, "n *signals"]
 """Samples of one or more signals: ``(n,)`` or ``(n, k)``."""
 Averaged = Float[Array, "*n"]
 """One value per sample (a scalar for one sample)."""
+OrderCoefficients = Float[ArrayLike, "*batch n_orders"] | Sequence[Scalar]
+"""One real coefficient per harmonic order ``j = 1 … M`` (rad), with any leading batch axes."""
+OrderCoefficientsOut = Float[Array, "*batch n_orders"]
+"""One real coefficient per harmonic order ``j = 1 … M`` (rad), batch axes of the input."""
+HeadReadings = Float[ArrayLike, "n n_heads"]
+"""Readings or errors of every head at each sample, rad, ``(n, n_heads)``."""
+ScalarOut = Float[Array, ""]
+"""One number returned as a 0-d array, unit as documented."""
+LayoutPhases = Complex[Array, "n_orders n_heads"]
+"""``exp(-i j alpha_k)`` of each order ``j = 1 … M`` (rows) and head ``k`` (columns)."""
