@@ -205,6 +205,12 @@ chunk_size = 2
 """
 
 
+# the resume and scale-out tests check the case files, not the fresh-build check of the
+# answer (tests/test_validate.py): no fresh replicates (each one is a new evaluation)
+NO_FRESH = ("--fresh-replicates", "0")
+QUIET = ("--quiet", *NO_FRESH)
+
+
 def _sweep_file(tmp_path: Path, seed: int = 1) -> Path:
     p = tmp_path / f"sweep{seed}.toml"
     p.write_text(SWEEP_TOML.format(seed=seed))
@@ -215,7 +221,7 @@ def _sweep_file(tmp_path: Path, seed: int = 1) -> Path:
 def uninterrupted(tmp_path_factory):
     d = tmp_path_factory.mktemp("sweep")
     cases = d / "full.jsonl"
-    assert main(["sweep", str(_sweep_file(d)), "--cases", str(cases), "--quiet"]) == 0
+    assert main(["sweep", str(_sweep_file(d)), "--cases", str(cases), *QUIET]) == 0
     return read_cases(cases)
 
 
@@ -227,7 +233,7 @@ def test_sweep_resume_gives_the_uninterrupted_table(uninterrupted, tmp_path, kep
 
     part = tmp_path / "part.jsonl"
     write_cases(part, uninterrupted[:kept] if kept < 8 else uninterrupted[1:])
-    assert main(["sweep", str(_sweep_file(tmp_path)), "--resume", str(part), "--quiet"]) == 0
+    assert main(["sweep", str(_sweep_file(tmp_path)), "--resume", str(part), *QUIET]) == 0
     assert read_cases(part) == uninterrupted
     reused = kept if kept < 8 else 8
     assert f"{reused} reused from the earlier run" in capsys.readouterr().out
@@ -238,7 +244,9 @@ def test_sweep_resume_checks_the_seed(uninterrupted, tmp_path, capsys):
 
     part = tmp_path / "other-seed.jsonl"
     write_cases(part, uninterrupted[:5])
-    assert main(["sweep", str(_sweep_file(tmp_path, seed=2)), "--resume", str(part)]) == 0
+    assert (
+        main(["sweep", str(_sweep_file(tmp_path, seed=2)), "--resume", str(part), *NO_FRESH]) == 0
+    )
     out = read_cases(part)
     assert "0 reused" in capsys.readouterr().out
     assert [c.seed for c in out[:9]] == [2] * 9 and len(out) == 14  # seed-1 cases kept after
@@ -246,7 +254,15 @@ def test_sweep_resume_checks_the_seed(uninterrupted, tmp_path, capsys):
 
 def test_sweep_on_two_processes_writes_the_same_case_file(uninterrupted, tmp_path):
     cases = tmp_path / "two.jsonl"
-    argv = ["sweep", str(_sweep_file(tmp_path)), "--cases", str(cases), "--processes", "2"]
+    argv = [
+        "sweep",
+        str(_sweep_file(tmp_path)),
+        "--cases",
+        str(cases),
+        "--processes",
+        "2",
+        *NO_FRESH,
+    ]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     rc = dist.spawn_local(dist.strip_launch_flags(argv), 2, env=env)
     assert rc == 0

@@ -51,6 +51,15 @@ from ..physics._layout import (
 from ..physics._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
+from ..physics._types import (
+    AngleValues,
+    BuildNormals,
+    BuildValues,
+    HeadAnglesOut,
+    SampleValues,
+    Scalar,
+    ScalarOut,
+)
 from ._distributed import shard_builds
 from ._drivers import build_normals, map_builds
 from ._tolerance import tolerance_cost
@@ -156,7 +165,7 @@ class Tolerances(eqx.Module):
         return Tolerances(**{n: (getattr(self, n) if n == name else 0.0) for n in TOLERANCE_NAMES})
 
 
-def symmetric_angles(n_heads: int) -> Array:
+def symmetric_angles(n_heads: int) -> HeadAnglesOut:
     """Azimuths of ``n_heads`` equally spaced heads starting at 0, rad."""
     return jnp.arange(n_heads, dtype=jnp.float64) * (2 * jnp.pi / n_heads)
 
@@ -216,7 +225,7 @@ class EncoderDesign(eqx.Module):
 # ----------------------------------------------------------------------------- sensitivity
 
 
-def cotangent_sensitivity(reference_angle_rad: ArrayLike, n_heads: int, max_order: int) -> Array:
+def cotangent_sensitivity(reference_angle_rad: Scalar, n_heads: int, max_order: int) -> ScalarOut:
     """Noise amplification of self-compensation over modes ``1 … max_order`` (seed 000,
     section III.D), for ``n_heads`` equally spaced heads and a reference head at
     ``reference_angle_rad`` (rad). Dimensionless; see
@@ -226,14 +235,14 @@ def cotangent_sensitivity(reference_angle_rad: ArrayLike, n_heads: int, max_orde
 
 
 def expected_sensitivity(
-    reference_angle_rad: ArrayLike,
+    reference_angle_rad: Scalar,
     n_heads: int,
     max_order: int,
-    placement_sigma_rad: ArrayLike,
+    placement_sigma_rad: Scalar,
     *,
     key: Array,
     n_builds: int = 256,
-) -> Array:
+) -> ScalarOut:
     """Mean cotangent sensitivity over builds whose heads are misplaced by
     ``N(0, placement_sigma_rad**2)`` each (all ``n_heads + 1`` heads), rad.
 
@@ -294,7 +303,7 @@ def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
     return out
 
 
-def build_model(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> EncoderModel:
+def build_model(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> EncoderModel:
     """The kinematic model of one build: ``design`` with deviations ``sigma * z`` (the
     layout of ``z``: :func:`_unit_deviations`)."""
     return _model_of(design, tol, _unit_deviations(design, z))
@@ -347,7 +356,7 @@ def _model_of(design: EncoderDesign, tol: Tolerances, u: dict[str, Array]) -> En
     )
 
 
-def build_residual(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
+def build_residual(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> AngleValues:
     """Residual error of one build after symmetry averaging and self-compensation, rad,
     at :attr:`EncoderDesign.theta_rad` (mean removed; see the module docstring)."""
     u = _unit_deviations(design, z)
@@ -366,7 +375,7 @@ def build_residual(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Arra
     return res - jnp.mean(res)
 
 
-def calibration_noise_ms(design: EncoderDesign, tol: Tolerances) -> Array:
+def calibration_noise_ms(design: EncoderDesign, tol: Tolerances) -> ScalarOut:
     """Expected mean square (rad²) that read noise during self-compensation leaves in the
     map: each Fourier coefficient of one head's noise over ``n_angles`` samples has std
     ``noise * sqrt(2 / n_angles)``, amplified by ``|T_j| A_j`` (cotangent sensitivity per
@@ -381,20 +390,20 @@ def calibration_noise_ms(design: EncoderDesign, tol: Tolerances) -> Array:
     return jnp.sum(t2 * amp**2) * sigma_c2
 
 
-def residual_rms(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
+def residual_rms(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> ScalarOut:
     """RMS residual of one build, rad, including the expected calibration-noise term."""
     r = build_residual(design, tol, z)
     return jnp.sqrt(jnp.mean(r * r) + calibration_noise_ms(design, tol))
 
 
-def residual_peak(design: EncoderDesign, tol: Tolerances, z: ArrayLike) -> Array:
+def residual_peak(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> ScalarOut:
     """Peak absolute residual of one build (noise-free), rad."""
     return jnp.max(jnp.abs(build_residual(design, tol, z)))
 
 
 def build_metric(
-    design: EncoderDesign, tol: Tolerances, z: ArrayLike, metric: str = "rms"
-) -> Array:
+    design: EncoderDesign, tol: Tolerances, z: BuildNormals, metric: str = "rms"
+) -> ScalarOut:
     """``"rms"`` (:func:`residual_rms`), ``"peak"`` (:func:`residual_peak`) or ``"ms"``
     (mean square including the expected calibration-noise term, rad²) of one build."""
     if metric == "rms":
@@ -416,7 +425,7 @@ def build_metrics(
     metric: str = "rms",
     chunk_size: int = 256,
     first_build: int = 0,
-) -> Array:
+) -> BuildValues:
     """Per-build metric for builds ``first_build … first_build + n_builds - 1`` of ``key``
     (common random numbers), chunked with ``lax.map``; rad (rad² for ``"ms"``).
 
@@ -443,7 +452,7 @@ def residual_percentile(
     q: float = 99.0,
     metric: str = "rms",
     chunk_size: int = 256,
-) -> Array:
+) -> ScalarOut:
     """The ``q``-th percentile (0–100) of the per-build metric over Monte Carlo builds,
     rad (linear interpolation between order statistics; differentiable almost
     everywhere)."""
@@ -453,7 +462,7 @@ def residual_percentile(
     return jnp.percentile(vals, q)
 
 
-def smooth_yield(values: ArrayLike, spec: ArrayLike, width: ArrayLike) -> Array:
+def smooth_yield(values: SampleValues, spec: Scalar, width: Scalar) -> ScalarOut:
     """Smooth surrogate of the fraction of ``values <= spec``: the mean of
     ``sigmoid((spec - v) / width)`` (same units for ``values``, ``spec``, ``width``)."""
     return jnp.mean(jax.nn.sigmoid((_f64(spec) - _f64(values)) / _f64(width)))
@@ -462,14 +471,14 @@ def smooth_yield(values: ArrayLike, spec: ArrayLike, width: ArrayLike) -> Array:
 def build_yield(
     design: EncoderDesign,
     tol: Tolerances,
-    spec_rad: ArrayLike,
+    spec_rad: Scalar,
     *,
     key: Array,
     n_builds: int,
     metric: str = "rms",
     smooth_width_rad: float | None = None,
     chunk_size: int = 256,
-) -> Array:
+) -> ScalarOut:
     """Fraction of Monte Carlo builds whose metric is ``<= spec_rad``.
 
     With ``smooth_width_rad`` the indicator is replaced by a sigmoid of that width (a
@@ -563,7 +572,7 @@ class LayoutDesign(eqx.Module):
         return LayoutDesign(radius_m=radius_m, head_angles_rad=ang, **kw)
 
 
-def layout_residual(design: LayoutDesign, tol: Tolerances, z: ArrayLike) -> Array:
+def layout_residual(design: LayoutDesign, tol: Tolerances, z: BuildNormals) -> AngleValues:
     """Residual error of one build of a free layout after least-squares self-compensation,
     rad, at :attr:`LayoutDesign.theta_rad` (mean removed). The build's deviations follow
     :func:`build_model` (``z`` of length :func:`n_build_normals`); the builder knows only
@@ -578,7 +587,7 @@ def layout_residual(design: LayoutDesign, tol: Tolerances, z: ArrayLike) -> Arra
     return res - jnp.mean(res)
 
 
-def layout_noise_ms(design: LayoutDesign, tol: Tolerances) -> Array:
+def layout_noise_ms(design: LayoutDesign, tol: Tolerances) -> ScalarOut:
     """Expected mean square (rad²) that read noise during self-compensation leaves in the
     map of a free layout: ``sum_j |T_j|^2 A_j^2 sigma_c^2``, ``sigma_c^2 = 2 noise^2 /
     n_angles`` (:func:`encdesign.physics.layout_noise_amplification`)."""
@@ -589,8 +598,8 @@ def layout_noise_ms(design: LayoutDesign, tol: Tolerances) -> Array:
 
 
 def layout_metric(
-    design: LayoutDesign, tol: Tolerances, z: ArrayLike, metric: str = "rms"
-) -> Array:
+    design: LayoutDesign, tol: Tolerances, z: BuildNormals, metric: str = "rms"
+) -> ScalarOut:
     """``"rms"`` (with the calibration-noise term), ``"peak"`` (noise-free) or ``"ms"``
     (rad²) of one build of a free layout."""
     r = layout_residual(design, tol, z)
@@ -613,7 +622,7 @@ def layout_metrics(
     metric: str = "rms",
     chunk_size: int = 256,
     first_build: int = 0,
-) -> Array:
+) -> BuildValues:
     """Per-build :func:`layout_metric` of builds ``first_build …`` of ``key`` (common random
     numbers, chunked like :func:`build_metrics`); differentiable in the azimuths and
     tolerances."""

@@ -48,3 +48,12 @@ ScalarOut = Float[Array, ""]
 """One number returned as a 0-d array, unit as documented."""
 LayoutPhases = Complex[Array, "n_orders n_heads"]
 """``exp(-i j alpha_k)`` of each order ``j = 1 … M`` (rows) and head ``k`` (columns)."""
+BuildNormals = Float[ArrayLike, "n_normals"]
+"""One Monte Carlo build's standard-normal deviations ``z`` (dimensionless; layout in
+:func:`encdesign.design.deviation_sizes`)."""
+BuildValues = Float[Array, "n_builds"]
+"""One value per Monte Carlo build (rad, or rad² for a mean square)."""
+AngleValues = Float[Array, "n_angles"]
+"""One value per evaluation angle of a design (rad)."""
+HeadAnglesOut = Float[Array, "n_heads"]
+"""One value per head, returned as an array, e.g. head azimuths (rad)."""
