@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import jax
 import jax.numpy as jnp
 from jax import Array
+from jax.core import Tracer
 from jax.typing import ArrayLike
 
 
@@ -18,7 +18,7 @@ def f64(x: ArrayLike | Sequence[ArrayLike] | Sequence[Sequence[ArrayLike]]) -> A
 
 def is_traced(x: object) -> bool:
     """Whether ``x`` is a JAX tracer (inside ``jit``/``grad``): value checks are skipped then."""
-    return isinstance(x, jax.core.Tracer)
+    return isinstance(x, Tracer)
 
 
 def wrap_rad(x: ArrayLike) -> Array:

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
 from .._array import f64 as _f64
+from .._array import is_traced
 from .._errors import EncdesignInputError, input_error
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
 from ..physics._layout import (
@@ -147,7 +148,7 @@ class Tolerances(eqx.Module):
             v = getattr(self, name)
             if hasattr(v, "shape") and v.shape != ():
                 raise EncdesignInputError(f"Tolerances.{name}: shape {v.shape}, expected a scalar")
-            if not isinstance(v, jax.core.Tracer) and hasattr(v, "shape") and float(v) < 0:
+            if not is_traced(v) and hasattr(v, "shape") and float(v) < 0:
                 raise EncdesignInputError(f"Tolerances.{name}: {float(v)}, expected >= 0")
 
     def vector(self) -> Array:
@@ -208,7 +209,7 @@ class EncoderDesign(eqx.Module):
                 f"{max(self.max_order, self.grating_orders)}"
             )
         r = self.radius_m
-        if not isinstance(r, jax.core.Tracer) and hasattr(r, "shape") and not float(r) > 0:
+        if not is_traced(r) and hasattr(r, "shape") and not float(r) > 0:
             raise EncdesignInputError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
 
     @property
@@ -264,7 +265,7 @@ def expected_sensitivity(
 # ----------------------------------------------------------------------------- builds
 
 
-def deviation_sizes(design: EncoderDesign) -> dict[str, int]:
+def deviation_sizes(design: EncoderDesign | LayoutDesign) -> dict[str, int]:
     """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
     h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
@@ -280,12 +281,12 @@ def deviation_sizes(design: EncoderDesign) -> dict[str, int]:
     }
 
 
-def n_build_normals(design: EncoderDesign) -> int:
+def n_build_normals(design: EncoderDesign | LayoutDesign) -> int:
     """Length of the standard-normal vector ``z`` of one build of ``design``."""
     return sum(deviation_sizes(design).values())
 
 
-def _unit_deviations(design: EncoderDesign, z: ArrayLike) -> dict[str, Array]:
+def _unit_deviations(design: EncoderDesign | LayoutDesign, z: ArrayLike) -> dict[str, Array]:
     """The deviations of one build per unit tolerance, by name.
 
     ``z`` (``[n_build_normals(design)]``) is split in order: eccentricity (x, y), tilt
@@ -309,7 +310,9 @@ def build_model(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> Enco
     return _model_of(design, tol, _unit_deviations(design, z))
 
 
-def _model_of(design: EncoderDesign, tol: Tolerances, u: dict[str, Array]) -> EncoderModel:
+def _model_of(
+    design: EncoderDesign | LayoutDesign, tol: Tolerances, u: dict[str, Array]
+) -> EncoderModel:
     """:func:`build_model` from the unit deviations ``u`` of :func:`_unit_deviations`."""
     h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
@@ -546,7 +549,7 @@ class LayoutDesign(eqx.Module):
                 f"LayoutDesign.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
-        if not isinstance(a, jax.core.Tracer):
+        if not is_traced(a):
             try:
                 check_layout(a, where="LayoutDesign.head_angles_rad")
             except EncdesignInputError as exc:
@@ -690,7 +693,7 @@ def sds_design(
     motor = reference_motor(
         pole_pairs, low_order_torque=(tol.speed_ripple, 2.0 * tol.speed_ripple / 3.0)
     )
-    kw = dict(
+    kw: dict[str, Any] = dict(
         eccentricity_rad=tol.eccentricity_rad,
         ellipticity_rad=tol.ellipticity_rad,
         n_harmonics=n_harmonics,

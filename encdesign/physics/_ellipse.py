@@ -333,7 +333,7 @@ def vibration_compensation_m(
         mean_metrological_m: ``M_me``, mean of the metrological errors (m).
     """
     t = _f64(t_s)
-    return mean_metrological_m + 0.5 * _f64(delta_gm_m) * jnp.sin(
+    return _f64(mean_metrological_m) + 0.5 * _f64(delta_gm_m) * jnp.sin(
         2 * jnp.pi * _f64(f_exc_hz) * t + phase_rad
     )
 

@@ -42,6 +42,7 @@ from jaxtyping import Array, ArrayLike
 
 from .. import _tuning
 from .._array import f64 as _f64
+from .._array import is_traced
 from ._types import Angles, ArrayInput, BatchHeadErrors, HeadAngles, HeadErrors
 
 __all__ = [
@@ -62,7 +63,7 @@ _GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: d
 
 
 def _concrete(x: object) -> bool:
-    return not isinstance(x, jax.core.Tracer)
+    return not is_traced(x)
 
 
 def _check_shape(name: str, x: Array, shape: tuple[int, ...]) -> None:
@@ -320,6 +321,7 @@ def _atan(x: ArrayLike) -> Array:
     traced through the selects of the rational approximation: the reverse pass of a Monte
     Carlo gradient is then about as cheap as the forward pass.
     """
+    x = jnp.asarray(x)
     s = jnp.where(x > 0, 1.0, -1.0)
     big = (x > _TAN_3PI_8) | (x < -_TAN_3PI_8)
     mid = ((x > 0.66) | (x < -0.66)) & ~big

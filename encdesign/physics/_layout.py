@@ -45,7 +45,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike
+from jaxtyping import Array
 
 from .._array import f64 as _f64
 from .._errors import EncdesignInputError
@@ -78,7 +78,7 @@ MIN_GAIN = 1e-9
 """``1 - |ubar_j|^2`` below which order ``j`` counts as unobservable."""
 
 
-def _weights(n: int, weights: ArrayLike | None) -> Array:
+def _weights(n: int, weights: HeadWeights) -> Array:
     w = jnp.full((n,), 1.0 / n) if weights is None else _f64(weights).reshape(-1)
     return w / jnp.sum(w)
 

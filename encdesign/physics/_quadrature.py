@@ -171,7 +171,8 @@ def quadrature_signals(
     hb, _ = _harmonic_part(ub, errors.harmonics_b)
     sa = errors.offset_a + errors.amplitude_ratio * (jnp.sin(ua) + ha)
     sb = errors.offset_b + jnp.sin(ub) + hb
-    return amplitude * sa, amplitude * sb
+    a = _f64(amplitude)
+    return a * sa, a * sb
 
 
 def signal_phase_rad(sa: ArrayLike, sb: ArrayLike) -> Array:

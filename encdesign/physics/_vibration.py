@@ -28,6 +28,7 @@ one signal without an accelerometer: it searches the pair of spectral lines symm
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, cast
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -39,6 +40,12 @@ from .._array import f64 as _f64
 from .._array import is_traced as _is_traced
 from .._errors import input_error
 from ._quadrature import SignalErrors, check_signals, quadrature_signals
+
+
+def _argmin(res: object) -> float:
+    """The minimiser ``x`` of a :func:`scipy.optimize.minimize_scalar` result."""
+    return float(cast(Any, res).x)
+
 
 __all__ = [
     "Vibration",
@@ -256,7 +263,7 @@ def _refine(t, x, freqs, idx, width):
     res = minimize_scalar(
         cost, bounds=(f0 - width, f0 + width), method="bounded", options={"xatol": 1e-6 * f0}
     )
-    return float(res.x)
+    return _argmin(res)
 
 
 def estimate_excitation(
@@ -321,19 +328,19 @@ def estimate_excitation(
         def cost(fe_, f1_=f1):
             return _lsq(t, x, [f1_, fe_ - f1_, fe_ + f1_])[1]
 
-        fe = float(
+        fe = _argmin(
             minimize_scalar(
                 cost, bounds=(fe - width, fe + width), method="bounded", options={"xatol": 1e-7}
-            ).x
+            )
         )
 
         def cost1(f1_, fe_=fe):
             return _lsq(t, x, [f1_, fe_ - f1_, fe_ + f1_])[1]
 
-        f1 = float(
+        f1 = _argmin(
             minimize_scalar(
                 cost1, bounds=(f1 - width, f1 + width), method="bounded", options={"xatol": 1e-7}
-            ).x
+            )
         )
     freqs = [f1, fe - f1, fe + f1]
     c, rss = _lsq(t, x, freqs)
