@@ -135,9 +135,16 @@ class Instrument:
         return [p.value(theta[i]) for i, p in enumerate(self.params)]
 
 
+_COMPILED: dict = {}
+
+
 def _compiled(inst: Instrument):
-    """Jitted model values, spreads and Jacobian of all figures of ``inst``."""
+    """Jitted model values, spreads and Jacobian of all figures of ``inst`` (kept per model
+    and figure list, so the joint fit of ``tension`` compiles nothing again)."""
     keys = [f.key for f in inst.figures]
+    cache_key = (id(inst.forward), tuple(keys))
+    if cache_key in _COMPILED and _COMPILED[cache_key][0] is inst.forward:
+        return _COMPILED[cache_key][1]
 
     def vals(t):
         out = inst.forward(t)
@@ -147,7 +154,15 @@ def _compiled(inst: Instrument):
         out = inst.forward(t)
         return jnp.stack([jnp.asarray(out[k][1], float) for k in keys])
 
-    return jax.jit(vals), jax.jit(spreads), jax.jit(jax.jacfwd(vals))
+    vals_j = jax.jit(vals)
+
+    def masked_resid(theta, args):  # (y, σ, mask) as arguments: one LM compilation
+        y, w, mask = args
+        return mask * (vals_j(theta) - y) / w
+
+    out = vals_j, jax.jit(spreads), jax.jit(jax.jacfwd(vals)), masked_resid
+    _COMPILED[cache_key] = (inst.forward, out)
+    return out
 
 
 def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Callable:
@@ -155,7 +170,7 @@ def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Call
     vals = vals or _compiled(inst)[0]
     idx = np.array([i for i, f in enumerate(inst.figures) if f.role == "train"])
     y = np.array([f.value for f in inst.figures if f.role == "train"])
-    w = np.asarray(weights, dtype=float)
+    w = jnp.asarray(weights, dtype=float)
 
     def resid(theta, args=None):
         return (vals(theta)[idx] - y) / w
@@ -166,20 +181,23 @@ def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Call
 def fit(inst: Instrument, max_steps: int = 400) -> dict:
     """Levenberg–Marquardt on the training figures (weights re-evaluated once at the first
     solution, for model spreads that depend on θ), Gauss–Newton covariance, predictions."""
-    vals, spreads, jac_all = _compiled(inst)
+    vals, spreads, jac_all, resid = _compiled(inst)
     train = np.array([f.role == "train" for f in inst.figures])
     sig = np.array([f.sigma for f in inst.figures])
     theta = jnp.asarray(inst.theta0, dtype=float)
     solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
     status = "success"
+    y = jnp.asarray([f.value for f in inst.figures], dtype=float)
+    mask = jnp.asarray(train, dtype=float)
     for _ in range(2):
-        w = np.hypot(sig, np.asarray(spreads(theta)))[train]
-        resid = training_residuals(inst, w, vals)
-        sol = optx.least_squares(resid, solver, theta, max_steps=max_steps, throw=False)
+        w_all = np.where(train, np.hypot(sig, np.asarray(spreads(theta))), 1.0)
+        args = (y, jnp.asarray(w_all), mask)
+        sol = optx.least_squares(resid, solver, theta, args=args, max_steps=max_steps, throw=False)
         if sol.result != optx.RESULTS.successful:
             status = "max_steps"
         theta = sol.value
-    r = np.asarray(resid(theta))
+    w = w_all[train]
+    r = np.asarray(resid(theta, args))[train]
     jall = np.asarray(jac_all(theta))
     jac = jall[train] / w[:, None]
     lam, vec = np.linalg.eigh(jac.T @ jac)
@@ -251,10 +269,14 @@ def fit(inst: Instrument, max_steps: int = 400) -> dict:
 def tension(inst: Instrument) -> dict:
     """All figures of the instrument as training at once: χ² and dof of that joint fit.
     A χ²/dof far above 1 means no single parameter set reproduces them together."""
-    every = [Figure(**{**f.__dict__, "role": "train"}) for f in inst.figures if f.bound is None]
+    every = [  # bounded figures stay predictions (a bound is not a value to fit)
+        Figure(**{**f.__dict__, "role": "train" if f.bound is None else "predict"})
+        for f in inst.figures
+    ]
     joint = Instrument(inst.name, inst.params, inst.theta0, inst.forward, every)
     res = fit(joint)
-    worst = sorted(res["figures"], key=lambda x: -abs(x["residual_sigma"] or 0))[:3]
+    rows = [x for x in res["figures"] if x["role"] == "fitted"]
+    worst = sorted(rows, key=lambda x: -abs(x["residual_sigma"] or 0))[:3]
     return {
         "chi2": res["chi2_training"],
         "dof": res["dof"],
@@ -697,9 +719,10 @@ def main(argv: list[str] | None = None) -> int:
     b1 = next(x for x in results[0]["params"] if x["name"] == "two_pair_order1")
     d2 = device2((b1["value"], b1["se"] or 0.0))
     results.append(fit(d2))
-    results.append(fit(shaker()))
+    sh = shaker()
+    results.append(fit(sh))
     _progress(f"tension: all figures fitted ({time.time() - t0:.0f} s)")
-    tensions = {r["instrument"]: tension(i) for r, i in zip(results, [d1, d2, shaker()])}
+    tensions = {r["instrument"]: tension(i) for r, i in zip(results, [d1, d2, sh])}
     _progress(f"done ({time.time() - t0:.0f} s)")
     for r in results:
         r["tension_all_figures"] = tensions[r["instrument"]]

@@ -61,31 +61,26 @@ def test_shaker_fit_recovers_training_figures():
     assert all(0.0 < x < 0.5 for x in offsets)
 
 
-def test_study_seed_calibration_quick(tmp_path):
-    from encdesign.cli import main
-
-    out = tmp_path / "sc"
-    assert (
-        main(
-            [
-                "study",
-                "run",
-                "seed-calibration",
-                "--quick",
-                "--out",
-                str(out),
-                "--json",
-                str(out / "s.json"),
-            ]
-        )
-        == 0
+def test_study_seed_calibration_quick(tmp_path, monkeypatch):
+    """The study end to end (fits, predictions, tension, JSON, plot) with the simulated noise
+    coefficients and pair constants replaced by stand-ins: the simulations are
+    ``simulate_readings`` (tested in ``test_sds.py``) and cost most of the run's compiling;
+    the pair constants' library function is tested above."""
+    m = _study()
+    monkeypatch.setattr(m, "sds_noise_coefficients", lambda marks, n_revs, key: _coef())
+    monkeypatch.setattr(
+        m, "pair_offset_constants", lambda marks, p: {"mean_arcsec": -3.0, "std_arcsec": 2.0}
     )
+    out = tmp_path / "sc"
+    assert m.main(["--quick", "--out", str(out), "--json", str(out / "s.json")]) == 0
     res = json.loads((out / "s.json").read_text())
     assert any(out.glob("*.png"))
     assert len(res["instruments"]) == 3
     for r in res["instruments"]:
         assert r["chi2_training"] >= 0 and r["predicted_total"] > 0
+        assert r["tension_all_figures"]["dof"] >= 1
     assert res["predicted_total"] >= res["predicted_within_2sigma"]
+    assert res["closed_forms"]["s001_closure_counts"]["N72_23_settings"]["n_equations"] == 1658
 
 
 def _instrument_tests_study():
