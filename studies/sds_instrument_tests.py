@@ -111,23 +111,12 @@ def noise_test(design, n_revs: int, key) -> dict:
 def pair_offset(design, offset_arcsec: float, phis_rad) -> dict:
     """Move one moving sensor ``offset_arcsec`` off 180° (the instrument's zero constants
     still assume 180°) and read both pairs at several platform angles."""
-    az = np.asarray(design.moving_azimuths_rad).copy()
-    az[1] += offset_arcsec * ARCSEC
-    moved = ed.SDSDesign(
-        design.motor,
-        design.disk_a,
-        design.disk_b,
-        design.fixed_azimuths_rad,
-        jnp.asarray(az),
-        design.radius_m,
+    pair = np.asarray(
+        ed.physics.moved_sensor_pair_errors(
+            design, 1, offset_arcsec * ARCSEC, phis_rad, _quiet_errors()
+        )
     )
-    # readings against the nominal zero constants: add back what the moved zero removed
-    dz = np.asarray(moved.zero_offsets_rad() - design.zero_offsets_rad())
-    offsets = []
-    for phi in phis_rad:
-        r = ed.simulate_readings(moved, float(phi), 1, _quiet_errors())
-        pair = np.asarray(r.pair_error_rad)[0] + dz
-        offsets.append(float(pair[1, 1] - pair[0, 0]) / ARCSEC)
+    offsets = [float(x) / ARCSEC for x in pair[:, 1, 1] - pair[:, 0, 0]]
     return {
         "placement_off_180_arcsec": offset_arcsec,
         "phi_deg": [math.degrees(p) for p in phis_rad],

@@ -42,6 +42,7 @@ three 0.8 mm/s peak pairs; predicted: the 3.4 mm/s peak pair (same excitation) a
 and worst error-area reductions (area taken ∝ rms).
 """
 
+import dataclasses
 import math
 import sys
 import time
@@ -134,9 +135,16 @@ class Instrument:
         return [p.value(theta[i]) for i, p in enumerate(self.params)]
 
 
+_COMPILED: dict = {}
+
+
 def _compiled(inst: Instrument):
-    """Jitted model values, spreads and Jacobian of all figures of ``inst``."""
+    """Jitted model values, spreads and Jacobian of all figures of ``inst`` (kept per model
+    and figure list, so the joint fit of ``tension`` compiles nothing again)."""
     keys = [f.key for f in inst.figures]
+    cache_key = (id(inst.forward), tuple(keys))
+    if cache_key in _COMPILED and _COMPILED[cache_key][0] is inst.forward:
+        return _COMPILED[cache_key][1]
 
     def vals(t):
         out = inst.forward(t)
@@ -146,7 +154,15 @@ def _compiled(inst: Instrument):
         out = inst.forward(t)
         return jnp.stack([jnp.asarray(out[k][1], float) for k in keys])
 
-    return jax.jit(vals), jax.jit(spreads), jax.jit(jax.jacfwd(vals))
+    vals_j = jax.jit(vals)
+
+    def masked_resid(theta, args):  # (y, σ, mask) as arguments: one LM compilation
+        y, w, mask = args
+        return mask * (vals_j(theta) - y) / w
+
+    out = vals_j, jax.jit(spreads), jax.jit(jax.jacfwd(vals)), masked_resid
+    _COMPILED[cache_key] = (inst.forward, out)
+    return out
 
 
 def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Callable:
@@ -154,7 +170,7 @@ def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Call
     vals = vals or _compiled(inst)[0]
     idx = np.array([i for i, f in enumerate(inst.figures) if f.role == "train"])
     y = np.array([f.value for f in inst.figures if f.role == "train"])
-    w = np.asarray(weights, dtype=float)
+    w = jnp.asarray(weights, dtype=float)
 
     def resid(theta, args=None):
         return (vals(theta)[idx] - y) / w
@@ -165,20 +181,23 @@ def training_residuals(inst: Instrument, weights: np.ndarray, vals=None) -> Call
 def fit(inst: Instrument, max_steps: int = 400) -> dict:
     """Levenberg–Marquardt on the training figures (weights re-evaluated once at the first
     solution, for model spreads that depend on θ), Gauss–Newton covariance, predictions."""
-    vals, spreads, jac_all = _compiled(inst)
+    vals, spreads, jac_all, resid = _compiled(inst)
     train = np.array([f.role == "train" for f in inst.figures])
     sig = np.array([f.sigma for f in inst.figures])
     theta = jnp.asarray(inst.theta0, dtype=float)
     solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
     status = "success"
+    y = jnp.asarray([f.value for f in inst.figures], dtype=float)
+    mask = jnp.asarray(train, dtype=float)
     for _ in range(2):
-        w = np.hypot(sig, np.asarray(spreads(theta)))[train]
-        resid = training_residuals(inst, w, vals)
-        sol = optx.least_squares(resid, solver, theta, max_steps=max_steps, throw=False)
+        w_all = np.where(train, np.hypot(sig, np.asarray(spreads(theta))), 1.0)
+        args = (y, jnp.asarray(w_all), mask)
+        sol = optx.least_squares(resid, solver, theta, args=args, max_steps=max_steps, throw=False)
         if sol.result != optx.RESULTS.successful:
             status = "max_steps"
         theta = sol.value
-    r = np.asarray(resid(theta))
+    w = w_all[train]
+    r = np.asarray(resid(theta, args))[train]
     jall = np.asarray(jac_all(theta))
     jac = jall[train] / w[:, None]
     lam, vec = np.linalg.eigh(jac.T @ jac)
@@ -250,10 +269,14 @@ def fit(inst: Instrument, max_steps: int = 400) -> dict:
 def tension(inst: Instrument) -> dict:
     """All figures of the instrument as training at once: χ² and dof of that joint fit.
     A χ²/dof far above 1 means no single parameter set reproduces them together."""
-    every = [Figure(**{**f.__dict__, "role": "train"}) for f in inst.figures if f.bound is None]
+    every = [  # bounded figures stay predictions (a bound is not a value to fit)
+        Figure(**{**f.__dict__, "role": "train" if f.bound is None else "predict"})
+        for f in inst.figures
+    ]
     joint = Instrument(inst.name, inst.params, inst.theta0, inst.forward, every)
     res = fit(joint)
-    worst = sorted(res["figures"], key=lambda x: -abs(x["residual_sigma"] or 0))[:3]
+    rows = [x for x in res["figures"] if x["role"] == "fitted"]
+    worst = sorted(rows, key=lambda x: -abs(x["residual_sigma"] or 0))[:3]
     return {
         "chi2": res["chi2_training"],
         "dof": res["dof"],
@@ -335,22 +358,13 @@ def pair_offset_constants(marks: int, placement_arcsec: float) -> dict:
     """Offset between the pairs minus the placement off 180°, at four platform angles
     (the pairs' systematic constants, speed × marks), from ``simulate_readings``."""
     design = ed.reference_design(2, 2, marks_per_rev=marks)
-    az = np.asarray(design.moving_azimuths_rad).copy()
-    az[1] += placement_arcsec * ARCSEC
-    moved = ed.SDSDesign(
-        design.motor,
-        design.disk_a,
-        design.disk_b,
-        design.fixed_azimuths_rad,
-        jnp.asarray(az),
-        design.radius_m,
+    phis = np.deg2rad([17.0, 107.0, 197.0, 287.0])
+    pair = np.asarray(
+        ed.physics.moved_sensor_pair_errors(
+            design, 1, placement_arcsec * ARCSEC, phis, _quiet_errors()
+        )
     )
-    dz = np.asarray(moved.zero_offsets_rad() - design.zero_offsets_rad())
-    off = []
-    for phi in np.deg2rad([17.0, 107.0, 197.0, 287.0]):
-        r = ed.simulate_readings(moved, float(phi), 1, _quiet_errors())
-        pair = np.asarray(r.pair_error_rad)[0] + dz
-        off.append(float(pair[1, 1] - pair[0, 0]) / ARCSEC - placement_arcsec)
+    off = [float(x) / ARCSEC - placement_arcsec for x in pair[:, 1, 1] - pair[:, 0, 0]]
     return {"mean_arcsec": float(np.mean(off)), "std_arcsec": float(np.std(off)), "values": off}
 
 
@@ -635,6 +649,56 @@ def shaker() -> Instrument:
     return Instrument("seed002-shaker", params, theta0, forward, figs, inputs)
 
 
+# ----------------------------------------------------------------------------- closed forms
+
+
+def closed_forms() -> dict:
+    """The seeds' arithmetic results (conversions, counts), recomputed: each is a check of
+    the seed's own arithmetic, not of a model (``docs/seeds.md`` marks them so)."""
+    urad, um, nm = 1e-6, 1e-6, 1e-9
+    r000 = 0.0254  # seed 000: 2.54 cm optical radius
+    sq = np.tile(np.repeat([1.0, -1.0], 50), 40) * 10.0  # ±10 mas square wave
+    win = 9 * 50  # moving average over 9 half-periods
+    tri = np.convolve(sq, np.ones(win) / win, mode="valid")
+    counts = {
+        name: dataclasses.asdict(ed.calibrate.closure_counts(n, k))
+        for name, (n, k) in {
+            "N12_complete": (12, 12),
+            "N72_complete": (72, 72),
+            "N72_15_settings": (72, 15),
+            "N72_23_settings": (72, 23),
+        }.items()
+    }
+    return {
+        "s000_centering_1um_urad": um / r000 / urad,
+        "s000_centering_1um_arcsec": um / r000 / ARCSEC,
+        "s000_5urad_arcsec": 5 * urad / ARCSEC,
+        "s001_0.1arcsec_parts": 0.1 / 1_296_000,
+        "s001_0.1arcsec_at_1in_uin": 0.1 * ARCSEC * 1e6,
+        "s001_1mas_at_1in_nm": MAS * INCH / nm,
+        "s001_nickel_cell_third_nm": 0.3524 / 3,
+        "s001_mark_spacing_over_1mas": (2 * math.pi / 10_000) / MAS,
+        "s001_sqrt_10000": math.sqrt(10_000),
+        "s001_1ns_one_edge_pair_mas": math.sqrt(2) * 1e-9 / REV_S * 2 * math.pi / MAS,
+        "s001_10ns_per_rev_parts": 10 * nm / REV_S,
+        "s001_10ns_arcsec": 10 * nm / REV_S * 2 * math.pi / ARCSEC,
+        "s001_0.0001in_at_1in_radius_arcsec": 1e-4 / ARCSEC,
+        "s001_89.5arcsec_at_1in_inch": 89.5 * ARCSEC,
+        "s001_50mas_at_1.75in_uin": 50 * MAS * 1.75 * 1e6,
+        "s001_0.0001in_at_10ft_arcsec": math.atan(1e-4 / 120) / ARCSEC,
+        "s001_1nm_at_84mm_mas": nm / 0.084 / MAS,
+        "s001_15um_at_84mm_arcsec": 15 * um / 0.084 / ARCSEC,
+        "s001_fig11_triangle_pp_mas": float(np.ptp(tri)),
+        "s001_1um_at_305.811mm_arcsec": um / 0.305811 / ARCSEC,
+        "s001_0.077arcsec_at_305mm_um": 0.077 * ARCSEC * 0.305 / um,
+        "s001_axial_1e-6in_at_1in_arcsec": (0.001 * 0.0001 / 0.1) / ARCSEC,
+        "s001_closure_counts": counts,
+        "s002_0.8mm_s_hz": 0.8e-3 / 20e-6,
+        "s002_2mm_s_hz": 2e-3 / 20e-6,
+        "s002_3.4mm_s_hz": 3.4e-3 / 20e-6,
+    }
+
+
 # ----------------------------------------------------------------------------- study
 
 
@@ -650,12 +714,16 @@ def main(argv: list[str] | None = None) -> int:
     _progress(f"pair constants ({time.time() - t0:.0f} s)")
     offset = pair_offset_constants(marks, 89.5)
     d1 = device1(coef, offset, jax.random.fold_in(key, 2))
+    _progress(f"fits ({time.time() - t0:.0f} s)")
     results = [fit(d1)]
     b1 = next(x for x in results[0]["params"] if x["name"] == "two_pair_order1")
     d2 = device2((b1["value"], b1["se"] or 0.0))
     results.append(fit(d2))
-    results.append(fit(shaker()))
-    tensions = {r["instrument"]: tension(i) for r, i in zip(results, [d1, d2, shaker()])}
+    sh = shaker()
+    results.append(fit(sh))
+    _progress(f"tension: all figures fitted ({time.time() - t0:.0f} s)")
+    tensions = {r["instrument"]: tension(i) for r, i in zip(results, [d1, d2, sh])}
+    _progress(f"done ({time.time() - t0:.0f} s)")
     for r in results:
         r["tension_all_figures"] = tensions[r["instrument"]]
         p1 = {x["name"]: x for x in r["params"]}
@@ -683,6 +751,7 @@ def main(argv: list[str] | None = None) -> int:
         "instruments": results,
         "predicted_within_2sigma": n_in,
         "predicted_total": n_all,
+        "closed_forms": closed_forms(),
         "runtime_s": time.time() - t0,
     }
     for r in results:

@@ -157,6 +157,9 @@ from ._sds import (
     mark_angles as mark_angles,
 )
 from ._sds import (
+    moved_sensor_pair_errors as moved_sensor_pair_errors,
+)
+from ._sds import (
     perfect_disk as perfect_disk,
 )
 from ._sds import (

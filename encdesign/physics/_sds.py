@@ -520,6 +520,59 @@ def simulate_readings(
     )
 
 
+def moved_sensor_pair_errors(
+    design: SDSDesign,
+    sensor: int,
+    offset_rad: float,
+    phis_rad: ArrayLike,
+    errors: SDSErrors | None = None,
+) -> Array:
+    """Pair errors of ``design`` with moving sensor ``sensor`` moved ``offset_rad`` off its
+    azimuth, read against the NOMINAL design's zero constants (the instrument still assumes
+    the nominal placement, so the move shows in the readings, as a misplaced sensor does).
+
+    The moved design is rebuilt as an :class:`SDSDesign`, one revolution is simulated at
+    each platform angle with :func:`simulate_readings` (no jitter), and the change of the
+    zero constants the move brought is added back.
+
+    Args:
+        design: the nominal instrument.
+        sensor: index of the moving sensor moved, 0 <= sensor < ``design.n_moving``.
+        offset_rad: the move, rad (positive: larger azimuth).
+        phis_rad: platform angles, rad, shape (P,).
+        errors: error physics (``None``: :class:`SDSErrors` defaults).
+
+    Returns:
+        Pair errors, rad, shape (P, F, M); e.g. ``e[:, 1, 1] − e[:, 0, 0]`` is the offset
+        between the pairs (fixed 0, moving 0) and (fixed 1, moving 1).
+
+    Raises:
+        EncdesignInputError: ``sensor`` out of range.
+    """
+    if not 0 <= int(sensor) < design.n_moving:
+        raise input_error(
+            "moved_sensor_pair_errors.sensor",
+            f"got {sensor}",
+            f"a moving sensor index in [0, {design.n_moving})",
+        )
+    az = np.asarray(design.moving_azimuths_rad).copy()
+    az[int(sensor)] += float(offset_rad)
+    moved = SDSDesign(
+        design.motor,
+        design.disk_a,
+        design.disk_b,
+        design.fixed_azimuths_rad,
+        jnp.asarray(az),
+        design.radius_m,
+    )
+    dz = np.asarray(moved.zero_offsets_rad() - design.zero_offsets_rad())
+    out = []
+    for phi in np.atleast_1d(np.asarray(phis_rad, dtype=float)):
+        r = simulate_readings(moved, float(phi), 1, errors)
+        out.append(np.asarray(r.pair_error_rad)[0] + dz)
+    return jnp.asarray(np.stack(out))
+
+
 def edge_times(
     design: SDSDesign,
     phi_rad: ArrayLike,
