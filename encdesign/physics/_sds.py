@@ -41,6 +41,17 @@ from .._array import wrap_rad as _wrap
 from .._errors import input_error
 from ._motor import Motor, time_at_angle
 from ._sds_errors import ARCSEC, SDSErrors, bearing_noise
+from ._types import (
+    Angles,
+    Averaged,
+    FixedEdgeTimes,
+    FixedValues,
+    MarkAngles,
+    MovingEdgeTimes,
+    MovingValues,
+    PairAngles,
+    PairOffsets,
+)
 
 __all__ = [
     "DiskMarks",
@@ -109,7 +120,7 @@ def perfect_disk(marks_per_rev: int, n_harmonics: int = 2) -> DiskMarks:
     )
 
 
-def mark_angles(disk: DiskMarks) -> Array:
+def mark_angles(disk: DiskMarks) -> MarkAngles:
     """Mark angles μ_j (rad) of marks 0…N−1, counted from the index (see module doc)."""
     n = disk.marks_per_rev
     x = 2 * jnp.pi * jnp.arange(n) / n
@@ -355,13 +366,13 @@ def _revolution(
 
 
 def sds_from_edges(
-    alpha_s: ArrayLike,
-    period_s: ArrayLike,
-    k_fixed: ArrayLike,
-    tau_s: ArrayLike,
-    k_moving: ArrayLike,
-    zero_offsets_rad: ArrayLike,
-) -> Array:
+    alpha_s: FixedEdgeTimes,
+    period_s: FixedValues,
+    k_fixed: FixedValues,
+    tau_s: MovingEdgeTimes,
+    k_moving: MovingValues,
+    zero_offsets_rad: PairOffsets,
+) -> PairAngles:
     """Shifted delta sum per fixed × moving pair (seed eqs. 23–24), rad.
 
     Every sensor contributes N consecutive edges from (about) the same start time, one
@@ -403,13 +414,13 @@ def _pair_errors(design, errors, phi, rev, key, n_newton):
 
 def sds_phi_error(
     design: SDSDesign,
-    phi_rad: ArrayLike,
+    phi_rad: Angles,
     errors: SDSErrors | None = None,
     *,
     rev: int = 0,
     n_newton: int = 2,
     batch_size: int = 8,
-) -> Array:
+) -> Averaged:
     """Error of the SDS reading of φ (pair average, one revolution), rad. jit/grad-able.
 
     Deterministic (no jitter); the error is measured against the true φ with the design

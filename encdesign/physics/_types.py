@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from jaxtyping import Array, ArrayLike, Complex, Float
+from jaxtyping import Array, ArrayLike, Complex, Float, Real
 
 ArrayInput = ArrayLike | Sequence[ArrayLike]
 """Any array input without a checked shape: an array, a scalar or a sequence of numbers
@@ -57,3 +57,17 @@ AngleValues = Float[Array, "n_angles"]
 """One value per evaluation angle of a design (rad)."""
 HeadAnglesOut = Float[Array, "n_heads"]
 """One value per head, returned as an array, e.g. head azimuths (rad)."""
+FixedEdgeTimes = Float[ArrayLike, "*batch n_fixed n_marks"]
+"""Edge times of each fixed sensor by mark index (s)."""
+MovingEdgeTimes = Float[ArrayLike, "*batch n_moving n_marks"]
+"""Edge times of each moving sensor by mark index (s)."""
+FixedValues = Real[ArrayLike, "*batch n_fixed"]
+"""One value per fixed sensor (a period in s, or a mark position)."""
+MovingValues = Real[ArrayLike, "*batch n_moving"]
+"""One value per moving sensor (a mark position)."""
+PairOffsets = Float[ArrayLike, "n_fixed n_moving"]
+"""One value per fixed × moving sensor pair (rad)."""
+PairAngles = Float[Array, "*batch n_fixed n_moving"]
+"""One angle per fixed × moving sensor pair (rad), batch axes of the edge times."""
+MarkAngles = Float[Array, "n_marks"]
+"""One angle per mark of a disk (rad)."""
