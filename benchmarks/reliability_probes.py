@@ -91,8 +91,8 @@ def _closure(d: Path) -> Path:
     sys.path.insert(0, str(HERE / "tests"))
     from helpers import closure_instrument_error
 
-    from encdesign.calibrate import simulate_closure_readings
     from encdesign.io._closure_recording import write_closure_recording
+    from encdesign.simulate import simulate_closure_readings
 
     readings = simulate_closure_readings(
         closure_instrument_error,
