@@ -89,7 +89,7 @@ def _closure(d: Path) -> Path:
     import numpy as np
 
     sys.path.insert(0, str(HERE / "tests"))
-    from helpers import closure_instrument_error
+    from helpers import closure_instrument_error  # pyright: ignore[reportMissingImports]
 
     from encdesign.io._closure_recording import write_closure_recording
     from encdesign.simulate import simulate_closure_readings
