@@ -72,7 +72,7 @@ def _digest(d: Path) -> dict[str, str]:
     }
 
 
-def _run(args: list[str], cwd: Path, env: dict) -> tuple[int, str]:
+def _run(args: list[str], cwd: Path, env: dict) -> tuple[int, str, str]:
     r = subprocess.run(
         [sys.executable, "-m", "encdesign", *args],
         cwd=cwd,
@@ -81,7 +81,7 @@ def _run(args: list[str], cwd: Path, env: dict) -> tuple[int, str]:
         text=True,
         timeout=600,
     )
-    return r.returncode, (r.stderr.strip().splitlines() or [""])[0]
+    return r.returncode, (r.stderr.strip().splitlines() or [""])[0], r.stderr
 
 
 def _closure(d: Path) -> Path:
@@ -89,10 +89,10 @@ def _closure(d: Path) -> Path:
     import numpy as np
 
     sys.path.insert(0, str(HERE / "tests"))
-    from helpers import closure_instrument_error
+    from helpers import closure_instrument_error  # pyright: ignore[reportMissingImports]
 
-    from encdesign.calibrate import simulate_closure_readings
     from encdesign.io._closure_recording import write_closure_recording
+    from encdesign.simulate import simulate_closure_readings
 
     readings = simulate_closure_readings(
         closure_instrument_error,
@@ -238,7 +238,90 @@ def probes() -> list[tuple[str, str, list[str], dict]]:
         ),
     ]:
         P.append((sa, name, argv, {"exit": 2, "names": word}))
+    fl = "file line numbers (item 3)"
+    for name, argv, word in [
+        ("moteus bad cell", ["import", "moteus", "m_cell.txt", "--out", "m.toml"], "line 9,"),
+        ("moteus phase jump", ["import", "moteus", "m_jump.txt", "--out", "m.toml"], "line 9"),
+        ("moteus 1_0 cell", ["import", "moteus", "m_sep.txt", "--out", "m.toml"], "line 9"),
+        ("servo bad count", ["import", "servo", "s_cell.txt", "--out", "s.toml"], "line 9,"),
+        ("magalpha 1e300", ["import", "magalpha", "a_big.csv", "--out", "a.toml"], "line 9"),
+    ]:
+        P.append((fl, name, argv, {"exit": 2, "names": word}))
+    vb = "vector variable bounds (item 4)"
+    for name, argv, word in [
+        ("head_angles upper [.., 1e300, ..]", ["sweep", "v_upper.toml", "--quiet"], "[1].upper"),
+        ("head_angles start [.., nan, ..]", ["sweep", "v_nan.toml", "--quiet"], "[1].start"),
+        ("head_angles lower -1e300", ["sweep", "v_lower.toml", "--quiet"], "[0].lower"),
+    ]:
+        P.append((vb, name, argv, {"exit": 2, "names": word}))
+    wf = "1e300: no warning, exit 2 (item 5)"
+    for name, argv, word in [
+        ("moteus cell 1e300", ["import", "moteus", "m_big.txt", "--out", "m.toml"], "line 9"),
+        ("servo cell 1e300", ["import", "servo", "s_big.txt", "--out", "s.toml"], "line 9"),
+        ("nmm cell 1e300", ["import", "nmm", "n_big.csv", "--out", "n.toml"], "line 9"),
+        ("recording cell 1e300", ["calibrate", "closure", "big_rec.toml"], "line 9"),
+        ("constraint lower 1e300", ["sweep", "c_big.toml", "--quiet"], "lower"),
+        ("yield spec 1e300", ["sweep", "y_big.toml", "--quiet"], "spec"),
+        ("driver rtol 1e300", ["optimize", "r_big.toml", "--quiet"], "rtol"),
+        (
+            "--fresh-replicates 1e300",
+            ["optimize", "ok.toml", "--fresh-replicates", "1e300"],
+            "--fresh",
+        ),
+        ("--processes 1e300", ["sweep", "ok.toml", "--processes", "1e300"], "--processes"),
+        ("--phi-deg 1e300", ["sds", "simulate", "--out", "s.toml", "--phi-deg", "1e300"], "--phi"),
+    ]:
+        P.append((wf, name, argv, {"exit": 2, "names": word, "warnings": True}))
     return P
+
+
+def _edit_line(src: Path, dst: Path, line: int, text: str) -> None:
+    """Copy ``src`` to ``dst`` with file line ``line`` (1-based) replaced by ``text``."""
+    lines = src.read_text().splitlines()
+    lines[line - 1] = text
+    dst.write_text("\n".join(lines) + "\n")
+
+
+def _item_files(d: Path) -> None:
+    """Inputs of the probes of items 3-5: a bad value on file line 9 of each source (the
+    moteus file gets a comment and blank lines, so data row and file line differ)."""
+    real = Path("/work/shared/realdata")
+    mot = real / "moteus_encoder_cal.txt"
+    body = mot.read_text().splitlines()[:40]
+    m = d / "m0.txt"
+    m.write_text("\n".join(body[:3] + ["", "# a comment", ""] + body[3:]) + "\n")
+    _edit_line(m, d / "m_cell.txt", 9, "1 9100 70000")
+    _edit_line(m, d / "m_jump.txt", 9, "1 50000 35596")
+    _edit_line(m, d / "m_sep.txt", 9, "1 9_100 35596")
+    _edit_line(m, d / "m_big.txt", 9, "1 9100 1e300")
+    srv = d / "s0.txt"
+    lines = (real / "servo_optical_encoder_capture.txt").read_text().splitlines()[:60]
+    srv.write_text("\n".join(["# t A B position cost", "", *lines]) + "\n")
+    t = lines[6].split()
+    _edit_line(srv, d / "s_cell.txt", 9, " ".join([t[0], "5702.5", *t[2:]]))
+    _edit_line(srv, d / "s_big.txt", 9, " ".join([t[0], "1e300", *t[2:]]))
+    mag = d / "a0.csv"
+    lines = (real / "magalpha_calibration_example.csv").read_text().splitlines()[:60]
+    mag.write_text("\n".join([lines[0], "", *lines[1:]]) + "\n")
+    _edit_line(mag, d / "a_big.csv", 9, "1e300,0.5")
+    nmm = d / "n0.csv"
+    nmm.write_text("\n".join((real / "nmm_X_raw.csv").read_text().splitlines()[:60]) + "\n")
+    _edit_line(nmm, d / "n_big.csv", 9, "1.0, 1e300, 1.0")
+    table = (d / "R.csv").read_text().splitlines()
+    cells = table[8].split(",")
+    cells[-1] = "1e300"
+    table[8] = ",".join(cells)
+    (d / "big_rec.csv").write_text("\n".join(table) + "\n")
+    rec = (d / "R.toml").read_text().replace('"R.csv"', '"big_rec.csv"')
+    (d / "big_rec.toml").write_text(rec)
+    head = (HERE / "examples" / "head_layout_3.toml").read_text()
+    (d / "v_upper.toml").write_text(head.replace("upper = 370.0", "upper = [370.0, 1e300, 370.0]"))
+    (d / "v_nan.toml").write_text(head.replace("[0.0, 100.0, 250.0]", "[0.0, nan, 250.0]"))
+    (d / "v_lower.toml").write_text(head.replace("lower = -10.0", "lower = -1e300"))
+    tol = (HERE / "examples" / "tolerance_cost_3p1.toml").read_text()
+    (d / "c_big.toml").write_text(tol.replace("lower = 0.99", "lower = 1e300"))
+    (d / "y_big.toml").write_text(tol.replace("spec = 1.0", "spec = 1e300"))
+    (d / "r_big.toml").write_text(tol.replace("rtol = 1e-4", "rtol = 1e300"))
 
 
 def setup(d: Path, env: dict) -> None:
@@ -256,7 +339,8 @@ def setup(d: Path, env: dict) -> None:
             mod, at_import, in_fn = exp["user"]
             (d / f"{mod}.py").write_text(USER_MOD.format(at_import=at_import, in_fn=in_fn))
             (d / f"{mod}.toml").write_text(USER_TOML.format(mod=mod))
-    rc, err = _run(["sweep", "ok.toml", "--cases", "full.jsonl", "--quiet"], d, env)
+    _item_files(d)
+    rc, err, _ = _run(["sweep", "ok.toml", "--cases", "full.jsonl", "--quiet"], d, env)
     assert rc == 0, err
     lines = (d / "full.jsonl").read_text().splitlines()
     first = json.loads(lines[0])
@@ -287,7 +371,8 @@ def main(argv: list[str] | None = None) -> int:
             d = root / hashlib.md5(name.encode()).hexdigest()[:8]
             subprocess.run(["cp", "-a", str(base), str(d)], check=True)
             before = _digest(d)
-            rc, err = _run(args, d, env)
+            penv = dict(env, PYTHONWARNINGS="default") if exp.get("warnings") else env
+            rc, err, full = _run(args, d, penv)
             after = _digest(d)
             problems = []
             changed = [k for k in before if before[k] != after.get(k)]
@@ -302,6 +387,8 @@ def main(argv: list[str] | None = None) -> int:
                 problems.append("message does not name it")
             if err.startswith(("/", "<")) and "Warning" in err:
                 problems.append("warning first")
+            if exp.get("warnings") and "Warning" in full:
+                problems.append("a warning printed")
             total[cls] = total.get(cls, 0) + 1
             if problems:
                 bad[cls] = bad.get(cls, 0) + 1

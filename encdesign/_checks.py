@@ -40,6 +40,7 @@ def int_arg(lower: int | None = None, upper: int | None = None) -> Callable[[str
         return v
 
     parse.__name__ = "integer"
+    vars(parse)["bounds"] = (lower, upper)  # the range, for tests and documentation
     return parse
 
 
@@ -69,6 +70,7 @@ def float_arg(
         return v
 
     parse.__name__ = "number"
+    vars(parse)["bounds"] = (lower, upper)  # the range, for tests and documentation
     return parse
 
 

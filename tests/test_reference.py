@@ -808,7 +808,7 @@ def test_reference_summary_of_the_real_sensors(moteus, magalpha):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("# dir phase encoder\n1 100\n1 200\n1 300\n", "shape"),
+        ("# dir phase encoder\n1 100\n1 200\n1 300\n", "line 2: wrong number of columns"),
         ("1 100 5\n3 200 6\n1 300 7\n", "'dir'"),
         ("1 100 5\n1 200 70000\n1 300 7\n", "'encoder'"),
         ("1 100 5\n1 200.5 6\n1 300 7\n", "integers"),
@@ -828,7 +828,7 @@ def test_moteus_refusals(tmp_path, text, message):
     [
         ("a,b\n1,2\n", "header"),
         ("Reference Angle [degree],Measured Angle [degree]\n1,x\n", "non-numeric"),
-        ("Reference Angle [degree],Measured Angle [degree]\n1,2\n2,3\n", "shape"),
+        ("Reference Angle [degree],Measured Angle [degree]\n1,2\n2,3\n", "2 data line"),
     ],
 )
 def test_magalpha_refusals(tmp_path, text, message):

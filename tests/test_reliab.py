@@ -7,6 +7,7 @@ import argparse
 import json
 import math
 import os
+import re
 
 import pytest
 from hypothesis import given, settings
@@ -135,3 +136,88 @@ def test_csv_cell_with_digit_separator_is_refused(tmp_path):
 
     with pytest.raises(EncdesignInputError, match="line 3, column 'a'"):
         _column("t.csv", "a", ["1.0", "1_0"], [2, 3], "f")
+
+
+# ----------------------------------------------------------------------------- issue 24, round 3
+
+
+def _moteus_lines(n=12):
+    return [f"1 {1300 * (i + 1)} {35332 + 40 * i}" for i in range(n)]
+
+
+@pytest.mark.parametrize(
+    ("bad", "col"),
+    [("1 2600 1e300", "encoder"), ("3 2600 35372", "dir"), ("1 2.5 35372", "phase")],
+)
+def test_moteus_messages_name_the_file_line(tmp_path, bad, col):
+    from encdesign.io._realdata import import_moteus
+
+    body = _moteus_lines()
+    body[4] = bad  # data row 4 sits on file line 8: a comment and two blank lines above it
+    src = tmp_path / "m.txt"
+    src.write_text("# dir phase encoder\n\n" + "\n".join(body[:2]) + "\n\n" + "\n".join(body[2:]))
+    with pytest.raises(EncdesignInputError, match=f"line 8, column '{col}'"):
+        import_moteus(src, tmp_path / "o.toml")
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_moteus_phase_jump_and_bad_cell_name_the_file_line(tmp_path):
+    from encdesign.io._realdata import import_moteus
+
+    body = _moteus_lines()
+    body[6] = "1 40000 35600"
+    src = tmp_path / "m.txt"
+    src.write_text("# header\n" + "\n".join(body) + "\n")
+    with pytest.raises(EncdesignInputError, match="line 8"):
+        import_moteus(src, tmp_path / "o.toml")
+    src.write_text("# header\n" + "\n".join(_moteus_lines()[:3]) + "\n1 1_0 3\n")
+    with pytest.raises(EncdesignInputError, match="line 5"):
+        import_moteus(src, tmp_path / "o.toml")
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "named"),
+    [
+        ("upper", "1e300", "head_angles[0].upper"),
+        ("upper", "[370.0, 1e300, 370.0]", "head_angles[1].upper"),
+        ("lower", "[-10.0, -10.0, -1e300]", "head_angles[2].lower"),
+        ("start", "[0.0, 1e300, 250.0]", "head_angles[1].start"),
+        ("start", "[0.0, nan, 250.0]", "head_angles[1].start"),
+        ("start", "[0.0, inf, 250.0]", "head_angles[1].start"),
+    ],
+)
+def test_vector_variables_bounded_like_scalars(key, value, named):
+    import tomllib
+    from pathlib import Path
+
+    from encdesign.design._problem import parse_problem
+
+    text = (Path(__file__).parents[1] / "examples" / "head_layout_3.toml").read_text()
+    lines = text.splitlines()
+    i = lines.index("[variables.head_angles]")
+    j = next(k for k in range(i, len(lines)) if lines[k].startswith(f"{key} ="))
+    lines[j] = f"{key} = {value}"
+    with pytest.raises(EncdesignInputError, match=re.escape(named)):
+        parse_problem(tomllib.loads("\n".join(lines)), source="p.toml")
+
+
+@pytest.mark.parametrize(
+    ("table", "key"),
+    [("constraints.yield_smooth", "lower"), ("yield", "spec"), ("driver", "rtol")],
+)
+@pytest.mark.parametrize("value", [1e300, -1e300])
+def test_absurd_problem_numbers_refused(table, key, value):
+    import tomllib
+    from pathlib import Path
+
+    from encdesign.design._problem import parse_problem
+
+    raw = tomllib.loads(
+        (Path(__file__).parents[1] / "examples" / "tolerance_cost_3p1.toml").read_text()
+    )
+    d = raw
+    for k in table.split("."):
+        d = d[k]
+    d[key] = value
+    with pytest.raises(EncdesignInputError, match=re.escape(f"{table}.{key}")):
+        parse_problem(raw, source="p.toml")

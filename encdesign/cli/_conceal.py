@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io._study import write_json
     from ..simulate._conceal import write_concealed
 
-    outputs = [("OUT", p) for p in recording_output_files(args.out)]
+    outputs = [("OUT", p) for p in recording_output_files(args.out, label="OUT")]
     outputs.append(("--truth", args.truth))
     with guard_outputs([], outputs):
         _, truth = write_concealed(

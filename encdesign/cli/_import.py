@@ -35,13 +35,15 @@ def run(args: argparse.Namespace) -> int:
             raise input_error(f"SRC {args.src}", "not a folder", "the realdata folder")
         jobs = _realdata.realdata_jobs(args.src, args.out)
         inputs = [("SRC", src) for _, src, _ in jobs]
-        outputs = [("--out", p) for _, _, dst in jobs for p in recording_output_files(dst)]
+        outputs = [
+            ("--out", p) for _, _, dst in jobs for p in recording_output_files(dst, label="--out")
+        ]
         with guard_outputs(inputs, outputs, folders=[("--out", args.out)]):
             written = _realdata.import_realdata_folder(args.src, args.out)
         for p in written:
             print(f"wrote {p}")
         return 0
-    outputs = [("--out", p) for p in recording_output_files(args.out)]
+    outputs = [("--out", p) for p in recording_output_files(args.out, label="--out")]
     fn = getattr(_realdata, f"import_{args.source}")
     with guard_outputs([("SRC", args.src)], outputs):
         rec = fn(args.src, args.out)

@@ -12,7 +12,10 @@ from ..design._distributed import add_launch_flags, is_main_process, process_ind
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
 from ..io._study import write_json
-from ._main import guard_outputs
+from ._main import guard_outputs, int_arg
+
+MAX_FRESH_REPLICATES = 10_000
+"""Most ``--fresh-replicates`` (each replicate re-runs the objective's builds twice)."""
 
 HELP = "solve a design problem (TOML): variables, objective, constraints, driver"
 
@@ -27,12 +30,13 @@ def add_common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress line")
     parser.add_argument(
         "--fresh-replicates",
-        type=int,
+        type=int_arg(0, MAX_FRESH_REPLICATES),
         default=8,
         metavar="R",
         help="out-of-sample check of a Monte Carlo optimum: the best design and the start "
         "design on R fresh replicates of the objective's builds (independent seeds, the same "
-        "for both); 0: none (default 8)",
+        "for both); 0: none, 1 is refused (no spread), at most "
+        f"{MAX_FRESH_REPLICATES} (default 8)",
     )
     add_launch_flags(parser)
 

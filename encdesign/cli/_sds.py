@@ -80,7 +80,10 @@ def run(args: argparse.Namespace) -> int:
                 f"{n_edges} edges",
                 f"at most {MAX_EDGES} edges ((fixed + moving) x marks x (revs + 1) x runs)",
             )
-        outputs = [("--out", p) for p in recording_output_files(args.out, compress=args.gzip)]
+        outputs = [
+            ("--out", p)
+            for p in recording_output_files(args.out, compress=args.gzip, label="--out")
+        ]
         with guard_outputs([], outputs):
             return _simulate(args)
     inputs = [("recording", p) for p in recording_input_files(args.recording)]

@@ -35,7 +35,9 @@ def run(args: argparse.Namespace) -> int:
     inputs = [("design", args.design)]
     if args.like is not None:
         inputs += [("--like", p) for p in recording_input_files(args.like)]
-    outputs = [("--out", p) for p in recording_output_files(args.out, compress=args.gzip)]
+    outputs = [
+        ("--out", p) for p in recording_output_files(args.out, compress=args.gzip, label="--out")
+    ]
     with guard_outputs(inputs, outputs):
         design = load_design(args.design)
         rec = simulate_recording(

@@ -59,6 +59,7 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from .. import _cpu
+from .._checks import int_arg
 from .._errors import DistributedError, EncdesignInputError, input_error
 
 BUILDS_AXIS = "builds"
@@ -125,6 +126,12 @@ def parse_coordinator(text: str) -> tuple[str, int]:
     return host, int(port_s)
 
 
+MAX_LOCAL_PROCESSES = 1024
+"""Most processes ``--processes N`` spawns on one machine."""
+MAX_PROCESSES = 100_000
+"""Most processes of a distributed run (``--num-processes``)."""
+
+
 def check_launch(
     processes: int | None = None,
     coordinator: str | None = None,
@@ -138,8 +145,12 @@ def check_launch(
     ``coordinator="auto"`` alone for JAX's auto-detection, e.g. under SLURM).
     """
     procs = 1 if processes is None else processes
-    if isinstance(procs, bool) or not isinstance(procs, int) or procs < 1:
-        raise input_error("--processes", f"{processes!r}", "an integer >= 1")
+    if (
+        isinstance(procs, bool)
+        or not isinstance(procs, int)
+        or not 1 <= procs <= MAX_LOCAL_PROCESSES
+    ):
+        raise input_error("--processes", f"{processes!r}", f"an integer 1 … {MAX_LOCAL_PROCESSES}")
     if coordinator is None:
         if num_processes is not None or process_id is not None:
             raise input_error(
@@ -161,8 +172,11 @@ def check_launch(
         raise input_error(
             "--coordinator", "needs --num-processes N and --process-id I", "both flags"
         )
-    if isinstance(num_processes, bool) or not isinstance(num_processes, int) or num_processes < 1:
-        raise input_error("--num-processes", f"{num_processes!r}", "an integer >= 1")
+    n = num_processes
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PROCESSES:
+        raise input_error(
+            "--num-processes", f"{num_processes!r}", f"an integer 1 … {MAX_PROCESSES}"
+        )
     if not isinstance(process_id, int) or not 0 <= process_id < num_processes:
         raise input_error("--process-id", f"{process_id!r}", f"an integer in 0…{num_processes - 1}")
     return Launch(1, str(coordinator).strip(), num_processes, process_id)
@@ -588,10 +602,10 @@ def add_launch_flags(parser: Any) -> None:
     g = parser.add_argument_group("scale-out (docs/scale.md)")
     g.add_argument(
         "--processes",
-        type=int,
+        type=int_arg(1, MAX_LOCAL_PROCESSES),
         default=None,
         metavar="N",
-        help="spawn N local processes with a coordinator on localhost",
+        help=f"spawn N local processes (1 … {MAX_LOCAL_PROCESSES}) with a coordinator on localhost",
     )
     g.add_argument(
         "--coordinator",
@@ -600,8 +614,20 @@ def add_launch_flags(parser: Any) -> None:
         help="join a distributed run (process 0 listens there); 'auto': JAX's cluster "
         "auto-detection (SLURM, Open MPI, ...)",
     )
-    g.add_argument("--num-processes", type=int, default=None, metavar="N")
-    g.add_argument("--process-id", type=int, default=None, metavar="I")
+    g.add_argument(
+        "--num-processes",
+        type=int_arg(1, MAX_PROCESSES),
+        default=None,
+        metavar="N",
+        help=f"processes of the distributed run (1 … {MAX_PROCESSES})",
+    )
+    g.add_argument(
+        "--process-id",
+        type=int_arg(0, MAX_PROCESSES - 1),
+        default=None,
+        metavar="I",
+        help="this process's index, 0 … N-1",
+    )
 
 
 def launch_from_args(args: Any) -> Launch:

@@ -219,6 +219,14 @@ def _num(value: Any, where: str, what: str = "a number") -> float:
     return float(value)
 
 
+def _bounded(value: Any, where: str, what: str = "a number") -> float:
+    """A finite number of magnitude at most :data:`MAX_MAGNITUDE_SI` (SI units)."""
+    x = _num(value, where, what)
+    if not abs(x) <= MAX_MAGNITUDE_SI:
+        raise input_error(where, f"{show(value)}", f"|value| <= {MAX_MAGNITUDE_SI:g} (SI units)")
+    return x
+
+
 def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str) -> None:
     for k in table:
         if k not in allowed:
@@ -475,8 +483,8 @@ def parse_problem(
         if not isinstance(table, Mapping):
             raise input_error(where, f"{table!r} is not a table", "lower and/or upper")
         _check_keys(table, {"lower", "upper"}, where)
-        lo = _num(table["lower"], f"{where}.lower") if "lower" in table else -math.inf
-        hi = _num(table["upper"], f"{where}.upper") if "upper" in table else math.inf
+        lo = _bounded(table["lower"], f"{where}.lower") if "lower" in table else -math.inf
+        hi = _bounded(table["upper"], f"{where}.upper") if "upper" in table else math.inf
         if not lo < hi:
             raise input_error(where, f"lower {lo} >= upper {hi}", "lower < upper")
         constraints.append(Constraint(out, lo, hi))
@@ -558,8 +566,12 @@ def _yield(table: Any, src: str, si_units: str = "rad") -> YieldTarget:
         raise input_error(f"{where}.spec_units", f"{show(units)} is not a string", "a unit name")
     spec = _num(table["spec"], f"{where}.spec")
     spec_si = to_si(spec, units, f"{where}.spec_units", si_units)
-    if spec_si <= 0.0:
-        raise input_error(f"{where}.spec", f"{spec!r}", "a positive accuracy spec")
+    if not 0.0 < spec_si <= MAX_MAGNITUDE_SI:
+        raise input_error(
+            f"{where}.spec",
+            f"{show(spec)} {units}",
+            f"a positive accuracy spec of at most {MAX_MAGNITUDE_SI:g} {si_units}",
+        )
     return YieldTarget(target, spec_si, int(n))
 
 
@@ -577,8 +589,10 @@ def _check_driver(table: dict[str, Any], where: str, kinds: tuple[str, ...]) -> 
             if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= int_max:
                 raise input_error(f"{where}.{k}", f"{show(v)[:60]}", f"an integer {lo} … {int_max}")
     for k in floats:
-        if k in table and _num(table[k], f"{where}.{k}") <= 0:
-            raise input_error(f"{where}.{k}", f"{show(table[k])}", "a positive number")
+        if k in table and not 0 < _num(table[k], f"{where}.{k}") <= MAX_MAGNITUDE_SI:
+            raise input_error(
+                f"{where}.{k}", f"{show(table[k])}", f"a positive number <= {MAX_MAGNITUDE_SI:g}"
+            )
 
 
 def load_problem(

@@ -110,9 +110,15 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def recording_output_files(
-    path: str | os.PathLike, *, compress: bool = False, data_name: str | None = None
+    path: str | os.PathLike,
+    *,
+    compress: bool = False,
+    data_name: str | None = None,
+    label: str | None = None,
 ) -> list[Path]:
     """The files a recording written at ``path`` consists of: the TOML and its table.
+
+    ``label``: the flag or argument that named ``path`` (``--out``), for the message.
 
     Raises:
         EncdesignInputError: ``path`` does not end in ``.toml`` (the table name is derived
@@ -121,7 +127,9 @@ def recording_output_files(
     path = Path(path)
     if path.suffix.lower() != ".toml":
         raise input_error(
-            str(path), "a recording is written as NAME.toml (its table beside it)", "a .toml path"
+            f"{label} {path}" if label else str(path),
+            "a recording is written as NAME.toml (its table beside it)",
+            "a .toml path",
         )
     if data_name is None:
         data_name = path.stem + (".csv.gz" if compress else ".csv")

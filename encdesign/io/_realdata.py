@@ -298,30 +298,69 @@ def _unwrap_counts(x: np.ndarray, per_turn: int) -> np.ndarray:
     return x[0] + np.concatenate([[0], np.cumsum(d)])
 
 
-def _whitespace_table(
-    path: str | os.PathLike, lines: str, n_cols: int, min_rows: int, cells: str
-) -> tuple[np.ndarray, str]:
-    """Read a whitespace-separated numeric table (``#`` comments) of ``n_cols`` columns and
-    at least ``min_rows`` rows; return it (float64) and the path for messages.
+def _text_table(
+    path: str | os.PathLike,
+    lines: str,
+    n_cols: int,
+    min_rows: int,
+    cells: str,
+    *,
+    delimiter: str | None = None,
+    skip_header: int = 0,
+) -> tuple[np.ndarray, str, np.ndarray]:
+    """Read a numeric text table of ``n_cols`` columns and at least ``min_rows`` rows
+    (whitespace-separated with ``#`` comments, or ``delimiter``-separated after
+    ``skip_header`` header lines; blank lines skipped).
+
+    Returns:
+        The table (float64), the path for messages and, per row, its FILE line number
+        (1-based, counting the header, comments and blank lines), for messages.
 
     Raises:
-        EncdesignInputError: a missing file, non-numeric data or the wrong shape; the
-            message says what was expected (``lines``: the line layout; ``cells``: what
-            each column holds, e.g. "integers").
+        EncdesignInputError: a missing or binary file, a non-numeric cell (Python literals
+            such as ``1_0`` included), the wrong column count or too few rows, naming the
+            file line; the message says what was expected (``lines``: the line layout;
+            ``cells``: what each column holds, e.g. "integers").
     """
     path = Path(path)
     where = str(path)
     if not path.exists():
         raise input_error(where, "file not found")
+    if path.is_dir():
+        raise input_error(where, "a folder", "a text file")
     try:
-        a = np.loadtxt(path, comments="#", ndmin=2)
-    except ValueError as exc:
-        raise input_error(where, f"non-numeric data ({exc})", lines) from None
-    if a.shape[1] != n_cols or a.shape[0] < min_rows:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise input_error(where, "not a UTF-8 text file", lines) from None
+    if "\x00" in text:
+        raise input_error(where, "binary data (NUL bytes)", lines)
+    rows: list[list[float]] = []
+    line_no: list[int] = []
+    for k, raw in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), 1):
+        if k <= skip_header:
+            continue
+        body = raw if delimiter is not None else raw.split("#", 1)[0]
+        if not body.strip():
+            continue
+        toks = [t.strip() for t in body.split(delimiter)]
+        if len(toks) != n_cols:
+            raise input_error(
+                f"{where}, line {k}", f"wrong number of columns ({len(toks)})", f"{n_cols} {cells}"
+            )
+        try:
+            if any("_" in t for t in toks):
+                raise ValueError
+            rows.append([float(t) for t in toks])
+        except ValueError:
+            raise input_error(
+                f"{where}, line {k}", f"non-numeric value in {raw.strip()[:60]!r}", lines
+            ) from None
+        line_no.append(k)
+    if len(rows) < min_rows:
         raise input_error(
-            where, f"table of shape {a.shape}", f"at least {min_rows} lines of {n_cols} {cells}"
+            where, f"{len(rows)} data line(s)", f"at least {min_rows} lines of {n_cols} {cells}"
         )
-    return a, where
+    return np.asarray(rows, dtype=np.float64), where, np.asarray(line_no, dtype=np.int64)
 
 
 def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
@@ -331,20 +370,29 @@ def read_moteus_cal(path: str | os.PathLike) -> np.ndarray:
         EncdesignInputError: not three integer columns, ``dir`` not 1 or 2, ``phase`` or
             ``encoder`` outside ``0 … 65535``, fewer than 3 rows.
     """
-    a, where = _whitespace_table(path, "lines 'dir phase encoder'", 3, 3, "integers")
-    bad = np.flatnonzero(~np.all(np.isfinite(a) & (a == np.round(a)), axis=1))
-    if bad.size:
-        raise input_error(f"{where}, data row {int(bad[0]) + 1}", "not integers", "integers")
-    a = a.astype(np.int64)
+    a, where, line = _text_table(path, "lines 'dir phase encoder'", 3, 3, "integers")
+    return _moteus_ints(a, where, line)
+
+
+def _moteus_ints(a: np.ndarray, where: str, line: np.ndarray) -> np.ndarray:
+    """Check the moteus columns (integers in range, before any cast) and cast to int64."""
     for j, name, lo, hi in ((0, "dir", 1, 2), (1, "phase", 0, 65535), (2, "encoder", 0, 65535)):
-        bad = np.flatnonzero((a[:, j] < lo) | (a[:, j] > hi))
+        x = a[:, j]
+        bad = np.flatnonzero(~(np.isfinite(x) & (x == np.round(x))))
         if bad.size:
             raise input_error(
-                f"{where}, data row {int(bad[0]) + 1}, column '{name}'",
-                f"got {int(a[bad[0], j])}",
+                f"{where}, line {int(line[bad[0]])}, column '{name}'",
+                f"got {x[bad[0]].item()!r}",
+                "integers",
+            )
+        bad = np.flatnonzero((x < lo) | (x > hi))
+        if bad.size:
+            raise input_error(
+                f"{where}, line {int(line[bad[0]])}, column '{name}'",
+                f"got {x[bad[0]].item():g}",
                 f"{lo} … {hi}",
             )
-    return a
+    return a.astype(np.int64)
 
 
 def import_moteus(
@@ -357,13 +405,15 @@ def import_moteus(
     (the sweep up then down), ``t`` the sample index. The electrical phase steps are checked
     to be below half an electrical turn (else the unwrapping would be ambiguous).
     """
-    a = read_moteus_cal(src)
-    where = str(src)
+    raw, where, line = _text_table(src, "lines 'dir phase encoder'", 3, 3, "integers")
+    a = _moteus_ints(raw, where, line)
     dp = (np.diff(a[:, 1]) + 32768) % 65536 - 32768
     if np.any(np.abs(dp) >= 16384):
-        i = int(np.flatnonzero(np.abs(dp) >= 16384)[0]) + 2
+        i = int(np.flatnonzero(np.abs(dp) >= 16384)[0]) + 1
         raise input_error(
-            f"{where}, data row {i}", "phase step of a quarter electrical turn or more", "a sweep"
+            f"{where}, line {int(line[i])}",
+            "phase step of a quarter electrical turn or more from the line before",
+            "a sweep",
         )
     phase = _unwrap_counts(a[:, 1], 65536).astype(np.float64)
     enc = _unwrap_counts(a[:, 2], MOTEUS_COUNTS).astype(np.float64)
@@ -385,6 +435,12 @@ def import_moteus(
 
 def read_magalpha_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read the MagAlpha toolbox CSV; return ``(reference_deg, measured_deg)``."""
+    ref, mea, _ = _read_magalpha(path)
+    return ref, mea
+
+
+def _read_magalpha(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(reference_deg, measured_deg, file line of each row)``."""
     path = Path(path)
     where = str(path)
     if not path.exists():
@@ -394,23 +450,20 @@ def read_magalpha_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     expected = ["Reference Angle [degree]", "Measured Angle [degree]"]
     if header != expected:
         raise input_error(where, f"header {header}", f"the MagAlpha toolbox columns {expected}")
-    try:
-        a = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    except ValueError as exc:
-        raise input_error(where, f"non-numeric data ({exc})", "two numeric columns") from None
-    if a.shape[1] != 2 or a.shape[0] < 8:
-        raise input_error(where, f"table of shape {a.shape}", "at least 8 rows of 2 columns")
+    a, _, line = _text_table(
+        path, "two numeric columns", 2, 8, "numbers", delimiter=",", skip_header=1
+    )
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
     if bad.size:
-        raise input_error(f"{where}, line {int(bad[0]) + 2}", "non-finite value", "finite")
+        raise input_error(f"{where}, line {int(line[bad[0]])}", "non-finite value", "finite")
     bad = np.flatnonzero(np.any(np.abs(a) > 720.0, axis=1))
     if bad.size:
         raise input_error(
-            f"{where}, line {int(bad[0]) + 2}",
+            f"{where}, line {int(line[bad[0]])}",
             f"angle {a[bad[0]].tolist()} deg",
             "angles of one turn in degrees (|angle| <= 720)",
         )
-    return a[:, 0], a[:, 1]
+    return a[:, 0], a[:, 1], line
 
 
 def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recording:
@@ -425,7 +478,7 @@ def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Reco
         EncdesignInputError: bad table, or the measured angle does not follow the sweep
             (a step of half a turn or more after re-ordering).
     """
-    ref_deg, mea_deg = read_magalpha_csv(src)
+    ref_deg, mea_deg, line = _read_magalpha(src)
     where = str(src)
     step = (np.diff(ref_deg) + 180.0) % 360.0 - 180.0
     sense = 1.0 if np.median(step) >= 0 else -1.0
@@ -436,10 +489,10 @@ def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Reco
     mea = np.unwrap(np.deg2rad(mea_deg[order]))
     dm = np.diff(mea) * sense
     if np.any(dm <= -np.pi / 2):
-        i = int(order[int(np.flatnonzero(dm <= -np.pi / 2)[0]) + 1]) + 2
+        i = int(line[order[int(np.flatnonzero(dm <= -np.pi / 2)[0]) + 1]])
         raise input_error(f"{where}, line {i}", "the measured angle runs against the sweep")
     prov = dict(MAGALPHA_PROVENANCE)
-    prov["reordered_rows"] = [int(i) + 2 for i in moved]  # file line numbers (header = 1)
+    prov["reordered_rows"] = [int(line[i]) for i in moved]  # file line numbers (header = 1)
     return write_recording(
         out_toml,
         "multihead",
@@ -479,22 +532,24 @@ def read_servo_capture(path: str | os.PathLike) -> np.ndarray:
         EncdesignInputError: not 5 numeric columns, non-finite values, A or B not integers
             in ``0 … 65535``, ``t`` not increasing, fewer than 32 rows.
     """
-    a, where = _whitespace_table(path, "lines 't A B position cost'", 5, 32, "numbers")
+    a, where, line = _text_table(path, "lines 't A B position cost'", 5, 32, "numbers")
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
     if bad.size:
-        raise input_error(f"{where}, data row {int(bad[0]) + 1}", "non-finite value", "finite")
+        raise input_error(f"{where}, line {int(line[bad[0]])}", "non-finite value", "finite")
     for j in (1, 2):
         x = a[:, j]
         bad = np.flatnonzero((x != np.round(x)) | (x < 0) | (x > 65535))
         if bad.size:
             raise input_error(
-                f"{where}, data row {int(bad[0]) + 1}, column '{SERVO_COLUMNS[j]}'",
-                f"got {x[bad[0]]!r}",
+                f"{where}, line {int(line[bad[0]])}, column '{SERVO_COLUMNS[j]}'",
+                f"got {x[bad[0]].item()!r}",
                 "an ADC count (integer 0 … 65535)",
             )
     bad = np.flatnonzero(np.diff(a[:, 0]) <= 0)
     if bad.size:
-        raise input_error(f"{where}, data row {int(bad[0]) + 2}, column 't'", "time not increasing")
+        raise input_error(
+            f"{where}, line {int(line[bad[0] + 1])}, column 't'", "time not increasing"
+        )
     return a
 
 
