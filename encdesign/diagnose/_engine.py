@@ -47,6 +47,7 @@ from ._kind import AbstractKind as Kind
 from ._nuisances import excluded_share
 from ._prepare import noise_spectral
 from ._protocol import Prepared
+from ._results import PlotData
 from ._select import select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._views import locate
@@ -269,6 +270,25 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
     }
 
 
+def effect_contributions(prep: Prepared, fitter: Fitter, sel: dict) -> dict[str, np.ndarray]:
+    """``{name: (n, C)}``: each named effect's own contribution in the final model (its
+    term evaluated alone, chunk by chunk; projected like the residual where the kind
+    projects), unit of y."""
+    out = {}
+    names = {s.name for s in sel["accepted"]}
+    for term in sel["final"].terms:
+        if term.cand.name not in names:
+            continue
+        parts = []
+        for a, b, x in fitter.chunks():
+            v = np.asarray(fitter.eval_term(term, a, b, x, jac=False)[0], float)
+            if prep.kd.project:
+                v = v - v.mean(1, keepdims=True)
+            parts.append(v.reshape(b - a, -1))
+        out[term.cand.name] = np.concatenate(parts) if parts else np.zeros((0, prep.n_channels))
+    return out
+
+
 def decide_verdict(doc: dict) -> str:
     """The verdict, decided once from the finished document: ``missing_physics`` when an
     effect is named, ``unexplained`` when structure is located that none explains or the
@@ -374,9 +394,10 @@ def run_engine(
     extra_candidates: Sequence[Candidate] = (),
     verbose: bool = False,
     settings: FinderSettings | None = None,
-) -> dict[str, Any]:
-    """Diagnose ``rec`` with ``kind``; returns the diagnosis JSON document (a dict, with
-    ``_plot`` for the plots).
+) -> tuple[dict[str, Any], PlotData]:
+    """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
+    document (a dict, ``diagnosis.schema.json``) and what the figures need
+    (:class:`~encdesign.diagnose._results.PlotData`).
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,
@@ -425,5 +446,10 @@ def run_engine(
         doc["report"] = report_text(doc) + kind.report_lines(doc)
     finally:
         pg.close()
-    doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])
-    return doc
+    plot = PlotData(
+        prep=prep,
+        base_resid=sel["base_resid"],
+        final_resid=sel["final_resid"],
+        effect_contributions=effect_contributions(prep, fitter, sel),
+    )
+    return doc, plot

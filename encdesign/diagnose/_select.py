@@ -44,7 +44,7 @@ def _tie(
     keep = prep.keep
     w = 1.0 / prep.sigma[None, :]
     saa = sbb = sab = 0.0
-    for lo, hi, x in fitter._chunks():  # one pass: both fits on each chunk
+    for lo, hi, x in fitter.chunks():  # one pass: both fits on each chunk
         ra = fitter.chunk_residual(a.terms, lo, hi, x)
         rb = fitter.chunk_residual(b.terms, lo, hi, x)
         k = keep[lo:hi]
@@ -168,8 +168,8 @@ def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
 def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
     """RMS of one term's own contribution (projected, whitened by the noise)."""
     tot = 0.0
-    for a, b, x in fitter._chunks():  # chunk by chunk: nothing per row is held
-        v = fitter._eval_term(term, a, b, x, jac=False)[0]
+    for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
+        v = fitter.eval_term(term, a, b, x, jac=False)[0]
         if prep.kd.project:
             v = v - v.mean(1, keepdims=True)
         tot += float(np.sum((v[prep.keep[a:b]] / prep.sigma[None, :]) ** 2))
