@@ -17,7 +17,7 @@ from encdesign.diagnose._engine import run_engine
 from encdesign.diagnose._multihead import MULTIHEAD
 from encdesign.diagnose._results import Alternative, Confounded, Effect, Finding, Refusal
 from encdesign.io._study import to_jsonable
-from tests.helpers import stepped_sensor_record, validate_diagnosis
+from tests.helpers import slow_wobble_bench, stepped_sensor_record, validate_diagnosis
 
 
 def _dump(doc) -> str:
@@ -93,3 +93,41 @@ def test_invariants_are_checked():
             other={},
             key_order=(),
         )
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_doubted_dominant_wobble_is_named_with_doubt_alternatives_and_one_pair(seed):
+    """Issue 22 item 3, on the issue's class at ONE speed (``slow_wobble_bench``): the
+    wobble at order 0.4 lowers the criterion far more than anything but a vibration at the
+    same frequency, and its plausibility rule doubts it (1.6 cycles: a drift could pose as
+    it). It is named with the doubt and the alternatives, not refused and left
+    ``unexplained``; the wobble and the vibration (one speed: the same column) are ONE
+    ``confounded`` entry saying what separates them, never two refusals."""
+    rec = slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=seed)
+    d = diagnose(rec)
+    validate_diagnosis(d.to_json())
+    assert d.verdict == "missing_physics", d["report"]
+    (e,) = d.effects
+    assert e.name == "bearing_wobble" and e.doubt is not None
+    assert e.doubt["rule"] == "bearing_wobble.plausible" and "drift" in e.doubt["reason"]
+    assert e.alternatives and all(
+        a.delta_bic_vs is None or a.delta_bic_vs > 0 for a in e.alternatives
+    )
+    assert all(a.separate_by for a in e.alternatives)
+    (pair,) = d.confounded
+    assert set(pair.pair) == {"bearing_wobble", "vibration"} and pair.correlation > 0.99
+    assert "speed" in pair.separate_by and pair.delta_bic is not None and pair.delta_bic > 0
+    refused = {r.name for r in d.rejected}
+    assert not refused & {"bearing_wobble", "vibration"}, d.rejected
+    assert any(n.startswith("doubted (bearing_wobble.plausible)") for n in e.notes)
+
+
+def test_a_doubt_without_dominance_still_refuses():
+    """With a dominance ratio no candidate can meet, the doubted wobble is refused as
+    before (rule ``bearing_wobble.plausible``) and the record stays unexplained."""
+    from encdesign.diagnose import FinderSettings
+
+    rec = slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=0)
+    d = diagnose(rec, settings=FinderSettings(dominant_ratio=1e9))
+    assert not d.effects and d.verdict == "unexplained"
+    assert any(r.rule == "bearing_wobble.plausible" for r in d.rejected)

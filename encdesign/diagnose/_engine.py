@@ -252,7 +252,7 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
         derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
     chans = _significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
     names = prep.kd.channel_names
-    return {
+    out = {
         "name": s.name,
         "params": term_params(term, final, idx),
         "derived": derived,
@@ -268,6 +268,33 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
         "explanation": term.cand.explanation,
         "confounded_with": s.confounded,
     }
+    if s.doubt is not None:  # named although a plausibility rule doubts it (issue 22 item 3)
+        out["doubt"] = s.doubt
+        out["alternatives"] = s.alternatives
+    return out
+
+
+def confounded_pairs(effects: list[dict], refused_pairs: list[dict]) -> list[dict]:
+    """The ``confounded`` entries: each named effect with each candidate it cannot be told
+    from (its ``confounded_with`` ties), and pairs refused together by one rule."""
+    out = []
+    for e in effects:
+        for c in e.get("confounded_with") or []:
+            if c.get("correlation") is None:
+                continue
+            db = c.get("delta_bic")
+            out.append(
+                {
+                    "pair": [e["name"], c["name"]],
+                    "correlation": float(min(c["correlation"], 1.0)),
+                    "delta_bic": None
+                    if db is None or e["delta_bic"] is None
+                    else float(db - e["delta_bic"]),
+                    "separate_by": c.get("separate_by", ""),
+                    "reason": c["reason"] + f"; {e['name']} is named",
+                }
+            )
+    return out + list(refused_pairs)
 
 
 def effect_contributions(prep: Prepared, fitter: Fitter, sel: dict) -> dict[str, np.ndarray]:
@@ -357,6 +384,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         "effects": effects,
         "unexplained": unexplained,
         "rejected": sel["rejected"],
+        "confounded": confounded_pairs(effects, sel["confounded"]),
         "not_testable": sel["not_testable"],
         "findings_before": [f.to_json(sig_mean) for f in sel["findings0"][:12]],
         "base": {

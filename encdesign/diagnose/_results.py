@@ -108,6 +108,8 @@ class Alternative(_Entry):
         delta_bic: its own change of the information criterion (``None``: not fitted).
         delta_bic_vs: its criterion less the named effect's (> 0: it fits worse).
         separate_by: what measurement would tell it from the named effect.
+        correlation: the correlation of what it and the named effect take out of the
+            residual (ties; in [0, 1]).
         params: its fitted parameters (``{name: value}``).
     """
 
@@ -117,6 +119,7 @@ class Alternative(_Entry):
     delta_bic: float | None = None
     delta_bic_vs: float | None = None
     separate_by: str | None = None
+    correlation: float | None = None
     params: Mapping[str, Any] | None = None
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     key_order: tuple[str, ...] = ("name", "reason", "rule", "delta_bic", "params")
@@ -128,6 +131,7 @@ class Alternative(_Entry):
         "delta_bic",
         "delta_bic_vs",
         "separate_by",
+        "correlation",
         "params",
     )
 

@@ -86,6 +86,18 @@ class FinderSettings(eqx.Module):
     """... and whose fitted errors correlate above this (kept rows, noise-whitened) are
     confounded (``confounded_with``). daa8c51, with ``tie_chi2``."""
 
+    dominant_ratio: float = eqx.field(default=3.0, static=True)
+    """A candidate a plausibility rule (``<candidate>.plausible``) doubts is still named,
+    with the doubt and its alternatives, when it passes every other rule and lowers the
+    information criterion by at least this many times more than any other candidate of its
+    round (and by ``dominant_gap`` more): evidence, not a veto (issue 22 item 3). Checked on
+    ``tests/helpers.slow_wobble_bench`` at one speed (seeds 0-2) and the ``effects`` / ``clean``
+    variation sets (seed 7)."""
+
+    dominant_gap: float = eqx.field(default=50.0, static=True)
+    """... and by at least this much (BIC) more than the next candidate, with
+    ``dominant_ratio``."""
+
     step_change_rows: int = eqx.field(default=3, static=True)
     """A located step is left to the direction / speed terms only within this many kept
     rows of a change of direction or speed (rule ``step``: otherwise a free step is the
