@@ -34,12 +34,12 @@ import numpy as np
 from .._errors import input_error
 from ._candidates import Candidate
 from ._document import (
-    _scan_order,
-    _se_dict,
-    _significant_channels,
     lattice_effect,
     order_spectrum,
     report_text,
+    scan_order_of,
+    se_dict,
+    significant_channels,
     term_params,
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
@@ -73,7 +73,7 @@ def _grow_base_order(
     Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
     the fitted values, or ``None`` (nothing changed)."""
-    hi = _scan_order(limit, order)
+    hi = scan_order_of(limit, order)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
@@ -114,7 +114,7 @@ def _grow_base_order(
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views, _scan_order(limit, M))
+    after = locate(prep, fitter.residual(grown.terms), kind.views, scan_order_of(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > prep.settings.growth_left_max * p0:
         prep.consts["max_order"] = order  # type: ignore[index]
@@ -249,8 +249,8 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
     term = final.terms[idx]
     derived = {}
     if term.cand.derived is not None:
-        derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
-    chans = _significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
+        derived = term.cand.derived(prep.ctx, term.values, se_dict(term, final, idx))
+    chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
     names = prep.kd.channel_names
     out = {
         "name": s.name,
@@ -452,7 +452,7 @@ def run_engine(
             seen[c.name] = c  # later ones (reference terms, user terms) override by name
         grow = kind.grows_orders and max_order is None
         base_fit, order = _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow)
-        scan = _scan_order(limit, order)
+        scan = scan_order_of(limit, order)
         pg.stage("base fitted")
         sel = select(
             prep,

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ._candidates import Candidate
-from ._document import _jsonable
+from ._document import jsonable
 from ._fit import FitResult, Fitter
 from ._protocol import Prepared
 
@@ -110,7 +110,7 @@ def partner_entry(chosen: Candidate, trial, gap: float, corr: float, dbic0: floa
         f"fits nearly as well (chi-square {gap:+.1f}): this record cannot tell them apart",
         "rule": "tie_corr",
         "delta_bic": float(dbic),
-        "params": {q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
         "correlation": float(corr),
         "separate_by": separate_by(chosen, cand, corr),
     }
@@ -119,7 +119,7 @@ def partner_entry(chosen: Candidate, trial, gap: float, corr: float, dbic0: floa
 def only_doubts(cand: Candidate, reasons: list) -> bool:
     """Whether every rule that refused ``cand`` is its plausibility rule (a doubt, not a
     failed test of the data)."""
-    return all(r == f"{cand.name}.plausible" for r, _ in reasons)
+    return cand.doubt_overruled and all(r == f"{cand.name}.plausible" for r, _ in reasons)
 
 
 def separate_by(a: Candidate, b: Candidate, corr: float | None = None) -> str:

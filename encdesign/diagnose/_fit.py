@@ -22,7 +22,7 @@ from ._views import SCAN_BLOCK
 
 
 @functools.lru_cache(maxsize=256)
-def _valjac_fn(cand: Candidate):
+def valjac_fn(cand: Candidate):
     # one jacfwd over all parameters (splitting it into linear and nonlinear tangents was
     # ~5x faster on the base term, but jax 0.10.2's CPU jit returned a Jacobian with zero
     # rows for the nonlinear half: checked against finite differences, not used)
@@ -177,7 +177,7 @@ class Fitter:
                     q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
                     for q in term.cand.params
                 }
-                v0, J = _valjac_fn(term.cand)(p0, x)
+                v0, J = valjac_fn(term.cand)(p0, x)
                 v0 = np.asarray(v0)[: b - a]
                 Jt = self._gather(term, J, b - a, v0.shape[1])
                 hit = (v0, Jt)
@@ -203,7 +203,7 @@ class Fitter:
                 v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
             return v, Jt
         if jac:
-            v, J = _valjac_fn(term.cand)(p, x)
+            v, J = valjac_fn(term.cand)(p, x)
             v = np.asarray(v)[: b - a]
             return v, self._gather(term, J, b - a, v.shape[1])
         v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]

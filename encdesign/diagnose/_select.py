@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
-from ._document import _jsonable
+from ._document import jsonable
 from ._evidence import (
     alternatives as _alternatives,
 )
@@ -366,7 +366,7 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
         f"the same (correlation {corr:.3f})",
         "rule": "tie_chi2",
         "delta_bic": float(dbic),
-        "params": {q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
         "correlation": float(corr),
         "separate_by": separate_by(chosen[0], cand, corr),
     }

@@ -80,7 +80,10 @@ def free_steps(prep: Prepared, findings: list) -> list[dict]:
         ch_rows = (
             np.flatnonzero(
                 (d[1:] != d[:-1])
-                | (np.abs(w[1:] - w[:-1]) > 0.05 * np.maximum(np.abs(w[1:]), np.abs(w[:-1])))
+                | (
+                    np.abs(w[1:] - w[:-1])
+                    > prep.settings.speed_change_min * np.maximum(np.abs(w[1:]), np.abs(w[:-1]))
+                )
             )
             + 1
         )
