@@ -48,7 +48,7 @@ from ._nuisances import excluded_share
 from ._prepare import noise_spectral
 from ._protocol import Prepared
 from ._results import PlotData
-from ._select import select
+from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._views import locate
 
@@ -242,9 +242,9 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     return base_fit, order
 
 
-def _effect_json(prep: Prepared, sel: dict, s) -> dict:
+def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
     """One named effect of the selection as its JSON entry."""
-    final = sel["final"]
+    final = sel.final
     idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
     term = final.terms[idx]
     derived = {}
@@ -262,7 +262,7 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
         "delta_bic": float(s.delta_bic),
         "delta_heldout_chi2": float(s.delta_heldout),
         "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
-        "share": float(sel["shares"].get(s.name, 0.0)),
+        "share": float(sel.shares.get(s.name, 0.0)),
         "size_rms": float(s.term_rms * float(np.mean(prep.sigma))),
         "notes": s.notes,
         "explanation": term.cand.explanation,
@@ -297,13 +297,13 @@ def confounded_pairs(effects: list[dict], refused_pairs: list[dict]) -> list[dic
     return out + list(refused_pairs)
 
 
-def effect_contributions(prep: Prepared, fitter: Fitter, sel: dict) -> dict[str, np.ndarray]:
+def effect_contributions(prep: Prepared, fitter: Fitter, sel: Selection) -> dict[str, np.ndarray]:
     """``{name: (n, C)}``: each named effect's own contribution in the final model (its
     term evaluated alone, chunk by chunk; projected like the residual where the kind
     projects), unit of y."""
     out = {}
-    names = {s.name for s in sel["accepted"]}
-    for term in sel["final"].terms:
+    names = {s.name for s in sel.accepted}
+    for term in sel.final.terms:
         if term.cand.name not in names:
             continue
         parts = []
@@ -330,12 +330,12 @@ def decide_verdict(doc: dict) -> str:
 def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
     """The diagnosis document before the kind's additions, the verdict and the report."""
     kd = prep.kd
-    base, final = sel["base"], sel["final"]
+    base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))
-    effects = [_effect_json(prep, sel, s) for s in sel["accepted"]]
+    effects = [_effect_json(prep, sel, s) for s in sel.accepted]
     unexplained = [
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
-        for f in sel["findings"][:12]
+        for f in sel.findings[:12]
     ]
     if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
         q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
@@ -371,8 +371,8 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
             "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
             "differences for the first weights and the glitch scan",
         },
-        "goodness_of_fit": goodness_of_fit(prep, sel["final_resid"], final.n_params),
-        "goodness_of_fit_base": sel["gof0"],
+        "goodness_of_fit": goodness_of_fit(prep, sel.final_resid, final.n_params),
+        "goodness_of_fit_base": sel.gof0,
         "heldout": prep.fold_design,
         "excluded_segments": prep.excluded,
         "glitches": prep.glitches,
@@ -383,10 +383,10 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         "gaps": prep.gaps,
         "effects": effects,
         "unexplained": unexplained,
-        "rejected": sel["rejected"],
-        "confounded": confounded_pairs(effects, sel["confounded"]),
-        "not_testable": sel["not_testable"],
-        "findings_before": [f.to_json(sig_mean) for f in sel["findings0"][:12]],
+        "rejected": sel.rejected,
+        "confounded": confounded_pairs(effects, sel.confounded),
+        "not_testable": sel.not_testable,
+        "findings_before": [f.to_json(sig_mean) for f in sel.findings0[:12]],
         "base": {
             "terms": base_params,
             "max_order": order,
@@ -406,7 +406,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         else "a least-squares fit stopped before converging",
         "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
-    doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    doc["spectrum"] = order_spectrum(prep, sel.base_resid, sel.final_resid, scan)
     # issue 22 item 4: a record mostly excluded is said so, with the reasons
     doc["excluded_share"] = excluded_share(prep.n, int(prep.keep.sum()), prep.excluded)
     doc.update(kind.summary(prep, base_params))
@@ -476,8 +476,8 @@ def run_engine(
         pg.close()
     plot = PlotData(
         prep=prep,
-        base_resid=sel["base_resid"],
-        final_resid=sel["final_resid"],
+        base_resid=sel.base_resid,
+        final_resid=sel.final_resid,
         effect_contributions=effect_contributions(prep, fitter, sel),
     )
     return doc, plot

@@ -485,6 +485,37 @@ def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, vi
     return current, cur_resid, findings, without
 
 
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """What stage 4 hands the document (typed: no string keys).
+
+    Attributes:
+        base, final: the base model's and the final model's fits.
+        base_resid, final_resid: (n, C) their residuals (unit of y).
+        findings0, findings: what the views located in the base and the final residual.
+        gof0: the base model's goodness of fit.
+        accepted: the named effects (:class:`Step`), in the order named.
+        rejected, not_testable: refusals (JSON entries, each with its ``rule``).
+        confounded: pairs refused together that the record cannot separate (JSON entries).
+        shares: each named effect's share of what all explain together.
+        tried: names of the candidates tried.
+    """
+
+    base: FitResult
+    base_resid: np.ndarray
+    findings0: list
+    gof0: dict
+    final: FitResult
+    final_resid: np.ndarray
+    findings: list
+    accepted: list[Step]
+    rejected: list[dict]
+    not_testable: list[dict]
+    confounded: list[dict]
+    shares: dict[str, float]
+    tried: list[str]
+
+
 def select(
     prep: Prepared,
     fitter: Fitter,
@@ -495,7 +526,8 @@ def select(
     max_effects: int = 3,
     log: Callable[[str], None] = lambda s: None,
 ):
-    """Forward selection with refits, then a backward held-out check (stage 4)."""
+    """Forward selection with refits, then a backward held-out check (stage 4); returns the
+    :class:`Selection`."""
     base = fitter.fit(base_terms)
     cur_resid = fitter.residual(base.terms)
     findings0 = locate(prep, cur_resid, views, scan_order)
@@ -602,7 +634,7 @@ def select(
             others = _frozen([t for t in current.terms if t.cand.name != s.name])
             fr = fitter.fit(others) if len(accepted) > 1 else base
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
-    return dict(
+    return Selection(
         base=base,
         # the base residual again (one pass): not held through the selection
         base_resid=cur_resid if current is base else fitter.residual(base.terms),
