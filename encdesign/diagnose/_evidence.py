@@ -16,7 +16,7 @@ from ._fit import FitResult, Fitter
 from ._protocol import Prepared
 
 
-def tie(
+def tie_gap(
     fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
 ) -> tuple[float, float]:
     """``(chi-square gap, correlation)`` of two alternative fits ``a`` (chosen) and ``b``:
@@ -49,7 +49,7 @@ def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confoun
         a, b = good[i], good[i + 1]
         if a[3] != b[3] or b[0] - a[0] >= s.tie_chi2:
             continue
-        gap, corr = tie(fitter, prep, cur_resid, a[2], b[2])
+        gap, corr = tie_gap(fitter, prep, cur_resid, a[2], b[2])
         if abs(gap) >= s.tie_chi2 or corr <= s.tie_corr:
             continue
         why = [r for r in rejected if r["name"] in (a[1].name, b[1].name)]
@@ -69,7 +69,7 @@ def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confoun
         return
 
 
-def dominant(st, trials: list) -> tuple[Candidate | None, list]:
+def find_dominant(st, trials: list) -> tuple[Candidate | None, list]:
     """``(candidate, partners)``: the first trial's candidate when it lowers the criterion
     far more than any other that is not the same fitted error (``dominant_ratio`` times and
     ``dominant_gap`` more than the next such trial, or than nothing), else ``(None, [])``;
@@ -84,7 +84,7 @@ def dominant(st, trials: list) -> tuple[Candidate | None, list]:
     d1 = 0.0
     for tr in trials[1:]:
         if len(partners) < 2 and tr[0] < -s.bic_min and tr[5] > 0:
-            gap, corr = tie(fitter, prep, st["cur_resid"], trials[0][2], tr[2])
+            gap, corr = tie_gap(fitter, prep, st["cur_resid"], trials[0][2], tr[2])
             if corr > s.tie_corr:
                 partners.append((tr, gap, corr))
                 continue
@@ -150,7 +150,7 @@ def separate_by(a: Candidate, b: Candidate, corr: float | None = None) -> str:
     return f"a record in which their fitted errors differ{c}: other speeds, directions or turns"
 
 
-def alternatives(chosen, trials: list, prep) -> list[dict]:
+def alternatives_of(chosen, trials: list, prep) -> list[dict]:
     """The other candidates of a doubted dominant one's round, best first (at most 3):
     name, their criterion, how much worse than the named one, what would tell them apart."""
     out = []

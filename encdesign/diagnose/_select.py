@@ -13,41 +13,18 @@ import numpy as np
 from ._candidates import Candidate
 from ._document import jsonable
 from ._evidence import (
-    alternatives as _alternatives,
-)
-from ._evidence import (
-    dominant as _dominant,
-)
-from ._evidence import (
-    only_doubts as _only_doubts,
-)
-from ._evidence import (
-    partner_entry as _partner_entry,
-)
-from ._evidence import (
-    refused_pair as _refused_pair,
-)
-from ._evidence import (
+    alternatives_of,
+    find_dominant,
+    only_doubts,
+    partner_entry,
+    refused_pair,
     rule_args,
     separate_by,
-)
-from ._evidence import (
-    tie as _tie,
+    tie_gap,
 )
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._protocol import Prepared
-from ._steps import (
-    beaten_by_step as _beaten_by_step,
-)
-from ._steps import (
-    free_steps as _free_steps,
-)
-from ._steps import (
-    frozen as _frozen,
-)
-from ._steps import (
-    place_step_refusals as _place_step_refusals,
-)
+from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._views import locate
 
 # ----------------------------------------------------------------------------- selection
@@ -238,8 +215,8 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
             rejected.append(_refusal(cand.name, [("max_param_fraction", reason)]))
             break
         if len(starts) > 1:
-            held = _frozen([term])[0]
-            fr0 = fitter.fit([*_frozen(current.terms), held])
+            held = frozen([term])[0]
+            fr0 = fitter.fit([*frozen(current.terms), held])
             screened.append((fr0.chi2, term, fr0))
         else:
             screened.append((0.0, term, None))
@@ -250,13 +227,13 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
     if screened[0][2] is not None:
         term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
     log(f"trying {cand.name}")
-    best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
+    best = fitter.fit([*frozen(current.terms), term], max_steps=12)
     # columns of the candidate the base model already spans are held at zero (reported),
     # so the rest of it can still be tested
     held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
     if held.size and held.size < best.terms[-1].n_free():
         t2 = _hold(best.terms[-1], held)
-        best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
+        best = fitter.fit([*frozen(current.terms), t2], max_steps=12)
         held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
     return best
 
@@ -327,7 +304,7 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
         return None, []
     after = locate(prep, fitter.residual(fr.terms), views, scan_order)
     # steps it leaves (a smooth model fitted to a step moves its change point)
-    steps_left = _free_steps(prep, after)
+    steps_left = free_steps(prep, after)
     p1 = sum(f.power - f.dof for f in after)
     # and clear the places its own signature located (not a larger structure there that it
     # only dents, e.g. a step fitted by a drift)
@@ -356,7 +333,7 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
     """A candidate the data cannot tell from the chosen one (``tie_chi2``, ``tie_corr``):
     its ``confounded_with`` entry, else ``None``."""
     s = prep.settings
-    gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
+    gap, corr = tie_gap(fitter, prep, cur_resid, chosen[1], fr)
     if not (gap < s.tie_chi2 and corr > s.tie_corr):
         return None
     return {
@@ -385,8 +362,8 @@ def _choose(
     dominant, partners = None, []
     if trials and trials[0][5] > 0 and trials[0][0] < -s.bic_min:
         r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
-        if r0 and _only_doubts(trials[0][1], r0):  # only then is dominance worth a pass
-            dominant, partners = _dominant(st, trials)
+        if r0 and only_doubts(trials[0][1], r0):  # only then is dominance worth a pass
+            dominant, partners = find_dominant(st, trials)
     refused: list = []
     for dbic, cand, fr, dho, dchi, k_new in trials:
         if k_new == 0:
@@ -401,7 +378,7 @@ def _choose(
             prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms
         )
         doubt = None
-        if reasons and chosen is None and cand is dominant and _only_doubts(cand, reasons):
+        if reasons and chosen is None and cand is dominant and only_doubts(cand, reasons):
             # evidence, not a veto: far ahead of every other candidate, refused only by a
             # plausibility rule -> named with the doubt and the alternatives
             doubt = {"rule": reasons[0][0], "reason": "; ".join(r for _, r in reasons)}
@@ -430,7 +407,7 @@ def _choose(
             continue
         # a step located where nothing in the catalog changes (no reversal, no change of
         # speed) is the alternative it must beat: a drift or a scale error only dents it
-        why = _beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
+        why = beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
         if why:
             rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
             step_refusals.append((cand.name, why[1]))
@@ -451,11 +428,11 @@ def _choose(
                 f"doubted ({doubt['rule']}): {doubt['reason']}; named because it lowers the "
                 "criterion far more than any other candidate (see alternatives)"
             )
-        ties = [_partner_entry(cand, tr, gap, corr, dbic) for tr, gap, corr in partners]
+        ties = [partner_entry(cand, tr, gap, corr, dbic) for tr, gap, corr in partners]
         chosen = (cand, fr, dbic, dho, col, notes, trms, erms, ties if doubt else [], doubt)
     if chosen is not None and chosen[9] is not None:
         rejected[:] = [r for r in rejected if not (r["name"] == chosen[0].name)]
-    _refused_pair(prep, fitter, st["cur_resid"], refused, rejected, confounded)
+    refused_pair(prep, fitter, st["cur_resid"], refused, rejected, confounded)
     return chosen
 
 
@@ -466,7 +443,7 @@ def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, vi
     if len(accepted) <= 1:
         return current, cur_resid, findings, without
     for s in list(accepted):
-        others = _frozen([t for t in current.terms if t.cand.name != s.name])
+        others = frozen([t for t in current.terms if t.cand.name != s.name])
         fr = fitter.fit(others)
         without[s.name] = fr
         if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
@@ -563,7 +540,7 @@ def select(
             cur_resid=cur_resid,
             views=views,
             scan_order=scan_order,
-            free_steps=_free_steps(prep, findings),
+            free_steps=free_steps(prep, findings),
         )
         trials = []
         for cand in applicable:
@@ -598,7 +575,7 @@ def select(
         if chosen is None:
             break
         cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen
-        alternatives = _alternatives(chosen, trials, prep) if doubt is not None else []
+        alternatives = alternatives_of(chosen, trials, prep) if doubt is not None else []
         if ties:
             notes = [
                 *notes,
@@ -621,7 +598,7 @@ def select(
     current, cur_resid, findings, without = _backward(
         prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan_order
     )
-    findings = _place_step_refusals(prep, fitter, current, step_refusals, findings)
+    findings = place_step_refusals(prep, fitter, current, step_refusals, findings)
     # a named effect's confounded partner is reported with it, never also as a refusal
     partners = {c["name"] for a in accepted for c in a.confounded}
     rejected[:] = [r for r in rejected if r["name"] not in partners]
@@ -631,7 +608,7 @@ def select(
     for s in accepted:
         fr = without.get(s.name)
         if fr is None:
-            others = _frozen([t for t in current.terms if t.cand.name != s.name])
+            others = frozen([t for t in current.terms if t.cand.name != s.name])
             fr = fitter.fit(others) if len(accepted) > 1 else base
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
     return Selection(

@@ -49,7 +49,7 @@ STEP_NUISANCE = Candidate(
 """A step of one size on the channels of a located step, from its row on within its run."""
 
 
-def free_steps(prep: Prepared, findings: list) -> list[dict]:
+def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
     A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
@@ -57,7 +57,9 @@ def free_steps(prep: Prepared, findings: list) -> list[dict]:
     half a time-view block, 1/64 of the run) of a kept row where the direction or the
     steady speed changes is left to those terms. The others are steps no smooth term (a
     drift, a scale error, an order) can make; each is returned with its time, run and
-    channels."""
+    channels. ``at_changes``: only the steps at such a change instead (``at_change`` set),
+    the alternative a drift in time must beat as well (``s9-nuis``:
+    ``_nuisances.drifts_in_time``)."""
     out = []
     keep = prep.keep
     for f in findings:
@@ -88,14 +90,21 @@ def free_steps(prep: Prepared, findings: list) -> list[dict]:
             + 1
         )
         near = max(prep.settings.step_change_rows, rows.size // 64)
-        if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
+        if bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near) != at_changes:
             continue
         ch = np.zeros(prep.n_channels)
         ch[list(f.where["heads"])] = 1.0
         sel = np.zeros(prep.ctx.n_runs)
         sel[r] = 1.0
         out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
+        out[-1]["at_change"] = at_changes
     return out
+
+
+_NO_STEP = (
+    "it cannot make a step there (no reversal, no change of speed at that time)",
+    "a slow drift in time cannot make the step at that reversal or change of speed",
+)
 
 
 def step_term(prep: Prepared, step: dict) -> Term:
@@ -146,8 +155,7 @@ def beaten_by_step(
                     f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
                     f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
                     f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
-                    f"{dbic:.1f}, held-out {dho:.1f}); it cannot make a step there (no "
-                    "reversal, no change of speed at that time)",
+                    f"{dbic:.1f}, held-out {dho:.1f}); " + _NO_STEP[bool(st.get("at_change"))],
                     f,
                 )
             if attempt:
