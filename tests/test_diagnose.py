@@ -14,7 +14,7 @@ import pytest
 import encdesign
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._fit import _valjac_fn
+from encdesign.diagnose._fit import valjac_fn
 from encdesign.diagnose._multihead import VIBRATION, _base_candidate
 from encdesign.physics import _effects as fx
 from tests.helpers import validate_diagnosis
@@ -182,7 +182,7 @@ def test_term_jacobian_matches_central_differences(which):
             "sin_rad": rng.normal(0, 1e-6, R * C),
         }
     p = {k: jnp.asarray(v, dtype=float) for k, v in p.items()}
-    _, J = _valjac_fn(cand)(p, x)
+    _, J = valjac_fn(cand)(p, x)
     for name, v in p.items():
         flat = np.asarray(v).ravel()
         h = 1e-6 * max(float(np.max(np.abs(flat))), 1e-6)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.diagnose._fit import _valjac_fn
+from encdesign.diagnose._fit import valjac_fn
 from encdesign.diagnose._multihead import _base_candidate
 from encdesign.diagnose._protocol import KeptRows, RowColumns
 
@@ -59,7 +59,7 @@ def test_base_term_jacobian_matches_central_differences_across_runs():
     }
     cand = _base_candidate(C, R, M)
     pj = {k: jnp.asarray(v) for k, v in p.items()}
-    v, J = _valjac_fn(cand)(pj, x)
+    v, J = valjac_fn(cand)(pj, x)
     np.testing.assert_allclose(np.asarray(v), np.asarray(cand.fn(pj, x)), rtol=0, atol=1e-18)
     h = 1e-6
     for name in ("run_angle_offset_rad", "placement_rad"):

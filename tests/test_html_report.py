@@ -5,6 +5,7 @@ embedded PNG, nothing refers outside the file; the CLI writes it."""
 from __future__ import annotations
 
 import base64
+import html
 import re
 from html.parser import HTMLParser
 
@@ -14,7 +15,8 @@ import pytest
 
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._html import render_html, report_inputs
+from encdesign.diagnose._document import nuisance_rows
+from encdesign.diagnose._html import fitted_curves, render_html, report_inputs
 from encdesign.io._recording import write_recording
 from encdesign.simulate import simulate_plan as simulate
 from encdesign.simulate import simulate_quadrature, write_concealed_sds
@@ -121,8 +123,24 @@ def test_report_shows_every_item(kind, tmp_path):
         == len(doc["rejected"])
         + len(doc["not_testable"])
         + sum(len(e.get("confounded_with") or []) for e in doc["effects"])
+        + sum(len(e.get("alternatives") or []) for e in doc["effects"] if e.get("doubt"))
         or alt.count("<tr>") == 0
     )
+    # the fitted-effect figure: one curve per fitted named effect, its own contribution
+    # from the typed results (not the sum of all)
+    fitted = [e.name for e in d.effects if e.delta_bic is not None]
+    assert set(d.plot_data.effect_contributions) == set(fitted)
+    if fitted:
+        curves = fitted_curves(doc, rows)
+        assert [n for n, _ in curves] == fitted
+        for name, c in curves:
+            assert c is rows["effects"][name] and c.shape == rows["base_resid"].shape
+            assert np.any(c[rows["keep"]] != 0.0)
+        assert "one curve each: " + ", ".join(fitted) in text
+    # one row formatter for the nuisances: the text report's lines and the HTML table's rows
+    for what, run, t, detail in nuisance_rows(doc):
+        assert f"{what}: run {run} t {t} s: {detail}" in doc["report"]
+        assert f"<td>{html.escape(what)}</td><td>{html.escape(run)}</td>" in text
     if kind in ("multihead", "sensor", "motion"):  # these benches start with a transient
         assert doc["excluded_segments"] and "excluded" in text
 
@@ -159,3 +177,21 @@ def test_cli_writes_the_report(tmp_path, capsys):
         ]
     )
     assert rc == 2
+
+
+def test_nuisance_rows_format_each_kind_once():
+    doc = {
+        "unit": "rad",
+        "excluded_segments": [
+            {"run": 0, "t_start_s": 0.0, "t_end_s": 1.25, "n_rows": 40, "reason": "start-up"}
+        ],
+        "glitches": [{"run": 1, "t_s": 2.5, "channel": "h1"}],
+        "count_jumps": [{"run": 1, "t_s": 3.0, "channel": "h0", "size": 1e-3}],
+        "gaps": [{"run": 2, "t_s": 4.0, "duration_s": 0.75}],
+    }
+    assert nuisance_rows(doc) == [
+        ("excluded", "0", "0..1.25", "40 rows: start-up"),
+        ("glitch", "1", "2.5", "channel h1"),
+        ("count jump", "1", "3", "channel h0, size 0.001 rad"),
+        ("gap", "2", "4", "for 0.75 s"),
+    ]

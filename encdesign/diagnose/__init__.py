@@ -19,6 +19,14 @@ from ._dispatch import (
     load_candidates as load_candidates,
 )
 from ._motion import candidate_orders as candidate_orders
+from ._results import (
+    Alternative as Alternative,
+    Confounded as Confounded,
+    Effect as Effect,
+    Finding as Finding,
+    PlotData as PlotData,
+    Refusal as Refusal,
+)
 from ._plots import engine_plots as write_diagnosis_plots
 from ._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,

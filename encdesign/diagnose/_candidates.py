@@ -158,6 +158,11 @@ class Candidate:
             physical (the effect is then refused with that reason).
         derived: ``derived(ctx, params, se) -> dict`` extra reported quantities (e.g. a
             length from an angle), each ``{"value", "se", "unit"}``.
+        doubt_overruled: ``True`` (default): ``plausible`` is a doubt about the fitted size
+            that the data may overrule (a candidate far ahead of every other is named with
+            the doubt and its alternatives, ``FinderSettings.dominant_ratio``); ``False``:
+            its ``plausible`` is itself a test the data failed (``vibration``: at one speed
+            the line must beat the rotation-locked order), always a refusal.
     """
 
     name: str
@@ -170,6 +175,7 @@ class Candidate:
     start: StartFn | None = None
     plausible: Callable[[Context, dict], str | None] | None = None
     derived: Callable[[Context, dict, dict], dict] | None = None
+    doubt_overruled: bool = True
 
     def __post_init__(self) -> None:
         names = [p.name for p in self.params]

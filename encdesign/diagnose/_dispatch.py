@@ -13,53 +13,110 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, final
+
+import equinox as eqx
 
 from .._errors import DiagnosisError, input_error
 from .._usercode import user_module_items
 from ..io._recording import Recording, load_recording
 from ._candidates import Candidate
+from ._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
 from ._settings import FinderSettings
 
 ENGINE_KINDS = ("multihead", "motion", "sds", "quadrature")
 
 
-@dataclasses.dataclass(frozen=True)
-class Diagnosis:
-    """A diagnosis: the JSON document (``doc``) plus what the plots need.
+TYPED_KEYS = ("verdict", "status", "effects", "unexplained", "rejected", "not_testable")
+"""Keys of the document held as typed fields of :class:`Diagnosis`."""
+
+
+@final
+class Diagnosis(eqx.Module):
+    """A diagnosis: typed results, the rest of the JSON document, and what the plots need.
 
     Attributes:
-        doc: the diagnosis document (``docs/diagnose.md``, ``diagnosis.schema.json``).
+        verdict: ``consistent``, ``missing_physics`` or ``unexplained``.
         status: ``"ok"`` or why a fit did not converge.
+        effects: named effects, most important first (:class:`Effect`).
+        unexplained: located structure no effect explains (:class:`Finding`).
+        rejected: refused candidates, each with its rule (:class:`Refusal`).
+        not_testable: candidates that do not apply to this record (:class:`Refusal`).
+        confounded: pairs of effects the record cannot separate (:class:`Confounded`;
+            empty when the document has none).
+        other: every other key of the document (``docs/diagnose.md``), as JSON.
+        key_order: the document's keys in order (:meth:`to_json` gives them back so).
+        plot_data: what the figures need beyond the document (:class:`PlotData`).
     """
 
-    doc: dict[str, Any]
-    status: str = "ok"
-    plot_data: Any = None
+    verdict: str
+    status: str
+    effects: tuple[Effect, ...]
+    unexplained: tuple[Finding, ...]
+    rejected: tuple[Refusal, ...]
+    not_testable: tuple[Refusal, ...]
+    confounded: tuple[Confounded, ...]
+    other: Mapping[str, Any]
+    key_order: tuple[str, ...]
+    plot_data: PlotData | None = None
 
-    @property
-    def verdict(self) -> str:
-        """``consistent``, ``missing_physics`` or ``unexplained``."""
-        return self.doc["verdict"]
+    def __check_init__(self):
+        if self.verdict not in VERDICTS:
+            raise DiagnosisError(f"diagnosis verdict: got {self.verdict!r}; expected {VERDICTS}")
+        if (self.verdict == "missing_physics") != bool(self.effects):
+            raise DiagnosisError(
+                f"diagnosis verdict {self.verdict!r} with {len(self.effects)} named effect(s): "
+                "missing_physics exactly when an effect is named"
+            )
+        if self.verdict == "consistent" and self.unexplained:
+            raise DiagnosisError("diagnosis verdict 'consistent' with unexplained structure")
 
-    @property
-    def effects(self) -> list[dict]:
-        """Named effects, most important first."""
-        return self.doc["effects"]
-
-    @property
-    def unexplained(self) -> list[dict]:
-        """Located structure no effect explains."""
-        return self.doc["unexplained"]
-
-    def __getitem__(self, key: str) -> Any:
-        return self.doc[key]
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any], plot_data: PlotData | None = None) -> Diagnosis:
+        """The typed diagnosis of a diagnosis document (``diagnosis.schema.json``)."""
+        return cls(
+            verdict=doc["verdict"],
+            status=doc.get("status", "ok"),
+            effects=tuple(Effect.from_json(e) for e in doc.get("effects", ())),
+            unexplained=tuple(Finding.from_json(f) for f in doc.get("unexplained", ())),
+            rejected=tuple(Refusal.from_json(r) for r in doc.get("rejected", ())),
+            not_testable=tuple(Refusal.from_json(r) for r in doc.get("not_testable", ())),
+            confounded=tuple(Confounded.from_json(c) for c in doc.get("confounded", ())),
+            other={k: v for k, v in doc.items() if k not in (*TYPED_KEYS, "confounded")},
+            key_order=tuple(doc),
+            plot_data=plot_data,
+        )
 
     def to_json(self) -> dict[str, Any]:
-        """The JSON document."""
-        return self.doc
+        """The JSON document (``diagnosis.schema.json``, ``docs/diagnose.md``)."""
+        typed: dict[str, Any] = {
+            "verdict": self.verdict,
+            "status": self.status,
+            "effects": [e.to_json() for e in self.effects],
+            "unexplained": [f.to_json() for f in self.unexplained],
+            "rejected": [r.to_json() for r in self.rejected],
+            "not_testable": [r.to_json() for r in self.not_testable],
+            "confounded": [c.to_json() for c in self.confounded],
+        }
+        return {k: typed[k] if k in typed else self.other[k] for k in self.key_order}
+
+    @property
+    def doc(self) -> dict[str, Any]:
+        """The JSON document (back compatibility: :meth:`to_json`)."""
+        return self.to_json()
+
+    def __getitem__(self, key: str) -> Any:
+        """Back compatibility: ``d["verdict"]`` reads the document's key."""
+        return self.to_json()[key]
+
+    def with_keys(self, **keys: Any) -> Diagnosis:
+        """A copy with document keys other than the typed ones set (e.g. ``plots``)."""
+        if set(keys) & {*TYPED_KEYS, "confounded"}:
+            raise DiagnosisError(f"with_keys: typed keys {sorted(keys)} are set as fields")
+        order = self.key_order + tuple(k for k in keys if k not in self.key_order)
+        return dataclasses.replace(self, other={**self.other, **keys}, key_order=order)
 
 
 def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
@@ -124,7 +181,7 @@ def diagnose(
     if rec.kind == "quadrature":
         from ._quadrature import run_quadrature
 
-        doc = run_quadrature(rec, **opts)
+        doc, plot_data = run_quadrature(rec, **opts)
     else:
         if rec.kind == "multihead":
             from ._multihead import MULTIHEAD as kind
@@ -132,17 +189,17 @@ def diagnose(
             from ._sds import SDS as kind
         else:
             from ._motion import MOTION as kind
-        doc = run_engine(kind, rec, **opts)
-    plot_data = doc.pop("_plot")
-    d = Diagnosis(doc, doc["status"], plot_data)
+        doc, plot_data = run_engine(kind, rec, **opts)
+    d = Diagnosis.from_json(doc, plot_data)
     if plots is not None:
         from ._plots import engine_plots
 
-        doc["plots"] = [str(p) for p in engine_plots(d, plots)]
+        paths = [str(p) for p in engine_plots(d, plots)]
         if rec.kind == "quadrature":
             from ._quadrature import quadrature_plots
 
-            doc["plots"] += [str(p) for p in quadrature_plots(d, plots)]
+            paths += [str(p) for p in quadrature_plots(d, plots)]
+        d = d.with_keys(plots=paths)
     if throw and d.status != "ok":
         raise DiagnosisError(f"diagnose: {d.status}")
     return d

@@ -14,12 +14,12 @@ from ._views import order_sums, run_spans
 # ----------------------------------------------------------------------------- run + JSON
 
 
-def _jsonable(v):
+def jsonable(v):
     a = np.asarray(v, float)
     a = np.where(np.isfinite(a), a, np.nan)
     if a.ndim == 0:
         return None if np.isnan(a) else float(a)
-    return [_jsonable(x) for x in a]
+    return [jsonable(x) for x in a]
 
 
 def term_params(term: Term, fit: FitResult, index: int) -> dict:
@@ -34,11 +34,11 @@ def term_params(term: Term, fit: FitResult, index: int) -> dict:
         k = int(m.sum())
         se[m] = se_all[pos : pos + k] if k else []
         pos += k
-        out[q.name] = {"value": _jsonable(term.values[q.name]), "se": _jsonable(se), "unit": q.unit}
+        out[q.name] = {"value": jsonable(term.values[q.name]), "se": jsonable(se), "unit": q.unit}
     return out
 
 
-def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
+def se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     s0, _ = fit.slices[index]
     se_all = np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) if fit.cov.size else np.zeros(0)
     out, pos = {}, s0
@@ -52,7 +52,7 @@ def _se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
-def _scan_order(limit: int, order: int) -> int:
+def scan_order_of(limit: int, order: int) -> int:
     """Highest order the views scan for a base of ``order``: twice it, at least 24, within
     what the record resolves."""
     return int(min(limit, max(2 * order, 24)))
@@ -188,10 +188,10 @@ def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: in
     return out
 
 
-def _significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
+def significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
     """Channels whose per-channel parameters differ from zero by more than 3 se (``None``
     when the term has no per-channel parameter)."""
-    se = _se_dict(term, fit, idx)
+    se = se_dict(term, fit, idx)
     per = [q for q in term.cand.params if q.shape in ("channels", "runs*channels")]
     if not per or C == 1:
         return None
@@ -201,6 +201,50 @@ def _significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
         v = np.nan_to_num(v)
         z = np.maximum(z, v.reshape(-1, C).max(0))
     return [k for k in range(C) if z[k] > 3]
+
+
+def _g(x, digits: int = 4) -> str:
+    """A number as text (``-`` for none / non-finite)."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return "-" if x is None else str(x)
+    return f"{v:.{digits}g}" if math.isfinite(v) else "-"
+
+
+def nuisance_rows(doc: dict) -> list[tuple[str, str, str, str]]:
+    """``(what, run, time, detail)`` text of each excluded segment, glitch, count jump and
+    gap of a diagnosis document: the one formatter of the plain-text report's lines and
+    the HTML report's nuisance table (time in s within the run; detail in the document's
+    unit)."""
+    u = doc.get("unit", "")
+    rows = [
+        (
+            "excluded",
+            str(s.get("run")),
+            f"{_g(s.get('t_start_s'))}..{_g(s.get('t_end_s'))}",
+            f"{s.get('n_rows')} rows: {s.get('reason', '')}",
+        )
+        for s in doc.get("excluded_segments") or []
+    ]
+    rows += [
+        ("glitch", str(s.get("run")), _g(s.get("t_s"), 6), f"channel {s.get('channel', '-')}")
+        for s in doc.get("glitches") or []
+    ]
+    rows += [
+        (
+            "count jump",
+            str(s.get("run")),
+            _g(s.get("t_s"), 6),
+            f"channel {s.get('channel', '-')}, size {_g(s.get('size'))} {u}",
+        )
+        for s in doc.get("count_jumps") or []
+    ]
+    rows += [
+        ("gap", str(s.get("run")), _g(s.get("t_s"), 6), f"for {_g(s.get('duration_s'), 3)} s")
+        for s in doc.get("gaps") or []
+    ]
+    return rows
 
 
 def report_text(doc: dict) -> str:
@@ -218,20 +262,8 @@ def report_text(doc: dict) -> str:
     ]
     if doc.get("excluded_share"):  # issue 22 item 4: prominent, near the top
         lines.insert(2, "WARNING: " + doc["excluded_share"]["note"])
-    for e in doc["excluded_segments"]:
-        lines.append(
-            f"excluded: run {e['run']} t {e['t_start_s']:.4g}..{e['t_end_s']:.4g} s "
-            f"({e['n_rows']} rows): {e['reason']}"
-        )
-    for gl in doc["glitches"]:
-        lines.append(f"glitch: run {gl['run']} t {gl['t_s']:.6g} s channel {gl['channel']}")
-    for j in doc["count_jumps"]:
-        lines.append(
-            f"count jump: run {j['run']} t {j['t_s']:.6g} s channel {j['channel']} "
-            f"size {j['size']:.4g} {u}"
-        )
-    for gp in doc["gaps"]:
-        lines.append(f"gap: run {gp['run']} at t {gp['t_s']:.6g} s for {gp['duration_s']:.3g} s")
+    for what, run, t, detail in nuisance_rows(doc):
+        lines.append(f"{what}: run {run} t {t} s: {detail}")
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]

@@ -34,12 +34,12 @@ import numpy as np
 from .._errors import input_error
 from ._candidates import Candidate
 from ._document import (
-    _scan_order,
-    _se_dict,
-    _significant_channels,
     lattice_effect,
     order_spectrum,
     report_text,
+    scan_order_of,
+    se_dict,
+    significant_channels,
     term_params,
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
@@ -47,7 +47,8 @@ from ._kind import AbstractKind as Kind
 from ._nuisances import excluded_share
 from ._prepare import noise_spectral
 from ._protocol import Prepared
-from ._select import select
+from ._results import PlotData
+from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._views import locate
 
@@ -72,7 +73,7 @@ def _grow_base_order(
     Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
     the fitted values, or ``None`` (nothing changed)."""
-    hi = _scan_order(limit, order)
+    hi = scan_order_of(limit, order)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
@@ -113,7 +114,7 @@ def _grow_base_order(
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views, _scan_order(limit, M))
+    after = locate(prep, fitter.residual(grown.terms), kind.views, scan_order_of(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > prep.settings.growth_left_max * p0:
         prep.consts["max_order"] = order  # type: ignore[index]
@@ -241,17 +242,17 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     return base_fit, order
 
 
-def _effect_json(prep: Prepared, sel: dict, s) -> dict:
+def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
     """One named effect of the selection as its JSON entry."""
-    final = sel["final"]
+    final = sel.final
     idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
     term = final.terms[idx]
     derived = {}
     if term.cand.derived is not None:
-        derived = term.cand.derived(prep.ctx, term.values, _se_dict(term, final, idx))
-    chans = _significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
+        derived = term.cand.derived(prep.ctx, term.values, se_dict(term, final, idx))
+    chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
     names = prep.kd.channel_names
-    return {
+    out = {
         "name": s.name,
         "params": term_params(term, final, idx),
         "derived": derived,
@@ -261,12 +262,58 @@ def _effect_json(prep: Prepared, sel: dict, s) -> dict:
         "delta_bic": float(s.delta_bic),
         "delta_heldout_chi2": float(s.delta_heldout),
         "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
-        "share": float(sel["shares"].get(s.name, 0.0)),
+        "share": float(sel.shares.get(s.name, 0.0)),
         "size_rms": float(s.term_rms * float(np.mean(prep.sigma))),
         "notes": s.notes,
         "explanation": term.cand.explanation,
         "confounded_with": s.confounded,
     }
+    if s.doubt is not None:  # named although a plausibility rule doubts it (issue 22 item 3)
+        out["doubt"] = s.doubt
+        out["alternatives"] = s.alternatives
+    return out
+
+
+def confounded_pairs(effects: list[dict], refused_pairs: list[dict]) -> list[dict]:
+    """The ``confounded`` entries: each named effect with each candidate it cannot be told
+    from (its ``confounded_with`` ties), and pairs refused together by one rule."""
+    out = []
+    for e in effects:
+        for c in e.get("confounded_with") or []:
+            if c.get("correlation") is None:
+                continue
+            db = c.get("delta_bic")
+            out.append(
+                {
+                    "pair": [e["name"], c["name"]],
+                    "correlation": float(min(c["correlation"], 1.0)),
+                    "delta_bic": None
+                    if db is None or e["delta_bic"] is None
+                    else float(db - e["delta_bic"]),
+                    "separate_by": c.get("separate_by", ""),
+                    "reason": c["reason"] + f"; {e['name']} is named",
+                }
+            )
+    return out + list(refused_pairs)
+
+
+def effect_contributions(prep: Prepared, fitter: Fitter, sel: Selection) -> dict[str, np.ndarray]:
+    """``{name: (n, C)}``: each named effect's own contribution in the final model (its
+    term evaluated alone, chunk by chunk; projected like the residual where the kind
+    projects), unit of y."""
+    out = {}
+    names = {s.name for s in sel.accepted}
+    for term in sel.final.terms:
+        if term.cand.name not in names:
+            continue
+        parts = []
+        for a, b, x in fitter.chunks():
+            v = np.asarray(fitter.eval_term(term, a, b, x, jac=False)[0], float)
+            if prep.kd.project:
+                v = v - v.mean(1, keepdims=True)
+            parts.append(v.reshape(b - a, -1))
+        out[term.cand.name] = np.concatenate(parts) if parts else np.zeros((0, prep.n_channels))
+    return out
 
 
 def decide_verdict(doc: dict) -> str:
@@ -283,12 +330,12 @@ def decide_verdict(doc: dict) -> str:
 def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
     """The diagnosis document before the kind's additions, the verdict and the report."""
     kd = prep.kd
-    base, final = sel["base"], sel["final"]
+    base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))
-    effects = [_effect_json(prep, sel, s) for s in sel["accepted"]]
+    effects = [_effect_json(prep, sel, s) for s in sel.accepted]
     unexplained = [
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
-        for f in sel["findings"][:12]
+        for f in sel.findings[:12]
     ]
     if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
         q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
@@ -324,8 +371,8 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
             "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
             "differences for the first weights and the glitch scan",
         },
-        "goodness_of_fit": goodness_of_fit(prep, sel["final_resid"], final.n_params),
-        "goodness_of_fit_base": sel["gof0"],
+        "goodness_of_fit": goodness_of_fit(prep, sel.final_resid, final.n_params),
+        "goodness_of_fit_base": sel.gof0,
         "heldout": prep.fold_design,
         "excluded_segments": prep.excluded,
         "glitches": prep.glitches,
@@ -336,9 +383,10 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         "gaps": prep.gaps,
         "effects": effects,
         "unexplained": unexplained,
-        "rejected": sel["rejected"],
-        "not_testable": sel["not_testable"],
-        "findings_before": [f.to_json(sig_mean) for f in sel["findings0"][:12]],
+        "rejected": sel.rejected,
+        "confounded": confounded_pairs(effects, sel.confounded),
+        "not_testable": sel.not_testable,
+        "findings_before": [f.to_json(sig_mean) for f in sel.findings0[:12]],
         "base": {
             "terms": base_params,
             "max_order": order,
@@ -358,7 +406,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         else "a least-squares fit stopped before converging",
         "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
-    doc["spectrum"] = order_spectrum(prep, sel["base_resid"], sel["final_resid"], scan)
+    doc["spectrum"] = order_spectrum(prep, sel.base_resid, sel.final_resid, scan)
     # issue 22 item 4: a record mostly excluded is said so, with the reasons
     doc["excluded_share"] = excluded_share(prep.n, int(prep.keep.sum()), prep.excluded)
     doc.update(kind.summary(prep, base_params))
@@ -374,9 +422,10 @@ def run_engine(
     extra_candidates: Sequence[Candidate] = (),
     verbose: bool = False,
     settings: FinderSettings | None = None,
-) -> dict[str, Any]:
-    """Diagnose ``rec`` with ``kind``; returns the diagnosis JSON document (a dict, with
-    ``_plot`` for the plots).
+) -> tuple[dict[str, Any], PlotData]:
+    """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
+    document (a dict, ``diagnosis.schema.json``) and what the figures need
+    (:class:`~encdesign.diagnose._results.PlotData`).
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,
@@ -403,7 +452,7 @@ def run_engine(
             seen[c.name] = c  # later ones (reference terms, user terms) override by name
         grow = kind.grows_orders and max_order is None
         base_fit, order = _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow)
-        scan = _scan_order(limit, order)
+        scan = scan_order_of(limit, order)
         pg.stage("base fitted")
         sel = select(
             prep,
@@ -425,5 +474,10 @@ def run_engine(
         doc["report"] = report_text(doc) + kind.report_lines(doc)
     finally:
         pg.close()
-    doc["_plot"] = dict(prep=prep, base_resid=sel["base_resid"], final_resid=sel["final_resid"])
-    return doc
+    plot = PlotData(
+        prep=prep,
+        base_resid=sel.base_resid,
+        final_resid=sel.final_resid,
+        effect_contributions=effect_contributions(prep, fitter, sel),
+    )
+    return doc, plot

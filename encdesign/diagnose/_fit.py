@@ -22,7 +22,7 @@ from ._views import SCAN_BLOCK
 
 
 @functools.lru_cache(maxsize=256)
-def _valjac_fn(cand: Candidate):
+def valjac_fn(cand: Candidate):
     # one jacfwd over all parameters (splitting it into linear and nonlinear tangents was
     # ~5x faster on the base term, but jax 0.10.2's CPU jit returned a Jacobian with zero
     # rows for the nonlinear half: checked against finite differences, not used)
@@ -131,7 +131,7 @@ class Fitter:
         self._pbytes = 0
         self._gram: dict = {}
 
-    def _chunks(self):
+    def chunks(self):
         prep = self.prep
         n = prep.n
         c = self.chunk
@@ -160,7 +160,7 @@ class Fitter:
     def _linear_only(term: Term) -> bool:
         return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
 
-    def _eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
+    def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
         """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
 
         A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
@@ -177,7 +177,7 @@ class Fitter:
                     q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
                     for q in term.cand.params
                 }
-                v0, J = _valjac_fn(term.cand)(p0, x)
+                v0, J = valjac_fn(term.cand)(p0, x)
                 v0 = np.asarray(v0)[: b - a]
                 Jt = self._gather(term, J, b - a, v0.shape[1])
                 hit = (v0, Jt)
@@ -203,7 +203,7 @@ class Fitter:
                 v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
             return v, Jt
         if jac:
-            v, J = _valjac_fn(term.cand)(p, x)
+            v, J = valjac_fn(term.cand)(p, x)
             v = np.asarray(v)[: b - a]
             return v, self._gather(term, J, b - a, v.shape[1])
         v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
@@ -220,11 +220,11 @@ class Fitter:
 
     def chunk_residual(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
         """Residual of rows ``a:b`` (projected when the kind says so), from the chunk's row
-        columns ``x`` (as :meth:`_chunks` yields them)."""
+        columns ``x`` (as :meth:`chunks` yields them)."""
         prep = self.prep
         pred = np.zeros((b - a, prep.n_channels))
         for tm in terms:
-            pred += self._eval_term(tm, a, b, x, jac=False)[0]
+            pred += self.eval_term(tm, a, b, x, jac=False)[0]
         r = prep.y[a:b] - pred
         if prep.kd.project:
             r = r - r.mean(1, keepdims=True)
@@ -233,7 +233,7 @@ class Fitter:
     def iter_residual(self, terms: Sequence[Term]):
         """``(a, b, residual of rows a:b)`` chunk by chunk: statistics of a residual without
         holding it whole."""
-        for a, b, x in self._chunks():
+        for a, b, x in self.chunks():
             yield a, b, self.chunk_residual(terms, a, b, x)
 
     def residual(self, terms: Sequence[Term]) -> np.ndarray:
@@ -250,7 +250,7 @@ class Fitter:
         pred = np.zeros((b - a, prep.n_channels))
         Js = []
         for tm in terms:
-            v, J = self._eval_term(tm, a, b, x, jac=True)
+            v, J = self.eval_term(tm, a, b, x, jac=True)
             pred += v
             Js.append(J)
         J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
@@ -303,7 +303,7 @@ class Fitter:
         ssr = np.zeros(K)
         sw = np.sqrt(self.w_ch)
         new_gram = np.zeros((K, p_s, p_s)) if gram is None else None
-        for a, b, x in self._chunks():
+        for a, b, x in self.chunks():
             ck = (skey, a)
             hit = self._pcache.get(ck)
             if hit is None:
@@ -324,12 +324,12 @@ class Fitter:
             # static prediction from current linear values (v0 + J p)
             pred = np.zeros((b - a, prep.n_channels))
             for tm in static:
-                pred += self._eval_term(tm, a, b, x, jac=False if not jac else True)[0]
+                pred += self.eval_term(tm, a, b, x, jac=False if not jac else True)[0]
             if dyn:
                 if jac:
                     pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
                 else:
-                    pd = sum(self._eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
+                    pd = sum(self.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
                     Jd = None
                 pred = pred + pd
             else:

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from ._document import nuisance_rows
+
 # ----------------------------------------------------------------------------------------
 # The adapter: the only code that touches the finder's objects.
 
@@ -37,7 +39,9 @@ def report_inputs(d: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
         the run (s), ``run`` (n,) the run number as the document names it, ``keep`` (n,) bool
         (rows used by the fits), ``theta`` (n,) the shaft angle (rad) or ``None``,
         ``base_resid`` and ``final_resid`` (n, C) residuals of the base and final model (unit
-        of the document), and ``channels`` (C names).
+        of the document), ``effects`` ``{name: (n, C)}`` each named effect's own fitted
+        contribution (typed :class:`~encdesign.diagnose._results.PlotData`; empty when the
+        plot data has none), and ``channels`` (C names).
     """
     doc = d.to_json()
     pd = getattr(d, "plot_data", None)
@@ -62,6 +66,10 @@ def report_inputs(d: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
         "theta": theta,
         "base_resid": np.asarray(pd["base_resid"], dtype=float),
         "final_resid": np.asarray(pd["final_resid"], dtype=float),
+        "effects": {
+            str(k): np.asarray(v, dtype=float)
+            for k, v in (getattr(pd, "effect_contributions", None) or {}).items()
+        },
         "channels": [str(c) for c in prep.kd.channel_names],
     }
     return doc, rows
@@ -332,34 +340,53 @@ def fig_heads(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
     return _png(fig)
 
 
+def fitted_curves(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """``[(name, (n, C) contribution), ...]``: each named effect's own fitted contribution
+    (the typed results' per-effect arrays, in the order of ``effects``); effects named from
+    a lattice (not fitted) have none. Without per-effect arrays, one curve: the named
+    effects together (base residual minus final residual)."""
+    own = rows.get("effects") or {}
+    curves = [(e["name"], own[e["name"]]) for e in doc.get("effects") or [] if e["name"] in own]
+    if curves:
+        return curves
+    return [("named effects", rows["base_resid"] - rows["final_resid"])]
+
+
 def fig_fitted(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
-    """The named effects' fitted contribution (base residual minus final residual) drawn over
-    the base residual it explains, on the channel where it is largest: against time and,
-    where the shaft angle is known, folded on the angle."""
+    """Each named effect's own fitted contribution (one curve per effect,
+    :func:`fitted_curves`) drawn over the base residual it explains, on the channel where
+    they are largest: against time and, where the shaft angle is known, folded on the
+    angle."""
     if not doc.get("effects"):
         return None
     Figure = _figure()
     keep = rows["keep"]
-    model = rows["base_resid"] - rows["final_resid"]
+    curves = fitted_curves(doc, rows)
+    model = sum(np.abs(c) for _, c in curves)
     k = int(np.argmax(np.sqrt(np.mean(model[keep] ** 2, axis=0)))) if keep.any() else 0
     has_theta = rows.get("theta") is not None
     fig = Figure(figsize=(10, 3.6))
     axes = fig.subplots(1, 2 if has_theta else 1, squeeze=False)[0]
     tau = rows["tau"][keep]
     s = _stride(tau.size)
-    b, m = rows["base_resid"][keep, k], model[keep, k]
+    b = rows["base_resid"][keep, k]
+    colors = ("tab:green", "tab:orange", "tab:purple", "tab:red", "tab:blue")
     axes[0].plot(tau[s], b[s], ".", ms=1.5, color="0.55", label="base residual")
-    axes[0].plot(tau[s], m[s], "-", lw=0.8, color="tab:green", label="fitted effects")
+    for i, (name, c) in enumerate(curves):
+        m = c[keep, k]
+        axes[0].plot(tau[s], m[s], "-", lw=0.8, color=colors[i % len(colors)], label=name)
     axes[0].set(xlabel="time, runs end to end (s)", ylabel=f"{rows['channels'][k]} ({doc['unit']})")
     axes[0].legend(fontsize=7, markerscale=5)
     if has_theta:
         ph = np.degrees(np.mod(rows["theta"][keep], 2 * np.pi))
         o = np.argsort(ph)[s]
         axes[1].plot(ph[o], b[o], ".", ms=1.5, color="0.55", label="base residual")
-        axes[1].plot(ph[o], m[o], ".", ms=1.5, color="tab:green", label="fitted effects")
+        for i, (name, c) in enumerate(curves):
+            m = c[keep, k]
+            axes[1].plot(ph[o], m[o], ".", ms=1.5, color=colors[i % len(colors)], label=name)
         axes[1].set(xlabel="angle mod one turn (deg)", ylabel=f"{rows['channels'][k]}")
         axes[1].legend(fontsize=7, markerscale=5)
-    names = ", ".join(e["name"] for e in doc["effects"])
+    names = ", ".join(name for name, _ in curves)
     fig.suptitle(f"fitted: {names} (channel {rows['channels'][k]})", fontsize=9)
     return _png(fig)
 
@@ -516,6 +543,17 @@ def _effect_parts(doc: dict) -> list[str]:
         for c in (e.get("confounded_with") or [])
     ]
     alt += [
+        [
+            _e(e["name"]),
+            f"named although doubted ({_e(e['doubt']['rule'])}); alternative " + _e(a.get("name")),
+            _e(a.get("reason", "")) + "; tell apart: " + _e(a.get("separate_by", "")),
+            _num(a.get("delta_bic")),
+        ]
+        for e in effects
+        if e.get("doubt")
+        for a in (e.get("alternatives") or [])
+    ]
+    alt += [
         [_e(r.get("name")), "rejected", _e(r.get("reason", "")), _num(r.get("delta_bic"))]
         for r in doc.get("rejected") or []
     ]
@@ -559,32 +597,7 @@ def _located_parts(doc: dict) -> list[str]:
             )
         )
     parts.append('<h2 id="nuisances">Excluded segments, glitches, count jumps, gaps</h2>')
-    nui = [
-        [
-            "excluded",
-            _e(s.get("run")),
-            f"{_num(s.get('t_start_s'))} … {_num(s.get('t_end_s'))}",
-            _e(f"{s.get('n_rows')} rows: {s.get('reason', '')}"),
-        ]
-        for s in doc.get("excluded_segments") or []
-    ]
-    nui += [
-        ["glitch", _e(s.get("run")), _num(s.get("t_s"), 6), _e(f"channel {s.get('channel', '-')}")]
-        for s in doc.get("glitches") or []
-    ]
-    nui += [
-        [
-            "count jump",
-            _e(s.get("run")),
-            _num(s.get("t_s"), 6),
-            _e(f"channel {s.get('channel', '-')}, size {_num(s.get('size'))} {u}"),
-        ]
-        for s in doc.get("count_jumps") or []
-    ]
-    nui += [
-        ["gap", _e(s.get("run")), _num(s.get("t_s"), 6), _e(f"{_num(s.get('duration_s'))} s")]
-        for s in doc.get("gaps") or []
-    ]
+    nui = [[_e(c) for c in row] for row in nuisance_rows(doc)]
     parts.append(_table(["what", "run", "t (s)", "detail"], nui) if nui else "<p>none</p>")
     return parts
 
@@ -632,7 +645,8 @@ def _figure_parts(doc: dict, rows: Any) -> list[str]:
                 fig_fitted(doc, rows),
                 "no named effect"
                 if not effects
-                else "base residual minus final residual: what the named effects explain",
+                else "each named effect's own fitted contribution, one curve each: "
+                + ", ".join(n for n, _ in fitted_curves(doc, rows)),
             )
         )
     parts.append(

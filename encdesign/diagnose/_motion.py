@@ -137,7 +137,7 @@ def motion_data(rec: Recording) -> KindData:
         channel_names=["theta"],
         sensor="motion",
         where=str(rec.path) if rec.path is not None else "recording",
-        steady_tolerance=0.5,
+        drive=True,
         speed_window=0.05,
     )
 

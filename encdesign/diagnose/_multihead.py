@@ -46,17 +46,19 @@ from ._multihead_terms import (
     VIBRATION,
     view_order_step,
 )
-from ._protocol import KindData, Prepared
+from ._prepare import prepare as engine_prepare
+from ._protocol import KindData, Prepared, steady_tolerance
+from ._settings import FinderSettings
 from ._views import run_spans
 
 
-def _where(rec: Recording) -> str:
+def make_where(rec: Recording) -> str:
     return str(rec.path) if rec.path is not None else "recording"
 
 
 def multihead_data(rec: Recording) -> KindData:
     """Observations of a multihead recording (head readings less the reference angle)."""
-    where = _where(rec)
+    where = make_where(rec)
     if rec.kind != "multihead":
         raise input_error(f"{where}: kind", f"got {rec.kind!r}", "'multihead'")
     enc = rec.encoder
@@ -100,15 +102,21 @@ def multihead_data(rec: Recording) -> KindData:
         sensor=str(enc.get("sensor", "optical")),
         where=where,
     )
-    # issue 22 item 5: a sensor against a reference recorded step by step (no steady
-    # motion) gets one segment per run and approach direction instead of being refused
+    return kd
+
+
+def stepped_segments(kd: KindData, settings: FinderSettings) -> None:
+    """Issue 22 item 5: a sensor against a reference recorded step by step (no steady
+    motion) gets one segment per run and approach direction instead of being refused
+    (``kd.segments`` set in place)."""
     if (
-        H == 1
-        and has_ref
-        and _stepped.is_stepped(kd.shaft, kd.t, kd.run, kd.steady_tolerance, kd.speed_window)
+        kd.y.shape[1] == 1
+        and kd.theta_ref is not None
+        and _stepped.is_stepped(
+            kd.shaft, kd.t, kd.run, steady_tolerance(kd, settings), kd.speed_window
+        )
     ):
         kd.segments = _stepped.stepped_segments(kd.shaft, kd.t, kd.run)
-    return kd
 
 
 COVERAGE_ORDER_MAX = 48
@@ -524,6 +532,10 @@ class MultiheadKind(AbstractKind):
 
     def data(self, rec):
         return multihead_data(rec)
+
+    def prepare(self, kd, meta, settings):
+        stepped_segments(kd, settings)
+        return engine_prepare(kd, meta, settings)
 
     def base(self, prep, max_order):
         return multihead_base(prep, max_order)

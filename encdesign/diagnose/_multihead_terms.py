@@ -11,7 +11,7 @@ import numpy as np
 from ..physics import _effects as fx
 from ._candidates import Candidate, Context, Param
 from ._protocol import Prepared
-from ._views import Finding, _logp, _thr
+from ._views import Finding, chi2_threshold, log10_tail_p
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)
 """Runout orders of the axial beam tilt."""
@@ -398,6 +398,7 @@ VIBRATION = Candidate(
     "speed (reported at its apparent frequency when aliased by the sampling).",
     start=_vb_start,
     plausible=_vb_plausible,
+    doubt_overruled=False,  # the locked-order margin is a test on the data
 )
 
 
@@ -579,7 +580,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     j = int(np.argmax(gain))
     chi = float(gain[j])
     n_tests = int(e.size)
-    if chi <= _thr(prep.settings.alpha, 2, n_tests):
+    if chi <= chi2_threshold(prep.settings.alpha, 2, n_tests):
         return []
     # refine to the row: the rows of the bins either side of the best edge
     eb = int(e[j])
@@ -625,7 +626,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
             },
             chi,
             2,
-            _logp(chi, 2),
+            log10_tail_p(chi, 2),
             detail=detail,
         )
     ]

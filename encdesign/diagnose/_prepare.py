@@ -11,7 +11,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Context
-from ._protocol import KeptRows, KindData, Prepared, RowColumns
+from ._protocol import KeptRows, KindData, Prepared, RowColumns, steady_tolerance
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import SCAN_BLOCK, run_spans
 
@@ -417,7 +417,7 @@ def _runs_in_order(kd: KindData):
     return kd, run, order_runs, sort
 
 
-def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
+def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray, settings: FinderSettings):
     """Gaps in ``t`` and the steady segments of each run. Returns ``(seg, excluded, gaps,
     revolutions per run, speed per segment)``."""
     n = kd.y.shape[0]
@@ -435,7 +435,7 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
         tr = t[rows]
         dt = np.diff(tr)
         med = np.median(dt) if dt.size else 1.0
-        cuts = np.flatnonzero(dt > 20.0 * med) + 1
+        cuts = np.flatnonzero(dt > settings.gap_factor * med) + 1
         for c in cuts:
             gaps.append(
                 dict(run=int(order_runs[r]), t_s=float(tr[c - 1]), duration_s=float(dt[c - 1]))
@@ -459,9 +459,8 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
                 s_id = np.unique(s_id, return_inverse=True)[1].reshape(s_id.shape)
                 bad = []
             else:
-                s_id, bad = find_motion_segments(
-                    kd.shaft[sub], t[sub], kd.steady_tolerance, kd.speed_window
-                )
+                tol = steady_tolerance(kd, settings)
+                s_id, bad = find_motion_segments(kd.shaft[sub], t[sub], tol, kd.speed_window)
             for sid in np.unique(s_id[s_id >= 0]):
                 m = sub[s_id == sid]
                 seg[m] = nseg
@@ -646,7 +645,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     kd, run, order_runs, sort = _runs_in_order(kd)
     R = order_runs.size
     t = kd.t
-    seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs)
+    seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs, settings)
     seg_motion = _mask_rows(kd, seg, run, order_runs, excluded)
     keep = seg >= 0
     if keep.sum() < 32:

@@ -35,7 +35,9 @@ class KindData:
         unit: unit of ``y``. channel_names: e.g. ``h0``...
         sensor: ``[encoder] sensor``.
         where: file name for messages.
-        steady_tolerance: relative speed deviation beyond which a sample is non-steady.
+        drive: ``True``: the shaft is a commanded drive with a large ripple of its own
+            (``motion``, ``quadrature``): rows are steady within
+            ``FinderSettings.steady_tolerance_drive``, else ``steady_tolerance``.
         speed_window: the speed is measured over this fraction of the run (at least 5 rows;
             longer for a motor whose own ripple is large).
         segments: optional steady-segment id per row (>= 0), given by the kind instead of
@@ -61,7 +63,7 @@ class KindData:
     channel_names: list[str]
     sensor: str
     where: str
-    steady_tolerance: float = 0.1
+    drive: bool = False
     speed_window: float = 0.01
     segments: np.ndarray | None = None
     masked: tuple[tuple[np.ndarray, str], ...] = ()
@@ -229,3 +231,9 @@ class Prepared:
         """Independent fitted values (kept rows x channels, less the projection)."""
         C = self.n_channels
         return float(self.keep.sum() * (C - 1 if self.kd.project else C))
+
+
+def steady_tolerance(kd: KindData, settings) -> float:
+    """The relative speed deviation beyond which a row of ``kd`` is not steady (the
+    ``FinderSettings`` field of its kind: ``steady_tolerance_drive`` for a drive)."""
+    return settings.steady_tolerance_drive if kd.drive else settings.steady_tolerance

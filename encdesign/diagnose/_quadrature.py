@@ -268,7 +268,7 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindDat
         channel_names=["radius"],
         sensor="quadrature",
         where=st["where"],
-        steady_tolerance=0.5,
+        drive=True,
         speed_window=0.05,
         segments=segments,
         masked=masked,
@@ -573,9 +573,9 @@ def quadrature_kind(st: dict[str, Any]) -> QuadratureKind:
     return QuadratureKind(st)
 
 
-def run_quadrature(rec: Recording, **kw) -> dict[str, Any]:
+def run_quadrature(rec: Recording, **kw) -> tuple[dict[str, Any], Any]:
     """Diagnose a quadrature recording on the engine (``kw``: :func:`run_engine`'s);
-    returns the diagnosis document (with ``_plot`` for the plots).
+    returns ``(document, plot data)`` (:func:`run_engine`'s).
 
     Raises:
         EncdesignInputError: the signals do not draw a Lissajous figure about the origin.

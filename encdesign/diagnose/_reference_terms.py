@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 
 import jax.numpy as jnp
 import numpy as np
@@ -37,15 +36,9 @@ __all__ = ["CANDIDATES", "interpolation_candidate"]
 # The engine's registration API (``encdesign.diagnose._candidates``): each term above as a
 # :class:`Candidate` of the multihead kind, tried on a sensor against a reference.
 
-MAX_DIRECTION_OFFSET_RAD = 0.35
-"""Largest direction offset accepted as backlash or hysteresis (20 degrees), rad."""
-MAX_DELAY_ANGLE_RAD = 0.35
-"""Largest lag angle ``|omega| tau`` accepted as a reading delay, rad."""
-MAX_SCALE = 0.1
-"""Largest relative scale error accepted (10 %: beyond it the declared ratio is wrong)."""
-MAX_SIGNAL_ERROR = 0.5 * math.pi
-"""Largest harmonic (rad of signal phase) of an interpolation error: an arctangent reading is
-off by less than a quarter period for any signal error that leaves the quadrature readable."""
+# The plausibility bounds of these candidates are FinderSettings fields
+# (direction_offset_max_rad, delay_angle_max_rad, scale_error_max, signal_error_max_rad,
+# interp_spread_min, quant_amplitude_tol), read through ``ctx.settings``.
 FIRST_ORDER_SIGNAL_ERROR = 0.3
 """Above it (rad of signal phase) the first-order conversion of the harmonics into offsets,
 amplitude ratio and phase error is approximate (second-order terms ~ c^2 / 2); the
@@ -84,7 +77,7 @@ def _hyst_applies(ctx: Context) -> str | None:
 
 def _hyst_plausible(ctx: Context, p: dict) -> str | None:
     h = abs(float(np.asarray(p["hysteresis_rad"])))
-    if h > MAX_DIRECTION_OFFSET_RAD:
+    if h > ctx.settings.direction_offset_max_rad:
         return f"an offset of {h:.3g} rad between directions is not backlash or hysteresis"
     return None
 
@@ -125,7 +118,7 @@ def _delay_applies(ctx: Context) -> str | None:
 def _delay_plausible(ctx: Context, p: dict) -> str | None:
     tau = abs(float(np.asarray(p["delay_s"])))
     w = float(np.max(np.abs(np.asarray(ctx.rows["omega"])))) if ctx.rows["omega"].size else 0.0
-    if tau * w > MAX_DELAY_ANGLE_RAD:
+    if tau * w > ctx.settings.delay_angle_max_rad:
         return f"a lag of {tau:.3g} s is {tau * w:.3g} rad at {w:.3g} rad/s: not a reading delay"
     return None
 
@@ -146,7 +139,7 @@ def _scale_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
 
 def _scale_plausible(ctx: Context, p: dict) -> str | None:
     s = abs(float(np.asarray(p["scale"])))
-    if s > MAX_SCALE:
+    if s > ctx.settings.scale_error_max:
         return f"a scale error of {s:.3g} means the declared ratio is wrong, not a sensor error"
     return None
 
@@ -194,12 +187,6 @@ def _sensor_angle_fit(ctx: Context) -> dict:
     return {"smooth_rad": coef[R:]}
 
 
-INTERP_SPREAD_MIN = 0.1
-"""Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin 2psi``
-over the kept rows; 0.5 for phases spread over the period) for the harmonics to be told
-apart: below it the sampled phases sit on a few points of the signal period."""
-
-
 def _interp_applies(ctx: Context) -> str | None:
     why = _need_ref(ctx)
     if why:
@@ -218,10 +205,11 @@ def _interp_applies(ctx: Context) -> str | None:
     psi = P * np.asarray(_sensor_angle(_sensor_angle_fit(ctx), x))
     X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
     lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
-    if lam < INTERP_SPREAD_MIN:
+    spread = ctx.settings.interp_spread_min
+    if lam < spread:
         return (
             f"the sampled signal phases sit on a few points of the period (smallest "
-            f"eigenvalue {lam:.3f} of the harmonics' mean square, needs {INTERP_SPREAD_MIN})"
+            f"eigenvalue {lam:.3f} of the harmonics' mean square, needs {spread})"
         )
     return None
 
@@ -234,7 +222,7 @@ def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[di
 
 def _interp_plausible(ctx: Context, p: dict) -> str | None:
     c = np.abs(np.asarray(p["coef"], dtype=np.float64))
-    if np.max(c) > MAX_SIGNAL_ERROR:
+    if np.max(c) > ctx.settings.signal_error_max_rad:
         return (
             f"a harmonic of {np.max(c):.3g} rad of signal phase is beyond what an arctangent "
             "interpolation of readable signals gives"
@@ -380,7 +368,8 @@ def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
 
 def _quant_plausible(ctx: Context, p: dict) -> str | None:
     a = float(np.asarray(p["amplitude"]))
-    if not 0.7 <= a <= 1.3:
+    tol = ctx.settings.quant_amplitude_tol
+    if not 1.0 - tol <= a <= 1.0 + tol:
         return (
             f"the staircase of the detected step explains the residual with an amplitude of "
             f"{a:.2f}, not 1: the residual is not the quantization"

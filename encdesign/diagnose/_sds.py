@@ -53,7 +53,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from ._fit import _valjac_fn
+from ._fit import valjac_fn as _valjac_fn
 from ._kind import AbstractKind
 from ._protocol import Prepared
 from ._sds_data import (
@@ -81,7 +81,10 @@ from ._sds_terms import (
     sds_candidates,
 )
 from ._settings import DEFAULT_SETTINGS, FinderSettings
-from ._views import Finding, _logp, _thr, _where
+from ._views import Finding
+from ._views import chi2_threshold as _thr
+from ._views import log10_tail_p as _logp
+from ._views import make_where as _where
 
 __all__ = [
     "SDS",

@@ -10,7 +10,10 @@ from scipy import stats
 
 from ._candidates import Context
 from ._protocol import Prepared
-from ._views import Finding, _logp, _thr, _where
+from ._views import Finding
+from ._views import chi2_threshold as _thr
+from ._views import log10_tail_p as _logp
+from ._views import make_where as _where
 
 REFERENCE_RADIUS_M = 0.0254
 BEAM_ORDERS = (1, 2, 3)

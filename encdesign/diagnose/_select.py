@@ -8,13 +8,23 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
-from ._candidates import Candidate, Param
-from ._document import _jsonable
+from ._candidates import Candidate
+from ._document import jsonable
+from ._evidence import (
+    alternatives_of,
+    find_dominant,
+    only_doubts,
+    partner_entry,
+    refused_pair,
+    rule_args,
+    separate_by,
+    tie_gap,
+)
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._protocol import Prepared
+from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._views import locate
 
 # ----------------------------------------------------------------------------- selection
@@ -33,29 +43,8 @@ class Step:
     term_rms: float
     explained_rms: float
     confounded: list[dict] = dataclasses.field(default_factory=list)
-
-
-def _tie(
-    fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
-) -> tuple[float, float]:
-    """``(chi-square gap, correlation)`` of two alternative fits ``a`` (chosen) and ``b``:
-    how much better ``a`` fits, and the correlation of what each takes out of the current
-    residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
-    keep = prep.keep
-    w = 1.0 / prep.sigma[None, :]
-    saa = sbb = sab = 0.0
-    for lo, hi, x in fitter._chunks():  # one pass: both fits on each chunk
-        ra = fitter.chunk_residual(a.terms, lo, hi, x)
-        rb = fitter.chunk_residual(b.terms, lo, hi, x)
-        k = keep[lo:hi]
-        ca = ((cur_resid[lo:hi] - ra) * w)[k]
-        cb = ((cur_resid[lo:hi] - rb) * w)[k]
-        saa += float(np.sum(ca * ca))
-        sbb += float(np.sum(cb * cb))
-        sab += float(np.sum(ca * cb))
-    den = math.sqrt(saa * sbb)
-    corr = float(abs(sab) / den) if den > 0 else 0.0
-    return float(b.chi2 - a.chi2), corr
+    doubt: dict | None = None
+    alternatives: list[dict] = dataclasses.field(default_factory=list)
 
 
 def _collinearity(fit: FitResult, n_base_terms: int) -> float:
@@ -143,18 +132,6 @@ def _local_names(held_term: Term, local: np.ndarray, fitted: Term) -> list[str]:
     return names
 
 
-def _frozen(terms: list[Term]) -> list[Term]:
-    """Copies with the nonlinear parameters held (trial fits: one matrix product each)."""
-    out = []
-    for t in terms:
-        t2 = t.copy()
-        for q in t.cand.params:
-            if not q.linear:
-                t2.free[q.name][...] = False
-        out.append(t2)
-    return out
-
-
 def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
     """``terms`` with the free masks of ``like`` (same order and names)."""
     out = []
@@ -168,192 +145,14 @@ def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
 def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
     """RMS of one term's own contribution (projected, whitened by the noise)."""
     tot = 0.0
-    for a, b, x in fitter._chunks():  # chunk by chunk: nothing per row is held
-        v = fitter._eval_term(term, a, b, x, jac=False)[0]
+    for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
+        v = fitter.eval_term(term, a, b, x, jac=False)[0]
         if prep.kd.project:
             v = v - v.mean(1, keepdims=True)
         tot += float(np.sum((v[prep.keep[a:b]] / prep.sigma[None, :]) ** 2))
     C = prep.n_channels
     eff = (C - 1) / C if prep.kd.project else 1.0
     return float(np.sqrt(tot / max(prep.keep.sum() * C * eff, 1)))
-
-
-def _step_fn(p: dict, x: dict):
-    on = jnp.where(x["tau"] >= p["tau_s"], 1.0, 0.0) * (x["run_onehot"] @ p["run_sel"])
-    return p["size"] * on[:, None] * p["channel_sel"][None, :]
-
-
-STEP_NUISANCE = Candidate(
-    name="located_step",
-    fn=_step_fn,
-    params=(
-        Param("size", "unit of y", scale=None, description="size of the step"),
-        Param("tau_s", "s", linear=False, fit=False, description="global time of the step"),
-        Param("run_sel", "1", shape="runs", linear=False, fit=False),
-        Param("channel_sel", "1", shape="channels", linear=False, fit=False),
-    ),
-    explanation="a step located in time (no catalog effect: the alternative a candidate "
-    "must beat where the time view located a step)",
-)
-"""A step of one size on the channels of a located step, from its row on within its run."""
-
-
-def _free_steps(prep: Prepared, findings: list) -> list[dict]:
-    """Steps the time view located at a time where nothing the catalog knows changes.
-
-    A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
-    step where the speed changes: a located step within ``settings.step_change_rows`` kept rows (or
-    half a time-view block, 1/64 of the run) of a kept row where the direction or the
-    steady speed changes is left to those terms. The others are steps no smooth term (a
-    drift, a scale error, an order) can make; each is returned with its time, run and
-    channels."""
-    out = []
-    keep = prep.keep
-    for f in findings:
-        if f.view != "time" or not (
-            f.detail.get("shape") == "step" or f.detail.get("step_significant")
-        ):
-            continue
-        if len(out) >= 2:
-            break
-        r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
-        rows = np.flatnonzero((prep.run == r) & keep)
-        tau0 = float(f.detail["global_step_time_s"])
-        i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
-        if i <= 0 or i >= rows.size:
-            continue
-        # kept rows where the direction or the steady speed changes (a reversal or a speed
-        # change, with the non-steady rows between them left out)
-        d = np.asarray(prep.rows.take("direction", rows), float)
-        w = np.asarray(prep.rows.take("omega", rows), float)
-        ch_rows = (
-            np.flatnonzero(
-                (d[1:] != d[:-1])
-                | (np.abs(w[1:] - w[:-1]) > 0.05 * np.maximum(np.abs(w[1:]), np.abs(w[:-1])))
-            )
-            + 1
-        )
-        near = max(prep.settings.step_change_rows, rows.size // 64)
-        if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
-            continue
-        ch = np.zeros(prep.n_channels)
-        ch[list(f.where["heads"])] = 1.0
-        sel = np.zeros(prep.ctx.n_runs)
-        sel[r] = 1.0
-        out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
-    return out
-
-
-def _step_term(prep: Prepared, step: dict) -> Term:
-    tm = make_term(
-        STEP_NUISANCE,
-        prep,
-        {"tau_s": step["tau_s"], "run_sel": step["run_sel"], "channel_sel": step["channels"]},
-    )
-    tm.scale["size"][...] = float(np.mean(prep.sigma))
-    return tm
-
-
-def _beaten_by_step(
-    fitter: Fitter,
-    prep: Prepared,
-    current: FitResult,
-    fr: FitResult,
-    steps: list[dict],
-    cache: dict,
-) -> tuple[str, Any] | None:
-    """``(why, the step's finding)`` when a candidate ``fr`` (current model plus the
-    candidate) is refused for a located step it cannot make, or ``None``: fitted together
-    with the step, the step still earns its place and the candidate no longer does
-    (information criterion or held-out)."""
-    if not steps:
-        return None
-    N = prep.n_values
-    logn = math.log(max(N, 2))
-    k = max(fr.n_determined(len(fr.terms) - 1), 0)
-    base_terms = _frozen(current.terms)
-    cand = _frozen(fr.terms[-1:])
-    for st in steps:
-        key = (st["tau_s"], st["run"], tuple(st["channels"]))
-        if key not in cache:
-            cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
-        f = st["finding"]
-        for attempt in range(2):
-            fs = cache[key]
-            both = fitter.fit([*base_terms, _step_term(prep, st), *cand])
-            if fr.chi2 - both.chi2 < prep.settings.bic_min + logn:
-                break  # with the candidate there is no step left: it makes it
-            dchi = fs.chi2 - both.chi2
-            dbic = -(dchi - k * logn)
-            dho = fs.heldout_chi2 - both.heldout_chi2
-            if dbic > -prep.settings.bic_min or dho < prep.settings.heldout_min:
-                heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
-                return (
-                    f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
-                    f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
-                    f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
-                    f"{dbic:.1f}, held-out {dho:.1f}); it cannot make a step there (no "
-                    "reversal, no change of speed at that time)",
-                    f,
-                )
-            if attempt:
-                break
-            # the step still leaves it something: a step placed a few rows off leaves a box
-            # a smooth term takes part of; the step's row from base + step fits, once
-            rkey = ("refined", key)
-            if rkey not in cache:
-                g = dataclasses.replace(f, where=dict(f.where), detail=dict(f.detail))
-                _refine_step(fitter, prep, current.terms, g)
-                st2 = dict(st, tau_s=g.detail["global_step_time_s"], finding=g)
-                cache[rkey] = st2
-            st2 = cache[rkey]
-            if st2["tau_s"] == st["tau_s"]:
-                break
-            st, f = st2, st2["finding"]
-            key = (st["tau_s"], st["run"], tuple(st["channels"]))
-            if key not in cache:
-                cache[key] = fitter.fit([*base_terms, _step_term(prep, st)])
-    return None
-
-
-def _refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
-    """Move a located step's time (``f``, a ``time`` finding) to the row where the model
-    ``terms`` plus a step fits best: the time view's change point is read off a residual
-    from which the base model has taken part of the step (and moved its change point). A
-    scan of 32 rows over 4 time-view blocks (1/8 of the run) either side, then of the rows
-    between the best one's neighbours (at most 48)."""
-    r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
-    rows = np.flatnonzero((prep.run == r) & prep.keep)
-    tau = prep.rows.take("tau", rows)
-    ch = np.zeros(prep.n_channels)
-    ch[list(f.where["heads"])] = 1.0
-    sel = np.zeros(prep.ctx.n_runs)
-    sel[r] = 1.0
-    held = _frozen(terms)
-
-    def chi2(i: int) -> float:
-        st = dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)
-        return fitter.fit([*held, _step_term(prep, st)]).chi2
-
-    # within 4 time-view blocks of the located row: a step and its mirror image about a
-    # reversal differ by a function of the angle, which the base model takes (the two
-    # times cannot be told apart over a turn back and forth); the located one is kept
-    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
-    width = max(int(4 * rows.size / 32), 4)
-    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
-    grid = np.unique(np.linspace(lo, hi, 32).astype(int))
-    best = min(grid, key=chi2)
-    k = int(np.searchsorted(grid, best))
-    a = int(grid[max(k - 1, 0)])
-    b = int(grid[min(k + 1, grid.size - 1)])
-    fine = np.arange(a, b + 1)
-    if fine.size > 48:
-        fine = np.unique(np.linspace(a, b, 48).astype(int))
-    best = int(min(fine, key=chi2))
-    t = prep.rows["t"]
-    f.detail["step_time_s"] = float(t[rows[best]])
-    f.detail["global_step_time_s"] = float(tau[best])
-    f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
 
 
 def _order_key(f) -> int | None:
@@ -416,8 +215,8 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
             rejected.append(_refusal(cand.name, [("max_param_fraction", reason)]))
             break
         if len(starts) > 1:
-            held = _frozen([term])[0]
-            fr0 = fitter.fit([*_frozen(current.terms), held])
+            held = frozen([term])[0]
+            fr0 = fitter.fit([*frozen(current.terms), held])
             screened.append((fr0.chi2, term, fr0))
         else:
             screened.append((0.0, term, None))
@@ -428,13 +227,13 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
     if screened[0][2] is not None:
         term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
     log(f"trying {cand.name}")
-    best = fitter.fit([*_frozen(current.terms), term], max_steps=12)
+    best = fitter.fit([*frozen(current.terms), term], max_steps=12)
     # columns of the candidate the base model already spans are held at zero (reported),
     # so the rest of it can still be tested
     held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
     if held.size and held.size < best.terms[-1].n_free():
         t2 = _hold(best.terms[-1], held)
-        best = fitter.fit([*_frozen(current.terms), t2], max_steps=12)
+        best = fitter.fit([*frozen(current.terms), t2], max_steps=12)
         held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
     return best
 
@@ -505,7 +304,7 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
         return None, []
     after = locate(prep, fitter.residual(fr.terms), views, scan_order)
     # steps it leaves (a smooth model fitted to a step moves its change point)
-    steps_left = _free_steps(prep, after)
+    steps_left = free_steps(prep, after)
     p1 = sum(f.power - f.dof for f in after)
     # and clear the places its own signature located (not a larger structure there that it
     # only dents, e.g. a step fitted by a drift)
@@ -534,7 +333,7 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
     """A candidate the data cannot tell from the chosen one (``tie_chi2``, ``tie_corr``):
     its ``confounded_with`` entry, else ``None``."""
     s = prep.settings
-    gap, corr = _tie(fitter, prep, cur_resid, chosen[1], fr)
+    gap, corr = tie_gap(fitter, prep, cur_resid, chosen[1], fr)
     if not (gap < s.tie_chi2 and corr > s.tie_corr):
         return None
     return {
@@ -544,17 +343,28 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
         f"the same (correlation {corr:.3f})",
         "rule": "tie_chi2",
         "delta_bic": float(dbic),
-        "params": {q.name: _jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "correlation": float(corr),
+        "separate_by": separate_by(chosen[0], cand, corr),
     }
 
 
-def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals):
+def _choose(
+    st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals, confounded
+):
     """Stage 4's decision for one round: the best trial every rule accepts (with the ties
-    it cannot be told from), or ``None``; every other trial is a named refusal."""
+    it cannot be told from), or ``None``; every other trial is a named refusal, except two
+    refused by the same rule that the record cannot separate: one ``confounded`` entry."""
     prep, fitter = st["prep"], st["fitter"]
     s = prep.settings
     chosen = None
     step_fits: dict = {}
+    dominant, partners = None, []
+    if trials and trials[0][5] > 0 and trials[0][0] < -s.bic_min:
+        r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
+        if r0 and only_doubts(trials[0][1], r0):  # only then is dominance worth a pass
+            dominant, partners = find_dominant(st, trials)
+    refused: list = []
     for dbic, cand, fr, dho, dchi, k_new in trials:
         if k_new == 0:
             reason = (
@@ -567,8 +377,15 @@ def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, s
         reasons, trms, erms, col = _criterion_rules(
             prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms
         )
+        doubt = None
+        if reasons and chosen is None and cand is dominant and only_doubts(cand, reasons):
+            # evidence, not a veto: far ahead of every other candidate, refused only by a
+            # plausibility rule -> named with the doubt and the alternatives
+            doubt = {"rule": reasons[0][0], "reason": "; ".join(r for _, r in reasons)}
+            reasons = []
         if reasons:
             rejected.append(_refusal(cand.name, reasons, dbic))
+            refused.append((dbic, cand, fr, reasons[0][0]))
             continue
         if chosen is not None:
             tie = _tie_entry(prep, fitter, st["cur_resid"], chosen, cand, fr, dbic)
@@ -590,7 +407,7 @@ def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, s
             continue
         # a step located where nothing in the catalog changes (no reversal, no change of
         # speed) is the alternative it must beat: a drift or a scale error only dents it
-        why = _beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
+        why = beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
         if why:
             rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
             step_refusals.append((cand.name, why[1]))
@@ -606,7 +423,16 @@ def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, s
                 f"nearly collinear with the base model (canonical correlation {col:.3f}): "
                 "part of it could be absorbed by base parameters"
             )
-        chosen = (cand, fr, dbic, dho, col, notes, trms, erms, [])
+        if doubt is not None:
+            notes.append(
+                f"doubted ({doubt['rule']}): {doubt['reason']}; named because it lowers the "
+                "criterion far more than any other candidate (see alternatives)"
+            )
+        ties = [partner_entry(cand, tr, gap, corr, dbic) for tr, gap, corr in partners]
+        chosen = (cand, fr, dbic, dho, col, notes, trms, erms, ties if doubt else [], doubt)
+    if chosen is not None and chosen[9] is not None:
+        rejected[:] = [r for r in rejected if not (r["name"] == chosen[0].name)]
+    refused_pair(prep, fitter, st["cur_resid"], refused, rejected, confounded)
     return chosen
 
 
@@ -617,7 +443,7 @@ def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, vi
     if len(accepted) <= 1:
         return current, cur_resid, findings, without
     for s in list(accepted):
-        others = _frozen([t for t in current.terms if t.cand.name != s.name])
+        others = frozen([t for t in current.terms if t.cand.name != s.name])
         fr = fitter.fit(others)
         without[s.name] = fr
         if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
@@ -636,37 +462,35 @@ def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, vi
     return current, cur_resid, findings, without
 
 
-def _place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
-    """A step that refused a candidate is reported where it was located (a smooth base or
-    effect fitted to it moves the change point the final residual's time view sees)."""
-    done: set = set()
-    for name, f in step_refusals:
-        key = (tuple(f.where["runs"]), tuple(f.where["heads"]))
-        if key in done:  # one refined step per run and heads: the first refusal's
-            continue
-        done.add(key)
-        ts = f.detail["step_time_s"]
-        seen = [
-            g
-            for g in findings
-            if g.view == "time"
-            and g.detail.get("shape") == "step"
-            and g.where["runs"] == f.where["runs"]
-            and min(g.where["times_s"]) - 4 * g.detail["block_s"]
-            <= ts
-            <= max(g.where["times_s"]) + 4 * g.detail["block_s"]
-        ]
-        if seen:  # the final residual's own step: refined with the final model
-            _refine_step(fitter, prep, current.terms, seen[0])
-            seen[0].where["times_s"] = list(seen[0].detail["step_times_s"])
-            continue
-        _refine_step(fitter, prep, current.terms, f)
-        f.where["times_s"] = list(f.detail["step_times_s"])
-        f.detail["shape"] = "step"
-        if not any(h is f for h in findings):  # else a finding of the final residual
-            f.detail["located_with"] = f"located in the residual of the model with {name}"
-            findings = sorted([*findings, f], key=lambda g: g.log10_p)
-    return findings
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """What stage 4 hands the document (typed: no string keys).
+
+    Attributes:
+        base, final: the base model's and the final model's fits.
+        base_resid, final_resid: (n, C) their residuals (unit of y).
+        findings0, findings: what the views located in the base and the final residual.
+        gof0: the base model's goodness of fit.
+        accepted: the named effects (:class:`Step`), in the order named.
+        rejected, not_testable: refusals (JSON entries, each with its ``rule``).
+        confounded: pairs refused together that the record cannot separate (JSON entries).
+        shares: each named effect's share of what all explain together.
+        tried: names of the candidates tried.
+    """
+
+    base: FitResult
+    base_resid: np.ndarray
+    findings0: list
+    gof0: dict
+    final: FitResult
+    final_resid: np.ndarray
+    findings: list
+    accepted: list[Step]
+    rejected: list[dict]
+    not_testable: list[dict]
+    confounded: list[dict]
+    shares: dict[str, float]
+    tried: list[str]
 
 
 def select(
@@ -679,7 +503,8 @@ def select(
     max_effects: int = 3,
     log: Callable[[str], None] = lambda s: None,
 ):
-    """Forward selection with refits, then a backward held-out check (stage 4)."""
+    """Forward selection with refits, then a backward held-out check (stage 4); returns the
+    :class:`Selection`."""
     base = fitter.fit(base_terms)
     cur_resid = fitter.residual(base.terms)
     findings0 = locate(prep, cur_resid, views, scan_order)
@@ -694,6 +519,7 @@ def select(
     gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
     held_notes: dict[str, list[str]] = {}
     step_refusals: list[tuple[str, Any]] = []
+    confounded: list[dict] = []
     for _ in range(max_effects):
         seen = {f.view for f in findings}
         gof = goodness_of_fit(prep, cur_resid, current.n_params)
@@ -714,7 +540,7 @@ def select(
             cur_resid=cur_resid,
             views=views,
             scan_order=scan_order,
-            free_steps=_free_steps(prep, findings),
+            free_steps=free_steps(prep, findings),
         )
         trials = []
         for cand in applicable:
@@ -736,16 +562,25 @@ def select(
         _sort_trials(trials, applicable)
         del kept[:]
         chosen = _choose(
-            st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals
+            st,
+            trials,
+            current,
+            accepted,
+            n_base_terms,
+            held_notes,
+            rejected,
+            step_refusals,
+            confounded,
         )
         if chosen is None:
             break
-        cand, fr, dbic, dho, col, notes, trms, erms, confounded = chosen
-        if confounded:
+        cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen
+        alternatives = alternatives_of(chosen, trials, prep) if doubt is not None else []
+        if ties:
             notes = [
                 *notes,
                 "confounded with "
-                + ", ".join(c["name"] for c in confounded)
+                + ", ".join(c["name"] for c in ties)
                 + ": this recording cannot tell them apart; the name is only the one with "
                 "the lower information criterion",
             ]
@@ -754,24 +589,29 @@ def select(
             fr = full
         del cur_resid, st  # (one residual held at a time)
         resid = fitter.residual(fr.terms)
-        accepted.append(Step(cand.name, fr, dbic, dho, col, notes, trms, erms, confounded))
+        accepted.append(
+            Step(cand.name, fr, dbic, dho, col, notes, trms, erms, ties, doubt, alternatives)
+        )
         log(f"named {cand.name}")
         current, cur_resid = fr, resid
         findings = locate(prep, cur_resid, views, scan_order)
     current, cur_resid, findings, without = _backward(
         prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan_order
     )
-    findings = _place_step_refusals(prep, fitter, current, step_refusals, findings)
+    findings = place_step_refusals(prep, fitter, current, step_refusals, findings)
+    # a named effect's confounded partner is reported with it, never also as a refusal
+    partners = {c["name"] for a in accepted for c in a.confounded}
+    rejected[:] = [r for r in rejected if r["name"] not in partners]
     # shares: what each effect explains given the others
     shares = {}
     total = base.chi2 - current.chi2
     for s in accepted:
         fr = without.get(s.name)
         if fr is None:
-            others = _frozen([t for t in current.terms if t.cand.name != s.name])
+            others = frozen([t for t in current.terms if t.cand.name != s.name])
             fr = fitter.fit(others) if len(accepted) > 1 else base
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
-    return dict(
+    return Selection(
         base=base,
         # the base residual again (one pass): not held through the selection
         base_resid=cur_resid if current is base else fitter.residual(base.terms),
@@ -783,6 +623,7 @@ def select(
         accepted=accepted,
         rejected=rejected,
         not_testable=not_testable,
+        confounded=confounded,
         shares=shares,
         tried=sorted(tried_names),
     )

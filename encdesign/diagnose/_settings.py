@@ -86,6 +86,18 @@ class FinderSettings(eqx.Module):
     """... and whose fitted errors correlate above this (kept rows, noise-whitened) are
     confounded (``confounded_with``). daa8c51, with ``tie_chi2``."""
 
+    dominant_ratio: float = eqx.field(default=3.0, static=True)
+    """A candidate a plausibility rule (``<candidate>.plausible``) doubts is still named,
+    with the doubt and its alternatives, when it passes every other rule and lowers the
+    information criterion by at least this many times more than any other candidate of its
+    round (and by ``dominant_gap`` more): evidence, not a veto (issue 22 item 3). Checked on
+    ``tests/helpers.slow_wobble_bench`` at one speed (seeds 0-2) and the ``effects`` / ``clean``
+    variation sets (seed 7)."""
+
+    dominant_gap: float = eqx.field(default=50.0, static=True)
+    """... and by at least this much (BIC) more than the next candidate, with
+    ``dominant_ratio``."""
+
     step_change_rows: int = eqx.field(default=3, static=True)
     """A located step is left to the direction / speed terms only within this many kept
     rows of a change of direction or speed (rule ``step``: otherwise a free step is the
@@ -142,6 +154,54 @@ class FinderSettings(eqx.Module):
     sds_sigma_test_p: float = eqx.field(default=1e-4, static=True)
     """sds: the level at which a noise estimate is widened for its degrees of freedom
     (F vs chi-square). fc0e1ba."""
+
+    steady_tolerance: float = eqx.field(default=0.1, static=True)
+    """Relative deviation of the smoothed speed from its segment's steady speed beyond which
+    a row is not steady and is left out of every fit (start-up, return moves, dwells). Was
+    ``KindData.steady_tolerance`` (multihead, sensor against a reference; and the test for a
+    static stepped calibration)."""
+
+    steady_tolerance_drive: float = eqx.field(default=0.5, static=True)
+    """The same for kinds whose shaft is a commanded drive with a large ripple of its own
+    (``motion``, ``quadrature``: ``KindData.drive``). Was ``KindData.steady_tolerance=0.5``
+    of those kinds."""
+
+    gap_factor: float = eqx.field(default=20.0, static=True)
+    """A time step over this many times the run's median sampling interval is a logger gap
+    (the run is cut there; reported in ``gaps``). Was an inline 20 in ``_prepare``."""
+
+    speed_change_min: float = eqx.field(default=0.05, static=True)
+    """A relative change of the steady speed between kept rows above this is a speed change
+    (a located step there is left to ``reading_delay``; rule ``step_change_rows``). Was an
+    inline 0.05 in ``_select``."""
+
+    direction_offset_max_rad: float = eqx.field(default=0.35, static=True)
+    """Largest direction offset (rad) accepted as backlash or hysteresis (20 degrees; rule
+    ``direction_hysteresis.plausible``). Was ``_reference_terms.MAX_DIRECTION_OFFSET_RAD``."""
+
+    delay_angle_max_rad: float = eqx.field(default=0.35, static=True)
+    """Largest lag angle ``|omega| tau`` (rad) accepted as a reading delay (rule
+    ``reading_delay.plausible``). Was ``_reference_terms.MAX_DELAY_ANGLE_RAD``."""
+
+    scale_error_max: float = eqx.field(default=0.1, static=True)
+    """Largest relative scale error accepted (10 %: beyond it the declared ratio is wrong;
+    rule ``scale_error.plausible``). Was ``_reference_terms.MAX_SCALE``."""
+
+    signal_error_max_rad: float = eqx.field(default=0.5 * math.pi, static=True)
+    """Largest harmonic (rad of signal phase) of an interpolation error: an arctangent
+    reading is off by less than a quarter period for any signal error that leaves the
+    quadrature readable (rule ``interpolation_error.plausible``). Was
+    ``_reference_terms.MAX_SIGNAL_ERROR``."""
+
+    interp_spread_min: float = eqx.field(default=0.1, static=True)
+    """Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin
+    2psi`` over the kept rows; 0.5 for phases spread over the period) for the interpolation
+    harmonics to be told apart (rule ``applies`` of ``interpolation_error``). Was
+    ``_reference_terms.INTERP_SPREAD_MIN``."""
+
+    quant_amplitude_tol: float = eqx.field(default=0.3, static=True)
+    """The fitted staircase of a detected LSB must explain the residual with an amplitude
+    within this of 1 (rule ``quantization.plausible``). Was an inline 0.7 .. 1.3."""
 
     sds_lattice_coarser: float = eqx.field(default=1.05, static=True)
     """sds: ``timing_quantization`` is named when the stamps' lattice is coarser than the

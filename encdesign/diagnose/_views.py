@@ -54,7 +54,7 @@ class Finding:
         }
 
 
-def _logp(chi2: float, dof: int) -> float:
+def log10_tail_p(chi2: float, dof: int) -> float:
     """log10 of the chi-square tail probability (floored at -999 where it underflows)."""
     v = float(stats.chi2.logsf(chi2, dof) / math.log(10))
     if not math.isfinite(v):
@@ -63,7 +63,7 @@ def _logp(chi2: float, dof: int) -> float:
     return max(v, -999.0) if math.isfinite(v) else -999.0
 
 
-def _thr(alpha: float, dof: int, n_tests: int) -> float:
+def chi2_threshold(alpha: float, dof: int, n_tests: int) -> float:
     return float(stats.chi2.isf(alpha / max(n_tests, 1), dof))
 
 
@@ -189,8 +189,10 @@ def _heads(
     tot = float(np.sum(np.abs(W) ** 2))
     # what the pattern leaves: noise, or at most 5 % of the power (a strong structure is not
     # seen through exactly equal heads: sensitivities, placements, per-head noise weights)
-    left_ok = res[k1] <= max(_thr(prep.settings.alpha, f * rows * (free - 1), 1), 0.05 * tot)
-    if left_ok and res[k2] - res[k1] > _thr(prep.settings.alpha, f * rows, 1):
+    left_ok = res[k1] <= max(
+        chi2_threshold(prep.settings.alpha, f * rows * (free - 1), 1), 0.05 * tot
+    )
+    if left_ok and res[k2] - res[k1] > chi2_threshold(prep.settings.alpha, f * rows, 1):
         return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
     return ch, f"on several heads, or not told apart from {what}"
 
@@ -202,7 +204,7 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
     C = rw.shape[1]
     out = []
     n_tests = max_order * C
-    thr = _thr(prep.settings.alpha, 2, n_tests)
+    thr = chi2_threshold(prep.settings.alpha, 2, n_tests)
     orders = np.arange(1, max_order + 1)
     N, Scc, Sss, Scs, ((Bc, Bs),) = order_sums(prep, name, [rw], orders)
     for i, m in enumerate(orders):
@@ -226,10 +228,10 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
             out.append(
                 Finding(
                     "orders",
-                    _where(orders=[float(m)], heads=heads, runs=prep.run_ids.tolist()),
+                    make_where(orders=[float(m)], heads=heads, runs=prep.run_ids.tolist()),
                     float(pw[ch].sum()),
                     2 * len(ch),
-                    _logp(float(pw.max()), 2),
+                    log10_tail_p(float(pw.max()), 2),
                     detail=detail,
                 )
             )
@@ -253,7 +255,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     if not runs:
         return out
     n_tests = sum((b - a) // 2 + 1 for _, a, b, _ in runs)
-    thr = _thr(prep.settings.alpha, 2 * dof_ch, n_tests)
+    thr = chi2_threshold(prep.settings.alpha, 2 * dof_ch, n_tests)
     per_run = []
     for r, a, b, nk in runs:
         t = _col(prep, "t", a, b)
@@ -300,7 +302,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     bin_hz=float(f[1]),
                     bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
                     nk=nk,
-                    logp=_logp(float(Ps[i]), 2 * dof_ch),
+                    logp=log10_tail_p(float(Ps[i]), 2 * dof_ch),
                 )
             )
     # group peaks across runs: fixed in Hz or in order
@@ -351,7 +353,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
             and all(round(o) >= 1 for o in orders if np.isfinite(o))
             and any(np.isfinite(o) for o in orders)
         )
-        thr_ch = _thr(prep.settings.alpha, 2, n_tests)
+        thr_ch = chi2_threshold(prep.settings.alpha, 2, n_tests)
         ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
         zs = np.concatenate([q["z"] for q in sel], 0)
         ints = {round(o) for o in orders if np.isfinite(o)}
@@ -360,7 +362,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         out.append(
             Finding(
                 "spectrum",
-                _where(
+                make_where(
                     orders=[float(o) for o in orders],
                     frequencies_hz=[float(q["f_hz"]) for q in sel],
                     heads=ch or [int(np.argmax(band))],
@@ -426,7 +428,7 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
         for lo, hi in bands(m):
             pw = P[lo:hi].sum(0) * (nk / m)
             dof = 2 * (hi - lo)
-            thr = _thr(prep.settings.alpha, dof, n_tests)
+            thr = chi2_threshold(prep.settings.alpha, dof, n_tests)
             ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
             if not ch:
                 continue
@@ -435,14 +437,14 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
             found.append(
                 Finding(
                     "band",
-                    _where(
+                    make_where(
                         frequencies_hz=[float(f[lo]), float(f[hi - 1])],
                         heads=heads,
                         runs=[int(prep.run_ids[r])],
                     ),
                     float(pw[ch].sum()),
                     dof * len(ch),
-                    _logp(float(pw[ch].max()), dof),
+                    log10_tail_p(float(pw[ch].max()), dof),
                     detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
                 )
             )
@@ -467,7 +469,7 @@ def view_time(prep, rw) -> list[Finding]:
     for r, parts, means in blocks_all:
         nb = len(parts)
         chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
-        thr = _thr(prep.settings.alpha, nb - 1, n_tests)
+        thr = chi2_threshold(prep.settings.alpha, nb - 1, n_tests)
         for k in range(C):
             if chi[k] <= thr:
                 continue
@@ -495,7 +497,7 @@ def view_time(prep, rw) -> list[Finding]:
                 "block_s": float(t1 - t0),
                 # the best single step alone is significant (a step a smooth model dents
                 # shows as a transient)
-                "step_significant": bool(step_pw > _thr(prep.settings.alpha, 1, n_tests)),
+                "step_significant": bool(step_pw > chi2_threshold(prep.settings.alpha, 1, n_tests)),
                 "n_values": int(sum(p.size for p in parts)),
             }
             # where the step is: between the last row before it and the first row after it
@@ -505,10 +507,10 @@ def view_time(prep, rw) -> list[Finding]:
             out.append(
                 Finding(
                     "time",
-                    _where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
+                    make_where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
                     float(chi[k]),
                     nb - 1,
-                    _logp(float(chi[k]), nb - 1),
+                    log10_tail_p(float(chi[k]), nb - 1),
                     detail=detail,
                 )
             )
@@ -593,17 +595,17 @@ def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
     if np.trace(G) <= (1e-12 * (xmax + 1e-300)) ** 2 * max(n_kept, 1):
         return []
     pw = _gram_power(G, B, n_kept, q)
-    thr = _thr(prep.settings.alpha, q, C)
+    thr = chi2_threshold(prep.settings.alpha, q, C)
     if pw.max() <= thr:
         return []
     ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
     return [
         Finding(
             name,
-            _where(heads=ch, runs=prep.run_ids.tolist()),
+            make_where(heads=ch, runs=prep.run_ids.tolist()),
             float(pw[ch].sum()),
             q * len(ch),
-            _logp(float(pw.max()), q),
+            log10_tail_p(float(pw.max()), q),
             detail={"n_values": int(n_kept), **(extra or {})},
         )
     ]
@@ -621,7 +623,7 @@ def view_line_phase(prep, rw):
     out = []
     keep = prep.keep
     C = rw.shape[1]
-    thr = _thr(prep.settings.alpha, 4, C)
+    thr = chi2_threshold(prep.settings.alpha, 4, C)
     G = np.zeros((C, 4, 4))
     B = np.zeros((C, 4))
     n_kept = 0
@@ -644,10 +646,10 @@ def view_line_phase(prep, rw):
         out.append(
             Finding(
                 "line_phase",
-                _where(orders=[float(L), float(2 * L)], heads=ch, runs=prep.run_ids.tolist()),
+                make_where(orders=[float(L), float(2 * L)], heads=ch, runs=prep.run_ids.tolist()),
                 float(pw[ch].sum()),
                 4 * len(ch),
-                _logp(float(pw.max()), 4),
+                log10_tail_p(float(pw.max()), 4),
                 detail={"n_values": int(keep.sum())},
             )
         )
@@ -747,7 +749,7 @@ def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> 
     return out
 
 
-def _where(**kw) -> dict[str, list]:
+def make_where(**kw) -> dict[str, list]:
     base = {"orders": [], "frequencies_hz": [], "heads": [], "runs": [], "times_s": []}
     for k, v in kw.items():
         base[k] = [x.item() if hasattr(x, "item") else x for x in v]

@@ -1,0 +1,184 @@
+"""Evidence, not vetoes (issue 22 item 3), for stage 4 (:mod:`._select`): a candidate
+far ahead of every other that only its plausibility rule doubts (:func:`dominant`), the
+alternatives it is named with (:func:`alternatives`), and pairs the record cannot separate
+(:func:`tie`, :func:`partner_entry`, :func:`refused_pair`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._candidates import Candidate
+from ._document import jsonable
+from ._fit import FitResult, Fitter
+from ._protocol import Prepared
+
+
+def tie_gap(
+    fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
+) -> tuple[float, float]:
+    """``(chi-square gap, correlation)`` of two alternative fits ``a`` (chosen) and ``b``:
+    how much better ``a`` fits, and the correlation of what each takes out of the current
+    residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
+    keep = prep.keep
+    w = 1.0 / prep.sigma[None, :]
+    saa = sbb = sab = 0.0
+    for lo, hi, x in fitter.chunks():  # one pass: both fits on each chunk
+        ra = fitter.chunk_residual(a.terms, lo, hi, x)
+        rb = fitter.chunk_residual(b.terms, lo, hi, x)
+        k = keep[lo:hi]
+        ca = ((cur_resid[lo:hi] - ra) * w)[k]
+        cb = ((cur_resid[lo:hi] - rb) * w)[k]
+        saa += float(np.sum(ca * ca))
+        sbb += float(np.sum(cb * cb))
+        sab += float(np.sum(ca * cb))
+    den = math.sqrt(saa * sbb)
+    corr = float(abs(sab) / den) if den > 0 else 0.0
+    return float(b.chi2 - a.chi2), corr
+
+
+def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confounded: list):
+    """Two candidates refused by the same rule that fit alike (within ``tie_chi2``) and take
+    out the same error (correlation above ``tie_corr``) are one ``confounded`` entry, not
+    two refusals (the two best such of a round; one pass over the rows)."""
+    s = prep.settings
+    good = sorted((r for r in refused if r[0] < -s.bic_min), key=lambda r: r[0])
+    for i in range(len(good) - 1):
+        a, b = good[i], good[i + 1]
+        if a[3] != b[3] or b[0] - a[0] >= s.tie_chi2:
+            continue
+        gap, corr = tie_gap(fitter, prep, cur_resid, a[2], b[2])
+        if abs(gap) >= s.tie_chi2 or corr <= s.tie_corr:
+            continue
+        why = [r for r in rejected if r["name"] in (a[1].name, b[1].name)]
+        rejected[:] = [r for r in rejected if r["name"] not in (a[1].name, b[1].name)]
+        confounded.append(
+            {
+                "pair": [a[1].name, b[1].name],
+                "correlation": float(corr),
+                "delta_bic": float(b[0] - a[0]),
+                "separate_by": separate_by(a[1], b[1], corr),
+                "reason": f"the record cannot separate them (chi-square {gap:+.1f}, "
+                f"correlation {corr:.3f}); both refused by rule {a[3]}: "
+                + "; ".join(f"{r['name']}: {r['reason']}" for r in why[:2]),
+                "rule": a[3],
+            }
+        )
+        return
+
+
+def find_dominant(st, trials: list) -> tuple[Candidate | None, list]:
+    """``(candidate, partners)``: the first trial's candidate when it lowers the criterion
+    far more than any other that is not the same fitted error (``dominant_ratio`` times and
+    ``dominant_gap`` more than the next such trial, or than nothing), else ``(None, [])``;
+    ``partners``: the trials before that one whose fitted error correlates with it above
+    ``tie_corr`` (at most two: one residual pass each), as ``(trial, chi2 gap, corr)``."""
+    prep, fitter = st["prep"], st["fitter"]
+    s = prep.settings
+    if not trials or trials[0][0] >= -s.bic_min:
+        return None, []
+    d0 = trials[0][0]
+    partners = []
+    d1 = 0.0
+    for tr in trials[1:]:
+        if len(partners) < 2 and tr[0] < -s.bic_min and tr[5] > 0:
+            gap, corr = tie_gap(fitter, prep, st["cur_resid"], trials[0][2], tr[2])
+            if corr > s.tie_corr:
+                partners.append((tr, gap, corr))
+                continue
+        d1 = min(tr[0], 0.0)
+        break
+    if -d0 >= s.dominant_ratio * -d1 and d1 - d0 >= s.dominant_gap:
+        return trials[0][1], partners
+    return None, []
+
+
+def rule_args(trial) -> tuple:
+    dbic, cand, fr, dho, dchi, _k = trial
+    return cand, fr, dbic, dho, dchi
+
+
+def partner_entry(chosen: Candidate, trial, gap: float, corr: float, dbic0: float) -> dict:
+    """A doubted dominant candidate's ``confounded_with`` entry for a trial that takes out
+    the same error (correlation above ``tie_corr``) but fits worse by ``gap``."""
+    dbic, cand, fr = trial[0], trial[1], trial[2]
+    return {
+        "name": cand.name,
+        "reason": f"takes out the same error as {chosen.name} (correlation {corr:.3f}) and "
+        f"fits nearly as well (chi-square {gap:+.1f}): this record cannot tell them apart",
+        "rule": "tie_corr",
+        "delta_bic": float(dbic),
+        "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "correlation": float(corr),
+        "separate_by": separate_by(chosen, cand, corr),
+    }
+
+
+def only_doubts(cand: Candidate, reasons: list) -> bool:
+    """Whether every rule that refused ``cand`` is its plausibility rule (a doubt, not a
+    failed test of the data)."""
+    return cand.doubt_overruled and all(r == f"{cand.name}.plausible" for r, _ in reasons)
+
+
+def separate_by(a: Candidate, b: Candidate, corr: float | None = None) -> str:
+    """What measurement would tell candidate ``a`` from ``b`` (from their signatures)."""
+    sa, sb = set(a.signature), set(b.signature)
+    both = sa | sb
+    pa, pb = {q.name for q in a.params}, {q.name for q in b.params}
+    if ("frequency_hz" in pa | pb) and ({"frequency_ratio", "orders"} & (pa | pb)):
+        return (
+            "runs at a second, clearly different speed: a fractional order follows the "
+            "speed, a frequency in Hz does not"
+        )
+    if ("direction" in sa) != ("direction" in sb):
+        return "runs in both directions: a direction-locked effect changes sign with it"
+    if ("speed" in sa) != ("speed" in sb):
+        return "runs at several speeds: a speed-dependent effect scales with the speed"
+    if ({"orders"} & both) and ({"spectrum", "time", "drift"} & both) and sa != sb:
+        return (
+            "runs at a second, clearly different speed: an effect locked to the angle keeps "
+            "its order, one locked to time keeps its frequency (or its time)"
+        )
+    if {"time", "drift", "order_step", "run_step"} & both:
+        return (
+            "a longer record, repeated runs or a temperature column: a change in time "
+            "recurs at the same time, a function of the angle at the same angle"
+        )
+    c = "" if corr is None else f" (their fitted errors correlate {corr:.3f} here)"
+    return f"a record in which their fitted errors differ{c}: other speeds, directions or turns"
+
+
+def alternatives_of(chosen, trials: list, prep) -> list[dict]:
+    """The other candidates of a doubted dominant one's round, best first (at most 3):
+    name, their criterion, how much worse than the named one, what would tell them apart."""
+    out = []
+    for dbic, cand, _fr, _dho, _dchi, _k in trials:
+        if cand is chosen[0] or len(out) >= 3:
+            continue
+        out.append(
+            {
+                "name": cand.name,
+                "reason": f"fits, but worse: dBIC {dbic:.1f} vs the named "
+                f"{chosen[0].name}'s {chosen[2]:.1f}",
+                "rule": "dominant_ratio",
+                "delta_bic": float(dbic),
+                "delta_bic_vs": float(dbic - chosen[2]),
+                "separate_by": separate_by(chosen[0], cand),
+            }
+        )
+    if not out:
+        out.append(
+            {
+                "name": "out_of_catalog",
+                "reason": "no other catalog candidate lowers the criterion here; the doubt "
+                f"names what could pose as it: {chosen[9]['reason']}",
+                "rule": chosen[9]["rule"],
+                "delta_bic": None,
+                "delta_bic_vs": None,
+                "separate_by": "the measurement the doubt asks for (see its reason)",
+            }
+        )
+    del prep
+    return out
