@@ -179,3 +179,36 @@ def stepped_sensor_record(
     enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), dict(amps=amps, hysteresis_rad=hysteresis_rad)
+
+
+def late_stamps_record(seed: int, n_gaps: int = 2, fs: float = 500.0, noise_rad: float = 2e-5):
+    """A sensor against a reference, 4 steady turns at 500 Hz, with ``n_gaps`` logger stalls
+    (0.2-0.5 s of rows lost) after each of which the 5-20 samples the logger buffered are
+    stamped late, on arrival (1-10 % of an interval apart); the shaft angles are those of the
+    true sample times (issue 22, item 4). Returns (recording, number of late rows per gap)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int(4 * 2 * np.pi / w * fs)
+    tt = np.arange(n) / fs
+    keep, t, late = np.ones(n, bool), tt.copy(), []
+    starts = np.sort(rng.choice(np.arange(n // 5, 4 * n // 5, n // 10), n_gaps, replace=False))
+    for g in starts:
+        gap = int(rng.uniform(0.2, 0.5) * fs)
+        keep[g : g + gap] = False
+        k = int(rng.integers(5, 21))
+        t[g + gap : g + gap + k] = (
+            tt[g + gap + k] - np.arange(k, 0, -1) * rng.uniform(0.01, 0.1) / fs
+        )
+        late.append(k)
+    th = w * tt + rng.uniform(0, 6)
+    amps, ph = 30 * noise_rad * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    h = th + e + rng.normal(0, noise_rad, n) + 0.7
+    cols = {"t": t[keep], "theta_ref": th[keep], "h0": h[keep]}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), late

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from helpers import late_stamps_record
 
 from encdesign import Recording
 from encdesign.diagnose import _nuisances
@@ -43,3 +44,21 @@ def test_a_record_mostly_at_rest_is_reported_prominently(seed):
     assert d.doc["report"].splitlines()[2].startswith("WARNING: ")
     d = diagnose(_dwell_record(seed, 0.1))
     assert d.doc["excluded_share"] is None
+
+
+@pytest.mark.parametrize("seed", [31, 32, 33])
+def test_late_stamps_after_a_logger_gap_are_excluded_as_such(seed):
+    rec, late = late_stamps_record(seed)
+    doc = diagnose(rec).doc
+    assert len(doc["gaps"]) == len(late)
+    assert [g.get("late_rows") for g in doc["gaps"]] == late
+    reasons = [e["reason"] for e in doc["excluded_segments"]]
+    assert reasons == [_nuisances.LATE_STAMPS_REASON] * len(late)
+    assert [e["n_rows"] for e in doc["excluded_segments"]] == late
+    assert doc["verdict"] == "consistent"
+
+
+def test_late_stamp_rows_counts_the_leading_short_intervals():
+    assert _nuisances.late_stamp_rows(np.array([0.1, 0.1, 1.0, 0.1]), 1.0, 0.5) == 2
+    assert _nuisances.late_stamp_rows(np.array([1.0, 0.1]), 1.0, 0.5) == 0
+    assert _nuisances.late_stamp_rows(np.array([0.2, 0.2]), 1.0, 0.5) == 2

@@ -1,11 +1,40 @@
 """Nuisances of measured benches (issue 22, item 4): plain functions the engine calls.
 
-The thresholds live at the top of this module (to move into the finder's settings).
+The excluded-share threshold is set by the issue (:data:`EXCLUDED_SHARE_WARN`); the
+others are :class:`~._settings.FinderSettings` fields.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+
+import numpy as np
+
+LATE_STAMPS_REASON = "late time stamps after a logger gap (buffered samples stamped on arrival)"
+"""The ``excluded_segments[].reason`` of the first rows after a gap whose host time stamps
+are late (:func:`late_stamp_rows`)."""
+
+
+def late_stamp_rows(dt_after: np.ndarray, dt_median: float, ratio: float) -> int:
+    """How many rows at the start of a stretch after a logger gap carry late time stamps.
+
+    A logger that stamps samples with the host's clock on arrival stamps the samples it
+    buffered during a stall (a gap in ``t``) all at about the same late time: the first
+    intervals after the gap are much shorter than the record's sampling interval, and the
+    shaft seems to jump ahead in them (speed far from steady). Those rows are the leading run
+    of intervals shorter than ``ratio`` times the median interval (the row that ends the
+    run is stamped on time and is kept).
+
+    Args:
+        dt_after: the time intervals (s) from the first row after the gap on.
+        dt_median: the run's median sampling interval (s).
+        ratio: ``FinderSettings.late_stamp_ratio``.
+    """
+    short = np.asarray(dt_after) < ratio * dt_median
+    if short.size == 0 or not short[0]:
+        return 0
+    return int(short.size if short.all() else np.argmin(short))
+
 
 EXCLUDED_SHARE_WARN = 1.0 / 3.0
 """Share of a record's rows left out of every fit (non-steady motion, gaps, masks, glitches)

@@ -11,6 +11,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Context
+from ._nuisances import LATE_STAMPS_REASON, late_stamp_rows
 from ._protocol import KeptRows, KindData, Prepared, RowColumns
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import SCAN_BLOCK, run_spans
@@ -417,9 +418,15 @@ def _runs_in_order(kd: KindData):
     return kd, run, order_runs, sort
 
 
-def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
-    """Gaps in ``t`` and the steady segments of each run. Returns ``(seg, excluded, gaps,
-    revolutions per run, speed per segment)``."""
+def _segments(
+    kd: KindData,
+    run: np.ndarray,
+    order_runs: np.ndarray,
+    settings: FinderSettings = DEFAULT_SETTINGS,
+):
+    """Gaps in ``t`` and the steady segments of each run; the late stamps after a gap are
+    excluded with their own reason (:func:`._nuisances.late_stamp_rows`). Returns ``(seg,
+    excluded, gaps, revolutions per run, speed per segment)``."""
     n = kd.y.shape[0]
     R = order_runs.size
     t = kd.t
@@ -441,8 +448,23 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray):
                 dict(run=int(order_runs[r]), t_s=float(tr[c - 1]), duration_s=float(dt[c - 1]))
             )
         bounds = [0, *cuts.tolist(), rows.size]
-        for a, b in zip(bounds[:-1], bounds[1:]):
+        gap0 = len(gaps) - cuts.size
+        for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
             sub = rows[a:b]
+            if a > 0:  # after a logger gap: buffered samples stamped late on arrival
+                k = late_stamp_rows(np.diff(tr[a:b]), float(med), settings.late_stamp_ratio)
+                if k:
+                    gaps[gap0 + i - 1]["late_rows"] = k
+                    excluded.append(
+                        dict(
+                            run=int(order_runs[r]),
+                            t_start_s=float(t[sub[0]]),
+                            t_end_s=float(t[sub[k - 1]]),
+                            n_rows=k,
+                            reason=LATE_STAMPS_REASON,
+                        )
+                    )
+                    sub = sub[k:]
             if sub.size < 8:
                 excluded.append(
                     dict(
@@ -646,7 +668,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     kd, run, order_runs, sort = _runs_in_order(kd)
     R = order_runs.size
     t = kd.t
-    seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs)
+    seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs, settings)
     seg_motion = _mask_rows(kd, seg, run, order_runs, excluded)
     keep = seg >= 0
     if keep.sum() < 32:

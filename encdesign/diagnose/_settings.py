@@ -147,6 +147,14 @@ class FinderSettings(eqx.Module):
     """sds: ``timing_quantization`` is named when the stamps' lattice is coarser than the
     declared clock period by more than this ratio. 8e334ac."""
 
+    late_stamp_ratio: float = eqx.field(default=0.5, static=True)
+    """The first rows after a logger gap whose time intervals are shorter than this share of
+    the median interval are late host stamps (samples buffered during the stall and stamped
+    on arrival) and are excluded with that reason, not as "speed far from steady". Issue 22
+    item 4; generated sets: tests/test_nuisances.py (5-20 buffered rows, 1-10 % of an
+    interval apart, seeds 31-33). Half an interval: a logger's ordinary jitter stays far
+    above it."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
