@@ -212,3 +212,33 @@ def late_stamps_record(seed: int, n_gaps: int = 2, fs: float = 500.0, noise_rad:
     enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), late
+
+
+def reversal_record(seed: int, shape: str, n: int = 1600, fs: float = 400.0, noise: float = 2e-5):
+    """Three heads, no reference: a steady turn forward, a reversal at mid-record, back at the
+    same speed (1.2-1.8 rev/s; ``n`` rows whatever the speed, so the fits compile once). Head
+    1 carries ``shape``: ``"reversal_step"`` a step of 10 noise units at the reversal (a
+    load reversal no catalog effect covers: no reference, so no direction term),
+    ``"drift"`` a slow linear drift of 20 noise units over the record (issue 22, item 4).
+    Returns (recording, truth dict with ``t_reversal_s``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(1.2, 1.8)
+    t = np.arange(n) / fs
+    k = n // 2
+    th = np.where(np.arange(n) < k, w * t, 2 * w * t[k] - w * t) + rng.uniform(0, 6)
+    alpha = np.array([0.0, 2.1, 4.2])
+    cols = {"t": t}
+    for j in range(3):
+        e = 1e-5 * np.sin(2 * (th - alpha[j]) + 1.0) + 5e-6 * np.sin(3 * (th - alpha[j]))
+        if j == 1 and shape == "reversal_step":
+            e = e + 10 * noise * (np.arange(n) >= k)
+        elif j == 1 and shape == "drift":
+            e = e + 20 * noise * (t / t[-1] - 0.5)
+        cols[f"h{j}"] = th + e + rng.normal(0, noise, n) + rng.uniform(-1, 1)
+    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "optical_radius_m": 0.02}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(t_reversal_s=float(t[k]))

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from helpers import late_stamps_record
+from helpers import late_stamps_record, reversal_record, validate_diagnosis
 
 from encdesign import Recording
 from encdesign.diagnose import _nuisances
@@ -62,3 +62,29 @@ def test_late_stamp_rows_counts_the_leading_short_intervals():
     assert _nuisances.late_stamp_rows(np.array([0.1, 0.1, 1.0, 0.1]), 1.0, 0.5) == 2
     assert _nuisances.late_stamp_rows(np.array([1.0, 0.1]), 1.0, 0.5) == 0
     assert _nuisances.late_stamp_rows(np.array([0.2, 0.2]), 1.0, 0.5) == 2
+
+
+@pytest.mark.parametrize("seed", [41, 42, 43])
+def test_a_step_at_a_reversal_is_unexplained_located_not_a_time_drift(seed):
+    """No temp_c: thermal_drift is a slow drift in time, never a stand-in for a step at a
+    reversal (no reference: no direction term covers it); the step is reported located in
+    time and direction."""
+    rec, truth = reversal_record(seed, "reversal_step")
+    doc = diagnose(rec).doc
+    assert doc["verdict"] == "unexplained", doc["report"]
+    assert not doc["effects"]
+    drift = [r for r in doc["rejected"] if r["name"] == "thermal_drift"]
+    assert drift and drift[0]["rule"] == "step_change_rows"
+    steps = [u["step_at"] for u in doc["unexplained"] if u.get("step_at")]
+    assert steps and steps[0]["heads"] == [1]
+    assert steps[0]["at"].startswith("at a reversal (forward to backward)")
+    assert abs(steps[0]["t_s"] - truth["t_reversal_s"]) < 0.3
+    assert "at a reversal" in doc["report"]
+    validate_diagnosis(doc)
+
+
+@pytest.mark.parametrize("seed", [41, 42])
+def test_a_slow_drift_across_a_reversal_is_still_thermal_drift(seed):
+    rec, _ = reversal_record(seed, "drift")
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["thermal_drift"], doc["report"]

@@ -262,5 +262,7 @@ def report_text(doc: dict) -> str:
         w = x["where"]
         loc = ", ".join(f"{k} {[round(v, 4) for v in w[k]][:6]}" for k in w if w[k])
         lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
+        if x.get("step_at"):
+            lines.append(f"  {x['step_at']['note']}")
     lines.append(f"status: {doc['status']}; {doc['time_s']:.1f} s")
     return "\n".join(lines) + "\n"

@@ -76,3 +76,74 @@ def excluded_share(n_rows: int, n_kept: int, excluded: Sequence[dict]) -> dict |
         reasons=dict(top),
         note=note,
     )
+
+
+TIME_DRIFTS = ("thermal_drift",)
+"""Candidates that are a slow drift over the record when no ``temp_c`` column drives them
+(the row column ``driver`` is then the time)."""
+
+
+def drifts_in_time(prep, name: str) -> bool:
+    """Whether candidate ``name`` is, in this record, a slow drift in time (issue 22, item
+    4: ``thermal_drift`` without ``temp_c``). Such a drift makes no step at a reversal or a
+    change of speed, so a step located there (left to the direction / speed terms for every
+    other candidate, ``FinderSettings.step_change_rows``) is an alternative it must beat too:
+    it is never a stand-in for a direction offset the catalog has no term for."""
+    return name in TIME_DRIFTS and prep.ctx.consts.get("driver_name") == "time"
+
+
+def _direction_word(d: float) -> str:
+    return "forward" if d > 0 else "backward"
+
+
+def step_context(prep, entry: dict) -> dict | None:
+    """Where a located step (an ``unexplained`` entry of the ``time`` view with a step)
+    lies in the motion: its time, run, and the direction of rotation before and after it,
+    and whether it is at a reversal, at a change of speed or within steady motion (issue 22,
+    item 4: a step in the error at a load reversal no catalog effect covers is reported
+    located in time and direction).
+
+    The change of direction or speed is looked for within the rows the selection exempts
+    steps there (``max(FinderSettings.step_change_rows, kept rows / 64)``), so "at a
+    reversal" here is the same judgement as there. Returns ``None`` for other entries.
+    """
+    det = entry.get("detail") or {}
+    if entry.get("view") != "time" or not (
+        det.get("shape") == "step" or det.get("step_significant")
+    ):
+        return None
+    runs = entry["where"]["runs"]
+    hit = np.flatnonzero(prep.run_ids == runs[0]) if runs else np.array([], int)
+    tau0 = det.get("global_step_time_s")
+    if hit.size == 0 or tau0 is None:
+        return None
+    rows = np.flatnonzero((prep.run == int(hit[0])) & prep.keep)
+    if rows.size < 2:
+        return None
+    i = int(np.clip(np.searchsorted(prep.rows.take("tau", rows), float(tau0)), 1, rows.size - 1))
+    d = np.asarray(prep.rows.take("direction", rows), float)
+    w = np.asarray(prep.rows.take("omega", rows), float)
+    near = max(prep.settings.step_change_rows, rows.size // 64)
+    lo, hi = max(i - near, 1), min(i + near + 1, rows.size)
+    span = np.arange(lo, hi)
+    rev = span[d[span] != d[span - 1]]
+    fast = np.abs(w[span] - w[span - 1]) > 0.05 * np.maximum(np.abs(w[span]), np.abs(w[span - 1]))
+    spd = span[fast]
+    j = int(rev[np.argmin(np.abs(rev - i))]) if rev.size else None
+    if j is not None:
+        at = f"at a reversal ({_direction_word(d[j - 1])} to {_direction_word(d[j])})"
+    elif spd.size:
+        j = int(spd[np.argmin(np.abs(spd - i))])
+        at = f"at a change of speed ({abs(w[j - 1]):.4g} to {abs(w[j]):.4g} rad/s)"
+    else:
+        at = f"within steady {_direction_word(d[i])} motion (no reversal, no change of speed)"
+    k = i if j is None else j
+    return dict(
+        t_s=det.get("step_time_s", tau0),
+        run=runs[0],
+        heads=list(entry["where"]["heads"]),
+        direction_before=_direction_word(d[k - 1]),
+        direction_after=_direction_word(d[k]),
+        at=at,
+        note=f"a step at t = {float(det.get('step_time_s', tau0)):.6g} s (run {runs[0]}) {at}",
+    )

@@ -14,6 +14,7 @@ import numpy as np
 from ._candidates import Candidate, Param
 from ._document import _jsonable
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._views import locate
 
@@ -198,7 +199,7 @@ STEP_NUISANCE = Candidate(
 """A step of one size on the channels of a located step, from its row on within its run."""
 
 
-def _free_steps(prep: Prepared, findings: list) -> list[dict]:
+def _free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
     A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
@@ -206,7 +207,8 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
     half a time-view block, 1/64 of the run) of a kept row where the direction or the
     steady speed changes is left to those terms. The others are steps no smooth term (a
     drift, a scale error, an order) can make; each is returned with its time, run and
-    channels."""
+    channels. ``at_changes``: only the steps at such a change instead (``at_change`` set),
+    the alternative a drift in time must beat as well (:func:`._nuisances.drifts_in_time`)."""
     out = []
     keep = prep.keep
     for f in findings:
@@ -234,14 +236,21 @@ def _free_steps(prep: Prepared, findings: list) -> list[dict]:
             + 1
         )
         near = max(prep.settings.step_change_rows, rows.size // 64)
-        if ch_rows.size and np.min(np.abs(ch_rows - i)) <= near:
+        if bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near) != at_changes:
             continue
         ch = np.zeros(prep.n_channels)
         ch[list(f.where["heads"])] = 1.0
         sel = np.zeros(prep.ctx.n_runs)
         sel[r] = 1.0
         out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
+        out[-1]["at_change"] = at_changes
     return out
+
+
+_NO_STEP = (
+    "it cannot make a step there (no reversal, no change of speed at that time)",
+    "a slow drift in time cannot make the step at that reversal or change of speed",
+)
 
 
 def _step_term(prep: Prepared, step: dict) -> Term:
@@ -292,8 +301,7 @@ def _beaten_by_step(
                     f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
                     f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
                     f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
-                    f"{dbic:.1f}, held-out {dho:.1f}); it cannot make a step there (no "
-                    "reversal, no change of speed at that time)",
+                    f"{dbic:.1f}, held-out {dho:.1f}); " + _NO_STEP[bool(st.get("at_change"))],
                     f,
                 )
             if attempt:
@@ -590,7 +598,10 @@ def _choose(st, trials, current, accepted, n_base_terms, held_notes, rejected, s
             continue
         # a step located where nothing in the catalog changes (no reversal, no change of
         # speed) is the alternative it must beat: a drift or a scale error only dents it
-        why = _beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
+        steps = st["free_steps"] + steps_left
+        if drifts_in_time(prep, cand.name):  # a drift in time makes no step at a reversal
+            steps = steps + st["change_steps"]
+        why = _beaten_by_step(fitter, prep, current, fr, steps, step_fits)
         if why:
             rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
             step_refusals.append((cand.name, why[1]))
@@ -715,6 +726,7 @@ def select(
             views=views,
             scan_order=scan_order,
             free_steps=_free_steps(prep, findings),
+            change_steps=_free_steps(prep, findings, at_changes=True),
         )
         trials = []
         for cand in applicable:
