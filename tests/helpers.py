@@ -242,3 +242,33 @@ def reversal_record(seed: int, shape: str, n: int = 1600, fs: float = 400.0, noi
     enc = {"head_angles_deg": np.degrees(alpha).tolist(), "optical_radius_m": 0.02}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), dict(t_reversal_s=float(t[k]))
+
+
+def dwell_reversal_record(seed: int, back: float = 0.1, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference driven forward / stop / back (issue 22, item 4): 3 turns
+    forward at 0.8-1.5 rev/s, a dwell of 0.05-1 s, then ``back`` of that angle backwards,
+    with 0.05-0.15 s speed ramps; the sensor's reading is offset by ``h d / 2`` (``h`` = 10
+    noise units, ``d`` the direction of the last motion: hysteresis holds through the
+    dwell). Returns (recording, truth dict with ``hysteresis_rad``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    k = max(1, int(rng.uniform(0.05, 0.15) * fs))
+    t1 = 3 * 2 * np.pi / w
+    plan = [(t1, 1.0), (rng.uniform(0.05, 1.0), 0.0), (back * t1, -1.0)]
+    v = np.concatenate([np.full(int(T * fs), s * w) for T, s in plan])
+    v = np.convolve(np.pad(v, k, mode="edge"), np.ones(k) / k, mode="same")[k:-k]
+    th = np.cumsum(v) / fs + rng.uniform(0, 6)
+    d = np.sign(v) * (np.abs(v) > 1e-9)
+    for i in range(1, d.size):  # the direction of the last motion, through the dwell
+        d[i] = d[i] if d[i] else d[i - 1]
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    h = th + e + 5 * noise * d + rng.normal(0, noise, th.size) + 0.7
+    cols = {"t": np.arange(th.size) / fs, "theta_ref": th, "h0": h}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(hysteresis_rad=10 * noise)

@@ -2,7 +2,12 @@
 
 import numpy as np
 import pytest
-from helpers import late_stamps_record, reversal_record, validate_diagnosis
+from helpers import (
+    dwell_reversal_record,
+    late_stamps_record,
+    reversal_record,
+    validate_diagnosis,
+)
 
 from encdesign import Recording
 from encdesign.diagnose import _nuisances
@@ -88,3 +93,17 @@ def test_a_slow_drift_across_a_reversal_is_still_thermal_drift(seed):
     rec, _ = reversal_record(seed, "drift")
     doc = diagnose(rec).doc
     assert [e["name"] for e in doc["effects"]] == ["thermal_drift"], doc["report"]
+
+
+@pytest.mark.parametrize("seed", [51, 52, 53])
+def test_a_short_move_back_after_a_dwell_tests_the_direction_offset(seed):
+    """Forward, stop, back by a tenth of the forward angle (about 8 % of the rows): the
+    move back is kept (``FinderSettings.reversal_piece_share``), so the direction offset
+    is tested at the reversal and found with its size."""
+    rec, truth = dwell_reversal_record(seed, back=0.1)
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["direction_hysteresis"], doc["report"]
+    p = doc["effects"][0]["params"]["hysteresis_rad"]
+    assert abs(p["value"] - truth["hysteresis_rad"]) < max(
+        4 * p["se"], 0.2 * truth["hysteresis_rad"]
+    )

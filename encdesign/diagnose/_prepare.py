@@ -86,7 +86,11 @@ def speed_window_rows(
 
 
 def find_motion_segments(
-    shaft: np.ndarray, t: np.ndarray, tolerance: float = 0.1, window: float = 0.01
+    shaft: np.ndarray,
+    t: np.ndarray,
+    tolerance: float = 0.1,
+    window: float = 0.01,
+    reversal_share: float = DEFAULT_SETTINGS.reversal_piece_share,
 ) -> tuple[np.ndarray, list[dict]]:
     """Steady segments of one run.
 
@@ -94,7 +98,10 @@ def find_motion_segments(
     speed within ``tolerance`` (relative) of that piece's median speed. Pieces are maximal
     stretches of one direction; a piece shorter than 10 % of the run (or 50 samples) is a
     return move, a reversal or a start-up, and samples slower than 10 % of the steady speed
-    are dwells. Each excluded stretch is widened by the speed window (settling).
+    are dwells. Each excluded stretch is widened by the speed window (settling). A piece
+    turning against the run's longest piece is kept from ``reversal_share`` of the run on
+    (and 50 samples; ``FinderSettings.reversal_piece_share``): a short move back after a
+    stop is where a direction offset shows.
 
     Returns:
         ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
@@ -112,10 +119,13 @@ def find_motion_segments(
     longest = max(longest, max((b - a for a, b in _runs_of(big & (sgn < 0))), default=0))
     min_len = max(50, int(0.1 * n), int(0.5 * longest) if longest < 0.2 * n else 0)
     min_len = min(min_len, max(50, int(0.1 * n)))
+    pieces = {s: _runs_of(big & (sgn == s)) for s in (1, -1)}
+    main = max((1, -1), key=lambda s: max((b - a for a, b in pieces[s]), default=0))
+    back_len = min(min_len, max(50, int(reversal_share * n)))
     sid = 0
     for s in (1, -1):
-        for a, b in _runs_of(big & (sgn == s)):
-            if b - a < min_len:
+        for a, b in pieces[s]:
+            if b - a < (min_len if s == main else back_len):
                 continue
             med = np.median(w[a:b])
             ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
@@ -482,7 +492,11 @@ def _segments(
                 bad = []
             else:
                 s_id, bad = find_motion_segments(
-                    kd.shaft[sub], t[sub], kd.steady_tolerance, kd.speed_window
+                    kd.shaft[sub],
+                    t[sub],
+                    kd.steady_tolerance,
+                    kd.speed_window,
+                    settings.reversal_piece_share,
                 )
             for sid in np.unique(s_id[s_id >= 0]):
                 m = sub[s_id == sid]

@@ -147,6 +147,14 @@ class FinderSettings(eqx.Module):
     """sds: ``timing_quantization`` is named when the stamps' lattice is coarser than the
     declared clock period by more than this ratio. 8e334ac."""
 
+    reversal_piece_share: float = eqx.field(default=0.05, static=True)
+    """A steady piece of a run turning against its longest piece (a move back after a stop
+    or a reversal) is kept for the fit from this share of the run's rows on (and 50 rows);
+    pieces in the main direction still need 10 % (start-ups, return moves). Below 10 % the
+    direction offset at a forward / stop / back reversal went untested (issue 22 item 4;
+    generated trapezoid profiles with 2-12 % back, tests/test_nuisances.py seeds 51-53).
+    5 %: the settling margins (1/50 of the run each side) leave at least a few percent."""
+
     late_stamp_ratio: float = eqx.field(default=0.5, static=True)
     """The first rows after a logger gap whose time intervals are shorter than this share of
     the median interval are late host stamps (samples buffered during the stall and stamped
