@@ -272,3 +272,27 @@ def dwell_reversal_record(seed: int, back: float = 0.1, fs: float = 500.0, noise
     enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), dict(hysteresis_rad=10 * noise)
+
+
+def steady_start_record(seed: int, ramp_s: float = 0.0, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference turning 4 turns at 0.8-1.5 rev/s, with 5 % of an
+    interval of sampling jitter and a 2 % speed ripple at order 3: steady from its first row
+    (``ramp_s`` = 0) or after a linear start-up ramp of ``ramp_s`` (issue 22, item 4)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int((4 * 2 * np.pi / w + ramp_s) * fs)
+    t = np.arange(n) / fs + rng.normal(0, 0.05 / fs, n)
+    tc = np.clip(t, 0, None)
+    th = w * np.where(tc < ramp_s, tc**2 / (2 * ramp_s) if ramp_s else 0, tc - ramp_s / 2)
+    th = th + rng.uniform(0, 6)
+    th = th + 0.02 / 3 * np.sin(3 * th + 1.0)
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    cols = {"t": t, "theta_ref": th, "h0": th + e + rng.normal(0, noise, n) + 0.7}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)

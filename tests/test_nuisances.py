@@ -6,6 +6,7 @@ from helpers import (
     dwell_reversal_record,
     late_stamps_record,
     reversal_record,
+    steady_start_record,
     validate_diagnosis,
 )
 
@@ -107,3 +108,12 @@ def test_a_short_move_back_after_a_dwell_tests_the_direction_offset(seed):
     assert abs(p["value"] - truth["hysteresis_rad"]) < max(
         4 * p["se"], 0.2 * truth["hysteresis_rad"]
     )
+
+
+@pytest.mark.parametrize("seed", [61, 62, 63])
+def test_a_steady_drive_from_its_first_row_is_no_start_up(seed):
+    doc = diagnose(steady_start_record(seed)).doc
+    assert doc["excluded_segments"] == [] and doc["verdict"] == "consistent", doc["report"]
+    doc = diagnose(steady_start_record(seed, ramp_s=0.6)).doc  # the control: a real ramp
+    starts = [e for e in doc["excluded_segments"] if e["reason"].startswith("start-up")]
+    assert starts and starts[0]["t_start_s"] < 0.01 and starts[0]["t_end_s"] > 0.3
