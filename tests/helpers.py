@@ -296,3 +296,33 @@ def steady_start_record(seed: int, ramp_s: float = 0.0, fs: float = 500.0, noise
     enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
+
+
+def angle_step_record(seed: int, accumulate: bool = False, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference, 5 turns at 0.8-1.5 rev/s, whose error function has a
+    box of 60 noise units on an arc of 1-2.5 rad (a potentiometer's track, a magnet's
+    segment: a step up and a step down at fixed angles on every pass; issue 22, item 4).
+    ``accumulate``: instead, 60 noise units of counts lost at one angle on every pass (a
+    disk defect: steps in time that never return). Returns (recording, truth dict with
+    ``angles_rad`` (the box's edges) and ``size_rad``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int(5 * 2 * np.pi / w * fs)
+    t = np.arange(n) / fs
+    th = w * t + rng.uniform(0, 6)
+    a0, width, size = rng.uniform(0, 2 * np.pi), rng.uniform(1.0, 2.5), 60 * noise
+    if accumulate:
+        e = -size * np.floor((th - a0) / (2 * np.pi))
+    else:
+        e = size * (np.mod(th - a0, 2 * np.pi) < width)
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = e + sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    cols = {"t": t, "theta_ref": th, "h0": th + e + rng.normal(0, noise, n) + 0.7}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    edges = [a0 % (2 * np.pi), (a0 + width) % (2 * np.pi)]
+    return Recording("multihead", meta, cols), dict(angles_rad=edges, size_rad=size)

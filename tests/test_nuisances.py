@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from helpers import (
+    angle_step_record,
     dwell_reversal_record,
     late_stamps_record,
     reversal_record,
@@ -117,3 +118,26 @@ def test_a_steady_drive_from_its_first_row_is_no_start_up(seed):
     doc = diagnose(steady_start_record(seed, ramp_s=0.6)).doc  # the control: a real ramp
     starts = [e for e in doc["excluded_segments"] if e["reason"].startswith("start-up")]
     assert starts and starts[0]["t_start_s"] < 0.01 and starts[0]["t_end_s"] > 0.3
+
+
+@pytest.mark.parametrize("seed", [71, 72, 73])
+def test_steps_recurring_at_one_angle_are_of_the_angle_not_count_jumps(seed):
+    rec, truth = angle_step_record(seed)
+    doc = diagnose(rec).doc
+    assert doc["count_jumps"] == [] and doc["verdict"] == "consistent", doc["report"]
+    steps = sorted(doc["angle_steps"], key=lambda s: s["size_rad"], reverse=True)
+    assert [s["passes"] >= 4 for s in steps] == [True, True]
+    for s, a, sign in zip(steps, truth["angles_rad"], (1, -1)):
+        assert abs(np.angle(np.exp(1j * (s["angle_rad"] - a)))) < 0.02
+        assert s["size_rad"] == pytest.approx(sign * truth["size_rad"], rel=0.15)
+    arc = doc["base"]["terms"]["angle_steps"]["arc_rad"]["value"]
+    assert len(arc) == 1 and abs(arc[0]) == pytest.approx(truth["size_rad"], rel=0.05)
+    assert "angle step: channel h0" in doc["report"]
+    validate_diagnosis(doc)
+
+
+def test_counts_lost_at_one_angle_every_pass_stay_count_jumps():
+    """They recur at one angle but never return: steps in time (angle_step_close)."""
+    rec, _ = angle_step_record(71, accumulate=True)
+    doc = diagnose(rec).doc
+    assert doc["angle_steps"] == [] and len(doc["count_jumps"]) >= 3, doc["report"]

@@ -230,6 +230,11 @@ def report_text(doc: dict) -> str:
             f"count jump: run {j['run']} t {j['t_s']:.6g} s channel {j['channel']} "
             f"size {j['size']:.4g} {u}"
         )
+    for a in doc.get("angle_steps") or []:
+        lines.append(
+            f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
+            f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
+        )
     for gp in doc["gaps"]:
         lines.append(f"gap: run {gp['run']} at t {gp['t_s']:.6g} s for {gp['duration_s']:.3g} s")
     if doc["base"]["unidentifiable"]:

@@ -337,6 +337,13 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
             for j in prep.count_jumps
         ],
         "gaps": prep.gaps,
+        "angle_steps": [
+            {
+                **{k: v for k, v in s.items() if k != "channel_index"},
+                "channel": kd.channel_names[s["channel_index"]],
+            }
+            for s in prep.angle_steps
+        ],
         "effects": effects,
         "unexplained": unexplained,
         "rejected": sel["rejected"],

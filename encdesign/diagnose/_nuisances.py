@@ -147,3 +147,71 @@ def step_context(prep, entry: dict) -> dict | None:
         at=at,
         note=f"a step at t = {float(det.get('step_time_s', tau0)):.6g} s (run {runs[0]}) {at}",
     )
+
+
+def _clusters(phi: np.ndarray, tol: float) -> list[np.ndarray]:
+    """Indices of ``phi`` (rad, in [0, 2 pi)) grouped where consecutive sorted angles are
+    within ``tol`` (circular: the last group joins the first across 2 pi)."""
+    order = np.argsort(phi)
+    p = phi[order]
+    cut = np.flatnonzero(np.diff(p) > tol) + 1
+    groups = [g for g in np.split(order, cut) if g.size]
+    if len(groups) > 1 and p[0] + 2 * np.pi - p[-1] <= tol:
+        groups = [np.concatenate([groups[-1], groups[0]]), *groups[1:-1]]
+    return groups
+
+
+def angle_steps(jumps: list[dict], theta: np.ndarray, settings) -> tuple[list[dict], list[dict]]:
+    """Count jumps that are steps of the sensor's error function of the angle (issue 22,
+    item 4: a potentiometer's track, a magnet's segment), and the jumps left.
+
+    A channel's jumps are grouped by the shaft angle at which they occur (within
+    ``FinderSettings.angle_step_tol_turns`` of a turn, or 3 rows' advance); a group is an
+    angle step when it recurs on at least ``angle_step_passes`` passes with one size (the
+    jump times the direction of rotation: a pass backwards crosses the step the other way,
+    each within half the group's median). The groups of a channel are steps of the angle
+    only together, when their sizes close over a turn (their sum within
+    ``angle_step_close`` of the sum of their magnitudes): missed counts at a disk defect
+    also recur at one angle but accumulate, and stay count jumps.
+
+    Args:
+        jumps: the prepared count jumps (``index``, ``channel_index``, ``size``, ...).
+        theta: the angle per prepared row (rad; the reference, else the shaft).
+        settings: the :class:`~._settings.FinderSettings`.
+
+    Returns:
+        ``(steps, jumps left)``; each step ``{channel_index, angle_rad, size_rad,
+        passes}`` (``size_rad``: the error's change crossing the angle forwards).
+    """
+    if not jumps:
+        return [], jumps
+    step = float(np.median(np.abs(np.diff(theta)))) if theta.size > 1 else 0.0
+    tol = max(2 * np.pi * settings.angle_step_tol_turns, 3 * step)
+    used: set[int] = set()
+    out: list[dict] = []
+    for k in sorted({int(j["channel_index"]) for j in jumps}):
+        mine = [q for q, j in enumerate(jumps) if int(j["channel_index"]) == k and k >= 0]
+        if len(mine) < 2 * settings.angle_step_passes:
+            continue
+        idx = np.asarray([jumps[q]["index"] for q in mine])
+        lo, hi = np.clip(idx - 1, 0, theta.size - 1), np.clip(idx + 1, 0, theta.size - 1)
+        fwd = np.where(theta[hi] >= theta[lo], 1.0, -1.0)
+        size = np.asarray([jumps[q]["size"] for q in mine], float) * fwd
+        phi = np.mod(0.5 * (theta[lo] + theta[idx]), 2 * np.pi)  # between the two rows
+        found = []
+        for g in _clusters(phi, tol):
+            med = float(np.median(size[g]))
+            if g.size >= settings.angle_step_passes and np.all(
+                np.abs(size[g] - med) <= 0.5 * abs(med)
+            ):
+                ang = float(np.angle(np.mean(np.exp(1j * phi[g]))) % (2 * np.pi))
+                found.append((g, ang, med))
+        if len(found) < 2:
+            continue
+        total = sum(m for _, _, m in found)
+        if abs(total) > settings.angle_step_close * sum(abs(m) for _, _, m in found):
+            continue
+        for g, ang, med in found:
+            used.update(mine[i] for i in g.tolist())
+            out.append(dict(channel_index=k, angle_rad=ang, size_rad=med, passes=int(g.size)))
+    return out, [j for q, j in enumerate(jumps) if q not in used]

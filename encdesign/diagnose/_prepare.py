@@ -11,7 +11,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Context
-from ._nuisances import LATE_STAMPS_REASON, late_stamp_rows
+from ._nuisances import LATE_STAMPS_REASON, angle_steps, late_stamp_rows
 from ._protocol import KeptRows, KindData, Prepared, RowColumns
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import SCAN_BLOCK, run_spans
@@ -692,6 +692,8 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
         kd, seg, keep, run, order_runs, sort
     )
+    ang = kd.theta_ref if kd.theta_ref is not None else kd.shaft  # recurring: of the angle
+    steps_of_angle, count_jumps = angle_steps(count_jumps, ang, settings)
     y = kd.y
     fold, design = _fold_blocks(keep, run, settings.n_folds)
     fold[~keep] = -1
@@ -735,6 +737,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         excluded=excluded,
         glitches=glitches,
         count_jumps=count_jumps,
+        angle_steps=steps_of_angle,
         gaps=gaps,
         fold_design=design,
         run_ids=order_runs,

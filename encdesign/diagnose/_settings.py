@@ -163,6 +163,23 @@ class FinderSettings(eqx.Module):
     interval apart, seeds 31-33). Half an interval: a logger's ordinary jitter stays far
     above it."""
 
+    angle_step_tol_turns: float = eqx.field(default=0.005, static=True)
+    """Count jumps of one channel within this share of a turn of the same shaft angle (or 3
+    rows' advance, if wider) are one recurring step (:func:`._nuisances.angle_steps`).
+    Issue 22 item 4; generated potentiometer / magnet-segment boxes (tests/test_nuisances.py,
+    seeds 71-73): a jump is located within a row."""
+
+    angle_step_passes: int = eqx.field(default=2, static=True)
+    """A recurring step must be seen on at least this many passes (with one size) to be a
+    property of the angle rather than count jumps in time. Issue 22 item 4: two passes are
+    the least that can tell an angle from a time."""
+
+    angle_step_close: float = eqx.field(default=0.25, static=True)
+    """A channel's recurring steps are steps of its error function of the angle only when
+    their sizes sum to within this share of their magnitudes over a turn (the function
+    returns to its start); missed counts at one angle accumulate and stay count jumps. Issue
+    22 item 4 (a box: two steps of opposite sizes)."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
