@@ -179,3 +179,150 @@ def stepped_sensor_record(
     enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), dict(amps=amps, hysteresis_rad=hysteresis_rad)
+
+
+def late_stamps_record(seed: int, n_gaps: int = 2, fs: float = 500.0, noise_rad: float = 2e-5):
+    """A sensor against a reference, 4 steady turns at 500 Hz, with ``n_gaps`` logger stalls
+    (0.2-0.5 s of rows lost) after each of which the 5-20 samples the logger buffered are
+    stamped late, on arrival (1-10 % of an interval apart); the shaft angles are those of the
+    true sample times (issue 22, item 4). Returns (recording, number of late rows per gap)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int(4 * 2 * np.pi / w * fs)
+    tt = np.arange(n) / fs
+    keep, t, late = np.ones(n, bool), tt.copy(), []
+    starts = np.sort(rng.choice(np.arange(n // 5, 4 * n // 5, n // 10), n_gaps, replace=False))
+    for g in starts:
+        gap = int(rng.uniform(0.2, 0.5) * fs)
+        keep[g : g + gap] = False
+        k = int(rng.integers(5, 21))
+        t[g + gap : g + gap + k] = (
+            tt[g + gap + k] - np.arange(k, 0, -1) * rng.uniform(0.01, 0.1) / fs
+        )
+        late.append(k)
+    th = w * tt + rng.uniform(0, 6)
+    amps, ph = 30 * noise_rad * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    h = th + e + rng.normal(0, noise_rad, n) + 0.7
+    cols = {"t": t[keep], "theta_ref": th[keep], "h0": h[keep]}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), late
+
+
+def reversal_record(seed: int, shape: str, n: int = 1600, fs: float = 400.0, noise: float = 2e-5):
+    """Three heads, no reference: a steady turn forward, a reversal at mid-record, back at the
+    same speed (1.2-1.8 rev/s; ``n`` rows whatever the speed, so the fits compile once). Head
+    1 carries ``shape``: ``"reversal_step"`` a step of 10 noise units at the reversal (a
+    load reversal no catalog effect covers: no reference, so no direction term),
+    ``"drift"`` a slow linear drift of 20 noise units over the record (issue 22, item 4).
+    Returns (recording, truth dict with ``t_reversal_s``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(1.2, 1.8)
+    t = np.arange(n) / fs
+    k = n // 2
+    th = np.where(np.arange(n) < k, w * t, 2 * w * t[k] - w * t) + rng.uniform(0, 6)
+    alpha = np.array([0.0, 2.1, 4.2])
+    cols = {"t": t}
+    for j in range(3):
+        e = 1e-5 * np.sin(2 * (th - alpha[j]) + 1.0) + 5e-6 * np.sin(3 * (th - alpha[j]))
+        if j == 1 and shape == "reversal_step":
+            e = e + 10 * noise * (np.arange(n) >= k)
+        elif j == 1 and shape == "drift":
+            e = e + 20 * noise * (t / t[-1] - 0.5)
+        cols[f"h{j}"] = th + e + rng.normal(0, noise, n) + rng.uniform(-1, 1)
+    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "optical_radius_m": 0.02}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(t_reversal_s=float(t[k]))
+
+
+def dwell_reversal_record(seed: int, back: float = 0.1, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference driven forward / stop / back (issue 22, item 4): 3 turns
+    forward at 0.8-1.5 rev/s, a dwell of 0.05-1 s, then ``back`` of that angle backwards,
+    with 0.05-0.15 s speed ramps; the sensor's reading is offset by ``h d / 2`` (``h`` = 10
+    noise units, ``d`` the direction of the last motion: hysteresis holds through the
+    dwell). Returns (recording, truth dict with ``hysteresis_rad``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    k = max(1, int(rng.uniform(0.05, 0.15) * fs))
+    t1 = 3 * 2 * np.pi / w
+    plan = [(t1, 1.0), (rng.uniform(0.05, 1.0), 0.0), (back * t1, -1.0)]
+    v = np.concatenate([np.full(int(T * fs), s * w) for T, s in plan])
+    v = np.convolve(np.pad(v, k, mode="edge"), np.ones(k) / k, mode="same")[k:-k]
+    th = np.cumsum(v) / fs + rng.uniform(0, 6)
+    d = np.sign(v) * (np.abs(v) > 1e-9)
+    for i in range(1, d.size):  # the direction of the last motion, through the dwell
+        d[i] = d[i] if d[i] else d[i - 1]
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    h = th + e + 5 * noise * d + rng.normal(0, noise, th.size) + 0.7
+    cols = {"t": np.arange(th.size) / fs, "theta_ref": th, "h0": h}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(hysteresis_rad=10 * noise)
+
+
+def steady_start_record(seed: int, ramp_s: float = 0.0, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference turning 4 turns at 0.8-1.5 rev/s, with 5 % of an
+    interval of sampling jitter and a 2 % speed ripple at order 3: steady from its first row
+    (``ramp_s`` = 0) or after a linear start-up ramp of ``ramp_s`` (issue 22, item 4)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int((4 * 2 * np.pi / w + ramp_s) * fs)
+    t = np.arange(n) / fs + rng.normal(0, 0.05 / fs, n)
+    tc = np.clip(t, 0, None)
+    th = w * np.where(tc < ramp_s, tc**2 / (2 * ramp_s) if ramp_s else 0, tc - ramp_s / 2)
+    th = th + rng.uniform(0, 6)
+    th = th + 0.02 / 3 * np.sin(3 * th + 1.0)
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    cols = {"t": t, "theta_ref": th, "h0": th + e + rng.normal(0, noise, n) + 0.7}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
+def angle_step_record(seed: int, accumulate: bool = False, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference, 5 turns at 0.8-1.5 rev/s, whose error function has a
+    box of 60 noise units on an arc of 1-2.5 rad (a potentiometer's track, a magnet's
+    segment: a step up and a step down at fixed angles on every pass; issue 22, item 4).
+    ``accumulate``: instead, 60 noise units of counts lost at one angle on every pass (a
+    disk defect: steps in time that never return). Returns (recording, truth dict with
+    ``angles_rad`` (the box's edges) and ``size_rad``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int(5 * 2 * np.pi / w * fs)
+    t = np.arange(n) / fs
+    th = w * t + rng.uniform(0, 6)
+    a0, width, size = rng.uniform(0, 2 * np.pi), rng.uniform(1.0, 2.5), 60 * noise
+    if accumulate:
+        e = -size * np.floor((th - a0) / (2 * np.pi))
+    else:
+        e = size * (np.mod(th - a0, 2 * np.pi) < width)
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = e + sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    cols = {"t": t, "theta_ref": th, "h0": th + e + rng.normal(0, noise, n) + 0.7}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    edges = [a0 % (2 * np.pi), (a0 + width) % (2 * np.pi)]
+    return Recording("multihead", meta, cols), dict(angles_rad=edges, size_rad=size)

@@ -2,6 +2,14 @@
 
 import numpy as np
 import pytest
+from helpers import (
+    angle_step_record,
+    dwell_reversal_record,
+    late_stamps_record,
+    reversal_record,
+    steady_start_record,
+    validate_diagnosis,
+)
 
 from encdesign import Recording
 from encdesign.diagnose import _nuisances
@@ -43,3 +51,93 @@ def test_a_record_mostly_at_rest_is_reported_prominently(seed):
     assert d.doc["report"].splitlines()[2].startswith("WARNING: ")
     d = diagnose(_dwell_record(seed, 0.1))
     assert d.doc["excluded_share"] is None
+
+
+@pytest.mark.parametrize("seed", [31, 32, 33])
+def test_late_stamps_after_a_logger_gap_are_excluded_as_such(seed):
+    rec, late = late_stamps_record(seed)
+    doc = diagnose(rec).doc
+    assert len(doc["gaps"]) == len(late)
+    assert [g.get("late_rows") for g in doc["gaps"]] == late
+    reasons = [e["reason"] for e in doc["excluded_segments"]]
+    assert reasons == [_nuisances.LATE_STAMPS_REASON] * len(late)
+    assert [e["n_rows"] for e in doc["excluded_segments"]] == late
+    assert doc["verdict"] == "consistent"
+
+
+def test_late_stamp_rows_counts_the_leading_short_intervals():
+    assert _nuisances.late_stamp_rows(np.array([0.1, 0.1, 1.0, 0.1]), 1.0, 0.5) == 2
+    assert _nuisances.late_stamp_rows(np.array([1.0, 0.1]), 1.0, 0.5) == 0
+    assert _nuisances.late_stamp_rows(np.array([0.2, 0.2]), 1.0, 0.5) == 2
+
+
+@pytest.mark.parametrize("seed", [41, 42, 43])
+def test_a_step_at_a_reversal_is_unexplained_located_not_a_time_drift(seed):
+    """No temp_c: thermal_drift is a slow drift in time, never a stand-in for a step at a
+    reversal (no reference: no direction term covers it); the step is reported located in
+    time and direction."""
+    rec, truth = reversal_record(seed, "reversal_step")
+    doc = diagnose(rec).doc
+    assert doc["verdict"] == "unexplained", doc["report"]
+    assert not doc["effects"]
+    drift = [r for r in doc["rejected"] if r["name"] == "thermal_drift"]
+    assert drift and drift[0]["rule"] == "step_change_rows"
+    steps = [u["step_at"] for u in doc["unexplained"] if u.get("step_at")]
+    assert steps and steps[0]["heads"] == [1]
+    assert steps[0]["at"].startswith("at a reversal (forward to backward)")
+    assert abs(steps[0]["t_s"] - truth["t_reversal_s"]) < 0.3
+    assert "at a reversal" in doc["report"]
+    validate_diagnosis(doc)
+
+
+@pytest.mark.parametrize("seed", [41, 42])
+def test_a_slow_drift_across_a_reversal_is_still_thermal_drift(seed):
+    rec, _ = reversal_record(seed, "drift")
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["thermal_drift"], doc["report"]
+
+
+@pytest.mark.parametrize("seed", [51, 52, 53])
+def test_a_short_move_back_after_a_dwell_tests_the_direction_offset(seed):
+    """Forward, stop, back by a tenth of the forward angle (about 8 % of the rows): the
+    move back is kept (``FinderSettings.reversal_piece_share``), so the direction offset
+    is tested at the reversal and found with its size."""
+    rec, truth = dwell_reversal_record(seed, back=0.1)
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["direction_hysteresis"], doc["report"]
+    p = doc["effects"][0]["params"]["hysteresis_rad"]
+    assert abs(p["value"] - truth["hysteresis_rad"]) < max(
+        4 * p["se"], 0.2 * truth["hysteresis_rad"]
+    )
+
+
+@pytest.mark.parametrize("seed", [61, 62, 63])
+def test_a_steady_drive_from_its_first_row_is_no_start_up(seed):
+    doc = diagnose(steady_start_record(seed)).doc
+    assert doc["excluded_segments"] == [] and doc["verdict"] == "consistent", doc["report"]
+    doc = diagnose(steady_start_record(seed, ramp_s=0.6)).doc  # the control: a real ramp
+    starts = [e for e in doc["excluded_segments"] if e["reason"].startswith("start-up")]
+    assert starts and starts[0]["t_start_s"] < 0.01 and starts[0]["t_end_s"] > 0.3
+
+
+@pytest.mark.parametrize("seed", [71, 72, 73])
+def test_steps_recurring_at_one_angle_are_of_the_angle_not_count_jumps(seed):
+    rec, truth = angle_step_record(seed)
+    doc = diagnose(rec).doc
+    assert doc["count_jumps"] == [] and doc["verdict"] == "consistent", doc["report"]
+    steps = sorted(doc["angle_steps"], key=lambda s: s["size_rad"], reverse=True)
+    assert [s["passes"] >= 4 for s in steps] == [True, True]
+    for s, a, sign in zip(steps, truth["angles_rad"], (1, -1)):
+        assert abs(np.angle(np.exp(1j * (s["angle_rad"] - a)))) < 0.02
+        assert s["size_rad"] == pytest.approx(sign * truth["size_rad"], rel=0.15)
+    arc = doc["base"]["terms"]["angle_steps"]["arc_rad"]["value"]
+    assert len(arc) == 1 and abs(arc[0]) == pytest.approx(truth["size_rad"], rel=0.05)
+    assert "angle step: channel h0" in doc["report"]
+    validate_diagnosis(doc)
+
+
+def test_counts_lost_at_one_angle_every_pass_stay_count_jumps():
+    """They recur at one angle but never return: steps in time (angle_step_close)."""
+    rec, _ = angle_step_record(71, accumulate=True)
+    doc = diagnose(rec).doc
+    assert doc["angle_steps"] == [] and len(doc["count_jumps"]) >= 3, doc["report"]

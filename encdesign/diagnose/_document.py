@@ -264,6 +264,11 @@ def report_text(doc: dict) -> str:
         lines.insert(2, "WARNING: " + doc["excluded_share"]["note"])
     for what, run, t, detail in nuisance_rows(doc):
         lines.append(f"{what}: run {run} t {t} s: {detail}")
+    for a in doc.get("angle_steps") or []:
+        lines.append(
+            f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
+            f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
+        )
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
@@ -294,5 +299,7 @@ def report_text(doc: dict) -> str:
         w = x["where"]
         loc = ", ".join(f"{k} {[round(v, 4) for v in w[k]][:6]}" for k in w if w[k])
         lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
+        if x.get("step_at"):
+            lines.append(f"  {x['step_at']['note']}")
     lines.append(f"status: {doc['status']}; {doc['time_s']:.1f} s")
     return "\n".join(lines) + "\n"

@@ -44,7 +44,7 @@ from ._document import (
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._kind import AbstractKind as Kind
-from ._nuisances import excluded_share
+from ._nuisances import excluded_share, step_context
 from ._prepare import noise_spectral
 from ._protocol import Prepared
 from ._results import PlotData
@@ -337,6 +337,9 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
         for f in sel.findings[:12]
     ]
+    for u in unexplained:  # a located step: where it lies in the motion (issue 22 item 4)
+        if (ctx := step_context(prep, u)) is not None:
+            u["step_at"] = ctx
     if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
         q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
         if q_eff is not None:
@@ -381,6 +384,13 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
             for j in prep.count_jumps
         ],
         "gaps": prep.gaps,
+        "angle_steps": [
+            {
+                **{k: v for k, v in s.items() if k != "channel_index"},
+                "channel": kd.channel_names[s["channel_index"]],
+            }
+            for s in prep.angle_steps
+        ],
         "effects": effects,
         "unexplained": unexplained,
         "rejected": sel.rejected,

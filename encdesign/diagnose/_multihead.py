@@ -412,6 +412,8 @@ def multihead_base(prep: Prepared, M: int):
     terms = [(cand, start)]
     if prep.count_jumps:
         terms.append((_jump_candidate(prep), {}))
+    if prep.angle_steps:
+        terms.append((_angle_step_candidate(prep), {}))
     info: dict = {"align": _align, "refine": _refine_shaft, "unidentifiable": []}
     if not prep.ctx.has_ref:
         alpha = prep.consts["alpha"]
@@ -454,6 +456,33 @@ def _jump_candidate(prep: Prepared) -> Candidate:
         fn,
         (Param("jump_rad", "rad", (len(idx),), description="size of each located count jump"),),
         explanation="located count jumps (nuisance)",
+    )
+
+
+def _angle_step_candidate(prep: Prepared) -> Candidate:
+    """The error function's steps of the angle (:func:`._nuisances.angle_steps`): per
+    channel, a constant on each arc between consecutive step angles but one (the channel's
+    constant takes that one)."""
+    arcs = []
+    for k in sorted({s["channel_index"] for s in prep.angle_steps}):
+        a = sorted(s["angle_rad"] for s in prep.angle_steps if s["channel_index"] == k)
+        arcs += [(k, a[j], a[j + 1]) for j in range(len(a) - 1)]
+    lo = jnp.asarray([x[1] for x in arcs])
+    width = jnp.asarray([x[2] - x[1] for x in arcs])
+    sel = np.zeros((len(arcs), prep.n_channels))
+    sel[np.arange(len(arcs)), [x[0] for x in arcs]] = 1.0
+    selj = jnp.asarray(sel)
+
+    def fn(p, x):
+        on = jnp.mod(x["theta"][:, None] - lo[None, :], 2 * jnp.pi) < width[None, :]
+        return (on.astype(x["theta"].dtype) * p["arc_rad"][None, :]) @ selj
+
+    return Candidate(
+        "angle_steps",
+        fn,
+        (Param("arc_rad", "rad", (len(arcs),), description="error on each arc between steps"),),
+        explanation="steps of the error function at fixed angles, recurring on every pass "
+        "(a potentiometer's track, a magnet's segment): a property of the angle (nuisance)",
     )
 
 

@@ -11,6 +11,7 @@ from scipy import stats
 
 from .._errors import input_error
 from ._candidates import Context
+from ._nuisances import LATE_STAMPS_REASON, angle_steps, late_stamp_rows
 from ._protocol import KeptRows, KindData, Prepared, RowColumns, steady_tolerance
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import SCAN_BLOCK, run_spans
@@ -85,7 +86,11 @@ def speed_window_rows(
 
 
 def find_motion_segments(
-    shaft: np.ndarray, t: np.ndarray, tolerance: float = 0.1, window: float = 0.01
+    shaft: np.ndarray,
+    t: np.ndarray,
+    tolerance: float = 0.1,
+    window: float = 0.01,
+    reversal_share: float = DEFAULT_SETTINGS.reversal_piece_share,
 ) -> tuple[np.ndarray, list[dict]]:
     """Steady segments of one run.
 
@@ -93,7 +98,10 @@ def find_motion_segments(
     speed within ``tolerance`` (relative) of that piece's median speed. Pieces are maximal
     stretches of one direction; a piece shorter than 10 % of the run (or 50 samples) is a
     return move, a reversal or a start-up, and samples slower than 10 % of the steady speed
-    are dwells. Each excluded stretch is widened by the speed window (settling).
+    are dwells. Each excluded stretch is widened by the speed window (settling). A piece
+    turning against the run's longest piece is kept from ``reversal_share`` of the run on
+    (and 50 samples; ``FinderSettings.reversal_piece_share``): a short move back after a
+    stop is where a direction offset shows.
 
     Returns:
         ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
@@ -111,10 +119,13 @@ def find_motion_segments(
     longest = max(longest, max((b - a for a, b in _runs_of(big & (sgn < 0))), default=0))
     min_len = max(50, int(0.1 * n), int(0.5 * longest) if longest < 0.2 * n else 0)
     min_len = min(min_len, max(50, int(0.1 * n)))
+    pieces = {s: _runs_of(big & (sgn == s)) for s in (1, -1)}
+    main = max((1, -1), key=lambda s: max((b - a for a, b in pieces[s]), default=0))
+    back_len = min(min_len, max(50, int(reversal_share * n)))
     sid = 0
     for s in (1, -1):
-        for a, b in _runs_of(big & (sgn == s)):
-            if b - a < min_len:
+        for a, b in pieces[s]:
+            if b - a < (min_len if s == main else back_len):
                 continue
             med = np.median(w[a:b])
             ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
@@ -418,8 +429,9 @@ def _runs_in_order(kd: KindData):
 
 
 def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray, settings: FinderSettings):
-    """Gaps in ``t`` and the steady segments of each run. Returns ``(seg, excluded, gaps,
-    revolutions per run, speed per segment)``."""
+    """Gaps in ``t`` and the steady segments of each run; the late stamps after a gap are
+    excluded with their own reason (:func:`._nuisances.late_stamp_rows`). Returns ``(seg,
+    excluded, gaps, revolutions per run, speed per segment)``."""
     n = kd.y.shape[0]
     R = order_runs.size
     t = kd.t
@@ -441,8 +453,23 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray, settings: F
                 dict(run=int(order_runs[r]), t_s=float(tr[c - 1]), duration_s=float(dt[c - 1]))
             )
         bounds = [0, *cuts.tolist(), rows.size]
-        for a, b in zip(bounds[:-1], bounds[1:]):
+        gap0 = len(gaps) - cuts.size
+        for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
             sub = rows[a:b]
+            if a > 0:  # after a logger gap: buffered samples stamped late on arrival
+                k = late_stamp_rows(np.diff(tr[a:b]), float(med), settings.late_stamp_ratio)
+                if k:
+                    gaps[gap0 + i - 1]["late_rows"] = k
+                    excluded.append(
+                        dict(
+                            run=int(order_runs[r]),
+                            t_start_s=float(t[sub[0]]),
+                            t_end_s=float(t[sub[k - 1]]),
+                            n_rows=k,
+                            reason=LATE_STAMPS_REASON,
+                        )
+                    )
+                    sub = sub[k:]
             if sub.size < 8:
                 excluded.append(
                     dict(
@@ -459,8 +486,13 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray, settings: F
                 s_id = np.unique(s_id, return_inverse=True)[1].reshape(s_id.shape)
                 bad = []
             else:
-                tol = steady_tolerance(kd, settings)
-                s_id, bad = find_motion_segments(kd.shaft[sub], t[sub], tol, kd.speed_window)
+                s_id, bad = find_motion_segments(
+                    kd.shaft[sub],
+                    t[sub],
+                    steady_tolerance(kd, settings),
+                    kd.speed_window,
+                    settings.reversal_piece_share,
+                )
             for sid in np.unique(s_id[s_id >= 0]):
                 m = sub[s_id == sid]
                 seg[m] = nseg
@@ -655,6 +687,8 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
         kd, seg, keep, run, order_runs, sort
     )
+    ang = kd.theta_ref if kd.theta_ref is not None else kd.shaft  # recurring: of the angle
+    steps_of_angle, count_jumps = angle_steps(count_jumps, ang, settings)
     y = kd.y
     fold, design = _fold_blocks(keep, run, settings.n_folds)
     fold[~keep] = -1
@@ -698,6 +732,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         excluded=excluded,
         glitches=glitches,
         count_jumps=count_jumps,
+        angle_steps=steps_of_angle,
         gaps=gaps,
         fold_design=design,
         run_ids=order_runs,

@@ -215,6 +215,8 @@ class Prepared:
     run_ids: np.ndarray
     run: np.ndarray  # run index 0..R-1
     settings: FinderSettings = DEFAULT_SETTINGS  # the thresholds of this diagnosis
+    # steps of a channel's error function of the angle (recurring count jumps), in the base
+    angle_steps: list[dict] = dataclasses.field(default_factory=list)
 
     @property
     def n(self) -> int:

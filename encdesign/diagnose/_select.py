@@ -23,6 +23,7 @@ from ._evidence import (
     tie_gap,
 )
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._views import locate
@@ -407,7 +408,10 @@ def _choose(
             continue
         # a step located where nothing in the catalog changes (no reversal, no change of
         # speed) is the alternative it must beat: a drift or a scale error only dents it
-        why = beaten_by_step(fitter, prep, current, fr, st["free_steps"] + steps_left, step_fits)
+        steps = st["free_steps"] + steps_left
+        if drifts_in_time(prep, cand.name):  # a drift in time makes no step at a reversal
+            steps = steps + st["change_steps"]
+        why = beaten_by_step(fitter, prep, current, fr, steps, step_fits)
         if why:
             rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
             step_refusals.append((cand.name, why[1]))
@@ -541,6 +545,7 @@ def select(
             views=views,
             scan_order=scan_order,
             free_steps=free_steps(prep, findings),
+            change_steps=free_steps(prep, findings, at_changes=True),
         )
         trials = []
         for cand in applicable:

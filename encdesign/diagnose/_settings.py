@@ -207,6 +207,39 @@ class FinderSettings(eqx.Module):
     """sds: ``timing_quantization`` is named when the stamps' lattice is coarser than the
     declared clock period by more than this ratio. 8e334ac."""
 
+    reversal_piece_share: float = eqx.field(default=0.05, static=True)
+    """A steady piece of a run turning against its longest piece (a move back after a stop
+    or a reversal) is kept for the fit from this share of the run's rows on (and 50 rows);
+    pieces in the main direction still need 10 % (start-ups, return moves). Below 10 % the
+    direction offset at a forward / stop / back reversal went untested (issue 22 item 4;
+    generated trapezoid profiles with 2-12 % back, tests/test_nuisances.py seeds 51-53).
+    5 %: the settling margins (1/50 of the run each side) leave at least a few percent."""
+
+    late_stamp_ratio: float = eqx.field(default=0.5, static=True)
+    """The first rows after a logger gap whose time intervals are shorter than this share of
+    the median interval are late host stamps (samples buffered during the stall and stamped
+    on arrival) and are excluded with that reason, not as "speed far from steady". Issue 22
+    item 4; generated sets: tests/test_nuisances.py (5-20 buffered rows, 1-10 % of an
+    interval apart, seeds 31-33). Half an interval: a logger's ordinary jitter stays far
+    above it."""
+
+    angle_step_tol_turns: float = eqx.field(default=0.005, static=True)
+    """Count jumps of one channel within this share of a turn of the same shaft angle (or 3
+    rows' advance, if wider) are one recurring step (:func:`._nuisances.angle_steps`).
+    Issue 22 item 4; generated potentiometer / magnet-segment boxes (tests/test_nuisances.py,
+    seeds 71-73): a jump is located within a row."""
+
+    angle_step_passes: int = eqx.field(default=2, static=True)
+    """A recurring step must be seen on at least this many passes (with one size) to be a
+    property of the angle rather than count jumps in time. Issue 22 item 4: two passes are
+    the least that can tell an angle from a time."""
+
+    angle_step_close: float = eqx.field(default=0.25, static=True)
+    """A channel's recurring steps are steps of its error function of the angle only when
+    their sizes sum to within this share of their magnitudes over a turn (the function
+    returns to its start); missed counts at one angle accumulate and stay count jumps. Issue
+    22 item 4 (a box: two steps of opposite sizes)."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
