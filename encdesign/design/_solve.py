@@ -34,11 +34,14 @@ from ._distributed import (
     use_local_devices,
 )
 from ._drivers import (
+    ANSWERS,
+    AT_BOUND,
     FAILED,
     INFEASIBLE,
     MAX_STEPS,
     NONFINITE,
     SUCCESS,
+    _at_bounds,
     enumerate_designs,
     grid_points,
     latin_hypercube,
@@ -218,9 +221,9 @@ def _finish_design(
 ) -> DesignResult:
     outs = ev.scalar_outputs(u)
     val = outs.get(ev.name, math.nan)
-    if status == SUCCESS and not all(math.isfinite(v) for v in outs.values()):
+    if status in ANSWERS and not all(math.isfinite(v) for v in outs.values()):
         status, message = NONFINITE, "non-finite output at the solution"
-    if status == SUCCESS and ev.violation(outs) > 1e-6:
+    if status in ANSWERS and ev.violation(outs) > 1e-6:
         status = INFEASIBLE
         message = f"constraint violated by {ev.violation(outs):.3g} (relative)"
     return DesignResult(
@@ -280,7 +283,7 @@ def _solve_combo(
                 gtol=float(drv.get("gtol", 1e-7)),
             )
             n_steps += sol.n_steps
-            if sol.status not in (SUCCESS, MAX_STEPS):
+            if sol.status not in (SUCCESS, MAX_STEPS, AT_BOUND):
                 break
             u = sol.value
         sol = dataclasses.replace(sol, n_steps=n_steps)
@@ -319,14 +322,14 @@ def _doe_combo(
             dict(ev.discrete), {}, {}, math.nan, FAILED, len(pts), "no feasible finite point"
         )
     outs = rows[best_i]
+    status, message = SUCCESS, f"best of {len(pts)} {kind} points"
+    edge = _at_bounds(pts[best_i], ulo, uhi)
+    if edge:  # the best point is on the box: the optimum may lie outside it
+        names = ", ".join(f"{s.split('[')[0]} {ev.vars[int(s[s.index('[') + 1 : -1])].name}"
+                          for s in edge)  # fmt: skip
+        status, message = AT_BOUND, f"{message}; the best is on the bound ({names})"
     return DesignResult(
-        dict(ev.discrete),
-        ev.inputs_of(pts[best_i]),
-        outs,
-        best_val,
-        SUCCESS,
-        len(pts),
-        f"best of {len(pts)} {kind} points",
+        dict(ev.discrete), ev.inputs_of(pts[best_i]), outs, best_val, status, len(pts), message
     )
 
 
