@@ -191,15 +191,25 @@ def test_reference_head_opt_quick(tmp_path):
             str(tmp_path),
             "--json",
             str(out),
+            *("--builds", "4", "--grid-step-deg", "0.5", "--max-order", "8"),
+            *("--fresh-builds", "200"),  # smaller than quick: CI time
         ]
     )
     assert rc == 0
     d = json.loads(out.read_text())
     assert [e["layout"] for e in d["layouts"]] == ["2+1", "3+1", "4+1"]
+    assert d["fresh_builds"] == 200
     for e in d["layouts"]:
         step = e["grid_step_deg"]
         assert abs(e["reference_angle_deg"] - e["grid_best_angle_deg"]) <= step
         assert e["sensitivity"] <= e["grid_best_sensitivity"] * (1 + 1e-12)
+        # out of sample against the tolerance-free optimum, on the same fresh builds
+        fr = e["fresh"]
+        assert fr["n"] == 200 and fr["chosen"] == e["sensitivity_fresh"]
+        assert fr["baseline"] == e["baseline_sensitivity_fresh"]
+        assert e["sensitivity_fresh_stderr"] > 0 and e["baseline_sensitivity_fresh_stderr"] > 0
+        assert e["win_significant"] == (fr["z"] > 2) == d["win_significant"][e["layout"]]
+        assert abs(e["baseline_angle_deg"] - e["grid_best_angle_deg"]) < 10 * step
 
 
 def test_tolerance_budget_quick(tmp_path):
