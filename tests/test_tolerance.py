@@ -269,6 +269,7 @@ def test_pole_sensor_opt_quick(tmp_path):
             str(tmp_path),
             "--json",
             str(out),
+            *("--starts", "1", "--fresh-builds", "4"),  # smaller than quick: CI time
         ]
     )
     assert rc == 0
@@ -289,6 +290,15 @@ def test_pole_sensor_opt_quick(tmp_path):
     assert d["rule_from_optimiser"]["3"]["holds"]
     assert opt[(6, 3)]["residual_mean_rad"] > 2 * opt[(5, 3)]["residual_mean_rad"]
     assert not d["best_optimised"]["pole_multiple_of_sensors"]
+    # out of sample: the optimiser's layout against equally spaced sensors, same disks
+    fc = d["fresh_check"]
+    assert (fc["pole_pairs"], fc["n_sensors"]) == (
+        d["best_optimised"]["pole_pairs"],
+        d["best_optimised"]["n_sensors"],
+    )
+    assert fc["n_fresh_builds"] == 4 and fc["comparison"]["n"] == 4
+    assert fc["residual_fresh_stderr_rad"] > 0 and fc["baseline_residual_fresh_stderr_rad"] > 0
+    assert d["win_significant"] == fc["win_significant"] == (fc["comparison"]["z"] > 2)
     g = d["gradient_check"]
     assert g["max_rel_error"] < 1e-3
     assert max(abs(v) for v in g["grad_fixed_per_rad"]) < 1e-6 * max(
