@@ -118,6 +118,10 @@ class ProblemResult:
             "best": None if self.best is None else one(self.best),
             "results": [one(r) for r in self.results],
             "fresh": self.fresh,
+            "resampled_between_rounds": False,
+            "rounds_note": "the penalty rounds (and the discrete combinations) of one run "
+            "share the problem's builds (its seed): nothing is re-sampled between them; "
+            "the fresh check above uses independent builds",
             "win_significant": None if self.fresh is None else self.fresh["win_significant"],
         }
 
