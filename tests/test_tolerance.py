@@ -304,3 +304,28 @@ def test_pole_sensor_opt_quick(tmp_path):
     assert max(abs(v) for v in g["grad_fixed_per_rad"]) < 1e-6 * max(
         abs(v) for v in g["grad_moving_per_rad"]
     )
+
+
+@jax.custom_jvp
+def _uphill_values(s):
+    """:func:`values_fn` whose derivative has the wrong sign: the allocator's line search
+    cannot find a decrease."""
+    return values_fn(s)
+
+
+@_uphill_values.defjvp
+def _uphill_values_jvp(primals, tangents):
+    (s,), (ds,) = primals, tangents
+    v, dv = jax.jvp(values_fn, (s,), (ds,))
+    return v, -dv
+
+
+def test_allocator_stalled_line_search_is_reported_not_success():
+    """A stalled line search in a penalty round ends the allocation with status
+    ``line_search_stalled`` (not success, not scaled), and its front row says so (issue 27)."""
+    ref = np.array([0.3, 0.3, 0.3])
+    a = allocate(_uphill_values, ref, NAMES, 1.0, 0.9, max_steps=60)
+    assert a.status == "line_search_stalled" and not a.ok, (a.status, a.message)
+    front = pareto_front(_uphill_values, ref, NAMES, 1.0, [0.9], max_steps=60)
+    (row,) = front.rows()
+    assert row["status"] == "line_search_stalled" and row["converged"] is False
