@@ -37,7 +37,9 @@ def test_bfgs_and_lm_find_rosenbrock_minimum():
 
 def test_lbfgsb_keeps_bounds():
     s = optimise(rosen, "lbfgsb", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
-    assert s.ok and s.value[0] == pytest.approx(0.5) and s.value[1] == pytest.approx(0.25)
+    assert s.value[0] == pytest.approx(0.5) and s.value[1] == pytest.approx(0.25)
+    # converged on the bound: an answer, but marked as such, never plain "success"
+    assert s.status == "at_bound" and not s.ok and s.at_bounds == ("upper[0]",), s.message
     # unconstrained BFGS with the same bounds reports the violation instead of hiding it
     b = optimise(rosen, "bfgs", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
     assert b.status == "bounds_violated"
@@ -60,7 +62,7 @@ def test_lbfgsb_compiles_once_per_function():
         f, "lbfgsb", jnp.array([0.2, 0.1]), jnp.array([-1.0, 0.5]), lower=jnp.array([-0.5, -1.0])
     )
     assert n >= 1 and len(traces) == n
-    assert s1.ok and s2.ok
+    assert s1.status == s2.status == "at_bound"  # both converge onto a bound
     np.testing.assert_allclose(s1.value, [0.5, 2.0], atol=1e-6)
     np.testing.assert_allclose(s2.value, [-0.5, 0.5], atol=1e-6)
 
@@ -161,3 +163,56 @@ def test_enumeration_finds_discrete_and_continuous_optimum():
     assert r.ok and r.best_choice == {"n": 2, "m": 1}
     assert r.best_solution.value[0] == pytest.approx(2.0, abs=1e-6)
     assert len(r.choices) == 6
+
+
+@jax.custom_jvp
+def _wrong_gradient(y):
+    """``sum((y - 3)^2)`` whose derivative has the wrong sign: every line search fails."""
+    return jnp.sum((y - 3.0) ** 2)
+
+
+@_wrong_gradient.defjvp
+def _wrong_gradient_jvp(primals, tangents):
+    (y,), (dy,) = primals, tangents
+    return _wrong_gradient(y), jnp.sum(-2.0 * (y - 3.0) * dy)
+
+
+def _uphill(y, a):
+    return _wrong_gradient(y)
+
+
+def _bowl(y, a):
+    return jnp.sum((y - 3.0) ** 2)
+
+
+@pytest.mark.parametrize("solver", ["bfgs", "lbfgsb"])
+def test_stalled_line_search_is_its_own_status(solver):
+    """A line search that never finds a decrease (the gradient points uphill) is reported
+    as ``line_search_stalled``, never as success or as a plain step cap (issue 27)."""
+    s = optimise(_uphill, solver, jnp.zeros(2), max_steps=60)
+    assert s.status == "line_search_stalled" and not s.ok, (s.status, s.message)
+    with pytest.raises(OptimisationError, match="line_search_stalled"):
+        optimise(_uphill, solver, jnp.zeros(2), max_steps=60, throw=True)
+    # the same function with its true gradient converges; a start at the optimum is a
+    # converged answer (no decrease possible), not a stall
+    good = optimise(_bowl, solver, jnp.zeros(2), max_steps=60)
+    assert good.status == "success" and np.allclose(good.value, 3.0, atol=1e-6)
+    at_opt = optimise(_bowl, solver, jnp.full(2, 3.0), max_steps=60)
+    assert at_opt.status == "success", at_opt.message
+
+
+def test_a_stop_on_a_small_step_with_a_large_gradient_is_stalled():
+    """BFGS stops when its steps become small; at a kink (``|y - 3|``) they do while the
+    gradient is still +-1, and the quasi-Newton step still predicts a decrease: the stop is
+    reported as ``line_search_stalled`` (nothing certifies it), not as success."""
+    s = optimise(lambda y, a: jnp.sum(jnp.abs(y - 3.0)), "bfgs", jnp.zeros(2), max_steps=200)
+    assert s.status == "line_search_stalled" and "quasi-Newton" in s.message, s.message
+    smooth = optimise(lambda y, a: jnp.sum((y - 3.0) ** 2), "bfgs", jnp.zeros(2))
+    assert smooth.status == "success"
+
+
+def test_bfgs_and_lm_touching_a_bound_are_marked():
+    lm = optimise(lambda y, a: y - 3.0, "lm", jnp.zeros(2), upper=3.0)
+    assert lm.status == "at_bound" and lm.at_bounds == ("upper[0]", "upper[1]")
+    free = optimise(lambda y, a: y - 3.0, "lm", jnp.zeros(2), upper=4.0)
+    assert free.status == "success" and free.at_bounds == ()

@@ -247,7 +247,8 @@ def test_head_layout_study_quick(tmp_path):
 
     out = tmp_path / "hlo"
     rc = main(["study", "run", "head-layout-opt", "--quick", "--heads", "3", "--out", str(out),
-               "--json", str(out / "s.json"), "--no-plots", "--fresh-builds", "64"])  # fmt: skip
+               "--json", str(out / "s.json"), "--no-plots", "--fresh-builds", "64",
+               "--max-steps", "6", "--n-angles", "16"])  # smaller than quick: CI time  # fmt: skip
     assert rc == 0
     s = json.loads((out / "s.json").read_text())
     (h3,) = s["head_counts"]

@@ -253,3 +253,23 @@ def test_sds_layout_problem_azimuths_and_tolerances_jointly():
     bad["variables"]["moving_azimuths"]["start"] = [0.0, 100.0, 100.0]
     with pytest.raises(EncdesignInputError, match=r"moving_azimuths\.start.*coincide"):
         parse_problem(bad, source="sds.toml")
+
+
+def test_bound_hits_are_reported_in_optimize_and_sweep_json():
+    """The optimum of x lies outside the box: L-BFGS-B ends on the bound and a grid's best
+    point is on the bound; both say ``at_bound`` (in the summary JSON too), never success,
+    and remain answers (issue 27)."""
+    d = _problem()
+    d["variables"]["x"] = {"units": "m", "start": 0.0, "lower": -1.0, "upper": 0.3}
+    r = solve_problem(parse_problem(d, REGISTRY))
+    assert r.status == "at_bound" and r.best is not None
+    assert r.best.inputs["x"] == pytest.approx(0.3) and "upper" in r.best.message
+    summary = r.summary()
+    assert summary["status"] == "at_bound" and summary["best"]["status"] == "at_bound"
+    d["sweep"] = {"kind": "grid", "points_per_dim": 5}
+    del d["variables"]["y"]
+    sw = sweep_problem(parse_problem(d, REGISTRY))
+    assert sw.status == "at_bound" and sw.best.inputs["x"] == pytest.approx(0.3)
+    assert "upper x" in sw.best.message
+    d["variables"]["x"]["upper"] = 1.0  # the optimum 0.5 inside: plain success
+    assert sweep_problem(parse_problem(d, REGISTRY)).status == "success"

@@ -191,15 +191,25 @@ def test_reference_head_opt_quick(tmp_path):
             str(tmp_path),
             "--json",
             str(out),
+            *("--builds", "4", "--grid-step-deg", "0.5", "--max-order", "8"),
+            *("--fresh-builds", "200"),  # smaller than quick: CI time
         ]
     )
     assert rc == 0
     d = json.loads(out.read_text())
     assert [e["layout"] for e in d["layouts"]] == ["2+1", "3+1", "4+1"]
+    assert d["fresh_builds"] == 200
     for e in d["layouts"]:
         step = e["grid_step_deg"]
         assert abs(e["reference_angle_deg"] - e["grid_best_angle_deg"]) <= step
         assert e["sensitivity"] <= e["grid_best_sensitivity"] * (1 + 1e-12)
+        # out of sample against the tolerance-free optimum, on the same fresh builds
+        fr = e["fresh"]
+        assert fr["n"] == 200 and fr["chosen"] == e["sensitivity_fresh"]
+        assert fr["baseline"] == e["baseline_sensitivity_fresh"]
+        assert e["sensitivity_fresh_stderr"] > 0 and e["baseline_sensitivity_fresh_stderr"] > 0
+        assert e["win_significant"] == (fr["z"] > 2) == d["win_significant"][e["layout"]]
+        assert abs(e["baseline_angle_deg"] - e["grid_best_angle_deg"]) < 10 * step
 
 
 def test_tolerance_budget_quick(tmp_path):
@@ -259,6 +269,7 @@ def test_pole_sensor_opt_quick(tmp_path):
             str(tmp_path),
             "--json",
             str(out),
+            *("--starts", "1", "--fresh-builds", "4"),  # smaller than quick: CI time
         ]
     )
     assert rc == 0
@@ -279,8 +290,42 @@ def test_pole_sensor_opt_quick(tmp_path):
     assert d["rule_from_optimiser"]["3"]["holds"]
     assert opt[(6, 3)]["residual_mean_rad"] > 2 * opt[(5, 3)]["residual_mean_rad"]
     assert not d["best_optimised"]["pole_multiple_of_sensors"]
+    # out of sample: the optimiser's layout against equally spaced sensors, same disks
+    fc = d["fresh_check"]
+    assert (fc["pole_pairs"], fc["n_sensors"]) == (
+        d["best_optimised"]["pole_pairs"],
+        d["best_optimised"]["n_sensors"],
+    )
+    assert fc["n_fresh_builds"] == 4 and fc["comparison"]["n"] == 4
+    assert fc["residual_fresh_stderr_rad"] > 0 and fc["baseline_residual_fresh_stderr_rad"] > 0
+    assert d["win_significant"] == fc["win_significant"] == (fc["comparison"]["z"] > 2)
     g = d["gradient_check"]
     assert g["max_rel_error"] < 1e-3
     assert max(abs(v) for v in g["grad_fixed_per_rad"]) < 1e-6 * max(
         abs(v) for v in g["grad_moving_per_rad"]
     )
+
+
+@jax.custom_jvp
+def _uphill_values(s):
+    """:func:`values_fn` whose derivative has the wrong sign: the allocator's line search
+    cannot find a decrease."""
+    return values_fn(s)
+
+
+@_uphill_values.defjvp
+def _uphill_values_jvp(primals, tangents):
+    (s,), (ds,) = primals, tangents
+    v, dv = jax.jvp(values_fn, (s,), (ds,))
+    return v, -dv
+
+
+def test_allocator_stalled_line_search_is_reported_not_success():
+    """A stalled line search in a penalty round ends the allocation with status
+    ``line_search_stalled`` (not success, not scaled), and its front row says so (issue 27)."""
+    ref = np.array([0.3, 0.3, 0.3])
+    a = allocate(_uphill_values, ref, NAMES, 1.0, 0.9, max_steps=60)
+    assert a.status == "line_search_stalled" and not a.ok, (a.status, a.message)
+    front = pareto_front(_uphill_values, ref, NAMES, 1.0, [0.9], max_steps=60)
+    (row,) = front.rows()
+    assert row["status"] == "line_search_stalled" and row["converged"] is False

@@ -66,6 +66,14 @@ def _value(a, z):
     return (a - z[0]) ** 2
 
 
+def _train(a, key):
+    """The training objective: the mean of :func:`_value` over 4 builds of ``key``."""
+    return expected_value(_value, a[0], key=key, n=4, dim=1)
+
+
+_train_jit = jax.jit(_train)
+
+
 def test_fresh_keys_are_independent_of_the_training_builds():
     key = jax.random.key(3)
     train = np.asarray(build_normals(key, jnp.arange(256), 2))
@@ -112,16 +120,12 @@ def test_overfit_in_sample_optimum_is_caught_on_fresh_builds(seed):
     (its expected excess is a*^2), and the report must not call it a win, and must call it
     a loss once a* is resolved."""
     key = jax.random.key(seed)
-
-    def train(a, _args):
-        return expected_value(_value, a[0], key=key, n=4, dim=1)
-
-    sol = optimise(train, "bfgs", jnp.array([0.7]), max_steps=100)
+    sol = optimise(_train, "bfgs", jnp.array([0.7]), key, max_steps=100)  # compiled once
     assert sol.status == "success"
     a_star = float(sol.value[0])
     z4 = np.asarray(build_normals(key, jnp.arange(4), 1))[:, 0]
     np.testing.assert_allclose(a_star, np.mean(z4), atol=1e-6)
-    assert float(train(sol.value, None)) < float(train(jnp.zeros(1), None))  # in-sample win
+    assert float(_train_jit(sol.value, key)) < float(_train_jit(jnp.zeros(1), key))  # in sample
     fk = fresh_key(key)
     chosen = monte_carlo(_value, a_star, key=fk, n=20_000, dim=1).values
     base = monte_carlo(_value, 0.0, key=fk, n=20_000, dim=1).values
@@ -137,8 +141,40 @@ def test_overfit_in_sample_optimum_is_caught_on_fresh_builds(seed):
     assert paired_comparison(chosen, worse).win_significant
 
 
+def test_fresh_replicates_are_one_compiled_program_equal_to_the_old_loop(user_module, monkeypatch):
+    """The fresh seed is a traced input: every replicate runs in one compiled program (one
+    evaluator built, once, while tracing), with the values of the old per-replicate loop
+    (one compilation each) to 1e-12 (issue 27)."""
+    from encdesign.design import _solve
+
+    spec = {
+        "problem": {"name": "o", "objective": f"{user_module}:overfit", "seed": 5},
+        "variables": {"a": {"start": 0.0, "lower": -3.0, "upper": 3.0}},
+    }
+    p = parse_problem(spec, source="o.toml")
+    designs = {"chosen": ({}, {"a": 0.3}), "baseline": ({}, {"a": 0.0})}
+    seeds = fresh_seeds(p.seed, 3)
+    built = []
+    real = _solve._Evaluator.__init__
+
+    def counting(self, *a, **k):
+        built.append(1)
+        real(self, *a, **k)
+
+    monkeypatch.setattr(_solve._Evaluator, "__init__", counting)
+    one = _solve._fresh_rows(p, designs, seeds)
+    assert len(built) == 1  # one trace for all replicates and both designs
+    loop = _solve._fresh_rows_per_replicate(p, designs, seeds)
+    assert len(built) == 1 + len(seeds)
+    for label in designs:
+        a = np.array([r["loss"] for r in one[label]])
+        b = np.array([r["loss"] for r in loop[label]])
+        assert len(a) == 3 and len(set(a.tolist())) == 3  # the replicates differ
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
+
+
 def test_solve_problem_reports_the_fresh_check_and_no_overfit_win(user_module):
-    for seed in (0,):  # each fresh replicate compiles the objective anew: kept small
+    for seed in (0,):
         spec = {
             "problem": {"name": "o", "objective": f"{user_module}:overfit", "seed": seed},
             "variables": {"a": {"start": 0.0, "lower": -3.0, "upper": 3.0}},

@@ -186,6 +186,18 @@ from ._drivers import (
 from ._drivers import (
     SUCCESS as SUCCESS,
 )
+from ._drivers import (
+    ANSWERS as ANSWERS,
+)
+from ._drivers import (
+    AT_BOUND as AT_BOUND,
+)
+from ._drivers import (
+    MAX_STEPS as MAX_STEPS,
+)
+from ._drivers import (
+    STALLED as STALLED,
+)
 from ._objectives import (
     deviation_sizes as deviation_sizes,
 )

@@ -2,8 +2,14 @@
 
 A driver takes a function and returns a result with a ``status``; it never returns a bad
 number silently. Statuses are plain strings (:data:`SUCCESS`, :data:`MAX_STEPS`,
-:data:`NONFINITE`, :data:`BOUNDS_VIOLATED`, :data:`INFEASIBLE`, :data:`FAILED`); with
-``throw=True`` a non-successful result raises :class:`OptimisationError` instead.
+:data:`STALLED`, :data:`AT_BOUND`, :data:`NONFINITE`, :data:`BOUNDS_VIOLATED`,
+:data:`INFEASIBLE`, :data:`FAILED`); with ``throw=True`` a result that is not an answer
+(anything but :data:`SUCCESS` and :data:`AT_BOUND`) raises :class:`OptimisationError`
+instead. :data:`AT_BOUND` is a converged answer with a variable on its bound (a valid
+optimum of the bounded problem, but never reported as plain success: the bound decides it);
+:data:`STALLED` is a line search that made no progress (no decrease from the start, a step
+size collapsed to nothing, or a "converged" stop with a quasi-Newton step that still
+predicts a real decrease).
 
 * :func:`optimise` — gradient solvers: optimistix BFGS (``"bfgs"``), optimistix
   Levenberg–Marquardt (``"lm"``, the function returns a residual vector) and jaxopt
@@ -49,12 +55,23 @@ NONFINITE = "nonfinite"
 BOUNDS_VIOLATED = "bounds_violated"
 INFEASIBLE = "infeasible"
 FAILED = "failed"
-STATUSES = (SUCCESS, MAX_STEPS, NONFINITE, BOUNDS_VIOLATED, INFEASIBLE, FAILED)
+STALLED = "line_search_stalled"
+AT_BOUND = "at_bound"
+STATUSES = (SUCCESS, MAX_STEPS, STALLED, AT_BOUND, NONFINITE, BOUNDS_VIOLATED, INFEASIBLE, FAILED)
+ANSWERS = (SUCCESS, AT_BOUND)
+"""Statuses whose value is a converged answer (an at-bound optimum is one, marked)."""
+STEP_COLLAPSE = 1e-12
+"""A final line-search step size (or trust-region radius) below this: the search collapsed."""
+STALL_FACTOR = 1e3
+"""A "converged" BFGS stop is stalled when its quasi-Newton step still predicts a decrease
+over ``STALL_FACTOR`` times the stopping tolerance ``atol + rtol * |f|``."""
+BOUND_RTOL = 1e-9
+"""A variable within ``BOUND_RTOL * max(1, bound width)`` of a bound is at that bound."""
 SOLVERS = ("bfgs", "lbfgsb", "lm")
 
 
 def _finish(result: Any, throw: bool) -> Any:
-    if throw and result.status != SUCCESS:
+    if throw and result.status not in ANSWERS:
         raise OptimisationError(f"{type(result).__name__}: {result.status}: {result.message}")
     return result
 
@@ -75,6 +92,8 @@ class Solution:
         n_steps: solver iterations taken.
         solver: ``"bfgs"``, ``"lm"`` or ``"lbfgsb"``.
         message: a human-readable account of the status.
+        at_bounds: the components on a bound at ``value``, as ``"lower[i]"`` /
+            ``"upper[i]"`` (empty when none).
     """
 
     value: np.ndarray
@@ -83,6 +102,7 @@ class Solution:
     n_steps: int
     solver: str
     message: str = ""
+    at_bounds: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -178,7 +198,17 @@ def optimise(
             values).
         gtol: L-BFGS-B convergence: projected-gradient norm (units of ``fn`` per unit of
             ``y``).
-        throw: raise :class:`OptimisationError` unless the status is ``"success"``.
+        throw: raise :class:`OptimisationError` unless the status is ``"success"`` or
+            ``"at_bound"``.
+
+    Statuses: ``"success"`` (converged, no variable on a bound); ``"at_bound"`` (converged
+    with components on a bound, listed in ``at_bounds``: for ``"lbfgsb"`` the box, for the
+    others a solution that touches a bound); ``"max_steps_reached"``;
+    ``"line_search_stalled"`` (a line-search step size or trust-region radius below
+    :data:`STEP_COLLAPSE`: no decrease found along the search direction; a failed L-BFGS-B
+    line search or an L-BFGS-B stop before the cap without convergence, or a BFGS stop on a small
+    step whose quasi-Newton step still predicts a decrease over :data:`STALL_FACTOR` times
+    the stopping tolerance); ``"nonfinite"``; ``"bounds_violated"``; ``"failed"``.
 
     Passing the same ``fn`` again (with other ``args``, bounds or start) reuses the
     compiled solver; put anything that changes between solves into ``args``.
@@ -194,54 +224,112 @@ def optimise(
     y0 = jnp.atleast_1d(jnp.asarray(y0, dtype=jnp.float64))
     n = y0.shape[0]
     lo, hi = _as_bounds(lower, n, -np.inf), _as_bounds(upper, n, np.inf)
-    status, message = SUCCESS, "converged"
     if solver != "lm":
         fn = _scalar_fn(fn)
     if solver == "lbfgsb":
-        y0c = jnp.clip(y0, lo, hi)
+        y0 = jnp.clip(y0, lo, hi)
         run = _lbfgsb(fn, int(max_steps), float(gtol))
-        value, state, out = run(y0c, (jnp.asarray(lo), jnp.asarray(hi)), args)
-        n_steps = int(state.iter_num)
-        err = float(state.error)
-        if not math.isfinite(err):
-            status, message = NONFINITE, "non-finite projected gradient"
-        elif err > gtol:
-            status = MAX_STEPS
-            message = f"{n_steps} steps, projected-gradient norm {err:.3g} > gtol {gtol:.3g}"
+        value, state, out = run(y0, (jnp.asarray(lo), jnp.asarray(hi)), args)
+        status, message, n_steps = _lbfgsb_status(state, gtol, int(max_steps))
     else:
         sol, out = _optx(fn, solver, float(rtol), float(atol), int(max_steps))(y0, args)
         value = sol.value
-        n_steps = int(sol.stats.get("num_steps", -1))
-        if sol.result != optx.RESULTS.successful:
-            name = next(
-                (
-                    k
-                    for k in (
-                        "nonlinear_max_steps_reached",
-                        "max_steps_reached",
-                        "nonfinite",
-                        "nonfinite_input",
-                        "nonlinear_divergence",
-                    )
-                    if sol.result == getattr(optx.RESULTS, k)
-                ),
-                None,
-            )
-            status = {
-                "nonlinear_max_steps_reached": MAX_STEPS,
-                "max_steps_reached": MAX_STEPS,
-                "nonfinite": NONFINITE,
-                "nonfinite_input": NONFINITE,
-            }.get(name, FAILED)
-            message = f"optimistix: {name or 'failed'} after {n_steps} steps"
     value_np = np.asarray(value, dtype=np.float64)
     objective = float(0.5 * jnp.sum(out**2)) if solver == "lm" else float(out)
-    if status == SUCCESS or status == MAX_STEPS:
+    if solver != "lbfgsb":
+        status, message, n_steps = _optx_status(sol, solver, objective, rtol, atol)
+    at = _at_bounds(value_np, lo, hi)
+    if status in (SUCCESS, MAX_STEPS, STALLED):
         if not (np.all(np.isfinite(value_np)) and math.isfinite(objective)):
             status, message = NONFINITE, "non-finite solution or objective"
         elif status == SUCCESS and (np.any(value_np < lo) or np.any(value_np > hi)):
             status, message = BOUNDS_VIOLATED, f"solution {value_np} outside [{lo}, {hi}]"
-    return _finish(Solution(value_np, objective, status, n_steps, solver, message), throw)
+        elif at:
+            if status == SUCCESS:
+                status, message = AT_BOUND, f"converged on the bound: {', '.join(at)}"
+            else:
+                message = f"{message}; on the bound: {', '.join(at)}"
+    res = Solution(value_np, objective, status, n_steps, solver, message, tuple(at))
+    return _finish(res, throw)
+
+
+def _at_bounds(value: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
+    """The components of ``value`` within :data:`BOUND_RTOL` of a finite bound."""
+    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+    tol = BOUND_RTOL * np.maximum(1.0, width)
+    out = []
+    for i in range(value.size):
+        if math.isfinite(lo[i]) and value[i] - lo[i] <= tol[i]:
+            out.append(f"lower[{i}]")
+        elif math.isfinite(hi[i]) and hi[i] - value[i] <= tol[i]:
+            out.append(f"upper[{i}]")
+    return out
+
+
+def _lbfgsb_status(state: Any, gtol: float, max_steps: int) -> tuple[str, str, int]:
+    """Status of a jaxopt L-BFGS-B run: converged (projected gradient <= ``gtol``), a
+    failed line search or a collapsed step size (stalled), the step cap, or non-finite."""
+    n_steps = int(state.iter_num)
+    err = float(state.error)
+    if not math.isfinite(err):
+        return NONFINITE, "non-finite projected gradient", n_steps
+    if err <= gtol:
+        return SUCCESS, "converged", n_steps
+    detail = f"{n_steps} steps, projected-gradient norm {err:.3g} > gtol {gtol:.3g}"
+    step = float(state.stepsize)
+    if bool(state.failed_linesearch) or (0 < step < STEP_COLLAPSE):
+        return STALLED, f"line search failed (step size {step:.3g}): {detail}", n_steps
+    if n_steps < max_steps:
+        return STALLED, f"stopped before the step cap without converging: {detail}", n_steps
+    return MAX_STEPS, detail, n_steps
+
+
+_OPTX_STATUS = {
+    "nonlinear_max_steps_reached": MAX_STEPS,
+    "max_steps_reached": MAX_STEPS,
+    "nonfinite": NONFINITE,
+    "nonfinite_input": NONFINITE,
+}
+
+
+def _optx_status(sol: Any, solver: str, f: float, rtol: float, atol: float) -> tuple[str, str, int]:
+    """Status of an optimistix run: its result, then a collapsed line-search step size
+    (trust-region radius for ``"lm"``) as stalled, and for BFGS a "converged" stop whose
+    quasi-Newton step still predicts a decrease over :data:`STALL_FACTOR` times the
+    stopping tolerance (the step, not the objective, became small) as stalled."""
+    n_steps = int(sol.stats.get("num_steps", -1))
+    status, message = SUCCESS, "converged"
+    if sol.result != optx.RESULTS.successful:
+        name = next(
+            (k for k in _OPTX_STATUS if hasattr(optx.RESULTS, k)
+             and sol.result == getattr(optx.RESULTS, k)),
+            None,
+        )  # fmt: skip
+        status = _OPTX_STATUS.get(name or "", FAILED)
+        message = f"optimistix: {name or 'failed'} after {n_steps} steps"
+    state = getattr(sol, "state", None)
+    if status not in (SUCCESS, MAX_STEPS) or state is None:
+        return status, message, n_steps
+    step = float(state.search_state.step_size)
+    if step < STEP_COLLAPSE:
+        return (
+            STALLED,
+            f"line search collapsed (step size {step:.3g}) after {n_steps} steps",
+            n_steps,
+        )
+    info = state.f_info
+    if status == SUCCESS and solver == "bfgs" and hasattr(info, "hessian_inv"):
+        g = info.grad
+        pred = 0.5 * float(jnp.vdot(g, info.hessian_inv.mv(g)))
+        tol = atol + rtol * abs(f)
+        if not math.isfinite(pred) or pred > STALL_FACTOR * tol:
+            return (
+                STALLED,
+                f"stopped on a small step, but the quasi-Newton step still predicts a decrease "
+                f"of {pred:.3g} (> {STALL_FACTOR:g} x tolerance {tol:.3g}) after {n_steps} steps",
+                n_steps,
+            )
+    return status, message, n_steps
 
 
 # ---------------------------------------------------------------------------------------
@@ -602,8 +690,11 @@ class EnumerationResult:
         choices: the discrete combinations tried, as dicts, in order.
         solutions: the inner result for each combination (anything with ``status`` and
             ``objective``).
-        best_index: index of the best successful combination (``-1`` if none).
-        status: ``"success"`` when at least one combination succeeded, else ``"failed"``.
+        best_index: index of the best combination whose status is an answer
+            (:data:`ANSWERS`: ``"success"`` or ``"at_bound"``; ``-1`` if none).
+        status: ``"success"`` when at least one combination succeeded and the best is a
+            plain success; the best one's status (``"at_bound"``) when it is marked; else
+            ``"failed"``.
         message: account of the status.
     """
 
@@ -615,8 +706,8 @@ class EnumerationResult:
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the best combination is an answer (``"success"`` or ``"at_bound"``)."""
+        return self.status in ANSWERS
 
     @property
     def best_choice(self) -> dict[str, Any]:
@@ -656,10 +747,13 @@ def enumerate_designs(
         for c in combos:
             sols.append(solve(c))
             bar.update()
-    okidx = [i for i, s in enumerate(sols) if s.status == SUCCESS and math.isfinite(s.objective)]
+    okidx = [i for i, s in enumerate(sols) if s.status in ANSWERS and math.isfinite(s.objective)]
     if okidx:
         best = min(okidx, key=lambda i: sols[i].objective)
         status, msg = SUCCESS, f"{len(okidx)}/{len(combos)} combinations solved"
+        if sols[best].status != SUCCESS:  # the best answer is marked (e.g. on a bound)
+            status = sols[best].status
+            msg = f"{msg}; the best is {status}: {getattr(sols[best], 'message', '')}"
     else:
         best, status, msg = -1, FAILED, "no combination solved"
     return _finish(EnumerationResult(tuple(combos), tuple(sols), best, status, msg), throw)

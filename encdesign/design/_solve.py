@@ -34,11 +34,14 @@ from ._distributed import (
     use_local_devices,
 )
 from ._drivers import (
+    ANSWERS,
+    AT_BOUND,
     FAILED,
     INFEASIBLE,
     MAX_STEPS,
     NONFINITE,
     SUCCESS,
+    _at_bounds,
     enumerate_designs,
     grid_points,
     latin_hypercube,
@@ -115,6 +118,10 @@ class ProblemResult:
             "best": None if self.best is None else one(self.best),
             "results": [one(r) for r in self.results],
             "fresh": self.fresh,
+            "resampled_between_rounds": False,
+            "rounds_note": "the penalty rounds (and the discrete combinations) of one run "
+            "share the problem's builds (its seed): nothing is re-sampled between them; "
+            "the fresh check above uses independent builds",
             "win_significant": None if self.fresh is None else self.fresh["win_significant"],
         }
 
@@ -141,7 +148,9 @@ def _assemble(variables: tuple, flat: dict[str, Any]) -> dict[str, Any]:
 class _Evaluator:
     """Normalised view of a problem for one discrete combination."""
 
-    def __init__(self, problem: Problem, discrete: dict[str, Any]):
+    def __init__(self, problem: Problem, discrete: dict[str, Any], check: bool = True):
+        """``check``: run the objective's own check at the start point (off for a rebuild
+        of an already checked problem under a trace, e.g. a traced fresh seed)."""
         self.problem = problem
         self.discrete = discrete
         self.vars = problem.continuous
@@ -151,7 +160,7 @@ class _Evaluator:
         self.upper = np.array([v.upper for v in self.vars], dtype=np.float64)
         raw = problem.objective.build(problem, dict(discrete))
         self.evaluate = lambda flat: raw(_assemble(self.vars, flat))
-        if problem.objective.check is not None:
+        if check and problem.objective.check is not None:
             start = {v.name: float(v.start) for v in self.vars}
             problem.objective.check(problem, dict(discrete), _assemble(self.vars, start))
         self.name = problem.objective.outputs[0]
@@ -218,9 +227,9 @@ def _finish_design(
 ) -> DesignResult:
     outs = ev.scalar_outputs(u)
     val = outs.get(ev.name, math.nan)
-    if status == SUCCESS and not all(math.isfinite(v) for v in outs.values()):
+    if status in ANSWERS and not all(math.isfinite(v) for v in outs.values()):
         status, message = NONFINITE, "non-finite output at the solution"
-    if status == SUCCESS and ev.violation(outs) > 1e-6:
+    if status in ANSWERS and ev.violation(outs) > 1e-6:
         status = INFEASIBLE
         message = f"constraint violated by {ev.violation(outs):.3g} (relative)"
     return DesignResult(
@@ -280,7 +289,7 @@ def _solve_combo(
                 gtol=float(drv.get("gtol", 1e-7)),
             )
             n_steps += sol.n_steps
-            if sol.status not in (SUCCESS, MAX_STEPS):
+            if sol.status not in (SUCCESS, MAX_STEPS, AT_BOUND):
                 break
             u = sol.value
         sol = dataclasses.replace(sol, n_steps=n_steps)
@@ -319,14 +328,14 @@ def _doe_combo(
             dict(ev.discrete), {}, {}, math.nan, FAILED, len(pts), "no feasible finite point"
         )
     outs = rows[best_i]
+    status, message = SUCCESS, f"best of {len(pts)} {kind} points"
+    edge = _at_bounds(pts[best_i], ulo, uhi)
+    if edge:  # the best point is on the box: the optimum may lie outside it
+        names = ", ".join(f"{s.split('[')[0]} {ev.vars[int(s[s.index('[') + 1 : -1])].name}"
+                          for s in edge)  # fmt: skip
+        status, message = AT_BOUND, f"{message}; the best is on the bound ({names})"
     return DesignResult(
-        dict(ev.discrete),
-        ev.inputs_of(pts[best_i]),
-        outs,
-        best_val,
-        SUCCESS,
-        len(pts),
-        f"best of {len(pts)} {kind} points",
+        dict(ev.discrete), ev.inputs_of(pts[best_i]), outs, best_val, status, len(pts), message
     )
 
 
@@ -601,18 +610,7 @@ def validate_problem(
     seeds = fresh_seeds(problem.seed, int(replicates))
     name = problem.objective.outputs[0]
     sign = -1.0 if problem.sense == "maximize" else 1.0
-    rows: dict[str, list[dict[str, float]]] = {"chosen": [], "baseline": []}
-    for s in seeds:
-        fresh = dataclasses.replace(problem, seed=s)
-        evs: dict[str, Any] = {}
-        for label, (disc, x) in (("chosen", chosen), ("baseline", baseline)):
-            key = repr(sorted(disc.items()))
-            if key not in evs:  # one evaluator (one compilation) per discrete combination
-                evs[key] = _Evaluator(fresh, dict(disc))
-            ev = evs[key]
-            xv = np.array([x.get(v.name, v.start) for v in ev.vars], dtype=np.float64)
-            u = (xv - ev.start) / ev.scale if ev.vars else np.zeros(0)
-            rows[label].append(ev.scalar_outputs(u))
+    rows = _fresh_rows(problem, {"chosen": chosen, "baseline": baseline}, seeds)
     va = np.array([sign * r[name] for r in rows["chosen"]])
     vb = np.array([sign * r[name] for r in rows["baseline"]])
     cmp = paired_comparison(va, vb, unit="replicates", z_threshold=z_threshold)
@@ -635,3 +633,55 @@ def validate_problem(
         },
     }
     return out
+
+
+def _design_u(ev: _Evaluator, x: dict[str, float]) -> np.ndarray:
+    xv = np.array([x.get(v.name, v.start) for v in ev.vars], dtype=np.float64)
+    return (xv - ev.start) / ev.scale if ev.vars else np.zeros(0)
+
+
+def _fresh_rows(
+    problem: Any, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
+) -> dict[str, list[dict[str, float]]]:
+    """Scalar outputs of each design for every fresh seed, from **one** compiled program:
+    the seed is a traced input (``problem.seed`` replaced by the traced value while the
+    objective is built, so its key is ``jax.random.key(seed)`` as in a solve) and
+    ``lax.map`` runs the replicates one after another (memory of one replicate), every
+    design of a replicate on the same seed (common random numbers)."""
+
+    def one(seed):
+        fresh = dataclasses.replace(problem, seed=seed)
+        evs: dict[str, _Evaluator] = {}
+        out = {}
+        for label, (disc, x) in designs.items():
+            k = repr(sorted(disc.items()))
+            if k not in evs:  # one evaluator per discrete combination (checked by the solve)
+                evs[k] = _Evaluator(fresh, dict(disc), check=False)
+            ev = evs[k]
+            vals = ev.outputs(jnp.asarray(_design_u(ev, x)))
+            out[label] = {n: v for n, v in vals.items() if jnp.ndim(v) == 0}
+        return out
+
+    run = jax.jit(lambda ss: jax.lax.map(one, ss))
+    res = run(jnp.asarray(np.array(seeds, dtype=np.int64)))
+    return {
+        label: [{n: float(v[i]) for n, v in outs.items()} for i in range(len(seeds))]
+        for label, outs in res.items()
+    }
+
+
+def _fresh_rows_per_replicate(
+    problem: Any, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
+) -> dict[str, list[dict[str, float]]]:
+    """:func:`_fresh_rows` the old way, one compilation per replicate (kept to test that
+    the single program gives the same values)."""
+    rows: dict[str, list[dict[str, float]]] = {label: [] for label in designs}
+    for s in seeds:
+        fresh = dataclasses.replace(problem, seed=s)
+        evs: dict[str, _Evaluator] = {}
+        for label, (disc, x) in designs.items():
+            k = repr(sorted(disc.items()))
+            if k not in evs:
+                evs[k] = _Evaluator(fresh, dict(disc))
+            rows[label].append(evs[k].scalar_outputs(_design_u(evs[k], x)))
+    return rows
