@@ -25,8 +25,9 @@ test: setup
 	$(VENV)/bin/ruff format --check encdesign studies tests benchmarks
 	$(VENV)/bin/basedpyright --pythonpath $(PY)
 	# single-threaded BLAS: the finders' many small least-squares solves run far slower
-	# with threads competing for 2 cores; two pytest workers (pytest-xdist), one per core
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --durations=25 tests
+	# with threads competing for 2 cores; two pytest workers (pytest-xdist), one per core;
+	# worksteal: an idle worker takes tests queued on the other (no idle tail)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 tests
 
 lint: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks
