@@ -34,6 +34,7 @@ from .._array import f64 as _f64
 from .._array import is_traced as _is_traced
 from .._errors import input_error
 from ._quadrature import SignalErrors, check_signals, phase_error_eq4_rad
+from ._types import Angles, Averaged, SampleValues, SampleValuesOut, Scalar
 
 __all__ = [
     "EllipseParams",
@@ -237,8 +238,8 @@ _fit_jit = eqx.filter_jit(_fit_core)
 
 
 def fit_ellipse(
-    sa: ArrayLike,
-    sb: ArrayLike,
+    sa: SampleValues,
+    sb: SampleValues,
     *,
     method: str = "direct",
     throw: bool = True,
@@ -279,7 +280,7 @@ def fit_ellipse(
     return fit
 
 
-def correct_signals(sa: ArrayLike, sb: ArrayLike, params: EllipseParams) -> tuple[Array, Array]:
+def correct_signals(sa: Angles, sb: Angles, params: EllipseParams) -> tuple[Averaged, Averaged]:
     """Heydemann correction: map samples back to the unit circle.
 
     Returns:
@@ -292,18 +293,18 @@ def correct_signals(sa: ArrayLike, sb: ArrayLike, params: EllipseParams) -> tupl
     return sin_psi, w
 
 
-def corrected_phase_rad(sa: ArrayLike, sb: ArrayLike, params: EllipseParams) -> Array:
+def corrected_phase_rad(sa: Angles, sb: Angles, params: EllipseParams) -> Averaged:
     """Line phase (rad, in (-pi, pi]) from the arctangent of the corrected signals."""
     s, c = correct_signals(sa, sb, params)
     return jnp.arctan2(s, c)
 
 
 def position_from_signals_m(
-    sa: ArrayLike,
-    sb: ArrayLike,
-    signal_period_m: ArrayLike,
+    sa: SampleValues,
+    sb: SampleValues,
+    signal_period_m: Scalar,
     params: EllipseParams | None = None,
-) -> Array:
+) -> SampleValuesOut:
     """Unwrapped position ``p/(2 pi) unwrap(atan2(S_A, S_B))`` (m) along a capture in time order.
 
     With ``params`` the signals are Heydemann-corrected first. Samples must be close enough

@@ -43,6 +43,7 @@ from jaxtyping import Array, ArrayLike
 from .._array import f64 as _f64
 from .._array import is_traced as _is_traced
 from .._errors import input_error
+from ._types import Angles, Averaged
 
 __all__ = [
     "SignalErrors",
@@ -175,7 +176,7 @@ def quadrature_signals(
     return a * sa, a * sb
 
 
-def signal_phase_rad(sa: ArrayLike, sb: ArrayLike) -> Array:
+def signal_phase_rad(sa: Angles, sb: Angles) -> Averaged:
     """The arctangent interpolation of eq. 3: ``atan2(S_A, S_B)`` in (-pi, pi] (rad)."""
     return jnp.arctan2(_f64(sa), _f64(sb))
 

@@ -71,3 +71,5 @@ PairAngles = Float[Array, "*batch n_fixed n_moving"]
 """One angle per fixed × moving sensor pair (rad), batch axes of the edge times."""
 MarkAngles = Float[Array, "n_marks"]
 """One angle per mark of a disk (rad)."""
+SampleValuesOut = Float[Array, "n"]
+"""One value per sample, returned as an array (unit of the values)."""
