@@ -150,7 +150,7 @@ def separate_by(a: Candidate, b: Candidate, corr: float | None = None) -> str:
     return f"a record in which their fitted errors differ{c}: other speeds, directions or turns"
 
 
-def alternatives_of(chosen, trials: list, prep) -> list[dict]:
+def alternatives_of(chosen, trials: list) -> list[dict]:
     """The other candidates of a doubted dominant one's round, best first (at most 3):
     name, their criterion, how much worse than the named one, what would tell them apart."""
     out = []
@@ -180,5 +180,4 @@ def alternatives_of(chosen, trials: list, prep) -> list[dict]:
                 "separate_by": "the measurement the doubt asks for (see its reason)",
             }
         )
-    del prep
     return out

@@ -143,6 +143,26 @@ class Alternative(_Entry):
         _keys_ok(self, ("name", "reason"))
 
 
+_EFFECT_KEYS = (
+    "name",
+    "params",
+    "derived",
+    "channels",
+    "rms_after",
+    "heldout_rms_after",
+    "delta_bic",
+    "delta_heldout_chi2",
+    "collinearity",
+    "share",
+    "size_rms",
+    "notes",
+    "explanation",
+    "confounded_with",
+)
+"""The keys of a named effect's JSON entry, in order (``doubt`` and ``alternatives`` follow
+only when the effect is doubted)."""
+
+
 @final
 class Effect(_Entry):
     """A named effect (an entry of ``effects``).
@@ -183,41 +203,9 @@ class Effect(_Entry):
     doubt: Mapping[str, Any] | None = None
     alternatives: tuple[Alternative, ...] | None = None
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    key_order: tuple[str, ...] = (
-        "name",
-        "params",
-        "derived",
-        "channels",
-        "rms_after",
-        "heldout_rms_after",
-        "delta_bic",
-        "delta_heldout_chi2",
-        "collinearity",
-        "share",
-        "size_rms",
-        "notes",
-        "explanation",
-        "confounded_with",
-    )
+    key_order: tuple[str, ...] = _EFFECT_KEYS
 
-    TYPED: ClassVar[tuple[str, ...]] = (
-        "name",
-        "params",
-        "derived",
-        "channels",
-        "rms_after",
-        "heldout_rms_after",
-        "delta_bic",
-        "delta_heldout_chi2",
-        "collinearity",
-        "share",
-        "size_rms",
-        "notes",
-        "explanation",
-        "confounded_with",
-        "doubt",
-        "alternatives",
-    )
+    TYPED: ClassVar[tuple[str, ...]] = (*_EFFECT_KEYS, "doubt", "alternatives")
     NESTED: ClassVar[Mapping[str, Any]] = {
         "confounded_with": Alternative,
         "alternatives": Alternative,
@@ -275,16 +263,6 @@ class Finding(_Entry):
     detail: Mapping[str, Any] | None = None
     note: str | None = None
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    key_order: tuple[str, ...] = (
-        "view",
-        "where",
-        "rms",
-        "variance_share",
-        "log10_p",
-        "detail",
-        "note",
-    )
-
     TYPED: ClassVar[tuple[str, ...]] = (
         "view",
         "where",
@@ -294,6 +272,7 @@ class Finding(_Entry):
         "detail",
         "note",
     )
+    key_order: tuple[str, ...] = TYPED
 
     def __check_init__(self):
         missing = [k for k in WHERE_KEYS if k not in self.where]
@@ -335,9 +314,8 @@ class Refusal(_Entry):
     rules: tuple[str, ...] | None = None
     delta_bic: float | None = None
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    key_order: tuple[str, ...] = ("name", "reason", "rule", "rules", "delta_bic")
-
     TYPED: ClassVar[tuple[str, ...]] = ("name", "reason", "rule", "rules", "delta_bic")
+    key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("rules",)
 
     def __check_init__(self):
@@ -370,9 +348,8 @@ class Confounded(_Entry):
     separate_by: str
     reason: str = ""
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    key_order: tuple[str, ...] = ("pair", "correlation", "delta_bic", "separate_by", "reason")
-
     TYPED: ClassVar[tuple[str, ...]] = ("pair", "correlation", "delta_bic", "separate_by", "reason")
+    key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("pair",)
 
     def __check_init__(self):

@@ -580,7 +580,7 @@ def select(
         if chosen is None:
             break
         cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen
-        alternatives = alternatives_of(chosen, trials, prep) if doubt is not None else []
+        alternatives = alternatives_of(chosen, trials) if doubt is not None else []
         if ties:
             notes = [
                 *notes,
