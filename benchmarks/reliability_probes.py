@@ -85,25 +85,10 @@ def _run(args: list[str], cwd: Path, env: dict) -> tuple[int, str, str]:
 
 
 def _closure(d: Path) -> Path:
-    import jax
-    import numpy as np
-
     sys.path.insert(0, str(HERE / "tests"))
-    from helpers import closure_instrument_error  # pyright: ignore[reportMissingImports]
+    from helpers import write_small_closure_recording  # pyright: ignore[reportMissingImports]
 
-    from encdesign.io._closure_recording import write_closure_recording
-    from encdesign.simulate import simulate_closure_readings
-
-    readings = simulate_closure_readings(
-        closure_instrument_error,
-        12,
-        list(range(12)),
-        face_error_rad=np.zeros(12),
-        setting_offset_rad=np.zeros(12),
-        sigma_reading_rad=1e-7,
-        key=jax.random.PRNGKey(0),
-    )
-    return write_closure_recording(d / "R.toml", readings).path
+    return write_small_closure_recording(d / "R.toml").path
 
 
 def probes() -> list[tuple[str, str, list[str], dict]]:

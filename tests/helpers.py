@@ -88,6 +88,29 @@ def closure_instrument_error(phi_rad):
     return CLOSURE_ARCSEC * (0.2 * np.sin(phi + 0.4) + 0.58 * np.cos(2 * phi + 1.1))
 
 
+def write_small_closure_recording(path):
+    """A 12-face closure recording of :func:`closure_instrument_error` (perfect faces and
+    settings, 0.1 urad reading noise, key 0) at ``path``; returns what
+    :func:`encdesign.io._closure_recording.write_closure_recording` returns. The CLI contract
+    test and ``benchmarks/reliability_probes.py`` feed it to ``calibrate closure``."""
+    import jax
+    import numpy as np
+
+    from encdesign.io._closure_recording import write_closure_recording
+    from encdesign.simulate import simulate_closure_readings
+
+    readings = simulate_closure_readings(
+        closure_instrument_error,
+        12,
+        list(range(12)),
+        face_error_rad=np.zeros(12),
+        setting_offset_rad=np.zeros(12),
+        sigma_reading_rad=1e-7,
+        key=jax.random.PRNGKey(0),
+    )
+    return write_closure_recording(path, readings)
+
+
 # --- scale-out (issue 15) ---
 # A small 3+1 build (coarse angles, low orders: compiles in seconds) and the tolerance set
 # of benchmarks/optimize.py, for the distributed Monte Carlo agreement tests.

@@ -210,22 +210,9 @@ def bench(tmp_path_factory) -> Path:
 
 
 def _closure(path: Path) -> None:
-    import jax
-    from helpers import closure_instrument_error
+    from helpers import write_small_closure_recording
 
-    from encdesign.io._closure_recording import write_closure_recording
-    from encdesign.simulate import simulate_closure_readings
-
-    readings = simulate_closure_readings(
-        closure_instrument_error,
-        12,
-        list(range(12)),
-        face_error_rad=np.zeros(12),
-        setting_offset_rad=np.zeros(12),
-        sigma_reading_rad=1e-7,
-        key=jax.random.PRNGKey(0),
-    )
-    write_closure_recording(path, readings)
+    write_small_closure_recording(path)
 
 
 @pytest.fixture
