@@ -9,7 +9,7 @@ from helpers import CRAMER_ECCENTRICITY_M, CRAMER_RADIUS_M, CRAMER_TILT_RAD, cra
 import encdesign
 from encdesign import EncoderModel, head_errors, head_readings, make_model, noisy_head_readings
 from encdesign.physics import head_errors_batch, mode_amplitudes, stack_models
-from encdesign.physics._kinematics import _atan
+from encdesign.physics._kinematics import _atan, _atan_ratio
 
 N = 512
 THETA = jnp.arange(N) * (2 * np.pi / N)
@@ -170,6 +170,30 @@ def test_atan_matches_numpy():
     x = np.concatenate([np.linspace(-30, 30, 20001), np.logspace(-12, 6, 500), [0.0]])
     x = np.concatenate([x, -x])
     np.testing.assert_allclose(_atan(jnp.asarray(x)), np.arctan(x), rtol=4e-16, atol=1e-300)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_atan_ratio_matches_arctan2_and_its_derivative(seed):
+    """One division per element: every branch of the range reduction (|a/b| below 0.66,
+    up to tan(3 pi / 8), beyond), b from 1e-3 to 2, against NumPy's arctan2 (rad)."""
+    rng = np.random.default_rng(seed)
+    b = rng.uniform(1e-3, 2.0, 20000)
+    a = b * np.concatenate(
+        [
+            rng.uniform(-0.66, 0.66, 5000),
+            rng.uniform(0.66, 2.42, 5000),
+            -rng.uniform(0.66, 2.42, 5000),
+            rng.uniform(-400, 400, 5000),
+        ]
+    )
+    got = np.asarray(_atan_ratio(jnp.asarray(a), jnp.asarray(b)))
+    np.testing.assert_allclose(got, np.arctan2(a, b), rtol=1e-15, atol=1e-300)
+    da, db = jax.vmap(jax.grad(_atan_ratio, argnums=(0, 1)))(
+        jnp.asarray(a[:50]), jnp.asarray(b[:50])
+    )
+    r2 = a[:50] ** 2 + b[:50] ** 2
+    np.testing.assert_allclose(da, b[:50] / r2, rtol=1e-14)
+    np.testing.assert_allclose(db, -a[:50] / r2, rtol=1e-14)
 
 
 def test_invalid_shapes_raise():

@@ -315,30 +315,55 @@ _TAN_3PI_8 = 2.41421356237309504880
 
 @jax.custom_jvp
 def _atan(x: ArrayLike) -> Array:
-    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere.
-
-    Its derivative is given in closed form (``1 / (1 + x²)``, :func:`_atan_jvp`) rather than
-    traced through the selects of the rational approximation: the reverse pass of a Monte
-    Carlo gradient is then about as cheap as the forward pass.
-    """
+    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere
+    (:func:`_atan_ratio` with ``b = 1``)."""
     x = jnp.asarray(x)
-    s = jnp.where(x > 0, 1.0, -1.0)
-    big = (x > _TAN_3PI_8) | (x < -_TAN_3PI_8)
-    mid = ((x > 0.66) | (x < -0.66)) & ~big
-    xr = jnp.where(big, -1.0 / jnp.where(big, x, 1.0), jnp.where(mid, (x - s) / (1.0 + s * x), x))
-    y0 = jnp.where(big, s * (jnp.pi / 2), jnp.where(mid, s * (jnp.pi / 4), 0.0))
-    corr = jnp.where(big, s * _ATAN_MOREBITS, jnp.where(mid, s * 0.5 * _ATAN_MOREBITS, 0.0))
-    z = xr * xr
-    p, q = _ATAN_P, _ATAN_Q
-    num = (((p[0] * z + p[1]) * z + p[2]) * z + p[3]) * z + p[4]
-    den = ((((z + q[0]) * z + q[1]) * z + q[2]) * z + q[3]) * z + q[4]
-    return y0 + (xr * z * num / den + xr) + corr
+    return _atan_ratio(x, jnp.ones_like(x))
 
 
 @_atan.defjvp
 def _atan_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
     return _atan(x), dx / (1.0 + x * x)
+
+
+@jax.custom_jvp
+def _atan_ratio(a: Array, b: Array) -> Array:
+    """``arctan(a / b)``, rad, for ``b > 0`` and ``|a|, |b|`` of order one, with a single
+    division per element.
+
+    Cephes' range reduction (``|x| <= 0.66``; ``0.66 < |x| <= tan 3pi/8`` via
+    ``(x - 1) / (1 + x)``; beyond via ``-1 / x``) is done on the numerator and denominator
+    (``x = a / b`` is never formed), and the rational approximation
+    ``atan(r) = r + r z P(z) / Q(z)``, ``z = r^2``, ``r = N / D``, is written homogeneously:
+    ``N (Q_h + N^2 P_h) / (D Q_h)`` with ``P_h = D^8 P(z)``, ``Q_h = D^10 Q(z)``, so the one
+    division of the whole function is the last one. Within a few ulp of ``arctan`` in
+    float64. Its derivative is given in closed form, ``(b da - a db) / (a^2 + b^2)``
+    (:func:`_atan_ratio_jvp`), not traced through the selects.
+    """
+    pos = a > 0.0
+    s = jnp.where(pos, 1.0, -1.0)
+    sa = s * a  # |a|
+    big = sa > _TAN_3PI_8 * b
+    mid = (sa > 0.66 * b) & ~big
+    n = jnp.where(big, -b, jnp.where(mid, a - s * b, a))
+    d = jnp.where(big, a, jnp.where(mid, b + s * a, b))
+    y0 = jnp.where(big, s * (jnp.pi / 2), jnp.where(mid, s * (jnp.pi / 4), 0.0))
+    corr = jnp.where(big, s * _ATAN_MOREBITS, jnp.where(mid, s * 0.5 * _ATAN_MOREBITS, 0.0))
+    n2, d2 = n * n, d * d
+    p, q = _ATAN_P, _ATAN_Q
+    d4 = d2 * d2
+    ph = (((p[0] * n2 + p[1] * d2) * n2 + p[2] * d4) * n2 + p[3] * d4 * d2) * n2 + p[4] * d4 * d4
+    qh = (
+        (((n2 + q[0] * d2) * n2 + q[1] * d4) * n2 + q[2] * d4 * d2) * n2 + q[3] * d4 * d4
+    ) * n2 + q[4] * d4 * d4 * d2
+    return y0 + (n * (qh + n2 * ph) / (d * qh) + corr)
+
+
+@_atan_ratio.defjvp
+def _atan_ratio_jvp(primals, tangents):
+    (a, b), (da, db) = primals, tangents
+    return _atan_ratio(a, b), (b * da - a * db) / (a * a + b * b)
 
 
 def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -> Array:
@@ -478,14 +503,19 @@ def _geometry(
     un = jnp.sqrt(1.0 + tg * tg)
     ux, uy, uz = -tg * sb / un, tg * cb / un, -1.0 / un
     rx, ry, rz = radius * cb, radius * sb, hd.gap_m
-    # --- ray-plane intersection (seed eq. 36 for a ray from r): i = r + s u
+    # --- ray-plane intersection (seed eq. 36 for a ray from r): i = r + s u with
+    # s = (w.n) / (u.n); v = i - c = s u - w is only needed up to a positive factor, so
+    # V = |u.n| v = sign(u.n) ((w.n) u - (u.n) w) is used instead (no division)
     wx, wy, wz = cx - rx, cy - ry, cz - rz
-    s = (wx * nx + wy * ny + wz * nz) / (ux * nx + uy * ny + uz * nz)
-    vx, vy, vz = s * ux - wx, s * uy - wy, s * uz - wz  # v = i - c, in the disk plane
+    wn = wx * nx + wy * ny + wz * nz
+    un_dot = ux * nx + uy * ny + uz * nz
+    sg = jnp.where(un_dot < 0.0, -1.0, 1.0)
+    wn, un_dot = sg * wn, sg * un_dot
+    vx, vy, vz = wn * ux - un_dot * wx, wn * uy - un_dot * wy, wn * uz - un_dot * wz
     # --- signed angle psi from v to the index line about n
     crx, cry, crz = vy * lz - vz * ly, vz * lx - vx * lz, vx * ly - vy * lx
-    sin_part = crx * nx + cry * ny + crz * nz  # rho sin(psi)
-    cos_part = vx * lx + vy * ly + vz * lz  # rho cos(psi)
+    sin_part = crx * nx + cry * ny + crz * nz  # |V| sin(psi)
+    cos_part = vx * lx + vy * ly + vz * lz  # |V| cos(psi)
     rho = jnp.sqrt(sin_part * sin_part + cos_part * cos_part)
     s1, c1 = sin_part / rho, cos_part / rho
     # geometric error psi - (theta - alpha_k), wrapped to (-pi, pi): rotate (cos psi, sin psi)
@@ -494,7 +524,7 @@ def _geometry(
     cd, sd = ct * ca + st * sa, st * ca - ct * sa  # cos, sin of (theta - alpha_k)
     # half-angle form of atan2 for unit vectors: phi = 2 atan(sin phi / (1 + cos phi)),
     # exact for |phi| < pi (a head 180 deg off is not an encoder)
-    geom = 2.0 * _atan((s1 * cd - c1 * sd) / (1.0 + c1 * cd + s1 * sd))
+    geom = 2.0 * _atan_ratio(s1 * cd - c1 * sd, 1.0 + c1 * cd + s1 * sd)
     psi = geom + (th - hd.angles_rad)  # only used for orders > _GRATING_LOOP_MAX
     return geom, s1, c1, psi
 
