@@ -37,12 +37,17 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.custom_derivatives import SymbolicZero
-from jaxtyping import Array, ArrayLike
+from jaxtyping import Array
 
 from .. import _tuning
 from .._array import f64 as _f64
 from .._array import is_traced
+from ._reading_math import (
+    _GRATING_LOOP_MAX,
+    _core,
+    _grating,
+    _readings,
+)
 from ._types import Angles, ArrayInput, BatchHeadErrors, HeadAngles, HeadErrors
 
 __all__ = [
@@ -59,7 +64,6 @@ __all__ = [
 ]
 
 _CHUNK_READINGS = _tuning.CHUNK_READINGS  # readings per chunk in head_errors_batch (swept)
-_GRATING_LOOP_MAX = 64  # orders up to this use Clenshaw's recurrence, beyond: direct sin/cos
 
 
 def _concrete(x: object) -> bool:
@@ -292,142 +296,13 @@ def make_model(
 # ----------------------------------------------------------------------------- physics
 
 
-# Cephes' arctan (S. L. Moshier): a rational approximation after range reduction, within
-# 1 ulp in float64. Written with selects only, so XLA vectorises it (about 3x faster on CPU
-# than the library arctan2), and odd in x without abs/sign, so its gradient is right at 0.
-_ATAN_P = (
-    -8.750608600031904122785e-1,
-    -1.615753718733365076637e1,
-    -7.500855792314704667340e1,
-    -1.228866684490136173410e2,
-    -6.485021904942025371773e1,
-)
-_ATAN_Q = (
-    2.485846490142306297962e1,
-    1.650270098316988542046e2,
-    4.328810604912902668951e2,
-    4.853903996359136964868e2,
-    1.945506571482613964425e2,
-)
-_ATAN_MOREBITS = 6.123233995736765886130e-17
-_TAN_3PI_8 = 2.41421356237309504880
-
-
-@jax.custom_jvp
-def _atan(x: ArrayLike) -> Array:
-    """``arctan(x)``, rad, to 1 ulp (float64), vectorisable and differentiable everywhere
-    (:func:`_atan_ratio` with ``b = 1``)."""
-    x = jnp.asarray(x)
-    return _atan_ratio(x, jnp.ones_like(x))
-
-
-@_atan.defjvp
-def _atan_jvp(primals, tangents):
-    (x,), (dx,) = primals, tangents
-    return _atan(x), dx / (1.0 + x * x)
-
-
-@jax.custom_jvp
-def _atan_ratio(a: Array, b: Array) -> Array:
-    """``arctan(a / b)``, rad, for ``b > 0`` and ``|a|, |b|`` of order one, with a single
-    division per element.
-
-    Cephes' range reduction (``|x| <= 0.66``; ``0.66 < |x| <= tan 3pi/8`` via
-    ``(x - 1) / (1 + x)``; beyond via ``-1 / x``) is done on the numerator and denominator
-    (``x = a / b`` is never formed), and the rational approximation
-    ``atan(r) = r + r z P(z) / Q(z)``, ``z = r^2``, ``r = N / D``, is written homogeneously:
-    ``N (Q_h + N^2 P_h) / (D Q_h)`` with ``P_h = D^8 P(z)``, ``Q_h = D^10 Q(z)``, so the one
-    division of the whole function is the last one. Within a few ulp of ``arctan`` in
-    float64. Its derivative is given in closed form, ``(b da - a db) / (a^2 + b^2)``
-    (:func:`_atan_ratio_jvp`), not traced through the selects.
-    """
-    pos = a > 0.0
-    s = jnp.where(pos, 1.0, -1.0)
-    sa = s * a  # |a|
-    big = sa > _TAN_3PI_8 * b
-    mid = (sa > 0.66 * b) & ~big
-    n = jnp.where(big, -b, jnp.where(mid, a - s * b, a))
-    d = jnp.where(big, a, jnp.where(mid, b + s * a, b))
-    y0 = jnp.where(big, s * (jnp.pi / 2), jnp.where(mid, s * (jnp.pi / 4), 0.0))
-    corr = jnp.where(big, s * _ATAN_MOREBITS, jnp.where(mid, s * 0.5 * _ATAN_MOREBITS, 0.0))
-    n2, d2 = n * n, d * d
-    p, q = _ATAN_P, _ATAN_Q
-    d4 = d2 * d2
-    ph = (((p[0] * n2 + p[1] * d2) * n2 + p[2] * d4) * n2 + p[3] * d4 * d2) * n2 + p[4] * d4 * d4
-    qh = (
-        (((n2 + q[0] * d2) * n2 + q[1] * d4) * n2 + q[2] * d4 * d2) * n2 + q[3] * d4 * d4
-    ) * n2 + q[4] * d4 * d4 * d2
-    return y0 + (n * (qh + n2 * ph) / (d * qh) + corr)
-
-
-@_atan_ratio.defjvp
-def _atan_ratio_jvp(primals, tangents):
-    (a, b), (da, db) = primals, tangents
-    return _atan_ratio(a, b), (b * da - a * db) / (a * a + b * b)
-
-
-def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -> Array:
-    """``sum_j S_j sin(j psi) + C_j cos(j psi)`` given ``sin psi``, ``cos psi`` (rad)."""
-    m = sin_rad.shape[0]
-    if m == 0:
-        return jnp.zeros_like(psi)
-    if m > _GRATING_LOOP_MAX:
-        j = jnp.arange(1, m + 1, dtype=psi.dtype)
-        arg = psi[..., None] * j
-        return jnp.sum(sin_rad * jnp.sin(arg) + cos_rad * jnp.cos(arg), axis=-1)
-    return _grating_series(sin_rad, cos_rad, s1, c1)
-
-
-def _instantiate(t):
-    return jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t
-
-
-def _clenshaw(cos_coef: Array, sin_coef: Array, c1: Array, s1: Array) -> Array:
-    """``sum_j a_j cos(j psi) + b_j sin(j psi)`` for ``j = 1 … M`` by Clenshaw's recurrence
-    (Chebyshev ``T_j`` for the cosines, ``sin psi U_{j-1}`` for the sines), from
-    ``c1 = cos psi``, ``s1 = sin psi``: two multiply-adds per order and series."""
-    m = cos_coef.shape[0]
-    x2 = 2.0 * c1
-    bc1 = bc2 = bs1 = bs2 = jnp.zeros_like(c1)
-    for j in range(m - 1, 0, -1):  # orders M … 2
-        bc1, bc2 = cos_coef[j] + x2 * bc1 - bc2, bc1
-        bs1, bs2 = sin_coef[j] + x2 * bs1 - bs2, bs1
-    cos_sum = c1 * (cos_coef[0] + x2 * bc1 - bc2) - bc1
-    sin_sum = s1 * (sin_coef[0] + x2 * bs1 - bs2)
-    return cos_sum + sin_sum
-
-
-@jax.custom_jvp
-def _grating_series(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array) -> Array:
-    """``sum_j S_j sin(j psi) + C_j cos(j psi)`` from the unit vector
-    ``(c1, s1) = (cos psi, sin psi)``; rad."""
-    return _clenshaw(cos_rad, sin_rad, c1, s1)
-
-
-def _grating_series_jvp(primals, tangents):
-    """Closed-form tangent: the series' derivative in ``psi`` is the series of coefficients
-    ``j C_j`` (sines, negated) and ``j S_j`` (cosines), and ``d psi = cos psi d(sin psi) -
-    sin psi d(cos psi)`` on the unit circle; a coefficient tangent enters linearly.
-    Reverse mode then transposes a few multiply-adds per reading."""
-    sin_rad, cos_rad, s1, c1 = primals
-    d_sin, d_cos, ds1, dc1 = tangents
-    j = jnp.arange(1, sin_rad.shape[0] + 1, dtype=s1.dtype)
-    g = _clenshaw(cos_rad, sin_rad, c1, s1)
-    gp = _clenshaw(j * sin_rad, -j * cos_rad, c1, s1)
-    dg = gp * (c1 * _instantiate(ds1) - s1 * _instantiate(dc1))
-    if not (isinstance(d_sin, SymbolicZero) and isinstance(d_cos, SymbolicZero)):
-        dg = dg + _clenshaw(_instantiate(d_cos), _instantiate(d_sin), c1, s1)
-    return g, dg
-
-
-_grating_series.defjvp(_grating_series_jvp, symbolic_zeros=True)
-
-
 @jax.jit
 def _errors(model: EncoderModel, theta: Array, time: Array | None) -> Array:
     """Head errors ``(n, H)``, rad, for shaft angles ``theta (n,)`` rad and times ``(n,)`` s."""
-    geom, s1, c1, psi = _geometry(model, theta, time)
     d = model.disk
+    if d.grating_sin_rad.shape[0] <= _GRATING_LOOP_MAX:
+        return _readings(_frame(model, theta, time), d.grating_sin_rad, d.grating_cos_rad)
+    geom, s1, c1, psi = _geometry(model, theta, time)
     return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
 
 
@@ -463,11 +338,11 @@ def _errors_scaled(model, theta, scale, unit_sin, unit_cos):
     return geom + scale * _grating(_f64(unit_sin), _f64(unit_cos), s1, c1, psi)
 
 
-def _geometry(
-    model: EncoderModel, theta: Array, time: Array | None
-) -> tuple[Array, Array, Array, Array]:
-    """Geometric head errors ``(n, H)`` (rad, no grating error) and the read point's
-    ``sin psi``, ``cos psi`` and ``psi`` (rad) on the disk."""
+def _frame(model: EncoderModel, theta: Array, time: Array | None) -> tuple[Array, ...]:
+    """Everything of the model that is not per reading: the rotated disk normal ``n``,
+    index line ``l`` and centre ``c`` per angle, each component ``(n, 1)`` (unit vectors;
+    m), the heads' beam ``u`` and position ``r`` (``(1, H)``; unit, m), ``cos``/``sin`` of
+    the shaft angle ``(n, 1)`` and of the nominal head azimuths ``(1, H)``."""
     d, hd, mo = model.disk, model.heads, model.motion
     radius = d.optical_radius_m
     # --- disk in the rotor frame at theta = 0
@@ -503,29 +378,23 @@ def _geometry(
     un = jnp.sqrt(1.0 + tg * tg)
     ux, uy, uz = -tg * sb / un, tg * cb / un, -1.0 / un
     rx, ry, rz = radius * cb, radius * sb, hd.gap_m
-    # --- ray-plane intersection (seed eq. 36 for a ray from r): i = r + s u with
-    # s = (w.n) / (u.n); v = i - c = s u - w is only needed up to a positive factor, so
-    # V = |u.n| v = sign(u.n) ((w.n) u - (u.n) w) is used instead (no division)
-    wx, wy, wz = cx - rx, cy - ry, cz - rz
-    wn = wx * nx + wy * ny + wz * nz
-    un_dot = ux * nx + uy * ny + uz * nz
-    sg = jnp.where(un_dot < 0.0, -1.0, 1.0)
-    wn, un_dot = sg * wn, sg * un_dot
-    vx, vy, vz = wn * ux - un_dot * wx, wn * uy - un_dot * wy, wn * uz - un_dot * wz
-    # --- signed angle psi from v to the index line about n
-    crx, cry, crz = vy * lz - vz * ly, vz * lx - vx * lz, vx * ly - vy * lx
-    sin_part = crx * nx + cry * ny + crz * nz  # |V| sin(psi)
-    cos_part = vx * lx + vy * ly + vz * lz  # |V| cos(psi)
-    rho = jnp.sqrt(sin_part * sin_part + cos_part * cos_part)
-    s1, c1 = sin_part / rho, cos_part / rho
-    # geometric error psi - (theta - alpha_k), wrapped to (-pi, pi): rotate (cos psi, sin psi)
-    # back by theta - alpha_k, whose sine and cosine need no further trigonometry
     ca, sa = jnp.cos(hd.angles_rad), jnp.sin(hd.angles_rad)
-    cd, sd = ct * ca + st * sa, st * ca - ct * sa  # cos, sin of (theta - alpha_k)
-    # half-angle form of atan2 for unit vectors: phi = 2 atan(sin phi / (1 + cos phi)),
-    # exact for |phi| < pi (a head 180 deg off is not an encoder)
-    geom = 2.0 * _atan_ratio(s1 * cd - c1 * sd, 1.0 + c1 * cd + s1 * sd)
-    psi = geom + (th - hd.angles_rad)  # only used for orders > _GRATING_LOOP_MAX
+    per_angle = (nx, ny, nz, lx, ly, lz, cx, cy, cz, ct, st)
+    per_head = (ux, uy, uz, rx, ry, rz, ca, sa)
+    n, h = theta.shape[0], hd.angles_rad.shape[-1]
+    return (
+        *(jnp.broadcast_to(x, (n, 1)) for x in per_angle),
+        *(jnp.broadcast_to(x, (1, h)) for x in per_head),
+    )
+
+
+def _geometry(
+    model: EncoderModel, theta: Array, time: Array | None
+) -> tuple[Array, Array, Array, Array]:
+    """Geometric head errors ``(n, H)`` (rad, no grating error) and the read point's
+    ``sin psi``, ``cos psi`` and ``psi`` (rad) on the disk."""
+    geom, s1, c1, _ = _core(_frame(model, theta, time))
+    psi = geom + (theta[:, None] - model.heads.angles_rad)  # only for orders > _GRATING_LOOP_MAX
     return geom, s1, c1, psi
 
 
