@@ -17,6 +17,7 @@ from encdesign.diagnose._sds import finish_sds
 from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
 from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
 from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn
+from encdesign.diagnose._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
 from encdesign.simulate import write_concealed_sds
 from tests.helpers import validate_diagnosis
@@ -183,26 +184,15 @@ def test_bearing_wobble_from_a_later_run_is_named(sds_bench):
     assert abs(rho - truth["params"]["frequency_ratio"]) < 0.02
 
 
-@pytest.mark.parametrize(
-    "phi_ref",
-    [
-        True,
-        pytest.param(
-            False,
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="issue 22 item 6: without phi_ref the delay step is located on the "
-                "wrong moving sensor (m2 for m1); fails on main 0dea21b too with today's "
-                "dependency set",
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("phi_ref", [True, False])
 def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     """Named on the right sensor and run, within 10 %. Without phi_ref the delays are known
     up to a common value (the per-run offset; the median is taken out), and the design
     orders with one phase at every moving sensor are left out of the base, not fitted from
-    columns that vanish up to rounding (which turned the step into noise)."""
+    columns that vanish up to rounding (which turned the step into noise). The delays are
+    measured against a reference sensor chosen from the data (its column exactly zero):
+    which of the three tied delay columns the pivoted Cholesky held used to follow the last
+    bit of rounding, and the held one (se None) could never be named."""
     rec, truth = sds_bench("sensor_delay_step", "clear", phi_ref)
     d = _diag(rec)
     if not phi_ref:
@@ -215,6 +205,30 @@ def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     want = truth["params"]["delay_step_s"]
     assert abs(der["delay_step_s"]["value"] - want) < 0.1 * want
     assert any(f["view"] == "run_step" for f in d["findings_before"])
+    assert der["delay_step_s"]["se"] is not None and der["delay_step_s"]["se"] > 0
+
+
+def test_delay_reference_sensor_column_is_zero(sds_bench):
+    """Without phi_ref the reference sensor's delay column is exactly zero (held by rule,
+    deterministically), the others are not: no tie left for the pivoting to break."""
+    from encdesign.diagnose._fit import valjac_fn
+
+    rec, _ = sds_bench(None, "clear", False)
+    kd = sds_data(rec)
+    prep = sds_prepare(kd, dict(rec.meta, kind="sds"))
+    x = {k: jnp.asarray(v) for k, v in prep.rows.items()}
+    x.update({k: jnp.asarray(v) for k, v in prep.consts.items() if isinstance(v, np.ndarray)})
+    cand = next(c for c in _sds_candidates(prep.ctx) if c.name == "sensor_delay_step")
+    for ref in (0, 2):
+        p = {
+            "delay_s": jnp.zeros(3),
+            "first_run": jnp.asarray(4.0),
+            "ref_sensor": jnp.asarray(float(ref)),
+        }
+        _, J = valjac_fn(cand)(p, x)
+        norms = np.sqrt(np.sum(np.asarray(J["delay_s"]) ** 2, axis=(0, 1)))
+        assert norms[ref] == 0.0
+        assert np.all(np.delete(norms, ref) > 0)
 
 
 def test_no_phi_ref_diagnoses(sds_bench, tmp_path):

@@ -170,8 +170,15 @@ def _beam_fn(p, x):
 def _delay_fn(p, x):
     xm, _, shp = _xk(x)
     on = (x["run_index"] >= p["first_run"] - 0.5).astype(float)  # held: no derivative
+    # without phi_ref the delays are known up to a common value (the per-run offset takes
+    # it): they are measured against the held reference sensor, whose column is then exactly
+    # zero and left out by rule, not by which of M tied columns rounding puts last in the
+    # pivoted Cholesky (that choice moved with the last bit and named the wrong sensor)
+    M = x["psi_m"].shape[0]
+    ref = (jnp.arange(M) == jnp.round(p["ref_sensor"])).astype(float)
+    tau = p["delay_s"] * (1.0 - x["proj"] * ref)
     # a later edge of the moving sensor reads a larger angle: +Omega tau
-    d = x["omega"] * p["delay_s"][None, :] * on[:, None]  # (n, M)
+    d = x["omega"] * tau[None, :] * on[:, None]  # (n, M)
     return _to_channels(jnp.broadcast_to(d[:, None, None, :], shp), x)
 
 
@@ -256,10 +263,22 @@ def _delay_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
             firsts.append(int(f.detail["first_run_index"]))
     if not firsts:
         firsts = [_best_step(ctx, resid)[1]]
+    ref = _delay_reference(ctx)
     out = []
     for k in dict.fromkeys(firsts):
-        out.append({"first_run": np.asarray(float(k))})
+        out.append({"first_run": np.asarray(float(k)), "ref_sensor": np.asarray(float(ref))})
     return out[:3]
+
+
+def _delay_reference(ctx: Context) -> int:
+    """The moving sensor the delays are measured against without phi_ref: the one whose
+    base run means show the weakest step (``run_change_power``; the first such on a tie).
+    A choice made from the data, not from rounding; the reported delays do not depend on
+    it (:func:`_delay_gauge` takes the median out)."""
+    ch = ctx.consts.get("run_change_power")
+    if not ch:
+        return 0
+    return int(np.argmin([float(c[0]) for c in ch]))
 
 
 def _best_step(ctx: Context, resid: np.ndarray) -> tuple[float, int, int]:
@@ -338,9 +357,15 @@ def _beam_derived(ctx, v, se):
 
 
 def _delay_derived(ctx, v, se):
+    # the sensor is the one with the largest step in the median gauge (invariant under the
+    # common value); its se is that of its delay against the reference sensor, or (when it
+    # is the reference, held) that of another sensor against it: the same difference
     d = _delay_gauge(ctx, v["delay_s"])
     s = np.asarray(se["delay_s"], float)
-    m = int(np.argmax(np.abs(d) / np.where(np.isfinite(s) & (s > 0), s, np.inf)))
+    m = int(np.argmax(np.abs(d)))
+    if not np.isfinite(s[m]):
+        ok = np.isfinite(s)
+        s = np.where(ok, s, np.min(s[ok]) if ok.any() else np.nan)
     rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
     return {
         "sensor": {"value": f"m{m}", "se": None, "unit": "1"},
@@ -427,6 +452,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             (
                 Param("delay_s", "s", (M,), scale=1e-10),
                 Param("first_run", "1", linear=False, fit=False),
+                Param("ref_sensor", "1", linear=False, fit=False),
             ),
             signature=("run_step",),
             kinds=("sds",),
