@@ -306,6 +306,26 @@ def _no_ref_beam(ctx: Context) -> str | None:
     )
 
 
+def moving_opposed(psi_m) -> bool:
+    """Whether every moving sensor sits at one azimuth modulo π (e.g. two opposed ones):
+    the tilt's error ``T(ψ)`` is π-periodic, so it is then the same at every moving sensor
+    (order 2 in ``φ + ψ_m`` with one phase at all of them)."""
+    z = np.exp(2j * np.asarray(psi_m, float))
+    return bool(np.max(np.abs(z - z[0])) < 1e-9)
+
+
+def _no_ref_tilt(ctx: Context) -> str | None:
+    if ctx.has_ref or not moving_opposed(ctx.consts["psi_m"]):
+        return None
+    return (
+        "without phi_ref the per-run offset takes everything common to the moving sensors; "
+        "with the moving sensors opposed (one azimuth modulo pi) the tilt's error, which "
+        "repeats every half turn, is the same at each of them, so axis_tilt is "
+        "unidentifiable (a phi_ref column or a moving sensor not opposed to the others "
+        "makes it testable)"
+    )
+
+
 def _no_ref_drift(ctx: Context) -> str | None:
     if ctx.has_ref:
         return None
@@ -402,6 +422,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             signature=("sds_axis_tilt", "orders"),
             kinds=("sds",),
             explanation=EXPLANATIONS["axis_tilt"],
+            applies=_no_ref_tilt,
             start=_tilt_start,
             plausible=_no_transient(),
             derived=_tilt_derived,
