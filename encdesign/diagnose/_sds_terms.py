@@ -276,7 +276,9 @@ def _delay_reference(ctx: Context) -> int:
     A choice made from the data, not from rounding; the reported delays do not depend on
     it (:func:`_delay_gauge` takes the median out)."""
     ch = ctx.consts.get("run_change_power")
-    if not ch:
+    if not ch or (float(ctx.consts["proj"]) > 0 and len(ch) == 2):
+        # two moving sensors without phi_ref: their projected steps are equal and opposite
+        # (a tie only rounding would break): m0 by rule, and the sensor is unidentifiable
         return 0
     return int(np.argmin([float(c[0]) for c in ch]))
 
@@ -387,7 +389,11 @@ def _delay_derived(ctx, v, se):
         ok = np.isfinite(s)
         s = np.where(ok, s, np.min(s[ok]) if ok.any() else np.nan)
     rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
-    return {
+    out = {}
+    if float(np.asarray(ctx.consts["proj"])) > 0 and d.size == 2:
+        # +tau on m1 and -tau on m0 are the same record without phi_ref
+        out["sensor_identifiable"] = {"value": False, "se": None, "unit": "1"}
+    return out | {
         "sensor": {"value": f"m{m}", "se": None, "unit": "1"},
         "first_run": {"value": rid, "se": None, "unit": "1"},
         "delay_step_s": {
