@@ -17,6 +17,7 @@ from encdesign.diagnose._sds import finish_sds
 from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
 from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
 from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn
+from encdesign.diagnose._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
 from encdesign.simulate import write_concealed_sds
 from tests.helpers import validate_diagnosis
@@ -111,6 +112,69 @@ def test_axis_tilt_standard_errors_are_honest(sds_bench):
     assert 0 <= chi < np.pi
 
 
+def _tilt_record(tmp_path, seed, n_fixed, n_moving, effect="axis_tilt", phi_ref=True):
+    return write_concealed_sds(
+        tmp_path / f"tilt-{seed}-{n_fixed}-{n_moving}.toml",
+        key=jax.random.key(seed),
+        effect=effect,
+        concealment="near_noise",
+        phi_ref=phi_ref,
+        n_runs=N_RUNS,
+        n_fixed=n_fixed,
+        n_moving=n_moving,
+    )
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("n_fixed, n_moving", [(2, 2), (3, 3)])
+def test_axis_tilt_named_with_two_or_three_pairs(tmp_path, seed, n_fixed, n_moving):
+    """A tilt at 4x the reading noise is named on 2 + 2 (two opposed pairs) and on 3 + 3
+    sensors, tilt and azimuth within 5 se of the truth. With opposed moving sensors the
+    tilt's order 2 is the same at both, as beam tilt x axial runout at order 2 of the
+    platform angle: the two are reported as confounded, with the layout that separates
+    them; with three moving sensors they are not."""
+    rec, truth = _tilt_record(tmp_path, seed, n_fixed, n_moving)
+    d = _diag(rec)
+    assert d["verdict"] == "missing_physics", d["report"]
+    assert d["effects"][0]["name"] == "axis_tilt", d["report"]
+    e = d["effects"][0]
+    b, sb = _param(d, "axis_tilt", "tilt_rad")
+    chi, sc = _param(d, "axis_tilt", "azimuth_rad")
+    tb, tc = truth["params"]["tilt_rad"], truth["params"]["azimuth_rad"]
+    assert sb is not None and sc is not None and sb > 1e-3 * tb
+    assert abs(b - tb) < 5 * sb and abs(b - tb) < 0.2 * tb, (b, sb, tb)
+    dchi = (chi - tc + np.pi / 2) % np.pi - np.pi / 2
+    assert abs(dchi) < 5 * sc, (chi, sc, tc)
+    conf = {c["name"]: c for c in e["confounded_with"] or []}
+    if n_moving == 2:
+        assert "beam_tilt_axial" in conf, d["report"]
+        assert "not opposed" in conf["beam_tilt_axial"]["separate_by"]
+        pairs = [c for c in d["confounded"] if set(c["pair"]) == {"axis_tilt", "beam_tilt_axial"}]
+        assert pairs and "not opposed" in pairs[0]["separate_by"]
+    else:
+        assert "beam_tilt_axial" not in conf, d["report"]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_clean_two_pair_bench_names_no_tilt(tmp_path, seed):
+    """The 2 + 2 control: no hidden effect, no axis_tilt (nor any effect) named."""
+    rec, _ = _tilt_record(tmp_path, seed, 2, 2, effect=None)
+    d = _diag(rec)
+    assert d["verdict"] == "consistent", d["report"]
+    assert "axis_tilt" not in [e["name"] for e in d["effects"]]
+
+
+def test_two_opposed_pairs_without_phi_ref_tilt_not_testable(tmp_path):
+    """Without phi_ref the per-run offset takes what is common to the moving sensors; with
+    two opposed ones the tilt's (half-turn periodic) error is common: not testable, said
+    so, rather than silently absent."""
+    rec, _ = _tilt_record(tmp_path, 1, 2, 2, phi_ref=False)
+    d = _diag(rec)
+    nt = {r["name"]: r["reason"] for r in d["not_testable"]}
+    assert "axis_tilt" in nt and "opposed" in nt["axis_tilt"], d["report"]
+    assert "axis_tilt" not in [e["name"] for e in d["effects"]]
+
+
 def test_unresolved_tilt_azimuth_is_unidentifiable():
     doc = {
         "effects": [
@@ -183,26 +247,15 @@ def test_bearing_wobble_from_a_later_run_is_named(sds_bench):
     assert abs(rho - truth["params"]["frequency_ratio"]) < 0.02
 
 
-@pytest.mark.parametrize(
-    "phi_ref",
-    [
-        True,
-        pytest.param(
-            False,
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="issue 22 item 6: without phi_ref the delay step is located on the "
-                "wrong moving sensor (m2 for m1); fails on main 0dea21b too with today's "
-                "dependency set",
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("phi_ref", [True, False])
 def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     """Named on the right sensor and run, within 10 %. Without phi_ref the delays are known
     up to a common value (the per-run offset; the median is taken out), and the design
     orders with one phase at every moving sensor are left out of the base, not fitted from
-    columns that vanish up to rounding (which turned the step into noise)."""
+    columns that vanish up to rounding (which turned the step into noise). The delays are
+    measured against a reference sensor chosen from the data (its column exactly zero):
+    which of the three tied delay columns the pivoted Cholesky held used to follow the last
+    bit of rounding, and the held one (se None) could never be named."""
     rec, truth = sds_bench("sensor_delay_step", "clear", phi_ref)
     d = _diag(rec)
     if not phi_ref:
@@ -215,6 +268,30 @@ def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
     want = truth["params"]["delay_step_s"]
     assert abs(der["delay_step_s"]["value"] - want) < 0.1 * want
     assert any(f["view"] == "run_step" for f in d["findings_before"])
+    assert der["delay_step_s"]["se"] is not None and der["delay_step_s"]["se"] > 0
+
+
+def test_delay_reference_sensor_column_is_zero(sds_bench):
+    """Without phi_ref the reference sensor's delay column is exactly zero (held by rule,
+    deterministically), the others are not: no tie left for the pivoting to break."""
+    from encdesign.diagnose._fit import valjac_fn
+
+    rec, _ = sds_bench(None, "clear", False)
+    kd = sds_data(rec)
+    prep = sds_prepare(kd, dict(rec.meta, kind="sds"))
+    x = {k: jnp.asarray(v) for k, v in prep.rows.items()}
+    x.update({k: jnp.asarray(v) for k, v in prep.consts.items() if isinstance(v, np.ndarray)})
+    cand = next(c for c in _sds_candidates(prep.ctx) if c.name == "sensor_delay_step")
+    for ref in (0, 2):
+        p = {
+            "delay_s": jnp.zeros(3),
+            "first_run": jnp.asarray(4.0),
+            "ref_sensor": jnp.asarray(float(ref)),
+        }
+        _, J = valjac_fn(cand)(p, x)
+        norms = np.sqrt(np.sum(np.asarray(J["delay_s"]) ** 2, axis=(0, 1)))
+        assert norms[ref] == 0.0
+        assert np.all(np.delete(norms, ref) > 0)
 
 
 def test_no_phi_ref_diagnoses(sds_bench, tmp_path):

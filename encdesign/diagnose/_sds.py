@@ -78,6 +78,7 @@ from ._sds_terms import (
     _ripple_term,
     _wobble_grid,
     _wobble_onsets,
+    moving_opposed,
     sds_candidates,
 )
 from ._settings import DEFAULT_SETTINGS, FinderSettings
@@ -322,6 +323,7 @@ def sds_summary(prep: Prepared, base_params: dict) -> dict:
         },
         "grid_period_s": P,
         "noise_estimate": dict(prep.ctx.consts.get("noise_info") or {}),
+        "moving_opposed": moving_opposed(prep.consts["psi_m"]),
         "drift_vs_orders": prep.ctx.consts.get("drift_vs_orders"),
     }
 
@@ -401,6 +403,8 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
             "2 pi P / (T sqrt(6 N)) is what a perfect bench on that lattice would show",
         }
     dv = doc.pop("drift_vs_orders", None)
+    if doc.pop("moving_opposed", False):
+        _tilt_beam_opposed(doc)
     for e in doc.get("effects", []):
         if e["name"] == "thermal_drift" and dv:
             lim = math.log(max(dv["n_values"], 2))
@@ -483,6 +487,39 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
             "look continuous (interpolated or free-running time)"
         )
     return _finite(doc)
+
+
+TILT_BEAM_SEPARATE_BY = (
+    "a moving sensor not opposed to the others (e.g. three at 120 degrees): the tilt's "
+    "order 2 then has a different phase at each moving sensor, beam tilt x axial runout "
+    "stays common to them"
+)
+
+
+def _tilt_beam_opposed(doc: dict) -> None:
+    """With the moving sensors opposed (one azimuth modulo π), ``axis_tilt`` (order 2 in
+    ``φ + ψ_m``, π-periodic) is the same at every moving sensor, as ``beam_tilt_axial`` at
+    order 2 of ``φ`` is: where the engine reports the two as confounded, say why and which
+    layout separates them (not the generic "other speeds" of a multihead bench)."""
+    pair = {"axis_tilt", "beam_tilt_axial"}
+    for e in doc.get("effects", []):
+        if e["name"] not in pair:
+            continue
+        other = (pair - {e["name"]}).pop()
+        hit = [c for c in e.get("confounded_with") or [] if c.get("name") == other]
+        for c in hit:
+            c["separate_by"] = TILT_BEAM_SEPARATE_BY
+        if hit:
+            e["notes"] = [
+                *e.get("notes", []),
+                f"confounded with {other}: with the moving sensors opposed, the tilt's error "
+                "(repeating every half turn) is the same at each of them, as beam tilt x "
+                "axial runout at order 2 of the platform angle is; the fitted values are "
+                f"those of {e['name']} alone. Separated by {TILT_BEAM_SEPARATE_BY}",
+            ]
+    for c in doc.get("confounded", []):
+        if set(c.get("pair", [])) == pair:
+            c["separate_by"] = TILT_BEAM_SEPARATE_BY
 
 
 def _scale(v, s):

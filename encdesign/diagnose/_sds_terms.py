@@ -170,8 +170,15 @@ def _beam_fn(p, x):
 def _delay_fn(p, x):
     xm, _, shp = _xk(x)
     on = (x["run_index"] >= p["first_run"] - 0.5).astype(float)  # held: no derivative
+    # without phi_ref the delays are known up to a common value (the per-run offset takes
+    # it): they are measured against the held reference sensor, whose column is then exactly
+    # zero and left out by rule, not by which of M tied columns rounding puts last in the
+    # pivoted Cholesky (that choice moved with the last bit and named the wrong sensor)
+    M = x["psi_m"].shape[0]
+    ref = (jnp.arange(M) == jnp.round(p["ref_sensor"])).astype(float)
+    tau = p["delay_s"] * (1.0 - x["proj"] * ref)
     # a later edge of the moving sensor reads a larger angle: +Omega tau
-    d = x["omega"] * p["delay_s"][None, :] * on[:, None]  # (n, M)
+    d = x["omega"] * tau[None, :] * on[:, None]  # (n, M)
     return _to_channels(jnp.broadcast_to(d[:, None, None, :], shp), x)
 
 
@@ -256,10 +263,24 @@ def _delay_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
             firsts.append(int(f.detail["first_run_index"]))
     if not firsts:
         firsts = [_best_step(ctx, resid)[1]]
+    ref = _delay_reference(ctx)
     out = []
     for k in dict.fromkeys(firsts):
-        out.append({"first_run": np.asarray(float(k))})
+        out.append({"first_run": np.asarray(float(k)), "ref_sensor": np.asarray(float(ref))})
     return out[:3]
+
+
+def _delay_reference(ctx: Context) -> int:
+    """The moving sensor the delays are measured against without phi_ref: the one whose
+    base run means show the weakest step (``run_change_power``; the first such on a tie).
+    A choice made from the data, not from rounding; the reported delays do not depend on
+    it (:func:`_delay_gauge` takes the median out)."""
+    ch = ctx.consts.get("run_change_power")
+    if not ch or (float(ctx.consts["proj"]) > 0 and len(ch) == 2):
+        # two moving sensors without phi_ref: their projected steps are equal and opposite
+        # (a tie only rounding would break): m0 by rule, and the sensor is unidentifiable
+        return 0
+    return int(np.argmin([float(c[0]) for c in ch]))
 
 
 def _best_step(ctx: Context, resid: np.ndarray) -> tuple[float, int, int]:
@@ -284,6 +305,26 @@ def _no_ref_beam(ctx: Context) -> str | None:
     return (
         "without phi_ref the per-run offset takes everything common to the moving "
         "sensors; beam_tilt_axial (common to them) is unidentifiable"
+    )
+
+
+def moving_opposed(psi_m) -> bool:
+    """Whether every moving sensor sits at one azimuth modulo π (e.g. two opposed ones):
+    the tilt's error ``T(ψ)`` is π-periodic, so it is then the same at every moving sensor
+    (order 2 in ``φ + ψ_m`` with one phase at all of them)."""
+    z = np.exp(2j * np.asarray(psi_m, float))
+    return bool(np.max(np.abs(z - z[0])) < 1e-9)
+
+
+def _no_ref_tilt(ctx: Context) -> str | None:
+    if ctx.has_ref or not moving_opposed(ctx.consts["psi_m"]):
+        return None
+    return (
+        "without phi_ref the per-run offset takes everything common to the moving sensors; "
+        "with the moving sensors opposed (one azimuth modulo pi) the tilt's error, which "
+        "repeats every half turn, is the same at each of them, so axis_tilt is "
+        "unidentifiable (a phi_ref column or a moving sensor not opposed to the others "
+        "makes it testable)"
     )
 
 
@@ -338,11 +379,21 @@ def _beam_derived(ctx, v, se):
 
 
 def _delay_derived(ctx, v, se):
+    # the sensor is the one with the largest step in the median gauge (invariant under the
+    # common value); its se is that of its delay against the reference sensor, or (when it
+    # is the reference, held) that of another sensor against it: the same difference
     d = _delay_gauge(ctx, v["delay_s"])
     s = np.asarray(se["delay_s"], float)
-    m = int(np.argmax(np.abs(d) / np.where(np.isfinite(s) & (s > 0), s, np.inf)))
+    m = int(np.argmax(np.abs(d)))
+    if not np.isfinite(s[m]):
+        ok = np.isfinite(s)
+        s = np.where(ok, s, np.min(s[ok]) if ok.any() else np.nan)
     rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
-    return {
+    out = {}
+    if float(np.asarray(ctx.consts["proj"])) > 0 and d.size == 2:
+        # +tau on m1 and -tau on m0 are the same record without phi_ref
+        out["sensor_identifiable"] = {"value": False, "se": None, "unit": "1"}
+    return out | {
         "sensor": {"value": f"m{m}", "se": None, "unit": "1"},
         "first_run": {"value": rid, "se": None, "unit": "1"},
         "delay_step_s": {
@@ -377,6 +428,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             signature=("sds_axis_tilt", "orders"),
             kinds=("sds",),
             explanation=EXPLANATIONS["axis_tilt"],
+            applies=_no_ref_tilt,
             start=_tilt_start,
             plausible=_no_transient(),
             derived=_tilt_derived,
@@ -427,6 +479,7 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
             (
                 Param("delay_s", "s", (M,), scale=1e-10),
                 Param("first_run", "1", linear=False, fit=False),
+                Param("ref_sensor", "1", linear=False, fit=False),
             ),
             signature=("run_step",),
             kinds=("sds",),

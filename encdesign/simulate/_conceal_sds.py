@@ -78,10 +78,14 @@ SPEED_RAD_S = 2 * math.pi * 10.0
 
 
 def sds_bench_design(
-    key: jax.Array, marks_per_rev: int = 500, coil_torque: float = 0.0, n_moving: int = 3
+    key: jax.Array,
+    marks_per_rev: int = 500,
+    coil_torque: float = 0.0,
+    n_moving: int = 3,
+    n_fixed: int = 2,
 ):
     """The bench's instrument (see module doc); ``coil_torque`` adds coil-mismatch ripple;
-    ``n_moving`` moving sensors equally spaced."""
+    ``n_fixed`` fixed and ``n_moving`` moving sensors, each set equally spaced."""
     torque_c = {6: 0.01, 12: 0.005, 18: 0.0033, 36: 0.02}
     torque_s = {6: 0.004, 12: -0.002, 18: 0.001, 36: 0.005}
     if coil_torque:
@@ -97,7 +101,7 @@ def sds_bench_design(
         motor,
         reference_disk(ka, marks_per_rev, n_harmonics=12, random_rad=1e-6),
         reference_disk(kb, marks_per_rev, n_harmonics=12, random_rad=1e-6),
-        equally_spaced(2),
+        equally_spaced(n_fixed),
         equally_spaced(n_moving),
     )
 
@@ -113,6 +117,7 @@ def write_concealed_sds(
     n_revs: int = 5,
     marks_per_rev: int = 500,
     n_moving: int = 3,
+    n_fixed: int = 2,
     clock_factor: float | None = None,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
@@ -131,6 +136,7 @@ def write_concealed_sds(
         n_moving: moving sensors (equally spaced). With two opposed moving sensors an axis
             tilt (order 2 in φ + ψ_m) and a beam tilt × axial runout at order 2 in φ give
             the same pattern; three or more separate them.
+        n_fixed: fixed sensors (equally spaced), >= 1.
         clock_factor: ``timing_quantization`` only: the bench clock period over the declared
             one (default 5 for ``near_noise`` / ``partial``, 20 for ``clear``).
 
@@ -151,7 +157,9 @@ def write_concealed_sds(
         coil = amp / 2e-3 * 1.2  # φ error ≈ speed ripple × eccentricity 2e-3
     if n_moving < 2:
         raise input_error("n_moving", f"got {n_moving}", ">= 2")
-    design = sds_bench_design(kd, marks_per_rev, coil, n_moving)
+    if n_fixed < 1:
+        raise input_error("n_fixed", f"got {n_fixed}", ">= 1")
+    design = sds_bench_design(kd, marks_per_rev, coil, n_moving, n_fixed)
     # platform positions stepped by the golden angle (about 137.5°, jittered by ±2°): every
     # subset of runs (e.g. the held-out folds) covers the circle without aliasing the
     # motor's orders (multiples of 6) onto a constant, as an equally spaced grid would
