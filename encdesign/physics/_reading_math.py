@@ -9,6 +9,8 @@ and per-head ``(1, H)`` inputs; nothing knows about the model's Modules.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
@@ -243,7 +245,11 @@ def _readings_bwd(res, e_bar):
     # cos, sin of theta - alpha_k
     ct_b, st_b = cd_bar * ca - sd_bar * sa, cd_bar * sa + sd_bar * ca
     ca_b, sa_b = cd_bar * ct + sd_bar * st, cd_bar * st - sd_bar * ct
-    over_h = lambda x: jnp.sum(x, axis=1, keepdims=True)  # noqa: E731
+    h = e_bar.shape[1]
+
+    def over_h(x: Array) -> Array:  # H - 1 adds of columns: about 2x faster than a reduce
+        return functools.reduce(jnp.add, [x[:, k : k + 1] for k in range(h)])
+
     over_n = lambda x: jnp.sum(x, axis=0, keepdims=True)  # noqa: E731
     per_angle = (nx_b, ny_b, nz_b, lx_b, ly_b, lz_b, wx_b, wy_b, wz_b, ct_b, st_b)
     per_head = (ux_b, uy_b, uz_b, -wx_b, -wy_b, -wz_b, ca_b, sa_b)
