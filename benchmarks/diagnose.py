@@ -8,7 +8,8 @@
    (compilation included; the issue's target is <= 20 s on a quiet 2-core machine), once
    clean and once with each effect of the multihead catalog (``CATALOG_MULTIHEAD``, each
    at about 3x the noise: :func:`_add_effect`); ``--effects`` picks some, ``--effects none``
-   skips them.
+   skips them. Each record: wall s, CPU s (user + system of the child: the number to compare
+   on a loaded machine), JAX compile events (count, wall s), verdict, named effects.
 3. Time and peak resident memory against the number of rows (each size in a fresh process:
    a 2-head bench with ``theta_ref`` and per-run zeros, clean), ``--rows`` (default 1e4 1e5
    1e6; add 1e7 by hand: about 10 min on a quiet machine). Targets: 1e6 rows in <= 5 min and
