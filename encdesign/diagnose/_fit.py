@@ -31,7 +31,7 @@ def valjac_fn(cand: Candidate):
         J = jax.jacfwd(cand.fn)(p, x)
         return v, J
 
-    return jax.jit(vj)
+    return jax.jit(vj if cand.valjac is None else cand.valjac)
 
 
 @functools.lru_cache(maxsize=256)
@@ -288,14 +288,7 @@ class Fitter:
             )
 
         sc_s, sc_d = scales(static), scales(dyn)
-        skey = tuple(
-            (
-                id(t.cand),
-                tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
-                tuple(t.free[q.name].tobytes() for q in t.cand.params),
-            )
-            for t in static
-        )
+        skey = self._static_key(static)
         gram = self._gram.get(skey)
         A = np.zeros((K, p, p))
         g = np.zeros((K, p))
@@ -378,6 +371,76 @@ class Fitter:
         g = g[:, idx]
         sc = np.concatenate([sc_s, sc_d])[idx]
         return A, g, c, ssr, sc
+
+    @staticmethod
+    def _static_key(static: Sequence[Term]) -> tuple:
+        return tuple(
+            (
+                id(t.cand),
+                tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
+                tuple(t.free[q.name].tobytes() for q in t.cand.params),
+            )
+            for t in static
+        )
+
+    def column_chi2(self, held: Sequence[Term], extra: Sequence[Term]) -> np.ndarray:
+        """``fit([*held, e]).chi2`` for each term ``e`` of ``extra``, without the fits.
+
+        ``held`` must be linear in its free parameters and each ``e`` have one free (linear)
+        scalar: the fit is then linear least squares, and adding one column ``j`` to the
+        columns ``B`` of ``held`` lowers chi-square by ``(j.r - j.B u)^2 / (j.j - j.B w)``
+        (``u = A^+ B.r``, ``w = A^+ B.j``, ``A = B.B`` on the columns the data determine),
+        ``r`` the residual of ``held`` at its values. The Gram matrix of ``held`` is the
+        cached one; each extra column costs one product with ``B``. A column the others
+        span (relative ``j.P.j`` under ``1e-10``, as the fit's pivoted Cholesky) lowers
+        nothing."""
+        prep = self.prep
+        held = list(held)
+        if not all(self._linear_only(t) for t in held) or any(
+            e.n_free() != 1 or not self._linear_only(e) for e in extra
+        ):
+            raise ValueError("column_chi2: held terms linear, one free linear scalar each")
+        K = prep.settings.n_folds
+        A, gb, c, _, _ = self.stats(held)  # caches the held Gram and processed Jacobians
+        At, gt = A.sum(0), gb.sum(0)
+        sc = np.concatenate(
+            [t.scale[q.name][t.free[q.name]].ravel() for t in held for q in t.cand.params]
+            or [np.zeros(0)]
+        )
+        skey = self._static_key(held)
+        sw = np.sqrt(self.w_ch)
+        E = len(extra)
+        p = At.shape[0]
+        Bj, jj, jr = np.zeros((p, E)), np.zeros(E), np.zeros(E)
+        for a, b, x in self.chunks():
+            hit = self._pcache.get((skey, a)) or self._processed(held, a, b, x, sc)
+            _, Js_, order, edges = hit
+            lo, hi = int(edges[0]), int(edges[K])
+            r = self.chunk_residual(held, a, b, x)
+            rw = (r * sw)[order][lo:hi].ravel()
+            S = Js_[lo:hi].reshape(rw.size, p)
+            cols = np.empty((rw.size, E))
+            for i, e in enumerate(extra):
+                pv = {k: jnp.asarray(v) for k, v in e.values.items()}
+                p0 = {
+                    q.name: (jnp.zeros_like(pv[q.name]) if q.linear else pv[q.name])
+                    for q in e.cand.params
+                }
+                _, J = valjac_fn(e.cand)(p0, x)
+                Je = self._gather(e, J, b - a, prep.n_channels)
+                if prep.kd.project:
+                    Je = Je - Je.mean(1, keepdims=True)
+                cols[:, i] = (Je[:, :, 0] * sw[None, :])[order][lo:hi].ravel()
+            Bj += S.T @ cols
+            jj += np.einsum("ij,ij->j", cols, cols)
+            jr += cols.T @ rw
+        uw = _solve_many(At, np.column_stack([gt, Bj]))
+        u, w = uw[:, 0], uw[:, 1:]
+        jpj = jj - np.einsum("pe,pe->e", Bj, w)
+        num = jr - Bj.T @ u
+        ok = jpj > 1e-10 * np.maximum(jj, 1e-300)
+        gain = np.where(ok, num * num / np.where(ok, jpj, 1.0), 0.0)
+        return float(c.sum()) - float(gt @ u) - gain
 
     def fit(self, terms: list[Term], max_steps: int = 30) -> FitResult:
         """Levenberg-Marquardt on the chunked normal equations; exact in one step for linear
@@ -503,6 +566,25 @@ def _solve(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.nda
     except (np.linalg.LinAlgError, ValueError):
         dz[keep] = np.linalg.lstsq(sub, (g / d)[keep], rcond=None)[0] / d[keep]
     return dz, keep
+
+
+def _solve_many(A: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """:func:`_solve` (``lam = 0``) for the columns of ``G`` at once."""
+    p = A.shape[0]
+    out = np.zeros((p, G.shape[1]))
+    if p == 0:
+        return out
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)]
+    rhs = (G / d[:, None])[keep]
+    try:
+        out[keep] = sla.solve(sub, rhs, assume_a="pos") / d[keep, None]
+    except (np.linalg.LinAlgError, ValueError):
+        out[keep] = np.linalg.lstsq(sub, rhs, rcond=None)[0] / d[keep, None]
+    return out
 
 
 def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:

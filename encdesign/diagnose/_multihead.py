@@ -222,6 +222,33 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
         )
         return e + oh @ p["offset_rad"]
 
+    def valjac(p, x):
+        # d e_k / d theta = sum_m m (b_m cos - a_m sin): the placement d_k moves head k's
+        # argument by -d_k, the run offset delta_r every sample of run r by +delta_r
+        oh = x["run_onehot"]
+        th = x["theta_raw"]
+        if R > 1:
+            th = th + oh[:, 1:] @ p["run_angle_offset_rad"]
+        alpha = x["alpha"]
+        if C > 1:
+            alpha = alpha + jnp.concatenate([jnp.zeros(1), p["placement_rad"]])
+        a, b = p["fourier_cos_rad"], p["fourier_sin_rad"]
+        m = jnp.arange(1, M + 1, dtype=th.dtype)
+        arg = m[None, None, :] * (th[:, None, None] - alpha[None, :, None])
+        cs, sn = jnp.cos(arg), jnp.sin(arg)
+        v = jnp.sum(a * cs + b * sn, axis=-1) + oh @ p["offset_rad"]
+        J = {
+            "offset_rad": oh[:, None, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, None, :],
+            "fourier_cos_rad": cs,
+            "fourier_sin_rad": sn,
+        }
+        slope = jnp.sum(m * (b * cs - a * sn), axis=-1)  # (n, C)
+        if C > 1:
+            J["placement_rad"] = -slope[:, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, 1:]
+        if R > 1:
+            J["run_angle_offset_rad"] = slope[:, :, None] * oh[:, None, 1:]
+        return v, J
+
     params = [
         Param("offset_rad", "rad", "runs*channels", description="constant per run and head"),
         Param("fourier_cos_rad", "rad", (M,), description="disk error, cos of orders 1..M"),
@@ -255,6 +282,7 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
         tuple(params),
         kinds=("multihead",),
         explanation="base model: disk error function, head placements, zeros",
+        valjac=valjac,
     )
 
 
