@@ -8,7 +8,8 @@ verdict or the set of named effects differs from the one with the defaults. The 
 of :mod:`encdesign.simulate._conceal_bench`, cases cycling over clean, single, weak,
 compound) and ``--n-variations`` records of ``benchmarks/finder_variations.py`` (clean and
 single effects). Prints one line per threshold and factor, and how many thresholds flip
-more than ``--flip`` (default 5 %) of the verdicts::
+more than ``--flip`` (default 5 %) of the verdicts; ``--json`` is rewritten after each
+threshold (``complete``: false until the last), so a stopped sweep keeps what it measured::
 
     python benchmarks/finder_sensitivity.py --kinds motion,multihead --n 2 \\
         --n-variations 2 --thresholds bic_min,heldout_min --json out.json
@@ -75,6 +76,32 @@ def outcome(rec, settings: FinderSettings) -> tuple[str, tuple[str, ...]]:
     return d["verdict"], tuple(sorted(e["name"] for e in d["effects"]))
 
 
+def write_json(path, args, kinds, recs, ref, rows, over, complete, elapsed_s) -> None:
+    """The sweep so far (``complete``: every threshold and factor done), written after each
+    threshold so that a sweep stopped early still leaves what it measured."""
+    with open(path, "w") as f:
+        json.dump(
+            dict(
+                kinds=kinds,
+                n=args.n,
+                n_variations=args.n_variations,
+                seed=args.seed,
+                factors=[float(x) for x in args.factors.split(",")],
+                flip=args.flip,
+                complete=complete,
+                thresholds_done=sorted({r["threshold"] for r in rows}),
+                elapsed_s=elapsed_s,
+                recordings=[lab for lab, _ in recs],
+                default={k: [v[0], list(v[1])] for k, v in ref.items()},
+                rows=rows,
+                over=over,
+            ),
+            f,
+            indent=1,
+            default=str,
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the sweep; returns 0."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -129,6 +156,10 @@ def main(argv: list[str] | None = None) -> int:
                 + "".join(f"\n    {f['recording']}: {f['default']} -> {f['moved']}" for f in flips),
                 flush=True,
             )
+        if args.json:
+            done = sorted({r["threshold"] for r in rows if r["share"] > args.flip})
+            el = time.perf_counter() - t0
+            write_json(args.json, args, kinds, recs, ref, rows, done, False, el)
     over = sorted({r["threshold"] for r in rows if r["share"] > args.flip})
     print(
         f"{len(over)} of {len(names)} thresholds flip more than {100 * args.flip:.0f} % of "
@@ -137,22 +168,8 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(
-                dict(
-                    kinds=kinds,
-                    n=args.n,
-                    n_variations=args.n_variations,
-                    seed=args.seed,
-                    recordings=[lab for lab, _ in recs],
-                    default={k: [v[0], list(v[1])] for k, v in ref.items()},
-                    rows=rows,
-                    over=over,
-                ),
-                f,
-                indent=1,
-                default=str,
-            )
+        el = time.perf_counter() - t0
+        write_json(args.json, args, kinds, recs, ref, rows, over, True, el)
     return 0
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from encdesign._errors import DiagnosisError
-from encdesign.diagnose import Diagnosis
+from encdesign.diagnose import Diagnosis, FinderSettings
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._engine import run_engine
 from encdesign.diagnose._multihead import MULTIHEAD
@@ -131,3 +131,53 @@ def test_a_doubt_without_dominance_still_refuses():
     d = diagnose(rec, settings=FinderSettings(dominant_ratio=1e9))
     assert not d.effects and d.verdict == "unexplained"
     assert any(r.rule == "bearing_wobble.plausible" for r in d.rejected)
+
+
+def _rules_of(d) -> list:
+    """Every rule name a diagnosis's JSON gives for a refusal, a not-testable candidate, a
+    confounded pair, a doubt or an alternative."""
+    doc = d.to_json()
+    out = [r.get("rule") for r in (*doc["rejected"], *doc["not_testable"], *doc["confounded"])]
+    out += [q for r in doc["rejected"] for q in r.get("rules", [])]
+    for e in doc["effects"]:
+        out += [c.get("rule") for c in (e.get("confounded_with") or ())]
+        out += [a.get("rule") for a in (e.get("alternatives") or ())]
+        if e.get("doubt"):
+            out.append(e["doubt"].get("rule"))
+    return out
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: diagnose(
+            slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=0),
+            settings=FinderSettings(dominant_ratio=1e9),
+        ),
+        lambda: diagnose(slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=1)),
+        lambda: diagnose(stepped_sensor_record(3, hysteresis_rad=4e-4)[0]),
+    ],
+    ids=["refused_wobble", "doubted_wobble", "stepped"],
+)
+def test_every_refusal_in_the_json_names_its_rule(make):
+    """Issue 22 acceptance: each refusal (and not-testable candidate, confounded pair,
+    doubt, alternative) in the JSON carries the name of the rule that decided it: a
+    ``FinderSettings`` field, a named rule or ``<candidate>.plausible``."""
+    from encdesign.diagnose._settings import is_rule_name
+
+    d = make()
+    validate_diagnosis(d.to_json())
+    rules = _rules_of(d)
+    assert rules, "no refusal to check"
+    bad = [r for r in rules if not is_rule_name(r)]
+    assert not bad, bad
+
+
+def test_rule_names_are_checked():
+    """The check above can fail: a missing or unknown rule is not a rule name."""
+    from encdesign.diagnose._settings import is_rule_name
+
+    assert is_rule_name("bic_min") and is_rule_name("bearing_wobble.plausible")
+    assert is_rule_name("better_candidate") and is_rule_name("applies")
+    assert not is_rule_name(None) and not is_rule_name("bic_minimum")
+    assert not is_rule_name(".plausible") and not is_rule_name("plausible")

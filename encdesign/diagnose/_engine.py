@@ -292,6 +292,7 @@ def confounded_pairs(effects: list[dict], refused_pairs: list[dict]) -> list[dic
                     else float(db - e["delta_bic"]),
                     "separate_by": c.get("separate_by", ""),
                     "reason": c["reason"] + f"; {e['name']} is named",
+                    "rule": c.get("rule") or "tie_corr",
                 }
             )
     return out + list(refused_pairs)

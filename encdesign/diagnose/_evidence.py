@@ -7,6 +7,7 @@ alternatives it is named with (:func:`alternatives`), and pairs the record canno
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -14,6 +15,50 @@ from ._candidates import Candidate
 from ._document import jsonable
 from ._fit import FitResult, Fitter
 from ._protocol import Prepared
+
+
+class Trial(NamedTuple):
+    """One candidate's full fit in a round of stage 4, against the current model."""
+
+    dbic: float
+    """Change of the information criterion (BIC); negative: the candidate is better."""
+    cand: Candidate
+    fit: FitResult
+    """The fit with the candidate's term last."""
+    dheldout: float
+    """How much it lowers the K-fold held-out chi-square."""
+    dchi2: float
+    """How much it lowers the chi-square."""
+    k_new: int
+    """Parameters it determines that the model did not (0: all already taken)."""
+
+
+class Refused(NamedTuple):
+    """A trial refused by a rule (for :func:`refused_pair`)."""
+
+    dbic: float
+    cand: Candidate
+    fit: FitResult
+    rule: str
+    """The name of the first rule that refused it."""
+
+
+class Chosen(NamedTuple):
+    """The trial a round names, with what its entry reports."""
+
+    cand: Candidate
+    fit: FitResult
+    dbic: float
+    dheldout: float
+    collinearity: float
+    """Canonical correlation with the base model."""
+    notes: list
+    term_rms: Any
+    explained_rms: Any
+    ties: list
+    """``confounded_with`` entries (trials it cannot be told from)."""
+    doubt: dict | None
+    """``{rule, reason}`` when a plausibility rule doubted it and it was named as dominant."""
 
 
 def tie_gap(
@@ -44,32 +89,32 @@ def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confoun
     out the same error (correlation above ``tie_corr``) are one ``confounded`` entry, not
     two refusals (the two best such of a round; one pass over the rows)."""
     s = prep.settings
-    good = sorted((r for r in refused if r[0] < -s.bic_min), key=lambda r: r[0])
+    good = sorted((r for r in refused if r.dbic < -s.bic_min), key=lambda r: r.dbic)
     for i in range(len(good) - 1):
         a, b = good[i], good[i + 1]
-        if a[3] != b[3] or b[0] - a[0] >= s.tie_chi2:
+        if a.rule != b.rule or b.dbic - a.dbic >= s.tie_chi2:
             continue
-        gap, corr = tie_gap(fitter, prep, cur_resid, a[2], b[2])
+        gap, corr = tie_gap(fitter, prep, cur_resid, a.fit, b.fit)
         if abs(gap) >= s.tie_chi2 or corr <= s.tie_corr:
             continue
-        why = [r for r in rejected if r["name"] in (a[1].name, b[1].name)]
-        rejected[:] = [r for r in rejected if r["name"] not in (a[1].name, b[1].name)]
+        why = [r for r in rejected if r["name"] in (a.cand.name, b.cand.name)]
+        rejected[:] = [r for r in rejected if r["name"] not in (a.cand.name, b.cand.name)]
         confounded.append(
             {
-                "pair": [a[1].name, b[1].name],
+                "pair": [a.cand.name, b.cand.name],
                 "correlation": float(corr),
-                "delta_bic": float(b[0] - a[0]),
-                "separate_by": separate_by(a[1], b[1], corr),
+                "delta_bic": float(b.dbic - a.dbic),
+                "separate_by": separate_by(a.cand, b.cand, corr),
                 "reason": f"the record cannot separate them (chi-square {gap:+.1f}, "
-                f"correlation {corr:.3f}); both refused by rule {a[3]}: "
+                f"correlation {corr:.3f}); both refused by rule {a.rule}: "
                 + "; ".join(f"{r['name']}: {r['reason']}" for r in why[:2]),
-                "rule": a[3],
+                "rule": a.rule,
             }
         )
         return
 
 
-def find_dominant(st, trials: list) -> tuple[Candidate | None, list]:
+def find_dominant(st, trials: list[Trial]) -> tuple[Candidate | None, list]:
     """``(candidate, partners)``: the first trial's candidate when it lowers the criterion
     far more than any other that is not the same fitted error (``dominant_ratio`` times and
     ``dominant_gap`` more than the next such trial, or than nothing), else ``(None, [])``;
@@ -77,33 +122,33 @@ def find_dominant(st, trials: list) -> tuple[Candidate | None, list]:
     ``tie_corr`` (at most two: one residual pass each), as ``(trial, chi2 gap, corr)``."""
     prep, fitter = st["prep"], st["fitter"]
     s = prep.settings
-    if not trials or trials[0][0] >= -s.bic_min:
+    if not trials or trials[0].dbic >= -s.bic_min:
         return None, []
-    d0 = trials[0][0]
+    d0 = trials[0].dbic
     partners = []
     d1 = 0.0
     for tr in trials[1:]:
-        if len(partners) < 2 and tr[0] < -s.bic_min and tr[5] > 0:
-            gap, corr = tie_gap(fitter, prep, st["cur_resid"], trials[0][2], tr[2])
+        if len(partners) < 2 and tr.dbic < -s.bic_min and tr.k_new > 0:
+            gap, corr = tie_gap(fitter, prep, st["cur_resid"], trials[0].fit, tr.fit)
             if corr > s.tie_corr:
                 partners.append((tr, gap, corr))
                 continue
-        d1 = min(tr[0], 0.0)
+        d1 = min(tr.dbic, 0.0)
         break
     if -d0 >= s.dominant_ratio * -d1 and d1 - d0 >= s.dominant_gap:
-        return trials[0][1], partners
+        return trials[0].cand, partners
     return None, []
 
 
-def rule_args(trial) -> tuple:
-    dbic, cand, fr, dho, dchi, _k = trial
-    return cand, fr, dbic, dho, dchi
+def rule_args(trial: Trial) -> tuple:
+    """``(cand, fit, dbic, dheldout, dchi2)``: the arguments of the criterion rules."""
+    return trial.cand, trial.fit, trial.dbic, trial.dheldout, trial.dchi2
 
 
-def partner_entry(chosen: Candidate, trial, gap: float, corr: float, dbic0: float) -> dict:
+def partner_entry(chosen: Candidate, trial: Trial, gap: float, corr: float, dbic0: float) -> dict:
     """A doubted dominant candidate's ``confounded_with`` entry for a trial that takes out
     the same error (correlation above ``tie_corr``) but fits worse by ``gap``."""
-    dbic, cand, fr = trial[0], trial[1], trial[2]
+    dbic, cand, fr = trial.dbic, trial.cand, trial.fit
     return {
         "name": cand.name,
         "reason": f"takes out the same error as {chosen.name} (correlation {corr:.3f}) and "
@@ -150,22 +195,24 @@ def separate_by(a: Candidate, b: Candidate, corr: float | None = None) -> str:
     return f"a record in which their fitted errors differ{c}: other speeds, directions or turns"
 
 
-def alternatives_of(chosen, trials: list) -> list[dict]:
+def alternatives_of(chosen: Chosen, trials: list[Trial]) -> list[dict]:
     """The other candidates of a doubted dominant one's round, best first (at most 3):
     name, their criterion, how much worse than the named one, what would tell them apart."""
     out = []
-    for dbic, cand, _fr, _dho, _dchi, _k in trials:
-        if cand is chosen[0] or len(out) >= 3:
+    assert chosen.doubt is not None
+    for tr in trials:
+        dbic, cand = tr.dbic, tr.cand
+        if cand is chosen.cand or len(out) >= 3:
             continue
         out.append(
             {
                 "name": cand.name,
                 "reason": f"fits, but worse: dBIC {dbic:.1f} vs the named "
-                f"{chosen[0].name}'s {chosen[2]:.1f}",
+                f"{chosen.cand.name}'s {chosen.dbic:.1f}",
                 "rule": "dominant_ratio",
                 "delta_bic": float(dbic),
-                "delta_bic_vs": float(dbic - chosen[2]),
-                "separate_by": separate_by(chosen[0], cand),
+                "delta_bic_vs": float(dbic - chosen.dbic),
+                "separate_by": separate_by(chosen.cand, cand),
             }
         )
     if not out:
@@ -173,8 +220,8 @@ def alternatives_of(chosen, trials: list) -> list[dict]:
             {
                 "name": "out_of_catalog",
                 "reason": "no other catalog candidate lowers the criterion here; the doubt "
-                f"names what could pose as it: {chosen[9]['reason']}",
-                "rule": chosen[9]["rule"],
+                f"names what could pose as it: {chosen.doubt['reason']}",
+                "rule": chosen.doubt["rule"],
                 "delta_bic": None,
                 "delta_bic_vs": None,
                 "separate_by": "the measurement the doubt asks for (see its reason)",

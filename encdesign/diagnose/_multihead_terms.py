@@ -195,7 +195,7 @@ def _wb_plausible(ctx, v):
     nu = float(v["frequency_ratio"])
     if nu <= 0:
         return f"frequency ratio {nu:.3g} is not positive"
-    if abs(nu - round(nu)) < 0.01:
+    if abs(nu - round(nu)) < ctx.settings.wobble_integer_tol:
         return f"frequency ratio {nu:.4f} is an integer: synchronous, not a wobble"
     st = ctx.settings
     revs = float(np.max(ctx.revolutions))
@@ -368,10 +368,11 @@ def _vb_plausible(ctx, v):
                 "separate them)"
             )
     T = float(np.max(_run_durations(ctx)))
-    if f * T < 3.0:
+    need = ctx.settings.vibration_cycles_min
+    if f * T < need:
         return (
             f"{f * T:.1f} cycles of {f:.3g} Hz in the longest run: a slow drift or a step "
-            "fits as well (needs 3)"
+            f"fits as well (needs {need:g})"
         )
     return None
 

@@ -90,18 +90,19 @@ def find_motion_segments(
     t: np.ndarray,
     tolerance: float = 0.1,
     window: float = 0.01,
-    reversal_share: float = DEFAULT_SETTINGS.reversal_piece_share,
+    settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> tuple[np.ndarray, list[dict]]:
     """Steady segments of one run.
 
     A sample is steady when the shaft turns in the direction of a long piece of the run at a
     speed within ``tolerance`` (relative) of that piece's median speed. Pieces are maximal
-    stretches of one direction; a piece shorter than 10 % of the run (or 50 samples) is a
-    return move, a reversal or a start-up, and samples slower than 10 % of the steady speed
-    are dwells. Each excluded stretch is widened by the speed window (settling). A piece
-    turning against the run's longest piece is kept from ``reversal_share`` of the run on
-    (and 50 samples; ``FinderSettings.reversal_piece_share``): a short move back after a
-    stop is where a direction offset shows.
+    stretches of one direction; a piece shorter than ``settings.segment_min_share`` of the
+    run (and ``segment_min_rows``) is a return move, a reversal or a start-up, and samples
+    slower than ``dwell_speed_share`` of the median speed are dwells. Each excluded stretch
+    is widened by the speed window or ``settling_share`` of the run (settling). A piece
+    turning against the run's longest piece is kept from ``reversal_piece_share`` of the run
+    on (and ``segment_min_rows``): a short move back after a stop is where a direction
+    offset shows.
 
     Returns:
         ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
@@ -114,14 +115,12 @@ def find_motion_segments(
     if n < 8:
         return np.zeros(n, dtype=int), out
     sgn = np.sign(w)
-    big = np.abs(w) > 0.1 * np.median(np.abs(w))
-    longest = max((b - a for a, b in _runs_of(big & (sgn > 0))), default=0)
-    longest = max(longest, max((b - a for a, b in _runs_of(big & (sgn < 0))), default=0))
-    min_len = max(50, int(0.1 * n), int(0.5 * longest) if longest < 0.2 * n else 0)
-    min_len = min(min_len, max(50, int(0.1 * n)))
+    st = settings
+    big = np.abs(w) > st.dwell_speed_share * np.median(np.abs(w))
+    min_len = max(st.segment_min_rows, int(st.segment_min_share * n))
     pieces = {s: _runs_of(big & (sgn == s)) for s in (1, -1)}
     main = max((1, -1), key=lambda s: max((b - a for a, b in pieces[s]), default=0))
-    back_len = min(min_len, max(50, int(reversal_share * n)))
+    back_len = min(min_len, max(st.segment_min_rows, int(st.reversal_piece_share * n)))
     sid = 0
     for s in (1, -1):
         for a, b in pieces[s]:
@@ -129,9 +128,10 @@ def find_motion_segments(
                 continue
             med = np.median(w[a:b])
             ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
-            # a piece starts and ends where the speed first / last comes within 10 % of its
-            # steady speed (a ramp is not steady even where it is inside a loose tolerance)
-            near = np.flatnonzero(np.abs(w[a:b] - med) <= 0.1 * abs(med))
+            # a piece starts and ends where the speed first / last comes within
+            # ramp_edge_tolerance of its steady speed (a ramp is not steady even where it is
+            # inside a loose tolerance)
+            near = np.flatnonzero(np.abs(w[a:b] - med) <= st.ramp_edge_tolerance * abs(med))
             # (a stretch shorter than the speed window is not resolved as a ramp: at a run's
             # end the window is one-sided and the estimate there leans on the last rows)
             if near.size:
@@ -140,21 +140,21 @@ def find_motion_segments(
                 if (b - a) - 1 - near[-1] >= win // 2 or b < n:
                     ok[near[-1] + 1 :] = False
             for c, d in _runs_of(ok):
-                if d - c >= min(min_len, 20):
+                if d - c >= min(min_len, st.segment_steady_rows):
                     seg[a + c : a + d] = sid
                     sid += 1
     # widen the exclusions (settling after a move)
     bad = seg < 0
     if bad.any() and not bad.all():
         widened = bad.copy()
-        h = max(win, n // 50)
+        h = max(win, int(st.settling_share * n))
         for a, b in _runs_of(bad):
             widened[max(0, a - h) : min(n, b + h)] = True
         seg[widened & ~bad] = -1
     for a, b in _runs_of(seg < 0):
         piece = w[a:b]
         steady = np.median(np.abs(w[seg >= 0])) if (seg >= 0).any() else 0.0
-        if np.median(np.abs(piece)) < 0.1 * steady:
+        if np.median(np.abs(piece)) < st.dwell_speed_share * steady:
             reason = "dwell (shaft nearly at rest)"
         elif (
             (seg[:a] >= 0).any()
@@ -294,14 +294,19 @@ def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
 
 
 def find_glitches(
-    r: np.ndarray, seg: np.ndarray, project: bool, t: np.ndarray | None = None
+    r: np.ndarray,
+    seg: np.ndarray,
+    project: bool,
+    t: np.ndarray | None = None,
+    settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> tuple[list[tuple[int, int]], list[tuple[int, int, float]]]:
     """Single-sample glitches and count jumps in ``r`` (n, C).
 
     On the second differences (any grid, :func:`_noise_d2`), a glitch of size g at row i
     gives ``(-1, 2, -1) g`` at rows ``i-1, i, i+1``; a step between rows i-1 and i gives
     ``(s, -s)`` at ``i-1, i``. Outliers beyond the Gaussian quantile at ``1e-4 / n`` (MAD
-    scale) are classified by that pattern; a clean record has none.
+    scale) are classified by that pattern (neighbour ratios: ``settings.glitch_neighbour_*``
+    and ``jump_neighbour_*``); a clean record has none.
 
     Returns:
         ``([(row, channel)] glitches, [(row of the first new value, channel, size)] jumps)``;
@@ -327,6 +332,8 @@ def find_glitches(
     pos = {int(centre[i]): int(i) for i in near}
     z = {int(i): d2[i] / s for i in near}
     hit_rows = sorted({int(centre[i]) for i in hit_idx})
+    lo_g, hi_g = settings.glitch_neighbour_min, settings.glitch_neighbour_max
+    lo_j, hi_j = settings.jump_neighbour_min, settings.jump_neighbour_max
     done: set[int] = set()
     for row in hit_rows:
         if row in done:
@@ -344,14 +351,15 @@ def find_glitches(
         if (
             np.sign(zl) == -np.sign(zi)
             and np.sign(zr) == -np.sign(zi)
-            and (0.25 < abs(zl / zi) < 0.75 and 0.25 < abs(zr / zi) < 0.75)
+            and lo_g < abs(zl / zi) < hi_g
+            and lo_g < abs(zr / zi) < hi_g
         ):
             out_g.append((row, kk))
             done |= {row - 1, row, row + 1}
             continue
         # step: the neighbour of opposite sign and similar size
         for nb, zn in ((row + 1, zr), (row - 1, zl)):
-            if np.sign(zn) == -np.sign(zi) and 0.6 < abs(zn / zi) < 1.6:
+            if np.sign(zn) == -np.sign(zi) and lo_j < abs(zn / zi) < hi_j:
                 first = max(row, nb)
                 size = float(-d2[i, k] / 2.0 * (1 if first == row + 1 else -1))
                 # the step size: jump of the level between the two rows
@@ -491,7 +499,7 @@ def _segments(kd: KindData, run: np.ndarray, order_runs: np.ndarray, settings: F
                     t[sub],
                     steady_tolerance(kd, settings),
                     kd.speed_window,
-                    settings.reversal_piece_share,
+                    settings,
                 )
             for sid in np.unique(s_id[s_id >= 0]):
                 m = sub[s_id == sid]
@@ -537,7 +545,7 @@ def _mask_rows(kd: KindData, seg, run, order_runs, excluded) -> np.ndarray:
     return seg_motion
 
 
-def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort):
+def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort, settings):
     """Glitches and count jumps on a first detrended residual (``keep`` updated in place),
     and the noise per channel (robust first). Returns ``(kd, glitches, count_jumps, seg_eff,
     sigma)``."""
@@ -547,7 +555,7 @@ def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort):
     y = kd.y - kd.y.mean(1, keepdims=True) if kd.project else kd.y
     if y is not kd.y:  # one (n, C) array held, not two
         kd = dataclasses.replace(kd, y=y)
-    glitches_raw, jumps_raw = find_glitches(_detrend(y, seg), seg, kd.project, t)
+    glitches_raw, jumps_raw = find_glitches(_detrend(y, seg), seg, kd.project, t, settings)
     glitches, count_jumps = [], []
     for i, k in glitches_raw:
         keep[i] = False
@@ -685,7 +693,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
             where, "no steady segment of at least 32 rows", "a shaft turning steadily"
         )
     kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
-        kd, seg, keep, run, order_runs, sort
+        kd, seg, keep, run, order_runs, sort, settings
     )
     ang = kd.theta_ref if kd.theta_ref is not None else kd.shaft  # recurring: of the angle
     steps_of_angle, count_jumps = angle_steps(count_jumps, ang, settings)

@@ -362,7 +362,7 @@ def _signal_shape(orders: tuple[int, ...]) -> Candidate:
 
     def plausible(ctx: Context, v: dict) -> str | None:
         amp = float(np.max(np.hypot(v["cos"], v["sin"])))
-        if amp > 0.3:
+        if amp > ctx.settings.signal_shape_max:
             return f"a radial harmonic of {amp:.2f} of the radius is not a signal shape"
         return None
 

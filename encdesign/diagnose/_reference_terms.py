@@ -84,7 +84,7 @@ def _hyst_plausible(ctx: Context, p: dict) -> str | None:
 
 def _hyst_derived(ctx: Context, p: dict, se: dict) -> dict:
     w = np.abs(np.asarray(ctx.rows["omega"], dtype=np.float64))
-    if w.size == 0 or np.max(w) <= 0 or np.ptp(w) > 0.2 * np.max(w):
+    if w.size == 0 or np.max(w) <= 0 or np.ptp(w) > ctx.settings.speed_spread_min * np.max(w):
         return {}
     h = float(np.asarray(p["hysteresis_rad"]))
     s_h = float(np.asarray(se.get("hysteresis_rad", np.nan)))
@@ -101,11 +101,12 @@ def _delay_applies(ctx: Context) -> str | None:
     if why:
         return why
     runs = [np.abs(w) for w in _by_run(ctx, "omega") if w.size]
-    within = any(np.ptp(w) > 0.2 * np.max(w) for w in runs if np.max(w) > 0)
+    spread = ctx.settings.speed_spread_min
+    within = any(np.ptp(w) > spread * np.max(w) for w in runs if np.max(w) > 0)
     if within:
         return None
     allw = np.concatenate(runs) if runs else np.zeros(0)
-    vary = allw.size > 0 and np.ptp(allw) > 0.2 * np.max(allw)
+    vary = allw.size > 0 and np.ptp(allw) > spread * np.max(allw)
     if _both_directions(ctx):
         # at one speed in both directions a delay -omega*tau is the same column as a
         # direction offset h = -2|omega|tau: it is tried, and the engine reports the two as

@@ -13,6 +13,9 @@ import numpy as np
 from ._candidates import Candidate
 from ._document import jsonable
 from ._evidence import (
+    Chosen,
+    Refused,
+    Trial,
     alternatives_of,
     find_dominant,
     only_doubts,
@@ -243,15 +246,15 @@ def _sort_trials(trials: list, applicable: list) -> None:
     """By dBIC; candidates equal to rounding (the same fitted error, e.g. an offset per
     direction and a delay at one speed), wherever they stand: the catalog's order decides,
     not the last digit."""
-    trials.sort(key=lambda x: x[0])
+    trials.sort(key=lambda x: x.dbic)
     rank = {c.name: i for i, c in enumerate(applicable)}
     g0 = 0
     while g0 < len(trials):
-        tol = 1e-7 * max(1.0, abs(trials[g0][0]))
+        tol = 1e-7 * max(1.0, abs(trials[g0].dbic))
         g1 = g0 + 1
-        while g1 < len(trials) and trials[g1][0] - trials[g0][0] <= tol:
+        while g1 < len(trials) and trials[g1].dbic - trials[g0].dbic <= tol:
             g1 += 1
-        trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x[1].name])
+        trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x.cand.name])
         g0 = g1
 
 
@@ -334,19 +337,19 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
     """A candidate the data cannot tell from the chosen one (``tie_chi2``, ``tie_corr``):
     its ``confounded_with`` entry, else ``None``."""
     s = prep.settings
-    gap, corr = tie_gap(fitter, prep, cur_resid, chosen[1], fr)
+    gap, corr = tie_gap(fitter, prep, cur_resid, chosen.fit, fr)
     if not (gap < s.tie_chi2 and corr > s.tie_corr):
         return None
     return {
         "name": cand.name,
-        "reason": f"the data cannot tell it from {chosen[0].name}: it fits as well "
+        "reason": f"the data cannot tell it from {chosen.cand.name}: it fits as well "
         f"(chi-square {gap:+.1f}, needs {s.tie_chi2:.0f} to decide) and its fitted error is "
         f"the same (correlation {corr:.3f})",
         "rule": "tie_chi2",
         "delta_bic": float(dbic),
         "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
         "correlation": float(corr),
-        "separate_by": separate_by(chosen[0], cand, corr),
+        "separate_by": separate_by(chosen.cand, cand, corr),
     }
 
 
@@ -358,14 +361,14 @@ def _choose(
     refused by the same rule that the record cannot separate: one ``confounded`` entry."""
     prep, fitter = st["prep"], st["fitter"]
     s = prep.settings
-    chosen = None
     step_fits: dict = {}
     dominant, partners = None, []
-    if trials and trials[0][5] > 0 and trials[0][0] < -s.bic_min:
+    if trials and trials[0].k_new > 0 and trials[0].dbic < -s.bic_min:
         r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
-        if r0 and only_doubts(trials[0][1], r0):  # only then is dominance worth a pass
+        if r0 and only_doubts(trials[0].cand, r0):  # only then is dominance worth a pass
             dominant, partners = find_dominant(st, trials)
-    refused: list = []
+    refused: list[Refused] = []
+    chosen: Chosen | None = None
     for dbic, cand, fr, dho, dchi, k_new in trials:
         if k_new == 0:
             reason = (
@@ -386,15 +389,16 @@ def _choose(
             reasons = []
         if reasons:
             rejected.append(_refusal(cand.name, reasons, dbic))
-            refused.append((dbic, cand, fr, reasons[0][0]))
+            refused.append(Refused(dbic, cand, fr, reasons[0][0]))
             continue
         if chosen is not None:
             tie = _tie_entry(prep, fitter, st["cur_resid"], chosen, cand, fr, dbic)
             if tie is not None:  # not decided by the criterion: reported with the chosen
-                chosen[8].append(tie)
+                chosen.ties.append(tie)
                 continue
             reason = (
-                f"{chosen[0].name} lowers the criterion more (dBIC {chosen[2]:.1f} vs {dbic:.1f})"
+                f"{chosen.cand.name} lowers the criterion more "
+                f"(dBIC {chosen.dbic:.1f} vs {dbic:.1f})"
             )
             rejected.append(_refusal(cand.name, [("better_candidate", reason)], dbic))
             continue
@@ -433,9 +437,9 @@ def _choose(
                 "criterion far more than any other candidate (see alternatives)"
             )
         ties = [partner_entry(cand, tr, gap, corr, dbic) for tr, gap, corr in partners]
-        chosen = (cand, fr, dbic, dho, col, notes, trms, erms, ties if doubt else [], doubt)
-    if chosen is not None and chosen[9] is not None:
-        rejected[:] = [r for r in rejected if not (r["name"] == chosen[0].name)]
+        chosen = Chosen(cand, fr, dbic, dho, col, notes, trms, erms, ties if doubt else [], doubt)
+    if chosen is not None and chosen.doubt is not None:
+        rejected[:] = [r for r in rejected if not (r["name"] == chosen.cand.name)]
     refused_pair(prep, fitter, st["cur_resid"], refused, rejected, confounded)
     return chosen
 
@@ -547,7 +551,7 @@ def select(
             free_steps=free_steps(prep, findings),
             change_steps=free_steps(prep, findings, at_changes=True),
         )
-        trials = []
+        trials: list[Trial] = []
         for cand in applicable:
             if cand.name in {s.name for s in accepted}:
                 continue
@@ -563,7 +567,7 @@ def select(
             k = best.n_determined(len(best.terms) - 1)
             dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
             dho = current.heldout_chi2 - best.heldout_chi2
-            trials.append((dbic, cand, best, dho, dchi, k))
+            trials.append(Trial(dbic, cand, best, dho, dchi, k))
         _sort_trials(trials, applicable)
         del kept[:]
         chosen = _choose(

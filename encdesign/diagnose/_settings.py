@@ -240,6 +240,79 @@ class FinderSettings(eqx.Module):
     returns to its start); missed counts at one angle accumulate and stay count jumps. Issue
     22 item 4 (a box: two steps of opposite sizes)."""
 
+    glitch_neighbour_min: float = eqx.field(default=0.25, static=True)
+    """A second-difference outlier is a single-sample glitch (pattern ``(-1, 2, -1) g``, each
+    neighbour half the centre, of opposite sign) when both neighbours are of opposite sign
+    and above this share of the centre ... (:func:`._prepare.find_glitches`). Was an inline
+    0.25 in ``_prepare`` (no recorded evidence; ``tests/test_engine.py``'s generated glitches
+    and jumps are classified with it; issue 22 item 2 moved it, no verdict changed on
+    ``finder_variations`` effects / clean, seeds 21-22)."""
+
+    glitch_neighbour_max: float = eqx.field(default=0.75, static=True)
+    """... and below this share (the ideal 0.5 within noise), with
+    ``glitch_neighbour_min``. Was an inline 0.75 in ``_prepare``."""
+
+    jump_neighbour_min: float = eqx.field(default=0.6, static=True)
+    """A second-difference outlier with a neighbour of opposite sign and a magnitude above
+    this share of it ... is a count jump (pattern ``(s, -s)``, ideal ratio 1; otherwise a
+    glitch). Was an inline 0.6 in ``_prepare``."""
+
+    jump_neighbour_max: float = eqx.field(default=1.6, static=True)
+    """... and below this ratio, with ``jump_neighbour_min``. Was an inline 1.6 in
+    ``_prepare``."""
+
+    segment_min_share: float = eqx.field(default=0.1, static=True)
+    """A piece of one direction shorter than this share of its run (and than
+    ``segment_min_rows``) is a return move, a reversal or a start-up and is left out of
+    every fit (pieces turning against the longest one: ``reversal_piece_share``). Was an
+    inline 10 % in :func:`._prepare.find_motion_segments` (moved unchanged in issue 22 item
+    2: no verdict changed on ``finder_variations`` effects / clean, seeds 21-22)."""
+
+    segment_min_rows: int = eqx.field(default=50, static=True)
+    """The least rows of a kept piece of one direction (either direction), with
+    ``segment_min_share`` and ``reversal_piece_share``. Was an inline 50 in
+    ``_prepare``."""
+
+    segment_steady_rows: int = eqx.field(default=20, static=True)
+    """A steady stretch inside a kept piece is a segment only with at least this many rows
+    (or the piece minimum, if smaller). Was an inline 20 in ``_prepare``."""
+
+    dwell_speed_share: float = eqx.field(default=0.1, static=True)
+    """Rows slower than this share of the run's median speed belong to no piece (a dwell,
+    the shaft nearly at rest), and an excluded stretch slower than this share of the steady
+    speed is reported as a dwell. Was an inline 10 % (twice) in ``_prepare`` (the forward /
+    stop / back profiles of ``tests/test_nuisances.py`` pass with it)."""
+
+    ramp_edge_tolerance: float = eqx.field(default=0.1, static=True)
+    """A piece starts and ends where its smoothed speed first / last comes within this
+    relative deviation of its steady speed (a ramp is not steady even inside a loose
+    ``steady_tolerance_drive``). Was an inline 10 % in ``_prepare``."""
+
+    settling_share: float = eqx.field(default=0.02, static=True)
+    """Each excluded stretch is widened by this share of the run (or the speed window, if
+    wider) on both sides: the settling after a move. Was an inline ``n // 50`` in
+    ``_prepare``."""
+
+    vibration_cycles_min: float = eqx.field(default=3.0, static=True)
+    """Rule ``vibration.plausible``: a vibration needs at least this many cycles of its
+    frequency in the longest run (with fewer, a slow drift or a step fits as well). Was an
+    inline 3.0 in ``_multihead_terms`` (first vibration candidate), like
+    ``wobble_cycles_min``."""
+
+    wobble_integer_tol: float = eqx.field(default=0.01, static=True)
+    """Rule ``bearing_wobble.plausible``: a frequency ratio within this of an integer is a
+    synchronous error, not a wobble. Was an inline 0.01 in ``_multihead_terms``."""
+
+    speed_spread_min: float = eqx.field(default=0.2, static=True)
+    """``reading_delay`` is testable within one run (rule ``applies``) when its speeds
+    spread by more than this share of the largest; below it the speed is one speed (the
+    hysteresis's equivalent delay is then reported). Was an inline 0.2 (three times) in
+    ``_reference_terms``."""
+
+    signal_shape_max: float = eqx.field(default=0.3, static=True)
+    """Rule ``signal_shape.plausible`` (quadrature): a radial harmonic above this share of
+    the signal radius is not a signal shape. Was an inline 0.3 in ``_quadrature``."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
@@ -252,6 +325,23 @@ class FinderSettings(eqx.Module):
 DEFAULT_SETTINGS = FinderSettings()
 
 SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
+
+NAMED_RULES = ("identifiable", "better_candidate", "applies")
+"""Acceptance rules that are not a threshold: all parameters already taken
+(``identifiable``), another candidate lowers the criterion more (``better_candidate``), the
+candidate cannot be tested on this record (``applies``); with ``<candidate>.plausible``."""
+
+
+def is_rule_name(name: object) -> bool:
+    """Whether ``name`` names an acceptance rule: a :class:`FinderSettings` field, one of
+    :data:`NAMED_RULES`, or ``<candidate>.plausible``."""
+    if not isinstance(name, str):
+        return False
+    if name in SETTINGS_FIELDS or name in NAMED_RULES:
+        return True
+    head, _, tail = name.rpartition(".")
+    return tail == "plausible" and head.isidentifier()
+
 
 CHUNK_ROWS = 8192
 CACHE_BYTES = 6.0e7
