@@ -253,11 +253,22 @@ def _readings_bwd(res, e_bar):
     over_n = lambda x: jnp.sum(x, axis=0, keepdims=True)  # noqa: E731
     per_angle = (nx_b, ny_b, nz_b, lx_b, ly_b, lz_b, wx_b, wy_b, wz_b, ct_b, st_b)
     per_head = (ux_b, uy_b, uz_b, -wx_b, -wy_b, -wz_b, ca_b, sa_b)
-    return (
-        (*(over_h(x) for x in per_angle), *(over_n(x) for x in per_head)),
-        sin_bar,
-        cos_bar,
-    )
+    bars = (*(over_h(x) for x in per_angle), *(over_n(x) for x in per_head))
+    return tuple(_unvary_like(b, x) for b, x in zip(bars, frame, strict=True)), sin_bar, cos_bar
+
+
+def _unvary_like(bar: Array, x: Array) -> Array:
+    """Inside ``shard_map``: the cotangent of an input that does not vary over a mesh axis
+    (the shaft angles, replicated) is summed over that axis, as JAX's own transposition does."""
+    extra = tuple(sorted(_varying(bar) - _varying(x)))
+    return jax.lax.psum(bar, extra) if extra else bar
+
+
+def _varying(x: Array) -> frozenset:
+    """The mesh axes ``x`` varies over inside ``shard_map`` (empty outside)."""
+    aval = jax.typeof(x)
+    mat = getattr(aval, "mat", None)  # JAX >= 0.10: manual axis type; earlier: .vma
+    return frozenset(getattr(mat, "varying", None) or getattr(aval, "vma", None) or ())
 
 
 _readings.defvjp(_readings_fwd, _readings_bwd)
