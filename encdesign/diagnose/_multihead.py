@@ -209,7 +209,8 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
     """The base term for C heads, R runs and orders 1..M (one object per shape, so one
     compiled Jacobian serves every record of that shape)."""
 
-    def fn(p, x):
+    def shifted(p, x):
+        """Run one-hot, shaft angles with the run offsets, head azimuths with placements."""
         oh = x["run_onehot"]
         th = x["theta_raw"]
         if R > 1:
@@ -217,6 +218,10 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
         alpha = x["alpha"]
         if C > 1:
             alpha = alpha + jnp.concatenate([jnp.zeros(1), p["placement_rad"]])
+        return oh, th, alpha
+
+    def fn(p, x):
+        oh, th, alpha = shifted(p, x)
         e = fx.base_error_rad(
             th, alpha, p["fourier_cos_rad"], p["fourier_sin_rad"], jnp.zeros_like(alpha)
         )
@@ -225,13 +230,7 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
     def valjac(p, x):
         # d e_k / d theta = sum_m m (b_m cos - a_m sin): the placement d_k moves head k's
         # argument by -d_k, the run offset delta_r every sample of run r by +delta_r
-        oh = x["run_onehot"]
-        th = x["theta_raw"]
-        if R > 1:
-            th = th + oh[:, 1:] @ p["run_angle_offset_rad"]
-        alpha = x["alpha"]
-        if C > 1:
-            alpha = alpha + jnp.concatenate([jnp.zeros(1), p["placement_rad"]])
+        oh, th, alpha = shifted(p, x)
         a, b = p["fourier_cos_rad"], p["fourier_sin_rad"]
         m = jnp.arange(1, M + 1, dtype=th.dtype)
         arg = m[None, None, :] * (th[:, None, None] - alpha[None, :, None])
