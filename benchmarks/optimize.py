@@ -56,7 +56,7 @@ import numpy as np
 import encdesign  # noqa: F401  (float64)
 from encdesign.design import _distributed as dist
 from encdesign.design._drivers import VECTOR_BUILDS, build_normals, values_of_normals
-from encdesign.design._objectives import _deviation_sizes
+from encdesign.design import deviation_sizes
 from encdesign.design._rare import importance_yield
 from encdesign.objectives import (
     TOLERANCE_NAMES,
@@ -246,7 +246,7 @@ def rare_event(args: argparse.Namespace) -> dict:
     se_c = math.sqrt(pf_c * (1 - pf_c) / n)
     group_of = {"eccentricity": 0, "tilt": 1, "placement": 2, "grating_sin": 3,
                 "grating_cos": 3, "beam_tilt": 4, "axial_cos": 5, "axial_sin": 5}  # fmt: skip
-    groups = [group_of[k] for k, m in _deviation_sizes(d).items() for _ in range(m)]
+    groups = [group_of[k] for k, m in deviation_sizes(d).items() for _ in range(m)]
     res = importance_yield(
         lambda z: residual_rms(d, tol, z),
         dim,
