@@ -419,7 +419,9 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
     }
     doc["spectrum"] = order_spectrum(prep, sel.base_resid, sel.final_resid, scan)
     # issue 22 item 4: a record mostly excluded is said so, with the reasons
-    doc["excluded_share"] = excluded_share(prep.n, int(prep.keep.sum()), prep.excluded)
+    doc["excluded_share"] = excluded_share(
+        prep.n, int(prep.keep.sum()), prep.excluded, prep.settings
+    )
     doc.update(kind.summary(prep, base_params))
     return doc
 

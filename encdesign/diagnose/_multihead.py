@@ -113,7 +113,7 @@ def stepped_segments(kd: KindData, settings: FinderSettings) -> None:
         kd.y.shape[1] == 1
         and kd.theta_ref is not None
         and _stepped.is_stepped(
-            kd.shaft, kd.t, kd.run, steady_tolerance(kd, settings), kd.speed_window
+            kd.shaft, kd.t, kd.run, steady_tolerance(kd, settings), kd.speed_window, settings
         )
     ):
         kd.segments = _stepped.stepped_segments(kd.shaft, kd.t, kd.run)
@@ -386,8 +386,8 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     error; it matters for large errors, e.g. magnetic or capacitive heads, and makes
     harmonics no catalog effect has). The angle becomes ``shaft - mean_k e_k(angle)`` (fixed
     point, ``SHAFT_ITERATIONS`` passes, a lazy column computed per chunk) when that moves
-    the fitted readings by more than a tenth of the noise; returns a note saying so when it
-    did (the caller refits the base), else None."""
+    the fitted readings by more than ``FinderSettings.refine_shaft_min_noise`` of the
+    noise; returns a note saying so when it did (the caller refits the base), else None."""
     if prep.ctx.has_ref or prep.n_channels < 2:
         return None
     base = next((t for t in terms if t.cand.name == "base"), None)
@@ -415,7 +415,9 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
         ss += float(np.sum(moved[kb] ** 2))
         nk += int(kb.sum())
     size = math.sqrt(ss / max(nk, 1))
-    if not math.isfinite(size) or size < 0.1 * float(np.min(prep.sigma)):
+    if not math.isfinite(size) or size < prep.settings.refine_shaft_min_noise * float(
+        np.min(prep.sigma)
+    ):
         return None
     prep.rows.set_lazy("theta_raw", corrected)
     return (
@@ -447,7 +449,7 @@ def multihead_base(prep: Prepared, M: int):
         bad = []
         for m in range(1, M + 1):
             v = np.exp(-1j * m * alpha)
-            if np.sum(np.abs(v - v.mean()) ** 2) / C <= 0.05:
+            if np.sum(np.abs(v - v.mean()) ** 2) / C <= prep.settings.head_pattern_min:
                 bad.append(m)
         info["unidentifiable"] += [
             "every error common to all heads at one sample (no theta_ref: the shaft angle is "

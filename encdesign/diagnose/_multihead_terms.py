@@ -104,9 +104,9 @@ def _bt_make(project: bool) -> Candidate:
 
 def _bt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
     """The runout orders (1-3) the rotation-locked orders view located (else the spectrum's
-    lines within 0.02 of an integer order), with at least a tenth of the strongest one's
-    power (a strong order leaks a little into its neighbours over a few turns); all three
-    when none is."""
+    lines within ``FinderSettings.integer_order_tol`` of an integer order), with at least
+    ``runout_order_share`` of the strongest one's power (a strong order leaks a little into
+    its neighbours over a few turns); all three when none is."""
 
     def located(views, tol):
         pw = np.zeros(3)
@@ -116,11 +116,11 @@ def _bt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
                     if np.isfinite(o) and round(o) in (1, 2, 3) and abs(o - round(o)) < tol:
                         j = int(round(o)) - 1
                         pw[j] = max(pw[j], f.power - f.dof)
-        return (pw > 0) & (pw >= 0.1 * pw.max())
+        return (pw > 0) & (pw >= ctx.settings.runout_order_share * pw.max())
 
-    on = located(("orders",), 0.5)
+    on = located(("orders",), 0.5)  # the orders view: nearest integer
     if not on.any():
-        on = located(("spectrum",), 0.02)
+        on = located(("spectrum",), ctx.settings.integer_order_tol)
     if not on.any():
         on[:] = True
     return [{"orders_on": on.astype(float)}]
@@ -242,8 +242,9 @@ BEARING_WOBBLE = Candidate(
     "sums like eccentricity.",
     applies=lambda ctx: (
         None
-        if float(np.sum(ctx.revolutions)) >= 2
-        else "needs at least two revolutions to resolve a fractional order"
+        if float(np.sum(ctx.revolutions)) >= ctx.settings.wobble_revolutions_min
+        else f"needs at least {ctx.settings.wobble_revolutions_min:g} revolutions to resolve "
+        "a fractional order"
     ),
     start=_wb_start,
     plausible=_wb_plausible,
@@ -267,7 +268,7 @@ def _one_speed(ctx) -> float | None:
     """The steady speed (rad/s) when every kept row turns at one |speed|, else ``None``."""
     w = np.abs(np.asarray(ctx.rows["omega"], float))
     w = w[w > 0]
-    if w.size and np.ptp(w) <= 0.05 * np.max(w):
+    if w.size and np.ptp(w) <= ctx.settings.one_speed_spread * np.max(w):
         return float(np.median(w))
     return None
 
@@ -352,7 +353,7 @@ def _vb_plausible(ctx, v):
     w = _one_speed(ctx)
     if w is not None:
         order = f / (w / (2 * np.pi))
-        res = max(0.02, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
+        res = max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
         margin = float(np.asarray(v.get("locked_margin", 0.0)))
         # within the span's resolution of an integer order, the data must show that it is
         # not rotation locked (the line beats the locked order by FinderSettings.locked_margin)
@@ -542,7 +543,10 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     C, R = prep.n_channels, prep.ctx.n_runs
     if C == 1 and prep.ctx.has_ref:  # a sensor against a reference: no disk on a hub
         return []
-    if kidx.size < 64 or float(np.sum(prep.ctx.revolutions)) < 1.0:
+    s = prep.settings
+    if kidx.size < s.order_step_min_rows or float(np.sum(prep.ctx.revolutions)) < (
+        s.order_step_revolutions_min
+    ):
         return []
     P = R * C + 2
     nb = int(min(ORDER_STEP_BINS, kidx.size // 8))

@@ -1,7 +1,7 @@
 """Nuisances of measured benches (issue 22, item 4): plain functions the engine calls.
 
-The excluded-share threshold is set by the issue (:data:`EXCLUDED_SHARE_WARN`); the
-others are :class:`~._settings.FinderSettings` fields.
+Every threshold is a :class:`~._settings.FinderSettings` field (the excluded share,
+``excluded_share_warn``, is set by the issue).
 """
 
 from __future__ import annotations
@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 LATE_STAMPS_REASON = "late time stamps after a logger gap (buffered samples stamped on arrival)"
 """The ``excluded_segments[].reason`` of the first rows after a gap whose host time stamps
@@ -36,14 +38,16 @@ def late_stamp_rows(dt_after: np.ndarray, dt_median: float, ratio: float) -> int
     return int(short.size if short.all() else np.argmin(short))
 
 
-EXCLUDED_SHARE_WARN = 1.0 / 3.0
-"""Share of a record's rows left out of every fit (non-steady motion, gaps, masks, glitches)
-above which the diagnosis says so prominently, with the reasons (issue 22: "excluding more
-than a third of a record is reported prominently with the reason"). Set by the issue, not
-tuned: a third of the rows is where the kept part no longer stands for the record."""
+EXCLUDED_SHARE_WARN = DEFAULT_SETTINGS.excluded_share_warn
+"""The default of ``FinderSettings.excluded_share_warn`` (kept for callers of the old name)."""
 
 
-def excluded_share(n_rows: int, n_kept: int, excluded: Sequence[dict]) -> dict | None:
+def excluded_share(
+    n_rows: int,
+    n_kept: int,
+    excluded: Sequence[dict],
+    settings: FinderSettings = DEFAULT_SETTINGS,
+) -> dict | None:
     """The prominent note on a record mostly left out of the fit, or ``None``.
 
     Args:
@@ -52,12 +56,13 @@ def excluded_share(n_rows: int, n_kept: int, excluded: Sequence[dict]) -> dict |
 
     Returns:
         ``{"share", "n_rows_excluded", "threshold", "reasons": {reason: rows}, "note"}``
-        when more than :data:`EXCLUDED_SHARE_WARN` of the rows are excluded.
+        when more than ``settings.excluded_share_warn`` of the rows are excluded.
     """
     if n_rows <= 0:
         return None
     share = 1.0 - n_kept / n_rows
-    if share <= EXCLUDED_SHARE_WARN:
+    warn = settings.excluded_share_warn
+    if share <= warn:
         return None
     reasons: dict[str, int] = {}
     for e in excluded:
@@ -72,7 +77,7 @@ def excluded_share(n_rows: int, n_kept: int, excluded: Sequence[dict]) -> dict |
     return dict(
         share=share,
         n_rows_excluded=int(n_rows - n_kept),
-        threshold=EXCLUDED_SHARE_WARN,
+        threshold=warn,
         reasons=dict(top),
         note=note,
     )
@@ -127,7 +132,9 @@ def step_context(prep, entry: dict) -> dict | None:
     lo, hi = max(i - near, 1), min(i + near + 1, rows.size)
     span = np.arange(lo, hi)
     rev = span[d[span] != d[span - 1]]
-    fast = np.abs(w[span] - w[span - 1]) > 0.05 * np.maximum(np.abs(w[span]), np.abs(w[span - 1]))
+    fast = np.abs(w[span] - w[span - 1]) > prep.settings.speed_change_min * np.maximum(
+        np.abs(w[span]), np.abs(w[span - 1])
+    )
     spd = span[fast]
     j = int(rev[np.argmin(np.abs(rev - i))]) if rev.size else None
     if j is not None:
@@ -202,7 +209,7 @@ def angle_steps(jumps: list[dict], theta: np.ndarray, settings) -> tuple[list[di
         for g in _clusters(phi, tol):
             med = float(np.median(size[g]))
             if g.size >= settings.angle_step_passes and np.all(
-                np.abs(size[g] - med) <= 0.5 * abs(med)
+                np.abs(size[g] - med) <= settings.angle_step_size_tol * abs(med)
             ):
                 ang = float(np.angle(np.mean(np.exp(1j * phi[g]))) % (2 * np.pi))
                 found.append((g, ang, med))

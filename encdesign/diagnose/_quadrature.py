@@ -49,6 +49,7 @@ from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
 from ._kind import AbstractKind
 from ._protocol import KindData, Prepared
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
 
@@ -116,15 +117,21 @@ def ray_radius(p, q, a, b, alpha, psi):
 
 
 def detect_clipping(
-    sa: np.ndarray, sb: np.ndarray, ellipse: np.ndarray, *, band: float = 0.002
+    sa: np.ndarray,
+    sb: np.ndarray,
+    ellipse: np.ndarray,
+    *,
+    band: float = 0.002,
+    settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> dict:
     """Find signals stuck at a level the fitted ellipse would exceed (saturation).
 
-    A channel extreme is called clipped when more than three times the samples a sinusoid
-    would put within ``band`` (relative to the amplitude) of its peak sit at the observed
-    extreme, and the ellipse fitted to all samples reaches more than 1 % of the amplitude
-    beyond it. Returns ``mask`` (samples at a clipped level), ``channels`` (one dict per
-    clipped channel extreme) and ``phase_deg`` (the phases where clipping happens).
+    A channel extreme is called clipped when more than ``settings.clip_excess_ratio`` times
+    the samples a sinusoid would put within ``band`` (relative to the amplitude) of its peak
+    sit at the observed extreme, and the ellipse fitted to all samples reaches more than
+    ``settings.clip_beyond_share`` of the amplitude beyond it. Returns ``mask`` (samples at
+    a clipped level), ``channels`` (one dict per clipped channel extreme) and ``phase_deg``
+    (the phases where clipping happens).
     """
     p, q, a, b, _ = ellipse
     mask = np.zeros(sa.size, dtype=bool)
@@ -136,7 +143,10 @@ def detect_clipping(
             at = np.abs(s - level) < band * amp
             model_extreme = centre + sign * amp
             beyond = sign * (model_extreme - level)
-            if at.sum() > 3 * expected and beyond > 0.01 * amp:
+            if (
+                at.sum() > settings.clip_excess_ratio * expected
+                and beyond > settings.clip_beyond_share * amp
+            ):
                 mask |= at
                 channels.append(
                     {
@@ -161,7 +171,7 @@ def _signals(rec: Recording) -> tuple[np.ndarray, np.ndarray, str]:
     return sa, sb, where
 
 
-def quadrature_start(rec: Recording) -> dict[str, Any]:
+def quadrature_start(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> dict[str, Any]:
     """Checks, the conic start, clipping and the centred radius of a quadrature recording.
 
     The rays start at the centre ``(p0, q0)`` of the conic fitted to the unclipped samples
@@ -177,7 +187,7 @@ def quadrature_start(rec: Recording) -> dict[str, Any]:
         raise input_error(f"{where}: columns sa, sb", bad, "sa, sb covering a signal period")
     try:
         e_all = ellipse_start(sa, sb)
-        clip = detect_clipping(sa, sb, e_all)
+        clip = detect_clipping(sa, sb, e_all, settings=settings)
         keep = ~clip["mask"]
         e1 = ellipse_start(sa[keep], sb[keep]) if keep.sum() >= 32 else e_all
     except ValueError as ex:
@@ -187,7 +197,12 @@ def quadrature_start(rec: Recording) -> dict[str, Any]:
     psi = np.arctan2(xb, xa)
     r = np.hypot(xa, xb)
     cover = np.unique(np.floor((psi + np.pi) / (2 * np.pi) * 16))
-    if abs(e1[4]) >= 1.2 or cover.size < 12 or np.std(r[keep]) > 0.5 * np.mean(r[keep]):
+    s = settings
+    if (
+        abs(e1[4]) >= s.quad_phase_error_max_rad
+        or cover.size < s.quad_sectors_min
+        or np.std(r[keep]) > s.quad_radius_spread_max * np.mean(r[keep])
+    ):
         raise input_error(
             f"{where}: columns sa, sb",
             f"{bad} (phase error {e1[4]:.3g} rad, {cover.size} of 16 phase sectors covered, "
@@ -562,7 +577,7 @@ class QuadratureKind(AbstractKind):
         return quadrature_summary(prep, base_params, self.st)
 
     def finish(self, doc, settings):
-        return finish(doc, self.st)
+        return finish(doc, self.st, settings)
 
     def report_lines(self, doc):
         return quadrature_report_lines(doc)
@@ -582,12 +597,14 @@ def run_quadrature(rec: Recording, **kw) -> tuple[dict[str, Any], Any]:
     """
     from ._engine import run_engine
 
-    st = quadrature_start(rec)
+    st = quadrature_start(rec, kw.get("settings") or DEFAULT_SETTINGS)
     st["has_t"] = "t" in rec.columns
     return run_engine(quadrature_kind(st), rec, **kw)
 
 
-def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
+def finish(
+    doc: dict[str, Any], st: dict, settings: FinderSettings = DEFAULT_SETTINGS
+) -> dict[str, Any]:
     """The kind's additions before the engine's verdict: clipping as unexplained structure
     (the verdict is then never ``consistent``), the ellipse with the named effects."""
     doc["noise"]["method"] = (
@@ -605,7 +622,7 @@ def finish(doc: dict[str, Any], st: dict) -> dict[str, Any]:
         odd = [
             float(v)
             for k, v in amp["value"].items()
-            if int(k) % 2 and v > 3 * (amp["se"].get(k) or 0.0)
+            if int(k) % 2 and v > settings.resolved_se * (amp["se"].get(k) or 0.0)
         ]
         if odd:  # an even signal harmonic moves the radius at order 1 too: the offsets take it
             bound = max(odd) * st["a0"]

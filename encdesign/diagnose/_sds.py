@@ -420,6 +420,7 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
                         f"{dv['drift_power']:.1f}, 1 dof; correlation "
                         f"{dv['correlation']:.2f}): with this platform stepping it is nearly "
                         "a trend over the runs",
+                        "rule": "one_parameter_bic",
                         "delta_bic": None,
                         "params": {},
                     },
@@ -441,11 +442,12 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
                 p["tilt_rad"]["value"] = -p["tilt_rad"]["value"]
             p["azimuth_rad"]["value"] = float(np.mod(p["azimuth_rad"]["value"], np.pi))
             b, sb = abs(p["tilt_rad"]["value"]), p["tilt_rad"]["se"]
-            if sb is None or not b > 3 * sb:
+            if sb is None or not b > settings.resolved_se * sb:
                 p["azimuth_rad"]["se"] = None
                 e["notes"] = [
                     *e.get("notes", []),
-                    "the tilt is not resolved (|tilt| <= 3 se): its azimuth is unidentifiable",
+                    f"the tilt is not resolved (|tilt| <= {settings.resolved_se:g} se): its "
+                    "azimuth is unidentifiable",
                 ]
     ratio = clock.get("ratio_to_declared")
     if ratio is not None and ratio > settings.sds_lattice_coarser:

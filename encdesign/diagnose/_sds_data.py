@@ -233,7 +233,9 @@ def sds_speed_harmonics(
     }
 
 
-def stamp_lattice(t: np.ndarray, max_samples: int = 200_000) -> dict[str, Any]:
+def stamp_lattice(
+    t: np.ndarray, max_samples: int = 200_000, settings: FinderSettings = DEFAULT_SETTINGS
+) -> dict[str, Any]:
     """The lattice the time stamps lie on, found from the data (any clock).
 
     Stamps on a clock of period ``P`` (and any offset) are ``t = t0 + n P``: the differences of
@@ -280,9 +282,9 @@ def stamp_lattice(t: np.ndarray, max_samples: int = 200_000) -> dict[str, Any]:
     for p in cands:
         q = d / p
         n = np.round(q)
-        on = np.abs(q - n) < 0.02
+        on = np.abs(q - n) < settings.sds_lattice_tol
         frac = float(np.mean(on))
-        if frac >= 0.995:
+        if frac >= settings.sds_lattice_share:
             # refine the period from the integer multiples (least squares through 0)
             p = float(np.sum(n[on] * d[on]) / np.sum(n[on] * n[on]))
             out.update(period_s=p, fraction_on_lattice=frac)

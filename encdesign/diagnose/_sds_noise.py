@@ -367,7 +367,7 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
         return None
     top = int(np.argmax(pw)) + 1
     own = pw[min(n, pw.size) - 1]
-    if top != n and pw[top - 1] > 2 * own:
+    if top != n and pw[top - 1] > ctx.settings.sds_common_order_ratio * own:
         return (
             f"its main order {n} is common to the moving sensors, but the common structure "
             f"peaks at order {top} of the platform angle (chi-square {pw[top - 1]:.0f})"
@@ -386,7 +386,7 @@ def _transient(ctx: Context) -> str | None:
     R = int(ctx.n_runs)
     thr = _thr(ctx.settings.alpha, 1, 2 * len(ch) * max(R - 1, 1))
     for m, (ps, _, po, jo, tot) in enumerate(ch):
-        if po > thr and po > ps and po > 0.5 * tot:
+        if po > thr and po > ps and po > ctx.settings.sds_transient_share * tot:
             return (
                 f"the base residual is dominated by one run's deviation on m{m} (run index "
                 f"{jo}, chi-square {po:.0f} of the sensor's {tot:.0f}): a transient no "
@@ -438,7 +438,7 @@ def _delay_plausible(ctx: Context, params: dict) -> str | None:
     moving sensors, e.g. a drift or a platform-angle order, is not a sensor's delay)."""
     dd = np.abs(_delay_gauge(ctx, params["delay_s"]))
     d = np.sort(dd)[::-1]
-    if d.size > 1 and d[1] > 0.5 * d[0]:
+    if d.size > 1 and d[1] > ctx.settings.sds_delay_shared_max * d[0]:
         return (
             f"the step is shared by several moving sensors ({d[1] / d[0]:.0%} of the largest "
             "on the next one): not one sensor's delay"
@@ -466,7 +466,7 @@ def _beam_plausible(ctx: Context, params: dict) -> str | None:
     if pw.size == 0:
         return None
     top = int(np.argmax(pw)) + 1
-    if top not in BEAM_ORDERS and pw[top - 1] > 2 * max(
+    if top not in BEAM_ORDERS and pw[top - 1] > ctx.settings.sds_common_order_ratio * max(
         pw[n - 1] for n in BEAM_ORDERS if n <= pw.size
     ):
         return (

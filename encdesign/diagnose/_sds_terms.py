@@ -342,7 +342,7 @@ def _tilt_derived(ctx, v, se):
     beta, sb = abs(float(v["tilt_rad"])), se["tilt_rad"]
     sb = float(sb) if np.isfinite(sb) else float("inf")
     out = {"tilt_squared_over_4_rad": {"value": beta**2 / 4, "se": None, "unit": "rad"}}
-    if not beta > 3 * sb:
+    if not beta > ctx.settings.resolved_se * sb:
         out["azimuth_identifiable"] = {
             "value": False,
             "se": None,

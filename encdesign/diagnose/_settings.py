@@ -313,6 +313,184 @@ class FinderSettings(eqx.Module):
     """Rule ``signal_shape.plausible`` (quadrature): a radial harmonic above this share of
     the signal radius is not a signal shape. Was an inline 0.3 in ``_quadrature``."""
 
+    # ---- issue 22 item 2, second pass: the decision numbers that were still inline in the
+    # views, the kinds and the nuisances (moved with their values; no verdict changed on
+    # ``finder_variations`` effects / clean, seed 21, n 4). "Set by hand" means no recorded
+    # evidence beyond the commit that introduced the number.
+
+    heads_left_share: float = eqx.field(default=0.05, static=True)
+    """Views: a structure is put on one head alone when that head's pattern leaves at most
+    noise or this share of the structure's power (a strong structure is not seen through
+    exactly equal heads: sensitivities, placements, noise weights). Was an inline 0.05 in
+    ``_views._heads``; set by hand in 009f9aa."""
+
+    spectrum_min_rows: int = eqx.field(default=32, static=True)
+    """Views: a run enters the ``spectrum`` view with at least this many rows (and kept
+    rows). Was an inline 32 in ``_views.view_spectrum``; set by hand in 2acd518."""
+
+    spectrum_speed_ratio: float = eqx.field(default=1.05, static=True)
+    """Views: runs whose steady speeds differ by more than this ratio are at two speeds, so a
+    spectral line can be told fixed in Hz from fixed in shaft order (``fixed_in``). Was an
+    inline 1.05 in ``_views.view_spectrum``; set by hand in 96be348 (first engine)."""
+
+    peak_match_bins: float = eqx.field(default=2.5, static=True)
+    """Views: peaks of different runs within this many frequency (or order) bins of each
+    other are one line. Was an inline 2.5 (twice) in ``_views.view_spectrum``; set by hand
+    in 96be348."""
+
+    integer_order_bins: float = eqx.field(default=1.5, static=True)
+    """Views: a spectral line is at an integer shaft order when within this many order bins
+    of it (or ``integer_order_tol``, if wider). Was an inline 1.5 in
+    ``_views.view_spectrum``; set by hand in 96be348."""
+
+    integer_order_tol: float = eqx.field(default=0.02, static=True)
+    """The least tolerance (in shaft orders) of an integer order: a spectral line's
+    ``integer_order`` (with ``integer_order_bins``), the spectrum lines ``beam_tilt_axial``
+    starts from, and the resolution below which a vibration at one speed is checked against
+    the rotation-locked order (rule ``vibration.plausible``, ``locked_margin``). Was an inline
+    0.02 in ``_views`` (96be348), ``_multihead_terms`` (45c7e65, 85f77a4); set by hand."""
+
+    head_power_share: float = eqx.field(default=0.25, static=True)
+    """Views: a channel carries a located structure (``spectrum``, ``band``, and the merge of
+    the ``time`` view's channels) when its power is at least this share of the strongest
+    channel's. Was an inline 0.25 (three times) in ``_views``; set by hand in 96be348."""
+
+    head_chi2_share: float = eqx.field(default=1.0 / 3.0, static=True)
+    """Views: ... and, in ``spectrum``, above this share of one channel's chi-square
+    threshold (Bonferroni over the bins). Was an inline ``thr / 3`` in
+    ``_views.view_spectrum``; set by hand in 96be348."""
+
+    spectrum_peaks_per_run: int = eqx.field(default=6, static=True)
+    """Views: at most this many peaks (the strongest) per run enter the ``spectrum`` view.
+    Was an inline ``[:6]``; set by hand before 68cdaf0 (where the module moved)."""
+
+    spectrum_findings_max: int = eqx.field(default=8, static=True)
+    """Views: at most this many ``spectrum`` findings (the strongest lines) are reported and
+    offered to the candidates. Was an inline ``[:8]``; set by hand in 96be348."""
+
+    band_min_rows: int = eqx.field(default=64, static=True)
+    """Views: a run enters the broadband (``band``) view with at least this many kept rows.
+    Was an inline 64 in ``_views.view_band``; set by hand in 2acd518."""
+
+    step_shape_share: float = eqx.field(default=0.7, static=True)
+    """Views: a ``time`` finding is a step (``shape``), not a transient or drift, when the
+    best single step takes more than this share of its block means' power. Was an inline
+    0.7 in ``_views.view_time``; set by hand in 96be348."""
+
+    time_merge_blocks: float = eqx.field(default=0.1, static=True)
+    """Views: ``time`` findings of two channels in one run are one structure when their step
+    times are within this share of a block (plus 1 ms). Was an inline 0.1 in
+    ``_views.view_time``; set by hand in b783399."""
+
+    one_speed_spread: float = eqx.field(default=0.05, static=True)
+    """The kept rows turn at one speed when their speeds spread by at most this share of the
+    largest: no ``speed`` view, and a vibration at one speed is read as a shaft order (rule
+    ``vibration.plausible``). Was an inline 0.05 in ``_views.view_speed`` and
+    ``_multihead_terms._one_speed``; set by hand in 85f77a4."""
+
+    refine_shaft_min_noise: float = eqx.field(default=0.1, static=True)
+    """multihead (no reference): the shaft angle is refined by the fitted disk error's head
+    mean only when that moves the readings by at least this share of the smallest noise
+    (RMS). Was an inline 0.1 in ``_multihead._refine_shaft``; set by hand in 6d1ca40."""
+
+    head_pattern_min: float = eqx.field(default=0.05, static=True)
+    """multihead (no reference): a disk order whose head pattern ``exp(-i m alpha)`` varies
+    over the heads by at most this mean square is reported unidentifiable (the heads' mean
+    takes it). Was an inline 0.05 in ``_multihead.multihead_base``; set by hand in 96be348."""
+
+    runout_order_share: float = eqx.field(default=0.1, static=True)
+    """multihead: ``beam_tilt_axial`` is fitted at the runout orders (1-3) located with at
+    least this share of the strongest one's power (a strong order leaks a little into its
+    neighbours over a few turns). Was an inline 0.1 in ``_multihead_terms._bt_start``;
+    45c7e65."""
+
+    wobble_revolutions_min: float = eqx.field(default=2.0, static=True)
+    """multihead: ``bearing_wobble`` is testable (rule ``applies``) with at least this many
+    revolutions in all (a fractional order is not resolved in fewer). Was an inline 2 in
+    ``_multihead_terms``; set by hand in e0d3df4."""
+
+    order_step_min_rows: int = eqx.field(default=64, static=True)
+    """multihead: the ``order_step`` view (an order that changes size at one time, where
+    ``eccentricity_shift`` starts) runs with at least this many kept rows ... Was an inline
+    64 in ``_multihead_terms``; set by hand in 1e3f0c4."""
+
+    order_step_revolutions_min: float = eqx.field(default=1.0, static=True)
+    """... and at least this many revolutions in all. Was an inline 1.0; 1e3f0c4."""
+
+    clip_excess_ratio: float = eqx.field(default=3.0, static=True)
+    """quadrature: a signal extreme is clipped when more than this many times the samples a
+    sinusoid would put near its peak sit at the observed extreme ... (excluded as
+    ``clipping``). Was an inline 3 in ``_quadrature.detect_clipping``; set by hand before
+    68cdaf0 (where the module moved)."""
+
+    clip_beyond_share: float = eqx.field(default=0.01, static=True)
+    """... and the fitted ellipse reaches beyond it by more than this share of the
+    amplitude. Was an inline 0.01 in ``_quadrature.detect_clipping``."""
+
+    quad_phase_error_max_rad: float = eqx.field(default=1.2, static=True)
+    """quadrature: the record is refused (input error: no Lissajous ellipse) when the conic
+    start's phase error is this large (rad) or more ... Was an inline 1.2 in
+    ``_quadrature.quadrature_start``; set by hand in 7d728be."""
+
+    quad_sectors_min: int = eqx.field(default=12, static=True)
+    """... or when fewer than this many of 16 phase sectors are covered (3/4 of a signal
+    period) ... Was an inline 12; 7d728be."""
+
+    quad_radius_spread_max: float = eqx.field(default=0.5, static=True)
+    """... or when the radius spreads (std) over this share of its mean. Was an inline 0.5;
+    7d728be."""
+
+    resolved_se: float = eqx.field(default=3.0, static=True)
+    """A fitted size counts as resolved above this many standard errors: an odd radial
+    harmonic of ``signal_shape`` bounds the offsets' confounding (quadrature), and the SDS
+    ``axis_tilt``'s azimuth is identifiable. Labels, not refusals. Was an inline 3 in
+    ``_quadrature`` (91a5b7a), ``_sds`` and ``_sds_terms`` (8e334ac); set by hand."""
+
+    sds_lattice_tol: float = eqx.field(default=0.02, static=True)
+    """sds: a stamp difference is on a candidate lattice when within this share of a period
+    of a multiple ... (``timing_quantization``'s clock). Was an inline 0.02 in
+    ``_sds_data.stamp_lattice``; set by hand in 8e334ac."""
+
+    sds_lattice_share: float = eqx.field(default=0.995, static=True)
+    """... and the coarsest period with at least this share of the differences on it is
+    the stamps' lattice. Was an inline 0.995; 8e334ac."""
+
+    sds_common_order_ratio: float = eqx.field(default=2.0, static=True)
+    """sds: rules ``coil_mismatch.plausible`` (an order common to the moving sensors) and
+    ``beam_tilt_axial.plausible``: refused when the common structure's strongest
+    platform-angle order is another one with more than this many times the power of the
+    effect's own.
+    Was an inline 2 (twice) in ``_sds_noise``; set by hand in 8e334ac."""
+
+    sds_transient_share: float = eqx.field(default=0.5, static=True)
+    """sds: a significant one-run deviation on one sensor that fits better than any step
+    and holds over this share of the sensor's power is a transient (reported unexplained,
+    no smooth effect named). Was an inline 0.5 in ``_sds_noise._transient``; fc0e1ba."""
+
+    sds_delay_shared_max: float = eqx.field(default=0.5, static=True)
+    """sds: rule ``sensor_delay_step.plausible``: refused when another moving sensor carries
+    over this share of the largest delay step (a pattern common to the moving sensors is not
+    one sensor's delay). Was an inline 0.5 in ``_sds_noise``; set by hand in 7492207."""
+
+    angle_step_size_tol: float = eqx.field(default=0.5, static=True)
+    """Recurring steps at one angle are one step when their sizes are within this share of
+    their median (:func:`._nuisances.angle_steps`, with ``angle_step_passes``). Was an
+    inline 0.5 in ``_nuisances``; set by hand in 7dca7f8 (generated boxes, seeds 71-73)."""
+
+    excluded_share_warn: float = eqx.field(default=1.0 / 3.0, static=True)
+    """Share of a record's rows left out of every fit (non-steady motion, gaps, masks,
+    glitches) above which the diagnosis says so prominently, with the reasons
+    (``excluded_share``). Set by the issue (issue 22 item 4: "excluding more than a third
+    of a record is reported prominently"), not tuned. Was
+    ``_nuisances.EXCLUDED_SHARE_WARN`` (f5a7bab)."""
+
+    stepped_max_steady_rows: int = eqx.field(default=32, static=True)
+    """A sensor against a reference is read as a static stepped calibration when the motion
+    segment finder leaves fewer steady rows than this over all its runs: the engine's own
+    minimum for a diagnosis (below it the record was refused), so every record accepted
+    before is still read as a motion record. Was ``_stepped.STEPPED_MAX_STEADY_ROWS``
+    (eb6531a)."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
@@ -326,10 +504,13 @@ DEFAULT_SETTINGS = FinderSettings()
 
 SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
 
-NAMED_RULES = ("identifiable", "better_candidate", "applies")
+NAMED_RULES = ("identifiable", "better_candidate", "applies", "one_parameter_bic")
 """Acceptance rules that are not a threshold: all parameters already taken
 (``identifiable``), another candidate lowers the criterion more (``better_candidate``), the
-candidate cannot be tested on this record (``applies``); with ``<candidate>.plausible``."""
+candidate cannot be tested on this record (``applies``), an alternative fits within one
+parameter's information-criterion penalty ``log N`` and is confounded with it
+(``one_parameter_bic``: sds, a drift vs an order of the platform angle); with
+``<candidate>.plausible``."""
 
 
 def is_rule_name(name: object) -> bool:

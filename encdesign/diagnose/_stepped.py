@@ -7,7 +7,7 @@ may be far apart, over several turns. The engine's segment finder
 a record and the record used to be refused ("no steady segment"). Here:
 
 * :func:`is_stepped` tells such a record (one run at a time: the motion segments cover
-  fewer than :data:`STEPPED_MAX_STEADY_ROWS` rows of it);
+  fewer than ``FinderSettings.stepped_max_steady_rows`` rows of it);
 * :func:`stepped_segments` gives the segments instead: one per run and approach direction
   (the sign of the last move into the row's position), so the engine's direction views and
   the ``direction_hysteresis`` candidate see both directions if the record has them;
@@ -18,7 +18,8 @@ What is left is what a static record measures: the error function vs angle (the 
 model), the direction offset (if both directions), the LSB (the value lattice), scale and
 interpolation errors (functions of the angle).
 
-The thresholds live at the top of this module (to move into the finder's settings).
+The threshold is ``FinderSettings.stepped_max_steady_rows``; the caller's settings are
+passed to the segment finder.
 """
 
 from __future__ import annotations
@@ -27,11 +28,11 @@ import dataclasses
 
 import numpy as np
 
-STEPPED_MAX_STEADY_ROWS = 32
-"""A record is read as stepped when the motion-segment finder leaves fewer steady rows than
-this over all its runs. 32 is the engine's own minimum for a diagnosis (below it the record
-was refused), so every record the engine accepted before is still read as a motion record:
-no verdict of a continuous record can change."""
+from ._settings import DEFAULT_SETTINGS, FinderSettings
+
+STEPPED_MAX_STEADY_ROWS = DEFAULT_SETTINGS.stepped_max_steady_rows
+"""The default of ``FinderSettings.stepped_max_steady_rows`` (kept for callers of the old
+name)."""
 
 DYNAMIC_CANDIDATES = ("vibration", "thermal_drift", "reading_delay", "bearing_wobble")
 """Candidates a stepped record cannot test: ``vibration`` is fixed in Hz, ``reading_delay``
@@ -57,24 +58,31 @@ def _sorted_rows(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def is_stepped(
-    shaft: np.ndarray, t: np.ndarray, run: np.ndarray, tolerance: float, window: float
+    shaft: np.ndarray,
+    t: np.ndarray,
+    run: np.ndarray,
+    tolerance: float,
+    window: float,
+    settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> bool:
-    """Whether a record has no steady motion (see :data:`STEPPED_MAX_STEADY_ROWS`).
+    """Whether a record has no steady motion (``settings.stepped_max_steady_rows``).
 
     Args:
         shaft: shaft angle per row (rad). t: time or step index per row. run: run id per row.
         tolerance, window: the kind's ``steady_tolerance`` and ``speed_window``.
+        settings: the caller's :class:`~._settings.FinderSettings` (the segment finder's
+            thresholds and ``stepped_max_steady_rows``).
     """
     from ._prepare import find_motion_segments
 
     steady = 0
     for rows in _run_slices(run):
         rows = _sorted_rows(rows, t)
-        if rows.size < 8:
+        if rows.size < 8:  # the segment finder's own minimum (it returns one segment below)
             continue
-        seg, _ = find_motion_segments(shaft[rows], t[rows], tolerance, window)
+        seg, _ = find_motion_segments(shaft[rows], t[rows], tolerance, window, settings)
         steady += int((seg >= 0).sum())
-        if steady >= STEPPED_MAX_STEADY_ROWS:
+        if steady >= settings.stepped_max_steady_rows:
             return False
     return True
 

@@ -133,8 +133,8 @@ def _heads(
     error takes the pattern ``b_k = exp(-i m alpha_k)`` (one disk seen by every head). A
     structure on head ``k`` alone therefore shows on every head as ``u_k``, ``e_k`` less those
     parts. Each one-head pattern is fitted; the structure is reported on head ``k`` only when
-    ``u_k`` leaves no significant power (chi-square at ``FinderSettings.alpha``, or 5 % of a strong
-    structure's power) and fits significantly
+    ``u_k`` leaves no significant power (chi-square at ``FinderSettings.alpha``, or
+    ``heads_left_share`` of a strong structure's power) and fits significantly
     better than every other head's pattern. When the patterns cannot be told apart (too few
     heads for what the base takes) or none fits, the structure is reported on ``ch`` (the
     channels where it is significant) with a note saying so."""
@@ -187,10 +187,12 @@ def _heads(
     f = 2 if np.iscomplexobj(W) else 1
     rows = W.shape[0]
     tot = float(np.sum(np.abs(W) ** 2))
-    # what the pattern leaves: noise, or at most 5 % of the power (a strong structure is not
-    # seen through exactly equal heads: sensitivities, placements, per-head noise weights)
+    # what the pattern leaves: noise, or at most heads_left_share of the power (a strong
+    # structure is not seen through exactly equal heads: sensitivities, placements, per-head
+    # noise weights)
     left_ok = res[k1] <= max(
-        chi2_threshold(prep.settings.alpha, f * rows * (free - 1), 1), 0.05 * tot
+        chi2_threshold(prep.settings.alpha, f * rows * (free - 1), 1),
+        prep.settings.heads_left_share * tot,
     )
     if left_ok and res[k2] - res[k1] > chi2_threshold(prep.settings.alpha, f * rows, 1):
         return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
@@ -249,7 +251,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     runs = []
     for r, (a, b) in _run_slices(prep):
         nk = int(keep[a:b].sum())
-        if b - a >= 32 and nk >= 32:
+        if b - a >= prep.settings.spectrum_min_rows and nk >= prep.settings.spectrum_min_rows:
             runs.append((r, a, b, nk))
     out: list[Finding] = []
     if not runs:
@@ -280,7 +282,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         Ps = P.sum(1)
         # power of each line: three bins (leakage), tested on the centre
         idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
-        for i in idx[np.argsort(-Ps[idx])][:6]:
+        for i in idx[np.argsort(-Ps[idx])][: prep.settings.spectrum_peaks_per_run]:
             lo, hi = max(i - 1, 1), min(i + 2, Ps.size)
             band = P[lo:hi].sum(0)
             # parabolic interpolation of the frequency
@@ -309,8 +311,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
     used = [False] * len(peaks)
     peaks.sort(key=lambda p: -p["power"])
     speeds = dict(per_run)
+    s = prep.settings
     multi_speed = len(per_run) > 1 and (
-        max(speeds.values()) > 1.05 * max(min(speeds.values()), 1e-12)
+        max(speeds.values()) > s.spectrum_speed_ratio * max(min(speeds.values()), 1e-12)
     )
     for i, p in enumerate(peaks):
         if used[i]:
@@ -318,13 +321,15 @@ def view_spectrum(prep, rw) -> list[Finding]:
         grp_hz = [
             j
             for j, q in enumerate(peaks)
-            if not used[j] and abs(q["f_hz"] - p["f_hz"]) <= 2.5 * max(p["bin_hz"], q["bin_hz"])
+            if not used[j]
+            and abs(q["f_hz"] - p["f_hz"]) <= s.peak_match_bins * max(p["bin_hz"], q["bin_hz"])
         ]
         grp_ord = [
             j
             for j, q in enumerate(peaks)
             if not used[j]
-            and abs(q["order"] - p["order"]) <= 2.5 * max(p["bin_order"], q["bin_order"])
+            and abs(q["order"] - p["order"])
+            <= s.peak_match_bins * max(p["bin_order"], q["bin_order"])
         ]
         runs_hz = {peaks[j]["run"] for j in grp_hz}
         runs_ord = {peaks[j]["run"] for j in grp_ord}
@@ -346,7 +351,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         orders = [q["order"] for q in sel]
         integer = (
             all(
-                abs(o - round(o)) <= max(1.5 * q["bin_order"], 0.02)
+                abs(o - round(o)) <= max(s.integer_order_bins * q["bin_order"], s.integer_order_tol)
                 for o, q in zip(orders, sel)
                 if np.isfinite(o)
             )
@@ -354,7 +359,11 @@ def view_spectrum(prep, rw) -> list[Finding]:
             and any(np.isfinite(o) for o in orders)
         )
         thr_ch = chi2_threshold(prep.settings.alpha, 2, n_tests)
-        ch = [k for k in range(C) if band[k] > thr_ch / 3 and band[k] >= 0.25 * band.max()]
+        ch = [
+            k
+            for k in range(C)
+            if band[k] > s.head_chi2_share * thr_ch and band[k] >= s.head_power_share * band.max()
+        ]
         zs = np.concatenate([q["z"] for q in sel], 0)
         ints = {round(o) for o in orders if np.isfinite(o)}
         o0 = ints.pop() if integer and len(ints) == 1 else None  # one integer order
@@ -379,7 +388,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                 },
             )
         )
-    return out[:8]
+    return out[: s.spectrum_findings_max]
 
 
 def run_spans(run: np.ndarray) -> list[tuple[int, tuple[int, int]]]:
@@ -411,7 +420,7 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
     runs = []
     for r, (a, b) in _run_slices(prep):
         nk = int(keep[a:b].sum())
-        if nk >= 64:
+        if nk >= prep.settings.band_min_rows:
             runs.append((r, a, b, nk))
     n_tests = sum(len(bands(b - a)) for _, a, b, _ in runs) * C
     if not n_tests:
@@ -429,7 +438,8 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
             pw = P[lo:hi].sum(0) * (nk / m)
             dof = 2 * (hi - lo)
             thr = chi2_threshold(prep.settings.alpha, dof, n_tests)
-            ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= 0.25 * (pw.max() - dof)]
+            share = prep.settings.head_power_share
+            ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= share * (pw.max() - dof)]
             if not ch:
                 continue
             Xb = Xf[lo:hi] * math.sqrt(2.0 / m)
@@ -484,7 +494,7 @@ def view_time(prep, rw) -> list[Finding]:
             x = np.arange(nb) >= jb
             xm = x - x.mean()
             step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
-            is_step = step_pw > 0.7 * chi[k]
+            is_step = step_pw > prep.settings.step_shape_share * chi[k]
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
@@ -521,9 +531,9 @@ def view_time(prep, rw) -> list[Finding]:
             if (
                 g.where["runs"] == f.where["runs"]
                 and abs(g.detail["step_time_s"] - f.detail["step_time_s"])
-                < 1e-9 + 0.1 * g.detail["block_s"] + 1e-3
+                < 1e-9 + prep.settings.time_merge_blocks * g.detail["block_s"] + 1e-3
             ):
-                if f.power >= 0.25 * g.power:
+                if f.power >= prep.settings.head_power_share * g.power:
                     g.where["heads"] = sorted(set(g.where["heads"]) | set(f.where["heads"]))
                 g.power += f.power
                 g.dof += f.dof
@@ -668,7 +678,7 @@ def view_direction(prep, rw):
 def view_speed(prep, rw):
     """A term proportional to the signed steady speed (needs two speeds or directions)."""
     w = prep.rows["omega"][prep.keep]
-    if np.ptp(w) <= 0.05 * np.max(np.abs(w)):
+    if np.ptp(w) <= prep.settings.one_speed_spread * np.max(np.abs(w)):
         return []
     del w
     return _regress_view(prep, rw, "speed", ["omega"])
