@@ -13,6 +13,11 @@ threshold (``complete``: false until the last), so a stopped sweep keeps what it
 
     python benchmarks/finder_sensitivity.py --kinds motion,multihead --n 2 \\
         --n-variations 2 --thresholds bic_min,heldout_min --json out.json
+
+``--only NAME,...`` with ``--json`` of an earlier sweep (same kinds, ``--n``,
+``--n-variations``, seed and factors) measures only those thresholds and merges them into
+that file: its rows for the other thresholds are kept as measured, not recomputed (the
+defaults' verdicts are recomputed and must equal the file's).
 """
 
 from __future__ import annotations
@@ -113,7 +118,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--flip", type=float, default=0.05, help="share of verdicts that flip")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--only",
+        default="",
+        help="comma-separated fields: measure only these and merge them into --json",
+    )
     args = ap.parse_args(argv)
+    old_rows: list[dict] = []
+    if args.only:
+        if not args.json or not Path(args.json).exists():
+            ap.error("--only merges into an earlier sweep: give its --json")
+        old = json.loads(Path(args.json).read_text())
+        same = (old["kinds"], old["n"], old["n_variations"], old["seed"], old["factors"])
+        want = (
+            args.kinds.split(","),
+            args.n,
+            args.n_variations,
+            args.seed,
+            [float(x) for x in args.factors.split(",")],
+        )
+        if same != tuple(want):
+            ap.error(f"--only: {args.json} was measured with {same}, not {want}")
+        args.thresholds = args.only
+        only = set(args.only.split(","))
+        old_rows = [r for r in old["rows"] if r["threshold"] not in only]
+        el0 = float(old.get("elapsed_s") or 0.0)  # the earlier sweep's time, kept in the sum
+    else:
+        el0 = 0.0
     kinds = [k for k in args.kinds.split(",") if k]
     bad = [k for k in kinds if k not in KINDS]
     names = [t for t in args.thresholds.split(",") if t] or list(SETTINGS_FIELDS)
@@ -130,7 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     for label, rec in recs:
         ref[label] = outcome(rec, base)
         print(f"default {label}: {ref[label][0]} {list(ref[label][1])}", flush=True)
-    rows = []
+    if args.only:
+        prev = {k: (v[0], tuple(v[1])) for k, v in old["default"].items()}
+        if prev != ref:
+            raise SystemExit(f"--only: the defaults' verdicts differ from {args.json}'s")
+    rows = list(old_rows)
     for name in names:
         for fac in factors:
             st = moved(base, name, fac)
@@ -158,18 +193,20 @@ def main(argv: list[str] | None = None) -> int:
             )
         if args.json:
             done = sorted({r["threshold"] for r in rows if r["share"] > args.flip})
-            el = time.perf_counter() - t0
+            el = el0 + time.perf_counter() - t0
             write_json(args.json, args, kinds, recs, ref, rows, done, False, el)
     over = sorted({r["threshold"] for r in rows if r["share"] > args.flip})
+    n_done = len({r["threshold"] for r in rows})
     print(
-        f"{len(over)} of {len(names)} thresholds flip more than {100 * args.flip:.0f} % of "
+        f"{len(over)} of {n_done} thresholds flip more than {100 * args.flip:.0f} % of "
         f"{len(recs)} verdicts at x{' or x'.join(f'{f:g}' for f in factors)}: {over} "
         f"({time.perf_counter() - t0:.0f} s)",
         flush=True,
     )
     if args.json:
-        el = time.perf_counter() - t0
-        write_json(args.json, args, kinds, recs, ref, rows, over, True, el)
+        el = el0 + time.perf_counter() - t0
+        complete = set(SETTINGS_FIELDS) <= {r["threshold"] for r in rows}
+        write_json(args.json, args, kinds, recs, ref, rows, over, complete, el)
     return 0
 
 
