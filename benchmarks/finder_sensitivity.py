@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from encdesign._errors import EncdesignInputError
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose._settings import SETTINGS_FIELDS
@@ -77,7 +78,13 @@ def recordings(kinds, n: int, n_var: int, seed: int) -> list[tuple[str, object]]
 
 
 def outcome(rec, settings: FinderSettings) -> tuple[str, tuple[str, ...]]:
-    d = diagnose(rec, settings=settings).doc
+    """The verdict and the named effects; ``("input_error", ())`` when a moved threshold
+    refuses the record itself (e.g. ``quad_sectors_min`` x2 asks for more sectors than
+    there are)."""
+    try:
+        d = diagnose(rec, settings=settings).doc
+    except EncdesignInputError:
+        return "input_error", ()
     return d["verdict"], tuple(sorted(e["name"] for e in d["effects"]))
 
 
