@@ -23,6 +23,11 @@ def test_excluded_share_lists_the_reasons_above_a_third():
     assert list(w["reasons"]) == ["dwell", "start-up", "other (glitches, settling)"]
     assert w["reasons"]["other (glitches, settling)"] == 20
     assert _nuisances.excluded_share(1000, 700, ex) is None
+    # the threshold is FinderSettings.excluded_share_warn (the caller's)
+    from encdesign.diagnose import FinderSettings
+
+    assert _nuisances.excluded_share(1000, 700, ex, FinderSettings(excluded_share_warn=0.25))
+    assert _nuisances.excluded_share(1000, 580, ex, FinderSettings(excluded_share_warn=0.5)) is None
 
 
 def _dwell_record(seed: int, dwell_share: float) -> Recording:

@@ -179,5 +179,6 @@ def test_rule_names_are_checked():
 
     assert is_rule_name("bic_min") and is_rule_name("bearing_wobble.plausible")
     assert is_rule_name("better_candidate") and is_rule_name("applies")
+    assert is_rule_name("one_parameter_bic")  # the sds drift / platform-order confounding
     assert not is_rule_name(None) and not is_rule_name("bic_minimum")
     assert not is_rule_name(".plausible") and not is_rule_name("plausible")

@@ -24,6 +24,24 @@ def test_a_steady_turn_is_not_stepped():
     assert _stepped.is_stepped(c["theta_ref"], c["t"], np.zeros(c["t"].size, int), 0.1, 0.01)
 
 
+def test_is_stepped_uses_the_callers_settings():
+    """The caller's settings reach the segment finder and the steady-row minimum: a steady
+    turn of 2,000 rows is a motion record with the defaults, and stepped when the minimum
+    asks for more rows than it has or the finder's kept pieces need 60 % of the run."""
+    from encdesign.diagnose import FinderSettings
+
+    t = np.arange(2000) / 1000.0
+    th = 2 * np.pi * t
+    run = np.zeros(t.size, int)
+    assert not _stepped.is_stepped(th, t, run, 0.1, 0.01, FinderSettings())
+    assert _stepped.is_stepped(th, t, run, 0.1, 0.01, FinderSettings(stepped_max_steady_rows=5000))
+    # two pieces (forward, back) of 50 % each: neither is 60 % of the run
+    th2 = np.where(t < 1.0, th, 2 * (2 * np.pi) - th)
+    assert not _stepped.is_stepped(th2, t, run, 0.1, 0.01, FinderSettings())
+    wide = FinderSettings(segment_min_share=0.6, reversal_piece_share=0.6)
+    assert _stepped.is_stepped(th2, t, run, 0.1, 0.01, wide)
+
+
 @pytest.mark.parametrize("seed", [3, 4])
 def test_stepped_calibration_names_the_direction_offset_and_no_dynamic_effect(seed):
     rec, _ = stepped_sensor_record(seed, hysteresis_rad=2e-4)
