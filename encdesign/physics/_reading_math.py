@@ -166,8 +166,12 @@ def _core(frame: tuple[Array, ...]) -> tuple[Array, Array, Array, tuple[Array, .
     crx, cry, crz = vy * lz - vz * ly, vz * lx - vx * lz, vx * ly - vy * lx
     sin_part = crx * nx + cry * ny + crz * nz  # |V| sin(psi)
     cos_part = vx * lx + vy * ly + vz * lz  # |V| cos(psi)
-    rho = jnp.sqrt(sin_part * sin_part + cos_part * cos_part)
-    s1, c1 = sin_part / rho, cos_part / rho
+    rho2 = sin_part * sin_part + cos_part * cos_part
+    rho = jnp.sqrt(rho2)
+    # one division for both components; written rho / rho^2, not 1 / rho: XLA rewrites
+    # 1 / sqrt(x) into rsqrt, whose float64 CPU code runs the whole kernel at 22 vs 61 M/s
+    inv_rho = rho / rho2
+    s1, c1 = sin_part * inv_rho, cos_part * inv_rho
     # geometric error psi - (theta - alpha_k), wrapped to (-pi, pi): rotate (cos psi, sin psi)
     # back by theta - alpha_k, whose sine and cosine need no further trigonometry
     cd, sd = ct * ca + st * sa, st * ca - ct * sa  # cos, sin of (theta - alpha_k)
