@@ -297,6 +297,32 @@ def dwell_reversal_record(seed: int, back: float = 0.1, fs: float = 500.0, noise
     return Recording("multihead", meta, cols), dict(hysteresis_rad=10 * noise)
 
 
+def return_move_record(seed: int, share: float = 0.05, fs: float = 500.0, noise: float = 2e-5):
+    """A sensor against a reference that first moves back at 3x the steady speed into its
+    start position for ``share`` of the rows (a return-to-zero move, reversing without a
+    stop), the heads shaken by 20 noise units at 7 Hz while it lasts (as the concealed
+    benchmark's return move), then 3 turns forward at 0.8-1.5 rev/s (issue 22: a move
+    back before the run is not a move back after a stop)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng(seed)
+    w = 2 * np.pi * rng.uniform(0.8, 1.5)
+    n = int(3 * 2 * np.pi / w * fs / (1 - share))
+    k = int(share * n)
+    t = np.arange(n) / fs
+    th = np.where(np.arange(n) < k, 3 * w * (k - np.arange(n)) / fs, w * (np.arange(n) - k) / fs)
+    th = th + rng.uniform(0, 6)
+    amps, ph = 30 * noise * rng.uniform(0.3, 1.0, 3) / np.arange(1, 4), rng.uniform(0, 6.3, 3)
+    e = sum(amps[m] * np.sin((m + 1) * th + ph[m]) for m in range(3))
+    shake = np.where(np.arange(n) < k, 20 * noise * np.sin(2 * np.pi * 7.0 * t), 0.0)
+    cols = {"t": t, "theta_ref": th, "h0": th + e + shake + rng.normal(0, noise, n) + 0.7}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
 def steady_start_record(seed: int, ramp_s: float = 0.0, fs: float = 500.0, noise: float = 2e-5):
     """A sensor against a reference turning 4 turns at 0.8-1.5 rev/s, with 5 % of an
     interval of sampling jitter and a 2 % speed ripple at order 3: steady from its first row

@@ -6,6 +6,7 @@ from helpers import (
     angle_step_record,
     dwell_reversal_record,
     late_stamps_record,
+    return_move_record,
     reversal_record,
     steady_start_record,
     validate_diagnosis,
@@ -114,6 +115,18 @@ def test_a_short_move_back_after_a_dwell_tests_the_direction_offset(seed):
     assert abs(p["value"] - truth["hysteresis_rad"]) < max(
         4 * p["se"], 0.2 * truth["hysteresis_rad"]
     )
+
+
+@pytest.mark.parametrize(("seed", "share"), [(201, 0.05), (202, 0.07), (203, 0.09)])
+def test_a_fast_move_back_before_the_run_is_a_return_move_not_a_reversal(seed, share):
+    """A move back into the start position (3x the steady speed, no stop, 5-9 % of the
+    rows, the heads shaken while it lasts) comes before any forward motion: it is excluded
+    as a return move (``segment_min_share``), not kept as a move back after a stop
+    (``reversal_piece_share``), and the record is consistent."""
+    doc = diagnose(return_move_record(seed, share)).doc
+    ex = doc["excluded_segments"]
+    assert ex and ex[0]["t_start_s"] == 0.0 and ex[0]["reason"].startswith("return move"), ex
+    assert doc["verdict"] == "consistent", doc["report"]
 
 
 @pytest.mark.parametrize("seed", [61, 62, 63])

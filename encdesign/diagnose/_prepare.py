@@ -101,8 +101,10 @@ def find_motion_segments(
     slower than ``dwell_speed_share`` of the median speed are dwells. Each excluded stretch
     is widened by the speed window or ``settling_share`` of the run (settling). A piece
     turning against the run's longest piece is kept from ``reversal_piece_share`` of the run
-    on (and ``segment_min_rows``): a short move back after a stop is where a direction
-    offset shows.
+    on (and ``segment_min_rows``) when it follows a long piece of the main direction: a short
+    move back after a stop is where a direction offset shows. Before the first long main
+    piece such a piece is a return move into the start position and needs
+    ``segment_min_share`` like a start-up.
 
     Returns:
         ``(segment id per sample (-1 excluded), [excluded stretches {start, stop, reason}])``.
@@ -121,10 +123,15 @@ def find_motion_segments(
     pieces = {s: _runs_of(big & (sgn == s)) for s in (1, -1)}
     main = max((1, -1), key=lambda s: max((b - a for a, b in pieces[s]), default=0))
     back_len = min(min_len, max(st.segment_min_rows, int(st.reversal_piece_share * n)))
+    # a move back is one that follows motion in the main direction (forward, stop, back):
+    # a piece against it before the run's first long main piece is a return move into the
+    # start position (a positioning move, then the run) and needs min_len like a start-up
+    first_main = min((a for a, b in pieces[main] if b - a >= min_len), default=n)
     sid = 0
     for s in (1, -1):
         for a, b in pieces[s]:
-            if b - a < (min_len if s == main else back_len):
+            short_ok = s != main and a > first_main
+            if b - a < (back_len if short_ok else min_len):
                 continue
             med = np.median(w[a:b])
             ok = np.abs(w[a:b] - med) <= tolerance * abs(med)
@@ -162,6 +169,8 @@ def find_motion_segments(
             and np.any(np.sign(piece) != np.sign(np.median(w[seg >= 0])))
         ):
             reason = "reversal or return move (direction changes)"
+        elif a == 0 and steady and np.median(piece) * np.median(w[seg >= 0]) < 0:
+            reason = "return move into the start position (opposite direction)"
         elif a == 0:
             reason = "start-up (speed far from the steady speed)"
         elif np.any(np.sign(piece) != np.sign(np.median(w[seg >= 0]) if steady else 1)):
