@@ -365,3 +365,25 @@ def test_conceal_benchmark_quadrature_quick(tmp_path):
     q = s["kinds"]["quadrature"]
     assert q["n_recordings"] == 2 and q["errors"] == 0
     assert set(q["confusion"]) == {"clean", "signal_shape"}
+
+
+@pytest.mark.parametrize("seed", [201, 202, 203])
+def test_heavily_clipped_timed_capture_gets_a_verdict(seed):
+    """Clipped on every peak of both signals at 13.7 samples per period: the kept rows come
+    in runs of one or two, so no second difference exists within a segment; the noise is
+    then taken from first differences (an upper bound) instead of refusing the capture."""
+    from encdesign.simulate import simulate_quadrature
+
+    plan = dict(
+        kind="quadrature", case="out_of_catalog", timed=True, transient=False, glitches=0,
+        n=4800, scale=90.0, dc_levels=True, noise_rel=2e-4, samples_per_period=13.7,
+        effects=["clipping"], harmonics=[7], amplitude=1.0,
+    )  # fmt: skip
+    rec, truth = simulate_quadrature(np.random.default_rng(seed), plan)
+    d = diagnose(rec).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "unexplained", d["report"]
+    assert d["unexplained"][0]["view"] == "clipping"
+    assert 0.2 < d["unexplained"][0]["fraction_of_samples"] < 0.8
+    sigma = d["noise"]["per_channel"][0]  # radius relative to the signal amplitude
+    assert 0.7 < sigma / truth["noise"] < 1.5

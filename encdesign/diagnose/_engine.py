@@ -44,8 +44,8 @@ from ._document import (
 )
 from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._kind import AbstractKind as Kind
+from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
-from ._prepare import noise_spectral
 from ._protocol import Prepared
 from ._results import PlotData
 from ._select import Selection, select

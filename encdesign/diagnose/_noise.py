@@ -1,0 +1,149 @@
+"""Noise of a recording per channel: second differences within motion segments (any time
+grid), robust scales, and the spectral estimate of a residual."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+
+from ._protocol import Prepared
+from ._views import SCAN_BLOCK
+
+
+def noise_d2(r: np.ndarray, seg: np.ndarray, t: np.ndarray | None = None):
+    """Second differences of ``r`` (n, C) within segments, on any time grid: each value less
+    the straight line through its two neighbours, scaled so that white noise of std sigma
+    gives ``6 sigma^2`` (as the plain second difference on a uniform grid). A straight line
+    gives exactly zero on any grid. Returns (values (m, C), index of the centre row).
+
+    Computed in blocks of :data:`SCAN_BLOCK` rows (temporaries bounded by the block)."""
+    n, C = r.shape
+    if n < 3:
+        return np.zeros((0, C)), np.zeros(0, dtype=np.int64)
+    ok = (seg[2:] == seg[1:-1]) & (seg[1:-1] == seg[:-2]) & (seg[1:-1] >= 0)
+    centre = np.flatnonzero(ok) + 1
+    out = np.empty((centre.size, C))
+    pos = 0
+    for a in range(1, n - 1, SCAN_BLOCK):
+        b = min(n - 1, a + SCAN_BLOCK)  # centres a..b-1
+        okb = ok[a - 1 : b - 1]
+        m = int(okb.sum())
+        if m == 0:
+            continue
+        rm, r0, rp = r[a - 1 : b - 1], r[a:b], r[a + 1 : b + 1]
+        if t is None:
+            d2 = rp - 2 * r0 + rm
+        else:
+            h1 = t[a:b] - t[a - 1 : b - 1]
+            h2 = t[a + 1 : b + 1] - t[a:b]
+            hs = np.where(h1 + h2 > 0, h1 + h2, 1.0)
+            w1, w2 = h2 / hs, h1 / hs
+            e = r0 - (w1[:, None] * rm + w2[:, None] * rp)
+            d2 = -2.0 * e * np.sqrt(1.5 / (1.0 + w1**2 + w2**2))[:, None]
+        out[pos : pos + m] = d2[okb]
+        pos += m
+    return out, centre
+
+
+TRIM_QUANTILE = 0.99
+"""Share of the smallest ``|d2|`` kept by the trimmed-RMS scale of :func:`robust_scale`."""
+_TRIM_RMS = math.sqrt(
+    1.0
+    - 2.0
+    * stats.norm.isf((1 - TRIM_QUANTILE) / 2)
+    * stats.norm.pdf(stats.norm.isf((1 - TRIM_QUANTILE) / 2))
+    / TRIM_QUANTILE
+)
+"""RMS of a unit Gaussian within its central ``TRIM_QUANTILE`` (0.962 at 99 %)."""
+
+
+ROBUST_ROWS = 1 << 18
+"""Rows :func:`robust_scale` reads at most."""
+
+
+def robust_scale(d: np.ndarray) -> np.ndarray:
+    """Robust std per column of ``d`` (m, C), centred at zero: the larger of 1.4826 MAD and
+    the RMS of the central ``TRIM_QUANTILE`` of ``|d|`` (scaled to a Gaussian's std).
+
+    The MAD alone collapses on values that sit on a lattice: the second differences of a
+    quantized reading are mostly exactly 0 (then +-1 LSB), so their MAD is 0 and every step
+    of the staircase would read as a glitch or a count jump. The trimmed RMS sees the
+    lattice's spread, and a few glitches (under 1 % of the values) cannot inflate it; for
+    Gaussian noise both read sigma. Over ``ROBUST_ROWS`` rows, from that many rows drawn at
+    random (fixed seed: the scale to a few parts per thousand, memory bounded)."""
+    if d.shape[0] > ROBUST_ROWS:
+        d = d[np.sort(np.random.default_rng(0).integers(0, d.shape[0], ROBUST_ROWS))]
+    a = np.abs(d)
+    mad = 1.4826 * np.median(a, axis=0)
+    if a.shape[0] < 8:
+        return mad
+    cut = np.quantile(a, TRIM_QUANTILE, axis=0)
+    inner = np.where(a <= cut[None, :], a, 0.0)
+    cnt = np.maximum(np.sum(a <= cut[None, :], axis=0), 1)
+    trim = np.sqrt(np.einsum("ij,ij->j", inner, inner) / cnt) / _TRIM_RMS
+    return np.maximum(mad, trim)
+
+
+def noise_d1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """First differences of adjacent rows of one segment, times ``sqrt(3)`` so that white
+    noise of std sigma gives ``6 sigma^2`` as :func:`noise_d2` (fallback of
+    :func:`noise_sigma`), ``(m, C)``."""
+    ok = (seg[1:] == seg[:-1]) & (seg[:-1] >= 0)
+    return (r[1:][ok] - r[:-1][ok]) * math.sqrt(3.0)
+
+
+def noise_sigma(
+    r: np.ndarray, seg: np.ndarray, robust: bool = False, t: np.ndarray | None = None
+) -> np.ndarray:
+    """Noise std per channel from second differences within segments:
+    ``var(d2) = 6 sigma^2`` for white noise; structure smooth on the sampling scale adds
+    ``(omega dt)^4`` of its variance only. ``robust``: from the MAD (glitch-proof).
+
+    Where fewer than 4 rows have both neighbours in their segment (kept rows come in pairs,
+    e.g. between the excluded phases of a clipped capture), first differences of adjacent
+    kept rows are used instead, scaled to the same ``6 sigma^2``: smooth structure then
+    adds ``(omega dt)^2`` of its variance, so the value is an upper bound. NaN only when
+    no two adjacent rows are kept."""
+    d2, _ = noise_d2(r, seg, t)
+    if d2.shape[0] < 4:
+        d2 = noise_d1(r, seg)
+        if d2.shape[0] < 4:
+            return np.full(r.shape[1], np.nan)
+    if robust:
+        med = np.median(d2, 0)
+        d2 -= med[None, :]
+        return robust_scale(d2) / math.sqrt(6.0)
+    return np.sqrt(np.einsum("ij,ij->j", d2, d2) / d2.shape[0] / 6.0)
+
+
+def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
+    """Noise std per channel from the median of the residual's periodogram, run by run.
+
+    For white noise each periodogram bin ``|X_j|^2 / n`` is ``sigma^2`` times a unit
+    exponential, whose median is ``ln 2``; structure in fewer than half of the bins (lines,
+    a band, a slow drift, a step) cannot inflate the median much, at any frequency (second
+    differences are inflated by structure near the Nyquist frequency)."""
+    C = resid.shape[1]
+    bins = [[] for _ in range(C)]
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero(prep.run == r)
+        kr = prep.keep[rows]
+        nk = int(kr.sum())
+        if nk < 16:
+            continue
+        x = np.where(kr[:, None], resid[rows], 0.0)
+        x = x - np.where(kr[:, None], x.sum(0) / nk, 0.0)
+        P = np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
+        P = P[1 : (x.shape[0] - 1) // 2 + 1]
+        for k in range(C):
+            bins[k].append(P[:, k])
+    out = np.full(C, np.nan)
+    eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
+    for k in range(C):
+        if bins[k]:
+            allb = np.concatenate(bins[k])
+            if allb.size >= 8:
+                out[k] = math.sqrt(np.median(allb) / math.log(2.0) / eff)
+    return out
