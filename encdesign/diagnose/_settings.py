@@ -213,7 +213,12 @@ class FinderSettings(eqx.Module):
     pieces in the main direction still need 10 % (start-ups, return moves). Below 10 % the
     direction offset at a forward / stop / back reversal went untested (issue 22 item 4;
     generated trapezoid profiles with 2-12 % back, tests/test_nuisances.py seeds 51-53).
-    5 %: the settling margins (1/50 of the run each side) leave at least a few percent."""
+    5 %: the settling margins (1/50 of the run each side) leave at least a few percent.
+    Only a piece that comes after a long piece of the main direction is a move back; one
+    before it is a return move into the start position and needs ``segment_min_share``
+    like a start-up (the conceal benchmark's fast, shaken return moves of 5 % were kept
+    and read as vibration: return moves of 2-9 %, seeds 301-320, 8/20 -> 20/20 consistent;
+    forward / stop / back, seeds 301-320, unchanged)."""
 
     late_stamp_ratio: float = eqx.field(default=0.5, static=True)
     """The first rows after a logger gap whose time intervals are shorter than this share of
