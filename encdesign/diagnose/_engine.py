@@ -452,7 +452,7 @@ def run_engine(
     t0 = time.perf_counter()
     pg = _Progress(verbose)
     try:
-        kd = kind.data(rec)
+        kd = kind.data(rec, settings)
         meta = dict(rec.meta)
         meta.setdefault("kind", rec.kind)
         prep = kind.prepare(kd, meta, settings)

@@ -18,7 +18,7 @@ import numpy as np
 from ._candidates import Candidate, Context
 from ._prepare import prepare as engine_prepare
 from ._protocol import KindData, Prepared
-from ._settings import FinderSettings
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 
 class AbstractKind(eqx.Module):
@@ -47,8 +47,9 @@ class AbstractKind(eqx.Module):
     reading_lattice: ClassVar[bool] = False
 
     @abc.abstractmethod
-    def data(self, rec) -> KindData:
-        """The observations and row columns of a recording (raises EncdesignInputError)."""
+    def data(self, rec, settings: FinderSettings = DEFAULT_SETTINGS) -> KindData:
+        """The observations and row columns of a recording (raises EncdesignInputError);
+        ``settings``: the run's thresholds (e.g. the SDS time-stamp lattice)."""
 
     @abc.abstractmethod
     def base(self, prep: Prepared, max_order: int) -> tuple[list, dict]:

@@ -37,6 +37,7 @@ from ..io._recording import Recording
 from ._candidates import Candidate, Context, Param
 from ._kind import AbstractKind
 from ._protocol import KindData, Prepared
+from ._settings import DEFAULT_SETTINGS
 
 EXPLANATIONS = {
     "cogging": (
@@ -324,7 +325,7 @@ class MotionKind(AbstractKind):
     default_max_order: ClassVar[int] = 200
     reading_lattice: ClassVar[bool] = True
 
-    def data(self, rec):
+    def data(self, rec, settings=DEFAULT_SETTINGS):
         return motion_data(rec)
 
     def base(self, prep, max_order):

@@ -48,7 +48,7 @@ from ._multihead_terms import (
 )
 from ._prepare import prepare as engine_prepare
 from ._protocol import KindData, Prepared, steady_tolerance
-from ._settings import FinderSettings
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 from ._views import run_spans
 
 
@@ -588,7 +588,7 @@ class MultiheadKind(AbstractKind):
     grows_orders: ClassVar[bool] = True
     reading_lattice: ClassVar[bool] = True
 
-    def data(self, rec):
+    def data(self, rec, settings=DEFAULT_SETTINGS):
         return multihead_data(rec)
 
     def prepare(self, kd, meta, settings):

@@ -555,7 +555,7 @@ class QuadratureKind(AbstractKind):
     def views(self) -> tuple:  # type: ignore[override]
         return ("orders", "time", "spectrum") if self.st["has_t"] else ("orders",)
 
-    def data(self, rec):
+    def data(self, rec, settings=DEFAULT_SETTINGS):
         return quadrature_data(rec, self.st)
 
     def base(self, prep, max_order):

@@ -336,8 +336,8 @@ class SDSKind(AbstractKind):
     default_max_order: ClassVar[int] = 60
     noise_replaces: ClassVar[bool] = True
 
-    def data(self, rec):
-        return sds_data(rec)
+    def data(self, rec, settings=DEFAULT_SETTINGS):
+        return sds_data(rec, settings)
 
     def base(self, prep, max_order):
         return sds_base(prep, max_order)

@@ -327,8 +327,9 @@ def _design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
     return sorted(o for o in orders if o <= cap)
 
 
-def sds_data(rec: Recording) -> SDSKindData:
-    """Rows (runs) and channels (moving sensor × {run mean, revolution contrasts})."""
+def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDSKindData:
+    """Rows (runs) and channels (moving sensor × {run mean, revolution contrasts});
+    ``settings``: the time-stamp lattice thresholds."""
     tab = sds_pair_table(rec)
     where = str(rec.path) if rec.path is not None else "recording"
     R = tab.run_ids.size
@@ -372,7 +373,7 @@ def sds_data(rec: Recording) -> SDSKindData:
     omega = 2 * np.pi / tab.period_s
     enc = rec.encoder
     clock_hz = enc.get("clock_hz")
-    lattice = stamp_lattice(np.asarray(rec.columns["t"], float))
+    lattice = stamp_lattice(np.asarray(rec.columns["t"], float), settings=settings)
     rows_extra = dict(
         phi=np.asarray(phi, float),
         tf_c=tf - t_mean,
