@@ -54,8 +54,10 @@ def _add_effect(name: str, e: np.ndarray, k: int, r: int, t: np.ndarray, th: np.
         psi = LINES * th
         e += A * (np.cos(psi) + 0.5 * np.sin(2 * psi + ctx["phase"]))
     elif name == "eccentricity_shift":  # the disk centre jumps in run 1 at t = 2 s
-        if r == 1:
-            step = 1.0 / (1.0 + np.exp(-(t - 2.0) / 1e-3))
+        # and stays moved in the later runs (a shift, the physics' step on the global time
+        # axis: held in run 1 only, it was a pulse of order 1 that no catalog effect is)
+        if r >= 1:
+            step = 0.5 * (1.0 + np.tanh((t - 2.0) / 2e-3)) if r == 1 else np.ones_like(t)
             e += A * step * np.sin(th - a + ctx["phase"])
     elif name not in ("clean", ""):
         raise ValueError(f"unknown effect {name!r}")

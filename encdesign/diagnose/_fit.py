@@ -166,13 +166,17 @@ class Fitter:
         A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
         depending only on the held (nonlinear) parameters: those are cached (within a
         memory budget), so refits with other terms cost one matrix product."""
-        p = {k: jnp.asarray(v) for k, v in term.values.items()}
+
+        def params() -> dict:  # device arrays only where a compiled function is called
+            return {k: jnp.asarray(v) for k, v in term.values.items()}
+
         if self._linear_only(term):
             held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
             fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
             key = (id(term.cand), a, held, fmask)
             hit = self._jcache.get(key)
             if hit is None:
+                p = params()
                 p0 = {
                     q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
                     for q in term.cand.params
@@ -200,13 +204,13 @@ class Fitter:
                 and np.any(term.values[q.name][~term.free[q.name]] != 0)
             ]
             if held_lin:
-                v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
+                v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
             return v, Jt
         if jac:
-            v, J = valjac_fn(term.cand)(p, x)
+            v, J = valjac_fn(term.cand)(params(), x)
             v = np.asarray(v)[: b - a]
             return v, self._gather(term, J, b - a, v.shape[1])
-        v = np.asarray(_val_fn(term.cand)(p, x))[: b - a]
+        v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
         return v, None
 
     @staticmethod

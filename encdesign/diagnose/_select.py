@@ -146,17 +146,38 @@ def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
     return out
 
 
-def _term_rms(fitter: Fitter, term: Term, prep: Prepared) -> float:
-    """RMS of one term's own contribution (projected, whitened by the noise)."""
-    tot = 0.0
+def _term_rms(fitter: Fitter, term: Term, prep: Prepared, per_run: bool = False) -> float:
+    """RMS of one term's own contribution (projected, whitened by the noise).
+
+    ``per_run``: less its mean per run and channel over the kept rows, the part a constant
+    per run and channel of the base model absorbs (e.g. a drift over the whole record seen
+    through runs, each with its own zero): not a size the data could see."""
+    R, C = prep.ctx.n_runs, prep.n_channels
+    s1, s2, cnt = np.zeros((R, C)), np.zeros((R, C)), np.zeros(R)
     for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
         v = fitter.eval_term(term, a, b, x, jac=False)[0]
         if prep.kd.project:
             v = v - v.mean(1, keepdims=True)
-        tot += float(np.sum((v[prep.keep[a:b]] / prep.sigma[None, :]) ** 2))
-    C = prep.n_channels
+        k = prep.keep[a:b]
+        w = v[k] / prep.sigma[None, :]
+        run = np.asarray(prep.run[a:b])[k]
+        np.add.at(s1, run, w)
+        np.add.at(s2, run, w * w)
+        np.add.at(cnt, run, 1.0)
+    tot = float(s2.sum())
+    if per_run:
+        tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1.0)[:, None]))
     eff = (C - 1) / C if prep.kd.project else 1.0
-    return float(np.sqrt(tot / max(prep.keep.sum() * C * eff, 1)))
+    return float(np.sqrt(max(tot, 0.0) / max(prep.keep.sum() * C * eff, 1)))
+
+
+def _has_run_constants(terms: Sequence[Term]) -> bool:
+    """Whether these (base) terms hold a free linear constant per run and channel."""
+    return any(
+        q.shape == "runs*channels" and q.linear and bool(t.free[q.name].all())
+        for t in terms
+        for q in t.cand.params
+    )
 
 
 def _order_key(f) -> int | None:
@@ -274,7 +295,7 @@ def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> t
             )
         )
     term = fr.terms[-1]
-    trms = _term_rms(fitter, term, prep)
+    trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
     erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
     if trms > s.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
         reasons.append(
