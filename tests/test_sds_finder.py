@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+import types
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -12,11 +14,12 @@ import pytest
 
 import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
-from encdesign.diagnose import diagnose
+from encdesign.diagnose import DEFAULT_SETTINGS, diagnose
+from encdesign.diagnose._candidates import Context
 from encdesign.diagnose._sds import finish_sds
 from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
 from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
-from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn
+from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
 from encdesign.diagnose._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
 from encdesign.simulate import write_concealed_sds
@@ -489,3 +492,39 @@ def test_conceal_benchmark_sds_quick(tmp_path):
     assert rc == 0
     s = json.loads((tmp_path / "s.json").read_text())["sds"]
     assert s["n_recordings"] == 1 and s["confusion"] == {"clean": {"consistent": 1}}
+
+
+def test_coil_order_count_follows_the_parameter_budget():
+    # 12 runs, 3 moving sensors, base = 3 pair constants + design orders 6 and 12 (7 params):
+    # K = 5 revolutions (180 values, 18 params) leaves all 5 coil orders, K = 4 (144
+    # values, 14.4) the lowest 3; no budget at all leaves all (the rule refuses by name)
+    def ctx(K, R=12, M=3):
+        c = dict(psi_m=np.zeros(M), base_orders=[6, 12])
+        ns = types.SimpleNamespace(n_runs=R, n_channels=K * M, consts=c, settings=DEFAULT_SETTINGS)
+        return cast(Context, ns)
+
+    assert coil_order_count(ctx(5), 6) == 5
+    assert coil_order_count(ctx(4), 6) == 3
+    assert coil_order_count(ctx(2, R=4), 6) == 5
+
+
+def test_clear_coil_mismatch_named_when_a_short_run_leaves_four_revolutions(tmp_path):
+    # seed 84514 is the conceal benchmark's clear coil record of seed 84 (sds014): one run
+    # has 4 complete revolutions, so every run keeps 4 and the five coil orders (10
+    # parameters) no longer fit the budget with the base's 7; it was refused whole
+    # (max_param_fraction) and the verdict was unexplained
+    rec, _ = write_concealed_sds(
+        tmp_path / "coil.toml",
+        key=jax.random.key(84514),
+        effect="coil_mismatch",
+        concealment="clear",
+        phi_ref=True,
+        n_runs=N_RUNS,
+    )
+    d = _diag(rec)
+    assert d["base"]["n_revolutions_per_run"] == 4  # the case this test is about
+    assert d["verdict"] == "missing_physics", d["report"]
+    e = d["effects"][0]
+    assert e["name"] == "coil_mismatch", d["report"]
+    assert e["derived"]["coil_orders_left_out"]["value"] == 2
+    assert e["heldout_rms_after"] < 0.2 * d["heldout_rms_before"]

@@ -125,6 +125,19 @@ def _ripple_derived(orders):
     return derived
 
 
+def _coil_derived(orders, pp):
+    """The ripple's derived values plus how many coil orders the budget left out."""
+    base = _ripple_derived(orders)
+
+    def derived(ctx, v, se):
+        left = pp - 1 - len(orders)
+        return base(ctx, v, se) | {
+            "coil_orders_left_out": {"value": int(left), "se": None, "unit": "1"}
+        }
+
+    return derived
+
+
 def _axis_tilt_fn(p, x):
     xm, pf, _ = _xk(x)
     beta, chi = p["tilt_rad"], p["azimuth_rad"]
@@ -408,11 +421,32 @@ def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
     """The SDS catalog candidates for this record."""
     M = ctx.consts["psi_m"].size
     pp = int(ctx.meta.get("encoder", {}).get("pole_pairs", 0) or 0)
-    return _catalog(M, pp)
+    return _catalog(M, pp, coil_order_count(ctx, pp))
+
+
+def coil_order_count(ctx: Context, pp: int) -> int:
+    """How many of the coil orders ``1 … pp − 1`` ``coil_mismatch`` fits, the lowest first:
+    as many as the parameter budget leaves (``max_param_fraction`` of the fitted values
+    ``R × K × M``, less the base model's pair constants and design-ripple pairs), all of
+    them when it leaves none (the rule then refuses it by name).
+
+    The values count ``K``, the complete revolutions of the shortest run, so one run short
+    by a revolution takes 20 % of the budget from every run (at 12 runs, 3 moving sensors:
+    180 -> 144 values, 18 -> 14.4 parameters, with 7 in the base and 10 in five coil
+    orders); a refusal of the whole effect then hid a coil ripple 15-50x the noise. A
+    torque ripple of order ``n`` moves the speed by about ripple / (``n`` x inertia), so
+    the low orders carry the most of it; the orders left out are reported
+    (``coil_orders_left_out``) and stay in the order views."""
+    n = max(pp - 1, 0)
+    R, C = int(ctx.n_runs), int(ctx.n_channels)
+    M = int(ctx.consts["psi_m"].size)
+    base = M + 2 * len(ctx.consts.get("base_orders", []))
+    budget = int((ctx.settings.max_param_fraction * R * C - base) // 2)
+    return n if budget < 1 else min(n, budget)
 
 
 @functools.lru_cache(maxsize=16)
-def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
+def _catalog(M: int, pp: int, n_coil: int | None = None) -> tuple[Candidate, ...]:
     """One set of candidate objects per layout (one compiled Jacobian each). Every
     candidate but the delay step is refused when one run's deviation on one sensor
     dominates the base residual (:func:`_transient`): a smooth pattern in the platform
@@ -490,13 +524,14 @@ def _catalog(M: int, pp: int) -> tuple[Candidate, ...]:
         ),
     ]
     if pp > 1:
-        orders = tuple(range(1, pp))
+        orders = tuple(range(1, pp))[: n_coil or None]
         coil = _ripple_term(orders, "coil_mismatch", EXPLANATIONS["coil_mismatch"])
         out.append(
             dataclasses.replace(
                 coil,
                 plausible=_no_transient(_coil_plausible),
                 signature=("sds_coil_mismatch", "run_step"),
+                derived=_coil_derived(orders, pp),
             )
         )
     return tuple(out)
