@@ -153,18 +153,19 @@ def _term_rms(fitter: Fitter, term: Term, prep: Prepared, per_run: bool = False)
     per run and channel of the base model absorbs (e.g. a drift over the whole record seen
     through runs, each with its own zero): not a size the data could see."""
     R, C = prep.ctx.n_runs, prep.n_channels
-    s1, s2, cnt = np.zeros((R, C)), np.zeros((R, C)), np.zeros(R)
+    tot, s1, cnt = 0.0, np.zeros((R, C)), np.zeros(R)
     for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
         v = fitter.eval_term(term, a, b, x, jac=False)[0]
         if prep.kd.project:
             v = v - v.mean(1, keepdims=True)
         k = prep.keep[a:b]
         w = v[k] / prep.sigma[None, :]
-        run = np.asarray(prep.run[a:b])[k]
-        np.add.at(s1, run, w)
-        np.add.at(s2, run, w * w)
-        np.add.at(cnt, run, 1.0)
-    tot = float(s2.sum())
+        tot += float(np.sum(w * w))
+        if per_run:  # sums per run and channel (bincount: np.add.at is slow per row)
+            run = np.asarray(prep.run[a:b])[k]
+            cnt += np.bincount(run, minlength=R)
+            for c in range(C):
+                s1[:, c] += np.bincount(run, weights=w[:, c], minlength=R)
     if per_run:
         tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1.0)[:, None]))
     eff = (C - 1) / C if prep.kd.project else 1.0
