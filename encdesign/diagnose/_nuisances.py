@@ -38,9 +38,6 @@ def late_stamp_rows(dt_after: np.ndarray, dt_median: float, ratio: float) -> int
     return int(short.size if short.all() else np.argmin(short))
 
 
-EXCLUDED_SHARE_WARN = DEFAULT_SETTINGS.excluded_share_warn
-"""The default of ``FinderSettings.excluded_share_warn`` (kept for callers of the old name)."""
-
 
 def excluded_share(
     n_rows: int,

@@ -30,10 +30,6 @@ import numpy as np
 
 from ._settings import DEFAULT_SETTINGS, FinderSettings
 
-STEPPED_MAX_STEADY_ROWS = DEFAULT_SETTINGS.stepped_max_steady_rows
-"""The default of ``FinderSettings.stepped_max_steady_rows`` (kept for callers of the old
-name)."""
-
 DYNAMIC_CANDIDATES = ("vibration", "thermal_drift", "reading_delay", "bearing_wobble")
 """Candidates a stepped record cannot test: ``vibration`` is fixed in Hz, ``reading_delay``
 is driven by the speed, ``thermal_drift`` without ``temp_c`` by time (``t`` may be a step
