@@ -401,9 +401,6 @@ def main(argv: list[str] | None = None) -> int:
             }
             best_core = max(per_core, key=lambda k: per_core[k]["readings_per_s"])
             res["kinematics"][c] = per_core[best_core]
-            for k, r in per_core.items():
-                if k != best_core:
-                    r.pop("first_designs_errors")
         res["numpy"] = _run_child("numpy", "numpy", clean, Path(tmp), core=best_core)
         if not args.skip_yield:
             for c in configs:
