@@ -38,7 +38,6 @@ def late_stamp_rows(dt_after: np.ndarray, dt_median: float, ratio: float) -> int
     return int(short.size if short.all() else np.argmin(short))
 
 
-
 def excluded_share(
     n_rows: int,
     n_kept: int,
