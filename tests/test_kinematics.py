@@ -163,7 +163,7 @@ def test_gradient_matches_central_differences():
 def test_hand_written_reverse_pass_matches_autodiff(orders, with_time, seed):
     """The per-reading reverse pass of ``_errors`` (``_readings_bwd``) against JAX's own
     reverse mode through the same equations (``_geometry`` + ``_grating``), for every leaf
-    of a random build with every hook switched on."""
+    of a random build with every hook switched on, and for the shaft angles and times."""
     k = jax.random.split(jax.random.key(seed), 10)
     nrm, h = jax.random.normal, 3
     m = make_model(
@@ -186,13 +186,14 @@ def test_hand_written_reverse_pass_matches_autodiff(orders, with_time, seed):
     t = theta / (2 * np.pi) if with_time else None
     w = jax.random.normal(k[8], (theta.shape[0], h))
 
-    def plain(mm):
-        geom, s1, c1, psi = _geometry(mm, theta, t)
+    def plain_at(mm, th, tt):
+        geom, s1, c1, psi = _geometry(mm, th, tt)
         d = mm.disk
         return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
 
-    g_hand = jax.grad(lambda mm: jnp.sum(w * _errors(mm, theta, t)))(m)
-    g_auto = jax.grad(lambda mm: jnp.sum(w * plain(mm)))(m)
+    # every leaf of the model, and the shaft angles and times (inputs, also differentiable)
+    g_hand = jax.grad(lambda mm, th, tt: jnp.sum(w * _errors(mm, th, tt)), (0, 1, 2))(m, theta, t)
+    g_auto = jax.grad(lambda mm, th, tt: jnp.sum(w * plain_at(mm, th, tt)), (0, 1, 2))(m, theta, t)
     for a, b in zip(jax.tree.leaves(g_hand), jax.tree.leaves(g_auto), strict=True):
         scale = float(jnp.max(jnp.abs(b))) if b.size else 0.0
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * scale + 1e-300)

@@ -44,6 +44,8 @@ from .._array import f64 as _f64
 from .._array import is_traced
 from ._reading_math import (
     _GRATING_LOOP_MAX,
+    _angle_frame,
+    _broadcast_frame,
     _core,
     _grating,
     _readings,
@@ -301,7 +303,8 @@ def _errors(model: EncoderModel, theta: Array, time: Array | None) -> Array:
     """Head errors ``(n, H)``, rad, for shaft angles ``theta (n,)`` rad and times ``(n,)`` s."""
     d = model.disk
     if d.grating_sin_rad.shape[0] <= _GRATING_LOOP_MAX:
-        return _readings(_frame(model, theta, time), d.grating_sin_rad, d.grating_cos_rad)
+        consts, per_head = _design(model)
+        return _readings(consts, per_head, theta, time, d.grating_sin_rad, d.grating_cos_rad)
     geom, s1, c1, psi = _geometry(model, theta, time)
     return geom + _grating(d.grating_sin_rad, d.grating_cos_rad, s1, c1, psi)
 
@@ -338,54 +341,41 @@ def _errors_scaled(model, theta, scale, unit_sin, unit_cos):
     return geom + scale * _grating(_f64(unit_sin), _f64(unit_cos), s1, c1, psi)
 
 
-def _frame(model: EncoderModel, theta: Array, time: Array | None) -> tuple[Array, ...]:
-    """Everything of the model that is not per reading: the rotated disk normal ``n``,
-    index line ``l`` and centre ``c`` per angle, each component ``(n, 1)`` (unit vectors;
-    m), the heads' beam ``u`` and position ``r`` (``(1, H)``; unit, m), ``cos``/``sin`` of
-    the shaft angle ``(n, 1)`` and of the nominal head azimuths ``(1, H)``."""
+def _design(model: EncoderModel) -> tuple[tuple[Array, ...], tuple[Array, ...]]:
+    """Everything of the model that is neither per angle nor per reading: the disk normal
+    ``n0``, index line ``l0`` and centre ``c0`` at ``theta = 0`` (unit vectors; m), the
+    runout's amplitude (m), ratio, phase (rad) and frequency (Hz), the axial coefficients
+    (m), and the heads' beam ``u`` and position ``r`` (``(H,)``; unit, m) with ``cos``/``sin``
+    of their nominal azimuths (:func:`._reading_math._angle_frame` takes it from here)."""
     d, hd, mo = model.disk, model.heads, model.motion
-    radius = d.optical_radius_m
-    # --- disk in the rotor frame at theta = 0
     tx, ty = jnp.tan(d.tilt_rad[0]), jnp.tan(d.tilt_rad[1])
     nn = jnp.sqrt(1.0 + tx * tx + ty * ty)
     n0x, n0y, n0z = tx / nn, ty / nn, 1.0 / nn
     ln = jnp.sqrt(1.0 - n0x * n0x)  # index line: +x projected into the disk plane
     l0x, l0y, l0z = (1.0 - n0x * n0x) / ln, -n0x * n0y / ln, -n0x * n0z / ln
-    c0x, c0y = d.eccentricity_m[0], d.eccentricity_m[1]
-    # --- rotate by theta about z; shapes (n, 1) so that heads broadcast along axis 1
-    th = theta[:, None]
-    ct, st = jnp.cos(th), jnp.sin(th)
-    nx, ny, nz = ct * n0x - st * n0y, st * n0x + ct * n0y, n0z
-    lx, ly, lz = ct * l0x - st * l0y, st * l0x + ct * l0y, l0z
-    cx, cy = ct * c0x - st * c0y, st * c0x + ct * c0y
-    # --- motion hooks
-    phase = mo.runout_ratio * th + mo.runout_phase_rad
-    if time is not None:
-        phase = phase + 2 * jnp.pi * mo.runout_freq_hz * time[:, None]
-    cx = cx + mo.runout_amplitude_m * jnp.cos(phase)
-    cy = cy + mo.runout_amplitude_m * jnp.sin(phase)
-    k = mo.axial_cos_m.shape[0]
-    if k:
-        j = jnp.arange(1, k + 1, dtype=theta.dtype)
-        arg = theta[:, None] * j
-        cz = (jnp.cos(arg) @ mo.axial_cos_m + jnp.sin(arg) @ mo.axial_sin_m)[:, None]
-    else:
-        cz = jnp.zeros_like(th)
+    consts = (
+        n0x, n0y, n0z, l0x, l0y, l0z, d.eccentricity_m[0], d.eccentricity_m[1],
+        mo.runout_amplitude_m, mo.runout_ratio, mo.runout_phase_rad, mo.runout_freq_hz,
+        mo.axial_cos_m, mo.axial_sin_m,
+    )  # fmt: skip
     # --- heads: position r, beam u (tangentially tilted from -z)
     beta = hd.angles_rad + hd.placement_error_rad
     cb, sb = jnp.cos(beta), jnp.sin(beta)
     tg = jnp.tan(hd.beam_tilt_rad)
     un = jnp.sqrt(1.0 + tg * tg)
-    ux, uy, uz = -tg * sb / un, tg * cb / un, -1.0 / un
-    rx, ry, rz = radius * cb, radius * sb, hd.gap_m
-    ca, sa = jnp.cos(hd.angles_rad), jnp.sin(hd.angles_rad)
-    per_angle = (nx, ny, nz, lx, ly, lz, cx, cy, cz, ct, st)
-    per_head = (ux, uy, uz, rx, ry, rz, ca, sa)
-    n, h = theta.shape[0], hd.angles_rad.shape[-1]
-    return (
-        *(jnp.broadcast_to(x, (n, 1)) for x in per_angle),
-        *(jnp.broadcast_to(x, (1, h)) for x in per_head),
-    )
+    radius = d.optical_radius_m
+    per_head = (
+        -tg * sb / un, tg * cb / un, -1.0 / un, radius * cb, radius * sb,
+        jnp.broadcast_to(hd.gap_m, beta.shape), jnp.cos(hd.angles_rad), jnp.sin(hd.angles_rad),
+    )  # fmt: skip
+    return consts, per_head
+
+
+def _frame(model: EncoderModel, theta: Array, time: Array | None) -> tuple[Array, ...]:
+    """The rotated disk frame per angle and the heads, broadcast for :func:`_core`
+    (:func:`._reading_math._angle_frame`)."""
+    consts, per_head = _design(model)
+    return _broadcast_frame(_angle_frame(consts, theta, time), per_head)
 
 
 def _geometry(

@@ -9,8 +9,6 @@ and per-head ``(1, H)`` inputs; nothing knows about the model's Modules.
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
@@ -183,53 +181,116 @@ def _core(frame: tuple[Array, ...]) -> tuple[Array, Array, Array, tuple[Array, .
         geom,
         s1,
         c1,
-        (sg, wx, wy, wz, un_dot, wn, vx, vy, vz, crx, cry, crz, rho, cd, sd, a_, b_),
+        (sg, wx, wy, wz, un_dot, wn, vx, vy, vz, crx, cry, crz, inv_rho, cd, sd, a_, b_),
+    )
+
+
+def _angle_frame(consts: tuple[Array, ...], theta: Array, time: Array | None) -> tuple[Array, ...]:
+    """The disk frame rotated to every shaft angle ``theta (n,)`` rad (times ``(n,)`` s):
+    normal ``n``, index line ``l`` and centre ``c`` (unit vectors; m) and ``cos``/``sin`` of
+    ``theta``, each ``(n, 1)``, from the design constants of ``_kinematics._design``."""
+    n0x, n0y, n0z, l0x, l0y, l0z, c0x, c0y, amp, ratio, phase0, freq, ax_c, ax_s = consts
+    th = theta[:, None]
+    ct, st = jnp.cos(th), jnp.sin(th)
+    nx, ny, nz = ct * n0x - st * n0y, st * n0x + ct * n0y, jnp.broadcast_to(n0z, th.shape)
+    lx, ly, lz = ct * l0x - st * l0y, st * l0x + ct * l0y, jnp.broadcast_to(l0z, th.shape)
+    phase = _phase(ratio, phase0, freq, th, time)
+    cx = ct * c0x - st * c0y + amp * jnp.cos(phase)
+    cy = st * c0x + ct * c0y + amp * jnp.sin(phase)
+    if ax_c.shape[0]:
+        ca_j, sa_j = _axial_basis(theta, ax_c.shape[0])
+        cz = (ca_j @ ax_c + sa_j @ ax_s)[:, None]
+    else:
+        cz = jnp.zeros_like(th)
+    return nx, ny, nz, lx, ly, lz, cx, cy, cz, ct, st
+
+
+def _phase(ratio: Array, phase0: Array, freq: Array, th: Array, time: Array | None) -> Array:
+    """Phase of the runout, rad, ``(n, 1)``."""
+    phase = ratio * th + phase0
+    return phase if time is None else phase + 2 * jnp.pi * freq * time[:, None]
+
+
+def _axial_basis(theta: Array, k: int) -> tuple[Array, Array]:
+    """``cos(j theta)``, ``sin(j theta)`` for ``j = 1 ... k``, ``(n, k)``."""
+    arg = theta[:, None] * jnp.arange(1, k + 1, dtype=theta.dtype)
+    return jnp.cos(arg), jnp.sin(arg)
+
+
+def _broadcast_frame(per_angle: tuple[Array, ...], per_head: tuple[Array, ...]) -> tuple:
+    """Per-angle ``(n, 1)`` and per-head ``(H,)`` arrays as the frame of :func:`_core`."""
+    n, h = per_angle[0].shape[0], per_head[0].shape[-1]
+    return (
+        *(jnp.broadcast_to(x, (n, 1)) for x in per_angle),
+        *(jnp.broadcast_to(x, (1, h)) for x in per_head),
     )
 
 
 @jax.custom_vjp
-def _readings(frame: tuple[Array, ...], sin_rad: Array, cos_rad: Array) -> Array:
-    """Head errors ``(n, H)``, rad: :func:`_core` plus the grating series (orders
-    ``1 ... M``, ``M <= _GRATING_LOOP_MAX``), with a hand-written reverse pass
-    (:func:`_readings_bwd`): every per-reading cotangent is formed in a few elementwise
-    passes and reduced once per input, instead of XLA's transposition of each broadcast
-    (about 70 reductions and 60 stored per-reading arrays per design)."""
+def _sums(xs: tuple[Array, ...]) -> tuple[Array, ...]:
+    """``sum(x, axis=0)`` of every ``x`` (equal shapes) as ONE variadic reduction: XLA
+    computes what the summands share once per element instead of once per summand or
+    stored (the reverse pass below has ~40 summands from the same per-reading values)."""
+    zero = jnp.zeros((), xs[0].dtype)
+    return tuple(
+        jax.lax.reduce(
+            tuple(xs), (zero,) * len(xs), lambda a, b: tuple(u + v for u, v in zip(a, b)), (0,)
+        )
+    )
+
+
+def _sums_fwd(xs):
+    return _sums(xs), xs[0].shape
+
+
+def _sums_bwd(shape, bars):
+    return (tuple(jnp.broadcast_to(b, shape) for b in bars),)
+
+
+_sums.defvjp(_sums_fwd, _sums_bwd)
+
+
+@jax.custom_vjp
+def _readings(consts, per_head, theta, time, sin_rad: Array, cos_rad: Array) -> Array:
+    """Head errors ``(n, H)``, rad: :func:`_core` on the frame of :func:`_angle_frame` plus
+    the grating series (orders ``1 ... M``, ``M <= _GRATING_LOOP_MAX``), with a
+    hand-written reverse pass (:func:`_readings_bwd`): every per-reading cotangent is formed
+    and reduced straight to the design's constants and heads in one variadic reduction over
+    the angles, instead of XLA's transposition of each broadcast (about 70 reductions and
+    60 stored per-reading arrays per design)."""
+    frame = _broadcast_frame(_angle_frame(consts, theta, time), per_head)
     geom, s1, c1, _ = _core(frame)
     return geom + _clenshaw(cos_rad, sin_rad, c1, s1) if sin_rad.shape[0] else geom
 
 
-def _readings_fwd(frame, sin_rad, cos_rad):
-    return _readings(frame, sin_rad, cos_rad), (frame, sin_rad, cos_rad)
+def _readings_fwd(consts, per_head, theta, time, sin_rad, cos_rad):
+    out = _readings(consts, per_head, theta, time, sin_rad, cos_rad)
+    return out, (consts, per_head, theta, time, sin_rad, cos_rad)
 
 
 def _readings_bwd(res, e_bar):
-    frame, sin_rad, cos_rad = res
+    consts, per_head, theta, time, sin_rad, cos_rad = res
+    n0x, n0y, n0z, l0x, l0y, l0z, c0x, c0y, amp, ratio, phase0, freq, ax_c, ax_s = consts
+    per_angle = _angle_frame(consts, theta, time)
+    frame = _broadcast_frame(per_angle, per_head)
     nx, ny, nz, lx, ly, lz, cx, cy, cz, ct, st, ux, uy, uz, rx, ry, rz, ca, sa = frame
     geom, s1, c1, aux = _core(frame)
-    sg, wx, wy, wz, un_dot, wn, vx, vy, vz, crx, cry, crz, rho, cd, sd, a_, b_ = aux
-    m = sin_rad.shape[0]
+    sg, wx, wy, wz, un_dot, wn, vx, vy, vz, crx, cry, crz, inv_rho, cd, sd, a_, _ = aux
+    m, k = sin_rad.shape[0], ax_c.shape[0]
     j = jnp.arange(1, m + 1, dtype=s1.dtype)
     gp = _clenshaw(j * sin_rad, -j * cos_rad, c1, s1) if m else jnp.zeros_like(s1)  # dg/dpsi
-    # grating coefficients: sum of e_bar sin(j psi), e_bar cos(j psi) over the readings
-    sj, cj, sins, coss = s1, c1, [], []
-    for _ in range(m):
-        sins.append(jnp.sum(e_bar * sj))
-        coss.append(jnp.sum(e_bar * cj))
-        sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
-    sin_bar = jnp.stack(sins) if m else jnp.zeros_like(sin_rad)
-    cos_bar = jnp.stack(coss) if m else jnp.zeros_like(cos_rad)
-    # geom = 2 atan(a / b)
-    q = 2.0 * e_bar / (a_ * a_ + b_ * b_)
-    a_bar, b_bar = q * b_, -q * a_
-    s1_bar = a_bar * cd + b_bar * sd + e_bar * gp * c1
-    c1_bar = -a_bar * sd + b_bar * cd - e_bar * gp * s1
-    cd_bar, sd_bar = a_bar * s1 + b_bar * c1, -a_bar * c1 + b_bar * s1
+    # geom = atan2(S, C) of the unit vector (C, S) = (c1 cd + s1 sd, s1 cd - c1 sd):
+    # d geom = C dS - S dC, no division
+    big_c, big_s = c1 * cd + s1 * sd, a_
+    s_bar, c_bar = e_bar * big_c, -e_bar * big_s
+    s1_bar = s_bar * cd + c_bar * sd + e_bar * gp * c1
+    c1_bar = -s_bar * sd + c_bar * cd - e_bar * gp * s1
+    cd_bar, sd_bar = s_bar * s1 + c_bar * c1, -s_bar * c1 + c_bar * s1
     # s1, c1 = (sin_part, cos_part) / rho
     t = s1 * s1_bar + c1 * c1_bar
-    sp_bar, cp_bar = (s1_bar - s1 * t) / rho, (c1_bar - c1 * t) / rho
+    sp_bar, cp_bar = (s1_bar - s1 * t) * inv_rho, (c1_bar - c1 * t) * inv_rho
     # sin_part = (V x l) . n, cos_part = V . l
     crx_b, cry_b, crz_b = sp_bar * nx, sp_bar * ny, sp_bar * nz
-    nx_b, ny_b, nz_b = sp_bar * crx, sp_bar * cry, sp_bar * crz
     vx_b = ly * crz_b - lz * cry_b + cp_bar * lx
     vy_b = lz * crx_b - lx * crz_b + cp_bar * ly
     vz_b = lx * cry_b - ly * crx_b + cp_bar * lz
@@ -243,22 +304,65 @@ def _readings_bwd(res, e_bar):
     wy_b = -un_dot * vy_b + wn_b * ny
     wz_b = -un_dot * vz_b + wn_b * nz
     ux_b, uy_b, uz_b = wn * vx_b + un_b * nx, wn * vy_b + un_b * ny, wn * vz_b + un_b * nz
-    nx_b = nx_b + wn_b * wx + un_b * ux
-    ny_b = ny_b + wn_b * wy + un_b * uy
-    nz_b = nz_b + wn_b * wz + un_b * uz
-    # cos, sin of theta - alpha_k
-    ct_b, st_b = cd_bar * ca - sd_bar * sa, cd_bar * sa + sd_bar * ca
-    ca_b, sa_b = cd_bar * ct + sd_bar * st, cd_bar * st - sd_bar * ct
-    h = e_bar.shape[1]
-
-    def over_h(x: Array) -> Array:  # H - 1 adds of columns: about 2x faster than a reduce
-        return functools.reduce(jnp.add, [x[:, k : k + 1] for k in range(h)])
-
-    over_n = lambda x: jnp.sum(x, axis=0, keepdims=True)  # noqa: E731
-    per_angle = (nx_b, ny_b, nz_b, lx_b, ly_b, lz_b, wx_b, wy_b, wz_b, ct_b, st_b)
-    per_head = (ux_b, uy_b, uz_b, -wx_b, -wy_b, -wz_b, ca_b, sa_b)
-    bars = (*(over_h(x) for x in per_angle), *(over_n(x) for x in per_head))
-    return tuple(_unvary_like(b, x) for b, x in zip(bars, frame, strict=True)), sin_bar, cos_bar
+    nx_b = sp_bar * crx + wn_b * wx + un_b * ux
+    ny_b = sp_bar * cry + wn_b * wy + un_b * uy
+    nz_b = sp_bar * crz + wn_b * wz + un_b * uz
+    # the per-angle frame is linear in the design constants: reduce straight onto them
+    phase = _phase(ratio, phase0, freq, theta[:, None], time)
+    cph, sph = jnp.cos(phase), jnp.sin(phase)
+    ph_b = amp * (wy_b * cph - wx_b * sph)
+    terms = [
+        nx_b * ct + ny_b * st, ny_b * ct - nx_b * st, nz_b,
+        lx_b * ct + ly_b * st, ly_b * ct - lx_b * st, lz_b,
+        wx_b * ct + wy_b * st, wy_b * ct - wx_b * st,
+        wx_b * cph + wy_b * sph, ph_b * theta[:, None], ph_b,
+    ]  # fmt: skip
+    if time is not None:
+        terms.append(ph_b * (2 * jnp.pi) * time[:, None])
+    if k:
+        ca_j, sa_j = _axial_basis(theta, k)
+        terms += [wz_b * ca_j[:, i : i + 1] for i in range(k)]
+        terms += [wz_b * sa_j[:, i : i + 1] for i in range(k)]
+    sj, cj, sins, coss = s1, c1, [], []  # grating coefficients: e_bar sin(j psi), cos(j psi)
+    for _ in range(m):
+        sins.append(e_bar * sj)
+        coss.append(e_bar * cj)
+        sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
+    ca_b, sa_b = cd_bar * ct + sd_bar * st, cd_bar * st - sd_bar * ct  # cos, sin(theta - alpha)
+    heads = [ux_b, uy_b, uz_b, -wx_b, -wy_b, -wz_b, ca_b, sa_b]
+    sums = _sums(tuple(terms + sins + coss + heads))
+    scal = [jnp.sum(x) for x in sums[: len(terms) + 2 * m]]
+    nt = len(terms)
+    freq_bar = scal[11] if time is not None else jnp.zeros_like(freq)
+    i_ax = 12 if time is not None else 11
+    consts_bar = (
+        *scal[:8], scal[8], scal[9], scal[10], freq_bar,
+        jnp.stack(scal[i_ax : i_ax + k]) if k else jnp.zeros_like(ax_c),
+        jnp.stack(scal[i_ax + k : i_ax + 2 * k]) if k else jnp.zeros_like(ax_s),
+    )  # fmt: skip
+    sin_bar = jnp.stack(scal[nt : nt + m]) if m else jnp.zeros_like(sin_rad)
+    cos_bar = jnp.stack(scal[nt + m : nt + 2 * m]) if m else jnp.zeros_like(cos_rad)
+    head_bar = tuple(x.reshape(p.shape) for x, p in zip(sums[nt + 2 * m :], per_head, strict=True))
+    # the shaft angles and times (inputs, rarely differentiated: XLA drops these when unused)
+    ct_b = cd_bar * ca - sd_bar * sa + nx_b * n0x + ny_b * n0y + lx_b * l0x + ly_b * l0y
+    ct_b = ct_b + wx_b * c0x + wy_b * c0y
+    st_b = cd_bar * sa + sd_bar * ca - nx_b * n0y + ny_b * n0x - lx_b * l0y + ly_b * l0x
+    st_b = st_b - wx_b * c0y + wy_b * c0x
+    th_b = ct * st_b - st * ct_b + ratio * ph_b
+    if k:
+        jj = jnp.arange(1, k + 1, dtype=theta.dtype)
+        th_b = th_b + wz_b * ((ca_j * jj) @ ax_s - (sa_j * jj) @ ax_c)[:, None]
+    theta_bar = jnp.sum(th_b, axis=1)
+    time_bar = None if time is None else jnp.sum(ph_b, axis=1) * (2 * jnp.pi) * freq
+    bars = (consts_bar, head_bar, theta_bar, time_bar)
+    res_in = (consts, per_head, theta, time)
+    bars = jax.tree.map(
+        lambda b, x: None if b is None else _unvary_like(b, x),
+        bars,
+        res_in,
+        is_leaf=lambda x: x is None,
+    )
+    return (*bars, _unvary_like(sin_bar, sin_rad), _unvary_like(cos_bar, cos_rad))
 
 
 def _unvary_like(bar: Array, x: Array) -> Array:
