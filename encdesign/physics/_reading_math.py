@@ -311,38 +311,42 @@ def _readings_bwd(res, e_bar):
     phase = _phase(ratio, phase0, freq, theta[:, None], time)
     cph, sph = jnp.cos(phase), jnp.sin(phase)
     ph_b = amp * (wy_b * cph - wx_b * sph)
-    terms = [
+    const_terms = [
         nx_b * ct + ny_b * st, ny_b * ct - nx_b * st, nz_b,
         lx_b * ct + ly_b * st, ly_b * ct - lx_b * st, lz_b,
         wx_b * ct + wy_b * st, wy_b * ct - wx_b * st,
         wx_b * cph + wy_b * sph, ph_b * theta[:, None], ph_b,
     ]  # fmt: skip
     if time is not None:
-        terms.append(ph_b * (2 * jnp.pi) * time[:, None])
+        const_terms.append(ph_b * (2 * jnp.pi) * time[:, None])
+    ax_terms = []
     if k:
         ca_j, sa_j = _axial_basis(theta, k)
-        terms += [wz_b * ca_j[:, i : i + 1] for i in range(k)]
-        terms += [wz_b * sa_j[:, i : i + 1] for i in range(k)]
+        ax_terms = [wz_b * ca_j[:, i : i + 1] for i in range(k)]
+        ax_terms += [wz_b * sa_j[:, i : i + 1] for i in range(k)]
     sj, cj, sins, coss = s1, c1, [], []  # grating coefficients: e_bar sin(j psi), cos(j psi)
     for _ in range(m):
         sins.append(e_bar * sj)
         coss.append(e_bar * cj)
         sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
+    grating_terms = sins + coss
     ca_b, sa_b = cd_bar * ct + sd_bar * st, cd_bar * st - sd_bar * ct  # cos, sin(theta - alpha)
     heads = [ux_b, uy_b, uz_b, -wx_b, -wy_b, -wz_b, ca_b, sa_b]
-    sums = _sums(tuple(terms + sins + coss + heads))
-    scal = [jnp.sum(x) for x in sums[: len(terms) + 2 * m]]
-    nt = len(terms)
-    freq_bar = scal[11] if time is not None else jnp.zeros_like(freq)
-    i_ax = 12 if time is not None else 11
+    sums = list(_sums(tuple(const_terms + ax_terms + grating_terms + heads)))
+    groups = []  # the sums split back into their groups, in the order above
+    for size in (len(const_terms), len(ax_terms), len(grating_terms)):
+        groups.append([jnp.sum(x) for x in sums[:size]])
+        sums = sums[size:]
+    (c_bar, a_bar, g_bar), head_sums = groups, sums
+    freq_bar = c_bar[11] if time is not None else jnp.zeros_like(freq)
     consts_bar = (
-        *scal[:8], scal[8], scal[9], scal[10], freq_bar,
-        jnp.stack(scal[i_ax : i_ax + k]) if k else jnp.zeros_like(ax_c),
-        jnp.stack(scal[i_ax + k : i_ax + 2 * k]) if k else jnp.zeros_like(ax_s),
+        *c_bar[:11], freq_bar,
+        jnp.stack(a_bar[:k]) if k else jnp.zeros_like(ax_c),
+        jnp.stack(a_bar[k:]) if k else jnp.zeros_like(ax_s),
     )  # fmt: skip
-    sin_bar = jnp.stack(scal[nt : nt + m]) if m else jnp.zeros_like(sin_rad)
-    cos_bar = jnp.stack(scal[nt + m : nt + 2 * m]) if m else jnp.zeros_like(cos_rad)
-    head_bar = tuple(x.reshape(p.shape) for x, p in zip(sums[nt + 2 * m :], per_head, strict=True))
+    sin_bar = jnp.stack(g_bar[:m]) if m else jnp.zeros_like(sin_rad)
+    cos_bar = jnp.stack(g_bar[m:]) if m else jnp.zeros_like(cos_rad)
+    head_bar = tuple(x.reshape(p.shape) for x, p in zip(head_sums, per_head, strict=True))
     # the shaft angles and times (inputs, rarely differentiated: XLA drops these when unused)
     ct_b = cd_bar * ca - sd_bar * sa + nx_b * n0x + ny_b * n0y + lx_b * l0x + ly_b * l0y
     ct_b = ct_b + wx_b * c0x + wy_b * c0y
