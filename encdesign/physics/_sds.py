@@ -43,6 +43,7 @@ from ._motor import Motor, time_at_angle
 from ._sds_errors import ARCSEC, SDSErrors, bearing_noise
 from ._types import (
     Angles,
+    ArrayInput,
     Averaged,
     FixedEdgeTimes,
     FixedValues,
@@ -73,7 +74,7 @@ __all__ = [
 ]
 
 
-def _f(x: ArrayLike) -> Array:
+def _f(x: ArrayInput) -> Array:
     return jnp.asarray(x, dtype=float)
 
 
