@@ -47,6 +47,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 import scipy.linalg
@@ -361,7 +362,11 @@ def solve_closure(
         aw, yw = a_diff, d.reshape(-1)
     a_full = np.vstack([aw, gauge])
     y_full = np.concatenate([yw, np.zeros(2)])
-    x, _, rank, sv = scipy.linalg.lstsq(a_full, y_full, cond=1e-10, check_finite=False)
+    # the default driver (gelsd) always returns the singular values (only gelsy gives None)
+    x, _, rank, sv = cast(
+        "tuple[np.ndarray, np.ndarray, int, np.ndarray]",
+        scipy.linalg.lstsq(a_full, y_full, cond=1e-10, check_finite=False),
+    )
     rank = int(rank)
     expected_rank = 2 * n - _rank_deficit(n, und)
     if rank != expected_rank:  # numerical trouble: never hide it
