@@ -3,7 +3,7 @@
 A stepped calibration has no steady motion: the rig moves to an angle, settles, and one row
 (or a few) is logged; ``t`` may be a step index rather than seconds, and consecutive angles
 may be far apart, over several turns. The engine's segment finder
-(:func:`~encdesign.diagnose._engine.find_motion_segments`) finds no steady segment in such
+(:func:`~encdesign.diagnose.engine._engine.find_motion_segments`) finds no steady segment in such
 a record and the record used to be refused ("no steady segment"). Here:
 
 * :func:`is_stepped` tells such a record (one run at a time: the motion segments cover
@@ -28,7 +28,7 @@ import dataclasses
 
 import numpy as np
 
-from ._settings import DEFAULT_SETTINGS, FinderSettings
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 DYNAMIC_CANDIDATES = ("vibration", "thermal_drift", "reading_delay", "bearing_wobble")
 """Candidates a stepped record cannot test: ``vibration`` is fixed in Hz, ``reading_delay``
@@ -69,7 +69,7 @@ def is_stepped(
         settings: the caller's :class:`~._settings.FinderSettings` (the segment finder's
             thresholds and ``stepped_max_steady_rows``).
     """
-    from ._prepare import find_motion_segments
+    from ...engine._prepare import find_motion_segments
 
     steady = 0
     for rows in _run_slices(run):

@@ -1,0 +1,1 @@
+"""One sensor against a reference: the sensor candidates and their data helpers."""

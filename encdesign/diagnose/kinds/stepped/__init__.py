@@ -1,0 +1,1 @@
+"""Stepped recordings: a shaft held at a sequence of angles (the multihead kind's steps)."""
