@@ -15,8 +15,8 @@ import scipy.linalg
 
 from encdesign import EncdesignInputError, load_recording, write_recording
 from encdesign.cli import main
-from encdesign.diagnose.kinds.reference import _reference_data as rd
-from encdesign.diagnose.kinds.reference import _reference_terms as rt
+from encdesign.diagnose.kinds.multihead import _reference_data as rd
+from encdesign.diagnose.kinds.multihead import _reference_terms as rt
 from encdesign.io._realdata import import_magalpha, import_moteus
 from encdesign.physics import _sensor_effects as se
 from encdesign.simulate import _conceal_reference as cr

@@ -17,7 +17,7 @@ the sensor, one constant per run.
 
 Candidates are the multihead catalog effects (terms in :mod:`encdesign.physics._effects`),
 plus, for a sensor against a reference, the terms of
-:mod:`encdesign.diagnose.kinds.reference._reference_terms` when that module is present.
+:mod:`encdesign.diagnose.kinds.multihead._reference_terms` when that module is present.
 """
 
 from __future__ import annotations
@@ -33,13 +33,13 @@ import numpy as np
 from ...._errors import input_error
 from ....io._recording import Recording
 from ....physics import _effects as fx
+from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import KindData, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import run_spans
-from ..stepped import _stepped
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -532,7 +532,7 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
         out += [BEARING_WOBBLE]
     if ctx.has_ref and C == 1:
         try:
-            from ..reference import _reference_terms  # 16b's sensor-against-reference terms
+            from . import _reference_terms  # 16b's sensor-against-reference terms
         except ImportError:
             pass
         else:
@@ -550,7 +550,7 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     if not (prep.ctx.has_ref and prep.n_channels == 1):
         return {}
     try:
-        from ..reference import _reference_data as rt
+        from . import _reference_data as rt
     except ImportError:
         return {}
     kd = prep.kd

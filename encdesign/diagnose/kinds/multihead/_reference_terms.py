@@ -4,7 +4,7 @@ The physics of each term (direction hysteresis, reading delay, scale error, quan
 interpolation error; derivations and closed forms) is in
 :mod:`encdesign.physics._sensor_effects`, the data helpers (reference velocity, the value
 lattice :func:`detect_lsb`, a record's summary) in
-:mod:`encdesign.diagnose.kinds.reference._reference_data`;
+:mod:`encdesign.diagnose.kinds.multihead._reference_data`;
 this module registers each term as a :class:`~encdesign.diagnose.Candidate` of the multihead
 kind, tried on a sensor against a reference.
 """

@@ -28,7 +28,7 @@ import dataclasses
 
 import numpy as np
 
-from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
+from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 DYNAMIC_CANDIDATES = ("vibration", "thermal_drift", "reading_delay", "bearing_wobble")
 """Candidates a stepped record cannot test: ``vibration`` is fixed in Hz, ``reading_delay``
@@ -69,7 +69,7 @@ def is_stepped(
         settings: the caller's :class:`~._settings.FinderSettings` (the segment finder's
             thresholds and ``stepped_max_steady_rows``).
     """
-    from ...engine._prepare import find_motion_segments
+    from ._prepare import find_motion_segments
 
     steady = 0
     for rows in _run_slices(run):

@@ -1,1 +1,0 @@
-"""One sensor against a reference: the sensor candidates and their data helpers."""

@@ -1,1 +1,0 @@
-"""Stepped recordings: a shaft held at a sequence of angles (the multihead kind's steps)."""
