@@ -216,11 +216,19 @@ def update_from_calibration(data: dict, cal: dict) -> list[str]:
     summary; returns the rows updated."""
     figs = {f"{r['instrument']}/{x['key']}": x for r in cal["instruments"] for x in r["figures"]}
     done = []
+    closed = cal.get("closed_forms", {})
     for row in data["rows"]:
         c = row.get("check")
-        if not c or not str(c.get("source", "")).startswith("cal:"):
+        src = str((c or {}).get("source", ""))
+        if src.startswith("cf:"):  # the seed's arithmetic, recomputed by the study
+            if src[3:] not in closed:
+                raise ValueError(f"row {row['id']}: source {src!r} not in closed_forms")
+            c["model"], c["model_sd"] = float(closed[src[3:]]), 0.0
+            done.append(row["id"])
             continue
-        key = c["source"][4:]
+        if not src.startswith("cal:"):
+            continue
+        key = src[4:]
         if key not in figs:
             raise ValueError(f"row {row['id']}: source {key!r} not in the calibration JSON")
         x = figs[key]

@@ -127,7 +127,14 @@ def test_agreement_is_the_calibration_studys_rule(st):
 
 def test_numbers_come_from_a_calibration_json(st, data):
     d = copy.deepcopy(data)
+    closed = {
+        r["check"]["source"][3:]: r["check"]["model"]
+        for r in d["rows"]
+        if str(r.get("check", {}).get("source", "")).startswith("cf:")
+    }
+    assert len(closed) >= 14
     cal = {
+        "closed_forms": closed,
         "predicted_within_2sigma": 1,
         "predicted_total": 2,
         "instruments": [
@@ -161,6 +168,11 @@ def test_numbers_come_from_a_calibration_json(st, data):
     assert row["check"]["model"] == 0.52
     assert any("numbers say" in b for b in st.check_row(row))  # 'disagrees' no longer holds
     assert d["calibration"] == {"predicted_within_2sigma": 1, "predicted_total": 2}
+    # the seed's arithmetic comes from the study's closed forms: a misprint would show
+    closed["s002_2mm_s_hz"] = 104.0
+    st.update_from_calibration(d, cal)
+    row = next(r for r in d["rows"] if r["id"] == "2.11")
+    assert any("verdict" in b for b in st.check_row(row))
 
 
 def test_readme_and_doc_quote_the_count_of_genuine_predictions(data):
