@@ -110,6 +110,16 @@ def test_shaker_fit_is_a_test_and_predicts_the_fast_case():
     assert not oldfig["700Hz_3.4_before"]["agrees"] and not oldfig["700Hz_3.4_after"]["agrees"]
 
 
+def test_eq5_gives_the_peak_no_speed_dependence():
+    """Seed 002's eq. 5 on one channel: the peak position error is the same at 0.8, 2 and
+    3.4 mm/s (so the seed's 1.5 -> 1.8 µm needs another cause: the fitted exponent); on both
+    channels it is an amplitude modulation with no position error at all."""
+    r = _study().eq5_speed_ratio()
+    assert r["peak_ratio_3.4_over_0.8_one_channel"] == pytest.approx(1.0, abs=0.01)
+    assert min(r["one_channel"]["peak_um"].values()) > 0.05
+    assert max(r["both_channels"]["peak_um"].values()) < 1e-9
+
+
 def test_study_seed_calibration_quick(tmp_path, monkeypatch):
     """The study end to end (fits, predictions, variants, JSON, plot) with the simulated noise
     coefficients and pair constants replaced by stand-ins: the simulations are
@@ -152,6 +162,9 @@ def test_study_seed_calibration_quick(tmp_path, monkeypatch):
         r["predicted_within_2sigma"] for r in res["instruments"]
     )
     assert res["closed_forms"]["s001_closure_counts"]["N72_23_settings"]["n_equations"] == 1658
+    assert res["eq5_speed_check"]["peak_ratio_3.4_over_0.8_one_channel"] == pytest.approx(
+        1, abs=0.01
+    )
 
 
 def _instrument_tests_study():
