@@ -672,7 +672,7 @@ def device1(
             "whirl_two_pair_std_mas": wv,
             "jitter_two_pair_std_mas": s2,
             "whirl_share_of_variance": wv**2 / std2**2 if std2 > 0 else 0.0,
-            "drift_in_ramp_rms_mas": float(theta[2]) * ramp_walk_scale / math.sqrt(6.0),
+            "drift_in_ramp_rms_mas": float(theta[2]) * ramp_walk_scale / math.sqrt(15.0),
         }
 
     return Instrument("seed001-device1", params, forward, figs, inputs, derived)

@@ -110,6 +110,18 @@ def test_shaker_fit_is_a_test_and_predicts_the_fast_case():
     assert not oldfig["700Hz_3.4_before"]["agrees"] and not oldfig["700Hz_3.4_after"]["agrees"]
 
 
+def test_ramp_draws_have_the_random_walk_residual_variance():
+    """A unit random walk about its least-squares line keeps 1/15 of its end variance on
+    average (the closed form the derived drift share uses); a half-sine bow keeps an RMS
+    of 0.31 of its amplitude about its line."""
+    import jax
+
+    rd = _study().ramp_draws(jax.random.PRNGKey(5), n_draw=800, n_t=256)
+    assert np.mean(rd["walk"] ** 2) == pytest.approx(1 / 15, rel=0.05)
+    assert np.abs(rd["bow_amp"]).max() <= 1.0
+    assert np.sqrt(np.mean(rd["bow"] ** 2)) == pytest.approx(0.31, abs=0.01)
+
+
 def test_eq5_gives_the_peak_no_speed_dependence():
     """Seed 002's eq. 5 on one channel: the peak position error is the same at 0.8, 2 and
     3.4 mm/s (so the seed's 1.5 -> 1.8 µm needs another cause: the fitted exponent); on both
