@@ -203,10 +203,12 @@ def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -
     d = diagnose(rec, verbose=False)
     t2, c2 = time.perf_counter(), _cpu_s()
     stages.update(d.doc.get("timings_s") or {})
+    stages_cpu = dict(d.doc.get("timings_cpu_s") or {})
     ru = resource.getrusage(resource.RUSAGE_SELF)
     rss = ru.ru_maxrss * 1024
     return dict(
         stages_s=stages,
+        stages_cpu_s=stages_cpu,
         data_file=io,
         cpu_s_total=ru.ru_utime + ru.ru_stime,
         cpu_s_diagnose=c2 - c1,
