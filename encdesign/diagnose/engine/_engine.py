@@ -21,6 +21,15 @@ Stages (``docs/diagnose.md``):
 6. **verdict** and report: ``consistent`` only when the goodness-of-fit test (variance ratio
    of the residual to the difference-based noise, globally and per time block) passes and no
    view finds anything.
+
+The wall time of each stage goes to the document's ``timings_s`` (:mod:`._timing`; exclusive:
+they add up to the diagnosis, less the report's text): ``data`` (the kind's observations
+from the recording's columns), ``prepare`` (segments, glitches, noise, folds), ``base_fit``
+(with the base's order growth and noise), ``views`` (every scan of a residual, wherever it
+runs), ``candidates`` (each candidate's starts and trial fits), ``heldout`` (the K-fold
+held-out solutions of every fit), ``select`` (the rest of stage 4: choosing, the backward
+check, residuals) and ``report`` (the document, the kind's additions, the verdict, the
+named effects' contributions).
 """
 
 from __future__ import annotations
@@ -50,6 +59,7 @@ from ._protocol import Prepared
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
+from ._timing import stage, timing
 from ._views import locate
 
 
@@ -452,38 +462,49 @@ def run_engine(
     t0 = time.perf_counter()
     pg = _Progress(verbose)
     try:
-        kd = kind.data(rec, settings)
-        meta = dict(rec.meta)
-        meta.setdefault("kind", rec.kind)
-        prep = kind.prepare(kd, meta, settings)
-        pg.stage("prepared")
-        order, limit = _order_of(kd, prep, kind, max_order)
-        base_terms, base_info = _base_terms(kind, prep, order)
-        fitter = Fitter(prep, progress=pg.chunk_done)
-        seen: dict[str, Candidate] = {}
-        for c in [*kind.candidates(prep.ctx), *extra_candidates]:
-            seen[c.name] = c  # later ones (reference terms, user terms) override by name
-        grow = kind.grows_orders and max_order is None
-        base_fit, order = _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow)
-        scan = scan_order_of(limit, order)
-        pg.stage("base fitted")
-        sel = select(
-            prep,
-            fitter,
-            base_fit.terms,
-            list(seen.values()),
-            kind.views,
-            scan,
-            max_effects,
-            pg.log,
-        )
-        pg.stage("selected")
-        pg.stage("held-out + goodness of fit")
-        doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
-        pg.stage("report")
-        doc = kind.finish(doc, settings)
-        doc["verdict"] = decide_verdict(doc)
+        with timing() as timer:
+            with stage("data"):
+                kd = kind.data(rec, settings)
+            meta = dict(rec.meta)
+            meta.setdefault("kind", rec.kind)
+            with stage("prepare"):
+                prep = kind.prepare(kd, meta, settings)
+            pg.stage("prepared")
+            with stage("base_fit"):
+                order, limit = _order_of(kd, prep, kind, max_order)
+                base_terms, base_info = _base_terms(kind, prep, order)
+                fitter = Fitter(prep, progress=pg.chunk_done)
+                seen: dict[str, Candidate] = {}
+                for c in [*kind.candidates(prep.ctx), *extra_candidates]:
+                    seen[c.name] = c  # later ones (reference, user terms) override by name
+                grow = kind.grows_orders and max_order is None
+                base_fit, order = _fit_base(
+                    kind, prep, fitter, base_terms, base_info, order, limit, grow
+                )
+                scan = scan_order_of(limit, order)
+            pg.stage("base fitted")
+            with stage("select"):
+                sel = select(
+                    prep,
+                    fitter,
+                    base_fit.terms,
+                    list(seen.values()),
+                    kind.views,
+                    scan,
+                    max_effects,
+                    pg.log,
+                )
+            pg.stage("selected")
+            pg.stage("held-out + goodness of fit")
+            with stage("report"):
+                doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
+                pg.stage("report")
+                doc = kind.finish(doc, settings)
+                doc["verdict"] = decide_verdict(doc)
+                contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0
+        doc["timings_s"] = dict(timer.totals)
+        doc["timings_cpu_s"] = dict(timer.cpu_totals)
         doc["report"] = report_text(doc) + kind.report_lines(doc)
     finally:
         pg.close()
@@ -491,6 +512,6 @@ def run_engine(
         prep=prep,
         base_resid=sel.base_resid,
         final_resid=sel.final_resid,
-        effect_contributions=effect_contributions(prep, fitter, sel),
+        effect_contributions=contributions,
     )
     return doc, plot

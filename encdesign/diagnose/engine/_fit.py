@@ -16,6 +16,7 @@ from scipy import stats
 from ._candidates import Candidate
 from ._protocol import Prepared
 from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
+from ._timing import stage
 from ._views import SCAN_BLOCK
 
 # ----------------------------------------------------------------------------- fitting
@@ -497,6 +498,10 @@ class Fitter:
         return self._result(terms, A, g, c, ssr, sc, converged, unident)
 
     def _result(self, terms, A, g, c, ssr, sc, converged, unident) -> FitResult:
+        with stage("heldout"):
+            return self._result_timed(terms, A, g, c, ssr, sc, converged, unident)
+
+    def _result_timed(self, terms, A, g, c, ssr, sc, converged, unident) -> FitResult:
         K = A.shape[0]
         At, gt = A.sum(0), g.sum(0)
         ho_c, ho_ssr = 0.0, 0.0

@@ -29,6 +29,7 @@ from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
+from ._timing import stage
 from ._views import locate
 
 # ----------------------------------------------------------------------------- selection
@@ -225,6 +226,11 @@ def _applicable(prep: Prepared, candidates: Sequence[Candidate], not_testable: l
 
 def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
     """The full fit of one candidate from the best of its (screened) starts, or ``None``."""
+    with stage("candidates"):
+        return _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
+
+
+def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log):
     prep, fitter = st["prep"], st["fitter"]
     N = prep.n_values
     starts = cand.start(prep.ctx, st["kept_resid"](), st["findings"]) if cand.start else [{}]

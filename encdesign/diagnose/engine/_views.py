@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ._timing import stage
+
 
 @dataclasses.dataclass
 class Finding:
@@ -729,6 +731,11 @@ class Whitened:
 
 def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
     """Run ``views`` on the residual; findings strongest first, with variance shares."""
+    with stage("views"):
+        return _locate(prep, resid, views, scan_order)
+
+
+def _locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
     rw = Whitened(resid, prep.sigma)
     tot = float(sum(np.sum(rw[a:b][prep.keep[a:b]] ** 2) for a, b in _blocks(rw.shape[0])))
     out: list[Finding] = []
