@@ -1,6 +1,7 @@
 """Benchmark: the discrepancy-finder engine's speed and memory, and its base term vs NumPy.
 
-1. The multihead base term (``encdesign.diagnose._multihead``: disk error function through
+1. The multihead base term (``encdesign.diagnose.kinds.multihead._multihead``: disk error function
+   through
    every head, placements, run angle offsets, one constant per head and run) evaluated by the
    engine (JAX, jit) and by a plain NumPy implementation of the same equation in this file:
    compared (max abs difference, rad) and timed.
@@ -198,8 +199,8 @@ def numpy_base(p: dict, theta, alpha, onehot) -> np.ndarray:
 def _terms_vs_numpy(repeats: int) -> dict:
     import jax.numpy as jnp
 
-    from encdesign.diagnose._fit import _val_fn
-    from encdesign.diagnose._multihead import _base_candidate
+    from encdesign.diagnose.engine._fit import _val_fn
+    from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
     rng = np.random.default_rng(0)
     n, C, R, M = 16384, 4, 4, 12

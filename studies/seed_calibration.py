@@ -297,17 +297,8 @@ def fit(inst: Instrument) -> dict:
 
 
 def _quiet_errors(**kw):
-    base = dict(
-        bearing_amplitude_m=[],
-        bearing_ratio=[],
-        bearing_phase_rad=[],
-        temperature_rate_k_per_s=0.0,
-        clock_period_s=0.0,
-        jitter_s=0.0,
-        axial_runout_cos_m=[0.0, 0.0],
-    )
-    base.update(kw)
-    return ed.reference_errors(**base)
+    """The seed device's systematic errors without its platform axial runout."""
+    return ed.reference_errors(systematic_only=True, **{"axial_runout_cos_m": [0.0, 0.0], **kw})
 
 
 def expected_range(n: int) -> float:

@@ -14,8 +14,8 @@ import pytest
 import encdesign
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._fit import valjac_fn
-from encdesign.diagnose._multihead import VIBRATION, _base_candidate
+from encdesign.diagnose.engine._fit import valjac_fn
+from encdesign.diagnose.kinds.multihead._multihead import VIBRATION, _base_candidate
 from encdesign.physics import _effects as fx
 from tests.helpers import validate_diagnosis
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.diagnose._multihead import _base_candidate
+from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
 
 @pytest.mark.parametrize("C,R,M", [(4, 4, 12), (1, 3, 4)])
@@ -41,10 +41,10 @@ def test_column_chi2_equals_a_refit_per_column(ref):
     """A step scanned over rows (the located-step refinement): the chi-square of held base +
     one step column, for every row, equals the fit of that model; without a reference the
     head mean is projected out of the columns too."""
-    from encdesign.diagnose._fit import Fitter, make_term
-    from encdesign.diagnose._multihead import multihead_base, multihead_data
-    from encdesign.diagnose._prepare import prepare
-    from encdesign.diagnose._steps import frozen, step_term
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._prepare import prepare
+    from encdesign.diagnose.engine._steps import frozen, step_term
+    from encdesign.diagnose.kinds.multihead._multihead import multihead_base, multihead_data
     from tests.test_engine import _bench
 
     rec = _bench(1500, 3, ref)

@@ -1,4 +1,4 @@
-"""Nuisances of measured benches (issue 22, item 4): ``encdesign.diagnose._nuisances``."""
+"""Nuisances of measured benches (issue 22, item 4): ``encdesign.diagnose.engine._nuisances``."""
 
 import numpy as np
 import pytest
@@ -13,8 +13,8 @@ from helpers import (
 )
 
 from encdesign import Recording
-from encdesign.diagnose import _nuisances
 from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose.engine import _nuisances
 
 
 def test_excluded_share_lists_the_reasons_above_a_third():

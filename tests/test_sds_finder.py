@@ -1,5 +1,5 @@
 """Discrepancy finder for sds recordings: the ``sds`` kind of the engine
-(``encdesign.diagnose._sds``)."""
+(``encdesign.diagnose.kinds.sds._sds``)."""
 
 from __future__ import annotations
 
@@ -15,12 +15,12 @@ import pytest
 import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
 from encdesign.diagnose import DEFAULT_SETTINGS, diagnose
-from encdesign.diagnose._candidates import Context
-from encdesign.diagnose._sds import finish_sds
-from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
-from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
-from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
-from encdesign.diagnose._sds_terms import sds_candidates as _sds_candidates
+from encdesign.diagnose.engine._candidates import Context
+from encdesign.diagnose.kinds.sds._sds import finish_sds
+from encdesign.diagnose.kinds.sds._sds_data import sds_data, sds_prepare, stamp_lattice
+from encdesign.diagnose.kinds.sds._sds_noise import _level_sigma, _saturating_columns, dof_widening
+from encdesign.diagnose.kinds.sds._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
+from encdesign.diagnose.kinds.sds._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
 from encdesign.simulate import write_concealed_sds
 from tests.helpers import validate_diagnosis
@@ -277,7 +277,7 @@ def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
 def test_delay_reference_sensor_column_is_zero(sds_bench):
     """Without phi_ref the reference sensor's delay column is exactly zero (held by rule,
     deterministically), the others are not: no tie left for the pivoting to break."""
-    from encdesign.diagnose._fit import valjac_fn
+    from encdesign.diagnose.engine._fit import valjac_fn
 
     rec, _ = sds_bench(None, "clear", False)
     kd = sds_data(rec)

@@ -83,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.report is not None:
         atomic_write_text(args.report, text)
     if args.html is not None:
-        from ..diagnose._html import write_html
+        from ..diagnose.engine._html import write_html
 
         write_html(d, args.html)
         print(f"wrote {args.html}", file=sys.stderr)

@@ -125,7 +125,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _measure(args: argparse.Namespace) -> int:
-    from ..diagnose._sds_readout import sds_readings_from_recording
+    from ..diagnose.kinds.sds._sds_readout import sds_readings_from_recording
     from ..io._recording import load_recording
     from ..physics._sds_errors import ARCSEC
 

@@ -1,10 +1,11 @@
 """One entry for the discrepancy finder over every recording kind: :func:`diagnose`.
 
 ``multihead`` (including one sensor against a reference), ``motion``, ``sds`` and
-``quadrature`` recordings all go through the engine (:mod:`encdesign.diagnose._engine`) with
-their kind (:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
-:mod:`encdesign.diagnose._sds`, :mod:`encdesign.diagnose._quadrature`); every diagnosis
-follows one contract
+``quadrature`` recordings all go through the engine
+(:mod:`encdesign.diagnose.engine._engine`) with their kind
+(:mod:`encdesign.diagnose.kinds.multihead._multihead`,
+:mod:`encdesign.diagnose.kinds.motion._motion`, :mod:`encdesign.diagnose.kinds.sds._sds`,
+:mod:`encdesign.diagnose.kinds.quadrature._quadrature`); every diagnosis follows one contract
 (``diagnosis.schema.json``).
 """
 
@@ -22,9 +23,9 @@ import equinox as eqx
 from .._errors import DiagnosisError, input_error
 from .._usercode import user_module_items
 from ..io._recording import Recording, load_recording
-from ._candidates import Candidate
-from ._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
-from ._settings import FinderSettings
+from .engine._candidates import Candidate
+from .engine._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
+from .engine._settings import FinderSettings
 
 ENGINE_KINDS = ("multihead", "motion", "sds", "quadrature")
 
@@ -169,7 +170,7 @@ def diagnose(
         raise input_error(
             "kind", f"no finder for recording kind {rec.kind!r}", f"one of {ENGINE_KINDS}"
         )
-    from ._engine import run_engine
+    from .engine._engine import run_engine
 
     opts = dict(
         max_order=max_order,
@@ -179,24 +180,24 @@ def diagnose(
         settings=settings,
     )
     if rec.kind == "quadrature":
-        from ._quadrature import run_quadrature
+        from .kinds.quadrature._quadrature import run_quadrature
 
         doc, plot_data = run_quadrature(rec, **opts)
     else:
         if rec.kind == "multihead":
-            from ._multihead import MULTIHEAD as kind
+            from .kinds.multihead._multihead import MULTIHEAD as kind
         elif rec.kind == "sds":
-            from ._sds import SDS as kind
+            from .kinds.sds._sds import SDS as kind
         else:
-            from ._motion import MOTION as kind
+            from .kinds.motion._motion import MOTION as kind
         doc, plot_data = run_engine(kind, rec, **opts)
     d = Diagnosis.from_json(doc, plot_data)
     if plots is not None:
-        from ._plots import engine_plots
+        from .engine._plots import engine_plots
 
         paths = [str(p) for p in engine_plots(d, plots)]
         if rec.kind == "quadrature":
-            from ._quadrature import quadrature_plots
+            from .kinds.quadrature._quadrature import quadrature_plots
 
             paths += [str(p) for p in quadrature_plots(d, plots)]
         d = d.with_keys(plots=paths)

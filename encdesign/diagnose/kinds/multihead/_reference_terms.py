@@ -3,7 +3,8 @@
 The physics of each term (direction hysteresis, reading delay, scale error, quantization,
 interpolation error; derivations and closed forms) is in
 :mod:`encdesign.physics._sensor_effects`, the data helpers (reference velocity, the value
-lattice :func:`detect_lsb`, a record's summary) in :mod:`encdesign.diagnose._reference_data`;
+lattice :func:`detect_lsb`, a record's summary) in
+:mod:`encdesign.diagnose.kinds.multihead._reference_data`;
 this module registers each term as a :class:`~encdesign.diagnose.Candidate` of the multihead
 kind, tried on a sensor against a reference.
 """
@@ -17,14 +18,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ..physics._sensor_effects import (
+from ....physics._sensor_effects import (
     REFERENCE_PARAM_UNITS,
     interpolation_params_from_harmonics,
     quantization_rad,
     reading_delay_rad,
     scale_error_rad,
 )
-from ._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param
 from ._reference_data import (
     Lattice,
     detect_lsb,
@@ -33,7 +34,7 @@ from ._reference_data import (
 __all__ = ["CANDIDATES", "interpolation_candidate"]
 
 # ----------------------------------------------------------------------------- candidates
-# The engine's registration API (``encdesign.diagnose._candidates``): each term above as a
+# The engine's registration API (``encdesign.diagnose.engine._candidates``): each term above as a
 # :class:`Candidate` of the multihead kind, tried on a sensor against a reference.
 
 # The plausibility bounds of these candidates are FinderSettings fields

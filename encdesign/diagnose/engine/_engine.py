@@ -11,7 +11,7 @@ Stages (``docs/diagnose.md``):
 2. **base fit**: the kind's base terms (one constant per channel and run, run angle offsets,
    the kind's error function up to the orders the record resolves) by Gauss-Newton /
    Levenberg-Marquardt on sufficient statistics accumulated chunk by chunk (bounded memory).
-3. **locate** (:mod:`encdesign.diagnose._views`): views of the residual, each finding with
+3. **locate** (:mod:`encdesign.diagnose.engine._views`): views of the residual, each finding with
    where it sits and a p-value.
 4. **select**: forward selection of candidates whose signature matches a finding, each refit
    with everything accepted so far; accepted on information criterion, K-fold held-out gain,
@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import input_error
+from ..._errors import input_error
 from ._candidates import Candidate
 from ._document import (
     lattice_effect,
@@ -130,7 +130,7 @@ class _Progress:
     ``verbose`` on a terminal."""
 
     def __init__(self, verbose: bool):
-        from .._progress import progress_bar
+        from ..._progress import progress_bar
 
         self.verbose = verbose
         self.bar = progress_bar("diagnose", 6, enabled=verbose, unit="stage")
@@ -147,7 +147,7 @@ class _Progress:
 
     def chunk_done(self, a: int, b: int, n: int) -> None:
         if self.rows is None:
-            from .._progress import progress_bar
+            from ..._progress import progress_bar
 
             self.rows = progress_bar("  pass", n, enabled=self.verbose, unit="row")
         if a == 0:
@@ -438,7 +438,7 @@ def run_engine(
 ) -> tuple[dict[str, Any], PlotData]:
     """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
     document (a dict, ``diagnosis.schema.json``) and what the figures need
-    (:class:`~encdesign.diagnose._results.PlotData`).
+    (:class:`~encdesign.diagnose.engine._results.PlotData`).
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, final
 
 import equinox as eqx
 
-from .._errors import DiagnosisError
+from ..._errors import DiagnosisError
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
 """The three verdicts of a diagnosis."""

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.signal
 from scipy import stats
 
-from .._errors import input_error
+from ..._errors import input_error
 from ._candidates import Context
 from ._noise import noise_d2, noise_sigma, robust_scale
 from ._nuisances import LATE_STAMPS_REASON, angle_steps, late_stamp_rows

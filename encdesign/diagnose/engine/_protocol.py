@@ -1,5 +1,5 @@
 """What a kind hands the engine (:class:`KindData`) and the prepared record (:class:`Prepared`,
-its row columns); the kind itself is :class:`~encdesign.diagnose._kind.AbstractKind`."""
+its row columns); the kind itself is :class:`~encdesign.diagnose.engine._kind.AbstractKind`."""
 
 from __future__ import annotations
 

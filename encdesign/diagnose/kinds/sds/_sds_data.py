@@ -10,12 +10,12 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from ..io._recording import Recording
-from ._candidates import Context
-from ._protocol import KindData, Prepared, RowColumns
+from ...._errors import input_error
+from ....io._recording import Recording
+from ...engine._candidates import Context
+from ...engine._protocol import KindData, Prepared, RowColumns
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ._sds_noise import REFERENCE_RADIUS_M, _level_sigma, _saturating_columns
-from ._settings import DEFAULT_SETTINGS, FinderSettings
 
 # ----------------------------------------------------------------------------- data
 
@@ -61,8 +61,8 @@ def _wrap(x):
 
 
 def _split_runs(rec: Recording):
-    from ..io._sds_format import check_sds_columns
-    from ..io._sds_format import sensor_counts as _sensor_counts
+    from ....io._sds_format import check_sds_columns
+    from ....io._sds_format import sensor_counts as _sensor_counts
 
     where = str(rec.path) if rec.path is not None else "<recording>"
     if rec.kind != "sds":
@@ -305,7 +305,7 @@ def _helmert(K: int) -> np.ndarray:
 
 @dataclasses.dataclass
 class SDSKindData(KindData):
-    """:class:`~encdesign.diagnose._protocol.KindData` plus the SDS pair table and clock."""
+    """:class:`~encdesign.diagnose.engine._protocol.KindData` plus the SDS pair table and clock."""
 
     table: Any = None
     n_revs: int = 0
@@ -444,7 +444,7 @@ def sds_prepare(
 ) -> Prepared:
     """Stage 1 for sds: one row per run, every run kept (an SDS run is a platform at rest:
     there is no shaft motion to segment), folds of whole runs, first noise levels."""
-    from ._protocol import Prepared
+    from ...engine._protocol import Prepared
 
     R, C = kd.y.shape
     if not np.all(np.isfinite(kd.y)):

@@ -8,10 +8,10 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics import _effects as fx
-from ._candidates import Candidate, Context, Param
-from ._protocol import Prepared
-from ._views import Finding, chi2_threshold, log10_tail_p
+from ....physics import _effects as fx
+from ...engine._candidates import Candidate, Context, Param
+from ...engine._protocol import Prepared
+from ...engine._views import Finding, chi2_threshold, log10_tail_p
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)
 """Runout orders of the axial beam tilt."""

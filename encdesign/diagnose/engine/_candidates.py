@@ -4,7 +4,7 @@ A candidate effect is a :class:`Candidate`: a differentiable JAX term that adds 
 (rad, or the kind's residual unit) to every sample and channel, the parameters it takes
 (each a :class:`Param`, with its unit and shape), and its *signature*: the views of the
 residual in which it shows (``docs/diagnose.md`` lists the views). The engine
-(:mod:`encdesign.diagnose._engine`) fits any candidate the same way: it evaluates
+(:mod:`encdesign.diagnose.engine._engine`) fits any candidate the same way: it evaluates
 ``fn`` and its Jacobian (``jax.jacfwd``) chunk by chunk over the rows, so a term only has
 to be a pure function of its parameters and of the row columns.
 

@@ -40,7 +40,7 @@ def report_inputs(d: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
         (rows used by the fits), ``theta`` (n,) the shaft angle (rad) or ``None``,
         ``base_resid`` and ``final_resid`` (n, C) residuals of the base and final model (unit
         of the document), ``effects`` ``{name: (n, C)}`` each named effect's own fitted
-        contribution (typed :class:`~encdesign.diagnose._results.PlotData`; empty when the
+        contribution (typed :class:`~encdesign.diagnose.engine._results.PlotData`; empty when the
         plot data has none), and ``channels`` (C names).
     """
     doc = d.to_json()
@@ -690,7 +690,7 @@ def render_html(d: Any) -> str:
 
 def write_html(d: Any, path: str | Path) -> Path:
     """Write :func:`render_html` of ``d`` to ``path`` atomically."""
-    from ..io._paths import atomic_write_text
+    from ...io._paths import atomic_write_text
 
     p = Path(path)
     atomic_write_text(p, render_html(d))

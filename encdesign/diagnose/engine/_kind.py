@@ -66,7 +66,7 @@ class AbstractKind(eqx.Module):
         """The highest base order this record resolves."""
 
     def prepare(self, kd: KindData, meta: dict, settings: FinderSettings) -> Prepared:
-        """Stage 1 (the engine's :func:`~encdesign.diagnose._prepare.prepare`; replaced by a
+        """Stage 1 (the engine's :func:`~encdesign.diagnose.engine._prepare.prepare`; replaced by a
         kind whose rows are not a time series of a turning shaft: ``sds``)."""
         return engine_prepare(kd, meta, settings)
 

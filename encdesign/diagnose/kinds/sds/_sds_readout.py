@@ -16,10 +16,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from ..io._recording import Recording
-from ..io._sds_format import check_sds_columns, sensor_counts
-from ..physics._sds import sds_from_edges
+from ...._errors import input_error
+from ....io._recording import Recording
+from ....io._sds_format import check_sds_columns, sensor_counts
+from ....physics._sds import sds_from_edges
 
 __all__ = ["SDSRecordingResult", "run_windows", "sds_jit", "sds_readings_from_recording"]
 

@@ -104,7 +104,7 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     model of the reading to fit: the finding is the LSB itself, so ``delta_bic``,
     ``collinearity`` and the held-out change are ``None`` (no parameter was fitted), and the
     residual RMS are the final model's. ``None`` when no channel qualifies."""
-    from ._reference_terms import detect_lsb
+    from ..kinds.multihead._reference_terms import detect_lsb
 
     # the first LATTICE_ROWS rows of each run: a lattice holds in any stretch of the
     # readings, and the test's sorts and gaps then stay bounded (10^7 rows: +1.5 GB)

@@ -35,7 +35,7 @@ Candidates (``docs/effects.md``, "SDS timing model"), each a differentiable term
 * ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors;
 * ``coil_mismatch``: Fourier terms in ``x`` at the coil orders ``1 … pole_pairs − 1``, the
   lowest as many as the parameter budget leaves
-  (:func:`~encdesign.diagnose._sds_terms.coil_order_count`);
+  (:func:`~encdesign.diagnose.kinds.sds._sds_terms.coil_order_count`);
 * ``sensor_delay_step``: one moving sensor's edges delayed by ``τ_m`` from one run on
   (electronics, cable, a re-plugged connector): ``+Ω τ_m`` on that sensor's pairs;
 * ``timing_quantization``: the time stamps lie on a lattice coarser than the declared clock
@@ -55,9 +55,14 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from ._fit import valjac_fn as _valjac_fn
-from ._kind import AbstractKind
-from ._protocol import Prepared
+from ...engine._fit import valjac_fn as _valjac_fn
+from ...engine._kind import AbstractKind
+from ...engine._protocol import Prepared
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
+from ...engine._views import Finding
+from ...engine._views import chi2_threshold as _thr
+from ...engine._views import log10_tail_p as _logp
+from ...engine._views import make_where as _where
 from ._sds_data import (
     SDSPairTable,
     _design_orders,
@@ -83,11 +88,6 @@ from ._sds_terms import (
     moving_opposed,
     sds_candidates,
 )
-from ._settings import DEFAULT_SETTINGS, FinderSettings
-from ._views import Finding
-from ._views import chi2_threshold as _thr
-from ._views import log10_tail_p as _logp
-from ._views import make_where as _where
 
 __all__ = [
     "SDS",
@@ -204,7 +204,7 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
     """The engine's ``orders`` view on the run-mean channels only (a pattern in the platform
     angle is constant within a run: it cannot reach the revolution contrasts, whose
     scan would only add false alarms)."""
-    from ._views import view_orders
+    from ...engine._views import view_orders
 
     M = prep.consts["psi_m"].size
     r = np.zeros_like(rw)

@@ -8,12 +8,12 @@ import math
 import numpy as np
 from scipy import stats
 
-from ._candidates import Context
-from ._protocol import Prepared
-from ._views import Finding
-from ._views import chi2_threshold as _thr
-from ._views import log10_tail_p as _logp
-from ._views import make_where as _where
+from ...engine._candidates import Context
+from ...engine._protocol import Prepared
+from ...engine._views import Finding
+from ...engine._views import chi2_threshold as _thr
+from ...engine._views import log10_tail_p as _logp
+from ...engine._views import make_where as _where
 
 REFERENCE_RADIUS_M = 0.0254
 BEAM_ORDERS = (1, 2, 3)

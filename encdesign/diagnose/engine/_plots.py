@@ -39,7 +39,7 @@ def engine_plots(d: Any, out_dir: Any) -> list:
     against time before and after (excluded segments shaded), and the residual spectra."""
     from pathlib import Path
 
-    from ..io._study import new_figure, save_figure
+    from ...io._study import new_figure, save_figure
 
     out = Path(out_dir)
     pd = d.plot_data

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param
 from ._sds_noise import (
     BEAM_ORDERS,
     EXPLANATIONS,

@@ -3,7 +3,7 @@
 A stepped calibration has no steady motion: the rig moves to an angle, settles, and one row
 (or a few) is logged; ``t`` may be a step index rather than seconds, and consecutive angles
 may be far apart, over several turns. The engine's segment finder
-(:func:`~encdesign.diagnose._engine.find_motion_segments`) finds no steady segment in such
+(:func:`~encdesign.diagnose.engine._engine.find_motion_segments`) finds no steady segment in such
 a record and the record used to be refused ("no steady segment"). Here:
 
 * :func:`is_stepped` tells such a record (one run at a time: the motion segments cover

@@ -44,12 +44,12 @@ from typing import Any, ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from ..io._recording import Recording
-from ._candidates import Candidate, Context, Param
-from ._kind import AbstractKind
-from ._protocol import KindData, Prepared
-from ._settings import DEFAULT_SETTINGS, FinderSettings
+from ...._errors import input_error
+from ....io._recording import Recording
+from ...engine._candidates import Candidate, Context, Param
+from ...engine._kind import AbstractKind
+from ...engine._protocol import KindData, Prepared
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
 
@@ -595,7 +595,7 @@ def run_quadrature(rec: Recording, **kw) -> tuple[dict[str, Any], Any]:
     Raises:
         EncdesignInputError: the signals do not draw a Lissajous figure about the origin.
     """
-    from ._engine import run_engine
+    from ...engine._engine import run_engine
 
     st = quadrature_start(rec, kw.get("settings") or DEFAULT_SETTINGS)
     st["has_t"] = "t" in rec.columns
@@ -698,7 +698,7 @@ def quadrature_plots(d: Any, folder: Any) -> list:
     against the signal phase (base and final model), plus the order spectrum."""
     from pathlib import Path
 
-    from ..io._study import new_figure, save_figure
+    from ....io._study import new_figure, save_figure
 
     pd = d.plot_data
     prep, r0, r1 = pd["prep"], pd["base_resid"], pd["final_resid"]

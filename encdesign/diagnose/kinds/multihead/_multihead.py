@@ -17,7 +17,7 @@ the sensor, one constant per run.
 
 Candidates are the multihead catalog effects (terms in :mod:`encdesign.physics._effects`),
 plus, for a sensor against a reference, the terms of
-:mod:`encdesign.diagnose._reference_terms` when that module is present.
+:mod:`encdesign.diagnose.kinds.multihead._reference_terms` when that module is present.
 """
 
 from __future__ import annotations
@@ -30,12 +30,16 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from ..io._recording import Recording
-from ..physics import _effects as fx
-from . import _stepped
-from ._candidates import Candidate, Context, Param
-from ._kind import AbstractKind
+from ...._errors import input_error
+from ....io._recording import Recording
+from ....physics import _effects as fx
+from ...engine import _stepped
+from ...engine._candidates import Candidate, Context, Param
+from ...engine._kind import AbstractKind
+from ...engine._prepare import prepare as engine_prepare
+from ...engine._protocol import KindData, Prepared, steady_tolerance
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
+from ...engine._views import run_spans
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -46,10 +50,6 @@ from ._multihead_terms import (
     VIBRATION,
     view_order_step,
 )
-from ._prepare import prepare as engine_prepare
-from ._protocol import KindData, Prepared, steady_tolerance
-from ._settings import DEFAULT_SETTINGS, FinderSettings
-from ._views import run_spans
 
 
 def make_where(rec: Recording) -> str:

@@ -32,12 +32,12 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from ..io._recording import Recording
-from ._candidates import Candidate, Context, Param
-from ._kind import AbstractKind
-from ._protocol import KindData, Prepared
-from ._settings import DEFAULT_SETTINGS
+from ...._errors import input_error
+from ....io._recording import Recording
+from ...engine._candidates import Candidate, Context, Param
+from ...engine._kind import AbstractKind
+from ...engine._protocol import KindData, Prepared
+from ...engine._settings import DEFAULT_SETTINGS
 
 EXPLANATIONS = {
     "cogging": (

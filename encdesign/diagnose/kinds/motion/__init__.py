@@ -1,0 +1,1 @@
+"""The motion kind: the angle of a shaft against time."""

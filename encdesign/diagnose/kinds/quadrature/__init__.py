@@ -1,0 +1,1 @@
+"""The quadrature kind: sine/cosine signals of one track."""

@@ -1,0 +1,1 @@
+"""The sds kind: the self-calibrating disk system (edge times read out into phi)."""
