@@ -101,7 +101,8 @@ def _worker(argv: list[str]) -> int:
     import jax
     import numpy as np
 
-    from encdesign.design._drivers import VECTOR_BUILDS, monte_carlo
+    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._sampling import VECTOR_BUILDS
     from encdesign.objectives import EncoderDesign, Tolerances, build_metric, n_build_normals
 
     design = EncoderDesign(

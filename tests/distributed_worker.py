@@ -42,7 +42,8 @@ def run_checks(sds: bool = False) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from encdesign.design._drivers import expected_value, monte_carlo
+    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._sampling import expected_value
     from encdesign.objectives import (
         EncoderDesign,
         SDSTolerances,

@@ -62,7 +62,7 @@ from ..physics._types import (
     ScalarOut,
 )
 from ._distributed import shard_builds
-from ._drivers import build_normals, map_builds
+from ._sampling import build_normals, map_builds
 from ._tolerance import tolerance_cost
 
 __all__ = [
