@@ -89,7 +89,7 @@ def _worker(argv: list[str]) -> int:
     p.add_argument("--angles", type=int, required=True)
     p.add_argument("--chunk", type=int, default=2048)
     p.add_argument("--pin", action="store_true")
-    from encdesign.design import _distributed as dist
+    from encdesign import _distributed as dist
 
     dist.add_launch_flags(p)
     args = p.parse_args(argv)
@@ -166,7 +166,7 @@ def _worker(argv: list[str]) -> int:
 
 
 def _run_config(name: str, builds: int, angles: int, tmp: Path) -> dict:
-    from encdesign.design import _distributed as dist
+    from encdesign import _distributed as dist
 
     procs, devices, one_thread, pinned = CONFIGS[name]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}

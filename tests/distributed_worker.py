@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from helpers import SCALE_BUILDS, SCALE_DESIGN, SCALE_TOLERANCES  # noqa: E402
 
-from encdesign.design import _distributed as dist  # noqa: E402
+from encdesign import _distributed as dist  # noqa: E402
 
 
 def run_checks(sds: bool = False) -> dict:

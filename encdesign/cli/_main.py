@@ -136,7 +136,7 @@ def _run_study(argv: Sequence[str]) -> int:
             print(f"{name:22s} {_study_title(path)}")
         return 0
     mod = _load_study(args.name)
-    from ..design import _distributed as dist
+    from .. import _distributed as dist
 
     launch_p = argparse.ArgumentParser(prog=f"encdesign study run {args.name}", add_help=False)
     dist.add_launch_flags(launch_p)

@@ -7,8 +7,8 @@ import math
 import sys
 from pathlib import Path
 
+from .._distributed import add_launch_flags, is_main_process, process_index, run_launched
 from ..design._cases import CaseRecorder
-from ..design._distributed import add_launch_flags, is_main_process, process_index, run_launched
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
 from ..io._study import write_json

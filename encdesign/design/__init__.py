@@ -213,10 +213,10 @@ from ._tolerance import (
 from ._tolerance import (
     pareto_front as pareto_front,
 )
-from ._distributed import (
+from .._distributed import (
     allgather_objects as allgather_objects,
 )
-from ._distributed import (
+from .._distributed import (
     is_my_task as is_my_task,
 )
 from ._status import (

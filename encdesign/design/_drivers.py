@@ -40,16 +40,16 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._errors import OptimisationError as OptimisationError
-from .._errors import input_error
-from .._progress import progress_bar
-from ._distributed import (
+from .._distributed import (
     chunk_plan,
     gather_chunks,
     is_main_process,
     n_build_shards,
     shard_builds,
 )
+from .._errors import OptimisationError as OptimisationError
+from .._errors import input_error
+from .._progress import progress_bar
 from ._sampling import MC_CHUNK, VECTOR_BUILDS, grid_points, latin_hypercube, local_builds
 from ._status import (
     AT_BOUND,
@@ -632,7 +632,7 @@ def monte_carlo(
     ``z`` (``[dim]``) to a scalar. The builds come from :func:`build_normals` (common random
     numbers: the same ``key`` gives the same builds for every ``theta``). Work is done in
     jitted chunks of at most ``chunk_size`` builds per device, the builds spread evenly over
-    the chunks (``chunk_plan`` in :mod:`encdesign.design._distributed`), each chunk split
+    the chunks (``chunk_plan`` in :mod:`encdesign._distributed`), each chunk split
     over the devices of the ``"builds"`` mesh. The values stay on the devices that computed
     them until the last chunk is done; then one gather collects them (``gather_chunks``):
     processes never wait for each other while they compute. With ``progress`` a progress

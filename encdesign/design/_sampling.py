@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._distributed import shard_builds
+from .._distributed import shard_builds
 
 MC_CHUNK = 4096
 """Default builds per device in one compiled Monte Carlo chunk."""

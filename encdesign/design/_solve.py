@@ -22,10 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from .._progress import progress_bar
-from ._cases import CaseRecorder
-from ._distributed import (
+from .._distributed import (
     allgather_rows,
     is_main_process,
     process_count,
@@ -33,6 +30,9 @@ from ._distributed import (
     split_range,
     use_local_devices,
 )
+from .._errors import input_error
+from .._progress import progress_bar
+from ._cases import CaseRecorder
 from ._drivers import (
     AbstractDOE,
     AbstractGradientSolver,

@@ -58,9 +58,9 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from .. import _cpu
-from .._checks import int_arg
-from .._errors import DistributedError, EncdesignInputError, input_error
+from . import _cpu
+from ._checks import int_arg
+from ._errors import DistributedError, EncdesignInputError, input_error
 
 BUILDS_AXIS = "builds"
 """Name of the mesh axis the Monte Carlo builds are split over."""
