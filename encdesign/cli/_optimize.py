@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from .._distributed import add_launch_flags, is_main_process, process_index, run_launched
+from .._distributed import add_launch_flags, is_main_process, process_index, shutdown, start
 from ..design._cases import CaseRecorder
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
@@ -93,9 +93,12 @@ def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = Non
         [("problem", args.problem)],
         [("--json", args.json), ("--cases" if resume is None else "--resume", cases)],
     ):
-        return run_launched(
-            args, getattr(args, "command_argv", None), lambda: _report(args, solve, resume)
-        )
+        rc = start(args, getattr(args, "command_argv", None) or [])
+        if rc is not None:  # spawned the processes, or could not join the runtime
+            return rc
+        rc = _report(args, solve, resume)
+        shutdown()
+        return rc
 
 
 def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
