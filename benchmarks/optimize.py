@@ -54,10 +54,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.design import _distributed as dist
+from encdesign import _distributed as dist
 from encdesign.design import deviation_sizes
-from encdesign.design._drivers import VECTOR_BUILDS, build_normals, values_of_normals
 from encdesign.design._rare import importance_yield
+from encdesign.design._sampling import VECTOR_BUILDS, build_normals, values_of_normals
 from encdesign.objectives import (
     TOLERANCE_NAMES,
     EncoderDesign,

@@ -89,7 +89,7 @@ def _worker(argv: list[str]) -> int:
     p.add_argument("--angles", type=int, required=True)
     p.add_argument("--chunk", type=int, default=2048)
     p.add_argument("--pin", action="store_true")
-    from encdesign.design import _distributed as dist
+    from encdesign import _distributed as dist
 
     dist.add_launch_flags(p)
     args = p.parse_args(argv)
@@ -101,7 +101,8 @@ def _worker(argv: list[str]) -> int:
     import jax
     import numpy as np
 
-    from encdesign.design._drivers import VECTOR_BUILDS, monte_carlo
+    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._sampling import VECTOR_BUILDS
     from encdesign.objectives import EncoderDesign, Tolerances, build_metric, n_build_normals
 
     design = EncoderDesign(
@@ -165,7 +166,7 @@ def _worker(argv: list[str]) -> int:
 
 
 def _run_config(name: str, builds: int, angles: int, tmp: Path) -> dict:
-    from encdesign.design import _distributed as dist
+    from encdesign import _distributed as dist
 
     procs, devices, one_thread, pinned = CONFIGS[name]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}

@@ -96,6 +96,7 @@ from .simulate import (
 
 # --- design problems, drivers and tolerances
 from .design import (
+    BFGS as BFGS,
     EncoderDesign as EncoderDesign,
     MonteCarloResult as MonteCarloResult,
     Problem as Problem,
@@ -200,6 +201,7 @@ __all__ = [
     "ProblemResult",
     "check_gradients",
     "optimise",
+    "BFGS",
     "Solution",
     "monte_carlo",
     "MonteCarloResult",

@@ -56,7 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design import CaseRecorder, fresh_key, optimise, paired_comparison
+from encdesign.design import BFGS, CaseRecorder, fresh_key, optimise, paired_comparison
 from encdesign.io import int_arg, new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import (
     LayoutDesign,
@@ -236,7 +236,9 @@ def main(argv: list[str] | None = None) -> int:
         def ref_obj(v, b, sl=sym_layout):
             return f_rms(sl(b[0] + (b[1] - b[0]) * jax.nn.sigmoid(v[0]))) * 1e6
 
-        sol = optimise(ref_obj, "bfgs", jnp.zeros(1), jnp.array([lo, hi]), max_steps=60)
+        sol = optimise(
+            ref_obj, BFGS(rtol=1e-8, atol=1e-12, max_steps=60), jnp.zeros(1), jnp.array([lo, hi])
+        )
         r_best = float(lo + (hi - lo) * jax.nn.sigmoid(sol.value[0]))
         if not float(f_rms(sym_layout(r_best))) <= gvals[gi]:
             r_best = float(grid[gi])
@@ -298,8 +300,8 @@ def main(argv: list[str] | None = None) -> int:
                 # candidates are ranked on the study's builds, none of them trained on
                 train_key = jax.random.fold_in(key, 100 + s_i)
                 sol = optimise(
-                    free_obj, "bfgs", jnp.asarray(v0), train_key, max_steps=max_steps,
-                    rtol=1e-8, atol=1e-10,
+                    free_obj, BFGS(rtol=1e-8, atol=1e-10, max_steps=max_steps),
+                    jnp.asarray(v0), train_key,
                 )  # fmt: skip
                 ang = np.asarray(to_angles(jnp.asarray(sol.value)))
                 val = float(f_rms(jnp.asarray(ang)))

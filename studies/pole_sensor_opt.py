@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from encdesign.design import (
+    BFGS,
     NONFINITE,
     SUCCESS,
     CaseRecorder,
@@ -121,8 +122,8 @@ def _optimise_azimuths(c, rj, tol, key, n_builds, marks, n_phi, starts, max_step
     runs = []
     for _ in range(starts):
         y0 = rng.uniform(0.0, 2 * math.pi, ns - 1)
-        sol = optimise(f, "bfgs", y0, jnp.asarray(fixed), max_steps=max_steps, rtol=1e-7,
-                       atol=1e-10)  # fmt: skip
+        sol = optimise(f, BFGS(rtol=1e-7, atol=1e-10, max_steps=max_steps), y0,
+                       jnp.asarray(fixed))  # fmt: skip
         f0 = _log_mean(rj(jnp.asarray(y0), jnp.asarray(fixed)))
         runs.append((float(sol.objective), sol, y0, f0))
     ok = [r for r in runs if math.isfinite(r[0])]

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from encdesign.design import CaseRecorder, fresh_key, optimise, paired_comparison
+from encdesign.design import BFGS, CaseRecorder, fresh_key, optimise, paired_comparison
 from encdesign.io import int_arg, new_figure, progress_bar, save_figure, study_parser, write_results
 from encdesign.objectives import cotangent_sensitivity, expected_sensitivity
 
@@ -162,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
                 for k in range(n_starts):
                     frac = (k + 0.5) / n_starts
                     v0 = jnp.array([math.log(frac / (1 - frac))])
-                    sol = optimise(obj, "bfgs", v0, bounds, max_steps=200, rtol=1e-10, atol=1e-12)
+                    sol = optimise(obj, BFGS(rtol=1e-10, atol=1e-12, max_steps=200), v0, bounds)
                     ang = float(_bounded(sol.value[0], lo, hi))
                     val = float(fj(ang))
                     rec.record(

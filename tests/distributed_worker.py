@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from helpers import SCALE_BUILDS, SCALE_DESIGN, SCALE_TOLERANCES  # noqa: E402
 
-from encdesign.design import _distributed as dist  # noqa: E402
+from encdesign import _distributed as dist  # noqa: E402
 
 
 def run_checks(sds: bool = False) -> dict:
@@ -42,7 +42,8 @@ def run_checks(sds: bool = False) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from encdesign.design._drivers import expected_value, monte_carlo
+    from encdesign.design._drivers import monte_carlo
+    from encdesign.design._sampling import expected_value
     from encdesign.objectives import (
         EncoderDesign,
         SDSTolerances,

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from encdesign import EncdesignInputError
+from encdesign import _distributed as dist
 from encdesign.cli import main
-from encdesign.design import _distributed as dist
 from encdesign.design._cases import CaseRecorder, part_path, read_cases
 
 WORKER = Path(__file__).resolve().parent / "distributed_worker.py"

@@ -7,17 +7,24 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from encdesign import EncdesignInputError
 from encdesign.design._drivers import (
+    BFGS,
+    DRIVERS,
+    LBFGSB,
+    AbstractGradientSolver,
+    DriverStatus,
+    Grid,
+    LatinHypercube,
+    LevenbergMarquardt,
+    MonteCarlo,
     OptimisationError,
-    build_normals,
     doe,
-    enumerate_designs,
-    expected_value,
-    grid_points,
-    latin_hypercube,
     monte_carlo,
     optimise,
 )
+from encdesign.design._enumerate import enumerate_designs
+from encdesign.design._sampling import build_normals, expected_value, grid_points, latin_hypercube
 
 
 def rosen(y, a):
@@ -25,24 +32,25 @@ def rosen(y, a):
 
 
 def test_bfgs_and_lm_find_rosenbrock_minimum():
-    s = optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=500)
+    s = optimise(rosen, BFGS(max_steps=500), jnp.array([-1.2, 1.0]))
     assert s.ok and np.allclose(s.value, [1.0, 1.0], atol=1e-6)
     r = optimise(
         lambda y, a: jnp.stack([1.0 - y[0], 10.0 * (y[1] - y[0] ** 2)]),
-        "lm",
+        LevenbergMarquardt(),
         jnp.array([-1.2, 1.0]),
     )
     assert r.ok and np.allclose(r.value, [1.0, 1.0], atol=1e-8) and r.objective < 1e-16
 
 
 def test_lbfgsb_keeps_bounds():
-    s = optimise(rosen, "lbfgsb", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
+    s = optimise(rosen, LBFGSB(), jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
     assert s.value[0] == pytest.approx(0.5) and s.value[1] == pytest.approx(0.25)
-    # converged on the bound: an answer, but marked as such, never plain "success"
-    assert s.status == "at_bound" and not s.ok and s.at_bounds == ("upper[0]",), s.message
+    # converged on the bound: an answer (ok), but marked as such, never plain "success"
+    assert s.status == "at_bound" and s.ok and s.at_bounds == ("upper[0]",), s.message
+    assert s.status is DriverStatus.AT_BOUND and s.status.ok
     # unconstrained BFGS with the same bounds reports the violation instead of hiding it
-    b = optimise(rosen, "bfgs", jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
-    assert b.status == "bounds_violated"
+    b = optimise(rosen, BFGS(), jnp.array([0.0, 0.0]), upper=jnp.array([0.5, 2.0]))
+    assert b.status == "bounds_violated" and not b.ok
 
 
 def test_lbfgsb_compiles_once_per_function():
@@ -54,12 +62,12 @@ def test_lbfgsb_compiles_once_per_function():
         return jnp.sum((y - a) ** 2)
 
     s1 = optimise(
-        f, "lbfgsb", jnp.array([0.0, 0.0]), jnp.array([1.0, 2.0]), upper=jnp.array([0.5, 3.0])
+        f, LBFGSB(), jnp.array([0.0, 0.0]), jnp.array([1.0, 2.0]), upper=jnp.array([0.5, 3.0])
     )
     n = len(traces)
     # another start, other bounds, other args: the jitted value-and-gradient is reused
     s2 = optimise(
-        f, "lbfgsb", jnp.array([0.2, 0.1]), jnp.array([-1.0, 0.5]), lower=jnp.array([-0.5, -1.0])
+        f, LBFGSB(), jnp.array([0.2, 0.1]), jnp.array([-1.0, 0.5]), lower=jnp.array([-0.5, -1.0])
     )
     assert n >= 1 and len(traces) == n
     assert s1.status == s2.status == "at_bound"  # both converge onto a bound
@@ -68,7 +76,7 @@ def test_lbfgsb_compiles_once_per_function():
 
 
 def test_map_builds_is_independent_of_chunking():
-    from encdesign.design._drivers import map_builds
+    from encdesign.design._sampling import map_builds
 
     key = jax.random.key(7)
     ref = build_normals(key, jnp.arange(3, 3 + 203), 5) @ jnp.arange(1.0, 6.0)
@@ -80,12 +88,12 @@ def test_map_builds_is_independent_of_chunking():
 
 
 def test_failures_come_back_with_a_status():
-    s = optimise(lambda y, a: jnp.log(y[0]) + y[0], "bfgs", jnp.array([1.0]))
+    s = optimise(lambda y, a: jnp.log(y[0]) + y[0], BFGS(), jnp.array([1.0]))
     assert not s.ok and s.status in ("nonfinite", "failed", "max_steps_reached")
-    m = optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=3)
+    m = optimise(rosen, BFGS(max_steps=3), jnp.array([-1.2, 1.0]))
     assert m.status == "max_steps_reached"
     with pytest.raises(OptimisationError, match="max_steps_reached"):
-        optimise(rosen, "bfgs", jnp.array([-1.2, 1.0]), max_steps=3, throw=True)
+        optimise(rosen, BFGS(max_steps=3), jnp.array([-1.2, 1.0]), throw=True)
 
 
 def test_common_random_numbers_independent_of_chunking():
@@ -157,7 +165,7 @@ def test_enumeration_finds_discrete_and_continuous_optimum():
     # f(x; n, m) = (x - n)^2 + (n - 2)^2 + 0.5 * |m - 1|: best n = 2, m = 1, x = 2
     def solve(c):
         fn = lambda y, a: (y[0] - a[0]) ** 2 + (a[0] - 2.0) ** 2 + 0.5 * jnp.abs(a[1] - 1.0)
-        return optimise(fn, "bfgs", jnp.zeros(1), jnp.array([c["n"], c["m"]], dtype=float))
+        return optimise(fn, BFGS(), jnp.zeros(1), jnp.array([c["n"], c["m"]], dtype=float))
 
     r = enumerate_designs(solve, {"n": [1, 2, 3], "m": [0, 1]})
     assert r.ok and r.best_choice == {"n": 2, "m": 1}
@@ -185,19 +193,19 @@ def _bowl(y, a):
     return jnp.sum((y - 3.0) ** 2)
 
 
-@pytest.mark.parametrize("solver", ["bfgs", "lbfgsb"])
+@pytest.mark.parametrize("solver", [BFGS(max_steps=60), LBFGSB(max_steps=60)], ids=str)
 def test_stalled_line_search_is_its_own_status(solver):
     """A line search that never finds a decrease (the gradient points uphill) is reported
     as ``line_search_stalled``, never as success or as a plain step cap (issue 27)."""
-    s = optimise(_uphill, solver, jnp.zeros(2), max_steps=60)
+    s = optimise(_uphill, solver, jnp.zeros(2))
     assert s.status == "line_search_stalled" and not s.ok, (s.status, s.message)
     with pytest.raises(OptimisationError, match="line_search_stalled"):
-        optimise(_uphill, solver, jnp.zeros(2), max_steps=60, throw=True)
+        optimise(_uphill, solver, jnp.zeros(2), throw=True)
     # the same function with its true gradient converges; a start at the optimum is a
     # converged answer (no decrease possible), not a stall
-    good = optimise(_bowl, solver, jnp.zeros(2), max_steps=60)
+    good = optimise(_bowl, solver, jnp.zeros(2))
     assert good.status == "success" and np.allclose(good.value, 3.0, atol=1e-6)
-    at_opt = optimise(_bowl, solver, jnp.full(2, 3.0), max_steps=60)
+    at_opt = optimise(_bowl, solver, jnp.full(2, 3.0))
     assert at_opt.status == "success", at_opt.message
 
 
@@ -205,14 +213,74 @@ def test_a_stop_on_a_small_step_with_a_large_gradient_is_stalled():
     """BFGS stops when its steps become small; at a kink (``|y - 3|``) they do while the
     gradient is still +-1, and the quasi-Newton step still predicts a decrease: the stop is
     reported as ``line_search_stalled`` (nothing certifies it), not as success."""
-    s = optimise(lambda y, a: jnp.sum(jnp.abs(y - 3.0)), "bfgs", jnp.zeros(2), max_steps=200)
+    s = optimise(lambda y, a: jnp.sum(jnp.abs(y - 3.0)), BFGS(max_steps=200), jnp.zeros(2))
     assert s.status == "line_search_stalled" and "quasi-Newton" in s.message, s.message
-    smooth = optimise(lambda y, a: jnp.sum((y - 3.0) ** 2), "bfgs", jnp.zeros(2))
+    smooth = optimise(lambda y, a: jnp.sum((y - 3.0) ** 2), BFGS(), jnp.zeros(2))
     assert smooth.status == "success"
 
 
 def test_bfgs_and_lm_touching_a_bound_are_marked():
-    lm = optimise(lambda y, a: y - 3.0, "lm", jnp.zeros(2), upper=3.0)
+    lm = optimise(lambda y, a: y - 3.0, LevenbergMarquardt(), jnp.zeros(2), upper=3.0)
     assert lm.status == "at_bound" and lm.at_bounds == ("upper[0]", "upper[1]")
-    free = optimise(lambda y, a: y - 3.0, "lm", jnp.zeros(2), upper=4.0)
+    free = optimise(lambda y, a: y - 3.0, LevenbergMarquardt(), jnp.zeros(2), upper=4.0)
     assert free.status == "success" and free.at_bounds == ()
+
+
+GRADIENT_SOLVERS = [BFGS, LBFGSB, LevenbergMarquardt]
+
+
+@pytest.mark.parametrize("cls", GRADIENT_SOLVERS, ids=lambda c: c.__name__)
+def test_every_gradient_solver_solves_a_bowl_with_its_defaults(cls):
+    """The one set of defaults of each solver converges on a shifted bowl; the residual
+    form for Levenberg-Marquardt."""
+    fn = (lambda y, a: y - a) if cls is LevenbergMarquardt else (lambda y, a: jnp.sum((y - a) ** 2))
+    target = jnp.array([0.3, -1.7])
+    s = optimise(fn, cls(), jnp.zeros(2), target)
+    assert s.status is DriverStatus.SUCCESS and s.ok and s.solver == cls.kind, s.message
+    np.testing.assert_allclose(s.value, target, atol=1e-6)
+
+
+DRIVER_CLASSES = [*GRADIENT_SOLVERS, Grid, LatinHypercube, MonteCarlo]
+
+
+@pytest.mark.parametrize("cls", DRIVER_CLASSES, ids=lambda c: c.__name__)
+def test_driver_settings_are_checked_by_name(cls):
+    """Every driver refuses a setting it cannot use in ``__check_init__``, naming its
+    class and field; good settings round-trip through ``settings()``."""
+    good = {"n_builds": 10} if cls is MonteCarlo else {}
+    d = cls(**good)
+    assert d.settings()["kind"] == cls.kind
+    for name, (number, lo, _hi) in cls.limits.items():
+        bad = 0 if number is int and lo >= 1 else -1.0
+        if number is int and lo == 2:
+            bad = 1
+        with pytest.raises(EncdesignInputError, match=rf"{cls.__name__}\.{name}"):
+            cls(**{**good, name: bad})
+        with pytest.raises(EncdesignInputError, match=rf"{cls.__name__}\.{name}"):
+            cls(**{**good, name: True if number is int else "1e-8"})
+
+
+def test_monte_carlo_refuses_zero_builds_by_name():
+    with pytest.raises(EncdesignInputError, match=r"MonteCarlo\.n_builds: 0"):
+        MonteCarlo(n_builds=0)
+    with pytest.raises(EncdesignInputError, match=r"n_builds"):
+        monte_carlo(_sq, 0.0, key=jax.random.key(0), n=0, dim=2)
+    r = MonteCarlo(n_builds=64, chunk_size=16).run(_sq, 0.0, key=jax.random.key(0), dim=2)
+    same = monte_carlo(_sq, 0.0, key=jax.random.key(0), n=64, dim=2, chunk_size=16)
+    assert r.ok and np.array_equal(r.values, same.values)
+
+
+def test_optimise_refuses_a_solver_name():
+    """The string form is gone: a name is refused with the object to use instead."""
+    with pytest.raises(EncdesignInputError, match="BFGS"):
+        optimise(rosen, "bfgs", jnp.zeros(2))  # type: ignore[arg-type]
+    with pytest.raises(EncdesignInputError, match="gradient solver"):
+        optimise(rosen, Grid(), jnp.zeros(2))  # type: ignore[arg-type]
+
+
+def test_statuses_are_one_enumeration_with_a_message_each():
+    assert {s.value for s in DriverStatus} >= {"success", "at_bound", "max_steps_reached"}
+    assert all(s.message for s in DriverStatus)
+    assert [s for s in DriverStatus if s.ok] == [DriverStatus.SUCCESS, DriverStatus.AT_BOUND]
+    assert set(DRIVERS) == {"bfgs", "lbfgsb", "lm", "grid", "lhs"}
+    assert all(issubclass(DRIVERS[k], AbstractGradientSolver) for k in ("bfgs", "lbfgsb", "lm"))

@@ -26,6 +26,7 @@ LAYERS = {
     "_progress": 0,
     "_tuning": 0,
     "_cpu": 1,  # the CPU device default; imports _errors
+    "_distributed": 1.5,  # the scale-out runtime; imports _cpu, _checks, _errors
     "_usercode": 0.5,  # base, above _errors (it raises the input error)
     "_checks": 0,
     "physics": 1,

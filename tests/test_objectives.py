@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from encdesign.design._drivers import build_normals
+from encdesign.design._sampling import build_normals
 from encdesign.objectives import (
     TOLERANCE_NAMES,
     EncoderDesign,

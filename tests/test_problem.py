@@ -9,6 +9,15 @@ import pytest
 from encdesign import EncdesignInputError
 from encdesign.cli import main
 from encdesign.design._cases import CaseRecorder, read_cases, write_cases
+from encdesign.design._drivers import (
+    BFGS,
+    DRIVERS,
+    LBFGSB,
+    DriverStatus,
+    Grid,
+    LatinHypercube,
+    LevenbergMarquardt,
+)
 from encdesign.design._problem import ProblemObjective, VariableInfo, load_problem, parse_problem
 from encdesign.design._solve import check_gradients, solve_problem, sweep_problem
 
@@ -63,7 +72,7 @@ def test_units_converted_to_si():
     x, y = p.variables
     assert x.start == pytest.approx(0.1) and x.upper == pytest.approx(2.0)
     assert y.lower == pytest.approx(-math.pi / 2)
-    assert p.seed == 3 and p.driver["kind"] == "lbfgsb"
+    assert p.seed == 3 and p.driver == LBFGSB(max_steps=200)
 
 
 @pytest.mark.parametrize("kind", ["bfgs", "lm"])  # lbfgsb: test_cli_optimize_and_check_gradients
@@ -273,3 +282,91 @@ def test_bound_hits_are_reported_in_optimize_and_sweep_json():
     assert "upper x" in sw.best.message
     d["variables"]["x"]["upper"] = 1.0  # the optimum 0.5 inside: plain success
     assert sweep_problem(parse_problem(d, REGISTRY)).status == "success"
+
+
+@pytest.mark.parametrize("kind", sorted(DRIVERS))
+def test_driver_table_parses_into_its_driver(kind):
+    """Each ``[driver] kind`` becomes its driver object, with the file's settings and the
+    driver's own defaults for the rest; the summary records every setting."""
+    cls = DRIVERS[kind]
+    name, (number, lo, _hi) = next(iter(cls.limits.items()))
+    value = number(lo) + (3 if number is int else 1e-9)
+    p = parse_problem(_problem(driver={"kind": kind, name: value}), REGISTRY)
+    assert type(p.driver) is cls and getattr(p.driver, name) == value
+    assert p.driver == cls(**{name: value})
+
+
+@pytest.mark.parametrize(
+    ("driver", "field", "needle"),
+    [
+        ({"kind": "bfgs", "gtol": 1e-8}, "driver.gtol", "not a setting of the 'bfgs' driver"),
+        ({"kind": "lm", "penalty": 10.0}, "driver.penalty", "not a setting of the 'lm'"),
+        ({"kind": "lbfgsb", "rtol": 1e-8}, "driver.rtol", "not a setting of the 'lbfgsb'"),
+        ({"kind": "grid", "n": 5}, "driver.n", "not a setting of the 'grid' driver"),
+        ({"kind": "lhs", "points_per_dim": 5}, "driver.points_per_dim", "'lhs' driver"),
+        ({"kind": "lhs", "n": 0}, "driver.n", "an integer 1"),
+        ({"kind": "bfgs", "max_steps": 0}, "driver.max_steps", "an integer 1"),
+        ({"kind": "bfgs", "max_steps": 2.5}, "driver.max_steps", "not an integer"),
+        ({"kind": "bfgs", "rtol": -1e-8}, "driver.rtol", "a finite number in"),
+        ({"kind": "lbfgsb", "gtol": "small"}, "driver.gtol", "not a number"),
+        ({"kind": "grid", "points_per_dim": 1}, "driver.points_per_dim", "an integer 2"),
+        ({"kind": "bfgs", "penalty": 0.0}, "driver.penalty", "a finite number in"),
+    ],
+)
+def test_driver_keys_and_values_are_refused_by_name(tmp_path, driver, field, needle):
+    """A key the driver does not take, or a value it cannot use, is refused naming the
+    file, the field and what was expected (before: silently ignored, or run)."""
+    body = "\n".join(f"{k} = {v!r}" for k, v in driver.items())
+    path = tmp_path / "p.toml"
+    path.write_text(
+        "[problem]\nname='t'\nobjective='quad'\n[variables.x]\nunits='m'\nstart=0.1\n"
+        f"lower=-1.0\nupper=1.0\n[driver]\n{body.replace(chr(39), chr(34))}\n"
+    )
+    with pytest.raises(EncdesignInputError, match=needle) as info:
+        load_problem(path, REGISTRY)
+    assert str(path) in str(info.value) and field in str(info.value)
+    assert "expected" in str(info.value)
+
+
+def test_sweep_table_takes_only_a_design_of_experiments():
+    p = parse_problem(_problem(sweep={"kind": "lhs", "n": 9}), REGISTRY)
+    assert p.sweep == LatinHypercube(n=9) and isinstance(
+        parse_problem(_problem(), REGISTRY).sweep, Grid
+    )
+    with pytest.raises(EncdesignInputError, match=r"sweep\.kind.*unknown driver 'bfgs'"):
+        parse_problem(_problem(sweep={"kind": "bfgs"}), REGISTRY)
+
+
+def test_at_bound_is_ok_and_exits_zero(tmp_path, capsys):
+    """An optimum on a bound is an answer, marked: ``result.ok`` and the CLI's exit code
+    agree (exit 0), and the status says ``at_bound``."""
+    d = _problem(driver={"kind": "lbfgsb"})
+    d["variables"]["x"] = {"units": "m", "start": 0.0, "lower": -1.0, "upper": 0.2}
+    r = solve_problem(parse_problem(d, REGISTRY))
+    assert r.status is DriverStatus.AT_BOUND and r.ok, r.message
+    assert r.best is not None and r.best.inputs["x"] == pytest.approx(0.2)
+    assert r.summary()["driver"] == {
+        "kind": "lbfgsb",
+        "gtol": 1e-7,
+        "max_steps": 256,
+        "penalty": 1e4,
+    }
+    path = tmp_path / "p.toml"  # the CLI on a registered objective, optimum outside the box
+    path.write_text(
+        "[problem]\nname='sens'\nobjective='cotangent_sensitivity'\n"
+        "[model]\nn_heads=3\nmax_order=9\nn_builds=0\n"
+        "[variables.reference_angle]\nunits='deg'\nstart=6.0\nlower=5.0\nupper=7.0\n"
+        "[driver]\nkind='lbfgsb'\n"
+    )
+    rc = main(["optimize", str(path), "--quiet", "--fresh-replicates", "0"])
+    out = capsys.readouterr().out
+    assert "at_bound" in out
+    assert rc == 0
+
+
+@pytest.mark.parametrize("cls", [BFGS, LevenbergMarquardt], ids=lambda c: c.__name__)
+def test_solve_uses_the_drivers_defaults(cls):
+    """The problem solve runs the driver object as given: one set of defaults."""
+    p = parse_problem(_problem(driver={"kind": cls.kind}), REGISTRY)
+    assert p.driver == cls()
+    assert solve_problem(p).ok

@@ -10,7 +10,7 @@ import pytest
 
 from encdesign import EncdesignInputError
 from encdesign.cli import main
-from encdesign.design._drivers import build_normals
+from encdesign.design._sampling import build_normals
 from encdesign.design._tolerance import (
     allocate,
     check_yield,

@@ -14,6 +14,7 @@ import pytest
 from encdesign import EncdesignInputError
 from encdesign.cli import main
 from encdesign.design import (
+    BFGS,
     check_gradients,
     expected_value,
     fresh_key,
@@ -24,7 +25,7 @@ from encdesign.design import (
     parse_problem,
     solve_problem,
 )
-from encdesign.design._drivers import build_normals
+from encdesign.design._sampling import build_normals
 
 USER_MODULE = '''
 import jax.numpy as jnp
@@ -120,7 +121,9 @@ def test_overfit_in_sample_optimum_is_caught_on_fresh_builds(seed):
     (its expected excess is a*^2), and the report must not call it a win, and must call it
     a loss once a* is resolved."""
     key = jax.random.key(seed)
-    sol = optimise(_train, "bfgs", jnp.array([0.7]), key, max_steps=100)  # compiled once
+    sol = optimise(
+        _train, BFGS(rtol=1e-8, atol=1e-12, max_steps=100), jnp.array([0.7]), key
+    )  # compiled once
     assert sol.status == "success"
     a_star = float(sol.value[0])
     z4 = np.asarray(build_normals(key, jnp.arange(4), 1))[:, 0]

@@ -136,7 +136,7 @@ def _run_study(argv: Sequence[str]) -> int:
             print(f"{name:22s} {_study_title(path)}")
         return 0
     mod = _load_study(args.name)
-    from ..design import _distributed as dist
+    from .. import _distributed as dist
 
     launch_p = argparse.ArgumentParser(prog=f"encdesign study run {args.name}", add_help=False)
     dist.add_launch_flags(launch_p)
@@ -145,11 +145,13 @@ def _run_study(argv: Sequence[str]) -> int:
     if launch.processes is not None:
         argv += ["--processes", str(launch.processes)]
 
-    def body() -> int:
-        with dist.quiet_unless_main():
-            return int(mod.main(dist.study_argv_for_this_process(args.name, flags)) or 0)
-
-    return dist.run_launched(launch, argv, body)
+    rc = dist.start(launch, argv)
+    if rc is not None:  # spawned the processes, or could not join the runtime
+        return rc
+    with dist.quiet_unless_main():
+        rc = int(mod.main(dist.study_argv_for_this_process(args.name, flags)) or 0)
+    dist.shutdown()
+    return rc
 
 
 def _version() -> str:

@@ -7,9 +7,8 @@ import math
 import sys
 from pathlib import Path
 
+from .._distributed import add_launch_flags, is_main_process, process_index, shutdown, start
 from ..design._cases import CaseRecorder
-from ..design._distributed import add_launch_flags, is_main_process, process_index, run_launched
-from ..design._drivers import ANSWERS
 from ..design._problem import load_problem
 from ..design._solve import solve_problem
 from ..io._study import write_json
@@ -80,7 +79,8 @@ def print_result(summary: dict, stream=None) -> None:
 
 def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = None) -> int:
     """Load ``args.problem``, run ``solve(problem, recorder=, progress=)``, record the cases,
-    print the result and write the ``--json`` summary; exit 0 on success, else 1.
+    print the result and write the ``--json`` summary; exit 0 when ``result.ok`` (an answer:
+    ``success``, or ``at_bound``, which is printed as the status), else 1.
 
     Output paths are checked against the inputs before any work (``guard_outputs``).
 
@@ -93,9 +93,12 @@ def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = Non
         [("problem", args.problem)],
         [("--json", args.json), ("--cases" if resume is None else "--resume", cases)],
     ):
-        return run_launched(
-            args, getattr(args, "command_argv", None), lambda: _report(args, solve, resume)
-        )
+        rc = start(args, getattr(args, "command_argv", None) or [])
+        if rc is not None:  # spawned the processes, or could not join the runtime
+            return rc
+        rc = _report(args, solve, resume)
+        shutdown()
+        return rc
 
 
 def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
@@ -113,7 +116,7 @@ def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
     with rec:
         result = solve(problem, recorder=rec, progress=not args.quiet, fresh_replicates=reps)
     if not main:
-        return 0 if result.status in ANSWERS else 1
+        return 0 if result.ok else 1
     summary = result.summary()
     summary["n_cases"] = len(rec.cases)
     summary["cases_file"] = None if cases is None else str(cases)
@@ -125,7 +128,7 @@ def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
         print(f"wrote {cases} ({len(rec.all_cases())} cases{extra})")
     if args.json is not None:
         print(f"wrote {write_json(args.json, summary)}")
-    return 0 if result.status in ANSWERS else 1
+    return 0 if result.ok else 1
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,15 +28,57 @@ from ._design import (
     parse_design as parse_design,
 )
 from ._drivers import (
-    DOEResult as DOEResult,
+    BFGS as BFGS,
 )
 from ._drivers import (
+    LBFGSB as LBFGSB,
+)
+from ._drivers import (
+    LevenbergMarquardt as LevenbergMarquardt,
+)
+from ._drivers import (
+    Grid as Grid,
+)
+from ._drivers import (
+    LatinHypercube as LatinHypercube,
+)
+from ._drivers import (
+    MonteCarlo as MonteCarlo,
+)
+from ._drivers import (
+    AbstractDriver as AbstractDriver,
+)
+from ._drivers import (
+    AbstractGradientSolver as AbstractGradientSolver,
+)
+from ._drivers import (
+    AbstractDOE as AbstractDOE,
+)
+from ._status import (
+    DriverStatus as DriverStatus,
+)
+from ._drivers import (
+    DRIVERS as DRIVERS,
+)
+from ._status import (
+    INFEASIBLE as INFEASIBLE,
+)
+from ._status import (
+    FAILED as FAILED,
+)
+from ._status import (
+    BOUNDS_VIOLATED as BOUNDS_VIOLATED,
+)
+from ._drivers import (
+    DOEResult as DOEResult,
+)
+from ._enumerate import (
     EnumerationResult as EnumerationResult,
 )
 from ._drivers import (
     MonteCarloResult as MonteCarloResult,
 )
-from ._drivers import (
+from .._errors import (
     OptimisationError as OptimisationError,
 )
 from ._drivers import (
@@ -45,16 +87,16 @@ from ._drivers import (
 from ._drivers import (
     doe as doe,
 )
-from ._drivers import (
+from ._enumerate import (
     enumerate_designs as enumerate_designs,
 )
-from ._drivers import (
+from ._sampling import (
     expected_value as expected_value,
 )
-from ._drivers import (
+from ._sampling import (
     grid_points as grid_points,
 )
-from ._drivers import (
+from ._sampling import (
     latin_hypercube as latin_hypercube,
 )
 from ._drivers import (
@@ -171,31 +213,31 @@ from ._tolerance import (
 from ._tolerance import (
     pareto_front as pareto_front,
 )
-from ._distributed import (
+from .._distributed import (
     allgather_objects as allgather_objects,
 )
-from ._distributed import (
+from .._distributed import (
     is_my_task as is_my_task,
 )
-from ._drivers import (
+from ._status import (
     NONFINITE as NONFINITE,
 )
-from ._drivers import (
+from ._status import (
     STATUSES as STATUSES,
 )
-from ._drivers import (
+from ._status import (
     SUCCESS as SUCCESS,
 )
-from ._drivers import (
+from ._status import (
     ANSWERS as ANSWERS,
 )
-from ._drivers import (
+from ._status import (
     AT_BOUND as AT_BOUND,
 )
-from ._drivers import (
+from ._status import (
     MAX_STEPS as MAX_STEPS,
 )
-from ._drivers import (
+from ._status import (
     STALLED as STALLED,
 )
 from ._objectives import (

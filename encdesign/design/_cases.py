@@ -383,7 +383,7 @@ class CaseRecorder:
     def close(self) -> None:
         """Flush, then (all processes done) remove this process's shard file."""
         self.flush()
-        from ._distributed import barrier
+        from .._distributed import barrier
 
         barrier("encdesign-cases-closed")
         if self.path is not None:

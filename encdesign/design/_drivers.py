@@ -1,37 +1,38 @@
-"""Drivers: the solvers a design problem is handed to.
+"""Drivers: the solvers a design problem is handed to, as objects that hold their settings.
 
-A driver takes a function and returns a result with a ``status``; it never returns a bad
-number silently. Statuses are plain strings (:data:`SUCCESS`, :data:`MAX_STEPS`,
-:data:`STALLED`, :data:`AT_BOUND`, :data:`NONFINITE`, :data:`BOUNDS_VIOLATED`,
-:data:`INFEASIBLE`, :data:`FAILED`); with ``throw=True`` a result that is not an answer
-(anything but :data:`SUCCESS` and :data:`AT_BOUND`) raises :class:`OptimisationError`
-instead. :data:`AT_BOUND` is a converged answer with a variable on its bound (a valid
-optimum of the bounded problem, but never reported as plain success: the bound decides it);
-:data:`STALLED` is a line search that made no progress (no decrease from the start, a step
-size collapsed to nothing, or a "converged" stop with a quasi-Newton step that still
-predicts a real decrease).
+Every driver is a final :class:`equinox.Module` with one set of defaults (the optimistix
+pattern); its invariants are checked when it is built (``__check_init__``), so a bad
+setting is an :class:`~encdesign.EncdesignInputError` naming the driver's field:
 
-* :func:`optimise` — gradient solvers: optimistix BFGS (``"bfgs"``), optimistix
-  Levenberg–Marquardt (``"lm"``, the function returns a residual vector) and jaxopt
-  L-BFGS-B (``"lbfgsb"``, bounds always hold).
-* :func:`monte_carlo` / :func:`expected_value` — Monte Carlo over builds with common random
-  numbers: build ``i`` of key ``k`` is always the same standard-normal vector
-  ``normal(fold_in(k, i))``, whatever the chunking, so expected objectives are smooth,
-  deterministic functions of the design and can be differentiated.
-* :func:`grid_points`, :func:`latin_hypercube`, :func:`doe` — design of experiments.
+* gradient solvers for :func:`optimise`: :class:`BFGS` (optimistix),
+  :class:`LevenbergMarquardt` (optimistix; the function returns a residual vector) and
+  :class:`LBFGSB` (jaxopt; bounds always hold) — ``optimise(fn, BFGS(), y0, ...)``;
+* design of experiments: :class:`Grid` and :class:`LatinHypercube` (both
+  :class:`AbstractDOE`) give the points, :func:`doe` evaluates them;
+* :class:`MonteCarlo` — :func:`monte_carlo` over builds with common random numbers: build
+  ``i`` of key ``k`` is always the same standard-normal vector ``normal(fold_in(k, i))``,
+  whatever the chunking, so expected objectives are smooth, deterministic functions of the
+  design and can be differentiated;
 * :func:`enumerate_designs` — enumeration of discrete variables wrapped around a
-  continuous solve.
+  continuous solve (it takes no settings).
+
+A driver's result never hides a bad number: it carries a :class:`DriverStatus` (one
+enumeration, a message each) and ``.ok``, which means the same everywhere: the status is an
+answer (:attr:`DriverStatus.ok`: ``success`` or ``at_bound``). ``at_bound`` is a converged
+optimum with a variable on its bound: a valid answer of the bounded problem, marked (the
+bound decided it), so ``.ok`` is true and ``encdesign optimize`` exits 0 while printing the
+status. With ``throw=True`` a result that is not ok raises :class:`OptimisationError`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 import math
+import numbers
 import warnings
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable
+from typing import Any, ClassVar, final
 
 import equinox as eqx
 import jax
@@ -39,9 +40,28 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._distributed import (
+    chunk_plan,
+    gather_chunks,
+    is_main_process,
+    n_build_shards,
+    shard_builds,
+)
 from .._errors import OptimisationError as OptimisationError
+from .._errors import input_error
 from .._progress import progress_bar
-from ._distributed import chunk_plan, gather_chunks, is_main_process, n_build_shards, shard_builds
+from ._sampling import MC_CHUNK, VECTOR_BUILDS, grid_points, latin_hypercube, local_builds
+from ._status import (
+    AT_BOUND,
+    BOUNDS_VIOLATED,
+    FAILED,
+    MAX_STEPS,
+    NONFINITE,
+    STALLED,
+    SUCCESS,
+    DriverStatus,
+    finish,
+)
 
 with warnings.catch_warnings():
     warnings.filterwarnings(
@@ -49,17 +69,7 @@ with warnings.catch_warnings():
     )
     import jaxopt
 
-SUCCESS = "success"
-MAX_STEPS = "max_steps_reached"
-NONFINITE = "nonfinite"
-BOUNDS_VIOLATED = "bounds_violated"
-INFEASIBLE = "infeasible"
-FAILED = "failed"
-STALLED = "line_search_stalled"
-AT_BOUND = "at_bound"
-STATUSES = (SUCCESS, MAX_STEPS, STALLED, AT_BOUND, NONFINITE, BOUNDS_VIOLATED, INFEASIBLE, FAILED)
-ANSWERS = (SUCCESS, AT_BOUND)
-"""Statuses whose value is a converged answer (an at-bound optimum is one, marked)."""
+
 STEP_COLLAPSE = 1e-12
 """A final line-search step size (or trust-region radius) below this: the search collapsed."""
 STALL_FACTOR = 1e3
@@ -67,13 +77,239 @@ STALL_FACTOR = 1e3
 over ``STALL_FACTOR`` times the stopping tolerance ``atol + rtol * |f|``."""
 BOUND_RTOL = 1e-9
 """A variable within ``BOUND_RTOL * max(1, bound width)`` of a bound is at that bound."""
-SOLVERS = ("bfgs", "lbfgsb", "lm")
+INT_MAX = 10_000_000
+"""Largest step cap, build count, point count or chunk a driver takes."""
+TOL_MAX = 1e12
+"""Largest tolerance a driver takes (larger is a typing slip)."""
 
 
-def _finish(result: Any, throw: bool) -> Any:
-    if throw and result.status not in ANSWERS:
-        raise OptimisationError(f"{type(result).__name__}: {result.status}: {result.message}")
-    return result
+# ---------------------------------------------------------------------------------------
+# the driver objects
+
+
+def check_setting(where: str, value: object, kind: type, lo: float, hi: float) -> None:
+    """Refuse a driver setting that is not a number of ``kind`` in range: integers in
+    ``lo … hi``, floats finite in ``(lo, hi]``; ``where`` names it in the error."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise input_error(
+                where, f"{value!r} is not an integer", f"an integer {lo:.0f} … {hi:.0f}"
+            )
+        if not lo <= int(value) <= hi:
+            raise input_error(where, f"{value!r}", f"an integer {lo:.0f} … {hi:.0f}")
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise input_error(where, f"{value!r} is not a number", f"a number in ({lo:g}, {hi:g}]")
+    try:
+        x = float(value)
+    except OverflowError:  # an integer beyond the float range
+        x = math.inf
+    if not (math.isfinite(x) and lo < x <= hi):
+        raise input_error(where, f"{value!r}", f"a finite number in ({lo:g}, {hi:g}]")
+
+
+class AbstractDriver(eqx.Module):
+    """A driver: its settings are its fields (static, each with one default).
+
+    ``kind`` is the driver's name in a problem file's ``[driver] kind``; ``limits`` maps
+    each field to ``(int or float, lower, upper)``, checked in ``__check_init__``.
+    """
+
+    kind: ClassVar[str]
+    limits: ClassVar[dict[str, tuple[type, float, float]]]
+
+    def __check_init__(self) -> None:
+        for name, (kind, lo, hi) in self.limits.items():
+            check_setting(f"{type(self).__name__}.{name}", getattr(self, name), kind, lo, hi)
+
+    def settings(self) -> dict[str, Any]:
+        """``{"kind": ..., field: value, ...}`` (JSON-able; what a summary records)."""
+        return {
+            "kind": self.kind,
+            **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)},
+        }
+
+
+class AbstractGradientSolver(AbstractDriver):
+    """A gradient solver for :func:`optimise`."""
+
+    max_steps: eqx.AbstractVar[int]
+
+    def run(
+        self, fn: Callable[[jax.Array, Any], jax.Array], y0: jax.Array, lo: np.ndarray,
+        hi: np.ndarray, args: Any,
+    ) -> tuple[np.ndarray, float, DriverStatus, str, int]:  # fmt: skip
+        """Minimise ``fn`` from ``y0``: ``(value, objective, status, message, n_steps)``
+        (the objective re-evaluated at ``value``; bounds are checked by :func:`optimise`)."""
+        raise NotImplementedError
+
+
+_TOLERANCES: dict[str, tuple[type, float, float]] = {
+    "rtol": (float, 0.0, TOL_MAX),
+    "atol": (float, 0.0, TOL_MAX),
+    "max_steps": (int, 1, INT_MAX),
+}
+
+
+@final
+class BFGS(AbstractGradientSolver):
+    """optimistix BFGS on a scalar ``fn(y, args)``; bounds are only checked (a solution
+    outside them is ``bounds_violated``, one on them ``at_bound``).
+
+    Attributes:
+        rtol, atol: optimistix convergence tolerances (relative; absolute in the units of
+            ``y`` and of ``fn``), on steps and values.
+        max_steps: iteration limit (``max_steps_reached`` when hit).
+    """
+
+    rtol: float = eqx.field(default=1e-10, static=True)
+    atol: float = eqx.field(default=1e-14, static=True)
+    max_steps: int = eqx.field(default=256, static=True)
+    kind: ClassVar[str] = "bfgs"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = _TOLERANCES
+
+    def run(self, fn, y0, lo, hi, args):
+        fn = _scalar_fn(fn)
+        sol, out = _optx(fn, self)(y0, args)
+        objective = float(out)
+        status, message, n_steps = _optx_status(sol, self, objective)
+        return np.asarray(sol.value, dtype=np.float64), objective, status, message, n_steps
+
+
+@final
+class LevenbergMarquardt(AbstractGradientSolver):
+    """optimistix Levenberg–Marquardt: ``fn(y, args)`` returns a residual vector and
+    ``0.5 * sum(r**2)`` is minimised; bounds are only checked, as for :class:`BFGS`.
+
+    Attributes:
+        rtol, atol: optimistix convergence tolerances.
+        max_steps: iteration limit.
+    """
+
+    rtol: float = eqx.field(default=1e-10, static=True)
+    atol: float = eqx.field(default=1e-14, static=True)
+    max_steps: int = eqx.field(default=256, static=True)
+    kind: ClassVar[str] = "lm"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = _TOLERANCES
+
+    def run(self, fn, y0, lo, hi, args):
+        sol, out = _optx(fn, self)(y0, args)
+        objective = float(0.5 * jnp.sum(out**2))
+        status, message, n_steps = _optx_status(sol, self, objective)
+        return np.asarray(sol.value, dtype=np.float64), objective, status, message, n_steps
+
+
+@final
+class LBFGSB(AbstractGradientSolver):
+    """jaxopt L-BFGS-B on a scalar ``fn(y, args)``: iterates always stay inside the bounds.
+
+    Attributes:
+        gtol: convergence on the projected-gradient norm (units of ``fn`` per unit of
+            ``y``).
+        max_steps: iteration limit.
+    """
+
+    gtol: float = eqx.field(default=1e-7, static=True)
+    max_steps: int = eqx.field(default=256, static=True)
+    kind: ClassVar[str] = "lbfgsb"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = {
+        "gtol": (float, 0.0, TOL_MAX),
+        "max_steps": (int, 1, INT_MAX),
+    }
+
+    def run(self, fn, y0, lo, hi, args):
+        fn = _scalar_fn(fn)
+        y0 = jnp.clip(y0, lo, hi)
+        run = _lbfgsb(fn, self.max_steps, self.gtol)
+        value, state, out = run(y0, (jnp.asarray(lo), jnp.asarray(hi)), args)
+        status, message, n_steps = _lbfgsb_status(state, self.gtol, self.max_steps)
+        return np.asarray(value, dtype=np.float64), float(out), status, message, n_steps
+
+
+class AbstractDOE(AbstractDriver):
+    """A design of experiments: points in a box, evaluated by :func:`doe`."""
+
+    chunk_size: eqx.AbstractVar[int]
+
+    def points(self, lower: np.ndarray, upper: np.ndarray, key: jax.Array) -> np.ndarray:
+        """The ``[n, d]`` points between ``lower`` and ``upper`` (``key``: its randomness)."""
+        raise NotImplementedError
+
+
+DOE_CHUNK = 256
+"""Default points per compiled DOE evaluation."""
+
+
+@final
+class Grid(AbstractDOE):
+    """Full-factorial grid (:func:`grid_points`), ``points_per_dim`` per variable."""
+
+    points_per_dim: int = eqx.field(default=11, static=True)
+    chunk_size: int = eqx.field(default=DOE_CHUNK, static=True)
+    kind: ClassVar[str] = "grid"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = {
+        "points_per_dim": (int, 2, INT_MAX),
+        "chunk_size": (int, 1, INT_MAX),
+    }
+
+    def points(self, lower, upper, key):
+        return grid_points(lower, upper, self.points_per_dim)
+
+
+@final
+class LatinHypercube(AbstractDOE):
+    """Latin hypercube of ``n`` points (:func:`latin_hypercube`)."""
+
+    n: int = eqx.field(default=64, static=True)
+    chunk_size: int = eqx.field(default=DOE_CHUNK, static=True)
+    kind: ClassVar[str] = "lhs"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = {
+        "n": (int, 1, INT_MAX),
+        "chunk_size": (int, 1, INT_MAX),
+    }
+
+    def points(self, lower, upper, key):
+        return latin_hypercube(key, lower, upper, self.n)
+
+
+@final
+class MonteCarlo(AbstractDriver):
+    """Monte Carlo over ``n_builds`` builds (:func:`monte_carlo`).
+
+    Attributes:
+        n_builds: builds (>= 1; ``MonteCarlo(n_builds=0)`` is refused).
+        chunk_size: builds per device in one compiled chunk (memory per device).
+    """
+
+    n_builds: int = eqx.field(static=True)
+    chunk_size: int = eqx.field(default=MC_CHUNK, static=True)
+    kind: ClassVar[str] = "monte_carlo"
+    limits: ClassVar[dict[str, tuple[type, float, float]]] = {
+        "n_builds": (int, 1, 2**62),
+        "chunk_size": (int, 1, INT_MAX),
+    }
+
+    def run(
+        self,
+        fn: Callable[[Any, jax.Array], jax.Array],
+        theta: Any,
+        *,
+        key: jax.Array,
+        dim: int,
+        progress: bool = False,
+        throw: bool = False,
+    ) -> MonteCarloResult:
+        """:func:`monte_carlo` with these settings."""
+        return monte_carlo(
+            fn, theta, key=key, n=self.n_builds, dim=dim, chunk_size=self.chunk_size,
+            progress=progress, throw=throw,
+        )  # fmt: skip
+
+
+DRIVERS: dict[str, type[AbstractDriver]] = {
+    c.kind: c for c in (BFGS, LBFGSB, LevenbergMarquardt, Grid, LatinHypercube)
+}
+"""The drivers a problem file's ``[driver] kind`` names."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -86,11 +322,11 @@ class Solution:
 
     Attributes:
         value: the solution (1-D float64 array, in the units of ``y0``).
-        objective: the objective at ``value`` (for ``"lm"``: half the sum of squared
-            residuals).
-        status: one of :data:`STATUSES`.
+        objective: the objective at ``value`` (for :class:`LevenbergMarquardt`: half the
+            sum of squared residuals).
+        status: a :class:`DriverStatus`.
         n_steps: solver iterations taken.
-        solver: ``"bfgs"``, ``"lm"`` or ``"lbfgsb"``.
+        solver: the driver's ``kind`` (``"bfgs"``, ``"lm"`` or ``"lbfgsb"``).
         message: a human-readable account of the status.
         at_bounds: the components on a bound at ``value``, as ``"lower[i]"`` /
             ``"upper[i]"`` (empty when none).
@@ -98,7 +334,7 @@ class Solution:
 
     value: np.ndarray
     objective: float
-    status: str
+    status: DriverStatus
     n_steps: int
     solver: str
     message: str = ""
@@ -106,15 +342,14 @@ class Solution:
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the status is an answer (``success`` or ``at_bound``)."""
+        return self.status.ok
 
 
 def _as_bounds(bound: Any, n: int, fill: float) -> np.ndarray:
     if bound is None:
         return np.full(n, fill)
-    b = np.broadcast_to(np.asarray(bound, dtype=np.float64), (n,)).copy()
-    return b
+    return np.broadcast_to(np.asarray(bound, dtype=np.float64), (n,)).copy()
 
 
 @functools.lru_cache(maxsize=128)
@@ -142,14 +377,15 @@ def _lbfgsb(fn: Callable[[jax.Array, Any], jax.Array], max_steps: int, gtol: flo
 
 
 @functools.lru_cache(maxsize=128)
-def _optx(fn: Callable[[jax.Array, Any], jax.Array], solver: str, rtol, atol, max_steps: int):
+def _optx(fn: Callable[[jax.Array, Any], jax.Array], driver: BFGS | LevenbergMarquardt):
     """The optimistix solve of ``fn`` and ``fn`` at its solution, compiled as one program
-    once per ``fn`` and settings and cached (``equinox.filter_jit``: non-array ``args``
-    are static, as in ``optimistix``)."""
+    once per ``fn`` and driver and cached (``equinox.filter_jit``: non-array ``args`` are
+    static, as in ``optimistix``)."""
+    rtol, atol, max_steps = float(driver.rtol), float(driver.atol), int(driver.max_steps)
 
     @eqx.filter_jit
     def run(y0, args):
-        if solver == "bfgs":
+        if isinstance(driver, BFGS):
             sol = optx.minimise(
                 fn, optx.BFGS(rtol=rtol, atol=atol), y0, args, max_steps=max_steps, throw=False
             )
@@ -169,91 +405,72 @@ def _optx(fn: Callable[[jax.Array, Any], jax.Array], solver: str, rtol, atol, ma
 
 def optimise(
     fn: Callable[[jax.Array, Any], jax.Array],
-    solver: str,
+    solver: AbstractGradientSolver,
     y0: Any,
     args: Any = None,
     *,
     lower: Any = None,
     upper: Any = None,
-    max_steps: int = 256,
-    rtol: float = 1e-8,
-    atol: float = 1e-12,
-    gtol: float = 1e-8,
     throw: bool = False,
 ) -> Solution:
     """Minimise ``fn(y, args)`` from ``y0`` with a gradient solver.
 
     Args:
-        fn: ``fn(y, args)``: a scalar for ``"bfgs"`` / ``"lbfgsb"``, a residual vector for
-            ``"lm"`` (which minimises ``0.5 * sum(r**2)``). Must be JAX-differentiable.
-        solver: ``"bfgs"`` (optimistix BFGS), ``"lm"`` (optimistix Levenberg–Marquardt) or
-            ``"lbfgsb"`` (jaxopt L-BFGS-B; iterates always stay inside the bounds).
+        fn: ``fn(y, args)``: a scalar for :class:`BFGS` / :class:`LBFGSB`, a residual
+            vector for :class:`LevenbergMarquardt` (which minimises ``0.5 * sum(r**2)``).
+            Must be JAX-differentiable.
+        solver: the driver with its settings, e.g. ``BFGS(rtol=1e-8, max_steps=500)``.
         y0: start point, 1-D (any units; ``fn`` defines them).
         args: passed through to ``fn``.
-        lower, upper: bounds (scalar or per component; ``None`` = unbounded). ``"lbfgsb"``
-            enforces them; for ``"bfgs"``/``"lm"`` a solution outside them gets status
-            ``"bounds_violated"``.
-        max_steps: iteration limit (status ``"max_steps_reached"`` when hit).
-        rtol, atol: optimistix convergence tolerances (relative/absolute, on steps and
-            values).
-        gtol: L-BFGS-B convergence: projected-gradient norm (units of ``fn`` per unit of
-            ``y``).
-        throw: raise :class:`OptimisationError` unless the status is ``"success"`` or
-            ``"at_bound"``.
+        lower, upper: bounds (scalar or per component; ``None`` = unbounded).
+            :class:`LBFGSB` enforces them; for the others a solution outside them gets
+            status ``bounds_violated``.
+        throw: raise :class:`OptimisationError` unless the status is an answer
+            (``success`` or ``at_bound``).
 
-    Statuses: ``"success"`` (converged, no variable on a bound); ``"at_bound"`` (converged
-    with components on a bound, listed in ``at_bounds``: for ``"lbfgsb"`` the box, for the
-    others a solution that touches a bound); ``"max_steps_reached"``;
-    ``"line_search_stalled"`` (a line-search step size or trust-region radius below
-    :data:`STEP_COLLAPSE`: no decrease found along the search direction; a failed L-BFGS-B
-    line search or an L-BFGS-B stop before the cap without convergence, or a BFGS stop on a small
-    step whose quasi-Newton step still predicts a decrease over :data:`STALL_FACTOR` times
-    the stopping tolerance); ``"nonfinite"``; ``"bounds_violated"``; ``"failed"``.
+    Statuses (:class:`DriverStatus`): ``success`` (converged, no variable on a bound);
+    ``at_bound`` (converged with components on a bound, listed in ``at_bounds``: for
+    L-BFGS-B the box, for the others a solution that touches a bound);
+    ``max_steps_reached``; ``line_search_stalled`` (a line-search step size or
+    trust-region radius below :data:`STEP_COLLAPSE`: no decrease found along the search
+    direction; a failed L-BFGS-B line search or an L-BFGS-B stop before the cap without
+    convergence, or a BFGS stop on a small step whose quasi-Newton step still predicts a
+    decrease over :data:`STALL_FACTOR` times the stopping tolerance); ``nonfinite``;
+    ``bounds_violated``; ``failed``.
 
     Passing the same ``fn`` again (with other ``args``, bounds or start) reuses the
     compiled solver; put anything that changes between solves into ``args``.
 
     Returns:
         A :class:`Solution`; its ``objective`` is re-evaluated at ``value`` and a
-        non-finite value or objective gives status ``"nonfinite"``.
+        non-finite value or objective gives status ``nonfinite``.
     """
-    if solver not in SOLVERS:
-        from .._errors import input_error
-
-        raise input_error("solver", f"unknown solver {solver!r}", f"one of {', '.join(SOLVERS)}")
+    if not isinstance(solver, AbstractGradientSolver):
+        raise input_error(
+            "optimise: solver",
+            f"{solver!r} is not a gradient solver",
+            "BFGS(...), LBFGSB(...) or LevenbergMarquardt(...) (encdesign.design)",
+        )
     y0 = jnp.atleast_1d(jnp.asarray(y0, dtype=jnp.float64))
     n = y0.shape[0]
     lo, hi = _as_bounds(lower, n, -np.inf), _as_bounds(upper, n, np.inf)
-    if solver != "lm":
-        fn = _scalar_fn(fn)
-    if solver == "lbfgsb":
-        y0 = jnp.clip(y0, lo, hi)
-        run = _lbfgsb(fn, int(max_steps), float(gtol))
-        value, state, out = run(y0, (jnp.asarray(lo), jnp.asarray(hi)), args)
-        status, message, n_steps = _lbfgsb_status(state, gtol, int(max_steps))
-    else:
-        sol, out = _optx(fn, solver, float(rtol), float(atol), int(max_steps))(y0, args)
-        value = sol.value
-    value_np = np.asarray(value, dtype=np.float64)
-    objective = float(0.5 * jnp.sum(out**2)) if solver == "lm" else float(out)
-    if solver != "lbfgsb":
-        status, message, n_steps = _optx_status(sol, solver, objective, rtol, atol)
-    at = _at_bounds(value_np, lo, hi)
+    value, objective, status, message, n_steps = solver.run(fn, y0, lo, hi, args)
+    at = at_bounds(value, lo, hi)
     if status in (SUCCESS, MAX_STEPS, STALLED):
-        if not (np.all(np.isfinite(value_np)) and math.isfinite(objective)):
+        if not (np.all(np.isfinite(value)) and math.isfinite(objective)):
             status, message = NONFINITE, "non-finite solution or objective"
-        elif status == SUCCESS and (np.any(value_np < lo) or np.any(value_np > hi)):
-            status, message = BOUNDS_VIOLATED, f"solution {value_np} outside [{lo}, {hi}]"
+        elif status == SUCCESS and (np.any(value < lo) or np.any(value > hi)):
+            status, message = BOUNDS_VIOLATED, f"solution {value} outside [{lo}, {hi}]"
         elif at:
             if status == SUCCESS:
                 status, message = AT_BOUND, f"converged on the bound: {', '.join(at)}"
             else:
                 message = f"{message}; on the bound: {', '.join(at)}"
-    res = Solution(value_np, objective, status, n_steps, solver, message, tuple(at))
-    return _finish(res, throw)
+    res = Solution(value, objective, status, n_steps, solver.kind, message, tuple(at))
+    return finish(res, throw)
 
 
-def _at_bounds(value: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
+def at_bounds(value: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
     """The components of ``value`` within :data:`BOUND_RTOL` of a finite bound."""
     width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
     tol = BOUND_RTOL * np.maximum(1.0, width)
@@ -266,7 +483,7 @@ def _at_bounds(value: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
     return out
 
 
-def _lbfgsb_status(state: Any, gtol: float, max_steps: int) -> tuple[str, str, int]:
+def _lbfgsb_status(state: Any, gtol: float, max_steps: int) -> tuple[DriverStatus, str, int]:
     """Status of a jaxopt L-BFGS-B run: converged (projected gradient <= ``gtol``), a
     failed line search or a collapsed step size (stalled), the step cap, or non-finite."""
     n_steps = int(state.iter_num)
@@ -292,11 +509,13 @@ _OPTX_STATUS = {
 }
 
 
-def _optx_status(sol: Any, solver: str, f: float, rtol: float, atol: float) -> tuple[str, str, int]:
+def _optx_status(
+    sol: Any, driver: BFGS | LevenbergMarquardt, f: float
+) -> tuple[DriverStatus, str, int]:
     """Status of an optimistix run: its result, then a collapsed line-search step size
-    (trust-region radius for ``"lm"``) as stalled, and for BFGS a "converged" stop whose
-    quasi-Newton step still predicts a decrease over :data:`STALL_FACTOR` times the
-    stopping tolerance (the step, not the objective, became small) as stalled."""
+    (trust-region radius for Levenberg–Marquardt) as stalled, and for BFGS a "converged"
+    stop whose quasi-Newton step still predicts a decrease over :data:`STALL_FACTOR` times
+    the stopping tolerance (the step, not the objective, became small) as stalled."""
     n_steps = int(sol.stats.get("num_steps", -1))
     status, message = SUCCESS, "converged"
     if sol.result != optx.RESULTS.successful:
@@ -318,10 +537,10 @@ def _optx_status(sol: Any, solver: str, f: float, rtol: float, atol: float) -> t
             n_steps,
         )
     info = state.f_info
-    if status == SUCCESS and solver == "bfgs" and hasattr(info, "hessian_inv"):
+    if status == SUCCESS and isinstance(driver, BFGS) and hasattr(info, "hessian_inv"):
         g = info.grad
         pred = 0.5 * float(jnp.vdot(g, info.hessian_inv.mv(g)))
-        tol = atol + rtol * abs(f)
+        tol = driver.atol + driver.rtol * abs(f)
         if not math.isfinite(pred) or pred > STALL_FACTOR * tol:
             return (
                 STALLED,
@@ -333,98 +552,7 @@ def _optx_status(sol: Any, solver: str, f: float, rtol: float, atol: float) -> t
 
 
 # ---------------------------------------------------------------------------------------
-# Monte Carlo with common random numbers
-
-
-def build_normals(key: jax.Array, index: jax.Array, dim: int) -> jax.Array:
-    """Standard-normal vectors of builds ``index`` (any shape) for ``key``: ``[..., dim]``.
-
-    Build ``i`` is ``normal(fold_in(key, i), (dim,))``: the same for any chunking, which
-    is what makes the random numbers common between designs.
-    """
-    flat = jnp.ravel(index)
-    z = jax.vmap(lambda i: jax.random.normal(jax.random.fold_in(key, i), (dim,)))(flat)
-    # materialise z: without the barrier XLA may fuse the random-number generation into
-    # every elementwise consumer and recompute it per reading (measured: the Monte Carlo
-    # objective ran 1.8x slower)
-    return jax.lax.optimization_barrier(z.reshape((*jnp.shape(index), dim)))
-
-
-VECTOR_BUILDS = 8  # builds vectorised together: a working set that stays in the CPU caches
-
-
-def values_of_normals(fn_z: Callable[[jax.Array], jax.Array], z: jax.Array, vector: int):
-    """``fn_z`` on every row of ``z [B, dim]`` (``B`` a multiple of ``vector``): ``lax.map``
-    over groups of ``vector`` rows, ``vmap`` within a group; returns ``[B]``."""
-    groups = z.reshape(-1, vector, z.shape[-1])
-    return jax.lax.map(jax.vmap(fn_z), groups).reshape(-1)
-
-
-def map_builds(
-    fn_z: Callable[[jax.Array], jax.Array],
-    key: jax.Array,
-    n: int,
-    dim: int,
-    *,
-    first: int = 0,
-    block: int = 512,
-    vector: int = VECTOR_BUILDS,
-    manual: bool = False,
-) -> jax.Array:
-    """Traceable per-build values ``fn_z(z_i)`` for builds ``first … first + n - 1`` of
-    ``key`` (:func:`build_normals`), ``[n]``.
-
-    Memory is bounded at any ``n``: the random numbers are drawn ``block`` builds at a
-    time (rounded up to a multiple of ``vector``) and the builds are vectorised ``vector``
-    at a time (small groups keep the working set in the CPU caches: measured fastest for
-    values and gradients alike). Drawing the numbers per block rather than inside the
-    innermost loop matters: XLA compiles that loop markedly slower (1.8x) when it also
-    draws random numbers.
-
-    The builds are split over the devices of the ``"builds"`` mesh (all devices of all
-    processes, or the one set with :func:`jax.set_mesh`;
-    :func:`encdesign.design.shard_builds`): each device evaluates ``ceil(n / D)``
-    consecutive builds in the same blocks, and the values are gathered in build order.
-    Build ``i`` depends only on ``fold_in(key, first + i)``, so the result is that of one
-    device (to rounding in the compiled code). With one device nothing changes.
-    ``manual``: the ``shard_map`` path of :func:`~encdesign.design.shard_builds` (only when
-    ``fn_z`` closes over no array that lives on a mesh).
-    """
-    return shard_builds(
-        lambda offset, m: _local_builds(fn_z, key, m, dim, first + offset, block, vector),
-        n,
-        manual=manual,
-    )
-
-
-def _local_builds(fn_z, key, n: int, dim: int, first: Any, block: int, vector: int):
-    """:func:`map_builds` on one device: builds ``first … first + n - 1`` (``first`` may be
-    traced)."""
-    vector = int(max(1, min(vector, n)))
-    n_groups = -(-n // vector)
-    per_block = int(max(1, min(n_groups, -(-int(block) // vector))))
-    size = per_block * vector
-    n_blocks = -(-n // size)
-
-    def one_block(b):
-        z = build_normals(key, first + b * size + jnp.arange(size), dim)
-        return values_of_normals(fn_z, z, vector)
-
-    return jax.lax.map(one_block, jnp.arange(n_blocks)).reshape(-1)[:n]
-
-
-def _chunked_values(
-    fn: Callable[[Any, jax.Array], jax.Array],
-    theta: Any,
-    key: jax.Array,
-    n: int,
-    dim: int,
-    chunk_size: int,
-) -> jax.Array:
-    """Per-build values ``fn(theta, z_i)`` for builds ``0 … n-1`` (:func:`map_builds`:
-    random numbers drawn ``chunk_size`` builds at a time, so memory is bounded by one
-    chunk)."""
-    return map_builds(lambda z: fn(theta, z), key, n, dim, block=chunk_size)
+# Monte Carlo
 
 
 @dataclasses.dataclass(frozen=True)
@@ -448,14 +576,14 @@ class MonteCarloResult:
     stderr: float
     n: int
     values: np.ndarray
-    status: str
+    status: DriverStatus
     n_nonfinite: int = 0
     message: str = ""
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the status is an answer (``success``)."""
+        return self.status.ok
 
     def percentile(self, q: float) -> float:
         """The ``q``-th percentile (0–100) of the per-build values."""
@@ -476,7 +604,7 @@ def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int, b
     @jax.jit
     def run_chunk(key, c, th):
         return shard_builds(
-            lambda off, m: _local_builds(
+            lambda off, m: local_builds(
                 lambda zi: fn(th, zi), key, m, dim, c * chunk + off, block, VECTOR_BUILDS
             ),
             chunk,
@@ -494,7 +622,7 @@ def monte_carlo(
     key: jax.Array,
     n: int,
     dim: int,
-    chunk_size: int = 4096,
+    chunk_size: int = MC_CHUNK,
     progress: bool = False,
     throw: bool = False,
 ) -> MonteCarloResult:
@@ -504,17 +632,16 @@ def monte_carlo(
     ``z`` (``[dim]``) to a scalar. The builds come from :func:`build_normals` (common random
     numbers: the same ``key`` gives the same builds for every ``theta``). Work is done in
     jitted chunks of at most ``chunk_size`` builds per device, the builds spread evenly over
-    the chunks (``chunk_plan`` in :mod:`encdesign.design._distributed`), each chunk split
+    the chunks (``chunk_plan`` in :mod:`encdesign._distributed`), each chunk split
     over the devices of the ``"builds"`` mesh. The values stay on the devices that computed
     them until the last chunk is done; then one gather collects them (``gather_chunks``):
     processes never wait for each other while they compute. With ``progress`` a progress
     line is shown (by process 0 only, for the whole run, when several processes share the
     work).
     """
-    if n < 1 or dim < 1:
-        from .._errors import input_error
-
-        raise input_error("monte_carlo", f"n={n}, dim={dim}", "n >= 1 and dim >= 1")
+    MonteCarlo(n_builds=n, chunk_size=chunk_size)  # refuses n < 1 by name
+    if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim < 1:
+        raise input_error("monte_carlo: dim", f"{dim!r}", "an integer >= 1")
     # host copies of the inputs: the chunks take the shard_map path, which needs inputs
     # that are not laid out on a mesh (theta may be the output of a sharded solver); plain
     # numbers become arrays too, so a design given as floats and the same design as arrays
@@ -551,66 +678,11 @@ def monte_carlo(
     std = float(np.std(values, ddof=1)) if n > 1 else 0.0
     status, msg = (SUCCESS, f"{n} builds") if bad == 0 else (NONFINITE, f"{bad} non-finite builds")
     res = MonteCarloResult(mean, std, std / math.sqrt(n), n, values, status, bad, msg)
-    return _finish(res, throw)
-
-
-def expected_value(
-    fn: Callable[[Any, jax.Array], jax.Array],
-    theta: Any,
-    *,
-    key: jax.Array,
-    n: int,
-    dim: int,
-    chunk_size: int = 4096,
-) -> jax.Array:
-    """Differentiable Monte Carlo mean of ``fn(theta, z)`` over builds ``0 … n-1`` of ``key``.
-
-    Traceable (use inside ``jax.grad``/``jax.jit``); chunked with ``lax.map`` so memory is
-    bounded by one chunk. The builds are common random numbers (see
-    :func:`build_normals`), so the estimate is a smooth function of ``theta``.
-    """
-    return jnp.mean(_chunked_values(fn, theta, key, n, dim, chunk_size))
-
-
-def expected_values(
-    fn: Callable[[Any, jax.Array], jax.Array],
-    theta: Any,
-    *,
-    key: jax.Array,
-    n: int,
-    dim: int,
-    chunk_size: int = 4096,
-) -> jax.Array:
-    """Traceable per-build values ``[n]`` of ``fn(theta, z_i)`` (see :func:`expected_value`)."""
-    return _chunked_values(fn, theta, key, n, dim, chunk_size)
+    return finish(res, throw)
 
 
 # ---------------------------------------------------------------------------------------
 # design of experiments
-
-
-def grid_points(lower: Sequence[float], upper: Sequence[float], n_per_dim: Any) -> np.ndarray:
-    """Full-factorial grid ``[prod(n), d]`` between ``lower`` and ``upper`` (inclusive)."""
-    lo = np.atleast_1d(np.asarray(lower, dtype=np.float64))
-    hi = np.atleast_1d(np.asarray(upper, dtype=np.float64))
-    ns = np.broadcast_to(np.asarray(n_per_dim, dtype=int), lo.shape)
-    axes = [np.linspace(a, b, int(k)) for a, b, k in zip(lo, hi, ns)]
-    return np.array(list(itertools.product(*axes)), dtype=np.float64).reshape(-1, lo.size)
-
-
-def latin_hypercube(
-    key: jax.Array, lower: Sequence[float], upper: Sequence[float], n: int
-) -> np.ndarray:
-    """Latin hypercube sample ``[n, d]``: each variable's range cut into ``n`` equal strata,
-    one point per stratum, strata paired at random (``key``), uniform inside a stratum."""
-    lo = np.atleast_1d(np.asarray(lower, dtype=np.float64))
-    hi = np.atleast_1d(np.asarray(upper, dtype=np.float64))
-    d = lo.size
-    k_perm, k_u = jax.random.split(key)
-    perms = jax.vmap(lambda k: jax.random.permutation(k, n))(jax.random.split(k_perm, d))
-    u = jax.random.uniform(k_u, (d, n), dtype=jnp.float64)
-    frac = (np.asarray(perms).astype(np.float64) + np.asarray(u)) / n
-    return lo + frac.T * (hi - lo)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -628,15 +700,15 @@ class DOEResult:
 
     points: np.ndarray
     values: np.ndarray
-    statuses: tuple[str, ...]
+    statuses: tuple[DriverStatus, ...]
     best_index: int
-    status: str
+    status: DriverStatus
     message: str = ""
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the status is an answer (``success``)."""
+        return self.status.ok
 
     @property
     def best_point(self) -> np.ndarray:
@@ -654,7 +726,7 @@ def doe(
     points: Any,
     args: Any = None,
     *,
-    chunk_size: int = 256,
+    chunk_size: int = DOE_CHUNK,
     progress: bool = False,
     throw: bool = False,
 ) -> DOEResult:
@@ -675,85 +747,4 @@ def doe(
         status, msg = SUCCESS, f"{int(finite.sum())}/{len(values)} points finite"
     else:
         best, status, msg = -1, FAILED, "no point gave a finite value"
-    return _finish(DOEResult(pts, values, statuses, best, status, msg), throw)
-
-
-# ---------------------------------------------------------------------------------------
-# enumeration of discrete variables
-
-
-@dataclasses.dataclass(frozen=True)
-class EnumerationResult:
-    """Result of :func:`enumerate_designs`.
-
-    Attributes:
-        choices: the discrete combinations tried, as dicts, in order.
-        solutions: the inner result for each combination (anything with ``status`` and
-            ``objective``).
-        best_index: index of the best combination whose status is an answer
-            (:data:`ANSWERS`: ``"success"`` or ``"at_bound"``; ``-1`` if none).
-        status: ``"success"`` when at least one combination succeeded and the best is a
-            plain success; the best one's status (``"at_bound"``) when it is marked; else
-            ``"failed"``.
-        message: account of the status.
-    """
-
-    choices: tuple[dict[str, Any], ...]
-    solutions: tuple[Any, ...]
-    best_index: int
-    status: str
-    message: str = ""
-
-    @property
-    def ok(self) -> bool:
-        """True when the best combination is an answer (``"success"`` or ``"at_bound"``)."""
-        return self.status in ANSWERS
-
-    @property
-    def best_choice(self) -> dict[str, Any]:
-        """The best discrete combination."""
-        return self.choices[self.best_index]
-
-    @property
-    def best_solution(self) -> Any:
-        """The inner solution at the best combination."""
-        return self.solutions[self.best_index]
-
-
-def enumerate_designs(
-    solve: Callable[[dict[str, Any]], Any],
-    choices: Mapping[str, Sequence[Any]],
-    *,
-    progress: bool = False,
-    throw: bool = False,
-) -> EnumerationResult:
-    """Solve the continuous problem for every combination of discrete values.
-
-    Args:
-        solve: ``solve(combination) -> result`` with ``.status`` and ``.objective`` (e.g. a
-            closure calling :func:`optimise` for fixed discrete values).
-        choices: variable name -> allowed values; the full product is enumerated.
-        progress: show a progress line.
-        throw: raise unless some combination succeeded.
-
-    Returns:
-        An :class:`EnumerationResult`; the best combination is the successful one with
-        the smallest ``objective``. Failed combinations stay in the table with their status.
-    """
-    names = list(choices)
-    combos = [dict(zip(names, vals)) for vals in itertools.product(*choices.values())]
-    sols = []
-    with progress_bar("enumerate", len(combos), enabled=progress) as bar:
-        for c in combos:
-            sols.append(solve(c))
-            bar.update()
-    okidx = [i for i, s in enumerate(sols) if s.status in ANSWERS and math.isfinite(s.objective)]
-    if okidx:
-        best = min(okidx, key=lambda i: sols[i].objective)
-        status, msg = SUCCESS, f"{len(okidx)}/{len(combos)} combinations solved"
-        if sols[best].status != SUCCESS:  # the best answer is marked (e.g. on a bound)
-            status = sols[best].status
-            msg = f"{msg}; the best is {status}: {getattr(sols[best], 'message', '')}"
-    else:
-        best, status, msg = -1, FAILED, "no combination solved"
-    return _finish(EnumerationResult(tuple(combos), tuple(sols), best, status, msg), throw)
+    return finish(DOEResult(pts, values, statuses, best, status, msg), throw)

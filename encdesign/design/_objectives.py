@@ -41,6 +41,7 @@ from jaxtyping import Array, ArrayLike
 
 from .._array import f64 as _f64
 from .._array import is_traced
+from .._distributed import shard_builds
 from .._errors import EncdesignInputError, input_error
 from ..physics._kinematics import EncoderModel, errors_scaled_grating
 from ..physics._layout import (
@@ -61,8 +62,7 @@ from ..physics._types import (
     Scalar,
     ScalarOut,
 )
-from ._distributed import shard_builds
-from ._drivers import build_normals, map_builds
+from ._sampling import build_normals, map_builds
 from ._tolerance import tolerance_cost
 
 __all__ = [

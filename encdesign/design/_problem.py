@@ -35,6 +35,12 @@ says how. Problems are written as TOML files (``encdesign optimize PROBLEM.toml`
     kind = "lbfgsb"                       # bfgs | lbfgsb | lm | grid | lhs
     max_steps = 200
 
+``[driver]`` (and ``[sweep]``, ``grid`` or ``lhs``) parses into one driver object of
+:mod:`encdesign.design._drivers` (:data:`~encdesign.design._drivers.DRIVERS`): its keys are
+that driver's fields, and a key it does not take (``gtol`` under ``bfgs``) or a value it
+cannot use is refused by name. ``penalty`` (the constraint penalty weight of
+:func:`~encdesign.design.solve_problem`) is also accepted under ``bfgs`` and ``lbfgsb``.
+
 Every name is checked against the objective's declaration in the registry
 (:class:`ProblemObjective`); values are converted to SI on load. Bad files raise
 :class:`~encdesign.EncdesignInputError` naming the file, the field, the value and what was
@@ -55,6 +61,16 @@ import numpy as np
 
 from .._errors import input_error
 from ..io._recording import read_toml, show
+from ._drivers import (
+    DRIVERS,
+    LBFGSB,
+    TOL_MAX,
+    AbstractDOE,
+    AbstractDriver,
+    Grid,
+    LevenbergMarquardt,
+    check_setting,
+)
 from ._registry import PROBLEM_OBJECTIVES
 from ._spec import ProblemObjective as ProblemObjective
 from ._spec import VariableInfo as VariableInfo
@@ -82,7 +98,12 @@ UNITS: dict[str, tuple[str, float]] = {
 SEED_MAX = 2**63 - 1  # JAX keys take a 64-bit seed
 MAX_GRID_POINTS = 10_000_000  # a grid beyond this does not fit in memory as one array
 
-DRIVER_KINDS = ("bfgs", "lbfgsb", "lm", "grid", "lhs")
+DRIVER_KINDS = tuple(DRIVERS)
+SWEEP_KINDS = tuple(k for k, c in DRIVERS.items() if issubclass(c, AbstractDOE))
+PENALTY = 1e4
+"""Default constraint penalty weight (relative to ``|objective|`` at the start)."""
+PENALISED = ("bfgs", "lbfgsb")
+"""The drivers that take ``penalty`` in a problem file (their solves penalise constraints)."""
 _TOP_KEYS = {"problem", "model", "variables", "constraints", "yield", "driver", "sweep"}
 
 
@@ -173,8 +194,9 @@ class Problem:
         variables: the design variables in file order.
         constraints: output bounds.
         yield_target: the ``[yield]`` table or ``None``.
-        driver: ``[driver]`` settings (``kind`` always present).
-        sweep: ``[sweep]`` settings for ``encdesign sweep`` (``kind`` always present).
+        driver: the ``[driver]`` (default :class:`~encdesign.design.LBFGSB`).
+        sweep: the ``[sweep]`` design of experiments for ``encdesign sweep`` (default
+            :class:`~encdesign.design.Grid`).
         seed: PRNG seed.
         path: the file (``None`` when built in memory).
     """
@@ -186,10 +208,13 @@ class Problem:
     variables: tuple[Variable, ...]
     constraints: tuple[Constraint, ...] = ()
     yield_target: YieldTarget | None = None
-    driver: dict[str, Any] = dataclasses.field(default_factory=lambda: {"kind": "lbfgsb"})
-    sweep: dict[str, Any] = dataclasses.field(default_factory=lambda: {"kind": "grid"})
+    driver: AbstractDriver = dataclasses.field(default_factory=LBFGSB)
+    sweep: AbstractDOE = dataclasses.field(default_factory=Grid)
     seed: int = 0
     path: Path | None = None
+    penalty: float = PENALTY
+    """Constraint penalty weight of a gradient solve, relative to ``|objective|`` at the
+    start (``[driver] penalty``)."""
 
     @property
     def continuous(self) -> tuple[Variable, ...]:
@@ -493,16 +518,13 @@ def parse_problem(
         ytarget = _yield(data["yield"], src, spec.yield_units)
     elif spec.requires_yield:
         raise input_error(src, f"objective {obj_name!r} needs a [yield] table")
-    driver = dict(data.get("driver", {}))
-    driver.setdefault("kind", "lbfgsb")
-    _check_driver(driver, _where(src, "driver"), DRIVER_KINDS)
-    sweep = dict(data.get("sweep", {}))
-    sweep.setdefault("kind", "grid")
-    _check_driver(sweep, _where(src, "sweep"), ("grid", "lhs"))
+    driver, penalty = parse_driver(data.get("driver", {}), _where(src, "driver"), DRIVER_KINDS)
+    sweep, _ = parse_driver(data.get("sweep", {}), _where(src, "sweep"), SWEEP_KINDS, "grid")
+    assert isinstance(sweep, AbstractDOE)
     n_cont = sum(not v.discrete for v in variables)
-    for table, label in ((driver, "driver"), (sweep, "sweep")):
-        if table["kind"] == "grid" and n_cont:
-            ppd = int(table.get("points_per_dim", 11))
+    for drv, label in ((driver, "driver"), (sweep, "sweep")):
+        if isinstance(drv, Grid) and n_cont:
+            ppd = drv.points_per_dim
             if ppd**n_cont > MAX_GRID_POINTS:
                 raise input_error(
                     _where(src, label, "points_per_dim"),
@@ -510,7 +532,7 @@ def parse_problem(
                     f"at most {MAX_GRID_POINTS} points "
                     f"(points_per_dim <= {int(MAX_GRID_POINTS ** (1 / n_cont) + 1e-9)})",
                 )
-    if driver["kind"] == "lm" and "residuals" not in spec.outputs:
+    if isinstance(driver, LevenbergMarquardt) and "residuals" not in spec.outputs:
         raise input_error(
             _where(src, "driver", "kind"),
             f"'lm' needs a residual vector but objective {obj_name!r} has none",
@@ -533,6 +555,7 @@ def parse_problem(
         sweep,
         seed,
         None if src == "<problem>" else Path(src),
+        penalty,
     )
 
 
@@ -575,24 +598,44 @@ def _yield(table: Any, src: str, si_units: str = "rad") -> YieldTarget:
     return YieldTarget(target, spec_si, int(n))
 
 
-def _check_driver(table: dict[str, Any], where: str, kinds: tuple[str, ...]) -> None:
-    kind = table["kind"]
-    if kind not in kinds:
-        raise input_error(f"{where}.kind", f"unknown driver {kind!r}", f"one of {', '.join(kinds)}")
-    ints = {"max_steps": 1, "n": 1, "points_per_dim": 2, "chunk_size": 1}
-    int_max = 10_000_000
-    floats = {"gtol", "rtol", "atol", "penalty"}
-    _check_keys(table, {"kind", *ints, *floats}, where)
-    for k, lo in ints.items():
-        if k in table:
-            v = table[k]
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= int_max:
-                raise input_error(f"{where}.{k}", f"{show(v)[:60]}", f"an integer {lo} … {int_max}")
-    for k in floats:
-        if k in table and not 0 < _num(table[k], f"{where}.{k}") <= MAX_MAGNITUDE_SI:
+def parse_driver(
+    table: Any, where: str, kinds: tuple[str, ...] = DRIVER_KINDS, default: str = "lbfgsb"
+) -> tuple[AbstractDriver, float]:
+    """The driver a ``[driver]`` (or ``[sweep]``) table names, and the penalty weight.
+
+    ``kind`` picks the driver (:data:`~encdesign.design._drivers.DRIVERS`, one of
+    ``kinds``; ``default`` when absent); every other key must be one of that driver's
+    fields (or ``penalty`` under :data:`PENALISED` drivers) and a value it can use. Errors
+    name ``where`` (the file and table), the key and what was expected.
+    """
+    if not isinstance(table, Mapping):
+        raise input_error(where, f"{show(table)[:60]} is not a table", "a table")
+    kind = table.get("kind", default)
+    if not isinstance(kind, str) or kind not in kinds:
+        raise input_error(
+            f"{where}.kind", f"unknown driver {show(kind)}", f"one of {', '.join(kinds)}"
+        )
+    cls = DRIVERS[kind]
+    fields = {f.name for f in dataclasses.fields(cls)}
+    extra = {"penalty"} if kind in PENALISED else set()
+    for k in table:
+        if k != "kind" and k not in fields | extra:
             raise input_error(
-                f"{where}.{k}", f"{show(table[k])}", f"a positive number <= {MAX_MAGNITUDE_SI:g}"
+                f"{where}.{k}",
+                f"{k!r} is not a setting of the {kind!r} driver ({cls.__name__})",
+                f"one of {', '.join(sorted(fields | extra))}",
             )
+    settings: dict[str, Any] = {}
+    for k, v in table.items():
+        if k in fields:
+            number, lo, hi = cls.limits[k]
+            check_setting(f"{where}.{k}", v, number, lo, hi)
+            settings[k] = number(v)
+    penalty = PENALTY
+    if "penalty" in table:
+        check_setting(f"{where}.penalty", table["penalty"], float, 0.0, TOL_MAX)
+        penalty = float(table["penalty"])
+    return cls(**settings), penalty
 
 
 def load_problem(

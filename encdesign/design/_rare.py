@@ -46,13 +46,14 @@ import numpy as np
 from scipy.special import ndtr
 
 from .._errors import EncdesignInputError
-from ._drivers import SUCCESS, VECTOR_BUILDS, values_of_normals
+from ._sampling import VECTOR_BUILDS, values_of_normals
+from ._status import SUCCESS, DriverStatus
 
 VECTOR = VECTOR_BUILDS
 
 __all__ = ["RareEventResult", "form_design_points", "importance_yield"]
 
-NO_FAILURE = "no_failure_found"
+NO_FAILURE = DriverStatus.NO_FAILURE_FOUND
 
 
 @functools.lru_cache(maxsize=32)
@@ -109,13 +110,13 @@ class RareEventResult:
     n_failures: int
     defensive: float
     wall_s: float
-    status: str
+    status: DriverStatus
     message: str = ""
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the status is an answer (:attr:`DriverStatus.ok`: ``success``)."""
+        return self.status.ok
 
     @property
     def yield_fraction(self) -> float:

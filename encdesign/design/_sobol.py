@@ -73,7 +73,7 @@ def sobol_indices(
     """
     from scipy.stats import sobol_indices as _scipy_sobol
 
-    from ._drivers import build_normals
+    from ._sampling import build_normals
 
     gidx = np.asarray(groups, dtype=int)
     dim, d = gidx.size, len(names)

@@ -22,10 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import input_error
-from .._progress import progress_bar
-from ._cases import CaseRecorder
-from ._distributed import (
+from .._distributed import (
     allgather_rows,
     is_main_process,
     process_count,
@@ -33,21 +30,21 @@ from ._distributed import (
     split_range,
     use_local_devices,
 )
+from .._errors import input_error
+from .._progress import progress_bar
+from ._cases import CaseRecorder
 from ._drivers import (
-    ANSWERS,
-    AT_BOUND,
-    FAILED,
-    INFEASIBLE,
-    MAX_STEPS,
-    NONFINITE,
-    SUCCESS,
-    _at_bounds,
-    enumerate_designs,
-    grid_points,
-    latin_hypercube,
+    AbstractDOE,
+    AbstractGradientSolver,
+    Grid,
+    LatinHypercube,
+    LevenbergMarquardt,
+    at_bounds,
     optimise,
 )
+from ._enumerate import enumerate_designs
 from ._problem import Problem
+from ._status import AT_BOUND, FAILED, INFEASIBLE, MAX_STEPS, NONFINITE, SUCCESS, DriverStatus
 from ._validate import Z_SIGNIFICANT, fresh_seeds, paired_comparison
 
 
@@ -61,7 +58,8 @@ class DesignResult:
         outputs: output name -> value (scalars), SI.
         objective: the minimised quantity (the objective output, negated for
             ``sense = "maximize"``).
-        status: driver status (``"success"``, ``"infeasible"``, ``"max_steps_reached"``, …).
+        status: driver status (:class:`~encdesign.design.DriverStatus`: ``success``,
+            ``infeasible``, ``max_steps_reached``, …).
         n_steps: solver steps (DOE: points evaluated).
         message: account of the status.
     """
@@ -70,7 +68,7 @@ class DesignResult:
     inputs: dict[str, float]
     outputs: dict[str, float]
     objective: float
-    status: str
+    status: DriverStatus
     n_steps: int = 0
     message: str = ""
 
@@ -82,12 +80,18 @@ class ProblemResult:
     problem: Problem
     results: tuple[DesignResult, ...]
     best: DesignResult | None
-    status: str
+    status: DriverStatus
     message: str = ""
     fresh: dict[str, Any] | None = None
     """Out-of-sample check of ``best`` against the baseline (the start point at the first
     discrete values) on fresh builds (:func:`~encdesign.design.validate_problem`), or
     ``None`` (not asked for, nothing solved, or no Monte Carlo in the objective)."""
+
+    @property
+    def ok(self) -> bool:
+        """True when the best design is an answer (:attr:`DriverStatus.ok`: ``success`` or
+        ``at_bound``; ``encdesign optimize`` exits 0 exactly then)."""
+        return self.status.ok
 
     def summary(self) -> dict[str, Any]:
         """A JSON-able summary (SI values, plus the file's display units)."""
@@ -110,7 +114,7 @@ class ProblemResult:
             "problem": p.name,
             "objective": p.objective.name,
             "sense": p.sense,
-            "driver": p.driver,
+            "driver": {**p.driver.settings(), **_penalty_of(p)},
             "seed": p.seed,
             "status": self.status,
             "message": self.message,
@@ -124,6 +128,13 @@ class ProblemResult:
             "the fresh check above uses independent builds",
             "win_significant": None if self.fresh is None else self.fresh["win_significant"],
         }
+
+
+def _penalty_of(p: Problem) -> dict[str, float]:
+    """``{"penalty": ...}`` for a driver whose solve penalises constraints, else ``{}``."""
+    drv = p.driver
+    penalised = isinstance(drv, AbstractGradientSolver) and not isinstance(drv, LevenbergMarquardt)
+    return {"penalty": p.penalty} if penalised else {}
 
 
 def _finite_or_none(d: dict[str, float]) -> dict[str, float | None]:
@@ -223,13 +234,13 @@ def _penalised(ev: _Evaluator):
 
 
 def _finish_design(
-    ev: _Evaluator, u: np.ndarray, status: str, n_steps: int, message: str
+    ev: _Evaluator, u: np.ndarray, status: DriverStatus, n_steps: int, message: str
 ) -> DesignResult:
     outs = ev.scalar_outputs(u)
     val = outs.get(ev.name, math.nan)
-    if status in ANSWERS and not all(math.isfinite(v) for v in outs.values()):
+    if status.ok and not all(math.isfinite(v) for v in outs.values()):
         status, message = NONFINITE, "non-finite output at the solution"
-    if status in ANSWERS and ev.violation(outs) > 1e-6:
+    if status.ok and ev.violation(outs) > 1e-6:
         status = INFEASIBLE
         message = f"constraint violated by {ev.violation(outs):.3g} (relative)"
     return DesignResult(
@@ -242,15 +253,20 @@ def _solve_combo(
 ) -> DesignResult:
     ev = _Evaluator(problem, discrete)
     drv = problem.driver
-    kind = drv["kind"]
     n_cont = len(ev.vars)
     if n_cont == 0:
         res = _finish_design(ev, np.zeros(0), SUCCESS, 0, "evaluated (no continuous variable)")
         _record(recorder, problem, res)
         return res
     ulo, uhi = ev.u_bounds()
-    if kind in ("grid", "lhs"):
-        return _doe_combo(ev, kind, drv, recorder, progress)
+    if isinstance(drv, AbstractDOE):
+        return _doe_combo(ev, drv, recorder, progress)
+    if not isinstance(drv, AbstractGradientSolver):
+        raise input_error(
+            f"{problem.path or problem.name}: driver",
+            f"{drv!r} cannot solve a problem",
+            "a gradient solver or a design of experiments",
+        )
     u0 = np.zeros(n_cont)
     f0 = float(ev.sign * ev.compiled_outputs(jnp.asarray(u0))[ev.name])
     if not math.isfinite(f0):
@@ -258,40 +274,22 @@ def _solve_combo(
         _record(recorder, problem, res)
         return res
     fscale = max(abs(f0), 1e-300)
-    weight = float(drv.get("penalty", 1e4)) * fscale
-    if kind == "lm":
-        sol = optimise(
-            lambda u, a: ev.outputs(u)["residuals"],
-            "lm",
-            u0,
-            lower=ulo,
-            upper=uhi,
-            max_steps=int(drv.get("max_steps", 256)),
-            rtol=float(drv.get("rtol", 1e-10)),
-            atol=float(drv.get("atol", 1e-14)),
-        )
+    weight = float(problem.penalty) * fscale
+    if isinstance(drv, LevenbergMarquardt):
+        sol = optimise(lambda u, a: ev.outputs(u)["residuals"], drv, u0, lower=ulo, upper=uhi)
     else:
         # quadratic penalty with increasing weight (one round without constraints)
         weights = [weight] if not problem.constraints else [weight * 10.0**k for k in (-2, 0, 2, 4)]
         u, n_steps = u0, 0
         f = _penalised(ev)
+        sol = None
         for w in weights:
-            sol = optimise(
-                f,
-                kind,
-                u,
-                jnp.array([w, fscale]),
-                lower=ulo,
-                upper=uhi,
-                max_steps=int(drv.get("max_steps", 256)),
-                rtol=float(drv.get("rtol", 1e-10)),
-                atol=float(drv.get("atol", 1e-14)),
-                gtol=float(drv.get("gtol", 1e-7)),
-            )
+            sol = optimise(f, drv, u, jnp.array([w, fscale]), lower=ulo, upper=uhi)
             n_steps += sol.n_steps
             if sol.status not in (SUCCESS, MAX_STEPS, AT_BOUND):
                 break
             u = sol.value
+        assert sol is not None
         sol = dataclasses.replace(sol, n_steps=n_steps)
     res = _finish_design(ev, sol.value, sol.status, sol.n_steps, sol.message)
     _record(recorder, problem, res)
@@ -299,22 +297,18 @@ def _solve_combo(
 
 
 def _doe_combo(
-    ev: _Evaluator, kind: str, drv: dict[str, Any], recorder: CaseRecorder | None, progress: bool
+    ev: _Evaluator, drv: AbstractDOE, recorder: CaseRecorder | None, progress: bool
 ) -> DesignResult:
     problem = ev.problem
+    kind = drv.kind
     if not (np.all(np.isfinite(ev.lower)) and np.all(np.isfinite(ev.upper))):
         raise input_error(
             f"{problem.path or problem.name}: driver.kind",
             f"{kind!r} needs lower and upper bounds on every continuous variable",
         )
     ulo, uhi = ev.u_bounds()
-    if kind == "grid":
-        pts = grid_points(ulo, uhi, int(drv.get("points_per_dim", 11)))
-    else:
-        pts = latin_hypercube(
-            jax.random.fold_in(jax.random.key(problem.seed), 1), ulo, uhi, int(drv.get("n", 64))
-        )
-    rows = _doe_rows(ev, pts, int(drv.get("chunk_size", 256)), recorder, progress, kind)
+    pts = drv.points(ulo, uhi, jax.random.fold_in(jax.random.key(problem.seed), 1))
+    rows = _doe_rows(ev, pts, drv.chunk_size, recorder, progress, kind)
     best_i, best_val = -1, math.inf
     for i, (u, outs) in enumerate(zip(pts, rows)):
         val = ev.sign * outs[ev.name]
@@ -329,7 +323,7 @@ def _doe_combo(
         )
     outs = rows[best_i]
     status, message = SUCCESS, f"best of {len(pts)} {kind} points"
-    edge = _at_bounds(pts[best_i], ulo, uhi)
+    edge = at_bounds(pts[best_i], ulo, uhi)
     if edge:  # the best point is on the box: the optimum may lie outside it
         names = ", ".join(f"{s.split('[')[0]} {ev.vars[int(s[s.index('[') + 1 : -1])].name}"
                           for s in edge)  # fmt: skip
@@ -339,7 +333,7 @@ def _doe_combo(
     )
 
 
-def _point_status(ev: _Evaluator, outs: dict[str, float]) -> str:
+def _point_status(ev: _Evaluator, outs: dict[str, float]) -> DriverStatus:
     if not all(math.isfinite(v) for v in outs.values()):
         return NONFINITE
     return INFEASIBLE if ev.violation(outs) > 1e-6 else SUCCESS
@@ -467,9 +461,13 @@ def sweep_problem(
     ``fresh_replicates``: the best point against the start on fresh builds, as for
     :func:`solve_problem`.
     """
-    sweep = dict(problem.sweep)
-    if kind is not None:
-        sweep["kind"] = kind
+    sweep = problem.sweep
+    if kind is not None and kind != sweep.kind:  # the other design, its own defaults
+        sweep = (
+            LatinHypercube(chunk_size=sweep.chunk_size)
+            if kind == "lhs"
+            else Grid(chunk_size=sweep.chunk_size)
+        )
     p = dataclasses.replace(problem, driver=sweep)
     return solve_problem(p, recorder=recorder, progress=progress, fresh_replicates=fresh_replicates)
 

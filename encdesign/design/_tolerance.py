@@ -38,7 +38,8 @@ import numpy as np
 
 from .._errors import input_error
 from .._progress import progress_bar
-from ._drivers import MAX_STEPS, SUCCESS, optimise
+from ._drivers import BFGS, optimise
+from ._status import MAX_STEPS, SUCCESS, DriverStatus
 
 ValuesFn = Callable[[jax.Array], jax.Array]
 
@@ -268,15 +269,15 @@ class Allocation:
     train_yield: float
     smooth_yield: float
     scale: float
-    status: str
+    status: DriverStatus
     message: str
     n_steps: int
     rare: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
-        """True when ``status == "success"``."""
-        return self.status == SUCCESS
+        """True when the status is an answer (:attr:`DriverStatus.ok`: ``success``)."""
+        return self.status.ok
 
 
 @functools.lru_cache(maxsize=64)
@@ -419,7 +420,7 @@ def allocate(
     capped: list[str] = []
     for mu in penalties:
         a = jax.tree.map(lambda x: jnp.asarray(x, dtype=jnp.float64), {**obj_args, "mu": mu})
-        sol = optimise(objective, "bfgs", v, a, max_steps=max_steps, rtol=1e-6, atol=1e-9)
+        sol = optimise(objective, BFGS(rtol=1e-6, atol=1e-9, max_steps=max_steps), v, a)
         steps += sol.n_steps
         if sol.status == MAX_STEPS:  # go on to the next round from here, but never "success"
             capped.append(f"penalty {mu:g}: {sol.n_steps} of {max_steps} steps")
@@ -452,7 +453,10 @@ def allocate(
     elif usable:
         a, b = 1e-3, 1.5
         if exact(a) < goal:
-            status, msg = "infeasible", f"yield target {goal:.4g} unreachable within bounds"
+            status, msg = (
+                DriverStatus.INFEASIBLE,
+                f"yield target {goal:.4g} unreachable within bounds",
+            )
         else:
             if exact(b) >= goal:
                 scale = b
@@ -470,8 +474,8 @@ def allocate(
     train_y = yield_stats(np.asarray(f(jnp.asarray(sig))), spec)[0]
     cost = float(tolerance_cost(sig, np.where(design, ref, 0.0), weights))
     res = Allocation(sig, tuple(names), cost, train_y, ys_opt, scale, status, msg, steps, rare_out)
-    if throw and status != SUCCESS:
-        from ._drivers import OptimisationError
+    if throw and not status.ok:
+        from .._errors import OptimisationError
 
         raise OptimisationError(f"allocate: {status}: {msg}")
     return res
@@ -492,7 +496,7 @@ def _rare_scale(
 
     def shown(fac: float):
         r = importance_yield(metric, dim, spec, key=key, n=n, args=jnp.asarray(sig_at(fac)))
-        if r.status == "no_failure_found":
+        if r.status == DriverStatus.NO_FAILURE_FOUND:
             return True, r
         if not r.ok:
             return False, r

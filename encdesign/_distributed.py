@@ -58,9 +58,9 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from .. import _cpu
-from .._checks import int_arg
-from .._errors import DistributedError, EncdesignInputError, input_error
+from . import _cpu
+from ._checks import int_arg
+from ._errors import DistributedError, EncdesignInputError, input_error
 
 BUILDS_AXIS = "builds"
 """Name of the mesh axis the Monte Carlo builds are split over."""
@@ -237,6 +237,8 @@ def initialize(launch: Launch, *, timeout_s: float = 60.0, heartbeat_s: int = 20
         except (ValueError, RuntimeError) as exc:
             raise DistributedError(f"cluster auto-detection failed: {exc}") from None
         return
+    if launch.coordinator is None:
+        raise DistributedError("no coordinator address to join (--coordinator HOST:PORT)")
     host, port = parse_coordinator(launch.coordinator)
     if launch.process_id == 0:
         _check_port_free(port)
@@ -408,7 +410,10 @@ def gather_chunks(chunks: Sequence[jax.Array]) -> np.ndarray:
         if x.is_fully_addressable:
             out.append(np.asarray(x))
         else:
-            rep = _replicate_on(x.sharding.mesh)(x)
+            sharding = x.sharding
+            if not isinstance(sharding, NamedSharding):
+                raise DistributedError(f"a chunk laid out by {type(sharding).__name__}, not a mesh")
+            rep = _replicate_on(sharding.mesh)(x)
             out.append(np.asarray(rep.addressable_data(0)))
     return np.concatenate(out) if out else np.zeros((0,))
 
@@ -656,9 +661,15 @@ def strip_launch_flags(argv: Sequence[str]) -> list[str]:
     return out
 
 
-def run_launched(args: Any, argv: Sequence[str], body: Callable[[], int]) -> int:
-    """Run a CLI command's ``body`` as its launch flags say: spawn ``--processes`` local
-    copies of ``argv``, or join the runtime, run ``body`` and leave it."""
+def start(args: Any, argv: Sequence[str]) -> int | None:
+    """Start what a command's launch flags (:func:`add_launch_flags`) ask for.
+
+    With ``--processes N``: spawn the N local copies of ``argv`` and return their exit code
+    (this process does no work itself). Otherwise join the runtime (with one process there is
+    nothing to join) and return ``None``: the caller does its work, then calls
+    :func:`shutdown`. A runtime that cannot be joined is printed and returned as exit code 1.
+    Nothing here calls back into the caller: the CLI and the studies run their own work.
+    """
     launch = launch_from_args(args)
     if launch.spawns:
         return spawn_local(strip_launch_flags(argv), launch.processes)
@@ -667,9 +678,7 @@ def run_launched(args: Any, argv: Sequence[str], body: Callable[[], int]) -> int
     except DistributedError as exc:
         print(f"encdesign: error: {exc}", file=sys.stderr)
         return 1
-    rc = body()
-    shutdown()
-    return rc
+    return None
 
 
 def study_argv_for_this_process(name: str, flags: Sequence[str]) -> list[str]:
