@@ -26,13 +26,14 @@ for ``N`` equally spaced heads keeps exactly the degenerate modes ``N, 2N, …``
 :func:`apply_map` subtracts it.
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations``: equinox reads the ``AbstractVar`` of
+# :class:`AbstractErrorSeries` at class creation and refuses it as a string
 import functools
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from equinox import AbstractVar
 from jaxtyping import Array
 
 from .._array import f64 as _f64
@@ -97,8 +98,8 @@ class AbstractErrorSeries(eqx.Module):
     :class:`~encdesign.physics.LayoutCompensation` and :class:`EncoderMap` share. Abstract:
     each of them declares the two fields; the methods here are never overridden."""
 
-    sin_rad: eqx.AbstractVar[Array]
-    cos_rad: eqx.AbstractVar[Array]
+    sin_rad: AbstractVar[Array]
+    cos_rad: AbstractVar[Array]
 
     @property
     def max_order(self) -> int:
