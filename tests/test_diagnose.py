@@ -43,12 +43,15 @@ def _bench(
     wobble: bool = False,
     ecc_shift: float = 0.0,
     interp: float = 0.0,
+    alpha_deg: tuple[float, ...] | None = None,
     path: Path | None = None,
 ):
     """A small multihead bench: disk errors of orders 1-5, ``R`` runs of ``n`` rows at
     200 Hz and 1-1.6 rev/s, 0.5 urad noise, and the nuisances / effects asked for."""
     rng = np.random.default_rng(seed)
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.5, 5.8, H - 1))])
+    if alpha_deg is not None:  # a given layout (the draw above keeps the seed's stream)
+        alpha = np.radians(np.asarray(alpha_deg, float))
     ts, ths, runs = [], [], []
     for r in range(R):
         t = np.arange(n) / 200.0
@@ -468,3 +471,55 @@ def test_quadrature_json_follows_the_same_contract(tmp_path):
     assert d.verdict == "consistent"
     assert d.doc["goodness_of_fit"]["passes"] and d.doc["heldout"]["k"] >= 4
     assert not any("not yet routed" in n for n in d.doc["notes"])
+
+
+@pytest.mark.parametrize(
+    ("seed", "H", "vib", "start"),
+    [(31, 3, False, 0), (32, 4, True, 0), (33, 5, False, 70), (34, 8, True, 0)],
+)
+def test_equally_spaced_heads_without_a_reference_fit_normally(seed, H, vib, start):
+    """Issue 44 A: equally spaced heads without theta_ref see the disk orders that are
+    multiples of H the same at every head (they cancel in head differences, so the common
+    rotation is unobservable). The base held them, and the shaft refinement (the fitted
+    error's head mean: exactly those orders) never diverges: the base residual is the
+    noise, a clean record is consistent and a vibration is named."""
+    step = 360.0 / H
+    rec, _ = _bench(
+        seed,
+        H=H,
+        ref=False,
+        n=600,
+        start_move=start,
+        vibration_hz=37.0 if vib else 0.0,
+        alpha_deg=tuple(step * k for k in range(H)),
+    )
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert "fit_failures" not in d.doc["base"] or not d.doc["base"]["fit_failures"]
+    assert d.doc["status"] == "ok", d.doc["report"]
+    if vib:
+        assert [e["name"] for e in d.effects] == ["vibration"], d.doc["report"]
+        assert d.effects[0]["rms_after"] < 1.2 * NOISE, d.doc["report"]
+    else:
+        assert d.verdict == "consistent", d.doc["report"]
+        assert d.doc["rms_before"] < 1.2 * NOISE, d.doc["report"]
+    held = [u for u in d.doc["base"]["unidentifiable"] if "fourier" in u]
+    assert any(f"[{H - 1}]" in u for u in held), d.doc["base"]["unidentifiable"]
+
+
+def test_a_diverging_shaft_refinement_is_reported_and_the_fit_recovers(monkeypatch):
+    """Issue 44 A: with the symmetric orders left free (the base before the fix), the
+    fit gives them any size and the shaft refinement's fixed point would diverge: it is
+    detected (slope of the head mean), reported under base.fit_failures with its cause,
+    undone, and never reaches the verdict (a clean record stays consistent)."""
+    import encdesign.diagnose.kinds.multihead._multihead as mh
+
+    monkeypatch.setattr(mh, "_symmetric_orders", lambda prep, M, limit=None: [])
+    rec, _ = _bench(35, H=4, ref=False, n=600, alpha_deg=(0.0, 90.0, 180.0, 270.0))
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    fails = d.doc["base"].get("fit_failures", [])
+    assert [f["stage"] for f in fails] == ["refine"], d.doc["report"]
+    assert "slope" in fails[0]["cause"] and "fit failure" in d.doc["report"]
+    assert "refined" not in d.doc["base"]
+    assert d.verdict == "consistent", d.doc["report"]

@@ -269,6 +269,8 @@ def report_text(doc: dict) -> str:
             f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
             f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
         )
+    for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
+        lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
