@@ -44,6 +44,7 @@ def _bench(
     ecc_shift: float = 0.0,
     interp: float = 0.0,
     alpha_deg: tuple[float, ...] | None = None,
+    pause_s: float | None = None,
     path: Path | None = None,
 ):
     """A small multihead bench: disk errors of orders 1-5, ``R`` runs of ``n`` rows at
@@ -55,6 +56,8 @@ def _bench(
     ts, ths, runs = [], [], []
     for r in range(R):
         t = np.arange(n) / 200.0
+        if pause_s is not None:  # one clock for the record: each run after a pause
+            t = t + r * (n / 200.0 + pause_s)
         if gap and r == 0:
             t[n // 2 :] += 0.7
         w = 2 * np.pi * (1.0 + 0.6 * r)
@@ -310,14 +313,14 @@ def test_eccentricity_shift_over_many_turns_is_located_and_named(size, tilt):
     validate_diagnosis(d.doc)
     want = ["beam_tilt_axial", "eccentricity_shift"] if tilt else ["eccentricity_shift"]
     assert sorted(e["name"] for e in d.effects) == want, d.doc["report"]
-    # the global time axis lays the runs end to end: run 1's rows follow run 0's
-    tau_true = float(rec.columns["t"][truth["shift_row"]] + rec.columns["t"][1499] + 1 / 200)
+    # reported on the recording's own clock (here one per run), with its run (issue 44 C)
+    t_true = float(rec.columns["t"][truth["shift_row"]])
     es = next(e for e in d.effects if e["name"] == "eccentricity_shift")
-    assert abs(float(np.ravel(es["params"]["shift_time_s"]["value"])[0]) - tau_true) < 0.05
+    assert es["params"]["shift_time_s"]["run"] == 1
+    assert abs(float(np.ravel(es["params"]["shift_time_s"]["value"])[0]) - t_true) < 0.05
     if not tilt:  # alone, the view locates it in the base residual, in run 1, at its row
         f = [f for f in d.doc["findings_before"] if f["view"] == "order_step"]
         assert f and f[0]["where"]["runs"] == [1], d.doc["findings_before"]
-        t_true = float(rec.columns["t"][truth["shift_row"]])
         assert abs(f[0]["where"]["times_s"][1] - t_true) < 0.05
     assert d.doc["goodness_of_fit"]["passes"], d.doc["report"]
 
@@ -523,3 +526,24 @@ def test_a_diverging_shaft_refinement_is_reported_and_the_fit_recovers(monkeypat
     assert "slope" in fails[0]["cause"] and "fit failure" in d.doc["report"]
     assert "refined" not in d.doc["base"]
     assert d.verdict == "consistent", d.doc["report"]
+
+
+@pytest.mark.parametrize(("seed", "H", "pause"), [(41, 3, 7.0), (42, 4, 2.5), (43, 3, None)])
+def test_located_change_time_is_in_the_recordings_own_clock(seed, H, pause):
+    """Issue 44 C: an eccentricity shift 60 % into the second run is reported at its time
+    on the recording's own ``t`` (one clock with pauses between runs, or a clock per run),
+    with its run and an uncertainty that holds the truth; the located change point too."""
+    rec, truth = _bench(seed, H=H, R=2, n=1500, ecc_shift=2.5, pause_s=pause)
+    t_true = float(rec.columns["t"][truth["shift_row"]])
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    es = next((e for e in d.effects if e["name"] == "eccentricity_shift"), None)
+    assert es is not None, d.doc["report"]
+    p = es["params"]["shift_time_s"]
+    got, se = float(np.ravel(p["value"])[0]), float(np.ravel(p["se"])[0])
+    assert p["run"] == 1 and 0 < se < 0.5, p
+    assert abs(got - t_true) <= 3 * se + 1 / 200, (got, se, t_true)
+    f = [f for f in d.doc["findings_before"] if f["view"] == "order_step"]
+    assert f and f[0]["where"]["runs"] == [1], d.doc["findings_before"]
+    lo, hi = f[0]["where"]["times_s"]
+    assert lo - 1 / 200 <= t_true <= hi + 1 / 200, (lo, hi, t_true)

@@ -43,6 +43,7 @@ import numpy as np
 from ..._errors import input_error
 from ._candidates import Candidate
 from ._document import (
+    global_times_in_own_clock,
     lattice_effect,
     order_spectrum,
     report_text,
@@ -291,7 +292,7 @@ def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
     names = prep.kd.channel_names
     out = {
         "name": s.name,
-        "params": term_params(term, final, idx),
+        "params": global_times_in_own_clock(prep, term, term_params(term, final, idx)),
         "derived": derived,
         "channels": [names[k] for k in chans] if chans is not None else None,
         "rms_after": s.fit.rms(prep),

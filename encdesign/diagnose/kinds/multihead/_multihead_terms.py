@@ -678,14 +678,14 @@ ECCENTRICITY_SHIFT = Candidate(
     "eccentricity_shift",
     _es_fn,
     (
-        Param("shift_time_s", "s", "1", linear=False, scale=1e-2),
+        Param("shift_time_s", "s", "1", linear=False, scale=1e-2, global_time=True),
         Param("shift_x_m", "m", "1"),
         Param("shift_y_m", "m", "1"),
     ),
     signature=("order_step", "time"),
     explanation="A shock or slip moved the disk on its hub during the record: the order-1 "
-    "error of the heads changes at one instant (shift_time_s is on the global time axis, runs "
-    "end to end).",
+    "error of the heads changes at one instant (shift_time_s is fitted on the global time "
+    "axis, runs end to end, and reported on the recording's own t with its run).",
     start=_es_start,
     plausible=_es_plausible,
 )
