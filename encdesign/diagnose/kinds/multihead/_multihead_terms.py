@@ -418,7 +418,16 @@ THERMAL_DRIFT = Candidate(
     (Param("rate", "rad/K (temp_c) or rad/s (no temp_c)", "channels"),),
     signature=("drift", "time"),
     explanation="Expansion of mounts and disk with temperature (seed 001: about 0.7 arcsec/K): "
-    "a slow error correlated with temp_c (or time), different between heads.",
+    "a slow error correlated with temp_c, different between heads.",
+    # issue 44 E: without a temperature that varies, a slow error in time is not attributable
+    # to temperature (it may be a step the motion hides, a reference's drift, ...): the
+    # drift is reported located, never named thermal_drift
+    applies=lambda ctx: (
+        None
+        if ctx.consts.get("driver_name") == "temp_c"
+        else "needs a temp_c column that varies (a drift in time alone is reported located, "
+        "not attributed to temperature)"
+    ),
 )
 
 
