@@ -76,6 +76,9 @@ class Param:
             engine scales each column to the residual's noise level.
         fit: ``False`` for a parameter held at its start value (e.g. a detected step size).
         description: one line for the report.
+        global_time: a time on the finder's end-to-end axis ``tau`` (runs laid end to end,
+            pauses removed; what the term reads): reported in the recording's own ``t``,
+            with its ``run`` (issue 44 C).
     """
 
     name: str
@@ -85,6 +88,7 @@ class Param:
     scale: float | None = None
     fit: bool = True
     description: str = ""
+    global_time: bool = False
 
     def resolved_shape(self, n_channels: int, n_runs: int) -> tuple[int, ...]:
         """The array shape of this parameter for a recording of that size."""

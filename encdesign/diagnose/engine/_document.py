@@ -38,6 +38,33 @@ def term_params(term: Term, fit: FitResult, index: int) -> dict:
     return out
 
 
+def recording_time(prep, tau: float) -> tuple[float, int]:
+    """A time on the end-to-end axis ``tau`` (runs laid end to end, pauses removed) as
+    ``(t, run)``: the recording's own ``t`` (s) and the run id, from the last row at or
+    before it (the first row when it is before every row)."""
+    taus = np.asarray(prep.rows["tau"], float)
+    i = int(np.clip(np.searchsorted(taus, tau, side="right") - 1, 0, taus.size - 1))
+    t_i = float(prep.rows.take("t", np.array([i]))[0])
+    return t_i + (float(tau) - float(taus[i])), int(prep.run_ids[prep.run[i]])
+
+
+def global_times_in_own_clock(prep, term: Term, params: dict) -> dict:
+    """``params`` (:func:`term_params`) with each ``global_time`` parameter moved from the
+    end-to-end axis to the recording's own ``t``, with its ``run`` (the se is the same: a
+    shift within a run)."""
+    for q in term.cand.params:
+        if not q.global_time or q.name not in params:
+            continue
+        v = np.ravel(np.asarray(params[q.name]["value"], float))
+        conv = [recording_time(prep, float(x)) for x in v]
+        vals = [c[0] for c in conv]
+        runs = [c[1] for c in conv]
+        params[q.name]["value"] = vals[0] if np.ndim(params[q.name]["value"]) == 0 else vals
+        params[q.name]["run"] = runs[0] if len(runs) == 1 else runs
+        params[q.name]["clock"] = "the recording's t"
+    return params
+
+
 def se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     s0, _ = fit.slices[index]
     se_all = np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) if fit.cov.size else np.zeros(0)
@@ -269,6 +296,8 @@ def report_text(doc: dict) -> str:
             f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
             f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
         )
+    for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
+        lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]

@@ -43,6 +43,7 @@ import numpy as np
 from ..._errors import input_error
 from ._candidates import Candidate
 from ._document import (
+    global_times_in_own_clock,
     lattice_effect,
     order_spectrum,
     report_text,
@@ -55,7 +56,7 @@ from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
-from ._protocol import Prepared
+from ._protocol import FitDivergence, Prepared
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -229,17 +230,44 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
         fitter.clear()
 
 
+def _fit_failure(base_info: dict, stage: str, cause: str) -> None:
+    """Record a fit stage that would have diverged (``base.fit_failures``; the report
+    lists them): the stage, its cause and how the fit recovered."""
+    base_info.setdefault("fit_failures", []).append(
+        {"stage": stage, "cause": cause, "recovery": "undone; the fit before it is kept"}
+    )
+
+
 def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
     """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
     growth. Returns ``(base_fit, order)``."""
     base_fit = fitter.fit(base_terms)
-    refined = kind.refine(base_fit.terms, prep, base_info)
+    state = prep.rows.snapshot()
+    try:
+        refined = kind.refine(base_fit.terms, prep, base_info)
+    except FitDivergence as exc:  # the kind's own check: it moved nothing
+        prep.rows.restore(state)
+        _fit_failure(base_info, "refine", str(exc))
+        refined = None
     if refined:
         # the kind moved the angle its base model is evaluated at (e.g. the shaft from the
         # heads' mean less the fitted error's mean): refit from the fitted values
-        base_info["refined"] = refined
         fitter.clear()
-        base_fit = fitter.fit(base_fit.terms)
+        trial = fitter.fit(base_fit.terms)
+        rise = prep.settings.refine_chi2_rise_max
+        if np.isfinite(trial.chi2) and trial.chi2 <= base_fit.chi2 * (1.0 + rise):
+            base_info["refined"] = refined
+            base_fit = trial
+        else:  # a divergence never reaches the verdict: undo it, keep the fit before
+            prep.rows.restore(state)
+            fitter.clear()
+            _fit_failure(
+                base_info,
+                "refine",
+                f"the refit after the kind's refinement ({refined}) raised chi-square from "
+                f"{base_fit.chi2:.6g} to {trial.chi2:.6g} (more than "
+                f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
+            )
     _align(kind, prep, fitter, base_info, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
@@ -264,7 +292,7 @@ def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
     names = prep.kd.channel_names
     out = {
         "name": s.name,
-        "params": term_params(term, final, idx),
+        "params": global_times_in_own_clock(prep, term, term_params(term, final, idx)),
         "derived": derived,
         "channels": [names[k] for k in chans] if chans is not None else None,
         "rms_after": s.fit.rms(prep),

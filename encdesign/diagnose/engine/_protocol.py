@@ -159,6 +159,14 @@ class RowColumns(MutableMapping):
         """The stored columns (without the derived one-hot and the lazy columns)."""
         return self._d.items()
 
+    def snapshot(self) -> tuple[dict, dict]:
+        """The columns as they are now (references, no copies), for :meth:`restore`."""
+        return dict(self._d), dict(self._lazy)
+
+    def restore(self, state: tuple[dict, dict]) -> None:
+        """Back to a :meth:`snapshot` (e.g. a refinement found to diverge)."""
+        self._d, self._lazy = dict(state[0]), dict(state[1])
+
     def names(self) -> list[str]:
         """Every column a term can read, ``run_onehot`` last."""
         return [k for k in self if k != "run_onehot"] + ["run_onehot"]
@@ -239,3 +247,10 @@ def steady_tolerance(kd: KindData, settings) -> float:
     """The relative speed deviation beyond which a row of ``kd`` is not steady (the
     ``FinderSettings`` field of its kind: ``steady_tolerance_drive`` for a drive)."""
     return settings.steady_tolerance_drive if kd.drive else settings.steady_tolerance
+
+
+class FitDivergence(ArithmeticError):
+    """A stage of the fit would diverge (issue 44 A): raised by a kind's hook (e.g. the
+    shaft-angle refinement) with the cause in its message; the engine reports it under
+    ``base.fit_failures`` and goes on from the last sound fit, so it never reaches the
+    verdict."""

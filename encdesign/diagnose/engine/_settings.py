@@ -398,6 +398,27 @@ class FinderSettings(eqx.Module):
     mean only when that moves the readings by at least this share of the smallest noise
     (RMS). Was an inline 0.1 in ``_multihead._refine_shaft``; set by hand in 6d1ca40."""
 
+    symmetric_order_max: float = eqx.field(default=1e-9, static=True)
+    """multihead (no reference): a disk order whose head pattern ``exp(-i m alpha)`` varies
+    over the heads by at most this mean square (every head sees it alike, up to the rounding
+    of the azimuths: multiples of the symmetry of equally spaced heads) is held at zero in
+    the base and out of the shaft refinement: the head differences cannot determine it and
+    its rounding-level columns would take any size (issue 44 A). Orders between this and
+    ``head_pattern_min`` are fitted and reported unidentifiable. Set by hand, not tuned."""
+
+    refine_shaft_max_slope: float = eqx.field(default=0.5, static=True)
+    """multihead (no reference): the shaft-angle refinement (a fixed point
+    ``angle = shaft - mean_k e_k(angle)``) is refused as diverging, and reported under
+    ``base.fit_failures``, where the slope of the fitted error's head mean reaches this
+    (1; the fixed point contracts only below 1, and three passes leave ``slope**3`` of the
+    error). Issue 44 A; set by hand, not tuned."""
+
+    refine_chi2_rise_max: float = eqx.field(default=0.01, static=True)
+    """Engine: a base refit after the kind's refinement that raises the whitened chi-square
+    by more than this share of the fit before (or makes it non-finite) is a divergence: the
+    refinement is undone, the fit before it kept, and the failure reported under
+    ``base.fit_failures``. Issue 44 A; set by hand, not tuned."""
+
     head_pattern_min: float = eqx.field(default=0.05, static=True)
     """multihead (no reference): a disk order whose head pattern ``exp(-i m alpha)`` varies
     over the heads by at most this mean square is reported unidentifiable (the heads' mean

@@ -49,6 +49,32 @@ STEP_NUISANCE = Candidate(
 """A step of one size on the channels of a located step, from its row on within its run."""
 
 
+def at_change(prep: Prepared, r: int, tau0: float) -> bool | None:
+    """Whether a step at ``tau0`` (end-to-end time, s) in run index ``r`` lies within
+    ``settings.step_change_rows`` kept rows (or 1/64 of the run) of a kept row where the
+    direction or the steady speed changes (a reversal or a speed change; the non-steady
+    rows between them, e.g. an excluded dwell, left out: a reversal inside it counts);
+    ``None`` when it is not inside the run's kept rows."""
+    rows = np.flatnonzero((prep.run == r) & prep.keep)
+    i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
+    if i <= 0 or i >= rows.size:
+        return None
+    d = np.asarray(prep.rows.take("direction", rows), float)
+    w = np.asarray(prep.rows.take("omega", rows), float)
+    ch_rows = (
+        np.flatnonzero(
+            (d[1:] != d[:-1])
+            | (
+                np.abs(w[1:] - w[:-1])
+                > prep.settings.speed_change_min * np.maximum(np.abs(w[1:]), np.abs(w[:-1]))
+            )
+        )
+        + 1
+    )
+    near = max(prep.settings.step_change_rows, rows.size // 64)
+    return bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near)
+
+
 def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
@@ -61,7 +87,6 @@ def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list
     the alternative a drift in time must beat as well (``s9-nuis``:
     ``_nuisances.drifts_in_time``)."""
     out = []
-    keep = prep.keep
     for f in findings:
         if f.view != "time" or not (
             f.detail.get("shape") == "step" or f.detail.get("step_significant")
@@ -70,27 +95,9 @@ def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list
         if len(out) >= 2:
             break
         r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
-        rows = np.flatnonzero((prep.run == r) & keep)
         tau0 = float(f.detail["global_step_time_s"])
-        i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
-        if i <= 0 or i >= rows.size:
-            continue
-        # kept rows where the direction or the steady speed changes (a reversal or a speed
-        # change, with the non-steady rows between them left out)
-        d = np.asarray(prep.rows.take("direction", rows), float)
-        w = np.asarray(prep.rows.take("omega", rows), float)
-        ch_rows = (
-            np.flatnonzero(
-                (d[1:] != d[:-1])
-                | (
-                    np.abs(w[1:] - w[:-1])
-                    > prep.settings.speed_change_min * np.maximum(np.abs(w[1:]), np.abs(w[:-1]))
-                )
-            )
-            + 1
-        )
-        near = max(prep.settings.step_change_rows, rows.size // 64)
-        if bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near) != at_changes:
+        near = at_change(prep, r, tau0)
+        if near is None or near != at_changes:
             continue
         ch = np.zeros(prep.n_channels)
         ch[list(f.where["heads"])] = 1.0
@@ -171,11 +178,20 @@ def beaten_by_step(
             st2 = cache[rkey]
             if st2["tau_s"] == st["tau_s"]:
                 break
+            if at_change(prep, st["run"], st2["tau_s"]) != bool(st.get("at_change")):
+                # placed on the model, the step moved to (or off) a reversal or change of
+                # speed: it is no longer the step this rule is about (issue 44 E)
+                return None
             st, f = st2, st2["finding"]
             key = (st["tau_s"], st["run"], tuple(st["channels"]))
             if key not in cache:
                 cache[key] = fitter.fit([*base_terms, step_term(prep, st)])
     return None
+
+
+REFINE_STEP_SHIFTS = 3
+"""Times :func:`refine_step` moves its window on when the best row is at the window's
+edge (each move one window width; not a threshold: a bound on the work)."""
 
 
 def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
@@ -203,9 +219,15 @@ def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     # times cannot be told apart over a turn back and forth); the located one is kept
     i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
     width = max(int(4 * rows.size / 32), 4)
-    lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
-    grid = np.unique(np.linspace(lo, hi, 32).astype(int))
-    best = best_of(grid)
+    for _ in range(REFINE_STEP_SHIFTS + 1):
+        lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
+        grid = np.unique(np.linspace(lo, hi, 32).astype(int))
+        best = best_of(grid)
+        # issue 44 C: the best row at an edge of the window that is not the run's edge: the
+        # step lies beyond it (the view's change point was blocks off); move the window
+        if not ((best == grid[0] and lo > 1) or (best == grid[-1] and hi < rows.size - 1)):
+            break
+        i0 = best
     k = int(np.searchsorted(grid, best))
     a = int(grid[max(k - 1, 0)])
     b = int(grid[min(k + 1, grid.size - 1)])
@@ -217,6 +239,7 @@ def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     f.detail["step_time_s"] = float(t[rows[best]])
     f.detail["global_step_time_s"] = float(tau[best])
     f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
+    f.detail["placed"] = True
 
 
 def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
@@ -249,4 +272,11 @@ def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
         if not any(h is f for h in findings):  # else a finding of the final residual
             f.detail["located_with"] = f"located in the residual of the model with {name}"
             findings = sorted([*findings, f], key=lambda g: g.log10_p)
+    # issue 44 C: every step the final residual's time view locates is placed on the final
+    # model too (the view's change point is read off a residual from which smooth terms
+    # took part of the step, and may lie blocks away from it)
+    for g in findings:
+        if g.view == "time" and g.detail.get("shape") == "step" and not g.detail.get("placed"):
+            refine_step(fitter, prep, current.terms, g)
+            g.where["times_s"] = list(g.detail["step_times_s"])
     return findings

@@ -37,7 +37,7 @@ from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
-from ...engine._protocol import KindData, Prepared, steady_tolerance
+from ...engine._protocol import FitDivergence, KindData, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import run_spans
 from ._multihead_terms import (
@@ -205,9 +205,18 @@ def max_order_limit(prep: Prepared) -> int:
 
 
 @functools.lru_cache(maxsize=64)
-def _base_candidate(C: int, R: int, M: int) -> Candidate:
+def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candidate:
     """The base term for C heads, R runs and orders 1..M (one object per shape, so one
-    compiled Jacobian serves every record of that shape)."""
+    compiled Jacobian serves every record of that shape). The disk orders in ``held`` are
+    held at zero (their Jacobian columns are exactly zero, so the fitter lists them as
+    undetermined): without ``theta_ref``, orders seen the same at every head (multiples of
+    the symmetry of equally spaced heads) cancel in head differences, and a fit of their
+    rounding-level columns would give them any size (issue 44 A)."""
+    live = np.ones(M)
+    for m in held:
+        if 1 <= m <= M:
+            live[m - 1] = 0.0
+    mask = jnp.asarray(live)
 
     def shifted(p, x):
         """Run one-hot, shaft angles with the run offsets, head azimuths with placements."""
@@ -223,7 +232,11 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
     def fn(p, x):
         oh, th, alpha = shifted(p, x)
         e = fx.base_error_rad(
-            th, alpha, p["fourier_cos_rad"], p["fourier_sin_rad"], jnp.zeros_like(alpha)
+            th,
+            alpha,
+            p["fourier_cos_rad"] * mask,
+            p["fourier_sin_rad"] * mask,
+            jnp.zeros_like(alpha),
         )
         return e + oh @ p["offset_rad"]
 
@@ -231,10 +244,10 @@ def _base_candidate(C: int, R: int, M: int) -> Candidate:
         # d e_k / d theta = sum_m m (b_m cos - a_m sin): the placement d_k moves head k's
         # argument by -d_k, the run offset delta_r every sample of run r by +delta_r
         oh, th, alpha = shifted(p, x)
-        a, b = p["fourier_cos_rad"], p["fourier_sin_rad"]
+        a, b = p["fourier_cos_rad"] * mask, p["fourier_sin_rad"] * mask
         m = jnp.arange(1, M + 1, dtype=th.dtype)
         arg = m[None, None, :] * (th[:, None, None] - alpha[None, :, None])
-        cs, sn = jnp.cos(arg), jnp.sin(arg)
+        cs, sn = jnp.cos(arg) * mask, jnp.sin(arg) * mask
         v = jnp.sum(a * cs + b * sn, axis=-1) + oh @ p["offset_rad"]
         J = {
             "offset_rad": oh[:, None, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, None, :],
@@ -362,7 +375,7 @@ def _head_mean_error(
 ):
     """The base model's disk error averaged over the heads at shaft angle ``th`` (rad),
     from the base term's values ``v``; with ``slope``, also its largest slope over the heads
-    (1), as ``(mean, slope)``."""
+    and the slope of the mean (both 1), as ``(mean, slope, mean_slope)``."""
     R_off = np.concatenate([[0.0], np.asarray(v.get("run_angle_offset_rad", []))])
     pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", []))])
     a, b = np.asarray(v["fourier_cos_rad"]), np.asarray(v["fourier_sin_rad"])
@@ -370,13 +383,18 @@ def _head_mean_error(
     x = th + R_off[run]
     mean = np.zeros(th.size)
     top = np.zeros(th.size)
+    dmean = np.zeros(th.size)
     for k in range(alpha.size):
         arg = m[None, :] * (x[:, None] - alpha[k] - pl[k])
         c, s_ = np.cos(arg), np.sin(arg)
         mean += c @ a + s_ @ b
         if slope:
-            top = np.maximum(top, np.abs(c @ (m * b) - s_ @ (m * a)))
-    return (mean / alpha.size, top) if slope else mean / alpha.size
+            d = c @ (m * b) - s_ @ (m * a)
+            top = np.maximum(top, np.abs(d))
+            dmean += d
+    if slope:
+        return mean / alpha.size, top, dmean / alpha.size
+    return mean / alpha.size
 
 
 def _refine_shaft(terms, prep: Prepared) -> str | None:
@@ -387,13 +405,22 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     harmonics no catalog effect has). The angle becomes ``shaft - mean_k e_k(angle)`` (fixed
     point, ``SHAFT_ITERATIONS`` passes, a lazy column computed per chunk) when that moves
     the fitted readings by more than ``FinderSettings.refine_shaft_min_noise`` of the
-    noise; returns a note saying so when it did (the caller refits the base), else None."""
+    noise; returns a note saying so when it did (the caller refits the base), else None.
+
+    The fixed point contracts only where the head mean's slope is below 1: where it
+    reaches ``FinderSettings.refine_shaft_max_slope`` anywhere the refinement would diverge
+    (the fitted error is not small, or its head mean holds orders the heads cannot
+    separate), and :class:`FitDivergence` says so (the angle is left as it was). Orders
+    every head sees alike (equally spaced heads) are held out of the head mean: the base
+    holds them at zero, since the common rotation they make is unobservable (issue 44 A)."""
     if prep.ctx.has_ref or prep.n_channels < 2:
         return None
     base = next((t for t in terms if t.cand.name == "base"), None)
     if base is None:
         return None
     v = {k: np.array(x, float) for k, x in base.values.items()}
+    for m in _symmetric_orders(prep, v["fourier_cos_rad"].size):
+        v["fourier_cos_rad"][m - 1] = v["fourier_sin_rad"][m - 1] = 0.0
     alpha = np.asarray(prep.consts["alpha"], float)
     shaft, run, keep = prep.kd.shaft, prep.run, prep.keep
 
@@ -404,17 +431,26 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
             corr = _head_mean_error(v, alpha, sh - corr, rn)
         if not with_size:
             return sh - _head_mean_error(v, alpha, sh - corr, rn)
-        corr, slope = _head_mean_error(v, alpha, sh - corr, rn, slope=True)
-        return sh - corr, slope * corr
+        corr, slope, dmean = _head_mean_error(v, alpha, sh - corr, rn, slope=True)
+        return sh - corr, slope * corr, dmean
 
-    ss, nk = 0.0, 0
+    ss, nk, steep = 0.0, 0, 0.0
     for lo in range(0, shaft.size, 1 << 16):
         hi = min(shaft.size, lo + (1 << 16))
-        _, moved = corrected(lo, hi, True)
+        _, moved, dmean = corrected(lo, hi, True)
         kb = keep[lo:hi]
         ss += float(np.sum(moved[kb] ** 2))
         nk += int(kb.sum())
+        if kb.any():
+            steep = max(steep, float(np.max(np.abs(dmean[kb]))))
     size = math.sqrt(ss / max(nk, 1))
+    limit = prep.settings.refine_shaft_max_slope
+    if not (math.isfinite(size) and math.isfinite(steep)) or steep >= limit:
+        raise FitDivergence(
+            "shaft-angle refinement: the fitted disk error's head mean has slope "
+            f"{steep:.3g} (the fixed point contracts only below {limit:g}, "
+            "FinderSettings.refine_shaft_max_slope); the angle is left the heads' mean reading"
+        )
     if not math.isfinite(size) or size < prep.settings.refine_shaft_min_noise * float(
         np.min(prep.sigma)
     ):
@@ -426,6 +462,26 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     )
 
 
+def _pattern_spread(alpha: np.ndarray, m: int) -> float:
+    """Mean square over the heads of the head pattern ``exp(-i m alpha_k)`` about its mean
+    (0: every head sees order ``m`` alike; 1: it cancels in the heads' mean)."""
+    v = np.exp(-1j * m * alpha)
+    return float(np.sum(np.abs(v - v.mean()) ** 2) / alpha.size)
+
+
+def _symmetric_orders(prep: Prepared, M: int, limit: float | None = None) -> list[int]:
+    """Without ``theta_ref`` (and more than one head): the disk orders 1..M whose head
+    pattern varies over the heads by at most ``limit`` (mean square; default
+    ``FinderSettings.symmetric_order_max``: exactly alike, up to the rounding of the
+    azimuths): the head differences cannot determine them (multiples of the symmetry of
+    equally spaced heads). Empty with a reference or one head."""
+    if prep.ctx.has_ref or prep.n_channels < 2:
+        return []
+    lim = prep.settings.symmetric_order_max if limit is None else limit
+    alpha = np.asarray(prep.consts["alpha"], float)
+    return [m for m in range(1, M + 1) if _pattern_spread(alpha, m) <= lim]
+
+
 def multihead_base(prep: Prepared, M: int):
     """Base terms (with starts) and the report info for a multihead record."""
     C, R = prep.n_channels, prep.ctx.n_runs
@@ -434,7 +490,8 @@ def multihead_base(prep: Prepared, M: int):
     # issue 22 item 5: a stepped record (segments given by multihead_data) is static; the
     # flag is read by multihead_candidates and multihead_summary
     prep.consts["stepped"] = prep.kd.segments is not None  # type: ignore[index]
-    cand = _base_candidate(C, R, M)
+    held = _symmetric_orders(prep, M)
+    cand = _base_candidate(C, R, M, tuple(held))
     start = {}
     if R > 1:
         start["run_angle_offset_rad"] = _run_offsets_start(prep, M)
@@ -445,12 +502,7 @@ def multihead_base(prep: Prepared, M: int):
         terms.append((_angle_step_candidate(prep), {}))
     info: dict = {"align": _align, "refine": _refine_shaft, "unidentifiable": []}
     if not prep.ctx.has_ref:
-        alpha = prep.consts["alpha"]
-        bad = []
-        for m in range(1, M + 1):
-            v = np.exp(-1j * m * alpha)
-            if np.sum(np.abs(v - v.mean()) ** 2) / C <= prep.settings.head_pattern_min:
-                bad.append(m)
+        bad = _symmetric_orders(prep, M, prep.settings.head_pattern_min)
         info["unidentifiable"] += [
             "every error common to all heads at one sample (no theta_ref: the shaft angle is "
             "the head mean)",

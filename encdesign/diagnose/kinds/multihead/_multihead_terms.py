@@ -418,7 +418,16 @@ THERMAL_DRIFT = Candidate(
     (Param("rate", "rad/K (temp_c) or rad/s (no temp_c)", "channels"),),
     signature=("drift", "time"),
     explanation="Expansion of mounts and disk with temperature (seed 001: about 0.7 arcsec/K): "
-    "a slow error correlated with temp_c (or time), different between heads.",
+    "a slow error correlated with temp_c, different between heads.",
+    # issue 44 E: without a temperature that varies, a slow error in time is not attributable
+    # to temperature (it may be a step the motion hides, a reference's drift, ...): the
+    # drift is reported located, never named thermal_drift
+    applies=lambda ctx: (
+        None
+        if ctx.consts.get("driver_name") == "temp_c"
+        else "needs a temp_c column that varies (a drift in time alone is reported located, "
+        "not attributed to temperature)"
+    ),
 )
 
 
@@ -678,14 +687,14 @@ ECCENTRICITY_SHIFT = Candidate(
     "eccentricity_shift",
     _es_fn,
     (
-        Param("shift_time_s", "s", "1", linear=False, scale=1e-2),
+        Param("shift_time_s", "s", "1", linear=False, scale=1e-2, global_time=True),
         Param("shift_x_m", "m", "1"),
         Param("shift_y_m", "m", "1"),
     ),
     signature=("order_step", "time"),
     explanation="A shock or slip moved the disk on its hub during the record: the order-1 "
-    "error of the heads changes at one instant (shift_time_s is on the global time axis, runs "
-    "end to end).",
+    "error of the heads changes at one instant (shift_time_s is fitted on the global time "
+    "axis, runs end to end, and reported on the recording's own t with its run).",
     start=_es_start,
     plausible=_es_plausible,
 )
