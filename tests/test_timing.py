@@ -85,4 +85,6 @@ def test_diagnosis_reports_its_stages(seed):
     assert tm["base_fit"] > 0.0 and tm["views"] > 0.0
     total = sum(tm.values())
     assert total <= d.doc["time_s"] + 1e-9
-    assert total >= 0.9 * d.doc["time_s"]  # only the report's text is outside the stages
+    # outside the stages: the progress bar's set-up and the calls between stages only (the
+    # margin is for a loaded machine, where a process can wait anywhere)
+    assert total >= 0.5 * d.doc["time_s"]
