@@ -14,7 +14,7 @@ def _order_reading(m: float, ctx_meta: dict, L: int) -> str:
     s = int(motor.get("slots") or 0)
     mi = int(round(m))
     parts = []
-    if L and mi % L == 0:
+    if L > 1 and mi % L == 0:
         parts.append(f"{mi // L} x the {L} signal periods")
     if p and s:
         lcm = p * s // math.gcd(p, s)
