@@ -109,7 +109,8 @@ class Term:
 
 def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Line], list[int]]:
     """The located lines of ``findings`` (``_views.Finding``) and, per finding, the index of
-    its first line (-1: a located structure no line models, e.g. a broad band)."""
+    its first line (-1: a located structure no line models, e.g. a broad band; -2: a line
+    beyond the first :data:`MAX_LINES`)."""
     out: list[Line] = []
     first: list[int] = []
 
@@ -141,7 +142,7 @@ def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Lin
         elif f.view == "line_phase" and signal_periods > 0:
             idx = add(Line("order", float(signal_periods)))
         first.append(idx)
-    return out[:MAX_LINES], [i if i < MAX_LINES else -1 for i in first]
+    return out[:MAX_LINES], [i if i < MAX_LINES else -2 for i in first]
 
 
 # ----------------------------------------------------------------------------- cells
@@ -712,6 +713,8 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
     """The ``model`` object of finding ``fi``."""
     li = st.first[fi]
     N = len(st.lib)
+    if li == -2:
+        return _none(f"beyond the first {MAX_LINES} located lines discovery models")
     if li < 0:
         return _none("no line, order or time structure to model (a broad band)")
     mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line == li]
