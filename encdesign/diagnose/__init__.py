@@ -18,6 +18,12 @@ from ._dispatch import (
     diagnose as diagnose,
     load_candidates as load_candidates,
 )
+from .engine._discover_export import (
+    discovered_candidate as discovered_candidate,
+)
+from .engine._discover_export import (
+    export_candidates as export_candidates,
+)
 from .kinds.motion._motion import candidate_orders as candidate_orders
 from .engine._results import (
     Alternative as Alternative,

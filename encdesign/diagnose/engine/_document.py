@@ -274,6 +274,30 @@ def nuisance_rows(doc: dict) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _model_lines(m: dict | None, u: str) -> list[str]:
+    """The report lines of a finding's discovered model (issue 41)."""
+    if not m:
+        return []
+    if not m["terms"]:
+        return [f"  not modelled: {m.get('reason', '')}"]
+    out = []
+    for t in m["terms"]:
+        p = t["params"]
+        sc = t.get("scaling")
+        law = ""
+        if sc:
+            se = sc["beta_se"]
+            law = f", speed^({sc['beta']:.2f}" + (f" +- {se:.2g})" if se is not None else ")")
+        out.append(
+            f"  discovered (outside the catalog): {t['line']}, {t['frame']}, {t['modulation']}"
+            f"{law}; amplitude {p['amplitude']:.3g} +- {p['amplitude_se']:.2g} {u}; held-out "
+            f"gain {t['heldout_gain_chi2']:.4g} (chi2); inclusion "
+            f"{t['inclusion_probability']:.0%}"
+        )
+    out.append(f"  reading: {m['reading']}")
+    return out
+
+
 def report_text(doc: dict) -> str:
     """A one-page plain-text report of a diagnosis document."""
     u = doc["unit"]
@@ -330,5 +354,6 @@ def report_text(doc: dict) -> str:
         lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
         if x.get("step_at"):
             lines.append(f"  {x['step_at']['note']}")
+        lines += _model_lines(x.get("model"), u)
     lines.append(f"status: {doc['status']}; {doc['time_s']:.1f} s")
     return "\n".join(lines) + "\n"

@@ -42,6 +42,7 @@ import numpy as np
 
 from ..._errors import input_error
 from ._candidates import Candidate
+from ._discover import discover
 from ._document import (
     global_times_in_own_clock,
     lattice_effect,
@@ -366,8 +367,24 @@ def decide_verdict(doc: dict) -> str:
     return "consistent"
 
 
-def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
-    """The diagnosis document before the kind's additions, the verdict and the report."""
+def _nearest_catalog(rejected: list[dict]) -> list[dict]:
+    """The catalog candidates fitted and refused in this diagnosis (best criterion first, one
+    entry per name): the nearest catalog effects a discovered model reports, and why each
+    was not enough."""
+    seen: dict[str, dict] = {}
+    for r in rejected:
+        if r.get("delta_bic") is None or r["name"] in seen:
+            continue
+        seen[r["name"]] = {"name": r["name"], "reason": r["reason"], "delta_bic": r["delta_bic"]}
+    return sorted(seen.values(), key=lambda r: r["delta_bic"])[:3]
+
+
+def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) -> dict:
+    """The diagnosis document before the kind's additions, the verdict and the report.
+
+    With ``fitter``, each ``unexplained`` finding gains a ``model``: what discovery
+    (:mod:`encdesign.diagnose.engine._discover`) models of it outside the catalog, fitted jointly
+    with the final catalog model (the verdict stays ``unexplained``)."""
     kd = prep.kd
     base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))
@@ -379,6 +396,12 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan) -> dict:
     for u in unexplained:  # a located step: where it lies in the motion (issue 22 item 4)
         if (ctx := step_context(prep, u)) is not None:
             u["step_at"] = ctx
+    if fitter is not None and unexplained:  # issue 41: discovery after the catalog
+        models = discover(prep, fitter, sel.final.terms, sel.final_resid, sel.findings[:12])
+        near = _nearest_catalog(sel.rejected)
+        for u, m in zip(unexplained, models):
+            if m is not None:
+                u["model"] = {**m, "nearest_catalog": near} if m["terms"] else m
     if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
         q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
         if q_eff is not None:
@@ -525,7 +548,7 @@ def run_engine(
             pg.stage("selected")
             pg.stage("held-out + goodness of fit")
             with stage("report"):
-                doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
+                doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
                 pg.stage("report")
                 doc = kind.finish(doc, settings)
                 doc["verdict"] = decide_verdict(doc)

@@ -253,6 +253,11 @@ class Finding(_Entry):
         rms: its RMS (unit of the document; ``None`` where not finite).
         variance_share, log10_p, detail, note: as documented (absent where a kind does not
             give them).
+        model: what discovery models of it outside the catalog (issue 41): ``frame``,
+            ``terms`` (each with its frame, modulation, scaling, parameters, held-out gain,
+            inclusion probability and reading), ``reading``; ``terms`` empty and a
+            ``reason`` where nothing in the library holds; absent where discovery does not
+            apply (an SDS record, a finding a kind adds).
     """
 
     where: Mapping[str, Any]
@@ -262,6 +267,7 @@ class Finding(_Entry):
     log10_p: float | None = None
     detail: Mapping[str, Any] | None = None
     note: str | None = None
+    model: Mapping[str, Any] | None = None
     extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = (
         "view",
@@ -271,8 +277,9 @@ class Finding(_Entry):
         "log10_p",
         "detail",
         "note",
+        "model",
     )
-    key_order: tuple[str, ...] = TYPED
+    key_order: tuple[str, ...] = TYPED[:-1]
 
     def __check_init__(self):
         missing = [k for k in WHERE_KEYS if k not in self.where]
@@ -280,6 +287,9 @@ class Finding(_Entry):
             raise _bad(f"Finding ({self.view}) where", missing, f"the keys {WHERE_KEYS}")
         if self.rms is not None and self.rms < 0:
             raise _bad(f"Finding ({self.view}) rms", self.rms, "a number >= 0")
+        m = self.model
+        if m is not None and not (m.get("outside_catalog") is True and "terms" in m):
+            raise _bad(f"Finding ({self.view}) model", m, "{'outside_catalog': True, 'terms'}")
         _keys_ok(self, ("where", "rms"))
 
     @property
