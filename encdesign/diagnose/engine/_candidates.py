@@ -116,6 +116,9 @@ class Context:
         meta: the recording's TOML content.
         settings: the finder's thresholds (:class:`~encdesign.diagnose.FinderSettings`)
             this diagnosis runs with (a candidate's ``plausible`` rule may read them).
+        data: the kind's own data of this record (the
+            :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
+            often the kind's subclass of it), read-only.
     """
 
     kind: str
@@ -131,6 +134,7 @@ class Context:
     revolutions: np.ndarray
     meta: Mapping[str, Any]
     settings: FinderSettings = DEFAULT_SETTINGS
+    data: Any = None
 
 
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]

@@ -87,7 +87,7 @@ def _grow_base_order(
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
-    findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
+    findings = locate(prep, fitter.residual(fit.terms), kind.views(prep), hi)
     if any(f.view in ("line_phase", "direction", "speed", "angle_trend") for f in findings):
         return None
     found = [
@@ -124,7 +124,7 @@ def _grow_base_order(
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views, scan_order_of(limit, M))
+    after = locate(prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > prep.settings.growth_left_max * p0:
         prep.consts["max_order"] = order  # type: ignore[index]
@@ -489,7 +489,7 @@ def run_engine(
                     fitter,
                     base_fit.terms,
                     list(seen.values()),
-                    kind.views,
+                    kind.views(prep),
                     scan,
                     max_effects,
                     pg.log,
@@ -499,7 +499,7 @@ def run_engine(
             with stage("report"):
                 doc = _document(kind, rec, prep, sel, base_info, order, limit, scan)
                 pg.stage("report")
-                doc = kind.finish(doc, settings)
+                doc = kind.finish(prep, doc, settings)
                 doc["verdict"] = decide_verdict(doc)
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0

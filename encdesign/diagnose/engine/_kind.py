@@ -1,15 +1,18 @@
 """The kind protocol: :class:`AbstractKind`, what every recording kind gives the engine.
 
-Equinox style: an abstract module with abstract ``data``, ``base``, ``candidates`` and
-``max_order_limit`` and defaulted hooks (``prepare``, ``noise``, ``refine``, ``align``,
-``summary``, ``finish``, ``report_lines``); each kind (``_multihead``: multihead and one
-sensor against a reference; ``_motion``; ``_sds``; ``_quadrature``) is a final subclass.
+Equinox style: an abstract module with abstract ``data``, ``views``, ``base``, ``candidates``,
+``max_order_limit`` and ``plots`` and defaulted hooks (``prepare``, ``noise``, ``refine``,
+``align``, ``summary``, ``finish``, ``report_lines``); each kind (``kinds/multihead``:
+multihead and one sensor against a reference; ``kinds/motion``; ``kinds/sds``;
+``kinds/quadrature``) is a final subclass, registered in ``encdesign.diagnose._registry``.
 """
 
 from __future__ import annotations
 
 import abc
+import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -26,8 +29,6 @@ class AbstractKind(eqx.Module):
 
     Class attributes (each final kind sets them):
         name: kind name.
-        views: names of the views run on the residual (or the kind's own view functions,
-            ``view(prep, whitened_residual, scan_order) -> [Finding, ...]``).
         default_max_order: the base model's order when the user gives none.
         noise_replaces: ``True``: the kind's :meth:`noise` replaces the periodogram median
             (``sds``: levels by degrees of freedom, rows are platform positions, not time).
@@ -40,7 +41,6 @@ class AbstractKind(eqx.Module):
     """
 
     name: ClassVar[str]
-    views: ClassVar[tuple[str | Callable[..., Any], ...]]
     default_max_order: ClassVar[int] = 12
     noise_replaces: ClassVar[bool] = False
     grows_orders: ClassVar[bool] = False
@@ -50,6 +50,18 @@ class AbstractKind(eqx.Module):
     def data(self, rec, settings: FinderSettings = DEFAULT_SETTINGS) -> KindData:
         """The observations and row columns of a recording (raises EncdesignInputError);
         ``settings``: the run's thresholds (e.g. the SDS time-stamp lattice)."""
+
+    @abc.abstractmethod
+    def views(self, prep: Prepared) -> tuple[str | Callable[..., Any], ...]:
+        """The views run on this record's residual: names of the engine's views
+        (:mod:`~encdesign.diagnose.engine._views`) or the kind's own view functions,
+        ``view(prep, whitened_residual, scan_order) -> [Finding, ...]``."""
+
+    @abc.abstractmethod
+    def plots(self, d: Any, folder: str | os.PathLike) -> list[Path]:
+        """The kind's own figures of a finished diagnosis ``d`` (a
+        :class:`~encdesign.diagnose.Diagnosis`), written into ``folder`` beside the engine's
+        (:func:`~encdesign.diagnose.engine._plots.engine_plots`); their paths."""
 
     @abc.abstractmethod
     def base(self, prep: Prepared, max_order: int) -> tuple[list, dict]:
@@ -92,7 +104,7 @@ class AbstractKind(eqx.Module):
         """Kind-specific keys for the JSON document."""
         return {}
 
-    def finish(self, doc: dict, settings: FinderSettings) -> dict:
+    def finish(self, prep: Prepared, doc: dict, settings: FinderSettings) -> dict:
         """The kind's additions to the engine's document (effects named from a lattice,
         located structure no term models, notes), before the engine decides the verdict and
         builds the report once."""

@@ -614,6 +614,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         revolutions=revs,
         meta=meta,
         settings=settings,
+        data=kd,
     )
     ctx.consts["driver_name"] = driver_name  # type: ignore[index]
     return Prepared(

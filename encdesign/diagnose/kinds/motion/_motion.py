@@ -321,12 +321,17 @@ class MotionKind(AbstractKind):
     """``motion``: a motor's shaft angle in time (speed ripple, cogging, ...)."""
 
     name: ClassVar[str] = "motion"
-    views: ClassVar[tuple] = ("orders", "spectrum", "band", "time")
     default_max_order: ClassVar[int] = 200
     reading_lattice: ClassVar[bool] = True
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         return motion_data(rec)
+
+    def views(self, prep):
+        return ("orders", "spectrum", "band", "time")
+
+    def plots(self, d, folder):
+        return []
 
     def base(self, prep, max_order):
         return motion_base(prep, max_order)

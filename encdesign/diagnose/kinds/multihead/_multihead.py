@@ -569,27 +569,36 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     return out
 
 
+MULTIHEAD_VIEWS = (
+    "spectrum",
+    "band",
+    "orders",
+    "time",
+    "drift",
+    "line_phase",
+    "direction",
+    "speed",
+    "angle_trend",
+    view_order_step,
+)
+"""The views run on a multihead record's residual."""
+
+
 class MultiheadKind(AbstractKind):
     """``multihead``: 2-6 heads on one disk, or one sensor against ``theta_ref``."""
 
     name: ClassVar[str] = "multihead"
-    views: ClassVar[tuple] = (
-        "spectrum",
-        "band",
-        "orders",
-        "time",
-        "drift",
-        "line_phase",
-        "direction",
-        "speed",
-        "angle_trend",
-        view_order_step,
-    )
     grows_orders: ClassVar[bool] = True
     reading_lattice: ClassVar[bool] = True
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         return multihead_data(rec)
+
+    def views(self, prep):
+        return MULTIHEAD_VIEWS
+
+    def plots(self, d, folder):
+        return []
 
     def prepare(self, kd, meta, settings):
         stepped_segments(kd, settings)

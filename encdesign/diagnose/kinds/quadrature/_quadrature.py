@@ -38,6 +38,7 @@ capture, time blocks otherwise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, ClassVar
 
@@ -229,14 +230,28 @@ def quadrature_start(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS
     )
 
 
-def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindData:
+@dataclasses.dataclass(kw_only=True)
+class QuadratureData(KindData):
+    """:class:`~encdesign.diagnose.engine._protocol.KindData` plus the record's conic start.
+
+    Attributes:
+        start: :func:`quadrature_start` of the recording, with ``has_t`` (whether it has a
+            ``t`` column).
+    """
+
+    start: dict[str, Any]
+
+
+def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> QuadratureData:
     """Observations: the relative radius less the conic-fit ellipse's, ``(r - R0(psi))/A0``.
 
     With ``t``: rows in time order, the unwrapped phase is the 'shaft' (segments where the
     signal phase does not advance steadily are excluded). Without ``t``: rows in phase
     order, ``t`` = row index in that order, one segment. ``st``: :func:`quadrature_start`
     of ``rec`` (computed when not given)."""
-    st = quadrature_start(rec) if st is None else st
+    if st is None:
+        st = quadrature_start(rec)
+        st["has_t"] = "t" in rec.columns
     psi = st["psi"]
     y = ((st["r"] - st["r0"]) / st["a0"])[:, None]
     run = np.asarray(rec.runs)
@@ -267,7 +282,8 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindDat
                 ),
             ),
         )
-    return KindData(
+    return QuadratureData(
+        start=st,
         y=y,
         shaft=shaft,
         t=t,
@@ -543,28 +559,41 @@ def quadrature_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
     return np.array([math.sqrt(float(np.mean(d2**2)) / 6.0)])
 
 
-class QuadratureKind(AbstractKind):
-    """``quadrature``: one pair of sin/cos signals, for one recording (its conic start
-    ``st``): views orders (of the phase), and with ``t`` also time and spectrum (Hz)."""
+def _start(prep: Prepared) -> dict[str, Any]:
+    """The conic start of the prepared record (its :class:`QuadratureData`)."""
+    kd = prep.kd
+    assert isinstance(kd, QuadratureData)
+    return kd.start
 
-    st: dict[str, Any]
+
+class QuadratureKind(AbstractKind):
+    """``quadrature``: one pair of sin/cos signals (the record's conic start travels in its
+    :class:`QuadratureData`): views orders (of the phase), and with ``t`` also time and
+    spectrum (Hz)."""
+
     name: ClassVar[str] = "quadrature"
     default_max_order: ClassVar[int] = 12
 
-    @property
-    def views(self) -> tuple:  # type: ignore[override]
-        return ("orders", "time", "spectrum") if self.st["has_t"] else ("orders",)
-
     def data(self, rec, settings=DEFAULT_SETTINGS):
-        return quadrature_data(rec, self.st)
+        st = quadrature_start(rec, settings)
+        st["has_t"] = "t" in rec.columns
+        return quadrature_data(rec, st)
+
+    def views(self, prep):
+        return ("orders", "time", "spectrum") if _start(prep)["has_t"] else ("orders",)
+
+    def plots(self, d, folder):
+        return quadrature_plots(d, folder)
 
     def base(self, prep, max_order):
-        return quadrature_base(prep, max_order, self.st)
+        return quadrature_base(prep, max_order, _start(prep))
 
     def candidates(self, ctx):
+        kd = ctx.data
+        assert isinstance(kd, QuadratureData)
         return (
             signal_shape_candidate(int(ctx.consts.get("max_order", 12))),
-            VIBRATION[bool(self.st["has_t"])],
+            VIBRATION[bool(kd.start["has_t"])],
         )
 
     def max_order_limit(self, prep):
@@ -574,32 +603,16 @@ class QuadratureKind(AbstractKind):
         return quadrature_noise(prep, base_resid)
 
     def summary(self, prep, base_params):
-        return quadrature_summary(prep, base_params, self.st)
+        return quadrature_summary(prep, base_params, _start(prep))
 
-    def finish(self, doc, settings):
-        return finish(doc, self.st, settings)
+    def finish(self, prep, doc, settings):
+        return finish(doc, _start(prep), settings)
 
     def report_lines(self, doc):
         return quadrature_report_lines(doc)
 
 
-def quadrature_kind(st: dict[str, Any]) -> QuadratureKind:
-    """The quadrature kind for one recording (its conic start ``st``)."""
-    return QuadratureKind(st)
-
-
-def run_quadrature(rec: Recording, **kw) -> tuple[dict[str, Any], Any]:
-    """Diagnose a quadrature recording on the engine (``kw``: :func:`run_engine`'s);
-    returns ``(document, plot data)`` (:func:`run_engine`'s).
-
-    Raises:
-        EncdesignInputError: the signals do not draw a Lissajous figure about the origin.
-    """
-    from ...engine._engine import run_engine
-
-    st = quadrature_start(rec, kw.get("settings") or DEFAULT_SETTINGS)
-    st["has_t"] = "t" in rec.columns
-    return run_engine(quadrature_kind(st), rec, **kw)
+QUADRATURE = QuadratureKind()
 
 
 def finish(

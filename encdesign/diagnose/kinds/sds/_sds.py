@@ -334,12 +334,17 @@ class SDSKind(AbstractKind):
     """``sds``: the shifted-delta-sum timing instrument, one row per run."""
 
     name: ClassVar[str] = "sds"
-    views: ClassVar[tuple] = SDS_VIEWS
     default_max_order: ClassVar[int] = 60
     noise_replaces: ClassVar[bool] = True
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         return sds_data(rec, settings)
+
+    def views(self, prep):
+        return SDS_VIEWS
+
+    def plots(self, d, folder):
+        return []
 
     def base(self, prep, max_order):
         return sds_base(prep, max_order)
@@ -359,7 +364,7 @@ class SDSKind(AbstractKind):
     def summary(self, prep, base_params):
         return sds_summary(prep, base_params)
 
-    def finish(self, doc, settings):
+    def finish(self, prep, doc, settings):
         return finish_sds(doc, settings)
 
 

@@ -506,6 +506,7 @@ def sds_prepare(
         revolutions=np.full(R, float(kd.n_revs)),
         meta=meta,
         settings=settings,
+        data=kd,
     )
     ctx.consts["driver_name"] = "time"  # type: ignore[index]
     ctx.consts["kd"] = kd  # type: ignore[index]
