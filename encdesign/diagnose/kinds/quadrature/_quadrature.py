@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, final
 
 import jax.numpy as jnp
 import numpy as np
@@ -49,7 +49,8 @@ from ...._errors import input_error
 from ....io._recording import Recording
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
-from ...engine._protocol import KindData, Prepared
+from ...engine._prepare import prepare as engine_prepare
+from ...engine._protocol import KindData, NoiseEstimate, Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
@@ -270,6 +271,8 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> Quadrat
         segments = np.zeros(psi.size, dtype=int)
     masked: tuple = ()
     clip = st["clip"]
+    e0, a0 = st["e0"], st["a0"]
+    rel = np.array([e0[0] / a0, e0[1] / a0, e0[2] / a0, e0[3] / a0, e0[4]])
     if clip["channels"]:
         masked = (
             (
@@ -303,6 +306,7 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> Quadrat
         speed_window=0.05,
         segments=segments,
         masked=masked,
+        constants={"ellipse_start": rel},  # the base term's start, relative to A0
     )
 
 
@@ -455,10 +459,8 @@ def quadrature_limit(prep: Prepared) -> int:
 
 def quadrature_base(prep: Prepared, M: int, st: dict[str, Any]):
     """The ellipse, started at the conic fit (plain Heydemann) of the unclipped rows."""
-    e0, a0 = st["e0"], st["a0"]
-    rel = np.array([e0[0] / a0, e0[1] / a0, e0[2] / a0, e0[3] / a0, e0[4]])
-    prep.consts["ellipse_start"] = rel  # type: ignore[index]
-    start = dict(zip(ELLIPSE_NAMES, rel))
+    a0 = st["a0"]
+    start = dict(zip(ELLIPSE_NAMES, prep.consts["ellipse_start"]))
     info = {
         "signal_scale_A0": a0,
         "unidentifiable": [
@@ -566,6 +568,7 @@ def _start(prep: Prepared) -> dict[str, Any]:
     return kd.start
 
 
+@final
 class QuadratureKind(AbstractKind):
     """``quadrature``: one pair of sin/cos signals (the record's conic start travels in its
     :class:`QuadratureData`): views orders (of the phase), and with ``t`` also time and
@@ -573,6 +576,9 @@ class QuadratureKind(AbstractKind):
 
     name: ClassVar[str] = "quadrature"
     default_max_order: ClassVar[int] = 12
+    noise_replaces: ClassVar[bool] = False
+    grows_orders: ClassVar[bool] = False
+    reading_lattice: ClassVar[bool] = False
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         st = quadrature_start(rec, settings)
@@ -585,6 +591,9 @@ class QuadratureKind(AbstractKind):
     def plots(self, d, folder):
         return quadrature_plots(d, folder)
 
+    def prepare(self, kd, meta, settings):
+        return engine_prepare(kd, meta, settings)
+
     def base(self, prep, max_order):
         return quadrature_base(prep, max_order, _start(prep))
 
@@ -592,7 +601,7 @@ class QuadratureKind(AbstractKind):
         kd = ctx.data
         assert isinstance(kd, QuadratureData)
         return (
-            signal_shape_candidate(int(ctx.consts.get("max_order", 12))),
+            signal_shape_candidate(int(ctx.max_order)),
             VIBRATION[bool(kd.start["has_t"])],
         )
 
@@ -600,7 +609,13 @@ class QuadratureKind(AbstractKind):
         return quadrature_limit(prep)
 
     def noise(self, prep, base_resid):
-        return quadrature_noise(prep, base_resid)
+        return NoiseEstimate(quadrature_noise(prep, base_resid))
+
+    def refine(self, terms, prep):
+        return None
+
+    def align(self, terms, prep):
+        return None
 
     def summary(self, prep, base_params):
         return quadrature_summary(prep, base_params, _start(prep))
