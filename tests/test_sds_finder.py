@@ -499,13 +499,13 @@ def test_coil_order_count_follows_the_parameter_budget():
     # K = 5 revolutions (180 values, 18 params) leaves all 5 coil orders, K = 4 (144
     # values, 14.4) the lowest 3; no budget at all leaves all (the rule refuses by name)
     def ctx(K, R=12, M=3):
-        c = dict(psi_m=np.zeros(M), base_orders=[6, 12])
+        c = dict(psi_m=np.zeros(M))
         ns = types.SimpleNamespace(n_runs=R, n_channels=K * M, consts=c, settings=DEFAULT_SETTINGS)
         return cast(Context, ns)
 
-    assert coil_order_count(ctx(5), 6) == 5
-    assert coil_order_count(ctx(4), 6) == 3
-    assert coil_order_count(ctx(2, R=4), 6) == 5
+    assert coil_order_count(ctx(5), 6, [6, 12]) == 5
+    assert coil_order_count(ctx(4), 6, [6, 12]) == 3
+    assert coil_order_count(ctx(2, R=4), 6, [6, 12]) == 5
 
 
 def test_clear_coil_mismatch_named_when_a_short_run_leaves_four_revolutions(tmp_path):

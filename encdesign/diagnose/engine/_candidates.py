@@ -56,7 +56,8 @@ CONSTANTS = {
     "signal_periods": "signal periods per revolution (0 when unknown)",
     "n_runs": "number of runs (float scalar)",
 }
-"""Recording constants passed to every term (not chunked)."""
+"""Recording constants passed to every term (not chunked); a kind adds its own arrays
+(``KindData.constants``, e.g. the sds sensor azimuths ``psi_m``)."""
 
 SHAPES = ("1", "channels", "runs", "runs*channels", "orders", "channels*orders")
 
@@ -114,12 +115,22 @@ class Context:
         signal_periods: signal periods per revolution (0 when unknown).
         radius_m: optical radius or ``None``.
         rows: the row columns of :data:`ROW_COLUMNS` over the kept samples (numpy).
-        consts: the constants of :data:`CONSTANTS`.
+        consts: the constants of :data:`CONSTANTS` and the kind's own term constants
+            (``KindData.constants``), built once in stage 1, read-only.
         noise: noise std per channel (difference-based estimate), residual unit.
         revolutions: revolutions covered per run.
         meta: the recording's TOML content.
         settings: the finder's thresholds (:class:`~encdesign.diagnose.FinderSettings`)
             this diagnosis runs with (a candidate's ``plausible`` rule may read them).
+        max_order: the base model's highest order now (engine-owned: the engine builds a new
+            context when it grows the base; 0 before the base is built).
+        driver_name: what the ``driver`` row column is (``"temp_c"`` or ``"time"``;
+            engine-owned).
+        noise_info: what the kind's noise hook found beside the levels
+            (``NoiseEstimate.info``; engine-owned, ``None`` before the noise stage).
+        data: the kind's own data of this record (the
+            :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
+            often the kind's subclass of it), read-only.
     """
 
     kind: str
@@ -135,6 +146,10 @@ class Context:
     revolutions: np.ndarray
     meta: Mapping[str, Any]
     settings: FinderSettings = DEFAULT_SETTINGS
+    max_order: int = 0
+    driver_name: str | None = None
+    noise_info: Any = None
+    data: Any = None
 
 
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ._fit import FitResult, Term
+from ._lattice import detect_lsb
 from ._protocol import Prepared
 from ._views import order_sums, run_spans
 
@@ -124,14 +125,13 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     """``quantization`` named from the value lattice of the readings, not fitted.
 
     Per channel, the readings of the kept rows (each run with its own zero) are tested for a
-    lattice ``c_r + q k`` (``_reference_terms.detect_lsb``); a channel whose floor
+    lattice ``c_r + q k`` (:func:`._lattice.detect_lsb`); a channel whose floor
     ``q^2 / 12`` is at least ``settings.lattice_noise_share`` of its measured noise variance (which,
     estimated from the data, includes the quantization) carries the effect. A dithered
     staircase (noise ahead of the quantizer above about ``q / 2``) leaves nothing for a
     model of the reading to fit: the finding is the LSB itself, so ``delta_bic``,
     ``collinearity`` and the held-out change are ``None`` (no parameter was fitted), and the
     residual RMS are the final model's. ``None`` when no channel qualifies."""
-    from ..kinds.multihead._reference_terms import detect_lsb
 
     # the first LATTICE_ROWS rows of each run: a lattice holds in any stretch of the
     # readings, and the test's sorts and gaps then stay bounded (10^7 rows: +1.5 GB)

@@ -34,6 +34,7 @@ named effects' contributions).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -65,6 +66,11 @@ from ._timing import stage, timing
 from ._views import locate
 
 
+def _set_order(prep: Prepared, order: int) -> None:
+    """The base model's highest order is now ``order``: a new (read-only) context says so."""
+    prep.ctx = dataclasses.replace(prep.ctx, max_order=int(order))
+
+
 def _grow_base_order(
     kind: Kind,
     prep: Prepared,
@@ -89,7 +95,7 @@ def _grow_base_order(
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
-    findings = locate(prep, fitter.residual(fit.terms), kind.views, hi)
+    findings = locate(prep, fitter.residual(fit.terms), kind.views(prep), hi)
     if any(f.view in ("line_phase", "direction", "speed", "angle_trend") for f in findings):
         return None
     found = [
@@ -122,17 +128,17 @@ def _grow_base_order(
             if q.scale is None:
                 tm.scale[q.name][...] = float(np.mean(prep.sigma))
         terms.append(tm)
-    prep.consts["max_order"] = M  # type: ignore[index]
+    _set_order(prep, M)
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views, scan_order_of(limit, M))
+    after = locate(prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M))
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > prep.settings.growth_left_max * p0:
-        prep.consts["max_order"] = order  # type: ignore[index]
+        _set_order(prep, order)
         fitter.clear()
         return None
-    base_info.update({k: v for k, v in info.items() if k not in ("refine",)})
+    base_info.update(info)
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
     return M, grown
 
@@ -190,7 +196,7 @@ def _order_of(kd, prep: Prepared, kind: Kind, max_order: int | None) -> tuple[in
 
 def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
     """The kind's base terms at ``order`` (scales from the noise) and its base info."""
-    prep.consts["max_order"] = order  # type: ignore[index]
+    _set_order(prep, order)
     base_spec, base_info = kind.base(prep, order)
     base_terms = [make_term(c, prep, st) for c, st in base_spec]
     for tm in base_terms:
@@ -200,9 +206,9 @@ def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
     return base_terms, base_info
 
 
-def _align(kind, prep: Prepared, fitter: Fitter, base_info: dict, fit: FitResult) -> None:
+def _align(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) -> None:
     """Rotation-locked candidates see the aligned angle (the kind's ``align``)."""
-    aligned = kind.align(fit.terms, prep, base_info)
+    aligned = kind.align(fit.terms, prep)
     if aligned is None:
         return
     if callable(aligned):  # a lazy column fn(lo, hi)
@@ -216,7 +222,10 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
     """The noise from the base residual's periodogram (structure cannot inflate it), or the
     kind's own estimate; the fitter's weights follow."""
     r_base = fitter.residual(fit.terms)
-    own = kind.noise(prep, r_base)
+    est = kind.noise(prep, r_base)
+    if est is not None and est.info is not None:  # the kind's findings, for its candidates
+        prep.ctx = dataclasses.replace(prep.ctx, noise_info=est.info)
+    own = None if est is None else est.sigma
     if own is not None and kind.noise_replaces:
         sig = np.asarray(own, float)
     else:
@@ -245,7 +254,7 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     base_fit = fitter.fit(base_terms)
     state = prep.rows.snapshot()
     try:
-        refined = kind.refine(base_fit.terms, prep, base_info)
+        refined = kind.refine(base_fit.terms, prep)
     except FitDivergence as exc:  # the kind's own check: it moved nothing
         prep.rows.restore(state)
         _fit_failure(base_info, "refine", str(exc))
@@ -269,14 +278,14 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
                 f"{base_fit.chi2:.6g} to {trial.chi2:.6g} (more than "
                 f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
             )
-    _align(kind, prep, fitter, base_info, base_fit)
+    _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
         order, base_fit = grown
-        _align(kind, prep, fitter, base_info, base_fit)  # the refit moved the run offsets a little
+        _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little
         _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
     return base_fit, order
 
@@ -468,9 +477,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
             "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
             "has_theta_ref": prep.ctx.has_ref,
             "terms_with_effects": final_base,
-            **{
-                k: v for k, v in base_info.items() if k not in ("align", "refine", "unidentifiable")
-            },
+            **{k: v for k, v in base_info.items() if k != "unidentifiable"},
         },
         "notes": nuis_notes,
         "status": "ok"
@@ -540,7 +547,7 @@ def run_engine(
                     fitter,
                     base_fit.terms,
                     list(seen.values()),
-                    kind.views,
+                    kind.views(prep),
                     scan,
                     max_effects,
                     pg.log,
@@ -550,7 +557,7 @@ def run_engine(
             with stage("report"):
                 doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
                 pg.stage("report")
-                doc = kind.finish(doc, settings)
+                doc = kind.finish(prep, doc, settings)
                 doc["verdict"] = decide_verdict(doc)
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0

@@ -90,7 +90,7 @@ def drifts_in_time(prep, name: str) -> bool:
     change of speed, so a step located there (left to the direction / speed terms for every
     other candidate, ``FinderSettings.step_change_rows``) is an alternative it must beat too:
     it is never a stand-in for a direction offset the catalog has no term for."""
-    return name in TIME_DRIFTS and prep.ctx.consts.get("driver_name") == "time"
+    return name in TIME_DRIFTS and prep.ctx.driver_name == "time"
 
 
 def _direction_word(d: float) -> str:

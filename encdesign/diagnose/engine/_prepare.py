@@ -598,6 +598,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         radius_m=np.asarray(kd.radius_m if kd.radius_m else 1.0, float),
         signal_periods=np.asarray(float(L)),
         n_runs=np.asarray(float(R)),
+        **kd.constants,
     )
     krows = KeptRows(rows, keep)
     ctx = Context(
@@ -614,8 +615,9 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         revolutions=revs,
         meta=meta,
         settings=settings,
+        driver_name=driver_name,
+        data=kd,
     )
-    ctx.consts["driver_name"] = driver_name  # type: ignore[index]
     return Prepared(
         kd=kd,
         ctx=ctx,

@@ -4,7 +4,7 @@ its row columns); the kind itself is :class:`~encdesign.diagnose.engine._kind.Ab
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, MutableMapping
+from collections.abc import Callable, Mapping, MutableMapping
 from typing import Any
 
 import numpy as np
@@ -46,6 +46,11 @@ class KindData:
         masked: optional ``(mask (n,) bool, reason)`` pairs: rows the kind knows to leave out
             of every fit (e.g. clipped signals); each is reported as one excluded segment
             (first to last masked row) with its reason and the number of stretches.
+        reading_cols: the recording's own reading columns, one per channel, when
+            ``reading`` is ``None``.
+        constants: the kind's own recording constants (arrays) its terms read as
+            ``x[name]``, beside the engine's (:data:`~._candidates.CONSTANTS`); built once
+            here, read-only.
     """
 
     y: np.ndarray
@@ -68,10 +73,26 @@ class KindData:
     segments: np.ndarray | None = None
     masked: tuple[tuple[np.ndarray, str], ...] = ()
     reading_cols: tuple[np.ndarray, ...] = ()
+    constants: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if self.reading is None and len(self.reading_cols) != self.y.shape[1]:
             raise ValueError("KindData: reading is None and reading_cols is not one per channel")
+
+
+@dataclasses.dataclass(frozen=True)
+class NoiseEstimate:
+    """What a kind's ``noise`` hook found on the base residual.
+
+    Attributes:
+        sigma: noise std per channel ``(C,)``, unit of ``y``.
+        info: the kind's own findings of its noise stage (a type of the kind's; e.g. the
+            sds levels and common-order powers), handed back read-only to its candidates and
+            summary as ``Context.noise_info``; ``None``: none.
+    """
+
+    sigma: np.ndarray
+    info: Any = None
 
 
 # ----------------------------------------------------------------------------- prepared
@@ -210,7 +231,7 @@ class Prepared:
     ctx: Context
     y: np.ndarray  # (n, C), rows sorted run-by-run in file order
     rows: RowColumns  # row columns for the terms
-    consts: dict[str, Any]
+    consts: Mapping[str, Any]  # the terms' recording constants, built once (read-only)
     keep: np.ndarray  # bool (n,)
     fold: np.ndarray  # int (n,), -1 for excluded rows
     seg: np.ndarray  # int (n,) steady segment id, -1 excluded

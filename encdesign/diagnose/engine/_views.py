@@ -148,7 +148,7 @@ def _heads(
         return ch, None
     names = prep.kd.channel_names
     proj = bool(prep.kd.project)
-    M = int(prep.consts.get("max_order", 0)) if hasattr(prep, "consts") else 0
+    M = int(prep.ctx.max_order) if hasattr(prep, "ctx") else 0
     base = (
         order is not None
         and np.iscomplexobj(W)
@@ -625,7 +625,7 @@ def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
 
 def view_drift(prep, rw):
     """Correlation with the driver (temperature or time)."""
-    return _regress_view(prep, rw, "drift", ["driver"], {"driver": prep.consts.get("driver_name")})
+    return _regress_view(prep, rw, "drift", ["driver"], {"driver": prep.ctx.driver_name})
 
 
 def view_line_phase(prep, rw):

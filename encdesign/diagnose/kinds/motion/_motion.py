@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import ClassVar
+from typing import ClassVar, final
 
 import jax.numpy as jnp
 import numpy as np
@@ -36,6 +36,7 @@ from ...._errors import input_error
 from ....io._recording import Recording
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
+from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import KindData, Prepared
 from ...engine._settings import DEFAULT_SETTINGS
 
@@ -234,20 +235,22 @@ def drift_degree(revolutions: float, turns_per_degree: float = 3.0) -> int:
     return int(min(15, 3 + max(0.0, revolutions - 3.0) // turns_per_degree))
 
 
+def nyquist_order(kept_per_run: np.ndarray, revolutions: np.ndarray) -> int:
+    """Below half the kept samples per revolution of the sparsest-sampled run (at least 1):
+    the base's limit before its parameter budget, and how far the candidates' fundamentals
+    reach."""
+    spr = [kept_per_run[r] / revolutions[r] for r in range(len(revolutions)) if revolutions[r] > 0]
+    return int(max(1, int(math.floor(min(spr) / 2.0)) - 1 if spr else 1))
+
+
 def motion_limit(prep: Prepared) -> int:
     """Highest order the record resolves (below half the samples per revolution)."""
-    keep = prep.keep
-    spr = [
-        ((prep.run == r) & keep).sum() / prep.ctx.revolutions[r]
-        for r in range(prep.ctx.n_runs)
-        if prep.ctx.revolutions[r] > 0
-    ]
-    nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
+    kept = np.array([((prep.run == r) & prep.keep).sum() for r in range(prep.ctx.n_runs)])
+    nyq = nyquist_order(kept, prep.ctx.revolutions)
     D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings.drift_turns_per_degree)
     budget = int(
         (prep.settings.max_param_fraction * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2
     )
-    prep.consts["nyquist_order"] = int(max(1, nyq))  # the candidates' fundamentals reach it
     return int(max(1, min(nyq, budget)))
 
 
@@ -285,8 +288,9 @@ def motion_candidates(ctx: Context) -> tuple[Candidate, ...]:
     """cogging, magnet_asymmetry, coil_mismatch at this motor's orders."""
     motor = ctx.meta.get("motor", {})
     p, s = int(motor["pole_pairs"]), motor.get("stator_slots")
-    M = int(ctx.consts.get("max_order", 200))
-    nyq = int(ctx.consts.get("nyquist_order", M))
+    M = int(ctx.max_order)
+    kept = np.asarray(ctx.rows["run_onehot"]).sum(0)  # kept rows per run
+    nyq = nyquist_order(kept, ctx.revolutions)
     design = set()
     if "commutation_states" in motor:
         step = int(motor["commutation_states"]) * p
@@ -317,16 +321,27 @@ def motion_candidates(ctx: Context) -> tuple[Candidate, ...]:
     return tuple(out)
 
 
+@final
 class MotionKind(AbstractKind):
     """``motion``: a motor's shaft angle in time (speed ripple, cogging, ...)."""
 
     name: ClassVar[str] = "motion"
-    views: ClassVar[tuple] = ("orders", "spectrum", "band", "time")
     default_max_order: ClassVar[int] = 200
+    noise_replaces: ClassVar[bool] = False
+    grows_orders: ClassVar[bool] = False
     reading_lattice: ClassVar[bool] = True
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         return motion_data(rec)
+
+    def views(self, prep):
+        return ("orders", "spectrum", "band", "time")
+
+    def plots(self, d, folder):
+        return []
+
+    def prepare(self, kd, meta, settings):
+        return engine_prepare(kd, meta, settings)
 
     def base(self, prep, max_order):
         return motion_base(prep, max_order)
@@ -336,6 +351,24 @@ class MotionKind(AbstractKind):
 
     def max_order_limit(self, prep):
         return motion_limit(prep)
+
+    def noise(self, prep, base_resid):
+        return None
+
+    def refine(self, terms, prep):
+        return None
+
+    def align(self, terms, prep):
+        return None
+
+    def summary(self, prep, base_params):
+        return {}
+
+    def finish(self, prep, doc, settings):
+        return doc
+
+    def report_lines(self, doc):
+        return ""
 
 
 MOTION = MotionKind()

@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import ClassVar
+from typing import ClassVar, final
 
 import jax.numpy as jnp
 import numpy as np
@@ -56,8 +56,24 @@ def make_where(rec: Recording) -> str:
     return str(rec.path) if rec.path is not None else "recording"
 
 
-def multihead_data(rec: Recording) -> KindData:
-    """Observations of a multihead recording (head readings less the reference angle)."""
+@dataclasses.dataclass(kw_only=True)
+class MultiheadData(KindData):
+    """:class:`~encdesign.diagnose.engine._protocol.KindData` of a multihead record.
+
+    Attributes:
+        stepped: a sensor against a reference recorded step by step (no steady motion;
+            issue 22 item 5): its ``segments`` are one per run and approach direction
+            (:func:`stepped_segments`), its dynamic candidates not testable and its summary
+            says so.
+    """
+
+    stepped: bool = False
+
+
+def multihead_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> MultiheadData:
+    """Observations of a multihead recording (head readings less the reference angle); a
+    sensor against a reference recorded step by step gets its segments here
+    (:func:`stepped_segments`)."""
     where = make_where(rec)
     if rec.kind != "multihead":
         raise input_error(f"{where}: kind", f"got {rec.kind!r}", "'multihead'")
@@ -84,7 +100,7 @@ def multihead_data(rec: Recording) -> KindData:
         y -= shaft[:, None]
     radius = enc.get("optical_radius_m")
     L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
-    kd = KindData(
+    kd = MultiheadData(
         y=y,
         shaft=shaft,
         t=np.asarray(rec.columns["t"], float),
@@ -102,13 +118,14 @@ def multihead_data(rec: Recording) -> KindData:
         sensor=str(enc.get("sensor", "optical")),
         where=where,
     )
-    return kd
+    seg = stepped_segments(kd, settings)
+    return kd if seg is None else dataclasses.replace(kd, segments=seg, stepped=True)
 
 
-def stepped_segments(kd: KindData, settings: FinderSettings) -> None:
+def stepped_segments(kd: KindData, settings: FinderSettings) -> np.ndarray | None:
     """Issue 22 item 5: a sensor against a reference recorded step by step (no steady
-    motion) gets one segment per run and approach direction instead of being refused
-    (``kd.segments`` set in place)."""
+    motion) gets one segment per run and approach direction instead of being refused: those
+    segments, or ``None`` (not a stepped record)."""
     if (
         kd.y.shape[1] == 1
         and kd.theta_ref is not None
@@ -116,7 +133,12 @@ def stepped_segments(kd: KindData, settings: FinderSettings) -> None:
             kd.shaft, kd.t, kd.run, steady_tolerance(kd, settings), kd.speed_window, settings
         )
     ):
-        kd.segments = _stepped.stepped_segments(kd.shaft, kd.t, kd.run)
+        return _stepped.stepped_segments(kd.shaft, kd.t, kd.run)
+    return None
+
+
+def _is_stepped(kd: KindData) -> bool:
+    return isinstance(kd, MultiheadData) and kd.stepped
 
 
 COVERAGE_ORDER_MAX = 48
@@ -487,9 +509,6 @@ def multihead_base(prep: Prepared, M: int):
     C, R = prep.n_channels, prep.ctx.n_runs
     if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
         prep.rows["theta_raw"] = prep.rows["theta"]
-    # issue 22 item 5: a stepped record (segments given by multihead_data) is static; the
-    # flag is read by multihead_candidates and multihead_summary
-    prep.consts["stepped"] = prep.kd.segments is not None  # type: ignore[index]
     held = _symmetric_orders(prep, M)
     cand = _base_candidate(C, R, M, tuple(held))
     start = {}
@@ -500,7 +519,7 @@ def multihead_base(prep: Prepared, M: int):
         terms.append((_jump_candidate(prep), {}))
     if prep.angle_steps:
         terms.append((_angle_step_candidate(prep), {}))
-    info: dict = {"align": _align, "refine": _refine_shaft, "unidentifiable": []}
+    info: dict = {"unidentifiable": []}
     if not prep.ctx.has_ref:
         bad = _symmetric_orders(prep, M, prep.settings.head_pattern_min)
         info["unidentifiable"] += [
@@ -592,7 +611,7 @@ def multihead_candidates(ctx: Context) -> tuple[Candidate, ...]:
             if ctx.n_runs > 1:  # one set of signal harmonics per run (per-run zeros)
                 out.append(_reference_terms.interpolation_candidate(ctx.n_runs))
     # issue 22 item 5: no dynamic candidates on a static stepped record
-    return _stepped.static_candidates(tuple(out), bool(ctx.consts.get("stepped", False)))
+    return _stepped.static_candidates(tuple(out), _is_stepped(ctx.data))
 
 
 def multihead_summary(prep: Prepared, base_params: dict) -> dict:
@@ -607,7 +626,7 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
         return {}
     kd = prep.kd
     out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, prep.rows["reading"][:, 0], prep.run)}
-    if prep.consts.get("stepped", False):  # issue 22 item 5
+    if _is_stepped(kd):  # issue 22 item 5
         out["sensor"]["record_type"] = "static stepped calibration (" + _stepped.STATIC_REASON + ")"
     b = base_params.get("base", {})
     if "fourier_cos_rad" in b:
@@ -621,30 +640,41 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     return out
 
 
+MULTIHEAD_VIEWS = (
+    "spectrum",
+    "band",
+    "orders",
+    "time",
+    "drift",
+    "line_phase",
+    "direction",
+    "speed",
+    "angle_trend",
+    view_order_step,
+)
+"""The views run on a multihead record's residual."""
+
+
+@final
 class MultiheadKind(AbstractKind):
     """``multihead``: 2-6 heads on one disk, or one sensor against ``theta_ref``."""
 
     name: ClassVar[str] = "multihead"
-    views: ClassVar[tuple] = (
-        "spectrum",
-        "band",
-        "orders",
-        "time",
-        "drift",
-        "line_phase",
-        "direction",
-        "speed",
-        "angle_trend",
-        view_order_step,
-    )
+    default_max_order: ClassVar[int] = 12
+    noise_replaces: ClassVar[bool] = False
     grows_orders: ClassVar[bool] = True
     reading_lattice: ClassVar[bool] = True
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
-        return multihead_data(rec)
+        return multihead_data(rec, settings)
+
+    def views(self, prep):
+        return MULTIHEAD_VIEWS
+
+    def plots(self, d, folder):
+        return []
 
     def prepare(self, kd, meta, settings):
-        stepped_segments(kd, settings)
         return engine_prepare(kd, meta, settings)
 
     def base(self, prep, max_order):
@@ -656,8 +686,23 @@ class MultiheadKind(AbstractKind):
     def max_order_limit(self, prep):
         return max_order_limit(prep)
 
+    def noise(self, prep, base_resid):
+        return None
+
+    def refine(self, terms, prep):
+        return _refine_shaft(terms, prep)
+
+    def align(self, terms, prep):
+        return _align(terms, prep)
+
     def summary(self, prep, base_params):
         return multihead_summary(prep, base_params)
+
+    def finish(self, prep, doc, settings):
+        return doc
+
+    def report_lines(self, doc):
+        return ""
 
 
 MULTIHEAD = MultiheadKind()

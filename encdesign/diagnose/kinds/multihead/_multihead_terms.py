@@ -304,7 +304,7 @@ def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float
     N = rw.size
     w = _one_speed(ctx)
     m = round(f_hz / (w / (2 * np.pi))) if w is not None else 0
-    in_base = 1 <= m <= int(ctx.consts.get("max_order", 0))
+    in_base = 1 <= m <= int(ctx.max_order)
     locked = np.stack([np.cos(m * th), np.sin(m * th)], 1)
     # at one speed near a base order the base's order m is refitted with the line (as the
     # engine's trial fit does): the line's gain is over it (the base residual alone shows
@@ -409,7 +409,7 @@ def _th_fn(p, x):
 
 
 def _th_unit(ctx):
-    return "rad/K" if ctx.consts.get("driver_name") == "temp_c" else "rad/s"
+    return "rad/K" if ctx.driver_name == "temp_c" else "rad/s"
 
 
 THERMAL_DRIFT = Candidate(

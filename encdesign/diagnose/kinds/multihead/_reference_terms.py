@@ -26,10 +26,7 @@ from ....physics._sensor_effects import (
     scale_error_rad,
 )
 from ...engine._candidates import Candidate, Context, Param
-from ._reference_data import (
-    Lattice,
-    detect_lsb,
-)
+from ...engine._lattice import Lattice, detect_lsb
 
 __all__ = ["CANDIDATES", "interpolation_candidate"]
 

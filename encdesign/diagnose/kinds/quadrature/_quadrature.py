@@ -38,8 +38,9 @@ capture, time blocks otherwise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, final
 
 import jax.numpy as jnp
 import numpy as np
@@ -48,7 +49,8 @@ from ...._errors import input_error
 from ....io._recording import Recording
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
-from ...engine._protocol import KindData, Prepared
+from ...engine._prepare import prepare as engine_prepare
+from ...engine._protocol import KindData, NoiseEstimate, Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
@@ -229,14 +231,28 @@ def quadrature_start(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS
     )
 
 
-def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindData:
+@dataclasses.dataclass(kw_only=True)
+class QuadratureData(KindData):
+    """:class:`~encdesign.diagnose.engine._protocol.KindData` plus the record's conic start.
+
+    Attributes:
+        start: :func:`quadrature_start` of the recording, with ``has_t`` (whether it has a
+            ``t`` column).
+    """
+
+    start: dict[str, Any]
+
+
+def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> QuadratureData:
     """Observations: the relative radius less the conic-fit ellipse's, ``(r - R0(psi))/A0``.
 
     With ``t``: rows in time order, the unwrapped phase is the 'shaft' (segments where the
     signal phase does not advance steadily are excluded). Without ``t``: rows in phase
     order, ``t`` = row index in that order, one segment. ``st``: :func:`quadrature_start`
     of ``rec`` (computed when not given)."""
-    st = quadrature_start(rec) if st is None else st
+    if st is None:
+        st = quadrature_start(rec)
+        st["has_t"] = "t" in rec.columns
     psi = st["psi"]
     y = ((st["r"] - st["r0"]) / st["a0"])[:, None]
     run = np.asarray(rec.runs)
@@ -255,6 +271,8 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindDat
         segments = np.zeros(psi.size, dtype=int)
     masked: tuple = ()
     clip = st["clip"]
+    e0, a0 = st["e0"], st["a0"]
+    rel = np.array([e0[0] / a0, e0[1] / a0, e0[2] / a0, e0[3] / a0, e0[4]])
     if clip["channels"]:
         masked = (
             (
@@ -267,7 +285,8 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindDat
                 ),
             ),
         )
-    return KindData(
+    return QuadratureData(
+        start=st,
         y=y,
         shaft=shaft,
         t=t,
@@ -287,6 +306,7 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> KindDat
         speed_window=0.05,
         segments=segments,
         masked=masked,
+        constants={"ellipse_start": rel},  # the base term's start, relative to A0
     )
 
 
@@ -439,10 +459,8 @@ def quadrature_limit(prep: Prepared) -> int:
 
 def quadrature_base(prep: Prepared, M: int, st: dict[str, Any]):
     """The ellipse, started at the conic fit (plain Heydemann) of the unclipped rows."""
-    e0, a0 = st["e0"], st["a0"]
-    rel = np.array([e0[0] / a0, e0[1] / a0, e0[2] / a0, e0[3] / a0, e0[4]])
-    prep.consts["ellipse_start"] = rel  # type: ignore[index]
-    start = dict(zip(ELLIPSE_NAMES, rel))
+    a0 = st["a0"]
+    start = dict(zip(ELLIPSE_NAMES, prep.consts["ellipse_start"]))
     info = {
         "signal_scale_A0": a0,
         "unidentifiable": [
@@ -543,63 +561,73 @@ def quadrature_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
     return np.array([math.sqrt(float(np.mean(d2**2)) / 6.0)])
 
 
-class QuadratureKind(AbstractKind):
-    """``quadrature``: one pair of sin/cos signals, for one recording (its conic start
-    ``st``): views orders (of the phase), and with ``t`` also time and spectrum (Hz)."""
+def _start(prep: Prepared) -> dict[str, Any]:
+    """The conic start of the prepared record (its :class:`QuadratureData`)."""
+    kd = prep.kd
+    assert isinstance(kd, QuadratureData)
+    return kd.start
 
-    st: dict[str, Any]
+
+@final
+class QuadratureKind(AbstractKind):
+    """``quadrature``: one pair of sin/cos signals (the record's conic start travels in its
+    :class:`QuadratureData`): views orders (of the phase), and with ``t`` also time and
+    spectrum (Hz)."""
+
     name: ClassVar[str] = "quadrature"
     default_max_order: ClassVar[int] = 12
-
-    @property
-    def views(self) -> tuple:  # type: ignore[override]
-        return ("orders", "time", "spectrum") if self.st["has_t"] else ("orders",)
+    noise_replaces: ClassVar[bool] = False
+    grows_orders: ClassVar[bool] = False
+    reading_lattice: ClassVar[bool] = False
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
-        return quadrature_data(rec, self.st)
+        st = quadrature_start(rec, settings)
+        st["has_t"] = "t" in rec.columns
+        return quadrature_data(rec, st)
+
+    def views(self, prep):
+        return ("orders", "time", "spectrum") if _start(prep)["has_t"] else ("orders",)
+
+    def plots(self, d, folder):
+        return quadrature_plots(d, folder)
+
+    def prepare(self, kd, meta, settings):
+        return engine_prepare(kd, meta, settings)
 
     def base(self, prep, max_order):
-        return quadrature_base(prep, max_order, self.st)
+        return quadrature_base(prep, max_order, _start(prep))
 
     def candidates(self, ctx):
+        kd = ctx.data
+        assert isinstance(kd, QuadratureData)
         return (
-            signal_shape_candidate(int(ctx.consts.get("max_order", 12))),
-            VIBRATION[bool(self.st["has_t"])],
+            signal_shape_candidate(int(ctx.max_order)),
+            VIBRATION[bool(kd.start["has_t"])],
         )
 
     def max_order_limit(self, prep):
         return quadrature_limit(prep)
 
     def noise(self, prep, base_resid):
-        return quadrature_noise(prep, base_resid)
+        return NoiseEstimate(quadrature_noise(prep, base_resid))
+
+    def refine(self, terms, prep):
+        return None
+
+    def align(self, terms, prep):
+        return None
 
     def summary(self, prep, base_params):
-        return quadrature_summary(prep, base_params, self.st)
+        return quadrature_summary(prep, base_params, _start(prep))
 
-    def finish(self, doc, settings):
-        return finish(doc, self.st, settings)
+    def finish(self, prep, doc, settings):
+        return finish(doc, _start(prep), settings)
 
     def report_lines(self, doc):
         return quadrature_report_lines(doc)
 
 
-def quadrature_kind(st: dict[str, Any]) -> QuadratureKind:
-    """The quadrature kind for one recording (its conic start ``st``)."""
-    return QuadratureKind(st)
-
-
-def run_quadrature(rec: Recording, **kw) -> tuple[dict[str, Any], Any]:
-    """Diagnose a quadrature recording on the engine (``kw``: :func:`run_engine`'s);
-    returns ``(document, plot data)`` (:func:`run_engine`'s).
-
-    Raises:
-        EncdesignInputError: the signals do not draw a Lissajous figure about the origin.
-    """
-    from ...engine._engine import run_engine
-
-    st = quadrature_start(rec, kw.get("settings") or DEFAULT_SETTINGS)
-    st["has_t"] = "t" in rec.columns
-    return run_engine(quadrature_kind(st), rec, **kw)
+QUADRATURE = QuadratureKind()
 
 
 def finish(

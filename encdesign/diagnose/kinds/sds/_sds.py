@@ -50,7 +50,7 @@ view per candidate (the power its columns take out of the whitened residual).
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import ClassVar, final
 
 import jax.numpy as jnp
 import numpy as np
@@ -65,7 +65,6 @@ from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
 from ._sds_data import (
     SDSPairTable,
-    _design_orders,
     sds_data,
     sds_pair_table,
     sds_prepare,
@@ -76,6 +75,8 @@ from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
     _ls_power_flat,
+    base_orders,
+    noise_info,
     sds_noise,
     view_common_orders,
 )
@@ -235,41 +236,19 @@ def sds_limit(prep: Prepared) -> int:
     return int(max(1, prep.ctx.n_runs * M // 2 - 1))
 
 
-def _common_x_orders(prep: Prepared, orders) -> list[int]:
-    """Orders ``n`` in ``x = φ + ψ_m`` whose columns vanish on the moving-sensor differences
-    (``n ψ_m`` equal mod 2π for every sensor) when the record is projected (no phi_ref)."""
-    if float(prep.consts["proj"]) <= 0:
-        return []
-    psi = np.asarray(prep.consts["psi_m"], float)
-    out = []
-    for n in orders:
-        z = np.exp(1j * n * psi)
-        if np.max(np.abs(z - z.mean())) < 1e-9:
-            out.append(int(n))
-    return out
-
-
 def sds_base(prep: Prepared, max_order: int):
     """Pair constants plus the design's ripple orders (see module doc)."""
     enc = prep.ctx.meta.get("encoder", {})
     M = prep.consts["psi_m"].size
     p = int(enc.get("pole_pairs", 0) or 0)
-    orders = (
-        _design_orders(p, enc.get("stator_coils"), enc.get("commutation_states"), max_order)
-        if p > 0
-        else []
-    )
     terms = [(_const_term(M), {})]
-    common_x = _common_x_orders(prep, orders)
-    if common_x:
-        # without phi_ref an order with one phase at every moving sensor is taken by the
-        # per-run offset: its projected columns are zero up to rounding, which a normalised
-        # solve would fit as if they carried information; left out and listed
-        orders = [o for o in orders if o not in common_x]
+    # without phi_ref an order with one phase at every moving sensor is taken by the
+    # per-run offset: its projected columns are zero up to rounding, which a normalised
+    # solve would fit as if they carried information; left out and listed (common_x)
+    orders, common_x = base_orders(prep.ctx.meta, prep.consts, max_order)
     if orders:
         terms.append((_ripple_term(tuple(orders)), {}))
     has_ref = prep.ctx.has_ref
-    prep.consts["base_orders"] = orders  # type: ignore[index]
     unid = [
         "the constant offset (instrument zero): its physical causes cannot be told apart",
     ]
@@ -324,22 +303,30 @@ def sds_summary(prep: Prepared, base_params: dict) -> dict:
             "method": lat.get("method"),
         },
         "grid_period_s": P,
-        "noise_estimate": dict(prep.ctx.consts.get("noise_info") or {}),
+        "noise_estimate": dict(noise_info(prep.ctx).levels),
         "moving_opposed": moving_opposed(prep.consts["psi_m"]),
-        "drift_vs_orders": prep.ctx.consts.get("drift_vs_orders"),
+        "drift_vs_orders": noise_info(prep.ctx).drift_vs_orders,
     }
 
 
+@final
 class SDSKind(AbstractKind):
     """``sds``: the shifted-delta-sum timing instrument, one row per run."""
 
     name: ClassVar[str] = "sds"
-    views: ClassVar[tuple] = SDS_VIEWS
     default_max_order: ClassVar[int] = 60
     noise_replaces: ClassVar[bool] = True
+    grows_orders: ClassVar[bool] = False
+    reading_lattice: ClassVar[bool] = False
 
     def data(self, rec, settings=DEFAULT_SETTINGS):
         return sds_data(rec, settings)
+
+    def views(self, prep):
+        return SDS_VIEWS
+
+    def plots(self, d, folder):
+        return []
 
     def base(self, prep, max_order):
         return sds_base(prep, max_order)
@@ -356,11 +343,20 @@ class SDSKind(AbstractKind):
     def noise(self, prep, base_resid):
         return sds_noise(prep, base_resid)
 
+    def refine(self, terms, prep):
+        return None
+
+    def align(self, terms, prep):
+        return None
+
     def summary(self, prep, base_params):
         return sds_summary(prep, base_params)
 
-    def finish(self, doc, settings):
+    def finish(self, prep, doc, settings):
         return finish_sds(doc, settings)
+
+    def report_lines(self, doc):
+        return ""
 
 
 SDS = SDSKind()

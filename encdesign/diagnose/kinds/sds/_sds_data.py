@@ -15,7 +15,7 @@ from ....io._recording import Recording
 from ...engine._candidates import Context
 from ...engine._protocol import KindData, Prepared, RowColumns
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ._sds_noise import REFERENCE_RADIUS_M, _level_sigma, _saturating_columns
+from ._sds_noise import REFERENCE_RADIUS_M, _level_sigma, _saturating_columns, design_orders
 
 # ----------------------------------------------------------------------------- data
 
@@ -312,19 +312,8 @@ class SDSKindData(KindData):
     lattice: dict | None = None
     declared_clock_s: float | None = None
     rows_extra: dict | None = None
-    consts_extra: dict | None = None
     dropped_revs: int = 0
     speed: dict | None = None
-
-
-def _design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
-    orders = set(range(p, cap + 1, p))
-    if c:
-        orders |= set(range(p * c, cap + 1, p * c))
-    if q:
-        cog = 2 * p * q // math.gcd(2 * p, q)
-        orders |= set(range(cog, cap + 1, cog))
-    return sorted(o for o in orders if o <= cap)
 
 
 def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDSKindData:
@@ -381,7 +370,7 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
         tmid_c=tmid - t_mean,
         run_index=np.arange(R, dtype=float),
     )
-    consts_extra = dict(
+    constants = dict(
         psi_f=np.asarray(tab.psi_fixed_rad, float),
         psi_m=np.asarray(tab.psi_moving_rad, float),
         helmert=H,
@@ -417,7 +406,7 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
         lattice=lattice,
         declared_clock_s=1.0 / float(clock_hz) if clock_hz else None,
         rows_extra=rows_extra,
-        consts_extra=consts_extra,
+        constants=constants,
         dropped_revs=int(dropped),
         speed=speed,
     )
@@ -477,17 +466,16 @@ def sds_prepare(
         radius_m=np.asarray(kd.radius_m or REFERENCE_RADIUS_M, float),
         signal_periods=np.asarray(0.0),
         n_runs=np.asarray(float(R)),
-        **kd.consts_extra,
+        **kd.constants,
     )
     enc = meta.get("encoder", {})
     pp = int(enc.get("pole_pairs", 0) or 0)
-    lim = max(1, R * kd.consts_extra["psi_m"].size // 2 - 1)
+    lim = max(1, R * kd.constants["psi_m"].size // 2 - 1)
     orders = (
-        _design_orders(pp, enc.get("stator_coils"), enc.get("commutation_states"), lim)
+        design_orders(pp, enc.get("stator_coils"), enc.get("commutation_states"), lim)
         if pp > 0
         else []
     )
-    consts["base_orders"] = orders
     X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
     sigma = _level_sigma(
         kd.y, kd.n_revs, X, float(consts["proj"]) > 0, test_p=settings.sds_sigma_test_p
@@ -506,9 +494,9 @@ def sds_prepare(
         revolutions=np.full(R, float(kd.n_revs)),
         meta=meta,
         settings=settings,
+        driver_name="time",
+        data=kd,
     )
-    ctx.consts["driver_name"] = "time"  # type: ignore[index]
-    ctx.consts["kd"] = kd  # type: ignore[index]
     return Prepared(
         kd=kd,
         ctx=ctx,

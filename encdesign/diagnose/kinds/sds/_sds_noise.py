@@ -3,13 +3,16 @@ freedom), the common-order view and the candidates' plausibility rules."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from scipy import stats
 
 from ...engine._candidates import Context
-from ...engine._protocol import Prepared
+from ...engine._protocol import NoiseEstimate, Prepared
 from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
@@ -57,6 +60,76 @@ EXPLANATIONS = {
 }
 
 
+def design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
+    """The motor's ripple orders up to ``cap``: multiples of the pole pairs ``p``, of
+    ``p`` times the commutation states ``c`` and of the cogging order (``q`` coils)."""
+    orders = set(range(p, cap + 1, p))
+    if c:
+        orders |= set(range(p * c, cap + 1, p * c))
+    if q:
+        cog = 2 * p * q // math.gcd(2 * p, q)
+        orders |= set(range(cog, cap + 1, cog))
+    return sorted(o for o in orders if o <= cap)
+
+
+def common_x_orders(consts: Mapping[str, Any], orders) -> list[int]:
+    """Orders ``n`` in ``x = φ + ψ_m`` whose columns vanish on the moving-sensor differences
+    (``n ψ_m`` equal mod 2π for every sensor) when the record is projected (no phi_ref)."""
+    if float(consts["proj"]) <= 0:
+        return []
+    psi = np.asarray(consts["psi_m"], float)
+    out = []
+    for n in orders:
+        z = np.exp(1j * n * psi)
+        if np.max(np.abs(z - z.mean())) < 1e-9:
+            out.append(int(n))
+    return out
+
+
+def base_orders(
+    meta: Mapping[str, Any], consts: Mapping[str, Any], max_order: int
+) -> tuple[list[int], list[int]]:
+    """``(orders, left_out)``: the design's ripple orders in the base model at
+    ``max_order`` (:func:`design_orders` of the ``[encoder]`` table), less those with one
+    phase at every moving sensor without phi_ref (:func:`common_x_orders`: taken by the
+    per-run offset), and those left out."""
+    enc = meta.get("encoder", {})
+    p = int(enc.get("pole_pairs", 0) or 0)
+    orders = (
+        design_orders(p, enc.get("stator_coils"), enc.get("commutation_states"), max_order)
+        if p > 0
+        else []
+    )
+    common_x = common_x_orders(consts, orders)
+    return [o for o in orders if o not in common_x], common_x
+
+
+@dataclasses.dataclass(frozen=True)
+class SDSNoiseInfo:
+    """What the sds noise hook (:func:`sds_noise`) found on the base residual, for the
+    candidates' rules and the summary (``Context.noise_info``).
+
+    Attributes:
+        levels: the two noise levels and how they were found (``noise_estimate``).
+        common_order_power: the base residual's power per order common to the moving
+            sensors (:func:`common_order_power`).
+        drift_vs_orders: a drift in time against the best common order, or ``None``.
+        run_change_power: per moving sensor, the best step and single-run outlier of its
+            whitened base run means (:func:`_step_or_outlier`).
+    """
+
+    levels: dict = dataclasses.field(default_factory=dict)
+    common_order_power: tuple[float, ...] = ()
+    drift_vs_orders: dict | None = None
+    run_change_power: tuple[tuple, ...] = ()
+
+
+def noise_info(ctx: Context) -> SDSNoiseInfo:
+    """The sds noise stage's findings (empty before it ran)."""
+    info = ctx.noise_info
+    return info if isinstance(info, SDSNoiseInfo) else SDSNoiseInfo()
+
+
 def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
     """Power (chi-square) the columns ``(n, C, q)`` take out of ``rw`` (n, C)."""
     X = cols.reshape(-1, cols.shape[-1])
@@ -71,7 +144,10 @@ def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
 
 
 def _saturating_columns(
-    rows: dict, consts: dict, orders_base: list[int], fraction: float = 0.6
+    rows: Mapping[str, Any],
+    consts: Mapping[str, Any],
+    orders_base: list[int],
+    fraction: float = 0.6,
 ) -> tuple:
     """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
     platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
@@ -228,14 +304,14 @@ def _level_sigma(
     return out
 
 
-def sds_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
-    """Noise hook: the two levels of :func:`_level_sigma` on the base residual. Also keeps
-    the base residual's common-order powers (:func:`common_order_power`) for the
-    plausibility of ``beam_tilt_axial``."""
+def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
+    """Noise hook: the two levels of :func:`_level_sigma` on the base residual, with what
+    the candidates' rules need (:class:`SDSNoiseInfo`: the base residual's common-order
+    powers (:func:`common_order_power`) for the plausibility of ``beam_tilt_axial``, ...)."""
     X, _ = _saturating_columns(
         prep.rows,
         prep.consts,
-        prep.consts.get("base_orders", []),
+        base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0],
         prep.settings.sds_saturate_fraction,
     )
     info: dict = {}
@@ -247,17 +323,16 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> np.ndarray:
         info=info,
         test_p=prep.settings.sds_sigma_test_p,
     )
-    prep.ctx.consts["noise_info"] = info  # type: ignore[index]
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
-    # a tuple, not an array: arrays in consts are passed to every term
     pw = common_order_power(prep, rwm)
-    prep.ctx.consts["common_order_power"] = tuple(float(v) for v in pw)  # type: ignore[index]
-    prep.ctx.consts["drift_vs_orders"] = _drift_vs_orders(prep, rwm, pw)  # type: ignore[index]
-    prep.ctx.consts["run_change_power"] = tuple(  # type: ignore[index]
-        _step_or_outlier(rwm[:, m]) for m in range(M)
+    found = SDSNoiseInfo(
+        levels=info,
+        common_order_power=tuple(float(v) for v in pw),
+        drift_vs_orders=_drift_vs_orders(prep, rwm, pw),
+        run_change_power=tuple(_step_or_outlier(rwm[:, m]) for m in range(M)),
     )
-    return sig
+    return NoiseEstimate(sig, found)
 
 
 def _step_or_outlier(x: np.ndarray) -> tuple[float, int, float, int, float]:
@@ -362,7 +437,7 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
     M = int(ctx.consts["psi_m"].size)
     amp = np.hypot(np.asarray(params["cos_rad"]), np.asarray(params["sin_rad"]))
     n = int(np.argmax(amp)) + 1
-    pw = np.asarray(ctx.consts.get("common_order_power", ()), float)
+    pw = np.asarray(noise_info(ctx).common_order_power, float)
     if M < 2 or n % M or pw.size == 0:
         return None
     top = int(np.argmax(pw)) + 1
@@ -380,7 +455,7 @@ def _transient(ctx: Context) -> str | None:
     largest single-run deviation is significant (1 dof, Bonferroni over sensors × runs),
     fits better than any step and holds over half of the sensor's power. A smooth
     effect fitted to such a record would take a part of the transient; it is not named."""
-    ch = ctx.consts.get("run_change_power")
+    ch = noise_info(ctx).run_change_power
     if not ch:
         return None
     R = int(ctx.n_runs)
@@ -409,7 +484,7 @@ def _drift_plausible(ctx: Context, params: dict) -> str | None:
     parameter's worth (BIC: ln of the number of run means): with the platform stepped by a
     fixed angle such an order is nearly a trend over the runs, and the better fit is the
     order (out of catalog: reported, not named)."""
-    dv = ctx.consts.get("drift_vs_orders")
+    dv = noise_info(ctx).drift_vs_orders
     if not dv:
         return None
     if dv["order_power"] - dv["drift_power"] > math.log(max(dv["n_values"], 2)):
@@ -445,7 +520,7 @@ def _delay_plausible(ctx: Context, params: dict) -> str | None:
         )
     # a delay change persists: a change confined to one run (a single-run outlier fits the
     # sensor's base run means better than any step, both 1 dof) is a transient, not a step
-    ch = ctx.consts.get("run_change_power")
+    ch = noise_info(ctx).run_change_power
     if ch:
         m = int(np.argmax(dd))
         ps, ks, po, jo, _ = ch[m]
@@ -462,7 +537,7 @@ def _beam_plausible(ctx: Context, params: dict) -> str | None:
     """Beam tilt x axial runout lives at orders 1..3 of φ: refused when the base residual's
     strongest common order is another one (an out-of-catalog order that orders 1..3 take in
     part through the sparse platform positions)."""
-    pw = np.asarray(ctx.consts.get("common_order_power", ()), float)
+    pw = np.asarray(noise_info(ctx).common_order_power, float)
     if pw.size == 0:
         return None
     top = int(np.argmax(pw)) + 1

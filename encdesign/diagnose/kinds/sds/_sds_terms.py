@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -21,6 +22,8 @@ from ._sds_noise import (
     _delay_plausible,
     _drift_plausible,
     _no_transient,
+    base_orders,
+    noise_info,
 )
 
 # ----------------------------------------------------------------------------- terms
@@ -108,8 +111,7 @@ def _ripple_derived(orders):
             }
             for i, o in enumerate(orders)
         }
-        kd = ctx.consts.get("kd")
-        sp = getattr(kd, "speed", None)
+        sp = getattr(ctx.data, "speed", None)
         if sp is not None:
             # the shaft speed ripple itself, from the moving sensors' edge intervals
             for o in orders:
@@ -210,11 +212,9 @@ def _tilt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
 
 
 def _wobble_grid(ctx: Context) -> np.ndarray:
-    kd = ctx.consts["kd"]
     t = ctx.rows["tmid_c"]
     span_rev = max(float(np.ptp(t)) * float(ctx.consts["omega"]) / (2 * np.pi), 1.0)
     step = min(1 / (8 * span_rev), 0.01)
-    del kd
     return np.arange(0.02, 0.98, step)
 
 
@@ -288,7 +288,7 @@ def _delay_reference(ctx: Context) -> int:
     base run means show the weakest step (``run_change_power``; the first such on a tie).
     A choice made from the data, not from rounding; the reported delays do not depend on
     it (:func:`_delay_gauge` takes the median out)."""
-    ch = ctx.consts.get("run_change_power")
+    ch = noise_info(ctx).run_change_power
     if not ch or (float(ctx.consts["proj"]) > 0 and len(ch) == 2):
         # two moving sensors without phi_ref: their projected steps are equal and opposite
         # (a tie only rounding would break): m0 by rule, and the sensor is unidentifiable
@@ -370,7 +370,7 @@ def _wobble_derived(ctx, v, se):
     s = s if math.isfinite(s) else None
     r = float(ctx.consts["radius_m"])
     k = int(round(float(v.get("first_run", 0.0))))
-    rid = int(ctx.consts["kd"].table.run_ids[min(max(k, 0), int(ctx.n_runs) - 1)])
+    rid = int(ctx.data.table.run_ids[min(max(k, 0), int(ctx.n_runs) - 1)])
     return {
         "amplitude_rad": {"value": amp, "se": s, "unit": "rad"},
         "runout_m": {"value": amp * r, "se": None if s is None else s * r, "unit": "m"},
@@ -401,7 +401,7 @@ def _delay_derived(ctx, v, se):
     if not np.isfinite(s[m]):
         ok = np.isfinite(s)
         s = np.where(ok, s, np.min(s[ok]) if ok.any() else np.nan)
-    rid = int(ctx.consts["kd"].table.run_ids[int(v["first_run"])])
+    rid = int(ctx.data.table.run_ids[int(v["first_run"])])
     out = {}
     if float(np.asarray(ctx.consts["proj"])) > 0 and d.size == 2:
         # +tau on m1 and -tau on m0 are the same record without phi_ref
@@ -421,10 +421,11 @@ def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
     """The SDS catalog candidates for this record."""
     M = ctx.consts["psi_m"].size
     pp = int(ctx.meta.get("encoder", {}).get("pole_pairs", 0) or 0)
-    return _catalog(M, pp, coil_order_count(ctx, pp))
+    orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
+    return _catalog(M, pp, coil_order_count(ctx, pp, orders))
 
 
-def coil_order_count(ctx: Context, pp: int) -> int:
+def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
     """How many of the coil orders ``1 … pp − 1`` ``coil_mismatch`` fits, the lowest first:
     as many as the parameter budget leaves (``max_param_fraction`` of the fitted values
     ``R × K × M``, less the base model's pair constants and design-ripple pairs), all of
@@ -440,7 +441,7 @@ def coil_order_count(ctx: Context, pp: int) -> int:
     n = max(pp - 1, 0)
     R, C = int(ctx.n_runs), int(ctx.n_channels)
     M = int(ctx.consts["psi_m"].size)
-    base = M + 2 * len(ctx.consts.get("base_orders", []))
+    base = M + 2 * len(orders_base)
     budget = int((ctx.settings.max_param_fraction * R * C - base) // 2)
     return n if budget < 1 else min(n, budget)
 
