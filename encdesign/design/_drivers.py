@@ -650,12 +650,13 @@ def monte_carlo(
         lambda x: np.asarray(x) if isinstance(x, (jax.Array, np.generic, float, int)) else x,
         theta,
     )
+    host_key: jax.Array | np.ndarray  # not laid out on a mesh
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        key = jax.random.wrap_key_data(
-            np.asarray(jax.random.key_data(key)), impl=jax.random.key_impl(key)
+        host_key = jax.random.wrap_key_data(
+            jnp.asarray(np.asarray(jax.random.key_data(key))), impl=jax.random.key_impl(key)
         )
     else:
-        key = np.asarray(key)
+        host_key = np.asarray(key)
     # every device of every process evaluates its block of each chunk; nothing crosses
     # devices or processes until all chunks are done (gather_chunks), so no process waits
     # for another while it computes
@@ -666,7 +667,7 @@ def monte_carlo(
     show = progress and is_main_process()
     with progress_bar("monte carlo", n_chunks, enabled=show) as bar:
         for c in range(n_chunks):
-            out.append(run_chunk(key, c, theta))  # dispatched; runs while the next is queued
+            out.append(run_chunk(host_key, c, theta))  # dispatched; runs while the next is queued
             if c:
                 out[c - 1].block_until_ready()
                 bar.update()

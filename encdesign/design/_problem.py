@@ -152,6 +152,11 @@ class Variable:
         return self.values is not None
 
     @property
+    def choices(self) -> tuple[float, ...]:
+        """The allowed values of a discrete variable (empty for a continuous one), SI."""
+        return self.values if self.values is not None else ()
+
+    @property
     def scale(self) -> float:
         """A typical size used to normalise the variable for solvers (SI)."""
         if math.isfinite(self.lower) and math.isfinite(self.upper) and self.upper > self.lower:
@@ -475,7 +480,7 @@ def parse_problem(
         limit = model_limit(k, spec)
         if limit is not None and not isinstance(v, bool | list | tuple) and not limit.admits(v):
             raise input_error(_where(src, "model", k), f"{show(v)}", limit.describe())
-        model[k] = float(v) if isinstance(default, float) else v
+        model[k] = float(v) if isinstance(default, float) and isinstance(v, int | float) else v
     if "n_angles" in model and "max_order" in model:
         n_ang, order = int(model["n_angles"]), int(model["max_order"])
         if n_ang < 2 * order + 1:

@@ -47,7 +47,7 @@ from scipy.special import ndtr
 
 from .._errors import EncdesignInputError
 from ._sampling import VECTOR_BUILDS, values_of_normals
-from ._status import SUCCESS, DriverStatus
+from ._status import NONFINITE, SUCCESS, DriverStatus
 
 VECTOR = VECTOR_BUILDS
 
@@ -146,9 +146,10 @@ class RareEventResult:
             "status": self.status,
             "message": self.message,
         }
-        if self.lr_gradient is not None:
-            out["lr_gradient"] = dict(zip(self.names, map(float, self.lr_gradient)))
-            out["lr_gradient_stderr"] = dict(zip(self.names, map(float, self.lr_gradient_stderr)))
+        grad, grad_se, names = self.lr_gradient, self.lr_gradient_stderr, self.names
+        if grad is not None and grad_se is not None and names is not None:
+            out["lr_gradient"] = dict(zip(names, map(float, grad)))
+            out["lr_gradient_stderr"] = dict(zip(names, map(float, grad_se)))
         return out
 
 
@@ -296,7 +297,7 @@ def form_design_points(
 
 
 def importance_yield(
-    metric_z: Callable[[jax.Array], jax.Array],
+    metric_z: Callable[..., jax.Array],
     dim: int,
     spec: float,
     *,
@@ -393,7 +394,7 @@ def importance_yield(
         return RareEventResult(
             math.nan, math.nan, n, n_form, pts, betas,
             (float(ndtr(-betas[0])) if betas.size else math.nan), None, None, None, 0,
-            defensive, time.perf_counter() - t0, "nonfinite",
+            defensive, time.perf_counter() - t0, NONFINITE,
             f"{bad} of {n} importance samples gave a non-finite metric",
         )  # fmt: skip
     fail = vals > spec

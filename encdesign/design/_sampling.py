@@ -8,12 +8,13 @@ deterministic functions of the design and can be differentiated.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._distributed import shard_builds
 
@@ -143,7 +144,7 @@ def expected_values(
     return _chunked_values(fn, theta, key, n, dim, chunk_size)
 
 
-def grid_points(lower: Sequence[float], upper: Sequence[float], n_per_dim: Any) -> np.ndarray:
+def grid_points(lower: ArrayLike, upper: ArrayLike, n_per_dim: ArrayLike) -> np.ndarray:
     """Full-factorial grid ``[prod(n), d]`` between ``lower`` and ``upper`` (inclusive)."""
     lo = np.atleast_1d(np.asarray(lower, dtype=np.float64))
     hi = np.atleast_1d(np.asarray(upper, dtype=np.float64))
@@ -152,9 +153,7 @@ def grid_points(lower: Sequence[float], upper: Sequence[float], n_per_dim: Any) 
     return np.array(list(itertools.product(*axes)), dtype=np.float64).reshape(-1, lo.size)
 
 
-def latin_hypercube(
-    key: jax.Array, lower: Sequence[float], upper: Sequence[float], n: int
-) -> np.ndarray:
+def latin_hypercube(key: jax.Array, lower: ArrayLike, upper: ArrayLike, n: int) -> np.ndarray:
     """Latin hypercube sample ``[n, d]``: each variable's range cut into ``n`` equal strata,
     one point per stratum, strata paired at random (``key``), uniform inside a stratum."""
     lo = np.atleast_1d(np.asarray(lower, dtype=np.float64))

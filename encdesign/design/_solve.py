@@ -193,7 +193,7 @@ class _Evaluator:
     def u_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return (self.lower - self.start) / self.scale, (self.upper - self.start) / self.scale
 
-    def scalar_outputs(self, u: jax.Array) -> dict[str, float]:
+    def scalar_outputs(self, u: jax.Array | np.ndarray) -> dict[str, float]:
         out = self.compiled_outputs(jnp.asarray(u, dtype=jnp.float64))
         return {k: float(v) for k, v in out.items() if jnp.ndim(v) == 0}
 
@@ -429,7 +429,7 @@ def solve_problem(
         A :class:`ProblemResult`; ``best`` is the successful design with the smallest
         (sense-adjusted) objective.
     """
-    choices = {v.name: list(v.values) for v in problem.discrete}
+    choices = {v.name: list(v.choices) for v in problem.discrete}
     enum = enumerate_designs(
         lambda combo: _solve_combo(problem, combo, recorder, progress and not choices),
         choices,
@@ -439,7 +439,7 @@ def solve_problem(
     best = enum.best_solution if enum.ok else None
     fresh = None
     if best is not None and fresh_replicates:
-        first = {v.name: v.values[0] for v in problem.discrete}
+        first = {v.name: v.choices[0] for v in problem.discrete}
         start = {v.name: float(v.start) for v in problem.continuous}
         fresh = validate_problem(
             problem, (best.discrete, best.inputs), (first, start), replicates=fresh_replicates
@@ -512,7 +512,7 @@ def check_gradients(
     absolute error, ``|ad - fd| <= atol``, and says so (``basis = "absolute"``); elsewhere
     it is ``ok`` when ``|ad - fd| <= rtol * max(|ad|, |fd|) + atol``.
     """
-    combo = {v.name: v.values[0] for v in problem.discrete}
+    combo = {v.name: v.choices[0] for v in problem.discrete}
     combo.update(discrete or {})
     ev = _Evaluator(problem, combo)
     names = [problem.objective.outputs[0]] + [
@@ -563,7 +563,7 @@ def check_gradients(
 def discrete_combinations(problem: Problem) -> list[dict[str, Any]]:
     """All combinations of the discrete variables' values (``[{}]`` when there are none)."""
     names = [v.name for v in problem.discrete]
-    return [dict(zip(names, c)) for c in itertools.product(*(v.values for v in problem.discrete))]
+    return [dict(zip(names, c)) for c in itertools.product(*(v.choices for v in problem.discrete))]
 
 
 def _monte_carlo_builds(problem: Any) -> int:

@@ -63,7 +63,7 @@ def yield_stats(values: Any, spec: float) -> tuple[float, float]:
     return p, math.sqrt(max(p * (1.0 - p), 0.0) / v.size)
 
 
-def smooth_yield(values: jax.Array, spec: float, width: float) -> jax.Array:
+def smooth_yield(values: jax.Array, spec: float | jax.Array, width: float | jax.Array) -> jax.Array:
     """Mean of ``sigmoid((spec - v) / width)``: a differentiable yield surrogate."""
     return jnp.mean(jax.nn.sigmoid((spec - values) / width))
 
@@ -445,7 +445,7 @@ def allocate(
     scale = 1.0
     rare_out = None
     usable = status in (SUCCESS, MAX_STEPS)  # a capped answer is scaled too, but stays marked
-    if usable and rare_metric is not None:
+    if usable and rare_metric is not None and rare_dim is not None and rare_key is not None:
         scale, rare_out = _rare_scale(
             rare_metric, rare_dim, rare_key, rare_n, lambda fac: np.asarray(
                 sig_of(jnp.asarray(u + math.log(fac)))), spec, final_target,
@@ -656,7 +656,10 @@ def pareto_front(
     """
     if "start" in allocate_kw:
         raise input_error("pareto_front", "'start' given", "warm starts chosen by the front")
-    ts = sorted({float(t) for t in targets} | ({float(anchor_target)} if anchor else set()))
+    anchor_t = None if anchor_target is None else float(anchor_target)
+    ts = sorted(
+        {float(t) for t in targets} | ({anchor_t} if anchor and anchor_t is not None else set())
+    )
     if not ts:
         raise input_error("pareto_front.targets", "empty", "at least one yield target")
     for t in ts:
@@ -666,7 +669,7 @@ def pareto_front(
         raise input_error("pareto_front.anchor", "given without anchor_target", "both")
     allocs: dict[float, Allocation] = {}
     warm_from: dict[float, float | None] = {}
-    i0 = ts.index(float(anchor_target)) if anchor is not None else 0
+    i0 = ts.index(anchor_t) if anchor is not None and anchor_t is not None else 0
     order = [i0, *range(i0 + 1, len(ts)), *range(i0 - 1, -1, -1)]
     with progress_bar("pareto front", len(ts), enabled=progress) as bar:
         for i in order:
