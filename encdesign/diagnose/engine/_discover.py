@@ -211,7 +211,7 @@ def accumulate(
     C = prep.n_channels
     S = len(cinfo["speed"])
     sig = np.asarray(prep.sigma, float)
-    has_temp = str(prep.consts.get("driver_name", "time")) != "time" and "driver" in prep.rows
+    has_temp = prep.ctx.driver_name != "time" and "driver" in prep.rows
     blocks = ["static", "growth"] + (["temperature"] if has_temp else [])
     nb = len(blocks)
     layout, slices, q0 = [], [], 0
