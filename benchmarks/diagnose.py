@@ -1,6 +1,7 @@
 """Benchmark: the discrepancy-finder engine's speed and memory, and its base term vs NumPy.
 
-1. The multihead base term (``encdesign.diagnose._multihead``: disk error function through
+1. The multihead base term (``encdesign.diagnose.kinds.multihead._multihead``: disk error function
+   through
    every head, placements, run angle offsets, one constant per head and run) evaluated by the
    engine (JAX, jit) and by a plain NumPy implementation of the same equation in this file:
    compared (max abs difference, rad) and timed.
@@ -14,8 +15,16 @@
    a 2-head bench with ``theta_ref`` and per-run zeros, clean), ``--rows`` (default 1e4 1e5
    1e6; add 1e7 by hand: about 10 min on a quiet machine). Targets: 1e6 rows in <= 5 min and
    < 2 GB; 1e7 rows < 2 GB (``within_target`` in each record).
+4. Long records (issue 43), ``--long-rows 1e6 1e7``: 4 heads, clean and with a 31 Hz
+   vibration, written to a ``--long-table`` file (Parquet by default) and diagnosed from
+   it, with the wall time per stage in ``stages_s``: ``parsing`` (loading the file), then
+   the engine's own ``timings_s`` (``data``, ``prepare``, ``base_fit``, ``views``,
+   ``candidates``, ``heldout``, ``select``, ``report``; exclusive, they add up to the
+   diagnosis). One record by hand:
+   ``python benchmarks/diagnose.py --child 1000000 --heads 4 --effect --table parquet``.
 
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
+        [--long-rows 1e6 1e7] [--long-table parquet]
 """
 
 from __future__ import annotations
@@ -150,22 +159,57 @@ def _compile_listener() -> dict:
     return stats
 
 
-def _child(n_rows: int, heads: int, effect: bool | str) -> dict:
+def _through_file(rec, table: str) -> tuple:
+    """Write ``rec`` as a ``table`` (``csv`` or ``parquet``) recording in a temporary folder
+    and load it back: ``(loaded recording, write s, parse s, file bytes)``. The parse time is
+    the ``parsing`` stage of a diagnosis from a file."""
+    import tempfile
+
+    from encdesign import load_recording, write_recording
+
+    with tempfile.TemporaryDirectory(prefix="bench-diagnose-") as tmp:
+        path = Path(tmp) / "rec.toml"
+        t0 = time.perf_counter()
+        write_recording(
+            path, rec.kind, rec.columns, encoder=rec.encoder, parquet=table == "parquet"
+        )
+        t1 = time.perf_counter()
+        del rec
+        back = load_recording(path)
+        t2 = time.perf_counter()
+        size = (path.parent / back.meta["data"]).stat().st_size
+    return back, t1 - t0, t2 - t1, size
+
+
+def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
     """Run one diagnosis in this (fresh) process; report wall and CPU time (user + system,
     s: robust to a loaded machine, where wall time is inflated), the time JAX spent
-    compiling, and peak RSS."""
+    compiling, peak RSS and the wall time per stage (``stages_s``: the engine's
+    ``timings_s``, and ``parsing`` when ``table`` is ``csv`` or ``parquet``: the record is
+    then written to a file of that format and loaded back first)."""
     t0 = time.perf_counter()
     import encdesign  # noqa: F401  (import time counts: a fresh process)
-    from encdesign.diagnose._dispatch import diagnose
+    from encdesign.diagnose import diagnose
 
     stats = _compile_listener()
     rec = _bench_recording(n_rows, heads, 5, effect)
+    stages: dict[str, float] = {}
+    io: dict = {"table": table}
+    if table != "memory":
+        rec, write_s, parse_s, size = _through_file(rec, table)
+        stages["parsing"] = parse_s
+        io.update(write_s=write_s, file_bytes=size)
     t1, c1 = time.perf_counter(), _cpu_s()
     d = diagnose(rec, verbose=False)
     t2, c2 = time.perf_counter(), _cpu_s()
+    stages.update(d.doc.get("timings_s") or {})
+    stages_cpu = dict(d.doc.get("timings_cpu_s") or {})
     ru = resource.getrusage(resource.RUSAGE_SELF)
     rss = ru.ru_maxrss * 1024
     return dict(
+        stages_s=stages,
+        stages_cpu_s=stages_cpu,
+        data_file=io,
         cpu_s_total=ru.ru_utime + ru.ru_stime,
         cpu_s_diagnose=c2 - c1,
         compile_s=sum(v[1] for v in stats.values()),
@@ -198,8 +242,8 @@ def numpy_base(p: dict, theta, alpha, onehot) -> np.ndarray:
 def _terms_vs_numpy(repeats: int) -> dict:
     import jax.numpy as jnp
 
-    from encdesign.diagnose._fit import _val_fn
-    from encdesign.diagnose._multihead import _base_candidate
+    from encdesign.diagnose.engine._fit import _val_fn
+    from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
     rng = np.random.default_rng(0)
     n, C, R, M = 16384, 4, 4, 12
@@ -240,8 +284,9 @@ def _terms_vs_numpy(repeats: int) -> dict:
     )
 
 
-def _spawn(n_rows: int, heads: int, effect: bool | str) -> dict:
+def _spawn(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
     cmd = [sys.executable, __file__, "--child", str(n_rows), "--heads", str(heads)]
+    cmd += ["--table", table]
     if isinstance(effect, str):
         cmd += ["--effect-name", effect]
     elif effect:
@@ -261,6 +306,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--effect", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--effect-name", default=None, help=argparse.SUPPRESS)
     ap.add_argument(
+        "--table",
+        choices=("memory", "csv", "parquet"),
+        default="memory",
+        help="with --child: diagnose the record from a file of this format (times parsing)",
+    )
+    ap.add_argument(
+        "--long-rows",
+        type=float,
+        nargs="*",
+        default=[],
+        help="long records: 4 heads, clean and with a vibration, from a --long-table file, "
+        "with the time per stage (e.g. 1e6 1e7)",
+    )
+    ap.add_argument("--long-table", choices=("csv", "parquet"), default="parquet")
+    ap.add_argument(
         "--effects",
         nargs="*",
         default=None,
@@ -269,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.child is not None:
         eff = args.effect_name if args.effect_name is not None else args.effect
-        print(json.dumps(_child(args.child, args.heads, eff)))
+        print(json.dumps(_child(args.child, args.heads, eff, args.table)))
         return 0
     from encdesign.physics._effects import CATALOG_MULTIHEAD
 
@@ -294,6 +354,12 @@ def main(argv: list[str] | None = None) -> int:
         r = _spawn(int(n), 2, False)
         out["scaling"].append(r)
         print(json.dumps(r), file=sys.stderr, flush=True)
+    out["long_records"] = []
+    for n in args.long_rows:
+        for eff in ("clean", "vibration"):
+            r = _spawn(int(n), 4, eff, args.long_table)
+            out["long_records"].append(r)
+            print(json.dumps(r), file=sys.stderr, flush=True)
     out["load_avg_after"] = os.getloadavg()
     text = json.dumps(out, indent=2)
     if args.json is not None:

@@ -34,7 +34,7 @@ import numpy as np
 from encdesign._errors import EncdesignInputError
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._settings import SETTINGS_FIELDS
+from encdesign.diagnose.engine._settings import SETTINGS_FIELDS
 from encdesign.simulate import draw_plan
 from encdesign.simulate import simulate_plan as simulate
 

@@ -301,6 +301,8 @@ def use_local_devices() -> contextlib.AbstractContextManager:
 def n_build_shards() -> int:
     """How many shards :func:`shard_builds` splits the builds into here and now."""
     am = jax.sharding.get_abstract_mesh()
+    if BUILDS_AXIS in am.manual_axes:  # inside a shard_map over the builds: not split again
+        return 1
     if BUILDS_AXIS in am.axis_names:
         return int(am.shape[BUILDS_AXIS])
     return len(jax.devices())
@@ -333,6 +335,11 @@ def shard_builds(
     """
     n = int(n)
     am = jax.sharding.get_abstract_mesh()
+    if BUILDS_AXIS in am.manual_axes:
+        # already inside a shard_map over the builds (e.g. a user objective that estimates an
+        # expectation, evaluated per build of monte_carlo): this device's slice runs here,
+        # nothing is split again
+        return local_fn(jnp.asarray(0, dtype=jnp.int32), n)
     if BUILDS_AXIS in am.axis_names:
         d = int(am.shape[BUILDS_AXIS])
         sharded, replicated = P(BUILDS_AXIS), P()

@@ -83,14 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     key = jax.random.PRNGKey(args.seed)
     rng = np.random.default_rng(args.seed)
-    errors = ed.reference_errors(
-        bearing_amplitude_m=[],
-        bearing_ratio=[],
-        bearing_phase_rad=[],
-        temperature_rate_k_per_s=0.0,
-        clock_period_s=0.0,
-        jitter_s=0.0,
-    )
+    errors = ed.reference_errors(systematic_only=True)
     m6, m5 = ed.physics.reference_motor(6), ed.physics.reference_motor(5)
     devices = {
         "first_one_pair": (ed.reference_design(1, 1, marks_per_rev=n_marks, key=key, motor=m6), 15),

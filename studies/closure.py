@@ -81,14 +81,7 @@ def _progress(msg: str) -> None:
 
 def _instruments(n_marks: int, key) -> dict:
     """SDS designs and their systematic error physics (no time-varying terms)."""
-    errors = ed.reference_errors(
-        bearing_amplitude_m=[],
-        bearing_ratio=[],
-        bearing_phase_rad=[],
-        temperature_rate_k_per_s=0.0,
-        clock_period_s=0.0,
-        jitter_s=0.0,
-    )
+    errors = ed.reference_errors(systematic_only=True)
     motor6 = ed.physics.reference_motor(6)
     motor5 = ed.physics.reference_motor(5)
     return {

@@ -57,19 +57,6 @@ def _progress(msg: str) -> None:
     print(f"[{NAME}] {msg}", file=sys.stderr, flush=True)
 
 
-def _quiet_errors(**kw):
-    base = dict(
-        bearing_amplitude_m=[],
-        bearing_ratio=[],
-        bearing_phase_rad=[],
-        temperature_rate_k_per_s=0.0,
-        clock_period_s=0.0,
-        jitter_s=0.0,
-    )
-    base.update(kw)
-    return ed.reference_errors(**base)
-
-
 def noise_test(design, n_revs: int, key) -> dict:
     """Single-revolution readings at rest for three bearing-noise spectra."""
     bearing = bearing_noise_default()
@@ -79,13 +66,15 @@ def noise_test(design, n_revs: int, key) -> dict:
     rms_m = float(np.sqrt(np.sum(amp**2)))
     scale = 0.2
     variants = {
-        "coherent_whirl": _quiet_errors(**bearing),
-        "whirl_without_cage": _quiet_errors(
+        "coherent_whirl": ed.reference_errors(systematic_only=True, **bearing),
+        "whirl_without_cage": ed.reference_errors(
+            systematic_only=True,
             bearing_amplitude_m=amp[keep],
             bearing_ratio=ratio[keep],
             bearing_phase_rad=np.asarray(bearing["bearing_phase_rad"])[keep],
         ),
-        "whirl_scaled_0.2": _quiet_errors(
+        "whirl_scaled_0.2": ed.reference_errors(
+            systematic_only=True,
             bearing_amplitude_m=amp * scale,
             bearing_ratio=ratio,
             bearing_phase_rad=np.asarray(bearing["bearing_phase_rad"]),
@@ -113,7 +102,7 @@ def pair_offset(design, offset_arcsec: float, phis_rad) -> dict:
     still assume 180°) and read both pairs at several platform angles."""
     pair = np.asarray(
         ed.physics.moved_sensor_pair_errors(
-            design, 1, offset_arcsec * ARCSEC, phis_rad, _quiet_errors()
+            design, 1, offset_arcsec * ARCSEC, phis_rad, ed.reference_errors(systematic_only=True)
         )
     )
     offsets = [float(x) / ARCSEC for x in pair[:, 1, 1] - pair[:, 0, 0]]
@@ -211,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     two_pair_noise_mas = noise["coherent_whirl"]["average_std_arcsec"] * 1000
     pz = piezo(max(two_pair_noise_mas, 1e-3), rng)
     phi_error = jax.jit(ed.sds_phi_error)
-    errs = _quiet_errors()
+    errs = ed.reference_errors(systematic_only=True)
 
     grid = np.linspace(-0.2, 0.3, 201)
     e_grid = np.asarray(phi_error(design, jnp.asarray(grid), errs))

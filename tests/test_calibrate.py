@@ -216,6 +216,59 @@ def test_bad_closure_recording_refused(tmp_path, edit, message, capsys):
     assert err.count("\n") == 1 and "error" in err
 
 
+def _row(s, j, n=4):
+    return f"{s},{j},{2 * math.pi * ((s + j) % n) / n + 1e-6}"
+
+
+@pytest.mark.parametrize(
+    "rows, message, bad_rows",
+    [
+        # face index outside 0 … N-1: the row itself
+        (
+            [_row(0, 0), _row(0, 1), "0,7,0.5", _row(0, 3), _row(0, 0)],
+            r"unknown face index 7",
+            (2,),
+        ),
+        # out of sequence: the first row that differs
+        (
+            [_row(0, 0), _row(0, 2), _row(0, 1), _row(0, 3), _row(0, 0)],
+            r"face 2 where face 1",
+            (1,),
+        ),
+        # a setting in two blocks: the first row of its second block
+        (
+            [_row(s, j) for s in (0, 1, 0) for j in (0, 1, 2, 3, 0)],
+            r"setting 0 appears in more than one block",
+            (10,),
+        ),
+        # a setting that does not start at face 0: its first row
+        ([_row(0, j) for j in (1, 2, 3, 0, 1)], r"starts at face 1", (0,)),
+        # no return to face 0: the last face's row
+        ([_row(0, j) for j in (0, 1, 2, 3)], r"does not return to face 0", (3,)),
+        # rows after the return: the first extra row
+        ([_row(0, j) for j in (0, 1, 2, 3, 0, 1)], r"row\(s\) after its return", (5,)),
+        # faces missing: the setting's first and last rows
+        ([_row(0, j) for j in (0, 1, 3, 0)], r"missing face\(s\) \[2\]", (0, 3)),
+    ],
+)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_bad_closure_recording_names_the_file_line(tmp_path, rows, message, bad_rows, seed):
+    """The closure check names the line of the file, counted past the blank lines the
+    table reader skips (before the first row, between rows), not ``row + 2``."""
+    rng = np.random.default_rng(seed)
+    lines, line_of = ["setting,face,reading"], {}
+    for i, r in enumerate(rows):
+        lines += [""] * int(rng.integers(0, 3))
+        lines.append(r)
+        line_of[i] = len(lines)
+    path = _write_raw(tmp_path, lines)
+    with pytest.raises(EncdesignInputError, match=message) as exc:
+        load_recording(path)
+    text = str(exc.value)
+    want = "–".join(str(line_of[i]) for i in bad_rows)
+    assert f"c.csv, line{'s' if len(bad_rows) > 1 else ''} {want}" in text, text
+
+
 def test_good_raw_table_loads(tmp_path):
     rec = load_recording(_write_raw(tmp_path, _table(tmp_path)))
     assert rec.n_rows == 10

@@ -14,8 +14,8 @@ import pytest
 import encdesign
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._fit import valjac_fn
-from encdesign.diagnose._multihead import VIBRATION, _base_candidate
+from encdesign.diagnose.engine._fit import valjac_fn
+from encdesign.diagnose.kinds.multihead._multihead import VIBRATION, _base_candidate
 from encdesign.physics import _effects as fx
 from tests.helpers import validate_diagnosis
 
@@ -43,15 +43,21 @@ def _bench(
     wobble: bool = False,
     ecc_shift: float = 0.0,
     interp: float = 0.0,
+    alpha_deg: tuple[float, ...] | None = None,
+    pause_s: float | None = None,
     path: Path | None = None,
 ):
     """A small multihead bench: disk errors of orders 1-5, ``R`` runs of ``n`` rows at
     200 Hz and 1-1.6 rev/s, 0.5 urad noise, and the nuisances / effects asked for."""
     rng = np.random.default_rng(seed)
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.5, 5.8, H - 1))])
+    if alpha_deg is not None:  # a given layout (the draw above keeps the seed's stream)
+        alpha = np.radians(np.asarray(alpha_deg, float))
     ts, ths, runs = [], [], []
     for r in range(R):
         t = np.arange(n) / 200.0
+        if pause_s is not None:  # one clock for the record: each run after a pause
+            t = t + r * (n / 200.0 + pause_s)
         if gap and r == 0:
             t[n // 2 :] += 0.7
         w = 2 * np.pi * (1.0 + 0.6 * r)
@@ -307,14 +313,14 @@ def test_eccentricity_shift_over_many_turns_is_located_and_named(size, tilt):
     validate_diagnosis(d.doc)
     want = ["beam_tilt_axial", "eccentricity_shift"] if tilt else ["eccentricity_shift"]
     assert sorted(e["name"] for e in d.effects) == want, d.doc["report"]
-    # the global time axis lays the runs end to end: run 1's rows follow run 0's
-    tau_true = float(rec.columns["t"][truth["shift_row"]] + rec.columns["t"][1499] + 1 / 200)
+    # reported on the recording's own clock (here one per run), with its run (issue 44 C)
+    t_true = float(rec.columns["t"][truth["shift_row"]])
     es = next(e for e in d.effects if e["name"] == "eccentricity_shift")
-    assert abs(float(np.ravel(es["params"]["shift_time_s"]["value"])[0]) - tau_true) < 0.05
+    assert es["params"]["shift_time_s"]["run"] == 1
+    assert abs(float(np.ravel(es["params"]["shift_time_s"]["value"])[0]) - t_true) < 0.05
     if not tilt:  # alone, the view locates it in the base residual, in run 1, at its row
         f = [f for f in d.doc["findings_before"] if f["view"] == "order_step"]
         assert f and f[0]["where"]["runs"] == [1], d.doc["findings_before"]
-        t_true = float(rec.columns["t"][truth["shift_row"]])
         assert abs(f[0]["where"]["times_s"][1] - t_true) < 0.05
     assert d.doc["goodness_of_fit"]["passes"], d.doc["report"]
 
@@ -468,3 +474,76 @@ def test_quadrature_json_follows_the_same_contract(tmp_path):
     assert d.verdict == "consistent"
     assert d.doc["goodness_of_fit"]["passes"] and d.doc["heldout"]["k"] >= 4
     assert not any("not yet routed" in n for n in d.doc["notes"])
+
+
+@pytest.mark.parametrize(
+    ("seed", "H", "vib", "start"),
+    [(31, 3, False, 0), (32, 4, True, 0), (33, 5, False, 70), (34, 8, True, 0)],
+)
+def test_equally_spaced_heads_without_a_reference_fit_normally(seed, H, vib, start):
+    """Issue 44 A: equally spaced heads without theta_ref see the disk orders that are
+    multiples of H the same at every head (they cancel in head differences, so the common
+    rotation is unobservable). The base held them, and the shaft refinement (the fitted
+    error's head mean: exactly those orders) never diverges: the base residual is the
+    noise, a clean record is consistent and a vibration is named."""
+    step = 360.0 / H
+    rec, _ = _bench(
+        seed,
+        H=H,
+        ref=False,
+        n=600,
+        start_move=start,
+        vibration_hz=37.0 if vib else 0.0,
+        alpha_deg=tuple(step * k for k in range(H)),
+    )
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert "fit_failures" not in d.doc["base"] or not d.doc["base"]["fit_failures"]
+    assert d.doc["status"] == "ok", d.doc["report"]
+    if vib:
+        assert [e["name"] for e in d.effects] == ["vibration"], d.doc["report"]
+        assert d.effects[0]["rms_after"] < 1.2 * NOISE, d.doc["report"]
+    else:
+        assert d.verdict == "consistent", d.doc["report"]
+        assert d.doc["rms_before"] < 1.2 * NOISE, d.doc["report"]
+    held = [u for u in d.doc["base"]["unidentifiable"] if "fourier" in u]
+    assert any(f"[{H - 1}]" in u for u in held), d.doc["base"]["unidentifiable"]
+
+
+def test_a_diverging_shaft_refinement_is_reported_and_the_fit_recovers(monkeypatch):
+    """Issue 44 A: with the symmetric orders left free (the base before the fix), the
+    fit gives them any size and the shaft refinement's fixed point would diverge: it is
+    detected (slope of the head mean), reported under base.fit_failures with its cause,
+    undone, and never reaches the verdict (a clean record stays consistent)."""
+    import encdesign.diagnose.kinds.multihead._multihead as mh
+
+    monkeypatch.setattr(mh, "_symmetric_orders", lambda prep, M, limit=None: [])
+    rec, _ = _bench(35, H=4, ref=False, n=600, alpha_deg=(0.0, 90.0, 180.0, 270.0))
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    fails = d.doc["base"].get("fit_failures", [])
+    assert [f["stage"] for f in fails] == ["refine"], d.doc["report"]
+    assert "slope" in fails[0]["cause"] and "fit failure" in d.doc["report"]
+    assert "refined" not in d.doc["base"]
+    assert d.verdict == "consistent", d.doc["report"]
+
+
+@pytest.mark.parametrize(("seed", "H", "pause"), [(41, 3, 7.0), (42, 4, 2.5), (43, 3, None)])
+def test_located_change_time_is_in_the_recordings_own_clock(seed, H, pause):
+    """Issue 44 C: an eccentricity shift 60 % into the second run is reported at its time
+    on the recording's own ``t`` (one clock with pauses between runs, or a clock per run),
+    with its run and an uncertainty that holds the truth; the located change point too."""
+    rec, truth = _bench(seed, H=H, R=2, n=1500, ecc_shift=2.5, pause_s=pause)
+    t_true = float(rec.columns["t"][truth["shift_row"]])
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    es = next((e for e in d.effects if e["name"] == "eccentricity_shift"), None)
+    assert es is not None, d.doc["report"]
+    p = es["params"]["shift_time_s"]
+    got, se = float(np.ravel(p["value"])[0]), float(np.ravel(p["se"])[0])
+    assert p["run"] == 1 and 0 < se < 0.5, p
+    assert abs(got - t_true) <= 3 * se + 1 / 200, (got, se, t_true)
+    f = [f for f in d.doc["findings_before"] if f["view"] == "order_step"]
+    assert f and f[0]["where"]["runs"] == [1], d.doc["findings_before"]
+    lo, hi = f[0]["where"]["times_s"]
+    assert lo - 1 / 200 <= t_true <= hi + 1 / 200, (lo, hi, t_true)

@@ -13,10 +13,11 @@ from encdesign.diagnose._dispatch import diagnose
 NOISE = 0.5e-6
 
 
-def _drift_record(seed: int, rate_rad_per_s: float) -> Recording:
+def _drift_record(seed: int, rate_rad_per_s: float, temp_k_per_s: float = 0.0) -> Recording:
     """4 heads, 4 runs of 3 s at 200 Hz, 2 s apart, per-run zeros of every head and of the
     reference, disk error orders 1-4; each head drifts ``rate * beta_k`` over the global time
-    (runs end to end with their gaps): the record is about 5x as long as a run."""
+    (runs end to end with their gaps): the record is about 5x as long as a run. With
+    ``temp_k_per_s`` a ``temp_c`` column rises at that rate over the same time."""
     rng = np.random.default_rng(seed)
     alpha = np.array([0.0, 2.1, 4.2, 0.9])
     beta = np.array([1.0, -0.6, 0.3, -0.8])
@@ -27,6 +28,8 @@ def _drift_record(seed: int, rate_rad_per_s: float) -> Recording:
         cols["t"].append(t)
         cols["run"].append(np.full(t.size, r))
         cols["theta_ref"].append(th + rng.uniform(-3, 3))
+        if temp_k_per_s:
+            cols.setdefault("temp_c", []).append(21.0 + temp_k_per_s * (t + 5.0 * r - 10.0))
         for k in range(4):
             e = sum(4e-6 / m * np.sin(m * (th - alpha[k]) + m) for m in range(1, 5))
             e = e + rate_rad_per_s * beta[k] * (t + 5.0 * r - 10.0)
@@ -40,10 +43,23 @@ def _drift_record(seed: int, rate_rad_per_s: float) -> Recording:
 @pytest.mark.parametrize("seed", [1, 2])
 def test_drift_over_runs_with_own_zeros_is_named(seed):
     rate = 0.4e-6  # rad/s: 1.2 urad over a run of head 0, 0.5 urad noise
-    d = diagnose(_drift_record(seed, rate))
-    assert [e["name"] for e in d.effects] == ["thermal_drift"]
-    got = np.asarray(d.effects[0]["params"]["rate"]["value"])
+    k_t = 0.05  # K/s: the temperature follows the drift (0.75 K over the record)
+    d = diagnose(_drift_record(seed, rate, temp_k_per_s=k_t))
+    assert [e["name"] for e in d.effects] == ["thermal_drift"], d.doc["report"]
+    got = np.asarray(d.effects[0]["params"]["rate"]["value"]) * k_t
     np.testing.assert_allclose(got, rate * np.array([1.0, -0.6, 0.3, -0.8]), atol=0.15 * rate)
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_a_drift_in_time_without_temp_c_is_located_never_thermal_drift(seed):
+    """Issue 44 E: without a temp_c column a slow drift is not attributed to temperature:
+    thermal_drift is not testable, and the drift is reported located (view ``drift``) on
+    the heads that drift most."""
+    d = diagnose(_drift_record(seed, 0.4e-6))
+    assert d.verdict == "unexplained" and not d.effects, d.doc["report"]
+    assert any(n["name"] == "thermal_drift" for n in d.doc["not_testable"])
+    drift = [u for u in d.doc["unexplained"] if u.get("view") == "drift"]
+    assert drift and 0 in drift[0]["where"]["heads"], d.doc["unexplained"][:3]
 
 
 def test_no_drift_is_not_named():

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.diagnose._fit import valjac_fn
-from encdesign.diagnose._multihead import _base_candidate
-from encdesign.diagnose._protocol import KeptRows, RowColumns
+from encdesign.diagnose.engine._fit import valjac_fn
+from encdesign.diagnose.engine._protocol import KeptRows, RowColumns
+from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
 
 @pytest.mark.parametrize("all_kept", [True, False])
@@ -109,8 +109,8 @@ def test_prepared_record_holds_little_per_row_and_lazy_columns_are_exact(ref):
     small indices per row (and the heads' mean without a reference); every other row column is
     the recording's own array or
     lazy, and a lazy column read per chunk equals the whole column."""
-    from encdesign.diagnose._multihead import multihead_data
-    from encdesign.diagnose._prepare import prepare
+    from encdesign.diagnose.engine._prepare import prepare
+    from encdesign.diagnose.kinds.multihead._multihead import multihead_data
 
     rec = _bench(2000, 3, ref)
     kd = multihead_data(rec)
@@ -172,7 +172,7 @@ def test_coverage_resolves_orders_above_the_per_revolution_nyquist(spr, revs, li
     """A whole number of samples per revolution aliases order spr/2 onto lower ones;
     many revolutions at a rate that is not one fill the circle (all orders to 40 resolved);
     half a turn cannot tell order 2 from order 1 and a constant."""
-    from encdesign.diagnose._multihead import coverage_limit
+    from encdesign.diagnose.kinds.multihead._multihead import coverage_limit
 
     n = int(spr * revs)
     th = np.arange(n) * 2 * np.pi / spr + 0.3
@@ -261,7 +261,7 @@ def test_a_quantized_reading_is_not_read_as_glitches_or_count_jumps():
     their MAD is 0, and before every step of the staircase read as a glitch or a count
     jump (595 on a concealed bench). The trimmed-RMS scale sees the lattice; a real glitch
     of 60 sigma is still found."""
-    from encdesign.diagnose._prepare import find_glitches, robust_scale
+    from encdesign.diagnose.engine._prepare import find_glitches, robust_scale
 
     rng = np.random.default_rng(4)
     n, sigma = 3000, 1e-4
@@ -387,7 +387,7 @@ def test_wobble_rule_needs_few_cycles_only_at_two_speeds(speeds, revs, refused):
     from types import SimpleNamespace
 
     from encdesign.diagnose import FinderSettings
-    from encdesign.diagnose._multihead_terms import _wb_plausible
+    from encdesign.diagnose.kinds.multihead._multihead_terms import _wb_plausible
 
     omega = np.concatenate([np.full(10, 2 * np.pi * s) for s in speeds])
     ctx = SimpleNamespace(

@@ -19,6 +19,7 @@ import encdesign
 from encdesign import EncdesignInputError
 from encdesign.design import parse_problem, solve_problem
 from encdesign.objectives import (
+    AbstractBuildDesign,
     EncoderDesign,
     LayoutDesign,
     Tolerances,
@@ -159,6 +160,48 @@ def test_layout_residual_equals_cramer_pipeline_on_the_n_plus_1_layout():
     a = build_metrics(cramer, TOL, key=key, n_builds=6)
     b = layout_metrics(lay, TOL, key=key, n_builds=6)
     np.testing.assert_allclose(b, a, rtol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "cls, heads",
+    [
+        (EncoderDesign, {"reference_angle_rad": 0.3157}),
+        (LayoutDesign, {"head_angles_rad": [0.0, 2.1, 4.0]}),
+    ],
+)
+def test_both_designs_share_the_geometry_and_its_checks(cls, heads):
+    """The geometry, orders and sampling are declared and checked once
+    (:class:`AbstractBuildDesign`); each design adds its heads."""
+    d = cls(radius_m=0.02, **heads, max_order=4, grating_orders=5, axial_orders=1, n_angles=16)
+    assert isinstance(d, AbstractBuildDesign)
+    assert (float(d.tilt_rad), float(d.gap_m)) == (0.0, 1e-3)
+    np.testing.assert_allclose(d.theta_rad, np.arange(16) * 2 * np.pi / 16)
+    assert n_build_normals(d) == 2 + 2 + 2 * d.head_angles_rad.shape[0] + 2 * 5 + 2 * 1
+    with pytest.raises(EncdesignInputError, match=rf"{cls.__name__}\.n_angles: 8 cannot resolve"):
+        cls(radius_m=0.02, **heads, max_order=4, n_angles=8)
+    with pytest.raises(EncdesignInputError, match=rf"{cls.__name__}\.radius_m: -0\.1, expected"):
+        cls(radius_m=-0.1, **heads)
+    with pytest.raises(EncdesignInputError, match=rf"{cls.__name__}: max_order, grating"):
+        cls(radius_m=0.02, **heads, axial_orders=-1)
+    with pytest.raises(TypeError):  # past the radius and the heads, keywords only
+        cls(0.02, *heads.values(), 6e-3)
+
+
+def test_problem_model_builds_both_designs_alike():
+    """The registry builds either design from one set of a problem model's keys."""
+    from encdesign.design._registry import _design_from, _geometry
+
+    model = {
+        "radius_m": 0.03, "tilt_rad": 2e-3, "gap_m": 5e-4, "n_heads": 4, "max_order": 6.0,
+        "grating_orders": 7, "axial_orders": 1, "n_angles": 40,
+    }  # fmt: skip
+    enc = _design_from(model, 0.4)
+    lay = LayoutDesign(head_angles_rad=enc.head_angles_rad, **_geometry(model))
+    for d in (enc, lay):
+        assert (float(d.radius_m), float(d.tilt_rad), float(d.gap_m)) == (0.03, 2e-3, 5e-4)
+        assert (d.max_order, d.grating_orders, d.axial_orders, d.n_angles) == (6, 7, 1, 40)
+        assert type(d.max_order) is int
+    assert enc.n_heads == 4 and lay.n_heads == 5
 
 
 def test_grating_only_build_is_compensated():

@@ -15,8 +15,8 @@ import pytest
 
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._document import nuisance_rows
-from encdesign.diagnose._html import fitted_curves, render_html, report_inputs
+from encdesign.diagnose.engine._document import nuisance_rows
+from encdesign.diagnose.engine._html import fitted_curves, render_html, report_inputs
 from encdesign.io._recording import write_recording
 from encdesign.simulate import simulate_plan as simulate
 from encdesign.simulate import simulate_quadrature, write_concealed_sds

@@ -3,9 +3,10 @@
 Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``_array``,
 ``_progress``, ``_tuning``); ``_cpu`` and ``physics``; ``io``; the tools ``design``,
 ``diagnose``, ``calibrate`` (and any later tool subpackage), which never import each
-other; ``simulate`` (the bench simulators: may use the tools' types, e.g. a ``Design``, and
-none of them imports it); ``cli``; the public facades
-(``__init__``, ``objectives``).
+other (inside ``diagnose``: the engine below the kinds, the kinds independent of each other,
+the registry on top); ``simulate`` (the bench simulators: may use the tools' types, e.g. a
+``Design``, and none of them imports it); ``cli``; the public facades (``__init__``,
+``objectives``).
 A module may import its own subpackage and any lower layer. Every import counts, including
 those inside functions: a lazy import hides a circle, it does not remove it.
 """
@@ -263,6 +264,88 @@ def test_io_imports_no_physics():
         if _layer(d) == "physics"
     )
     assert not bad, "\n".join(bad)
+
+
+def _unresolved_relative_imports(mods: dict[str, Path]) -> list[str]:
+    bad = []
+    for mod, path in mods.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.ImportFrom) and node.level):
+                continue
+            base = mod.split(".")[:-1]
+            up = node.level - 1
+            spec = "." * node.level + (node.module or "")
+            if up > len(base):
+                bad.append(f"{mod}: from {spec} import ... leaves the package")
+                continue
+            target = base[: len(base) - up] + (node.module.split(".") if node.module else [])
+            name = ".".join(target)
+            if target and name not in mods and f"{name}.__init__" not in mods:
+                bad.append(f"{mod}: from {spec} import ... (no module encdesign.{name})")
+    return sorted(bad)
+
+
+def test_relative_imports_resolve():
+    """Every relative import names a module of the package (a moved module's lazy import
+    inside a function would otherwise fail only when that function runs)."""
+    bad = _unresolved_relative_imports(_modules())
+    assert not bad, "\n".join(bad)
+
+
+def test_unresolved_import_would_fail(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def g():\n    from ...engine._prepare import x\n", encoding="utf-8")
+    mods = {"diagnose.engine._stepped": f, "diagnose.engine._prepare": f}
+    assert _unresolved_relative_imports(mods)
+    f.write_text("def g():\n    from ._prepare import x\n", encoding="utf-8")
+    assert not _unresolved_relative_imports(mods)
+
+
+def _diagnose_layer_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Inside ``diagnose/``: the engine (``diagnose.engine``) imports only itself; a kind
+    (``diagnose.kinds.<kind>``) imports the engine and its own folder, never another kind;
+    the registry and the entry (``diagnose._registry``, ``_dispatch``, ``__init__``) sit on
+    top."""
+    bad = []
+    for m, deps in graph.items():
+        p = m.split(".")
+        if p[0] != "diagnose" or len(p) < 3 or p[1] not in ("engine", "kinds"):
+            continue
+        for d in deps:
+            q = d.split(".")
+            if q[0] != "diagnose":
+                continue
+            if p[1] == "engine" and q[1] != "engine":
+                bad.append(f"{m} imports {d}: the engine imports no kind and nothing above it")
+            elif p[1] == "kinds" and len(p) > 3:
+                own = q[1] == "kinds" and len(q) > 3 and q[2] == p[2]
+                if not (own or q[1] == "engine"):
+                    bad.append(f"{m} imports {d}: a kind imports the engine and itself only")
+    return sorted(bad)
+
+
+def test_diagnose_engine_below_kinds_and_kinds_apart():
+    """``diagnose/`` layers (``docs/DEVELOPING.md``): engine below kinds, kinds independent
+    of each other, the registry (``diagnose._registry.KINDS``) and the entry above both."""
+    graph = _imports(_modules())
+    assert any(m.startswith("diagnose.kinds.") for m in graph)  # the layout is there
+    assert any(m.startswith("diagnose.engine.") for m in graph)
+    bad = _diagnose_layer_violations(graph)
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "mod, dep",
+    [
+        ("diagnose.engine._document", "diagnose.kinds.multihead._reference_terms"),
+        ("diagnose.engine._fit", "diagnose._registry"),
+        ("diagnose.kinds.multihead._multihead", "diagnose.kinds.sds._sds"),
+        ("diagnose.kinds.sds._sds", "diagnose._dispatch"),
+    ],
+)
+def test_diagnose_layer_check_would_fail(mod, dep):
+    assert _diagnose_layer_violations({mod: {dep}})
+    assert not _diagnose_layer_violations({mod: {"diagnose.engine._protocol"}})
 
 
 def test_simulate_is_imported_by_no_tool():

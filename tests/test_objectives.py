@@ -76,7 +76,7 @@ def test_self_compensation_removes_degenerate_grating_modes():
     flat = EncoderDesign(
         0.0254,
         DESIGN.reference_angle_rad,
-        0.0,
+        tilt_rad=0.0,
         n_heads=3,
         max_order=8,
         grating_orders=8,

@@ -8,8 +8,8 @@ import pytest
 from encdesign import write_recording
 from encdesign.cli import main
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._motion import candidate_orders
-from encdesign.diagnose._quadrature import ray_radius
+from encdesign.diagnose.kinds.motion._motion import candidate_orders
+from encdesign.diagnose.kinds.quadrature._quadrature import ray_radius
 from tests.helpers import validate_diagnosis
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
@@ -42,7 +42,7 @@ def test_candidate_orders_of_a_14_pole_12_slot_motor():
 def test_shared_motor_orders_go_to_the_lowest_harmonic():
     """84 = lcm(14, 12) is cogging's fundamental, the 12th multiple of p and the 7th of s:
     credited to cogging, reported as shared with the other two; 7 = p goes to the magnets."""
-    from encdesign.diagnose._motion import assigned_orders
+    from encdesign.diagnose.kinds.motion._motion import assigned_orders
 
     orders, shared = assigned_orders(7, 12, 200)
     assert orders["cogging"] == [84, 168]

@@ -15,8 +15,8 @@ import scipy.linalg
 
 from encdesign import EncdesignInputError, load_recording, write_recording
 from encdesign.cli import main
-from encdesign.diagnose import _reference_data as rd
-from encdesign.diagnose import _reference_terms as rt
+from encdesign.diagnose.kinds.multihead import _reference_data as rd
+from encdesign.diagnose.kinds.multihead import _reference_terms as rt
 from encdesign.io._realdata import import_magalpha, import_moteus
 from encdesign.physics import _sensor_effects as se
 from encdesign.simulate import _conceal_reference as cr
@@ -368,7 +368,7 @@ def test_direction_offset_and_delay_are_collinear_at_one_speed():
 
 def _context(cols, truth):
     """The engine's row columns and Context for a simulated bench (kept samples = all)."""
-    from encdesign.diagnose._candidates import Context
+    from encdesign.diagnose.engine._candidates import Context
 
     th = cols["theta_ref"]
     run = cols.get("run", np.zeros(th.size, dtype=np.int64))
@@ -518,7 +518,7 @@ def _diagnosed(tmp_path, effect, seed):
 
 @pytest.mark.parametrize("effect", se.CATALOG_REFERENCE)
 def test_engine_names_and_recovers_each_effect_within_10_percent(tmp_path, effect):
-    pytest.importorskip("encdesign.diagnose._engine")
+    pytest.importorskip("encdesign.diagnose.engine._engine")
     doc, named, params = _diagnosed(tmp_path, effect, SEEDS[0])
     assert doc["verdict"] != "consistent"
     if effect == "direction_hysteresis":
@@ -563,7 +563,7 @@ def _plain_direction_offset(rec, max_order):
 def test_engine_on_the_measured_sensors(name):
     from encdesign.diagnose import diagnose
 
-    pytest.importorskip("encdesign.diagnose._engine")
+    pytest.importorskip("encdesign.diagnose.engine._engine")
     rec = load_recording(DATA / f"{name}.toml")
     doc = diagnose(rec).doc
     b = doc["base"]["terms"]["base"]

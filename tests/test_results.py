@@ -13,9 +13,9 @@ import pytest
 from encdesign._errors import DiagnosisError
 from encdesign.diagnose import Diagnosis, FinderSettings
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose._engine import run_engine
-from encdesign.diagnose._multihead import MULTIHEAD
-from encdesign.diagnose._results import Alternative, Confounded, Effect, Finding, Refusal
+from encdesign.diagnose.engine._engine import run_engine
+from encdesign.diagnose.engine._results import Alternative, Confounded, Effect, Finding, Refusal
+from encdesign.diagnose.kinds.multihead._multihead import MULTIHEAD
 from encdesign.io._study import to_jsonable
 from tests.helpers import slow_wobble_bench, stepped_sensor_record, validate_diagnosis
 
@@ -163,7 +163,7 @@ def test_every_refusal_in_the_json_names_its_rule(make):
     """Issue 22 acceptance: each refusal (and not-testable candidate, confounded pair,
     doubt, alternative) in the JSON carries the name of the rule that decided it: a
     ``FinderSettings`` field, a named rule or ``<candidate>.plausible``."""
-    from encdesign.diagnose._settings import is_rule_name
+    from encdesign.diagnose.engine._settings import is_rule_name
 
     d = make()
     validate_diagnosis(d.to_json())
@@ -175,7 +175,7 @@ def test_every_refusal_in_the_json_names_its_rule(make):
 
 def test_rule_names_are_checked():
     """The check above can fail: a missing or unknown rule is not a rule name."""
-    from encdesign.diagnose._settings import is_rule_name
+    from encdesign.diagnose.engine._settings import is_rule_name
 
     assert is_rule_name("bic_min") and is_rule_name("bearing_wobble.plausible")
     assert is_rule_name("better_candidate") and is_rule_name("applies")

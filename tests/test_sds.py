@@ -292,6 +292,28 @@ def test_thermal_drift_and_axial_shift():
 # ----------------------------------------------------------------------------- recordings
 
 
+def test_reference_errors_systematic_only():
+    """``systematic_only`` is the studies' "no random or time-varying terms" call, field for
+    field; keywords still override it, and the full set keeps its noise."""
+    explicit = ed.reference_errors(
+        bearing_amplitude_m=[],
+        bearing_ratio=[],
+        bearing_phase_rad=[],
+        temperature_rate_k_per_s=0.0,
+        clock_period_s=0.0,
+        jitter_s=0.0,
+    )
+    quiet = ed.reference_errors(systematic_only=True)
+    a, b = jax.tree.leaves(explicit), jax.tree.leaves(quiet)
+    assert jax.tree.structure(explicit) == jax.tree.structure(quiet)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    assert float(quiet.axis_tilt_rad) > 0 and float(quiet.thermal_drift_rad_per_k) > 0
+    assert float(ed.reference_errors(systematic_only=True, jitter_s=2e-9).jitter_s) == 2e-9
+    full = ed.reference_errors()
+    assert float(full.jitter_s) > 0 and np.size(full.bearing_amplitude_m) > 0
+
+
 def test_recording_round_trip(tmp_path):
     d = sds_reference(2, 3)
     phis = np.asarray([0.0, 1.0, 2.5, 4.0])

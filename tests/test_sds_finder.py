@@ -1,5 +1,5 @@
 """Discrepancy finder for sds recordings: the ``sds`` kind of the engine
-(``encdesign.diagnose._sds``)."""
+(``encdesign.diagnose.kinds.sds._sds``)."""
 
 from __future__ import annotations
 
@@ -15,12 +15,12 @@ import pytest
 import encdesign  # noqa: F401  (float64)
 from encdesign.cli import main as cli_main
 from encdesign.diagnose import DEFAULT_SETTINGS, diagnose
-from encdesign.diagnose._candidates import Context
-from encdesign.diagnose._sds import finish_sds
-from encdesign.diagnose._sds_data import sds_data, sds_prepare, stamp_lattice
-from encdesign.diagnose._sds_noise import _level_sigma, _saturating_columns, dof_widening
-from encdesign.diagnose._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
-from encdesign.diagnose._sds_terms import sds_candidates as _sds_candidates
+from encdesign.diagnose.engine._candidates import Context
+from encdesign.diagnose.kinds.sds._sds import finish_sds
+from encdesign.diagnose.kinds.sds._sds_data import sds_data, sds_prepare, stamp_lattice
+from encdesign.diagnose.kinds.sds._sds_noise import _level_sigma, _saturating_columns, dof_widening
+from encdesign.diagnose.kinds.sds._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
+from encdesign.diagnose.kinds.sds._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
 from encdesign.simulate import write_concealed_sds
 from tests.helpers import validate_diagnosis
@@ -277,7 +277,7 @@ def test_sensor_delay_step_located_and_named(sds_bench, phi_ref):
 def test_delay_reference_sensor_column_is_zero(sds_bench):
     """Without phi_ref the reference sensor's delay column is exactly zero (held by rule,
     deterministically), the others are not: no tie left for the pivoting to break."""
-    from encdesign.diagnose._fit import valjac_fn
+    from encdesign.diagnose.engine._fit import valjac_fn
 
     rec, _ = sds_bench(None, "clear", False)
     kd = sds_data(rec)
@@ -499,13 +499,13 @@ def test_coil_order_count_follows_the_parameter_budget():
     # K = 5 revolutions (180 values, 18 params) leaves all 5 coil orders, K = 4 (144
     # values, 14.4) the lowest 3; no budget at all leaves all (the rule refuses by name)
     def ctx(K, R=12, M=3):
-        c = dict(psi_m=np.zeros(M), base_orders=[6, 12])
+        c = dict(psi_m=np.zeros(M))
         ns = types.SimpleNamespace(n_runs=R, n_channels=K * M, consts=c, settings=DEFAULT_SETTINGS)
         return cast(Context, ns)
 
-    assert coil_order_count(ctx(5), 6) == 5
-    assert coil_order_count(ctx(4), 6) == 3
-    assert coil_order_count(ctx(2, R=4), 6) == 5
+    assert coil_order_count(ctx(5), 6, [6, 12]) == 5
+    assert coil_order_count(ctx(4), 6, [6, 12]) == 3
+    assert coil_order_count(ctx(2, R=4), 6, [6, 12]) == 5
 
 
 def test_clear_coil_mismatch_named_when_a_short_run_leaves_four_revolutions(tmp_path):

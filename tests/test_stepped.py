@@ -1,11 +1,11 @@
-"""Static stepped calibrations (issue 22, item 5): ``encdesign.diagnose._stepped``."""
+"""Static stepped calibrations (issue 22, item 5): ``encdesign.diagnose.engine._stepped``."""
 
 import numpy as np
 import pytest
 from helpers import stepped_sensor_record, validate_diagnosis
 
-from encdesign.diagnose import _stepped
 from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose.engine import _stepped
 
 
 def test_approach_direction_forward_fills_the_last_move():

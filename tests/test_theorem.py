@@ -10,6 +10,7 @@ from encdesign import head_errors, make_model, surviving_orders
 from encdesign.physics import (
     averaged_error,
     fourier_coefficients,
+    fourier_series,
     mode_amplitudes,
     mode_transfer,
     model_mode_transfer,
@@ -100,6 +101,30 @@ def test_fourier_coefficients_on_uneven_samples():
     np.testing.assert_allclose(c, [0, -3, 0, 0, 0, 0], atol=1e-12)
     with pytest.raises(ValueError, match="cannot resolve"):
         fourier_coefficients(th[:10], y[:10], 6)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_fourier_series_inverts_fourier_coefficients(seed):
+    """The series of the fitted coefficients is the sampled function less its constant, at
+    any angle shape; the compensation results and the map evaluate it the same way."""
+    from encdesign.physics import EncoderMap
+
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(2, 9))
+    s_true, c_true = rng.normal(size=m), rng.normal(size=m)
+    th = np.sort(rng.uniform(0, 2 * np.pi, 4 * m + 3))
+    y = sum(s_true[j] * np.sin((j + 1) * th) + c_true[j] * np.cos((j + 1) * th) for j in range(m))
+    c0, s, c = fourier_coefficients(th, y + 0.7, m)
+    np.testing.assert_allclose(fourier_series(th, s, c), y, atol=1e-10)
+    grid = rng.uniform(-7, 7, (2, 3))
+    direct = sum(
+        s_true[j] * np.sin((j + 1) * grid) + c_true[j] * np.cos((j + 1) * grid) for j in range(m)
+    )
+    np.testing.assert_allclose(fourier_series(grid, s_true, c_true), direct, atol=1e-12)
+    emap = EncoderMap(sin_rad=jnp.asarray(s_true), cos_rad=jnp.asarray(c_true))
+    assert emap.max_order == m
+    np.testing.assert_allclose(emap(grid), direct, atol=1e-12)
+    np.testing.assert_allclose(emap.error_function(grid), direct, atol=1e-12)
 
 
 def test_averaged_error_weights():

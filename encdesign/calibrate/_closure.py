@@ -47,6 +47,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 import scipy.linalg
@@ -272,6 +273,15 @@ def _difference_cholesky(n: int) -> np.ndarray:
     return np.linalg.cholesky(t)
 
 
+def _lstsq(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """scipy's least squares (gelsd: it always returns the singular values; only gelsy gives
+    None)."""
+    return cast(
+        "tuple[np.ndarray, np.ndarray, int, np.ndarray]",
+        scipy.linalg.lstsq(a, y, cond=1e-10, check_finite=False),
+    )
+
+
 def solve_closure(
     readings_rad: np.ndarray,
     setting_positions: Sequence[int] | np.ndarray,
@@ -361,7 +371,7 @@ def solve_closure(
         aw, yw = a_diff, d.reshape(-1)
     a_full = np.vstack([aw, gauge])
     y_full = np.concatenate([yw, np.zeros(2)])
-    x, _, rank, sv = scipy.linalg.lstsq(a_full, y_full, cond=1e-10, check_finite=False)
+    x, _, rank, sv = _lstsq(a_full, y_full)
     rank = int(rank)
     expected_rank = 2 * n - _rank_deficit(n, und)
     if rank != expected_rank:  # numerical trouble: never hide it

@@ -1,4 +1,5 @@
-"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE] [--html FILE]``.
+"""``encdesign diagnose REC.toml --json OUT.json [--plots DIR] [--report FILE] [--html FILE]
+[--export-candidates F.py]``.
 
 Every kind goes through :func:`encdesign.diagnose.diagnose` (``encdesign.diagnose._dispatch``);
 the JSON follows ``encdesign/diagnose/diagnosis.schema.json``."""
@@ -40,6 +41,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="a Python file defining CANDIDATES = [Candidate(...), ...]: your own effects",
     )
     parser.add_argument(
+        "--export-candidates",
+        type=Path,
+        default=None,
+        help="write what discovery models outside the catalog as a --candidates file (a "
+        "later diagnosis of a similar record then tests it like a catalog effect)",
+    )
+    parser.add_argument(
         "--max-effects", type=int_arg(0, 100), default=3, help="most effects to name"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -55,7 +63,12 @@ def run(args: argparse.Namespace) -> int:
     inputs = [("recording", p) for p in recording_input_files(args.recording)]
     if args.candidates is not None:
         inputs.append(("--candidates", args.candidates))
-    outputs = [("--json", args.json), ("--report", args.report), ("--html", args.html)]
+    outputs = [
+        ("--json", args.json),
+        ("--report", args.report),
+        ("--html", args.html),
+        ("--export-candidates", args.export_candidates),
+    ]
     with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
         return _run(args)
 
@@ -82,8 +95,16 @@ def _run(args: argparse.Namespace) -> int:
     text = doc.get("report", "")
     if args.report is not None:
         atomic_write_text(args.report, text)
+    if args.export_candidates is not None:
+        from ..diagnose.engine._discover_export import export_candidates
+
+        names = export_candidates(doc, args.export_candidates)
+        if names:
+            print(f"wrote {args.export_candidates}: {', '.join(names)}", file=sys.stderr)
+        else:
+            print("--export-candidates: nothing discovered, no file written", file=sys.stderr)
     if args.html is not None:
-        from ..diagnose._html import write_html
+        from ..diagnose.engine._html import write_html
 
         write_html(d, args.html)
         print(f"wrote {args.html}", file=sys.stderr)

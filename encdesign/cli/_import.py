@@ -23,6 +23,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, required=True, help="output recording TOML (folder for 'realdata')"
     )
+    parser.add_argument(
+        "--parquet", action="store_true", help="write the table as Parquet (NAME.parquet)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,16 +39,20 @@ def run(args: argparse.Namespace) -> int:
         jobs = _realdata.realdata_jobs(args.src, args.out)
         inputs = [("SRC", src) for _, src, _ in jobs]
         outputs = [
-            ("--out", p) for _, _, dst in jobs for p in recording_output_files(dst, label="--out")
+            ("--out", p)
+            for _, _, dst in jobs
+            for p in recording_output_files(dst, parquet=args.parquet, label="--out")
         ]
         with guard_outputs(inputs, outputs, folders=[("--out", args.out)]):
-            written = _realdata.import_realdata_folder(args.src, args.out)
+            written = _realdata.import_realdata_folder(args.src, args.out, parquet=args.parquet)
         for p in written:
             print(f"wrote {p}")
         return 0
-    outputs = [("--out", p) for p in recording_output_files(args.out, label="--out")]
+    outputs = [
+        ("--out", p) for p in recording_output_files(args.out, parquet=args.parquet, label="--out")
+    ]
     fn = getattr(_realdata, f"import_{args.source}")
     with guard_outputs([("SRC", args.src)], outputs):
-        rec = fn(args.src, args.out)
+        rec = fn(args.src, args.out, parquet=args.parquet)
     print(f"wrote {rec.path} ({rec.kind}, {rec.n_rows} rows)")
     return 0

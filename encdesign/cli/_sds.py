@@ -55,7 +55,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="error physics besides ripple and mark errors (reference_errors())",
     )
     s.add_argument("--seed", type=SEED, default=0, help="PRNG seed of disks and jitter")
-    s.add_argument("--gzip", action="store_true", help="write the table as .csv.gz")
+    table = s.add_mutually_exclusive_group()
+    table.add_argument("--gzip", action="store_true", help="write the table as .csv.gz")
+    table.add_argument(
+        "--parquet", action="store_true", help="write the table as Parquet (NAME.parquet)"
+    )
     m = sub.add_parser("measure", help="measure phi per run from an sds recording")
     m.add_argument("recording", type=Path, help="recording NAME.toml of kind sds")
     m.add_argument(
@@ -82,7 +86,9 @@ def run(args: argparse.Namespace) -> int:
             )
         outputs = [
             ("--out", p)
-            for p in recording_output_files(args.out, compress=args.gzip, label="--out")
+            for p in recording_output_files(
+                args.out, compress=args.gzip, parquet=args.parquet, label="--out"
+            )
         ]
         with guard_outputs([], outputs):
             return _simulate(args)
@@ -117,6 +123,7 @@ def _simulate(args: argparse.Namespace) -> int:
         errors,
         key=k_noise,
         compress=args.gzip,
+        parquet=args.parquet,
         description=f"simulated SDS reference device, {args.pole_pairs} pole pairs, "
         f"{args.fixed}+{args.moving} sensors, errors={args.errors}",
     )
@@ -125,7 +132,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _measure(args: argparse.Namespace) -> int:
-    from ..diagnose._sds_readout import sds_readings_from_recording
+    from ..diagnose.kinds.sds._sds_readout import sds_readings_from_recording
     from ..io._recording import load_recording
     from ..physics._sds_errors import ARCSEC
 

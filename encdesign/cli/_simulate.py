@@ -1,4 +1,5 @@
-"""``encdesign simulate DESIGN.toml --out REC.toml [--seed N] [--like REC.toml]``."""
+"""``encdesign simulate DESIGN.toml --out REC.toml [--seed N] [--like REC.toml]
+[--gzip | --parquet]``."""
 
 from __future__ import annotations
 
@@ -21,7 +22,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="reuse the samples (t, run, theta_ref) of this multihead recording",
     )
-    parser.add_argument("--gzip", action="store_true", help="write the table as .csv.gz")
+    table = parser.add_mutually_exclusive_group()
+    table.add_argument("--gzip", action="store_true", help="write the table as .csv.gz")
+    table.add_argument(
+        "--parquet", action="store_true", help="write the table as Parquet (NAME.parquet)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,12 +41,20 @@ def run(args: argparse.Namespace) -> int:
     if args.like is not None:
         inputs += [("--like", p) for p in recording_input_files(args.like)]
     outputs = [
-        ("--out", p) for p in recording_output_files(args.out, compress=args.gzip, label="--out")
+        ("--out", p)
+        for p in recording_output_files(
+            args.out, compress=args.gzip, parquet=args.parquet, label="--out"
+        )
     ]
     with guard_outputs(inputs, outputs):
         design = load_design(args.design)
         rec = simulate_recording(
-            design, args.out, seed=args.seed, like=args.like, compress=args.gzip
+            design,
+            args.out,
+            seed=args.seed,
+            like=args.like,
+            compress=args.gzip,
+            parquet=args.parquet,
         )
     data = rec.meta["data"]
     print(

@@ -30,13 +30,14 @@ amplification (:func:`calibration_noise_ms`). Population metrics: :func:`residua
 problem files (:mod:`encdesign.design._problem`).
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations``: equinox reads the ``AbstractVar`` of
+# :class:`AbstractBuildDesign` at class creation and refuses it as a string
 from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from equinox import AbstractVar
 from jaxtyping import Array, ArrayLike
 
 from .._array import f64 as _f64
@@ -69,6 +70,7 @@ __all__ = [
     "TOLERANCE_NAMES",
     "TOLERANCE_UNITS",
     "Tolerances",
+    "AbstractBuildDesign",
     "EncoderDesign",
     "symmetric_angles",
     "cotangent_sensitivity",
@@ -156,12 +158,12 @@ class Tolerances(eqx.Module):
         return jnp.stack([getattr(self, n) for n in TOLERANCE_NAMES])
 
     @staticmethod
-    def from_vector(v: ArrayLike) -> Tolerances:
+    def from_vector(v: ArrayLike) -> "Tolerances":
         """Inverse of :meth:`vector`."""
         v = _f64(v)
         return Tolerances(*[v[i] for i in range(len(TOLERANCE_NAMES))])
 
-    def only(self, name: str) -> Tolerances:
+    def only(self, name: str) -> "Tolerances":
         """A copy with every tolerance except ``name`` set to zero."""
         return Tolerances(**{n: (getattr(self, n) if n == name else 0.0) for n in TOLERANCE_NAMES})
 
@@ -171,56 +173,74 @@ def symmetric_angles(n_heads: int) -> HeadAnglesOut:
     return jnp.arange(n_heads, dtype=jnp.float64) * (2 * jnp.pi / n_heads)
 
 
-class EncoderDesign(eqx.Module):
-    """An ``N+1`` encoder design: ``N`` equally spaced heads plus a reference head.
+class AbstractBuildDesign(eqx.Module):
+    """What every multihead design built with :class:`Tolerances` holds besides its heads:
+    the disk's geometry and the orders and sampling of its self-compensation.
+    :class:`EncoderDesign` and :class:`LayoutDesign` add their heads (``head_angles_rad``);
+    the checks and :attr:`theta_rad` here are never overridden.
 
     Attributes:
         radius_m: optical radius, m.
-        reference_angle_rad: azimuth of the reference head, rad (a design variable).
-        tilt_rad: nominal disk tilt about x, rad (seed figure 8: 6 mrad).
-        gap_m: head-to-disk distance, m.
-        n_heads: number ``N`` of symmetric heads (static).
-        max_order: highest order ``M`` self-compensation determines (static).
-        grating_orders: orders ``1 … grating_orders`` of the grating error (static).
-        axial_orders: orders of the axial runout (static).
-        n_angles: samples per revolution (static).
+        tilt_rad: nominal disk tilt about x, rad (seed figure 8: 6 mrad); keyword only.
+        gap_m: head-to-disk distance, m; keyword only.
+        max_order: highest order ``M`` self-compensation determines (static); keyword only.
+        grating_orders: orders ``1 … grating_orders`` of the grating error (static); keyword
+            only.
+        axial_orders: orders of the axial runout (static); keyword only.
+        n_angles: samples per revolution (static); keyword only.
     """
 
     radius_m: Array = eqx.field(converter=_f64)
-    reference_angle_rad: Array = eqx.field(converter=_f64)
-    tilt_rad: Array = eqx.field(converter=_f64, default=0.0)
-    gap_m: Array = eqx.field(converter=_f64, default=1e-3)
-    n_heads: int = eqx.field(static=True, default=3)
-    max_order: int = eqx.field(static=True, default=16)
-    grating_orders: int = eqx.field(static=True, default=16)
-    axial_orders: int = eqx.field(static=True, default=2)
-    n_angles: int = eqx.field(static=True, default=256)
+    tilt_rad: Array = eqx.field(converter=_f64, default=0.0, kw_only=True)
+    gap_m: Array = eqx.field(converter=_f64, default=1e-3, kw_only=True)
+    max_order: int = eqx.field(static=True, default=16, kw_only=True)
+    grating_orders: int = eqx.field(static=True, default=16, kw_only=True)
+    axial_orders: int = eqx.field(static=True, default=2, kw_only=True)
+    n_angles: int = eqx.field(static=True, default=256, kw_only=True)
+    head_angles_rad: AbstractVar[Array]
 
     def __check_init__(self) -> None:
-        if self.n_heads < 2:
-            raise EncdesignInputError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
+        name = type(self).__name__
         if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise EncdesignInputError(
-                "EncoderDesign: max_order, grating_orders >= 1, axial_orders >= 0"
-            )
+            raise EncdesignInputError(f"{name}: max_order, grating_orders >= 1, axial_orders >= 0")
         if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
             raise EncdesignInputError(
-                f"EncoderDesign.n_angles: {self.n_angles} cannot resolve order "
+                f"{name}.n_angles: {self.n_angles} cannot resolve order "
                 f"{max(self.max_order, self.grating_orders)}"
             )
         r = self.radius_m
         if not is_traced(r) and hasattr(r, "shape") and not float(r) > 0:
-            raise EncdesignInputError(f"EncoderDesign.radius_m: {float(r)}, expected > 0")
-
-    @property
-    def head_angles_rad(self) -> Array:
-        """All nominal azimuths, rad: the ``N`` symmetric heads, then the reference head."""
-        return jnp.concatenate([symmetric_angles(self.n_heads), self.reference_angle_rad[None]])
+            raise EncdesignInputError(f"{name}.radius_m: {float(r)}, expected > 0")
 
     @property
     def theta_rad(self) -> Array:
         """The ``n_angles`` equally spaced shaft angles of one revolution, rad."""
         return jnp.arange(self.n_angles, dtype=jnp.float64) * (2 * jnp.pi / self.n_angles)
+
+
+class EncoderDesign(AbstractBuildDesign):
+    """An ``N+1`` encoder design: ``N`` equally spaced heads plus a reference head.
+
+    ``EncoderDesign(radius_m, reference_angle_rad, *, n_heads=3, …)``; the geometry, orders
+    and sampling (``tilt_rad``, ``gap_m``, ``max_order``, ``grating_orders``,
+    ``axial_orders``, ``n_angles``) are those of :class:`AbstractBuildDesign`.
+
+    Attributes:
+        reference_angle_rad: azimuth of the reference head, rad (a design variable).
+        n_heads: number ``N`` of symmetric heads (static); keyword only.
+    """
+
+    reference_angle_rad: Array = eqx.field(converter=_f64)
+    n_heads: int = eqx.field(static=True, default=3, kw_only=True)
+
+    def __check_init__(self) -> None:
+        if self.n_heads < 2:
+            raise EncdesignInputError(f"EncoderDesign.n_heads: {self.n_heads}, expected >= 2")
+
+    @property
+    def head_angles_rad(self) -> Array:
+        """All nominal azimuths, rad: the ``N`` symmetric heads, then the reference head."""
+        return jnp.concatenate([symmetric_angles(self.n_heads), self.reference_angle_rad[None]])
 
 
 # ----------------------------------------------------------------------------- sensitivity
@@ -265,7 +285,7 @@ def expected_sensitivity(
 # ----------------------------------------------------------------------------- builds
 
 
-def deviation_sizes(design: EncoderDesign | LayoutDesign) -> dict[str, int]:
+def deviation_sizes(design: AbstractBuildDesign) -> dict[str, int]:
     """The parts of one build's standard-normal vector ``z``, in order, and their sizes."""
     h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
@@ -281,12 +301,12 @@ def deviation_sizes(design: EncoderDesign | LayoutDesign) -> dict[str, int]:
     }
 
 
-def n_build_normals(design: EncoderDesign | LayoutDesign) -> int:
+def n_build_normals(design: AbstractBuildDesign) -> int:
     """Length of the standard-normal vector ``z`` of one build of ``design``."""
     return sum(deviation_sizes(design).values())
 
 
-def _unit_deviations(design: EncoderDesign | LayoutDesign, z: ArrayLike) -> dict[str, Array]:
+def _unit_deviations(design: AbstractBuildDesign, z: ArrayLike) -> dict[str, Array]:
     """The deviations of one build per unit tolerance, by name.
 
     ``z`` (``[n_build_normals(design)]``) is split in order: eccentricity (x, y), tilt
@@ -310,9 +330,7 @@ def build_model(design: EncoderDesign, tol: Tolerances, z: BuildNormals) -> Enco
     return _model_of(design, tol, _unit_deviations(design, z))
 
 
-def _model_of(
-    design: EncoderDesign | LayoutDesign, tol: Tolerances, u: dict[str, Array]
-) -> EncoderModel:
+def _model_of(design: AbstractBuildDesign, tol: Tolerances, u: dict[str, Array]) -> EncoderModel:
     """:func:`build_model` from the unit deviations ``u`` of :func:`_unit_deviations`."""
     h = design.head_angles_rad.shape[0]
     mg, ka = design.grating_orders, design.axial_orders
@@ -499,7 +517,7 @@ def build_yield(
 # ----------------------------------------------------------------------------- free layouts
 
 
-class LayoutDesign(eqx.Module):
+class LayoutDesign(AbstractBuildDesign):
     """An encoder whose heads sit at arbitrary azimuths (free head placement).
 
     Self-compensation recovers the disk's error function from all head differences by least
@@ -508,27 +526,17 @@ class LayoutDesign(eqx.Module):
     its map. Cramer's ``N + 1`` layout is the special case ``head_angles_rad = [0, 2 pi/N,
     …, reference]``.
 
+    ``LayoutDesign(radius_m, head_angles_rad, *, weights=None, …)``; the geometry, orders
+    and sampling (``tilt_rad``, ``gap_m``, ``max_order``, ``grating_orders``,
+    ``axial_orders``, ``n_angles``) are those of :class:`AbstractBuildDesign`.
+
     Attributes:
-        radius_m: optical radius, m.
         head_angles_rad: nominal azimuths of all ``H >= 2`` heads, rad (a design variable).
-        tilt_rad: nominal disk tilt about x, rad.
-        gap_m: head-to-disk distance, m.
-        weights: weights of the heads in the output (``None``: equal).
-        max_order: highest order ``M`` self-compensation determines (static).
-        grating_orders: orders ``1 … grating_orders`` of the grating error (static).
-        axial_orders: orders of the axial runout (static).
-        n_angles: samples per revolution (static).
+        weights: weights of the heads in the output (``None``: equal); keyword only.
     """
 
-    radius_m: Array = eqx.field(converter=_f64)
     head_angles_rad: Array = eqx.field(converter=_f64)
-    tilt_rad: Array = eqx.field(converter=_f64, default=0.0)
-    gap_m: Array = eqx.field(converter=_f64, default=1e-3)
-    weights: Array | None = None
-    max_order: int = eqx.field(static=True, default=16)
-    grating_orders: int = eqx.field(static=True, default=16)
-    axial_orders: int = eqx.field(static=True, default=2)
-    n_angles: int = eqx.field(static=True, default=256)
+    weights: Array | None = eqx.field(default=None, kw_only=True)
 
     def __check_init__(self) -> None:
         a = self.head_angles_rad
@@ -539,15 +547,6 @@ class LayoutDesign(eqx.Module):
         if self.weights is not None and jnp.shape(self.weights) != a.shape:
             raise EncdesignInputError(
                 f"LayoutDesign.weights: shape {jnp.shape(self.weights)}, expected {a.shape}"
-            )
-        if self.max_order < 1 or self.grating_orders < 1 or self.axial_orders < 0:
-            raise EncdesignInputError(
-                "LayoutDesign: max_order, grating_orders >= 1, axial_orders >= 0"
-            )
-        if 2 * max(self.max_order, self.grating_orders) + 1 > self.n_angles:
-            raise EncdesignInputError(
-                f"LayoutDesign.n_angles: {self.n_angles} cannot resolve order "
-                f"{max(self.max_order, self.grating_orders)}"
             )
         if not is_traced(a):
             try:
@@ -560,15 +559,10 @@ class LayoutDesign(eqx.Module):
         """Number of heads ``H``."""
         return int(self.head_angles_rad.shape[0])
 
-    @property
-    def theta_rad(self) -> Array:
-        """The ``n_angles`` equally spaced shaft angles of one revolution, rad."""
-        return jnp.arange(self.n_angles, dtype=jnp.float64) * (2 * jnp.pi / self.n_angles)
-
     @staticmethod
     def symmetric(
         n_heads: int, reference_angle_rad: ArrayLike, radius_m: ArrayLike, **kw: Any
-    ) -> LayoutDesign:
+    ) -> "LayoutDesign":
         """Cramer's ``N + 1`` layout: ``n_heads`` equally spaced heads plus a reference head
         at ``reference_angle_rad``, all averaged."""
         ang = jnp.concatenate([symmetric_angles(n_heads), _f64(reference_angle_rad)[None]])

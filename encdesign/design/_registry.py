@@ -46,17 +46,17 @@ _TOL_VARS = {
 _TOL_MODEL_KEYS = {f"sigma_{n}": 0.0 for n in TOLERANCE_NAMES}
 
 
+def _geometry(model: dict[str, Any]) -> dict[str, Any]:
+    """The :class:`~encdesign.design.AbstractBuildDesign` keywords of a problem's model."""
+    out: dict[str, Any] = {k: model[k] for k in ("radius_m", "tilt_rad", "gap_m")}
+    for k in ("max_order", "grating_orders", "axial_orders", "n_angles"):
+        out[k] = int(model[k])
+    return out
+
+
 def _design_from(model: dict[str, Any], reference_angle: Any) -> EncoderDesign:
     return EncoderDesign(
-        radius_m=model["radius_m"],
-        reference_angle_rad=reference_angle,
-        tilt_rad=model["tilt_rad"],
-        gap_m=model["gap_m"],
-        n_heads=int(model["n_heads"]),
-        max_order=int(model["max_order"]),
-        grating_orders=int(model["grating_orders"]),
-        axial_orders=int(model["axial_orders"]),
-        n_angles=int(model["n_angles"]),
+        reference_angle_rad=reference_angle, n_heads=int(model["n_heads"]), **_geometry(model)
     )
 
 
@@ -256,16 +256,7 @@ def _build_layout(problem: Any, discrete: dict[str, Any]):
 
     def evaluate(x):
         angles = x.get("head_angles", default_angles)
-        design = LayoutDesign(
-            radius_m=m["radius_m"],
-            head_angles_rad=angles,
-            tilt_rad=m["tilt_rad"],
-            gap_m=m["gap_m"],
-            max_order=int(m["max_order"]),
-            grating_orders=int(m["grating_orders"]),
-            axial_orders=int(m["axial_orders"]),
-            n_angles=int(m["n_angles"]),
-        )
+        design = LayoutDesign(head_angles_rad=angles, **_geometry(m))
         tol = _tolerances_from(m, x)
         ms = layout_metrics(
             design, tol, key=key, n_builds=n_builds, metric="ms", chunk_size=int(m["chunk_size"])

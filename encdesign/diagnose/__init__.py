@@ -8,7 +8,7 @@ function; this subpackage's contents are imported as ``from encdesign.diagnose i
 
 from pathlib import Path
 
-from ._candidates import (
+from .engine._candidates import (
     Candidate as Candidate,
     Context as Context,
     Param as Param,
@@ -18,8 +18,14 @@ from ._dispatch import (
     diagnose as diagnose,
     load_candidates as load_candidates,
 )
-from ._motion import candidate_orders as candidate_orders
-from ._results import (
+from .engine._discover_export import (
+    discovered_candidate as discovered_candidate,
+)
+from .engine._discover_export import (
+    export_candidates as export_candidates,
+)
+from .kinds.motion._motion import candidate_orders as candidate_orders
+from .engine._results import (
     Alternative as Alternative,
     Confounded as Confounded,
     Effect as Effect,
@@ -27,16 +33,16 @@ from ._results import (
     PlotData as PlotData,
     Refusal as Refusal,
 )
-from ._plots import engine_plots as write_diagnosis_plots
-from ._settings import (
+from .engine._plots import engine_plots as write_diagnosis_plots
+from .engine._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,
     FinderSettings as FinderSettings,
     settings_table as settings_table,
 )
-from ._sds_readout import (
+from .kinds.sds._sds_readout import (
     SDSRecordingResult as SDSRecordingResult,
 )
-from ._sds_readout import (
+from .kinds.sds._sds_readout import (
     sds_readings_from_recording as sds_readings_from_recording,
 )
 

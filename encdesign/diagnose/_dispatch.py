@@ -1,11 +1,10 @@
 """One entry for the discrepancy finder over every recording kind: :func:`diagnose`.
 
-``multihead`` (including one sensor against a reference), ``motion``, ``sds`` and
-``quadrature`` recordings all go through the engine (:mod:`encdesign.diagnose._engine`) with
-their kind (:mod:`encdesign.diagnose._multihead`, :mod:`encdesign.diagnose._motion`,
-:mod:`encdesign.diagnose._sds`, :mod:`encdesign.diagnose._quadrature`); every diagnosis
-follows one contract
-(``diagnosis.schema.json``).
+Every recording goes through the one engine entry
+(:func:`~encdesign.diagnose.engine._engine.run_engine`) with the kind object
+:data:`~encdesign.diagnose._registry.KINDS` holds for its ``kind`` (``multihead``, including
+one sensor against a reference, ``motion``, ``sds``, ``quadrature``: one folder each under
+``kinds/``); every diagnosis follows one contract (``diagnosis.schema.json``).
 """
 
 from __future__ import annotations
@@ -22,12 +21,12 @@ import equinox as eqx
 from .._errors import DiagnosisError, input_error
 from .._usercode import user_module_items
 from ..io._recording import Recording, load_recording
-from ._candidates import Candidate
-from ._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
-from ._settings import FinderSettings
-
-ENGINE_KINDS = ("multihead", "motion", "sds", "quadrature")
-
+from ._registry import KINDS
+from .engine._candidates import Candidate
+from .engine._engine import run_engine
+from .engine._plots import engine_plots
+from .engine._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
+from .engine._settings import FinderSettings
 
 TYPED_KEYS = ("verdict", "status", "effects", "unexplained", "rejected", "not_testable")
 """Keys of the document held as typed fields of :class:`Diagnosis`."""
@@ -165,41 +164,24 @@ def diagnose(
         EncdesignInputError: a recording that cannot be diagnosed.
     """
     rec = recording if isinstance(recording, Recording) else load_recording(recording)
-    if rec.kind not in ENGINE_KINDS:
+    kind = KINDS.get(rec.kind)
+    if kind is None:
         raise input_error(
-            "kind", f"no finder for recording kind {rec.kind!r}", f"one of {ENGINE_KINDS}"
+            "kind", f"no finder for recording kind {rec.kind!r}", f"one of {tuple(KINDS)}"
         )
-    from ._engine import run_engine
-
-    opts = dict(
+    doc, plot_data = run_engine(
+        kind,
+        rec,
         max_order=max_order,
         max_effects=max_effects,
         extra_candidates=candidates,
         verbose=verbose,
         settings=settings,
     )
-    if rec.kind == "quadrature":
-        from ._quadrature import run_quadrature
-
-        doc, plot_data = run_quadrature(rec, **opts)
-    else:
-        if rec.kind == "multihead":
-            from ._multihead import MULTIHEAD as kind
-        elif rec.kind == "sds":
-            from ._sds import SDS as kind
-        else:
-            from ._motion import MOTION as kind
-        doc, plot_data = run_engine(kind, rec, **opts)
     d = Diagnosis.from_json(doc, plot_data)
     if plots is not None:
-        from ._plots import engine_plots
-
-        paths = [str(p) for p in engine_plots(d, plots)]
-        if rec.kind == "quadrature":
-            from ._quadrature import quadrature_plots
-
-            paths += [str(p) for p in quadrature_plots(d, plots)]
-        d = d.with_keys(plots=paths)
+        paths = [*engine_plots(d, plots), *kind.plots(d, plots)]
+        d = d.with_keys(plots=[str(p) for p in paths])
     if throw and d.status != "ok":
         raise DiagnosisError(f"diagnose: {d.status}")
     return d

@@ -25,6 +25,7 @@ import numpy as np
 
 from .._errors import input_error
 from ._recording import KINDS, KindSpec, Recording, positive_int, write_recording
+from ._table import row_line
 
 __all__ = ["closure_arrays", "write_closure_recording"]
 
@@ -37,7 +38,7 @@ def _closure_check(where: str, meta: dict, cols: dict) -> None:
     if bad.size:
         i = int(bad[0])
         raise input_error(
-            f"{where}, line {i + 2}, column 'face'",
+            f"{where}, line {row_line(where, i)}, column 'face'",
             f"unknown face index {int(face[i])}",
             f"0 … {n - 1} ([encoder] faces = {n})",
         )
@@ -50,7 +51,7 @@ def _closure_check(where: str, meta: dict, cols: dict) -> None:
         s = int(setting[a])
         if s in seen:
             raise input_error(
-                f"{where}, line {a + 2}, column 'setting'",
+                f"{where}, line {row_line(where, a)}, column 'setting'",
                 f"setting {s} appears in more than one block of rows",
                 "the rows of one setting consecutive",
             )
@@ -60,14 +61,14 @@ def _closure_check(where: str, meta: dict, cols: dict) -> None:
             continue
         if got[0] != 0:
             raise input_error(
-                f"{where}, line {a + 2}",
+                f"{where}, line {row_line(where, a)}",
                 f"setting {s} starts at face {got[0]}",
                 "each setting to start at face 0",
             )
         missing = sorted(set(range(n)) - set(got))
         if missing:
             raise input_error(
-                f"{where}, lines {a + 2}–{b + 1}",
+                f"{where}, lines {row_line(where, a)}–{row_line(where, b - 1)}",
                 f"setting {s} is missing face(s) {missing}",
                 f"faces 0 … {n - 1} in sequence, then face 0 again",
             )
@@ -75,18 +76,18 @@ def _closure_check(where: str, meta: dict, cols: dict) -> None:
             after = "nothing" if len(got) == n else f"face {got[n]}"
             if len(got) == n or got[n] != 0:
                 raise input_error(
-                    f"{where}, line {a + n + 1}",
+                    f"{where}, line {row_line(where, a + n - 1)}",
                     f"setting {s} does not return to face 0 after face {n - 1} ({after})",
                     "a last reading of face 0 (the closure)",
                 )
             raise input_error(
-                f"{where}, line {a + n + 3}",
+                f"{where}, line {row_line(where, a + n + 1)}",
                 f"setting {s} has {len(got) - n - 1} row(s) after its return to face 0",
                 f"{n + 1} rows per setting",
             )
         idx = next(i for i, (g, e) in enumerate(zip(got, expected)) if g != e)
         raise input_error(
-            f"{where}, line {a + idx + 2}, column 'face'",
+            f"{where}, line {row_line(where, a + idx)}, column 'face'",
             f"setting {s}: face {got[idx]} where face {expected[idx]} was expected",
             f"faces 0 … {n - 1} in sequence, then face 0 again",
         )

@@ -113,12 +113,14 @@ def recording_output_files(
     path: str | os.PathLike,
     *,
     compress: bool = False,
+    parquet: bool = False,
     data_name: str | None = None,
     label: str | None = None,
 ) -> list[Path]:
     """The files a recording written at ``path`` consists of: the TOML and its table.
 
     ``label``: the flag or argument that named ``path`` (``--out``), for the message.
+    ``compress``: a ``.csv.gz`` table; ``parquet``: a ``.parquet`` table.
 
     Raises:
         EncdesignInputError: ``path`` does not end in ``.toml`` (the table name is derived
@@ -132,7 +134,7 @@ def recording_output_files(
             "a .toml path",
         )
     if data_name is None:
-        data_name = path.stem + (".csv.gz" if compress else ".csv")
+        data_name = path.stem + (".parquet" if parquet else ".csv.gz" if compress else ".csv")
     return [path, path.parent / data_name]
 
 

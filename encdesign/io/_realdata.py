@@ -112,7 +112,11 @@ def read_nmm_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 def import_nmm(
-    src: str | os.PathLike, out_toml: str | os.PathLike, *, axis: str | None = None
+    src: str | os.PathLike,
+    out_toml: str | os.PathLike,
+    *,
+    axis: str | None = None,
+    parquet: bool = False,
 ) -> Recording:
     """Convert an NmmQuad Lissajous capture to a ``quadrature`` recording.
 
@@ -135,6 +139,7 @@ def import_nmm(
         description=f"NMM-1 {axis} interferometer Lissajous capture (ADC counts, phase-sorted)",
         provenance=NMM_PROVENANCE,
         source=str(src),
+        parquet=parquet,
     )
 
 
@@ -197,7 +202,11 @@ def _one_line(exc: BaseException) -> str:
 
 
 def import_odrive(
-    src: str | os.PathLike, out_toml: str | os.PathLike, *, label: str | None = None
+    src: str | os.PathLike,
+    out_toml: str | os.PathLike,
+    *,
+    label: str | None = None,
+    parquet: bool = False,
 ) -> Recording:
     """Convert an ODrive ``slow2`` record to a ``motion`` recording (counts, 8192/rev)."""
     a = read_odrive_npy(src)
@@ -211,6 +220,7 @@ def import_odrive(
         description=f"ODrive brushless motor at 0.1 rev/s, velocity control ({label})",
         provenance=ODRIVE_PROVENANCE,
         source=str(src),
+        parquet=parquet,
     )
 
 
@@ -234,8 +244,12 @@ def realdata_jobs(src_dir: str | os.PathLike, out_dir: str | os.PathLike) -> lis
     return [(kind, src_dir / src, out_dir / dst) for kind, src, dst in REALDATA_JOBS]
 
 
-def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLike) -> list[Path]:
+def import_realdata_folder(
+    src_dir: str | os.PathLike, out_dir: str | os.PathLike, *, parquet: bool = False
+) -> list[Path]:
     """Convert the shared recordings found in ``src_dir`` into ``out_dir``.
+
+    ``parquet``: write every table as Parquet instead of CSV.
 
     Every source is read and checked before anything is written, so a bad source leaves
     ``out_dir`` as it was.
@@ -256,7 +270,7 @@ def import_realdata_folder(src_dir: str | os.PathLike, out_dir: str | os.PathLik
         "servo": import_servo,
     }
     for kind, src, dst in jobs:
-        importers[kind](src, dst)
+        importers[kind](src, dst, parquet=parquet)
         written.append(dst)
     return written
 
@@ -396,7 +410,11 @@ def _moteus_ints(a: np.ndarray, where: str, line: np.ndarray) -> np.ndarray:
 
 
 def import_moteus(
-    src: str | os.PathLike, out_toml: str | os.PathLike, *, pole_pairs: int = MOTEUS_POLE_PAIRS
+    src: str | os.PathLike,
+    out_toml: str | os.PathLike,
+    *,
+    pole_pairs: int = MOTEUS_POLE_PAIRS,
+    parquet: bool = False,
 ) -> Recording:
     """Convert a moteus encoder-calibration sweep to a sensor-against-reference recording.
 
@@ -430,6 +448,7 @@ def import_moteus(
         description="moteus on-board magnetic encoder against its open-loop commanded angle "
         f"({pole_pairs} pole pairs), one turn up and one down",
         provenance=prov,
+        parquet=parquet,
     )
 
 
@@ -466,7 +485,9 @@ def _read_magalpha(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.
     return a[:, 0], a[:, 1], line
 
 
-def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recording:
+def import_magalpha(
+    src: str | os.PathLike, out_toml: str | os.PathLike, *, parquet: bool = False
+) -> Recording:
     """Convert the MagAlpha calibration example to a sensor-against-reference recording.
 
     The rows are one sweep of the reference over a turn, a few of them out of order near
@@ -500,6 +521,7 @@ def import_magalpha(src: str | os.PathLike, out_toml: str | os.PathLike) -> Reco
         encoder={"head_angles_deg": [0.0], "sensor": "magnetic", "signal_periods_per_rev": 1},
         description="MagAlpha magnetic angle sensor against a reference angle, one turn",
         provenance=prov,
+        parquet=parquet,
     )
 
 
@@ -553,7 +575,9 @@ def read_servo_capture(path: str | os.PathLike) -> np.ndarray:
     return a
 
 
-def import_servo(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recording:
+def import_servo(
+    src: str | os.PathLike, out_toml: str | os.PathLike, *, parquet: bool = False
+) -> Recording:
     """Convert a ServoProject optical-encoder capture to a ``quadrature`` recording
     (``t`` s, ``sa`` = channel A, ``sb`` = channel B in ADC counts; one run: the pauses
     between bursts are gaps the diagnosis reports)."""
@@ -565,6 +589,7 @@ def import_servo(src: str | os.PathLike, out_toml: str | os.PathLike) -> Recordi
         description="ServoProject: raw two-channel optical encoder on a DC motor (ADC counts), "
         "one signal period per motor turn, bursts in both directions",
         provenance=SERVO_PROVENANCE,
+        parquet=parquet,
     )
 
 

@@ -1,10 +1,12 @@
 """Recordings in the ``encdesign-recording/1`` format (see ``docs/recording-format.md``).
 
-A recording is a TOML file (metadata and nominal design) plus the CSV table it names
-(optionally ``.csv.gz``). :func:`load_recording` validates the whole file before returning
-anything: a bad file raises :class:`~encdesign.EncdesignInputError` naming the file, the
-row or column and what was expected. :func:`write_recording` validates first and writes
-atomically (temporary files renamed into place), so nothing is ever half-written.
+A recording is a TOML file (metadata and nominal design) plus the table it names: a CSV
+(optionally ``.csv.gz``) or a Parquet file (``.parquet``, read in row groups).
+:func:`load_recording` validates the whole file before returning anything: a bad file
+raises :class:`~encdesign.EncdesignInputError` naming the file, the row (line, or row
+group and row) or column and what was expected. :func:`write_recording` validates first
+and writes atomically (temporary files renamed into place), so nothing is ever
+half-written.
 
 Kinds: ``multihead``, ``sds``, ``quadrature``, ``motion``. Each kind has a
 :class:`KindSpec` in :data:`KINDS` stating its table keys, columns and extra checks.
@@ -31,9 +33,10 @@ import numpy as np
 import tomli_w
 
 from .._errors import EncdesignInputError, input_error
+from ._parquet import PARQUET_SUFFIXES, is_parquet, read_parquet_columns, write_parquet_table
 from ._paths import atomic_output
 from ._sds_format import check_sds_columns
-from ._table import read_columns, row_line
+from ._table import read_columns, row_at
 
 FORMAT = "encdesign-recording/1"
 MAX_TOML_BYTES = 16 * 2**20  # a recording, design or problem TOML is metadata only
@@ -314,8 +317,8 @@ def _check_time_increasing(where: str, cols: dict, tcol: str) -> None:
             a, b = int(order[a]), int(order[b])
         r = 0 if run is None else int(run[b])
         raise input_error(
-            f"{where}, line {row_line(where, b)}, column '{tcol}'",
-            f"time goes backwards or repeats ({show(t[a])} at line {row_line(where, a)}, "
+            f"{where}, {row_at(where, b)}, column '{tcol}'",
+            f"time goes backwards or repeats ({show(t[a])} at {row_at(where, a)}, "
             f"then {show(t[b])}) within run {r}",
             "strictly increasing time within each run",
         )
@@ -341,7 +344,7 @@ def check_runs_contiguous(rec: Recording) -> None:
             i = int(np.concatenate([[0], change])[k])
             where = rec.table or str(rec.path or "<recording>")
             raise input_error(
-                f"{where}, line {row_line(where, i)}, column 'run'",
+                f"{where}, {row_at(where, i)}, column 'run'",
                 f"rows of the runs are interleaved: run {r} resumes here after other runs",
                 "each run's rows together, in time order",
             )
@@ -499,7 +502,7 @@ def _names(cols: list[str]) -> str:
 
 
 def _bad_cell(where: str, name: str, i: int, problem: str, expected: str):
-    return input_error(f"{where}, line {row_line(where, i)}, column '{name}'", problem, expected)
+    return input_error(f"{where}, {row_at(where, i)}, column '{name}'", problem, expected)
 
 
 def _convert(where: str, name: str, values: Any, kind: str, spec: KindSpec) -> np.ndarray:
@@ -622,7 +625,8 @@ def load_recording(path: str | os.PathLike) -> Recording:
     """Load and validate a recording from its TOML file.
 
     Args:
-        path: the ``NAME.toml`` file; its ``data`` key names the CSV relative to it.
+        path: the ``NAME.toml`` file; its ``data`` key names the table relative to it: a
+            CSV (``.csv``, ``.csv.gz``) or a Parquet file (``.parquet``, read in row groups).
 
     Returns:
         The validated :class:`Recording`.
@@ -635,12 +639,13 @@ def load_recording(path: str | os.PathLike) -> Recording:
     where = str(path)
     meta = validate_meta(read_toml(path), where)
     if "data" not in meta:
-        raise input_error(where, "missing key 'data'", "the name of the CSV data table")
+        raise input_error(where, "missing key 'data'", "the name of the data table")
     if not meta["data"].strip():
-        raise input_error(f"{where}: data", "is empty", "the name of the CSV data table")
+        raise input_error(f"{where}: data", "is empty", "the name of the data table")
     data_path = path.parent / meta["data"]
     spec = KINDS[meta["kind"]]
-    _, table, ref = read_columns(
+    reader = read_parquet_columns if is_parquet(data_path) else read_columns
+    _, table, ref = reader(
         data_path, string_columns=spec.string_columns, int_columns=spec.int_columns
     )
     columns = validate_columns(ref, meta["kind"], meta, table)
@@ -668,17 +673,22 @@ def write_recording(
     provenance: Mapping[str, Any] | None = None,
     data_name: str | None = None,
     compress: bool = False,
+    parquet: bool = False,
     source: str | None = None,
 ) -> Recording:
-    """Validate and write a recording (``path`` = the TOML file; the CSV goes beside it).
+    """Validate and write a recording (``path`` = the TOML file; the table goes beside it).
 
     Args:
         path: output TOML path.
         kind: recording kind.
         columns: column name -> 1-D array-like (SI units, see the format).
         encoder, motor, description, provenance: TOML content.
-        data_name: file name of the data table (default ``<stem>.csv[.gz]``).
-        compress: gzip the table.
+        data_name: file name of the data table (default ``<stem>.csv[.gz]``, or
+            ``<stem>.parquet`` with ``parquet``); a name ending in ``.parquet`` or ``.pq``
+            writes Parquet.
+        compress: gzip the table (CSV only).
+        parquet: write the table as Parquet (float64, int64 and string columns, in row
+            groups of 2^20 rows) instead of CSV.
         source: the input the columns were made from (a design, an imported file): a
             validation error then names it instead of the output file.
 
@@ -691,7 +701,14 @@ def write_recording(
     path = Path(path)
     meta: dict[str, Any] = {"format": FORMAT, "kind": kind}
     if data_name is None:
-        data_name = path.stem + (".csv.gz" if compress else ".csv")
+        data_name = path.stem + (".parquet" if parquet else ".csv.gz" if compress else ".csv")
+    as_parquet = parquet or Path(data_name).suffix.lower() in PARQUET_SUFFIXES
+    if as_parquet and compress:
+        raise input_error(
+            str(path.parent / data_name),
+            "gzip compression asked of a Parquet table",
+            "gzip for a CSV table only (Parquet compresses its own pages)",
+        )
     meta["data"] = data_name
     if description is not None:
         meta["description"] = description
@@ -712,12 +729,17 @@ def write_recording(
     names = list(conv)
     # the table first, then the TOML that names it: each renamed into place when whole
     with atomic_output(path, "wb") as toml_fh:
-        with atomic_output(data_path, "w", newline="", compress=data_name.endswith(".gz")) as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(names)
-            n = len(conv[names[0]])
-            for a in range(0, n, WRITE_CHUNK_ROWS):
-                b = min(n, a + WRITE_CHUNK_ROWS)
-                w.writerows(zip(*[_format_column(conv[c][a:b]) for c in names]))
+        if as_parquet:
+            with atomic_output(data_path, "wb") as fh:
+                write_parquet_table(fh, conv)
+        else:
+            gz = data_name.endswith(".gz")
+            with atomic_output(data_path, "w", newline="", compress=gz) as fh:
+                w = csv.writer(fh, lineterminator="\n")
+                w.writerow(names)
+                n = len(conv[names[0]])
+                for a in range(0, n, WRITE_CHUNK_ROWS):
+                    b = min(n, a + WRITE_CHUNK_ROWS)
+                    w.writerows(zip(*[_format_column(conv[c][a:b]) for c in names]))
         tomli_w.dump(meta, toml_fh)
     return Recording(kind=kind, meta=meta, columns=conv, path=path)

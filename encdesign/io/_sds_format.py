@@ -12,7 +12,7 @@ import re
 import numpy as np
 
 from .._errors import input_error
-from ._table import row_line
+from ._table import row_at
 
 # ----------------------------------------------------------------------------- checks
 
@@ -50,7 +50,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     if not np.all(ok):
         i = int(np.flatnonzero(~ok)[0])
         raise input_error(
-            f"{where}, line {row_line(where, i)}, column 'sensor'",
+            f"{where}, {row_at(where, i)}, column 'sensor'",
             f"sensor {str(sensors[i])!r} is not declared in the TOML",
             f"one of {', '.join(allowed)} (fixed_sensor_angles_deg lists {n_fixed}, "
             f"moving_sensor_angles_deg lists {n_moving})",
@@ -60,7 +60,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
     if bad.size:
         i = int(bad[0])
         raise input_error(
-            f"{where}, line {row_line(where, i)}, column 'mark'",
+            f"{where}, {row_at(where, i)}, column 'mark'",
             f"mark index {int(mark[i])} out of range",
             f"0 … {n_marks - 1} (marks_per_rev = {n_marks})",
         )
@@ -83,7 +83,7 @@ def check_sds_columns(where: str, meta: dict, cols: dict) -> None:
             if np.any(vals != vals[0]):
                 j = int(idx[np.flatnonzero(vals != vals[0])[0]])
                 raise input_error(
-                    f"{where}, line {row_line(where, j)}, column 'phi_ref'",
+                    f"{where}, {row_at(where, j)}, column 'phi_ref'",
                     f"phi_ref changes within run {int(r)} "
                     f"({float(vals[0])!r} then {float(phi[j])!r})",
                     "one platform angle per run (the platform is at rest during a run)",
@@ -116,9 +116,9 @@ def _check_sequences(
     if badt.size:
         a, b = lo + int(order[badt[0]]), lo + int(order[badt[0] + 1])
         raise input_error(
-            f"{where}, line {row_line(where, b)}, column 't'",
+            f"{where}, {row_at(where, b)}, column 't'",
             f"time of sensor {sensors_all[b]} goes backwards or repeats "
-            f"({float(t[badt[0]])!r} at line {row_line(where, a)}, "
+            f"({float(t[badt[0]])!r} at {row_at(where, a)}, "
             f"then {float(t[badt[0] + 1])!r}) within run {int(run_all[b])}",
             "strictly increasing edge times for each sensor within a run",
         )
@@ -129,9 +129,9 @@ def _check_sequences(
         a, b = lo + int(order[badm[0]]), lo + int(order[badm[0] + 1])
         missing = int((step[badm[0]] - 1) % n_marks)
         raise input_error(
-            f"{where}, line {row_line(where, b)}, column 'mark'",
+            f"{where}, {row_at(where, b)}, column 'mark'",
             f"sensor {sensors_all[b]} jumps from mark {int(mk[badm[0]])} "
-            f"(line {row_line(where, a)}) to mark "
+            f"({row_at(where, a)}) to mark "
             f"{int(mk[badm[0] + 1])} in run {int(run_all[b])}: {missing} edge(s) missing"
             if missing
             else f"sensor {sensors_all[b]} repeats mark {int(mk[badm[0]])} "

@@ -31,7 +31,7 @@ import numpy as np
 
 from .._errors import input_error
 
-__all__ = ["TableRef", "read_columns", "row_line"]
+__all__ = ["TableRef", "read_columns", "row_at", "row_line"]
 
 _BLOCK_BYTES = 1 << 22  # 4 MiB of text per block
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -61,12 +61,24 @@ class TableRef(str):
         k = int(np.searchsorted(self._starts, row, side="right")) - 1
         return int(row) + int(self._offsets[max(k, 0)])
 
+    def at(self, row: int) -> str:
+        """Where data row ``row`` is, for messages: ``"line N"``."""
+        return f"line {self.line(row)}"
+
 
 def row_line(where: str, row: int) -> int:
     """Line of data row ``row`` in the table named ``where`` (``row + 2`` without a map)."""
     if isinstance(where, TableRef):
         return where.line(row)
     return int(row) + 2
+
+
+def row_at(where: str, row: int) -> str:
+    """Where data row ``row`` is in the table named ``where``, for messages: ``"line N"``
+    of a CSV, ``"row group G, row R"`` of a Parquet file (``line row+2`` without a map)."""
+    if isinstance(where, TableRef):
+        return where.at(row)
+    return f"line {int(row) + 2}"
 
 
 def _open_binary(path: Path, where: str):

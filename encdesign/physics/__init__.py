@@ -232,6 +232,9 @@ from ._theorem import (
     fourier_coefficients as fourier_coefficients,
 )
 from ._theorem import (
+    fourier_series as fourier_series,
+)
+from ._theorem import (
     mode_amplitudes as mode_amplitudes,
 )
 from ._theorem import (

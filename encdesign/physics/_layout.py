@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import functools
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -49,11 +48,9 @@ from jaxtyping import Array
 
 from .._array import f64 as _f64
 from .._errors import EncdesignInputError
-from ._selfcomp import EncoderMap
+from ._selfcomp import AbstractErrorSeries, EncoderMap
 from ._theorem import fourier_coefficients
 from ._types import (
-    Angles,
-    Averaged,
     HeadAngles,
     HeadReadings,
     HeadWeights,
@@ -179,8 +176,10 @@ def check_layout(
                 )
 
 
-class LayoutCompensation(eqx.Module):
+class LayoutCompensation(AbstractErrorSeries):
     """Result of :func:`least_squares_compensate` (orders ``1 … M``).
+    :meth:`error_function` is ``e(theta)`` of a head at azimuth 0 (unobservable orders left
+    out).
 
     Attributes:
         sin_rad, cos_rad: ``S_j``, ``C_j`` of the error function ``e`` of a head at azimuth 0,
@@ -201,18 +200,6 @@ class LayoutCompensation(eqx.Module):
     noise_amplification: Array
     fit_residual_rad: Array
     head_angles_rad: Array
-
-    @property
-    def max_order(self) -> int:
-        """Highest order ``M``."""
-        return int(self.sin_rad.shape[0])
-
-    def error_function(self, theta_rad: Angles) -> Averaged:
-        """``e(theta)`` of a head at azimuth 0, rad (unobservable orders left out)."""
-        th = _f64(theta_rad)
-        j = jnp.arange(1, self.max_order + 1)
-        arg = th[..., None] * j
-        return jnp.sin(arg) @ self.sin_rad + jnp.cos(arg) @ self.cos_rad
 
 
 @functools.partial(jax.jit, static_argnames="max_order")

@@ -102,8 +102,9 @@ def _grating(sin_rad: Array, cos_rad: Array, s1: Array, c1: Array, psi: Array) -
     return _grating_series(sin_rad, cos_rad, s1, c1)
 
 
-def _instantiate(t):
-    return jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t
+def _instantiate(t: Array | SymbolicZero, primal: Array) -> Array:
+    """The tangent ``t`` of ``primal``, zeros of its shape and dtype when symbolic."""
+    return jnp.zeros_like(primal) if isinstance(t, SymbolicZero) else t
 
 
 def _clenshaw(cos_coef: Array, sin_coef: Array, c1: Array, s1: Array) -> Array:
@@ -138,9 +139,9 @@ def _grating_series_jvp(primals, tangents):
     j = jnp.arange(1, sin_rad.shape[0] + 1, dtype=s1.dtype)
     g = _clenshaw(cos_rad, sin_rad, c1, s1)
     gp = _clenshaw(j * sin_rad, -j * cos_rad, c1, s1)
-    dg = gp * (c1 * _instantiate(ds1) - s1 * _instantiate(dc1))
+    dg = gp * (c1 * _instantiate(ds1, s1) - s1 * _instantiate(dc1, c1))
     if not (isinstance(d_sin, SymbolicZero) and isinstance(d_cos, SymbolicZero)):
-        dg = dg + _clenshaw(_instantiate(d_cos), _instantiate(d_sin), c1, s1)
+        dg = dg + _clenshaw(_instantiate(d_cos, cos_rad), _instantiate(d_sin, sin_rad), c1, s1)
     return g, dg
 
 

@@ -43,6 +43,7 @@ from ._motor import Motor, time_at_angle
 from ._sds_errors import ARCSEC, SDSErrors, bearing_noise
 from ._types import (
     Angles,
+    ArrayInput,
     Averaged,
     FixedEdgeTimes,
     FixedValues,
@@ -73,7 +74,7 @@ __all__ = [
 ]
 
 
-def _f(x: ArrayLike) -> Array:
+def _f(x: ArrayInput) -> Array:
     return jnp.asarray(x, dtype=float)
 
 
@@ -740,15 +741,21 @@ def reference_design(
     )
 
 
-def reference_errors(**kw) -> SDSErrors:
+def reference_errors(*, systematic_only: bool = False, **kw) -> SDSErrors:
     """Error physics of the seed's device (each can be overridden by keyword):
 
     axis tilt 10 arcsec, optical-axis tilt 0.01 rad (0.001 in over 0.1 in) with 2.5 µm
     platform axial runout at order 1 and 1.2 µm at order 2, bearing runout 2.5 µm RMS
     (0.0001 in) at non-synchronous orders, thermal drift 0.7 arcsec/K at 0.1 K/h, clock
     100 MHz with 1 ns jitter.
+
+    ``systematic_only=True`` keeps only what repeats every revolution (the tilts, the axial
+    runout, the drift coefficient): no bearing runout, temperature rate 0, no clock
+    quantisation and no jitter. Keywords still override either set.
     """
     bearing = bearing_noise_default()
+    if systematic_only:
+        bearing = {"bearing_amplitude_m": [], "bearing_ratio": [], "bearing_phase_rad": []}
     base = dict(
         axis_tilt_rad=10 * ARCSEC,
         axis_tilt_azimuth_rad=0.4,
@@ -762,6 +769,8 @@ def reference_errors(**kw) -> SDSErrors:
         jitter_s=1e-9,
         **bearing,
     )
+    if systematic_only:
+        base.update(temperature_rate_k_per_s=0.0, clock_period_s=0.0, jitter_s=0.0)
     base.update(kw)
     return SDSErrors(**base)
 

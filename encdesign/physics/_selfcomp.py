@@ -26,18 +26,19 @@ for ``N`` equally spaced heads keeps exactly the degenerate modes ``N, 2N, …``
 :func:`apply_map` subtracts it.
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations``: equinox reads the ``AbstractVar`` of
+# :class:`AbstractErrorSeries` at class creation and refuses it as a string
 import functools
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from equinox import AbstractVar
 from jaxtyping import Array
 
 from .._array import f64 as _f64
 from .._errors import EncdesignInputError
-from ._theorem import fourier_coefficients
+from ._theorem import fourier_coefficients, fourier_series
 from ._types import (
     Angles,
     Averaged,
@@ -53,6 +54,7 @@ from ._types import (
 )
 
 __all__ = [
+    "AbstractErrorSeries",
     "cotangent_equations",
     "SelfCompensation",
     "self_compensate",
@@ -90,8 +92,29 @@ def cotangent_equations(
     return 0.5 * (cp * cot - sp), -0.5 * (sp * cot + cp)
 
 
-class SelfCompensation(eqx.Module):
+class AbstractErrorSeries(eqx.Module):
+    """Sine and cosine coefficients ``S_j``, ``C_j`` (rad) of orders ``j = 1 … M`` of an
+    error function, and its value: the part :class:`SelfCompensation`,
+    :class:`~encdesign.physics.LayoutCompensation` and :class:`EncoderMap` share. Abstract:
+    each of them declares the two fields; the methods here are never overridden."""
+
+    sin_rad: AbstractVar[Array]
+    cos_rad: AbstractVar[Array]
+
+    @property
+    def max_order(self) -> int:
+        """Highest order ``M``."""
+        return int(self.sin_rad.shape[0])
+
+    def error_function(self, theta_rad: Angles) -> Averaged:
+        """The error function at angles ``theta`` (rad, any shape), rad:
+        ``sum_j S_j sin(j theta) + C_j cos(j theta)``."""
+        return fourier_series(theta_rad, self.sin_rad, self.cos_rad)
+
+
+class SelfCompensation(AbstractErrorSeries):
     """Result of :func:`self_compensate` (all coefficients in rad, orders ``1 … M``).
+    :meth:`error_function` is the reference head's error ``e_0(theta)``.
 
     Attributes:
         sin_rad, cos_rad: averaged ``S_j``, ``C_j`` of the reference head's error ``(M,)``.
@@ -114,18 +137,6 @@ class SelfCompensation(eqx.Module):
     head_offsets_rad: Array
     reference_angle_rad: Array
     pair_heads: tuple[int, ...] = eqx.field(static=True)
-
-    @property
-    def max_order(self) -> int:
-        """Highest order ``M``."""
-        return int(self.sin_rad.shape[0])
-
-    def error_function(self, theta_rad: Angles) -> Averaged:
-        """The reference head's error ``e_0(theta)``, rad, at angles ``theta`` (rad)."""
-        th = _f64(theta_rad)
-        j = jnp.arange(1, self.max_order + 1)
-        arg = th[..., None] * j
-        return jnp.sin(arg) @ self.sin_rad + jnp.cos(arg) @ self.cos_rad
 
 
 @functools.partial(jax.jit, static_argnames=("reference_head", "max_order"))
@@ -193,7 +204,7 @@ def self_compensate(
     )
 
 
-class EncoderMap(eqx.Module):
+class EncoderMap(AbstractErrorSeries):
     """The encoder map ``m(theta) = sum_j S_j sin(j theta) + C_j cos(j theta)``, rad.
 
     ``m`` is the error that remains in an averaged reading; ``corrected = reading - m``.
@@ -206,11 +217,8 @@ class EncoderMap(eqx.Module):
     cos_rad: Array
 
     def __call__(self, theta_rad: Angles) -> Averaged:
-        """``m(theta)``, rad, at angles ``theta`` (rad), any shape."""
-        th = _f64(theta_rad)
-        j = jnp.arange(1, self.sin_rad.shape[0] + 1)
-        arg = th[..., None] * j
-        return jnp.sin(arg) @ self.sin_rad + jnp.cos(arg) @ self.cos_rad
+        """``m(theta)``, rad, at angles ``theta`` (rad), any shape (:meth:`error_function`)."""
+        return self.error_function(theta_rad)
 
     def table(self, n_points: int) -> tuple[Array, Array]:
         """Seed eq. 19: ``(theta_i, m_i)`` at ``n_points`` equally spaced angles in

@@ -7,7 +7,8 @@ Setting: a ``multihead`` recording with one head ``h0`` (the sensor's reading, r
 
 with ``f`` the sensor's error function of the shaft angle (the base model: Fourier orders of
 ``theta_ref``), ``c_r`` one constant per run (each run re-zeroes) and the candidate terms
-below (the finder registers each as a ``Candidate`` in ``encdesign.diagnose._reference_terms``;
+below (the finder registers each as a ``Candidate`` in
+``encdesign.diagnose.kinds.multihead._reference_terms``;
 the concealed benches of ``encdesign.simulate`` add them to generated records). Every term is
 a differentiable JAX function of data arrays (``theta_ref``, the reference velocity
 ``omega``, the modelled reading) and of its parameters; it returns the additive error in rad

@@ -35,6 +35,7 @@ from ._types import (
     HeadAngles,
     HeadErrors,
     HeadWeights,
+    OrderCoefficients,
     OrderTransfer,
     OrderValues,
     Signals,
@@ -46,6 +47,7 @@ __all__ = [
     "surviving_orders",
     "model_mode_transfer",
     "fourier_coefficients",
+    "fourier_series",
     "mode_amplitudes",
 ]
 
@@ -134,6 +136,20 @@ def fourier_coefficients(
     coef = jnp.linalg.solve(an.T @ an, an.T @ y.reshape(theta.shape[0], -1))
     coef = (coef / scale[:, None]).reshape((2 * max_order + 1, *y.shape[1:]))
     return coef[0], coef[1 : max_order + 1], coef[max_order + 1 :]
+
+
+def fourier_series(
+    theta_rad: Angles, sin_rad: OrderCoefficients, cos_rad: OrderCoefficients
+) -> Averaged:
+    """``sum_j S_j sin(j theta) + C_j cos(j theta)`` over orders ``j = 1 … M`` at angles
+    ``theta`` (rad, any shape): the series :func:`fourier_coefficients` fits, without its
+    constant. The result has the shape of ``theta`` and the unit of the coefficients
+    (``(M,)`` each). Differentiable."""
+    th = jnp.asarray(theta_rad, dtype=jnp.float64)
+    s = jnp.asarray(sin_rad, dtype=jnp.float64)
+    j = jnp.arange(1, s.shape[-1] + 1)
+    arg = th[..., None] * j
+    return jnp.sin(arg) @ s + jnp.cos(arg) @ jnp.asarray(cos_rad, dtype=jnp.float64)
 
 
 @functools.partial(jax.jit, static_argnames="max_order")

@@ -110,6 +110,7 @@ def simulate_recording(
     seed: int = 0,
     like: str | os.PathLike | None = None,
     compress: bool = False,
+    parquet: bool = False,
 ) -> Recording:
     """Simulate a bench and write it as a multihead recording (atomically).
 
@@ -121,6 +122,7 @@ def simulate_recording(
             are reused instead of the design's ``[[bench.runs]]``; its head count must
             match the design's.
         compress: write ``.csv.gz``.
+        parquet: write the table as Parquet (``.parquet``).
 
     Returns:
         The written :class:`~encdesign.Recording`.
@@ -162,5 +164,6 @@ def simulate_recording(
         description=desc,
         provenance=provenance,
         compress=compress,
+        parquet=parquet,
         source=str(design.path or "design"),
     )

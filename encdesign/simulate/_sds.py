@@ -130,6 +130,7 @@ def simulate_sds_recording(
     key: jax.Array | None = None,
     description: str | None = None,
     compress: bool = False,
+    parquet: bool = False,
     n_newton: int = 2,
 ) -> Recording:
     """Simulate a bench run and write it as an ``sds`` recording (TOML + CSV).
@@ -145,6 +146,7 @@ def simulate_sds_recording(
         key: ``jax.random`` key for jitter (``None``: no jitter).
         description: free text for the TOML.
         compress: write ``.csv.gz``.
+        parquet: write the table as Parquet (``.parquet``).
         n_newton: Newton iterations for the edge times.
 
     Returns:
@@ -164,4 +166,5 @@ def simulate_sds_recording(
         description=description or "simulated shifted-delta-sum bench run (encdesign)",
         provenance={"simulated_by": "encdesign.simulate_sds_recording", "n_revs": n_revs},
         compress=compress,
+        parquet=parquet,
     )

@@ -1,0 +1,233 @@
+"""Benchmark: discovery of out-of-catalog physics (issue 41), on generated records.
+
+Each case is a record of :func:`encdesign.simulate._outside.outside_record` (a class of
+:data:`~encdesign.simulate._outside.CLASSES`, a size in noise units, a kind), diagnosed by
+the finder; discovery's model of the located line is scored against the truth:
+
+* ``frame_right``: the strongest discovered term at the truth's line has the truth's frame;
+* ``modulation_right``: and its modulation (``cell <i>`` of the truth's run);
+* ``beta_within_2se``: for the classes with a speed law, ``|beta - truth| <= 2 SE``;
+* ``gain_ratio``: held-out chi-square gain of the discovered terms at the line over that of
+  the true model (the truth's frame and modulation fitted to the same record);
+* ``catalog``: the catalog named an effect that took the structure (not a discovery case).
+
+Clean records (``--clean N`` per kind) count the records where discovery adds a term.
+Seeds come from ``--seed`` (a base never used while developing). ``--json`` is rewritten
+after each record (``complete``: false until the last)::
+
+    python benchmarks/discovery.py --seeds 1 --rows 3000 --clean 10 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose.engine import _discover as D
+from encdesign.diagnose.engine import _engine
+from encdesign.simulate._outside import CLASSES, KINDS, outside_record
+
+SIZES = (2.0, 5.0, 20.0)
+
+_CAP: dict = {}
+
+
+def _capture(prep, fitter, terms, resid, findings):
+    _CAP.update(prep=prep, fitter=fitter, terms=terms, resid=resid, findings=findings)
+    t0 = time.perf_counter()
+    out = D.discover(prep, fitter, terms, resid, findings)
+    _CAP["discovery_s"] = time.perf_counter() - t0
+    return out
+
+
+def _at_line(t: dict, truth: dict) -> bool:
+    kind, val = truth["line"]
+    if kind == "hz":
+        return t["line_kind"] == "hz" and abs(t["value"] - val) < 0.5
+    return t["line_kind"] == "order" and abs(t["value"] - val) < 1e-6
+
+
+def _gains(truth: dict) -> tuple[float, float]:
+    """``(discovered, true)``: held-out gains, on the same sums, of the discovered terms at
+    the truth's line (jointly) and of the truth's frame and modulation there."""
+    nan = float("nan")
+    st = D.build(_CAP["prep"], _CAP["fitter"], _CAP["terms"], _CAP["resid"], _CAP["findings"])
+    if st is None:
+        return nan, nan
+    kind, val = truth["line"]
+    li = [i for i, ln in enumerate(st.lines) if ln.kind == kind and abs(ln.value - val) < 0.5]
+    if not li:
+        return nan, nan
+    folds = list(range(st.sums.A.shape[0]))
+    kept, _ = D.select_terms(st)
+    mine = [st.lib[i] for i in kept if st.lib[i].line == li[0]]
+    got = D._heldout(st.sums.A, st.sums.b, D._embed(st.sums, mine), folds, st.sums.raw)
+    mod = truth["modulation"]
+    best = nan
+    for tm in st.lib:
+        if tm.line != li[0] or tm.frame != truth["frame"]:
+            continue
+        m = tm.modulation
+        if mod == "cell":
+            ok = m.startswith("cell ") and st.cinfo["run"][int(m.split()[1])] == truth["run"]
+        elif mod == "growth":  # a growth from zero: the level and the growth
+            ok = m == "growth"
+            if ok:
+                lvl = [t for t in st.lib if t.line == tm.line and t.frame == tm.frame]
+                lvl = [t for t in lvl if t.modulation == "static"]
+                g = D._heldout(
+                    st.sums.A, st.sums.b, D._embed(st.sums, [tm, *lvl]), folds, st.sums.raw
+                )
+                best = g if not np.isfinite(best) else max(best, g)
+                continue
+        else:
+            ok = m == mod
+        if ok:
+            g = D._single_heldout(st.sums, tm, folds)
+            best = g if not np.isfinite(best) else max(best, g)
+    return got, best
+
+
+def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
+    rec, truth = outside_record(np.random.default_rng(seed), cls, size, kind, rows)
+    _CAP.clear()
+    t0 = time.perf_counter()
+    d = diagnose(rec)
+    wall = time.perf_counter() - t0
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        if u.get("model")
+        for t in u["model"]["terms"]
+        if _at_line(t, truth)
+    ]
+    # one entry per discovered term (a term sits in every finding at its line)
+    uniq = {(t["frame"], t["modulation"]): t for t in terms}
+    terms = sorted(uniq.values(), key=lambda t: -t["heldout_gain_chi2"])
+    out = {
+        "class": cls,
+        "size": size,
+        "kind": kind,
+        "truth": {k: truth.get(k) for k in ("line", "frame", "modulation", "beta", "run")},
+        "verdict": d.verdict,
+        "effects": [e["name"] for e in d.effects],
+        "wall_s": wall,
+        "discovery_s": _CAP.get("discovery_s", 0.0),
+        "found": bool(terms),
+        "terms": [
+            {k: t[k] for k in ("frame", "modulation", "heldout_gain_chi2", "scaling")}
+            for t in terms
+        ],
+    }
+    out["catalog"] = bool(d.effects) and not terms
+    # a static order of one sensor is its own error function: the base model takes it
+    out["base"] = d.verdict == "consistent"
+    if terms:
+        t = terms[0]
+        out["frame_right"] = t["frame"] == truth["frame"]
+        mod = truth["modulation"]
+        out["modulation_right"] = (
+            t["modulation"].startswith("cell ") if mod == "cell" else t["modulation"] == mod
+        )
+        if truth.get("beta") is not None:
+            sc = t.get("scaling")
+            out["beta_within_2se"] = bool(
+                sc and sc["beta_se"] and abs(sc["beta"] - truth["beta"]) <= 2 * sc["beta_se"]
+            )
+        got, tg = _gains(truth) if "fitter" in _CAP else (float("nan"), float("nan"))
+        out["gain_discovered_chi2"], out["gain_true_chi2"] = got, tg
+        ok = np.isfinite(tg) and tg > 0 and np.isfinite(got)
+        out["gain_ratio"] = float(got / tg) if ok else None
+    else:
+        out["frame_right"] = False
+    return out
+
+
+def summarise(cases: list[dict], clean: list[dict]) -> dict:
+    def rate(xs):
+        xs = [bool(x) for x in xs]
+        return {"n": len(xs), "rate": (sum(xs) / len(xs)) if xs else None}
+
+    disc = [c for c in cases if not c["catalog"] and not c.get("base")]
+    ratios = [c["gain_ratio"] for c in disc if c.get("gain_ratio") is not None]
+    by = {}
+    for key in ("class", "size", "kind"):
+        vals = sorted({c[key] for c in cases}, key=str)
+        by[key] = {str(v): rate([c["frame_right"] for c in disc if c[key] == v]) for v in vals}
+    return {
+        "frame_right_all": rate([c["frame_right"] for c in cases]),
+        "frame_right_excluding_catalog_and_base": rate([c["frame_right"] for c in disc]),
+        "modulation_right": rate([c.get("modulation_right", False) for c in disc]),
+        "beta_within_2se": rate([c["beta_within_2se"] for c in disc if "beta_within_2se" in c]),
+        "gain_ratio_ge_0_8": rate([r >= 0.8 for r in ratios]),
+        "gain_ratio_median": float(np.median(ratios)) if ratios else None,
+        "catalog_took_it": rate([c["catalog"] for c in cases]),
+        "base_took_it": rate([c.get("base", False) for c in cases]),
+        "frame_right_by": by,
+        "clean_with_a_term": rate([c["found_any"] for c in clean]),
+        "discovery_s_max": max([c["discovery_s"] for c in cases + clean], default=0.0),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=20261204)
+    ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--rows", type=int, default=3000)
+    ap.add_argument("--clean", type=int, default=10, help="clean records per kind")
+    ap.add_argument("--classes", default=",".join(CLASSES))
+    ap.add_argument("--kinds", default=",".join(KINDS))
+    ap.add_argument("--sizes", default=",".join(str(s) for s in SIZES))
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--no-cases", action="store_true", help="clean records only")
+    a = ap.parse_args(argv)
+    _engine.discover = _capture
+    classes, kinds = ([] if a.no_cases else a.classes.split(",")), a.kinds.split(",")
+    sizes = [float(s) for s in a.sizes.split(",")]
+    cases, clean = [], []
+    t0 = time.perf_counter()
+
+    def write(complete: bool) -> dict:
+        summary = summarise(cases, clean)
+        summary["elapsed_s"] = time.perf_counter() - t0
+        summary["complete"] = complete
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump({"args": vars(a), "summary": summary, "cases": cases}, f, indent=1)
+        return summary
+
+    for ki, kind in enumerate(kinds):
+        for ci, cls in enumerate(classes):
+            for si, size in enumerate(sizes):
+                for i in range(a.seeds):
+                    c = run_case(cls, size, kind, [a.seed, ki, ci, si, i], a.rows)
+                    cases.append(c)
+                    print(
+                        f"{kind:9s} {cls:14s} {size:4g}x  found={c['found']!s:5s} "
+                        f"frame={c['frame_right']!s:5s} catalog={c['catalog']!s:5s} "
+                        f"beta2se={c.get('beta_within_2se', '-')!s:5s} "
+                        f"ratio={c.get('gain_ratio')} {c['wall_s']:.1f}s",
+                        flush=True,
+                    )
+                    write(False)
+        for i in range(a.clean):
+            rec, _ = outside_record(
+                np.random.default_rng([a.seed, 99, ki, i]), "clean", 0, kind, a.rows
+            )
+            _CAP.clear()
+            d = diagnose(rec)
+            found = any(u.get("model") and u["model"]["terms"] for u in d.doc["unexplained"])
+            clean.append(
+                {"kind": kind, "found_any": found, "discovery_s": _CAP.get("discovery_s", 0.0)}
+            )
+            write(False)
+    print(json.dumps(write(True), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,218 @@
+"""Candidate effects of the discrepancy finder: the registration API.
+
+A candidate effect is a :class:`Candidate`: a differentiable JAX term that adds an error
+(rad, or the kind's residual unit) to every sample and channel, the parameters it takes
+(each a :class:`Param`, with its unit and shape), and its *signature*: the views of the
+residual in which it shows (``docs/diagnose.md`` lists the views). The engine
+(:mod:`encdesign.diagnose.engine._engine`) fits any candidate the same way: it evaluates
+``fn`` and its Jacobian (``jax.jacfwd``) chunk by chunk over the rows, so a term only has
+to be a pure function of its parameters and of the row columns.
+
+Term function contract::
+
+    fn(params: dict[str, Array], x: dict[str, Array]) -> Array  # shape (n, C)
+
+``params`` maps each :class:`Param` name to an array of the shape given by
+:meth:`Param.resolved_shape`; ``x`` holds the row columns of one chunk (``n`` rows) and the
+recording constants (see :data:`ROW_COLUMNS` and :data:`CONSTANTS`). ``C`` is the number of
+channels (heads of a multihead recording, 1 for a sensor against a reference or a motion
+recording). No Python control flow on traced values; discrete choices go in the
+:class:`Candidate` itself (it is a frozen dataclass, hashable: one compiled Jacobian per
+candidate and chunk shape).
+
+Users add their own candidate without editing the package: build a :class:`Candidate` and
+pass it to :func:`encdesign.diagnose.diagnose` (``candidates=[...]``), or name a Python file
+that defines ``CANDIDATES = [...]`` with ``encdesign diagnose --candidates FILE``
+(``examples/custom_candidate.py``). There is no global registry (no mutable singleton).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from ._settings import DEFAULT_SETTINGS, FinderSettings
+
+ROW_COLUMNS = {
+    "t": "time within the run, s",
+    "tau": "global time (runs end to end in file order), s",
+    "theta": "shaft angle (theta_ref, or the head mean), run angle offsets applied, rad",
+    "theta_ref": "reference angle as recorded (zeros when absent), rad",
+    "reading": "each channel's reading, rad, shape (n, C)",
+    "run_onehot": "one-hot run membership, shape (n, R)",
+    "omega": "steady speed of the sample's segment (signed), rad/s",
+    "direction": "+1 / -1: direction of rotation of the sample's segment",
+    "driver": "temp_c - mean (K) when a temperature column varies, else tau - mean (s)",
+    "psi": "phase within one signal period (grating line, pole pair), rad, shape (n, C)",
+}
+"""Row columns the engine passes to every term (chunked along the first axis)."""
+
+CONSTANTS = {
+    "alpha": "nominal azimuth of each channel, rad, shape (C,)",
+    "radius_m": "optical radius, m (1.0 when the recording gives none: lengths not reported)",
+    "signal_periods": "signal periods per revolution (0 when unknown)",
+    "n_runs": "number of runs (float scalar)",
+}
+"""Recording constants passed to every term (not chunked); a kind adds its own arrays
+(``KindData.constants``, e.g. the sds sensor azimuths ``psi_m``)."""
+
+SHAPES = ("1", "channels", "runs", "runs*channels", "orders", "channels*orders")
+
+
+@dataclasses.dataclass(frozen=True)
+class Param:
+    """One named parameter (block) of a candidate.
+
+    Attributes:
+        name: parameter name, with its unit in it where it has one (``frequency_hz``).
+        unit: SI unit (``"rad"``, ``"m"``, ``"Hz"``, ``"s"``, ``"1"``, ``"rad/K"``, ...).
+        shape: ``"1"`` (scalar), ``"channels"``, ``"runs"``, ``"runs*channels"``, or a fixed
+            tuple of ints.
+        linear: whether the term is linear in it (then one Gauss-Newton step is exact and
+            no start value is needed).
+        scale: typical size (in ``unit``) used to scale the Jacobian column; ``None``: the
+            engine scales each column to the residual's noise level.
+        fit: ``False`` for a parameter held at its start value (e.g. a detected step size).
+        description: one line for the report.
+        global_time: a time on the finder's end-to-end axis ``tau`` (runs laid end to end,
+            pauses removed; what the term reads): reported in the recording's own ``t``,
+            with its ``run`` (issue 44 C).
+    """
+
+    name: str
+    unit: str
+    shape: str | tuple[int, ...] = "1"
+    linear: bool = True
+    scale: float | None = None
+    fit: bool = True
+    description: str = ""
+    global_time: bool = False
+
+    def resolved_shape(self, n_channels: int, n_runs: int) -> tuple[int, ...]:
+        """The array shape of this parameter for a recording of that size."""
+        if isinstance(self.shape, tuple):
+            return self.shape
+        return {
+            "1": (),
+            "channels": (n_channels,),
+            "runs": (n_runs,),
+            "runs*channels": (n_runs, n_channels),
+        }[self.shape]
+
+
+@dataclasses.dataclass(frozen=True)
+class Context:
+    """What a candidate's hooks may look at (numpy, read-only).
+
+    Attributes:
+        kind: recording kind (``multihead``, ``motion``, ...).
+        n_channels, n_runs: sizes.
+        has_ref: whether the residual is against a reference angle (``theta_ref``).
+        sensor: ``[encoder] sensor`` (``optical`` when absent).
+        signal_periods: signal periods per revolution (0 when unknown).
+        radius_m: optical radius or ``None``.
+        rows: the row columns of :data:`ROW_COLUMNS` over the kept samples (numpy).
+        consts: the constants of :data:`CONSTANTS` and the kind's own term constants
+            (``KindData.constants``), built once in stage 1, read-only.
+        noise: noise std per channel (difference-based estimate), residual unit.
+        revolutions: revolutions covered per run.
+        meta: the recording's TOML content.
+        settings: the finder's thresholds (:class:`~encdesign.diagnose.FinderSettings`)
+            this diagnosis runs with (a candidate's ``plausible`` rule may read them).
+        max_order: the base model's highest order now (engine-owned: the engine builds a new
+            context when it grows the base; 0 before the base is built).
+        driver_name: what the ``driver`` row column is (``"temp_c"`` or ``"time"``;
+            engine-owned).
+        noise_info: what the kind's noise hook found beside the levels
+            (``NoiseEstimate.info``; engine-owned, ``None`` before the noise stage).
+        data: the kind's own data of this record (the
+            :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
+            often the kind's subclass of it), read-only.
+    """
+
+    kind: str
+    n_channels: int
+    n_runs: int
+    has_ref: bool
+    sensor: str
+    signal_periods: int
+    radius_m: float | None
+    rows: Mapping[str, np.ndarray]
+    consts: Mapping[str, Any]
+    noise: np.ndarray
+    revolutions: np.ndarray
+    meta: Mapping[str, Any]
+    settings: FinderSettings = DEFAULT_SETTINGS
+    max_order: int = 0
+    driver_name: str | None = None
+    noise_info: Any = None
+    data: Any = None
+
+
+StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]
+"""``start(ctx, residual, findings) -> [params, ...]``: starting values for the nonlinear
+parameters (one dict per alternative start; linear ones may be left out, they start at 0)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """A candidate effect (or a base-model term) the engine can fit.
+
+    Attributes:
+        name: catalog name (``docs/effects.md``) or the user's own name.
+        fn: the term, ``fn(params, x) -> (n, C)`` (see module doc).
+        params: its parameters.
+        signature: views it shows in (``spectrum``, ``orders``, ``time``, ``drift``,
+            ``line_phase``, ``direction``, ``speed``, ``angle_trend``, ``floor``): the engine
+            tries it only when one of those views located something (an empty signature:
+            tried whenever the residual fails the goodness-of-fit test).
+        kinds: recording kinds it applies to.
+        explanation: what it means physically (the report adds the fitted numbers).
+        applies: ``applies(ctx) -> None`` or the reason it cannot be tested on this record.
+        start: starting values for nonlinear parameters (see :data:`StartFn`).
+        plausible: ``plausible(ctx, params) -> None`` or the reason the fitted size is not
+            physical (the effect is then refused with that reason).
+        derived: ``derived(ctx, params, se) -> dict`` extra reported quantities (e.g. a
+            length from an angle), each ``{"value", "se", "unit"}``.
+        doubt_overruled: ``True`` (default): ``plausible`` is a doubt about the fitted size
+            that the data may overrule (a candidate far ahead of every other is named with
+            the doubt and its alternatives, ``FinderSettings.dominant_ratio``); ``False``:
+            its ``plausible`` is itself a test the data failed (``vibration``: at one speed
+            the line must beat the rotation-locked order), always a refusal.
+        valjac: ``valjac(params, x) -> (value (n, C), {name: (n, C, *shape)})``, the value
+            and Jacobian written by hand, or ``None`` (default): ``jax.jacfwd`` of ``fn``.
+            For a term with many parameters (the base: forward mode carries one tangent per
+            parameter through every intermediate) it is several times faster; it must
+            agree with ``jax.jacfwd(fn)`` (tested).
+    """
+
+    name: str
+    fn: Callable[[dict, dict], Any]
+    params: tuple[Param, ...]
+    signature: tuple[str, ...] = ()
+    kinds: tuple[str, ...] = ("multihead",)
+    explanation: str = ""
+    applies: Callable[[Context], str | None] | None = None
+    start: StartFn | None = None
+    plausible: Callable[[Context, dict], str | None] | None = None
+    derived: Callable[[Context, dict, dict], dict] | None = None
+    doubt_overruled: bool = True
+    valjac: Callable[[dict, dict], Any] | None = None
+
+    def __post_init__(self) -> None:
+        names = [p.name for p in self.params]
+        if len(set(names)) != len(names):
+            raise ValueError(f"candidate {self.name!r}: parameter names repeat: {names}")
+        if not callable(self.fn):
+            raise TypeError(f"candidate {self.name!r}: fn must be callable")
+
+    def shapes(self, n_channels: int, n_runs: int) -> dict[str, tuple[int, ...]]:
+        """Parameter name -> array shape for a recording of that size."""
+        return {p.name: p.resolved_shape(n_channels, n_runs) for p in self.params}
+
+    def size(self, n_channels: int, n_runs: int) -> int:
+        """Number of scalar parameters."""
+        return int(sum(np.prod(s, dtype=int) for s in self.shapes(n_channels, n_runs).values()))

@@ -1,0 +1,776 @@
+"""Discovery after the catalog: model located structure no catalog effect explains (issue 41).
+
+For each located line (an integer or fractional shaft order, a fixed frequency in Hz, order 0
+for offsets that drift, step or follow the direction), candidate terms are built from a
+generic library organised by **frame** and **modulation**:
+
+* frames: ``disk`` (the order seen by every head with the phase ``m psi_k`` of its azimuth),
+  ``shaft`` (one phase on every head: a motion of the shaft or of the reference),
+  ``head <k>`` (one head only), ``hz`` (a fixed frequency: its own phase in every cell);
+* modulations (per *cell*: rows of one run, one direction and one steady speed):
+  ``static``, ``speed`` (amplitude ``(|omega| / omega_0)^beta``, the exponent fitted with a
+  standard error), ``direction`` (opposite sign in the two directions), ``forward`` /
+  ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
+  own amplitude and phase), ``growth`` (amplitude linear in the time across runs),
+  ``temperature`` (linear in ``temp_c``).
+
+Every term is a linear (``speed``: nonlinear in ``beta`` only) restriction of one *full*
+block per line: cos/sin of the line's phase, per cell and channel, times the within-cell
+modulations (1, time, temperature). One pass over the rows accumulates per held-out fold the
+Gram matrix of those columns, their products with the whitened residual and with the
+Jacobian of the final catalog model; the columns are then made orthogonal to that Jacobian
+(Frisch-Waugh: a discovered term is fitted jointly with the catalog model, never taking what
+it already explains), and every term's fit, held-out gain and inclusion are computed from
+those sums without another pass.
+
+Selection is **orthogonal forward regression**: at each step the term with the largest
+in-sample chi-square drop less its multiple-testing threshold ``chi2.isf(alpha / N, q)``
+(``N`` terms in the library, ``q`` parameters: Bonferroni, which also prefers the smaller of
+two nested terms) enters when that margin is positive and its K-fold held-out gain (fitted
+without each fold, scored on it) is positive. The same selection repeated without each fold
+in turn gives each term's inclusion probability; a term enters only when it is at least
+``INCLUSION_MIN``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from ._discover_words import reading
+
+ALPHA = 0.01
+"""Family-wise false-alarm rate of the selection over the whole library (Bonferroni)."""
+
+INCLUSION_MIN = 0.6
+"""A term enters only when the selection repeated without each fold keeps it this often."""
+
+MAX_TERMS = 4
+"""Terms the forward selection may add over all lines."""
+
+MAX_LINES = 10
+"""Located lines modelled (the strongest findings first)."""
+
+MAX_CELLS = 12
+"""Cells (run x direction x speed) beyond which the cell modulations are left out."""
+
+MODEL_ERROR_PER_PARAM = 5e-3
+"""Share of a term's chi-square drop discounted per parameter when terms are ranked: the
+finder's own angle and base are not exact (a run offset fitted with the structure present
+moves the phase of a line a little), so at a high signal-to-noise ratio a term with more
+parameters (its own phase per run) would otherwise win over the physical one by fitting
+that small model error."""
+
+BETA_RANGE = (-4.0, 4.0)
+"""Range searched for a speed exponent."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Line:
+    """A located line: ``kind`` ``order`` (integer shaft order, ``value`` cycles per turn;
+    0: an offset), ``frac`` (a fractional order) or ``hz`` (``value`` Hz)."""
+
+    kind: str
+    value: float
+
+    def label(self) -> str:
+        if self.kind == "hz":
+            return f"{self.value:.4g} Hz"
+        if self.kind == "order" and self.value == 0:
+            return "offset (order 0)"
+        return f"order {self.value:g}"
+
+
+@dataclasses.dataclass
+class Term:
+    """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
+    the line's full block; ``beta`` the speed exponent (``speed`` modulation)."""
+
+    line: int
+    frame: str
+    modulation: str
+    H: np.ndarray
+    beta: float | None = None
+    beta_se: float | None = None
+    H0: np.ndarray | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.frame} / {self.modulation} @ line {self.line}"
+
+
+# ----------------------------------------------------------------------------- lines
+
+
+def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Line], list[int]]:
+    """The located lines of ``findings`` (``_views.Finding``) and, per finding, the index of
+    its first line (-1: a located structure no line models, e.g. a broad band; -2: a line
+    beyond the first :data:`MAX_LINES`)."""
+    out: list[Line] = []
+    first: list[int] = []
+
+    def add(ln: Line) -> int:
+        for i, o in enumerate(out):
+            if o.kind == ln.kind and abs(o.value - ln.value) <= 1e-6 * max(1.0, abs(ln.value)):
+                return i
+        out.append(ln)
+        return len(out) - 1
+
+    for f in findings:
+        w, d = f.where, f.detail
+        idx = -1
+        orders = [o for o in w.get("orders", []) if math.isfinite(o)]
+        freqs = [h for h in w.get("frequencies_hz", []) if math.isfinite(h)]
+        if f.view == "orders" and orders:
+            idx = add(Line("order", float(round(orders[0]))))
+        elif f.view == "spectrum" and (orders or freqs):
+            if d.get("fixed_in") == "frequency" and freqs:
+                idx = add(Line("hz", float(np.median(freqs))))
+            elif d.get("integer_order") and orders:
+                m = float(round(np.median(orders)))
+                idx = add(Line("order", m)) if m > 0 else -1
+            elif orders:
+                nu = float(np.median(orders))
+                idx = add(Line("frac", round(nu, 3))) if nu > 0 else -1
+        elif f.view in ("time", "drift", "direction", "speed"):
+            idx = add(Line("order", 0.0))
+        elif f.view == "line_phase" and signal_periods > 0:
+            idx = add(Line("order", float(signal_periods)))
+        first.append(idx)
+    return out[:MAX_LINES], [i if i < MAX_LINES else -2 for i in first]
+
+
+# ----------------------------------------------------------------------------- cells
+
+
+def _cells(prep) -> tuple[np.ndarray, dict]:
+    """Cell index per row (-1: not kept) and the cells' run, direction and speed."""
+    keep = prep.keep
+    run = np.asarray(prep.run)
+    om = np.asarray(prep.rows["omega"], float) if "omega" in prep.rows else np.zeros(prep.n)
+    sgn = np.where(om < 0, -1, 1)
+    lsp = np.round(np.log(np.maximum(np.abs(om), 1e-12)) / 0.05).astype(np.int64)
+    key = np.stack([run, sgn, lsp], 1)
+    key = np.where(keep[:, None], key, np.iinfo(np.int64).min)
+    uniq, inv = np.unique(key[keep], axis=0, return_inverse=True)
+    cell = -np.ones(prep.n, dtype=int)
+    cell[keep] = inv.ravel()
+    S = len(uniq)
+    speed = np.array([np.median(np.abs(om[cell == s])) for s in range(S)])
+    info = {
+        "run": uniq[:, 0].astype(int),
+        "direction": uniq[:, 1].astype(int),
+        "speed": speed,
+        "rows": np.bincount(cell[keep], minlength=S),
+    }
+    return cell, info
+
+
+# ----------------------------------------------------------------------------- sums
+
+
+@dataclasses.dataclass
+class Sums:
+    """Per-fold sums of the full blocks, made orthogonal to the catalog model's Jacobian.
+
+    ``A`` (K, Q, Q), ``b`` (K, Q): Gram and products with the whitened residual; ``raw``
+    (K, Q, Q): the Gram before the projection (a direction the catalog model spans keeps
+    nothing of its raw norm, and is dropped); ``rr``
+    (K,): the residual's chi-square per fold; ``slices``: each line's columns in ``Q``;
+    ``layout``: per line ``(n_blocks, S, C, n_basis)``; ``scales``: the centres and half
+    spans of the growth (``tau``) and temperature (``driver``) modulations."""
+
+    A: np.ndarray
+    b: np.ndarray
+    rr: np.ndarray
+    raw: np.ndarray
+    slices: list[slice]
+    layout: list[tuple[int, int, int, int]]
+    blocks: list[str]
+    scales: dict
+
+
+def _phase_basis(line: Line, th: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(rows, n_basis)`` cos/sin of the line's phase (order 0: a constant)."""
+    if line.kind == "order" and line.value == 0:
+        return np.ones((th.size, 1))
+    ph = 2 * np.pi * line.value * t if line.kind == "hz" else line.value * th
+    return np.stack([np.cos(ph), np.sin(ph)], 1)
+
+
+def accumulate(
+    prep, fitter, terms: Sequence[Any], resid: np.ndarray, lines: Sequence[Line], cell, cinfo
+) -> Sums:
+    """One pass over the rows: the per-fold sums of every line's full block (see module)."""
+    K = prep.settings.n_folds
+    C = prep.n_channels
+    S = len(cinfo["speed"])
+    sig = np.asarray(prep.sigma, float)
+    has_temp = str(prep.consts.get("driver_name", "time")) != "time" and "driver" in prep.rows
+    blocks = ["static", "growth"] + (["temperature"] if has_temp else [])
+    nb = len(blocks)
+    layout, slices, q0 = [], [], 0
+    for ln in lines:
+        nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
+        layout.append((nb, S, C, nj))
+        size = nb * S * C * nj
+        slices.append(slice(q0, q0 + size))
+        q0 += size
+    Q = q0
+    U = sum(nb * lay[3] for lay in layout)  # compact columns (before cell x channel)
+    tau_all = np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
+    kept_tau = tau_all[prep.keep]
+    tmid = float(np.mean(kept_tau)) if kept_tau.size else 0.0
+    tsc = float(np.ptp(kept_tau)) / 2 or 1.0
+    dmid, dsc = 0.0, 1.0
+    if has_temp:
+        dr = np.asarray(prep.rows["driver"], float)[prep.keep]
+        dmid, dsc = float(np.mean(dr)), float(np.ptp(dr)) / 2 or 1.0
+    scales = {"tau_mid_s": tmid, "tau_half_s": tsc, "driver_mid": dmid, "driver_half": dsc}
+    G = np.zeros((K, S, U, U))
+    XR = np.zeros((K, S, U, C))
+    p = None
+    JX = JJ = Jr = None
+    rr = np.zeros(K)
+    for a, b, x in fitter.chunks():
+        kb = prep.keep[a:b]
+        if not kb.any():
+            continue
+        Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
+        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, C, 0))
+        if prep.kd.project:
+            J = J - J.mean(1, keepdims=True)
+        J = (J / sig[None, :, None])[kb]
+        if p is None:
+            p = J.shape[2]
+            JX = np.zeros((K, p, S, U, C))
+            JJ = np.zeros((K, p, p))
+            Jr = np.zeros((K, p))
+        th = np.asarray(x["theta"][: b - a], float)[kb]
+        t = np.asarray(x["t"][: b - a], float)[kb]
+        tau = t
+        if "tau" in x:
+            tau = np.asarray(x["tau"][: b - a], float)[kb]
+        mods = [np.ones(th.size), (tau - tmid) / tsc]
+        if has_temp:
+            mods.append((np.asarray(x["driver"][: b - a], float)[kb] - dmid) / dsc)
+        cols = []
+        for ln in lines:
+            B = _phase_basis(ln, th, t)
+            for m in mods:
+                cols.append(B * m[:, None])
+        Xc = np.concatenate(cols, 1)  # (rows, U)
+        rw = (resid[a:b] / sig[None, :])[kb]
+        fo = prep.fold[a:b][kb]
+        ce = cell[a:b][kb]
+        for k in range(K):
+            mk = fo == k
+            if not mk.any():
+                continue
+            rr[k] += float(np.sum(rw[mk] ** 2))
+            Jk = J[mk]
+            JJ[k] += np.einsum("ncp,ncq->pq", Jk, Jk)
+            Jr[k] += np.einsum("ncp,nc->p", Jk, rw[mk])
+            for s in np.unique(ce[mk]):
+                ms = mk & (ce == s)
+                Xs = Xc[ms]
+                G[k, s] += Xs.T @ Xs
+                XR[k, s] += Xs.T @ rw[ms]
+                JX[k, :, s] += np.einsum("ncp,nu->puc", J[ms], Xs)
+    if p is None:
+        raise ValueError("discovery: no kept rows")
+    # full columns: (line, block, cell, channel, basis); compact u: (line, block, basis)
+    A = np.zeros((K, Q, Q))
+    bvec = np.zeros((K, Q))
+    JXf = np.zeros((K, p, Q))
+    comp = []  # per full column: (u, s, c)
+    u0 = 0
+    for nb_, S_, C_, nj in layout:
+        for bl in range(nb_):
+            for s in range(S_):
+                for c in range(C_):
+                    for j in range(nj):
+                        comp.append((u0 + bl * nj + j, s, c))
+        u0 += nb_ * nj
+    comp_a = np.asarray(comp)
+    uu, ss, cc = comp_a[:, 0], comp_a[:, 1], comp_a[:, 2]
+    w = 1.0 / sig
+    same_s = ss[:, None] == ss[None, :]
+    same_c = cc[:, None] == cc[None, :]
+    for k in range(K):
+        Gk = G[k][ss[:, None], uu[:, None], uu[None, :]]  # (Q, Q) on the same cell
+        fac = same_c * (w[cc][:, None] ** 2)
+        if prep.kd.project:
+            fac = fac - w[cc][:, None] * w[cc][None, :] / C
+        A[k] = np.where(same_s, Gk * fac, 0.0)
+        bvec[k] = XR[k][ss, uu, cc] * w[cc]
+        JXf[k] = JX[k][:, ss, uu, cc] * w[cc][None, :]
+    # Frisch-Waugh: columns orthogonal to the catalog model's Jacobian (all folds' sums)
+    JJt, JXt = JJ.sum(0), JXf.sum(0)
+    P = _psolve(JJt, JXt)
+    raw = A.copy()
+    for k in range(K):
+        A[k] = A[k] - JXf[k].T @ P - P.T @ JXf[k] + P.T @ JJ[k] @ P
+        bvec[k] = bvec[k] - P.T @ Jr[k]
+    return Sums(
+        A=A, b=bvec, rr=rr, raw=raw, slices=slices, scales=scales, layout=layout, blocks=blocks
+    )
+
+
+KEEP_SHARE = 1e-6
+"""A direction of a term keeps at least this share of its raw norm after the projection on
+the catalog model, else the catalog model spans it and it is dropped."""
+
+
+def _psolve(
+    A: np.ndarray, B: np.ndarray, rtol: float = 1e-10, raw: np.ndarray | None = None
+) -> np.ndarray:
+    """``A^+ B`` for a symmetric positive semi-definite ``A``, on the unit-diagonal scaled
+    matrix (columns of very different sizes): eigenvalues under ``rtol`` times the largest
+    dropped; with ``raw`` (the Gram before a projection), scaled by its diagonal instead and
+    eigenvalues under :data:`KEEP_SHARE` dropped (directions the projection took)."""
+    if A.size == 0:
+        return np.zeros((0,) + B.shape[1:])
+    d = np.sqrt(np.maximum(np.diag(A if raw is None else raw), 0.0))
+    d = np.where(d > 0, d, 1.0)
+    An = A / d[:, None] / d[None, :]
+    ev, V = np.linalg.eigh(An)
+    tol = rtol * max(float(ev.max()), 1e-300) if raw is None else KEEP_SHARE
+    keep = ev > tol
+    inv = np.where(keep, 1.0 / np.where(keep, ev, 1.0), 0.0)
+    Bn = B / d.reshape((-1,) + (1,) * (B.ndim - 1))
+    VB = V.T @ Bn
+    X = V @ (inv.reshape((-1,) + (1,) * (VB.ndim - 1)) * VB)
+    return X / d.reshape((-1,) + (1,) * (X.ndim - 1))
+
+
+# ----------------------------------------------------------------------------- library
+
+
+def _frame_maps(line: Line, C: int, alpha: np.ndarray) -> dict[str, np.ndarray]:
+    """Per frame, ``M`` (C, nj, nj'): each channel's basis coefficients from the frame's
+    parameters (``nj'``)."""
+    nj = 1 if (line.kind == "order" and line.value == 0) else 2
+    eye = np.eye(nj)
+    out: dict[str, np.ndarray] = {}
+    if C > 1 or nj == 2:
+        out["shaft"] = np.repeat(eye[None], C, 0)
+    if line.kind == "order" and line.value > 0 and C > 1:
+        ph = line.value * np.asarray(alpha, float)
+        c, s = np.cos(ph), np.sin(ph)
+        # C cos(m(theta - a)) + S sin(m(theta - a)) on the cos / sin of m theta
+        out["disk"] = np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
+    if C > 1:
+        for k in range(C):
+            M = np.zeros((C, nj, nj))
+            M[k] = eye
+            out[f"head {k}"] = M
+    return out
+
+
+def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Restriction ``(Q_line, nj' * n_free_cells)``: the frame map ``M`` on the block, per
+    cell scaled by ``f`` (S,) (one shared parameter set), or ``f`` (S, G) (G groups of
+    cells, each its own parameters)."""
+    nb, S, C, nj = layout
+    f2 = f[:, None] if f.ndim == 1 else f
+    Gn = f2.shape[1]
+    njp = M.shape[2]
+    H = np.zeros((nb, S, C, nj, Gn, njp))
+    for g in range(Gn):
+        H[block, :, :, :, g, :] = f2[:, g][:, None, None, None] * M[None]
+    return H.reshape(nb * S * C * nj, Gn * njp)
+
+
+def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> list[Term]:
+    """Every (line, frame, modulation) term the record can test."""
+    S = len(cinfo["speed"])
+    sp, dr = cinfo["speed"], cinfo["direction"]
+    out: list[Term] = []
+    for li, ln in enumerate(lines):
+        lay = sums.layout[li]
+        per_cell_phase = ln.kind in ("hz", "frac")
+        for fr, M in _frame_maps(ln, C, alpha).items():
+            name = "hz" if ln.kind == "hz" and fr == "shaft" else fr
+            if per_cell_phase:
+                if S <= MAX_CELLS:
+                    out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
+                continue
+            one = np.ones(S)
+            out.append(Term(li, name, "static", _H(lay, 0, M, one)))
+            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(1.2):
+                H0 = _H(lay, 0, M, one)
+                out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
+            if (dr > 0).any() and (dr < 0).any():
+                out.append(Term(li, name, "direction", _H(lay, 0, M, dr.astype(float))))
+                out.append(Term(li, name, "forward", _H(lay, 0, M, (dr > 0).astype(float))))
+                out.append(Term(li, name, "reverse", _H(lay, 0, M, (dr < 0).astype(float))))
+            if 1 < S <= MAX_CELLS:
+                for s in range(S):
+                    out.append(
+                        Term(li, name, f"cell {s}", _H(lay, 0, M, (np.arange(S) == s) * 1.0))
+                    )
+                out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
+            out.append(Term(li, name, "growth", _H(lay, 1, M, one)))
+            if "temperature" in sums.blocks:
+                out.append(Term(li, name, "temperature", _H(lay, 2, M, one)))
+    return out
+
+
+# ----------------------------------------------------------------------------- fits
+
+
+def _speed_H(term: Term, lay, beta: float, speed: np.ndarray) -> np.ndarray:
+    """The speed term's restriction: the frame scaled per cell by ``(speed / geometric
+    mean)^beta`` (``term.H0``: the static restriction). Where the catalog model already
+    spans the static frame, the projection leaves only the law's shape; near ``beta = 0``
+    that shape has no norm left and is dropped (:data:`KEEP_SHARE`)."""
+    f = (speed / math.exp(np.mean(np.log(np.maximum(speed, 1e-12))))) ** beta
+    nb, S, C, nj = lay
+    scale = np.broadcast_to(f[None, :, None, None], (nb, S, C, nj)).reshape(-1)
+    return term.H0 * scale[:, None]
+
+
+def _gain(A: np.ndarray, b: np.ndarray, raw: np.ndarray | None = None) -> float:
+    """In-sample chi-square drop ``b' A^+ b`` (``raw``: see :func:`_psolve`)."""
+    return float(b @ _psolve(A, b, raw=raw)) if b.size else 0.0
+
+
+def _fit_beta(term: Term, lay, sl: slice, sums: Sums, speed: np.ndarray, infl: float) -> None:
+    """The speed exponent minimising chi-square, and its standard error (profile curvature,
+    inflated by ``infl``, the residual's chi-square per value when above 1)."""
+    At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
+
+    def g(beta: float) -> float:
+        H = _speed_H(term, lay, beta, speed)
+        return -_gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+
+    grid = np.linspace(*BETA_RANGE, 33)
+    vals = [g(v) for v in grid]
+    i = int(np.argmin(vals))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(g, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
+    bh = float(res.x)
+    h = 1e-3
+    curv = (g(bh + h) - 2 * g(bh) + g(bh - h)) / h**2
+    term.beta = bh
+    term.beta_se = float(math.sqrt(2.0 / curv) * math.sqrt(max(infl, 1.0))) if curv > 0 else None
+    term.H = _speed_H(term, lay, bh, speed)
+
+
+def _embed(sums: Sums, terms: Sequence[Term]) -> np.ndarray:
+    """The joint restriction ``(Q, sum q)`` of ``terms``."""
+    Q = sums.A.shape[1]
+    Hs = []
+    for tm in terms:
+        H = np.zeros((Q, tm.H.shape[1]))
+        H[sums.slices[tm.line]] = tm.H
+        Hs.append(H)
+    return np.concatenate(Hs, 1) if Hs else np.zeros((Q, 0))
+
+
+def _heldout(
+    A: np.ndarray, b: np.ndarray, H: np.ndarray, folds: Sequence[int], raw: np.ndarray
+) -> float:
+    """K-fold held-out chi-square drop of the model ``H`` over ``folds``: fitted without each
+    fold, scored on it (``raw``: the Gram before the projection, per fold)."""
+    rows = np.flatnonzero(np.any(H != 0, 1))  # the columns of the lines it touches
+    H = H[rows]
+    Af = H.T @ (A[:, rows][:, :, rows] @ H)
+    Rf = H.T @ (raw[:, rows][:, :, rows] @ H)
+    bf = b[:, rows] @ H
+    At, bt, Rt = Af[list(folds)].sum(0), bf[list(folds)].sum(0), Rf[list(folds)].sum(0)
+    out = 0.0
+    for k in folds:
+        beta = _psolve(At - Af[k], bt - bf[k], raw=Rt - Rf[k])
+        out += float(2 * beta @ bf[k] - beta @ Af[k] @ beta)
+    return out
+
+
+def _single_heldout(sums: Sums, tm: Term, folds) -> float:
+    """Held-out gain of one term alone (on its line's columns only)."""
+    sl = sums.slices[tm.line]
+    return _heldout(sums.A[:, sl, sl], sums.b[:, sl], tm.H, folds, sums.raw[:, sl, sl])
+
+
+def _forward(
+    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh
+) -> list[int]:
+    """Orthogonal forward regression over the folds ``folds``: indices of the terms taken
+    (each step: the largest chi-square drop beyond its threshold, given those taken, by
+    the Schur complement; taken when its K-fold held-out gain is positive)."""
+    folds = list(folds)
+    At, bt, Rt = A[folds].sum(0), b[folds].sum(0), sums.raw[folds].sum(0)
+    D, e, Dr = [], [], []
+    for tm in lib:
+        sl = sums.slices[tm.line]
+        D.append(tm.H.T @ At[sl, sl] @ tm.H)
+        Dr.append(tm.H.T @ Rt[sl, sl] @ tm.H)
+        e.append(tm.H.T @ bt[sl])
+    chosen: list[int] = []
+    Hc = np.zeros((At.shape[0], 0))
+    ho_c = 0.0
+    for _ in range(MAX_TERMS):
+        AHc = At @ Hc
+        Gc = Hc.T @ AHc
+        Gr = Hc.T @ Rt @ Hc
+        gc = Hc.T @ bt
+        u = _psolve(Gc, gc, raw=Gr) if Hc.shape[1] else np.zeros(0)
+        best, best_m = -1, 0.0
+        for i, tm in enumerate(lib):
+            if i in chosen:
+                continue
+            sl = sums.slices[tm.line]
+            if Hc.shape[1]:
+                X = tm.H.T @ AHc[sl]  # (q, qc)
+                W = _psolve(Gc, X.T, raw=Gr)  # (qc, q)
+                Dt = D[i] - X @ W
+                et = e[i] - X @ u
+            else:
+                Dt, et = D[i], e[i]
+            gi = _gain(Dt, et, Dr[i])
+            q = tm.H.shape[1] + (tm.beta is not None)
+            if gi <= thresh[i]:
+                continue
+            m = gi * (1.0 - MODEL_ERROR_PER_PARAM * q) - thresh[i]
+            if m > best_m:
+                best, best_m = i, m
+        if best < 0:
+            break
+        Hj = np.concatenate([Hc, _embed(sums, [lib[best]])], 1)
+        if len(folds) > 1:
+            ho = _heldout(A, b, Hj, folds, sums.raw)
+            if ho <= ho_c:
+                break
+            ho_c = ho
+        chosen.append(best)
+        Hc = Hj
+    return chosen
+
+
+# ----------------------------------------------------------------------------- entry
+
+
+@dataclasses.dataclass
+class State:
+    """What discovery built for one record: the located lines, each finding's line, the
+    cells, the per-fold sums, the library (speed exponents fitted) and its thresholds."""
+
+    lines: list[Line]
+    first: list[int]
+    cinfo: dict
+    sums: Sums
+    lib: list[Term]
+    thresh: np.ndarray
+    infl: float
+    signal_periods: int
+
+
+def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
+    """The discovery state of a record (``None``: discovery does not apply: nothing
+    located, an SDS record, no shaft angle and time, no line to model)."""
+    if not findings or prep.ctx.kind == "sds" or not {"theta", "t"} <= set(prep.rows):
+        return None
+    L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
+    lines, first = lines_of(findings, L)
+    if not lines:
+        return None
+    cell, cinfo = _cells(prep)
+    C = prep.n_channels
+    alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
+    if alpha.size != C:
+        alpha = np.zeros(C)
+    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
+    infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
+    lib = library(lines, sums, cinfo, C, alpha)
+    for tm in lib:
+        if tm.modulation == "speed":
+            _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
+    N = max(len(lib), 1)
+    thresh = np.array(
+        [stats.chi2.isf(ALPHA / N, tm.H.shape[1] + (tm.beta is not None)) for tm in lib]
+    )
+    return State(lines, first, cinfo, sums, lib, thresh, infl, L)
+
+
+def discover(
+    prep,
+    fitter,
+    terms: Sequence[Any],
+    resid: np.ndarray,
+    findings: Sequence[Any],
+) -> list[dict | None]:
+    """Discovery after the catalog: one ``model`` object per finding (``None`` for every
+    finding where discovery does not apply: see :func:`build`).
+
+    ``terms``: the final catalog model's terms (the discovered ones are fitted jointly with
+    it); ``resid``: its residual (n, C); ``findings``: what the views still locate
+    (``_views.Finding``)."""
+    st = build(prep, fitter, terms, resid, findings)
+    if st is None:
+        if findings and prep.ctx.kind != "sds":
+            return [_none("no line, order or time structure to model (a broad band)")] * len(
+                findings
+            )
+        return [None] * len(findings)
+    kept, incl = select_terms(st)
+    terms_json = [_term_json(prep, st, kept, i, incl) for i in kept]
+    near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
+    return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
+
+
+def select_terms(st: State) -> tuple[list[int], np.ndarray]:
+    """Forward selection on all folds, and each term's inclusion probability over the
+    selections repeated without each fold; the terms kept (chosen on all folds and
+    included at least ``INCLUSION_MIN``)."""
+    sums, lib = st.sums, st.lib
+    K = sums.A.shape[0]
+    folds = list(range(K))
+    chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh)
+    incl = np.zeros(len(lib))
+    for k in folds:
+        for i in _forward(sums.A, sums.b, lib, sums, [f for f in folds if f != k], st.thresh):
+            incl[i] += 1.0 / K
+    return [i for i in chosen if incl[i] >= INCLUSION_MIN], incl
+
+
+def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> dict:
+    """One kept term's JSON entry (parameters and held-out gain fitted with the others)."""
+    sums, lib, cinfo = st.sums, st.lib, st.cinfo
+    folds = list(range(sums.A.shape[0]))
+    At, bt = sums.A.sum(0), sums.b.sum(0)
+    Hk = _embed(sums, [lib[j] for j in kept])
+    G = Hk.T @ At @ Hk
+    Gr = Hk.T @ sums.raw.sum(0) @ Hk
+    coef = _psolve(G, Hk.T @ bt, raw=Gr)
+    cov = _psolve(G, np.eye(Hk.shape[1]), raw=Gr) * max(st.infl, 1.0)
+    q0 = sum(lib[j].H.shape[1] for j in kept[: kept.index(i)])
+    tm = lib[i]
+    q = tm.H.shape[1]
+    c, cv = coef[q0 : q0 + q], cov[q0 : q0 + q, q0 : q0 + q]
+    ho_all = _heldout(sums.A, sums.b, Hk, folds, sums.raw)
+    Hwo = _embed(sums, [lib[j] for j in kept if j != i])
+    ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
+    ln = st.lines[tm.line]
+    nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
+    pairs = c.reshape(-1, nj)
+    amp = float(np.sqrt(np.mean(np.sum(pairs**2, 1))))
+    amp_se = float(np.sqrt(max(np.trace(cv), 0.0) / max(pairs.shape[0], 1)))
+    runs = sorted({int(r) for r in cinfo["run"]})
+    if tm.modulation.startswith("cell "):
+        runs = [int(cinfo["run"][int(tm.modulation.split()[1])])]
+    dirs = sorted({int(d) for d in cinfo["direction"]})
+    if tm.modulation in ("forward", "reverse"):
+        dirs = [1 if tm.modulation == "forward" else -1]
+    names = list(prep.kd.channel_names)
+    heads = names if not tm.frame.startswith("head ") else [names[int(tm.frame.split()[1])]]
+    scaling = None
+    if tm.beta is not None:
+        scaling = {
+            "law": "amplitude ~ (speed / geometric-mean speed)^beta",
+            "beta": tm.beta,
+            "beta_se": tm.beta_se,
+            "speeds_rad_s": [float(v) for v in cinfo["speed"]],
+        }
+    return {
+        "line": ln.label(),
+        "line_kind": ln.kind,
+        "value": float(ln.value),
+        "frame": tm.frame,
+        "modulation": tm.modulation,
+        "heads": heads,
+        "runs": [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in runs],
+        "directions": ["positive" if d > 0 else "negative" for d in dirs],
+        "scaling": scaling,
+        "params": {
+            "coefficients": [float(v) for v in c],
+            "coefficients_se": [math.sqrt(max(float(v), 0.0)) for v in np.diag(cv)],
+            "amplitude": amp,
+            "amplitude_se": amp_se,
+            "unit": prep.kd.unit,
+        },
+        "heldout_gain_chi2": float(ho_all - ho_wo),
+        "inclusion_probability": float(incl[i]),
+        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names)),
+        "export": {
+            **sums.scales,
+            "kind": prep.ctx.kind,
+            "n_runs": int(prep.ctx.n_runs),
+            "run_index": int(cinfo["run"][int(tm.modulation.split()[1])])
+            if tm.modulation.startswith("cell ")
+            else None,
+            "speed_ref_rad_s": float(np.exp(np.mean(np.log(np.maximum(cinfo["speed"], 1e-12))))),
+        },
+    }
+
+
+def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, near) -> dict:
+    """The ``model`` object of finding ``fi``."""
+    li = st.first[fi]
+    N = len(st.lib)
+    if li == -2:
+        return _none(f"beyond the first {MAX_LINES} located lines discovery models")
+    if li < 0:
+        return _none("no line, order or time structure to model (a broad band)")
+    mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line == li]
+    if not mine:
+        return _none(
+            f"no term of the library ({N} terms: frames x modulations) passes the "
+            f"multiple-testing threshold with a positive held-out gain at "
+            f"{st.lines[li].label()}",
+            library_size=N,
+        )
+    K = st.sums.A.shape[0]
+    frames = sorted({t["frame"] for t in mine})
+    return {
+        "outside_catalog": True,
+        "frame": frames[0] if len(frames) == 1 else ", ".join(frames),
+        "terms": mine,
+        "scaling": next((t["scaling"] for t in mine if t["scaling"]), None),
+        "heldout_gain_chi2": float(sum(t["heldout_gain_chi2"] for t in mine)),
+        "inclusion": {
+            f"{t['frame']} / {t['modulation']}": t["inclusion_probability"] for t in mine
+        },
+        "library_size": N,
+        "selection": "orthogonal forward regression; Bonferroni threshold "
+        f"chi2.isf({ALPHA} / {N}, q); K-fold held-out gain > 0; inclusion over {K} "
+        f"leave-one-fold-out repeats >= {INCLUSION_MIN}",
+        "alternatives": near.setdefault(li, _nearest(st.lib, kept, li, st.sums, list(range(K)))),
+        "reading": " ".join(t["reading"] for t in mine),
+    }
+
+
+def _nearest(lib, kept, li, sums, folds) -> list[dict]:
+    """The best other frames at the same line (held-out gain each alone): why the chosen
+    frame, not these."""
+    out = []
+    best: dict[str, float] = {}
+    for i, tm in enumerate(lib):
+        if tm.line != li or i in kept:
+            continue
+        g = _single_heldout(sums, tm, folds)
+        k = f"{tm.frame} / {tm.modulation}"
+        if g > best.get(k, -np.inf):
+            best[k] = g
+    for k, g in sorted(best.items(), key=lambda kv: -kv[1])[:3]:
+        out.append({"term": k, "heldout_gain_chi2": float(g)})
+    return out
+
+
+def _none(reason: str, **kw) -> dict:
+    return {"outside_catalog": True, "frame": None, "terms": [], "reason": reason, **kw}
+
+
+def term_heldout_gain(
+    prep, sums: Sums, lib: Sequence[Term], frame: str, modulation: str, line: int
+) -> float:
+    """Held-out gain of one library term (a benchmark's "true model" at the truth's frame)."""
+    for tm in lib:
+        if tm.frame == frame and tm.modulation == modulation and tm.line == line:
+            return _single_heldout(sums, tm, range(sums.A.shape[0]))
+    return float("nan")

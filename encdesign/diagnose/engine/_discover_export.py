@@ -1,0 +1,160 @@
+"""Discovered models as candidate modules (issue 41 item 4): ``encdesign diagnose
+--export-candidates F.py`` writes each discovered term of a diagnosis as a
+:class:`~encdesign.diagnose.Candidate` in the ``--candidates`` form, so that a later
+diagnosis of a similar record tests it like a catalog effect, under its own name
+(``discovered_...``, never a catalog name) and with its own doubt rule (an exponent outside
+the range searched, or a size far from the one discovered, is refused).
+
+The written file holds only data (the terms' specifications); the term functions are built
+by :func:`discovered_candidate` from them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+
+from ...io._paths import atomic_write_text
+from ._candidates import Candidate, Param
+
+SIZE_RATIO_MAX = 100.0
+"""A refit amplitude more than this many times the discovered one (or less than its
+inverse) is refused: another physics, not the one discovered."""
+
+
+def candidate_name(term: Mapping[str, Any]) -> str:
+    """``discovered_<line>_<frame>_<modulation>`` (lower case, ``[a-z0-9_]``)."""
+    raw = f"discovered_{term['line']}_{term['frame']}_{term['modulation']}"
+    return re.sub(r"[^a-z0-9]+", "_", raw.lower()).strip("_")
+
+
+def _phase(spec: Mapping[str, Any], x: dict):
+    v = float(spec["value"])
+    if spec["line_kind"] == "hz":
+        return 2 * math.pi * v * x["t"]
+    return v * x["theta"]
+
+
+def _frame(spec: Mapping[str, Any], x: dict, ph, C: int):
+    """``(cos part, sin part)`` each (n, C) of the term's frame."""
+    fr = spec["frame"]
+    if fr == "disk":
+        arg = spec["value"] * (x["theta"][:, None] - x["alpha"][None, :C])
+        return jnp.cos(arg), jnp.sin(arg)
+    c, s = jnp.cos(ph)[:, None], jnp.sin(ph)[:, None]
+    mask = jnp.ones((1, C))
+    if fr.startswith("head "):
+        mask = (jnp.arange(C) == int(fr.split()[1]))[None, :] * 1.0
+    return c * mask, s * mask
+
+
+def _modulation(spec: Mapping[str, Any], p: dict, x: dict):
+    """The per-row factor (n, 1) of the modulation (``per_cell``: 1, the runs' own
+    amplitudes are the parameters)."""
+    mod, ex = spec["modulation"], spec["export"]
+    if mod == "speed":
+        return (jnp.abs(x["omega"]) / ex["speed_ref_rad_s"]) ** p["beta"]
+    if mod == "direction":
+        return x["direction"]
+    if mod == "forward":
+        return (x["direction"] > 0) * 1.0
+    if mod == "reverse":
+        return (x["direction"] < 0) * 1.0
+    if mod.startswith("cell "):
+        return x["run_onehot"][:, ex["run_index"]]
+    if mod == "growth":
+        return (x["tau"] - ex["tau_mid_s"]) / ex["tau_half_s"]
+    if mod == "temperature":
+        return (x["driver"] - ex["driver_mid"]) / ex["driver_half"]
+    return jnp.ones_like(x["t"])
+
+
+def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
+    """The candidate of one discovered term's JSON entry (``unexplained[i].model.terms[j]``)."""
+    name = candidate_name(spec)
+    per_run = spec["modulation"] == "per_cell" or spec["line_kind"] == "hz"
+    offset = spec["line_kind"] == "order" and float(spec["value"]) == 0.0
+    shape = "runs" if per_run else "1"
+    amp0 = float(spec["params"]["amplitude"])
+    unit = spec["params"]["unit"]
+
+    def fn(p, x):
+        C = x["alpha"].shape[0] if "alpha" in x else 1
+        g = _modulation(spec, p, x)[:, None]
+        if offset:
+            base = jnp.ones((x["t"].shape[0], C))
+            if spec["frame"].startswith("head "):
+                base = base * (jnp.arange(C) == int(spec["frame"].split()[1]))[None, :]
+            a = x["run_onehot"] @ p["cos_rad"] if per_run else p["cos_rad"]
+            return g * base * (a[:, None] if per_run else a)
+        cpart, spart = _frame(spec, x, _phase(spec, x), C)
+        if per_run:
+            a = (x["run_onehot"] @ p["cos_rad"])[:, None]
+            b = (x["run_onehot"] @ p["sin_rad"])[:, None]
+        else:
+            a, b = p["cos_rad"], p["sin_rad"]
+        return g * (a * cpart + b * spart)
+
+    params = [Param("cos_rad", unit, shape, description="cos amplitude")]
+    if not offset:
+        params.append(Param("sin_rad", unit, shape, description="sin amplitude"))
+    start = None
+    if spec["modulation"] == "speed":
+        b0 = float(spec["scaling"]["beta"])
+        params.append(
+            Param("beta", "1", "1", linear=False, scale=0.1, description="speed exponent")
+        )
+
+        def start(ctx, resid, findings):  # noqa: ARG001 - the StartFn contract
+            return [{"beta": jnp.asarray(b0)}]
+
+    def plausible(ctx, p):  # noqa: ARG001 - the Candidate contract
+        if "beta" in p and not (-4.0 <= float(p["beta"]) <= 4.0):
+            return f"speed exponent {float(p['beta']):.2f} outside [-4, 4]"
+        amp = math.sqrt(
+            float(jnp.mean(jnp.asarray(p["cos_rad"]) ** 2))
+            + float(jnp.mean(jnp.asarray(p.get("sin_rad", 0.0)) ** 2))
+        )
+        if amp0 > 0 and not (amp0 / SIZE_RATIO_MAX <= amp <= amp0 * SIZE_RATIO_MAX):
+            return f"amplitude {amp:.3g} {unit} far from the discovered {amp0:.3g} {unit}"
+        return None
+
+    sig = ("time", "drift", "direction", "speed") if offset else ("spectrum", "orders")
+    return Candidate(
+        name=name,
+        fn=fn,
+        params=tuple(params),
+        signature=sig,
+        kinds=(spec["export"]["kind"],),
+        explanation="Discovered outside the catalog by an earlier diagnosis: " + spec["reading"],
+        start=start,
+        plausible=plausible,
+    )
+
+
+def export_candidates(doc: Mapping[str, Any], path: str | Path) -> list[str]:
+    """Write the discovered terms of a diagnosis document as a ``--candidates`` module;
+    returns the candidates' names (empty: nothing discovered, no file written)."""
+    specs: dict[str, dict] = {}
+    for u in doc.get("unexplained", ()):
+        for t in (u.get("model") or {}).get("terms", ()):
+            specs.setdefault(candidate_name(t), t)
+    if not specs:
+        return []
+    body = json.dumps(list(specs.values()), indent=1)
+    text = (
+        f'"""Candidates discovered by encdesign diagnose in {doc.get("recording")!s}: pass this\n'
+        'file to `encdesign diagnose REC --candidates FILE` (issue 41)."""\n\n'
+        "import json\n\n"
+        "from encdesign.diagnose import discovered_candidate\n\n"
+        f"SPECS = json.loads(r'''{body}''')\n\n"
+        "CANDIDATES = [discovered_candidate(s) for s in SPECS]\n"
+    )
+    atomic_write_text(Path(path), text)
+    return list(specs)

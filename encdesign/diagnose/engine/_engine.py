@@ -1,0 +1,575 @@
+"""The discrepancy finder's engine: every stage written once, for every recording kind.
+
+Stages (``docs/diagnose.md``):
+
+1. **prepare** (:func:`prepare`): the kind turns the recording into observations ``y`` (n, C)
+   and row columns; the engine finds the bench's nuisances: gaps in ``t``, segments where the
+   shaft does not turn steadily (start-up, return moves, reversals, dwells, speed far from the
+   segment's steady speed), single-sample glitches and count jumps; it estimates the noise per
+   channel from second differences (structure smooth on the sampling scale cannot inflate it)
+   and lays out K blocked, randomly assigned held-out folds.
+2. **base fit**: the kind's base terms (one constant per channel and run, run angle offsets,
+   the kind's error function up to the orders the record resolves) by Gauss-Newton /
+   Levenberg-Marquardt on sufficient statistics accumulated chunk by chunk (bounded memory).
+3. **locate** (:mod:`encdesign.diagnose.engine._views`): views of the residual, each finding with
+   where it sits and a p-value.
+4. **select**: forward selection of candidates whose signature matches a finding, each refit
+   with everything accepted so far; accepted on information criterion, K-fold held-out gain,
+   plausibility and conditioning; then a backward check on held-out data.
+5. **held-out proof**: the K-fold held-out residual of each model, from the per-fold
+   sufficient statistics (exact for parameters the model is linear in).
+6. **verdict** and report: ``consistent`` only when the goodness-of-fit test (variance ratio
+   of the residual to the difference-based noise, globally and per time block) passes and no
+   view finds anything.
+
+The wall time of each stage goes to the document's ``timings_s`` (:mod:`._timing`; exclusive:
+they add up to the diagnosis, less the report's text): ``data`` (the kind's observations
+from the recording's columns), ``prepare`` (segments, glitches, noise, folds), ``base_fit``
+(with the base's order growth and noise), ``views`` (every scan of a residual, wherever it
+runs), ``candidates`` (each candidate's starts and trial fits), ``heldout`` (the K-fold
+held-out solutions of every fit), ``select`` (the rest of stage 4: choosing, the backward
+check, residuals) and ``report`` (the document, the kind's additions, the verdict, the
+named effects' contributions).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..._errors import input_error
+from ._candidates import Candidate
+from ._discover import discover
+from ._document import (
+    global_times_in_own_clock,
+    lattice_effect,
+    order_spectrum,
+    report_text,
+    scan_order_of,
+    se_dict,
+    significant_channels,
+    term_params,
+)
+from ._fit import FitResult, Fitter, goodness_of_fit, make_term
+from ._kind import AbstractKind as Kind
+from ._noise import noise_spectral
+from ._nuisances import excluded_share, step_context
+from ._protocol import FitDivergence, Prepared
+from ._results import PlotData
+from ._select import Selection, select
+from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
+from ._timing import stage, timing
+from ._views import locate
+
+
+def _set_order(prep: Prepared, order: int) -> None:
+    """The base model's highest order is now ``order``: a new (read-only) context says so."""
+    prep.ctx = dataclasses.replace(prep.ctx, max_order=int(order))
+
+
+def _grow_base_order(
+    kind: Kind,
+    prep: Prepared,
+    fitter: Fitter,
+    fit: FitResult,
+    order: int,
+    limit: int,
+    base_info: dict,
+):
+    """Integer orders above ``order`` that the base residual shows significantly (the
+    ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
+    error function has every order, and one left out would be reported as structure no
+    effect explains. Not when the residual also shows a line at the signal period (aliased,
+    it can pose as integer orders) or structure tied to the direction or speed (the
+    candidates' to explain); and the grown base must leave at most ``settings.growth_left_max`` of
+    what every view located (a line in Hz, a step or a drift that only leaks into high orders
+    stays the candidates'; a strong order's leakage into lines off the integers goes with it).
+    Orders ``L`` and ``2 L`` of the signal period
+    (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
+    the fitted values, or ``None`` (nothing changed)."""
+    hi = scan_order_of(limit, order)
+    if hi <= order:
+        return None
+    L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
+    findings = locate(prep, fitter.residual(fit.terms), kind.views(prep), hi)
+    if any(f.view in ("line_phase", "direction", "speed", "angle_trend") for f in findings):
+        return None
+    found = [
+        round(f.where["orders"][0])
+        for f in findings
+        if f.view == "orders" and f.where["orders"] and round(f.where["orders"][0]) > order
+    ]
+    found = [m for m in found if not (L > 0 and m in (L, 2 * L))]
+    if not found:
+        return None
+    M = int(max(found))
+    spec, info = kind.base(prep, M)
+    old = {t.cand.name: t for t in fit.terms}
+    terms = []
+    for cand, start in spec:
+        prev = old.get(cand.name)
+        st = dict(start)
+        if prev is not None:
+            for q in cand.params:
+                v = prev.values.get(q.name)
+                if v is None:
+                    continue
+                shp = q.resolved_shape(prep.n_channels, prep.ctx.n_runs)
+                if v.shape == shp:
+                    st[q.name] = v
+                elif v.ndim == 1 and len(shp) == 1 and v.size < shp[0]:
+                    st[q.name] = np.concatenate([v, np.zeros(shp[0] - v.size)])
+        tm = make_term(cand, prep, st)
+        for q in cand.params:
+            if q.scale is None:
+                tm.scale[q.name][...] = float(np.mean(prep.sigma))
+        terms.append(tm)
+    _set_order(prep, M)
+    fitter.clear()
+    grown = fitter.fit(terms)
+    p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
+    after = locate(prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M))
+    p1 = sum(max(f.power - f.dof, 0.0) for f in after)
+    if p1 > prep.settings.growth_left_max * p0:
+        _set_order(prep, order)
+        fitter.clear()
+        return None
+    base_info.update(info)
+    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
+    return M, grown
+
+
+class _Progress:
+    """The two tqdm bars of a diagnosis (stages, rows of each chunked pass); quiet unless
+    ``verbose`` on a terminal."""
+
+    def __init__(self, verbose: bool):
+        from ..._progress import progress_bar
+
+        self.verbose = verbose
+        self.bar = progress_bar("diagnose", 6, enabled=verbose, unit="stage")
+        self.rows = None
+        self.bar.set_postfix_str("preparing")
+
+    def stage(self, name: str) -> None:
+        self.bar.set_postfix_str(name)
+        self.bar.update(1)
+
+    def log(self, msg: str) -> None:
+        if self.verbose:
+            self.bar.set_postfix_str(msg)
+
+    def chunk_done(self, a: int, b: int, n: int) -> None:
+        if self.rows is None:
+            from ..._progress import progress_bar
+
+            self.rows = progress_bar("  pass", n, enabled=self.verbose, unit="row")
+        if a == 0:
+            self.rows.reset(total=n)
+        self.rows.update(b - a)
+
+    def close(self) -> None:
+        if self.rows is not None:
+            self.rows.close()
+        self.bar.close()
+
+
+def _order_of(kd, prep: Prepared, kind: Kind, max_order: int | None) -> tuple[int, int]:
+    """``(order, limit)``: the base order to start from and the highest the record
+    resolves. Raises EncdesignInputError for a ``max_order`` beyond the limit."""
+    limit = int(kind.max_order_limit(prep))
+    if max_order is not None and max_order > limit:
+        raise input_error(
+            f"{kd.where}: --max-order",
+            f"got {max_order}; this record resolves orders up to {limit} "
+            "(half the samples per revolution of its slowest-sampled run, and at most "
+            f"{prep.settings.max_param_fraction:.0%} of the fitted values as parameters)",
+            f"a max order <= {limit}",
+        )
+    order = min(limit, kind.default_max_order) if max_order is None else max_order
+    return order, limit
+
+
+def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
+    """The kind's base terms at ``order`` (scales from the noise) and its base info."""
+    _set_order(prep, order)
+    base_spec, base_info = kind.base(prep, order)
+    base_terms = [make_term(c, prep, st) for c, st in base_spec]
+    for tm in base_terms:
+        for q in tm.cand.params:
+            if q.scale is None:
+                tm.scale[q.name][...] = float(np.mean(prep.sigma))
+    return base_terms, base_info
+
+
+def _align(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) -> None:
+    """Rotation-locked candidates see the aligned angle (the kind's ``align``)."""
+    aligned = kind.align(fit.terms, prep)
+    if aligned is None:
+        return
+    if callable(aligned):  # a lazy column fn(lo, hi)
+        prep.rows.set_lazy("theta", aligned)
+    else:
+        prep.rows["theta"] = aligned
+    fitter.clear()
+
+
+def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) -> None:
+    """The noise from the base residual's periodogram (structure cannot inflate it), or the
+    kind's own estimate; the fitter's weights follow."""
+    r_base = fitter.residual(fit.terms)
+    est = kind.noise(prep, r_base)
+    if est is not None and est.info is not None:  # the kind's findings, for its candidates
+        prep.ctx = dataclasses.replace(prep.ctx, noise_info=est.info)
+    own = None if est is None else est.sigma
+    if own is not None and kind.noise_replaces:
+        sig = np.asarray(own, float)
+    else:
+        sig = noise_spectral(prep, r_base)
+        if own is not None:  # the kind's second estimate: the smaller of the two
+            sig = np.fmin(sig, np.asarray(own, float))
+    del r_base
+    if np.all(np.isfinite(sig)) and np.all(sig > 0):
+        prep.sigma = sig
+        prep.ctx.noise[...] = sig
+        fitter.w_ch = 1.0 / sig**2
+        fitter.clear()
+
+
+def _fit_failure(base_info: dict, stage: str, cause: str) -> None:
+    """Record a fit stage that would have diverged (``base.fit_failures``; the report
+    lists them): the stage, its cause and how the fit recovered."""
+    base_info.setdefault("fit_failures", []).append(
+        {"stage": stage, "cause": cause, "recovery": "undone; the fit before it is kept"}
+    )
+
+
+def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
+    """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
+    growth. Returns ``(base_fit, order)``."""
+    base_fit = fitter.fit(base_terms)
+    state = prep.rows.snapshot()
+    try:
+        refined = kind.refine(base_fit.terms, prep)
+    except FitDivergence as exc:  # the kind's own check: it moved nothing
+        prep.rows.restore(state)
+        _fit_failure(base_info, "refine", str(exc))
+        refined = None
+    if refined:
+        # the kind moved the angle its base model is evaluated at (e.g. the shaft from the
+        # heads' mean less the fitted error's mean): refit from the fitted values
+        fitter.clear()
+        trial = fitter.fit(base_fit.terms)
+        rise = prep.settings.refine_chi2_rise_max
+        if np.isfinite(trial.chi2) and trial.chi2 <= base_fit.chi2 * (1.0 + rise):
+            base_info["refined"] = refined
+            base_fit = trial
+        else:  # a divergence never reaches the verdict: undo it, keep the fit before
+            prep.rows.restore(state)
+            fitter.clear()
+            _fit_failure(
+                base_info,
+                "refine",
+                f"the refit after the kind's refinement ({refined}) raised chi-square from "
+                f"{base_fit.chi2:.6g} to {trial.chi2:.6g} (more than "
+                f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
+            )
+    _align(kind, prep, fitter, base_fit)
+    _estimate_noise(kind, prep, fitter, base_fit)
+    for _ in range(2 if grow else 0):
+        grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
+        if grown is None:
+            break
+        order, base_fit = grown
+        _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little
+        _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
+    return base_fit, order
+
+
+def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
+    """One named effect of the selection as its JSON entry."""
+    final = sel.final
+    idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
+    term = final.terms[idx]
+    derived = {}
+    if term.cand.derived is not None:
+        derived = term.cand.derived(prep.ctx, term.values, se_dict(term, final, idx))
+    chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
+    names = prep.kd.channel_names
+    out = {
+        "name": s.name,
+        "params": global_times_in_own_clock(prep, term, term_params(term, final, idx)),
+        "derived": derived,
+        "channels": [names[k] for k in chans] if chans is not None else None,
+        "rms_after": s.fit.rms(prep),
+        "heldout_rms_after": s.fit.heldout_rms(prep),
+        "delta_bic": float(s.delta_bic),
+        "delta_heldout_chi2": float(s.delta_heldout),
+        "collinearity": float(s.collinearity) if np.isfinite(s.collinearity) else None,
+        "share": float(sel.shares.get(s.name, 0.0)),
+        "size_rms": float(s.term_rms * float(np.mean(prep.sigma))),
+        "notes": s.notes,
+        "explanation": term.cand.explanation,
+        "confounded_with": s.confounded,
+    }
+    if s.doubt is not None:  # named although a plausibility rule doubts it (issue 22 item 3)
+        out["doubt"] = s.doubt
+        out["alternatives"] = s.alternatives
+    return out
+
+
+def confounded_pairs(effects: list[dict], refused_pairs: list[dict]) -> list[dict]:
+    """The ``confounded`` entries: each named effect with each candidate it cannot be told
+    from (its ``confounded_with`` ties), and pairs refused together by one rule."""
+    out = []
+    for e in effects:
+        for c in e.get("confounded_with") or []:
+            if c.get("correlation") is None:
+                continue
+            db = c.get("delta_bic")
+            out.append(
+                {
+                    "pair": [e["name"], c["name"]],
+                    "correlation": float(min(c["correlation"], 1.0)),
+                    "delta_bic": None
+                    if db is None or e["delta_bic"] is None
+                    else float(db - e["delta_bic"]),
+                    "separate_by": c.get("separate_by", ""),
+                    "reason": c["reason"] + f"; {e['name']} is named",
+                    "rule": c.get("rule") or "tie_corr",
+                }
+            )
+    return out + list(refused_pairs)
+
+
+def effect_contributions(prep: Prepared, fitter: Fitter, sel: Selection) -> dict[str, np.ndarray]:
+    """``{name: (n, C)}``: each named effect's own contribution in the final model (its
+    term evaluated alone, chunk by chunk; projected like the residual where the kind
+    projects), unit of y."""
+    out = {}
+    names = {s.name for s in sel.accepted}
+    for term in sel.final.terms:
+        if term.cand.name not in names:
+            continue
+        parts = []
+        for a, b, x in fitter.chunks():
+            v = np.asarray(fitter.eval_term(term, a, b, x, jac=False)[0], float)
+            if prep.kd.project:
+                v = v - v.mean(1, keepdims=True)
+            parts.append(v.reshape(b - a, -1))
+        out[term.cand.name] = np.concatenate(parts) if parts else np.zeros((0, prep.n_channels))
+    return out
+
+
+def decide_verdict(doc: dict) -> str:
+    """The verdict, decided once from the finished document: ``missing_physics`` when an
+    effect is named, ``unexplained`` when structure is located that none explains or the
+    goodness-of-fit test fails, else ``consistent``."""
+    if doc["effects"]:
+        return "missing_physics"
+    if doc["unexplained"] or not (doc.get("goodness_of_fit") or {}).get("passes", True):
+        return "unexplained"
+    return "consistent"
+
+
+def _nearest_catalog(rejected: list[dict]) -> list[dict]:
+    """The catalog candidates fitted and refused in this diagnosis (best criterion first, one
+    entry per name): the nearest catalog effects a discovered model reports, and why each
+    was not enough."""
+    seen: dict[str, dict] = {}
+    for r in rejected:
+        if r.get("delta_bic") is None or r["name"] in seen:
+            continue
+        seen[r["name"]] = {"name": r["name"], "reason": r["reason"], "delta_bic": r["delta_bic"]}
+    return sorted(seen.values(), key=lambda r: r["delta_bic"])[:3]
+
+
+def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) -> dict:
+    """The diagnosis document before the kind's additions, the verdict and the report.
+
+    With ``fitter``, each ``unexplained`` finding gains a ``model``: what discovery
+    (:mod:`encdesign.diagnose.engine._discover`) models of it outside the catalog, fitted jointly
+    with the final catalog model (the verdict stays ``unexplained``)."""
+    kd = prep.kd
+    base, final = sel.base, sel.final
+    sig_mean = float(np.mean(prep.sigma))
+    effects = [_effect_json(prep, sel, s) for s in sel.accepted]
+    unexplained = [
+        {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
+        for f in sel.findings[:12]
+    ]
+    for u in unexplained:  # a located step: where it lies in the motion (issue 22 item 4)
+        if (ctx := step_context(prep, u)) is not None:
+            u["step_at"] = ctx
+    if fitter is not None and unexplained:  # issue 41: discovery after the catalog
+        models = discover(prep, fitter, sel.final.terms, sel.final_resid, sel.findings[:12])
+        near = _nearest_catalog(sel.rejected)
+        for u, m in zip(unexplained, models):
+            if m is not None:
+                u["model"] = {**m, "nearest_catalog": near} if m["terms"] else m
+    if kind.reading_lattice and not any(e["name"] == "quantization" for e in effects):
+        q_eff = lattice_effect(prep, final.rms(prep), final.heldout_rms(prep))
+        if q_eff is not None:
+            effects.append(q_eff)
+    nuis_notes = []
+    if prep.excluded:
+        nuis_notes.append(
+            f"{len(prep.excluded)} non-steady segment(s) left out of every fit "
+            f"({sum(e['n_rows'] for e in prep.excluded)} rows)"
+        )
+    base_params = {t.cand.name: term_params(t, base, i) for i, t in enumerate(base.terms)}
+    # the base terms as refitted with the named effects (kinds report e.g. their ellipse)
+    final_base = {
+        t.cand.name: term_params(t, final, i)
+        for i, t in enumerate(final.terms)
+        if t.cand.name in base_params
+    }
+    doc = {
+        "format": "encdesign-diagnosis/2",
+        "kind": rec.kind,
+        "recording": str(rec.path) if rec.path is not None else None,
+        "verdict": None,  # decided once, after the kind's additions (decide_verdict)
+        "unit": kd.unit,
+        "rms_before": base.rms(prep),
+        "heldout_rms_before": base.heldout_rms(prep),
+        "rms_final": final.rms(prep),
+        "heldout_rms_final": final.heldout_rms(prep),
+        "noise": {
+            "per_channel": [float(s) for s in prep.sigma],
+            "channels": kd.channel_names,
+            "method": "median of the base residual's periodogram per channel (white noise: "
+            "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
+            "differences for the first weights and the glitch scan",
+        },
+        "goodness_of_fit": goodness_of_fit(prep, sel.final_resid, final.n_params),
+        "goodness_of_fit_base": sel.gof0,
+        "heldout": prep.fold_design,
+        "excluded_segments": prep.excluded,
+        "glitches": prep.glitches,
+        "count_jumps": [
+            {k: v for k, v in j.items() if k not in ("index", "channel_index")}
+            for j in prep.count_jumps
+        ],
+        "gaps": prep.gaps,
+        "angle_steps": [
+            {
+                **{k: v for k, v in s.items() if k != "channel_index"},
+                "channel": kd.channel_names[s["channel_index"]],
+            }
+            for s in prep.angle_steps
+        ],
+        "effects": effects,
+        "unexplained": unexplained,
+        "rejected": sel.rejected,
+        "confounded": confounded_pairs(effects, sel.confounded),
+        "not_testable": sel.not_testable,
+        "findings_before": [f.to_json(sig_mean) for f in sel.findings0[:12]],
+        "base": {
+            "terms": base_params,
+            "max_order": order,
+            "max_order_limit": limit,
+            "max_param_fraction": prep.settings.max_param_fraction,
+            "n_params": base.n_params,
+            "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
+            "has_theta_ref": prep.ctx.has_ref,
+            "terms_with_effects": final_base,
+            **{k: v for k, v in base_info.items() if k != "unidentifiable"},
+        },
+        "notes": nuis_notes,
+        "status": "ok"
+        if (base.converged and final.converged)
+        else "a least-squares fit stopped before converging",
+        "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
+    }
+    doc["spectrum"] = order_spectrum(prep, sel.base_resid, sel.final_resid, scan)
+    # issue 22 item 4: a record mostly excluded is said so, with the reasons
+    doc["excluded_share"] = excluded_share(
+        prep.n, int(prep.keep.sum()), prep.excluded, prep.settings
+    )
+    doc.update(kind.summary(prep, base_params))
+    return doc
+
+
+def run_engine(
+    kind: Kind,
+    rec,
+    *,
+    max_order: int | None = None,
+    max_effects: int = 3,
+    extra_candidates: Sequence[Candidate] = (),
+    verbose: bool = False,
+    settings: FinderSettings | None = None,
+) -> tuple[dict[str, Any], PlotData]:
+    """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
+    document (a dict, ``diagnosis.schema.json``) and what the figures need
+    (:class:`~encdesign.diagnose.engine._results.PlotData`).
+
+    The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
+    before the verdict, which :func:`decide_verdict` decides once, and before the report,
+    built once from the finished document.
+
+    Raises:
+        EncdesignInputError: a recording the kind cannot diagnose, or ``max_order`` beyond
+            what the record resolves.
+    """
+    settings = DEFAULT_SETTINGS if settings is None else settings
+    t0 = time.perf_counter()
+    pg = _Progress(verbose)
+    try:
+        with timing() as timer:
+            with stage("data"):
+                kd = kind.data(rec, settings)
+            meta = dict(rec.meta)
+            meta.setdefault("kind", rec.kind)
+            with stage("prepare"):
+                prep = kind.prepare(kd, meta, settings)
+            pg.stage("prepared")
+            with stage("base_fit"):
+                order, limit = _order_of(kd, prep, kind, max_order)
+                base_terms, base_info = _base_terms(kind, prep, order)
+                fitter = Fitter(prep, progress=pg.chunk_done)
+                seen: dict[str, Candidate] = {}
+                for c in [*kind.candidates(prep.ctx), *extra_candidates]:
+                    seen[c.name] = c  # later ones (reference, user terms) override by name
+                grow = kind.grows_orders and max_order is None
+                base_fit, order = _fit_base(
+                    kind, prep, fitter, base_terms, base_info, order, limit, grow
+                )
+                scan = scan_order_of(limit, order)
+            pg.stage("base fitted")
+            with stage("select"):
+                sel = select(
+                    prep,
+                    fitter,
+                    base_fit.terms,
+                    list(seen.values()),
+                    kind.views(prep),
+                    scan,
+                    max_effects,
+                    pg.log,
+                )
+            pg.stage("selected")
+            pg.stage("held-out + goodness of fit")
+            with stage("report"):
+                doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
+                pg.stage("report")
+                doc = kind.finish(prep, doc, settings)
+                doc["verdict"] = decide_verdict(doc)
+                contributions = effect_contributions(prep, fitter, sel)
+        doc["time_s"] = time.perf_counter() - t0
+        doc["timings_s"] = dict(timer.totals)
+        doc["timings_cpu_s"] = dict(timer.cpu_totals)
+        doc["report"] = report_text(doc) + kind.report_lines(doc)
+    finally:
+        pg.close()
+    plot = PlotData(
+        prep=prep,
+        base_resid=sel.base_resid,
+        final_resid=sel.final_resid,
+        effect_contributions=contributions,
+    )
+    return doc, plot

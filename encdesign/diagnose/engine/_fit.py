@@ -1,0 +1,731 @@
+"""Stage 2 of the engine, **fit**: terms, the chunked Gauss-Newton fitter, goodness of fit."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg as sla
+from scipy import stats
+
+from ._candidates import Candidate
+from ._protocol import Prepared
+from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
+from ._timing import stage
+from ._views import SCAN_BLOCK
+
+# ----------------------------------------------------------------------------- fitting
+
+
+@functools.lru_cache(maxsize=256)
+def valjac_fn(cand: Candidate):
+    # one jacfwd over all parameters (splitting it into linear and nonlinear tangents was
+    # ~5x faster on the base term, but jax 0.10.2's CPU jit returned a Jacobian with zero
+    # rows for the nonlinear half: checked against finite differences, not used)
+    def vj(p, x):
+        v = cand.fn(p, x)
+        J = jax.jacfwd(cand.fn)(p, x)
+        return v, J
+
+    return jax.jit(vj if cand.valjac is None else cand.valjac)
+
+
+@functools.lru_cache(maxsize=256)
+def _val_fn(cand: Candidate):
+    return jax.jit(cand.fn)
+
+
+@dataclasses.dataclass
+class Term:
+    """A candidate with its current parameter values and which scalars are free."""
+
+    cand: Candidate
+    values: dict[str, np.ndarray]
+    free: dict[str, np.ndarray]  # bool masks, same shapes
+    scale: dict[str, np.ndarray]
+
+    def flat(self) -> np.ndarray:
+        """Values of the free scalars, in parameter order."""
+        return np.concatenate(
+            [self.values[p.name][self.free[p.name]].ravel() for p in self.cand.params]
+            or [np.zeros(0)]
+        )
+
+    def n_free(self) -> int:
+        """Free scalars."""
+        return int(sum(int(self.free[p.name].sum()) for p in self.cand.params))
+
+    def copy(self) -> Term:
+        """A deep copy."""
+        return Term(
+            self.cand,
+            {k: v.copy() for k, v in self.values.items()},
+            {k: v.copy() for k, v in self.free.items()},
+            {k: v.copy() for k, v in self.scale.items()},
+        )
+
+
+def make_term(cand: Candidate, prep: Prepared, start: dict | None = None) -> Term:
+    """A :class:`Term` at ``start`` (others zero), free where the parameter is fitted."""
+    C, R = prep.n_channels, prep.ctx.n_runs
+    vals, free, scale = {}, {}, {}
+    for p in cand.params:
+        shp = p.resolved_shape(C, R)
+        v = np.zeros(shp)
+        if start and p.name in start:
+            v = np.broadcast_to(np.asarray(start[p.name], float), shp).copy()
+        vals[p.name] = v
+        free[p.name] = np.full(shp, bool(p.fit))
+        scale[p.name] = np.full(shp, p.scale if p.scale else 1.0)
+    return Term(cand, vals, free, scale)
+
+
+@dataclasses.dataclass
+class FitResult:
+    """Sufficient statistics of a fitted model and what follows from them."""
+
+    terms: list[Term]
+    chi2: float  # whitened residual sum of squares (kept rows)
+    n_params: int
+    cov: np.ndarray  # covariance of the free scalars (parameter units)
+    heldout_chi2: float
+    heldout_ssr: float  # unwhitened, for an RMS
+    ssr: float
+    n_rows: int
+    converged: bool
+    A: np.ndarray  # whitened normal matrix in parameter units (free scalars)
+    unidentifiable: list[str]
+    slices: list[tuple[int, int]]  # per term, range in the free vector
+    determined: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
+
+    def n_determined(self, index: int) -> int:
+        """Determined (fitted) scalars of term ``index``."""
+        s0, s1 = self.slices[index]
+        return int(np.sum((self.determined >= s0) & (self.determined < s1)))
+
+    def rms(self, prep: Prepared) -> float:
+        """Fitted residual RMS (unit of y)."""
+        return math.sqrt(self.ssr / max(prep.n_values, 1))
+
+    def heldout_rms(self, prep: Prepared) -> float:
+        """K-fold held-out residual RMS (unit of y)."""
+        return math.sqrt(self.heldout_ssr / max(prep.n_values, 1))
+
+
+class Fitter:
+    """Chunked evaluation of a sum of terms, its Jacobian and the per-fold statistics."""
+
+    def __init__(self, prep: Prepared, progress: Callable[[int, int, int], None] | None = None):
+        self.prep = prep
+        self.w_ch = 1.0 / prep.sigma**2
+        n = prep.n
+        self.chunk = int(min(CHUNK_ROWS, 1 << max(5, int(math.ceil(math.log2(max(n, 2)))))))
+        self.progress = progress
+        self._jcache: dict = {}
+        self._jbytes = 0
+        self._pcache: dict = {}
+        self._pbytes = 0
+        self._gram: dict = {}
+
+    def chunks(self):
+        prep = self.prep
+        n = prep.n
+        c = self.chunk
+        for a in range(0, n, c):
+            b = min(n, a + c)
+            pad = c - (b - a)
+            x = {}
+            for k in prep.rows.names():
+                s = prep.rows.column(k, a, b)
+                if pad:
+                    s = np.concatenate([s, np.repeat(s[-1:], pad, axis=0)], axis=0)
+                x[k] = s
+            x.update({k: v for k, v in prep.consts.items() if isinstance(v, np.ndarray)})
+            yield a, b, x
+            if self.progress is not None:
+                self.progress(a, b, n)
+
+    def clear(self) -> None:
+        """Drop the cached Jacobians (after a row column changed)."""
+        self._jcache.clear()
+        self._pcache.clear()
+        self._gram.clear()
+        self._jbytes = self._pbytes = 0
+
+    @staticmethod
+    def _linear_only(term: Term) -> bool:
+        return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
+
+    def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
+        """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
+
+        A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
+        depending only on the held (nonlinear) parameters: those are cached (within a
+        memory budget), so refits with other terms cost one matrix product."""
+
+        def params() -> dict:  # device arrays only where a compiled function is called
+            return {k: jnp.asarray(v) for k, v in term.values.items()}
+
+        if self._linear_only(term):
+            held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
+            fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
+            key = (id(term.cand), a, held, fmask)
+            hit = self._jcache.get(key)
+            if hit is None:
+                p = params()
+                p0 = {
+                    q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
+                    for q in term.cand.params
+                }
+                v0, J = valjac_fn(term.cand)(p0, x)
+                v0 = np.asarray(v0)[: b - a]
+                Jt = self._gather(term, J, b - a, v0.shape[1])
+                hit = (v0, Jt)
+                nbytes = Jt.nbytes + v0.nbytes
+                if self._jbytes + nbytes < CACHE_BYTES:
+                    self._jcache[key] = hit
+                    self._jbytes += nbytes
+            v0, Jt = hit
+            lin = np.concatenate(
+                [term.values[q.name][term.free[q.name]].ravel() for q in term.cand.params]
+                or [np.zeros(0)]
+            )
+            # held linear parameters (fit=False) enter through v0 only when zero: add them
+            v = v0 + Jt @ lin if lin.size else v0.copy()
+            held_lin = [
+                q
+                for q in term.cand.params
+                if q.linear
+                and (~term.free[q.name]).any()
+                and np.any(term.values[q.name][~term.free[q.name]] != 0)
+            ]
+            if held_lin:
+                v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
+            return v, Jt
+        if jac:
+            v, J = valjac_fn(term.cand)(params(), x)
+            v = np.asarray(v)[: b - a]
+            return v, self._gather(term, J, b - a, v.shape[1])
+        v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
+        return v, None
+
+    @staticmethod
+    def _gather(term: Term, J: dict, rows: int, C: int) -> np.ndarray:
+        cols = []
+        for par in term.cand.params:
+            Jp = np.asarray(J[par.name])[:rows]
+            Jp = Jp.reshape(rows, C, -1)
+            free = term.free[par.name].ravel()
+            cols.append(Jp if free.all() else Jp[:, :, free])  # no copy when all are free
+        return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
+
+    def chunk_residual(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
+        """Residual of rows ``a:b`` (projected when the kind says so), from the chunk's row
+        columns ``x`` (as :meth:`chunks` yields them)."""
+        prep = self.prep
+        pred = np.zeros((b - a, prep.n_channels))
+        for tm in terms:
+            pred += self.eval_term(tm, a, b, x, jac=False)[0]
+        r = prep.y[a:b] - pred
+        if prep.kd.project:
+            r = r - r.mean(1, keepdims=True)
+        return r
+
+    def iter_residual(self, terms: Sequence[Term]):
+        """``(a, b, residual of rows a:b)`` chunk by chunk: statistics of a residual without
+        holding it whole."""
+        for a, b, x in self.chunks():
+            yield a, b, self.chunk_residual(terms, a, b, x)
+
+    def residual(self, terms: Sequence[Term]) -> np.ndarray:
+        """Residual ``(n, C)`` (projected when the kind says so), all rows."""
+        out = np.empty_like(self.prep.y)
+        for a, b, r in self.iter_residual(terms):
+            out[a:b] = r
+        return out
+
+    def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
+        """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
+        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
+        prep = self.prep
+        pred = np.zeros((b - a, prep.n_channels))
+        Js = []
+        for tm in terms:
+            v, J = self.eval_term(tm, a, b, x, jac=True)
+            pred += v
+            Js.append(J)
+        if len(Js) == 1:
+            J = Js[0]  # not copied here: the fold sort below makes the copy
+        else:
+            J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+        if prep.kd.project:
+            J = J - J.mean(1, keepdims=True)
+        order, edges = self._fold_order(a, b)
+        # sorted first, then scaled in place: each element is (J sc) sqrt(w) as before
+        J = J[order]
+        J *= sc[None, None, :]
+        J *= np.sqrt(self.w_ch)[None, :, None]
+        return pred, J, order, edges
+
+    def _fold_order(self, a: int, b: int):
+        f = self.prep.fold[a:b]
+        order = np.argsort(f, kind="stable")
+        edges = np.searchsorted(f[order], np.arange(self.prep.settings.n_folds + 1) - 0.5)
+        return order, edges
+
+    def stats(self, terms: Sequence[Term], jac: bool = True):
+        """Per-fold ``(A_f, g_f, c_f, ssr_f)`` over kept rows; parameters in scaled units.
+
+        Terms whose free parameters are all linear form a *static* block: its processed
+        Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
+        costs the products with the candidate's columns only."""
+        prep = self.prep
+        K = prep.settings.n_folds
+        terms = list(terms)
+        static = [t for t in terms if self._linear_only(t)]
+        dyn = [t for t in terms if not self._linear_only(t)]
+        perm_terms = static + dyn
+        p_s = sum(t.n_free() for t in static)
+        p = sum(t.n_free() for t in terms)
+
+        def scales(ts):
+            return np.concatenate(
+                [t.scale[q.name][t.free[q.name]].ravel() for t in ts for q in t.cand.params]
+                or [np.zeros(0)]
+            )
+
+        sc_s, sc_d = scales(static), scales(dyn)
+        skey = self._static_key(static)
+        gram = self._gram.get(skey)
+        A = np.zeros((K, p, p))
+        g = np.zeros((K, p))
+        c = np.zeros(K)
+        ssr = np.zeros(K)
+        sw = np.sqrt(self.w_ch)
+        new_gram = np.zeros((K, p_s, p_s)) if gram is None else None
+        for a, b, x in self.chunks():
+            ck = (skey, a)
+            hit = self._pcache.get(ck)
+            fresh = hit is None
+            if fresh and not jac:  # values only: the processed Jacobian is not needed
+                hit = (None, None, *self._fold_order(a, b))
+            elif fresh:
+                hit = self._processed(static, a, b, x, sc_s)
+                if self._pbytes + hit[1].nbytes < CACHE_BYTES:
+                    self._pcache[ck] = hit
+                    self._pbytes += hit[1].nbytes
+            _, Js_, order, edges = hit
+            # static prediction from current linear values (v0 + J p): made just now with
+            # the Jacobian (the same sum, term by term, as below), else from the cache
+            if fresh and jac:
+                pred = hit[0].copy()
+            else:
+                pred = np.zeros((b - a, prep.n_channels))
+                for tm in static:
+                    pred += self.eval_term(tm, a, b, x, jac=jac)[0]
+            if dyn:
+                if jac:
+                    pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
+                else:
+                    pd = sum(self.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
+                    Jd = None
+                pred = pred + pd
+            else:
+                Jd = np.zeros((b - a, prep.n_channels, 0))[order]
+            r = prep.y[a:b] - pred
+            if prep.kd.project:
+                r = r - r.mean(1, keepdims=True)
+            rw = (r * sw)[order]
+            rr = r[order]
+            for k in range(K):
+                lo, hi = edges[k], edges[k + 1]
+                if hi <= lo:
+                    continue
+                c[k] += float(np.sum(rw[lo:hi] ** 2))
+                ssr[k] += float(np.sum(rr[lo:hi] ** 2))
+                if not jac:
+                    continue
+                rk = rw[lo:hi].ravel()
+                Sk = Js_[lo:hi].reshape(rk.size, p_s)
+                g[k, :p_s] += Sk.T @ rk
+                if new_gram is not None:
+                    new_gram[k] += Sk.T @ Sk
+                if Jd is not None and Jd.shape[2]:
+                    Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
+                    A[k, :p_s, p_s:] += Sk.T @ Dk
+                    A[k, p_s:, p_s:] += Dk.T @ Dk
+                    g[k, p_s:] += Dk.T @ rk
+        if jac:
+            if new_gram is not None:
+                gram = new_gram
+                self._gram[skey] = gram
+            A[:, :p_s, :p_s] = gram
+            A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
+        # back to the caller's term order
+        idx = []
+        pos = {}
+        s0 = 0
+        for t in perm_terms:
+            pos[id(t)] = (s0, s0 + t.n_free())
+            s0 += t.n_free()
+        for t in terms:
+            lo, hi = pos[id(t)]
+            idx += list(range(lo, hi))
+        idx = np.asarray(idx, dtype=int)
+        A = A[:, idx][:, :, idx]
+        g = g[:, idx]
+        sc = np.concatenate([sc_s, sc_d])[idx]
+        return A, g, c, ssr, sc
+
+    @staticmethod
+    def _static_key(static: Sequence[Term]) -> tuple:
+        return tuple(
+            (
+                id(t.cand),
+                tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
+                tuple(t.free[q.name].tobytes() for q in t.cand.params),
+            )
+            for t in static
+        )
+
+    def column_chi2(self, held: Sequence[Term], extra: Sequence[Term]) -> np.ndarray:
+        """``fit([*held, e]).chi2`` for each term ``e`` of ``extra``, without the fits.
+
+        ``held`` must be linear in its free parameters and each ``e`` have one free (linear)
+        scalar: the fit is then linear least squares, and adding one column ``j`` to the
+        columns ``B`` of ``held`` lowers chi-square by ``(j.r - j.B u)^2 / (j.j - j.B w)``
+        (``u = A^+ B.r``, ``w = A^+ B.j``, ``A = B.B`` on the columns the data determine),
+        ``r`` the residual of ``held`` at its values. The Gram matrix of ``held`` is the
+        cached one; each extra column costs one product with ``B``. A column the others
+        span (relative ``j.P.j`` under ``1e-10``, as the fit's pivoted Cholesky) lowers
+        nothing."""
+        prep = self.prep
+        held = list(held)
+        if not all(self._linear_only(t) for t in held) or any(
+            e.n_free() != 1 or not self._linear_only(e) for e in extra
+        ):
+            raise ValueError("column_chi2: held terms linear, one free linear scalar each")
+        K = prep.settings.n_folds
+        A, gb, c, _, _ = self.stats(held)  # caches the held Gram and processed Jacobians
+        At, gt = A.sum(0), gb.sum(0)
+        sc = np.concatenate(
+            [t.scale[q.name][t.free[q.name]].ravel() for t in held for q in t.cand.params]
+            or [np.zeros(0)]
+        )
+        skey = self._static_key(held)
+        sw = np.sqrt(self.w_ch)
+        E = len(extra)
+        p = At.shape[0]
+        Bj, jj, jr = np.zeros((p, E)), np.zeros(E), np.zeros(E)
+        for a, b, x in self.chunks():
+            hit = self._pcache.get((skey, a))
+            if hit is None:  # the prediction comes with the Jacobian: no second evaluation
+                pred, Js_, order, edges = self._processed(held, a, b, x, sc)
+                r = prep.y[a:b] - pred
+                if prep.kd.project:
+                    r = r - r.mean(1, keepdims=True)
+            else:
+                _, Js_, order, edges = hit
+                r = self.chunk_residual(held, a, b, x)
+            lo, hi = int(edges[0]), int(edges[K])
+            rw = (r * sw)[order][lo:hi].ravel()
+            S = Js_[lo:hi].reshape(rw.size, p)
+            cols = np.empty((rw.size, E))
+            for i, e in enumerate(extra):
+                pv = {k: jnp.asarray(v) for k, v in e.values.items()}
+                p0 = {
+                    q.name: (jnp.zeros_like(pv[q.name]) if q.linear else pv[q.name])
+                    for q in e.cand.params
+                }
+                _, J = valjac_fn(e.cand)(p0, x)
+                Je = self._gather(e, J, b - a, prep.n_channels)
+                if prep.kd.project:
+                    Je = Je - Je.mean(1, keepdims=True)
+                cols[:, i] = (Je[:, :, 0] * sw[None, :])[order][lo:hi].ravel()
+            Bj += S.T @ cols
+            jj += np.einsum("ij,ij->j", cols, cols)
+            jr += cols.T @ rw
+        uw = _solve_many(At, np.column_stack([gt, Bj]))
+        u, w = uw[:, 0], uw[:, 1:]
+        jpj = jj - np.einsum("pe,pe->e", Bj, w)
+        num = jr - Bj.T @ u
+        ok = jpj > 1e-10 * np.maximum(jj, 1e-300)
+        gain = np.where(ok, num * num / np.where(ok, jpj, 1.0), 0.0)
+        return float(c.sum()) - float(gt @ u) - gain
+
+    def fit(self, terms: list[Term], max_steps: int = 30) -> FitResult:
+        """Levenberg-Marquardt on the chunked normal equations; exact in one step for linear
+        terms. Parameters that the data cannot determine (pivoted Cholesky of the scaled
+        normal matrix) are held and listed."""
+        terms = [t.copy() for t in terms]
+        nonlinear = any(
+            (not q.linear) and t.free[q.name].any() for t in terms for q in t.cand.params
+        )
+        lam = 1e-6
+        converged = True
+        A, g, c, ssr, sc = self.stats(terms)
+        unident: list[str] = []
+        for it in range(max_steps):
+            At, gt, ct = A.sum(0), g.sum(0), c.sum()
+            dz, keep_idx = _solve(At, gt, lam if nonlinear else 0.0)
+            if it == 0:
+                unident = _names_of(terms, np.setdiff1d(np.arange(At.shape[0]), keep_idx))
+                if nonlinear:
+                    # converged already (e.g. a refit from the optimum): the Gauss-Newton
+                    # step's predicted decrease of chi-square is negligible
+                    dz0, _ = _solve(At, gt, 0.0)
+                    if float(dz0 @ gt) < min(1e-2, 1e-7 * max(ct, 1e-300)):
+                        break
+            new = _apply(terms, dz * sc)
+            if not nonlinear:
+                terms = new
+                A, g, c, ssr, sc = self.stats(terms)
+                break
+            # the trial point's chi-square first (values only); the Jacobian only where the
+            # step is taken
+            _, _, c2, _, _ = self.stats(new, jac=False)
+            if c2.sum() <= ct:
+                rel = (ct - c2.sum()) / max(ct, 1e-300)
+                terms = new
+                A, g, c, ssr, sc = self.stats(new)
+                lam = max(lam / 10, 1e-9)
+                if rel < 1e-7 or (ct - c2.sum()) < 1e-2:
+                    break
+                # the next Gauss-Newton step would lower chi-square negligibly: converged
+                dz1, _ = _solve(A.sum(0), g.sum(0), 0.0)
+                if float(dz1 @ g.sum(0)) < min(1e-2, 1e-7 * max(c.sum(), 1e-300)):
+                    break
+            else:
+                lam *= 10
+                if lam > 1e8:
+                    break
+        else:
+            converged = False
+        return self._result(terms, A, g, c, ssr, sc, converged, unident)
+
+    def _result(self, terms, A, g, c, ssr, sc, converged, unident) -> FitResult:
+        with stage("heldout"):
+            return self._result_timed(terms, A, g, c, ssr, sc, converged, unident)
+
+    def _result_timed(self, terms, A, g, c, ssr, sc, converged, unident) -> FitResult:
+        K = A.shape[0]
+        At, gt = A.sum(0), g.sum(0)
+        ho_c, ho_ssr = 0.0, 0.0
+        # one held-out step per fold from the full solution (exact for linear terms):
+        # delta_f = (A - A_f)^+ (g - g_f); held-out chi2 = c_f - 2 delta.g_f + delta A_f delta
+        _, kidx = _solve(At, gt, 0.0)
+        for k in range(K):
+            Ak = (At - A[k])[np.ix_(kidx, kidx)]
+            gk = (gt - g[k])[kidx]
+            try:
+                d = sla.solve(
+                    Ak + 1e-12 * np.trace(Ak) / max(len(kidx), 1) * np.eye(len(kidx)),
+                    gk,
+                    assume_a="pos",
+                )
+            except (np.linalg.LinAlgError, ValueError):
+                d = np.linalg.lstsq(Ak, gk, rcond=None)[0]
+            Af = A[k][np.ix_(kidx, kidx)]
+            gf = g[k][kidx]
+            hc = c[k] - 2 * d @ gf + d @ Af @ d
+            ho_c += hc
+            # unwhitened: scale by the mean channel variance ratio of this fold
+            ho_ssr += ssr[k] * (hc / c[k] if c[k] > 0 else 1.0)
+        p = At.shape[0]
+        cov = np.full((p, p), np.nan)
+        if kidx.size:
+            sub = At[np.ix_(kidx, kidx)]
+            try:
+                inv = np.linalg.inv(sub)
+            except np.linalg.LinAlgError:
+                inv = np.linalg.pinv(sub)
+            full = np.full((p, p), np.nan)
+            full[np.ix_(kidx, kidx)] = inv
+            cov = full * np.outer(sc, sc)
+        slices, s = [], 0
+        for t in terms:
+            slices.append((s, s + t.n_free()))
+            s += t.n_free()
+        Apar = At / np.outer(sc, sc) if p else At
+        return FitResult(
+            terms=terms,
+            chi2=float(c.sum()),
+            n_params=int(kidx.size),
+            cov=cov,
+            heldout_chi2=float(ho_c),
+            heldout_ssr=float(ho_ssr),
+            ssr=float(ssr.sum()),
+            n_rows=int(self.prep.keep.sum()),
+            converged=converged,
+            A=Apar,
+            unidentifiable=unident,
+            slices=slices,
+            determined=kidx,
+        )
+
+
+def _solve(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``(A + lam diag A) dz = g`` on the columns the data determine (pivoted Cholesky,
+    relative tolerance 1e-10); the others get 0. Returns (dz, determined indices)."""
+    p = A.shape[0]
+    if p == 0:
+        return np.zeros(0), np.zeros(0, dtype=int)
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)] + lam * np.eye(keep.size)
+    dz = np.zeros(p)
+    try:
+        dz[keep] = sla.solve(sub, (g / d)[keep], assume_a="pos") / d[keep]
+    except (np.linalg.LinAlgError, ValueError):
+        dz[keep] = np.linalg.lstsq(sub, (g / d)[keep], rcond=None)[0] / d[keep]
+    return dz, keep
+
+
+def _solve_many(A: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """:func:`_solve` (``lam = 0``) for the columns of ``G`` at once."""
+    p = A.shape[0]
+    out = np.zeros((p, G.shape[1]))
+    if p == 0:
+        return out
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)]
+    rhs = (G / d[:, None])[keep]
+    try:
+        out[keep] = sla.solve(sub, rhs, assume_a="pos") / d[keep, None]
+    except (np.linalg.LinAlgError, ValueError):
+        out[keep] = np.linalg.lstsq(sub, rhs, rcond=None)[0] / d[keep, None]
+    return out
+
+
+def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:
+    from scipy.linalg import lapack
+
+    c, piv, rank, info = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
+    zero_diag = np.diag(An) < 1e-200
+    piv = piv - 1
+    rank = int(rank)
+    if zero_diag.any():
+        good = [i for i in piv[:rank] if not zero_diag[i]]
+        rest = [i for i in piv if i not in good]
+        piv = np.array(good + rest)
+        rank = len(good)
+    return piv, rank
+
+
+def _apply(terms: list[Term], dz: np.ndarray) -> list[Term]:
+    out = []
+    s = 0
+    for t in terms:
+        t2 = t.copy()
+        for q in t.cand.params:
+            m = t.free[q.name]
+            k = int(m.sum())
+            v = t2.values[q.name]
+            v[m] = v[m] + dz[s : s + k]
+            s += k
+        out.append(t2)
+    return out
+
+
+def _names_of(terms: list[Term], idx: np.ndarray) -> list[str]:
+    names = []
+    s = 0
+    idx = set(int(i) for i in idx)
+    for t in terms:
+        for q in t.cand.params:
+            m = t.free[q.name]
+            pos = np.argwhere(m)
+            for j, ij in enumerate(pos):
+                if s + j in idx:
+                    ij_s = [int(v) for v in ij]
+                    names.append(f"{t.cand.name}.{q.name}{ij_s if ij_s else ''}")
+            s += int(m.sum())
+    return names
+
+
+# ----------------------------------------------------------------------------- goodness of fit
+
+
+def _row_chi2(resid: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``sum_c (resid / sigma_c)^2`` per row (n,), in blocks (no (n, C) temporary)."""
+    out = np.empty(resid.shape[0])
+    w = 1.0 / np.asarray(sigma, float) ** 2
+    for a in range(0, resid.shape[0], SCAN_BLOCK):
+        r = resid[a : a + SCAN_BLOCK]
+        out[a : a + SCAN_BLOCK] = (r * r) @ w
+    return out
+
+
+def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
+    """Variance-ratio test of the residual against the noise level.
+
+    ``z = log(s_r^2) / sqrt(v / N)`` with ``s_r^2`` the residual variance per fitted value
+    (dof-corrected) whitened by the noise per channel (the periodogram-median estimate,
+    :func:`noise_spectral`, which structure in fewer than half the frequency bins cannot
+    inflate), and ``v = 2 + 2 MEDIAN_VAR`` (residual and noise estimate treated as
+    independent: conservative). Under white noise ``z ~ N(0, 1)``; structure the model misses
+    raises ``s_r^2``. Applied to the whole record and to each time block of each run
+    (Bonferroni); ``p`` is the smaller of the two (times 2).
+    """
+    keep = prep.keep
+    q = _row_chi2(resid, prep.sigma)  # whitened chi-square per row (n,)
+    C = prep.n_channels
+    eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
+    N = float(keep.sum() * C * eff)
+    v = 2.0 + 2.0 * MEDIAN_VAR / eff
+    sr = float(np.sum(q, where=keep)) / max(N - n_params, 1.0)
+    z = math.log(sr) / math.sqrt(v / max(N, 1.0))
+    p_global = float(stats.norm.sf(z))
+    blocks = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero((prep.run == r) & keep)
+        nb = int(min(16, max(1, rows.size // 64)))
+        for part in np.array_split(rows, nb):
+            if part.size < 16:
+                continue
+            Nb = part.size * C * eff
+            srb = float(np.sum(q[part])) / max(Nb * (1 - n_params / max(N, 1)), 1.0)
+            zb = math.log(max(srb, 1e-300)) / math.sqrt(2.0 / Nb + (v - 2.0) / N)
+            blocks.append(
+                (
+                    float(stats.norm.sf(zb)),
+                    zb,
+                    int(prep.run_ids[r]),
+                    float(prep.rows["t"][part[0]]),
+                    float(prep.rows["t"][part[-1]]),
+                )
+            )
+    nbk = max(len(blocks), 1)
+    worst = min(blocks, default=(1.0, 0.0, 0, 0.0, 0.0))
+    p_block = min(1.0, worst[0] * nbk)
+    p = min(1.0, 2 * min(p_global, p_block))
+    return {
+        "test": "variance ratio of the whitened residual to the noise (median of the "
+        "periodogram per channel); log ratio ~ N(0, v/N) under white noise, whole record and "
+        "per time block (16 per run, Bonferroni)",
+        "statistic_z": z,
+        "variance_ratio": sr,
+        "p_value": p,
+        "p_value_whole": p_global,
+        "p_value_blocks": p_block,
+        "worst_block": {
+            "run": worst[2],
+            "t_start_s": worst[3],
+            "t_end_s": worst[4],
+            "z": worst[1],
+        },
+        "n_values": N,
+        "n_params": n_params,
+        "alpha": prep.settings.alpha,
+        "passes": bool(p >= prep.settings.alpha),
+    }

@@ -1,0 +1,666 @@
+"""Stage 4 of the engine, **select**: forward selection of candidates with nuisance steps,
+ties and the backward check."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ._candidates import Candidate
+from ._document import jsonable
+from ._evidence import (
+    Chosen,
+    Refused,
+    Trial,
+    alternatives_of,
+    find_dominant,
+    only_doubts,
+    partner_entry,
+    refused_pair,
+    rule_args,
+    separate_by,
+    tie_gap,
+)
+from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._nuisances import drifts_in_time
+from ._protocol import Prepared
+from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
+from ._timing import stage
+from ._views import locate
+
+# ----------------------------------------------------------------------------- selection
+
+
+@dataclasses.dataclass
+class Step:
+    """One accepted (or tried) candidate."""
+
+    name: str
+    fit: FitResult
+    delta_bic: float
+    delta_heldout: float
+    collinearity: float
+    notes: list[str]
+    term_rms: float
+    explained_rms: float
+    confounded: list[dict] = dataclasses.field(default_factory=list)
+    doubt: dict | None = None
+    alternatives: list[dict] = dataclasses.field(default_factory=list)
+
+
+def _collinearity(fit: FitResult, n_base_terms: int) -> float:
+    """Largest canonical correlation between the last term's columns and the base's."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    A = fit.A
+    p = A.shape[0]
+    if s1 <= s0 or base_n == 0:
+        return 0.0
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    e = np.arange(s0, s1)
+    Abb, Aee, Abe = An[np.ix_(b, b)], An[np.ix_(e, e)], An[np.ix_(b, e)]
+    try:
+        Lb = np.linalg.pinv(Abb, rcond=1e-10, hermitian=True)
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    M = Le @ Abe.T @ Lb @ Abe
+    ev = np.linalg.eigvals(M).real
+    del p
+    return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
+
+
+def _collinear_columns(fit: FitResult, n_base_terms: int, refuse: float) -> np.ndarray:
+    """Local indices (in the last term's free vector) to hold so that the rest of the term
+    has a canonical correlation with the base model's columns of at most
+    ``settings.collinear_refuse``: greedily, the column best explained by the base and the columns
+    kept so far first."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    if s1 <= s0 or base_n == 0:
+        return np.zeros(0, int)
+    A = fit.A
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    Lb = np.linalg.pinv(An[np.ix_(b, b)], rcond=1e-10, hermitian=True)
+    keep = list(range(s0, s1))
+    held: list[int] = []
+    for _ in range(s1 - s0):
+        e = np.asarray(keep)
+        Aee, Abe = An[np.ix_(e, e)], An[np.ix_(b, e)]
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+        ev = np.linalg.eigvals(Le @ Abe.T @ Lb @ Abe).real
+        if ev.size == 0 or ev.max() <= refuse**2:
+            break
+        r2 = np.einsum("bj,bc,cj->j", Abe, Lb, Abe)
+        j = int(np.argmax(r2))
+        held.append(keep.pop(j) - s0)
+        if not keep:
+            break
+    return np.asarray(sorted(held), int)
+
+
+def _hold(term: Term, local: np.ndarray) -> Term:
+    """``term`` with the free scalars at ``local`` (free-vector indices) held at zero."""
+    t2 = term.copy()
+    pos = 0
+    local = set(int(i) for i in local)
+    for q in t2.cand.params:
+        m = t2.free[q.name]
+        flat = m.ravel()
+        v = t2.values[q.name].ravel()
+        for j in np.flatnonzero(flat):
+            if pos in local:
+                flat[j] = False
+                v[j] = 0.0
+            pos += 1
+        t2.free[q.name] = flat.reshape(m.shape)
+        t2.values[q.name] = v.reshape(m.shape)
+    return t2
+
+
+def _local_names(held_term: Term, local: np.ndarray, fitted: Term) -> list[str]:
+    del fitted
+    names = []
+    for q in held_term.cand.params:
+        m = held_term.free[q.name]
+        for ij in np.argwhere(~m):
+            names.append(f"{q.name}{[int(v) for v in ij] if ij.size else ''}")
+    del local
+    return names
+
+
+def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
+    """``terms`` with the free masks of ``like`` (same order and names)."""
+    out = []
+    for t, l in zip(terms, like):
+        t2 = t.copy()
+        t2.free = {k: v.copy() for k, v in l.free.items()}
+        out.append(t2)
+    return out
+
+
+def _term_rms(fitter: Fitter, term: Term, prep: Prepared, per_run: bool = False) -> float:
+    """RMS of one term's own contribution (projected, whitened by the noise).
+
+    ``per_run``: less its mean per run and channel over the kept rows, the part a constant
+    per run and channel of the base model absorbs (e.g. a drift over the whole record seen
+    through runs, each with its own zero): not a size the data could see."""
+    R, C = prep.ctx.n_runs, prep.n_channels
+    tot, s1, cnt = 0.0, np.zeros((R, C)), np.zeros(R)
+    for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
+        v = fitter.eval_term(term, a, b, x, jac=False)[0]
+        if prep.kd.project:
+            v = v - v.mean(1, keepdims=True)
+        k = prep.keep[a:b]
+        w = v[k] / prep.sigma[None, :]
+        tot += float(np.sum(w * w))
+        if per_run:  # sums per run and channel (bincount: np.add.at is slow per row)
+            run = np.asarray(prep.run[a:b])[k]
+            cnt += np.bincount(run, minlength=R)
+            for c in range(C):
+                s1[:, c] += np.bincount(run, weights=w[:, c], minlength=R)
+    if per_run:
+        tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1.0)[:, None]))
+    eff = (C - 1) / C if prep.kd.project else 1.0
+    return float(np.sqrt(max(tot, 0.0) / max(prep.keep.sum() * C * eff, 1)))
+
+
+def _has_run_constants(terms: Sequence[Term]) -> bool:
+    """Whether these (base) terms hold a free linear constant per run and channel."""
+    return any(
+        q.shape == "runs*channels" and q.linear and bool(t.free[q.name].all())
+        for t in terms
+        for q in t.cand.params
+    )
+
+
+def _order_key(f) -> int | None:
+    """The integer order a finding is at (the ``orders`` view, or a spectrum line at an
+    integer order), else None."""
+    integer = f.view == "orders" or (f.view == "spectrum" and f.detail.get("integer_order"))
+    ints = {round(o) for o in f.where.get("orders", []) if math.isfinite(o)}
+    return ints.pop() if integer and len(ints) == 1 else None
+
+
+def _untouched_orders(before, after, share: float) -> set:
+    """Integer orders located before a candidate's fit that keep at least
+    ``settings.untouched_share`` of their excess power after it."""
+    p0: dict = {}
+    p1: dict = {}
+    for fs, acc in ((before, p0), (after, p1)):
+        for f in fs:
+            k = _order_key(f)
+            if k is not None:
+                acc[k] = acc.get(k, 0.0) + max(f.power - f.dof, 0.0)
+    return {k for k, v in p0.items() if v > 0 and p1.get(k, 0.0) >= share * v}
+
+
+def _refusal(name: str, rules: list[tuple[str, str]], dbic: float | None = None) -> dict:
+    """A refused candidate's JSON entry: the reasons, and the name of every acceptance rule
+    (a :class:`~encdesign.diagnose.FinderSettings` field or a named rule) that refused it."""
+    out = {"name": name, "reason": "; ".join(r for _, r in rules), "rule": rules[0][0]}
+    out["rules"] = [k for k, _ in rules]
+    if dbic is not None:
+        out["delta_bic"] = float(dbic)
+    return out
+
+
+def _applicable(prep: Prepared, candidates: Sequence[Candidate], not_testable: list) -> list:
+    out = []
+    for c in candidates:
+        why = c.applies(prep.ctx) if c.applies else None
+        if why:
+            not_testable.append({"name": c.name, "reason": why, "rule": "applies"})
+        else:
+            out.append(c)
+    return out
+
+
+def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
+    """The full fit of one candidate from the best of its (screened) starts, or ``None``."""
+    with stage("candidates"):
+        return _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
+
+
+def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log):
+    prep, fitter = st["prep"], st["fitter"]
+    N = prep.n_values
+    starts = cand.start(prep.ctx, st["kept_resid"](), st["findings"]) if cand.start else [{}]
+    # screen the starts with the nonlinear parameters held (one linear pass each), then run
+    # the full fit from the best one
+    screened = []
+    for s0 in starts[:4]:
+        term = make_term(cand, prep, s0)
+        frac = prep.settings.max_param_fraction
+        if prep.n_values - current.n_params - term.n_free() < 0 or (
+            current.n_params + term.n_free() > frac * N
+        ):
+            reason = f"more parameters than {frac:.0%} of the fitted values"
+            rejected.append(_refusal(cand.name, [("max_param_fraction", reason)]))
+            break
+        if len(starts) > 1:
+            held = frozen([term])[0]
+            fr0 = fitter.fit([*frozen(current.terms), held])
+            screened.append((fr0.chi2, term, fr0))
+        else:
+            screened.append((0.0, term, None))
+    if not screened:
+        return None
+    screened.sort(key=lambda z: z[0])
+    term = screened[0][1]
+    if screened[0][2] is not None:
+        term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
+    log(f"trying {cand.name}")
+    best = fitter.fit([*frozen(current.terms), term], max_steps=12)
+    # columns of the candidate the base model already spans are held at zero (reported),
+    # so the rest of it can still be tested
+    held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
+    if held.size and held.size < best.terms[-1].n_free():
+        t2 = _hold(best.terms[-1], held)
+        best = fitter.fit([*frozen(current.terms), t2], max_steps=12)
+        held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
+    return best
+
+
+def _sort_trials(trials: list, applicable: list) -> None:
+    """By dBIC; candidates equal to rounding (the same fitted error, e.g. an offset per
+    direction and a delay at one speed), wherever they stand: the catalog's order decides,
+    not the last digit."""
+    trials.sort(key=lambda x: x.dbic)
+    rank = {c.name: i for i, c in enumerate(applicable)}
+    g0 = 0
+    while g0 < len(trials):
+        tol = 1e-7 * max(1.0, abs(trials[g0].dbic))
+        g1 = g0 + 1
+        while g1 < len(trials) and trials[g1].dbic - trials[g0].dbic <= tol:
+            g1 += 1
+        trials[g0:g1] = sorted(trials[g0:g1], key=lambda x: rank[x.cand.name])
+        g0 = g1
+
+
+def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
+    """The rules on the criterion, the held-out gain, plausibility and conditioning:
+    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
+    s = prep.settings
+    N = prep.n_values
+    reasons = []
+    if dbic > -s.bic_min:
+        reasons.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
+    if dho < s.heldout_min:
+        reasons.append(
+            (
+                "heldout_min",
+                f"held-out chi-square lowered by {dho:.1f} only (needs {s.heldout_min:.0f})",
+            )
+        )
+    term = fr.terms[-1]
+    trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
+    erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
+    if trms > s.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
+        reasons.append(
+            (
+                "plausible_ratio",
+                f"implausible: its own size ({trms:.3g} noise units RMS) is over "
+                f"{s.plausible_ratio:.0f}x the residual it explains ({erms:.3g})",
+            )
+        )
+    col = _collinearity(fr, n_base_terms)
+    if np.isfinite(col) and col > s.collinear_refuse:
+        reasons.append(
+            (
+                "collinear_refuse",
+                f"ill-conditioned against the base model (canonical correlation {col:.4f})",
+            )
+        )
+    if cand.plausible is not None:
+        why = cand.plausible(prep.ctx, term.values)
+        if why:
+            reasons.append((f"{cand.name}.plausible", f"implausible: {why}"))
+    return reasons, trms, erms, col
+
+
+def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
+    """The rules on what the candidate leaves of the located structure: ``(rule or None,
+    steps it leaves)``."""
+    s = prep.settings
+    p0 = sum(f.power - f.dof for f in findings)
+    if p0 <= 0:
+        return None, []
+    after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+    # steps it leaves (a smooth model fitted to a step moves its change point)
+    steps_left = free_steps(prep, after)
+    p1 = sum(f.power - f.dof for f in after)
+    # and clear the places its own signature located (not a larger structure there that it
+    # only dents, e.g. a step fitted by a drift)
+    sig = set(cand.signature) or {f.view for f in findings}
+    # an integer order it leaves untouched is another effect's (several effects at once
+    # share the views), not structure it only dents
+    left = _untouched_orders(findings, after, s.untouched_share)
+    m0 = sum(f.power - f.dof for f in findings if f.view in sig and _order_key(f) not in left)
+    m1 = sum(f.power - f.dof for f in after if f.view in sig and _order_key(f) not in left)
+    if m0 > 0 and m1 > s.signature_left_max * m0:
+        return (
+            "signature_left_max",
+            f"leaves {100 * m1 / m0:.0f}% of the structure its signature views "
+            f"({', '.join(sorted(sig))}) located in place",
+        ), steps_left
+    if p1 > (1.0 - s.located_share_min) * p0:
+        return (
+            "located_share_min",
+            f"explains only {100 * (1 - p1 / p0):.0f}% of the located structure (needs "
+            f"{100 * s.located_share_min:.0f}%)",
+        ), steps_left
+    return None, steps_left
+
+
+def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
+    """A candidate the data cannot tell from the chosen one (``tie_chi2``, ``tie_corr``):
+    its ``confounded_with`` entry, else ``None``."""
+    s = prep.settings
+    gap, corr = tie_gap(fitter, prep, cur_resid, chosen.fit, fr)
+    if not (gap < s.tie_chi2 and corr > s.tie_corr):
+        return None
+    return {
+        "name": cand.name,
+        "reason": f"the data cannot tell it from {chosen.cand.name}: it fits as well "
+        f"(chi-square {gap:+.1f}, needs {s.tie_chi2:.0f} to decide) and its fitted error is "
+        f"the same (correlation {corr:.3f})",
+        "rule": "tie_chi2",
+        "delta_bic": float(dbic),
+        "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
+        "correlation": float(corr),
+        "separate_by": separate_by(chosen.cand, cand, corr),
+    }
+
+
+def _choose(
+    st, trials, current, accepted, n_base_terms, held_notes, rejected, step_refusals, confounded
+):
+    """Stage 4's decision for one round: the best trial every rule accepts (with the ties
+    it cannot be told from), or ``None``; every other trial is a named refusal, except two
+    refused by the same rule that the record cannot separate: one ``confounded`` entry."""
+    prep, fitter = st["prep"], st["fitter"]
+    s = prep.settings
+    step_fits: dict = {}
+    dominant, partners = None, []
+    if trials and trials[0].k_new > 0 and trials[0].dbic < -s.bic_min:
+        r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
+        if r0 and only_doubts(trials[0].cand, r0):  # only then is dominance worth a pass
+            dominant, partners = find_dominant(st, trials)
+    refused: list[Refused] = []
+    chosen: Chosen | None = None
+    for dbic, cand, fr, dho, dchi, k_new in trials:
+        if k_new == 0:
+            reason = (
+                "confounded: all its parameters are already taken by the base model or by "
+                f"{', '.join(a.name for a in accepted) or 'nothing else'} (shared orders go "
+                "to the effect accepted first)"
+            )
+            rejected.append(_refusal(cand.name, [("identifiable", reason)]))
+            continue
+        reasons, trms, erms, col = _criterion_rules(
+            prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms
+        )
+        doubt = None
+        if reasons and chosen is None and cand is dominant and only_doubts(cand, reasons):
+            # evidence, not a veto: far ahead of every other candidate, refused only by a
+            # plausibility rule -> named with the doubt and the alternatives
+            doubt = {"rule": reasons[0][0], "reason": "; ".join(r for _, r in reasons)}
+            reasons = []
+        if reasons:
+            rejected.append(_refusal(cand.name, reasons, dbic))
+            refused.append(Refused(dbic, cand, fr, reasons[0][0]))
+            continue
+        if chosen is not None:
+            tie = _tie_entry(prep, fitter, st["cur_resid"], chosen, cand, fr, dbic)
+            if tie is not None:  # not decided by the criterion: reported with the chosen
+                chosen.ties.append(tie)
+                continue
+            reason = (
+                f"{chosen.cand.name} lowers the criterion more "
+                f"(dBIC {chosen.dbic:.1f} vs {dbic:.1f})"
+            )
+            rejected.append(_refusal(cand.name, [("better_candidate", reason)], dbic))
+            continue
+        # it must explain a fair share of everything located, so that a larger structure it
+        # cannot explain is not pinned on it through a small part of it
+        rule, steps_left = _located_rule(
+            prep, fitter, cand, fr, st["findings"], st["views"], st["scan_order"]
+        )
+        if rule is not None:
+            rejected.append(_refusal(cand.name, [rule], dbic))
+            continue
+        # a step located where nothing in the catalog changes (no reversal, no change of
+        # speed) is the alternative it must beat: a drift or a scale error only dents it
+        steps = st["free_steps"] + steps_left
+        if drifts_in_time(prep, cand.name):  # a drift in time makes no step at a reversal
+            steps = steps + st["change_steps"]
+        why = beaten_by_step(fitter, prep, current, fr, steps, step_fits)
+        if why:
+            rejected.append(_refusal(cand.name, [("step_change_rows", why[0])], dbic))
+            step_refusals.append((cand.name, why[1]))
+            continue
+        notes = []
+        if held_notes.get(cand.name):
+            notes.append(
+                "held at zero, already spanned by the base model (canonical correlation "
+                f"> {s.collinear_refuse}): {', '.join(held_notes[cand.name][:12])}"
+            )
+        if col > s.collinear_note:
+            notes.append(
+                f"nearly collinear with the base model (canonical correlation {col:.3f}): "
+                "part of it could be absorbed by base parameters"
+            )
+        if doubt is not None:
+            notes.append(
+                f"doubted ({doubt['rule']}): {doubt['reason']}; named because it lowers the "
+                "criterion far more than any other candidate (see alternatives)"
+            )
+        ties = [partner_entry(cand, tr, gap, corr, dbic) for tr, gap, corr in partners]
+        chosen = Chosen(cand, fr, dbic, dho, col, notes, trms, erms, ties if doubt else [], doubt)
+    if chosen is not None and chosen.doubt is not None:
+        rejected[:] = [r for r in rejected if not (r["name"] == chosen.cand.name)]
+    refused_pair(prep, fitter, st["cur_resid"], refused, rejected, confounded)
+    return chosen
+
+
+def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan):
+    """Each named effect must still earn its place on held-out data (the others held at
+    their nonlinear values: one linear refit each)."""
+    without: dict[str, FitResult] = {}
+    if len(accepted) <= 1:
+        return current, cur_resid, findings, without
+    for s in list(accepted):
+        others = frozen([t for t in current.terms if t.cand.name != s.name])
+        fr = fitter.fit(others)
+        without[s.name] = fr
+        if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
+            accepted.remove(s)
+            reason = (
+                "backward check: with the other named effects it no longer lowers the "
+                "held-out residual"
+            )
+            rejected.append(_refusal(s.name, [("heldout_min", reason)]))
+            current = fitter.fit(
+                _unfrozen(fr.terms, [t for t in current.terms if t.cand.name != s.name])
+            )
+            cur_resid = fitter.residual(current.terms)
+            findings = locate(prep, cur_resid, views, scan)
+            without = {}
+    return current, cur_resid, findings, without
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """What stage 4 hands the document (typed: no string keys).
+
+    Attributes:
+        base, final: the base model's and the final model's fits.
+        base_resid, final_resid: (n, C) their residuals (unit of y).
+        findings0, findings: what the views located in the base and the final residual.
+        gof0: the base model's goodness of fit.
+        accepted: the named effects (:class:`Step`), in the order named.
+        rejected, not_testable: refusals (JSON entries, each with its ``rule``).
+        confounded: pairs refused together that the record cannot separate (JSON entries).
+        shares: each named effect's share of what all explain together.
+        tried: names of the candidates tried.
+    """
+
+    base: FitResult
+    base_resid: np.ndarray
+    findings0: list
+    gof0: dict
+    final: FitResult
+    final_resid: np.ndarray
+    findings: list
+    accepted: list[Step]
+    rejected: list[dict]
+    not_testable: list[dict]
+    confounded: list[dict]
+    shares: dict[str, float]
+    tried: list[str]
+
+
+def select(
+    prep: Prepared,
+    fitter: Fitter,
+    base_terms: list[Term],
+    candidates: Sequence[Candidate],
+    views: tuple[str, ...],
+    scan_order: int,
+    max_effects: int = 3,
+    log: Callable[[str], None] = lambda s: None,
+):
+    """Forward selection with refits, then a backward held-out check (stage 4); returns the
+    :class:`Selection`."""
+    base = fitter.fit(base_terms)
+    cur_resid = fitter.residual(base.terms)
+    findings0 = locate(prep, cur_resid, views, scan_order)
+    N = prep.n_values
+    current, findings = base, findings0
+    accepted: list[Step] = []
+    rejected: list[dict] = []
+    not_testable: list[dict] = []
+    n_base_terms = len(base.terms)
+    tried_names: set[str] = set()
+    applicable = _applicable(prep, candidates, not_testable)
+    gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
+    held_notes: dict[str, list[str]] = {}
+    step_refusals: list[tuple[str, Any]] = []
+    confounded: list[dict] = []
+    for _ in range(max_effects):
+        seen = {f.view for f in findings}
+        gof = goodness_of_fit(prep, cur_resid, current.n_params)
+        if not findings and gof["passes"]:
+            break
+        kept: list = []  # the current residual over the kept rows, made once per round
+
+        def kept_resid(kept=kept, r=cur_resid):
+            if not kept:
+                kept.append(r if prep.keep.all() else r[prep.keep])
+            return kept[0]
+
+        st = dict(
+            prep=prep,
+            fitter=fitter,
+            findings=findings,
+            kept_resid=kept_resid,
+            cur_resid=cur_resid,
+            views=views,
+            scan_order=scan_order,
+            free_steps=free_steps(prep, findings),
+            change_steps=free_steps(prep, findings, at_changes=True),
+        )
+        trials: list[Trial] = []
+        for cand in applicable:
+            if cand.name in {s.name for s in accepted}:
+                continue
+            if cand.signature and not (set(cand.signature) & seen):
+                continue
+            if not cand.signature and gof["passes"]:
+                continue
+            tried_names.add(cand.name)
+            best = _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log)
+            if best is None:
+                continue
+            dchi = current.chi2 - best.chi2
+            k = best.n_determined(len(best.terms) - 1)
+            dbic = -(dchi - max(k, 0) * math.log(max(N, 2)))
+            dho = current.heldout_chi2 - best.heldout_chi2
+            trials.append(Trial(dbic, cand, best, dho, dchi, k))
+        _sort_trials(trials, applicable)
+        del kept[:]
+        chosen = _choose(
+            st,
+            trials,
+            current,
+            accepted,
+            n_base_terms,
+            held_notes,
+            rejected,
+            step_refusals,
+            confounded,
+        )
+        if chosen is None:
+            break
+        cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen
+        alternatives = alternatives_of(chosen, trials) if doubt is not None else []
+        if ties:
+            notes = [
+                *notes,
+                "confounded with "
+                + ", ".join(c["name"] for c in ties)
+                + ": this recording cannot tell them apart; the name is only the one with "
+                "the lower information criterion",
+            ]
+        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
+        if full.chi2 <= fr.chi2:
+            fr = full
+        del cur_resid, st  # (one residual held at a time)
+        resid = fitter.residual(fr.terms)
+        accepted.append(
+            Step(cand.name, fr, dbic, dho, col, notes, trms, erms, ties, doubt, alternatives)
+        )
+        log(f"named {cand.name}")
+        current, cur_resid = fr, resid
+        findings = locate(prep, cur_resid, views, scan_order)
+    current, cur_resid, findings, without = _backward(
+        prep, fitter, accepted, current, cur_resid, findings, rejected, views, scan_order
+    )
+    findings = place_step_refusals(prep, fitter, current, step_refusals, findings)
+    # a named effect's confounded partner is reported with it, never also as a refusal
+    partners = {c["name"] for a in accepted for c in a.confounded}
+    rejected[:] = [r for r in rejected if r["name"] not in partners]
+    # shares: what each effect explains given the others
+    shares = {}
+    total = base.chi2 - current.chi2
+    for s in accepted:
+        fr = without.get(s.name)
+        if fr is None:
+            others = frozen([t for t in current.terms if t.cand.name != s.name])
+            fr = fitter.fit(others) if len(accepted) > 1 else base
+        shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
+    return Selection(
+        base=base,
+        # the base residual again (one pass): not held through the selection
+        base_resid=cur_resid if current is base else fitter.residual(base.terms),
+        findings0=findings0,
+        gof0=gof0,
+        final=current,
+        final_resid=cur_resid,
+        findings=findings,
+        accepted=accepted,
+        rejected=rejected,
+        not_testable=not_testable,
+        confounded=confounded,
+        shares=shares,
+        tried=sorted(tried_names),
+    )

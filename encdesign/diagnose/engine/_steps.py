@@ -1,0 +1,282 @@
+"""Located steps as rivals, for stage 4 (:mod:`._select`): a step located where nothing in
+the catalog changes (no reversal, no change of speed) is the alternative a candidate must
+beat (:func:`beaten_by_step`); its time is refined on the model (:func:`refine_step`) and
+reported where it was located (:func:`place_step_refusals`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._candidates import Candidate, Param
+from ._fit import FitResult, Fitter, Term, make_term
+from ._protocol import Prepared
+
+
+def frozen(terms: list[Term]) -> list[Term]:
+    """Copies with the nonlinear parameters held (trial fits: one matrix product each)."""
+    out = []
+    for t in terms:
+        t2 = t.copy()
+        for q in t.cand.params:
+            if not q.linear:
+                t2.free[q.name][...] = False
+        out.append(t2)
+    return out
+
+
+def _step_fn(p: dict, x: dict):
+    on = jnp.where(x["tau"] >= p["tau_s"], 1.0, 0.0) * (x["run_onehot"] @ p["run_sel"])
+    return p["size"] * on[:, None] * p["channel_sel"][None, :]
+
+
+STEP_NUISANCE = Candidate(
+    name="located_step",
+    fn=_step_fn,
+    params=(
+        Param("size", "unit of y", scale=None, description="size of the step"),
+        Param("tau_s", "s", linear=False, fit=False, description="global time of the step"),
+        Param("run_sel", "1", shape="runs", linear=False, fit=False),
+        Param("channel_sel", "1", shape="channels", linear=False, fit=False),
+    ),
+    explanation="a step located in time (no catalog effect: the alternative a candidate "
+    "must beat where the time view located a step)",
+)
+"""A step of one size on the channels of a located step, from its row on within its run."""
+
+
+def at_change(prep: Prepared, r: int, tau0: float) -> bool | None:
+    """Whether a step at ``tau0`` (end-to-end time, s) in run index ``r`` lies within
+    ``settings.step_change_rows`` kept rows (or 1/64 of the run) of a kept row where the
+    direction or the steady speed changes (a reversal or a speed change; the non-steady
+    rows between them, e.g. an excluded dwell, left out: a reversal inside it counts);
+    ``None`` when it is not inside the run's kept rows."""
+    rows = np.flatnonzero((prep.run == r) & prep.keep)
+    i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
+    if i <= 0 or i >= rows.size:
+        return None
+    d = np.asarray(prep.rows.take("direction", rows), float)
+    w = np.asarray(prep.rows.take("omega", rows), float)
+    ch_rows = (
+        np.flatnonzero(
+            (d[1:] != d[:-1])
+            | (
+                np.abs(w[1:] - w[:-1])
+                > prep.settings.speed_change_min * np.maximum(np.abs(w[1:]), np.abs(w[:-1]))
+            )
+        )
+        + 1
+    )
+    near = max(prep.settings.step_change_rows, rows.size // 64)
+    return bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near)
+
+
+def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list[dict]:
+    """Steps the time view located at a time where nothing the catalog knows changes.
+
+    A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
+    step where the speed changes: a located step within ``settings.step_change_rows`` kept rows (or
+    half a time-view block, 1/64 of the run) of a kept row where the direction or the
+    steady speed changes is left to those terms. The others are steps no smooth term (a
+    drift, a scale error, an order) can make; each is returned with its time, run and
+    channels. ``at_changes``: only the steps at such a change instead (``at_change`` set),
+    the alternative a drift in time must beat as well (``s9-nuis``:
+    ``_nuisances.drifts_in_time``)."""
+    out = []
+    for f in findings:
+        if f.view != "time" or not (
+            f.detail.get("shape") == "step" or f.detail.get("step_significant")
+        ):
+            continue
+        if len(out) >= 2:
+            break
+        r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+        tau0 = float(f.detail["global_step_time_s"])
+        near = at_change(prep, r, tau0)
+        if near is None or near != at_changes:
+            continue
+        ch = np.zeros(prep.n_channels)
+        ch[list(f.where["heads"])] = 1.0
+        sel = np.zeros(prep.ctx.n_runs)
+        sel[r] = 1.0
+        out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
+        out[-1]["at_change"] = at_changes
+    return out
+
+
+_NO_STEP = (
+    "it cannot make a step there (no reversal, no change of speed at that time)",
+    "a slow drift in time cannot make the step at that reversal or change of speed",
+)
+
+
+def step_term(prep: Prepared, step: dict) -> Term:
+    tm = make_term(
+        STEP_NUISANCE,
+        prep,
+        {"tau_s": step["tau_s"], "run_sel": step["run_sel"], "channel_sel": step["channels"]},
+    )
+    tm.scale["size"][...] = float(np.mean(prep.sigma))
+    return tm
+
+
+def beaten_by_step(
+    fitter: Fitter,
+    prep: Prepared,
+    current: FitResult,
+    fr: FitResult,
+    steps: list[dict],
+    cache: dict,
+) -> tuple[str, Any] | None:
+    """``(why, the step's finding)`` when a candidate ``fr`` (current model plus the
+    candidate) is refused for a located step it cannot make, or ``None``: fitted together
+    with the step, the step still earns its place and the candidate no longer does
+    (information criterion or held-out)."""
+    if not steps:
+        return None
+    N = prep.n_values
+    logn = math.log(max(N, 2))
+    k = max(fr.n_determined(len(fr.terms) - 1), 0)
+    base_terms = frozen(current.terms)
+    cand = frozen(fr.terms[-1:])
+    for st in steps:
+        key = (st["tau_s"], st["run"], tuple(st["channels"]))
+        if key not in cache:
+            cache[key] = fitter.fit([*base_terms, step_term(prep, st)])
+        f = st["finding"]
+        for attempt in range(2):
+            fs = cache[key]
+            both = fitter.fit([*base_terms, step_term(prep, st), *cand])
+            if fr.chi2 - both.chi2 < prep.settings.bic_min + logn:
+                break  # with the candidate there is no step left: it makes it
+            dchi = fs.chi2 - both.chi2
+            dbic = -(dchi - k * logn)
+            dho = fs.heldout_chi2 - both.heldout_chi2
+            if dbic > -prep.settings.bic_min or dho < prep.settings.heldout_min:
+                heads = [prep.kd.channel_names[h] for h in f.where["heads"]]
+                return (
+                    f"a step located at t = {f.detail['step_time_s']:.6g} s (run "
+                    f"{f.where['runs'][0]}, {', '.join(heads)}) explains what it explains: "
+                    f"fitted with that step it lowers chi-square by {dchi:.1f} only (dBIC "
+                    f"{dbic:.1f}, held-out {dho:.1f}); " + _NO_STEP[bool(st.get("at_change"))],
+                    f,
+                )
+            if attempt:
+                break
+            # the step still leaves it something: a step placed a few rows off leaves a box
+            # a smooth term takes part of; the step's row from base + step fits, once
+            rkey = ("refined", key)
+            if rkey not in cache:
+                g = dataclasses.replace(f, where=dict(f.where), detail=dict(f.detail))
+                refine_step(fitter, prep, current.terms, g)
+                st2 = dict(st, tau_s=g.detail["global_step_time_s"], finding=g)
+                cache[rkey] = st2
+            st2 = cache[rkey]
+            if st2["tau_s"] == st["tau_s"]:
+                break
+            if at_change(prep, st["run"], st2["tau_s"]) != bool(st.get("at_change")):
+                # placed on the model, the step moved to (or off) a reversal or change of
+                # speed: it is no longer the step this rule is about (issue 44 E)
+                return None
+            st, f = st2, st2["finding"]
+            key = (st["tau_s"], st["run"], tuple(st["channels"]))
+            if key not in cache:
+                cache[key] = fitter.fit([*base_terms, step_term(prep, st)])
+    return None
+
+
+REFINE_STEP_SHIFTS = 3
+"""Times :func:`refine_step` moves its window on when the best row is at the window's
+edge (each move one window width; not a threshold: a bound on the work)."""
+
+
+def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
+    """Move a located step's time (``f``, a ``time`` finding) to the row where the model
+    ``terms`` plus a step fits best: the time view's change point is read off a residual
+    from which the base model has taken part of the step (and moved its change point). A
+    scan of 32 rows over 4 time-view blocks (1/8 of the run) either side, then of the rows
+    between the best one's neighbours (at most 48)."""
+    r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
+    rows = np.flatnonzero((prep.run == r) & prep.keep)
+    tau = prep.rows.take("tau", rows)
+    ch = np.zeros(prep.n_channels)
+    ch[list(f.where["heads"])] = 1.0
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[r] = 1.0
+    held = frozen(terms)
+
+    def best_of(idx: np.ndarray) -> int:
+        # fit(held + step at row i).chi2 for every row at once (one linear column each)
+        steps = [step_term(prep, dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)) for i in idx]
+        return int(idx[int(np.argmin(fitter.column_chi2(held, steps)))])
+
+    # within 4 time-view blocks of the located row: a step and its mirror image about a
+    # reversal differ by a function of the angle, which the base model takes (the two
+    # times cannot be told apart over a turn back and forth); the located one is kept
+    i0 = int(np.searchsorted(tau, f.detail["global_step_time_s"]))
+    width = max(int(4 * rows.size / 32), 4)
+    for _ in range(REFINE_STEP_SHIFTS + 1):
+        lo, hi = max(i0 - width, 1), min(i0 + width, rows.size - 1)
+        grid = np.unique(np.linspace(lo, hi, 32).astype(int))
+        best = best_of(grid)
+        # issue 44 C: the best row at an edge of the window that is not the run's edge: the
+        # step lies beyond it (the view's change point was blocks off); move the window
+        if not ((best == grid[0] and lo > 1) or (best == grid[-1] and hi < rows.size - 1)):
+            break
+        i0 = best
+    k = int(np.searchsorted(grid, best))
+    a = int(grid[max(k - 1, 0)])
+    b = int(grid[min(k + 1, grid.size - 1)])
+    fine = np.arange(a, b + 1)
+    if fine.size > 48:
+        fine = np.unique(np.linspace(a, b, 48).astype(int))
+    best = best_of(fine)
+    t = prep.rows["t"]
+    f.detail["step_time_s"] = float(t[rows[best]])
+    f.detail["global_step_time_s"] = float(tau[best])
+    f.detail["step_times_s"] = [float(t[rows[best - 1]]), float(t[rows[best]])]
+    f.detail["placed"] = True
+
+
+def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
+    """A step that refused a candidate is reported where it was located (a smooth base or
+    effect fitted to it moves the change point the final residual's time view sees)."""
+    done: set = set()
+    for name, f in step_refusals:
+        key = (tuple(f.where["runs"]), tuple(f.where["heads"]))
+        if key in done:  # one refined step per run and heads: the first refusal's
+            continue
+        done.add(key)
+        ts = f.detail["step_time_s"]
+        seen = [
+            g
+            for g in findings
+            if g.view == "time"
+            and g.detail.get("shape") == "step"
+            and g.where["runs"] == f.where["runs"]
+            and min(g.where["times_s"]) - 4 * g.detail["block_s"]
+            <= ts
+            <= max(g.where["times_s"]) + 4 * g.detail["block_s"]
+        ]
+        if seen:  # the final residual's own step: refined with the final model
+            refine_step(fitter, prep, current.terms, seen[0])
+            seen[0].where["times_s"] = list(seen[0].detail["step_times_s"])
+            continue
+        refine_step(fitter, prep, current.terms, f)
+        f.where["times_s"] = list(f.detail["step_times_s"])
+        f.detail["shape"] = "step"
+        if not any(h is f for h in findings):  # else a finding of the final residual
+            f.detail["located_with"] = f"located in the residual of the model with {name}"
+            findings = sorted([*findings, f], key=lambda g: g.log10_p)
+    # issue 44 C: every step the final residual's time view locates is placed on the final
+    # model too (the view's change point is read off a residual from which smooth terms
+    # took part of the step, and may lie blocks away from it)
+    for g in findings:
+        if g.view == "time" and g.detail.get("shape") == "step" and not g.detail.get("placed"):
+            refine_step(fitter, prep, current.terms, g)
+            g.where["times_s"] = list(g.detail["step_times_s"])
+    return findings

@@ -1,0 +1,773 @@
+"""Views of a residual: where the model and the recording disagree (engine stage 3).
+
+Each view tests the whitened residual ``r / sigma_c`` (kept rows only) with regressors of
+known shape; under white noise the power they take out is chi-square with as many degrees of
+freedom as regressors, and each view tests at ``alpha / n_tests`` (Bonferroni), so a record
+with nothing missing gives no finding.
+
+* ``spectrum``: per run, the periodogram in Hz of every channel (FFT on the run's kept rows,
+  excluded rows set to zero), summed over channels; peaks in Hz and in shaft orders; across
+  runs at different speeds a line stays fixed in Hz or in order.
+* ``orders``: per channel, integer shaft orders ``1..M`` fitted over all runs (rotation
+  locked, the same phase in every run): structure one channel shows and the others do not.
+* ``time``: per channel and run, block means over time (a transient, a step, a drift) and
+  the best single change point.
+* ``drift``: per channel, the driver (``temp_c`` or time).
+* ``line_phase``: per channel, harmonics 1 and 2 of the phase within one signal period.
+* ``direction``: per channel, the mean difference between the two directions of rotation.
+* ``speed``: per channel, a term proportional to the signed steady speed.
+* ``angle_trend``: per channel, a term proportional to the shaft angle within each run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from ._timing import stage
+
+
+@dataclasses.dataclass
+class Finding:
+    """One located mismatch (``where``: orders, frequencies_hz, heads, runs, times_s)."""
+
+    view: str
+    where: dict[str, list]
+    power: float  # whitened chi-square it carries
+    dof: int
+    log10_p: float
+    variance_share: float = 0.0
+    detail: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def to_json(self, sigma_mean: float) -> dict:
+        """JSON form (rms in the unit of the residual)."""
+        n = max(self.detail.get("n_values", 1), 1)
+        return {
+            "view": self.view,
+            "where": self.where,
+            "rms": float(sigma_mean * math.sqrt(max(self.power - self.dof, 0.0) / n)),
+            "variance_share": float(self.variance_share),
+            "log10_p": float(self.log10_p),
+            "detail": self.detail,
+        }
+
+
+def log10_tail_p(chi2: float, dof: int) -> float:
+    """log10 of the chi-square tail probability (floored at -999 where it underflows)."""
+    v = float(stats.chi2.logsf(chi2, dof) / math.log(10))
+    if not math.isfinite(v):
+        z = (chi2 - dof) / math.sqrt(2.0 * max(dof, 1))
+        v = float(stats.norm.logsf(z) / math.log(10))
+    return max(v, -999.0) if math.isfinite(v) else -999.0
+
+
+def chi2_threshold(alpha: float, dof: int, n_tests: int) -> float:
+    return float(stats.chi2.isf(alpha / max(n_tests, 1), dof))
+
+
+SCAN_BLOCK = 1 << 18
+"""Rows per block of the views' accumulations (temporaries bounded by the block)."""
+
+
+def _blocks(n: int, size: int = SCAN_BLOCK):
+    for a in range(0, n, size):
+        yield a, min(n, a + size)
+
+
+def _col(prep, name: str, a: int, b: int) -> np.ndarray:
+    """Rows ``a:b`` of a row column (lazy columns computed for those rows only)."""
+    rows = prep.rows
+    return rows.column(name, a, b) if hasattr(rows, "column") else rows[name][a:b]
+
+
+def _gram_power(G: np.ndarray, B: np.ndarray, n_rows: int, q: int) -> np.ndarray:
+    """Power ``B_c^T G^+ B_c`` per column of ``B`` (q, C): the chi-square regressors with
+    Gram matrix ``G`` (q, q) take out of each channel (its projection, as a QR would give)."""
+    if n_rows <= q:
+        return np.zeros(B.shape[1])
+    coef = np.linalg.lstsq(G, B, rcond=None)[0]
+    return np.maximum(np.sum(B * coef, axis=0), 0.0)
+
+
+def order_sums(prep, theta_name: str, resids, orders) -> tuple:
+    """Sums over the kept rows, in blocks, for integer shaft orders ``m``: ``(N, Scc, Sss,
+    Scs, [(Bc, Bs) per residual])`` with ``c = cos(m theta)``, ``s = sin(m theta)``,
+    ``Scc = sum c^2`` (M,), ``Bc = sum c r`` (M, C). Memory: one block of rows."""
+    m = np.asarray(orders, float)
+    M = m.size
+    keep = prep.keep
+    n = keep.size
+    Scc, Sss, Scs = np.zeros(M), np.zeros(M), np.zeros(M)
+    Bs = [(np.zeros((M, r.shape[1])), np.zeros((M, r.shape[1]))) for r in resids]
+    N = 0
+    step = max(1024, SCAN_BLOCK // max(M, 1))
+    for a, b in _blocks(n, step):
+        kb = keep[a:b]
+        if not kb.any():
+            continue
+        th = _col(prep, theta_name, a, b)[kb]
+        ang = th[:, None] * m[None, :]
+        c, s_ = np.cos(ang), np.sin(ang)
+        del ang
+        N += th.size
+        Scc += np.einsum("ij,ij->j", c, c)
+        Sss += np.einsum("ij,ij->j", s_, s_)
+        Scs += np.einsum("ij,ij->j", c, s_)
+        for (bc, bs), r in zip(Bs, resids):
+            rb = r[a:b][kb]
+            bc += c.T @ rb
+            bs += s_.T @ rb
+    return N, Scc, Sss, Scs, Bs
+
+
+def _heads(
+    prep, W: np.ndarray, ch: list[int], order: float | None = None
+) -> tuple[list[int], str | None]:
+    """Heads that carry a structure, from its whitened coefficients ``W`` (values x channels;
+    complex: Fourier coefficients, real: block means).
+
+    Each channel is seen through what the base model cannot take: without a reference the
+    heads' mean is removed (``P``), and at an integer order ``m <= M`` the base model's disk
+    error takes the pattern ``b_k = exp(-i m alpha_k)`` (one disk seen by every head). A
+    structure on head ``k`` alone therefore shows on every head as ``u_k``, ``e_k`` less those
+    parts. Each one-head pattern is fitted; the structure is reported on head ``k`` only when
+    ``u_k`` leaves no significant power (chi-square at ``FinderSettings.alpha``, or
+    ``heads_left_share`` of a strong structure's power) and fits significantly
+    better than every other head's pattern. When the patterns cannot be told apart (too few
+    heads for what the base takes) or none fits, the structure is reported on ``ch`` (the
+    channels where it is significant) with a note saying so."""
+    W = np.asarray(W)
+    if W.ndim == 1:
+        W = W[None, :]
+    C = W.shape[1]
+    if C < 2:
+        return ch, None
+    names = prep.kd.channel_names
+    proj = bool(prep.kd.project)
+    M = int(prep.ctx.max_order) if hasattr(prep, "ctx") else 0
+    base = (
+        order is not None
+        and np.iscomplexobj(W)
+        and abs(order - round(order)) < 1e-9
+        and 1 <= round(order) <= M
+    )
+    B = []
+    if proj:
+        B.append(np.ones(C, complex) / math.sqrt(C))
+    if base:
+        alpha = np.asarray(prep.consts["alpha"], float)
+        B.append(np.exp(-1j * round(order) * alpha))
+    if B:
+        Qb, _ = np.linalg.qr(np.stack(B, 1))
+    else:
+        Qb = np.zeros((C, 0), complex)
+    free = C - Qb.shape[1]  # complex (or real) dimensions the base model leaves
+    if not B:
+        return ch, None
+    what = " and ".join(
+        (["the heads' mean (no reference)"] if proj else [])
+        + ([f"the base model's disk error at order {round(order)}"] if base else [])
+    )
+    if free < 2:
+        return sorted(set(ch) | set(range(C))) if proj else ch, (
+            f"confounded: with {C} heads, {what} leave too little to tell which head carries it"
+        )
+    res = []
+    for k in range(C):
+        u = np.zeros(C, complex)
+        u[k] = 1.0
+        u = u - Qb @ (Qb.conj().T @ u)
+        nu = np.linalg.norm(u)
+        u = u / nu if nu > 0 else u
+        res.append(float(np.sum(np.abs(W) ** 2) - np.sum(np.abs(W @ u.conj()) ** 2)))
+    order_k = np.argsort(res)
+    k1, k2 = int(order_k[0]), int(order_k[1])
+    f = 2 if np.iscomplexobj(W) else 1
+    rows = W.shape[0]
+    tot = float(np.sum(np.abs(W) ** 2))
+    # what the pattern leaves: noise, or at most heads_left_share of the power (a strong
+    # structure is not seen through exactly equal heads: sensitivities, placements, per-head
+    # noise weights)
+    left_ok = res[k1] <= max(
+        chi2_threshold(prep.settings.alpha, f * rows * (free - 1), 1),
+        prep.settings.heads_left_share * tot,
+    )
+    if left_ok and res[k2] - res[k1] > chi2_threshold(prep.settings.alpha, f * rows, 1):
+        return [k1], f"on {names[k1]} alone (the other heads show it through {what})"
+    return ch, f"on several heads, or not told apart from {what}"
+
+
+def view_orders(prep, rw, max_order: int) -> list[Finding]:
+    """Integer shaft orders per channel, rotation locked over all runs (least squares of
+    cos / sin of each order, from sums accumulated in blocks of rows)."""
+    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+    C = rw.shape[1]
+    out = []
+    n_tests = max_order * C
+    thr = chi2_threshold(prep.settings.alpha, 2, n_tests)
+    orders = np.arange(1, max_order + 1)
+    N, Scc, Sss, Scs, ((Bc, Bs),) = order_sums(prep, name, [rw], orders)
+    for i, m in enumerate(orders):
+        G = np.array([[Scc[i], Scs[i]], [Scs[i], Sss[i]]])
+        B = np.stack([Bc[i], Bs[i]])  # (2, C)
+        if N <= 2:
+            continue
+        coef = np.linalg.lstsq(G, B, rcond=None)[0]  # (2, C): the cos / sin amplitudes
+        pw = np.maximum(np.sum(B * coef, axis=0), 0.0)
+        if pw.max() > thr:
+            ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+            Z = coef * math.sqrt(0.5 * N)
+            heads, note = _heads(prep, Z[0] - 1j * Z[1], ch, order=float(m))
+            detail = {
+                "integer_order": True,
+                "n_values": int(N),
+                "power_per_channel": pw.tolist(),
+            }
+            if note:
+                detail["heads_note"] = note
+            out.append(
+                Finding(
+                    "orders",
+                    make_where(orders=[float(m)], heads=heads, runs=prep.run_ids.tolist()),
+                    float(pw[ch].sum()),
+                    2 * len(ch),
+                    log10_tail_p(float(pw.max()), 2),
+                    detail=detail,
+                )
+            )
+    return out
+
+
+def view_spectrum(prep, rw) -> list[Finding]:
+    """Periodogram per run (channels summed), peaks in Hz and shaft order."""
+    keep = prep.keep
+    C = rw.shape[1]
+    dof_ch = C - 1 if prep.kd.project and C > 1 else C
+    peaks = []
+    # the runs tested and the number of bins (the threshold), before any transform: then
+    # one run's transform at a time (memory of one run, not of the record)
+    runs = []
+    for r, (a, b) in _run_slices(prep):
+        nk = int(keep[a:b].sum())
+        if b - a >= prep.settings.spectrum_min_rows and nk >= prep.settings.spectrum_min_rows:
+            runs.append((r, a, b, nk))
+    out: list[Finding] = []
+    if not runs:
+        return out
+    n_tests = sum((b - a) // 2 + 1 for _, a, b, _ in runs)
+    thr = chi2_threshold(prep.settings.alpha, 2 * dof_ch, n_tests)
+    per_run = []
+    for r, a, b, nk in runs:
+        t = _col(prep, "t", a, b)
+        dt = float(np.median(np.diff(t)))
+        kr = keep[a:b]
+        x = np.where(kr[:, None], rw[a:b], 0.0)
+        X = np.fft.rfft(x, axis=0)
+        del x
+        P = 2.0 * np.abs(X) ** 2 / nk  # ~ chi2(2) per channel
+        P[0] = 0.0
+        if (b - a) % 2 == 0:
+            P[-1] = 0.0
+        f = np.fft.rfftfreq(b - a, dt)
+        # revolutions per second from the steady speeds (a record that turns back and
+        # forth has no net advance)
+        om = _col(prep, "omega", a, b)[kr]
+        frev = float(np.median(np.abs(om))) / (2 * np.pi)
+        # a run turning backwards sees exp(+i m alpha_k) at positive frequencies
+        if np.median(om) < 0:
+            np.conj(X, out=X)
+        per_run.append((r, frev))
+        Ps = P.sum(1)
+        # power of each line: three bins (leakage), tested on the centre
+        idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
+        for i in idx[np.argsort(-Ps[idx])][: prep.settings.spectrum_peaks_per_run]:
+            lo, hi = max(i - 1, 1), min(i + 2, Ps.size)
+            band = P[lo:hi].sum(0)
+            # parabolic interpolation of the frequency
+            if 0 < i < Ps.size - 1:
+                pl, pc, pr = Ps[i - 1], Ps[i], Ps[i + 1]
+                den = pl - 2 * pc + pr
+                di = 0.5 * (pl - pr) / den if den != 0 else 0.0
+            else:
+                di = 0.0
+            fr = float(f[1] * (i + di)) if f.size > 1 else 0.0
+            peaks.append(
+                dict(
+                    run=r,
+                    f_hz=fr,
+                    order=fr / frev if frev > 0 else float("nan"),
+                    power=float(band.sum()),
+                    band=band,
+                    z=X[lo:hi] * math.sqrt(2.0 / nk),
+                    bin_hz=float(f[1]),
+                    bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
+                    nk=nk,
+                    logp=log10_tail_p(float(Ps[i]), 2 * dof_ch),
+                )
+            )
+    # group peaks across runs: fixed in Hz or in order
+    used = [False] * len(peaks)
+    peaks.sort(key=lambda p: -p["power"])
+    speeds = dict(per_run)
+    s = prep.settings
+    multi_speed = len(per_run) > 1 and (
+        max(speeds.values()) > s.spectrum_speed_ratio * max(min(speeds.values()), 1e-12)
+    )
+    for i, p in enumerate(peaks):
+        if used[i]:
+            continue
+        grp_hz = [
+            j
+            for j, q in enumerate(peaks)
+            if not used[j]
+            and abs(q["f_hz"] - p["f_hz"]) <= s.peak_match_bins * max(p["bin_hz"], q["bin_hz"])
+        ]
+        grp_ord = [
+            j
+            for j, q in enumerate(peaks)
+            if not used[j]
+            and abs(q["order"] - p["order"])
+            <= s.peak_match_bins * max(p["bin_order"], q["bin_order"])
+        ]
+        runs_hz = {peaks[j]["run"] for j in grp_hz}
+        runs_ord = {peaks[j]["run"] for j in grp_ord}
+        if not multi_speed or len(runs_hz) == len(runs_ord):
+            fixed = (
+                "single_run"
+                if len(runs_ord) == 1 and len(per_run) > 1 and multi_speed
+                else ("undetermined")
+            )
+            grp = grp_ord if len(grp_ord) >= len(grp_hz) else grp_hz
+        elif len(runs_hz) > len(runs_ord):
+            fixed, grp = "hz", grp_hz
+        else:
+            fixed, grp = "order", grp_ord
+        for j in grp:
+            used[j] = True
+        sel = [peaks[j] for j in grp]
+        band = np.sum([q["band"] for q in sel], 0)
+        orders = [q["order"] for q in sel]
+        integer = (
+            all(
+                abs(o - round(o)) <= max(s.integer_order_bins * q["bin_order"], s.integer_order_tol)
+                for o, q in zip(orders, sel)
+                if np.isfinite(o)
+            )
+            and all(round(o) >= 1 for o in orders if np.isfinite(o))
+            and any(np.isfinite(o) for o in orders)
+        )
+        thr_ch = chi2_threshold(prep.settings.alpha, 2, n_tests)
+        ch = [
+            k
+            for k in range(C)
+            if band[k] > s.head_chi2_share * thr_ch and band[k] >= s.head_power_share * band.max()
+        ]
+        zs = np.concatenate([q["z"] for q in sel], 0)
+        ints = {round(o) for o in orders if np.isfinite(o)}
+        o0 = ints.pop() if integer and len(ints) == 1 else None  # one integer order
+        ch, note = _heads(prep, zs, ch, order=float(round(o0)) if o0 is not None else None)
+        out.append(
+            Finding(
+                "spectrum",
+                make_where(
+                    orders=[float(o) for o in orders],
+                    frequencies_hz=[float(q["f_hz"]) for q in sel],
+                    heads=ch or [int(np.argmax(band))],
+                    runs=[int(prep.run_ids[q["run"]]) for q in sel],
+                ),
+                float(band.sum()),
+                2 * 3 * C * len(sel),
+                float(min(q["logp"] for q in sel)),
+                detail={
+                    "fixed_in": fixed,
+                    "integer_order": bool(integer),
+                    "n_values": int(sum(q["nk"] for q in sel)),
+                    **({"heads_note": note} if note else {}),
+                },
+            )
+        )
+    return out[: s.spectrum_findings_max]
+
+
+def run_spans(run: np.ndarray) -> list[tuple[int, tuple[int, int]]]:
+    """``(run index, (start, stop))`` of each stretch of rows with one run index (prepared
+    rows are sorted run by run, so one stretch per run)."""
+    run = np.asarray(run)
+    cut = np.flatnonzero(np.diff(run)) + 1
+    edges = [0, *cut.tolist(), run.size]
+    return [(int(run[a]), (a, b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _run_slices(prep):
+    """:func:`run_spans` of a prepared record."""
+    return run_spans(prep.run)
+
+
+def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
+    """Broadband excess: periodogram power per run, channel and frequency band (1/16 of the
+    band to Nyquist), for structure spread over many bins (a chirp, a wideband noise)."""
+    keep = prep.keep
+    C = rw.shape[1]
+    found: list[Finding] = []
+
+    def bands(m: int) -> list[tuple[int, int]]:
+        n_bins = m // 2 + 1
+        edges = np.linspace(1, n_bins - 1, n_bands + 1).astype(int)
+        return [(lo, hi) for lo, hi in zip(edges[:-1], edges[1:]) if hi - lo >= 4]
+
+    runs = []
+    for r, (a, b) in _run_slices(prep):
+        nk = int(keep[a:b].sum())
+        if nk >= prep.settings.band_min_rows:
+            runs.append((r, a, b, nk))
+    n_tests = sum(len(bands(b - a)) for _, a, b, _ in runs) * C
+    if not n_tests:
+        return found
+    for r, a, b, nk in runs:  # one run's transform at a time
+        kr = keep[a:b]
+        x = np.where(kr[:, None], rw[a:b], 0.0)
+        m = x.shape[0]
+        Xf = np.fft.rfft(x, axis=0)
+        del x
+        P = 2.0 * np.abs(Xf) ** 2 / nk
+        dt = float(np.median(np.diff(_col(prep, "t", a, b))))
+        f = np.fft.rfftfreq(m, dt)
+        for lo, hi in bands(m):
+            pw = P[lo:hi].sum(0) * (nk / m)
+            dof = 2 * (hi - lo)
+            thr = chi2_threshold(prep.settings.alpha, dof, n_tests)
+            share = prep.settings.head_power_share
+            ch = [k for k in range(C) if pw[k] > thr and pw[k] - dof >= share * (pw.max() - dof)]
+            if not ch:
+                continue
+            Xb = Xf[lo:hi] * math.sqrt(2.0 / m)
+            heads, note = _heads(prep, Xb, ch)
+            found.append(
+                Finding(
+                    "band",
+                    make_where(
+                        frequencies_hz=[float(f[lo]), float(f[hi - 1])],
+                        heads=heads,
+                        runs=[int(prep.run_ids[r])],
+                    ),
+                    float(pw[ch].sum()),
+                    dof * len(ch),
+                    log10_tail_p(float(pw[ch].max()), dof),
+                    detail={"n_values": int(nk), **({"heads_note": note} if note else {})},
+                )
+            )
+    return found
+
+
+def view_time(prep, rw) -> list[Finding]:
+    """Block means over time per channel and run; and the best change point."""
+    keep = prep.keep
+    C = rw.shape[1]
+    out = []
+    blocks_all = []
+    for r in range(prep.ctx.n_runs):
+        rows = np.flatnonzero((prep.run == r) & keep)
+        nb = int(min(32, max(2, rows.size // 32)))
+        if rows.size < 2 * nb:
+            continue
+        parts = np.array_split(rows, nb)
+        means = np.stack([rw[p].sum(0) / math.sqrt(p.size) for p in parts])  # ~N(0,1) each
+        blocks_all.append((r, parts, means))
+    n_tests = max(1, len(blocks_all) * C)
+    for r, parts, means in blocks_all:
+        nb = len(parts)
+        chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
+        thr = chi2_threshold(prep.settings.alpha, nb - 1, n_tests)
+        for k in range(C):
+            if chi[k] <= thr:
+                continue
+            # where: the block farthest from the mean, and the best step
+            dev = np.abs(means[:, k] - means[:, k].mean())
+            b = int(np.argmax(dev))
+            cs = np.cumsum(means[:, k] - means[:, k].mean())
+            jb = int(np.argmax(np.abs(cs[:-1]))) + 1 if nb > 2 else 1
+            t0 = float(prep.rows["t"][parts[b][0]])
+            t1 = float(prep.rows["t"][parts[b][-1]])
+            # step vs transient: power a single step takes out of the block means
+            x = np.arange(nb) >= jb
+            xm = x - x.mean()
+            step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
+            is_step = step_pw > prep.settings.step_shape_share * chi[k]
+            # the step's row: the single change point of largest likelihood near the block
+            # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
+            rows_r = np.concatenate(parts)
+            i_step = _change_row(rw[rows_r, k], parts, jb)
+            tstep = float(prep.rows["t"][rows_r[i_step]])
+            detail = {
+                "shape": "step" if is_step else "transient_or_drift",
+                "step_time_s": tstep,
+                "global_step_time_s": float(prep.rows.take("tau", rows_r[i_step])),
+                "block_s": float(t1 - t0),
+                # the best single step alone is significant (a step a smooth model dents
+                # shows as a transient)
+                "step_significant": bool(step_pw > chi2_threshold(prep.settings.alpha, 1, n_tests)),
+                "n_values": int(sum(p.size for p in parts)),
+            }
+            # where the step is: between the last row before it and the first row after it
+            detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
+            if is_step:
+                t0, t1 = detail["step_times_s"]
+            out.append(
+                Finding(
+                    "time",
+                    make_where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
+                    float(chi[k]),
+                    nb - 1,
+                    log10_tail_p(float(chi[k]), nb - 1),
+                    detail=detail,
+                )
+            )
+    # merge channels that share a run and a time (report a structure on several heads once)
+    merged: list[Finding] = []
+    for f in sorted(out, key=lambda f: -f.power):
+        for g in merged:
+            if (
+                g.where["runs"] == f.where["runs"]
+                and abs(g.detail["step_time_s"] - f.detail["step_time_s"])
+                < 1e-9 + prep.settings.time_merge_blocks * g.detail["block_s"] + 1e-3
+            ):
+                if f.power >= prep.settings.head_power_share * g.power:
+                    g.where["heads"] = sorted(set(g.where["heads"]) | set(f.where["heads"]))
+                g.power += f.power
+                g.dof += f.dof
+                break
+        else:
+            merged.append(f)
+    # which heads: without a reference, one head's step shows on all of them
+    zrun = {r: means - means.mean(0) for r, _, means in blocks_all}
+    for g in merged:
+        r = int(np.flatnonzero(prep.run_ids == g.where["runs"][0])[0])
+        heads, note = _heads(prep, zrun[r], g.where["heads"])
+        g.where["heads"] = heads
+        if note:
+            g.detail["heads_note"] = note
+    return merged
+
+
+def _change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> int:
+    """Row index (into the run's kept rows ``x``) of the most likely single step in ``x``,
+    searched over the blocks next to block edge ``jb``: the first row after the step."""
+    n = x.size
+    lo = int(sum(p.size for p in parts[: max(jb - 1, 0)]))
+    hi = int(sum(p.size for p in parts[: min(jb + 1, len(parts))]))
+    cs = np.cumsum(x - x.mean())[:-1]  # S_i: sum of the first i + 1 rows
+    i = np.arange(1, n, dtype=float)
+    stat = cs**2 * n / (i * (n - i))
+    lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
+    return int(lo + np.argmax(stat[lo - 1 : hi - 1]))
+
+
+def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
+    """Least squares of the whitened residual on ``cols`` (names of row columns, or arrays),
+    less a constant per run (the base model has one): sums accumulated run by run in blocks
+    (two passes: run means, then centred products), so nothing per row is held."""
+    keep = prep.keep
+    C = rw.shape[1]
+    q = len(cols)
+
+    def X_of(a: int, b: int) -> np.ndarray:
+        return np.stack(
+            [(_col(prep, c, a, b) if isinstance(c, str) else np.asarray(c)[a:b]) for c in cols],
+            1,
+        )
+
+    G = np.zeros((q, q))
+    B = np.zeros((q, C))
+    xmax = 0.0
+    n_kept = 0
+    for _, (a0, b0) in _run_slices(prep):
+        nk = int(keep[a0:b0].sum())
+        if nk == 0:
+            continue
+        sx, sr = np.zeros(q), np.zeros(C)
+        for a, b in _blocks(b0 - a0):
+            kb = keep[a0 + a : a0 + b]
+            sx += X_of(a0 + a, a0 + b)[kb].sum(0)
+            sr += rw[a0 + a : a0 + b][kb].sum(0)
+        mx, mr = sx / nk, sr / nk
+        for a, b in _blocks(b0 - a0):
+            kb = keep[a0 + a : a0 + b]
+            X = X_of(a0 + a, a0 + b)[kb]
+            if X.size:
+                xmax = max(xmax, float(np.abs(X).max()))
+            Xc = X - mx
+            G += Xc.T @ Xc
+            B += Xc.T @ (rw[a0 + a : a0 + b][kb] - mr)
+        n_kept += nk
+    # nothing left after the run constants (e.g. one speed per run)
+    if np.trace(G) <= (1e-12 * (xmax + 1e-300)) ** 2 * max(n_kept, 1):
+        return []
+    pw = _gram_power(G, B, n_kept, q)
+    thr = chi2_threshold(prep.settings.alpha, q, C)
+    if pw.max() <= thr:
+        return []
+    ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+    return [
+        Finding(
+            name,
+            make_where(heads=ch, runs=prep.run_ids.tolist()),
+            float(pw[ch].sum()),
+            q * len(ch),
+            log10_tail_p(float(pw.max()), q),
+            detail={"n_values": int(n_kept), **(extra or {})},
+        )
+    ]
+
+
+def view_drift(prep, rw):
+    """Correlation with the driver (temperature or time)."""
+    return _regress_view(prep, rw, "drift", ["driver"], {"driver": prep.ctx.driver_name})
+
+
+def view_line_phase(prep, rw):
+    """Harmonics 1 and 2 of the phase within a signal period, per channel."""
+    if prep.ctx.signal_periods <= 0:
+        return []
+    out = []
+    keep = prep.keep
+    C = rw.shape[1]
+    thr = chi2_threshold(prep.settings.alpha, 4, C)
+    G = np.zeros((C, 4, 4))
+    B = np.zeros((C, 4))
+    n_kept = 0
+    for a, b in _blocks(keep.size):
+        kb = keep[a:b]
+        if not kb.any():
+            continue
+        psi = np.asarray(_col(prep, "psi", a, b))[kb]
+        r = rw[a:b][kb]
+        n_kept += int(kb.sum())
+        for k in range(C):
+            ph = psi[:, k]
+            X = np.stack([np.cos(ph), np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)], 1)
+            G[k] += X.T @ X
+            B[k] += X.T @ r[:, k]
+    pw = np.array([_gram_power(G[k], B[k][:, None], n_kept, 4)[0] for k in range(C)])
+    if pw.max() > thr:
+        ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+        L = prep.ctx.signal_periods
+        out.append(
+            Finding(
+                "line_phase",
+                make_where(orders=[float(L), float(2 * L)], heads=ch, runs=prep.run_ids.tolist()),
+                float(pw[ch].sum()),
+                4 * len(ch),
+                log10_tail_p(float(pw.max()), 4),
+                detail={"n_values": int(keep.sum())},
+            )
+        )
+    return out
+
+
+def view_direction(prep, rw):
+    """Mean difference between the directions of rotation."""
+    d = prep.rows["direction"][prep.keep]
+    if np.all(d == d[0]):
+        return []
+    del d
+    return _regress_view(prep, rw, "direction", ["direction"])
+
+
+def view_speed(prep, rw):
+    """A term proportional to the signed steady speed (needs two speeds or directions)."""
+    w = prep.rows["omega"][prep.keep]
+    if np.ptp(w) <= prep.settings.one_speed_spread * np.max(np.abs(w)):
+        return []
+    del w
+    return _regress_view(prep, rw, "speed", ["omega"])
+
+
+def view_angle_trend(prep, rw):
+    """A term growing linearly with the shaft angle within each run."""
+    return _regress_view(prep, rw, "angle_trend", ["theta"])
+
+
+VIEWS = {
+    "spectrum": lambda prep, rw, M: view_spectrum(prep, rw),
+    "orders": lambda prep, rw, M: view_orders(prep, rw, M),
+    "time": lambda prep, rw, M: view_time(prep, rw),
+    "band": lambda prep, rw, M: view_band(prep, rw),
+    "drift": lambda prep, rw, M: view_drift(prep, rw),
+    "line_phase": lambda prep, rw, M: view_line_phase(prep, rw),
+    "direction": lambda prep, rw, M: view_direction(prep, rw),
+    "speed": lambda prep, rw, M: view_speed(prep, rw),
+    "angle_trend": lambda prep, rw, M: view_angle_trend(prep, rw),
+}
+
+
+class Whitened:
+    """The whitened residual ``resid / sigma`` (n, C), whitened where it is indexed: the
+    engine's views read it by row ranges or row indices, so no whitened copy of the whole
+    residual is made (``np.asarray`` makes one, for a kind's own views)."""
+
+    def __init__(self, resid: np.ndarray, sigma: np.ndarray):
+        self.resid = resid
+        self.inv = 1.0 / np.asarray(sigma, float)[None, :]
+        self.shape = resid.shape
+        self.ndim = resid.ndim
+        self.dtype = resid.dtype
+
+    def __getitem__(self, idx):
+        if isinstance(idx, tuple):
+            return (self.resid[idx[0]] * self.inv)[(slice(None), *idx[1:])]
+        return self.resid[idx] * self.inv
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.resid * self.inv
+        return out if dtype is None else out.astype(dtype)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+
+def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
+    """Run ``views`` on the residual; findings strongest first, with variance shares."""
+    with stage("views"):
+        return _locate(prep, resid, views, scan_order)
+
+
+def _locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
+    rw = Whitened(resid, prep.sigma)
+    tot = float(sum(np.sum(rw[a:b][prep.keep[a:b]] ** 2) for a, b in _blocks(rw.shape[0])))
+    out: list[Finding] = []
+    rw_array = None
+    for v in views:
+        if isinstance(v, str):
+            out += VIEWS[v](prep, rw, scan_order)
+        else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
+            if rw_array is None:
+                rw_array = np.asarray(rw)
+            out += v(prep, rw_array, scan_order)
+    # a spectrum line at an integer order takes its heads from the rotation-locked fit of
+    # that order (the orders view), which sees every run at once
+    by_order = {
+        round(f.where["orders"][0]): f for f in out if f.view == "orders" and f.where["orders"]
+    }
+    for f in out:
+        if f.view == "spectrum" and f.detail.get("integer_order") and f.where["orders"]:
+            ints = {round(o) for o in f.where["orders"] if math.isfinite(o)}
+            g = by_order.get(ints.pop()) if len(ints) == 1 else None
+            if g is not None:
+                f.where["heads"] = list(g.where["heads"])
+                if "heads_note" in g.detail:
+                    f.detail["heads_note"] = g.detail["heads_note"]
+    for f in out:
+        f.variance_share = float(max(f.power - f.dof, 0.0) / max(tot, 1e-300))
+    out.sort(key=lambda f: f.log10_p)
+    return out
+
+
+def make_where(**kw) -> dict[str, list]:
+    base = {"orders": [], "frequencies_hz": [], "heads": [], "runs": [], "times_s": []}
+    for k, v in kw.items():
+        base[k] = [x.item() if hasattr(x, "item") else x for x in v]
+    return base

@@ -1,0 +1,700 @@
+"""The multihead kind's candidate terms (beam tilt, bearing wobble, vibration, thermal drift,
+interpolation error, eccentricity shift) and its order-step view (``docs/effects.md``)."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from ....physics import _effects as fx
+from ...engine._candidates import Candidate, Context, Param
+from ...engine._protocol import Prepared
+from ...engine._views import Finding, chi2_threshold, log10_tail_p
+
+RUNOUT_ORDERS = (1.0, 2.0, 3.0)
+"""Runout orders of the axial beam tilt."""
+
+# ----------------------------------------------------------------------------- candidates
+
+
+def _R(x):
+    return x["radius_m"]
+
+
+def _bt_basis(alpha, m: float, project: bool):
+    """Orthonormal head vectors (complex, (q, C)) of what the base model spans at order ``m``:
+    the disk error every head sees phase-shifted by its azimuth, ``u_k = exp(-i m alpha_k)``,
+    and without theta_ref also the common mode (the head mean is projected out)."""
+    C = alpha.shape[0]
+    u = jnp.exp(-1j * m * alpha)
+    if not project:
+        return (u / jnp.sqrt(C))[None, :]
+    q1 = jnp.ones(C, complex) / jnp.sqrt(C)
+    v = u - q1 * jnp.vdot(q1, u)
+    nv = jnp.sqrt(jnp.sum(jnp.abs(v) ** 2))
+    # at a multiple of the head symmetry u is the common mode itself: one vector only
+    q2 = jnp.where(nv > 1e-6 * jnp.sqrt(C), v / jnp.maximum(nv, 1e-300), 0.0)
+    return jnp.stack([q1, q2])
+
+
+def _bt_head_specific(alpha, coefs, project: bool):
+    """Per runout order: the complex head coefficients ``z_k = c_k - i s_k`` less their part
+    in the base model's span (what the disk error, or the head mean, would take)."""
+    out = []
+    for j, m in enumerate(RUNOUT_ORDERS):
+        c, s_ = coefs[j]
+        w = c - 1j * s_
+        Q = _bt_basis(alpha, m, project)
+        out.append(w - Q.T @ (jnp.conj(Q) @ w))
+    return out
+
+
+def _bt_make(project: bool) -> Candidate:
+    """Axial beam tilt as a linear term: per head and runout order ``m`` (1-3) a cosine and
+    a sine of ``m theta`` with the same phase origin at every head (``beta_k z(theta) / R``
+    has no head-angle phase), less the base model's span at that order. The product form
+    ``beta_k z_m`` is not used: with two heads and theta_ref (three without) its tangent
+    space at an order holds the base model's own pattern, so it was always ill-conditioned
+    against the base; projected, the fitted part is the identifiable, head-specific one."""
+
+    def fn(p, x):
+        alpha = x["alpha"]
+        th = x["theta"]
+        on = p["orders_on"]
+        coefs = [(p[f"cos{j + 1}_rad"], p[f"sin{j + 1}_rad"]) for j in range(3)]
+        zs = _bt_head_specific(alpha, coefs, project)
+        e = 0.0
+        for j, m in enumerate(RUNOUT_ORDERS):
+            z = zs[j] * on[j]
+            e = e + jnp.real(z)[None, :] * jnp.cos(m * th)[:, None]
+            e = e - jnp.imag(z)[None, :] * jnp.sin(m * th)[:, None]
+        return e
+
+    params = []
+    for j in range(3):
+        params += [
+            Param(f"cos{j + 1}_rad", "rad", "channels", description=f"cos of order {j + 1}"),
+            Param(f"sin{j + 1}_rad", "rad", "channels", description=f"sin of order {j + 1}"),
+        ]
+    params.append(
+        Param(
+            "orders_on",
+            "1",
+            (3,),
+            linear=False,
+            fit=False,
+            description="runout orders 1-3 fitted (those the views located; held)",
+        )
+    )
+    return Candidate(
+        "beam_tilt_axial",
+        fn,
+        tuple(params),
+        signature=("orders", "spectrum"),
+        explanation="Axial runout of the disk seen through tangentially tilted beams (seed "
+        "001, axial shifts): a head-specific error at low integer orders that is not a "
+        "phase-shifted copy of the other heads' errors, which the encoder theorem assumes "
+        "(fitted: its part the base model's disk error cannot take).",
+        start=_bt_start,
+        derived=_bt_derived,
+    )
+
+
+def _bt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
+    """The runout orders (1-3) the rotation-locked orders view located (else the spectrum's
+    lines within ``FinderSettings.integer_order_tol`` of an integer order), with at least
+    ``runout_order_share`` of the strongest one's power (a strong order leaks a little into
+    its neighbours over a few turns); all three when none is."""
+
+    def located(views, tol):
+        pw = np.zeros(3)
+        for f in findings:
+            if f.view in views and (f.view == "orders" or f.detail.get("integer_order")):
+                for o in f.where["orders"]:
+                    if np.isfinite(o) and round(o) in (1, 2, 3) and abs(o - round(o)) < tol:
+                        j = int(round(o)) - 1
+                        pw[j] = max(pw[j], f.power - f.dof)
+        return (pw > 0) & (pw >= ctx.settings.runout_order_share * pw.max())
+
+    on = located(("orders",), 0.5)  # the orders view: nearest integer
+    if not on.any():
+        on = located(("spectrum",), ctx.settings.integer_order_tol)
+    if not on.any():
+        on[:] = True
+    return [{"orders_on": on.astype(float)}]
+
+
+def _bt_derived(ctx: Context, v: dict, se: dict) -> dict:
+    alpha = jnp.asarray(ctx.consts["alpha"], float)
+    coefs = [
+        (jnp.asarray(v[f"cos{j + 1}_rad"]), jnp.asarray(v[f"sin{j + 1}_rad"])) for j in range(3)
+    ]
+    zs = _bt_head_specific(alpha, coefs, not ctx.has_ref)
+    on = np.asarray(v["orders_on"], float)
+    amp = np.stack([np.abs(np.asarray(z)) * on[j] for j, z in enumerate(zs)], 1)  # (C, 3)
+    out = {
+        "error_amplitude_rad": {
+            "value": amp.tolist(),
+            "se": None,
+            "unit": "rad",
+            "note": "per head (rows) and runout order 1..3 (columns): the head-specific part "
+            "(what the base model's disk error cannot take)",
+        },
+        "orders_fitted": {
+            "value": [int(m) for m, o in zip(RUNOUT_ORDERS, on) if o],
+            "se": None,
+            "unit": "1",
+        },
+    }
+    if ctx.radius_m:
+        out["tilt_runout_product_m_rad"] = {
+            "value": (amp * float(ctx.radius_m)).tolist(),
+            "se": None,
+            "unit": "m rad",
+            "note": "beta_k z_m (head-specific part): only the products are observable",
+        }
+    return out
+
+
+BEAM_TILT_AXIAL = _bt_make(False)
+BEAM_TILT_AXIAL_NO_REF = _bt_make(True)
+
+
+def _wb_fn(p, x):
+    oh = x["run_onehot"]
+    return fx.bearing_wobble_rad(
+        x["theta"],
+        x["alpha"],
+        _R(x),
+        p["frequency_ratio"],
+        oh @ p["runout_a_m"],
+        oh @ p["runout_b_m"],
+    )
+
+
+def _spectrum_orders(findings, integer: bool | None) -> list[float]:
+    out = []
+    for f in findings:
+        if f.view != "spectrum":
+            continue
+        if integer is not None and f.detail.get("integer_order") != integer:
+            continue
+        o = [v for v in f.where["orders"] if np.isfinite(v)]
+        if o:
+            out.append(float(np.median(o)))
+    return out
+
+
+def _wb_start(ctx, resid, findings):
+    return [{"frequency_ratio": o} for o in _spectrum_orders(findings, False)[:3]]
+
+
+def _wb_plausible(ctx, v):
+    nu = float(v["frequency_ratio"])
+    if nu <= 0:
+        return f"frequency ratio {nu:.3g} is not positive"
+    if abs(nu - round(nu)) < ctx.settings.wobble_integer_tol:
+        return f"frequency ratio {nu:.4f} is an integer: synchronous, not a wobble"
+    st = ctx.settings
+    revs = float(np.max(ctx.revolutions))
+    if nu * revs >= st.wobble_cycles_min:
+        return None
+    # fewer cycles than the rule asks in every run: a slow drift or a step could pose as
+    # it, unless the record tells them apart: runs at clearly different speeds that share
+    # one order (not one frequency) over enough cycles in all
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    total = nu * float(np.sum(ctx.revolutions))
+    if w.size and np.max(w) >= st.speed_ratio_min * np.min(w) and total >= st.wobble_cycles_min:
+        return None
+    return (
+        f"{nu * revs:.1f} wobble cycles in the longest run: a slow drift or a step fits as "
+        f"well (needs {st.wobble_cycles_min:g}, or runs at speeds {st.speed_ratio_min:g}x "
+        f"apart showing the same order over {st.wobble_cycles_min:g} cycles in all)"
+    )
+
+
+def _wb_derived(ctx, v, se):
+    rho = np.hypot(v["runout_a_m"], v["runout_b_m"])
+    return {
+        "runout_m": {
+            "value": rho.tolist(),
+            "se": None,
+            "unit": "m",
+            "note": "radial runout amplitude per run",
+        }
+    }
+
+
+BEARING_WOBBLE = Candidate(
+    "bearing_wobble",
+    _wb_fn,
+    (
+        Param("frequency_ratio", "1", "1", linear=False, scale=1e-3),
+        Param("runout_a_m", "m", "runs"),
+        Param("runout_b_m", "m", "runs"),
+    ),
+    signature=("spectrum",),
+    explanation="Shaft runout not synchronous with rotation (balls, cage, races): a "
+    "fractional order, not repeatable revolution to revolution, cancelling in opposed-head "
+    "sums like eccentricity.",
+    applies=lambda ctx: (
+        None
+        if float(np.sum(ctx.revolutions)) >= ctx.settings.wobble_revolutions_min
+        else f"needs at least {ctx.settings.wobble_revolutions_min:g} revolutions to resolve "
+        "a fractional order"
+    ),
+    start=_wb_start,
+    plausible=_wb_plausible,
+    derived=_wb_derived,
+)
+
+
+def _vb_fn(p, x):
+    oh = x["run_onehot"]
+    C = x["reading"].shape[1]
+    R = oh.shape[1]
+    return fx.vibration_rad(
+        x["t"],
+        p["frequency_hz"],
+        oh @ p["cos_rad"].reshape(R, C),
+        oh @ p["sin_rad"].reshape(R, C),
+    )
+
+
+def _one_speed(ctx) -> float | None:
+    """The steady speed (rad/s) when every kept row turns at one |speed|, else ``None``."""
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    if w.size and np.ptp(w) <= ctx.settings.one_speed_spread * np.max(w):
+        return float(np.median(w))
+    return None
+
+
+def _gain(rw: np.ndarray, X: np.ndarray) -> float:
+    """Whitened chi-square that regressors ``X`` (n, q) take out of ``rw`` (n, C)."""
+    if X.shape[0] <= X.shape[1]:
+        return 0.0
+    Q, _ = np.linalg.qr(X)
+    return float(np.sum((Q.T @ rw) ** 2))
+
+
+def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
+    """``(frequency, margin)``: the line's frequency refined on a grid of +-2 Rayleigh bins
+    (the spectrum's peak of a record with excluded stretches, set to zero, can split in two
+    and sit a bin off: a frequency fit started there does not find the line), and at one
+    speed by how much (whitened chi-square less ``k ln N`` for its parameters) a line fixed
+    in time at it beats a rotation-locked error at the nearest integer order (the same phase
+    in every run: ``cos m theta, sin m theta`` per channel). A line at a non-integer order
+    that the record resolves beats it clearly; a rotation-locked error (any number of turns)
+    or a line that the span cannot tell from one (``|order - m| * turns`` small) does not.
+    When the base model has order ``m`` the locked error is already fitted, so what the line
+    takes out of this residual is all its own (the locked alternative gains nothing).
+    ``1e9`` when not at one speed."""
+    t = np.asarray(ctx.rows["t"], float)
+    th = np.asarray(ctx.rows["theta"], float)
+    oh = np.asarray(ctx.rows["run_onehot"], float)
+    rw = np.asarray(resid, float).reshape(t.size, -1) / np.asarray(ctx.noise)[None, :]
+    rw = rw - oh @ np.linalg.lstsq(oh, rw, rcond=None)[0]  # the run constants are the base's
+    T = float(np.max(_run_durations(ctx)))
+    if T <= 0:
+        return f_hz, 1e9
+    N = rw.size
+    w = _one_speed(ctx)
+    m = round(f_hz / (w / (2 * np.pi))) if w is not None else 0
+    in_base = 1 <= m <= int(ctx.max_order)
+    locked = np.stack([np.cos(m * th), np.sin(m * th)], 1)
+    # at one speed near a base order the base's order m is refitted with the line (as the
+    # engine's trial fit does): the line's gain is over it (the base residual alone shows
+    # the line less the base's share of it, split around a reversal)
+    g0 = _gain(rw, locked) if in_base else 0.0
+    best = (-math.inf, f_hz)
+    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
+        c, s_ = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
+        X = np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
+        g = _gain(rw, np.concatenate([X, locked], 1)) - g0 if in_base else _gain(rw, X)
+        best = max(best, (g, float(f)))
+    g_vib, f_best = best
+    if w is None or m < 1:
+        return f_best, 1e9
+    k_vib = 2 * oh.shape[1] * rw.shape[1]
+    k_lock = 2 * rw.shape[1]
+    if in_base:
+        g_lock = 0.0  # in the base model: what the line takes beyond it is its own
+    else:
+        g_lock = _gain(rw, locked)
+    margin = (g_vib - k_vib * math.log(N)) - (g_lock - k_lock * math.log(N))
+    return f_best, float(margin)
+
+
+def _vb_start(ctx, resid, findings):
+    out = []
+    for f in findings:
+        if f.view == "spectrum" and f.detail.get("fixed_in") != "order":
+            fr = [v for v in f.where["frequencies_hz"] if v > 0]
+            if fr:
+                f0, margin = _vb_locked_margin(ctx, resid, float(np.median(fr)))
+                out.append({"frequency_hz": f0, "locked_margin": margin})
+    return out[:3]
+
+
+def _run_durations(ctx: Context) -> np.ndarray:
+    oh = ctx.rows["run_onehot"] > 0
+    t = ctx.rows["t"]
+    return np.array([np.ptp(t[oh[:, r]]) if oh[:, r].any() else 0.0 for r in range(oh.shape[1])])
+
+
+def _vb_plausible(ctx, v):
+    f = float(v["frequency_hz"])
+    if f <= 0:
+        return "frequency is not positive"
+    w = _one_speed(ctx)
+    if w is not None:
+        order = f / (w / (2 * np.pi))
+        res = max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
+        margin = float(np.asarray(v.get("locked_margin", 0.0)))
+        # within the span's resolution of an integer order, the data must show that it is
+        # not rotation locked (the line beats the locked order by FinderSettings.locked_margin)
+        if (
+            abs(order - round(order)) < res
+            and round(order) >= 1
+            and margin < ctx.settings.locked_margin
+        ):
+            return (
+                f"at one speed a line at {f:.4g} Hz is shaft order {order:.3f}: a "
+                f"rotation-locked error at order {round(order)} fits as well (chi-square "
+                f"margin {margin:.1f}, needs {ctx.settings.locked_margin:.0f}; two speeds "
+                "separate them)"
+            )
+    T = float(np.max(_run_durations(ctx)))
+    need = ctx.settings.vibration_cycles_min
+    if f * T < need:
+        return (
+            f"{f * T:.1f} cycles of {f:.3g} Hz in the longest run: a slow drift or a step "
+            f"fits as well (needs {need:g})"
+        )
+    return None
+
+
+VIBRATION = Candidate(
+    "vibration",
+    _vb_fn,
+    (
+        Param("frequency_hz", "Hz", "1", linear=False, scale=1e-3),
+        Param("cos_rad", "rad", "runs*channels"),
+        Param("sin_rad", "rad", "runs*channels"),
+        Param(
+            "locked_margin",
+            "1",
+            linear=False,
+            fit=False,
+            description="at one speed: whitened chi-square (less k ln N) by which a line fixed "
+            "in time beats a rotation-locked error at the nearest integer order (held)",
+        ),
+    ),
+    signature=("spectrum",),
+    explanation="Relative oscillation of head and scale at a structural frequency "
+    "(seed 002): fixed in Hz across runs at different speeds, so its shaft order moves with "
+    "speed (reported at its apparent frequency when aliased by the sampling).",
+    start=_vb_start,
+    plausible=_vb_plausible,
+    doubt_overruled=False,  # the locked-order margin is a test on the data
+)
+
+
+def _th_fn(p, x):
+    return x["driver"][:, None] * p["rate"][None, :]
+
+
+def _th_unit(ctx):
+    return "rad/K" if ctx.driver_name == "temp_c" else "rad/s"
+
+
+THERMAL_DRIFT = Candidate(
+    "thermal_drift",
+    _th_fn,
+    (Param("rate", "rad/K (temp_c) or rad/s (no temp_c)", "channels"),),
+    signature=("drift", "time"),
+    explanation="Expansion of mounts and disk with temperature (seed 001: about 0.7 arcsec/K): "
+    "a slow error correlated with temp_c, different between heads.",
+    # issue 44 E: without a temperature that varies, a slow error in time is not attributable
+    # to temperature (it may be a step the motion hides, a reference's drift, ...): the
+    # drift is reported located, never named thermal_drift
+    applies=lambda ctx: (
+        None
+        if ctx.consts.get("driver_name") == "temp_c"
+        else "needs a temp_c column that varies (a drift in time alone is reported located, "
+        "not attributed to temperature)"
+    ),
+)
+
+
+def _ip_fn(p, x):
+    L = jnp.maximum(x["signal_periods"], 1.0)
+    oh = x["run_onehot"]
+    R, C = oh.shape[1], x["psi"].shape[1]
+    # one set per run and head: a head's zero set anew for a run by any amount (not a whole
+    # number of signal periods) moves the signal phase psi = L * reading by a constant, which
+    # rotates harmonic 1 by L*dz and harmonic 2 by 2 L*dz (the same physics, other phases)
+    c = p["coef"].reshape(4, R, C)
+    coef = jnp.einsum("nr,qrc->qnc", oh, c)
+    return fx.interpolation_harmonics_rad(x["psi"], L, coef)
+
+
+def _ip_derived(ctx, v, se):
+    C, R = ctx.n_channels, ctx.n_runs
+    c = np.asarray(v["coef"]).reshape(4, R, C)
+    if R == 1:
+        c = c[:, 0]
+    L = max(ctx.signal_periods, 1)
+    note = {"note": "per run (rows) and head (columns)"} if R > 1 else {}
+    return {
+        "offset_a": {"value": c[0].tolist(), "se": None, "unit": "1", **note},
+        "offset_b": {"value": (-c[1]).tolist(), "se": None, "unit": "1", **note},
+        "amplitude_error": {"value": (-2 * c[3]).tolist(), "se": None, "unit": "1", **note},
+        "phase_error_rad": {"value": (-2 * c[2]).tolist(), "se": None, "unit": "rad", **note},
+        "amplitude_1x_rad": {
+            "value": (np.hypot(c[0], c[1]) / L).tolist(),
+            "se": None,
+            "unit": "rad",
+            **note,
+        },
+        "amplitude_2x_rad": {
+            "value": (np.hypot(c[2], c[3]) / L).tolist(),
+            "se": None,
+            "unit": "rad",
+            **note,
+        },
+    }
+
+
+INTERPOLATION_ERROR = Candidate(
+    "interpolation_error",
+    _ip_fn,
+    (Param("coef", "1", (4, 0)),),  # shape (4, runs * heads) fixed per record below
+    signature=("line_phase",),
+    explanation="Imperfect quadrature signals interpolated by arctangent (seed 002 eq. 4): "
+    "offsets, amplitude ratio and phase error give orders L and 2L of the shaft angle "
+    "(L signal periods per revolution).",
+    applies=lambda ctx: (
+        None if ctx.signal_periods > 0 else "needs grating_lines or signal_periods_per_rev"
+    ),
+    derived=_ip_derived,
+)
+
+
+ORDER_STEP_BINS = 2048
+"""Change points the ``order_step`` view scans (bin edges over the kept rows; the best one
+is refined to the row)."""
+
+
+def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
+    """Per kept row ``idx``: the whitened eccentricity columns ``X`` (rows, C, 2) (order 1 of
+    the disk error as every head sees it: ``sin, cos (theta - alpha_k)``), and the sums a
+    step in them needs: ``X^T r`` (rows, 2), ``X^T X`` (rows, 2, 2), ``X^T B`` (rows, 2, P)
+    and ``B^T B``, ``B^T r`` with ``B`` the base columns a step must be told from (one
+    constant per run and head, and order 1 over the whole record)."""
+    C, R = prep.n_channels, prep.ctx.n_runs
+    th = np.asarray(prep.rows.take("theta", idx), float)
+    d = th[:, None] - np.asarray(prep.consts["alpha"], float)[None, :]
+    X = np.stack([np.sin(d), np.cos(d)], 2)  # (n, C, 2)
+    B = np.zeros((idx.size, C, P))
+    run = prep.run[idx]
+    for k in range(C):
+        B[np.arange(idx.size), k, run * C + k] = 1.0
+    B[:, :, R * C :] = X
+    if prep.kd.project:  # without theta_ref the head mean is projected out (data and terms)
+        X = X - X.mean(1, keepdims=True)
+        B = B - B.mean(1, keepdims=True)
+    w = 1.0 / np.asarray(prep.sigma, float)[None, :, None]
+    X, B = X * w, B * w
+    r = rw[idx]
+    return (
+        X,
+        np.einsum("nck,nc->nk", X, r),
+        np.einsum("nck,ncl->nkl", X, X),
+        np.einsum("nck,ncp->nkp", X, B),
+        np.einsum("ncp,ncq->pq", B, B),
+        np.einsum("ncp,nc->p", B, r),
+    )
+
+
+def _step_gain(Sa, SG, SXB, BBi, Br):
+    """Whitened chi-square (2 dof) a step in the eccentricity columns takes out, given the
+    suffix sums from the step on (arrays over candidate change points), the base columns
+    projected out."""
+    g = Sa - SXB @ (BBi @ Br)
+    Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
+    det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
+    tr = Gp[..., 0, 0] + Gp[..., 1, 1]
+    ok = det > 1e-9 * np.maximum(tr, 1e-300) ** 2
+    det = np.where(ok, det, 1.0)
+    q = (
+        g[..., 0] ** 2 * Gp[..., 1, 1]
+        - 2 * g[..., 0] * g[..., 1] * Gp[..., 0, 1]
+        + g[..., 1] ** 2 * Gp[..., 0, 0]
+    ) / det
+    return np.where(ok, np.maximum(q, 0.0), 0.0)
+
+
+def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """A change at one instant of the disk's order-1 error (the disk moved on its hub): the
+    step ``H(tau - t_s)`` times the eccentricity columns every head sees, ``sin, cos(theta -
+    alpha_k)`` (so one displacement, phase shifted by the head angle), with the base model's
+    constant order 1 and run constants projected out, scanned over the change time on the
+    global time axis (runs end to end). Its block means average out over each turn, so the
+    ``time`` view does not see it; a line fitted to it is a detuned order 1. Chi-square with
+    2 dof at the best change point, Bonferroni over the change points scanned."""
+    keep = prep.keep
+    kidx = np.flatnonzero(keep)
+    C, R = prep.n_channels, prep.ctx.n_runs
+    if C == 1 and prep.ctx.has_ref:  # a sensor against a reference: no disk on a hub
+        return []
+    s = prep.settings
+    if kidx.size < s.order_step_min_rows or float(np.sum(prep.ctx.revolutions)) < (
+        s.order_step_revolutions_min
+    ):
+        return []
+    P = R * C + 2
+    nb = int(min(ORDER_STEP_BINS, kidx.size // 8))
+    edges = np.linspace(0, kidx.size, nb + 1).astype(int)
+    a = np.zeros((nb, 2))
+    G = np.zeros((nb, 2, 2))
+    XB = np.zeros((nb, 2, P))
+    BB = np.zeros((P, P))
+    Br = np.zeros(P)
+    pos_bin = np.repeat(np.arange(nb), np.diff(edges))
+    step = 1 << 14
+    for lo in range(0, kidx.size, step):
+        hi = min(kidx.size, lo + step)
+        _, ai, Gi, XBi, BBc, Brc = _order_step_sums(prep, rw, kidx[lo:hi], P)
+        # the kept rows are in time order, so a chunk's bins are contiguous and ascending
+        bi = pos_bin[lo:hi]
+        st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
+        a[bi[st]] += np.add.reduceat(ai, st, axis=0)
+        G[bi[st]] += np.add.reduceat(Gi, st, axis=0)
+        XB[bi[st]] += np.add.reduceat(XBi, st, axis=0)
+        BB += BBc
+        Br += Brc
+    BBi = np.linalg.pinv(BB)
+
+    def suffix(x):
+        return np.cumsum(x[::-1], 0)[::-1]
+
+    Sa, SG, SXB = suffix(a), suffix(G), suffix(XB)
+    # change points at bin edges 1..nb-1, with at least 1 % of the kept rows either side
+    e = np.arange(1, nb)
+    margin = max(10, kidx.size // 100)
+    e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
+    if e.size == 0:
+        return []
+    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br)
+    j = int(np.argmax(gain))
+    chi = float(gain[j])
+    n_tests = int(e.size)
+    if chi <= chi2_threshold(prep.settings.alpha, 2, n_tests):
+        return []
+    # refine to the row: the rows of the bins either side of the best edge
+    eb = int(e[j])
+    lo, hi = edges[max(eb - 1, 0)], edges[min(eb + 1, nb)]
+    _, ai, Gi, XBi, _, _ = _order_step_sums(prep, rw, kidx[lo:hi], P)
+    tail = min(eb + 1, nb)
+    base_a = Sa[tail] if tail < nb else np.zeros(2)
+    base_G = SG[tail] if tail < nb else np.zeros((2, 2))
+    base_XB = SXB[tail] if tail < nb else np.zeros((2, P))
+    ra = base_a + np.cumsum(ai[::-1], 0)[::-1]
+    rG = base_G + np.cumsum(Gi[::-1], 0)[::-1]
+    rXB = base_XB + np.cumsum(XBi[::-1], 0)[::-1]
+    gi = _step_gain(ra, rG, rXB, BBi, Br)
+    ok = (np.arange(lo, hi) >= margin) & (kidx.size - np.arange(lo, hi) >= margin)
+    gi = np.where(ok, gi, -1.0)
+    i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
+    i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
+    tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
+    tau_b = float(prep.rows.take("tau", np.array([i_before]))[0])
+    t_a = float(prep.rows.take("t", np.array([i_after]))[0])
+    t_b = float(prep.rows.take("t", np.array([i_before]))[0])
+    r_after = int(prep.run[i_after])
+    detail = {
+        "shape": "order_change",
+        "order": 1,
+        # the change lies between the last row before it and the first row after it (a
+        # change between two runs is put at the start of the later one)
+        "global_step_time_s": 0.5 * (tau_a + tau_b) if prep.run[i_before] == r_after else tau_a,
+        "step_time_s": t_a,
+        "step_times_s": [t_b if prep.run[i_before] == r_after else t_a, t_a],
+        "n_values": int(kidx.size * C),
+        "n_change_points": n_tests,
+    }
+    return [
+        Finding(
+            "order_step",
+            {
+                "orders": [1.0],
+                "frequencies_hz": [],
+                "heads": list(range(C)),
+                "runs": [int(prep.run_ids[r_after])],
+                "times_s": detail["step_times_s"],
+            },
+            chi,
+            2,
+            log10_tail_p(chi, 2),
+            detail=detail,
+        )
+    ]
+
+
+def _es_fn(p, x):
+    return fx.eccentricity_shift_rad(
+        x["theta"],
+        x["tau"],
+        x["alpha"],
+        _R(x),
+        p["shift_time_s"],
+        p["shift_x_m"],
+        p["shift_y_m"],
+        x["step_width_s"],
+    )
+
+
+def _es_start(ctx, resid, findings):
+    # the order-1 change point first: the time view's block means average an order-1
+    # change out over each turn, so its change points are those of other structure
+    out = [
+        {"shift_time_s": f.detail["global_step_time_s"]}
+        for f in findings
+        if f.view == "order_step" and "global_step_time_s" in f.detail
+    ]
+    out += [
+        {"shift_time_s": f.detail["global_step_time_s"]}
+        for f in findings
+        if f.view == "time" and "global_step_time_s" in f.detail
+    ]
+    return out[:3]
+
+
+def _es_plausible(ctx, v):
+    tau = ctx.rows["tau"]
+    ts = float(v["shift_time_s"])
+    if not (tau.min() < ts < tau.max()):
+        return f"shift time {ts:.4g} s lies outside the record"
+    return None
+
+
+ECCENTRICITY_SHIFT = Candidate(
+    "eccentricity_shift",
+    _es_fn,
+    (
+        Param("shift_time_s", "s", "1", linear=False, scale=1e-2, global_time=True),
+        Param("shift_x_m", "m", "1"),
+        Param("shift_y_m", "m", "1"),
+    ),
+    signature=("order_step", "time"),
+    explanation="A shock or slip moved the disk on its hub during the record: the order-1 "
+    "error of the heads changes at one instant (shift_time_s is fitted on the global time "
+    "axis, runs end to end, and reported on the recording's own t with its run).",
+    start=_es_start,
+    plausible=_es_plausible,
+)

@@ -1,0 +1,539 @@
+"""``sds`` kind of the discrepancy-finder engine (edge times of a shifted-delta-sum bench).
+
+Data (:func:`sds_pair_table`): every run (one platform position φ_r) and every complete
+revolution gives one shifted delta sum per fixed × moving sensor pair (seed 001 eqs. 23–24,
+pair constants from the nominal sensor azimuths of the TOML), with the mean time of each
+sensor's window. The engine sees **one row per run** and, per moving sensor ``m``, ``K``
+channels: the run mean over the ``K`` revolutions (channel ``m<i>``, the pair values averaged
+over the fixed sensors, minus ``φ_ref``) and ``K − 1`` orthonormal (Helmert) contrasts over the
+revolutions (channels ``m<i>.d<k>``), so that the two noise levels of an SDS bench (run to
+run, e.g. clock ticks locked to the revolution, and revolution to revolution) are separate
+channels with their own noise, and rows (runs) are independent. Every term is computed per
+pair and revolution and mapped the same way, so it stays one differentiable function.
+
+Base model (what the design includes), per pair (f, m), with ``x = φ_r + ψ_m``:
+
+    y = c_m + Σ_{n ∈ design orders} a_n cos n x + b_n sin n x
+
+the pair constants averaged over the fixed sensors ``c_m`` and the product of the design's
+speed ripple with disk B's mark errors at the design motor's orders (multiples of
+``pole_pairs``, of ``pole_pairs·commutation_states`` and the cogging order, up to
+``R·M/2 − 1``; seed 001 eqs. 46–53). Without ``phi_ref`` the datum is ``wrap(SDS − φ̂_r)``
+with φ̂_r the run's mean reading, and every term is projected on the differences between the
+moving sensors of a run (the per-run offset is a nuisance that takes everything common to
+the moving sensors): the absolute angle per run, the common constant, what is common to the
+moving sensors (beam tilt × axial runout, coil orders at multiples of M, a common drift
+across runs) are unidentifiable and listed.
+
+Candidates (``docs/effects.md``, "SDS timing model"), each a differentiable term:
+
+* ``axis_tilt``: ``T(φ+ψ_m) − T(ψ_f)``, ``T(ψ) = atan2(sin(ψ−χ), cos(ψ−χ) cos β) − (ψ−χ)``
+  (seed eq. 26), parameters β (rad), χ (rad); χ is unidentifiable when β is not resolved;
+* ``thermal_drift``: ``k (t_m − t̄)`` (no temperature column in sds: time drives);
+* ``bearing_wobble``: ``w(t_m, φ+ψ_m) − w(t_f, ψ_f)``,
+  ``w = sinc(ρ) [A sin(ρΩt − ψ) + B cos(ρΩt − ψ)]`` (window mean over one revolution);
+* ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors;
+* ``coil_mismatch``: Fourier terms in ``x`` at the coil orders ``1 … pole_pairs − 1``, the
+  lowest as many as the parameter budget leaves
+  (:func:`~encdesign.diagnose.kinds.sds._sds_terms.coil_order_count`);
+* ``sensor_delay_step``: one moving sensor's edges delayed by ``τ_m`` from one run on
+  (electronics, cable, a re-plugged connector): ``+Ω τ_m`` on that sensor's pairs;
+* ``timing_quantization``: the time stamps lie on a lattice coarser than the declared clock
+  (:func:`stamp_lattice`, found from the data for any clock); a noise floor, named from the
+  lattice, not fitted.
+
+Views: the engine's ``orders`` (per channel, in φ), a run-step view (per moving sensor, the
+best change point over the runs in time order, and single-run outliers) and one matched
+view per candidate (the power its columns take out of the whitened residual).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, final
+
+import jax.numpy as jnp
+import numpy as np
+
+from ...engine._fit import valjac_fn as _valjac_fn
+from ...engine._kind import AbstractKind
+from ...engine._protocol import Prepared
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
+from ...engine._views import Finding
+from ...engine._views import chi2_threshold as _thr
+from ...engine._views import log10_tail_p as _logp
+from ...engine._views import make_where as _where
+from ._sds_data import (
+    SDSPairTable,
+    sds_data,
+    sds_pair_table,
+    sds_prepare,
+    sds_speed_harmonics,
+    stamp_lattice,
+)
+from ._sds_noise import (
+    EXPLANATIONS,
+    REFERENCE_RADIUS_M,
+    _ls_power_flat,
+    base_orders,
+    noise_info,
+    sds_noise,
+    view_common_orders,
+)
+from ._sds_terms import (
+    _const_term,
+    _jx,
+    _ripple_term,
+    _wobble_grid,
+    _wobble_onsets,
+    moving_opposed,
+    sds_candidates,
+)
+
+__all__ = [
+    "SDS",
+    "SDSPairTable",
+    "sds_pair_table",
+    "sds_speed_harmonics",
+    "stamp_lattice",
+]
+
+# ----------------------------------------------------------------------------- views
+
+
+def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """Per moving sensor (run-mean channels), the best step over the runs in time order and
+    the strongest single-run outlier; 1 dof each, Bonferroni over sensors x positions."""
+    M = prep.consts["psi_m"].size
+    r = rw[:, :M]
+    R = r.shape[0]
+    n_tests = max(1, 2 * M * (R - 1))
+    thr = _thr(prep.settings.alpha, 1, n_tests)
+    out = []
+    for m in range(M):
+        x = r[:, m] - r[:, m].mean()
+        best = (0.0, 1, "step")
+        for k in range(1, R):
+            s = (np.arange(R) >= k).astype(float)
+            s -= s.mean()
+            pw = float((s @ x) ** 2 / (s @ s))
+            if pw > best[0]:
+                best = (pw, k, "step")
+        j = int(np.argmax(np.abs(x)))
+        pw_out = float(x[j] ** 2 * R / (R - 1))
+        if pw_out > best[0]:
+            best = (pw_out, j, "run_outlier")
+        if best[0] > thr:
+            k = best[1]
+            out.append(
+                Finding(
+                    "run_step",
+                    _where(
+                        heads=[m],
+                        runs=[int(prep.run_ids[k])],
+                        times_s=[float(prep.rows["t"][k])],
+                    ),
+                    best[0],
+                    1,
+                    _logp(best[0], 1),
+                    detail={
+                        "shape": best[2],
+                        "first_run_index": int(k),
+                        "sensor": f"m{m}",
+                        "n_values": int(R),
+                    },
+                )
+            )
+    return out
+
+
+def _matched_view(name: str):
+    """A view: the power the candidate's columns (at its start) take out of the residual."""
+
+    def view(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+        ctx = prep.ctx
+        cands = {c.name: c for c in sds_candidates(ctx)}
+        if name not in cands:
+            return []
+        cand = cands[name]
+        if cand.applies is not None and cand.applies(ctx):
+            return []
+        x = _jx(ctx)
+        resid = rw * prep.sigma[None, :]
+        starts = cand.start(ctx, resid, []) if cand.start else [{}]
+        best = (0.0, 0)
+        for st in starts:
+            p = {}
+            for q in cand.params:
+                shp = q.resolved_shape(ctx.n_channels, ctx.n_runs)
+                v0 = st.get(q.name)
+                p[q.name] = jnp.asarray(np.zeros(shp) if v0 is None else v0, float)
+            free = [q.name for q in cand.params if q.fit]
+            _, J = _valjac_fn(cand)(p, x)
+            cols = (
+                np.concatenate([np.asarray(J[k]).reshape(*rw.shape, -1) for k in free], axis=-1)
+                / prep.sigma[None, :, None]
+            )
+            pw = _ls_power_flat(rw, cols)
+            q_eff = int(np.linalg.matrix_rank(cols.reshape(-1, cols.shape[-1]), tol=None))
+            if pw > best[0]:
+                best = (pw, max(q_eff, 1))
+        pw, q = best
+        n_starts = (
+            len(_wobble_grid(ctx)) * len(_wobble_onsets(int(ctx.n_runs)))
+            if name == "bearing_wobble"
+            else max(len(starts), 1)
+        )
+        thr = _thr(prep.settings.alpha, q, 6 * n_starts)
+        if pw <= thr:
+            return []
+        return [
+            Finding(
+                f"sds_{name}",
+                _where(heads=list(range(prep.n_channels)), runs=prep.run_ids.tolist()),
+                pw,
+                q,
+                _logp(pw, q),
+                detail={"n_values": int(rw.size), "candidate": name},
+            )
+        ]
+
+    return view
+
+
+def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """The engine's ``orders`` view on the run-mean channels only (a pattern in the platform
+    angle is constant within a run: it cannot reach the revolution contrasts, whose
+    scan would only add false alarms)."""
+    from ...engine._views import view_orders
+
+    M = prep.consts["psi_m"].size
+    r = np.zeros_like(rw)
+    r[:, :M] = rw[:, :M]
+    return view_orders(prep, r, min(scan_order, sds_limit(prep)))
+
+
+# the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
+# strong structure; among equals the most specific location (one sensor, one run) leads
+SDS_VIEWS = (
+    view_run_step,
+    view_mean_orders,
+    view_common_orders,
+    _matched_view("axis_tilt"),
+    _matched_view("thermal_drift"),
+    _matched_view("bearing_wobble"),
+    _matched_view("beam_tilt_axial"),
+    _matched_view("coil_mismatch"),
+)
+
+
+# ----------------------------------------------------------------------------- base
+
+
+def sds_limit(prep: Prepared) -> int:
+    """Highest order in ``x = φ + ψ_m`` the record resolves: ``R·M/2 − 1``."""
+    M = prep.consts["psi_m"].size
+    return int(max(1, prep.ctx.n_runs * M // 2 - 1))
+
+
+def sds_base(prep: Prepared, max_order: int):
+    """Pair constants plus the design's ripple orders (see module doc)."""
+    enc = prep.ctx.meta.get("encoder", {})
+    M = prep.consts["psi_m"].size
+    p = int(enc.get("pole_pairs", 0) or 0)
+    terms = [(_const_term(M), {})]
+    # without phi_ref an order with one phase at every moving sensor is taken by the
+    # per-run offset: its projected columns are zero up to rounding, which a normalised
+    # solve would fit as if they carried information; left out and listed (common_x)
+    orders, common_x = base_orders(prep.ctx.meta, prep.consts, max_order)
+    if orders:
+        terms.append((_ripple_term(tuple(orders)), {}))
+    has_ref = prep.ctx.has_ref
+    unid = [
+        "the constant offset (instrument zero): its physical causes cannot be told apart",
+    ]
+    if not has_ref:
+        unid += [
+            "no phi_ref: the absolute platform angle of each run (a per-run offset is "
+            "taken out), so the common constant of the moving sensors is held",
+            "no phi_ref: anything common to the moving sensors of a run (beam tilt x axial "
+            f"runout, orders that are multiples of {M} in x, a common drift across runs)",
+        ]
+        common = [n for n in range(1, p) if n % M == 0 and M > 1]
+        if common:
+            unid.append(
+                f"no phi_ref: coil_mismatch orders {common} have one phase at every moving "
+                "sensor (multiples of the moving-sensor count): held as unidentifiable"
+            )
+    if common_x:
+        unid.append(
+            f"no phi_ref: design orders {common_x} have one phase at every moving sensor "
+            "(taken by the per-run offset): left out of the base model"
+        )
+    info = {
+        "design_orders": orders,
+        "pole_pairs": p,
+        "n_revolutions_per_run": int(prep.kd.n_revs),
+        "revolutions_left_out": int(prep.kd.dropped_revs),
+        "radius_m": float(prep.kd.radius_m or REFERENCE_RADIUS_M),
+        "unidentifiable": unid,
+    }
+    return terms, info
+
+
+def sds_summary(prep: Prepared, base_params: dict) -> dict:
+    """The clock block: the stamp lattice found in the data against the declared clock."""
+    kd = prep.kd
+    lat = dict(kd.lattice or {})
+    P = lat.get("period_s")
+    T = kd.table.period_s
+    N = kd.table.n_marks
+    floor = None
+    if P is not None:
+        # uniform stamp error (var P^2/12) on the 2N window edges of a pair: seed 001 eq. 23
+        floor = 2 * math.pi * P / (T * math.sqrt(6 * N))
+    ratio = P / kd.declared_clock_s if (P is not None and kd.declared_clock_s) else None
+    return {
+        "clock": {
+            "declared_period_s": kd.declared_clock_s,
+            "lattice_period_s": P,
+            "ratio_to_declared": ratio,
+            "fraction_on_lattice": lat.get("fraction_on_lattice"),
+            "predicted_floor_rad": floor,
+            "method": lat.get("method"),
+        },
+        "grid_period_s": P,
+        "noise_estimate": dict(noise_info(prep.ctx).levels),
+        "moving_opposed": moving_opposed(prep.consts["psi_m"]),
+        "drift_vs_orders": noise_info(prep.ctx).drift_vs_orders,
+    }
+
+
+@final
+class SDSKind(AbstractKind):
+    """``sds``: the shifted-delta-sum timing instrument, one row per run."""
+
+    name: ClassVar[str] = "sds"
+    default_max_order: ClassVar[int] = 60
+    noise_replaces: ClassVar[bool] = True
+    grows_orders: ClassVar[bool] = False
+    reading_lattice: ClassVar[bool] = False
+
+    def data(self, rec, settings=DEFAULT_SETTINGS):
+        return sds_data(rec, settings)
+
+    def views(self, prep):
+        return SDS_VIEWS
+
+    def plots(self, d, folder):
+        return []
+
+    def base(self, prep, max_order):
+        return sds_base(prep, max_order)
+
+    def candidates(self, ctx):
+        return sds_candidates(ctx)
+
+    def max_order_limit(self, prep):
+        return sds_limit(prep)
+
+    def prepare(self, kd, meta, settings):
+        return sds_prepare(kd, meta, settings)
+
+    def noise(self, prep, base_resid):
+        return sds_noise(prep, base_resid)
+
+    def refine(self, terms, prep):
+        return None
+
+    def align(self, terms, prep):
+        return None
+
+    def summary(self, prep, base_params):
+        return sds_summary(prep, base_params)
+
+    def finish(self, prep, doc, settings):
+        return finish_sds(doc, settings)
+
+    def report_lines(self, doc):
+        return ""
+
+
+SDS = SDSKind()
+
+
+# ----------------------------------------------------------------------------- finish
+
+
+NOISE_METHOD = (
+    "run means: residual of a saturated least-squares fit of the base residual (smooth "
+    "patterns in the platform angle, drift, significant change points and single-value "
+    "outliers), sqrt(SSR / dof) with dof = independent values - rank (R(M-1) values without "
+    "phi_ref), widened by sqrt(q F(q, dof) / chi2(q)) at p = 1e-4 for its estimation error "
+    "(estimate, dof and factor under 'estimate'); revolution contrasts: 1.4826 MAD, the larger "
+    "of the parts common to the moving sensors and their differences"
+)
+
+
+def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
+    """SDS additions to the engine's document: ``timing_quantization`` named from the stamp
+    lattice (a floor, not a fitted term), the quantization floor in the goodness of fit,
+    honest standard errors (scaled by the final variance ratio when it exceeds 1; the
+    azimuth of an unresolved tilt is unidentifiable), and no non-finite number anywhere."""
+    clock = doc.get("clock", {})
+    est = doc.pop("noise_estimate", None)
+    if isinstance(doc.get("noise"), dict):
+        doc["noise"]["method"] = NOISE_METHOD
+        if est:
+            doc["noise"]["estimate"] = est
+    gof = doc.get("goodness_of_fit") or {}
+    vr = float(gof.get("variance_ratio", 1.0) or 1.0)
+    scale = math.sqrt(max(vr, 1.0))
+    noise = doc.get("noise", {}).get("per_channel", [])
+    floor = clock.get("predicted_floor_rad")
+    if isinstance(gof, dict):
+        gof["quantization"] = {
+            "lattice_period_s": clock.get("lattice_period_s"),
+            "predicted_floor_rad": floor,
+            "noise_run_means_rad": noise[0] if noise else None,
+            "note": "the noise levels are estimated from the data and so include the "
+            "quantization of the stamps on the lattice found; the predicted floor "
+            "2 pi P / (T sqrt(6 N)) is what a perfect bench on that lattice would show",
+        }
+    dv = doc.pop("drift_vs_orders", None)
+    if doc.pop("moving_opposed", False):
+        _tilt_beam_opposed(doc)
+    for e in doc.get("effects", []):
+        if e["name"] == "thermal_drift" and dv:
+            lim = math.log(max(dv["n_values"], 2))
+            if dv["order_power"] >= dv["drift_power"] - lim:
+                # within one parameter's worth: the data cannot tell the two apart
+                e["confounded_with"] = [
+                    *(e.get("confounded_with") or []),
+                    {
+                        "name": f"platform_angle_order_{dv['order']}",
+                        "reason": f"order {dv['order']} of the platform angle, common to the "
+                        f"moving sensors, fits the base residual nearly as well (chi-square "
+                        f"{dv['order_power']:.1f}, 2 dof, vs the drift's "
+                        f"{dv['drift_power']:.1f}, 1 dof; correlation "
+                        f"{dv['correlation']:.2f}): with this platform stepping it is nearly "
+                        "a trend over the runs",
+                        "rule": "one_parameter_bic",
+                        "delta_bic": None,
+                        "params": {},
+                    },
+                ]
+                e["notes"] = [
+                    *e.get("notes", []),
+                    f"confounded with order {dv['order']} of the platform angle (out of "
+                    "catalog): this recording cannot tell a drift in time from it; step the "
+                    "platform in another order or repeat positions to separate them",
+                ]
+        for q in e.get("params", {}).values():
+            if isinstance(q.get("se"), list | float | int) and scale > 1:
+                q["se"] = _scale(q["se"], scale)
+        if e["name"] == "axis_tilt":
+            p = e["params"]
+            # (tilt, azimuth) and (-tilt, azimuth + pi) are one tilt: report tilt >= 0 and
+            # the azimuth in [0, pi)
+            if p["tilt_rad"]["value"] < 0:
+                p["tilt_rad"]["value"] = -p["tilt_rad"]["value"]
+            p["azimuth_rad"]["value"] = float(np.mod(p["azimuth_rad"]["value"], np.pi))
+            b, sb = abs(p["tilt_rad"]["value"]), p["tilt_rad"]["se"]
+            if sb is None or not b > settings.resolved_se * sb:
+                p["azimuth_rad"]["se"] = None
+                e["notes"] = [
+                    *e.get("notes", []),
+                    f"the tilt is not resolved (|tilt| <= {settings.resolved_se:g} se): its "
+                    "azimuth is unidentifiable",
+                ]
+    ratio = clock.get("ratio_to_declared")
+    if ratio is not None and ratio > settings.sds_lattice_coarser:
+        rms = doc.get("rms_final", doc.get("rms_before"))
+        doc["effects"].append(
+            {
+                "name": "timing_quantization",
+                "params": {
+                    "clock_period_s": {
+                        "value": clock["lattice_period_s"],
+                        "se": None,
+                        "unit": "s",
+                    },
+                    "declared_period_s": {
+                        "value": clock["declared_period_s"],
+                        "se": None,
+                        "unit": "s",
+                    },
+                    "predicted_floor_rad": {"value": floor, "se": None, "unit": "rad"},
+                },
+                "derived": {},
+                "channels": None,
+                "rms_after": rms,
+                "heldout_rms_after": doc.get("heldout_rms_final"),
+                "delta_bic": None,
+                "collinearity": None,
+                "share": 0.0,
+                "notes": [
+                    f"every stamp lies on a {clock['lattice_period_s']:.4g} s lattice, "
+                    f"{ratio:.3g} x the declared clock period; named from the lattice, not "
+                    "fitted (a noise floor): delta_bic and collinearity do not apply"
+                ],
+                "explanation": EXPLANATIONS["timing_quantization"],
+            }
+        )
+    elif clock.get("lattice_period_s") is None and clock.get("declared_period_s"):
+        doc["notes"].append(
+            "no stamp lattice found in the data although a clock is declared: the stamps "
+            "look continuous (interpolated or free-running time)"
+        )
+    return _finite(doc)
+
+
+TILT_BEAM_SEPARATE_BY = (
+    "a moving sensor not opposed to the others (e.g. three at 120 degrees): the tilt's "
+    "order 2 then has a different phase at each moving sensor, beam tilt x axial runout "
+    "stays common to them"
+)
+
+
+def _tilt_beam_opposed(doc: dict) -> None:
+    """With the moving sensors opposed (one azimuth modulo π), ``axis_tilt`` (order 2 in
+    ``φ + ψ_m``, π-periodic) is the same at every moving sensor, as ``beam_tilt_axial`` at
+    order 2 of ``φ`` is: where the engine reports the two as confounded, say why and which
+    layout separates them (not the generic "other speeds" of a multihead bench)."""
+    pair = {"axis_tilt", "beam_tilt_axial"}
+    for e in doc.get("effects", []):
+        if e["name"] not in pair:
+            continue
+        other = (pair - {e["name"]}).pop()
+        hit = [c for c in e.get("confounded_with") or [] if c.get("name") == other]
+        for c in hit:
+            c["separate_by"] = TILT_BEAM_SEPARATE_BY
+        if hit:
+            e["notes"] = [
+                *e.get("notes", []),
+                f"confounded with {other}: with the moving sensors opposed, the tilt's error "
+                "(repeating every half turn) is the same at each of them, as beam tilt x "
+                "axial runout at order 2 of the platform angle is; the fitted values are "
+                f"those of {e['name']} alone. Separated by {TILT_BEAM_SEPARATE_BY}",
+            ]
+    for c in doc.get("confounded", []):
+        if set(c.get("pair", [])) == pair:
+            c["separate_by"] = TILT_BEAM_SEPARATE_BY
+
+
+def _scale(v, s):
+    if isinstance(v, list):
+        return [_scale(x, s) for x in v]
+    return None if v is None else float(v) * s
+
+
+def _finite(v):
+    """Non-finite numbers become ``None`` (the JSON has no NaN)."""
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite(x) for x in v]
+    if isinstance(v, float | np.floating) and not math.isfinite(float(v)):
+        return None
+    return v

@@ -1,0 +1,551 @@
+"""The SDS kind's noise levels (saturated run-mean fit, contrasts, widened for their degrees of
+freedom), the common-order view and the candidates' plausibility rules."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from ...engine._candidates import Context
+from ...engine._protocol import NoiseEstimate, Prepared
+from ...engine._views import Finding
+from ...engine._views import chi2_threshold as _thr
+from ...engine._views import log10_tail_p as _logp
+from ...engine._views import make_where as _where
+
+REFERENCE_RADIUS_M = 0.0254
+BEAM_ORDERS = (1, 2, 3)
+
+EXPLANATIONS = {
+    "axis_tilt": (
+        "The disk axis is tilted against the platform axis; the sensors then read the disk at "
+        "projected azimuths (seed 001 eq. 26), an error of nearly pure order 2 in the "
+        "platform angle, about tilt²/4. The simulation assumed both axes aligned."
+    ),
+    "thermal_drift": (
+        "The moving sensors drift against their disk with temperature (seed 001: about "
+        "0.7 arcsec/K); with no temperature column the drift shows as a trend in time. The "
+        "simulation held the temperature constant."
+    ),
+    "bearing_wobble": (
+        "The shaft bearings move the disk centre at a frequency that is not a multiple of the "
+        "shaft speed (cage, balls); the error changes from one revolution to the next and "
+        "cancels only in opposed sensor pairs. The simulation assumed perfect bearings."
+    ),
+    "beam_tilt_axial": (
+        "The moving sensors' beams are tilted tangentially and the platform moves axially as "
+        "it turns (axial runout), so the read point slides along the track: an error in the "
+        "platform angle common to all moving sensors. Only the product tilt × runout is seen."
+    ),
+    "coil_mismatch": (
+        "Unequal stator coils make the shaft speed ripple at orders below the pole-pair count; "
+        "with the disk's mark errors at the same orders it biases the shifted delta sum "
+        "(seed 001 eqs. 46-53). The design's motor had no such ripple."
+    ),
+    "sensor_delay_step": (
+        "One moving sensor's edges arrive later (or earlier) from one run on: a delay in its "
+        "electronics or cable changed (a re-plugged connector, a thermal step in a "
+        "comparator). Its pairs read +Omega*tau from then on. The design has fixed delays."
+    ),
+    "timing_quantization": (
+        "The edges are stamped on a coarser clock than the declared one, which adds a noise "
+        "floor to every reading (it cannot be fitted away, only made smaller with a faster "
+        "clock)."
+    ),
+}
+
+
+def design_orders(p: int, q: int | None, c: int | None, cap: int) -> list[int]:
+    """The motor's ripple orders up to ``cap``: multiples of the pole pairs ``p``, of
+    ``p`` times the commutation states ``c`` and of the cogging order (``q`` coils)."""
+    orders = set(range(p, cap + 1, p))
+    if c:
+        orders |= set(range(p * c, cap + 1, p * c))
+    if q:
+        cog = 2 * p * q // math.gcd(2 * p, q)
+        orders |= set(range(cog, cap + 1, cog))
+    return sorted(o for o in orders if o <= cap)
+
+
+def common_x_orders(consts: Mapping[str, Any], orders) -> list[int]:
+    """Orders ``n`` in ``x = φ + ψ_m`` whose columns vanish on the moving-sensor differences
+    (``n ψ_m`` equal mod 2π for every sensor) when the record is projected (no phi_ref)."""
+    if float(consts["proj"]) <= 0:
+        return []
+    psi = np.asarray(consts["psi_m"], float)
+    out = []
+    for n in orders:
+        z = np.exp(1j * n * psi)
+        if np.max(np.abs(z - z.mean())) < 1e-9:
+            out.append(int(n))
+    return out
+
+
+def base_orders(
+    meta: Mapping[str, Any], consts: Mapping[str, Any], max_order: int
+) -> tuple[list[int], list[int]]:
+    """``(orders, left_out)``: the design's ripple orders in the base model at
+    ``max_order`` (:func:`design_orders` of the ``[encoder]`` table), less those with one
+    phase at every moving sensor without phi_ref (:func:`common_x_orders`: taken by the
+    per-run offset), and those left out."""
+    enc = meta.get("encoder", {})
+    p = int(enc.get("pole_pairs", 0) or 0)
+    orders = (
+        design_orders(p, enc.get("stator_coils"), enc.get("commutation_states"), max_order)
+        if p > 0
+        else []
+    )
+    common_x = common_x_orders(consts, orders)
+    return [o for o in orders if o not in common_x], common_x
+
+
+@dataclasses.dataclass(frozen=True)
+class SDSNoiseInfo:
+    """What the sds noise hook (:func:`sds_noise`) found on the base residual, for the
+    candidates' rules and the summary (``Context.noise_info``).
+
+    Attributes:
+        levels: the two noise levels and how they were found (``noise_estimate``).
+        common_order_power: the base residual's power per order common to the moving
+            sensors (:func:`common_order_power`).
+        drift_vs_orders: a drift in time against the best common order, or ``None``.
+        run_change_power: per moving sensor, the best step and single-run outlier of its
+            whitened base run means (:func:`_step_or_outlier`).
+    """
+
+    levels: dict = dataclasses.field(default_factory=dict)
+    common_order_power: tuple[float, ...] = ()
+    drift_vs_orders: dict | None = None
+    run_change_power: tuple[tuple, ...] = ()
+
+
+def noise_info(ctx: Context) -> SDSNoiseInfo:
+    """The sds noise stage's findings (empty before it ran)."""
+    info = ctx.noise_info
+    return info if isinstance(info, SDSNoiseInfo) else SDSNoiseInfo()
+
+
+def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
+    """Power (chi-square) the columns ``(n, C, q)`` take out of ``rw`` (n, C)."""
+    X = cols.reshape(-1, cols.shape[-1])
+    keep = np.any(np.abs(X) > 0, axis=0)
+    X = X[:, keep]
+    if X.shape[1] == 0:
+        return 0.0
+    Q, Rm = np.linalg.qr(X)
+    ok = np.abs(np.diag(Rm)) > 1e-10 * np.abs(np.diag(Rm)).max()
+    Q = Q[:, ok]
+    return float(np.sum((Q.T @ rw.ravel()) ** 2))
+
+
+def _saturating_columns(
+    rows: Mapping[str, Any],
+    consts: Mapping[str, Any],
+    orders_base: list[int],
+    fraction: float = 0.6,
+) -> tuple:
+    """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
+    platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
+    and the design orders in ``x = φ + ψ_m``, common orders ``1..L`` in ``φ``, a drift in
+    time; ``L`` as large as ``fraction`` (``FinderSettings.sds_saturate_fraction``) of the values
+    allows. Projected on the
+    moving-sensor differences without ``phi_ref``."""
+    phi = np.asarray(rows["phi"], float)
+    psi_m = np.asarray(consts["psi_m"], float)
+    R, M = phi.size, psi_m.size
+    x = phi[:, None] + psi_m[None, :]
+    ph = np.broadcast_to(phi[:, None], (R, M))
+    t = np.broadcast_to(np.asarray(rows["tmid_c"]).mean(1)[:, None], (R, M))
+    cols = [np.eye(M)[None, :, :].repeat(R, 0).reshape(R * M, M)]
+    n0 = M + 1 + 2 * len(orders_base)
+    L = int(max(0, (fraction * R * M - n0) // 4))
+    L = min(L, max(1, (R - 1) // 2))
+    rot = sorted(set(range(1, L + 1)) | set(orders_base))
+    for n in rot:
+        cols += [np.cos(n * x).reshape(-1, 1), np.sin(n * x).reshape(-1, 1)]
+    for n in range(1, L + 1):
+        cols += [np.cos(n * ph).reshape(-1, 1), np.sin(n * ph).reshape(-1, 1)]
+    cols.append((t / max(np.ptp(t), 1e-12)).reshape(-1, 1))
+    X = np.concatenate(cols, 1)
+    if float(consts["proj"]) > 0:
+        X3 = X.reshape(R, M, -1)
+        X = (X3 - X3.mean(1, keepdims=True)).reshape(R * M, -1)
+    return X, L
+
+
+def dof_widening(nu: float, q: int = 2, p: float = 1e-4) -> float:
+    """Factor ``c`` on a noise level estimated with ``nu`` degrees of freedom so that the
+    engine's tests, which treat the level as known (chi-square thresholds), keep their
+    false-alarm rate: ``c² = q F⁻¹(1 − p; q, nu) / χ²⁻¹(1 − p; q)``, the ratio of the
+    F-test's threshold to the chi-square test's for a ``q``-parameter term at tail
+    probability ``p`` (about the engine's Bonferroni-corrected levels; for ``nu`` = 18, c is
+    1.3 for q = 1…6 within 0.05). 1 for ``nu`` → ∞."""
+    if not np.isfinite(nu) or nu > 1e4:
+        return 1.0
+    nu = max(float(nu), 1.0)
+    return float(math.sqrt(q * stats.f.isf(p, q, nu) / stats.chi2.isf(p, q)))
+
+
+def _sensor_helmert(M: int) -> np.ndarray:
+    """Orthonormal ``(M, M)`` basis over the moving sensors: column 0 common (1/√M each),
+    columns 1… the differences."""
+    H = np.zeros((M, M))
+    H[:, 0] = 1.0 / math.sqrt(M)
+    for k in range(1, M):
+        H[:k, k] = 1.0
+        H[k, k] = -k
+        H[:, k] /= math.sqrt(k * (k + 1))
+    return H
+
+
+def _level_sigma(
+    resid: np.ndarray,
+    K: int,
+    X: np.ndarray,
+    proj: bool = False,
+    info: dict | None = None,
+    test_p: float = 1e-4,
+) -> np.ndarray:
+    """Noise per channel: one level for the run means, one for the revolution contrasts
+    (each pooled over the moving sensors, which see the same clock and marks).
+
+    Run means: the residual of a saturated least-squares fit (:func:`_saturating_columns`:
+    every smooth pattern in the platform angle up to order ``L``, so no catalog effect and
+    no low order can inflate it), plus the significant change points (a step on one sensor
+    from one run on) and single-value outliers (one sensor in one run), each searched for
+    and tested as F(1, dof) against what is left (Bonferroni), so neither can inflate it
+    either. The level is ``sqrt(SSR / nu)`` with ``nu`` = independent values − rank (without
+    ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
+    1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
+    its estimation error: with ~12 platform positions it is known to ~±17 %, which the
+    engine's known-level tests would otherwise turn into false alarms.
+
+    Contrasts: the robust scale (1.4826 MAD) of the contrasts themselves (nothing constant
+    within a run reaches them), separately for the part common to the moving sensors (the
+    fixed sensors' timing noise enters every pair alike) and for the differences; the larger
+    per-value level is used (the engine weighs channels as independent: this keeps its tests
+    conservative for common and differential patterns alike)."""
+    R, C = resid.shape
+    M = C // K
+    out = np.empty(C)
+    ym = resid[:, :M].ravel()
+    n_ind = R * (M - 1) if proj else R * M
+
+    def basis(X):
+        Q, Rm = np.linalg.qr(X)
+        d = np.abs(np.diag(Rm))
+        return Q[:, d > 1e-10 * max(float(d.max(initial=0.0)), 1e-300)]
+
+    # candidate columns: a change point per sensor and run, a single value per sensor and run
+    cols = []
+    for m in range(M):
+        for k in range(1, R):
+            a = np.zeros((R, M))
+            a[k:, m] = 1.0
+            cols.append(a)
+        for r in range(R):
+            a = np.zeros((R, M))
+            a[r, m] = 1.0
+            cols.append(a)
+    A = np.stack(cols, -1)  # (R, M, n_cols)
+    if proj:
+        A = A - A.mean(1, keepdims=True)
+    A = A.reshape(R * M, -1)
+    n_tests = max(1, A.shape[1])
+    Q = basis(X)
+    added = 0
+    for _ in range(2 * M):
+        e = ym - Q @ (Q.T @ ym)
+        ssr0 = float(e @ e)
+        dof = n_ind - Q.shape[1] - 1
+        if dof < 3 or ssr0 <= 0:
+            break
+        Ap = A - Q @ (Q.T @ A)
+        nn = np.sum(Ap**2, 0)
+        ok = nn > 1e-10 * np.sum(A**2, 0)
+        gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
+        j = int(np.argmax(gain))
+        f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
+        if not ok[j] or f <= stats.f.isf(1e-3 / n_tests, 1, dof):
+            break
+        Q = basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
+        added += 1
+    e = ym - Q @ (Q.T @ ym)
+    ssr0, rk0 = float(e @ e), Q.shape[1]
+    nu = max(n_ind - rk0, 1)
+    s_raw = math.sqrt(ssr0 / nu) if ssr0 > 0 else 0.0
+    c = dof_widening(nu, p=test_p)
+    out[:M] = s_raw * c
+    if C > M:
+        H = _sensor_helmert(M)
+        z = resid[:, M:].reshape(R, K - 1, M) @ H
+        parts = [z[..., :1].ravel()] + ([z[..., 1:].ravel()] if M > 1 else [])
+        lv = []
+        for x in parts:
+            s = 1.4826 * float(np.median(np.abs(x)))
+            lv.append(s if s > 0 else float(np.sqrt(np.mean(x**2))))
+        out[M:] = max(lv)
+    if info is not None:
+        info.update(
+            run_means_rad=s_raw,
+            run_means_dof=int(nu),
+            run_means_widening=c,
+            run_means_steps_or_outliers=added,
+            contrasts_common_rad=lv[0] if C > M else None,
+            contrasts_differences_rad=lv[1] if C > M and M > 1 else None,
+        )
+    if not np.all(np.isfinite(out)) or np.any(out <= 0):
+        out = np.full(C, float(np.std(resid)) or 1e-12)
+    return out
+
+
+def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
+    """Noise hook: the two levels of :func:`_level_sigma` on the base residual, with what
+    the candidates' rules need (:class:`SDSNoiseInfo`: the base residual's common-order
+    powers (:func:`common_order_power`) for the plausibility of ``beam_tilt_axial``, ...)."""
+    X, _ = _saturating_columns(
+        prep.rows,
+        prep.consts,
+        base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0],
+        prep.settings.sds_saturate_fraction,
+    )
+    info: dict = {}
+    sig = _level_sigma(
+        resid[prep.keep],
+        prep.kd.n_revs,
+        X,
+        float(prep.consts["proj"]) > 0,
+        info=info,
+        test_p=prep.settings.sds_sigma_test_p,
+    )
+    M = prep.consts["psi_m"].size
+    rwm = resid[:, :M] / sig[None, :M]
+    pw = common_order_power(prep, rwm)
+    found = SDSNoiseInfo(
+        levels=info,
+        common_order_power=tuple(float(v) for v in pw),
+        drift_vs_orders=_drift_vs_orders(prep, rwm, pw),
+        run_change_power=tuple(_step_or_outlier(rwm[:, m]) for m in range(M)),
+    )
+    return NoiseEstimate(sig, found)
+
+
+def _step_or_outlier(x: np.ndarray) -> tuple[float, int, float, int, float]:
+    """``(power, first run index)`` of the best step over the runs and of the best
+    single-run outlier in one sensor's whitened run means (each 1 dof, less the mean), and
+    the sensor's total power."""
+    R = x.size
+    x = x - x.mean()
+    best_s, k_s = 0.0, 1
+    for k in range(1, R):
+        s = (np.arange(R) >= k).astype(float)
+        s -= s.mean()
+        pw = float((s @ x) ** 2 / (s @ s))
+        if pw > best_s:
+            best_s, k_s = pw, k
+    j = int(np.argmax(np.abs(x)))
+    return best_s, k_s, float(x[j] ** 2 * R / max(R - 1, 1)), j, float(x @ x)
+
+
+def _drift_vs_orders(prep: Prepared, rwm: np.ndarray, pw: np.ndarray) -> dict | None:
+    """A drift in time against the orders of the platform angle, both common to the moving
+    sensors, on the whitened base run means: the drift's power (1 dof), the best order's
+    (2 dof) and the correlation of the drift column with that order's two columns. With the
+    platform stepped by a fixed angle (e.g. golden-angle steps), order ``n`` advances by a
+    nearly fixed phase per run: over a few runs it is nearly a trend in time (order 5 with
+    golden steps), so the two can be confounded."""
+    if float(prep.consts["proj"]) > 0 or pw.size == 0:
+        return None
+    R, M = rwm.shape
+    phi = np.asarray(prep.rows["phi"], float)
+    t = np.asarray(prep.rows["tmid_c"], float).mean(1)
+    y = (rwm - rwm.mean(0, keepdims=True)).ravel()
+    d = np.repeat(t - t.mean(), M)
+    pd = float((d @ y) ** 2 / max(d @ d, 1e-300))
+    n = int(np.argmax(pw)) + 1
+    X = np.stack(
+        [np.cos(n * phi) - np.cos(n * phi).mean(), np.sin(n * phi) - np.sin(n * phi).mean()], 1
+    )
+    X = np.repeat(X, M, axis=0)
+    Q, _ = np.linalg.qr(X)
+    dn = d / max(np.linalg.norm(d), 1e-300)
+    rho = float(np.linalg.norm(Q.T @ dn))
+    return {
+        "drift_power": pd,
+        "order": n,
+        "order_power": float(pw[n - 1]),
+        "correlation": rho,
+        "n_values": int(R * M),
+    }
+
+
+def _common_max_order(R: int) -> int:
+    return int(max(1, (R - 1) // 2))
+
+
+def common_order_power(prep: Prepared, rwm: np.ndarray) -> np.ndarray:
+    """Chi-square (2 dof) of orders ``1..(R-1)//2`` in the platform angle φ, one coefficient
+    pair for all moving sensors (a pattern common to them), in the whitened run means
+    ``rwm`` (R, M), less a constant per sensor."""
+    phi = np.asarray(prep.rows["phi"], float)
+    R, M = rwm.shape
+    y = (rwm - rwm.mean(0, keepdims=True)).ravel()
+    out = []
+    for n in range(1, _common_max_order(R) + 1):
+        c = np.repeat(np.cos(n * phi), M).reshape(R, M)
+        sn = np.repeat(np.sin(n * phi), M).reshape(R, M)
+        X = np.stack([(c - c.mean(0)).ravel(), (sn - sn.mean(0)).ravel()], 1)
+        if float(prep.consts["proj"]) > 0:
+            X = np.zeros_like(X)  # common to the moving sensors: taken by the run offsets
+        out.append(_ls_power_flat(y[:, None], X[:, None, :]))
+    return np.asarray(out)
+
+
+def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """Orders in φ common to every moving sensor (platform gear, axial runout, a reference
+    error), 2 dof each, Bonferroni over the orders; nothing without ``phi_ref``."""
+    M = prep.consts["psi_m"].size
+    if float(prep.consts["proj"]) > 0:
+        return []
+    pw = common_order_power(prep, rw[:, :M])
+    thr = _thr(prep.settings.alpha, 2, pw.size)
+    out = []
+    for i in np.flatnonzero(pw > thr):
+        out.append(
+            Finding(
+                "common_orders",
+                _where(orders=[float(i + 1)], heads=list(range(M)), runs=prep.run_ids.tolist()),
+                float(pw[i]),
+                2,
+                _logp(float(pw[i]), 2),
+                detail={"n_values": int(rw.shape[0] * M), "common_to_moving_sensors": True},
+            )
+        )
+    return out
+
+
+def _coil_plausible(ctx: Context, params: dict) -> str | None:
+    """Coil orders that are multiples of the moving-sensor count are a pattern common to
+    the moving sensors: refused when that is the fitted effect's main part and the base
+    residual's common structure peaks at another order (aliased through the platform
+    positions)."""
+    M = int(ctx.consts["psi_m"].size)
+    amp = np.hypot(np.asarray(params["cos_rad"]), np.asarray(params["sin_rad"]))
+    n = int(np.argmax(amp)) + 1
+    pw = np.asarray(noise_info(ctx).common_order_power, float)
+    if M < 2 or n % M or pw.size == 0:
+        return None
+    top = int(np.argmax(pw)) + 1
+    own = pw[min(n, pw.size) - 1]
+    if top != n and pw[top - 1] > ctx.settings.sds_common_order_ratio * own:
+        return (
+            f"its main order {n} is common to the moving sensors, but the common structure "
+            f"peaks at order {top} of the platform angle (chi-square {pw[top - 1]:.0f})"
+        )
+    return None
+
+
+def _transient(ctx: Context) -> str | None:
+    """A one-run transient on one sensor dominates the base residual: that sensor's
+    largest single-run deviation is significant (1 dof, Bonferroni over sensors × runs),
+    fits better than any step and holds over half of the sensor's power. A smooth
+    effect fitted to such a record would take a part of the transient; it is not named."""
+    ch = noise_info(ctx).run_change_power
+    if not ch:
+        return None
+    R = int(ctx.n_runs)
+    thr = _thr(ctx.settings.alpha, 1, 2 * len(ch) * max(R - 1, 1))
+    for m, (ps, _, po, jo, tot) in enumerate(ch):
+        if po > thr and po > ps and po > ctx.settings.sds_transient_share * tot:
+            return (
+                f"the base residual is dominated by one run's deviation on m{m} (run index "
+                f"{jo}, chi-square {po:.0f} of the sensor's {tot:.0f}): a transient no "
+                "catalog effect makes, reported as unexplained"
+            )
+    return None
+
+
+def _no_transient(fn=None):
+    def plausible(ctx: Context, params: dict) -> str | None:
+        return _transient(ctx) or (fn(ctx, params) if fn is not None else None)
+
+    plausible.__doc__ = (fn.__doc__ or "") + " Refused, too, when :func:`_transient` says so."
+    return plausible
+
+
+def _drift_plausible(ctx: Context, params: dict) -> str | None:
+    """A drift in time is refused when an order of the platform angle (common to the
+    moving sensors) fits the base residual's common structure better by more than one
+    parameter's worth (BIC: ln of the number of run means): with the platform stepped by a
+    fixed angle such an order is nearly a trend over the runs, and the better fit is the
+    order (out of catalog: reported, not named)."""
+    dv = noise_info(ctx).drift_vs_orders
+    if not dv:
+        return None
+    if dv["order_power"] - dv["drift_power"] > math.log(max(dv["n_values"], 2)):
+        return (
+            f"order {dv['order']} of the platform angle fits the common structure better "
+            f"(chi-square {dv['order_power']:.0f}, 2 dof, vs {dv['drift_power']:.0f}, 1 dof) "
+            f"and is nearly a trend over these runs (correlation {dv['correlation']:.2f} with "
+            "a drift): not a drift in time"
+        )
+    return None
+
+
+def _delay_gauge(ctx: Context, delay) -> np.ndarray:
+    """The fitted delays per moving sensor; without phi_ref a delay common to every moving
+    sensor is taken by the per-run offset, so the delays are known up to a common value:
+    the median is taken out (one sensor's step then shows on that sensor alone)."""
+    d = np.asarray(delay, float)
+    if float(np.asarray(ctx.consts["proj"])) > 0 and d.size > 2:
+        d = d - np.median(d)
+    return d
+
+
+def _delay_plausible(ctx: Context, params: dict) -> str | None:
+    """A delay step is one sensor's (its electronics, its cable): refused when another
+    moving sensor carries more than half of the largest step (a pattern common to the
+    moving sensors, e.g. a drift or a platform-angle order, is not a sensor's delay)."""
+    dd = np.abs(_delay_gauge(ctx, params["delay_s"]))
+    d = np.sort(dd)[::-1]
+    if d.size > 1 and d[1] > ctx.settings.sds_delay_shared_max * d[0]:
+        return (
+            f"the step is shared by several moving sensors ({d[1] / d[0]:.0%} of the largest "
+            "on the next one): not one sensor's delay"
+        )
+    # a delay change persists: a change confined to one run (a single-run outlier fits the
+    # sensor's base run means better than any step, both 1 dof) is a transient, not a step
+    ch = noise_info(ctx).run_change_power
+    if ch:
+        m = int(np.argmax(dd))
+        ps, ks, po, jo, _ = ch[m]
+        if po > ps * (1 + 1e-9):
+            return (
+                f"the change on m{m} is confined to one run (run index {jo}: a single-run "
+                f"outlier fits with chi-square {po:.0f}, the best step from one run on with "
+                f"{ps:.0f}): a transient in one run, not a persisting delay step"
+            )
+    return None
+
+
+def _beam_plausible(ctx: Context, params: dict) -> str | None:
+    """Beam tilt x axial runout lives at orders 1..3 of φ: refused when the base residual's
+    strongest common order is another one (an out-of-catalog order that orders 1..3 take in
+    part through the sparse platform positions)."""
+    pw = np.asarray(noise_info(ctx).common_order_power, float)
+    if pw.size == 0:
+        return None
+    top = int(np.argmax(pw)) + 1
+    if top not in BEAM_ORDERS and pw[top - 1] > ctx.settings.sds_common_order_ratio * max(
+        pw[n - 1] for n in BEAM_ORDERS if n <= pw.size
+    ):
+        return (
+            f"the common structure peaks at order {top} of the platform angle (chi-square "
+            f"{pw[top - 1]:.0f}), not at the beam-tilt orders {list(BEAM_ORDERS)}"
+        )
+    return None
