@@ -154,8 +154,10 @@ def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | Non
     of the term's channel (its head; else the largest) folded on the term's line phase
     (``m theta`` mod 2 pi for an order, ``2 pi f t`` for a frequency), averaged in
     :data:`FOLD_BINS` bins, per direction where the term follows it, with the term's
-    sinusoid at the line's phase (least squares on the folded rows) drawn over it and the
-    model's amplitude and held-out gain in the legend."""
+    sinusoid at the line's phase drawn over it and the model's amplitude and held-out gain in
+    the title. The sinusoids of every discovered line are fitted together (least squares on
+    the group's rows) and the other lines' are taken out of the residual before it is folded,
+    so a panel shows its own line, not its neighbours leaking through an uneven coverage."""
     terms = [t for t in discovered_terms(doc) if _term_phase(t, rows) is not None]
     if not terms:
         return None
@@ -166,7 +168,14 @@ def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | Non
     keep = rows["keep"]
     chans = rows["channels"]
     dirs = _directions(rows)
+    lines: dict[tuple[Any, float], np.ndarray] = {}
+    for t in discovered_terms(doc):
+        q = _term_phase(t, rows)
+        if q is not None:
+            lines.setdefault((t.get("line_kind"), float(t.get("value", 0.0))), q)
     for ax, t in zip(axes, terms):
+        own = (t.get("line_kind"), float(t.get("value", 0.0)))
+        others = [q for key, q in lines.items() if key != own]
         heads = t.get("heads") or []
         fr = str(t.get("frame", ""))
         if fr.startswith("head ") and len(heads) == 1 and heads[0] in chans:
@@ -187,6 +196,12 @@ def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | Non
             if sel.sum() < 3:
                 continue
             y, p = rows["final_resid"][sel, k], ph[sel]
+            X = np.column_stack(
+                [np.ones_like(p), np.cos(p), np.sin(p)]
+                + [f(q[sel]) for q in others for f in (np.cos, np.sin)]
+            )
+            c = np.linalg.lstsq(X, y, rcond=None)[0]
+            y = y - X[:, 3:] @ c[3:]
             b = np.clip(np.digitize(p, edges) - 1, 0, FOLD_BINS - 1)
             cnt = np.bincount(b, minlength=FOLD_BINS)
             mean = np.bincount(b, y, minlength=FOLD_BINS) / np.maximum(cnt, 1)
@@ -194,8 +209,6 @@ def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | Non
             ax.plot(
                 np.degrees(mids), mean, "o", ms=3, color=col, alpha=0.6, label=f"residual, {lab}"
             )
-            X = np.column_stack([np.ones_like(p), np.cos(p), np.sin(p)])
-            c = np.linalg.lstsq(X, y, rcond=None)[0]
             g = np.linspace(0, 2 * np.pi, 200)
             ax.plot(
                 np.degrees(g),
