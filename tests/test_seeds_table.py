@@ -276,3 +276,28 @@ def test_every_source_names_a_study(st, data):
         for c in st.checks(r):
             prefix = str(c["source"]).split(":", 1)[0]
             assert prefix in {"cal", "cf"} | names, (r["id"], c["source"])
+
+
+def test_cramer_rows_are_what_the_study_gives(st, data, tmp_path):
+    """Rows 0.1, 0.4, 0.5 quote the cramer study's summary: re-run it (quick: 256 samples per
+    revolution; these keys agree with the full run to 1e-4) and compare each number."""
+    import json
+
+    js = tmp_path / "cramer.json"
+    rc = _load("cramer").main(["--quick", "--no-plots", "--out", str(tmp_path), "--json", str(js)])
+    assert rc in (0, None)
+    summary = json.loads(js.read_text(encoding="utf-8"))
+    n = 0
+    for r in data["rows"]:
+        for c in st.checks(r):
+            src = c["source"]
+            if not src.startswith("cramer:"):
+                continue
+            m = re.fullmatch(r"cramer:(\w+)(?:\[(\d+)\])?( / 5 .*)?(?: \(.*\))?", src)
+            assert m, src
+            value = summary[m.group(1)]
+            value = value[int(m.group(2))] if m.group(2) else value
+            value = value / 5 if m.group(3) else value
+            assert value == pytest.approx(c["model"], rel=1e-3), (r["id"], src)
+            n += 1
+    assert n == 3
