@@ -934,6 +934,7 @@ def closed_forms() -> dict:
         "s000_centering_1um_arcsec": um / r000 / ARCSEC,
         "s000_5urad_arcsec": 5 * urad / ARCSEC,
         "s001_0.1arcsec_parts": 0.1 / 1_296_000,
+        "s001_1mas_parts": 0.001 / 1_296_000,
         "s001_0.1arcsec_at_1in_uin": 0.1 * ARCSEC * 1e6,
         "s001_1mas_at_1in_nm": MAS * INCH / nm,
         "s001_nickel_cell_third_nm": 0.3524 / 3,

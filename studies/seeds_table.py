@@ -3,7 +3,10 @@
 ``docs/seeds_rows.json`` holds every row of ``docs/seeds.md`` (the seed's result, its value,
 encdesign's value, the label) and, for every row with numbers, a ``check``: the model value
 and its uncertainty, the seed's value with its σ or its bound, and where the numbers come
-from (``source``: ``"cal:<instrument>/<figure key>"`` for the ``seed-calibration`` study).
+from (``source``: ``"cal:<instrument>/<figure key>"`` for the ``seed-calibration`` study,
+``"cf:<key>"`` for its closed forms, ``"<study>:<JSON key>"`` for another study's summary).
+A row that quotes several of the seed's numbers holds a list of checks. A prediction row
+without numbers must say why: ``qualitative: "no number in the seed: <reason>"``.
 This study checks every label against its numbers with the one agreement rule (a value
 agrees within 2σ, σ² = σ_model² + σ_seed²; a bound "≤ b" is met when model − 2σ_model ≤ b:
 a bound is a bound, never a Gaussian), optionally refreshes the numbers from a
@@ -45,13 +48,17 @@ HEADER = (
 
 def agreement(model: float, model_sd: float, seed: float, seed_sigma: float, bound) -> dict:
     """A value agrees within 2σ (σ² = σ_model² + σ_seed²); a bound "≤ b" is met when
-    model − 2σ_model ≤ b (the seed's σ is not used: a bound is not a Gaussian). The same
-    rule as ``seed-calibration``'s (its tests check both)."""
+    model − 2σ_model ≤ b, a bound "≥ b" (``"lower"``: the seed's "more than", "slightly more
+    than") when model + 2σ_model ≥ b (the seed's σ is not used: a bound is not a Gaussian).
+    The same rule as ``seed-calibration``'s for values and upper bounds (its tests check both)."""
     if bound == "upper":
         excess = (model - seed) / model_sd if model_sd > 0 else None
         return {"agrees": model - 2 * model_sd <= seed, "z": None, "excess": excess}
+    if bound == "lower":
+        excess = (seed - model) / model_sd if model_sd > 0 else None
+        return {"agrees": model + 2 * model_sd >= seed, "z": None, "excess": excess}
     if bound is not None:
-        raise ValueError(f"bound {bound!r}: expected None or 'upper'")
+        raise ValueError(f"bound {bound!r}: expected None, 'upper' or 'lower'")
     comb = math.hypot(model_sd, seed_sigma)
     if comb == 0:
         return {"agrees": model == seed, "z": None, "excess": None}
@@ -68,10 +75,16 @@ def load(path: Path = ROWS_PATH) -> dict:
     return data
 
 
-def verdict(row: dict) -> dict | None:
+def checks(row: dict) -> list[dict]:
+    """The row's numbers: ``check`` is one comparison or a list of them (a row that quotes
+    several of the seed's numbers, e.g. a count of measurements, equations and unknowns)."""
     c = row.get("check")
     if c is None:
-        return None
+        return []
+    return list(c) if isinstance(c, list) else [c]
+
+
+def _one(c: dict) -> dict:
     return agreement(
         float(c["model"]),
         float(c.get("model_sd", 0.0)),
@@ -81,6 +94,18 @@ def verdict(row: dict) -> dict | None:
     )
 
 
+def verdict(row: dict) -> dict | None:
+    """The row's verdict: it agrees when every one of its comparisons does; ``z`` and
+    ``excess`` are the first comparison's (the one the encdesign cell quotes as ``{z}``)."""
+    vs = [_one(c) for c in checks(row)]
+    if not vs:
+        return None
+    return {"agrees": all(v["agrees"] for v in vs), "z": vs[0]["z"], "excess": vs[0]["excess"]}
+
+
+QUALITATIVE_PREFIX = "no number in the seed: "
+
+
 def check_row(row: dict) -> list[str]:
     """Every way the row's label contradicts its numbers (empty: consistent)."""
     rid, label = row.get("id", "?"), row.get("label")
@@ -88,25 +113,41 @@ def check_row(row: dict) -> list[str]:
     if label not in LABELS:
         return [f"row {rid}: label {label!r} not one of {LABELS}"]
     v = verdict(row)
-    c = row.get("check") or {}
-    if c.get("bound") == "upper" and "seed_sigma" in c:
-        bad.append(f"row {rid}: a bound carries a seed_sigma (a bound is not a Gaussian)")
+    cs = checks(row)
+    for c in cs:
+        if c.get("bound") in ("upper", "lower") and "seed_sigma" in c:
+            bad.append(f"row {rid}: a bound carries a seed_sigma (a bound is not a Gaussian)")
+        if not c.get("source"):
+            bad.append(f"row {rid}: a check without its source (study and key)")
+    q = row.get("qualitative")
+    if q is not None:
+        reason = str(q)[len(QUALITATIVE_PREFIX) :] if str(q).startswith(QUALITATIVE_PREFIX) else ""
+        if len(reason.strip()) < 10:
+            bad.append(
+                f"row {rid}: qualitative {q!r}: expected {QUALITATIVE_PREFIX!r} and the reason"
+            )
+        if v is not None:
+            bad.append(f"row {rid}: qualitative, yet it carries numbers (check)")
     if label in PREDICTION_LABELS:
         if v is None:
-            if not row.get("qualitative"):
+            if q is None:
                 bad.append(f"row {rid}: '{label}' without numbers (check) or a qualitative reason")
         elif v["agrees"] != (label == "agrees"):
             bad.append(f"row {rid}: label '{label}' but the numbers say {_say(v)}")
-        if c.get("kind") not in (None, "predict"):
-            bad.append(f"row {rid}: '{label}' on a {c.get('kind')} figure (not a prediction)")
+        for c in cs:
+            if c.get("kind") not in (None, "predict"):
+                bad.append(f"row {rid}: '{label}' on a {c.get('kind')} figure (not a prediction)")
     if row.get("verdict") and v is None:
         bad.append(f"row {rid}: a verdict without the numbers (check) behind it")
-    if label in APART_LABELS and v is not None:
-        want = "agrees" if v["agrees"] else "disagrees"
-        if row.get("verdict") != want:
-            bad.append(f"row {rid}: verdict {row.get('verdict')!r} but the numbers say {want}")
-    if label == "fitted" and c and c.get("kind") != "train":
-        bad.append(f"row {rid}: 'fitted' on a {c.get('kind')} figure")
+    if label in APART_LABELS:
+        if v is None:
+            bad.append(f"row {rid}: '{label}' without the numbers (check) behind its verdict")
+        else:
+            want = "agrees" if v["agrees"] else "disagrees"
+            if row.get("verdict") != want:
+                bad.append(f"row {rid}: verdict {row.get('verdict')!r} but the numbers say {want}")
+    if label == "fitted" and any(c.get("kind") != "train" for c in cs):
+        bad.append(f"row {rid}: 'fitted' on a non-training figure")
     if label == "disagrees" and not row.get("reason"):
         bad.append(f"row {rid}: 'disagrees' without the reason")
     return bad
@@ -120,15 +161,20 @@ def _say(v: dict) -> str:
 
 def _cell(row: dict) -> str:
     text = row["encdesign"]
-    c = row.get("check")
-    if c is not None:
-        v = verdict(row)
-        fields = {
-            "model": c["model"],
-            "model_sd": c.get("model_sd", 0.0),
-            "z": v["z"] if v["z"] is not None else float("nan"),
-            "excess": v["excess"] if v["excess"] is not None else float("nan"),
-        }
+    cs = checks(row)
+    if cs:
+        fields = {}
+        for i, c in enumerate(cs):
+            v = _one(c)
+            f = {
+                "model": c["model"],
+                "model_sd": c.get("model_sd", 0.0),
+                "z": v["z"] if v["z"] is not None else float("nan"),
+                "excess": v["excess"] if v["excess"] is not None else float("nan"),
+            }
+            fields.update({f"{k}{i}": x for k, x in f.items()})
+            if i == 0:
+                fields.update(f)
         text = text.format(**fields)
     return text
 
@@ -137,6 +183,8 @@ def _label_cell(row: dict) -> str:
     s = row["label"]
     if row.get("verdict"):
         s += f" ({row['verdict']})"
+    if row.get("qualitative"):
+        s += f" (qualitative: {row['qualitative']})"
     if row.get("reason"):
         s += f": {row['reason']}"
     return s
@@ -211,6 +259,17 @@ def render_doc(text: str, data: dict) -> str:
     return out
 
 
+def _closed(closed: dict, path: str):
+    """``closed_forms[path]``, where a dotted path reaches into a nested entry
+    (``s001_closure_counts.N12_complete.equations``)."""
+    if path in closed:
+        return closed[path]
+    for k in sorted(closed, key=len, reverse=True):  # keys may hold dots themselves
+        if path.startswith(k + ".") and isinstance(closed[k], dict):
+            return _closed(closed[k], path[len(k) + 1 :])
+    raise KeyError(path)
+
+
 def update_from_calibration(data: dict, cal: dict) -> list[str]:
     """Copy model values and uncertainties of ``cal:`` rows from a ``seed-calibration``
     summary; returns the rows updated."""
@@ -218,22 +277,26 @@ def update_from_calibration(data: dict, cal: dict) -> list[str]:
     done = []
     closed = cal.get("closed_forms", {})
     for row in data["rows"]:
-        c = row.get("check")
-        src = str((c or {}).get("source", ""))
-        if src.startswith("cf:"):  # the seed's arithmetic, recomputed by the study
-            if src[3:] not in closed:
-                raise ValueError(f"row {row['id']}: source {src!r} not in closed_forms")
-            c["model"], c["model_sd"] = float(closed[src[3:]]), 0.0
+        for c in checks(row):
+            src = str(c.get("source", ""))
+            if src.startswith("cf:"):  # the seed's arithmetic, recomputed by the study
+                try:
+                    value = _closed(closed, src[3:])
+                except KeyError:
+                    raise ValueError(
+                        f"row {row['id']}: source {src!r} not in closed_forms"
+                    ) from None
+                c["model"], c["model_sd"] = float(value), 0.0
+                done.append(row["id"])
+                continue
+            if not src.startswith("cal:"):
+                continue
+            key = src[4:]
+            if key not in figs:
+                raise ValueError(f"row {row['id']}: source {key!r} not in the calibration JSON")
+            x = figs[key]
+            c["model"], c["model_sd"], c["kind"] = x["model"], x["model_sd"] or 0.0, x["kind"]
             done.append(row["id"])
-            continue
-        if not src.startswith("cal:"):
-            continue
-        key = src[4:]
-        if key not in figs:
-            raise ValueError(f"row {row['id']}: source {key!r} not in the calibration JSON")
-        x = figs[key]
-        c["model"], c["model_sd"], c["kind"] = x["model"], x["model_sd"] or 0.0, x["kind"]
-        done.append(row["id"])
     data["calibration"] = {
         k: cal[k] for k in ("predicted_within_2sigma", "predicted_total") if k in cal
     }

@@ -98,7 +98,14 @@ def test_label_check_catches_each_kind_of_mismatch(st):
     ok = {
         "id": "9.1",
         "label": "agrees",
-        "check": {"model": 1.0, "model_sd": 0.1, "seed": 1.1, "seed_sigma": 0.1, "kind": "predict"},
+        "check": {
+            "model": 1.0,
+            "model_sd": 0.1,
+            "seed": 1.1,
+            "seed_sigma": 0.1,
+            "kind": "predict",
+            "source": "cal:x/y",
+        },
     }
     assert st.check_row(ok) == []
     wrong = dict(ok, label="disagrees", reason="x")
@@ -127,11 +134,8 @@ def test_agreement_is_the_calibration_studys_rule(st):
 
 def test_numbers_come_from_a_calibration_json(st, data):
     d = copy.deepcopy(data)
-    closed = {
-        r["check"]["source"][3:]: r["check"]["model"]
-        for r in d["rows"]
-        if str(r.get("check", {}).get("source", "")).startswith("cf:")
-    }
+    every = [c for r in d["rows"] for c in st.checks(r)]
+    closed = {c["source"][3:]: c["model"] for c in every if c["source"].startswith("cf:")}
     assert len(closed) >= 14
     cal = {
         "closed_forms": closed,
@@ -149,14 +153,14 @@ def test_numbers_come_from_a_calibration_json(st, data):
     with pytest.raises(ValueError, match="not in the calibration JSON"):
         st.update_from_calibration(d, cal)
     figs = {
-        f"{r['check']['source'][4:]}": dict(
-            key=r["check"]["source"].split("/")[1],
-            model=r["check"]["model"],
-            model_sd=r["check"]["model_sd"],
-            kind=r["check"]["kind"],
+        c["source"][4:]: dict(
+            key=c["source"].split("/")[1],
+            model=c["model"],
+            model_sd=c["model_sd"],
+            kind=c["kind"],
         )
-        for r in d["rows"]
-        if str(r.get("check", {}).get("source", "")).startswith("cal:")
+        for c in every
+        if c["source"].startswith("cal:")
     }
     figs["seed002-shaker/area_worst"]["model"] = 0.52
     insts = {}
@@ -182,3 +186,118 @@ def test_readme_and_doc_quote_the_count_of_genuine_predictions(data):
     want = f"{n} of {m}"
     assert re.search(rf"genuine predictions[^.]*\*\*{want}", readme, re.I | re.S), want
     assert f"**Genuine predictions within 2σ: {want}**" in doc
+
+
+GENERIC = (
+    "no number to compare with a σ: the seed's claim is exact, a curve or a statement; "
+    "the row names the test or key"
+)
+
+
+def test_every_verdict_carries_its_numbers_or_says_why_not(st, data):
+    """A prediction or an arithmetic row carries its numbers, each with its source; an
+    'agrees' without numbers is allowed only when the seed has no number, said so with the
+    reason (the generic flag of before is refused)."""
+    n_numbers = n_qualitative = 0
+    for r in data["rows"]:
+        cs = st.checks(r)
+        if r["label"] in st.PREDICTION_LABELS + st.APART_LABELS:
+            if cs:
+                n_numbers += 1
+                for c in cs:
+                    assert {"model", "model_sd", "seed", "source"} <= set(c), r["id"]
+                    assert (c.get("bound") in ("upper", "lower")) != ("seed_sigma" in c), r["id"]
+            else:
+                assert r["label"] == "agrees", r["id"]
+                assert r["qualitative"].startswith(st.QUALITATIVE_PREFIX), r["id"]
+                n_qualitative += 1
+    assert n_numbers >= 37 and n_qualitative <= 18, (n_numbers, n_qualitative)
+    row = {"id": "9.6", "label": "agrees", "qualitative": GENERIC}
+    assert any("expected" in b for b in st.check_row(row))
+    row["qualitative"] = st.QUALITATIVE_PREFIX
+    assert any("expected" in b for b in st.check_row(row))
+    row["qualitative"] = st.QUALITATIVE_PREFIX + "a curve without a quoted value"
+    assert st.check_row(row) == []
+    with_numbers = dict(row, check={"model": 1, "seed": 2, "bound": "upper", "source": "cf:x"})
+    assert any("carries numbers" in b for b in st.check_row(with_numbers))
+    no_source = {"id": "9.7", "label": "agrees", "check": {"model": 1, "seed": 2, "bound": "upper"}}
+    assert any("source" in b for b in st.check_row(no_source))
+    bare_arith = {"id": "9.8", "label": "arithmetic", "verdict": "agrees"}
+    assert st.check_row(bare_arith)
+    assert st.check_row({"id": "9.9", "label": "arithmetic"})
+
+
+def test_lower_bounds_and_lists_of_numbers(st, data):
+    """'slightly more than 0.2 arcsec' is a lower bound: 0.206 meets it, 0.19 does not, and
+    a bound never carries the seed's σ; a row of counts agrees only when every count does."""
+    rows = {r["id"]: copy.deepcopy(r) for r in data["rows"]}
+    r = rows["1.62"]
+    assert r["check"]["bound"] == "lower" and st.check_row(r) == []
+    r["check"]["model"] = 0.19
+    assert any("verdict" in b for b in st.check_row(r))
+    r["check"]["model_sd"] = 0.01  # within 2σ_model of the bound: met
+    assert st.check_row(r) == []
+    r["check"]["seed_sigma"] = 0.05
+    assert any("not a Gaussian" in b for b in st.check_row(r))
+    counts = rows["1.40"]
+    assert [c["seed"] for c in counts["check"]] == [156, 146, 24]
+    assert st.check_row(counts) == []
+    counts["check"][2]["model"] = 25.0  # one count off: the row no longer agrees
+    assert any("verdict" in b for b in st.check_row(counts))
+    assert "25" in st._cell(counts)  # the cell quotes the numbers it is checked on
+
+
+def test_closed_form_numbers_are_the_studys(st, data):
+    """Every 'cf:' number in the table is what seed-calibration's closed forms compute now
+    (a dotted source reaches into a nested entry: the closure counts)."""
+    closed = _load("seed_calibration").closed_forms()
+    n = 0
+    for r in data["rows"]:
+        for c in st.checks(r):
+            if str(c["source"]).startswith("cf:"):
+                assert float(st._closed(closed, c["source"][3:])) == pytest.approx(
+                    c["model"], rel=1e-12
+                ), r["id"]
+                n += 1
+    assert n >= 29
+    with pytest.raises(KeyError):
+        st._closed(closed, "s001_closure_counts.N12_complete.no_such_count")
+
+
+def test_every_source_names_a_study(st, data):
+    """A check's source is 'cal:' / 'cf:' (seed-calibration) or '<study>:<JSON key>' with a
+    study that exists, so each number can be traced and re-run."""
+    names = set()
+    for path in (ROOT / "studies").glob("*.py"):
+        m = re.search(r'^NAME = "([\w-]+)"', path.read_text(encoding="utf-8"), re.M)
+        if m:
+            names.add(m.group(1))
+    for r in data["rows"]:
+        for c in st.checks(r):
+            prefix = str(c["source"]).split(":", 1)[0]
+            assert prefix in {"cal", "cf"} | names, (r["id"], c["source"])
+
+
+def test_cramer_rows_are_what_the_study_gives(st, data, tmp_path):
+    """Rows 0.1, 0.4, 0.5 quote the cramer study's summary: re-run it (quick: 256 samples per
+    revolution; these keys agree with the full run to 1e-4) and compare each number."""
+    import json
+
+    js = tmp_path / "cramer.json"
+    rc = _load("cramer").main(["--quick", "--no-plots", "--out", str(tmp_path), "--json", str(js)])
+    assert rc in (0, None)
+    summary = json.loads(js.read_text(encoding="utf-8"))
+    n = 0
+    for r in data["rows"]:
+        for c in st.checks(r):
+            src = c["source"]
+            if not src.startswith("cramer:"):
+                continue
+            m = re.fullmatch(r"cramer:(\w+)(?:\[(\d+)\])?( / 5 .*)?(?: \(.*\))?", src)
+            assert m, src
+            value = summary[m.group(1)]
+            value = value[int(m.group(2))] if m.group(2) else value
+            value = value / 5 if m.group(3) else value
+            assert value == pytest.approx(c["model"], rel=1e-3), (r["id"], src)
+            n += 1
+    assert n == 3
