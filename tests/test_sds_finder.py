@@ -158,6 +158,32 @@ def test_axis_tilt_named_with_two_or_three_pairs(tmp_path, seed, n_fixed, n_movi
         assert "beam_tilt_axial" not in conf, d["report"]
 
 
+@pytest.mark.parametrize("seed", [13, 14])
+def test_weak_tilt_on_opposed_moving_sensors_is_tried(tmp_path, seed):
+    """Two opposed fixed and two opposed moving sensors with phi_ref, 24 runs, a tilt whose
+    error (tilt^2 / 4) is one reading noise (about 39 arcsec): its order 2 is common to the
+    moving sensors and is located by the common-orders view, where beam tilt x axial runout
+    shows too. The tilt is tried there (named, or refused or confounded by name), and the
+    located structure is never left ``unexplained``."""
+    rec, truth = write_concealed_sds(
+        tmp_path / f"weak-tilt-{seed}.toml",
+        key=jax.random.key(seed),
+        effect="axis_tilt",
+        phi_ref=True,
+        n_runs=24,
+        n_fixed=2,
+        n_moving=2,
+        amplitude_noise=1.0,
+    )
+    d = _diag(rec)
+    assert d["verdict"] == "missing_physics", d["report"]
+    named = [e["name"] for e in d["effects"]]
+    assert named and named[0] in ("axis_tilt", "beam_tilt_axial"), d["report"]
+    tried = set(named) | {r["name"] for r in d["rejected"]}
+    tried |= {c["name"] for e in d["effects"] for c in e.get("confounded_with") or []}
+    assert "axis_tilt" in tried, d["report"]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_clean_two_pair_bench_names_no_tilt(tmp_path, seed):
     """The 2 + 2 control: no hidden effect, no axis_tilt (nor any effect) named."""
