@@ -158,6 +158,39 @@ def test_axis_tilt_named_with_two_or_three_pairs(tmp_path, seed, n_fixed, n_movi
         assert "beam_tilt_axial" not in conf, d["report"]
 
 
+@pytest.mark.parametrize("seed", [13, 14])
+def test_weak_tilt_on_opposed_moving_sensors_is_tried(tmp_path, seed):
+    """Two opposed fixed and two opposed moving sensors with phi_ref, 24 runs, a tilt whose
+    error (tilt^2 / 4) is one reading noise (about 39 arcsec): its order 2 is common to the
+    moving sensors and is located by the common-orders view, where beam tilt x axial runout
+    shows too. The tilt is tried there, the located structure is never left
+    ``unexplained``, and where the record cannot tell the tilt from beam tilt (beam tilt's
+    orders 1 and 3 not supported) the pair is reported, never a bare refusal."""
+    rec, truth = write_concealed_sds(
+        tmp_path / f"weak-tilt-{seed}.toml",
+        key=jax.random.key(seed),
+        effect="axis_tilt",
+        phi_ref=True,
+        n_runs=24,
+        n_fixed=2,
+        n_moving=2,
+        amplitude_noise=1.0,
+    )
+    d = _diag(rec)
+    assert d["verdict"] == "missing_physics", d["report"]
+    named = [e["name"] for e in d["effects"]]
+    assert named and named[0] in ("axis_tilt", "beam_tilt_axial"), d["report"]
+    other = ({"axis_tilt", "beam_tilt_axial"} - {named[0]}).pop()
+    conf = {c["name"]: c for c in d["effects"][0].get("confounded_with") or []}
+    refused = {r["name"]: r for r in d["rejected"]}
+    # tried: confounded with the named one, or refused by a rule of its own
+    assert other in conf or (other in refused and refused[other]["rule"] != "better_candidate")
+    if other in conf:
+        assert "not opposed" in conf[other]["separate_by"]
+        pairs = [c for c in d["confounded"] if set(c["pair"]) == {"axis_tilt", "beam_tilt_axial"}]
+        assert pairs, d["report"]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_clean_two_pair_bench_names_no_tilt(tmp_path, seed):
     """The 2 + 2 control: no hidden effect, no axis_tilt (nor any effect) named."""

@@ -119,6 +119,7 @@ def write_concealed_sds(
     n_moving: int = 3,
     n_fixed: int = 2,
     clock_factor: float | None = None,
+    amplitude_noise: float | None = None,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -139,6 +140,9 @@ def write_concealed_sds(
         n_fixed: fixed sensors (equally spaced), >= 1.
         clock_factor: ``timing_quantization`` only: the bench clock period over the declared
             one (default 5 for ``near_noise`` / ``partial``, 20 for ``clear``).
+        amplitude_noise: the effect's amplitude in multiples of the per-pair reading noise
+            (about 9 nrad), in place of the concealment's (4, 6 or 40); e.g. for
+            ``axis_tilt`` the tilt is ``2 sqrt(amplitude_noise × noise)`` rad.
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -150,6 +154,10 @@ def write_concealed_sds(
     if n_runs < 4:
         raise input_error("n_runs", f"got {n_runs}", ">= 4")
     amp = {"near_noise": 4.0, "partial": 6.0, "clear": 40.0}[concealment] * NOISE_RAD
+    if amplitude_noise is not None:
+        if not amplitude_noise > 0:
+            raise input_error("amplitude_noise", f"got {amplitude_noise!r}", "> 0")
+        amp = float(amplitude_noise) * NOISE_RAD
     kd, kp, ke, kj = jax.random.split(key, 4)
     rng = np.random.default_rng(np.asarray(jax.random.randint(ke, (), 0, 2**31 - 1)).item())
     coil = 0.0

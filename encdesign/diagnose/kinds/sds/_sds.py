@@ -402,7 +402,7 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
         }
     dv = doc.pop("drift_vs_orders", None)
     if doc.pop("moving_opposed", False):
-        _tilt_beam_opposed(doc)
+        _tilt_beam_opposed(doc, settings)
     for e in doc.get("effects", []):
         if e["name"] == "thermal_drift" and dv:
             lim = math.log(max(dv["n_values"], 2))
@@ -496,12 +496,23 @@ TILT_BEAM_SEPARATE_BY = (
 )
 
 
-def _tilt_beam_opposed(doc: dict) -> None:
+def _tilt_beam_opposed(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> None:
     """With the moving sensors opposed (one azimuth modulo π), ``axis_tilt`` (order 2 in
     ``φ + ψ_m``, π-periodic) is the same at every moving sensor, as ``beam_tilt_axial`` at
     order 2 of ``φ`` is: where the engine reports the two as confounded, say why and which
-    layout separates them (not the generic "other speeds" of a multihead bench)."""
+    layout separates them (not the generic "other speeds" of a multihead bench).
+
+    The engine's tie rule compares the two whole fits; beam tilt's orders 1 and 3 then take
+    some noise, and its fitted error can correlate below ``tie_corr`` with the tilt's
+    although the tilt's is exactly beam tilt's at order 2 (both: one amplitude and one
+    phase of order 2 in φ common to the moving sensors; the tilt's part at the fixed
+    sensors is a constant, taken by the pair constants). So, on this layout: a named
+    ``axis_tilt`` is always confounded with a tried ``beam_tilt_axial`` (axial runout at
+    order 2 alone gives the same record); a named ``beam_tilt_axial`` is confounded with a
+    tried ``axis_tilt`` when its orders 1 and 3 do not lower the criterion by
+    ``tie_chi2`` more than the tilt does (the record does not support them)."""
     pair = {"axis_tilt", "beam_tilt_axial"}
+    _opposed_pair_from_refusals(doc, settings)
     for e in doc.get("effects", []):
         if e["name"] not in pair:
             continue
@@ -520,6 +531,63 @@ def _tilt_beam_opposed(doc: dict) -> None:
     for c in doc.get("confounded", []):
         if set(c.get("pair", [])) == pair:
             c["separate_by"] = TILT_BEAM_SEPARATE_BY
+
+
+def _opposed_pair_from_refusals(doc: dict, settings: FinderSettings) -> None:
+    """A tried partner of the tilt / beam-tilt pair refused only because the named one
+    lowers the criterion more becomes the named one's ``confounded_with`` entry and one
+    ``confounded`` pair (see :func:`_tilt_beam_opposed`)."""
+    pair = ("axis_tilt", "beam_tilt_axial")
+    rejected = doc.get("rejected", [])
+    for e in doc.get("effects", []):
+        if e["name"] not in pair:
+            continue
+        other = pair[1 - pair.index(e["name"])]
+        if any(c.get("name") == other for c in e.get("confounded_with") or []):
+            continue
+        rej = next((r for r in rejected if r["name"] == other), None)
+        if rej is None or rej.get("rule") != "better_candidate":
+            continue
+        db, db0 = rej.get("delta_bic"), e.get("delta_bic")
+        if db is None or db0 is None:
+            continue
+        if e["name"] == "beam_tilt_axial" and not db - db0 < settings.tie_chi2:
+            continue  # its orders 1 and 3 are supported: told apart by the criterion
+        why = (
+            "with the moving sensors opposed the tilt's error is beam tilt x axial runout at "
+            "order 2 of the platform angle (one amplitude and one phase common to the moving "
+            f"sensors, the same columns); {e['name']} lowers the criterion by {db - db0:.1f} "
+            f"more (needs "
+            f"{settings.tie_chi2:.0f} to decide"
+            + (
+                ": beam tilt's orders 1 and 3 are not supported by the record)"
+                if e["name"] == "beam_tilt_axial"
+                else "; beam tilt's orders 1 and 3 only add parameters)"
+            )
+        )
+        e["confounded_with"] = [
+            *(e.get("confounded_with") or []),
+            {
+                "name": other,
+                "reason": why,
+                "rule": "tie_chi2",
+                "delta_bic": float(db),
+                "params": {},
+                "correlation": 1.0,
+                "separate_by": TILT_BEAM_SEPARATE_BY,
+            },
+        ]
+        rejected.remove(rej)
+        doc.setdefault("confounded", []).append(
+            {
+                "pair": [e["name"], other],
+                "correlation": 1.0,
+                "delta_bic": float(db - db0),
+                "separate_by": TILT_BEAM_SEPARATE_BY,
+                "reason": why + f"; {e['name']} is named",
+                "rule": "tie_chi2",
+            }
+        )
 
 
 def _scale(v, s):

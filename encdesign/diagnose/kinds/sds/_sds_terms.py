@@ -422,7 +422,8 @@ def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
     M = ctx.consts["psi_m"].size
     pp = int(ctx.meta.get("encoder", {}).get("pole_pairs", 0) or 0)
     orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
-    return _catalog(M, pp, coil_order_count(ctx, pp, orders))
+    opposed = moving_opposed(ctx.consts["psi_m"])
+    return _catalog(M, pp, coil_order_count(ctx, pp, orders), opposed)
 
 
 def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
@@ -447,11 +448,20 @@ def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
 
 
 @functools.lru_cache(maxsize=16)
-def _catalog(M: int, pp: int, n_coil: int | None = None) -> tuple[Candidate, ...]:
+def _catalog(
+    M: int, pp: int, n_coil: int | None = None, opposed: bool = False
+) -> tuple[Candidate, ...]:
     """One set of candidate objects per layout (one compiled Jacobian each). Every
     candidate but the delay step is refused when one run's deviation on one sensor
     dominates the base residual (:func:`_transient`): a smooth pattern in the platform
-    angle or in time would only take a part of that transient."""
+    angle or in time would only take a part of that transient.
+
+    With the moving sensors ``opposed`` (:func:`moving_opposed`) the tilt's order 2 in
+    ``φ + ψ_m`` has one phase at every moving sensor: it shows in the view of what is
+    common to them (``common_orders``), where beam tilt × axial runout shows too, so the
+    tilt's signature holds that view and the two are tried (and reported as confounded
+    where the record cannot tell them apart) rather than the tilt never being tried."""
+    tilt_sig = ("sds_axis_tilt", "orders", *(("common_orders",) if opposed else ()))
     out = [
         Candidate(
             "axis_tilt",
@@ -460,7 +470,7 @@ def _catalog(M: int, pp: int, n_coil: int | None = None) -> tuple[Candidate, ...
                 Param("tilt_rad", "rad", linear=False, scale=1e-3),
                 Param("azimuth_rad", "rad", linear=False, scale=0.3),
             ),
-            signature=("sds_axis_tilt", "orders"),
+            signature=tilt_sig,
             kinds=("sds",),
             explanation=EXPLANATIONS["axis_tilt"],
             applies=_no_ref_tilt,
