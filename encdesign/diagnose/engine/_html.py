@@ -10,15 +10,18 @@ external CSS, JavaScript or font: the file opens offline.
 from __future__ import annotations
 
 import base64
-import html
 import io
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..._html import escape as _e
+from ..._html import num as _num
+from ..._html import result_html
+from ..._html import table as _table
 from ._document import nuisance_rows
 
 # ----------------------------------------------------------------------------------------
@@ -97,32 +100,6 @@ figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}
 figcaption{font-size:.85em;color:#555}.small{font-size:.85em;color:#555}
 details summary{cursor:pointer;color:#225}
 """
-
-
-def _e(x: Any) -> str:
-    return html.escape(str(x), quote=True)
-
-
-def _num(x: Any, digits: int = 4) -> str:
-    """A number for a table cell (``-`` for none / non-finite)."""
-    if x is None:
-        return "-"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, int | np.integer):
-        return str(int(x))
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return _e(x)
-    return f"{v:.{digits}g}" if math.isfinite(v) else "-"
-
-
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]], cls: str = "") -> str:
-    """An HTML table; cells are already HTML."""
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
 
 def _param_cell(p: Mapping[str, Any]) -> str:
@@ -686,6 +663,24 @@ def render_html(d: Any) -> str:
     parts += _figure_parts(doc, rows)
     parts.append("</body></html>\n")
     return "\n".join(parts)
+
+
+def notebook_html(d: Any) -> str:
+    """A diagnosis in a notebook (``Diagnosis._repr_html_``): the report's verdict line and
+    its tables (residual, noise, goodness of fit, named effects, alternatives and refusals,
+    located structure, nuisances), without the figures (each a rendered PNG; the full report
+    is :func:`render_html`)."""
+    doc = d.to_json()
+    verdict = doc["verdict"]
+    headline = (
+        f"kind <b>{_e(doc['kind'])}</b> · verdict "
+        f'<span class="verdict v-{_e(verdict)}">{_e(verdict)}</span> · status '
+        f"{_e(doc.get('status', '-'))}"
+    )
+    title = f"Diagnosis of {doc.get('recording') or 'a recording'}"
+    return result_html(
+        title, headline, sections=_summary_parts(doc) + _effect_parts(doc) + _located_parts(doc)
+    )
 
 
 def write_html(d: Any, path: str | Path) -> Path:
