@@ -125,3 +125,26 @@ def problem_html(r: Any) -> str:
         ]
         sections += [table(["discrete", "status", "objective", "steps"], rows, "results")]
     return result_html(f"Problem {p.name}", _headline(r), fields, sections)
+
+
+def rare_event_html(r: Any) -> str:
+    """A :class:`~encdesign.design.RareEventResult`: the failure probability with its standard
+    error, FORM's own estimate, the design points and the builds spent."""
+    betas = np.asarray(r.betas, dtype=np.float64)
+    fields = [
+        ("failure probability", f"{num(r.failure_prob, 6)} ± {num(r.failure_stderr, 3)}"),
+        ("FORM estimate Φ(−β_min)", num(r.form_failure_prob, 6)),
+        ("design points", num(len(betas))),
+        ("reliability indices β", array_cell(betas, 4)),
+        ("builds (importance / FORM)", f"{num(r.n_builds)} / {num(r.n_form_builds)}"),
+        ("builds in the failure region", num(r.n_failures)),
+    ]
+    if r.lr_gradient is not None:
+        names = r.names or [str(i) for i in range(len(r.lr_gradient))]
+        se = r.lr_gradient_stderr if r.lr_gradient_stderr is not None else [None] * len(names)
+        grad = table(
+            ["group", "dP_f/dσ", "standard error"],
+            [[escape(n), num(g, 4), num(s, 3)] for n, g, s in zip(names, r.lr_gradient, se)],
+        )
+        return result_html("Rare-event yield", _headline(r), fields, [grad])
+    return result_html("Rare-event yield", _headline(r), fields)
