@@ -8,15 +8,18 @@ import base64
 import html
 import re
 from html.parser import HTMLParser
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 
+from encdesign import load_recording
 from encdesign.cli import main as cli_main
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._document import nuisance_rows
 from encdesign.diagnose.engine._html import fitted_curves, render_html, report_inputs
+from encdesign.diagnose.engine._html_discovery import discovered_terms, spectrum_data
 from encdesign.io._recording import write_recording
 from encdesign.simulate import simulate_plan as simulate
 from encdesign.simulate import simulate_quadrature, write_concealed_sds
@@ -94,7 +97,7 @@ def test_report_shows_every_item(kind, tmp_path):
     bare = re.sub(r'src="data:image/png;base64,[A-Za-z0-9+/=]+"', "", text)
     assert not re.search(r"(https?:)?//[a-z0-9]|url\(|@import", bare, re.I)
     # each drawn figure is a decodable PNG (the fitted-effect one only with effects)
-    n_fig = len(FIGURES) - (0 if doc["effects"] else 1)
+    n_fig = len(FIGURES) - (0 if doc["effects"] else 1) + (1 if discovered_terms(doc) else 0)
     assert len(p.imgs) == n_fig
     for src in p.imgs:
         head, data = src.split(",", 1)
@@ -230,3 +233,53 @@ def test_diagnosis_renders_in_a_notebook(tmp_path):
     h2 = type(d).from_json(doc2)._repr_html_()
     assert html.escape(bad) in h2 and bad not in h2
     assert "&lt;script&gt;x&lt;/script&gt;" in h2 and "<script>" not in h2
+
+
+MOTEUS = Path(__file__).resolve().parent.parent / "data" / "real" / "moteus_cal.toml"
+
+
+def test_report_shows_the_discovered_model_where_it_is():
+    """On the measured moteus record (a sensor against a commanded reference): the located
+    lines sit at shaft orders near 126 and 252, beyond the base model's order limit. The
+    spectrum figure reaches them (and shows the line there), the discovered model is shown
+    with a figure of each term over the residual in its own frame, and each refusal row
+    carries its selection round (a candidate tried in several rounds: once per round)."""
+    d = diagnose(load_recording(MOTEUS))
+    doc, rows = report_inputs(d)
+    located = [o for f in doc["unexplained"] for o in f["where"].get("orders") or []]
+    assert located and max(located) > 200, located
+    o, before, _ = spectrum_data(doc, rows)
+    assert o.max() >= max(located), (o.max(), located)
+    # the strongest located line stands out of its neighbourhood in the figure's spectrum
+    lines = [f for f in doc["unexplained"] if f["where"].get("orders")]
+    top = round(max(lines, key=lambda f: f["rms"])["where"]["orders"][0])
+    i = int(np.flatnonzero(o == top)[0])
+    assert before[i] > 3 * np.median(before[max(i - 20, 0) : i + 20]), before[i - 3 : i + 4]
+    text = render_html(d)
+    p = _Parse()
+    p.feed(text)
+    assert {"fig-spectrum", "fig-discovered"} <= p.ids, sorted(p.ids)
+    terms = discovered_terms(doc)
+    assert terms and "discovered model (outside the catalog)" in text
+    for t in terms:
+        assert html.escape(t["reading"]) in text
+        assert f"{t['heldout_gain_chi2']:.4g}" in text
+    fig = text.split('id="fig-discovered"', 1)[1].split("</figure>", 1)[0]
+    assert fig.count("data:image/png;base64,") == 1
+    # refusals: every row names its round; a (candidate, round) pair at most once
+    alt = text.split('id="alternatives"', 1)[1].split("<h2", 1)[0]
+    rows_ = re.findall(r"<tr>(.*?)</tr>", alt, re.S)[1:]
+    rej = [r for r in rows_ if "<td>rejected</td>" in r]
+    assert len(rej) == len(doc["rejected"]) > 0
+    pairs = []
+    for r in rej:
+        cells = re.findall(r"<td[^>]*>(.*?)</td>", r, re.S)
+        assert re.fullmatch(r"round \d+|after selection", cells[-1]), cells
+        pairs.append((cells[0], cells[-1]))
+    assert len(set(pairs)) == len(pairs), pairs
+    # the text report: where each term sits and the nearest catalog effects
+    assert "    on heads " in doc["report"] and "directions " in doc["report"]
+    assert "nearest catalog effects (not enough): " in doc["report"]
+    for r in doc["rejected"]:
+        rnd = f"round {r['round']}" if r.get("round") is not None else "after selection"
+        assert f"rejected {r['name']} ({rnd}): " in doc["report"]

@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.typing import ArrayLike
 
 from .._distributed import (
     chunk_plan,
@@ -352,7 +353,7 @@ class Solution:
         return solution_html(self)
 
 
-def _as_bounds(bound: Any, n: int, fill: float) -> np.ndarray:
+def _as_bounds(bound: ArrayLike | None, n: int, fill: float) -> np.ndarray:
     if bound is None:
         return np.full(n, fill)
     return np.broadcast_to(np.asarray(bound, dtype=np.float64), (n,)).copy()
@@ -412,11 +413,11 @@ def _optx(fn: Callable[[jax.Array, Any], jax.Array], driver: BFGS | LevenbergMar
 def optimise(
     fn: Callable[[jax.Array, Any], jax.Array],
     solver: AbstractGradientSolver,
-    y0: Any,
+    y0: ArrayLike,
     args: Any = None,
     *,
-    lower: Any = None,
-    upper: Any = None,
+    lower: ArrayLike | None = None,
+    upper: ArrayLike | None = None,
     throw: bool = False,
 ) -> Solution:
     """Minimise ``fn(y, args)`` from ``y0`` with a gradient solver.
@@ -516,7 +517,7 @@ _OPTX_STATUS = {
 
 
 def _optx_status(
-    sol: Any, driver: BFGS | LevenbergMarquardt, f: float
+    sol: optx.Solution, driver: BFGS | LevenbergMarquardt, f: float
 ) -> tuple[DriverStatus, str, int]:
     """Status of an optimistix run: its result, then a collapsed line-search step size
     (trust-region radius for Levenberg–Marquardt) as stalled, and for BFGS a "converged"
@@ -742,7 +743,7 @@ class DOEResult:
 
 def doe(
     fn: Callable[[jax.Array, Any], jax.Array],
-    points: Any,
+    points: ArrayLike,
     args: Any = None,
     *,
     chunk_size: int = DOE_CHUNK,

@@ -223,7 +223,7 @@ def _penalised(ev: _Evaluator):
     solver."""
     cons = ev.problem.constraints
 
-    def f(u: jax.Array, args: Any) -> jax.Array:
+    def f(u: jax.Array, args: jax.Array) -> jax.Array:
         weight, fscale = args[0], args[1]
         out = ev.outputs(u)
         val = ev.sign * out[ev.name]
@@ -572,7 +572,7 @@ def discrete_combinations(problem: Problem) -> list[dict[str, Any]]:
     return [dict(zip(names, c)) for c in itertools.product(*(v.choices for v in problem.discrete))]
 
 
-def _monte_carlo_builds(problem: Any) -> int:
+def _monte_carlo_builds(problem: Problem) -> int:
     """The problem's Monte Carlo builds per evaluation (0: deterministic)."""
     yt = problem.yield_target
     if yt is not None:
@@ -581,7 +581,7 @@ def _monte_carlo_builds(problem: Any) -> int:
 
 
 def validate_problem(
-    problem: Any,
+    problem: Problem,
     chosen: tuple[dict[str, Any], dict[str, float]],
     baseline: tuple[dict[str, Any], dict[str, float]],
     *,
@@ -645,7 +645,7 @@ def _design_u(ev: _Evaluator, x: dict[str, float]) -> np.ndarray:
 
 
 def _fresh_rows(
-    problem: Any, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
+    problem: Problem, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
 ) -> dict[str, list[dict[str, float]]]:
     """Scalar outputs of each design for every fresh seed, from **one** compiled program:
     the seed is a traced input (``problem.seed`` replaced by the traced value while the
@@ -675,7 +675,7 @@ def _fresh_rows(
 
 
 def _fresh_rows_per_replicate(
-    problem: Any, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
+    problem: Problem, designs: dict[str, tuple[dict[str, Any], dict[str, float]]], seeds: list[int]
 ) -> dict[str, list[dict[str, float]]]:
     """:func:`_fresh_rows` the old way, one compilation per replicate (kept to test that
     the single program gives the same values)."""

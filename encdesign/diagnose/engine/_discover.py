@@ -211,7 +211,7 @@ def accumulate(
     C = prep.n_channels
     S = len(cinfo["speed"])
     sig = np.asarray(prep.sigma, float)
-    has_temp = str(prep.consts.get("driver_name", "time")) != "time" and "driver" in prep.rows
+    has_temp = prep.ctx.driver_name != "time" and "driver" in prep.rows
     blocks = ["static", "growth"] + (["temperature"] if has_temp else [])
     nb = len(blocks)
     layout, slices, q0 = [], [], 0
@@ -430,6 +430,8 @@ def _speed_H(term: Term, lay, beta: float, speed: np.ndarray) -> np.ndarray:
     mean)^beta`` (``term.H0``: the static restriction). Where the catalog model already
     spans the static frame, the projection leaves only the law's shape; near ``beta = 0``
     that shape has no norm left and is dropped (:data:`KEEP_SHARE`)."""
+    if term.H0 is None:
+        raise ValueError(f"discovery: speed term of line {term.line} has no static restriction H0")
     f = (speed / math.exp(np.mean(np.log(np.maximum(speed, 1e-12))))) ** beta
     nb, S, C, nj = lay
     scale = np.broadcast_to(f[None, :, None, None], (nb, S, C, nj)).reshape(-1)

@@ -294,7 +294,20 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
             f"gain {t['heldout_gain_chi2']:.4g} (chi2); inclusion "
             f"{t['inclusion_probability']:.0%}"
         )
+        where = [
+            f"{lab} {', '.join(map(str, t.get(key) or []))}"
+            for key, lab in (("heads", "heads"), ("runs", "runs"), ("directions", "directions"))
+            if t.get(key)
+        ]
+        if where:
+            out.append("    on " + "; ".join(where))
     out.append(f"  reading: {m['reading']}")
+    near = m.get("nearest_catalog") or []
+    if near:
+        out.append(
+            "  nearest catalog effects (not enough): "
+            + "; ".join(f"{n['name']}: {n.get('reason', '')}" for n in near)
+        )
     return out
 
 
@@ -345,7 +358,8 @@ def report_text(doc: dict) -> str:
         for n in e["notes"]:
             lines.append(f"  note: {n}")
     for r in doc["rejected"]:
-        lines.append(f"rejected {r['name']}: {r['reason']}")
+        rnd = f"round {r['round']}" if r.get("round") is not None else "after selection"
+        lines.append(f"rejected {r['name']} ({rnd}): {r['reason']}")
     for r in doc["not_testable"]:
         lines.append(f"not testable {r['name']}: {r['reason']}")
     for x in doc["unexplained"]:

@@ -9,8 +9,6 @@ external CSS, JavaScript or font: the file opens offline.
 
 from __future__ import annotations
 
-import base64
-import io
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -18,11 +16,25 @@ from typing import Any
 
 import numpy as np
 
-from ..._html import escape as _e
-from ..._html import num as _num
 from ..._html import result_html
-from ..._html import table as _table
 from ._document import nuisance_rows
+from ._html_base import (
+    _e,
+    _figure,
+    _located,
+    _num,
+    _param_cell,
+    _png,
+    _table,
+    _where_text,
+)
+from ._html_discovery import (
+    discovered_terms,
+    fig_discovered,
+    fig_spectrum,
+    model_parts,
+    refusal_round,
+)
 
 # ----------------------------------------------------------------------------------------
 # The adapter: the only code that touches the finder's objects.
@@ -102,78 +114,6 @@ details summary{cursor:pointer;color:#225}
 """
 
 
-def _param_cell(p: Mapping[str, Any]) -> str:
-    """``value ± se unit``; arrays as their size and largest magnitude, full in details."""
-    v, se, unit = p.get("value"), p.get("se"), p.get("unit", "")
-    if v is None or np.ndim(v) == 0:
-        s = _num(v, 6)
-        if se is not None:
-            s += f" ± {_num(se, 3)}"
-        return f"{s} {_e(unit)}"
-    va = np.asarray(v, dtype=float)
-    sa = np.asarray(se, dtype=float) if se is not None else None
-    shape = "×".join(str(n) for n in va.shape)
-    i = int(np.nanargmax(np.abs(va))) if va.size else 0
-    s = f"{shape} values, largest {_num(va.flat[i], 4)}"
-    if sa is not None and sa.shape == va.shape and va.size:
-        s += f" ± {_num(sa.flat[i], 3)}"
-    s += f" {_e(unit)}"
-    flat = [
-        f"{_num(a, 5)} ± {_num(b, 3)}" if sa is not None and sa.shape == va.shape else _num(a, 5)
-        for a, b in zip(va.ravel(), sa.ravel() if sa is not None else va.ravel())
-    ]
-    return f"{s}<details><summary>all</summary>{_e(', '.join(flat))}</details>"
-
-
-def _where_text(w: Mapping[str, Any] | None) -> str:
-    if not w:
-        return "-"
-    parts = []
-    for key, lab in (
-        ("orders", "orders"),
-        ("frequencies_hz", "Hz"),
-        ("heads", "heads"),
-        ("runs", "runs"),
-        ("times_s", "t (s)"),
-    ):
-        vals = w.get(key) or []
-        if vals:
-            parts.append(f"{lab}: " + ", ".join(_num(v, 5) for v in vals[:8]))
-    return _e("; ".join(parts)) or "-"
-
-
-def _png(fig: Any) -> str:
-    """A matplotlib figure as an ``<img>`` with a base64 PNG ``data:`` URI."""
-    buf = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buf, format="png", dpi=90)
-    data = base64.b64encode(buf.getvalue()).decode("ascii")
-    return f'<img alt="figure" src="data:image/png;base64,{data}">'
-
-
-def _figure() -> Any:
-    from matplotlib.figure import Figure
-
-    return Figure
-
-
-def _located(doc: Mapping[str, Any]) -> list[Mapping[str, Any]]:
-    """Every ``where`` the document names: findings before, unexplained, effects'."""
-    out = []
-    for f in list(doc.get("findings_before") or []) + list(doc.get("unexplained") or []):
-        if isinstance(f.get("where"), Mapping):
-            out.append(f["where"])
-    for e in doc.get("effects") or []:
-        if isinstance(e.get("where"), Mapping):
-            out.append(e["where"])
-    return out
-
-
-def _located_orders(doc: Mapping[str, Any]) -> list[float]:
-    orders = {round(float(o), 3) for w in _located(doc) for o in (w.get("orders") or []) if o}
-    return sorted(orders)
-
-
 def _located_times(doc: Mapping[str, Any]) -> list[tuple[Any, float, str]]:
     """``(run or None, t within the run (s), label)`` of every located time."""
     out: list[tuple[Any, float, str]] = []
@@ -248,36 +188,6 @@ def fig_time(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
         ax.set_ylabel(f"{rows['channels'][k]} ({doc['unit']})", fontsize=8)
     axes[0].legend(fontsize=7, loc="upper right", ncol=5, markerscale=5)
     axes[-1].set_xlabel("time, runs end to end (s)")
-    return _png(fig)
-
-
-def fig_spectrum(doc: Mapping[str, Any]) -> str | None:
-    """Residual amplitude by integer order (base and final), located orders marked."""
-    sp = doc.get("spectrum")
-    if not sp or not sp.get("orders"):
-        return None
-    Figure = _figure()
-    fig = Figure(figsize=(10, 3.6))
-    ax = fig.subplots()
-    o = np.asarray(sp["orders"], float)
-    ax.semilogy(o, np.asarray(sp["before"], float) + 1e-300, "o-", ms=2.5, lw=0.7, label="base")
-    ax.semilogy(o, np.asarray(sp["after"], float) + 1e-300, "o-", ms=2.5, lw=0.7, label="final")
-    first = True
-    for m in _located_orders(doc):
-        if o.min() <= m <= o.max():
-            ax.axvline(m, color="tab:purple", lw=0.8, ls="--", label="located" if first else None)
-            ax.annotate(
-                f"{m:g}",
-                (m, 1),
-                xycoords=("data", "axes fraction"),
-                fontsize=7,
-                va="top",
-                ha="left",
-                color="tab:purple",
-            )
-            first = False
-    ax.set(xlabel="order (cycles per turn)", ylabel=f"amplitude ({doc['unit']}, channel mean)")
-    ax.legend(fontsize=8)
     return _png(fig)
 
 
@@ -465,6 +375,7 @@ def _summary_parts(doc: dict) -> list[str]:
 
 def _effect_parts(doc: dict) -> list[str]:
     """The named effects, and the alternatives and refusals."""
+
     parts: list[str] = []
     u = doc["unit"]
     # effects
@@ -515,7 +426,7 @@ def _effect_parts(doc: dict) -> list[str]:
     # alternatives and refusals
     parts.append('<h2 id="alternatives">Alternatives and refusals</h2>')
     alt = [
-        [_e(e["name"]), "confounded with " + _e(c.get("name")), _e(c.get("reason", "")), "-"]
+        [_e(e["name"]), "confounded with " + _e(c.get("name")), _e(c.get("reason", "")), "-", "-"]
         for e in effects
         for c in (e.get("confounded_with") or [])
     ]
@@ -525,21 +436,28 @@ def _effect_parts(doc: dict) -> list[str]:
             f"named although doubted ({_e(e['doubt']['rule'])}); alternative " + _e(a.get("name")),
             _e(a.get("reason", "")) + "; tell apart: " + _e(a.get("separate_by", "")),
             _num(a.get("delta_bic")),
+            "-",
         ]
         for e in effects
         if e.get("doubt")
         for a in (e.get("alternatives") or [])
     ]
     alt += [
-        [_e(r.get("name")), "rejected", _e(r.get("reason", "")), _num(r.get("delta_bic"))]
+        [
+            _e(r.get("name")),
+            "rejected",
+            _e(r.get("reason", "")),
+            _num(r.get("delta_bic")),
+            refusal_round(r),
+        ]
         for r in doc.get("rejected") or []
     ]
     alt += [
-        [_e(r.get("name")), "not testable", _e(r.get("reason", "")), "-"]
+        [_e(r.get("name")), "not testable", _e(r.get("reason", "")), "-", "-"]
         for r in doc.get("not_testable") or []
     ]
     parts.append(
-        _table(["candidate", "outcome", "reason", "ΔBIC"], alt, "alternatives")
+        _table(["candidate", "outcome", "reason", "ΔBIC", "round"], alt, "alternatives")
         if alt
         else "<p>none</p>"
     )
@@ -548,6 +466,7 @@ def _effect_parts(doc: dict) -> list[str]:
 
 def _located_parts(doc: dict) -> list[str]:
     """Unexplained and located structure, and the nuisances."""
+
     parts: list[str] = []
     u = doc["unit"]
     # located structure
@@ -555,12 +474,33 @@ def _located_parts(doc: dict) -> list[str]:
     un = doc.get("unexplained") or []
     parts.append(
         _table(
-            ["view", "where", f"RMS ({u})"],
-            [[_e(f.get("view", "-")), _where_text(f.get("where")), _num(f.get("rms"))] for f in un],
+            ["view", "where", f"RMS ({u})", "discovered"],
+            [
+                [
+                    _e(f.get("view", "-")),
+                    _where_text(f.get("where")),
+                    _num(f.get("rms")),
+                    _e(
+                        "-"
+                        if not isinstance(f.get("model"), Mapping)
+                        else f"{len(f['model'].get('terms') or [])} term(s)"
+                        if f["model"].get("terms")
+                        else "not modelled"
+                    ),
+                ]
+                for f in un
+            ],
         )
         if un
         else "<p>none</p>"
     )
+    for i, f in enumerate(un, 1):
+        mp = model_parts(f, u)
+        if mp:
+            parts.append(
+                f'<h3 id="discovered-{i}">Unexplained {i}: {_where_text(f.get("where"))}</h3>'
+            )
+            parts += mp
     fb = doc.get("findings_before") or []
     if fb:
         parts.append('<h3 id="findings">Located in the base residual</h3>')
@@ -581,6 +521,7 @@ def _located_parts(doc: dict) -> list[str]:
 
 def _figure_parts(doc: dict, rows: Any) -> list[str]:
     """The embedded figures."""
+
     parts: list[str] = []
     effects = doc.get("effects") or []
     # figures
@@ -601,11 +542,22 @@ def _figure_parts(doc: dict, rows: Any) -> list[str]:
         _fig_block(
             "fig-spectrum",
             "Residual spectrum by order",
-            fig_spectrum(doc),
-            "amplitude of integer shaft orders in the base and final residual; "
-            "dashed: orders the finder located",
+            fig_spectrum(doc, rows),
+            "amplitude of integer shaft orders in the base and final residual, up to the "
+            "highest order the finder located; dashed: orders the finder located",
         )
     )
+    if rows is not None and discovered_terms(doc):
+        parts.append(
+            _fig_block(
+                "fig-discovered",
+                "Discovered terms in their own frame",
+                fig_discovered(doc, rows),
+                "the final (catalog) residual folded on each discovered term's line phase, "
+                "binned, per direction where the term follows it, with the term's sinusoid "
+                "over it (outside the catalog)",
+            )
+        )
     if rows is not None:
         parts.append(
             _fig_block(

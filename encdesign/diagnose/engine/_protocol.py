@@ -80,6 +80,44 @@ class KindData:
             raise ValueError("KindData: reading is None and reading_cols is not one per channel")
 
 
+def drive_channel(
+    y: np.ndarray,
+    shaft: np.ndarray,
+    t: np.ndarray,
+    run: np.ndarray,
+    *,
+    unit: str,
+    channel_name: str,
+    sensor: str,
+    where: str,
+    signal_periods: int = 0,
+) -> dict:
+    """The :class:`KindData` fields of a one-channel record of a commanded drive
+    (``motion``, ``quadrature``): ``y`` ``(n, 1)`` in ``unit``, read against the shaft angle
+    ``shaft`` (rad) itself, no reference, temperature or head geometry; ``drive=True`` and a
+    5 % speed window (the motor's own ripple is large). A kind passes them on with its own
+    extra fields: ``QuadratureData(**drive_channel(...), start=...)``."""
+    return dict(
+        y=y,
+        shaft=shaft,
+        t=t,
+        run=run,
+        reading=shaft[:, None],
+        theta_ref=None,
+        temp=None,
+        alpha=np.zeros(1),
+        radius_m=None,
+        signal_periods=signal_periods,
+        project=False,
+        unit=unit,
+        channel_names=[channel_name],
+        sensor=sensor,
+        where=where,
+        drive=True,
+        speed_window=0.05,
+    )
+
+
 @dataclasses.dataclass(frozen=True)
 class NoiseEstimate:
     """What a kind's ``noise`` hook found on the base residual.

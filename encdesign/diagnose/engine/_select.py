@@ -556,7 +556,7 @@ def select(
     held_notes: dict[str, list[str]] = {}
     step_refusals: list[tuple[str, Any]] = []
     confounded: list[dict] = []
-    for _ in range(max_effects):
+    for rnd in range(1, max_effects + 1):
         seen = {f.view for f in findings}
         gof = goodness_of_fit(prep, cur_resid, current.n_params)
         if not findings and gof["passes"]:
@@ -609,6 +609,8 @@ def select(
             step_refusals,
             confounded,
         )
+        for r in rejected:  # the selection round that refused it (1-based; earlier: marked)
+            r.setdefault("round", rnd)
         if chosen is None:
             break
         cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen

@@ -37,7 +37,7 @@ from ....io._recording import Recording
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
-from ...engine._protocol import KindData, Prepared
+from ...engine._protocol import KindData, Prepared, drive_channel
 from ...engine._settings import DEFAULT_SETTINGS
 
 EXPLANATIONS = {
@@ -124,23 +124,16 @@ def motion_data(rec: Recording) -> KindData:
     _motor(rec)
     theta = motion_angle(rec)
     return KindData(
-        y=theta[:, None],
-        shaft=theta,
-        t=np.asarray(rec.columns["t"], float),
-        run=np.asarray(rec.runs),
-        reading=theta[:, None],
-        theta_ref=None,
-        temp=None,
-        alpha=np.zeros(1),
-        radius_m=None,
-        signal_periods=0,
-        project=False,
-        unit="rad",
-        channel_names=["theta"],
-        sensor="motion",
-        where=str(rec.path) if rec.path is not None else "recording",
-        drive=True,
-        speed_window=0.05,
+        **drive_channel(
+            theta[:, None],
+            theta,
+            np.asarray(rec.columns["t"], float),
+            np.asarray(rec.runs),
+            unit="rad",
+            channel_name="theta",
+            sensor="motion",
+            where=str(rec.path) if rec.path is not None else "recording",
+        )
     )
 
 

@@ -424,7 +424,7 @@ THERMAL_DRIFT = Candidate(
     # drift is reported located, never named thermal_drift
     applies=lambda ctx: (
         None
-        if ctx.consts.get("driver_name") == "temp_c"
+        if ctx.driver_name == "temp_c"
         else "needs a temp_c column that varies (a drift in time alone is reported located, "
         "not attributed to temperature)"
     ),

@@ -50,7 +50,7 @@ from ....io._recording import Recording
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
-from ...engine._protocol import KindData, NoiseEstimate, Prepared
+from ...engine._protocol import KindData, NoiseEstimate, Prepared, drive_channel
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 ELLIPSE_NAMES = ("offset_a", "offset_b", "amplitude_a", "amplitude_b", "phase_error_rad")
@@ -286,24 +286,18 @@ def quadrature_data(rec: Recording, st: dict[str, Any] | None = None) -> Quadrat
             ),
         )
     return QuadratureData(
+        **drive_channel(
+            y,
+            shaft,
+            t,
+            run,
+            unit="1",
+            channel_name="radius",
+            sensor="quadrature",
+            where=st["where"],
+            signal_periods=1,
+        ),
         start=st,
-        y=y,
-        shaft=shaft,
-        t=t,
-        run=run,
-        reading=shaft[:, None],
-        theta_ref=None,
-        temp=None,
-        alpha=np.zeros(1),
-        radius_m=None,
-        signal_periods=1,
-        project=False,
-        unit="1",
-        channel_names=["radius"],
-        sensor="quadrature",
-        where=st["where"],
-        drive=True,
-        speed_window=0.05,
         segments=segments,
         masked=masked,
         constants={"ellipse_start": rel},  # the base term's start, relative to A0
