@@ -1,5 +1,6 @@
 """Drivers on small analytic objectives: statuses, Monte Carlo, DOE, enumeration."""
 
+import dataclasses
 import math
 
 import jax
@@ -284,3 +285,41 @@ def test_statuses_are_one_enumeration_with_a_message_each():
     assert [s for s in DriverStatus if s.ok] == [DriverStatus.SUCCESS, DriverStatus.AT_BOUND]
     assert set(DRIVERS) == {"bfgs", "lbfgsb", "lm", "grid", "lhs"}
     assert all(issubclass(DRIVERS[k], AbstractGradientSolver) for k in ("bfgs", "lbfgsb", "lm"))
+
+
+def test_results_render_in_a_notebook():
+    """``_repr_html_`` of every driver result: the status and its key numbers, escaped."""
+    s = optimise(_bowl, BFGS(), jnp.zeros(2))
+    h = s._repr_html_()
+    assert '<span class="badge ok">success</span>' in h and "Solution (bfgs)" in h
+    assert f"<td>{s.n_steps}</td>" in h and "[3, 3]" in h  # the steps and the value
+    assert f"<td>{s.objective:.8g}</td>" in h
+    bad = dataclasses.replace(s, status=DriverStatus.FAILED, message='x < 1 & "<script>"')
+    h = bad._repr_html_()
+    assert '<span class="badge not-ok">failed</span>' in h
+    assert "x &lt; 1 &amp; &quot;&lt;script&gt;&quot;" in h and "<script>" not in h
+    assert DriverStatus.FAILED.message in h
+
+    mc = monte_carlo(lambda th, z: th + z[0], 2.0, key=jax.random.key(1), n=400, dim=1)
+    h = mc._repr_html_()
+    assert '<span class="badge ok">success</span>' in h and "<td>400</td>" in h
+    assert f"{mc.mean:.6g} ± {mc.stderr:.3g}" in h and f"{mc.std:.6g}" in h
+    assert f"{np.percentile(mc.values, 95):.6g}" in h
+    mc_bad = monte_carlo(lambda th, z: jnp.log(z[0]), 0.0, key=jax.random.key(0), n=50, dim=1)
+    h = mc_bad._repr_html_()
+    assert "not-ok" in h and f"<td>{mc_bad.n_nonfinite}</td>" in h
+
+    g = doe(lambda x, a: (x[0] - 0.3) ** 2, np.array([[0.0], [0.3], [1.0]]))
+    h = g._repr_html_()
+    assert '<span class="badge ok">success</span>' in h and "<td>1</td>" in h
+    assert "[0.3]" in h and f"<td>{g.best_value:.8g}</td>" in h
+
+    def solve(c):
+        a = {"<a>": 2.0, "b&": 1.0}[c["tag"]]
+        return optimise(lambda y, a: (y[0] - a) ** 2 + a, BFGS(), jnp.zeros(1), a)
+
+    e = enumerate_designs(solve, {"tag": ["<a>", "b&"]})
+    h = e._repr_html_()
+    assert "<b>best</b> tag = b&amp;" in h and "tag = &lt;a&gt;" in h and "<a>" not in h
+    assert h.count('class="badge ok"') == 3  # the result and its two rows
+    assert f"{e.solutions[0].objective:.8g}" in h

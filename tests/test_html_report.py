@@ -200,6 +200,41 @@ def test_nuisance_rows_format_each_kind_once():
     ]
 
 
+def test_diagnosis_renders_in_a_notebook(tmp_path):
+    """``Diagnosis._repr_html_``: the report's verdict line and tables (a fragment with its
+    own scoped style, no figures), every value from the document escaped."""
+    d = diagnose(_record("multihead", tmp_path))
+    doc = d.to_json()
+    h = d._repr_html_()
+    assert f'<span class="verdict v-{doc["verdict"]}">{doc["verdict"]}</span>' in h
+    assert f"status {html.escape(doc['status'])}" in h and f"<b>{doc['kind']}</b>" in h
+    assert f"<td>{doc['rms_before']:.4g}</td>" in h
+    assert f"{doc['goodness_of_fit']['p_value']:.4g}" in h
+    for s in doc["noise"]["per_channel"]:
+        assert f"{s:.4g}" in h
+    assert doc["effects"]  # the bench hides one effect: its name and held-out RMS are shown
+    for e in doc["effects"]:
+        assert f". {e['name']}</h3>" in h and f"{e['heldout_rms_after']:.4g}" in h
+    p = _Parse()
+    p.feed(h)
+    assert {"summary", "effects", "alternatives", "nuisances"} <= p.ids
+    assert not p.imgs and not {"html", "body", "script"} & p.tags  # a fragment, no figures
+    style = h.split("<style>", 1)[1].split("</style>", 1)[0]
+    rules = [r.strip() for r in style.split("}") if r.strip()]
+    assert rules and all(
+        all(sel.strip().startswith(".encdesign-result") for sel in r.split("{")[0].split(","))
+        for r in rules
+    )  # the notebook's own styles are left alone
+    # a hostile recording name and effect explanation are shown as text
+    bad = '<img src=x onerror="alert(1)">'
+    doc2 = dict(doc, recording=bad)
+    doc2["effects"] = [dict(doc["effects"][0], explanation="<script>x</script>")]
+    doc2["effects"] += doc["effects"][1:]
+    h2 = type(d).from_json(doc2)._repr_html_()
+    assert html.escape(bad) in h2 and bad not in h2
+    assert "&lt;script&gt;x&lt;/script&gt;" in h2 and "<script>" not in h2
+
+
 MOTEUS = Path(__file__).resolve().parent.parent / "data" / "real" / "moteus_cal.toml"
 
 

@@ -5,7 +5,8 @@ Layers, lowest first (``docs/DEVELOPING.md``): the base modules (``_errors``, ``
 ``diagnose``, ``calibrate`` (and any later tool subpackage), which never import each
 other (inside ``diagnose``: the engine below the kinds, the kinds independent of each other,
 the registry on top); ``simulate`` (the bench simulators: may use the tools' types, e.g. a
-``Design``, and none of them imports it); ``cli``; the public facades (``__init__``,
+``Design``, and none of them imports it); ``cli``, which uses public names only (no
+private module or name but its own modules); the public facades (``__init__``,
 ``objectives``).
 A module may import its own subpackage and any lower layer. Every import counts, including
 those inside functions: a lazy import hides a circle, it does not remove it.
@@ -30,6 +31,9 @@ LAYERS = {
     "_distributed": 1.5,  # the scale-out runtime; imports _cpu, _checks, _errors
     "_usercode": 0.5,  # base, above _errors (it raises the input error)
     "_checks": 0,
+    "_html": 0,  # HTML pieces of the reports and of the results' notebook display
+    "errors": 0.25,  # the public face of _errors (the classes and input_error)
+    "distributed": 1.75,  # the public face of the scale-out runtime _distributed
     "physics": 1,
     "io": 2,
     "design": 3,
@@ -361,3 +365,85 @@ def test_simulate_is_imported_by_no_tool():
         if _layer(d) == "simulate"
     )
     assert not bad, "\n".join(bad)
+
+
+def _is_private(part: str) -> bool:
+    """A private module or name: a leading underscore (a dunder such as ``__future__`` is
+    not)."""
+    return part.startswith("_") and not (part.startswith("__") and part.endswith("__"))
+
+
+def private_imports(path: Path, mod: str) -> list[str]:
+    """Every import of a private module or name in ``path`` (module ``mod``, e.g.
+    ``cli._sds``), as ``file:line: module``; imports inside functions count.
+
+    Private: an ``encdesign`` module path with a component that starts with ``_`` (or a
+    name imported from one that does: ``from ..io import _realdata``), the same for any
+    other package (``jax._src``). Allowed: the CLI's own modules (``encdesign.cli.*``)."""
+    rel = path.relative_to(PKG.parent).as_posix() if path.is_relative_to(PKG.parent) else path
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            targets = [(a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = ["encdesign", *mod.split(".")[:-1]]
+                base = base[: len(base) - (node.level - 1)]
+                name = ".".join(base + (node.module.split(".") if node.module else []))
+            else:
+                name = node.module or ""
+            targets = [(name, [a.name for a in node.names])]
+        else:
+            continue
+        for name, names in targets:
+            parts = name.split(".")
+            if parts[:2] == ["encdesign", "cli"]:
+                continue  # the CLI's own modules
+            shown = [f"{name}.{n}" for n in names if _is_private(n)]
+            if any(_is_private(q) for q in parts):
+                shown = [name]
+            bad += [f"{rel}:{node.lineno}: {s}" for s in shown]
+    return bad
+
+
+def _cli_private_imports() -> list[str]:
+    out = []
+    for f in sorted((PKG / "cli").rglob("*.py")):
+        mod = ".".join(f.relative_to(PKG).with_suffix("").parts)
+        out += private_imports(f, mod)
+    return out
+
+
+def test_cli_uses_public_names_only():
+    """The command line is a user of the library like any other: it imports the public
+    names of the subpackages (``encdesign.io``, ``encdesign.design``, ``encdesign.errors``,
+    ``encdesign.distributed``, ...), never a private module, so that everything a command
+    does can be done from Python with public names."""
+    bad = _cli_private_imports()
+    assert not bad, "private imports in encdesign/cli (use the public names):\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "src, mod, expected",
+    [
+        ("from ..io._paths import x\n", "cli._diagnose", ["encdesign.io._paths"]),
+        ("def f():\n    from .. import _distributed\n", "cli._main", ["encdesign._distributed"]),
+        (
+            "def f():\n    from ..io import _realdata, write_json\n",
+            "cli._import",
+            ["encdesign.io._realdata"],
+        ),
+        ("import encdesign.diagnose.engine._html\n", "cli._x", ["encdesign.diagnose.engine._html"]),
+        ("from jax._src import core\n", "cli._x", ["jax._src"]),
+        ("from ._main import _load_study, guard_outputs\n", "cli.__init__", []),
+        ("from __future__ import annotations\nfrom ..io import write_json\n", "cli._x", []),
+        ("from .. import errors\nfrom ..design import BFGS\n", "cli._x", []),
+    ],
+)
+def test_private_import_check_would_fail(tmp_path, src, mod, expected):
+    f = tmp_path / "m.py"
+    f.write_text(src, encoding="utf-8")
+    got = [b.split(": ", 1)[1] for b in private_imports(f, mod)]
+    assert got == expected
+    for b in private_imports(f, mod):
+        assert b.startswith(f"{f}:") and b.split(":")[1].isdigit()  # file and line named

@@ -370,3 +370,20 @@ def test_solve_uses_the_drivers_defaults(cls):
     p = parse_problem(_problem(driver={"kind": cls.kind}), REGISTRY)
     assert p.driver == cls()
     assert solve_problem(p).ok
+
+
+def test_problem_result_renders_in_a_notebook():
+    """``ProblemResult._repr_html_``: status, best design and every combination, escaped."""
+    vars_ = _problem()["variables"] | {"k": {"values": [0, 1]}}
+    data = _problem(variables=vars_, driver={"kind": "bfgs"})
+    data["problem"] = dict(data["problem"], name="<b>bowl</b> & co")
+    r = solve_problem(parse_problem(data, REGISTRY))
+    h = r._repr_html_()
+    assert "Problem &lt;b&gt;bowl&lt;/b&gt; &amp; co" in h and "<b>bowl</b>" not in h
+    assert '<span class="badge ok">success</span>' in h and "minimize quad" in h
+    assert f"<td>{r.best.objective:.8g}</td>" in h
+    for name in ("x", "y"):
+        assert f"<td>{name}</td><td>{r.best.inputs[name]:.6g}</td>" in h
+    assert f"<td>f</td><td>{r.best.outputs['f']:.6g}</td>" in h
+    assert h.count('class="badge ok"') == 1 + len(r.results)  # the result and each row
+    assert "<td>best discrete</td><td>k = 0</td>" in h and "<td>k = 1</td>" in h

@@ -4,6 +4,7 @@ Carlo of 10^6 encoder builds is ``benchmarks/optimize.py --rare``."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -106,3 +107,36 @@ def test_allocate_refuses_a_target_importance_sampling_cannot_reach():
             lambda s: train(s) * 0 + 0.5, [1.0, 1.0], ("a", "b"), 1.0, 0.9999,
             rare_metric=floor, rare_dim=2, rare_key=jax.random.key(4), rare_n=500,
         )  # fmt: skip
+
+
+def test_rare_event_result_renders_in_a_notebook():
+    """``RareEventResult._repr_html_``: the status, P_f ± its error, FORM's estimate, the
+    gradient per group, escaped."""
+    from encdesign.design import DriverStatus, RareEventResult
+
+    SUCCESS, NO_FAILURE_FOUND = DriverStatus.SUCCESS, DriverStatus.NO_FAILURE_FOUND
+
+    r = RareEventResult(
+        failure_prob=3.2e-7,
+        failure_stderr=4.1e-8,
+        n_builds=20_000,
+        n_form_builds=312,
+        design_points=np.zeros((2, 3)),
+        betas=np.array([4.97, 5.3]),
+        form_failure_prob=3.3e-7,
+        lr_gradient=np.array([1.5e-3, -2.0e-4]),
+        lr_gradient_stderr=np.array([1e-4, 3e-5]),
+        names=("<runout>", "tilt"),
+        n_failures=1234,
+        defensive=0.1,
+        wall_s=1.0,
+        status=SUCCESS,
+    )
+    h = r._repr_html_()
+    assert '<span class="badge ok">success</span>' in h
+    assert "3.2e-07 ± 4.1e-08" in h and "<td>3.3e-07</td>" in h and "20000 / 312" in h
+    assert "[4.97, 5.3]" in h and "<td>1234</td>" in h
+    assert "<td>&lt;runout&gt;</td><td>0.0015</td><td>0.0001</td>" in h and "<runout>" not in h
+    none = dataclasses.replace(r, status=NO_FAILURE_FOUND, message="P_f < 1e-9 & no start")
+    h = none._repr_html_()
+    assert "badge not-ok" in h and "P_f &lt; 1e-9 &amp; no start" in h

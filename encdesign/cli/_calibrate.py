@@ -105,7 +105,7 @@ def _plot_closure(res, out: Path) -> Path:
     import numpy as np
 
     from ..calibrate import harmonic_amplitudes
-    from ..io._study import new_figure, save_figure
+    from ..io import new_figure, save_figure
 
     deg = res.positions_rad * 180 / math.pi
     fig, (a1, a2) = new_figure(2, 1, figsize=(7, 6))
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
 
     Outputs are checked against the recording (its TOML and table) and one another before
     any work; a failed run leaves none of them behind."""
-    from ..io._paths import recording_input_files
+    from ..io import recording_input_files
 
     inputs = [("recording", p) for p in recording_input_files(args.recording)]
     outputs = [("--json", args.json)]
@@ -140,8 +140,8 @@ _FLAGS = {"order": "--order", "max_order": "--max-order", "fit_curve n_folds": "
 
 
 def _curve(rec, args):
-    from .._errors import EncdesignInputError
     from ..calibrate import curve_from_recording
+    from ..errors import EncdesignInputError
 
     try:
         return curve_from_recording(
@@ -159,8 +159,7 @@ def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..calibrate import closure_from_recording, write_correction_table
-    from ..io._recording import load_recording
-    from ..io._study import write_json
+    from ..io import load_recording, write_json
 
     rec = load_recording(args.recording)
     if args.action == "closure":
@@ -230,7 +229,7 @@ def _run(args: argparse.Namespace) -> int:
         )
         print(f"wrote {args.json}")
     if args.plots is not None:
-        from ..io._study import new_figure, save_figure
+        from ..io import new_figure, save_figure
 
         grid = np.linspace(0, 2 * np.pi, 721)
         fig, ax = new_figure(figsize=(7, 4))

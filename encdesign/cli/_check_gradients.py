@@ -6,9 +6,8 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from ..design._problem import load_problem
-from ..design._solve import check_gradients
-from ..io._study import write_json
+from ..design import check_gradients, load_problem
+from ..io import write_json
 from ._main import float_arg, guard_outputs
 
 HELP = "compare AD gradients of a problem's outputs with central finite differences"
@@ -44,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .._errors import input_error
+    from ..errors import input_error
 
     problem = load_problem(args.problem)
     if not problem.continuous:

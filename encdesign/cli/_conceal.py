@@ -16,7 +16,7 @@ MAX_AMPLITUDE = 1e4  # in units of the noise: beyond it the "hidden" effect hide
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the command's arguments."""
-    from ..simulate._conceal import CONCEALMENTS, HIDDEN, LAYOUTS
+    from ..simulate import CONCEALMENTS, HIDDEN, LAYOUTS
 
     parser.add_argument("out", type=Path, help="recording TOML to write (CSV beside it)")
     parser.add_argument("--effect", default="none", choices=["none", *HIDDEN])
@@ -43,9 +43,8 @@ def run(args: argparse.Namespace) -> int:
     """Write the recording (and the truth JSON when asked)."""
     import jax
 
-    from ..io._paths import recording_output_files
-    from ..io._study import write_json
-    from ..simulate._conceal import write_concealed
+    from ..io import recording_output_files, write_json
+    from ..simulate import write_concealed
 
     outputs = [("OUT", p) for p in recording_output_files(args.out, label="OUT")]
     outputs.append(("--truth", args.truth))

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     Inputs and outputs are checked before any work: no output may be an input (by path or
     resolved identity), and outputs are written atomically."""
-    from ..io._paths import recording_input_files
+    from ..io import recording_input_files
 
     inputs = [("recording", p) for p in recording_input_files(args.recording)]
     if args.candidates is not None:
@@ -74,10 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ..diagnose._dispatch import diagnose, load_candidates
-    from ..io._paths import atomic_write_text
-    from ..io._recording import check_runs_contiguous, load_recording
-    from ..io._study import write_json
+    from ..diagnose import diagnose, load_candidates
+    from ..io import atomic_write_text, check_runs_contiguous, load_recording, write_json
 
     cands = load_candidates(args.candidates) if args.candidates is not None else ()
     rec = load_recording(args.recording)
@@ -96,7 +94,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.report is not None:
         atomic_write_text(args.report, text)
     if args.export_candidates is not None:
-        from ..diagnose.engine._discover_export import export_candidates
+        from ..diagnose import export_candidates
 
         names = export_candidates(doc, args.export_candidates)
         if names:
@@ -104,7 +102,7 @@ def _run(args: argparse.Namespace) -> int:
         else:
             print("--export-candidates: nothing discovered, no file written", file=sys.stderr)
     if args.html is not None:
-        from ..diagnose.engine._html import write_html
+        from ..diagnose import write_diagnosis_html as write_html
 
         write_html(d, args.html)
         print(f"wrote {args.html}", file=sys.stderr)

@@ -29,14 +29,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._errors import input_error
-    from ..io import _realdata
-    from ..io._paths import recording_output_files
+    from .. import io
+    from ..errors import input_error
+    from ..io import import_realdata_folder, realdata_jobs, recording_output_files
 
     if args.source == "realdata":
         if not args.src.is_dir():
             raise input_error(f"SRC {args.src}", "not a folder", "the realdata folder")
-        jobs = _realdata.realdata_jobs(args.src, args.out)
+        jobs = realdata_jobs(args.src, args.out)
         inputs = [("SRC", src) for _, src, _ in jobs]
         outputs = [
             ("--out", p)
@@ -44,14 +44,14 @@ def run(args: argparse.Namespace) -> int:
             for p in recording_output_files(dst, parquet=args.parquet, label="--out")
         ]
         with guard_outputs(inputs, outputs, folders=[("--out", args.out)]):
-            written = _realdata.import_realdata_folder(args.src, args.out, parquet=args.parquet)
+            written = import_realdata_folder(args.src, args.out, parquet=args.parquet)
         for p in written:
             print(f"wrote {p}")
         return 0
     outputs = [
         ("--out", p) for p in recording_output_files(args.out, parquet=args.parquet, label="--out")
     ]
-    fn = getattr(_realdata, f"import_{args.source}")
+    fn = getattr(io, f"import_{args.source}")
     with guard_outputs([("SRC", args.src)], outputs):
         rec = fn(args.src, args.out, parquet=args.parquet)
     print(f"wrote {rec.path} ({rec.kind}, {rec.n_rows} rows)")

@@ -31,9 +31,16 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .._checks import SEED, SEED_MAX, float_arg, int_arg  # noqa: F401 (used by commands)
-from .._errors import EncdesignInputError
-from ..io._paths import OutputGuard, check_output_folder, check_outputs
+from ..errors import EncdesignInputError
+from ..io import (  # noqa: F401 (SEED, SEED_MAX, float_arg, int_arg: used by commands)
+    SEED,
+    SEED_MAX,
+    OutputGuard,
+    check_output_folder,
+    check_outputs,
+    float_arg,
+    int_arg,
+)
 
 _CLI = Path(__file__).resolve().parent
 _PKG = _CLI.parent
@@ -136,7 +143,7 @@ def _run_study(argv: Sequence[str]) -> int:
             print(f"{name:22s} {_study_title(path)}")
         return 0
     mod = _load_study(args.name)
-    from .. import _distributed as dist
+    from .. import distributed as dist
 
     launch_p = argparse.ArgumentParser(prog=f"encdesign study run {args.name}", add_help=False)
     dist.add_launch_flags(launch_p)

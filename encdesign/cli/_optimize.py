@@ -7,11 +7,9 @@ import math
 import sys
 from pathlib import Path
 
-from .._distributed import add_launch_flags, is_main_process, process_index, shutdown, start
-from ..design._cases import CaseRecorder
-from ..design._problem import load_problem
-from ..design._solve import solve_problem
-from ..io._study import write_json
+from ..design import CaseRecorder, load_problem, solve_problem
+from ..distributed import add_launch_flags, is_main_process, process_index, shutdown, start
+from ..io import write_json
 from ._main import guard_outputs, int_arg
 
 MAX_FRESH_REPLICATES = 10_000
@@ -102,7 +100,7 @@ def run_and_report(args: argparse.Namespace, solve, *, resume: Path | None = Non
 
 
 def _report(args: argparse.Namespace, solve, resume: Path | None) -> int:
-    from .._errors import input_error
+    from ..errors import input_error
 
     reps = int(getattr(args, "fresh_replicates", 0) or 0)
     if reps == 1 or reps < 0:

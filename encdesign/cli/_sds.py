@@ -73,8 +73,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the action; 0 on success (bad input raises EncdesignInputError -> exit 2)."""
-    from .._errors import input_error
-    from ..io._paths import recording_input_files, recording_output_files
+    from ..errors import input_error
+    from ..io import recording_input_files, recording_output_files
 
     if args.action == "simulate":
         n_edges = (args.fixed + args.moving) * args.marks * (args.revs + 1) * len(args.phi_deg)
@@ -100,9 +100,8 @@ def run(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     import jax
 
-    from ..physics._sds import reference_design, reference_errors
-    from ..physics._sds_errors import SDSErrors
-    from ..simulate._sds import simulate_sds_recording
+    from ..physics import SDSErrors, reference_design, reference_errors
+    from ..simulate import simulate_sds_recording
 
     key = jax.random.PRNGKey(args.seed)
     k_disk, k_noise = jax.random.split(key)
@@ -132,9 +131,9 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _measure(args: argparse.Namespace) -> int:
-    from ..diagnose.kinds.sds._sds_readout import sds_readings_from_recording
-    from ..io._recording import load_recording
-    from ..physics._sds_errors import ARCSEC
+    from ..diagnose import sds_readings_from_recording
+    from ..io import load_recording
+    from ..physics import ARCSEC
 
     res = sds_readings_from_recording(
         load_recording(args.recording), revs_per_reading=args.revs_per_reading
@@ -161,7 +160,7 @@ def _measure(args: argparse.Namespace) -> int:
             f'readings, std {row["reading_std_arcsec"]:.4f}"){extra}'
         )
     if args.json is not None:
-        from ..io._study import write_json
+        from ..io import write_json
 
         write_json(args.json, {"recording": str(args.recording), "runs": rows})
         print(f"wrote {args.json}")

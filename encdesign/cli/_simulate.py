@@ -33,9 +33,9 @@ def run(args: argparse.Namespace) -> int:
     """Load the design, simulate, write the recording; 0 on success."""
     import numpy as np
 
-    from ..design._design import load_design
-    from ..io._paths import recording_input_files, recording_output_files
-    from ..simulate._multihead import simulate_recording
+    from ..design import load_design
+    from ..io import recording_input_files, recording_output_files
+    from ..simulate import simulate_recording
 
     inputs = [("design", args.design)]
     if args.like is not None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .._errors import input_error
-from ..design._solve import sweep_problem
+from ..design import sweep_problem
+from ..errors import input_error
 from ._optimize import add_common, run_and_report
 
 HELP = "evaluate a design problem on its [sweep] grid or Latin hypercube, recording cases"

@@ -346,6 +346,12 @@ class Solution:
         """True when the status is an answer (``success`` or ``at_bound``)."""
         return self.status.ok
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import solution_html
+
+        return solution_html(self)
+
 
 def _as_bounds(bound: ArrayLike | None, n: int, fill: float) -> np.ndarray:
     if bound is None:
@@ -595,6 +601,12 @@ class MonteCarloResult:
         p = float(np.mean(self.values <= spec))
         return p, math.sqrt(max(p * (1.0 - p), 0.0) / self.n)
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import monte_carlo_html
+
+        return monte_carlo_html(self)
+
 
 @functools.lru_cache(maxsize=64)
 def _mc_chunk(fn: Callable[[Any, jax.Array], jax.Array], chunk: int, dim: int, block: int):
@@ -721,6 +733,12 @@ class DOEResult:
     def best_value(self) -> float:
         """The smallest finite value."""
         return float(self.values[self.best_index])
+
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import doe_html
+
+        return doe_html(self)
 
 
 def doe(

@@ -50,6 +50,12 @@ class EnumerationResult:
         """The inner solution at the best combination."""
         return self.solutions[self.best_index]
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import enumeration_html
+
+        return enumeration_html(self)
+
 
 def enumerate_designs(
     solve: Callable[[dict[str, Any]], Any],

@@ -118,6 +118,12 @@ class RareEventResult:
         """True when the status is an answer (:attr:`DriverStatus.ok`: ``success``)."""
         return self.status.ok
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import rare_event_html
+
+        return rare_event_html(self)
+
     @property
     def yield_fraction(self) -> float:
         """``1 - failure_prob``."""

@@ -93,6 +93,12 @@ class ProblemResult:
         ``at_bound``; ``encdesign optimize`` exits 0 exactly then)."""
         return self.status.ok
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the status and the key numbers."""
+        from ._display import problem_html
+
+        return problem_html(self)
+
     def summary(self) -> dict[str, Any]:
         """A JSON-able summary (SI values, plus the file's display units)."""
         p = self.problem

@@ -34,6 +34,10 @@ from .engine._results import (
     Refusal as Refusal,
 )
 from .engine._plots import engine_plots as write_diagnosis_plots
+from .engine._html import (
+    render_html as render_diagnosis_html,
+    write_html as write_diagnosis_html,
+)
 from .engine._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,
     FinderSettings as FinderSettings,

@@ -106,6 +106,13 @@ class Diagnosis(eqx.Module):
         """The JSON document (back compatibility: :meth:`to_json`)."""
         return self.to_json()
 
+    def _repr_html_(self) -> str:
+        """Jupyter's rich display: the HTML report's verdict line and tables (no figures;
+        :func:`~encdesign.diagnose.render_diagnosis_html` gives the whole report)."""
+        from .engine._html import notebook_html
+
+        return notebook_html(self)
+
     def __getitem__(self, key: str) -> Any:
         """Back compatibility: ``d["verdict"]`` reads the document's key."""
         return self.to_json()[key]

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..._html import result_html
 from ._document import nuisance_rows
 from ._html_base import (
     _e,
@@ -614,6 +615,24 @@ def render_html(d: Any) -> str:
     parts += _figure_parts(doc, rows)
     parts.append("</body></html>\n")
     return "\n".join(parts)
+
+
+def notebook_html(d: Any) -> str:
+    """A diagnosis in a notebook (``Diagnosis._repr_html_``): the report's verdict line and
+    its tables (residual, noise, goodness of fit, named effects, alternatives and refusals,
+    located structure, nuisances), without the figures (each a rendered PNG; the full report
+    is :func:`render_html`)."""
+    doc = d.to_json()
+    verdict = doc["verdict"]
+    headline = (
+        f"kind <b>{_e(doc['kind'])}</b> · verdict "
+        f'<span class="verdict v-{_e(verdict)}">{_e(verdict)}</span> · status '
+        f"{_e(doc.get('status', '-'))}"
+    )
+    title = f"Diagnosis of {doc.get('recording') or 'a recording'}"
+    return result_html(
+        title, headline, sections=_summary_parts(doc) + _effect_parts(doc) + _located_parts(doc)
+    )
 
 
 def write_html(d: Any, path: str | Path) -> Path:

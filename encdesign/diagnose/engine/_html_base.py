@@ -1,42 +1,19 @@
-"""Pieces the HTML report's modules share: escaping, numbers and tables as HTML, a
+"""Pieces the HTML report's modules share: escaping, numbers and tables as HTML (from the
+package's HTML pieces, ``encdesign/_html.py``, which the results' notebook display uses too), a
 matplotlib figure as an embedded PNG, and the located places a diagnosis document names."""
 
 from __future__ import annotations
 
 import base64
-import html
 import io
-import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-
-def _e(x: Any) -> str:
-    return html.escape(str(x), quote=True)
-
-
-def _num(x: Any, digits: int = 4) -> str:
-    """A number for a table cell (``-`` for none / non-finite)."""
-    if x is None:
-        return "-"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, int | np.integer):
-        return str(int(x))
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return _e(x)
-    return f"{v:.{digits}g}" if math.isfinite(v) else "-"
-
-
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]], cls: str = "") -> str:
-    """An HTML table; cells are already HTML."""
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+from ..._html import escape as _e
+from ..._html import num as _num
+from ..._html import table as _table  # noqa: F401 (the report's modules import it from here)
 
 
 def _param_cell(p: Mapping[str, Any]) -> str:
