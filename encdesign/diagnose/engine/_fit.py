@@ -220,7 +220,8 @@ class Fitter:
         for par in term.cand.params:
             Jp = np.asarray(J[par.name])[:rows]
             Jp = Jp.reshape(rows, C, -1)
-            cols.append(Jp[:, :, term.free[par.name].ravel()])
+            free = term.free[par.name].ravel()
+            cols.append(Jp if free.all() else Jp[:, :, free])  # no copy when all are free
         return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
 
     def chunk_residual(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
@@ -304,25 +305,21 @@ class Fitter:
         for a, b, x in self.chunks():
             ck = (skey, a)
             hit = self._pcache.get(ck)
-            if hit is None:
-                J0 = self._processed(static, a, b, x, sc_s)
-                lin = [
-                    np.concatenate(
-                        [t.values[q.name][t.free[q.name]].ravel() for q in t.cand.params]
-                        or [np.zeros(0)]
-                    )
-                    for t in static
-                ]
-                del lin
-                hit = J0
-                if self._pbytes + J0[1].nbytes < CACHE_BYTES:
-                    self._pcache[ck] = J0
-                    self._pbytes += J0[1].nbytes
+            fresh = hit is None
+            if fresh:
+                hit = self._processed(static, a, b, x, sc_s)
+                if self._pbytes + hit[1].nbytes < CACHE_BYTES:
+                    self._pcache[ck] = hit
+                    self._pbytes += hit[1].nbytes
             _, Js_, order, edges = hit
-            # static prediction from current linear values (v0 + J p)
-            pred = np.zeros((b - a, prep.n_channels))
-            for tm in static:
-                pred += self.eval_term(tm, a, b, x, jac=False if not jac else True)[0]
+            # static prediction from current linear values (v0 + J p): made just now with
+            # the Jacobian (the same sum, term by term, as below), else from the cache
+            if fresh:
+                pred = hit[0].copy()
+            else:
+                pred = np.zeros((b - a, prep.n_channels))
+                for tm in static:
+                    pred += self.eval_term(tm, a, b, x, jac=jac)[0]
             if dyn:
                 if jac:
                     pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
@@ -418,10 +415,16 @@ class Fitter:
         p = At.shape[0]
         Bj, jj, jr = np.zeros((p, E)), np.zeros(E), np.zeros(E)
         for a, b, x in self.chunks():
-            hit = self._pcache.get((skey, a)) or self._processed(held, a, b, x, sc)
-            _, Js_, order, edges = hit
+            hit = self._pcache.get((skey, a))
+            if hit is None:  # the prediction comes with the Jacobian: no second evaluation
+                pred, Js_, order, edges = self._processed(held, a, b, x, sc)
+                r = prep.y[a:b] - pred
+                if prep.kd.project:
+                    r = r - r.mean(1, keepdims=True)
+            else:
+                _, Js_, order, edges = hit
+                r = self.chunk_residual(held, a, b, x)
             lo, hi = int(edges[0]), int(edges[K])
-            r = self.chunk_residual(held, a, b, x)
             rw = (r * sw)[order][lo:hi].ravel()
             S = Js_[lo:hi].reshape(rw.size, p)
             cols = np.empty((rw.size, E))
