@@ -259,11 +259,17 @@ class Fitter:
             v, J = self.eval_term(tm, a, b, x, jac=True)
             pred += v
             Js.append(J)
-        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+        if len(Js) == 1:
+            J = Js[0]  # not copied here: the fold sort below makes the copy
+        else:
+            J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
         if prep.kd.project:
             J = J - J.mean(1, keepdims=True)
         order, edges = self._fold_order(a, b)
-        J = (J * sc[None, None, :] * np.sqrt(self.w_ch)[None, :, None])[order]
+        # sorted first, then scaled in place: each element is (J sc) sqrt(w) as before
+        J = J[order]
+        J *= sc[None, None, :]
+        J *= np.sqrt(self.w_ch)[None, :, None]
         return pred, J, order, edges
 
     def _fold_order(self, a: int, b: int):
