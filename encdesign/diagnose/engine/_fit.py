@@ -312,7 +312,9 @@ class Fitter:
             ck = (skey, a)
             hit = self._pcache.get(ck)
             fresh = hit is None
-            if fresh:
+            if fresh and not jac:  # values only: the processed Jacobian is not needed
+                hit = (None, None, *self._fold_order(a, b))
+            elif fresh:
                 hit = self._processed(static, a, b, x, sc_s)
                 if self._pbytes + hit[1].nbytes < CACHE_BYTES:
                     self._pcache[ck] = hit
@@ -320,7 +322,7 @@ class Fitter:
             _, Js_, order, edges = hit
             # static prediction from current linear values (v0 + J p): made just now with
             # the Jacobian (the same sum, term by term, as below), else from the cache
-            if fresh:
+            if fresh and jac:
                 pred = hit[0].copy()
             else:
                 pred = np.zeros((b - a, prep.n_channels))
