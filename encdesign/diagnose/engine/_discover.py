@@ -43,6 +43,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ._discover_words import reading
+from ._settings import FinderSettings
 
 ALPHA = 0.01
 """Family-wise false-alarm rate of the selection over the whole library (Bonferroni)."""
@@ -387,7 +388,9 @@ def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
     return H.reshape(nb * S * C * nj, Gn * njp)
 
 
-def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> list[Term]:
+def library(
+    lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha, settings: FinderSettings
+) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
     sp, dr = cinfo["speed"], cinfo["direction"]
@@ -403,7 +406,9 @@ def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> li
                 continue
             one = np.ones(S)
             out.append(Term(li, name, "static", _H(lay, 0, M, one)))
-            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(1.2):
+            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(
+                settings.discover_speed_ratio
+            ):
                 H0 = _H(lay, 0, M, one)
                 out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
             if (dr > 0).any() and (dr < 0).any():
@@ -589,7 +594,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
         alpha = np.zeros(C)
     sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha)
+    lib = library(lines, sums, cinfo, C, alpha, prep.settings)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
@@ -726,7 +731,9 @@ def _term_json(
         "heldout_gain_drop_one_chi2": float(gains["drop_one"][i]),
         "heldout_gain_line_chi2": float(gains["line"][tm.line]),
         "inclusion_probability": float(incl[i]),
-        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names)),
+        "reading": reading(
+            ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
+        ),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
