@@ -648,18 +648,15 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:
-    """Held-out gains (chi-square) of the kept terms, in the order forward selection took
-    them: ``entry`` (per term: the gain when it entered, over the terms taken before it; these
-    sum to the whole model's gain), ``drop_one`` (per term: the loss when only it is removed;
-    0 for a term another kept term spans) and ``line`` (per line: the loss when all of that
-    line's terms are removed)."""
+    """Held-out gains (chi-square) of the kept terms (in forward order): ``entry`` (over the
+    terms taken before it: they sum to the model's), ``drop_one`` (the loss when only it is
+    removed: 0 where another kept term spans it), ``line`` (when a line's terms are removed)."""
     sums, lib = st.sums, st.lib
     folds = list(range(sums.A.shape[0]))
 
     def ho(idx: list[int]) -> float:
-        if not idx:
-            return 0.0
-        return _heldout(sums.A, sums.b, _embed(sums, [lib[j] for j in idx]), folds, sums.raw)
+        H = _embed(sums, [lib[j] for j in idx]) if idx else None
+        return _heldout(sums.A, sums.b, H, folds, sums.raw) if H is not None else 0.0
 
     whole = ho(kept)
     entry, prev = {}, 0.0
@@ -667,9 +664,9 @@ def _gains(st: State, kept: list[int]) -> dict[str, dict]:
         cur = ho(kept[: n + 1])
         entry[i], prev = cur - prev, cur
     drop = {i: whole - ho([j for j in kept if j != i]) for i in kept}
-    line = {}
-    for li in {lib[i].line for i in kept}:
-        line[li] = whole - ho([j for j in kept if lib[j].line != li])
+    line = {
+        li: whole - ho([j for j in kept if lib[j].line != li]) for li in {lib[i].line for i in kept}
+    }
     return {"entry": entry, "drop_one": drop, "line": line}
 
 
@@ -801,13 +798,3 @@ def _nearest(lib, kept, li, sums, folds) -> list[dict]:
 
 def _none(reason: str, **kw) -> dict:
     return {"outside_catalog": True, "frame": None, "terms": [], "reason": reason, **kw}
-
-
-def term_heldout_gain(
-    prep, sums: Sums, lib: Sequence[Term], frame: str, modulation: str, line: int
-) -> float:
-    """Held-out gain of one library term (a benchmark's "true model" at the truth's frame)."""
-    for tm in lib:
-        if tm.frame == frame and tm.modulation == modulation and tm.line == line:
-            return _single_heldout(sums, tm, range(sums.A.shape[0]))
-    return float("nan")
