@@ -626,7 +626,8 @@ def discover(
             )
         return [None] * len(findings)
     kept, incl = select_terms(st)
-    terms_json = [_term_json(prep, st, kept, i, incl) for i in kept]
+    gains = _gains(st, kept)
+    terms_json = [_term_json(prep, st, kept, i, incl, gains) for i in kept]
     near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
     return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
 
@@ -648,10 +649,35 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
 
 
-def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> dict:
-    """One kept term's JSON entry (parameters and held-out gain fitted with the others)."""
-    sums, lib, cinfo = st.sums, st.lib, st.cinfo
+def _gains(st: State, kept: list[int]) -> dict[str, dict]:
+    """Held-out gains (chi-square) of the kept terms (in forward order): ``entry`` (over the
+    terms taken before it: they sum to the model's), ``drop_one`` (the loss when only it is
+    removed: 0 where another kept term spans it), ``line`` (when a line's terms are removed)."""
+    sums, lib = st.sums, st.lib
     folds = list(range(sums.A.shape[0]))
+
+    def ho(idx: list[int]) -> float:
+        H = _embed(sums, [lib[j] for j in idx]) if idx else None
+        return _heldout(sums.A, sums.b, H, folds, sums.raw) if H is not None else 0.0
+
+    whole = ho(kept)
+    entry, prev = {}, 0.0
+    for n, i in enumerate(kept):
+        cur = ho(kept[: n + 1])
+        entry[i], prev = cur - prev, cur
+    drop = {i: whole - ho([j for j in kept if j != i]) for i in kept}
+    line = {
+        li: whole - ho([j for j in kept if lib[j].line != li]) for li in {lib[i].line for i in kept}
+    }
+    return {"entry": entry, "drop_one": drop, "line": line}
+
+
+def _term_json(
+    prep, st: State, kept: list[int], i: int, incl: np.ndarray, gains: dict[str, dict]
+) -> dict:
+    """One kept term's JSON entry (parameters fitted with the others; held-out gains as
+    :func:`_gains` defines them)."""
+    sums, lib, cinfo = st.sums, st.lib, st.cinfo
     At, bt = sums.A.sum(0), sums.b.sum(0)
     Hk = _embed(sums, [lib[j] for j in kept])
     G = Hk.T @ At @ Hk
@@ -662,9 +688,6 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
     tm = lib[i]
     q = tm.H.shape[1]
     c, cv = coef[q0 : q0 + q], cov[q0 : q0 + q, q0 : q0 + q]
-    ho_all = _heldout(sums.A, sums.b, Hk, folds, sums.raw)
-    Hwo = _embed(sums, [lib[j] for j in kept if j != i])
-    ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
     ln = st.lines[tm.line]
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
@@ -703,7 +726,9 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
-        "heldout_gain_chi2": float(ho_all - ho_wo),
+        "heldout_gain_chi2": float(gains["entry"][i]),
+        "heldout_gain_drop_one_chi2": float(gains["drop_one"][i]),
+        "heldout_gain_line_chi2": float(gains["line"][tm.line]),
         "inclusion_probability": float(incl[i]),
         "reading": reading(
             ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
@@ -743,7 +768,7 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         "frame": frames[0] if len(frames) == 1 else ", ".join(frames),
         "terms": mine,
         "scaling": next((t["scaling"] for t in mine if t["scaling"]), None),
-        "heldout_gain_chi2": float(sum(t["heldout_gain_chi2"] for t in mine)),
+        "heldout_gain_chi2": mine[0]["heldout_gain_line_chi2"],
         "inclusion": {
             f"{t['frame']} / {t['modulation']}": t["inclusion_probability"] for t in mine
         },
@@ -776,13 +801,3 @@ def _nearest(lib, kept, li, sums, folds) -> list[dict]:
 
 def _none(reason: str, **kw) -> dict:
     return {"outside_catalog": True, "frame": None, "terms": [], "reason": reason, **kw}
-
-
-def term_heldout_gain(
-    prep, sums: Sums, lib: Sequence[Term], frame: str, modulation: str, line: int
-) -> float:
-    """Held-out gain of one library term (a benchmark's "true model" at the truth's frame)."""
-    for tm in lib:
-        if tm.frame == frame and tm.modulation == modulation and tm.line == line:
-            return _single_heldout(sums, tm, range(sums.A.shape[0]))
-    return float("nan")

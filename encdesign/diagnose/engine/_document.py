@@ -295,7 +295,13 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
         out.append(
             f"  discovered (outside the catalog): {t['line']}, {t['frame']}, {t['modulation']}"
             f"{law}; amplitude {p['amplitude']:.3g} +- {p['amplitude_se']:.2g} {u}; held-out "
-            f"gain {t['heldout_gain_chi2']:.4g} (chi2); inclusion "
+            f"gain {t['heldout_gain_chi2']:.4g} (chi2) at entry"
+            + (
+                f", {t['heldout_gain_drop_one_chi2']:.4g} if only it were removed"
+                if "heldout_gain_drop_one_chi2" in t
+                else ""
+            )
+            + "; inclusion "
             f"{t['inclusion_probability']:.0%}"
         )
         where = [
