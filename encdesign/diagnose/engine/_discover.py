@@ -494,19 +494,12 @@ def _single_heldout(sums: Sums, tm: Term, folds) -> float:
 
 
 def _forward(
-    A: np.ndarray,
-    b: np.ndarray,
-    lib: Sequence[Term],
-    sums: Sums,
-    folds,
-    thresh,
-    model_error: float,
+    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh, me: float
 ) -> list[int]:
     """Orthogonal forward regression over the folds ``folds``: indices of the terms taken
-    (each step: the largest chi-square drop beyond its threshold, given those taken, by
-    the Schur complement, less ``model_error`` of it per parameter
-    (``settings.discover_model_error``); taken when its K-fold held-out gain is
-    positive)."""
+    (each step: the largest chi-square drop beyond its threshold, given those taken, by the
+    Schur complement, less ``me`` of it per parameter (``settings.discover_model_error``);
+    taken when its K-fold held-out gain is positive)."""
     folds = list(folds)
     At, bt, Rt = A[folds].sum(0), b[folds].sum(0), sums.raw[folds].sum(0)
     D, e, Dr = [], [], []
@@ -540,7 +533,7 @@ def _forward(
             q = tm.H.shape[1] + (tm.beta is not None)
             if gi <= thresh[i]:
                 continue
-            m = gi * (1.0 - model_error * q) - thresh[i]
+            m = gi * (1.0 - me * q) - thresh[i]
             if m > best_m:
                 best, best_m = i, m
         if best < 0:
@@ -595,13 +588,8 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    N = max(len(lib), 1)
-    thresh = np.array(
-        [
-            stats.chi2.isf(prep.settings.discover_alpha / N, tm.H.shape[1] + (tm.beta is not None))
-            for tm in lib
-        ]
-    )
+    a_n = prep.settings.discover_alpha / max(len(lib), 1)
+    thresh = np.array([stats.chi2.isf(a_n, tm.H.shape[1] + (tm.beta is not None)) for tm in lib])
     return State(lines, first, cinfo, sums, lib, thresh, infl, L, prep.settings)
 
 
