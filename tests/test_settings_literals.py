@@ -8,9 +8,12 @@ collected. The allow-list holds numerical constants, counts, array shapes, physi
 plotting numbers only: a threshold that decides what the finder reports belongs in
 ``FinderSettings`` (documented, in the generated table of ``docs/diagnose.md``), not here.
 
+A number can also leave a comparison through a module constant (``if x > LIMIT``): every
+module-level constant of ``encdesign/diagnose/`` that is a number (or a tuple of numbers) is
+allow-listed in :data:`CONSTANTS` with its reason, or fails the second test.
+
 ``min`` / ``max`` / ``np.clip`` arguments are not scanned: what is there is guards
-(``max(x, 1e-300)``), block and window sizes and caps on a model's order (see the module
-constants ``CHUNK_ROWS`` etc.), not comparisons.
+(``max(x, 1e-300)``), block and window sizes and caps on a model's order, not comparisons.
 """
 
 from __future__ import annotations
@@ -108,6 +111,45 @@ ALLOWED: dict[tuple[str, float], str] = {
 """``(module under encdesign/diagnose, literal) -> reason``; every entry must be used."""
 
 
+BOUND = "bound on the work (rows, bins, iterations, orders scanned), not a threshold"
+MODEL = "size of a start-value or smoothing model (orders, degree), not a threshold"
+
+CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
+    ("engine/_discover.py", "MAX_LINES"): BOUND + " (located lines modelled)",
+    ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
+    ("engine/_discover.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
+    ("engine/_discover.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
+    ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
+    ("engine/_document.py", "LATTICE_ROWS"): BOUND,
+    ("engine/_html.py", "MAX_POINTS"): PLOT,
+    ("engine/_html.py", "MAX_PANELS"): PLOT,
+    ("engine/_html_discovery.py", "MAX_SPECTRUM_ORDER"): PLOT,
+    ("engine/_html_discovery.py", "FOLD_BINS"): PLOT,
+    ("engine/_noise.py", "TRIM_QUANTILE"): "estimator: the trimmed RMS's quantile, with its "
+    "consistency factor _TRIM_RMS (a definition of the noise scale, not a threshold)",
+    ("engine/_noise.py", "ROBUST_ROWS"): BOUND,
+    ("engine/_settings.py", "CHUNK_ROWS"): BOUND,
+    ("engine/_settings.py", "CACHE_BYTES"): BOUND,
+    ("engine/_settings.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
+    ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
+    ("engine/_views.py", "SCAN_BLOCK"): BOUND,
+    ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
+    ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
+    ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",
+    ("kinds/multihead/_multihead_terms.py", "RUNOUT_ORDERS"): PHYSICS,
+    ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
+    ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
+    ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,
+    ("kinds/multihead/_reference_terms.py", "QUANT_POLY_DEGREE"): MODEL,
+    ("kinds/sds/_sds_noise.py", "REFERENCE_RADIUS_M"): PHYSICS + " (1 inch: a unit of the "
+    "reported sizes)",
+    ("kinds/sds/_sds_noise.py", "BEAM_ORDERS"): PHYSICS,
+}
+"""``(module, NAME) -> reason`` for every module-level numeric constant; every entry must be
+used."""
+
+
 def _number(node: ast.AST) -> float | None:
     if isinstance(node, ast.Constant) and type(node.value) in (int, float):
         return node.value
@@ -199,3 +241,63 @@ def test_the_scan_finds_a_threshold_inside_arithmetic(tmp_path):
     (pkg / "_views.py").write_text(src, encoding="utf-8")
     bad, _ = scan(tmp_path)
     assert len(bad) == 3 and bad[0].startswith("engine/_views.py:3: 0.25:")
+
+
+def _numeric(node: ast.AST) -> bool:
+    if isinstance(node, ast.Constant):
+        return type(node.value) in (int, float)
+    if isinstance(node, ast.Tuple | ast.List):
+        return bool(node.elts) and all(_numeric(e) for e in node.elts)
+    if isinstance(node, ast.UnaryOp):
+        return _numeric(node.operand)
+    if isinstance(node, ast.BinOp):
+        return _numeric(node.left) and _numeric(node.right)
+    return False
+
+
+def numeric_constants(source: str) -> list[tuple[int, str, str]]:
+    """``(line, name, value)`` of every module-level constant that is a number, arithmetic
+    of numbers or a tuple of numbers."""
+    out = []
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target, value = node.targets[0], node.value
+        elif isinstance(node, ast.AnnAssign) and node.value is not None:
+            target, value = node.target, node.value
+        else:
+            continue
+        if isinstance(target, ast.Name) and _numeric(value):
+            out.append((node.lineno, target.id, ast.unparse(value)))
+    return out
+
+
+def scan_constants(root: Path = DIAGNOSE) -> tuple[list[str], set[tuple[str, str]]]:
+    bad, used = [], set()
+    for path in sorted(root.rglob("*.py")):
+        mod = path.relative_to(root).as_posix()
+        for line, name, value in numeric_constants(path.read_text(encoding="utf-8")):
+            if (mod, name) in CONSTANTS:
+                used.add((mod, name))
+            else:
+                bad.append(f"{mod}:{line}: {name} = {value}")
+    return bad, used
+
+
+def test_module_constants_are_not_thresholds():
+    """A threshold is not hidden in a module constant: each numeric one has its reason."""
+    bad, used = scan_constants()
+    assert not bad, (
+        "module-level numeric constants under encdesign/diagnose/ not allow-listed in "
+        "tests/test_settings_literals.py CONSTANTS (a threshold: make it a FinderSettings "
+        "field read through the settings passed in):\n" + "\n".join(bad)
+    )
+    stale = sorted(set(CONSTANTS) - used)
+    assert not stale, f"allow-listed constants no longer found (remove them): {stale}"
+
+
+def test_the_constant_scan_finds_a_new_constant(tmp_path):
+    src = "import math\nLIMIT = 0.25\nPAIR = (1, -2.0)\nNAME = 'x'\nF = math.pi\n"
+    assert [n for _, n, _ in numeric_constants(src)] == ["LIMIT", "PAIR"]
+    (tmp_path / "_x.py").write_text(src, encoding="utf-8")
+    bad, _ = scan_constants(tmp_path)
+    assert bad == ["_x.py:2: LIMIT = 0.25", "_x.py:3: PAIR = (1, -2.0)"]

@@ -132,35 +132,35 @@ class FinderSettings(eqx.Module):
     lattice_tolerance: float = eqx.field(default=0.1, static=True)
     """Value lattice (``detect_lsb``): a gap (or a value) is on the lattice when within this
     many steps of an integer multiple (of ``c_r + q k``); covers readings printed with a few
-    significant digits. Was the ``tolerance=0.1`` default of ``detect_lsb`` (cdf1843); set by
+    significant digits. Was the ``tolerance=0.1`` default of ``detect_lsb`` (50f039d); set by
     hand."""
 
     lattice_max_divisor: int = eqx.field(default=12, static=True)
     """Value lattice: the step is looked for as the smallest gap between distinct values
     divided by ``j = 1 ... this`` (a gap of up to this many steps is the smallest one seen).
-    Was the ``max_divisor=12`` default of ``detect_lsb``; set by hand in cdf1843."""
+    Was the ``max_divisor=12`` default of ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_min_fraction: float = eqx.field(default=0.99, static=True)
     """Value lattice: at least this share of the gaps (to accept a step) and of the values
     (to accept the lattice) lie within ``lattice_tolerance`` of it; continuous values put
     only about ``2 lattice_tolerance`` there. Was the ``min_fraction=0.99`` default of
-    ``detect_lsb``; set by hand in cdf1843."""
+    ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_min_differences: int = eqx.field(default=20, static=True)
     """Value lattice: with fewer gaps between distinct values than this no lattice is
     decided (``lsb_rad`` is ``None``). Was the ``min_differences=20`` default of
-    ``detect_lsb``; set by hand in cdf1843."""
+    ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_exact_floor: float = eqx.field(default=1e3, static=True)
     """Value lattice, exact branch (Euclid's algorithm on the gaps, for readings computed
     from integer counts): a step not over this many times the algorithm's absolute
     tolerance (``1e-12`` of the largest value) is the tolerance itself (continuous values),
-    not a resolution. Was an inline ``1e3`` in ``detect_lsb``; set by hand."""
+    not a resolution. Was an inline ``1e3`` in ``detect_lsb``; set by hand in 1669bd9."""
 
     lattice_gap_steps_max: float = eqx.field(default=1e4, static=True)
     """Value lattice, exact branch: a step over this many times below the median gap is the
     decimal digits a file was printed with, not a reading's resolution. Was an inline
-    ``1e4`` in ``detect_lsb``; set by hand."""
+    ``1e4`` in ``detect_lsb``; set by hand in 1669bd9."""
 
     alpha: float = eqx.field(default=1e-3, static=True)
     """Family-wise false-alarm rate of each view (Bonferroni over its tests) and of the
@@ -204,7 +204,7 @@ class FinderSettings(eqx.Module):
     take change points and single-value outliers out of the run-mean noise level
     (:func:`._sds_noise._level_sigma`), so that neither inflates it. Equal to ``alpha`` by
     default but a noise-estimation choice, not a finding's. Was an inline ``1e-3`` in
-    ``_sds_noise``; set by hand in fc0e1ba (moved unchanged in issue 44 G)."""
+    ``_sds_noise``; set by hand in 0a3345d (moved unchanged in issue 44 G)."""
 
     steady_tolerance: float = eqx.field(default=0.1, static=True)
     """Relative deviation of the smoothed speed from its segment's steady speed beyond which
@@ -449,14 +449,14 @@ class FinderSettings(eqx.Module):
     time_merge_s: float = eqx.field(default=1e-3, static=True)
     """Views: ... plus this many seconds (``time_merge_blocks``), so that step times of two
     channels a row apart at short blocks still merge. Was an inline ``1e-3`` in
-    ``_views.view_time``; set by hand in b783399 (moved unchanged in issue 44 G)."""
+    ``_views.view_time``; set by hand in e0d3df4 (moved unchanged in issue 44 G)."""
 
     step_match_blocks: float = eqx.field(default=4.0, static=True)
     """A step that refused a candidate is refined with the final model's own ``time``
     finding when that finding's step times lie within this many of its blocks of the
     refused step's time (:func:`._steps.place_step_refusals`); otherwise it is reported
-    where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand (issue 44
-    C), moved unchanged in issue 44 G."""
+    where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand in 0c3e0e7,
+    moved unchanged in issue 44 G."""
 
     one_speed_spread: float = eqx.field(default=0.05, static=True)
     """The kept rows turn at one speed when their speeds spread by at most this share of the
@@ -603,19 +603,51 @@ class FinderSettings(eqx.Module):
     discover_speed_ratio: float = eqx.field(default=1.2, static=True)
     """Discovery (``_discover``): a located line gets a speed-modulated term (amplitude ~
     speed^beta) when the steady speeds of its cells span more than this ratio. Was an inline
-    ``math.log(1.2)`` in ``_discover.library``; set by hand (moved unchanged in issue 44
-    G)."""
+    ``math.log(1.2)`` in ``_discover.library``; set by hand in 3ff0f02 (moved unchanged in
+    issue 44 G)."""
 
     discover_beta_max: float = eqx.field(default=4.0, static=True)
     """Discovery: a discovered term's speed exponent beta is implausible (rule
     ``<discovered>.plausible``) outside ``[-this, this]``. Was an inline ``4.0`` in
-    ``_discover_export``; set by hand (moved unchanged in issue 44 G)."""
+    ``_discover_export``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
 
     speed_cause_se: float = eqx.field(default=2.0, static=True)
     """Discovery words: a fitted speed exponent is read as a simple mechanism (-2, -1, 0, 1
     or 2) when within this many standard errors of it. Words, not a verdict. Was an inline
-    ``2`` in ``_discover_words._speed_cause``; set by hand (moved unchanged in issue 44
+    ``2`` in ``_discover_words._speed_cause``; set by hand in 3ff0f02 (moved unchanged in
+    issue 44 G)."""
+
+    discover_alpha: float = eqx.field(default=0.01, static=True)
+    """Discovery: family-wise false-alarm rate of the forward selection over the whole
+    library of terms (Bonferroni: ``chi2.isf(discover_alpha / N, q)``). Was the module
+    constant ``_discover.ALPHA``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+
+    discover_inclusion_min: float = eqx.field(default=0.6, static=True)
+    """Discovery: a term is kept only when the selection repeated without each fold keeps
+    it at least this often. Was ``_discover.INCLUSION_MIN``; set by hand in 3ff0f02 (moved
+    unchanged in issue 44 G)."""
+
+    discover_model_error: float = eqx.field(default=5e-3, static=True)
+    """Discovery: share of a term's chi-square drop discounted per parameter when terms are
+    ranked: the finder's own angle and base are not exact (a run offset fitted with the
+    structure present moves the phase of a line a little), so at a high signal-to-noise
+    ratio a term with more parameters (its own phase per run) would otherwise win over the
+    physical one by fitting that small model error. Was ``_discover.MODEL_ERROR_PER_PARAM``;
+    set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+
+    discover_size_ratio_max: float = eqx.field(default=100.0, static=True)
+    """Discovery: an exported candidate whose refit amplitude is more than this many times
+    the discovered one (or less than its inverse) is refused (rule
+    ``<discovered>.plausible``): another physics, not the one discovered. Was
+    ``_discover_export.SIZE_RATIO_MAX``; set by hand in 3ff0f02 (moved unchanged in issue 44
     G)."""
+
+    signal_first_order_max_rad: float = eqx.field(default=0.3, static=True)
+    """``interpolation_error``: above this harmonic (rad of signal phase) the first-order
+    conversion of the harmonics into offsets, amplitude ratio and phase error is flagged
+    approximate (``first_order_note``; second-order terms ~ c^2 / 2); the fitted harmonics
+    are not. A note, not a refusal. Was ``_reference_terms.FIRST_ORDER_SIGNAL_ERROR``; set by
+    hand in 431a074 (moved unchanged in issue 44 G)."""
 
     def __check_init__(self):
         for f in dataclasses.fields(self):
