@@ -117,7 +117,7 @@ class Diagnosis(eqx.Module):
         """Back compatibility: ``d["verdict"]`` reads the document's key."""
         return self.to_json()[key]
 
-    def with_keys(self, **keys: Any) -> Diagnosis:
+    def with_keys(self, **keys: object) -> Diagnosis:
         """A copy with document keys other than the typed ones set (e.g. ``plots``)."""
         if set(keys) & {*TYPED_KEYS, "confounded"}:
             raise DiagnosisError(f"with_keys: typed keys {sorted(keys)} are set as fields")
