@@ -81,10 +81,10 @@ def se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
-def scan_order_of(limit: int, order: int) -> int:
-    """Highest order the views scan for a base of ``order``: twice it, at least 24, within
-    what the record resolves."""
-    return int(min(limit, max(2 * order, 24)))
+def scan_order_of(limit: int, order: int, settings: FinderSettings) -> int:
+    """Highest order the views scan for a base of ``order``: twice it, at least
+    ``settings.scan_order_min``, within what the record resolves."""
+    return int(min(limit, max(2 * order, settings.scan_order_min)))
 
 
 SWEEP_WINDOW = 9
@@ -204,9 +204,10 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
 
 def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
     """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
-    the base and the final residual (least squares over the kept rows)."""
+    the base and the final residual (least squares over the kept rows), at most
+    ``settings.spectrum_order_max`` of them."""
 
-    M = int(min(max_order, 400))
+    M = int(min(max_order, prep.settings.spectrum_order_max))
     out = {"orders": list(range(1, M + 1)), "before": [], "after": []}
     N, _, _, _, sums = order_sums(prep, "theta", [r0, r1], np.arange(1, M + 1))
     for (Bc, Bs), key in zip(sums, ("before", "after")):

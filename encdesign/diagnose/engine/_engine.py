@@ -91,7 +91,7 @@ def _grow_base_order(
     Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
     the fitted values, or ``None`` (nothing changed)."""
-    hi = scan_order_of(limit, order)
+    hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
@@ -132,7 +132,9 @@ def _grow_base_order(
     fitter.clear()
     grown = fitter.fit(terms)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    after = locate(prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M))
+    after = locate(
+        prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M, prep.settings)
+    )
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     if p1 > prep.settings.growth_left_max * p0:
         _set_order(prep, order)
@@ -539,7 +541,7 @@ def run_engine(
                 base_fit, order = _fit_base(
                     kind, prep, fitter, base_terms, base_info, order, limit, grow
                 )
-                scan = scan_order_of(limit, order)
+                scan = scan_order_of(limit, order, prep.settings)
             pg.stage("base fitted")
             with stage("select"):
                 sel = select(

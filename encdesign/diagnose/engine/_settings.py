@@ -189,8 +189,8 @@ class FinderSettings(eqx.Module):
 
     drift_turns_per_degree: float = eqx.field(default=3.0, static=True)
     """motion: the speed-drift polynomial gains one degree per this many revolutions beyond
-    3 (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 % speed wander came back
-    unexplained at orders 1-3)."""
+    ``drift_growth_turns`` (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 %
+    speed wander came back unexplained at orders 1-3)."""
 
     sds_saturate_fraction: float = eqx.field(default=0.6, static=True)
     """sds: the saturating base columns use at most this share of the values. 8e334ac."""
@@ -648,6 +648,66 @@ class FinderSettings(eqx.Module):
     approximate (``first_order_note``; second-order terms ~ c^2 / 2); the fitted harmonics
     are not. A note, not a refusal. Was ``_reference_terms.FIRST_ORDER_SIGNAL_ERROR``; set by
     hand in 431a074 (moved unchanged in issue 44 G)."""
+
+    drift_degree_min: int = eqx.field(default=3, static=True)
+    """motion: degree of the base's speed-drift polynomial per run (Legendre: start angle,
+    speed, drift) on a short run; it grows past ``drift_growth_turns`` (one degree per
+    ``drift_turns_per_degree`` revolutions of the shortest run) up to ``drift_degree_max``.
+    A cubic since the first motion base (96be348); the growth in 3a1c6be. Was an inline 3 in
+    ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    drift_degree_max: int = eqx.field(default=15, static=True)
+    """motion: the speed-drift polynomial's degree stops growing here (a long run's slow
+    wander, not its orders, which the Legendre degree would start to absorb). 3a1c6be. Was an
+    inline 15 in ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    drift_growth_turns: float = eqx.field(default=3.0, static=True)
+    """motion: the speed-drift polynomial keeps ``drift_degree_min`` up to this many
+    revolutions of the shortest run (cubic to 6 turns with ``drift_turns_per_degree`` = 3).
+    3a1c6be. Was an inline 3.0 in ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    scan_order_min: int = eqx.field(default=24, static=True)
+    """The views scan the integer orders up to twice the base's order and at least up to
+    this order (within what the record resolves): a disk error or a runout above a low base
+    order is located. 4be389a (the base grows its order). Was an inline 24 in
+    ``_document.scan_order_of`` (moved unchanged in issue 44 G)."""
+
+    spectrum_order_max: int = eqx.field(default=400, static=True)
+    """The report's order spectrum (base and final residual amplitudes per integer order)
+    lists at most this many orders. From the first engine (96be348). Was an inline 400 in
+    ``_document.order_spectrum`` (moved unchanged in issue 44 G)."""
+
+    quad_order_min: int = eqx.field(default=3, static=True)
+    """quadrature: the base's radial order (``signal_shape`` orders 3..M above the ellipse)
+    is at least this, whatever the record's size; it is otherwise an eighth of the kept
+    samples within the parameter budget ... 7d728be. Was an inline 3 in
+    ``_quadrature.quadrature_limit`` (moved unchanged in issue 44 G)."""
+
+    quad_order_max: int = eqx.field(default=400, static=True)
+    """... and at most this. 7d728be. Was an inline 400 in ``_quadrature.quadrature_limit``
+    (moved unchanged in issue 44 G)."""
+
+    run_offset_start_orders: int = eqx.field(default=6, static=True)
+    """multihead: the start of the run offsets ``delta_r`` fits each run's orders up to this
+    (or the base's order, if lower) and aligns their phases to run 0: a start value only,
+    the fit refines it. From the first engine (96be348). Was an inline 6 in
+    ``_multihead._run_offsets_start`` (moved unchanged in issue 44 G)."""
+
+    order_step_margin_rows: int = eqx.field(default=10, static=True)
+    """multihead: the ``order_step`` view tests change points with at least this many kept
+    rows on either side ... 1e3f0c4. Was an inline 10 in ``_multihead_terms`` (moved
+    unchanged in issue 44 G)."""
+
+    order_step_margin_share: float = eqx.field(default=0.01, static=True)
+    """... and at least this share of the kept rows (a step at the record's very edge is an
+    offset, not a change). 1e3f0c4. Was an inline ``// 100`` in ``_multihead_terms`` (moved
+    unchanged in issue 44 G)."""
+
+    clip_band: float = eqx.field(default=0.002, static=True)
+    """quadrature: a sample is at a signal extreme when within this share of the amplitude
+    of it: the band in which ``clip_excess_ratio`` compares the samples found with those a
+    sinusoid puts there (``sqrt(2 band) / pi`` of them). Set by hand in e0d3df4. Was the
+    default ``band`` of ``_quadrature.detect_clipping`` (moved unchanged in issue 44 G)."""
 
     def __check_init__(self):
         for f in dataclasses.fields(self):

@@ -584,9 +584,10 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         return np.cumsum(x[::-1], 0)[::-1]
 
     Sa, SG, SXB = suffix(a), suffix(G), suffix(XB)
-    # change points at bin edges 1..nb-1, with at least 1 % of the kept rows either side
+    # change points at bin edges 1..nb-1, with at least order_step_margin_rows and
+    # order_step_margin_share of the kept rows either side
     e = np.arange(1, nb)
-    margin = max(10, kidx.size // 100)
+    margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
     if e.size == 0:
         return []
