@@ -27,9 +27,11 @@ from .engine._discover_export import (
 from .kinds.motion._motion import candidate_orders as candidate_orders
 from .engine._results import (
     Alternative as Alternative,
+    BaseOrder as BaseOrder,
     Confounded as Confounded,
     Effect as Effect,
     Finding as Finding,
+    OrderTrial as OrderTrial,
     PlotData as PlotData,
     Refusal as Refusal,
 )

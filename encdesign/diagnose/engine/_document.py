@@ -344,6 +344,20 @@ def report_text(doc: dict) -> str:
             f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
             f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
         )
+    if (bo := doc.get("base_order")) is not None:  # issue 44 E: the base order's choice
+        lines.append(
+            f"base order: {bo['chosen']} (default {bo['start']}"
+            + (", lowered by held-out error" if bo["lowered"] else "")
+            + f"; held-out / fitted RMS {bo['heldout_ratio']:.3g} at {bo['start']})"
+        )
+        if len(bo["tried"]) > 1:
+            lines.append(
+                "  tried (order: fitted / held-out RMS): "
+                + ", ".join(
+                    f"{r['order']}: {r['rms']:.3g} / {r['heldout_rms']:.3g}" for r in bo["tried"]
+                )
+                + f" {u}"
+            )
     for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
         lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:

@@ -116,6 +116,19 @@ class FinderSettings(eqx.Module):
     share of what every view located. 1af4a3c (strong high orders leak into the time,
     drift and order-step views)."""
 
+    base_order_ratio: float = eqx.field(default=1.5, static=True)
+    """multihead: when the base model's K-fold held-out residual RMS exceeds its fitted RMS
+    by more than this factor, its orders may be ill-conditioned on this record (few samples
+    per turn, few turns: a held-out block's arc is bridged by orders the other folds cannot
+    pin down), and the base order is chosen by held-out error among orders 1 .. the default
+    (``base_order`` in the document; a lower order only where it lowers the held-out
+    chi-square by ``heldout_min``). A well-conditioned base stays below it: with ``p`` of
+    ``n`` values as parameters the ratio is about ``sqrt((1 + p/n K/(K-1)) / (1 - p/n))``,
+    1.12 at the ``max_param_fraction`` budget with K = 5, and unmodelled structure (an
+    effect not yet named) took it to 1.21 at most on the variation sets (seeds 21-22) and
+    ``moteus_cal``. Issue 44 E (a sensor turned one turn forward and back at 60-260 samples
+    per turn: 1.6-9 at order 12)."""
+
     lattice_noise_share: float = eqx.field(default=0.25, static=True)
     """``quantization`` is named from the readings' value lattice when its floor
     ``LSB^2 / 12`` is at least this share of the channel's noise variance (the LSB then is
