@@ -43,8 +43,8 @@ from .engine._html import (
 from .engine._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,
     FinderSettings as FinderSettings,
-    settings_table as settings_table,
 )
+from .engine._settings_table import settings_table as settings_table
 from .kinds.sds._sds_readout import (
     SDSRecordingResult as SDSRecordingResult,
 )
