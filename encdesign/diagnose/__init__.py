@@ -12,6 +12,7 @@ from .engine._candidates import (
     Candidate as Candidate,
     Context as Context,
     Param as Param,
+    Probe as Probe,
 )
 from ._dispatch import (
     Diagnosis as Diagnosis,
@@ -28,6 +29,7 @@ from .kinds.motion._motion import candidate_orders as candidate_orders
 from .engine._results import (
     Alternative as Alternative,
     Confounded as Confounded,
+    DetectionBound as DetectionBound,
     Effect as Effect,
     Finding as Finding,
     PlotData as PlotData,
