@@ -12,6 +12,7 @@ from .engine._candidates import (
     Candidate as Candidate,
     Context as Context,
     Param as Param,
+    Probe as Probe,
 )
 from ._dispatch import (
     Diagnosis as Diagnosis,
@@ -29,6 +30,7 @@ from .engine._results import (
     Alternative as Alternative,
     BaseOrder as BaseOrder,
     Confounded as Confounded,
+    DetectionBound as DetectionBound,
     Effect as Effect,
     Finding as Finding,
     OrderTrial as OrderTrial,

@@ -29,6 +29,7 @@ from .engine._results import (
     VERDICTS,
     BaseOrder,
     Confounded,
+    DetectionBound,
     Effect,
     Finding,
     PlotData,
@@ -36,7 +37,16 @@ from .engine._results import (
 )
 from .engine._settings import FinderSettings
 
-TYPED_KEYS = ("verdict", "status", "effects", "unexplained", "rejected", "not_testable")
+TYPED_KEYS = (
+    "verdict",
+    "status",
+    "effects",
+    "unexplained",
+    "rejected",
+    "not_testable",
+    "confounded",
+    "detection_bounds",
+)
 """Keys of the document held as typed fields of :class:`Diagnosis`."""
 _OPTIONAL_TYPED = ("confounded", "base_order")
 """Typed keys a document may lack (``base_order``: only where the engine chose an order)."""
@@ -58,6 +68,9 @@ class Diagnosis(eqx.Module):
         base_order: how the base model's order was chosen, each tried order's fitted and
             held-out RMS (:class:`BaseOrder`; ``None`` where the kind's order is fixed or
             the caller gave ``max_order``).
+        detection_bounds: on a ``consistent`` verdict, the smallest size of each catalog
+            effect (per head or sensor) this record would have revealed
+            (:class:`DetectionBound`; empty on other verdicts, where the document has none).
         other: every other key of the document (``docs/diagnose.md``), as JSON.
         key_order: the document's keys in order (:meth:`to_json` gives them back so).
         plot_data: what the figures need beyond the document (:class:`PlotData`).
@@ -74,6 +87,7 @@ class Diagnosis(eqx.Module):
     key_order: tuple[str, ...]
     plot_data: PlotData | None = None
     base_order: BaseOrder | None = None
+    detection_bounds: tuple[DetectionBound, ...] = ()
 
     def __check_init__(self):
         if self.verdict not in VERDICTS:
@@ -85,6 +99,11 @@ class Diagnosis(eqx.Module):
             )
         if self.verdict == "consistent" and self.unexplained:
             raise DiagnosisError("diagnosis verdict 'consistent' with unexplained structure")
+        if self.verdict != "consistent" and self.detection_bounds:
+            raise DiagnosisError(
+                f"diagnosis verdict {self.verdict!r} with detection bounds: they are reported "
+                "on a consistent verdict only"
+            )
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any], plot_data: PlotData | None = None) -> Diagnosis:
@@ -103,6 +122,9 @@ class Diagnosis(eqx.Module):
             base_order=None
             if doc.get("base_order") is None
             else BaseOrder.from_json(doc["base_order"]),
+            detection_bounds=tuple(
+                DetectionBound.from_json(b) for b in doc.get("detection_bounds", ())
+            ),
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -116,6 +138,7 @@ class Diagnosis(eqx.Module):
             "not_testable": [r.to_json() for r in self.not_testable],
             "confounded": [c.to_json() for c in self.confounded],
             "base_order": None if self.base_order is None else self.base_order.to_json(),
+            "detection_bounds": [b.to_json() for b in self.detection_bounds],
         }
         return {k: typed[k] if k in typed else self.other[k] for k in self.key_order}
 
@@ -156,7 +179,7 @@ def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
         lambda: (spec.loader.exec_module(mod), mod)[1],  # type: ignore[union-attr]
         "CANDIDATES",
         Candidate,
-        ("fn", "applies", "start", "plausible", "derived"),
+        ("fn", "applies", "start", "plausible", "derived", "probes"),
     )
 
 

@@ -322,6 +322,27 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
     return out
 
 
+def bound_lines(doc: dict) -> list[str]:
+    """The report's lines on the detection bounds of a clean verdict (issue 44 F)."""
+    bounds = doc.get("detection_bounds")
+    if not bounds:
+        return []
+    lines = [
+        "smallest size this record would have revealed (about 50 % power at the finder's "
+        "thresholds; 1.5x it is found almost always, half of it almost never):"
+    ]
+    for b in bounds:
+        size = "not revealed at any size" if b["bound"] is None else f"{b['bound']:.3g} {b['unit']}"
+        why = b.get("note") or f"set by {b['set_by']}"
+        at = f", {b['at']}" if b["at"] else ""
+        lines.append(f"  - {b['effect']} {b['parameter']} on {b['where']}: {size} ({why}{at})")
+    if doc.get("detection_bounds_not_covered"):
+        lines.append(
+            "  not bounded (no probe yet): " + ", ".join(doc["detection_bounds_not_covered"])
+        )
+    return lines
+
+
 def report_text(doc: dict) -> str:
     """A one-page plain-text report of a diagnosis document."""
     u = doc["unit"]
@@ -363,6 +384,7 @@ def report_text(doc: dict) -> str:
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
+    lines += bound_lines(doc)
     for i, e in enumerate(doc["effects"], 1):
         col = e["collinearity"]
         col_s = "n/a" if col is None else f"{col:.3f}"

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import input_error
+from ._bounds import detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
 from ._document import (
@@ -662,6 +663,14 @@ def run_engine(
                 pg.stage("report")
                 doc = kind.finish(prep, doc, settings)
                 doc["verdict"] = decide_verdict(doc)
+            if doc["verdict"] == "consistent":  # issue 44 F: what the record could have shown
+                with stage("bounds"):
+                    cands = list(seen.values())
+                    doc["detection_bounds"] = detection_bounds(
+                        prep, fitter, sel.base.terms, cands, kind.views(prep), scan
+                    )
+                    doc["detection_bounds_not_covered"] = not_covered(cands, prep)
+            with stage("report"):
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0
         doc["timings_s"] = dict(timer.totals)

@@ -344,6 +344,61 @@ class Refusal(_Entry):
 
 
 @final
+class DetectionBound(_Entry):
+    """The smallest size of one catalog effect this record would have revealed (an entry
+    of ``detection_bounds``, only on a ``consistent`` verdict; issue 44 F,
+    :mod:`encdesign.diagnose.engine._bounds`).
+
+    Attributes:
+        effect: the candidate's name.
+        parameter: the size's name (``delay_step_s``, ``amplitude_rad``).
+        unit: its SI unit.
+        where: the head or sensor it acts on, or ``"all"``.
+        at: where its other parameters are held, in words.
+        bound: the size detected with about 50 % probability (``unit``), or ``None`` (with a
+            ``note`` in ``extra``) when no size would be revealed.
+        set_by: the test that sets it (``view``, ``bic_min``, ``heldout_min``).
+        noncentrality: the effect's noncentrality at the bound.
+        n_params: the candidate's fitted parameters ``k``.
+        convention: what the bound means.
+    """
+
+    effect: str
+    parameter: str
+    unit: str
+    where: str
+    at: str
+    bound: float | None
+    set_by: str | None
+    noncentrality: float | None
+    n_params: int | None
+    convention: str
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = (
+        "effect",
+        "parameter",
+        "unit",
+        "where",
+        "at",
+        "bound",
+        "set_by",
+        "noncentrality",
+        "n_params",
+        "convention",
+    )
+    key_order: tuple[str, ...] = TYPED
+
+    def __check_init__(self):
+        if not isinstance(self.effect, str) or not self.effect:
+            raise _bad("DetectionBound.effect", self.effect, "a non-empty string")
+        if self.bound is not None and not (_opt_number(self.bound) and self.bound > 0):
+            raise _bad(f"DetectionBound {self.effect!r} bound", self.bound, "a number > 0")
+        if self.bound is None and "note" not in self.extra:
+            raise _bad(f"DetectionBound {self.effect!r}", self.extra, "a note without a bound")
+        _keys_ok(self, self.TYPED)
+
+
+@final
 class Confounded(_Entry):
     """Two effects the record cannot separate (an entry of ``confounded``): reported as
     one entry, never as two refusals.

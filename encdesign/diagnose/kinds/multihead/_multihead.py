@@ -39,7 +39,7 @@ from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import run_spans
+from ...engine._views import KindView, run_spans
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -657,7 +657,7 @@ MULTIHEAD_VIEWS = (
     "direction",
     "speed",
     "angle_trend",
-    view_order_step,
+    KindView(view_order_step, ("order_step",)),
 )
 """The views run on a multihead record's residual."""
 

@@ -25,7 +25,7 @@ from ....physics._sensor_effects import (
     reading_delay_rad,
     scale_error_rad,
 )
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._lattice import Lattice, detect_lsb
 
 __all__ = ["CANDIDATES", "interpolation_candidate"]
@@ -68,6 +68,21 @@ def _hyst_applies(ctx: Context) -> str | None:
     if not _both_directions(ctx):
         return "no run turns in both directions: a direction offset is a run constant"
     return None
+
+
+def _sensor_name(ctx: Context) -> str:
+    names = ctx.data.channel_names if ctx.data is not None else []
+    return names[0] if names else "all"
+
+
+def _hyst_probes(ctx: Context) -> list[Probe]:
+    """An offset of 1 rad between the directions (the bound: the smallest offset)."""
+    return [Probe({"hysteresis_rad": np.asarray(1.0)}, "hysteresis_rad", "rad", _sensor_name(ctx))]
+
+
+def _delay_probes(ctx: Context) -> list[Probe]:
+    """A reading delay of 1 s (the bound: the smallest delay)."""
+    return [Probe({"delay_s": np.asarray(1.0)}, "delay_s", "s", _sensor_name(ctx))]
 
 
 def _hyst_plausible(ctx: Context, p: dict) -> str | None:
@@ -406,6 +421,7 @@ def _candidates() -> tuple:
         applies=_hyst_applies,
         plausible=_hyst_plausible,
         derived=_hyst_derived,
+        probes=_hyst_probes,
     )
     delay = Candidate(
         name="reading_delay",
@@ -421,6 +437,7 @@ def _candidates() -> tuple:
         ),
         applies=_delay_applies,
         plausible=_delay_plausible,
+        probes=_delay_probes,
     )
     scale = Candidate(
         name="scale_error",
