@@ -53,6 +53,10 @@ UNIVERSAL = {0: SIGN, 1: SIGN, -1: SIGN, 1e-300: GUARD}
 
 ALLOWED: dict[tuple[str, float], str] = {
     # engine
+    ("engine/_bounds.py", 1e-10): NUMERIC + " (rank tolerance of the probe's eigenvalues)",
+    ("engine/_bounds.py", 1e-12): GUARD + " (a probe the base spans entirely)",
+    ("engine/_bounds.py", 2): SHAPE
+    + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
     ("engine/_discover.py", 2): DOF + " (two cos / sin columns of one channel)",
     ("engine/_discover.py", 1e-6): NUMERIC + " (two line values equal to rounding)",
@@ -156,6 +160,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_noise.py", 4): DOF + " (a rotating and a common cos / sin pair per order)",
     ("kinds/sds/_sds_noise.py", 1e-12): GUARD + " (a zero time span)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
+    ("kinds/sds/_sds_terms.py", 4): SEARCH
+    + " (detection-bound probes: a step's first run at the quartiles of the runs)",
     ("kinds/sds/_sds_terms.py", 3): SEARCH + " (three starts)",
     ("kinds/sds/_sds_terms.py", 0.03): SEARCH + " (distinct start ratios)",
     ("kinds/sds/_sds_terms.py", 0.5): SHAPE,
@@ -168,6 +174,12 @@ ALLOWED: dict[tuple[str, float], str] = {
 
 
 CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
+    ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
+    + " (the probe's whitened norm: the fits are linear in it)",
+    ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
+    + " (the frequency at which the vibration's detection bound is stated, reported with it)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
