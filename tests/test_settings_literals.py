@@ -80,6 +80,11 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_fit.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_html.py", 2): SHAPE,
     ("engine/_html.py", 6): PLOT,
+    ("engine/_html.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
+    ("engine/_plots.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
+    ("engine/_located.py", 2): COUNT + " (a change searched over at least two rows)",
+    ("engine/_located.py", 24): SEARCH
+    + " (a profile's best row this far from the start: the scan is repeated around it)",
     ("engine/_html_discovery.py", 3): PLOT,
     ("engine/_html_discovery.py", 100): PLOT,
     ("engine/_html_discovery.py", 1.1): PLOT,
@@ -223,6 +228,8 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("_dispatch.py", "diagnose.max_effects"): ARGUMENT,
     ("engine/_engine.py", "run_engine.max_effects"): ARGUMENT,
     ("engine/_select.py", "select.max_effects"): ARGUMENT,
+    ("engine/_located.py", "scan_indices.near"): SEARCH
+    + " (rows scanned one by one around a profile's best, then spaced out)",
     ("engine/_discover.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_fit.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",

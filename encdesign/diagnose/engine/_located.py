@@ -130,3 +130,17 @@ def describe(lt: dict) -> str:
     else:
         iv = f"[{t0:.6g} s (run {r0}), {t1:.6g} s (run {r1})]"
     return f"t = {lt['t_s']:.6g} s (run {lt['run']}), {lvl} interval {iv}"
+
+
+def change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> tuple[int, np.ndarray]:
+    """Row index (into the run's kept rows ``x``) of the most likely single step in ``x``,
+    searched over the blocks next to block edge ``jb``: the first row after the step; and
+    the chi-square a step takes out at each row ``1 .. n - 1`` (its profile)."""
+    n = x.size
+    lo = int(sum(p.size for p in parts[: max(jb - 1, 0)]))
+    hi = int(sum(p.size for p in parts[: min(jb + 1, len(parts))]))
+    cs = np.cumsum(x - x.mean())[:-1]  # S_i: sum of the first i + 1 rows
+    i = np.arange(1, n, dtype=float)
+    stat = cs**2 * n / (i * (n - i))
+    lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
+    return int(lo + np.argmax(stat[lo - 1 : hi - 1])), stat

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from ._located import change_chi2, interval_of, located_time
+from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
 
 
@@ -515,7 +515,7 @@ def view_time(prep, rw) -> list[Finding]:
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
-            i_step, stat = _change_row(rw[rows_r, k], parts, jb)
+            i_step, stat = change_row(rw[rows_r, k], parts, jb)
             tstep = float(prep.rows["t"][rows_r[i_step]])
             detail = {
                 "shape": "step" if is_step else "transient_or_drift",
@@ -576,20 +576,6 @@ def view_time(prep, rw) -> list[Finding]:
         if note:
             g.detail["heads_note"] = note
     return merged
-
-
-def _change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> tuple[int, np.ndarray]:
-    """Row index (into the run's kept rows ``x``) of the most likely single step in ``x``,
-    searched over the blocks next to block edge ``jb``: the first row after the step; and
-    the chi-square a step takes out at each row ``1 .. n - 1`` (its profile)."""
-    n = x.size
-    lo = int(sum(p.size for p in parts[: max(jb - 1, 0)]))
-    hi = int(sum(p.size for p in parts[: min(jb + 1, len(parts))]))
-    cs = np.cumsum(x - x.mean())[:-1]  # S_i: sum of the first i + 1 rows
-    i = np.arange(1, n, dtype=float)
-    stat = cs**2 * n / (i * (n - i))
-    lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
-    return int(lo + np.argmax(stat[lo - 1 : hi - 1])), stat
 
 
 def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
