@@ -80,7 +80,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 4): COUNT,
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
-    ("kinds/multihead/_multihead_terms.py", 3): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/multihead/_reference_data.py", 2): COUNT,
