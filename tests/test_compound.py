@@ -10,7 +10,7 @@ import pytest
 
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose._dispatch import diagnose
-from encdesign.diagnose.kinds.multihead._multihead_terms import _bt_orders_supported
+from encdesign.diagnose.kinds.multihead._runout import _bt_orders_supported
 from encdesign.simulate._compound import COMPOUND_EFFECTS, GEOMETRIES, simulate_compound
 
 
