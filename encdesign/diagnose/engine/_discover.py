@@ -7,12 +7,20 @@ generic library organised by **frame** and **modulation**:
 * frames: ``disk`` (the order seen by every head with the phase ``m psi_k`` of its azimuth),
   ``shaft`` (one phase on every head: a motion of the shaft or of the reference),
   ``head <k>`` (one head only), ``hz`` (a fixed frequency: its own phase in every cell);
+  on an SDS record (rows: runs, one platform angle each; only the moving sensors' run-mean
+  channels carry a term) ``platform`` (an order of the platform angle, one phase on every
+  moving sensor; not identifiable without ``phi_ref``), ``azimuth`` (an order of
+  ``phi + psi_m``: every moving sensor with the phase ``m psi_m`` of its azimuth) and
+  ``sensor m<k>`` (one moving sensor only: an error in the frame of that sensor);
 * modulations (per *cell*: rows of one run, one direction and one steady speed):
   ``static``, ``speed`` (amplitude ``(|omega| / omega_0)^beta``, the exponent fitted with a
   standard error), ``direction`` (opposite sign in the two directions), ``forward`` /
   ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
   own amplitude and phase), ``growth`` (amplitude linear in the time across runs),
-  ``temperature`` (linear in ``temp_c``).
+  ``temperature`` (linear in ``temp_c``), ``step`` (the amplitude switches on at one change
+  time: the best of the times the finder's views located (``time``, ``order_step``,
+  ``run_step``) and :data:`STEP_BINS` change points over the kept rows, scanned per line on
+  the residual; the scan is counted in the multiple-testing threshold).
 
 Every term is a linear (``speed``: nonlinear in ``beta`` only) restriction of one *full*
 block per line: cos/sin of the line's phase, per cell and channel, times the within-cell
@@ -26,10 +34,11 @@ those sums without another pass.
 Selection is **orthogonal forward regression**: at each step the term with the largest
 in-sample chi-square drop less its multiple-testing threshold ``chi2.isf(alpha / N, q)``
 (``N`` terms in the library, ``q`` parameters: Bonferroni, which also prefers the smaller of
-two nested terms) enters when that margin is positive and its K-fold held-out gain (fitted
-without each fold, scored on it) is positive. The same selection repeated without each fold
-in turn gives each term's inclusion probability; a term enters only when it is at least
-``INCLUSION_MIN``.
+two nested terms; where the library holds step terms, half of ``alpha`` goes to them, each
+counted once per change point scanned, and half to the others) enters when that margin is
+positive and its K-fold held-out gain (fitted without each fold, scored on it) is positive.
+The same selection repeated without each fold in turn gives each term's inclusion
+probability; a term enters only when it is at least ``INCLUSION_MIN``.
 """
 
 from __future__ import annotations
@@ -69,6 +78,17 @@ that small model error."""
 BETA_RANGE = (-4.0, 4.0)
 """Range searched for a speed exponent."""
 
+STEP_BINS = 32
+"""Equal-count bins of the kept rows (in time order) whose edges are the change points a
+step term scans (plus the times the finder's views located); a record with fewer rows (an
+SDS record: one row per run) scans every row boundary."""
+
+STEP_MARGIN = 0.02
+"""Share of the kept rows (at least 2) a step leaves on either side of its change point."""
+
+STEP_VIEWS = ("time", "order_step", "run_step")
+"""Views whose located change times a step term tries."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Line:
@@ -89,7 +109,8 @@ class Line:
 @dataclasses.dataclass
 class Term:
     """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
-    the line's full block; ``beta`` the speed exponent (``speed`` modulation)."""
+    the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
+    change time (``step`` modulation, :func:`locate_steps`)."""
 
     line: int
     frame: str
@@ -98,6 +119,7 @@ class Term:
     beta: float | None = None
     beta_se: float | None = None
     H0: np.ndarray | None = None
+    step: dict | None = None
 
     @property
     def name(self) -> str:
@@ -110,7 +132,8 @@ class Term:
 def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Line], list[int]]:
     """The located lines of ``findings`` (``_views.Finding``) and, per finding, the index of
     its first line (-1: a located structure no line models, e.g. a broad band; -2: a line
-    beyond the first :data:`MAX_LINES`)."""
+    beyond the first :data:`MAX_LINES`; -3: an SDS candidate's matched view, the pattern of
+    a catalog effect, which discovery never takes)."""
     out: list[Line] = []
     first: list[int] = []
 
@@ -126,7 +149,7 @@ def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Lin
         idx = -1
         orders = [o for o in w.get("orders", []) if math.isfinite(o)]
         freqs = [h for h in w.get("frequencies_hz", []) if math.isfinite(h)]
-        if f.view == "orders" and orders:
+        if f.view in ("orders", "common_orders") and orders:
             idx = add(Line("order", float(round(orders[0]))))
         elif f.view == "spectrum" and (orders or freqs):
             if d.get("fixed_in") == "frequency" and freqs:
@@ -137,12 +160,31 @@ def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Lin
             elif orders:
                 nu = float(np.median(orders))
                 idx = add(Line("frac", round(nu, 3))) if nu > 0 else -1
-        elif f.view in ("time", "drift", "direction", "speed"):
+        elif f.view in ("time", "drift", "direction", "speed", "run_step"):
             idx = add(Line("order", 0.0))
+        elif f.view.startswith("sds_"):
+            idx = -3  # a catalog candidate's matched view: its own pattern, refused by its rule
         elif f.view == "line_phase" and signal_periods > 0:
             idx = add(Line("order", float(signal_periods)))
         first.append(idx)
     return out[:MAX_LINES], [i if i < MAX_LINES else -2 for i in first]
+
+
+def located_steps(findings: Sequence[Any]) -> list[tuple[float, str]]:
+    """``(tau_s, view)``: the change times (on the end-to-end axis ``tau``) the finder's
+    views located (:data:`STEP_VIEWS`); an SDS ``run_step`` gives its first run's index in
+    ``first_run_index`` (placed on that row by :func:`locate_steps`)."""
+    out = []
+    for f in findings:
+        d = f.detail
+        if f.view not in STEP_VIEWS:
+            continue
+        if f.view == "run_step" and d.get("shape") == "step":
+            out.append((float(d["first_run_index"]), "run_step"))
+        elif f.view in ("time", "order_step") and "global_step_time_s" in d:
+            if f.view == "order_step" or d.get("shape") == "step" or d.get("step_significant"):
+                out.append((float(d["global_step_time_s"]), f.view))
+    return out
 
 
 # ----------------------------------------------------------------------------- cells
@@ -152,6 +194,8 @@ def _cells(prep) -> tuple[np.ndarray, dict]:
     """Cell index per row (-1: not kept) and the cells' run, direction and speed."""
     keep = prep.keep
     run = np.asarray(prep.run)
+    if prep.ctx.kind == "sds":  # one row per run, nothing varies but the time: one cell
+        run = np.zeros(prep.n, dtype=int)
     om = np.asarray(prep.rows["omega"], float) if "omega" in prep.rows else np.zeros(prep.n)
     sgn = np.where(om < 0, -1, 1)
     lsp = np.round(np.log(np.maximum(np.abs(om), 1e-12)) / 0.05).astype(np.int64)
@@ -203,16 +247,122 @@ def _phase_basis(line: Line, th: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.stack([np.cos(ph), np.sin(ph)], 1)
 
 
+def _tau(prep) -> np.ndarray:
+    return np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
+
+
+def _sds_channels(prep) -> tuple[int, np.ndarray, bool] | None:
+    """SDS: ``(M, psi_m, projected)``: the moving sensors (their run-mean channels are the
+    first ``M``), their azimuths (rad), and whether terms are projected on the differences
+    between them (no ``phi_ref``); ``None`` for another kind."""
+    if prep.ctx.kind != "sds":
+        return None
+    psi = np.asarray(prep.consts["psi_m"], float).ravel()
+    return psi.size, psi, float(np.asarray(prep.consts.get("proj", 0.0))) > 0
+
+
+def locate_steps(prep, resid: np.ndarray, lines: Sequence[Line], findings) -> list[dict | None]:
+    """Per line, the change time a ``step`` term uses (``None``: no step term: a line whose
+    phase is fitted per cell, or too few rows): the change point, among the
+    :data:`STEP_BINS` equal-count bin edges of the kept rows and the times the finder's
+    views located (:func:`located_steps`), where a step of the line's cos / sin (each
+    channel its own, the constant line projected out) takes the most chi-square from the
+    residual. ``n_tests``: the change points scanned (the term's multiple-testing count)."""
+    kidx = np.flatnonzero(prep.keep)
+    tau = _tau(prep)
+    order = kidx[np.argsort(tau[kidx], kind="stable")]
+    n = order.size
+    margin = max(2, int(STEP_MARGIN * n))
+    if n < 2 * margin + 1:
+        return [None] * len(lines)
+    pos = set(np.unique(np.round(np.linspace(0, n, min(STEP_BINS, n) + 1)).astype(int))[1:-1])
+    ts = tau[order]
+    src: dict[int, str] = {}
+    for v, view in located_steps(findings):
+        if view == "run_step":  # the first run's row (SDS: one row per run)
+            p = int(np.searchsorted(order, int(v)))
+        else:
+            p = int(np.searchsorted(ts, v))
+        src[p] = view
+        pos.add(p)
+    cand = np.array(sorted(p for p in pos if margin <= p <= n - margin), dtype=int)
+    if cand.size == 0:
+        return [None] * len(lines)
+    sds = _sds_channels(prep)
+    chans = np.arange(sds[0]) if sds else np.arange(prep.n_channels)
+    sig = np.asarray(prep.sigma, float)[chans]
+    th = np.asarray(prep.rows["theta"], float)[order]
+    t = np.asarray(prep.rows["t"], float)[order]
+    r = np.asarray(resid, float)[order][:, chans] / sig[None, :]
+    seg = np.concatenate([[0], cand])
+    out: list[dict | None] = []
+    for ln in lines:
+        if ln.kind != "order":
+            out.append(None)
+            continue
+        B = _phase_basis(ln, th, t)  # (n, nj)
+        Gs = np.add.reduceat(B[:, :, None] * B[:, None, :], seg, axis=0)  # per segment
+        gs = np.add.reduceat(B[:, :, None] * r[:, None, :], seg, axis=0)  # (segs, nj, C)
+        GT, gT = Gs.sum(0), gs.sum(0)
+        GU = np.cumsum(Gs[::-1], 0)[::-1][1:]  # suffix from each change point
+        gU = np.cumsum(gs[::-1], 0)[::-1][1:]
+        GTi = np.linalg.pinv(GT)
+
+        def gain(GUi, gUi, GTi=GTi, gT=gT):
+            e = gUi - GUi @ GTi @ gT  # (nj, C)
+            Sc = GUi - GUi @ GTi @ GUi
+            return float(np.sum(e * (np.linalg.pinv(Sc) @ e)))
+
+        gains = [gain(GU[i], gU[i]) for i in range(cand.size)]
+        bi = int(np.argmax(gains))
+        p, n_tests = int(cand[bi]), int(cand.size)
+        if p not in src:  # refined to the row between the neighbouring change points
+            lo = int(cand[bi - 1]) + 1 if bi > 0 else margin
+            hi = int(cand[bi + 1]) if bi + 1 < cand.size else n - margin + 1
+            if hi - lo > 1:
+                Gt, gt = B[hi:].T @ B[hi:], np.einsum("nj,nc->jc", B[hi:], r[hi:])  # from hi on
+                Bl, rl = B[lo:hi], r[lo:hi]
+                Gr = np.cumsum((Bl[:, :, None] * Bl[:, None, :])[::-1], 0)[::-1] + Gt
+                gr = np.cumsum((Bl[:, :, None] * rl[:, None, :])[::-1], 0)[::-1] + gt
+                gi = [gain(Gr[j], gr[j]) for j in range(hi - lo)]
+                p = lo + int(np.argmax(gi))
+                n_tests += hi - lo - 1
+        out.append(
+            {
+                "row": int(order[p]),
+                "row_before": int(order[p - 1]),
+                "tau_s": float(ts[p]),
+                "n_tests": n_tests,
+                "located_by": src.get(p, "scan"),
+            }
+        )
+    return out
+
+
 def accumulate(
-    prep, fitter, terms: Sequence[Any], resid: np.ndarray, lines: Sequence[Line], cell, cinfo
+    prep,
+    fitter,
+    terms: Sequence[Any],
+    resid: np.ndarray,
+    lines: Sequence[Line],
+    cell,
+    cinfo,
+    steps: Sequence[dict | None] | None = None,
 ) -> Sums:
-    """One pass over the rows: the per-fold sums of every line's full block (see module)."""
+    """One pass over the rows: the per-fold sums of every line's full block (see module);
+    ``steps``: per line its change time (:func:`locate_steps`), the ``step`` block."""
     K = prep.settings.n_folds
     C = prep.n_channels
     S = len(cinfo["speed"])
     sig = np.asarray(prep.sigma, float)
     has_temp = prep.ctx.driver_name != "time" and "driver" in prep.rows
-    blocks = ["static", "growth"] + (["temperature"] if has_temp else [])
+    steps = list(steps) if steps is not None else [None] * len(lines)
+    has_step = any(st is not None for st in steps)
+    blocks = (
+        ["static", "growth"]
+        + (["temperature"] if has_temp else [])
+        + (["step"] if has_step else [])
+    )
     nb = len(blocks)
     layout, slices, q0 = [], [], 0
     for ln in lines:
@@ -223,7 +373,7 @@ def accumulate(
         q0 += size
     Q = q0
     U = sum(nb * lay[3] for lay in layout)  # compact columns (before cell x channel)
-    tau_all = np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
+    tau_all = _tau(prep)
     kept_tau = tau_all[prep.keep]
     tmid = float(np.mean(kept_tau)) if kept_tau.size else 0.0
     tsc = float(np.ptp(kept_tau)) / 2 or 1.0
@@ -260,10 +410,13 @@ def accumulate(
         if has_temp:
             mods.append((np.asarray(x["driver"][: b - a], float)[kb] - dmid) / dsc)
         cols = []
-        for ln in lines:
+        for ln, stp in zip(lines, steps):
             B = _phase_basis(ln, th, t)
             for m in mods:
                 cols.append(B * m[:, None])
+            if has_step:
+                on = tau >= stp["tau_s"] if stp is not None else np.zeros(th.size, bool)
+                cols.append(B * on[:, None])
         Xc = np.concatenate(cols, 1)  # (rows, U)
         rw = (resid[a:b] / sig[None, :])[kb]
         fo = prep.fold[a:b][kb]
@@ -352,19 +505,54 @@ def _psolve(
 # ----------------------------------------------------------------------------- library
 
 
-def _frame_maps(line: Line, C: int, alpha: np.ndarray) -> dict[str, np.ndarray]:
+def _rotation(m: float, a: np.ndarray) -> np.ndarray:
+    """``(len(a), 2, 2)``: ``C cos(m(theta - a)) + S sin(m(theta - a))`` on the cos / sin of
+    ``m theta``."""
+    c, s = np.cos(m * a), np.sin(m * a)
+    return np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
+
+
+def _sds_frame_maps(line: Line, C: int, sds: tuple[int, np.ndarray, bool]) -> dict:
+    """The SDS frames (see module) on the moving sensors' run-mean channels (the revolution
+    contrasts carry no static term), projected on the differences between the moving
+    sensors where the record has no ``phi_ref`` (as the data and every catalog term are)."""
+    Mn, psi, proj = sds
+    nj = 1 if (line.kind == "order" and line.value == 0) else 2
+    eye = np.eye(nj)
+
+    def lift(Mm: np.ndarray) -> np.ndarray:
+        if proj:
+            Mm = Mm - Mm.mean(0, keepdims=True)
+        full = np.zeros((C, *Mm.shape[1:]))
+        full[:Mn] = Mm
+        return full
+
+    out: dict[str, np.ndarray] = {}
+    if not proj:
+        out["platform"] = lift(np.repeat(eye[None], Mn, 0))
+    if line.kind == "order" and line.value > 0 and Mn > 1:
+        out["azimuth"] = lift(_rotation(line.value, -psi))  # an order of phi + psi_m
+    for k in range(Mn if Mn > 1 else 0):
+        Mk = np.zeros((Mn, nj, nj))
+        Mk[k] = eye
+        out[f"sensor m{k}"] = lift(Mk)
+    return out
+
+
+def _frame_maps(
+    line: Line, C: int, alpha: np.ndarray, sds: tuple[int, np.ndarray, bool] | None = None
+) -> dict[str, np.ndarray]:
     """Per frame, ``M`` (C, nj, nj'): each channel's basis coefficients from the frame's
-    parameters (``nj'``)."""
+    parameters (``nj'``); ``sds``: the SDS frames instead (:func:`_sds_frame_maps`)."""
+    if sds is not None:
+        return _sds_frame_maps(line, C, sds)
     nj = 1 if (line.kind == "order" and line.value == 0) else 2
     eye = np.eye(nj)
     out: dict[str, np.ndarray] = {}
     if C > 1 or nj == 2:
         out["shaft"] = np.repeat(eye[None], C, 0)
     if line.kind == "order" and line.value > 0 and C > 1:
-        ph = line.value * np.asarray(alpha, float)
-        c, s = np.cos(ph), np.sin(ph)
-        # C cos(m(theta - a)) + S sin(m(theta - a)) on the cos / sin of m theta
-        out["disk"] = np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
+        out["disk"] = _rotation(line.value, np.asarray(alpha, float))
     if C > 1:
         for k in range(C):
             M = np.zeros((C, nj, nj))
@@ -387,15 +575,24 @@ def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
     return H.reshape(nb * S * C * nj, Gn * njp)
 
 
-def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> list[Term]:
+def library(
+    lines: Sequence[Line],
+    sums: Sums,
+    cinfo: dict,
+    C: int,
+    alpha,
+    sds: tuple[int, np.ndarray, bool] | None = None,
+    steps: Sequence[dict | None] | None = None,
+) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
     sp, dr = cinfo["speed"], cinfo["direction"]
+    steps = list(steps) if steps is not None else [None] * len(lines)
     out: list[Term] = []
     for li, ln in enumerate(lines):
         lay = sums.layout[li]
         per_cell_phase = ln.kind in ("hz", "frac")
-        for fr, M in _frame_maps(ln, C, alpha).items():
+        for fr, M in _frame_maps(ln, C, alpha, sds).items():
             name = "hz" if ln.kind == "hz" and fr == "shaft" else fr
             if per_cell_phase:
                 if S <= MAX_CELLS:
@@ -419,6 +616,9 @@ def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> li
             out.append(Term(li, name, "growth", _H(lay, 1, M, one)))
             if "temperature" in sums.blocks:
                 out.append(Term(li, name, "temperature", _H(lay, 2, M, one)))
+            if steps[li] is not None:
+                bl = sums.blocks.index("step")
+                out.append(Term(li, name, "step", _H(lay, bl, M, one), step=steps[li]))
     return out
 
 
@@ -575,8 +775,8 @@ class State:
 
 def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
     """The discovery state of a record (``None``: discovery does not apply: nothing
-    located, an SDS record, no shaft angle and time, no line to model)."""
-    if not findings or prep.ctx.kind == "sds" or not {"theta", "t"} <= set(prep.rows):
+    located, no shaft (platform) angle and time, no line to model)."""
+    if not findings or not {"theta", "t"} <= set(prep.rows):
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     lines, first = lines_of(findings, L)
@@ -587,17 +787,30 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
     if alpha.size != C:
         alpha = np.zeros(C)
-    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
+    sds = _sds_channels(prep)
+    steps = locate_steps(prep, resid, lines, findings)
+    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha)
+    lib = library(lines, sums, cinfo, C, alpha, sds, steps)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    N = max(len(lib), 1)
-    thresh = np.array(
-        [stats.chi2.isf(ALPHA / N, tm.H.shape[1] + (tm.beta is not None)) for tm in lib]
-    )
-    return State(lines, first, cinfo, sums, lib, thresh, infl, L)
+    return State(lines, first, cinfo, sums, lib, thresholds(lib), infl, L)
+
+
+def thresholds(lib: Sequence[Term]) -> np.ndarray:
+    """Each term's chi-square threshold (Bonferroni over the library, :data:`ALPHA`): the
+    step terms, each counted once per change point scanned, share half of ``ALPHA`` and the
+    others the other half (all of it when there is no step term)."""
+    n_step = sum(tm.step["n_tests"] for tm in lib if tm.step is not None)
+    n_other = sum(1 for tm in lib if tm.step is None)
+    share = 0.5 if n_step and n_other else 1.0
+    out = []
+    for tm in lib:
+        n = n_step if tm.step is not None else n_other
+        q = tm.H.shape[1] + (tm.beta is not None)
+        out.append(stats.chi2.isf(ALPHA * share / max(n, 1), q))
+    return np.asarray(out)
 
 
 def discover(
@@ -615,7 +828,7 @@ def discover(
     (``_views.Finding``)."""
     st = build(prep, fitter, terms, resid, findings)
     if st is None:
-        if findings and prep.ctx.kind != "sds":
+        if findings:
             return [_none("no line, order or time structure to model (a broad band)")] * len(
                 findings
             )
@@ -659,18 +872,29 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
     Hwo = _embed(sums, [lib[j] for j in kept if j != i])
     ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
     ln = st.lines[tm.line]
+    st_sds = _sds_channels(prep)
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
     amp = float(np.sqrt(np.mean(np.sum(pairs**2, 1))))
     amp_se = float(np.sqrt(max(np.trace(cv), 0.0) / max(pairs.shape[0], 1)))
-    runs = sorted({int(r) for r in cinfo["run"]})
+    runs_id = [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in cinfo["run"]]
+    if prep.ctx.kind == "sds" or tm.step is not None:  # the runs of the rows (from the step)
+        on = prep.keep & (_tau(prep) >= (tm.step["tau_s"] if tm.step else -np.inf))
+        runs_id = [int(prep.run_ids[r]) for r in np.unique(np.asarray(prep.run)[on])]
+    runs = sorted(set(runs_id))
     if tm.modulation.startswith("cell "):
-        runs = [int(cinfo["run"][int(tm.modulation.split()[1])])]
+        runs = [runs_id[int(tm.modulation.split()[1])]]
     dirs = sorted({int(d) for d in cinfo["direction"]})
     if tm.modulation in ("forward", "reverse"):
         dirs = [1 if tm.modulation == "forward" else -1]
     names = list(prep.kd.channel_names)
-    heads = names if not tm.frame.startswith("head ") else [names[int(tm.frame.split()[1])]]
+    heads = names
+    if tm.frame.startswith("head "):
+        heads = [names[int(tm.frame.split()[1])]]
+    elif tm.frame.startswith("sensor "):
+        heads = [tm.frame.split()[1]]
+    elif prep.ctx.kind == "sds":  # the moving sensors' run-mean channels
+        heads = [c for c in names if "." not in c]
     scaling = None
     if tm.beta is not None:
         scaling = {
@@ -686,7 +910,7 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
         "frame": tm.frame,
         "modulation": tm.modulation,
         "heads": heads,
-        "runs": [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in runs],
+        "runs": runs,
         "directions": ["positive" if d > 0 else "negative" for d in dirs],
         "scaling": scaling,
         "params": {
@@ -696,9 +920,11 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
+        **({"step": _step_json(prep, tm.step)} if tm.step is not None else {}),
         "heldout_gain_chi2": float(ho_all - ho_wo),
         "inclusion_probability": float(incl[i]),
-        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names)),
+        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names))
+        + (_step_words(prep, tm.step) if tm.step is not None else ""),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
@@ -707,7 +933,34 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             if tm.modulation.startswith("cell ")
             else None,
             "speed_ref_rad_s": float(np.exp(np.mean(np.log(np.maximum(cinfo["speed"], 1e-12))))),
+            **({"step_tau_s": tm.step["tau_s"]} if tm.step is not None else {}),
+            **({"n_moving": int(st_sds[0]), "projected": bool(st_sds[2])} if st_sds else {}),
         },
+    }
+
+
+def _step_words(prep, step: dict) -> str:
+    j = _step_json(prep, step)
+    how = (
+        f"located by the finder's {j['located_by']} view"
+        if j["located_by"] != "scan"
+        else f"the best of {j['n_change_points']} change points scanned"
+    )
+    return f" It switches on at t = {j['time_s']:.6g} s in run {j['run']} ({how})."
+
+
+def _step_json(prep, step: dict) -> dict:
+    """A step's change time on the recording's own ``t``: between the last kept row before
+    it and the first after it, with that row's run."""
+    t = np.asarray(prep.rows["t"], float)
+    a, b = step["row"], step["row_before"]
+    return {
+        "time_s": float(t[a]),
+        "time_before_s": float(t[b]),
+        "run": int(prep.run_ids[int(prep.run[a])]),
+        "tau_s": float(step["tau_s"]),
+        "located_by": step["located_by"],
+        "n_change_points": int(step["n_tests"]),
     }
 
 
@@ -717,6 +970,11 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
     N = len(st.lib)
     if li == -2:
         return _none(f"beyond the first {MAX_LINES} located lines discovery models")
+    if li == -3:
+        return _none(
+            "the matched view of a catalog candidate: its own pattern, which the catalog "
+            "refused by its rule; discovery never takes a catalog effect's structure"
+        )
     if li < 0:
         return _none("no line, order or time structure to model (a broad band)")
     mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line == li]
