@@ -51,6 +51,21 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
+from ._discover_lines import (
+    MAX_LINES,
+    STEP_EXACT_ROWS,
+    Line,
+    drive_neighbours,
+    frame_maps,
+    hmap,
+    lines_of,
+    locate_steps,
+    phase_basis,
+    sds_channels,
+    step_json,
+    step_words,
+    tau_of,
+)
 from ._discover_words import reading
 
 ALPHA = 0.01
@@ -61,9 +76,6 @@ INCLUSION_MIN = 0.6
 
 MAX_TERMS = 4
 """Terms the forward selection may add over all lines."""
-
-MAX_LINES = 10
-"""Located lines modelled (the strongest findings first)."""
 
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
@@ -77,33 +89,6 @@ that small model error."""
 
 BETA_RANGE = (-4.0, 4.0)
 """Range searched for a speed exponent."""
-
-STEP_BINS = 32
-"""Equal-count bins of the kept rows (in time order) whose edges are the change points a
-step term scans (plus the times the finder's views located); a record with fewer rows (an
-SDS record: one row per run) scans every row boundary."""
-
-STEP_MARGIN = 0.02
-"""Share of the kept rows (at least 2) a step leaves on either side of its change point."""
-
-STEP_VIEWS = ("time", "order_step", "run_step")
-"""Views whose located change times a step term tries."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Line:
-    """A located line: ``kind`` ``order`` (integer shaft order, ``value`` cycles per turn;
-    0: an offset), ``frac`` (a fractional order) or ``hz`` (``value`` Hz)."""
-
-    kind: str
-    value: float
-
-    def label(self) -> str:
-        if self.kind == "hz":
-            return f"{self.value:.4g} Hz"
-        if self.kind == "order" and self.value == 0:
-            return "offset (order 0)"
-        return f"order {self.value:g}"
 
 
 @dataclasses.dataclass
@@ -127,64 +112,6 @@ class Term:
 
 
 # ----------------------------------------------------------------------------- lines
-
-
-def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Line], list[int]]:
-    """The located lines of ``findings`` (``_views.Finding``) and, per finding, the index of
-    its first line (-1: a located structure no line models, e.g. a broad band; -2: a line
-    beyond the first :data:`MAX_LINES`; -3: an SDS candidate's matched view, the pattern of
-    a catalog effect, which discovery never takes)."""
-    out: list[Line] = []
-    first: list[int] = []
-
-    def add(ln: Line) -> int:
-        for i, o in enumerate(out):
-            if o.kind == ln.kind and abs(o.value - ln.value) <= 1e-6 * max(1.0, abs(ln.value)):
-                return i
-        out.append(ln)
-        return len(out) - 1
-
-    for f in findings:
-        w, d = f.where, f.detail
-        idx = -1
-        orders = [o for o in w.get("orders", []) if math.isfinite(o)]
-        freqs = [h for h in w.get("frequencies_hz", []) if math.isfinite(h)]
-        if f.view in ("orders", "common_orders") and orders:
-            idx = add(Line("order", float(round(orders[0]))))
-        elif f.view == "spectrum" and (orders or freqs):
-            if d.get("fixed_in") == "frequency" and freqs:
-                idx = add(Line("hz", float(np.median(freqs))))
-            elif d.get("integer_order") and orders:
-                m = float(round(np.median(orders)))
-                idx = add(Line("order", m)) if m > 0 else -1
-            elif orders:
-                nu = float(np.median(orders))
-                idx = add(Line("frac", round(nu, 3))) if nu > 0 else -1
-        elif f.view in ("time", "drift", "direction", "speed", "run_step"):
-            idx = add(Line("order", 0.0))
-        elif f.view.startswith("sds_"):
-            idx = -3  # a catalog candidate's matched view: its own pattern, refused by its rule
-        elif f.view == "line_phase" and signal_periods > 0:
-            idx = add(Line("order", float(signal_periods)))
-        first.append(idx)
-    return out[:MAX_LINES], [i if i < MAX_LINES else -2 for i in first]
-
-
-def located_steps(findings: Sequence[Any]) -> list[tuple[float, str]]:
-    """``(tau_s, view)``: the change times (on the end-to-end axis ``tau``) the finder's
-    views located (:data:`STEP_VIEWS`); an SDS ``run_step`` gives its first run's index in
-    ``first_run_index`` (placed on that row by :func:`locate_steps`)."""
-    out = []
-    for f in findings:
-        d = f.detail
-        if f.view not in STEP_VIEWS:
-            continue
-        if f.view == "run_step" and d.get("shape") == "step":
-            out.append((float(d["first_run_index"]), "run_step"))
-        elif f.view in ("time", "order_step") and "global_step_time_s" in d:
-            if f.view == "order_step" or d.get("shape") == "step" or d.get("step_significant"):
-                out.append((float(d["global_step_time_s"]), f.view))
-    return out
 
 
 # ----------------------------------------------------------------------------- cells
@@ -239,104 +166,20 @@ class Sums:
     scales: dict
 
 
-def _phase_basis(line: Line, th: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``(rows, n_basis)`` cos/sin of the line's phase (order 0: a constant)."""
-    if line.kind == "order" and line.value == 0:
-        return np.ones((th.size, 1))
-    ph = 2 * np.pi * line.value * t if line.kind == "hz" else line.value * th
-    return np.stack([np.cos(ph), np.sin(ph)], 1)
+def _jac_chunk(prep, fitter, terms: Sequence[Any], a: int, b: int, x: dict) -> np.ndarray:
+    """The final catalog model's Jacobian on rows ``a:b`` (rows, C, p), projected like the
+    data and whitened."""
+    Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
+    J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+    if prep.kd.project:
+        J = J - J.mean(1, keepdims=True)
+    return J / np.asarray(prep.sigma, float)[None, :, None]
 
 
-def _tau(prep) -> np.ndarray:
-    return np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
-
-
-def _sds_channels(prep) -> tuple[int, np.ndarray, bool] | None:
-    """SDS: ``(M, psi_m, projected)``: the moving sensors (their run-mean channels are the
-    first ``M``), their azimuths (rad), and whether terms are projected on the differences
-    between them (no ``phi_ref``); ``None`` for another kind."""
-    if prep.ctx.kind != "sds":
-        return None
-    psi = np.asarray(prep.consts["psi_m"], float).ravel()
-    return psi.size, psi, float(np.asarray(prep.consts.get("proj", 0.0))) > 0
-
-
-def locate_steps(prep, resid: np.ndarray, lines: Sequence[Line], findings) -> list[dict | None]:
-    """Per line, the change time a ``step`` term uses (``None``: no step term: a line whose
-    phase is fitted per cell, or too few rows): the change point, among the
-    :data:`STEP_BINS` equal-count bin edges of the kept rows and the times the finder's
-    views located (:func:`located_steps`), where a step of the line's cos / sin (each
-    channel its own, the constant line projected out) takes the most chi-square from the
-    residual. ``n_tests``: the change points scanned (the term's multiple-testing count)."""
-    kidx = np.flatnonzero(prep.keep)
-    tau = _tau(prep)
-    order = kidx[np.argsort(tau[kidx], kind="stable")]
-    n = order.size
-    margin = max(2, int(STEP_MARGIN * n))
-    if n < 2 * margin + 1:
-        return [None] * len(lines)
-    pos = set(np.unique(np.round(np.linspace(0, n, min(STEP_BINS, n) + 1)).astype(int))[1:-1])
-    ts = tau[order]
-    src: dict[int, str] = {}
-    for v, view in located_steps(findings):
-        if view == "run_step":  # the first run's row (SDS: one row per run)
-            p = int(np.searchsorted(order, int(v)))
-        else:
-            p = int(np.searchsorted(ts, v))
-        src[p] = view
-        pos.add(p)
-    cand = np.array(sorted(p for p in pos if margin <= p <= n - margin), dtype=int)
-    if cand.size == 0:
-        return [None] * len(lines)
-    sds = _sds_channels(prep)
-    chans = np.arange(sds[0]) if sds else np.arange(prep.n_channels)
-    sig = np.asarray(prep.sigma, float)[chans]
-    th = np.asarray(prep.rows["theta"], float)[order]
-    t = np.asarray(prep.rows["t"], float)[order]
-    r = np.asarray(resid, float)[order][:, chans] / sig[None, :]
-    seg = np.concatenate([[0], cand])
-    out: list[dict | None] = []
-    for ln in lines:
-        if ln.kind != "order":
-            out.append(None)
-            continue
-        B = _phase_basis(ln, th, t)  # (n, nj)
-        Gs = np.add.reduceat(B[:, :, None] * B[:, None, :], seg, axis=0)  # per segment
-        gs = np.add.reduceat(B[:, :, None] * r[:, None, :], seg, axis=0)  # (segs, nj, C)
-        GT, gT = Gs.sum(0), gs.sum(0)
-        GU = np.cumsum(Gs[::-1], 0)[::-1][1:]  # suffix from each change point
-        gU = np.cumsum(gs[::-1], 0)[::-1][1:]
-        GTi = np.linalg.pinv(GT)
-
-        def gain(GUi, gUi, GTi=GTi, gT=gT):
-            e = gUi - GUi @ GTi @ gT  # (nj, C)
-            Sc = GUi - GUi @ GTi @ GUi
-            return float(np.sum(e * (np.linalg.pinv(Sc) @ e)))
-
-        gains = [gain(GU[i], gU[i]) for i in range(cand.size)]
-        bi = int(np.argmax(gains))
-        p, n_tests = int(cand[bi]), int(cand.size)
-        if p not in src:  # refined to the row between the neighbouring change points
-            lo = int(cand[bi - 1]) + 1 if bi > 0 else margin
-            hi = int(cand[bi + 1]) if bi + 1 < cand.size else n - margin + 1
-            if hi - lo > 1:
-                Gt, gt = B[hi:].T @ B[hi:], np.einsum("nj,nc->jc", B[hi:], r[hi:])  # from hi on
-                Bl, rl = B[lo:hi], r[lo:hi]
-                Gr = np.cumsum((Bl[:, :, None] * Bl[:, None, :])[::-1], 0)[::-1] + Gt
-                gr = np.cumsum((Bl[:, :, None] * rl[:, None, :])[::-1], 0)[::-1] + gt
-                gi = [gain(Gr[j], gr[j]) for j in range(hi - lo)]
-                p = lo + int(np.argmax(gi))
-                n_tests += hi - lo - 1
-        out.append(
-            {
-                "row": int(order[p]),
-                "row_before": int(order[p - 1]),
-                "tau_s": float(ts[p]),
-                "n_tests": n_tests,
-                "located_by": src.get(p, "scan"),
-            }
-        )
-    return out
+def _jacobian(prep, fitter, terms: Sequence[Any]) -> np.ndarray:
+    """:func:`_jac_chunk` on every row (n, C, p)."""
+    parts = [_jac_chunk(prep, fitter, terms, a, b, x) for a, b, x in fitter.chunks()]
+    return np.concatenate(parts, 0)
 
 
 def accumulate(
@@ -348,9 +191,12 @@ def accumulate(
     cell,
     cinfo,
     steps: Sequence[dict | None] | None = None,
+    jac: np.ndarray | None = None,
 ) -> Sums:
     """One pass over the rows: the per-fold sums of every line's full block (see module);
-    ``steps``: per line its change time (:func:`locate_steps`), the ``step`` block."""
+    ``steps``: per line its change time (:func:`locate_steps`), the ``step`` block;
+    ``jac``: the catalog model's whitened Jacobian on every row (:func:`_jacobian`), else
+    evaluated per chunk."""
     K = prep.settings.n_folds
     C = prep.n_channels
     S = len(cinfo["speed"])
@@ -373,7 +219,7 @@ def accumulate(
         q0 += size
     Q = q0
     U = sum(nb * lay[3] for lay in layout)  # compact columns (before cell x channel)
-    tau_all = _tau(prep)
+    tau_all = tau_of(prep)
     kept_tau = tau_all[prep.keep]
     tmid = float(np.mean(kept_tau)) if kept_tau.size else 0.0
     tsc = float(np.ptp(kept_tau)) / 2 or 1.0
@@ -391,11 +237,7 @@ def accumulate(
         kb = prep.keep[a:b]
         if not kb.any():
             continue
-        Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
-        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, C, 0))
-        if prep.kd.project:
-            J = J - J.mean(1, keepdims=True)
-        J = (J / sig[None, :, None])[kb]
+        J = (jac[a:b] if jac is not None else _jac_chunk(prep, fitter, terms, a, b, x))[kb]
         if p is None:
             p = J.shape[2]
             JX = np.zeros((K, p, S, U, C))
@@ -411,7 +253,7 @@ def accumulate(
             mods.append((np.asarray(x["driver"][: b - a], float)[kb] - dmid) / dsc)
         cols = []
         for ln, stp in zip(lines, steps):
-            B = _phase_basis(ln, th, t)
+            B = phase_basis(ln, th, t)
             for m in mods:
                 cols.append(B * m[:, None])
             if has_step:
@@ -505,76 +347,6 @@ def _psolve(
 # ----------------------------------------------------------------------------- library
 
 
-def _rotation(m: float, a: np.ndarray) -> np.ndarray:
-    """``(len(a), 2, 2)``: ``C cos(m(theta - a)) + S sin(m(theta - a))`` on the cos / sin of
-    ``m theta``."""
-    c, s = np.cos(m * a), np.sin(m * a)
-    return np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
-
-
-def _sds_frame_maps(line: Line, C: int, sds: tuple[int, np.ndarray, bool]) -> dict:
-    """The SDS frames (see module) on the moving sensors' run-mean channels (the revolution
-    contrasts carry no static term), projected on the differences between the moving
-    sensors where the record has no ``phi_ref`` (as the data and every catalog term are)."""
-    Mn, psi, proj = sds
-    nj = 1 if (line.kind == "order" and line.value == 0) else 2
-    eye = np.eye(nj)
-
-    def lift(Mm: np.ndarray) -> np.ndarray:
-        if proj:
-            Mm = Mm - Mm.mean(0, keepdims=True)
-        full = np.zeros((C, *Mm.shape[1:]))
-        full[:Mn] = Mm
-        return full
-
-    out: dict[str, np.ndarray] = {}
-    if not proj:
-        out["platform"] = lift(np.repeat(eye[None], Mn, 0))
-    if line.kind == "order" and line.value > 0 and Mn > 1:
-        out["azimuth"] = lift(_rotation(line.value, -psi))  # an order of phi + psi_m
-    for k in range(Mn if Mn > 1 else 0):
-        Mk = np.zeros((Mn, nj, nj))
-        Mk[k] = eye
-        out[f"sensor m{k}"] = lift(Mk)
-    return out
-
-
-def _frame_maps(
-    line: Line, C: int, alpha: np.ndarray, sds: tuple[int, np.ndarray, bool] | None = None
-) -> dict[str, np.ndarray]:
-    """Per frame, ``M`` (C, nj, nj'): each channel's basis coefficients from the frame's
-    parameters (``nj'``); ``sds``: the SDS frames instead (:func:`_sds_frame_maps`)."""
-    if sds is not None:
-        return _sds_frame_maps(line, C, sds)
-    nj = 1 if (line.kind == "order" and line.value == 0) else 2
-    eye = np.eye(nj)
-    out: dict[str, np.ndarray] = {}
-    if C > 1 or nj == 2:
-        out["shaft"] = np.repeat(eye[None], C, 0)
-    if line.kind == "order" and line.value > 0 and C > 1:
-        out["disk"] = _rotation(line.value, np.asarray(alpha, float))
-    if C > 1:
-        for k in range(C):
-            M = np.zeros((C, nj, nj))
-            M[k] = eye
-            out[f"head {k}"] = M
-    return out
-
-
-def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Restriction ``(Q_line, nj' * n_free_cells)``: the frame map ``M`` on the block, per
-    cell scaled by ``f`` (S,) (one shared parameter set), or ``f`` (S, G) (G groups of
-    cells, each its own parameters)."""
-    nb, S, C, nj = layout
-    f2 = f[:, None] if f.ndim == 1 else f
-    Gn = f2.shape[1]
-    njp = M.shape[2]
-    H = np.zeros((nb, S, C, nj, Gn, njp))
-    for g in range(Gn):
-        H[block, :, :, :, g, :] = f2[:, g][:, None, None, None] * M[None]
-    return H.reshape(nb * S * C * nj, Gn * njp)
-
-
 def library(
     lines: Sequence[Line],
     sums: Sums,
@@ -592,33 +364,33 @@ def library(
     for li, ln in enumerate(lines):
         lay = sums.layout[li]
         per_cell_phase = ln.kind in ("hz", "frac")
-        for fr, M in _frame_maps(ln, C, alpha, sds).items():
+        for fr, M in frame_maps(ln, C, alpha, sds).items():
             name = "hz" if ln.kind == "hz" and fr == "shaft" else fr
             if per_cell_phase:
                 if S <= MAX_CELLS:
-                    out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
+                    out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
                 continue
             one = np.ones(S)
-            out.append(Term(li, name, "static", _H(lay, 0, M, one)))
+            out.append(Term(li, name, "static", hmap(lay, 0, M, one)))
             if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(1.2):
-                H0 = _H(lay, 0, M, one)
+                H0 = hmap(lay, 0, M, one)
                 out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
             if (dr > 0).any() and (dr < 0).any():
-                out.append(Term(li, name, "direction", _H(lay, 0, M, dr.astype(float))))
-                out.append(Term(li, name, "forward", _H(lay, 0, M, (dr > 0).astype(float))))
-                out.append(Term(li, name, "reverse", _H(lay, 0, M, (dr < 0).astype(float))))
+                out.append(Term(li, name, "direction", hmap(lay, 0, M, dr.astype(float))))
+                out.append(Term(li, name, "forward", hmap(lay, 0, M, (dr > 0).astype(float))))
+                out.append(Term(li, name, "reverse", hmap(lay, 0, M, (dr < 0).astype(float))))
             if 1 < S <= MAX_CELLS:
                 for s in range(S):
                     out.append(
-                        Term(li, name, f"cell {s}", _H(lay, 0, M, (np.arange(S) == s) * 1.0))
+                        Term(li, name, f"cell {s}", hmap(lay, 0, M, (np.arange(S) == s) * 1.0))
                     )
-                out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
-            out.append(Term(li, name, "growth", _H(lay, 1, M, one)))
+                out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
+            out.append(Term(li, name, "growth", hmap(lay, 1, M, one)))
             if "temperature" in sums.blocks:
-                out.append(Term(li, name, "temperature", _H(lay, 2, M, one)))
+                out.append(Term(li, name, "temperature", hmap(lay, 2, M, one)))
             if steps[li] is not None:
                 bl = sums.blocks.index("step")
-                out.append(Term(li, name, "step", _H(lay, bl, M, one), step=steps[li]))
+                out.append(Term(li, name, "step", hmap(lay, bl, M, one), step=steps[li]))
     return out
 
 
@@ -761,7 +533,8 @@ def _forward(
 @dataclasses.dataclass
 class State:
     """What discovery built for one record: the located lines, each finding's line, the
-    cells, the per-fold sums, the library (speed exponents fitted) and its thresholds."""
+    cells, the per-fold sums, the library (speed exponents fitted) and its thresholds;
+    ``drive``: per located line, the drive orders next to it brought in as lines."""
 
     lines: list[Line]
     first: list[int]
@@ -771,6 +544,7 @@ class State:
     thresh: np.ndarray
     infl: float
     signal_periods: int
+    drive: dict[int, list[int]] = dataclasses.field(default_factory=dict)
 
 
 def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
@@ -782,20 +556,22 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     lines, first = lines_of(findings, L)
     if not lines:
         return None
+    near = drive_neighbours(lines, dict(prep.ctx.meta))
     cell, cinfo = _cells(prep)
     C = prep.n_channels
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
     if alpha.size != C:
         alpha = np.zeros(C)
-    sds = _sds_channels(prep)
-    steps = locate_steps(prep, resid, lines, findings)
-    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps)
+    sds = sds_channels(prep)
+    jac = _jacobian(prep, fitter, terms) if prep.n <= STEP_EXACT_ROWS else None
+    steps = locate_steps(prep, resid, lines, findings, jac)
+    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps, jac)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
     lib = library(lines, sums, cinfo, C, alpha, sds, steps)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    return State(lines, first, cinfo, sums, lib, thresholds(lib), infl, L)
+    return State(lines, first, cinfo, sums, lib, thresholds(lib), infl, L, near)
 
 
 def thresholds(lib: Sequence[Term]) -> np.ndarray:
@@ -872,14 +648,14 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
     Hwo = _embed(sums, [lib[j] for j in kept if j != i])
     ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
     ln = st.lines[tm.line]
-    st_sds = _sds_channels(prep)
+    st_sds = sds_channels(prep)
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
     amp = float(np.sqrt(np.mean(np.sum(pairs**2, 1))))
     amp_se = float(np.sqrt(max(np.trace(cv), 0.0) / max(pairs.shape[0], 1)))
     runs_id = [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in cinfo["run"]]
     if prep.ctx.kind == "sds" or tm.step is not None:  # the runs of the rows (from the step)
-        on = prep.keep & (_tau(prep) >= (tm.step["tau_s"] if tm.step else -np.inf))
+        on = prep.keep & (tau_of(prep) >= (tm.step["tau_s"] if tm.step else -np.inf))
         runs_id = [int(prep.run_ids[r]) for r in np.unique(np.asarray(prep.run)[on])]
     runs = sorted(set(runs_id))
     if tm.modulation.startswith("cell "):
@@ -905,6 +681,7 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
         }
     return {
         "line": ln.label(),
+        "located": ln.located,
         "line_kind": ln.kind,
         "value": float(ln.value),
         "frame": tm.frame,
@@ -920,11 +697,12 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
-        **({"step": _step_json(prep, tm.step)} if tm.step is not None else {}),
+        **({"step": step_json(prep, tm.step)} if tm.step is not None else {}),
         "heldout_gain_chi2": float(ho_all - ho_wo),
         "inclusion_probability": float(incl[i]),
         "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names))
-        + (_step_words(prep, tm.step) if tm.step is not None else ""),
+        + (step_words(prep, tm.step) if tm.step is not None else "")
+        + ("" if ln.located else " Not located itself: the drive order next to a located line."),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
@@ -936,31 +714,6 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             **({"step_tau_s": tm.step["tau_s"]} if tm.step is not None else {}),
             **({"n_moving": int(st_sds[0]), "projected": bool(st_sds[2])} if st_sds else {}),
         },
-    }
-
-
-def _step_words(prep, step: dict) -> str:
-    j = _step_json(prep, step)
-    how = (
-        f"located by the finder's {j['located_by']} view"
-        if j["located_by"] != "scan"
-        else f"the best of {j['n_change_points']} change points scanned"
-    )
-    return f" It switches on at t = {j['time_s']:.6g} s in run {j['run']} ({how})."
-
-
-def _step_json(prep, step: dict) -> dict:
-    """A step's change time on the recording's own ``t``: between the last kept row before
-    it and the first after it, with that row's run."""
-    t = np.asarray(prep.rows["t"], float)
-    a, b = step["row"], step["row_before"]
-    return {
-        "time_s": float(t[a]),
-        "time_before_s": float(t[b]),
-        "run": int(prep.run_ids[int(prep.run[a])]),
-        "tau_s": float(step["tau_s"]),
-        "located_by": step["located_by"],
-        "n_change_points": int(step["n_tests"]),
     }
 
 
@@ -977,7 +730,8 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         )
     if li < 0:
         return _none("no line, order or time structure to model (a broad band)")
-    mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line == li]
+    own = {li, *st.drive.get(li, [])}  # its line and the drive orders next to it
+    mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line in own]
     if not mine:
         return _none(
             f"no term of the library ({N} terms: frames x modulations) passes the "
