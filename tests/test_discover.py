@@ -10,6 +10,7 @@ import pytest
 
 from encdesign.diagnose import export_candidates
 from encdesign.diagnose._dispatch import diagnose, load_candidates
+from encdesign.diagnose.engine._html import render_html
 from encdesign.physics._effects import CATALOG_MULTIHEAD
 from encdesign.physics._sensor_effects import CATALOG_REFERENCE
 from encdesign.simulate._outside import outside_record
@@ -131,6 +132,8 @@ def test_sds_sensor_frame_error_is_on_that_sensor(tmp_path):
     amp = 5.0 * 1.3e-8
     assert abs(t["params"]["amplitude"] - amp) < 4 * t["params"]["amplitude_se"] + 0.3 * amp
     _no_catalog_name(d.doc)
+    html = render_html(d)  # the report shows it, with its figure in the platform angle
+    assert 'id="fig-discovered"' in html and "discovered model (outside the catalog)" in html
     names = export_candidates(d.doc, tmp_path / "sds.py")
     d2 = diagnose(rec, candidates=load_candidates(tmp_path / "sds.py"))
     assert any(e["name"] in names for e in d2.effects), d2.doc["report"]
