@@ -168,3 +168,19 @@ def test_a_step_at_a_located_time_reports_its_time_in_the_recordings_t():
     assert "switches on at t =" in mine[0]["reading"]
     assert mine[0]["frame"] == "shaft"
     _no_catalog_name(d.doc)
+
+
+def test_drive_orders_next_to_a_located_line_enter_the_library():
+    """A multiple of the pole pairs (or slots, or their lcm) within one order of a located
+    order, or within half an order of a fractional one (sidebands too), becomes a line of its
+    own, marked not located; an order far from the drive brings nothing."""
+    from encdesign.diagnose.engine._discover_lines import Line, drive_neighbours, drive_orders
+
+    mult, side = drive_orders({"motor": {"pole_pairs": 7, "slots": 12}}, 30)
+    assert mult == [7, 12, 14, 21, 24, 28] and 13 in side and 29 in side and 84 not in mult
+    lines = [Line("order", 13.0), Line("frac", 27.8), Line("order", 10.0), Line("order", 0.0)]
+    near = drive_neighbours(lines, {"motor": {"pole_pairs": 7, "slots": 12}})
+    added = {i: [lines[j].value for j in js] for i, js in near.items()}
+    assert added == {0: [12.0, 14.0], 1: [28.0]}, added
+    assert all(not lines[j].located for js in near.values() for j in js)
+    assert drive_neighbours([Line("order", 13.0)], {}) == {}

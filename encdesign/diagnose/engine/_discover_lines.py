@@ -315,15 +315,12 @@ def locate_steps(
             out.append(None)
             continue
         B = phase_basis(ln, th, t)  # (n, nj)
-        if Jk is not None:
-            Z = _step_columns(prep, B)
+        Z = _step_columns(prep, B) if Jk is not None else None
 
-            def gains(ps, Z=Z):
+        def gains(ps, B=B, Z=Z) -> np.ndarray:
+            if Z is not None and Jk is not None:
                 return _exact_gains(Z, rw, Jk, ps)
-        else:
-
-            def gains(ps, B=B):
-                return _residual_gains(B, rw[:, chans], cand, ps, n)
+            return _residual_gains(B, rw[:, chans], cand, ps, n)
 
         bi = int(np.argmax(gains(cand)))
         p, n_tests = int(cand[bi]), int(cand.size)
