@@ -288,6 +288,11 @@ def _terms_vs_numpy(repeats: int) -> dict:
     )
 
 
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int) -> dict:
     """One diagnosis through the CLI on ``processes`` local processes
     (``encdesign diagnose REC --processes N``; the fit's row passes split over them): the
@@ -315,6 +320,7 @@ def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int
         processes=processes,
         effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
         wall_s_command=wall,
+        cpu_s_all_processes=_children_cpu_s(),
         stages_s=doc.get("timings_s") or {},
         verdict=doc["verdict"],
         named=[e["name"] for e in doc.get("effects", [])],
