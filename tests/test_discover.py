@@ -187,4 +187,4 @@ def test_drive_orders_next_to_a_located_line_enter_the_library():
     added = {i: [lines[j].value for j in js] for i, js in near.items()}
     assert added == {0: [12.0, 14.0], 1: [28.0]}, added
     assert all(not lines[j].located for js in near.values() for j in js)
-    assert drive_neighbours([Line("order", 13.0)], {}) == {}
+    assert drive_neighbours([Line("order", 13.0)], {}, FinderSettings()) == {}
