@@ -180,6 +180,9 @@ ALLOWED: dict[tuple[str, float], str] = {
 
 
 CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_rowshare.py", "ROW_GROUPS"): BOUND
+    + " (groups a pass's chunks are cut into, shared over processes; fixed so that 1 and N "
+    "processes sum in the same order)",
     ("engine/_discover_lines.py", "STEP_BINS"): SEARCH + " (change points a step term scans)",
     ("engine/_discover_lines.py", "STEP_EXACT_ROWS"): BOUND
     + " (rows up to which a step is located with the catalog model projected out)",
