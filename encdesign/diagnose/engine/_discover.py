@@ -24,12 +24,13 @@ it already explains), and every term's fit, held-out gain and inclusion are comp
 those sums without another pass.
 
 Selection is **orthogonal forward regression**: at each step the term with the largest
-in-sample chi-square drop less its multiple-testing threshold ``chi2.isf(alpha / N, q)``
+in-sample chi-square drop less its multiple-testing threshold
+``chi2.isf(settings.discover_alpha / N, q)``
 (``N`` terms in the library, ``q`` parameters: Bonferroni, which also prefers the smaller of
 two nested terms) enters when that margin is positive and its K-fold held-out gain (fitted
 without each fold, scored on it) is positive. The same selection repeated without each fold
 in turn gives each term's inclusion probability; a term enters only when it is at least
-``INCLUSION_MIN``.
+``settings.discover_inclusion_min``.
 """
 
 from __future__ import annotations
@@ -43,12 +44,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ._discover_words import reading
-
-ALPHA = 0.01
-"""Family-wise false-alarm rate of the selection over the whole library (Bonferroni)."""
-
-INCLUSION_MIN = 0.6
-"""A term enters only when the selection repeated without each fold keeps it this often."""
+from ._settings import FinderSettings
 
 MAX_TERMS = 4
 """Terms the forward selection may add over all lines."""
@@ -58,13 +54,6 @@ MAX_LINES = 10
 
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
-
-MODEL_ERROR_PER_PARAM = 5e-3
-"""Share of a term's chi-square drop discounted per parameter when terms are ranked: the
-finder's own angle and base are not exact (a run offset fitted with the structure present
-moves the phase of a line a little), so at a high signal-to-noise ratio a term with more
-parameters (its own phase per run) would otherwise win over the physical one by fitting
-that small model error."""
 
 BETA_RANGE = (-4.0, 4.0)
 """Range searched for a speed exponent."""
@@ -387,7 +376,9 @@ def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
     return H.reshape(nb * S * C * nj, Gn * njp)
 
 
-def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> list[Term]:
+def library(
+    lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha, settings: FinderSettings
+) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
     sp, dr = cinfo["speed"], cinfo["direction"]
@@ -403,7 +394,9 @@ def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> li
                 continue
             one = np.ones(S)
             out.append(Term(li, name, "static", _H(lay, 0, M, one)))
-            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(1.2):
+            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(
+                settings.discover_speed_ratio
+            ):
                 H0 = _H(lay, 0, M, one)
                 out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
             if (dr > 0).any() and (dr < 0).any():
@@ -501,11 +494,12 @@ def _single_heldout(sums: Sums, tm: Term, folds) -> float:
 
 
 def _forward(
-    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh
+    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh, me: float
 ) -> list[int]:
     """Orthogonal forward regression over the folds ``folds``: indices of the terms taken
-    (each step: the largest chi-square drop beyond its threshold, given those taken, by
-    the Schur complement; taken when its K-fold held-out gain is positive)."""
+    (each step: the largest chi-square drop beyond its threshold, given those taken, by the
+    Schur complement, less ``me`` of it per parameter (``settings.discover_model_error``);
+    taken when its K-fold held-out gain is positive)."""
     folds = list(folds)
     At, bt, Rt = A[folds].sum(0), b[folds].sum(0), sums.raw[folds].sum(0)
     D, e, Dr = [], [], []
@@ -539,7 +533,7 @@ def _forward(
             q = tm.H.shape[1] + (tm.beta is not None)
             if gi <= thresh[i]:
                 continue
-            m = gi * (1.0 - MODEL_ERROR_PER_PARAM * q) - thresh[i]
+            m = gi * (1.0 - me * q) - thresh[i]
             if m > best_m:
                 best, best_m = i, m
         if best < 0:
@@ -571,6 +565,7 @@ class State:
     thresh: np.ndarray
     infl: float
     signal_periods: int
+    settings: FinderSettings
 
 
 def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
@@ -589,15 +584,13 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
         alpha = np.zeros(C)
     sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha)
+    lib = library(lines, sums, cinfo, C, alpha, prep.settings)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    N = max(len(lib), 1)
-    thresh = np.array(
-        [stats.chi2.isf(ALPHA / N, tm.H.shape[1] + (tm.beta is not None)) for tm in lib]
-    )
-    return State(lines, first, cinfo, sums, lib, thresh, infl, L)
+    a_n = prep.settings.discover_alpha / max(len(lib), 1)
+    thresh = np.array([stats.chi2.isf(a_n, tm.H.shape[1] + (tm.beta is not None)) for tm in lib])
+    return State(lines, first, cinfo, sums, lib, thresh, infl, L, prep.settings)
 
 
 def discover(
@@ -621,7 +614,8 @@ def discover(
             )
         return [None] * len(findings)
     kept, incl = select_terms(st)
-    terms_json = [_term_json(prep, st, kept, i, incl) for i in kept]
+    gains = _gains(st, kept)
+    terms_json = [_term_json(prep, st, kept, i, incl, gains) for i in kept]
     near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
     return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
 
@@ -629,22 +623,49 @@ def discover(
 def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     """Forward selection on all folds, and each term's inclusion probability over the
     selections repeated without each fold; the terms kept (chosen on all folds and
-    included at least ``INCLUSION_MIN``)."""
+    included at least ``settings.discover_inclusion_min``)."""
     sums, lib = st.sums, st.lib
     K = sums.A.shape[0]
     folds = list(range(K))
-    chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh)
+    me = st.settings.discover_model_error
+    chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
     incl = np.zeros(len(lib))
     for k in folds:
-        for i in _forward(sums.A, sums.b, lib, sums, [f for f in folds if f != k], st.thresh):
+        rest = [f for f in folds if f != k]
+        for i in _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me):
             incl[i] += 1.0 / K
-    return [i for i in chosen if incl[i] >= INCLUSION_MIN], incl
+    return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
 
 
-def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> dict:
-    """One kept term's JSON entry (parameters and held-out gain fitted with the others)."""
-    sums, lib, cinfo = st.sums, st.lib, st.cinfo
+def _gains(st: State, kept: list[int]) -> dict[str, dict]:
+    """Held-out gains (chi-square) of the kept terms (in forward order): ``entry`` (over the
+    terms taken before it: they sum to the model's), ``drop_one`` (the loss when only it is
+    removed: 0 where another kept term spans it), ``line`` (when a line's terms are removed)."""
+    sums, lib = st.sums, st.lib
     folds = list(range(sums.A.shape[0]))
+
+    def ho(idx: list[int]) -> float:
+        H = _embed(sums, [lib[j] for j in idx]) if idx else None
+        return _heldout(sums.A, sums.b, H, folds, sums.raw) if H is not None else 0.0
+
+    whole = ho(kept)
+    entry, prev = {}, 0.0
+    for n, i in enumerate(kept):
+        cur = ho(kept[: n + 1])
+        entry[i], prev = cur - prev, cur
+    drop = {i: whole - ho([j for j in kept if j != i]) for i in kept}
+    line = {
+        li: whole - ho([j for j in kept if lib[j].line != li]) for li in {lib[i].line for i in kept}
+    }
+    return {"entry": entry, "drop_one": drop, "line": line}
+
+
+def _term_json(
+    prep, st: State, kept: list[int], i: int, incl: np.ndarray, gains: dict[str, dict]
+) -> dict:
+    """One kept term's JSON entry (parameters fitted with the others; held-out gains as
+    :func:`_gains` defines them)."""
+    sums, lib, cinfo = st.sums, st.lib, st.cinfo
     At, bt = sums.A.sum(0), sums.b.sum(0)
     Hk = _embed(sums, [lib[j] for j in kept])
     G = Hk.T @ At @ Hk
@@ -655,9 +676,6 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
     tm = lib[i]
     q = tm.H.shape[1]
     c, cv = coef[q0 : q0 + q], cov[q0 : q0 + q, q0 : q0 + q]
-    ho_all = _heldout(sums.A, sums.b, Hk, folds, sums.raw)
-    Hwo = _embed(sums, [lib[j] for j in kept if j != i])
-    ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
     ln = st.lines[tm.line]
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
@@ -696,9 +714,13 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
-        "heldout_gain_chi2": float(ho_all - ho_wo),
+        "heldout_gain_chi2": float(gains["entry"][i]),
+        "heldout_gain_drop_one_chi2": float(gains["drop_one"][i]),
+        "heldout_gain_line_chi2": float(gains["line"][tm.line]),
         "inclusion_probability": float(incl[i]),
-        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names)),
+        "reading": reading(
+            ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
+        ),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
@@ -734,14 +756,15 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         "frame": frames[0] if len(frames) == 1 else ", ".join(frames),
         "terms": mine,
         "scaling": next((t["scaling"] for t in mine if t["scaling"]), None),
-        "heldout_gain_chi2": float(sum(t["heldout_gain_chi2"] for t in mine)),
+        "heldout_gain_chi2": mine[0]["heldout_gain_line_chi2"],
         "inclusion": {
             f"{t['frame']} / {t['modulation']}": t["inclusion_probability"] for t in mine
         },
         "library_size": N,
         "selection": "orthogonal forward regression; Bonferroni threshold "
-        f"chi2.isf({ALPHA} / {N}, q); K-fold held-out gain > 0; inclusion over {K} "
-        f"leave-one-fold-out repeats >= {INCLUSION_MIN}",
+        f"chi2.isf({st.settings.discover_alpha} / {N}, q); K-fold held-out gain > 0; "
+        f"inclusion over {K} leave-one-fold-out repeats >= "
+        f"{st.settings.discover_inclusion_min}",
         "alternatives": near.setdefault(li, _nearest(st.lib, kept, li, st.sums, list(range(K)))),
         "reading": " ".join(t["reading"] for t in mine),
     }
@@ -766,13 +789,3 @@ def _nearest(lib, kept, li, sums, folds) -> list[dict]:
 
 def _none(reason: str, **kw) -> dict:
     return {"outside_catalog": True, "frame": None, "terms": [], "reason": reason, **kw}
-
-
-def term_heldout_gain(
-    prep, sums: Sums, lib: Sequence[Term], frame: str, modulation: str, line: int
-) -> float:
-    """Held-out gain of one library term (a benchmark's "true model" at the truth's frame)."""
-    for tm in lib:
-        if tm.frame == frame and tm.modulation == modulation and tm.line == line:
-            return _single_heldout(sums, tm, range(sums.A.shape[0]))
-    return float("nan")

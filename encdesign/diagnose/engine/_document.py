@@ -9,7 +9,9 @@ import numpy as np
 
 from ._fit import FitResult, Term
 from ._lattice import detect_lsb
+from ._located import describe as describe_located
 from ._protocol import Prepared
+from ._settings import FinderSettings
 from ._views import order_sums, run_spans
 
 # ----------------------------------------------------------------------------- run + JSON
@@ -80,10 +82,10 @@ def se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
-def scan_order_of(limit: int, order: int) -> int:
-    """Highest order the views scan for a base of ``order``: twice it, at least 24, within
-    what the record resolves."""
-    return int(min(limit, max(2 * order, 24)))
+def scan_order_of(limit: int, order: int, settings: FinderSettings) -> int:
+    """Highest order the views scan for a base of ``order``: twice it, at least
+    ``settings.scan_order_min``, within what the record resolves."""
+    return int(min(limit, max(2 * order, settings.scan_order_min)))
 
 
 SWEEP_WINDOW = 9
@@ -143,7 +145,7 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     run = np.concatenate([prep.run[a:b] for a, b in pieces])
     chans, lsb, share, offsets = [], [], [], []
     for k in range(reading.shape[1]):
-        lat = detect_lsb(reading[keep, k], run[keep])
+        lat = detect_lsb(reading[keep, k], run[keep], settings=prep.settings)
         if lat.lsb_rad is None or _sweep_grid(
             reading[:, k], keep, run, lat, prep.settings.sweep_coherence
         ):
@@ -203,9 +205,10 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
 
 def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
     """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
-    the base and the final residual (least squares over the kept rows)."""
+    the base and the final residual (least squares over the kept rows), at most
+    ``settings.spectrum_order_max`` of them."""
 
-    M = int(min(max_order, 400))
+    M = int(min(max_order, prep.settings.spectrum_order_max))
     out = {"orders": list(range(1, M + 1)), "before": [], "after": []}
     N, _, _, _, sums = order_sums(prep, "theta", [r0, r1], np.arange(1, M + 1))
     for (Bc, Bs), key in zip(sums, ("before", "after")):
@@ -215,9 +218,12 @@ def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: in
     return out
 
 
-def significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
-    """Channels whose per-channel parameters differ from zero by more than 3 se (``None``
-    when the term has no per-channel parameter)."""
+def significant_channels(
+    term: Term, fit: FitResult, idx: int, C: int, R: int, settings: FinderSettings
+):
+    """Channels whose per-channel parameters differ from zero by more than
+    ``settings.significant_channel_se`` standard errors (``None`` when the term has no
+    per-channel parameter)."""
     se = se_dict(term, fit, idx)
     per = [q for q in term.cand.params if q.shape in ("channels", "runs*channels")]
     if not per or C == 1:
@@ -227,7 +233,7 @@ def significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
         v = np.abs(term.values[q.name]) / np.where(se[q.name] > 0, se[q.name], np.inf)
         v = np.nan_to_num(v)
         z = np.maximum(z, v.reshape(-1, C).max(0))
-    return [k for k in range(C) if z[k] > 3]
+    return [k for k in range(C) if z[k] > settings.significant_channel_se]
 
 
 def _g(x, digits: int = 4) -> str:
@@ -291,7 +297,13 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
         out.append(
             f"  discovered (outside the catalog): {t['line']}, {t['frame']}, {t['modulation']}"
             f"{law}; amplitude {p['amplitude']:.3g} +- {p['amplitude_se']:.2g} {u}; held-out "
-            f"gain {t['heldout_gain_chi2']:.4g} (chi2); inclusion "
+            f"gain {t['heldout_gain_chi2']:.4g} (chi2) at entry"
+            + (
+                f", {t['heldout_gain_drop_one_chi2']:.4g} if only it were removed"
+                if "heldout_gain_drop_one_chi2" in t
+                else ""
+            )
+            + "; inclusion "
             f"{t['inclusion_probability']:.0%}"
         )
         where = [
@@ -354,6 +366,20 @@ def report_text(doc: dict) -> str:
             f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
             f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
         )
+    if (bo := doc.get("base_order")) is not None:  # issue 44 E: the base order's choice
+        lines.append(
+            f"base order: {bo['chosen']} (default {bo['start']}"
+            + (", lowered by held-out error" if bo["lowered"] else "")
+            + f"; held-out / fitted RMS {bo['heldout_ratio']:.3g} at {bo['start']})"
+        )
+        if len(bo["tried"]) > 1:
+            lines.append(
+                "  tried (order: fitted / held-out RMS): "
+                + ", ".join(
+                    f"{r['order']}: {r['rms']:.3g} / {r['heldout_rms']:.3g}" for r in bo["tried"]
+                )
+                + f" {u}"
+            )
     for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
         lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:
@@ -376,6 +402,10 @@ def report_text(doc: dict) -> str:
         )
         if e["channels"] is not None:
             lines.append(f"  on channels: {e['channels']}")
+        for name, p in e["params"].items():  # a parameter that is a time (issue 44 C)
+            if isinstance(p, dict) and "interval_s" in p:
+                lt = {"t_s": float(np.ravel(p["value"])[0]), **p}
+                lines.append(f"  {name}: {describe_located(lt)} ({p['clock']})")
         lines.append(f"  {e['explanation']}")
         for n in e["notes"]:
             lines.append(f"  note: {n}")
@@ -388,6 +418,8 @@ def report_text(doc: dict) -> str:
         w = x["where"]
         loc = ", ".join(f"{k} {[round(v, 4) for v in w[k]][:6]}" for k in w if w[k])
         lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
+        if x.get("located_time"):
+            lines.append(f"  located at {describe_located(x['located_time'])}")
         if x.get("step_at"):
             lines.append(f"  {x['step_at']['note']}")
         lines += _model_lines(x.get("model"), u)

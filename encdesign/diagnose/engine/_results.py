@@ -1,5 +1,6 @@
 """Typed results of a diagnosis: :class:`Effect`, :class:`Finding`, :class:`Refusal`,
-:class:`Alternative`, :class:`Confounded` and :class:`PlotData` (equinox Modules, final,
+:class:`Alternative`, :class:`Confounded`, :class:`BaseOrder` (with its :class:`OrderTrial`)
+and :class:`PlotData` (equinox Modules, final,
 their invariants checked in ``__check_init__``).
 
 Each entry is built from its JSON form (:meth:`from_json`) and gives it back unchanged
@@ -18,8 +19,12 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, final
 
 import equinox as eqx
+import numpy as np
 
 from ..._errors import DiagnosisError
+
+if TYPE_CHECKING:
+    from ._protocol import Prepared
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
 """The three verdicts of a diagnosis."""
@@ -28,11 +33,11 @@ WHERE_KEYS = ("orders", "frequencies_hz", "heads", "runs", "times_s")
 """The keys every ``where`` (a finding's location) carries."""
 
 
-def _bad(what: str, got: Any, expected: str) -> DiagnosisError:
+def _bad(what: str, got: object, expected: str) -> DiagnosisError:
     return DiagnosisError(f"diagnosis result {what}: got {got!r}; expected {expected}")
 
 
-def _opt_number(v: Any) -> bool:
+def _opt_number(v: object) -> bool:
     return v is None or (isinstance(v, int | float) and not isinstance(v, bool))
 
 
@@ -41,12 +46,12 @@ class _Entry(eqx.Module):
     ``extra`` and ``key_order``)."""
 
     if TYPE_CHECKING:  # declared by each final entry (fields after its own)
-        extra: Mapping[str, Any]
+        extra: Mapping[str, object]
         key_order: tuple[str, ...]
 
     TYPED: ClassVar[tuple[str, ...]] = ()
     """The JSON keys that are typed fields, in the document's usual order."""
-    NESTED: ClassVar[Mapping[str, Any]] = {}
+    NESTED: ClassVar[Mapping[str, type[_Entry]]] = {}
     """Typed fields that hold a tuple of entries (key -> entry class)."""
     TUPLES: ClassVar[tuple[str, ...]] = ()
     """Typed fields held as tuples (lists in the JSON)."""
@@ -87,7 +92,7 @@ class _Entry(eqx.Module):
         return self.to_json()[key]
 
 
-def _keys_ok(entry: Any, required: tuple[str, ...]) -> None:
+def _keys_ok(entry: _Entry, required: tuple[str, ...]) -> None:
     missing = [k for k in required if k not in entry.key_order]
     if missing:
         raise _bad(f"{type(entry).__name__} {getattr(entry, 'name', '')!r}", missing, "present")
@@ -121,7 +126,7 @@ class Alternative(_Entry):
     separate_by: str | None = None
     correlation: float | None = None
     params: Mapping[str, Any] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     key_order: tuple[str, ...] = ("name", "reason", "rule", "delta_bic", "params")
 
     TYPED: ClassVar[tuple[str, ...]] = (
@@ -202,11 +207,11 @@ class Effect(_Entry):
     confounded_with: tuple[Alternative, ...] | None = None
     doubt: Mapping[str, Any] | None = None
     alternatives: tuple[Alternative, ...] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     key_order: tuple[str, ...] = _EFFECT_KEYS
 
     TYPED: ClassVar[tuple[str, ...]] = (*_EFFECT_KEYS, "doubt", "alternatives")
-    NESTED: ClassVar[Mapping[str, Any]] = {
+    NESTED: ClassVar[Mapping[str, type[_Entry]]] = {
         "confounded_with": Alternative,
         "alternatives": Alternative,
     }
@@ -268,7 +273,7 @@ class Finding(_Entry):
     detail: Mapping[str, Any] | None = None
     note: str | None = None
     model: Mapping[str, Any] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = (
         "view",
         "where",
@@ -323,7 +328,7 @@ class Refusal(_Entry):
     rule: str | None = None
     rules: tuple[str, ...] | None = None
     delta_bic: float | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = ("name", "reason", "rule", "rules", "delta_bic")
     key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("rules",)
@@ -412,7 +417,7 @@ class Confounded(_Entry):
     delta_bic: float | None
     separate_by: str
     reason: str = ""
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = ("pair", "correlation", "delta_bic", "separate_by", "reason")
     key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("pair",)
@@ -423,6 +428,89 @@ class Confounded(_Entry):
         if not (0.0 <= self.correlation <= 1.0 + 1e-12):
             raise _bad(f"Confounded {self.pair} correlation", self.correlation, "in [0, 1]")
         _keys_ok(self, ("pair", "correlation", "delta_bic", "separate_by"))
+
+
+@final
+class OrderTrial(_Entry):
+    """One base order tried by the held-out choice (an entry of ``base_order.tried``).
+
+    Attributes:
+        order: the base model's highest order ``M`` (orders 1..M).
+        rms: the base's fitted residual RMS at that order (unit of the document).
+        heldout_rms: its K-fold held-out residual RMS, in the engine's folds.
+        heldout_chi2: its K-fold held-out chi-square (noise-whitened; the choice's measure).
+        n_params: its fitted (determined) parameters.
+    """
+
+    order: int
+    rms: float
+    heldout_rms: float
+    heldout_chi2: float | None = None
+    n_params: int | None = None
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = ("order", "rms", "heldout_rms", "heldout_chi2", "n_params")
+    key_order: tuple[str, ...] = TYPED
+
+    def __check_init__(self):
+        if isinstance(self.order, bool) or not isinstance(self.order, int) or self.order < 1:
+            raise _bad("OrderTrial.order", self.order, "an integer >= 1")
+        for k in ("rms", "heldout_rms"):
+            v = getattr(self, k)
+            if not isinstance(v, int | float) or not (v >= 0.0 or math.isnan(v)):
+                raise _bad(f"OrderTrial {self.order} {k}", v, "a number >= 0")
+        _keys_ok(self, ("order", "rms", "heldout_rms"))
+
+
+@final
+class BaseOrder(_Entry):
+    """How the base model's order was chosen (the document's ``base_order``; issue 44 E).
+
+    Attributes:
+        start: the default order (the kind's default, within what the record resolves).
+        chosen: the order the base model was fitted at before any growth (``base.max_order``
+            holds the final one, after growth).
+        lowered: whether held-out error lowered it below ``start``.
+        heldout_ratio: the base's held-out RMS over its fitted RMS at ``start``.
+        ratio_max: ``FinderSettings.base_order_ratio``: above it the orders ``1..start`` are
+            tried.
+        tried: each tried order's fitted and held-out RMS (:class:`OrderTrial`); only
+            ``start`` when the ratio is within ``ratio_max``.
+        reason: the choice, in words.
+    """
+
+    start: int
+    chosen: int
+    lowered: bool
+    heldout_ratio: float
+    ratio_max: float
+    tried: tuple[OrderTrial, ...]
+    reason: str = ""
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = (
+        "start",
+        "chosen",
+        "lowered",
+        "heldout_ratio",
+        "ratio_max",
+        "tried",
+        "reason",
+    )
+    key_order: tuple[str, ...] = TYPED
+    NESTED: ClassVar[Mapping[str, Any]] = {"tried": OrderTrial}
+
+    def __check_init__(self):
+        if not (1 <= self.chosen <= self.start):
+            raise _bad("BaseOrder.chosen", self.chosen, f"an order in 1..{self.start}")
+        if self.lowered != (self.chosen < self.start):
+            raise _bad("BaseOrder.lowered", self.lowered, "chosen < start")
+        if self.chosen not in {t.order for t in self.tried}:
+            raise _bad("BaseOrder.tried", [t.order for t in self.tried], "the chosen order")
+        _keys_ok(self, self.TYPED)
+
+    @property
+    def trial(self) -> OrderTrial:
+        """The chosen order's trial."""
+        return next(t for t in self.tried if t.order == self.chosen)
 
 
 @final
@@ -437,10 +525,10 @@ class PlotData(eqx.Module):
             named effects of the final model, evaluated alone; projected like the residual).
     """
 
-    prep: Any
-    base_resid: Any
-    final_resid: Any
-    effect_contributions: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    prep: Prepared
+    base_resid: np.ndarray
+    final_resid: np.ndarray
+    effect_contributions: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     def __getitem__(self, key: str) -> Any:
         """Back compatibility: ``plot_data["prep"]``."""

@@ -10,6 +10,7 @@ import numpy as np
 
 from ....physics import _effects as fx
 from ...engine._candidates import Candidate, Context, Param, Probe
+from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 
@@ -638,9 +639,10 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         return np.cumsum(x[::-1], 0)[::-1]
 
     Sa, SG, SXB = suffix(a), suffix(G), suffix(XB)
-    # change points at bin edges 1..nb-1, with at least 1 % of the kept rows either side
+    # change points at bin edges 1..nb-1, with at least order_step_margin_rows and
+    # order_step_margin_share of the kept rows either side
     e = np.arange(1, nb)
-    margin = max(10, kidx.size // 100)
+    margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
     if e.size == 0:
         return []
@@ -665,6 +667,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     ok = (np.arange(lo, hi) >= margin) & (kidx.size - np.arange(lo, hi) >= margin)
     gi = np.where(ok, gi, -1.0)
     i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
+    located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], gain)
     i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
     tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
     tau_b = float(prep.rows.take("tau", np.array([i_before]))[0])
@@ -696,8 +699,29 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
             2,
             log10_tail_p(chi, 2),
             detail=detail,
+            located_time=located,
         )
     ]
+
+
+def _order_step_interval(prep, kidx, lo, gi, ok, edge_pos, edge_gain) -> dict:
+    """The ``located_time`` of the order-1 change: the profile of its chi-square gain over
+    the rows ``gi`` (kept-row positions ``lo ..``, ``ok`` the candidates), widened where the
+    interval reaches the rows scanned to the nearest bin edge ``edge_pos`` whose gain
+    ``edge_gain`` lies outside it (a conservative bound, :mod:`engine._located`)."""
+    c = change_chi2(prep.settings.change_time_level)
+    pos = np.arange(lo, lo + gi.size)[ok]
+    g = gi[ok]
+    best = int(pos[int(np.argmax(g))])
+    _, a, b = interval_of(pos, -g, c, best=best)
+    out = edge_pos[edge_gain < float(g.max()) - c]
+    if a == pos[0]:  # reaches the rows scanned: the nearest bin edge outside below it
+        below = out[out < a]
+        a = int(below.max()) + 1 if below.size else 1
+    if b == pos[-1]:
+        above = out[out > b]
+        b = int(above.min()) - 1 if above.size else kidx.size - 1
+    return located_time(prep, kidx, best, a, b)
 
 
 def _es_fn(p, x):

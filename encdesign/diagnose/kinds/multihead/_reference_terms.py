@@ -36,11 +36,8 @@ __all__ = ["CANDIDATES", "interpolation_candidate"]
 
 # The plausibility bounds of these candidates are FinderSettings fields
 # (direction_offset_max_rad, delay_angle_max_rad, scale_error_max, signal_error_max_rad,
-# interp_spread_min, quant_amplitude_tol), read through ``ctx.settings``.
-FIRST_ORDER_SIGNAL_ERROR = 0.3
-"""Above it (rad of signal phase) the first-order conversion of the harmonics into offsets,
-amplitude ratio and phase error is approximate (second-order terms ~ c^2 / 2); the
-harmonics themselves are still the fitted error."""
+# interp_spread_min, quant_amplitude_tol, signal_first_order_max_rad), read through
+# ``ctx.settings``.
 
 
 def _by_run(ctx: Context, name: str) -> list[np.ndarray]:
@@ -257,7 +254,7 @@ def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     P = int(ctx.signal_periods)
     out["orders"] = {"value": [P, 2 * P], "se": None, "unit": "1"}
     big = float(np.max(np.abs(c)))
-    if big > FIRST_ORDER_SIGNAL_ERROR:
+    if big > ctx.settings.signal_first_order_max_rad:
         out["first_order_note"] = {
             "value": big,
             "se": None,
@@ -320,7 +317,7 @@ def _quant_fn(p: dict, x: dict) -> Array:
 def _quant_lattice(ctx: Context) -> Lattice:
     rows = ctx.rows
     run = np.argmax(np.asarray(rows["run_onehot"]), axis=1)
-    return detect_lsb(np.asarray(rows["reading"])[:, 0], run)
+    return detect_lsb(np.asarray(rows["reading"])[:, 0], run, settings=ctx.settings)
 
 
 def _quant_applies(ctx: Context) -> str | None:

@@ -147,7 +147,7 @@ def _saturating_columns(
     rows: Mapping[str, Any],
     consts: Mapping[str, Any],
     orders_base: list[int],
-    fraction: float = 0.6,
+    fraction: float,
 ) -> tuple:
     """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
     platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
@@ -178,7 +178,7 @@ def _saturating_columns(
     return X, L
 
 
-def dof_widening(nu: float, q: int = 2, p: float = 1e-4) -> float:
+def dof_widening(nu: float, q: int = 2, *, p: float) -> float:
     """Factor ``c`` on a noise level estimated with ``nu`` degrees of freedom so that the
     engine's tests, which treat the level as known (chi-square thresholds), keep their
     false-alarm rate: ``c² = q F⁻¹(1 − p; q, nu) / χ²⁻¹(1 − p; q)``, the ratio of the
@@ -209,7 +209,9 @@ def _level_sigma(
     X: np.ndarray,
     proj: bool = False,
     info: dict | None = None,
-    test_p: float = 1e-4,
+    *,
+    test_p: float,
+    level_alpha: float,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -271,7 +273,7 @@ def _level_sigma(
         gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
         j = int(np.argmax(gain))
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
-        if not ok[j] or f <= stats.f.isf(1e-3 / n_tests, 1, dof):
+        if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
             break
         Q = basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
         added += 1
@@ -322,6 +324,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         float(prep.consts["proj"]) > 0,
         info=info,
         test_p=prep.settings.sds_sigma_test_p,
+        level_alpha=prep.settings.sds_level_alpha,
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
