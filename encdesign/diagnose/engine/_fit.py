@@ -321,9 +321,9 @@ class Fitter:
                 ck = (skey, a)
                 hit = self._pcache.get(ck)
                 fresh = hit is None
-                if fresh and not jac:  # values only: the processed Jacobian is not needed
+                if hit is None and not jac:  # values only: the processed Jacobian is not needed
                     hit = (None, None, *self._fold_order(a, b))
-                elif fresh:
+                elif hit is None:
                     hit = self._processed(static, a, b, x, sc_s)
                     if self._pbytes + hit[1].nbytes < CACHE_BYTES:
                         self._pcache[ck] = hit
