@@ -65,3 +65,46 @@ def test_column_chi2_equals_a_refit_per_column(ref):
     np.testing.assert_allclose(got, want, rtol=1e-9)
     assert np.ptp(want) > 1e-6 * want.max()  # the rows differ: the test can tell them apart
     assert int(np.argmin(got)) == int(np.argmin(want))
+
+
+def _vibration_record(seed: int):
+    """Three heads, two runs of 500 rows at 200 Hz, disk errors of orders 1-4 and a 23 Hz
+    vibration at 4x the 0.5 urad noise (a nonlinear candidate: its fit takes several
+    passes), per-run zeros and a reference angle."""
+    rng = np.random.default_rng(seed)
+    alpha = np.array([0.0, 2.2, 4.1])
+    n, R = 500, 2
+    t = np.tile(np.arange(n) / 200.0, R)
+    run = np.repeat(np.arange(R), n)
+    th = 2 * np.pi * (1.0 + 0.5 * run) * t + rng.uniform(0, 6, R)[run]
+    err = sum(
+        4e-6 / m * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6))
+        for m in range(1, 5)
+    )
+    err = err + 2e-6 * np.sin(2 * np.pi * 23.0 * t[:, None] + rng.uniform(0, 6, (R, 3))[run])
+    read = th[:, None] + err + rng.normal(0, 5e-7, (t.size, 3)) + rng.uniform(-3, 3, (R, 3))[run]
+    cols = {"t": t, "run": run, "theta_ref": th, **{f"h{k}": read[:, k] for k in range(3)}}
+    meta = {
+        "format": "encdesign-recording/1",
+        "kind": "multihead",
+        "encoder": {"head_angles_deg": np.degrees(alpha).tolist()},
+    }
+    return encdesign.Recording("multihead", meta, cols)
+
+
+@pytest.mark.parametrize("seed", [4, 19])
+def test_the_caches_change_no_bit_of_a_diagnosis(monkeypatch, seed):
+    """Every chunk recomputed (no cache: the static prediction is the one made with the
+    Jacobian, column_chi2's residual too) against the default cache: the same document."""
+    from encdesign.diagnose import diagnose
+    from encdesign.diagnose.engine import _fit
+
+    def doc(cache_bytes: float) -> dict:
+        monkeypatch.setattr(_fit, "CACHE_BYTES", cache_bytes)
+        d = diagnose(_vibration_record(seed))
+        skip = ("time_s", "timings_s", "timings_cpu_s", "report")
+        return {k: v for k, v in d.doc.items() if k not in skip}
+
+    cached, uncached = doc(_fit.CACHE_BYTES), doc(0.0)
+    assert [e["name"] for e in cached["effects"]] == ["vibration"]
+    assert uncached == cached

@@ -15,6 +15,7 @@ import scipy.linalg
 
 from encdesign import EncdesignInputError, load_recording, write_recording
 from encdesign.cli import main
+from encdesign.diagnose import FinderSettings
 from encdesign.diagnose.kinds.multihead import _reference_data as rd
 from encdesign.diagnose.kinds.multihead import _reference_terms as rt
 from encdesign.io._realdata import import_magalpha, import_moteus
@@ -221,13 +222,15 @@ def test_lsb_found_from_the_value_lattice(bits, seed):
     x = np.cumsum(rng.uniform(0.0, 3 * q, 1500))  # irregular steps, 0-3 LSB
     run = np.repeat([0, 1, 2], 500)
     xq = q * np.round(x / q) + np.array([0.0, 0.3, -0.7])[run] * q  # each run its zero
-    lat = rd.detect_lsb(xq, run)
+    lat = rd.detect_lsb(xq, run, settings=FinderSettings())
     assert lat.lsb_rad == pytest.approx(q, rel=1e-6)
     assert lat.bits_per_turn == pytest.approx(bits, abs=1e-6)
     assert lat.fraction_on_lattice > 0.999
     # printed to 6 significant digits in degrees, as a CSV would carry it
     printed = np.deg2rad(np.array([float(f"{v:.6g}") for v in np.rad2deg(xq)]))
-    assert rd.detect_lsb(printed, run).lsb_rad == pytest.approx(q, rel=2e-3)
+    assert rd.detect_lsb(printed, run, settings=FinderSettings()).lsb_rad == pytest.approx(
+        q, rel=2e-3
+    )
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -236,7 +239,7 @@ def test_lsb_of_a_fast_sweep(seed):
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 2**17
     x = 0.3 + np.arange(2000) * 250.37 * q + rng.normal(0, 0.2 * q, 2000)
-    lat = rd.detect_lsb(q * np.round(x / q))
+    lat = rd.detect_lsb(q * np.round(x / q), settings=FinderSettings())
     assert lat.lsb_rad == pytest.approx(q, rel=1e-9)
     assert not lat.single_step
 
@@ -245,7 +248,7 @@ def test_lsb_of_a_fast_sweep(seed):
 def test_no_lattice_in_continuous_readings(seed):
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.uniform(0.0, 1e-3, 2000)) + rng.normal(0, 1e-5, 2000)
-    lat = rd.detect_lsb(x)
+    lat = rd.detect_lsb(x, settings=FinderSettings())
     assert lat.lsb_rad is None
     assert "no lattice" in lat.note or "only" in lat.note
 
@@ -342,7 +345,7 @@ def test_each_effect_alone_recovered_within_10_percent(effect, seed):
 def test_quantization_recovered(seed):
     cols, truth, params = _bench("quantization", seed)
     q = params["lsb_rad"]
-    lat = rd.detect_lsb(cols["h0"], cols.get("run"))
+    lat = rd.detect_lsb(cols["h0"], cols.get("run"), settings=FinderSettings())
     assert lat.lsb_rad == pytest.approx(q, rel=0.1)
     # the staircase term, evaluated at the base model's unquantized reading, explains the
     # residual: its fitted amplitude is 1 within 10 %
@@ -776,7 +779,7 @@ def test_moteus_import(moteus):
     up = slice(0, 1060)
     assert np.ptp(th[up]) / (2 * np.pi) == pytest.approx(1.0, abs=2e-3)
     assert np.ptp(h[up]) / (2 * np.pi) == pytest.approx(1.0, abs=2e-3)
-    lat = rd.detect_lsb(h)
+    lat = rd.detect_lsb(h, settings=FinderSettings())
     assert lat.counts_per_turn == pytest.approx(16384, rel=1e-9)  # a 14-bit sensor
 
 
@@ -787,17 +790,25 @@ def test_magalpha_import(magalpha):
     assert rec.meta["provenance"]["reordered_rows"] == [61, 62, 57, 58, 59, 60]
     assert np.all(np.diff(rec.columns["theta_ref"]) > 0)
     assert np.all(np.diff(rec.columns["h0"]) > 0)
-    lat = rd.detect_lsb(rec.columns["h0"])
+    lat = rd.detect_lsb(rec.columns["h0"], settings=FinderSettings())
     assert lat.counts_per_turn == pytest.approx(512, rel=1e-4)  # 360/512 degree
 
 
 @pytestmark_real
 def test_reference_summary_of_the_real_sensors(moteus, magalpha):
-    s = rd.reference_summary(moteus.columns["t"], moteus.columns["theta_ref"], moteus.columns["h0"])
+    s = rd.reference_summary(
+        moteus.columns["t"],
+        moteus.columns["theta_ref"],
+        moteus.columns["h0"],
+        settings=FinderSettings(),
+    )
     assert s["directions"] == {"0": "both"}
     assert s["sensor_lattice"]["bits_per_turn"] == pytest.approx(14.0, abs=1e-9)
     s = rd.reference_summary(
-        magalpha.columns["t"], magalpha.columns["theta_ref"], magalpha.columns["h0"]
+        magalpha.columns["t"],
+        magalpha.columns["theta_ref"],
+        magalpha.columns["h0"],
+        settings=FinderSettings(),
     )
     assert s["directions"] == {"0": "forward"}
     assert s["span_turns"]["0"] == pytest.approx(358.594 / 360, rel=1e-4)

@@ -370,7 +370,9 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
         if not phi_ref:
             y[:, :M] -= y[:, :M].mean(1, keepdims=True)
         info: dict = {}
-        out = _level_sigma(y, K, X, proj=not phi_ref, info=info)
+        out = _level_sigma(
+            y, K, X, proj=not phi_ref, info=info, level_alpha=DEFAULT_SETTINGS.sds_level_alpha
+        )
         est.append(info["run_means_rad"] ** 2)
         assert out[0] == pytest.approx(info["run_means_rad"] * info["run_means_widening"])
         assert info["run_means_steps_or_outliers"] >= 1

@@ -25,7 +25,7 @@ import math
 import os
 import re
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -125,9 +125,11 @@ class KindSpec:
         check: extra whole-recording checks ``(where, meta, columns) -> None``.
     """
 
-    encoder_keys: Mapping[str, Callable[[str, Any], Any]]
+    encoder_keys: Mapping[str, Callable[[str, object], object]]
     required_encoder: tuple[str, ...] = ()
-    motor_keys: Mapping[str, Callable[[str, Any], Any]] = dataclasses.field(default_factory=dict)
+    motor_keys: Mapping[str, Callable[[str, object], object]] = dataclasses.field(
+        default_factory=dict
+    )
     required_columns: Callable[[dict], list[str]] = lambda meta: []
     optional_columns: Callable[[dict], list[str]] = lambda meta: []
     string_columns: tuple[str, ...] = ()
@@ -138,7 +140,7 @@ class KindSpec:
 # ----------------------------------------------------------------------------- checkers
 
 
-def show(v: Any) -> str:
+def show(v: object) -> str:
     """``repr`` of a value for messages, NumPy scalars as plain numbers (no ``np.float64(…)``)."""
     if isinstance(v, np.generic):
         v = v.item()
@@ -147,7 +149,7 @@ def show(v: Any) -> str:
     return repr(v)
 
 
-def finite_number(where: str, v: Any) -> float:
+def finite_number(where: str, v: object) -> float:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise input_error(where, f"got {show(v)}", "a finite number")
     return float(v)
@@ -162,7 +164,7 @@ def number_in(lower: float, upper: float, units: str = "", *, lower_open: bool =
     else:
         rng = f"{lower:g} {'<' if lower_open else '<='} value <= {upper:g}{u}"
 
-    def check(where: str, v: Any) -> float:
+    def check(where: str, v: object) -> float:
         x = finite_number(where, v)
         if x < lower or (lower_open and x == lower) or x > upper:
             raise input_error(where, f"got {show(v)}", rng)
@@ -171,20 +173,20 @@ def number_in(lower: float, upper: float, units: str = "", *, lower_open: bool =
     return check
 
 
-def positive_number(where: str, v: Any) -> float:
+def positive_number(where: str, v: object) -> float:
     x = finite_number(where, v)
     if x <= 0:
         raise input_error(where, f"got {v!r}", "a positive number")
     return x
 
 
-def positive_int(where: str, v: Any) -> int:
+def positive_int(where: str, v: object) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
         raise input_error(where, f"got {v!r}", "a positive integer")
     return int(v)
 
 
-def _nonneg_int(where: str, v: Any) -> int:
+def _nonneg_int(where: str, v: object) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v < 0:
         raise input_error(where, f"got {v!r}", "a non-negative integer")
     return int(v)
@@ -193,7 +195,7 @@ def _nonneg_int(where: str, v: Any) -> int:
 def int_in(lower: int, upper: int):
     """A checker for an integer in ``[lower, upper]`` (bools refused)."""
 
-    def check(where: str, v: Any) -> int:
+    def check(where: str, v: object) -> int:
         if isinstance(v, bool) or not isinstance(v, int) or not lower <= v <= upper:
             raise input_error(where, f"got {show(v)[:40]}", f"an integer {lower} … {upper}")
         return int(v)
@@ -201,13 +203,13 @@ def int_in(lower: int, upper: int):
     return check
 
 
-def _angle_list(where: str, v: Any) -> list[float]:
+def _angle_list(where: str, v: object) -> list[float]:
     if not isinstance(v, list) or len(v) == 0 or len(v) > 1000:
         raise input_error(where, f"got {show(v)[:80]}", "a list of 1 … 1000 angles in degrees")
     return [_ANGLE_DEG(f"{where}[{i}]", x) for i, x in enumerate(v)]
 
 
-def _string(where: str, v: Any) -> str:
+def _string(where: str, v: object) -> str:
     if not isinstance(v, str):
         raise input_error(where, f"got {v!r}", "a string")
     return v
@@ -217,13 +219,13 @@ SENSORS = ("optical", "magnetic", "resolver", "capacitive")
 """Values of ``[encoder] sensor`` (multihead kind)."""
 
 
-def _sensor(where: str, v: Any) -> str:
+def _sensor(where: str, v: object) -> str:
     if not isinstance(v, str) or v not in SENSORS:
         raise input_error(where, f"got {v!r}", f"one of {', '.join(repr(s) for s in SENSORS)}")
     return v
 
 
-def _table(where: str, v: Any) -> dict:
+def _table(where: str, v: object) -> dict:
     if not isinstance(v, dict):
         raise input_error(where, f"got {v!r}", "a table")
     return v
@@ -505,7 +507,9 @@ def _bad_cell(where: str, name: str, i: int, problem: str, expected: str):
     return input_error(f"{where}, {row_at(where, i)}, column '{name}'", problem, expected)
 
 
-def _convert(where: str, name: str, values: Any, kind: str, spec: KindSpec) -> np.ndarray:
+def _convert(
+    where: str, name: str, values: Iterable[object], kind: str, spec: KindSpec
+) -> np.ndarray:
     """Column ``values`` (strings or numbers) -> a typed, checked array."""
     if name in spec.string_columns:
         arr = np.asarray(values)

@@ -43,6 +43,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ._discover_words import reading
+from ._settings import FinderSettings
 
 ALPHA = 0.01
 """Family-wise false-alarm rate of the selection over the whole library (Bonferroni)."""
@@ -387,7 +388,9 @@ def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
     return H.reshape(nb * S * C * nj, Gn * njp)
 
 
-def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> list[Term]:
+def library(
+    lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha, settings: FinderSettings
+) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
     sp, dr = cinfo["speed"], cinfo["direction"]
@@ -403,7 +406,9 @@ def library(lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha) -> li
                 continue
             one = np.ones(S)
             out.append(Term(li, name, "static", _H(lay, 0, M, one)))
-            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(1.2):
+            if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(
+                settings.discover_speed_ratio
+            ):
                 H0 = _H(lay, 0, M, one)
                 out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
             if (dr > 0).any() and (dr < 0).any():
@@ -589,7 +594,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
         alpha = np.zeros(C)
     sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha)
+    lib = library(lines, sums, cinfo, C, alpha, prep.settings)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
@@ -621,7 +626,8 @@ def discover(
             )
         return [None] * len(findings)
     kept, incl = select_terms(st)
-    terms_json = [_term_json(prep, st, kept, i, incl) for i in kept]
+    gains = _gains(st, kept)
+    terms_json = [_term_json(prep, st, kept, i, incl, gains) for i in kept]
     near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
     return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
 
@@ -641,10 +647,38 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     return [i for i in chosen if incl[i] >= INCLUSION_MIN], incl
 
 
-def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> dict:
-    """One kept term's JSON entry (parameters and held-out gain fitted with the others)."""
-    sums, lib, cinfo = st.sums, st.lib, st.cinfo
+def _gains(st: State, kept: list[int]) -> dict[str, dict]:
+    """Held-out gains (chi-square) of the kept terms, in the order forward selection took
+    them: ``entry`` (per term: the gain when it entered, over the terms taken before it; these
+    sum to the whole model's gain), ``drop_one`` (per term: the loss when only it is removed;
+    0 for a term another kept term spans) and ``line`` (per line: the loss when all of that
+    line's terms are removed)."""
+    sums, lib = st.sums, st.lib
     folds = list(range(sums.A.shape[0]))
+
+    def ho(idx: list[int]) -> float:
+        if not idx:
+            return 0.0
+        return _heldout(sums.A, sums.b, _embed(sums, [lib[j] for j in idx]), folds, sums.raw)
+
+    whole = ho(kept)
+    entry, prev = {}, 0.0
+    for n, i in enumerate(kept):
+        cur = ho(kept[: n + 1])
+        entry[i], prev = cur - prev, cur
+    drop = {i: whole - ho([j for j in kept if j != i]) for i in kept}
+    line = {}
+    for li in {lib[i].line for i in kept}:
+        line[li] = whole - ho([j for j in kept if lib[j].line != li])
+    return {"entry": entry, "drop_one": drop, "line": line}
+
+
+def _term_json(
+    prep, st: State, kept: list[int], i: int, incl: np.ndarray, gains: dict[str, dict]
+) -> dict:
+    """One kept term's JSON entry (parameters fitted with the others; held-out gains as
+    :func:`_gains` defines them)."""
+    sums, lib, cinfo = st.sums, st.lib, st.cinfo
     At, bt = sums.A.sum(0), sums.b.sum(0)
     Hk = _embed(sums, [lib[j] for j in kept])
     G = Hk.T @ At @ Hk
@@ -655,9 +689,6 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
     tm = lib[i]
     q = tm.H.shape[1]
     c, cv = coef[q0 : q0 + q], cov[q0 : q0 + q, q0 : q0 + q]
-    ho_all = _heldout(sums.A, sums.b, Hk, folds, sums.raw)
-    Hwo = _embed(sums, [lib[j] for j in kept if j != i])
-    ho_wo = _heldout(sums.A, sums.b, Hwo, folds, sums.raw)
     ln = st.lines[tm.line]
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
@@ -696,9 +727,13 @@ def _term_json(prep, st: State, kept: list[int], i: int, incl: np.ndarray) -> di
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
-        "heldout_gain_chi2": float(ho_all - ho_wo),
+        "heldout_gain_chi2": float(gains["entry"][i]),
+        "heldout_gain_drop_one_chi2": float(gains["drop_one"][i]),
+        "heldout_gain_line_chi2": float(gains["line"][tm.line]),
         "inclusion_probability": float(incl[i]),
-        "reading": reading(ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names)),
+        "reading": reading(
+            ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
+        ),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
@@ -734,7 +769,7 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         "frame": frames[0] if len(frames) == 1 else ", ".join(frames),
         "terms": mine,
         "scaling": next((t["scaling"] for t in mine if t["scaling"]), None),
-        "heldout_gain_chi2": float(sum(t["heldout_gain_chi2"] for t in mine)),
+        "heldout_gain_chi2": mine[0]["heldout_gain_line_chi2"],
         "inclusion": {
             f"{t['frame']} / {t['modulation']}": t["inclusion_probability"] for t in mine
         },

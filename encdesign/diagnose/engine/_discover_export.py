@@ -115,8 +115,9 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             return [{"beta": jnp.asarray(b0)}]
 
     def plausible(ctx, p):  # noqa: ARG001 - the Candidate contract
-        if "beta" in p and not (-4.0 <= float(p["beta"]) <= 4.0):
-            return f"speed exponent {float(p['beta']):.2f} outside [-4, 4]"
+        bmax = ctx.settings.discover_beta_max
+        if "beta" in p and not (-bmax <= float(p["beta"]) <= bmax):
+            return f"speed exponent {float(p['beta']):.2f} outside [-{bmax:g}, {bmax:g}]"
         amp = math.sqrt(
             float(jnp.mean(jnp.asarray(p["cos_rad"]) ** 2))
             + float(jnp.mean(jnp.asarray(p.get("sin_rad", 0.0)) ** 2))

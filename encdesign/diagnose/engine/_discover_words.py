@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+from ._settings import FinderSettings
+
 
 def _order_reading(m: float, ctx_meta: dict, L: int) -> str:
     """What an integer order ``m`` is a multiple of (pole pairs, slots, their lcm, the
@@ -52,7 +54,7 @@ MOD_WORDS = {
 }
 
 
-def _speed_cause(beta: float, se: float | None) -> str:
+def _speed_cause(beta: float, se: float | None, n_se: float) -> str:
     s = se or 0.5
     for b0, words in (
         (-2.0, "a periodic torque filtered by the rotor's inertia"),
@@ -61,12 +63,12 @@ def _speed_cause(beta: float, se: float | None) -> str:
         (1.0, "a lag: a delay or a filter's time constant times the speed"),
         (2.0, "a centrifugal or inertial load growing with the speed squared"),
     ):
-        if abs(beta - b0) <= 2 * s:
+        if abs(beta - b0) <= n_se * s:
             return words
     return "no simple mechanism (exponent not near -2, -1, 0, 1 or 2)"
 
 
-def reading(line, tm, meta: dict, L: int, cinfo: dict, C: int) -> str:
+def reading(line, tm, meta: dict, L: int, cinfo: dict, C: int, settings: FinderSettings) -> str:
     """One sentence of the structure and its likely cause."""
     what = line.label()
     if line.kind == "order" and line.value > 0:
@@ -84,7 +86,7 @@ def reading(line, tm, meta: dict, L: int, cinfo: dict, C: int) -> str:
         S = len(cinfo["speed"])
         se = f" +- {tm.beta_se:.2g}" if tm.beta_se is not None else ""
         mw = f"amplitude ~ speed^({tm.beta:.2f}{se}) across {S} steady speeds: " + _speed_cause(
-            tm.beta, tm.beta_se
+            tm.beta, tm.beta_se, settings.speed_cause_se
         )
     elif tm.modulation.startswith("cell "):
         s = int(tm.modulation.split()[1])

@@ -10,6 +10,7 @@ import numpy as np
 from ._fit import FitResult, Term
 from ._lattice import detect_lsb
 from ._protocol import Prepared
+from ._settings import FinderSettings
 from ._views import order_sums, run_spans
 
 # ----------------------------------------------------------------------------- run + JSON
@@ -143,7 +144,7 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
     run = np.concatenate([prep.run[a:b] for a, b in pieces])
     chans, lsb, share, offsets = [], [], [], []
     for k in range(reading.shape[1]):
-        lat = detect_lsb(reading[keep, k], run[keep])
+        lat = detect_lsb(reading[keep, k], run[keep], settings=prep.settings)
         if lat.lsb_rad is None or _sweep_grid(
             reading[:, k], keep, run, lat, prep.settings.sweep_coherence
         ):
@@ -215,9 +216,12 @@ def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: in
     return out
 
 
-def significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
-    """Channels whose per-channel parameters differ from zero by more than 3 se (``None``
-    when the term has no per-channel parameter)."""
+def significant_channels(
+    term: Term, fit: FitResult, idx: int, C: int, R: int, settings: FinderSettings
+):
+    """Channels whose per-channel parameters differ from zero by more than
+    ``settings.significant_channel_se`` standard errors (``None`` when the term has no
+    per-channel parameter)."""
     se = se_dict(term, fit, idx)
     per = [q for q in term.cand.params if q.shape in ("channels", "runs*channels")]
     if not per or C == 1:
@@ -227,7 +231,7 @@ def significant_channels(term: Term, fit: FitResult, idx: int, C: int, R: int):
         v = np.abs(term.values[q.name]) / np.where(se[q.name] > 0, se[q.name], np.inf)
         v = np.nan_to_num(v)
         z = np.maximum(z, v.reshape(-1, C).max(0))
-    return [k for k in range(C) if z[k] > 3]
+    return [k for k in range(C) if z[k] > settings.significant_channel_se]
 
 
 def _g(x, digits: int = 4) -> str:
@@ -291,7 +295,13 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
         out.append(
             f"  discovered (outside the catalog): {t['line']}, {t['frame']}, {t['modulation']}"
             f"{law}; amplitude {p['amplitude']:.3g} +- {p['amplitude_se']:.2g} {u}; held-out "
-            f"gain {t['heldout_gain_chi2']:.4g} (chi2); inclusion "
+            f"gain {t['heldout_gain_chi2']:.4g} (chi2) at entry"
+            + (
+                f", {t['heldout_gain_drop_one_chi2']:.4g} if only it were removed"
+                if "heldout_gain_drop_one_chi2" in t
+                else ""
+            )
+            + "; inclusion "
             f"{t['inclusion_probability']:.0%}"
         )
         where = [

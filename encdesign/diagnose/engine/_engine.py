@@ -298,7 +298,7 @@ def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
     derived = {}
     if term.cand.derived is not None:
         derived = term.cand.derived(prep.ctx, term.values, se_dict(term, final, idx))
-    chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs)
+    chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs, prep.settings)
     names = prep.kd.channel_names
     out = {
         "name": s.name,

@@ -220,7 +220,8 @@ class Fitter:
         for par in term.cand.params:
             Jp = np.asarray(J[par.name])[:rows]
             Jp = Jp.reshape(rows, C, -1)
-            cols.append(Jp[:, :, term.free[par.name].ravel()])
+            free = term.free[par.name].ravel()
+            cols.append(Jp if free.all() else Jp[:, :, free])  # no copy when all are free
         return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
 
     def chunk_residual(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
@@ -258,11 +259,17 @@ class Fitter:
             v, J = self.eval_term(tm, a, b, x, jac=True)
             pred += v
             Js.append(J)
-        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+        if len(Js) == 1:
+            J = Js[0]  # not copied here: the fold sort below makes the copy
+        else:
+            J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
         if prep.kd.project:
             J = J - J.mean(1, keepdims=True)
         order, edges = self._fold_order(a, b)
-        J = (J * sc[None, None, :] * np.sqrt(self.w_ch)[None, :, None])[order]
+        # sorted first, then scaled in place: each element is (J sc) sqrt(w) as before
+        J = J[order]
+        J *= sc[None, None, :]
+        J *= np.sqrt(self.w_ch)[None, :, None]
         return pred, J, order, edges
 
     def _fold_order(self, a: int, b: int):
@@ -304,25 +311,23 @@ class Fitter:
         for a, b, x in self.chunks():
             ck = (skey, a)
             hit = self._pcache.get(ck)
-            if hit is None:
-                J0 = self._processed(static, a, b, x, sc_s)
-                lin = [
-                    np.concatenate(
-                        [t.values[q.name][t.free[q.name]].ravel() for q in t.cand.params]
-                        or [np.zeros(0)]
-                    )
-                    for t in static
-                ]
-                del lin
-                hit = J0
-                if self._pbytes + J0[1].nbytes < CACHE_BYTES:
-                    self._pcache[ck] = J0
-                    self._pbytes += J0[1].nbytes
+            fresh = hit is None
+            if fresh and not jac:  # values only: the processed Jacobian is not needed
+                hit = (None, None, *self._fold_order(a, b))
+            elif fresh:
+                hit = self._processed(static, a, b, x, sc_s)
+                if self._pbytes + hit[1].nbytes < CACHE_BYTES:
+                    self._pcache[ck] = hit
+                    self._pbytes += hit[1].nbytes
             _, Js_, order, edges = hit
-            # static prediction from current linear values (v0 + J p)
-            pred = np.zeros((b - a, prep.n_channels))
-            for tm in static:
-                pred += self.eval_term(tm, a, b, x, jac=False if not jac else True)[0]
+            # static prediction from current linear values (v0 + J p): made just now with
+            # the Jacobian (the same sum, term by term, as below), else from the cache
+            if fresh and jac:
+                pred = hit[0].copy()
+            else:
+                pred = np.zeros((b - a, prep.n_channels))
+                for tm in static:
+                    pred += self.eval_term(tm, a, b, x, jac=jac)[0]
             if dyn:
                 if jac:
                     pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
@@ -418,10 +423,16 @@ class Fitter:
         p = At.shape[0]
         Bj, jj, jr = np.zeros((p, E)), np.zeros(E), np.zeros(E)
         for a, b, x in self.chunks():
-            hit = self._pcache.get((skey, a)) or self._processed(held, a, b, x, sc)
-            _, Js_, order, edges = hit
+            hit = self._pcache.get((skey, a))
+            if hit is None:  # the prediction comes with the Jacobian: no second evaluation
+                pred, Js_, order, edges = self._processed(held, a, b, x, sc)
+                r = prep.y[a:b] - pred
+                if prep.kd.project:
+                    r = r - r.mean(1, keepdims=True)
+            else:
+                _, Js_, order, edges = hit
+                r = self.chunk_residual(held, a, b, x)
             lo, hi = int(edges[0]), int(edges[K])
-            r = self.chunk_residual(held, a, b, x)
             rw = (r * sw)[order][lo:hi].ravel()
             S = Js_[lo:hi].reshape(rw.size, p)
             cols = np.empty((rw.size, E))

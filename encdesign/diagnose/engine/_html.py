@@ -12,13 +12,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from ..._html import result_html
 from ._document import nuisance_rows
 from ._html_base import (
+    ReportRows,
     _e,
     _figure,
     _located,
@@ -40,7 +41,14 @@ from ._html_discovery import (
 # The adapter: the only code that touches the finder's objects.
 
 
-def report_inputs(d: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
+class Diagnosed(Protocol):
+    """What the report reads of a diagnosis (a :class:`~encdesign.diagnose.Diagnosis`): its
+    JSON document, and ``plot_data`` where it has one."""
+
+    def to_json(self) -> dict[str, Any]: ...
+
+
+def report_inputs(d: Diagnosed) -> tuple[dict[str, Any], ReportRows | None]:
     """The JSON document and the per-row arrays of a diagnosis (the report's only inputs).
 
     Args:
@@ -73,7 +81,7 @@ def report_inputs(d: Any) -> tuple[dict[str, Any], dict[str, Any] | None]:
             continue
         theta = theta[:, 0] if theta.ndim == 2 else theta
         break
-    rows = {
+    rows: ReportRows = {
         "tau": np.asarray(prep.rows["tau"], dtype=float),
         "t": np.asarray(prep.rows["t"], dtype=float),
         "run": run_ids[run] if run_ids.size > run.max(initial=0) else run,
@@ -114,9 +122,9 @@ details summary{cursor:pointer;color:#225}
 """
 
 
-def _located_times(doc: Mapping[str, Any]) -> list[tuple[Any, float, str]]:
+def _located_times(doc: Mapping[str, Any]) -> list[tuple[object, float, str]]:
     """``(run or None, t within the run (s), label)`` of every located time."""
-    out: list[tuple[Any, float, str]] = []
+    out: list[tuple[object, float, str]] = []
     for w in _located(doc):
         runs = w.get("runs") or [None]
         for t in w.get("times_s") or []:
@@ -129,7 +137,7 @@ def _located_times(doc: Mapping[str, Any]) -> list[tuple[Any, float, str]]:
     return out
 
 
-def _tau_of(rows: Mapping[str, Any], run: Any, t: float) -> float | None:
+def _tau_of(rows: ReportRows, run: object, t: float) -> float | None:
     """The end-to-end time of the row nearest ``t`` in ``run`` (any run when ``None``)."""
     sel = np.ones(rows["t"].size, bool) if run is None else rows["run"] == run
     if not sel.any():
@@ -151,14 +159,14 @@ def _stride(n: int) -> slice:
     return slice(None, None, max(1, math.ceil(n / MAX_POINTS)))
 
 
-def _channels_by_size(rows: Mapping[str, Any]) -> list[int]:
+def _channels_by_size(rows: ReportRows) -> list[int]:
     r0 = np.where(rows["keep"][:, None], rows["base_resid"], np.nan)
     rms = np.sqrt(np.nanmean(r0**2, axis=0))
     order = list(np.argsort(-np.nan_to_num(rms)))
     return sorted(int(k) for k in order[:MAX_PANELS])
 
 
-def fig_time(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
+def fig_time(doc: Mapping[str, Any], rows: ReportRows) -> str:
     """Residual against time (runs end to end): base and final, excluded rows shaded,
     located times (findings, glitches, count jumps, gaps) as vertical lines."""
     Figure = _figure()
@@ -191,7 +199,7 @@ def fig_time(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
     return _png(fig)
 
 
-def fig_heads(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
+def fig_heads(doc: Mapping[str, Any], rows: ReportRows) -> str:
     """Per channel (head): residual RMS of the base and final model over the kept rows
     against the noise, and the base residual folded on the shaft angle."""
     Figure = _figure()
@@ -199,7 +207,8 @@ def fig_heads(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
     C = rows["base_resid"].shape[1]
     r0 = np.sqrt(np.mean(rows["base_resid"][keep] ** 2, axis=0)) if keep.any() else np.zeros(C)
     r1 = np.sqrt(np.mean(rows["final_resid"][keep] ** 2, axis=0)) if keep.any() else np.zeros(C)
-    has_theta = rows.get("theta") is not None
+    theta = rows["theta"]
+    has_theta = theta is not None
     fig = Figure(figsize=(10, 3.6))
     axes = fig.subplots(1, 2 if has_theta else 1, squeeze=False)[0]
     x = np.arange(C)
@@ -212,7 +221,7 @@ def fig_heads(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
     axes[0].set(ylabel=f"RMS ({doc['unit']})", title="per channel")
     axes[0].legend(fontsize=7)
     if has_theta:
-        ph = np.degrees(np.mod(rows["theta"][keep], 2 * np.pi))
+        ph = np.degrees(np.mod(theta[keep], 2 * np.pi))
         s = _stride(ph.size * min(C, MAX_PANELS))
         for k in _channels_by_size(rows):
             axes[1].plot(
@@ -227,19 +236,19 @@ def fig_heads(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str:
     return _png(fig)
 
 
-def fitted_curves(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> list[tuple[str, Any]]:
+def fitted_curves(doc: Mapping[str, Any], rows: ReportRows) -> list[tuple[str, np.ndarray]]:
     """``[(name, (n, C) contribution), ...]``: each named effect's own fitted contribution
     (the typed results' per-effect arrays, in the order of ``effects``); effects named from
     a lattice (not fitted) have none. Without per-effect arrays, one curve: the named
     effects together (base residual minus final residual)."""
-    own = rows.get("effects") or {}
+    own = rows["effects"]
     curves = [(e["name"], own[e["name"]]) for e in doc.get("effects") or [] if e["name"] in own]
     if curves:
         return curves
     return [("named effects", rows["base_resid"] - rows["final_resid"])]
 
 
-def fig_fitted(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
+def fig_fitted(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
     """Each named effect's own fitted contribution (one curve per effect,
     :func:`fitted_curves`) drawn over the base residual it explains, on the channel where
     they are largest: against time and, where the shaft angle is known, folded on the
@@ -251,7 +260,8 @@ def fig_fitted(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
     curves = fitted_curves(doc, rows)
     model = sum(np.abs(c) for _, c in curves)
     k = int(np.argmax(np.sqrt(np.mean(model[keep] ** 2, axis=0)))) if keep.any() else 0
-    has_theta = rows.get("theta") is not None
+    theta = rows["theta"]
+    has_theta = theta is not None
     fig = Figure(figsize=(10, 3.6))
     axes = fig.subplots(1, 2 if has_theta else 1, squeeze=False)[0]
     tau = rows["tau"][keep]
@@ -265,7 +275,7 @@ def fig_fitted(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
     axes[0].set(xlabel="time, runs end to end (s)", ylabel=f"{rows['channels'][k]} ({doc['unit']})")
     axes[0].legend(fontsize=7, markerscale=5)
     if has_theta:
-        ph = np.degrees(np.mod(rows["theta"][keep], 2 * np.pi))
+        ph = np.degrees(np.mod(theta[keep], 2 * np.pi))
         o = np.argsort(ph)[s]
         axes[1].plot(ph[o], b[o], ".", ms=1.5, color="0.55", label="base residual")
         for i, (name, c) in enumerate(curves):
@@ -278,7 +288,7 @@ def fig_fitted(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
     return _png(fig)
 
 
-def fig_before_after(doc: Mapping[str, Any], rows: Mapping[str, Any] | None) -> str:
+def fig_before_after(doc: Mapping[str, Any], rows: ReportRows | None) -> str:
     """RMS per model step (base, then each named effect), fitted and held out, against the
     noise; and the distribution of the base and final residual."""
     from ._plots import rms_bars, rms_steps
@@ -519,7 +529,7 @@ def _located_parts(doc: dict) -> list[str]:
     return parts
 
 
-def _figure_parts(doc: dict, rows: Any) -> list[str]:
+def _figure_parts(doc: dict, rows: ReportRows | None) -> list[str]:
     """The embedded figures."""
 
     parts: list[str] = []
@@ -596,7 +606,7 @@ def _figure_parts(doc: dict, rows: Any) -> list[str]:
     return parts
 
 
-def render_html(d: Any) -> str:
+def render_html(d: Diagnosed) -> str:
     """The whole report of a diagnosis as one HTML string (see the module docstring)."""
     doc, rows = report_inputs(d)
     verdict = doc["verdict"]
@@ -617,7 +627,7 @@ def render_html(d: Any) -> str:
     return "\n".join(parts)
 
 
-def notebook_html(d: Any) -> str:
+def notebook_html(d: Diagnosed) -> str:
     """A diagnosis in a notebook (``Diagnosis._repr_html_``): the report's verdict line and
     its tables (residual, noise, goodness of fit, named effects, alternatives and refusals,
     located structure, nuisances), without the figures (each a rendered PNG; the full report
@@ -635,7 +645,7 @@ def notebook_html(d: Any) -> str:
     )
 
 
-def write_html(d: Any, path: str | Path) -> Path:
+def write_html(d: Diagnosed, path: str | Path) -> Path:
     """Write :func:`render_html` of ``d`` to ``path`` atomically."""
     from ...io._paths import atomic_write_text
 

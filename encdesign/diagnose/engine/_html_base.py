@@ -7,13 +7,40 @@ from __future__ import annotations
 import base64
 import io
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
 from ..._html import escape as _e
 from ..._html import num as _num
 from ..._html import table as _table  # noqa: F401 (the report's modules import it from here)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+
+class ReportRows(TypedDict):
+    """The per-row arrays of a diagnosis that the report draws (:func:`._html.report_inputs`),
+    over the recording's rows in the finder's order."""
+
+    tau: np.ndarray
+    """(n,) time with the runs end to end (s)."""
+    t: np.ndarray
+    """(n,) time within the run (s)."""
+    run: np.ndarray
+    """(n,) the run as the document names it."""
+    keep: np.ndarray
+    """(n,) bool: the rows the fits used."""
+    theta: np.ndarray | None
+    """(n,) the shaft angle (rad), ``None`` when the recording has none."""
+    base_resid: np.ndarray
+    """(n, C) residual of the base model (unit of the document)."""
+    final_resid: np.ndarray
+    """(n, C) residual of the final model."""
+    effects: dict[str, np.ndarray]
+    """``{name: (n, C)}`` each named effect's own fitted contribution (may be empty)."""
+    channels: list[str]
+    """The C channel names."""
 
 
 def _param_cell(p: Mapping[str, Any]) -> str:
@@ -56,7 +83,7 @@ def _where_text(w: Mapping[str, Any] | None) -> str:
     return _e("; ".join(parts)) or "-"
 
 
-def _png(fig: Any) -> str:
+def _png(fig: Figure) -> str:
     """A matplotlib figure as an ``<img>`` with a base64 PNG ``data:`` URI."""
     buf = io.BytesIO()
     fig.tight_layout()
@@ -65,7 +92,7 @@ def _png(fig: Any) -> str:
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
 
 
-def _figure() -> Any:
+def _figure() -> type[Figure]:
     from matplotlib.figure import Figure
 
     return Figure

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ._html_base import _e, _figure, _located_orders, _num, _png, _table
+from ._html_base import ReportRows, _e, _figure, _located_orders, _num, _png, _table
 
 MAX_SPECTRUM_ORDER = 1000
 """Highest shaft order the report's own spectrum reaches (the located orders set it)."""
@@ -36,7 +36,7 @@ def order_amplitudes(
 
 
 def spectrum_data(
-    doc: Mapping[str, Any], rows: Mapping[str, Any] | None = None
+    doc: Mapping[str, Any], rows: ReportRows | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """``(orders, base, final)`` amplitudes by integer shaft order for the spectrum figure.
 
@@ -53,7 +53,7 @@ def spectrum_data(
             np.asarray(sp["before"], float),
             np.asarray(sp["after"], float),
         )
-    if rows is not None and rows.get("theta") is not None and top >= 1 and rows["keep"].any():
+    if rows is not None and rows["theta"] is not None and top >= 1 and rows["keep"].any():
         last = max(int(math.ceil(1.1 * top)), max(sp.get("orders") or [0]))
         o = np.arange(1, min(last, MAX_SPECTRUM_ORDER) + 1, dtype=float)
         keep = rows["keep"]
@@ -72,7 +72,7 @@ def spectrum_data(
     )
 
 
-def fig_spectrum(doc: Mapping[str, Any], rows: Mapping[str, Any] | None = None) -> str | None:
+def fig_spectrum(doc: Mapping[str, Any], rows: ReportRows | None = None) -> str | None:
     """Residual amplitude by integer order (base and final, :func:`spectrum_data`: up to the
     highest located order where the rows allow), located orders marked."""
     data = spectrum_data(doc, rows)
@@ -125,9 +125,9 @@ FOLD_BINS = 48
 """Phase bins of the residual folded on a discovered term's line."""
 
 
-def _directions(rows: Mapping[str, Any]) -> np.ndarray:
+def _directions(rows: ReportRows) -> np.ndarray:
     """+1 / -1 per row: the sign of the shaft angle's change within its run (0: unknown)."""
-    th, run = rows.get("theta"), rows["run"]
+    th, run = rows["theta"], rows["run"]
     if th is None:
         return np.zeros(run.size)
     d = np.zeros(run.size)
@@ -138,18 +138,19 @@ def _directions(rows: Mapping[str, Any]) -> np.ndarray:
     return d
 
 
-def _term_phase(t: Mapping[str, Any], rows: Mapping[str, Any]) -> np.ndarray | None:
+def _term_phase(t: Mapping[str, Any], rows: ReportRows) -> np.ndarray | None:
     """The phase (rad) of a discovered term's line per row: ``m theta`` for an order (the
     shaft angle; ``None`` without it), ``2 pi f t`` for a frequency."""
     v = float(t.get("value", 0.0))
     if t.get("line_kind") == "hz":
         return 2 * math.pi * v * rows["t"]
-    if rows.get("theta") is None or v == 0:
+    theta = rows["theta"]
+    if theta is None or v == 0:
         return None
-    return v * rows["theta"]
+    return v * theta
 
 
-def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | None:
+def fig_discovered(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
     """Each discovered term over the final catalog residual in its own frame: the residual
     of the term's channel (its head; else the largest) folded on the term's line phase
     (``m theta`` mod 2 pi for an order, ``2 pi f t`` for a frequency), averaged in
@@ -168,7 +169,7 @@ def fig_discovered(doc: Mapping[str, Any], rows: Mapping[str, Any]) -> str | Non
     keep = rows["keep"]
     chans = rows["channels"]
     dirs = _directions(rows)
-    lines: dict[tuple[Any, float], np.ndarray] = {}
+    lines: dict[tuple[str | None, float], np.ndarray] = {}
     for t in discovered_terms(doc):
         q = _term_phase(t, rows)
         if q is not None:

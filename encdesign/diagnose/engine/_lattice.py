@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from ._settings import FinderSettings
+
 __all__ = ["Lattice", "detect_lsb"]
 
 
@@ -74,40 +76,41 @@ def detect_lsb(
     values_rad: np.ndarray,
     run: np.ndarray | None = None,
     *,
-    tolerance: float = 0.1,
-    max_divisor: int = 12,
-    min_fraction: float = 0.99,
-    min_differences: int = 20,
+    settings: FinderSettings,
 ) -> Lattice:
     """Find the step of the value lattice of a quantized reading (rad).
 
     Values of one run lie on ``c_r + q k`` (integers ``k``; each run may have its own zero
-    ``c_r``). The smallest gap ``d_min`` between distinct values of a run is ``q`` or a
-    multiple of it: the step is the largest ``d_min / j`` (``j = 1 … max_divisor``) of which
-    at least ``min_fraction`` of all gaps are integer multiples within ``tolerance * q``
-    (values printed with a few digits pass). When that fails, or finds only an even sweep,
-    readings computed from integer counts still sit on their lattice to rounding error: the
-    step is then the approximate greatest common divisor of the gaps (Euclid's algorithm
-    with an absolute tolerance of ``1e-12`` of the largest value), even when every gap is
-    hundreds of steps (a fast sweep); a "step" of the size of that tolerance (continuous
-    values) or over 1e4 times below the typical gap (a file's printed decimals) is refused.
-    Either step is refined by least squares over the gaps. A record without a lattice
-    (continuous values) fails the first test: the fractional parts of its gaps are spread
-    uniformly, so only about ``2 tolerance`` of them pass. Values that step evenly by one gap
-    and never repeat are a uniform sweep sampled evenly, not a quantized reading: no lattice.
+    ``c_r``). The smallest gap ``d_min`` between distinct values of a run is ``q`` or a multiple
+    of it: the step is the largest ``d_min / j`` (``j = 1 … lattice_max_divisor``) of which at
+    least ``lattice_min_fraction`` of all gaps are integer multiples within
+    ``lattice_tolerance * q`` (values printed with a few digits pass). When that fails, or finds
+    only an even sweep,
+    readings computed from integer counts still sit on their lattice to rounding error: the step
+    is then the approximate greatest common divisor of the gaps (Euclid's algorithm with an
+    absolute tolerance of ``1e-12`` of the largest value), even when every gap is hundreds of
+    steps (a fast sweep); a "step" not over ``lattice_exact_floor`` times that tolerance
+    (continuous values) or over ``lattice_gap_steps_max`` times below the typical gap (a file's
+    printed decimals) is refused. Either step is refined by least squares over the gaps. A
+    record without a lattice (continuous values) fails the first test: the fractional parts of
+    its gaps are spread uniformly, so only about ``2 lattice_tolerance`` of them pass. Values
+    that step evenly by one gap and never repeat are a uniform sweep sampled evenly, not a
+    quantized reading: no lattice.
 
     Args:
         values_rad: the readings, rad (any unwrapped angle).
         run: run id per value (``None``: one run).
-        tolerance: allowed distance from the lattice, in steps (covers values printed with
-            a few significant digits).
-        max_divisor: largest ``j`` tried.
-        min_fraction: share of gaps (and of values) that must sit on the lattice.
-        min_differences: fewer distinct gaps than this: no decision (``lsb_rad = None``).
+        settings: the finder's thresholds; the ``lattice_*`` fields decide (tolerance in
+            steps, largest divisor, least share of gaps and values on the lattice, least
+            number of gaps, the exact branch's floor and largest gap in steps).
 
     Returns:
         A :class:`Lattice`.
     """
+    tolerance = settings.lattice_tolerance
+    max_divisor = settings.lattice_max_divisor
+    min_fraction = settings.lattice_min_fraction
+    min_differences = settings.lattice_min_differences
     v = np.asarray(values_rad, dtype=np.float64)
     run = np.zeros(v.size, dtype=np.int64) if run is None else np.asarray(run)
     scale = float(np.max(np.abs(v))) if v.size else 0.0
@@ -139,11 +142,16 @@ def detect_lsb(
         # 2) an exact lattice (readings computed from integer counts): Euclid's algorithm on
         #    the gaps with an absolute tolerance finds a step far below the smallest gap (a
         #    fast sweep whose gaps are all ~250 LSB). Continuous values only reach a "step"
-        #    of the size of the tolerance; a step over 1e4 times below the typical gap (the
-        #    decimal digits a file was printed with) is not a reading's resolution either
+        #    of the size of the tolerance; a step over lattice_gap_steps_max times below the
+        #    typical gap (the decimal digits a file was printed with) is not a reading's
+        #    resolution either
         exact_tol = 1e-12 * max(scale, 1.0)
         g = _approximate_gcd(d, exact_tol)
-        if g is not None and g > 1e3 * exact_tol and np.median(d) / g <= 1e4:
+        if (
+            g is not None
+            and g > settings.lattice_exact_floor * exact_tol
+            and np.median(d) / g <= settings.lattice_gap_steps_max
+        ):
             q, tolerance = g, 10 * exact_tol / g  # tolerance in steps
     if q is None:
         return dataclasses.replace(

@@ -567,8 +567,10 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     """Stage 1: nuisances, noise, folds (see module doc). Raises EncdesignInputError."""
     n, C = kd.y.shape
     where = kd.where
-    if n < 32:
-        raise input_error(where, f"only {n} rows", "at least 32 rows to diagnose")
+    if n < settings.diagnose_min_rows:
+        raise input_error(
+            where, f"only {n} rows", f"at least {settings.diagnose_min_rows} rows to diagnose"
+        )
     if not np.all(np.isfinite(kd.y)):
         raise input_error(where, "non-finite readings", "finite values")
     kd, run, order_runs, sort = _runs_in_order(kd)
@@ -577,9 +579,11 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
     seg, excluded, gaps, revs, seg_speed = _segments(kd, run, order_runs, settings)
     seg_motion = _mask_rows(kd, seg, run, order_runs, excluded)
     keep = seg >= 0
-    if keep.sum() < 32:
+    if keep.sum() < settings.diagnose_min_rows:
         raise input_error(
-            where, "no steady segment of at least 32 rows", "a shaft turning steadily"
+            where,
+            f"no steady segment of at least {settings.diagnose_min_rows} rows",
+            "a shaft turning steadily",
         )
     kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
         kd, seg, keep, run, order_runs, sort, settings

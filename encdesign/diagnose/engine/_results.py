@@ -18,8 +18,12 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, final
 
 import equinox as eqx
+import numpy as np
 
 from ..._errors import DiagnosisError
+
+if TYPE_CHECKING:
+    from ._protocol import Prepared
 
 VERDICTS = ("consistent", "missing_physics", "unexplained")
 """The three verdicts of a diagnosis."""
@@ -28,11 +32,11 @@ WHERE_KEYS = ("orders", "frequencies_hz", "heads", "runs", "times_s")
 """The keys every ``where`` (a finding's location) carries."""
 
 
-def _bad(what: str, got: Any, expected: str) -> DiagnosisError:
+def _bad(what: str, got: object, expected: str) -> DiagnosisError:
     return DiagnosisError(f"diagnosis result {what}: got {got!r}; expected {expected}")
 
 
-def _opt_number(v: Any) -> bool:
+def _opt_number(v: object) -> bool:
     return v is None or (isinstance(v, int | float) and not isinstance(v, bool))
 
 
@@ -41,12 +45,12 @@ class _Entry(eqx.Module):
     ``extra`` and ``key_order``)."""
 
     if TYPE_CHECKING:  # declared by each final entry (fields after its own)
-        extra: Mapping[str, Any]
+        extra: Mapping[str, object]
         key_order: tuple[str, ...]
 
     TYPED: ClassVar[tuple[str, ...]] = ()
     """The JSON keys that are typed fields, in the document's usual order."""
-    NESTED: ClassVar[Mapping[str, Any]] = {}
+    NESTED: ClassVar[Mapping[str, type[_Entry]]] = {}
     """Typed fields that hold a tuple of entries (key -> entry class)."""
     TUPLES: ClassVar[tuple[str, ...]] = ()
     """Typed fields held as tuples (lists in the JSON)."""
@@ -87,7 +91,7 @@ class _Entry(eqx.Module):
         return self.to_json()[key]
 
 
-def _keys_ok(entry: Any, required: tuple[str, ...]) -> None:
+def _keys_ok(entry: _Entry, required: tuple[str, ...]) -> None:
     missing = [k for k in required if k not in entry.key_order]
     if missing:
         raise _bad(f"{type(entry).__name__} {getattr(entry, 'name', '')!r}", missing, "present")
@@ -121,7 +125,7 @@ class Alternative(_Entry):
     separate_by: str | None = None
     correlation: float | None = None
     params: Mapping[str, Any] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     key_order: tuple[str, ...] = ("name", "reason", "rule", "delta_bic", "params")
 
     TYPED: ClassVar[tuple[str, ...]] = (
@@ -202,11 +206,11 @@ class Effect(_Entry):
     confounded_with: tuple[Alternative, ...] | None = None
     doubt: Mapping[str, Any] | None = None
     alternatives: tuple[Alternative, ...] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     key_order: tuple[str, ...] = _EFFECT_KEYS
 
     TYPED: ClassVar[tuple[str, ...]] = (*_EFFECT_KEYS, "doubt", "alternatives")
-    NESTED: ClassVar[Mapping[str, Any]] = {
+    NESTED: ClassVar[Mapping[str, type[_Entry]]] = {
         "confounded_with": Alternative,
         "alternatives": Alternative,
     }
@@ -268,7 +272,7 @@ class Finding(_Entry):
     detail: Mapping[str, Any] | None = None
     note: str | None = None
     model: Mapping[str, Any] | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = (
         "view",
         "where",
@@ -323,7 +327,7 @@ class Refusal(_Entry):
     rule: str | None = None
     rules: tuple[str, ...] | None = None
     delta_bic: float | None = None
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = ("name", "reason", "rule", "rules", "delta_bic")
     key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("rules",)
@@ -357,7 +361,7 @@ class Confounded(_Entry):
     delta_bic: float | None
     separate_by: str
     reason: str = ""
-    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    extra: Mapping[str, object] = dataclasses.field(default_factory=dict)
     TYPED: ClassVar[tuple[str, ...]] = ("pair", "correlation", "delta_bic", "separate_by", "reason")
     key_order: tuple[str, ...] = TYPED
     TUPLES: ClassVar[tuple[str, ...]] = ("pair",)
@@ -382,10 +386,10 @@ class PlotData(eqx.Module):
             named effects of the final model, evaluated alone; projected like the residual).
     """
 
-    prep: Any
-    base_resid: Any
-    final_resid: Any
-    effect_contributions: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    prep: Prepared
+    base_resid: np.ndarray
+    final_resid: np.ndarray
+    effect_contributions: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     def __getitem__(self, key: str) -> Any:
         """Back compatibility: ``plot_data["prep"]``."""

@@ -304,7 +304,7 @@ def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> t
     term = fr.terms[-1]
     trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
     erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
-    if trms > s.plausible_ratio * max(erms, 1e-300) and trms > 1.0:
+    if trms > s.plausible_ratio * max(erms, 1e-300) and trms > s.plausible_rms_min:
         reasons.append(
             (
                 "plausible_ratio",

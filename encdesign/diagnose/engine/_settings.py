@@ -53,6 +53,13 @@ class FinderSettings(eqx.Module):
     residual RMS it explains (and over one noise unit) is an implausible cancellation of
     base terms. From the first engine (96be348)."""
 
+    plausible_rms_min: float = eqx.field(default=1.0, static=True)
+    """... and whose own RMS is over this many noise units (the noise-whitened RMS), with
+    ``plausible_ratio``: a candidate smaller than the noise is not refused as a
+    cancellation. Was an inline ``1.0`` in ``_select``; from the first engine (96be348);
+    issue 44 G moved it unchanged (no verdict changed on ``finder_variations`` effects seed
+    21 n 4, clean seed 21 n 5)."""
+
     located_share_min: float = eqx.field(default=0.2, static=True)
     """Rule ``located_share_min``: a candidate must explain at least this share of the
     excess chi-square every view located, so that a larger structure is not pinned on it
@@ -118,6 +125,43 @@ class FinderSettings(eqx.Module):
     """Above this phase coherence of the moving mean on the value lattice, the lattice is a
     steady sweep's time grid, not a quantizer. 67bc926."""
 
+    # ---- issue 44 G: the value-lattice test (:func:`._lattice.detect_lsb`), its keyword
+    # defaults and inline cut-offs moved unchanged (no verdict changed on
+    # ``finder_variations`` effects seed 21 n 4, clean seed 21 n 5; tests/test_reference.py).
+
+    lattice_tolerance: float = eqx.field(default=0.1, static=True)
+    """Value lattice (``detect_lsb``): a gap (or a value) is on the lattice when within this
+    many steps of an integer multiple (of ``c_r + q k``); covers readings printed with a few
+    significant digits. Was the ``tolerance=0.1`` default of ``detect_lsb`` (cdf1843); set by
+    hand."""
+
+    lattice_max_divisor: int = eqx.field(default=12, static=True)
+    """Value lattice: the step is looked for as the smallest gap between distinct values
+    divided by ``j = 1 ... this`` (a gap of up to this many steps is the smallest one seen).
+    Was the ``max_divisor=12`` default of ``detect_lsb``; set by hand in cdf1843."""
+
+    lattice_min_fraction: float = eqx.field(default=0.99, static=True)
+    """Value lattice: at least this share of the gaps (to accept a step) and of the values
+    (to accept the lattice) lie within ``lattice_tolerance`` of it; continuous values put
+    only about ``2 lattice_tolerance`` there. Was the ``min_fraction=0.99`` default of
+    ``detect_lsb``; set by hand in cdf1843."""
+
+    lattice_min_differences: int = eqx.field(default=20, static=True)
+    """Value lattice: with fewer gaps between distinct values than this no lattice is
+    decided (``lsb_rad`` is ``None``). Was the ``min_differences=20`` default of
+    ``detect_lsb``; set by hand in cdf1843."""
+
+    lattice_exact_floor: float = eqx.field(default=1e3, static=True)
+    """Value lattice, exact branch (Euclid's algorithm on the gaps, for readings computed
+    from integer counts): a step not over this many times the algorithm's absolute
+    tolerance (``1e-12`` of the largest value) is the tolerance itself (continuous values),
+    not a resolution. Was an inline ``1e3`` in ``detect_lsb``; set by hand."""
+
+    lattice_gap_steps_max: float = eqx.field(default=1e4, static=True)
+    """Value lattice, exact branch: a step over this many times below the median gap is the
+    decimal digits a file was printed with, not a reading's resolution. Was an inline
+    ``1e4`` in ``detect_lsb``; set by hand."""
+
     alpha: float = eqx.field(default=1e-3, static=True)
     """Family-wise false-alarm rate of each view (Bonferroni over its tests) and of the
     goodness-of-fit test (``consistent`` needs p >= alpha). From the first engine
@@ -154,6 +198,13 @@ class FinderSettings(eqx.Module):
     sds_sigma_test_p: float = eqx.field(default=1e-4, static=True)
     """sds: the level at which a noise estimate is widened for its degrees of freedom
     (F vs chi-square). fc0e1ba."""
+
+    sds_level_alpha: float = eqx.field(default=1e-3, static=True)
+    """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
+    take change points and single-value outliers out of the run-mean noise level
+    (:func:`._sds_noise._level_sigma`), so that neither inflates it. Equal to ``alpha`` by
+    default but a noise-estimation choice, not a finding's. Was an inline ``1e-3`` in
+    ``_sds_noise``; set by hand in fc0e1ba (moved unchanged in issue 44 G)."""
 
     steady_tolerance: float = eqx.field(default=0.1, static=True)
     """Relative deviation of the smoothed speed from its segment's steady speed beyond which
@@ -365,6 +416,14 @@ class FinderSettings(eqx.Module):
     threshold (Bonferroni over the bins). Was an inline ``thr / 3`` in
     ``_views.view_spectrum``; set by hand in 96be348."""
 
+    channel_power_share: float = eqx.field(default=0.25, static=True)
+    """Views: the same as ``head_power_share`` for the ``orders``, ``line_phase`` and
+    regression (``drift``, ``speed``, ...) views: a channel carries the located structure
+    when its power is at least this share of the strongest channel's. Was an inline
+    ``0.25 * pw.max()`` (three times) in ``_views``; set by hand in 96be348; issue 44 G moved
+    it unchanged (no verdict changed on ``finder_variations`` effects seed 21 n 4, clean
+    seed 21 n 5)."""
+
     spectrum_peaks_per_run: int = eqx.field(default=6, static=True)
     """Views: at most this many peaks (the strongest) per run enter the ``spectrum`` view.
     Was an inline ``[:6]``; set by hand before 68cdaf0 (where the module moved)."""
@@ -386,6 +445,18 @@ class FinderSettings(eqx.Module):
     """Views: ``time`` findings of two channels in one run are one structure when their step
     times are within this share of a block (plus 1 ms). Was an inline 0.1 in
     ``_views.view_time``; set by hand in b783399."""
+
+    time_merge_s: float = eqx.field(default=1e-3, static=True)
+    """Views: ... plus this many seconds (``time_merge_blocks``), so that step times of two
+    channels a row apart at short blocks still merge. Was an inline ``1e-3`` in
+    ``_views.view_time``; set by hand in b783399 (moved unchanged in issue 44 G)."""
+
+    step_match_blocks: float = eqx.field(default=4.0, static=True)
+    """A step that refused a candidate is refined with the final model's own ``time``
+    finding when that finding's step times lie within this many of its blocks of the
+    refused step's time (:func:`._steps.place_step_refusals`); otherwise it is reported
+    where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand (issue 44
+    C), moved unchanged in issue 44 G."""
 
     one_speed_spread: float = eqx.field(default=0.05, static=True)
     """The kept rows turn at one speed when their speeds spread by at most this share of the
@@ -472,6 +543,12 @@ class FinderSettings(eqx.Module):
     ``axis_tilt``'s azimuth is identifiable. Labels, not refusals. Was an inline 3 in
     ``_quadrature`` (91a5b7a), ``_sds`` and ``_sds_terms`` (8e334ac); set by hand."""
 
+    significant_channel_se: float = eqx.field(default=3.0, static=True)
+    """A named effect's per-channel parameters single out the channels (its ``channels``
+    in the JSON) where one of them differs from zero by more than this many standard errors
+    (:func:`._document.significant_channels`). A label, not a refusal. Was an inline ``3``
+    in ``_document``; set by hand in 96be348 (moved unchanged in issue 44 G)."""
+
     sds_lattice_tol: float = eqx.field(default=0.02, static=True)
     """sds: a stamp difference is on a candidate lattice when within this share of a period
     of a multiple ... (``timing_quantization``'s clock). Was an inline 0.02 in
@@ -516,6 +593,29 @@ class FinderSettings(eqx.Module):
     minimum for a diagnosis (below it the record was refused), so every record accepted
     before is still read as a motion record. Was ``_stepped.STEPPED_MAX_STEADY_ROWS``
     (eb6531a)."""
+
+    diagnose_min_rows: int = eqx.field(default=32, static=True)
+    """A record with fewer rows than this, or fewer kept (steady) rows after the segment
+    finder, is refused as input error (too short to diagnose). Was an inline ``32`` (twice)
+    in ``_prepare.prepare``; from the first engine (96be348), set by hand; moved unchanged in
+    issue 44 G. ``stepped_max_steady_rows`` has the same default by construction."""
+
+    discover_speed_ratio: float = eqx.field(default=1.2, static=True)
+    """Discovery (``_discover``): a located line gets a speed-modulated term (amplitude ~
+    speed^beta) when the steady speeds of its cells span more than this ratio. Was an inline
+    ``math.log(1.2)`` in ``_discover.library``; set by hand (moved unchanged in issue 44
+    G)."""
+
+    discover_beta_max: float = eqx.field(default=4.0, static=True)
+    """Discovery: a discovered term's speed exponent beta is implausible (rule
+    ``<discovered>.plausible``) outside ``[-this, this]``. Was an inline ``4.0`` in
+    ``_discover_export``; set by hand (moved unchanged in issue 44 G)."""
+
+    speed_cause_se: float = eqx.field(default=2.0, static=True)
+    """Discovery words: a fitted speed exponent is read as a simple mechanism (-2, -1, 0, 1
+    or 2) when within this many standard errors of it. Words, not a verdict. Was an inline
+    ``2`` in ``_discover_words._speed_cause``; set by hand (moved unchanged in issue 44
+    G)."""
 
     def __check_init__(self):
         for f in dataclasses.fields(self):

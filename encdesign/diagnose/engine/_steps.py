@@ -258,9 +258,9 @@ def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
             if g.view == "time"
             and g.detail.get("shape") == "step"
             and g.where["runs"] == f.where["runs"]
-            and min(g.where["times_s"]) - 4 * g.detail["block_s"]
+            and min(g.where["times_s"]) - prep.settings.step_match_blocks * g.detail["block_s"]
             <= ts
-            <= max(g.where["times_s"]) + 4 * g.detail["block_s"]
+            <= max(g.where["times_s"]) + prep.settings.step_match_blocks * g.detail["block_s"]
         ]
         if seen:  # the final residual's own step: refined with the final model
             refine_step(fitter, prep, current.terms, seen[0])

@@ -201,6 +201,13 @@ def _heads(
     return ch, f"on several heads, or not told apart from {what}"
 
 
+def _carrying(prep, pw: np.ndarray, thr: float) -> list[int]:
+    """The channels that carry a structure: power above the test threshold ``thr`` and at
+    least ``settings.channel_power_share`` of the strongest channel's."""
+    top = prep.settings.channel_power_share * pw.max()
+    return [k for k in range(pw.size) if pw[k] > thr and pw[k] >= top]
+
+
 def view_orders(prep, rw, max_order: int) -> list[Finding]:
     """Integer shaft orders per channel, rotation locked over all runs (least squares of
     cos / sin of each order, from sums accumulated in blocks of rows)."""
@@ -219,7 +226,7 @@ def view_orders(prep, rw, max_order: int) -> list[Finding]:
         coef = np.linalg.lstsq(G, B, rcond=None)[0]  # (2, C): the cos / sin amplitudes
         pw = np.maximum(np.sum(B * coef, axis=0), 0.0)
         if pw.max() > thr:
-            ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+            ch = _carrying(prep, pw, thr)
             Z = coef * math.sqrt(0.5 * N)
             heads, note = _heads(prep, Z[0] - 1j * Z[1], ch, order=float(m))
             detail = {
@@ -533,7 +540,9 @@ def view_time(prep, rw) -> list[Finding]:
             if (
                 g.where["runs"] == f.where["runs"]
                 and abs(g.detail["step_time_s"] - f.detail["step_time_s"])
-                < 1e-9 + prep.settings.time_merge_blocks * g.detail["block_s"] + 1e-3
+                < 1e-9
+                + prep.settings.time_merge_blocks * g.detail["block_s"]
+                + prep.settings.time_merge_s
             ):
                 if f.power >= prep.settings.head_power_share * g.power:
                     g.where["heads"] = sorted(set(g.where["heads"]) | set(f.where["heads"]))
@@ -610,7 +619,7 @@ def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):
     thr = chi2_threshold(prep.settings.alpha, q, C)
     if pw.max() <= thr:
         return []
-    ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+    ch = _carrying(prep, pw, thr)
     return [
         Finding(
             name,
@@ -653,7 +662,7 @@ def view_line_phase(prep, rw):
             B[k] += X.T @ r[:, k]
     pw = np.array([_gram_power(G[k], B[k][:, None], n_kept, 4)[0] for k in range(C)])
     if pw.max() > thr:
-        ch = [k for k in range(C) if pw[k] > thr and pw[k] >= 0.25 * pw.max()]
+        ch = _carrying(prep, pw, thr)
         L = prep.ctx.signal_periods
         out.append(
             Finding(

@@ -625,7 +625,11 @@ def multihead_summary(prep: Prepared, base_params: dict) -> dict:
     except ImportError:
         return {}
     kd = prep.kd
-    out = {"sensor": rt.reference_summary(kd.t, kd.theta_ref, prep.rows["reading"][:, 0], prep.run)}
+    out = {
+        "sensor": rt.reference_summary(
+            kd.t, kd.theta_ref, prep.rows["reading"][:, 0], prep.run, settings=prep.settings
+        )
+    }
     if _is_stepped(kd):  # issue 22 item 5
         out["sensor"]["record_type"] = "static stepped calibration (" + _stepped.STATIC_REASON + ")"
     b = base_params.get("base", {})

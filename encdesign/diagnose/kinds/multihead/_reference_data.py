@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from ...engine._lattice import Lattice, detect_lsb
+from ...engine._settings import FinderSettings
 
 __all__ = [
     "reference_velocity_rad_s",
@@ -56,6 +57,8 @@ def reference_summary(
     theta_ref_rad: np.ndarray,
     reading_rad: np.ndarray,
     run: np.ndarray | None = None,
+    *,
+    settings: FinderSettings,
 ) -> dict:
     """What a sensor-against-reference record is, before any fit (JSON-ready).
 
@@ -78,7 +81,7 @@ def reference_summary(
         speed[str(int(r))] = float(np.median(np.abs(w[m])))
     out = {"span_turns": span, "directions": dirs, "speed_rad_s": speed}
     for name, vals in (("sensor_lattice", rd), ("reference_lattice", th)):
-        lat = detect_lsb(vals, run).as_dict()
+        lat = detect_lsb(vals, run, settings=settings).as_dict()
         lat["floor_rms_rad"] = None if lat["lsb_rad"] is None else lat["lsb_rad"] / math.sqrt(12)
         out[name] = lat
     return out

@@ -305,7 +305,7 @@ def _quant_fn(p: dict, x: dict) -> Array:
 def _quant_lattice(ctx: Context) -> Lattice:
     rows = ctx.rows
     run = np.argmax(np.asarray(rows["run_onehot"]), axis=1)
-    return detect_lsb(np.asarray(rows["reading"])[:, 0], run)
+    return detect_lsb(np.asarray(rows["reading"])[:, 0], run, settings=ctx.settings)
 
 
 def _quant_applies(ctx: Context) -> str | None:

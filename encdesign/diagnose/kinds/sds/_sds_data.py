@@ -478,7 +478,12 @@ def sds_prepare(
     )
     X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
     sigma = _level_sigma(
-        kd.y, kd.n_revs, X, float(consts["proj"]) > 0, test_p=settings.sds_sigma_test_p
+        kd.y,
+        kd.n_revs,
+        X,
+        float(consts["proj"]) > 0,
+        test_p=settings.sds_sigma_test_p,
+        level_alpha=settings.sds_level_alpha,
     )
     ctx = Context(
         kind="sds",

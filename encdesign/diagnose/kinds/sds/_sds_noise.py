@@ -210,6 +210,8 @@ def _level_sigma(
     proj: bool = False,
     info: dict | None = None,
     test_p: float = 1e-4,
+    *,
+    level_alpha: float,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -271,7 +273,7 @@ def _level_sigma(
         gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
         j = int(np.argmax(gain))
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
-        if not ok[j] or f <= stats.f.isf(1e-3 / n_tests, 1, dof):
+        if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
             break
         Q = basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
         added += 1
@@ -322,6 +324,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         float(prep.consts["proj"]) > 0,
         info=info,
         test_p=prep.settings.sds_sigma_test_p,
+        level_alpha=prep.settings.sds_level_alpha,
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
