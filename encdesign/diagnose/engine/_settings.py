@@ -116,6 +116,15 @@ class FinderSettings(eqx.Module):
     share of what every view located. 1af4a3c (strong high orders leak into the time,
     drift and order-step views)."""
 
+    growth_veto_share: float = eqx.field(default=0.01, static=True)
+    """The base model's order growth is not tried when the residual shows a line at the
+    signal period or structure tied to the direction or speed (views ``line_phase``,
+    ``direction``, ``speed``, ``angle_trend``) holding at least this share of what every view
+    located; below it that structure is leakage and cannot pose as the integer orders.
+    Session 14 (issue 44 H): on the `high` variation set's misses (disk orders 13-20, seeds
+    1302-1304) an aliased signal-period line or an angle trend of 0.01-0.23 % of the located
+    excess kept the base at order 12 and the record `unexplained`."""
+
     lattice_noise_share: float = eqx.field(default=0.25, static=True)
     """``quantization`` is named from the readings' value lattice when its floor
     ``LSB^2 / 12`` is at least this share of the channel's noise variance (the LSB then is
