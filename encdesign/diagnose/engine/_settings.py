@@ -122,7 +122,7 @@ class FinderSettings(eqx.Module):
     ``direction``, ``speed``, ``angle_trend``) holding at least this share of what every view
     located; below it that structure is leakage and cannot pose as the integer orders.
     Session 14 (issue 44 H): on the `high` variation set's misses (disk orders 13-20, seeds
-    1302-1304) an aliased signal-period line or an angle trend of 0.01-0.23 % of the located
+    1302-1304) an aliased signal-period line or an angle trend of 0.005-0.23 % of the located
     excess kept the base at order 12 and the record `unexplained`."""
 
     lattice_noise_share: float = eqx.field(default=0.25, static=True)
