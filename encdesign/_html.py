@@ -16,6 +16,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 CSS = """
 .encdesign-result table{border-collapse:collapse;margin:.4em 0;font-size:.9em}
@@ -37,7 +38,7 @@ MAX_ITEMS = 8
 """Elements of an array shown in a cell (the rest counted)."""
 
 
-def escape(x: Any) -> str:
+def escape(x: object) -> str:
     """``x`` as HTML text (quotes escaped too: safe inside an attribute)."""
     return html.escape(str(x), quote=True)
 
@@ -57,7 +58,7 @@ def num(x: Any, digits: int = 4) -> str:
     return f"{v:.{digits}g}" if math.isfinite(v) else "-"
 
 
-def array_cell(a: Any, digits: int = 6) -> str:
+def array_cell(a: ArrayLike, digits: int = 6) -> str:
     """A scalar, or the first :data:`MAX_ITEMS` elements of an array and how many there are."""
     v = np.asarray(a)
     if v.ndim == 0:
@@ -75,7 +76,7 @@ def table(header: Sequence[str], rows: Iterable[Sequence[str]], cls: str = "") -
     return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
 
 
-def status_badge(status: Any, ok: bool) -> str:
+def status_badge(status: object, ok: bool) -> str:
     """The status as a green (an answer) or red (not) badge."""
     return f'<span class="badge {"ok" if ok else "not-ok"}">{escape(status)}</span>'
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import IO
 
 from tqdm.auto import tqdm
 
 
 def progress_bar(
-    label: str, total: int, enabled: bool = True, *, unit: str = "it", stream: Any = None
+    label: str, total: int, enabled: bool = True, *, unit: str = "it", stream: IO[str] | None = None
 ) -> tqdm:
     """A ``tqdm`` bar on stderr for ``total`` items labelled ``label``.
 

@@ -12,9 +12,16 @@ import contextlib
 import dataclasses
 import functools
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 from ._errors import EncdesignInputError, input_error
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+P = ParamSpec("P")
+R = TypeVar("R")
+Item = TypeVar("Item", bound="DataclassInstance")
 
 __all__ = ["guarded", "user_code", "user_module_items"]
 
@@ -46,12 +53,12 @@ def user_code(where: str, *, keep: tuple[type[BaseException], ...] = ()) -> Iter
 
 
 def guarded(
-    where: str, fn: Callable[..., Any], *, keep: tuple[type[BaseException], ...] = ()
-) -> Callable[..., Any]:
+    where: str, fn: Callable[P, R], *, keep: tuple[type[BaseException], ...] = ()
+) -> Callable[P, R]:
     """``fn`` wrapped so that every call runs under :func:`user_code` (``where`` names it)."""
 
     @functools.wraps(fn)
-    def call(*args: Any, **kwargs: Any) -> Any:
+    def call(*args: P.args, **kwargs: P.kwargs) -> R:
         with user_code(where, keep=keep):
             return fn(*args, **kwargs)
 
@@ -60,11 +67,11 @@ def guarded(
 
 def user_module_items(
     where: str,
-    load: Callable[[], Any],
+    load: Callable[[], object],
     attr: str,
-    item_type: type,
+    item_type: type[Item],
     callables: tuple[str, ...] = (),
-) -> tuple[Any, ...]:
+) -> tuple[Item, ...]:
     """The sequence ``attr`` of a user module, its items' user functions guarded.
 
     Args:
@@ -90,7 +97,7 @@ def user_module_items(
     for i, c in enumerate(items):
         if not isinstance(c, item_type):
             raise input_error(where, f"{attr}[{i}] is a {type(c).__name__}", expected)
-    out = []
+    out: list[Item] = []
     for c in items:
         name = getattr(c, "name", type(c).__name__)
         repl = {

@@ -176,7 +176,10 @@ def test_coverage_resolves_orders_above_the_per_revolution_nyquist(spr, revs, li
 
     n = int(spr * revs)
     th = np.arange(n) * 2 * np.pi / spr + 0.3
-    assert coverage_limit(th, np.zeros(n, int), 1, 40) == limit
+    from encdesign.diagnose import DEFAULT_SETTINGS
+
+    got = coverage_limit(th, np.zeros(n, int), 1, 40, coverage_min=DEFAULT_SETTINGS.coverage_min)
+    assert got == limit
 
 
 def _clean_bench(seed, heads, ref, n_run, turns, rate_hz, orders, amp_over_noise, noise):

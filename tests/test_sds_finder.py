@@ -362,7 +362,7 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
     phi = np.mod(2.39996 * np.arange(R) + rng.uniform(0, 6.28), 2 * np.pi)
     rows = {"phi": phi, "tmid_c": np.repeat(np.linspace(-5, 5, R)[:, None], K, 1)}
     consts = {"psi_m": 2 * np.pi * np.arange(M) / M, "proj": np.asarray(0.0 if phi_ref else 1.0)}
-    X, _ = _saturating_columns(rows, consts, [6, 12])
+    X, _ = _saturating_columns(rows, consts, [6, 12], DEFAULT_SETTINGS.sds_saturate_fraction)
     est = []
     for _ in range(300):
         y = rng.normal(0, sig, (R, K * M))
@@ -371,14 +371,22 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
             y[:, :M] -= y[:, :M].mean(1, keepdims=True)
         info: dict = {}
         out = _level_sigma(
-            y, K, X, proj=not phi_ref, info=info, level_alpha=DEFAULT_SETTINGS.sds_level_alpha
+            y,
+            K,
+            X,
+            proj=not phi_ref,
+            info=info,
+            test_p=DEFAULT_SETTINGS.sds_sigma_test_p,
+            level_alpha=DEFAULT_SETTINGS.sds_level_alpha,
         )
         est.append(info["run_means_rad"] ** 2)
         assert out[0] == pytest.approx(info["run_means_rad"] * info["run_means_widening"])
         assert info["run_means_steps_or_outliers"] >= 1
     assert np.sqrt(np.mean(est)) == pytest.approx(sig, rel=0.05)
-    assert dof_widening(1e9) == 1.0
-    assert 1.25 < dof_widening(18) < 1.4 and dof_widening(10) > dof_widening(30) > 1.0
+    p = DEFAULT_SETTINGS.sds_sigma_test_p
+    assert dof_widening(1e9, p=p) == 1.0
+    widen = [dof_widening(nu, p=p) for nu in (10, 18, 30)]
+    assert 1.25 < widen[1] < 1.4 and widen[0] > widen[2] > 1.0
 
 
 def test_order_in_platform_angle_is_not_a_drift(sds_bench):

@@ -8,9 +8,19 @@ collected. The allow-list holds numerical constants, counts, array shapes, physi
 plotting numbers only: a threshold that decides what the finder reports belongs in
 ``FinderSettings`` (documented, in the generated table of ``docs/diagnose.md``), not here.
 
-``min`` / ``max`` / ``np.clip`` arguments are not scanned: what is there is guards
-(``max(x, 1e-300)``), block and window sizes and caps on a model's order (see the module
-constants ``CHUNK_ROWS`` etc.), not comparisons.
+A number can also leave a comparison through a module constant (``if x > LIMIT``): every
+module-level constant of ``encdesign/diagnose/`` that is a number (or a tuple of numbers) is
+allow-listed in :data:`CONSTANTS` with its reason, or fails the second test.
+
+A cap or a floor is a comparison too: the numeric literals in the arguments of ``min``,
+``max``, ``np.clip``, ``np.minimum`` and ``np.maximum`` are collected with those of the
+comparisons (guards such as ``max(x, 1e-300)``, block sizes and bounds on the work are
+allow-listed with their reason; a cap on what the finder fits or reports is a setting).
+
+A number can also hide in a function's default (``def f(x, test_p=1e-4)``): every numeric
+default of a parameter under ``encdesign/diagnose/`` is allow-listed in :data:`DEFAULTS`
+with its reason, or fails the third test; a default that mirrors a setting is removed (the
+callers pass the setting).
 """
 
 from __future__ import annotations
@@ -31,6 +41,12 @@ PHYSICS = "physics or geometry (2 pi, the harmonic 2L, the runout orders 1-3)"
 SEARCH = "search: where an optimiser starts or how fine its grid is, not what it accepts"
 REPORT = "report: how many alternatives or partners are listed, not a verdict"
 PLOT = "plot layout only"
+BOUND = "bound on the work (rows, bins, iterations, orders scanned), not a threshold"
+MODEL = "size of a start-value or smoothing model (orders, degree), not a threshold"
+HALF_BLOCK = (
+    "resolution: half a time-view block (1/64 of the run's rows), how well the view locates a "
+    "time (with step_change_rows)"
+)
 
 UNIVERSAL = {0: SIGN, 1: SIGN, -1: SIGN, 1e-300: GUARD}
 """Allowed in every module."""
@@ -41,6 +57,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_discover.py", 2): DOF + " (two cos / sin columns of one channel)",
     ("engine/_discover.py", 1e-6): NUMERIC + " (two line values equal to rounding)",
     ("engine/_discover.py", 1e-12): GUARD + " (log of a speed)",
+    ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
+    "highest order)",
     ("engine/_engine.py", 2): PHYSICS,
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",
     ("engine/_evidence.py", 3): REPORT + " (at most three alternatives)",
@@ -50,20 +68,37 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_fit.py", 1e-2): NUMERIC + " (LM convergence: 0.01 of chi-square)",
     ("engine/_fit.py", 1e8): NUMERIC + " (LM damping gives up)",
     ("engine/_fit.py", 16): COUNT + " (a block of the goodness-of-fit test)",
+    ("engine/_fit.py", 2): COUNT + " (Bonferroni over the two goodness-of-fit tests); guard"
+    " of a log2",
+    ("engine/_fit.py", 5): BOUND + " (the smallest chunk: 2^5 rows)",
+    ("engine/_fit.py", 10): NUMERIC + " (LM damping divided by 10 on success)",
+    ("engine/_fit.py", 1e-9): NUMERIC + " (LM damping floor)",
+    ("engine/_fit.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_html.py", 2): SHAPE,
     ("engine/_html.py", 6): PLOT,
     ("engine/_html_discovery.py", 3): PLOT,
     ("engine/_html_discovery.py", 100): PLOT,
+    ("engine/_html_discovery.py", 1.1): PLOT,
+    ("engine/_html_discovery.py", 1e-4): PLOT,
     ("engine/_lattice.py", 2): COUNT,
     ("engine/_noise.py", 3): COUNT,
     ("engine/_noise.py", 4): COUNT,
     ("engine/_noise.py", 8): COUNT,
     ("engine/_noise.py", 16): COUNT,
     ("engine/_nuisances.py", 2): COUNT + "; 2 pi",
+    ("engine/_nuisances.py", 3): NUMERIC + " (three sample spacings: the angle resolution of "
+    "the record)",
+    ("engine/_nuisances.py", 64): HALF_BLOCK,
     ("engine/_prepare.py", 2): COUNT + "; half a window; two channels of a quadrature pair",
     ("engine/_prepare.py", 3): COUNT + "; 3.0 in the sum of squares h(h+1)(2h+1)/3",
     ("engine/_prepare.py", 8): COUNT,
     ("engine/_prepare.py", 16): COUNT,
+    ("engine/_prepare.py", 5): COUNT + " (the least rows of a speed window)",
+    ("engine/_prepare.py", 4): BOUND + " (a speed window is at most a quarter of the run)",
+    ("engine/_prepare.py", 0.95): "estimator: the mean square of the smallest 95 % of the "
+    "second differences (a reversal or a glitch does not count), a definition of the scatter",
+    ("engine/_prepare.py", 2001): BOUND + " (rows of a speed window)",
+    ("engine/_prepare.py", 64): BOUND + " (blocks of the held-out folds)",
     ("engine/_results.py", 2): SHAPE + " (a pair)",
     ("engine/_results.py", 1e-12): NUMERIC + " (a correlation <= 1 up to rounding)",
     ("engine/_select.py", 2): SHAPE + " (a squared correlation)",
@@ -71,41 +106,127 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_stepped.py", 8): COUNT + " (the segment finder's own minimum)",
     ("engine/_steps.py", 2): COUNT,
     ("engine/_steps.py", 48): SEARCH + " (rows tried in a step's fine search)",
+    ("engine/_steps.py", 64): HALF_BLOCK,
+    ("engine/_steps.py", 4): SEARCH + " (four time-view blocks either side of a located step)",
+    ("engine/_steps.py", 32): SHAPE + " (the time view's 32 blocks); points of a search grid",
     ("engine/_views.py", 2): COUNT + "; DOF; parity of a run length",
     ("engine/_views.py", 4): COUNT + " (bins of a band)",
     ("engine/_views.py", 1e-9): NUMERIC,
     ("engine/_views.py", 1e-12): NUMERIC + " (nothing left after the run constants); guard",
+    ("engine/_views.py", -999.0): REPORT + " (the floor of a reported log10 p)",
+    ("engine/_views.py", 1024): BOUND + " (rows per scanned block)",
+    ("engine/_views.py", 32): COUNT + " (the time view's blocks, at least 32 rows each)",
     # kinds
+    ("kinds/motion/_motion.py", 2.0): PHYSICS + " (Nyquist: half the samples per revolution)",
+    ("kinds/motion/_motion.py", 0.5): SHAPE + " (a run's centre and half-span in time)",
+    ("kinds/motion/_motion.py", 1e-12): GUARD + " (a zero time span)",
+    ("kinds/sds/_sds.py", 2): COUNT + " (a cos / sin pair per test; half the values); guard of a "
+    "log",
     ("kinds/multihead/_multihead.py", 2): COUNT + " (two heads or runs); 2 pi",
     ("kinds/multihead/_multihead.py", 4): COUNT,
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
+    ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
     ("kinds/multihead/_multihead_terms.py", 3): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
+    ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
     ("kinds/multihead/_reference_data.py", 2): COUNT,
     ("kinds/multihead/_reference_terms.py", 2): SHAPE,
     ("kinds/multihead/_reference_terms.py", 8): COUNT,
     ("kinds/multihead/_reference_terms.py", 0.5): SHAPE,
+    ("kinds/multihead/_reference_terms.py", 1e-9): GUARD + " (a zero time span)",
     ("kinds/quadrature/_quadrature.py", 2): SHAPE + " (the two coordinates of the centre)",
     ("kinds/quadrature/_quadrature.py", 4): SHAPE + " (an order's parity mod 4)",
     ("kinds/quadrature/_quadrature.py", 16): COUNT,
     ("kinds/quadrature/_quadrature.py", 32): COUNT + " (samples for a conic fit)",
+    ("kinds/quadrature/_quadrature.py", 3): PHYSICS + " (radial orders from 3: the ellipse "
+    "takes 1 and 2)",
+    ("kinds/quadrature/_quadrature.py", 8): COUNT + " (8 kept samples per radial order: the "
+    "phase is sampled irregularly)",
     ("kinds/sds/_sds_data.py", 2): COUNT + " (revolutions per run); two mark periods",
     ("kinds/sds/_sds_data.py", 4): COUNT + " (runs, marks)",
     ("kinds/sds/_sds_data.py", 16): COUNT + " (stamp differences)",
+    ("kinds/sds/_sds_data.py", 100): BOUND + " (orders of the readout table)",
     ("kinds/sds/_sds_noise.py", 2): COUNT + "; DOF; a squared norm",
     ("kinds/sds/_sds_noise.py", 3): COUNT + " (degrees of freedom of an F-test)",
     ("kinds/sds/_sds_noise.py", 1e-9): NUMERIC,
     ("kinds/sds/_sds_noise.py", 1e-10): NUMERIC + " (rank cut-off)",
     ("kinds/sds/_sds_noise.py", 1e4): NUMERIC + " (F tends to chi-square: no widening)",
+    ("kinds/sds/_sds_noise.py", 4): DOF + " (a rotating and a common cos / sin pair per order)",
+    ("kinds/sds/_sds_noise.py", 1e-12): GUARD + " (a zero time span)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
     ("kinds/sds/_sds_terms.py", 3): SEARCH + " (three starts)",
     ("kinds/sds/_sds_terms.py", 0.03): SEARCH + " (distinct start ratios)",
     ("kinds/sds/_sds_terms.py", 0.5): SHAPE,
     ("kinds/sds/_sds_terms.py", 1e-9): NUMERIC,
+    ("kinds/sds/_sds_terms.py", 8): SEARCH + " (grid step: an eighth of a turn over the span)",
+    ("kinds/sds/_sds_terms.py", 0.01): SEARCH + " (grid step at most 0.01)",
+    ("kinds/sds/_sds_terms.py", 1e-15): GUARD,
 }
 """``(module under encdesign/diagnose, literal) -> reason``; every entry must be used."""
+
+
+CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
+    ("engine/_discover.py", "MAX_LINES"): BOUND + " (located lines modelled)",
+    ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
+    ("engine/_discover.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
+    ("engine/_discover.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
+    ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
+    ("engine/_document.py", "LATTICE_ROWS"): BOUND,
+    ("engine/_html.py", "MAX_POINTS"): PLOT,
+    ("engine/_html.py", "MAX_PANELS"): PLOT,
+    ("engine/_html_discovery.py", "MAX_SPECTRUM_ORDER"): PLOT,
+    ("engine/_html_discovery.py", "FOLD_BINS"): PLOT,
+    ("engine/_noise.py", "TRIM_QUANTILE"): "estimator: the trimmed RMS's quantile, with its "
+    "consistency factor _TRIM_RMS (a definition of the noise scale, not a threshold)",
+    ("engine/_noise.py", "ROBUST_ROWS"): BOUND,
+    ("engine/_settings.py", "CHUNK_ROWS"): BOUND,
+    ("engine/_settings.py", "CACHE_BYTES"): BOUND,
+    ("engine/_settings.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
+    ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
+    ("engine/_views.py", "SCAN_BLOCK"): BOUND,
+    ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
+    ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
+    ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",
+    ("kinds/multihead/_multihead_terms.py", "RUNOUT_ORDERS"): PHYSICS,
+    ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
+    ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
+    ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,
+    ("kinds/multihead/_reference_terms.py", "QUANT_POLY_DEGREE"): MODEL,
+    ("kinds/sds/_sds_noise.py", "REFERENCE_RADIUS_M"): PHYSICS + " (1 inch: a unit of the "
+    "reported sizes)",
+    ("kinds/sds/_sds_noise.py", "BEAM_ORDERS"): PHYSICS,
+}
+"""``(module, NAME) -> reason`` for every module-level numeric constant; every entry must be
+used."""
+
+ARGUMENT = (
+    "a caller's argument (the CLI's --max-effects): how many effects the user asks to be "
+    "named at most, not a threshold on what is named"
+)
+
+DEFAULTS: dict[tuple[str, str], str] = {
+    ("_dispatch.py", "diagnose.max_effects"): ARGUMENT,
+    ("engine/_engine.py", "run_engine.max_effects"): ARGUMENT,
+    ("engine/_select.py", "select.max_effects"): ARGUMENT,
+    ("engine/_discover.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
+    ("engine/_fit.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
+    ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",
+    ("engine/_document.py", "_g.digits"): REPORT + " (significant digits printed)",
+    ("engine/_html_discovery.py", "order_amplitudes.chunk"): PLOT,
+    ("engine/_lattice.py", "_approximate_gcd.max_iter"): BOUND,
+    ("engine/_views.py", "view_band.n_bands"): BOUND + " (the band view's frequency bands)",
+    ("kinds/multihead/_reference_data.py", "velocity_width_rad_s.fraction"): "physics model: "
+    "the smoothing width of a simulated direction sign (a few percent of the speed), for the "
+    "generated records of the tests; the finder does not call it",
+    ("kinds/multihead/_reference_data.py", "dominant_orders.n"): REPORT + " (orders listed)",
+    ("kinds/sds/_sds_data.py", "stamp_lattice.max_samples"): BOUND + " (stamps read)",
+    ("kinds/sds/_sds_noise.py", "dof_widening.q"): DOF + " (of the term whose test is widened)",
+}
+"""``(module, "function.parameter") -> reason`` for every numeric parameter default; every
+entry must be used."""
 
 
 def _number(node: ast.AST) -> float | None:
@@ -134,14 +255,31 @@ def _literals(node: ast.AST):
         yield from _literals(child)
 
 
+BOUNDING_CALLS = frozenset({"min", "max", "clip", "minimum", "maximum"})
+"""Calls whose numeric arguments are a cap or a floor (``min``, ``np.clip``, ...)."""
+
+
+def _bounding_call(node: ast.AST) -> bool:
+    if not isinstance(node, ast.Call):
+        return False
+    f = node.func
+    name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None
+    return name in BOUNDING_CALLS
+
+
 def compared_literals(source: str) -> list[tuple[int, float, str]]:
-    """``(line, literal, line text)`` of every numeric literal inside a comparison."""
+    """``(line, literal, line text)`` of every numeric literal inside a comparison or an
+    argument of a bounding call (:data:`BOUNDING_CALLS`)."""
     lines = source.splitlines()
     out, seen = [], set()
     for node in ast.walk(ast.parse(source)):
-        if not isinstance(node, ast.Compare):
+        if isinstance(node, ast.Compare):
+            operands = [node.left, *node.comparators]
+        elif _bounding_call(node):
+            operands = [*node.args, *(k.value for k in node.keywords)]
+        else:
             continue
-        for operand in (node.left, *node.comparators):
+        for operand in operands:
             for lit, v in _literals(operand):
                 if (lit.lineno, lit.col_offset) not in seen:
                     seen.add((lit.lineno, lit.col_offset))
@@ -194,8 +332,146 @@ def test_the_scan_finds_a_threshold_inside_arithmetic(tmp_path):
     )
     found = [(line, v) for line, v, _ in compared_literals(src)]
     assert found == [(3, 0.25), (5, -0.5), (5, 2.5)]
+    capped = (
+        "def f(x, n):\n"
+        "    k = min(15, 3 + max(0.0, x - 3.5) // 2.0)\n"
+        "    return np.clip(x[2], 0.2, n)\n"
+    )
+    found = [(line, v) for line, v, _ in compared_literals(capped)]
+    assert found == [(2, 0.0), (2, 2.0), (2, 3), (2, 3.5), (2, 15), (3, 0.2)]
     pkg = tmp_path / "engine"
     pkg.mkdir()
     (pkg / "_views.py").write_text(src, encoding="utf-8")
     bad, _ = scan(tmp_path)
     assert len(bad) == 3 and bad[0].startswith("engine/_views.py:3: 0.25:")
+
+
+def _numeric(node: ast.AST) -> bool:
+    if isinstance(node, ast.Constant):
+        return type(node.value) in (int, float)
+    if isinstance(node, ast.Tuple | ast.List):
+        return bool(node.elts) and all(_numeric(e) for e in node.elts)
+    if isinstance(node, ast.UnaryOp):
+        return _numeric(node.operand)
+    if isinstance(node, ast.BinOp):
+        return _numeric(node.left) and _numeric(node.right)
+    return False
+
+
+def numeric_constants(source: str) -> list[tuple[int, str, str]]:
+    """``(line, name, value)`` of every module-level constant that is a number, arithmetic
+    of numbers or a tuple of numbers."""
+    out = []
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target, value = node.targets[0], node.value
+        elif isinstance(node, ast.AnnAssign) and node.value is not None:
+            target, value = node.target, node.value
+        else:
+            continue
+        if isinstance(target, ast.Name) and _numeric(value):
+            out.append((node.lineno, target.id, ast.unparse(value)))
+    return out
+
+
+def scan_constants(root: Path = DIAGNOSE) -> tuple[list[str], set[tuple[str, str]]]:
+    bad, used = [], set()
+    for path in sorted(root.rglob("*.py")):
+        mod = path.relative_to(root).as_posix()
+        for line, name, value in numeric_constants(path.read_text(encoding="utf-8")):
+            if (mod, name) in CONSTANTS:
+                used.add((mod, name))
+            else:
+                bad.append(f"{mod}:{line}: {name} = {value}")
+    return bad, used
+
+
+def test_module_constants_are_not_thresholds():
+    """A threshold is not hidden in a module constant: each numeric one has its reason."""
+    bad, used = scan_constants()
+    assert not bad, (
+        "module-level numeric constants under encdesign/diagnose/ not allow-listed in "
+        "tests/test_settings_literals.py CONSTANTS (a threshold: make it a FinderSettings "
+        "field read through the settings passed in):\n" + "\n".join(bad)
+    )
+    stale = sorted(set(CONSTANTS) - used)
+    assert not stale, f"allow-listed constants no longer found (remove them): {stale}"
+
+
+def test_the_constant_scan_finds_a_new_constant(tmp_path):
+    src = "import math\nLIMIT = 0.25\nPAIR = (1, -2.0)\nNAME = 'x'\nF = math.pi\n"
+    assert [n for _, n, _ in numeric_constants(src)] == ["LIMIT", "PAIR"]
+    (tmp_path / "_x.py").write_text(src, encoding="utf-8")
+    bad, _ = scan_constants(tmp_path)
+    assert bad == ["_x.py:2: LIMIT = 0.25", "_x.py:3: PAIR = (1, -2.0)"]
+
+
+def numeric_defaults(source: str) -> list[tuple[int, str, float]]:
+    """``(line, "function.parameter", value)`` of every parameter whose default is a number
+    (functions, methods and lambdas at any depth)."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+            continue
+        a = node.args
+        pos = [*a.posonlyargs, *a.args]
+        pairs = [*zip(pos[len(pos) - len(a.defaults) :], a.defaults)]
+        pairs += [(k, d) for k, d in zip(a.kwonlyargs, a.kw_defaults) if d is not None]
+        for arg, default in pairs:
+            v = _number(default)
+            if v is not None:
+                out.append((default.lineno, f"{getattr(node, 'name', 'lambda')}.{arg.arg}", v))
+    return sorted(out)
+
+
+def scan_defaults(root: Path = DIAGNOSE) -> tuple[list[str], set[tuple[str, str]]]:
+    bad, used = [], set()
+    for path in sorted(root.rglob("*.py")):
+        mod = path.relative_to(root).as_posix()
+        for line, name, v in numeric_defaults(path.read_text(encoding="utf-8")):
+            if v in UNIVERSAL:
+                continue
+            if (mod, name) in DEFAULTS:
+                used.add((mod, name))
+            else:
+                bad.append(f"{mod}:{line}: {name} = {v!r}")
+    return bad, used
+
+
+def test_numeric_defaults_are_not_thresholds():
+    """A threshold is not hidden in a parameter's default: each numeric one has its reason,
+    and one that mirrors a setting is gone (its callers pass the setting)."""
+    bad, used = scan_defaults()
+    assert not bad, (
+        "numeric parameter defaults under encdesign/diagnose/ not allow-listed in "
+        "tests/test_settings_literals.py DEFAULTS (a threshold: make it a FinderSettings field "
+        "and a required parameter its callers pass; a size or a count: allow-list it with its "
+        "reason):\n" + "\n".join(bad)
+    )
+    stale = sorted(set(DEFAULTS) - used)
+    assert not stale, f"allow-listed defaults no longer found (remove them): {stale}"
+    assert all(reason.strip() for reason in DEFAULTS.values())
+
+
+def test_the_default_scan_finds_a_new_default(tmp_path):
+    src = (
+        "def f(x, p=1e-4, *, q=-2, name='a', w=None):\n"
+        "    return lambda y, k=3: y\n"
+        "class A:\n"
+        "    def g(self, band=0.002, n=2 * 3):\n"
+        "        pass\n"
+    )
+    assert numeric_defaults(src) == [
+        (1, "f.p", 1e-4),
+        (1, "f.q", -2),
+        (2, "lambda.k", 3),
+        (4, "g.band", 0.002),
+    ]
+    (tmp_path / "_x.py").write_text(src, encoding="utf-8")
+    bad, _ = scan_defaults(tmp_path)
+    assert bad == [
+        "_x.py:1: f.p = 0.0001",
+        "_x.py:1: f.q = -2",
+        "_x.py:2: lambda.k = 3",
+        "_x.py:4: g.band = 0.002",
+    ]

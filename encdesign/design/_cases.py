@@ -24,12 +24,15 @@ import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._errors import EncdesignInputError, input_error
 from ..io._paths import atomic_write_text
+
+if TYPE_CHECKING:
+    from ._problem import Problem
 
 FORMATS = (".jsonl", ".csv")
 
@@ -55,7 +58,7 @@ class Case:
     """The checksum read from the file (:func:`case_check`; ``None`` when it had none)."""
 
 
-def _plain(x: Any) -> Any:
+def _plain(x: object) -> object:
     if isinstance(x, Mapping):
         return {str(k): _plain(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
@@ -70,7 +73,7 @@ def _plain(x: Any) -> Any:
     return x
 
 
-def _restore(x: Any) -> Any:
+def _restore(x: object) -> object:
     if x is None:
         return math.nan
     if isinstance(x, list):
@@ -222,14 +225,14 @@ def read_cases(path: str | os.PathLike) -> list[Case]:
     return out
 
 
-def case_key(inputs: Mapping[str, Any], seed: int | None) -> str:
+def case_key(inputs: Mapping[str, object], seed: int | None) -> str:
     """The identity of a case for ``--resume``: its inputs (as recorded, names sorted) and
     its seed. Recorded floats round-trip exactly, so a recomputed design point matches."""
     plain = {str(k): _plain(_restore(_plain(v))) for k, v in inputs.items()}
     return json.dumps({"inputs": plain, "seed": seed}, sort_keys=True, allow_nan=False)
 
 
-def verify_case(c: Case, path: str | os.PathLike, problem: Any = None) -> None:
+def verify_case(c: Case, path: str | os.PathLike, problem: Problem | None = None) -> None:
     """Refuse a case read for ``--resume`` that cannot be trusted.
 
     Its checksum (:func:`case_check`) must match the line, its inputs must be finite and,
@@ -301,7 +304,7 @@ class CaseRecorder:
         resume: bool = False,
         write: bool = True,
         process: int = 0,
-        problem: Any = None,
+        problem: Problem | None = None,
     ):
         self.path = None if path is None else Path(path)
         if self.path is not None:
@@ -325,14 +328,14 @@ class CaseRecorder:
         """Cases recorded again from the earlier file (``resume``)."""
         return len(self._reused)
 
-    def lookup(self, inputs: Mapping[str, Any], seed: int | None) -> Case | None:
+    def lookup(self, inputs: Mapping[str, object], seed: int | None) -> Case | None:
         """The recorded case with these inputs and seed (``resume``), else ``None``."""
         return self.previous.get(case_key(inputs, seed))
 
     def record(
         self,
-        inputs: Mapping[str, Any],
-        outputs: Mapping[str, Any],
+        inputs: Mapping[str, object],
+        outputs: Mapping[str, object],
         status: str,
         seed: int | None = None,
     ) -> Case:
@@ -352,7 +355,10 @@ class CaseRecorder:
             self.flush()
         return c
 
-    def record_part(self, cases: Iterable[tuple[Mapping[str, Any], Mapping[str, Any], str, Any]]):
+    def record_part(
+        self,
+        cases: Iterable[tuple[Mapping[str, object], Mapping[str, object], str, int | None]],
+    ):
         """Add ``(inputs, outputs, status, seed)`` evaluated by this process to its shard
         file (rewritten atomically)."""
         for inputs, outputs, status, seed in cases:
@@ -397,7 +403,7 @@ class CaseRecorder:
     def __enter__(self) -> CaseRecorder:
         return self
 
-    def __exit__(self, exc_type: Any, *exc: Any) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
         if exc_type is None:
             self.close()
         elif issubclass(exc_type, EncdesignInputError):

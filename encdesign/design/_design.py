@@ -122,14 +122,14 @@ _number = finite_number
 _positive = positive_number
 
 
-def _nonneg(where: str, v: Any) -> float:
+def _nonneg(where: str, v: object) -> float:
     x = _number(where, v)
     if x < 0:
         raise input_error(where, f"got {show(v)}", "a non-negative number")
     return x
 
 
-def _within(where: str, v: Any, limit: float, units: str, *, nonneg: bool = False) -> float:
+def _within(where: str, v: object, limit: float, units: str, *, nonneg: bool = False) -> float:
     """A finite number with ``|v| <= limit`` (and ``>= 0`` with ``nonneg``)."""
     x = _number(where, v)
     if abs(x) > limit or (nonneg and x < 0):
@@ -150,7 +150,7 @@ MAX_GRATING_RAD = 0.1
 MAX_GAP_M = 1.0
 
 
-def _int(where: str, v: Any, low: int = 0) -> int:
+def _int(where: str, v: object, low: int = 0) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v < low:
         raise input_error(where, f"got {v!r}", f"an integer >= {low}")
     return int(v)
@@ -158,7 +158,7 @@ def _int(where: str, v: Any, low: int = 0) -> int:
 
 def _list(
     where: str,
-    v: Any,
+    v: object,
     length: int | None = None,
     what: str = "",
     limit: float | None = None,
@@ -179,7 +179,7 @@ def _list(
 
 def _per_head(
     where: str,
-    v: Any,
+    v: object,
     n_heads: int,
     nonneg: bool = False,
     limit: float = math.pi,

@@ -6,14 +6,142 @@ status as a badge with its message, then the key numbers. Every value is escaped
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Protocol
 
 import numpy as np
 
 from .._html import array_cell, escape, num, result_html, status_badge, table
+from ._spec import ProblemObjective
+from ._status import DriverStatus
+
+# What each display reads of its result. Protocols, not the result classes: those import
+# this module (their ``_repr_html_``), and this module imports none of them back.
 
 
-def _headline(r: Any) -> str:
+class _Outcome(Protocol):
+    """A status and an objective (a solution, a combination's inner result)."""
+
+    @property
+    def status(self) -> DriverStatus: ...
+    @property
+    def objective(self) -> float: ...
+
+
+class _Reported(Protocol):
+    """Any design result: a status and the driver's account of it."""
+
+    @property
+    def status(self) -> DriverStatus: ...
+    @property
+    def message(self) -> str: ...
+
+
+class _SolutionView(_Reported, Protocol):
+    @property
+    def objective(self) -> float: ...
+    @property
+    def n_steps(self) -> int: ...
+    @property
+    def at_bounds(self) -> tuple[str, ...]: ...
+    @property
+    def value(self) -> np.ndarray: ...
+    @property
+    def solver(self) -> str: ...
+
+
+class _MonteCarloView(_Reported, Protocol):
+    @property
+    def values(self) -> np.ndarray: ...
+    @property
+    def n(self) -> int: ...
+    @property
+    def mean(self) -> float: ...
+    @property
+    def stderr(self) -> float: ...
+    @property
+    def std(self) -> float: ...
+    @property
+    def n_nonfinite(self) -> int: ...
+
+
+class _DOEView(_Reported, Protocol):
+    @property
+    def values(self) -> np.ndarray: ...
+    @property
+    def best_index(self) -> int: ...
+    @property
+    def best_value(self) -> float: ...
+    @property
+    def best_point(self) -> np.ndarray: ...
+
+
+class _EnumerationView(_Reported, Protocol):
+    @property
+    def choices(self) -> Sequence[Mapping[str, object]]: ...
+    @property
+    def solutions(self) -> Sequence[_Outcome]: ...
+    @property
+    def best_index(self) -> int: ...
+    @property
+    def best_choice(self) -> Mapping[str, object]: ...
+
+
+class _ProblemView(Protocol):
+    @property
+    def name(self) -> str: ...
+    @property
+    def sense(self) -> str: ...
+    @property
+    def objective(self) -> ProblemObjective: ...
+    @property
+    def driver(self) -> object: ...
+
+
+class _DesignView(_Outcome, Protocol):
+    @property
+    def discrete(self) -> Mapping[str, object]: ...
+    @property
+    def inputs(self) -> Mapping[str, float]: ...
+    @property
+    def outputs(self) -> Mapping[str, float]: ...
+    @property
+    def n_steps(self) -> int: ...
+
+
+class _ProblemResultView(_Reported, Protocol):
+    @property
+    def problem(self) -> _ProblemView: ...
+    @property
+    def best(self) -> _DesignView | None: ...
+    @property
+    def results(self) -> Sequence[_DesignView]: ...
+
+
+class _RareEventView(_Reported, Protocol):
+    @property
+    def betas(self) -> np.ndarray: ...
+    @property
+    def failure_prob(self) -> float: ...
+    @property
+    def failure_stderr(self) -> float: ...
+    @property
+    def form_failure_prob(self) -> float: ...
+    @property
+    def n_builds(self) -> int: ...
+    @property
+    def n_form_builds(self) -> int: ...
+    @property
+    def n_failures(self) -> int: ...
+    @property
+    def lr_gradient(self) -> np.ndarray | None: ...
+    @property
+    def lr_gradient_stderr(self) -> np.ndarray | None: ...
+    @property
+    def names(self) -> tuple[str, ...] | None: ...
+
+
+def _headline(r: _Reported) -> str:
     """The status badge, what the status means, and the driver's own account."""
     status = r.status
     meaning = getattr(status, "message", "")
@@ -26,7 +154,7 @@ def _headline(r: Any) -> str:
     return text
 
 
-def solution_html(s: Any) -> str:
+def solution_html(s: _SolutionView) -> str:
     """A :class:`~encdesign.design.Solution`: objective, steps, bounds touched, the value."""
     fields = [
         ("objective", num(s.objective, 8)),
@@ -37,7 +165,7 @@ def solution_html(s: Any) -> str:
     return result_html(f"Solution ({s.solver})", _headline(s), fields)
 
 
-def monte_carlo_html(r: Any) -> str:
+def monte_carlo_html(r: _MonteCarloView) -> str:
     """A :class:`~encdesign.design.MonteCarloResult`: mean ± standard error, spread and the
     5 / 50 / 95 % percentiles of the per-build values."""
     vals = np.asarray(r.values, dtype=np.float64)
@@ -55,7 +183,7 @@ def monte_carlo_html(r: Any) -> str:
     return result_html("Monte Carlo", _headline(r), fields)
 
 
-def doe_html(r: Any) -> str:
+def doe_html(r: _DOEView) -> str:
     """A :class:`~encdesign.design.DOEResult`: points, how many finite, the best point."""
     vals = np.asarray(r.values, dtype=np.float64)
     best = r.best_index >= 0
@@ -69,7 +197,7 @@ def doe_html(r: Any) -> str:
     return result_html("Design of experiments", _headline(r), fields)
 
 
-def enumeration_html(r: Any) -> str:
+def enumeration_html(r: _EnumerationView) -> str:
     """An :class:`~encdesign.design.EnumerationResult`: one row per combination (its status
     and objective), the best marked."""
     rows = [
@@ -87,16 +215,16 @@ def enumeration_html(r: Any) -> str:
     return result_html("Enumeration", _headline(r), fields, sections)
 
 
-def _choice(d: dict[str, Any]) -> str:
+def _choice(d: Mapping[str, object]) -> str:
     """``k = v, ...`` of a discrete combination, escaped."""
     return escape(", ".join(f"{k} = {v}" for k, v in d.items()))
 
 
-def _values(d: dict[str, Any]) -> str:
+def _values(d: Mapping[str, float]) -> str:
     return table(["name", "value (SI)"], [[escape(k), array_cell(v)] for k, v in d.items()])
 
 
-def problem_html(r: Any) -> str:
+def problem_html(r: _ProblemResultView) -> str:
     """A :class:`~encdesign.design.ProblemResult`: the problem, the best design (inputs and
     outputs) and every discrete combination's status and objective."""
     p = r.problem
@@ -127,7 +255,7 @@ def problem_html(r: Any) -> str:
     return result_html(f"Problem {p.name}", _headline(r), fields, sections)
 
 
-def rare_event_html(r: Any) -> str:
+def rare_event_html(r: _RareEventView) -> str:
     """A :class:`~encdesign.design.RareEventResult`: the failure probability with its standard
     error, FORM's own estimate, the design points and the builds spent."""
     betas = np.asarray(r.betas, dtype=np.float64)

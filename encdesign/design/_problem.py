@@ -241,7 +241,7 @@ def _where(path: Path | str, *keys: str) -> str:
     return f"{path}: " + ".".join(keys) if keys else str(path)
 
 
-def _num(value: Any, where: str, what: str = "a number") -> float:
+def _num(value: object, where: str, what: str = "a number") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise input_error(where, f"{show(value)[:60]} is not a number", what)
     if not math.isfinite(float(value)):
@@ -249,7 +249,7 @@ def _num(value: Any, where: str, what: str = "a number") -> float:
     return float(value)
 
 
-def _bounded(value: Any, where: str, what: str = "a number") -> float:
+def _bounded(value: object, where: str, what: str = "a number") -> float:
     """A finite number of magnitude at most :data:`MAX_MAGNITUDE_SI` (SI units)."""
     x = _num(value, where, what)
     if not abs(x) <= MAX_MAGNITUDE_SI:
@@ -257,13 +257,13 @@ def _bounded(value: Any, where: str, what: str = "a number") -> float:
     return x
 
 
-def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str) -> None:
+def _check_keys(table: Mapping[str, object], allowed: set[str], where: str) -> None:
     for k in table:
         if k not in allowed:
             raise input_error(where, f"unknown key {k!r}", f"one of {', '.join(sorted(allowed))}")
 
 
-def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
+def _variable(name: str, table: object, info: VariableInfo, src: str) -> Variable:
     where = _where(src, "variables", name)
     if not isinstance(table, Mapping):
         raise input_error(where, f"{table!r} is not a table", "a [variables.NAME] table")
@@ -341,7 +341,7 @@ def _variable(name: str, table: Any, info: VariableInfo, src: str) -> Variable:
     return Variable(name, units, info.units, start, lower, upper)
 
 
-def _vector_variable(name: str, table: Any, info: VariableInfo, src: str) -> list[Variable]:
+def _vector_variable(name: str, table: object, info: VariableInfo, src: str) -> list[Variable]:
     """The elements ``name[i]`` of a vector variable (``start`` a list; ``lower``/``upper``
     a number or a list of the same length), each checked like a scalar variable, then the
     whole start vector by ``info.check``."""
@@ -385,7 +385,7 @@ def _vector_variable(name: str, table: Any, info: VariableInfo, src: str) -> lis
     return elems
 
 
-def _user_objective(obj_name: Any, registry: Mapping[str, ProblemObjective], where: str):
+def _user_objective(obj_name: object, registry: Mapping[str, ProblemObjective], where: str):
     """A user objective (``package.module:function`` or an entry-point name)."""
     from ._user import load_user_objective, registered_names
 
@@ -564,7 +564,7 @@ def parse_problem(
     )
 
 
-def _yield(table: Any, src: str, si_units: str = "rad") -> YieldTarget:
+def _yield(table: object, src: str, si_units: str = "rad") -> YieldTarget:
     where = _where(src, "yield")
     if not isinstance(table, Mapping):
         raise input_error(where, f"{table!r} is not a table", "target, spec, n_builds")
@@ -604,7 +604,7 @@ def _yield(table: Any, src: str, si_units: str = "rad") -> YieldTarget:
 
 
 def parse_driver(
-    table: Any, where: str, kinds: tuple[str, ...] = DRIVER_KINDS, default: str = "lbfgsb"
+    table: object, where: str, kinds: tuple[str, ...] = DRIVER_KINDS, default: str = "lbfgsb"
 ) -> tuple[AbstractDriver, float]:
     """The driver a ``[driver]`` (or ``[sweep]``) table names, and the penalty weight.
 

@@ -32,7 +32,7 @@ from ._objectives import (
     smooth_yield,
     tolerance_cost,
 )
-from ._spec import ModelLimit, ProblemObjective, VariableInfo
+from ._spec import ModelLimit, ProblemObjective, ProblemView, VariableInfo
 
 __all__ = ["PROBLEM_OBJECTIVES"]
 
@@ -64,7 +64,7 @@ def _tolerances_from(model: dict[str, Any], x: dict[str, Any]) -> Tolerances:
     return Tolerances(**{n: x.get(f"sigma_{n}", model[f"sigma_{n}"]) for n in TOLERANCE_NAMES})
 
 
-def _build_sensitivity(problem: Any, discrete: dict[str, Any]):
+def _build_sensitivity(problem: ProblemView, discrete: dict[str, Any]):
     m = problem.model
     n_heads = int(discrete.get("n_heads", m["n_heads"]))
     key = jax.random.key(problem.seed)
@@ -83,7 +83,7 @@ def _build_sensitivity(problem: Any, discrete: dict[str, Any]):
     return evaluate
 
 
-def _build_residual(problem: Any, discrete: dict[str, Any]):
+def _build_residual(problem: ProblemView, discrete: dict[str, Any]):
     m = dict(problem.model)
     m.update(discrete)
     key = jax.random.key(problem.seed)
@@ -116,7 +116,7 @@ def _build_residual(problem: Any, discrete: dict[str, Any]):
     return evaluate
 
 
-def _build_cost(problem: Any, discrete: dict[str, Any]):
+def _build_cost(problem: ProblemView, discrete: dict[str, Any]):
     inner = _build_residual(problem, discrete)
 
     def evaluate(x):
@@ -126,7 +126,7 @@ def _build_cost(problem: Any, discrete: dict[str, Any]):
     return evaluate
 
 
-def _build_sds(problem: Any, discrete: dict[str, Any]):
+def _build_sds(problem: ProblemView, discrete: dict[str, Any]):
     m = dict(problem.model)
     m.update(discrete)
     key = jax.random.key(problem.seed)
@@ -243,7 +243,7 @@ def _check_head_angles(start: Any, where: str) -> None:
     check_layout(start, where=where)
 
 
-def _build_layout(problem: Any, discrete: dict[str, Any]):
+def _build_layout(problem: ProblemView, discrete: dict[str, Any]):
     m = dict(problem.model)
     m.update(discrete)
     key = jax.random.key(problem.seed)
@@ -319,7 +319,7 @@ PROBLEM_OBJECTIVES["head_layout"] = _HEAD_LAYOUT
 _SDS_MARK_TOLS = ("eccentricity_rad", "ellipticity_rad", "harmonic_rad", "random_rad")
 
 
-def _build_sds_layout(problem: Any, discrete: dict[str, Any]):
+def _build_sds_layout(problem: ProblemView, discrete: dict[str, Any]):
     from ..physics._sds import equally_spaced
 
     m = dict(problem.model)

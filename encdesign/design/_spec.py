@@ -10,11 +10,43 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from pathlib import Path
+from typing import Any, Protocol
 
 SI_UNITS = ("rad", "m", "s", "1")
 """The SI units a variable is declared in (problem files may use any unit of the same
 dimension, :data:`encdesign.design._problem.UNITS`)."""
+
+
+class YieldSpec(Protocol):
+    """What a builder reads of a problem's ``[yield]`` table (a
+    :class:`~encdesign.design.YieldTarget`)."""
+
+    @property
+    def target(self) -> float: ...
+    @property
+    def spec(self) -> float: ...
+    @property
+    def n_builds(self) -> int: ...
+
+
+class ProblemView(Protocol):
+    """What an objective's ``build`` and ``check`` read of a problem (a
+    :class:`~encdesign.design.Problem`; kept a protocol here so that this module imports
+    none of the modules that use it)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def objective(self) -> ProblemObjective: ...
+    @property
+    def model(self) -> Mapping[str, Any]: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def yield_target(self) -> YieldSpec | None: ...
+    @property
+    def path(self) -> Path | None: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,11 +114,11 @@ class ProblemObjective:
     variables: Mapping[str, VariableInfo]
     model: Mapping[str, Any]
     outputs: tuple[str, ...]
-    build: Callable[[Any, dict[str, Any]], Callable[[dict[str, Any]], dict[str, Any]]]
+    build: Callable[[ProblemView, dict[str, Any]], Callable[[dict[str, Any]], dict[str, Any]]]
     requires_yield: bool = False
     model_limits: Mapping[str, ModelLimit] = dataclasses.field(default_factory=dict)
     yield_units: str = "rad"
-    check: Callable[[Any, dict[str, Any], dict[str, Any]], None] | None = dataclasses.field(
+    check: Callable[[ProblemView, dict[str, Any], dict[str, Any]], None] | None = dataclasses.field(
         default=None, compare=False
     )
 

@@ -35,6 +35,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike
 
 from .._errors import input_error
 from .._progress import progress_bar
@@ -44,7 +45,9 @@ from ._status import MAX_STEPS, SUCCESS, DriverStatus
 ValuesFn = Callable[[jax.Array], jax.Array]
 
 
-def tolerance_cost(sigmas: Any, reference: Any, weights: Any | None = None) -> jax.Array:
+def tolerance_cost(
+    sigmas: ArrayLike, reference: ArrayLike, weights: ArrayLike | None = None
+) -> jax.Array:
     """``sum_i c_i ref_i / sigma_i`` (dimensionless); ``ref_i`` is the tolerance that costs
     ``c_i`` (default 1). Entries with ``ref_i = 0`` are not under design and cost nothing."""
     s = jnp.asarray(sigmas, dtype=jnp.float64)
@@ -54,7 +57,7 @@ def tolerance_cost(sigmas: Any, reference: Any, weights: Any | None = None) -> j
     return jnp.sum(jnp.where(active, c * ref / jnp.where(active, s, 1.0), 0.0))
 
 
-def yield_stats(values: Any, spec: float) -> tuple[float, float]:
+def yield_stats(values: ArrayLike, spec: float) -> tuple[float, float]:
     """Fraction of ``values <= spec`` and its binomial standard error ``sqrt(p(1-p)/n)``."""
     v = np.asarray(values)
     if not np.all(np.isfinite(v)):
@@ -111,7 +114,7 @@ class SweepTable:
 
 def sweep_scales(
     values_fn: ValuesFn,
-    sigmas: Any,
+    sigmas: ArrayLike,
     names: Sequence[str],
     spec: float,
     scales_a: Sequence[float],
@@ -212,7 +215,7 @@ class Contributions:
 def contributions(
     ms_fn: ValuesFn,
     values_fn: ValuesFn,
-    sigmas: Any,
+    sigmas: ArrayLike,
     names: Sequence[str],
     *,
     q: float = 99.0,
@@ -308,15 +311,15 @@ def _allocation_objective(values_fn: ValuesFn, didx: tuple[int, ...]):
 
 def allocate(
     values_fn: ValuesFn,
-    reference: Any,
+    reference: ArrayLike,
     names: Sequence[str],
     spec: float,
     target: float,
     *,
-    weights: Any | None = None,
+    weights: ArrayLike | None = None,
     margin: float | None = None,
     width: float | None = None,
-    fixed: Any | None = None,
+    fixed: ArrayLike | None = None,
     bounds: tuple[float, float] = (1e-3, 1e3),
     penalties: Sequence[float] = (1e2, 1e4, 1e6),
     max_steps: int = 200,
@@ -325,7 +328,7 @@ def allocate(
     rare_dim: int | None = None,
     rare_key: jax.Array | None = None,
     rare_n: int = 4000,
-    start: Any | None = None,
+    start: ArrayLike | None = None,
 ) -> Allocation:
     """Cheapest tolerances with ``target`` of the training builds within ``spec``.
 
@@ -535,7 +538,9 @@ def _rare_scale(
     return a, r.as_dict()
 
 
-def fresh_vs_reference(values: Any, reference_values: Any, spec: float) -> dict[str, Any]:
+def fresh_vs_reference(
+    values: ArrayLike, reference_values: ArrayLike, spec: float
+) -> dict[str, Any]:
     """An allocation against the reference tolerances on the same fresh builds
     (:func:`~encdesign.design.paired_comparison`): the failure fraction (builds over
     ``spec``) of both, with standard errors, and the paired difference (reference minus
@@ -549,7 +554,9 @@ def fresh_vs_reference(values: Any, reference_values: Any, spec: float) -> dict[
         v, r).as_dict()}  # fmt: skip
 
 
-def check_yield(values: Any, spec: float, target: float, *, n_sigma: float = 2.0) -> dict[str, Any]:
+def check_yield(
+    values: ArrayLike, spec: float, target: float, *, n_sigma: float = 2.0
+) -> dict[str, Any]:
     """Independent check of a yield: fraction within ``spec``, binomial standard error, and
     whether the target is reached within ``n_sigma`` standard errors."""
     p, se = yield_stats(values, spec)
@@ -619,7 +626,7 @@ class ParetoFront:
 
 def pareto_front(
     values_fn: ValuesFn,
-    reference: Any,
+    reference: ArrayLike,
     names: Sequence[str],
     spec: float,
     targets: Sequence[float],
@@ -700,7 +707,7 @@ def pareto_front(
     ref_fresh = None if check_fn is None else np.asarray(check_fn(jnp.asarray(reference)))
     for t in ts:
         a = allocs[t]
-        if check_fn is None or a.status not in (SUCCESS, MAX_STEPS):
+        if check_fn is None or ref_fresh is None or a.status not in (SUCCESS, MAX_STEPS):
             checked.append(None)
         else:
             fresh = np.asarray(check_fn(jnp.asarray(a.sigmas)))

@@ -58,7 +58,7 @@ import numpy as np
 
 from .._errors import EncdesignInputError, input_error
 from .._usercode import user_code
-from ._spec import SI_UNITS, ProblemObjective, VariableInfo
+from ._spec import SI_UNITS, ProblemObjective, ProblemView, VariableInfo
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -282,7 +282,7 @@ def load_user_objective(name: str, where: str = "problem.objective") -> ProblemO
         except TypeError as exc:
             raise input_error(f"{path}_declaration", str(exc)) from exc
 
-    def build(problem: Any, discrete: dict[str, Any]) -> Callable[[dict[str, Any]], dict]:
+    def build(problem: ProblemView, discrete: dict[str, Any]) -> Callable[[dict[str, Any]], dict]:
         model = dict(problem.model)
         key = jax.random.key(problem.seed)
         disc = dict(discrete)
@@ -319,7 +319,7 @@ def load_user_objective(name: str, where: str = "problem.objective") -> ProblemO
     )
 
 
-def check_user_objective(problem: Any, discrete: dict[str, Any], x: dict[str, Any]) -> None:
+def check_user_objective(problem: ProblemView, discrete: dict[str, Any], x: dict[str, Any]) -> None:
     """Evaluate a user objective once at ``x`` (SI, the start point) and differentiate it.
 
     Raises :class:`~encdesign.EncdesignInputError` naming the objective when it raises,
@@ -351,7 +351,7 @@ def check_user_objective(problem: Any, discrete: dict[str, Any], x: dict[str, An
     _check_eagerly(problem, evaluate, x, xj, first)
 
 
-def _check_eagerly(problem: Any, evaluate: Callable, x: dict, xj: dict, first: str) -> None:
+def _check_eagerly(problem: ProblemView, evaluate: Callable, x: dict, xj: dict, first: str) -> None:
     where = f"objective {problem.objective.name!r}"
     try:
         out = evaluate(xj)

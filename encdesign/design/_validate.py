@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
 
 import jax
 import numpy as np
+from jaxtyping import ArrayLike
 
 from .._errors import input_error
 
@@ -97,7 +97,7 @@ class FreshComparison:
             return "win"
         return "loss" if self.worse_significant else "no significant difference"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, float | int | bool | str | None]:
         """JSON-able (non-finite numbers as ``None``)."""
         d = dataclasses.asdict(self)
         d["verdict"] = self.verdict
@@ -118,8 +118,8 @@ class FreshComparison:
 
 
 def paired_comparison(
-    chosen_values: Any,
-    baseline_values: Any,
+    chosen_values: ArrayLike,
+    baseline_values: ArrayLike,
     *,
     reduce: str = "mean",
     unit: str = "builds",

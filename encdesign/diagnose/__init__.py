@@ -12,6 +12,7 @@ from .engine._candidates import (
     Candidate as Candidate,
     Context as Context,
     Param as Param,
+    Probe as Probe,
 )
 from ._dispatch import (
     Diagnosis as Diagnosis,
@@ -27,9 +28,12 @@ from .engine._discover_export import (
 from .kinds.motion._motion import candidate_orders as candidate_orders
 from .engine._results import (
     Alternative as Alternative,
+    BaseOrder as BaseOrder,
     Confounded as Confounded,
+    DetectionBound as DetectionBound,
     Effect as Effect,
     Finding as Finding,
+    OrderTrial as OrderTrial,
     PlotData as PlotData,
     Refusal as Refusal,
 )
@@ -41,8 +45,8 @@ from .engine._html import (
 from .engine._settings import (
     DEFAULT_SETTINGS as DEFAULT_SETTINGS,
     FinderSettings as FinderSettings,
-    settings_table as settings_table,
 )
+from .engine._settings_table import settings_table as settings_table
 from .kinds.sds._sds_readout import (
     SDSRecordingResult as SDSRecordingResult,
 )

@@ -25,11 +25,31 @@ from ._registry import KINDS
 from .engine._candidates import Candidate
 from .engine._engine import run_engine
 from .engine._plots import engine_plots
-from .engine._results import VERDICTS, Confounded, Effect, Finding, PlotData, Refusal
+from .engine._results import (
+    VERDICTS,
+    BaseOrder,
+    Confounded,
+    DetectionBound,
+    Effect,
+    Finding,
+    PlotData,
+    Refusal,
+)
 from .engine._settings import FinderSettings
 
-TYPED_KEYS = ("verdict", "status", "effects", "unexplained", "rejected", "not_testable")
+TYPED_KEYS = (
+    "verdict",
+    "status",
+    "effects",
+    "unexplained",
+    "rejected",
+    "not_testable",
+    "confounded",
+    "detection_bounds",
+)
 """Keys of the document held as typed fields of :class:`Diagnosis`."""
+_OPTIONAL_TYPED = ("confounded", "base_order")
+"""Typed keys a document may lack (``base_order``: only where the engine chose an order)."""
 
 
 @final
@@ -45,6 +65,12 @@ class Diagnosis(eqx.Module):
         not_testable: candidates that do not apply to this record (:class:`Refusal`).
         confounded: pairs of effects the record cannot separate (:class:`Confounded`;
             empty when the document has none).
+        base_order: how the base model's order was chosen, each tried order's fitted and
+            held-out RMS (:class:`BaseOrder`; ``None`` where the kind's order is fixed or
+            the caller gave ``max_order``).
+        detection_bounds: on a ``consistent`` verdict, the smallest size of each catalog
+            effect (per head or sensor) this record would have revealed
+            (:class:`DetectionBound`; empty on other verdicts, where the document has none).
         other: every other key of the document (``docs/diagnose.md``), as JSON.
         key_order: the document's keys in order (:meth:`to_json` gives them back so).
         plot_data: what the figures need beyond the document (:class:`PlotData`).
@@ -60,6 +86,8 @@ class Diagnosis(eqx.Module):
     other: Mapping[str, Any]
     key_order: tuple[str, ...]
     plot_data: PlotData | None = None
+    base_order: BaseOrder | None = None
+    detection_bounds: tuple[DetectionBound, ...] = ()
 
     def __check_init__(self):
         if self.verdict not in VERDICTS:
@@ -71,6 +99,11 @@ class Diagnosis(eqx.Module):
             )
         if self.verdict == "consistent" and self.unexplained:
             raise DiagnosisError("diagnosis verdict 'consistent' with unexplained structure")
+        if self.verdict != "consistent" and self.detection_bounds:
+            raise DiagnosisError(
+                f"diagnosis verdict {self.verdict!r} with detection bounds: they are reported "
+                "on a consistent verdict only"
+            )
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any], plot_data: PlotData | None = None) -> Diagnosis:
@@ -83,9 +116,15 @@ class Diagnosis(eqx.Module):
             rejected=tuple(Refusal.from_json(r) for r in doc.get("rejected", ())),
             not_testable=tuple(Refusal.from_json(r) for r in doc.get("not_testable", ())),
             confounded=tuple(Confounded.from_json(c) for c in doc.get("confounded", ())),
-            other={k: v for k, v in doc.items() if k not in (*TYPED_KEYS, "confounded")},
+            other={k: v for k, v in doc.items() if k not in (*TYPED_KEYS, *_OPTIONAL_TYPED)},
             key_order=tuple(doc),
             plot_data=plot_data,
+            base_order=None
+            if doc.get("base_order") is None
+            else BaseOrder.from_json(doc["base_order"]),
+            detection_bounds=tuple(
+                DetectionBound.from_json(b) for b in doc.get("detection_bounds", ())
+            ),
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -98,6 +137,8 @@ class Diagnosis(eqx.Module):
             "rejected": [r.to_json() for r in self.rejected],
             "not_testable": [r.to_json() for r in self.not_testable],
             "confounded": [c.to_json() for c in self.confounded],
+            "base_order": None if self.base_order is None else self.base_order.to_json(),
+            "detection_bounds": [b.to_json() for b in self.detection_bounds],
         }
         return {k: typed[k] if k in typed else self.other[k] for k in self.key_order}
 
@@ -117,9 +158,9 @@ class Diagnosis(eqx.Module):
         """Back compatibility: ``d["verdict"]`` reads the document's key."""
         return self.to_json()[key]
 
-    def with_keys(self, **keys: Any) -> Diagnosis:
+    def with_keys(self, **keys: object) -> Diagnosis:
         """A copy with document keys other than the typed ones set (e.g. ``plots``)."""
-        if set(keys) & {*TYPED_KEYS, "confounded"}:
+        if set(keys) & {*TYPED_KEYS, *_OPTIONAL_TYPED}:
             raise DiagnosisError(f"with_keys: typed keys {sorted(keys)} are set as fields")
         order = self.key_order + tuple(k for k in keys if k not in self.key_order)
         return dataclasses.replace(self, other={**self.other, **keys}, key_order=order)
@@ -138,7 +179,7 @@ def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
         lambda: (spec.loader.exec_module(mod), mod)[1],  # type: ignore[union-attr]
         "CANDIDATES",
         Candidate,
-        ("fn", "applies", "start", "plausible", "derived"),
+        ("fn", "applies", "start", "plausible", "derived", "probes"),
     )
 
 

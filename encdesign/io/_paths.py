@@ -28,6 +28,7 @@ import tempfile
 import tomllib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from types import TracebackType
 from typing import IO, Any
 
 from .._errors import input_error
@@ -307,7 +308,12 @@ class OutputGuard:
             with contextlib.suppress(OSError):
                 d.rmdir()
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         if exc_type is not None:
             self.cleanup()
 

@@ -13,13 +13,16 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._checks import SEED, float_arg, int_arg
 from .._errors import EncdesignInputError
 from ._paths import atomic_output, atomic_write_text
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "float_arg",
@@ -176,7 +179,7 @@ def new_figure(*args: Any, **kwargs: Any):
     return plt.subplots(*args, **kwargs)
 
 
-def save_figure(fig: Any, out: str | os.PathLike, filename: str) -> Path:
+def save_figure(fig: Figure, out: str | os.PathLike, filename: str) -> Path:
     """Save a matplotlib figure as PNG under ``out`` and close it."""
     import matplotlib.pyplot as plt
 

@@ -152,6 +152,39 @@ class Context:
     data: Any = None
 
 
+@dataclasses.dataclass(frozen=True)
+class Probe:
+    """One unit-size effect of a candidate, whose smallest detectable size a clean verdict
+    reports (``detection_bounds``, issue 44 F; :mod:`encdesign.diagnose.engine._bounds`).
+
+    Attributes:
+        values: parameter values of the effect at size 1 (in ``unit``): its linear
+            parameters where it acts (the size scales them all), its nonlinear ones at the
+            value the bound is stated for (e.g. a frequency, a change point).
+        parameter: the size's name in the report (``amplitude_rad``, ``delay_step_s``).
+        unit: SI unit of the size.
+        where: the channel (head, sensor) it acts on, or ``"all"``.
+        at: in words, where its other parameters are held (``"at 123.4 Hz"``).
+        worst_of: more values of the same effect (e.g. other change points): the bound is
+            the largest over ``values`` and these.
+        seen: ``seen(lam) -> lam_seen``: the noncentrality the finder's tests see of an
+            effect whose noncentrality at the record's noise is ``lam``, where the kind's
+            noise estimate takes part of it (a level estimated from few values, which an
+            effect below its own step test inflates: the sds run means); ``None``: all of it.
+    """
+
+    values: Mapping[str, Any]
+    parameter: str
+    unit: str
+    where: str = "all"
+    at: str = ""
+    worst_of: tuple[Mapping[str, Any], ...] = ()
+    seen: Callable[[float], float] | None = None
+
+
+ProbeFn = Callable[[Context], list[Probe]]
+"""``probes(ctx) -> [Probe, ...]``: the unit-size effects a clean verdict bounds."""
+
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]
 """``start(ctx, residual, findings) -> [params, ...]``: starting values for the nonlinear
 parameters (one dict per alternative start; linear ones may be left out, they start at 0)."""
@@ -187,6 +220,9 @@ class Candidate:
             For a term with many parameters (the base: forward mode carries one tangent per
             parameter through every intermediate) it is several times faster; it must
             agree with ``jax.jacfwd(fn)`` (tested).
+        probes: ``probes(ctx) -> [Probe, ...]`` (:data:`ProbeFn`): the unit-size effects
+            whose smallest detectable size a clean verdict reports (``detection_bounds``),
+            or ``None`` (default: no bound reported for it).
     """
 
     name: str
@@ -201,6 +237,7 @@ class Candidate:
     derived: Callable[[Context, dict, dict], dict] | None = None
     doubt_overruled: bool = True
     valjac: Callable[[dict, dict], Any] | None = None
+    probes: ProbeFn | None = None
 
     def __post_init__(self) -> None:
         names = [p.name for p in self.params]

@@ -24,12 +24,13 @@ it already explains), and every term's fit, held-out gain and inclusion are comp
 those sums without another pass.
 
 Selection is **orthogonal forward regression**: at each step the term with the largest
-in-sample chi-square drop less its multiple-testing threshold ``chi2.isf(alpha / N, q)``
+in-sample chi-square drop less its multiple-testing threshold
+``chi2.isf(settings.discover_alpha / N, q)``
 (``N`` terms in the library, ``q`` parameters: Bonferroni, which also prefers the smaller of
 two nested terms) enters when that margin is positive and its K-fold held-out gain (fitted
 without each fold, scored on it) is positive. The same selection repeated without each fold
 in turn gives each term's inclusion probability; a term enters only when it is at least
-``INCLUSION_MIN``.
+``settings.discover_inclusion_min``.
 """
 
 from __future__ import annotations
@@ -45,12 +46,6 @@ from scipy import optimize, stats
 from ._discover_words import reading
 from ._settings import FinderSettings
 
-ALPHA = 0.01
-"""Family-wise false-alarm rate of the selection over the whole library (Bonferroni)."""
-
-INCLUSION_MIN = 0.6
-"""A term enters only when the selection repeated without each fold keeps it this often."""
-
 MAX_TERMS = 4
 """Terms the forward selection may add over all lines."""
 
@@ -59,13 +54,6 @@ MAX_LINES = 10
 
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
-
-MODEL_ERROR_PER_PARAM = 5e-3
-"""Share of a term's chi-square drop discounted per parameter when terms are ranked: the
-finder's own angle and base are not exact (a run offset fitted with the structure present
-moves the phase of a line a little), so at a high signal-to-noise ratio a term with more
-parameters (its own phase per run) would otherwise win over the physical one by fitting
-that small model error."""
 
 BETA_RANGE = (-4.0, 4.0)
 """Range searched for a speed exponent."""
@@ -506,11 +494,12 @@ def _single_heldout(sums: Sums, tm: Term, folds) -> float:
 
 
 def _forward(
-    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh
+    A: np.ndarray, b: np.ndarray, lib: Sequence[Term], sums: Sums, folds, thresh, me: float
 ) -> list[int]:
     """Orthogonal forward regression over the folds ``folds``: indices of the terms taken
-    (each step: the largest chi-square drop beyond its threshold, given those taken, by
-    the Schur complement; taken when its K-fold held-out gain is positive)."""
+    (each step: the largest chi-square drop beyond its threshold, given those taken, by the
+    Schur complement, less ``me`` of it per parameter (``settings.discover_model_error``);
+    taken when its K-fold held-out gain is positive)."""
     folds = list(folds)
     At, bt, Rt = A[folds].sum(0), b[folds].sum(0), sums.raw[folds].sum(0)
     D, e, Dr = [], [], []
@@ -544,7 +533,7 @@ def _forward(
             q = tm.H.shape[1] + (tm.beta is not None)
             if gi <= thresh[i]:
                 continue
-            m = gi * (1.0 - MODEL_ERROR_PER_PARAM * q) - thresh[i]
+            m = gi * (1.0 - me * q) - thresh[i]
             if m > best_m:
                 best, best_m = i, m
         if best < 0:
@@ -576,6 +565,7 @@ class State:
     thresh: np.ndarray
     infl: float
     signal_periods: int
+    settings: FinderSettings
 
 
 def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
@@ -598,11 +588,9 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    N = max(len(lib), 1)
-    thresh = np.array(
-        [stats.chi2.isf(ALPHA / N, tm.H.shape[1] + (tm.beta is not None)) for tm in lib]
-    )
-    return State(lines, first, cinfo, sums, lib, thresh, infl, L)
+    a_n = prep.settings.discover_alpha / max(len(lib), 1)
+    thresh = np.array([stats.chi2.isf(a_n, tm.H.shape[1] + (tm.beta is not None)) for tm in lib])
+    return State(lines, first, cinfo, sums, lib, thresh, infl, L, prep.settings)
 
 
 def discover(
@@ -635,31 +623,30 @@ def discover(
 def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     """Forward selection on all folds, and each term's inclusion probability over the
     selections repeated without each fold; the terms kept (chosen on all folds and
-    included at least ``INCLUSION_MIN``)."""
+    included at least ``settings.discover_inclusion_min``)."""
     sums, lib = st.sums, st.lib
     K = sums.A.shape[0]
     folds = list(range(K))
-    chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh)
+    me = st.settings.discover_model_error
+    chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
     incl = np.zeros(len(lib))
     for k in folds:
-        for i in _forward(sums.A, sums.b, lib, sums, [f for f in folds if f != k], st.thresh):
+        rest = [f for f in folds if f != k]
+        for i in _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me):
             incl[i] += 1.0 / K
-    return [i for i in chosen if incl[i] >= INCLUSION_MIN], incl
+    return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:
-    """Held-out gains (chi-square) of the kept terms, in the order forward selection took
-    them: ``entry`` (per term: the gain when it entered, over the terms taken before it; these
-    sum to the whole model's gain), ``drop_one`` (per term: the loss when only it is removed;
-    0 for a term another kept term spans) and ``line`` (per line: the loss when all of that
-    line's terms are removed)."""
+    """Held-out gains (chi-square) of the kept terms (in forward order): ``entry`` (over the
+    terms taken before it: they sum to the model's), ``drop_one`` (the loss when only it is
+    removed: 0 where another kept term spans it), ``line`` (when a line's terms are removed)."""
     sums, lib = st.sums, st.lib
     folds = list(range(sums.A.shape[0]))
 
     def ho(idx: list[int]) -> float:
-        if not idx:
-            return 0.0
-        return _heldout(sums.A, sums.b, _embed(sums, [lib[j] for j in idx]), folds, sums.raw)
+        H = _embed(sums, [lib[j] for j in idx]) if idx else None
+        return _heldout(sums.A, sums.b, H, folds, sums.raw) if H is not None else 0.0
 
     whole = ho(kept)
     entry, prev = {}, 0.0
@@ -667,9 +654,9 @@ def _gains(st: State, kept: list[int]) -> dict[str, dict]:
         cur = ho(kept[: n + 1])
         entry[i], prev = cur - prev, cur
     drop = {i: whole - ho([j for j in kept if j != i]) for i in kept}
-    line = {}
-    for li in {lib[i].line for i in kept}:
-        line[li] = whole - ho([j for j in kept if lib[j].line != li])
+    line = {
+        li: whole - ho([j for j in kept if lib[j].line != li]) for li in {lib[i].line for i in kept}
+    }
     return {"entry": entry, "drop_one": drop, "line": line}
 
 
@@ -775,8 +762,9 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         },
         "library_size": N,
         "selection": "orthogonal forward regression; Bonferroni threshold "
-        f"chi2.isf({ALPHA} / {N}, q); K-fold held-out gain > 0; inclusion over {K} "
-        f"leave-one-fold-out repeats >= {INCLUSION_MIN}",
+        f"chi2.isf({st.settings.discover_alpha} / {N}, q); K-fold held-out gain > 0; "
+        f"inclusion over {K} leave-one-fold-out repeats >= "
+        f"{st.settings.discover_inclusion_min}",
         "alternatives": near.setdefault(li, _nearest(st.lib, kept, li, st.sums, list(range(K)))),
         "reading": " ".join(t["reading"] for t in mine),
     }
@@ -801,13 +789,3 @@ def _nearest(lib, kept, li, sums, folds) -> list[dict]:
 
 def _none(reason: str, **kw) -> dict:
     return {"outside_catalog": True, "frame": None, "terms": [], "reason": reason, **kw}
-
-
-def term_heldout_gain(
-    prep, sums: Sums, lib: Sequence[Term], frame: str, modulation: str, line: int
-) -> float:
-    """Held-out gain of one library term (a benchmark's "true model" at the truth's frame)."""
-    for tm in lib:
-        if tm.frame == frame and tm.modulation == modulation and tm.line == line:
-            return _single_heldout(sums, tm, range(sums.A.shape[0]))
-    return float("nan")

@@ -23,10 +23,6 @@ import jax.numpy as jnp
 from ...io._paths import atomic_write_text
 from ._candidates import Candidate, Param
 
-SIZE_RATIO_MAX = 100.0
-"""A refit amplitude more than this many times the discovered one (or less than its
-inverse) is refused: another physics, not the one discovered."""
-
 
 def candidate_name(term: Mapping[str, Any]) -> str:
     """``discovered_<line>_<frame>_<modulation>`` (lower case, ``[a-z0-9_]``)."""
@@ -122,7 +118,8 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             float(jnp.mean(jnp.asarray(p["cos_rad"]) ** 2))
             + float(jnp.mean(jnp.asarray(p.get("sin_rad", 0.0)) ** 2))
         )
-        if amp0 > 0 and not (amp0 / SIZE_RATIO_MAX <= amp <= amp0 * SIZE_RATIO_MAX):
+        ratio = ctx.settings.discover_size_ratio_max
+        if amp0 > 0 and not (amp0 / ratio <= amp <= amp0 * ratio):
             return f"amplitude {amp:.3g} {unit} far from the discovered {amp0:.3g} {unit}"
         return None
 

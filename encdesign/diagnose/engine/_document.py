@@ -81,10 +81,10 @@ def se_dict(term: Term, fit: FitResult, index: int) -> dict[str, np.ndarray]:
     return out
 
 
-def scan_order_of(limit: int, order: int) -> int:
-    """Highest order the views scan for a base of ``order``: twice it, at least 24, within
-    what the record resolves."""
-    return int(min(limit, max(2 * order, 24)))
+def scan_order_of(limit: int, order: int, settings: FinderSettings) -> int:
+    """Highest order the views scan for a base of ``order``: twice it, at least
+    ``settings.scan_order_min``, within what the record resolves."""
+    return int(min(limit, max(2 * order, settings.scan_order_min)))
 
 
 SWEEP_WINDOW = 9
@@ -204,9 +204,10 @@ def lattice_effect(prep: Prepared, rms_final: float, heldout_final: float | None
 
 def order_spectrum(prep: Prepared, r0: np.ndarray, r1: np.ndarray, max_order: int) -> dict:
     """Amplitude (unit of y, mean over channels) of integer shaft orders ``1..max_order`` in
-    the base and the final residual (least squares over the kept rows)."""
+    the base and the final residual (least squares over the kept rows), at most
+    ``settings.spectrum_order_max`` of them."""
 
-    M = int(min(max_order, 400))
+    M = int(min(max_order, prep.settings.spectrum_order_max))
     out = {"orders": list(range(1, M + 1)), "before": [], "after": []}
     N, _, _, _, sums = order_sums(prep, "theta", [r0, r1], np.arange(1, M + 1))
     for (Bc, Bs), key in zip(sums, ("before", "after")):
@@ -321,6 +322,27 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
     return out
 
 
+def bound_lines(doc: dict) -> list[str]:
+    """The report's lines on the detection bounds of a clean verdict (issue 44 F)."""
+    bounds = doc.get("detection_bounds")
+    if not bounds:
+        return []
+    lines = [
+        "smallest size this record would have revealed (about 50 % power at the finder's "
+        "thresholds; 1.5x it is found almost always, half of it almost never):"
+    ]
+    for b in bounds:
+        size = "not revealed at any size" if b["bound"] is None else f"{b['bound']:.3g} {b['unit']}"
+        why = b.get("note") or f"set by {b['set_by']}"
+        at = f", {b['at']}" if b["at"] else ""
+        lines.append(f"  - {b['effect']} {b['parameter']} on {b['where']}: {size} ({why}{at})")
+    if doc.get("detection_bounds_not_covered"):
+        lines.append(
+            "  not bounded (no probe yet): " + ", ".join(doc["detection_bounds_not_covered"])
+        )
+    return lines
+
+
 def report_text(doc: dict) -> str:
     """A one-page plain-text report of a diagnosis document."""
     u = doc["unit"]
@@ -343,11 +365,26 @@ def report_text(doc: dict) -> str:
             f"angle step: channel {a['channel']} at {a['angle_rad']:.4g} rad, size "
             f"{a['size_rad']:.4g} rad, on {a['passes']} passes (of the angle, in the base)"
         )
+    if (bo := doc.get("base_order")) is not None:  # issue 44 E: the base order's choice
+        lines.append(
+            f"base order: {bo['chosen']} (default {bo['start']}"
+            + (", lowered by held-out error" if bo["lowered"] else "")
+            + f"; held-out / fitted RMS {bo['heldout_ratio']:.3g} at {bo['start']})"
+        )
+        if len(bo["tried"]) > 1:
+            lines.append(
+                "  tried (order: fitted / held-out RMS): "
+                + ", ".join(
+                    f"{r['order']}: {r['rms']:.3g} / {r['heldout_rms']:.3g}" for r in bo["tried"]
+                )
+                + f" {u}"
+            )
     for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
         lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
+    lines += bound_lines(doc)
     for i, e in enumerate(doc["effects"], 1):
         col = e["collinearity"]
         col_s = "n/a" if col is None else f"{col:.3f}"

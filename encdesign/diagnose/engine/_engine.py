@@ -35,6 +35,7 @@ named effects' contributions).
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -42,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import input_error
+from ._bounds import detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
 from ._document import (
@@ -91,9 +93,11 @@ def _grow_base_order(
     that only leaks into high orders stays the candidates'; a strong order's leakage into
     lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period
-    (``interpolation_error``'s) stay out. Returns ``(order, fit)``, grown and refitted from
-    the fitted values, or ``None`` (nothing changed)."""
-    hi = scan_order_of(limit, order)
+    (``interpolation_error``'s) stay out. Where held-out error lowered the base order
+    (:func:`_choose_base_order`), growth is also undone when it raises the held-out
+    chi-square. Returns ``(order, fit)``, grown and refitted from the fitted values, or
+    ``None`` (nothing changed)."""
+    hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
@@ -112,6 +116,31 @@ def _grow_base_order(
     if not found:
         return None
     M = int(max(found))
+    lowered = (base_info.get("order_choice") or {}).get("lowered", False)
+    # (an order the held-out choice lowered grows back only where held-out error allows;
+    # the two held-out chi-squares in the same noise weights)
+    ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered else math.inf
+    terms, info = _terms_at_order(kind, prep, fit, M)
+    _set_order(prep, M)
+    fitter.clear()
+    grown = fitter.fit(terms)
+    after = locate(
+        prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M, prep.settings)
+    )
+    p1 = sum(max(f.power - f.dof, 0.0) for f in after)
+    worse = grown.heldout_chi2 > ho0
+    if p1 > prep.settings.growth_left_max * p0 or worse:
+        _set_order(prep, order)
+        fitter.clear()
+        return None
+    base_info.update(info)
+    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
+    return M, grown
+
+
+def _terms_at_order(kind: Kind, prep: Prepared, fit: FitResult, M: int) -> tuple[list, dict]:
+    """The kind's base terms at order ``M`` started from ``fit``'s values (orders above
+    ``M`` dropped, new orders at zero; scales from the noise), and the kind's base info."""
     spec, info = kind.base(prep, M)
     old = {t.cand.name: t for t in fit.terms}
     terms = []
@@ -128,23 +157,90 @@ def _grow_base_order(
                     st[q.name] = v
                 elif v.ndim == 1 and len(shp) == 1 and v.size < shp[0]:
                     st[q.name] = np.concatenate([v, np.zeros(shp[0] - v.size)])
+                elif v.ndim == 1 and len(shp) == 1:
+                    st[q.name] = v[: shp[0]]
         tm = make_term(cand, prep, st)
         for q in cand.params:
             if q.scale is None:
                 tm.scale[q.name][...] = float(np.mean(prep.sigma))
         terms.append(tm)
-    _set_order(prep, M)
-    fitter.clear()
-    grown = fitter.fit(terms)
-    after = locate(prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M))
-    p1 = sum(max(f.power - f.dof, 0.0) for f in after)
-    if p1 > prep.settings.growth_left_max * p0:
-        _set_order(prep, order)
-        fitter.clear()
+    return terms, info
+
+
+def _order_row(prep: Prepared, M: int, f: FitResult) -> dict:
+    return {
+        "order": int(M),
+        "rms": f.rms(prep),
+        "heldout_rms": f.heldout_rms(prep),
+        "heldout_chi2": float(f.heldout_chi2),
+        "n_params": int(f.n_params),
+    }
+
+
+def _choose_base_order(
+    kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, order: int, base_info: dict
+):
+    """Issue 44 E: the base order chosen by held-out error where the base is
+    ill-conditioned. When the base's K-fold held-out RMS exceeds its fitted RMS by more than
+    ``settings.base_order_ratio`` (e.g. one turn forward and back at few samples per turn:
+    a held-out block's arc is bridged by orders the other folds cannot pin down), the base
+    is fitted at every order ``1 .. order`` in the engine's own folds and the order of least
+    held-out chi-square is taken, when it lowers the held-out chi-square by at least
+    ``settings.heldout_min``. A well-conditioned base (any long record) is never refitted, so
+    its result is unchanged. Records ``base_info["order_choice"]`` (each tried order's fitted
+    and held-out RMS); returns ``(order, fit)`` when the order was lowered, else ``None``."""
+    s = prep.settings
+    row0 = _order_row(prep, order, fit)
+    ratio = row0["heldout_rms"] / row0["rms"] if row0["rms"] > 0 else 1.0
+    choice = {
+        "start": int(order),
+        "chosen": int(order),
+        "lowered": False,
+        "heldout_ratio": float(ratio),
+        "ratio_max": float(s.base_order_ratio),
+        "tried": [row0],
+    }
+    base_info["order_choice"] = choice
+    if not (math.isfinite(ratio) and ratio > s.base_order_ratio) or order <= 1:
+        choice["reason"] = (
+            f"held-out RMS {ratio:.3g}x the fitted RMS (at most "
+            f"FinderSettings.base_order_ratio = {s.base_order_ratio:g}): the default order kept"
+        )
         return None
+    fitter.clear()
+    fit = fitter.fit(fit.terms)  # in the weights of the noise estimate, like every trial
+    fits = {order: fit}
+    choice["tried"] = [_order_row(prep, order, fit)]
+    for M in range(1, order):
+        terms, _ = _terms_at_order(kind, prep, fit, M)
+        _set_order(prep, M)
+        fitter.clear()
+        fits[M] = fitter.fit(terms)
+        choice["tried"].append(_order_row(prep, M, fits[M]))
+    _set_order(prep, order)
+    fitter.clear()
+    choice["tried"].sort(key=lambda r: r["order"])
+    ok = {M: f for M, f in fits.items() if math.isfinite(f.heldout_chi2)}
+    best = min(ok, key=lambda M: ok[M].heldout_chi2) if ok else order
+    gain = fit.heldout_chi2 - fits[best].heldout_chi2
+    if best == order or not gain >= s.heldout_min:
+        choice["reason"] = (
+            f"held-out RMS {ratio:.3g}x the fitted RMS (over FinderSettings.base_order_ratio = "
+            f"{s.base_order_ratio:g}); no lower order lowers the held-out chi-square by "
+            f"FinderSettings.heldout_min = {s.heldout_min:g}: the default order kept"
+        )
+        return None
+    _, info = kind.base(prep, best)
     base_info.update(info)
-    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
-    return M, grown
+    choice.update(chosen=int(best), lowered=True)
+    choice["reason"] = (
+        f"held-out RMS {ratio:.3g}x the fitted RMS at order {order} (over "
+        f"FinderSettings.base_order_ratio = {s.base_order_ratio:g}): order {best} has the least "
+        f"held-out chi-square of orders 1-{order} ({gain:.1f} below order {order})"
+    )
+    _set_order(prep, best)
+    fitter.clear()
+    return best, fits[best]
 
 
 class _Progress:
@@ -284,6 +380,12 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
             )
     _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
+    if grow:  # issue 44 E: an ill-conditioned base's order is chosen by held-out error
+        chosen = _choose_base_order(kind, prep, fitter, base_fit, order, base_info)
+        if chosen is not None:
+            order, base_fit = chosen
+            _align(kind, prep, fitter, base_fit)
+            _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
@@ -481,7 +583,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
             "unidentifiable": base.unidentifiable + base_info.get("unidentifiable", []),
             "has_theta_ref": prep.ctx.has_ref,
             "terms_with_effects": final_base,
-            **{k: v for k, v in base_info.items() if k != "unidentifiable"},
+            **{k: v for k, v in base_info.items() if k not in ("unidentifiable", "order_choice")},
         },
         "notes": nuis_notes,
         "status": "ok"
@@ -489,6 +591,8 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
         else "a least-squares fit stopped before converging",
         "settings": {f: getattr(prep.settings, f) for f in SETTINGS_FIELDS},
     }
+    if base_info.get("order_choice") is not None:  # issue 44 E: the order held-out error chose
+        doc["base_order"] = base_info["order_choice"]
     doc["spectrum"] = order_spectrum(prep, sel.base_resid, sel.final_resid, scan)
     # issue 22 item 4: a record mostly excluded is said so, with the reasons
     doc["excluded_share"] = excluded_share(
@@ -543,7 +647,7 @@ def run_engine(
                 base_fit, order = _fit_base(
                     kind, prep, fitter, base_terms, base_info, order, limit, grow
                 )
-                scan = scan_order_of(limit, order)
+                scan = scan_order_of(limit, order, prep.settings)
             pg.stage("base fitted")
             with stage("select"):
                 sel = select(
@@ -563,6 +667,14 @@ def run_engine(
                 pg.stage("report")
                 doc = kind.finish(prep, doc, settings)
                 doc["verdict"] = decide_verdict(doc)
+            if doc["verdict"] == "consistent":  # issue 44 F: what the record could have shown
+                with stage("bounds"):
+                    cands = list(seen.values())
+                    doc["detection_bounds"] = detection_bounds(
+                        prep, fitter, sel.base.terms, cands, kind.views(prep), scan
+                    )
+                    doc["detection_bounds_not_covered"] = not_covered(cands, prep)
+            with stage("report"):
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0
         doc["timings_s"] = dict(timer.totals)

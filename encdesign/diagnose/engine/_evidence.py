@@ -7,7 +7,7 @@ alternatives it is named with (:func:`alternatives`), and pairs the record canno
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,8 +53,8 @@ class Chosen(NamedTuple):
     collinearity: float
     """Canonical correlation with the base model."""
     notes: list
-    term_rms: Any
-    explained_rms: Any
+    term_rms: float
+    explained_rms: float
     ties: list
     """``confounded_with`` entries (trials it cannot be told from)."""
     doubt: dict | None

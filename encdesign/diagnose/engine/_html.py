@@ -383,6 +383,38 @@ def _summary_parts(doc: dict) -> list[str]:
     return parts
 
 
+def _bound_parts(doc: dict) -> list[str]:
+    """A consistent verdict's detection bounds (issue 44 F): the smallest size of each
+    catalog effect, per head or sensor, this record would have revealed."""
+    bounds = doc.get("detection_bounds")
+    if not bounds:
+        return []
+    rows = [
+        [
+            _e(b["effect"]),
+            _e(b["parameter"]),
+            _e(b["where"]),
+            "-" if b["bound"] is None else f'<span class="num">{_num(b["bound"])}</span>',
+            _e(b["unit"]),
+            _e(b.get("note") or b["set_by"] or ""),
+            _e(b["at"]),
+        ]
+        for b in bounds
+    ]
+    parts = ['<h2 id="bounds">What this record could have shown</h2>']
+    parts.append(
+        _table(["effect", "size", "on", "smallest revealed", "unit", "set by", "at"], rows)
+    )
+    note = (
+        "About 50 % power at the finder's own thresholds: 1.5x the bound is found almost "
+        "always, half of it almost never."
+    )
+    if doc.get("detection_bounds_not_covered"):
+        note += " Not bounded (no probe yet): " + ", ".join(doc["detection_bounds_not_covered"])
+    parts.append(f'<p class="small">{_e(note)}</p>')
+    return parts
+
+
 def _effect_parts(doc: dict) -> list[str]:
     """The named effects, and the alternatives and refusals."""
 
@@ -620,6 +652,7 @@ def render_html(d: Diagnosed) -> str:
         f"{_e(doc.get('status', '-'))} · {_e(doc.get('format', ''))}</p>",
     ]
     parts += _summary_parts(doc)
+    parts += _bound_parts(doc)
     parts += _effect_parts(doc)
     parts += _located_parts(doc)
     parts += _figure_parts(doc, rows)
@@ -641,7 +674,9 @@ def notebook_html(d: Diagnosed) -> str:
     )
     title = f"Diagnosis of {doc.get('recording') or 'a recording'}"
     return result_html(
-        title, headline, sections=_summary_parts(doc) + _effect_parts(doc) + _located_parts(doc)
+        title,
+        headline,
+        sections=_summary_parts(doc) + _bound_parts(doc) + _effect_parts(doc) + _located_parts(doc),
     )
 
 

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import os
+
+    from matplotlib.axes import Axes
 
 
 def rms_steps(d: Mapping[str, Any]) -> tuple[list[str], list[float], list[float]]:
@@ -18,7 +23,7 @@ def rms_steps(d: Mapping[str, Any]) -> tuple[list[str], list[float], list[float]
 
 
 def rms_bars(
-    ax: Any,
+    ax: Axes,
     names: Sequence[str],
     fitted: Sequence[float],
     heldout: Sequence[float],
@@ -34,7 +39,7 @@ def rms_bars(
     ax.set_xticks(x, names, **tick_kw)
 
 
-def engine_plots(d: Any, out_dir: Any) -> list:
+def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
     """PNG figures of an engine diagnosis: RMS steps (fitted and held out), the residual
     against time before and after (excluded segments shaded), and the residual spectra."""
     from pathlib import Path

@@ -51,9 +51,7 @@ def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
-def speed_window_rows(
-    shaft: np.ndarray, t: np.ndarray, tolerance: float = 0.1, window: float = 0.01
-) -> int:
+def speed_window_rows(shaft: np.ndarray, t: np.ndarray, tolerance: float, window: float) -> int:
     """Rows over which the speed is measured when judging steadiness.
 
     At least ``window`` of the run (and 5 rows), and long enough that the shaft angle's own
@@ -89,8 +87,8 @@ def speed_window_rows(
 def find_motion_segments(
     shaft: np.ndarray,
     t: np.ndarray,
-    tolerance: float = 0.1,
-    window: float = 0.01,
+    tolerance: float,
+    window: float,
     settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> tuple[np.ndarray, list[dict]]:
     """Steady segments of one run.

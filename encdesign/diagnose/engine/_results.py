@@ -1,5 +1,6 @@
 """Typed results of a diagnosis: :class:`Effect`, :class:`Finding`, :class:`Refusal`,
-:class:`Alternative`, :class:`Confounded` and :class:`PlotData` (equinox Modules, final,
+:class:`Alternative`, :class:`Confounded`, :class:`BaseOrder` (with its :class:`OrderTrial`)
+and :class:`PlotData` (equinox Modules, final,
 their invariants checked in ``__check_init__``).
 
 Each entry is built from its JSON form (:meth:`from_json`) and gives it back unchanged
@@ -343,6 +344,61 @@ class Refusal(_Entry):
 
 
 @final
+class DetectionBound(_Entry):
+    """The smallest size of one catalog effect this record would have revealed (an entry
+    of ``detection_bounds``, only on a ``consistent`` verdict; issue 44 F,
+    :mod:`encdesign.diagnose.engine._bounds`).
+
+    Attributes:
+        effect: the candidate's name.
+        parameter: the size's name (``delay_step_s``, ``amplitude_rad``).
+        unit: its SI unit.
+        where: the head or sensor it acts on, or ``"all"``.
+        at: where its other parameters are held, in words.
+        bound: the size detected with about 50 % probability (``unit``), or ``None`` (with a
+            ``note`` in ``extra``) when no size would be revealed.
+        set_by: the test that sets it (``view``, ``bic_min``, ``heldout_min``).
+        noncentrality: the effect's noncentrality at the bound.
+        n_params: the candidate's fitted parameters ``k``.
+        convention: what the bound means.
+    """
+
+    effect: str
+    parameter: str
+    unit: str
+    where: str
+    at: str
+    bound: float | None
+    set_by: str | None
+    noncentrality: float | None
+    n_params: int | None
+    convention: str
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = (
+        "effect",
+        "parameter",
+        "unit",
+        "where",
+        "at",
+        "bound",
+        "set_by",
+        "noncentrality",
+        "n_params",
+        "convention",
+    )
+    key_order: tuple[str, ...] = TYPED
+
+    def __check_init__(self):
+        if not isinstance(self.effect, str) or not self.effect:
+            raise _bad("DetectionBound.effect", self.effect, "a non-empty string")
+        if self.bound is not None and not (_opt_number(self.bound) and self.bound > 0):
+            raise _bad(f"DetectionBound {self.effect!r} bound", self.bound, "a number > 0")
+        if self.bound is None and "note" not in self.extra:
+            raise _bad(f"DetectionBound {self.effect!r}", self.extra, "a note without a bound")
+        _keys_ok(self, self.TYPED)
+
+
+@final
 class Confounded(_Entry):
     """Two effects the record cannot separate (an entry of ``confounded``): reported as
     one entry, never as two refusals.
@@ -372,6 +428,89 @@ class Confounded(_Entry):
         if not (0.0 <= self.correlation <= 1.0 + 1e-12):
             raise _bad(f"Confounded {self.pair} correlation", self.correlation, "in [0, 1]")
         _keys_ok(self, ("pair", "correlation", "delta_bic", "separate_by"))
+
+
+@final
+class OrderTrial(_Entry):
+    """One base order tried by the held-out choice (an entry of ``base_order.tried``).
+
+    Attributes:
+        order: the base model's highest order ``M`` (orders 1..M).
+        rms: the base's fitted residual RMS at that order (unit of the document).
+        heldout_rms: its K-fold held-out residual RMS, in the engine's folds.
+        heldout_chi2: its K-fold held-out chi-square (noise-whitened; the choice's measure).
+        n_params: its fitted (determined) parameters.
+    """
+
+    order: int
+    rms: float
+    heldout_rms: float
+    heldout_chi2: float | None = None
+    n_params: int | None = None
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = ("order", "rms", "heldout_rms", "heldout_chi2", "n_params")
+    key_order: tuple[str, ...] = TYPED
+
+    def __check_init__(self):
+        if isinstance(self.order, bool) or not isinstance(self.order, int) or self.order < 1:
+            raise _bad("OrderTrial.order", self.order, "an integer >= 1")
+        for k in ("rms", "heldout_rms"):
+            v = getattr(self, k)
+            if not isinstance(v, int | float) or not (v >= 0.0 or math.isnan(v)):
+                raise _bad(f"OrderTrial {self.order} {k}", v, "a number >= 0")
+        _keys_ok(self, ("order", "rms", "heldout_rms"))
+
+
+@final
+class BaseOrder(_Entry):
+    """How the base model's order was chosen (the document's ``base_order``; issue 44 E).
+
+    Attributes:
+        start: the default order (the kind's default, within what the record resolves).
+        chosen: the order the base model was fitted at before any growth (``base.max_order``
+            holds the final one, after growth).
+        lowered: whether held-out error lowered it below ``start``.
+        heldout_ratio: the base's held-out RMS over its fitted RMS at ``start``.
+        ratio_max: ``FinderSettings.base_order_ratio``: above it the orders ``1..start`` are
+            tried.
+        tried: each tried order's fitted and held-out RMS (:class:`OrderTrial`); only
+            ``start`` when the ratio is within ``ratio_max``.
+        reason: the choice, in words.
+    """
+
+    start: int
+    chosen: int
+    lowered: bool
+    heldout_ratio: float
+    ratio_max: float
+    tried: tuple[OrderTrial, ...]
+    reason: str = ""
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    TYPED: ClassVar[tuple[str, ...]] = (
+        "start",
+        "chosen",
+        "lowered",
+        "heldout_ratio",
+        "ratio_max",
+        "tried",
+        "reason",
+    )
+    key_order: tuple[str, ...] = TYPED
+    NESTED: ClassVar[Mapping[str, Any]] = {"tried": OrderTrial}
+
+    def __check_init__(self):
+        if not (1 <= self.chosen <= self.start):
+            raise _bad("BaseOrder.chosen", self.chosen, f"an order in 1..{self.start}")
+        if self.lowered != (self.chosen < self.start):
+            raise _bad("BaseOrder.lowered", self.lowered, "chosen < start")
+        if self.chosen not in {t.order for t in self.tried}:
+            raise _bad("BaseOrder.tried", [t.order for t in self.tried], "the chosen order")
+        _keys_ok(self, self.TYPED)
+
+    @property
+    def trial(self) -> OrderTrial:
+        """The chosen order's trial."""
+        return next(t for t in self.tried if t.order == self.chosen)
 
 
 @final

@@ -125,6 +125,19 @@ class FinderSettings(eqx.Module):
     1302-1304) an aliased signal-period line or an angle trend of 0.005-0.23 % of the located
     excess kept the base at order 12 and the record `unexplained`."""
 
+    base_order_ratio: float = eqx.field(default=1.5, static=True)
+    """multihead: when the base model's K-fold held-out residual RMS exceeds its fitted RMS
+    by more than this factor, its orders may be ill-conditioned on this record (few samples
+    per turn, few turns: a held-out block's arc is bridged by orders the other folds cannot
+    pin down), and the base order is chosen by held-out error among orders 1 .. the default
+    (``base_order`` in the document; a lower order only where it lowers the held-out
+    chi-square by ``heldout_min``). A well-conditioned base stays below it: with ``p`` of
+    ``n`` values as parameters the ratio is about ``sqrt((1 + p/n K/(K-1)) / (1 - p/n))``,
+    1.12 at the ``max_param_fraction`` budget with K = 5, and unmodelled structure (an
+    effect not yet named) took it to 1.21 at most on the variation sets (seeds 21-22) and
+    ``moteus_cal``. Issue 44 E (a sensor turned one turn forward and back at 60-260 samples
+    per turn: 1.6-9 at order 12)."""
+
     lattice_noise_share: float = eqx.field(default=0.25, static=True)
     """``quantization`` is named from the readings' value lattice when its floor
     ``LSB^2 / 12`` is at least this share of the channel's noise variance (the LSB then is
@@ -141,35 +154,35 @@ class FinderSettings(eqx.Module):
     lattice_tolerance: float = eqx.field(default=0.1, static=True)
     """Value lattice (``detect_lsb``): a gap (or a value) is on the lattice when within this
     many steps of an integer multiple (of ``c_r + q k``); covers readings printed with a few
-    significant digits. Was the ``tolerance=0.1`` default of ``detect_lsb`` (cdf1843); set by
+    significant digits. Was the ``tolerance=0.1`` default of ``detect_lsb`` (50f039d); set by
     hand."""
 
     lattice_max_divisor: int = eqx.field(default=12, static=True)
     """Value lattice: the step is looked for as the smallest gap between distinct values
     divided by ``j = 1 ... this`` (a gap of up to this many steps is the smallest one seen).
-    Was the ``max_divisor=12`` default of ``detect_lsb``; set by hand in cdf1843."""
+    Was the ``max_divisor=12`` default of ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_min_fraction: float = eqx.field(default=0.99, static=True)
     """Value lattice: at least this share of the gaps (to accept a step) and of the values
     (to accept the lattice) lie within ``lattice_tolerance`` of it; continuous values put
     only about ``2 lattice_tolerance`` there. Was the ``min_fraction=0.99`` default of
-    ``detect_lsb``; set by hand in cdf1843."""
+    ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_min_differences: int = eqx.field(default=20, static=True)
     """Value lattice: with fewer gaps between distinct values than this no lattice is
     decided (``lsb_rad`` is ``None``). Was the ``min_differences=20`` default of
-    ``detect_lsb``; set by hand in cdf1843."""
+    ``detect_lsb``; set by hand in 50f039d."""
 
     lattice_exact_floor: float = eqx.field(default=1e3, static=True)
     """Value lattice, exact branch (Euclid's algorithm on the gaps, for readings computed
     from integer counts): a step not over this many times the algorithm's absolute
     tolerance (``1e-12`` of the largest value) is the tolerance itself (continuous values),
-    not a resolution. Was an inline ``1e3`` in ``detect_lsb``; set by hand."""
+    not a resolution. Was an inline ``1e3`` in ``detect_lsb``; set by hand in 1669bd9."""
 
     lattice_gap_steps_max: float = eqx.field(default=1e4, static=True)
     """Value lattice, exact branch: a step over this many times below the median gap is the
     decimal digits a file was printed with, not a reading's resolution. Was an inline
-    ``1e4`` in ``detect_lsb``; set by hand."""
+    ``1e4`` in ``detect_lsb``; set by hand in 1669bd9."""
 
     alpha: float = eqx.field(default=1e-3, static=True)
     """Family-wise false-alarm rate of each view (Bonferroni over its tests) and of the
@@ -198,8 +211,8 @@ class FinderSettings(eqx.Module):
 
     drift_turns_per_degree: float = eqx.field(default=3.0, static=True)
     """motion: the speed-drift polynomial gains one degree per this many revolutions beyond
-    3 (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 % speed wander came back
-    unexplained at orders 1-3)."""
+    ``drift_growth_turns`` (cubic to 6 turns). 3a1c6be (a 10-20 turn record with a 1-2 %
+    speed wander came back unexplained at orders 1-3)."""
 
     sds_saturate_fraction: float = eqx.field(default=0.6, static=True)
     """sds: the saturating base columns use at most this share of the values. 8e334ac."""
@@ -213,7 +226,7 @@ class FinderSettings(eqx.Module):
     take change points and single-value outliers out of the run-mean noise level
     (:func:`._sds_noise._level_sigma`), so that neither inflates it. Equal to ``alpha`` by
     default but a noise-estimation choice, not a finding's. Was an inline ``1e-3`` in
-    ``_sds_noise``; set by hand in fc0e1ba (moved unchanged in issue 44 G)."""
+    ``_sds_noise``; set by hand in 0a3345d (moved unchanged in issue 44 G)."""
 
     steady_tolerance: float = eqx.field(default=0.1, static=True)
     """Relative deviation of the smoothed speed from its segment's steady speed beyond which
@@ -458,14 +471,14 @@ class FinderSettings(eqx.Module):
     time_merge_s: float = eqx.field(default=1e-3, static=True)
     """Views: ... plus this many seconds (``time_merge_blocks``), so that step times of two
     channels a row apart at short blocks still merge. Was an inline ``1e-3`` in
-    ``_views.view_time``; set by hand in b783399 (moved unchanged in issue 44 G)."""
+    ``_views.view_time``; set by hand in e0d3df4 (moved unchanged in issue 44 G)."""
 
     step_match_blocks: float = eqx.field(default=4.0, static=True)
     """A step that refused a candidate is refined with the final model's own ``time``
     finding when that finding's step times lie within this many of its blocks of the
     refused step's time (:func:`._steps.place_step_refusals`); otherwise it is reported
-    where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand (issue 44
-    C), moved unchanged in issue 44 G."""
+    where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand in 0c3e0e7,
+    moved unchanged in issue 44 G."""
 
     one_speed_spread: float = eqx.field(default=0.05, static=True)
     """The kept rows turn at one speed when their speeds spread by at most this share of the
@@ -612,19 +625,111 @@ class FinderSettings(eqx.Module):
     discover_speed_ratio: float = eqx.field(default=1.2, static=True)
     """Discovery (``_discover``): a located line gets a speed-modulated term (amplitude ~
     speed^beta) when the steady speeds of its cells span more than this ratio. Was an inline
-    ``math.log(1.2)`` in ``_discover.library``; set by hand (moved unchanged in issue 44
-    G)."""
+    ``math.log(1.2)`` in ``_discover.library``; set by hand in 3ff0f02 (moved unchanged in
+    issue 44 G)."""
 
     discover_beta_max: float = eqx.field(default=4.0, static=True)
     """Discovery: a discovered term's speed exponent beta is implausible (rule
     ``<discovered>.plausible``) outside ``[-this, this]``. Was an inline ``4.0`` in
-    ``_discover_export``; set by hand (moved unchanged in issue 44 G)."""
+    ``_discover_export``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
 
     speed_cause_se: float = eqx.field(default=2.0, static=True)
     """Discovery words: a fitted speed exponent is read as a simple mechanism (-2, -1, 0, 1
     or 2) when within this many standard errors of it. Words, not a verdict. Was an inline
-    ``2`` in ``_discover_words._speed_cause``; set by hand (moved unchanged in issue 44
+    ``2`` in ``_discover_words._speed_cause``; set by hand in 3ff0f02 (moved unchanged in
+    issue 44 G)."""
+
+    discover_alpha: float = eqx.field(default=0.01, static=True)
+    """Discovery: family-wise false-alarm rate of the forward selection over the whole
+    library of terms (Bonferroni: ``chi2.isf(discover_alpha / N, q)``). Was the module
+    constant ``_discover.ALPHA``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+
+    discover_inclusion_min: float = eqx.field(default=0.6, static=True)
+    """Discovery: a term is kept only when the selection repeated without each fold keeps
+    it at least this often. Was ``_discover.INCLUSION_MIN``; set by hand in 3ff0f02 (moved
+    unchanged in issue 44 G)."""
+
+    discover_model_error: float = eqx.field(default=5e-3, static=True)
+    """Discovery: share of a term's chi-square drop discounted per parameter when terms are
+    ranked: the finder's own angle and base are not exact (a run offset fitted with the
+    structure present moves the phase of a line a little), so at a high signal-to-noise
+    ratio a term with more parameters (its own phase per run) would otherwise win over the
+    physical one by fitting that small model error. Was ``_discover.MODEL_ERROR_PER_PARAM``;
+    set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+
+    discover_size_ratio_max: float = eqx.field(default=100.0, static=True)
+    """Discovery: an exported candidate whose refit amplitude is more than this many times
+    the discovered one (or less than its inverse) is refused (rule
+    ``<discovered>.plausible``): another physics, not the one discovered. Was
+    ``_discover_export.SIZE_RATIO_MAX``; set by hand in 3ff0f02 (moved unchanged in issue 44
     G)."""
+
+    signal_first_order_max_rad: float = eqx.field(default=0.3, static=True)
+    """``interpolation_error``: above this harmonic (rad of signal phase) the first-order
+    conversion of the harmonics into offsets, amplitude ratio and phase error is flagged
+    approximate (``first_order_note``; second-order terms ~ c^2 / 2); the fitted harmonics
+    are not. A note, not a refusal. Was ``_reference_terms.FIRST_ORDER_SIGNAL_ERROR``; set by
+    hand in 431a074 (moved unchanged in issue 44 G)."""
+
+    drift_degree_min: int = eqx.field(default=3, static=True)
+    """motion: degree of the base's speed-drift polynomial per run (Legendre: start angle,
+    speed, drift) on a short run; it grows past ``drift_growth_turns`` (one degree per
+    ``drift_turns_per_degree`` revolutions of the shortest run) up to ``drift_degree_max``.
+    A cubic since the first motion base (96be348); the growth in 3a1c6be. Was an inline 3 in
+    ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    drift_degree_max: int = eqx.field(default=15, static=True)
+    """motion: the speed-drift polynomial's degree stops growing here (a long run's slow
+    wander, not its orders, which the Legendre degree would start to absorb). 3a1c6be. Was an
+    inline 15 in ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    drift_growth_turns: float = eqx.field(default=3.0, static=True)
+    """motion: the speed-drift polynomial keeps ``drift_degree_min`` up to this many
+    revolutions of the shortest run (cubic to 6 turns with ``drift_turns_per_degree`` = 3).
+    3a1c6be. Was an inline 3.0 in ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+
+    scan_order_min: int = eqx.field(default=24, static=True)
+    """The views scan the integer orders up to twice the base's order and at least up to
+    this order (within what the record resolves): a disk error or a runout above a low base
+    order is located. 4be389a (the base grows its order). Was an inline 24 in
+    ``_document.scan_order_of`` (moved unchanged in issue 44 G)."""
+
+    spectrum_order_max: int = eqx.field(default=400, static=True)
+    """The report's order spectrum (base and final residual amplitudes per integer order)
+    lists at most this many orders. From the first engine (96be348). Was an inline 400 in
+    ``_document.order_spectrum`` (moved unchanged in issue 44 G)."""
+
+    quad_order_min: int = eqx.field(default=3, static=True)
+    """quadrature: the base's radial order (``signal_shape`` orders 3..M above the ellipse)
+    is at least this, whatever the record's size; it is otherwise an eighth of the kept
+    samples within the parameter budget ... 7d728be. Was an inline 3 in
+    ``_quadrature.quadrature_limit`` (moved unchanged in issue 44 G)."""
+
+    quad_order_max: int = eqx.field(default=400, static=True)
+    """... and at most this. 7d728be. Was an inline 400 in ``_quadrature.quadrature_limit``
+    (moved unchanged in issue 44 G)."""
+
+    run_offset_start_orders: int = eqx.field(default=6, static=True)
+    """multihead: the start of the run offsets ``delta_r`` fits each run's orders up to this
+    (or the base's order, if lower) and aligns their phases to run 0: a start value only,
+    the fit refines it. From the first engine (96be348). Was an inline 6 in
+    ``_multihead._run_offsets_start`` (moved unchanged in issue 44 G)."""
+
+    order_step_margin_rows: int = eqx.field(default=10, static=True)
+    """multihead: the ``order_step`` view tests change points with at least this many kept
+    rows on either side ... 1e3f0c4. Was an inline 10 in ``_multihead_terms`` (moved
+    unchanged in issue 44 G)."""
+
+    order_step_margin_share: float = eqx.field(default=0.01, static=True)
+    """... and at least this share of the kept rows (a step at the record's very edge is an
+    offset, not a change). 1e3f0c4. Was an inline ``// 100`` in ``_multihead_terms`` (moved
+    unchanged in issue 44 G)."""
+
+    clip_band: float = eqx.field(default=0.002, static=True)
+    """quadrature: a sample is at a signal extreme when within this share of the amplitude
+    of it: the band in which ``clip_excess_ratio`` compares the samples found with those a
+    sinusoid puts there (``sqrt(2 band) / pi`` of them). Set by hand in e0d3df4. Was the
+    default ``band`` of ``_quadrature.detect_clipping`` (moved unchanged in issue 44 G)."""
 
     def __check_init__(self):
         for f in dataclasses.fields(self):
@@ -667,39 +772,3 @@ D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
 """Variance of log(residual variance / second-difference variance) times N (white noise)."""
 MEDIAN_VAR = 2.0 / math.log(2.0) ** 2
 """Variance of log(median periodogram level) times the number of periodogram bins."""
-
-
-def _field_docs() -> dict[str, str]:
-    """Each field's docstring (the string literal after its annotation), from this file."""
-    import ast
-    from pathlib import Path
-
-    tree = ast.parse(Path(__file__).read_text(encoding="utf-8"))
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "FinderSettings")
-    out, last = {}, None
-    for node in cls.body:
-        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-            last = node.target.id
-        elif (
-            last
-            and isinstance(node, ast.Expr)
-            and isinstance(node.value, ast.Constant)
-            and isinstance(node.value.value, str)
-        ):
-            out[last] = " ".join(node.value.value.split())
-            last = None
-        else:
-            last = None
-    return out
-
-
-def settings_table(settings: FinderSettings = DEFAULT_SETTINGS) -> str:
-    """The Markdown table of every threshold (field, default, what it controls and what
-    evidence set it) that ``docs/diagnose.md`` carries between its
-    ``<!-- settings-table -->`` markers."""
-    docs = _field_docs()
-    lines = ["| setting | default | what it controls; evidence |", "| --- | --- | --- |"]
-    for name in SETTINGS_FIELDS:
-        doc = docs.get(name, "").replace("|", "\\|")
-        lines.append(f"| `{name}` | {getattr(settings, name)!r} | {doc} |")
-    return "\n".join(lines) + "\n"

@@ -38,7 +38,7 @@ from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import KindData, Prepared, drive_channel
-from ...engine._settings import DEFAULT_SETTINGS
+from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 EXPLANATIONS = {
     "cogging": (
@@ -194,7 +194,7 @@ def _fourier(
 
 
 @functools.lru_cache(maxsize=16)
-def _poly_candidate(R: int, D: int = 3) -> Candidate:
+def _poly_candidate(R: int, D: int) -> Candidate:
     """Per run a polynomial of degree ``D`` in normalised time (Legendre basis: start angle,
     speed and the speed loop's slow drift)."""
 
@@ -223,9 +223,13 @@ def _poly_candidate(R: int, D: int = 3) -> Candidate:
     )
 
 
-def drift_degree(revolutions: float, turns_per_degree: float = 3.0) -> int:
-    """Degree of the drift polynomial of a run of ``revolutions`` turns (3 to 15)."""
-    return int(min(15, 3 + max(0.0, revolutions - 3.0) // turns_per_degree))
+def drift_degree(revolutions: float, settings: FinderSettings) -> int:
+    """Degree of the drift polynomial of a run of ``revolutions`` turns
+    (``settings.drift_degree_min`` to ``drift_degree_max``, one more per
+    ``drift_turns_per_degree`` turns beyond ``drift_growth_turns``)."""
+    s = settings
+    grown = max(0.0, revolutions - s.drift_growth_turns) // s.drift_turns_per_degree
+    return int(min(s.drift_degree_max, s.drift_degree_min + grown))
 
 
 def nyquist_order(kept_per_run: np.ndarray, revolutions: np.ndarray) -> int:
@@ -240,7 +244,7 @@ def motion_limit(prep: Prepared) -> int:
     """Highest order the record resolves (below half the samples per revolution)."""
     kept = np.array([((prep.run == r) & prep.keep).sum() for r in range(prep.ctx.n_runs)])
     nyq = nyquist_order(kept, prep.ctx.revolutions)
-    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings.drift_turns_per_degree)
+    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings)
     budget = int(
         (prep.settings.max_param_fraction * prep.n_values - (D + 1) * prep.ctx.n_runs) // 2
     )
@@ -259,7 +263,7 @@ def motion_base(prep: Prepared, M: int):
     prep.rows["t_norm"] = tn
     motor = prep.ctx.meta.get("motor", {})
     p = int(motor["pole_pairs"])
-    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings.drift_turns_per_degree)
+    D = drift_degree(float(np.min(prep.ctx.revolutions)), prep.settings)
     terms = [(_poly_candidate(prep.ctx.n_runs, D), {})]
     design = []
     if "commutation_states" in motor:

@@ -39,7 +39,7 @@ from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import run_spans
+from ...engine._views import KindView, run_spans
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -150,7 +150,7 @@ COVERAGE_ROWS = 200_000
 
 
 def coverage_limit(
-    theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int, coverage_min: float = 0.05
+    theta: np.ndarray, run: np.ndarray, n_runs: int, m_max: int, *, coverage_min: float
 ) -> int:
     """Highest order ``M <= m_max`` such that ``cos m theta, sin m theta`` (m = 1..M) and one
     constant per run are well conditioned over the samples (``FinderSettings.coverage_min``).
@@ -222,7 +222,9 @@ def max_order_limit(prep: Prepared) -> int:
         if idx.size > COVERAGE_ROWS:
             idx = np.sort(np.random.default_rng(0).choice(idx, COVERAGE_ROWS, replace=False))
         th = prep.rows.take("theta", idx) if hasattr(prep.rows, "take") else prep.rows["theta"][idx]
-        nyq = max(nyq, coverage_limit(th, prep.run[idx], R, want, prep.settings.coverage_min))
+        nyq = max(
+            nyq, coverage_limit(th, prep.run[idx], R, want, coverage_min=prep.settings.coverage_min)
+        )
     return int(max(1, min(nyq, budget)))
 
 
@@ -322,13 +324,14 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
 
 def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     """Start for ``delta_r``: each run's low orders fitted alone, phase-aligned to run 0
-    on a 0.05 deg grid (the orders' phases advance by ``m delta``)."""
+    on a 0.05 deg grid (the orders' phases advance by ``m delta``), with the orders up to
+    ``settings.run_offset_start_orders``."""
     R = prep.ctx.n_runs
     if R < 2:
         return np.zeros(0)
     C = prep.n_channels
     alpha = prep.consts["alpha"]
-    Mz = int(min(M, 6))
+    Mz = int(min(M, prep.settings.run_offset_start_orders))
     Z = []
     P = 2 * Mz + C
     spans = dict(run_spans(prep.run))
@@ -654,7 +657,7 @@ MULTIHEAD_VIEWS = (
     "direction",
     "speed",
     "angle_trend",
-    view_order_step,
+    KindView(view_order_step, ("order_step",)),
 )
 """The views run on a multihead record's residual."""
 

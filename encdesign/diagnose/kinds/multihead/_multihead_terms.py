@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ....physics import _effects as fx
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 
@@ -378,6 +378,50 @@ def _vb_plausible(ctx, v):
     return None
 
 
+VIBRATION_PROBE_NYQUIST = 0.6
+"""The vibration's bound is stated for a line at this fraction of the Nyquist frequency of
+the slowest-sampled run, moved to the nearest half-integer shaft order (off the orders the
+base model fits; a line's bound hardly depends on where it is off them)."""
+
+
+def _vb_probe_hz(ctx: Context) -> float | None:
+    """The frequency (Hz) the vibration's bound is stated at (:data:`VIBRATION_PROBE_NYQUIST`)."""
+    t = np.asarray(ctx.rows["t"], float)
+    oh = np.asarray(ctx.rows["run_onehot"], float) > 0
+    dts = [np.median(np.diff(t[oh[:, r]])) for r in range(oh.shape[1]) if oh[:, r].sum() > 2]
+    dts = [d for d in dts if d > 0]
+    if not dts:
+        return None
+    f = VIBRATION_PROBE_NYQUIST * 0.5 / float(max(dts))
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    if w.size:
+        f_rot = float(np.median(w)) / (2 * np.pi)
+        f = (math.floor(f / f_rot) + 0.5) * f_rot
+    return f if f > 0 else None
+
+
+def _vb_probes(ctx: Context) -> list[Probe]:
+    """Per head, a line of 1 rad on that head alone in every run (its own phase per run)."""
+    f = _vb_probe_hz(ctx)
+    if f is None:
+        return []
+    C, R = ctx.n_channels, ctx.n_runs
+    names = ctx.data.channel_names if ctx.data is not None else [f"h{k}" for k in range(C)]
+    out = []
+    for k in range(C):
+        cos = np.zeros((R, C))
+        cos[:, k] = 1.0
+        vals = {
+            "frequency_hz": np.asarray(f),
+            "cos_rad": cos,
+            "sin_rad": np.zeros((R, C)),
+            "locked_margin": np.asarray(1e9),
+        }
+        out.append(Probe(vals, "amplitude_rad", "rad", where=names[k], at=f"a line at {f:.6g} Hz"))
+    return out
+
+
 VIBRATION = Candidate(
     "vibration",
     _vb_fn,
@@ -401,6 +445,7 @@ VIBRATION = Candidate(
     start=_vb_start,
     plausible=_vb_plausible,
     doubt_overruled=False,  # the locked-order margin is a test on the data
+    probes=_vb_probes,
 )
 
 
@@ -410,6 +455,14 @@ def _th_fn(p, x):
 
 def _th_unit(ctx):
     return "rad/K" if ctx.driver_name == "temp_c" else "rad/s"
+
+
+def _th_probes(ctx: Context) -> list[Probe]:
+    """Per head, a drift of 1 rad/K (or rad/s) on that head alone."""
+    C = ctx.n_channels
+    names = ctx.data.channel_names if ctx.data is not None else [f"h{k}" for k in range(C)]
+    unit = _th_unit(ctx)
+    return [Probe({"rate": np.eye(C)[k]}, "rate", unit, where=names[k]) for k in range(C)]
 
 
 THERMAL_DRIFT = Candidate(
@@ -428,6 +481,7 @@ THERMAL_DRIFT = Candidate(
         else "needs a temp_c column that varies (a drift in time alone is reported located, "
         "not attributed to temperature)"
     ),
+    probes=_th_probes,
 )
 
 
@@ -584,9 +638,10 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         return np.cumsum(x[::-1], 0)[::-1]
 
     Sa, SG, SXB = suffix(a), suffix(G), suffix(XB)
-    # change points at bin edges 1..nb-1, with at least 1 % of the kept rows either side
+    # change points at bin edges 1..nb-1, with at least order_step_margin_rows and
+    # order_step_margin_share of the kept rows either side
     e = np.arange(1, nb)
-    margin = max(10, kidx.size // 100)
+    margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
     if e.size == 0:
         return []

@@ -25,7 +25,7 @@ from ....physics._sensor_effects import (
     reading_delay_rad,
     scale_error_rad,
 )
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._lattice import Lattice, detect_lsb
 
 __all__ = ["CANDIDATES", "interpolation_candidate"]
@@ -36,11 +36,8 @@ __all__ = ["CANDIDATES", "interpolation_candidate"]
 
 # The plausibility bounds of these candidates are FinderSettings fields
 # (direction_offset_max_rad, delay_angle_max_rad, scale_error_max, signal_error_max_rad,
-# interp_spread_min, quant_amplitude_tol), read through ``ctx.settings``.
-FIRST_ORDER_SIGNAL_ERROR = 0.3
-"""Above it (rad of signal phase) the first-order conversion of the harmonics into offsets,
-amplitude ratio and phase error is approximate (second-order terms ~ c^2 / 2); the
-harmonics themselves are still the fitted error."""
+# interp_spread_min, quant_amplitude_tol, signal_first_order_max_rad), read through
+# ``ctx.settings``.
 
 
 def _by_run(ctx: Context, name: str) -> list[np.ndarray]:
@@ -71,6 +68,21 @@ def _hyst_applies(ctx: Context) -> str | None:
     if not _both_directions(ctx):
         return "no run turns in both directions: a direction offset is a run constant"
     return None
+
+
+def _sensor_name(ctx: Context) -> str:
+    names = ctx.data.channel_names if ctx.data is not None else []
+    return names[0] if names else "all"
+
+
+def _hyst_probes(ctx: Context) -> list[Probe]:
+    """An offset of 1 rad between the directions (the bound: the smallest offset)."""
+    return [Probe({"hysteresis_rad": np.asarray(1.0)}, "hysteresis_rad", "rad", _sensor_name(ctx))]
+
+
+def _delay_probes(ctx: Context) -> list[Probe]:
+    """A reading delay of 1 s (the bound: the smallest delay)."""
+    return [Probe({"delay_s": np.asarray(1.0)}, "delay_s", "s", _sensor_name(ctx))]
 
 
 def _hyst_plausible(ctx: Context, p: dict) -> str | None:
@@ -242,7 +254,7 @@ def _interp_derived(ctx: Context, p: dict, se: dict) -> dict:
     P = int(ctx.signal_periods)
     out["orders"] = {"value": [P, 2 * P], "se": None, "unit": "1"}
     big = float(np.max(np.abs(c)))
-    if big > FIRST_ORDER_SIGNAL_ERROR:
+    if big > ctx.settings.signal_first_order_max_rad:
         out["first_order_note"] = {
             "value": big,
             "se": None,
@@ -409,6 +421,7 @@ def _candidates() -> tuple:
         applies=_hyst_applies,
         plausible=_hyst_plausible,
         derived=_hyst_derived,
+        probes=_hyst_probes,
     )
     delay = Candidate(
         name="reading_delay",
@@ -424,6 +437,7 @@ def _candidates() -> tuple:
         ),
         applies=_delay_applies,
         plausible=_delay_plausible,
+        probes=_delay_probes,
     )
     scale = Candidate(
         name="scale_error",

@@ -123,21 +123,21 @@ def detect_clipping(
     sb: np.ndarray,
     ellipse: np.ndarray,
     *,
-    band: float = 0.002,
     settings: FinderSettings = DEFAULT_SETTINGS,
 ) -> dict:
     """Find signals stuck at a level the fitted ellipse would exceed (saturation).
 
     A channel extreme is called clipped when more than ``settings.clip_excess_ratio`` times
-    the samples a sinusoid would put within ``band`` (relative to the amplitude) of its peak
-    sit at the observed extreme, and the ellipse fitted to all samples reaches more than
-    ``settings.clip_beyond_share`` of the amplitude beyond it. Returns ``mask`` (samples at
-    a clipped level), ``channels`` (one dict per clipped channel extreme) and ``phase_deg``
-    (the phases where clipping happens).
+    the samples a sinusoid would put within ``settings.clip_band`` (relative to the
+    amplitude) of its peak sit at the observed extreme, and the ellipse fitted to all samples
+    reaches more than ``settings.clip_beyond_share`` of the amplitude beyond it. Returns
+    ``mask`` (samples at a clipped level), ``channels`` (one dict per clipped channel
+    extreme) and ``phase_deg`` (the phases where clipping happens).
     """
     p, q, a, b, _ = ellipse
     mask = np.zeros(sa.size, dtype=bool)
     channels = []
+    band = settings.clip_band
     expected = sa.size * math.sqrt(2 * band) / math.pi
     for name, s, centre, amp in (("sa", sa, p, a), ("sb", sb, q, b)):
         for sign in (1.0, -1.0):
@@ -445,10 +445,12 @@ VIBRATION = {True: _vibration(True), False: _vibration(False)}
 
 def quadrature_limit(prep: Prepared) -> int:
     """Highest radial order the record resolves: an eighth of the kept samples (the phase
-    is sampled irregularly), within the parameter budget."""
+    is sampled irregularly), within the parameter budget, from ``settings.quad_order_min`` to
+    ``quad_order_max``."""
+    s = prep.settings
     n = int(prep.keep.sum())
-    budget = int((prep.settings.max_param_fraction * prep.n_values - 5) // 2)
-    return int(max(3, min(n // 8, budget, 400)))
+    budget = int((s.max_param_fraction * prep.n_values - 5) // 2)
+    return int(max(s.quad_order_min, min(n // 8, budget, s.quad_order_max)))
 
 
 def quadrature_base(prep: Prepared, M: int, st: dict[str, Any]):

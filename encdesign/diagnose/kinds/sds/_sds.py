@@ -59,7 +59,7 @@ from ...engine._fit import valjac_fn as _valjac_fn
 from ...engine._kind import AbstractKind
 from ...engine._protocol import Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import Finding
+from ...engine._views import Finding, KindView
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
@@ -216,14 +216,19 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
 # strong structure; among equals the most specific location (one sensor, one run) leads
 SDS_VIEWS = (
-    view_run_step,
-    view_mean_orders,
-    view_common_orders,
-    _matched_view("axis_tilt"),
-    _matched_view("thermal_drift"),
-    _matched_view("bearing_wobble"),
-    _matched_view("beam_tilt_axial"),
-    _matched_view("coil_mismatch"),
+    KindView(view_run_step, ("run_step",)),
+    KindView(view_mean_orders, ("orders",)),
+    KindView(view_common_orders, ("common_orders",)),
+    *(
+        KindView(_matched_view(n), (f"sds_{n}",))
+        for n in (
+            "axis_tilt",
+            "thermal_drift",
+            "bearing_wobble",
+            "beam_tilt_axial",
+            "coil_mismatch",
+        )
+    ),
 )
 
 

@@ -147,7 +147,7 @@ def _saturating_columns(
     rows: Mapping[str, Any],
     consts: Mapping[str, Any],
     orders_base: list[int],
-    fraction: float = 0.6,
+    fraction: float,
 ) -> tuple:
     """Columns ``(R*M, q)`` over the run-mean channels that span every smooth structure a
     platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
@@ -178,7 +178,7 @@ def _saturating_columns(
     return X, L
 
 
-def dof_widening(nu: float, q: int = 2, p: float = 1e-4) -> float:
+def dof_widening(nu: float, q: int = 2, *, p: float) -> float:
     """Factor ``c`` on a noise level estimated with ``nu`` degrees of freedom so that the
     engine's tests, which treat the level as known (chi-square thresholds), keep their
     false-alarm rate: ``c² = q F⁻¹(1 − p; q, nu) / χ²⁻¹(1 − p; q)``, the ratio of the
@@ -209,8 +209,8 @@ def _level_sigma(
     X: np.ndarray,
     proj: bool = False,
     info: dict | None = None,
-    test_p: float = 1e-4,
     *,
+    test_p: float,
     level_alpha: float,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts

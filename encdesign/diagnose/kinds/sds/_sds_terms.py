@@ -11,8 +11,9 @@ from collections.abc import Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy import stats
 
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ._sds_noise import (
     BEAM_ORDERS,
     EXPLANATIONS,
@@ -417,6 +418,80 @@ def _delay_derived(ctx, v, se):
     }
 
 
+def _middle_half(R: int) -> list[int]:
+    """First runs of a step in the middle half of ``R`` runs: its ends and its middle (the
+    step's noncentrality is smallest at the ends: ``k (R - k) / R`` runs' worth)."""
+    lo, hi = max(1, round(R / 4)), min(R - 1, round(3 * R / 4))
+    return sorted({lo, R // 2, hi})
+
+
+def _run_mean_seen(ctx: Context, caught: bool):
+    """``seen(lam)`` of an effect on the run means (:class:`Probe`): their noise level is
+    estimated from ``nu`` values left by a saturated fit (``_level_sigma``), which an effect
+    inflates by ``lam / nu`` (the tests then see ``lam / (1 + lam / nu)``) unless
+    (``caught``: a step or an outlier) the estimate's own F test at ``1e-3 / n_tests`` finds
+    and removes it first."""
+    lv = noise_info(ctx).levels
+    nu = float(lv.get("run_means_dof", 0) or 0)
+    if nu <= 0:
+        return None
+    M, R = int(ctx.consts["psi_m"].size), int(ctx.n_runs)
+    f_crit = float(stats.f.isf(1e-3 / max(M * (2 * R - 1), 1), 1, max(nu - 1, 1)))
+
+    def seen(lam: float) -> float:
+        if caught and lam + 1.0 > f_crit:
+            return lam
+        return lam / (1.0 + lam / nu)
+
+    return seen
+
+
+def _delay_probes(ctx: Context) -> list[Probe]:
+    """Per moving sensor, a delay step of 1 s from a run in the middle half of the record
+    (the bound: the worst of its ends and middle). Without phi_ref the delays are measured
+    against another sensor (the common value is the per-run offset's)."""
+    M = int(ctx.consts["psi_m"].size)
+    R = int(ctx.n_runs)
+    firsts = _middle_half(R)
+    ids = ctx.data.table.run_ids if ctx.data is not None else np.arange(R)
+    out = []
+    for m in range(M):
+        ref = float((m + 1) % M)
+        sets = [
+            {
+                "delay_s": np.eye(M)[m],
+                "first_run": np.asarray(float(k)),
+                "ref_sensor": np.asarray(ref),
+            }
+            for k in firsts
+        ]
+        out.append(
+            Probe(
+                sets[0],
+                "delay_step_s",
+                "s",
+                where=f"m{m}",
+                at=f"a step from any run in the middle half of the record (runs "
+                f"{ids[firsts[0]]} to {ids[firsts[-1]]}; the worst of them)",
+                worst_of=tuple(sets[1:]),
+                seen=_run_mean_seen(ctx, caught=True),
+            )
+        )
+    return out
+
+
+def _drift_probes(ctx: Context) -> list[Probe]:
+    """A drift of the moving sensors' pair angles at 1 rad/s over the whole record."""
+    return [
+        Probe(
+            {"drift_rate_rad_per_s": np.asarray(1.0)},
+            "drift_rate_rad_per_s",
+            "rad/s",
+            seen=_run_mean_seen(ctx, caught=False),
+        )
+    ]
+
+
 def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
     """The SDS catalog candidates for this record."""
     M = ctx.consts["psi_m"].size
@@ -487,6 +562,7 @@ def _catalog(
             explanation=EXPLANATIONS["thermal_drift"],
             applies=_no_ref_drift,
             plausible=_no_transient(_drift_plausible),
+            probes=_drift_probes,
         ),
         Candidate(
             "bearing_wobble",
@@ -532,6 +608,7 @@ def _catalog(
             start=_delay_start,
             plausible=_delay_plausible,
             derived=_delay_derived,
+            probes=_delay_probes,
         ),
     ]
     if pp > 1:

@@ -1,0 +1,42 @@
+"""The documentation table of :class:`~encdesign.diagnose.FinderSettings`: each field, its
+default and its docstring (read from the class's source), as ``docs/diagnose.md`` carries it."""
+
+from __future__ import annotations
+
+from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
+
+
+def _field_docs() -> dict[str, str]:
+    """Each field's docstring (the string literal after its annotation), from this file."""
+    import ast
+    from pathlib import Path
+
+    tree = ast.parse((Path(__file__).parent / "_settings.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "FinderSettings")
+    out, last = {}, None
+    for node in cls.body:
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            last = node.target.id
+        elif (
+            last
+            and isinstance(node, ast.Expr)
+            and isinstance(node.value, ast.Constant)
+            and isinstance(node.value.value, str)
+        ):
+            out[last] = " ".join(node.value.value.split())
+            last = None
+        else:
+            last = None
+    return out
+
+
+def settings_table(settings: FinderSettings = DEFAULT_SETTINGS) -> str:
+    """The Markdown table of every threshold (field, default, what it controls and what
+    evidence set it) that ``docs/diagnose.md`` carries between its
+    ``<!-- settings-table -->`` markers."""
+    docs = _field_docs()
+    lines = ["| setting | default | what it controls; evidence |", "| --- | --- | --- |"]
+    for name in SETTINGS_FIELDS:
+        doc = docs.get(name, "").replace("|", "\\|")
+        lines.append(f"| `{name}` | {getattr(settings, name)!r} | {doc} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,139 @@
+"""The base order chosen by held-out error (issue 44 E).
+
+A sensor against a stepper's commanded angle, turned one turn (or 1.5) forward, held in a
+dwell and turned back, at 140-260 samples per turn: on so few turns the default base order
+(12) is often ill-conditioned in the engine's blocked folds (a held-out block's arc is
+bridged by orders the other folds cannot pin down) and its held-out RMS is up to several
+times its fitted RMS (on ``main``: over 1.5x on 8 of 20 fresh one-turn records). The base
+order is then chosen by held-out error among orders 1..12; long records keep the default
+order untouched.
+"""
+
+import numpy as np
+import pytest
+from helpers import validate_diagnosis
+
+from encdesign import Recording
+from encdesign.diagnose import BaseOrder, Diagnosis, FinderSettings, diagnose
+
+
+def stepper_sensor_record(seed: int, turns: float = 1.0, hysteresis_noise: float = 0.0):
+    """A magnetic sensor against a stepper's commanded angle ``theta_ref``: at rest, ``turns``
+    forward at 45-240 deg/s, a dwell of 0.5-2 s, ``turns`` back, at rest (speed ramps of
+    0.1 s); 140-260 samples per turn. The sensor's error is one dominant order ``m0``
+    (2, 3, 5 or 6) of 2-6 degrees plus every lower order at 0.02-0.1 degree; noise
+    0.2-1 mrad; a direction offset ``h d / 2`` with ``h = hysteresis_noise`` noise units
+    (``d`` the direction of the last motion, held through the dwell). Returns
+    ``(recording, truth)``."""
+    rng = np.random.default_rng(seed)
+    speed = np.deg2rad(rng.uniform(45.0, 240.0))
+    spt = rng.uniform(140.0, 260.0)
+    fs = spt * speed / (2 * np.pi)
+    noise = 10 ** rng.uniform(-3.7, -3.0)
+    T = turns * 2 * np.pi / speed
+    plan = [(rng.uniform(0.3, 1.0), 0.0), (T, 1.0), (rng.uniform(0.5, 2.0), 0.0)]
+    plan += [(T, -1.0), (0.5, 0.0)]
+    v = np.concatenate([np.full(int(d * fs), s * speed) for d, s in plan])
+    k = max(1, int(0.1 * fs))
+    v = np.convolve(np.pad(v, k, mode="edge"), np.ones(k) / k, mode="same")[k:-k]
+    th = np.cumsum(v) / fs + rng.uniform(0, 2 * np.pi)
+    m0 = int(rng.choice([2, 3, 5, 6]))
+    e = np.deg2rad(rng.uniform(2.0, 6.0)) * np.sin(m0 * th + rng.uniform(0, 2 * np.pi))
+    for m in range(1, m0):
+        e += np.deg2rad(rng.uniform(0.02, 0.1)) * np.sin(m * th + rng.uniform(0, 2 * np.pi))
+    d = np.sign(v) * (np.abs(v) > 1e-9)
+    for i in range(1, d.size):
+        d[i] = d[i] if d[i] else d[i - 1]
+    h = hysteresis_noise * noise
+    y = th + e + 0.5 * h * d + rng.normal(0, noise, th.size) + rng.uniform(-1, 1)
+    cols = {"t": np.arange(th.size) / fs, "theta_ref": th, "h0": y}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), dict(order=m0, hysteresis_rad=h)
+
+
+RATIO = FinderSettings().base_order_ratio
+
+
+@pytest.mark.parametrize("turns", [1.0, 1.5])
+@pytest.mark.parametrize("seed", range(601, 606))
+def test_a_few_turns_get_a_base_order_chosen_by_heldout_error(seed, turns):
+    """Clean: consistent, and the base's held-out RMS within ``base_order_ratio`` of its
+    fitted RMS (on ``main`` the order-12 base fails that on 3 of the 5 one-turn records
+    here, 1.6-3.7x; the 1.5-turn ones pass there too); a lowered order keeps every order of
+    the error."""
+    rec, truth = stepper_sensor_record(seed, turns)
+    d = diagnose(rec)
+    doc = d.to_json()
+    assert doc["verdict"] == "consistent", doc["report"]
+    assert doc["heldout_rms_before"] <= RATIO * doc["rms_before"], doc["report"]
+    bo = d.base_order
+    assert isinstance(bo, BaseOrder)
+    assert bo.start == min(12, doc["base"]["max_order_limit"]) and bo.trial.order == bo.chosen
+    if bo.lowered:
+        assert bo.heldout_ratio > RATIO
+        assert bo.chosen >= truth["order"], doc["report"]
+        assert [t.order for t in bo.tried] == list(range(1, bo.start + 1))
+        best = min(bo.tried, key=lambda t: t.heldout_chi2)
+        assert best.order == bo.chosen
+        assert "lowered by held-out error" in doc["report"]
+    else:
+        assert [t.order for t in bo.tried] == [bo.start] or bo.heldout_ratio > RATIO
+    assert "base order: " in doc["report"]
+    validate_diagnosis(doc)
+    assert Diagnosis.from_json(doc).to_json() == doc
+
+
+@pytest.mark.parametrize("seed", range(601, 606))
+def test_a_direction_offset_on_one_turn_is_named_on_a_well_conditioned_base(seed):
+    """One turn forward and back with a direction offset of 6 noise units: named, its size
+    right, and the final model's held-out RMS within ``base_order_ratio`` of its fitted RMS
+    (on ``main`` the ill-conditioned base leaves it at 1.6-3.9x on 3 of these 5 records)."""
+    rec, truth = stepper_sensor_record(seed, 1.0, hysteresis_noise=6.0)
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["direction_hysteresis"], doc["report"]
+    p = doc["effects"][0]["params"]["hysteresis_rad"]
+    assert abs(p["value"] - truth["hysteresis_rad"]) < max(
+        4 * p["se"], 0.2 * truth["hysteresis_rad"]
+    )
+    assert doc["heldout_rms_final"] <= RATIO * doc["rms_final"], doc["report"]
+
+
+def test_a_long_record_keeps_the_default_order_untried():
+    """Twenty turns at 200 samples per turn: the base is well conditioned, no lower order is
+    fitted, and the order is the default one."""
+    rng = np.random.default_rng(611)
+    n = 4000
+    t = np.arange(n) / 400.0
+    th = 2 * np.pi * 2.0 * t + 0.4
+    e = 3e-3 * np.sin(2 * th + 1.0) + 1e-3 * np.sin(3 * th)
+    cols = {"t": t, "theta_ref": th, "h0": th + e + rng.normal(0, 2e-4, n) + 0.3}
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic"}
+    rec = Recording(
+        "multihead", {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}, cols
+    )
+    d = diagnose(rec)
+    bo = d.base_order
+    assert d.verdict == "consistent", d.doc["report"]
+    assert bo is not None and not bo.lowered and bo.chosen == bo.start == 12
+    assert [t.order for t in bo.tried] == [12] and bo.heldout_ratio < RATIO
+    assert d.doc["base"]["max_order"] == 12
+
+
+def test_the_ratio_setting_decides_whether_orders_are_tried():
+    """With ``base_order_ratio`` above any ratio the default order stays (and the base is
+    ill-conditioned again); with the default the order is lowered."""
+    for seed in range(601, 611):  # the first of these records whose default base is lowered
+        rec, _ = stepper_sensor_record(seed, 1.0)
+        low = diagnose(rec)
+        if low.base_order.lowered:
+            break
+    off = diagnose(rec, settings=FinderSettings(base_order_ratio=1e6))
+    assert low.base_order.lowered
+    assert not off.base_order.lowered and len(off.base_order.tried) == 1
+    assert off.doc["base"]["max_order"] >= low.doc["base"]["max_order"]
+    assert off.doc["heldout_rms_before"] > RATIO * off.doc["rms_before"]
+    # a caller's max_order is kept as given: nothing is chosen
+    fixed = diagnose(rec, max_order=8)
+    assert fixed.base_order is None and "base_order" not in fixed.doc
+    assert fixed.doc["base"]["max_order"] == 8
