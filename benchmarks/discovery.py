@@ -5,13 +5,17 @@ Each case is a record of :func:`encdesign.simulate._outside.outside_record` (a c
 the finder; discovery's model of the located line is scored against the truth:
 
 * ``frame_right``: the strongest discovered term at the truth's line has the truth's frame;
-* ``modulation_right``: and its modulation (``cell <i>`` of the truth's run);
+* ``modulation_right``: and its modulation (``cell <i>`` of the truth's run; ``step``:
+  ``step_run_right`` also says whether the located change lies in the truth's run);
 * ``beta_within_2se``: for the classes with a speed law, ``|beta - truth| <= 2 SE``;
 * ``gain_ratio``: held-out chi-square gain of the discovered terms at the line over that of
   the true model (the truth's frame and modulation fitted to the same record);
 * ``catalog``: the catalog named an effect that took the structure (not a discovery case).
 
 Clean records (``--clean N`` per kind) count the records where discovery adds a term.
+Each kind runs the classes of ``--classes`` its bench can carry
+(:func:`~encdesign.simulate._outside.classes_for`: an SDS bench has the sensor-frame,
+platform-order and step classes and a slow growth).
 Seeds come from ``--seed`` (a base never used while developing). ``--json`` is rewritten
 after each record (``complete``: false until the last)::
 
@@ -29,7 +33,7 @@ import numpy as np
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine import _discover as D
 from encdesign.diagnose.engine import _engine
-from encdesign.simulate._outside import CLASSES, KINDS, outside_record
+from encdesign.simulate._outside import CLASSES, KINDS, classes_for, outside_record
 
 SIZES = (2.0, 5.0, 20.0)
 
@@ -74,6 +78,8 @@ def _gains(truth: dict) -> tuple[float, float]:
         m = tm.modulation
         if mod == "cell":
             ok = m.startswith("cell ") and st.cinfo["run"][int(m.split()[1])] == truth["run"]
+        elif mod == "step" and tm.modulation == "step":  # at the change time the truth has
+            ok = True
         elif mod == "growth":  # a growth from zero: the level and the growth
             ok = m == "growth"
             if ok:
@@ -112,14 +118,16 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         "class": cls,
         "size": size,
         "kind": kind,
-        "truth": {k: truth.get(k) for k in ("line", "frame", "modulation", "beta", "run")},
+        "truth": {
+            k: truth.get(k) for k in ("line", "frame", "modulation", "beta", "run", "step_time_s")
+        },
         "verdict": d.verdict,
         "effects": [e["name"] for e in d.effects],
         "wall_s": wall,
         "discovery_s": _CAP.get("discovery_s", 0.0),
         "found": bool(terms),
         "terms": [
-            {k: t[k] for k in ("frame", "modulation", "heldout_gain_chi2", "scaling")}
+            {k: t.get(k) for k in ("frame", "modulation", "heldout_gain_chi2", "scaling", "step")}
             for t in terms
         ],
     }
@@ -133,6 +141,9 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         out["modulation_right"] = (
             t["modulation"].startswith("cell ") if mod == "cell" else t["modulation"] == mod
         )
+        if mod == "step" and t.get("step"):
+            out["step_run_right"] = t["step"]["run"] == truth["run"]
+            out["step_time_s"] = t["step"]["time_s"]
         if truth.get("beta") is not None:
             sc = t.get("scaling")
             out["beta_within_2se"] = bool(
@@ -163,6 +174,7 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
         "frame_right_excluding_catalog_and_base": rate([c["frame_right"] for c in disc]),
         "modulation_right": rate([c.get("modulation_right", False) for c in disc]),
         "beta_within_2se": rate([c["beta_within_2se"] for c in disc if "beta_within_2se" in c]),
+        "step_run_right": rate([c["step_run_right"] for c in disc if "step_run_right" in c]),
         "gain_ratio_ge_0_8": rate([r >= 0.8 for r in ratios]),
         "gain_ratio_median": float(np.median(ratios)) if ratios else None,
         "catalog_took_it": rate([c["catalog"] for c in cases]),
@@ -202,6 +214,8 @@ def main(argv=None) -> int:
 
     for ki, kind in enumerate(kinds):
         for ci, cls in enumerate(classes):
+            if cls not in classes_for(kind):
+                continue
             for si, size in enumerate(sizes):
                 for i in range(a.seeds):
                     c = run_case(cls, size, kind, [a.seed, ki, ci, si, i], a.rows)

@@ -10,6 +10,7 @@ import pytest
 
 from encdesign.diagnose import export_candidates
 from encdesign.diagnose._dispatch import diagnose, load_candidates
+from encdesign.diagnose.engine._html import render_html
 from encdesign.physics._effects import CATALOG_MULTIHEAD
 from encdesign.physics._sensor_effects import CATALOG_REFERENCE
 from encdesign.simulate._outside import outside_record
@@ -110,3 +111,80 @@ def test_export_candidates_round_trip(tmp_path):
     assert abs(beta + 2.0) < 0.5, named[0]["params"]
     assert export_candidates({"unexplained": []}, tmp_path / "none.py") == []
     assert not (tmp_path / "none.py").exists()
+
+
+def _sds(cls: str, seed: int, size: float = 5.0):
+    rec, truth = outside_record(np.random.default_rng(seed), cls, size, "sds")
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    line = truth["line"][1]
+    mine = [t for t in _terms(d.doc) if t["line_kind"] == "order" and t["value"] == line]
+    return rec, truth, d, mine
+
+
+def test_sds_sensor_frame_error_is_on_that_sensor(tmp_path):
+    """A periodic error in the frame of one moving sensor of an SDS bench: modelled on that
+    sensor only (not the platform, not the sensors' azimuths), outside the catalog; its
+    exported candidate is named under its own name when the record is diagnosed again."""
+    rec, truth, d, mine = _sds("sensor_frame", 801)
+    assert d.verdict == "unexplained", d.doc["report"]
+    assert mine, d.doc["report"]
+    t = mine[0]
+    assert (t["frame"], t["modulation"]) == (truth["frame"], "static"), d.doc["report"]
+    assert t["heads"] == [truth["frame"].split()[1]]
+    assert "frame of that sensor" in t["reading"], t["reading"]
+    amp = 5.0 * 1.3e-8
+    assert abs(t["params"]["amplitude"] - amp) < 4 * t["params"]["amplitude_se"] + 0.3 * amp
+    _no_catalog_name(d.doc)
+    html = render_html(d)  # the report shows it, with its figure in the platform angle
+    assert 'id="fig-discovered"' in html and "discovered model (outside the catalog)" in html
+    names = export_candidates(d.doc, tmp_path / "sds.py")
+    d2 = diagnose(rec, candidates=load_candidates(tmp_path / "sds.py"))
+    assert any(e["name"] in names for e in d2.effects), d2.doc["report"]
+
+
+def test_sds_platform_order_is_common_to_the_moving_sensors():
+    _, truth, d, mine = _sds("platform_order", 802)
+    assert d.verdict == "unexplained", d.doc["report"]
+    assert mine and mine[0]["frame"] == "platform", d.doc["report"]
+    assert mine[0]["heads"] == ["m0", "m1", "m2"]
+    _no_catalog_name(d.doc)
+
+
+def test_sds_clean_record_gets_nothing():
+    rec, _ = outside_record(np.random.default_rng(803), "clean", 0.0, "sds")
+    d = diagnose(rec)
+    assert not _terms(d.doc), d.doc["report"]
+
+
+def test_a_step_at_a_located_time_reports_its_time_in_the_recordings_t():
+    """An order that switches on inside a run: a step term at the change time, located to
+    within a few rows and reported on the recording's own t with its run."""
+    rec, truth = outside_record(np.random.default_rng(801), "order_step", 5.0, "multihead", 3000)
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    mine = [t for t in _terms(d.doc) if t["value"] == truth["line"][1]]
+    assert mine and mine[0]["modulation"] == "step", d.doc["report"]
+    st = mine[0]["step"]
+    assert st["run"] == truth["run"]
+    assert abs(st["time_s"] - truth["step_time_s"]) < 0.02, st  # 10 rows at 500 Hz
+    assert st["time_before_s"] <= st["time_s"]
+    assert "switches on at t =" in mine[0]["reading"]
+    assert mine[0]["frame"] == "shaft"
+    _no_catalog_name(d.doc)
+
+
+def test_drive_orders_next_to_a_located_line_enter_the_library():
+    """A multiple of the pole pairs (or slots, or their lcm) within one order of a located
+    order, or within half an order of a fractional one (sidebands too), becomes a line of its
+    own, marked not located; an order far from the drive brings nothing."""
+    from encdesign.diagnose.engine._discover_lines import Line, drive_neighbours, drive_orders
+
+    mult, side = drive_orders({"motor": {"pole_pairs": 7, "slots": 12}}, 30)
+    assert mult == [7, 12, 14, 21, 24, 28] and 13 in side and 29 in side and 84 not in mult
+    lines = [Line("order", 13.0), Line("frac", 27.8), Line("order", 10.0), Line("order", 0.0)]
+    near = drive_neighbours(lines, {"motor": {"pole_pairs": 7, "slots": 12}})
+    added = {i: [lines[j].value for j in js] for i, js in near.items()}
+    assert added == {0: [12.0, 14.0], 1: [28.0]}, added
+    assert all(not lines[j].located for js in near.values() for j in js)
+    assert drive_neighbours([Line("order", 13.0)], {}) == {}

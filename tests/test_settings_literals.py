@@ -53,6 +53,10 @@ UNIVERSAL = {0: SIGN, 1: SIGN, -1: SIGN, 1e-300: GUARD}
 
 ALLOWED: dict[tuple[str, float], str] = {
     # engine
+    ("engine/_bounds.py", 1e-10): NUMERIC + " (rank tolerance of the probe's eigenvalues)",
+    ("engine/_bounds.py", 1e-12): GUARD + " (a probe the base spans entirely)",
+    ("engine/_bounds.py", 2): SHAPE
+    + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
     ("engine/_discover.py", 2): DOF + " (two cos / sin columns of one channel)",
     ("engine/_discover.py", 1e-6): NUMERIC + " (two line values equal to rounding)",
@@ -76,6 +80,11 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_fit.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_html.py", 2): SHAPE,
     ("engine/_html.py", 6): PLOT,
+    ("engine/_html.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
+    ("engine/_plots.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
+    ("engine/_located.py", 2): COUNT + " (a change searched over at least two rows)",
+    ("engine/_located.py", 24): SEARCH
+    + " (a profile's best row this far from the start: the scan is repeated around it)",
     ("engine/_html_discovery.py", 3): PLOT,
     ("engine/_html_discovery.py", 100): PLOT,
     ("engine/_html_discovery.py", 1.1): PLOT,
@@ -127,7 +136,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
-    ("kinds/multihead/_multihead_terms.py", 3): PHYSICS,
+    ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
@@ -156,6 +165,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_noise.py", 4): DOF + " (a rotating and a common cos / sin pair per order)",
     ("kinds/sds/_sds_noise.py", 1e-12): GUARD + " (a zero time span)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
+    ("kinds/sds/_sds_terms.py", 4): SEARCH
+    + " (detection-bound probes: a step's first run at the quartiles of the runs)",
     ("kinds/sds/_sds_terms.py", 3): SEARCH + " (three starts)",
     ("kinds/sds/_sds_terms.py", 0.03): SEARCH + " (distinct start ratios)",
     ("kinds/sds/_sds_terms.py", 0.5): SHAPE,
@@ -168,6 +179,12 @@ ALLOWED: dict[tuple[str, float], str] = {
 
 
 CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
+    ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
+    + " (the probe's whitened norm: the fits are linear in it)",
+    ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
+    + " (the frequency at which the vibration's detection bound is stated, reported with it)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
@@ -190,7 +207,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
     ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
     ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",
-    ("kinds/multihead/_multihead_terms.py", "RUNOUT_ORDERS"): PHYSICS,
+    ("kinds/multihead/_runout.py", "RUNOUT_ORDERS"): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
     ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,
@@ -211,6 +228,8 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("_dispatch.py", "diagnose.max_effects"): ARGUMENT,
     ("engine/_engine.py", "run_engine.max_effects"): ARGUMENT,
     ("engine/_select.py", "select.max_effects"): ARGUMENT,
+    ("engine/_located.py", "scan_indices.near"): SEARCH
+    + " (rows scanned one by one around a profile's best, then spaced out)",
     ("engine/_discover.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_fit.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",

@@ -3,11 +3,16 @@
 :func:`outside_record` draws a multihead bench (4 heads and a reference angle, ``multihead``)
 or one sensor against a reference (``sensor``), 3 steady runs at different speeds (and, for
 the direction classes, both directions), with a disk error of orders 1-5, white noise, and
-one structure of a class nobody wrote into the catalog. The truth says the frame and
+one structure of a class nobody wrote into the catalog; or (``sds``) a shifted-delta-sum
+bench (the concealed benchmark's instrument: a 6-pole-pair motor, 2 fixed and 3 moving
+sensors, 24 platform positions stepped by the golden angle, 1 ns jitter, a 100 MHz clock)
+whose moving sensors' edges carry the structure as a delay. The truth says the frame and
 modulation a correct model has, and the speed exponent where there is one.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -25,14 +30,44 @@ CLASSES = (
     "intermittent",
     "direction_lag",
     "speed_lag",
+    "order_step",
+    "sensor_frame",
+    "platform_order",
+    "sensor_step",
+    "platform_step",
 )
 """The out-of-catalog classes: torque ripple at a drive order falling as speed^-2 (a shaft
 motion); a defect of one head; an error in one direction only; a structure at a fixed
 frequency with its own Q (excited in every run with its own phase); a slow growth over the
 record; an order present in one run only; an error of opposite sign in the two directions;
-a lag growing as speed^+1."""
+a lag growing as speed^+1; an order that switches on at one time of the middle run
+(``order_step``); and on an SDS bench: a periodic error of the platform angle in the frame
+of one moving sensor (``sensor_frame``: an SDS sensor-frame error), an order of the platform
+angle common to the moving sensors that no catalog effect has (``platform_order``, orders 5
+to 11, beyond the beam tilt's 1-3), and a sensor-frame order that switches on from one run
+on (``sensor_step``)."""
 
-KINDS = ("multihead", "sensor")
+KINDS = ("multihead", "sensor", "sds")
+
+SDS_CLASSES = ("sensor_frame", "platform_order", "sensor_step", "platform_step", "slow_growth")
+"""The classes an SDS bench (one steady speed, one direction, one row per run) carries."""
+
+
+def classes_for(kind: str) -> tuple[str, ...]:
+    """The classes of :data:`CLASSES` a bench of ``kind`` can carry."""
+    if kind == "sds":
+        return SDS_CLASSES
+    return tuple(c for c in CLASSES if c not in SDS_CLASSES or c == "slow_growth")
+
+
+SDS_NOISE_RAD = 1.3e-8
+"""Noise std of an SDS run-mean reading of this bench (rad): the level the finder estimates
+on the run-mean channels of a clean record (1.30e-8 on seed 801; 1 ns jitter, 100 MHz
+clock, 200 marks, 4 revolutions)."""
+
+SDS_RUNS = 24
+SDS_REVS = 4
+SDS_MARKS = 200
 
 POLE_PAIRS = 7
 
@@ -58,6 +93,8 @@ def _truth(cls: str, C: int, rng) -> dict:
         return dict(line=("order", m), frame="shaft", modulation="direction")
     if cls == "speed_lag":
         return dict(line=("order", m), frame="shaft", modulation="speed", beta=1.0)
+    if cls == "order_step":
+        return dict(line=("order", m), frame="shaft", modulation="step", step_run=1)
     raise ValueError(f"unknown class {cls!r}; expected one of {CLASSES}")
 
 
@@ -73,9 +110,13 @@ def outside_record(
 
     ``truth``: ``line`` (``("order", m)`` or ``("hz", f)``), ``frame``, ``modulation``,
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
-    C = 4 if kind == "multihead" else 1
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
+    if cls != "clean" and cls not in classes_for(kind):
+        raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
+    if kind == "sds":
+        return _sds_record(rng, cls, size)
+    C = 4 if kind == "multihead" else 1
     R = 3
     n = n_rows // R
     fs = 500.0
@@ -128,6 +169,10 @@ def outside_record(
                 g = tau / tau.max()
             elif mod == "cell":
                 g = (run == truth["run"]) * 1.0
+            elif mod == "step":  # on from a time inside the run (a third to two thirds in)
+                ts = float(rng.uniform(0.33, 0.67)) * n / fs
+                truth["step_time_s"], truth["run"] = ts, truth["step_run"]
+                g = ((run > truth["step_run"]) | ((run == truth["step_run"]) & (t >= ts))) * 1.0
             else:
                 g = np.ones(t.size)
             s = A * s * g[:, None]
@@ -149,3 +194,66 @@ def outside_record(
     }
     truth["speeds_rad_s"] = speeds
     return Recording("multihead", meta, cols), truth
+
+
+def _sds_record(rng: np.random.Generator, cls: str, size: float) -> tuple[Recording, dict]:
+    """An SDS bench (module doc) with one structure of ``cls`` on the moving sensors' edges:
+    a delay ``A f(phi) / Omega`` (``A`` = ``size`` x :data:`SDS_NOISE_RAD`)."""
+    import jax
+
+    from ..physics._sds_errors import SDSErrors
+    from ._conceal_sds import CLOCK_S, SPEED_RAD_S, sds_bench_design
+    from ._sds import sds_bench_columns, sds_encoder_table
+
+    key = jax.random.PRNGKey(int(rng.integers(0, 2**31 - 1)))
+    kd, kj = jax.random.split(key)
+    design = sds_bench_design(kd, SDS_MARKS, 0.0, 3, 2)
+    M = 3
+    psi = np.asarray(design.moving_azimuths_rad, float)
+    golden = np.pi * (3 - math.sqrt(5))
+    R = SDS_RUNS
+    phis = golden * np.arange(R) + np.radians(rng.uniform(-2, 2, R))
+    phis = np.mod(phis + rng.uniform(0, 2 * np.pi), 2 * np.pi)
+    truth: dict = {"class": cls, "size": size, "kind": "sds", "alpha": psi}
+    n = int(rng.choice([5, 7]))
+    k = int(rng.integers(0, M))
+    if cls == "sensor_frame":
+        truth.update(line=("order", n), frame=f"sensor m{k}", modulation="static")
+    elif cls == "platform_order":
+        truth.update(line=("order", n), frame="platform", modulation="static")
+    elif cls == "sensor_step":
+        truth.update(line=("order", n), frame=f"sensor m{k}", modulation="step")
+        truth["step_run"] = int(rng.integers(R // 3, 2 * R // 3))
+    elif cls == "platform_step":
+        truth.update(line=("order", n), frame="platform", modulation="step")
+        truth["step_run"] = int(rng.integers(R // 3, 2 * R // 3))
+    elif cls == "slow_growth":
+        truth.update(line=("order", n), frame=f"sensor m{k}", modulation="growth")
+    A = size * SDS_NOISE_RAD
+    ph = float(rng.uniform(0, 2 * np.pi))
+
+    def hook(i: int, phi: float, f: np.ndarray, m: np.ndarray):
+        if cls != "clean":
+            g = 1.0
+            if cls in ("sensor_step", "platform_step"):
+                g = float(i >= truth["step_run"])
+            elif cls == "slow_growth":
+                g = i / (R - 1)
+            d = A * g * math.sin(n * phi + ph) / SPEED_RAD_S
+            if cls in ("platform_order", "platform_step"):
+                m = m + d
+            else:
+                m[k] = m[k] + d
+        return np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
+
+    errors = SDSErrors(clock_period_s=0.0, jitter_s=1e-9)
+    cols = sds_bench_columns(design, phis, SDS_REVS, errors, key=kj, edge_hook=hook)
+    meta = {
+        "format": "encdesign-recording/1",
+        "kind": "sds",
+        "encoder": sds_encoder_table(design, CLOCK_S),
+    }
+    truth["speeds_rad_s"] = np.array([SPEED_RAD_S])
+    if "step_run" in truth:
+        truth["run"] = truth["step_run"]
+    return Recording("sds", meta, cols), truth

@@ -79,7 +79,9 @@ class Param:
         description: one line for the report.
         global_time: a time on the finder's end-to-end axis ``tau`` (runs laid end to end,
             pauses removed; what the term reads): reported in the recording's own ``t``,
-            with its ``run`` (issue 44 C).
+            with its ``run`` and interval (issue 44 C).
+        first_run: the index of the first run of a change (held): reported with its
+            interval of runs and the first row's time on the recording's own ``t``.
     """
 
     name: str
@@ -90,6 +92,7 @@ class Param:
     fit: bool = True
     description: str = ""
     global_time: bool = False
+    first_run: bool = False
 
     def resolved_shape(self, n_channels: int, n_runs: int) -> tuple[int, ...]:
         """The array shape of this parameter for a recording of that size."""

@@ -7,12 +7,20 @@ generic library organised by **frame** and **modulation**:
 * frames: ``disk`` (the order seen by every head with the phase ``m psi_k`` of its azimuth),
   ``shaft`` (one phase on every head: a motion of the shaft or of the reference),
   ``head <k>`` (one head only), ``hz`` (a fixed frequency: its own phase in every cell);
+  on an SDS record (rows: runs, one platform angle each; only the moving sensors' run-mean
+  channels carry a term) ``platform`` (an order of the platform angle, one phase on every
+  moving sensor; not identifiable without ``phi_ref``), ``azimuth`` (an order of
+  ``phi + psi_m``: every moving sensor with the phase ``m psi_m`` of its azimuth) and
+  ``sensor m<k>`` (one moving sensor only: an error in the frame of that sensor);
 * modulations (per *cell*: rows of one run, one direction and one steady speed):
   ``static``, ``speed`` (amplitude ``(|omega| / omega_0)^beta``, the exponent fitted with a
   standard error), ``direction`` (opposite sign in the two directions), ``forward`` /
   ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
   own amplitude and phase), ``growth`` (amplitude linear in the time across runs),
-  ``temperature`` (linear in ``temp_c``).
+  ``temperature`` (linear in ``temp_c``), ``step`` (the amplitude switches on at one change
+  time: the best of the times the finder's views located (``time``, ``order_step``,
+  ``run_step``) and :data:`STEP_BINS` change points over the kept rows, scanned per line on
+  the residual; the scan is counted in the multiple-testing threshold).
 
 Every term is a linear (``speed``: nonlinear in ``beta`` only) restriction of one *full*
 block per line: cos/sin of the line's phase, per cell and channel, times the within-cell
@@ -27,10 +35,11 @@ Selection is **orthogonal forward regression**: at each step the term with the l
 in-sample chi-square drop less its multiple-testing threshold
 ``chi2.isf(settings.discover_alpha / N, q)``
 (``N`` terms in the library, ``q`` parameters: Bonferroni, which also prefers the smaller of
-two nested terms) enters when that margin is positive and its K-fold held-out gain (fitted
-without each fold, scored on it) is positive. The same selection repeated without each fold
-in turn gives each term's inclusion probability; a term enters only when it is at least
-``settings.discover_inclusion_min``.
+two nested terms; where the library holds step terms, half of ``alpha`` goes to them, each
+counted once per change point scanned, and half to the others) enters when that margin is
+positive and its K-fold held-out gain (fitted without each fold, scored on it) is positive.
+The same selection repeated without each fold in turn gives each term's inclusion
+probability; a term enters only when it is at least ``settings.discover_inclusion_min``.
 """
 
 from __future__ import annotations
@@ -41,16 +50,29 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
+from ._discover_lines import (
+    MAX_LINES,
+    STEP_EXACT_ROWS,
+    Line,
+    drive_neighbours,
+    frame_maps,
+    hmap,
+    lines_of,
+    locate_steps,
+    phase_basis,
+    sds_channels,
+    step_json,
+    step_words,
+    tau_of,
+    thresholds,
+)
 from ._discover_words import reading
 from ._settings import FinderSettings
 
 MAX_TERMS = 4
 """Terms the forward selection may add over all lines."""
-
-MAX_LINES = 10
-"""Located lines modelled (the strongest findings first)."""
 
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
@@ -59,26 +81,11 @@ BETA_RANGE = (-4.0, 4.0)
 """Range searched for a speed exponent."""
 
 
-@dataclasses.dataclass(frozen=True)
-class Line:
-    """A located line: ``kind`` ``order`` (integer shaft order, ``value`` cycles per turn;
-    0: an offset), ``frac`` (a fractional order) or ``hz`` (``value`` Hz)."""
-
-    kind: str
-    value: float
-
-    def label(self) -> str:
-        if self.kind == "hz":
-            return f"{self.value:.4g} Hz"
-        if self.kind == "order" and self.value == 0:
-            return "offset (order 0)"
-        return f"order {self.value:g}"
-
-
 @dataclasses.dataclass
 class Term:
     """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
-    the line's full block; ``beta`` the speed exponent (``speed`` modulation)."""
+    the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
+    change time (``step`` modulation, :func:`locate_steps`)."""
 
     line: int
     frame: str
@@ -87,6 +94,7 @@ class Term:
     beta: float | None = None
     beta_se: float | None = None
     H0: np.ndarray | None = None
+    step: dict | None = None
 
     @property
     def name(self) -> str:
@@ -96,44 +104,6 @@ class Term:
 # ----------------------------------------------------------------------------- lines
 
 
-def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Line], list[int]]:
-    """The located lines of ``findings`` (``_views.Finding``) and, per finding, the index of
-    its first line (-1: a located structure no line models, e.g. a broad band; -2: a line
-    beyond the first :data:`MAX_LINES`)."""
-    out: list[Line] = []
-    first: list[int] = []
-
-    def add(ln: Line) -> int:
-        for i, o in enumerate(out):
-            if o.kind == ln.kind and abs(o.value - ln.value) <= 1e-6 * max(1.0, abs(ln.value)):
-                return i
-        out.append(ln)
-        return len(out) - 1
-
-    for f in findings:
-        w, d = f.where, f.detail
-        idx = -1
-        orders = [o for o in w.get("orders", []) if math.isfinite(o)]
-        freqs = [h for h in w.get("frequencies_hz", []) if math.isfinite(h)]
-        if f.view == "orders" and orders:
-            idx = add(Line("order", float(round(orders[0]))))
-        elif f.view == "spectrum" and (orders or freqs):
-            if d.get("fixed_in") == "frequency" and freqs:
-                idx = add(Line("hz", float(np.median(freqs))))
-            elif d.get("integer_order") and orders:
-                m = float(round(np.median(orders)))
-                idx = add(Line("order", m)) if m > 0 else -1
-            elif orders:
-                nu = float(np.median(orders))
-                idx = add(Line("frac", round(nu, 3))) if nu > 0 else -1
-        elif f.view in ("time", "drift", "direction", "speed"):
-            idx = add(Line("order", 0.0))
-        elif f.view == "line_phase" and signal_periods > 0:
-            idx = add(Line("order", float(signal_periods)))
-        first.append(idx)
-    return out[:MAX_LINES], [i if i < MAX_LINES else -2 for i in first]
-
-
 # ----------------------------------------------------------------------------- cells
 
 
@@ -141,6 +111,8 @@ def _cells(prep) -> tuple[np.ndarray, dict]:
     """Cell index per row (-1: not kept) and the cells' run, direction and speed."""
     keep = prep.keep
     run = np.asarray(prep.run)
+    if prep.ctx.kind == "sds":  # one row per run, nothing varies but the time: one cell
+        run = np.zeros(prep.n, dtype=int)
     om = np.asarray(prep.rows["omega"], float) if "omega" in prep.rows else np.zeros(prep.n)
     sgn = np.where(om < 0, -1, 1)
     lsp = np.round(np.log(np.maximum(np.abs(om), 1e-12)) / 0.05).astype(np.int64)
@@ -184,24 +156,49 @@ class Sums:
     scales: dict
 
 
-def _phase_basis(line: Line, th: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``(rows, n_basis)`` cos/sin of the line's phase (order 0: a constant)."""
-    if line.kind == "order" and line.value == 0:
-        return np.ones((th.size, 1))
-    ph = 2 * np.pi * line.value * t if line.kind == "hz" else line.value * th
-    return np.stack([np.cos(ph), np.sin(ph)], 1)
+def _jac_chunk(prep, fitter, terms: Sequence[Any], a: int, b: int, x: dict) -> np.ndarray:
+    """The final catalog model's Jacobian on rows ``a:b`` (rows, C, p), projected like the
+    data and whitened."""
+    Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
+    J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+    if prep.kd.project:
+        J = J - J.mean(1, keepdims=True)
+    return J / np.asarray(prep.sigma, float)[None, :, None]
+
+
+def _jacobian(prep, fitter, terms: Sequence[Any]) -> np.ndarray:
+    """:func:`_jac_chunk` on every row (n, C, p)."""
+    parts = [_jac_chunk(prep, fitter, terms, a, b, x) for a, b, x in fitter.chunks()]
+    return np.concatenate(parts, 0)
 
 
 def accumulate(
-    prep, fitter, terms: Sequence[Any], resid: np.ndarray, lines: Sequence[Line], cell, cinfo
+    prep,
+    fitter,
+    terms: Sequence[Any],
+    resid: np.ndarray,
+    lines: Sequence[Line],
+    cell,
+    cinfo,
+    steps: Sequence[dict | None] | None = None,
+    jac: np.ndarray | None = None,
 ) -> Sums:
-    """One pass over the rows: the per-fold sums of every line's full block (see module)."""
+    """One pass over the rows: the per-fold sums of every line's full block (see module);
+    ``steps``: per line its change time (:func:`locate_steps`), the ``step`` block;
+    ``jac``: the catalog model's whitened Jacobian on every row (:func:`_jacobian`), else
+    evaluated per chunk."""
     K = prep.settings.n_folds
     C = prep.n_channels
     S = len(cinfo["speed"])
     sig = np.asarray(prep.sigma, float)
     has_temp = prep.ctx.driver_name != "time" and "driver" in prep.rows
-    blocks = ["static", "growth"] + (["temperature"] if has_temp else [])
+    steps = list(steps) if steps is not None else [None] * len(lines)
+    has_step = any(st is not None for st in steps)
+    blocks = (
+        ["static", "growth"]
+        + (["temperature"] if has_temp else [])
+        + (["step"] if has_step else [])
+    )
     nb = len(blocks)
     layout, slices, q0 = [], [], 0
     for ln in lines:
@@ -212,7 +209,7 @@ def accumulate(
         q0 += size
     Q = q0
     U = sum(nb * lay[3] for lay in layout)  # compact columns (before cell x channel)
-    tau_all = np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
+    tau_all = tau_of(prep)
     kept_tau = tau_all[prep.keep]
     tmid = float(np.mean(kept_tau)) if kept_tau.size else 0.0
     tsc = float(np.ptp(kept_tau)) / 2 or 1.0
@@ -230,11 +227,7 @@ def accumulate(
         kb = prep.keep[a:b]
         if not kb.any():
             continue
-        Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
-        J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, C, 0))
-        if prep.kd.project:
-            J = J - J.mean(1, keepdims=True)
-        J = (J / sig[None, :, None])[kb]
+        J = (jac[a:b] if jac is not None else _jac_chunk(prep, fitter, terms, a, b, x))[kb]
         if p is None:
             p = J.shape[2]
             JX = np.zeros((K, p, S, U, C))
@@ -249,10 +242,13 @@ def accumulate(
         if has_temp:
             mods.append((np.asarray(x["driver"][: b - a], float)[kb] - dmid) / dsc)
         cols = []
-        for ln in lines:
-            B = _phase_basis(ln, th, t)
+        for ln, stp in zip(lines, steps):
+            B = phase_basis(ln, th, t)
             for m in mods:
                 cols.append(B * m[:, None])
+            if has_step:
+                on = tau >= stp["tau_s"] if stp is not None else np.zeros(th.size, bool)
+                cols.append(B * on[:, None])
         Xc = np.concatenate(cols, 1)  # (rows, U)
         rw = (resid[a:b] / sig[None, :])[kb]
         fo = prep.fold[a:b][kb]
@@ -341,77 +337,53 @@ def _psolve(
 # ----------------------------------------------------------------------------- library
 
 
-def _frame_maps(line: Line, C: int, alpha: np.ndarray) -> dict[str, np.ndarray]:
-    """Per frame, ``M`` (C, nj, nj'): each channel's basis coefficients from the frame's
-    parameters (``nj'``)."""
-    nj = 1 if (line.kind == "order" and line.value == 0) else 2
-    eye = np.eye(nj)
-    out: dict[str, np.ndarray] = {}
-    if C > 1 or nj == 2:
-        out["shaft"] = np.repeat(eye[None], C, 0)
-    if line.kind == "order" and line.value > 0 and C > 1:
-        ph = line.value * np.asarray(alpha, float)
-        c, s = np.cos(ph), np.sin(ph)
-        # C cos(m(theta - a)) + S sin(m(theta - a)) on the cos / sin of m theta
-        out["disk"] = np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
-    if C > 1:
-        for k in range(C):
-            M = np.zeros((C, nj, nj))
-            M[k] = eye
-            out[f"head {k}"] = M
-    return out
-
-
-def _H(layout, block: int, M: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Restriction ``(Q_line, nj' * n_free_cells)``: the frame map ``M`` on the block, per
-    cell scaled by ``f`` (S,) (one shared parameter set), or ``f`` (S, G) (G groups of
-    cells, each its own parameters)."""
-    nb, S, C, nj = layout
-    f2 = f[:, None] if f.ndim == 1 else f
-    Gn = f2.shape[1]
-    njp = M.shape[2]
-    H = np.zeros((nb, S, C, nj, Gn, njp))
-    for g in range(Gn):
-        H[block, :, :, :, g, :] = f2[:, g][:, None, None, None] * M[None]
-    return H.reshape(nb * S * C * nj, Gn * njp)
-
-
 def library(
-    lines: Sequence[Line], sums: Sums, cinfo: dict, C: int, alpha, settings: FinderSettings
+    lines: Sequence[Line],
+    sums: Sums,
+    cinfo: dict,
+    C: int,
+    alpha,
+    settings: FinderSettings,
+    sds: tuple[int, np.ndarray, bool] | None = None,
+    steps: Sequence[dict | None] | None = None,
 ) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
     sp, dr = cinfo["speed"], cinfo["direction"]
+    steps = list(steps) if steps is not None else [None] * len(lines)
     out: list[Term] = []
     for li, ln in enumerate(lines):
         lay = sums.layout[li]
         per_cell_phase = ln.kind in ("hz", "frac")
-        for fr, M in _frame_maps(ln, C, alpha).items():
+        for fr, M in frame_maps(ln, C, alpha, sds).items():
             name = "hz" if ln.kind == "hz" and fr == "shaft" else fr
             if per_cell_phase:
                 if S <= MAX_CELLS:
-                    out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
+                    out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
                 continue
             one = np.ones(S)
-            out.append(Term(li, name, "static", _H(lay, 0, M, one)))
+            out.append(Term(li, name, "static", hmap(lay, 0, M, one)))
             if S > 1 and np.ptp(np.log(np.maximum(sp, 1e-12))) > math.log(
                 settings.discover_speed_ratio
             ):
-                H0 = _H(lay, 0, M, one)
+                H0 = hmap(lay, 0, M, one)
                 out.append(Term(li, name, "speed", H0, beta=0.0, H0=H0))
             if (dr > 0).any() and (dr < 0).any():
-                out.append(Term(li, name, "direction", _H(lay, 0, M, dr.astype(float))))
-                out.append(Term(li, name, "forward", _H(lay, 0, M, (dr > 0).astype(float))))
-                out.append(Term(li, name, "reverse", _H(lay, 0, M, (dr < 0).astype(float))))
+                out.append(Term(li, name, "direction", hmap(lay, 0, M, dr.astype(float))))
+                out.append(Term(li, name, "forward", hmap(lay, 0, M, (dr > 0).astype(float))))
+                out.append(Term(li, name, "reverse", hmap(lay, 0, M, (dr < 0).astype(float))))
             if 1 < S <= MAX_CELLS:
                 for s in range(S):
                     out.append(
-                        Term(li, name, f"cell {s}", _H(lay, 0, M, (np.arange(S) == s) * 1.0))
+                        Term(li, name, f"cell {s}", hmap(lay, 0, M, (np.arange(S) == s) * 1.0))
                     )
-                out.append(Term(li, name, "per_cell", _H(lay, 0, M, np.eye(S))))
-            out.append(Term(li, name, "growth", _H(lay, 1, M, one)))
+                out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
+            out.append(Term(li, name, "growth", hmap(lay, 1, M, one)))
             if "temperature" in sums.blocks:
-                out.append(Term(li, name, "temperature", _H(lay, 2, M, one)))
+                out.append(Term(li, name, "temperature", hmap(lay, 2, M, one)))
+            if steps[li] is not None:
+                bl = sums.blocks.index("step")
+                out.append(Term(li, name, "step", hmap(lay, bl, M, one), step=steps[li]))
     return out
 
 
@@ -555,7 +527,8 @@ def _forward(
 @dataclasses.dataclass
 class State:
     """What discovery built for one record: the located lines, each finding's line, the
-    cells, the per-fold sums, the library (speed exponents fitted) and its thresholds."""
+    cells, the per-fold sums, the library (speed exponents fitted) and its thresholds;
+    ``drive``: per located line, the drive orders next to it brought in as lines."""
 
     lines: list[Line]
     first: list[int]
@@ -566,31 +539,35 @@ class State:
     infl: float
     signal_periods: int
     settings: FinderSettings
+    drive: dict[int, list[int]] = dataclasses.field(default_factory=dict)
 
 
 def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> State | None:
     """The discovery state of a record (``None``: discovery does not apply: nothing
-    located, an SDS record, no shaft angle and time, no line to model)."""
-    if not findings or prep.ctx.kind == "sds" or not {"theta", "t"} <= set(prep.rows):
+    located, no shaft (platform) angle and time, no line to model)."""
+    if not findings or not {"theta", "t"} <= set(prep.rows):
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     lines, first = lines_of(findings, L)
     if not lines:
         return None
+    near = drive_neighbours(lines, dict(prep.ctx.meta))
     cell, cinfo = _cells(prep)
     C = prep.n_channels
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
     if alpha.size != C:
         alpha = np.zeros(C)
-    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo)
+    sds = sds_channels(prep)
+    jac = _jacobian(prep, fitter, terms) if prep.n <= STEP_EXACT_ROWS else None
+    steps = locate_steps(prep, resid, lines, findings, jac)
+    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps, jac)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha, prep.settings)
+    lib = library(lines, sums, cinfo, C, alpha, prep.settings, sds, steps)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
-    a_n = prep.settings.discover_alpha / max(len(lib), 1)
-    thresh = np.array([stats.chi2.isf(a_n, tm.H.shape[1] + (tm.beta is not None)) for tm in lib])
-    return State(lines, first, cinfo, sums, lib, thresh, infl, L, prep.settings)
+    th = thresholds(lib, prep.settings.discover_alpha)
+    return State(lines, first, cinfo, sums, lib, th, infl, L, prep.settings, near)
 
 
 def discover(
@@ -608,7 +585,7 @@ def discover(
     (``_views.Finding``)."""
     st = build(prep, fitter, terms, resid, findings)
     if st is None:
-        if findings and prep.ctx.kind != "sds":
+        if findings:
             return [_none("no line, order or time structure to model (a broad band)")] * len(
                 findings
             )
@@ -677,18 +654,29 @@ def _term_json(
     q = tm.H.shape[1]
     c, cv = coef[q0 : q0 + q], cov[q0 : q0 + q, q0 : q0 + q]
     ln = st.lines[tm.line]
+    st_sds = sds_channels(prep)
     nj = 1 if (ln.kind == "order" and ln.value == 0) else 2
     pairs = c.reshape(-1, nj)
     amp = float(np.sqrt(np.mean(np.sum(pairs**2, 1))))
     amp_se = float(np.sqrt(max(np.trace(cv), 0.0) / max(pairs.shape[0], 1)))
-    runs = sorted({int(r) for r in cinfo["run"]})
+    runs_id = [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in cinfo["run"]]
+    if prep.ctx.kind == "sds" or tm.step is not None:  # the runs of the rows (from the step)
+        on = prep.keep & (tau_of(prep) >= (tm.step["tau_s"] if tm.step else -np.inf))
+        runs_id = [int(prep.run_ids[r]) for r in np.unique(np.asarray(prep.run)[on])]
+    runs = sorted(set(runs_id))
     if tm.modulation.startswith("cell "):
-        runs = [int(cinfo["run"][int(tm.modulation.split()[1])])]
+        runs = [runs_id[int(tm.modulation.split()[1])]]
     dirs = sorted({int(d) for d in cinfo["direction"]})
     if tm.modulation in ("forward", "reverse"):
         dirs = [1 if tm.modulation == "forward" else -1]
     names = list(prep.kd.channel_names)
-    heads = names if not tm.frame.startswith("head ") else [names[int(tm.frame.split()[1])]]
+    heads = names
+    if tm.frame.startswith("head "):
+        heads = [names[int(tm.frame.split()[1])]]
+    elif tm.frame.startswith("sensor "):
+        heads = [tm.frame.split()[1]]
+    elif prep.ctx.kind == "sds":  # the moving sensors' run-mean channels
+        heads = [c for c in names if "." not in c]
     scaling = None
     if tm.beta is not None:
         scaling = {
@@ -699,12 +687,13 @@ def _term_json(
         }
     return {
         "line": ln.label(),
+        "located": ln.located,
         "line_kind": ln.kind,
         "value": float(ln.value),
         "frame": tm.frame,
         "modulation": tm.modulation,
         "heads": heads,
-        "runs": [int(prep.run_ids[r]) if r < len(prep.run_ids) else r for r in runs],
+        "runs": runs,
         "directions": ["positive" if d > 0 else "negative" for d in dirs],
         "scaling": scaling,
         "params": {
@@ -714,13 +703,16 @@ def _term_json(
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
         },
+        **({"step": step_json(prep, tm.step)} if tm.step is not None else {}),
         "heldout_gain_chi2": float(gains["entry"][i]),
         "heldout_gain_drop_one_chi2": float(gains["drop_one"][i]),
         "heldout_gain_line_chi2": float(gains["line"][tm.line]),
         "inclusion_probability": float(incl[i]),
         "reading": reading(
             ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
-        ),
+        )
+        + (step_words(prep, tm.step) if tm.step is not None else "")
+        + ("" if ln.located else " Not located itself: the drive order next to a located line."),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,
@@ -729,6 +721,8 @@ def _term_json(
             if tm.modulation.startswith("cell ")
             else None,
             "speed_ref_rad_s": float(np.exp(np.mean(np.log(np.maximum(cinfo["speed"], 1e-12))))),
+            **({"step_tau_s": tm.step["tau_s"]} if tm.step is not None else {}),
+            **({"n_moving": int(st_sds[0]), "projected": bool(st_sds[2])} if st_sds else {}),
         },
     }
 
@@ -739,9 +733,15 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
     N = len(st.lib)
     if li == -2:
         return _none(f"beyond the first {MAX_LINES} located lines discovery models")
+    if li == -3:
+        return _none(
+            "the matched view of a catalog candidate: its own pattern, which the catalog "
+            "refused by its rule; discovery never takes a catalog effect's structure"
+        )
     if li < 0:
         return _none("no line, order or time structure to model (a broad band)")
-    mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line == li]
+    own = {li, *st.drive.get(li, [])}  # its line and the drive orders next to it
+    mine = [t for t, i in zip(terms_json, kept) if st.lib[i].line in own]
     if not mine:
         return _none(
             f"no term of the library ({N} terms: frames x modulations) passes the "

@@ -43,11 +43,32 @@ def _frame(spec: Mapping[str, Any], x: dict, ph, C: int):
     if fr == "disk":
         arg = spec["value"] * (x["theta"][:, None] - x["alpha"][None, :C])
         return jnp.cos(arg), jnp.sin(arg)
+    if fr in ("platform", "azimuth") or fr.startswith("sensor "):
+        return _sds_frame(spec, x, ph, C)
     c, s = jnp.cos(ph)[:, None], jnp.sin(ph)[:, None]
     mask = jnp.ones((1, C))
     if fr.startswith("head "):
         mask = (jnp.arange(C) == int(fr.split()[1]))[None, :] * 1.0
     return c * mask, s * mask
+
+
+def _sds_frame(spec: Mapping[str, Any], x: dict, ph, C: int):
+    """The SDS frames on the moving sensors' run-mean channels (the first ``n_moving``),
+    projected on their differences where the record had no ``phi_ref``."""
+    ex, fr = spec["export"], spec["frame"]
+    M = int(ex["n_moving"])
+    if fr == "azimuth":
+        arg = spec["value"] * (x["theta"][:, None] + x["psi_m"][None, :M])
+        cm, sm = jnp.cos(arg), jnp.sin(arg)
+    else:
+        mask = jnp.ones((1, M))
+        if fr.startswith("sensor "):
+            mask = (jnp.arange(M) == int(fr.split()[1][1:]))[None, :] * 1.0
+        cm, sm = jnp.cos(ph)[:, None] * mask, jnp.sin(ph)[:, None] * mask
+    if ex.get("projected"):
+        cm, sm = cm - cm.mean(1, keepdims=True), sm - sm.mean(1, keepdims=True)
+    pad = jnp.zeros((cm.shape[0], C - M))
+    return jnp.concatenate([cm, pad], 1), jnp.concatenate([sm, pad], 1)
 
 
 def _modulation(spec: Mapping[str, Any], p: dict, x: dict):
@@ -68,6 +89,8 @@ def _modulation(spec: Mapping[str, Any], p: dict, x: dict):
         return (x["tau"] - ex["tau_mid_s"]) / ex["tau_half_s"]
     if mod == "temperature":
         return (x["driver"] - ex["driver_mid"]) / ex["driver_half"]
+    if mod == "step":
+        return (x["tau"] >= ex["step_tau_s"]) * 1.0
     return jnp.ones_like(x["t"])
 
 
@@ -87,6 +110,8 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             base = jnp.ones((x["t"].shape[0], C))
             if spec["frame"].startswith("head "):
                 base = base * (jnp.arange(C) == int(spec["frame"].split()[1]))[None, :]
+            elif spec["export"].get("n_moving"):  # SDS: the frame's run-mean channels
+                base, _ = _sds_frame(spec, x, jnp.zeros(x["t"].shape[0]), C)
             a = x["run_onehot"] @ p["cos_rad"] if per_run else p["cos_rad"]
             return g * base * (a[:, None] if per_run else a)
         cpart, spart = _frame(spec, x, _phase(spec, x), C)
@@ -123,7 +148,11 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             return f"amplitude {amp:.3g} {unit} far from the discovered {amp0:.3g} {unit}"
         return None
 
-    sig = ("time", "drift", "direction", "speed") if offset else ("spectrum", "orders")
+    sig = (
+        ("time", "drift", "direction", "speed", "run_step")
+        if offset
+        else ("spectrum", "orders", "common_orders")
+    )
     return Candidate(
         name=name,
         fn=fn,

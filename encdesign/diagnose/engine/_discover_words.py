@@ -41,6 +41,11 @@ FRAME_WORDS = {
     "error of the disk or of a head",
     "hz": "fixed in Hz, its own phase in every run: a structure (vibration, supply) at its "
     "own frequency, not tied to the angle",
+    "platform": "of the platform angle, one phase on every moving sensor: a motion or an "
+    "error of the platform's positioning (a gear, a bearing, the reference), not of a sensor",
+    "azimuth": "of phi + psi_m, every moving sensor with the phase m psi_m of its azimuth: "
+    "a property of where the sensors sit in the fixed frame (what they pass over), not of "
+    "one sensor or of the platform's motion",
 }
 
 MOD_WORDS = {
@@ -51,6 +56,8 @@ MOD_WORDS = {
     "per_cell": "its own amplitude and phase in every run (intermittent)",
     "growth": "growing linearly with the time across the record (a slow growth or drift)",
     "temperature": "linear in the temperature",
+    "step": "switching on at one change time (a change of the set-up: a part that loosened, "
+    "a replaced or re-plugged component)",
 }
 
 
@@ -78,10 +85,19 @@ def reading(line, tm, meta: dict, L: int, cinfo: dict, C: int, settings: FinderS
     fr = tm.frame
     if fr.startswith("head "):
         fw = f"on {fr} only: a property of that head (its reading or mounting), not of the disk"
+    elif fr.startswith("sensor "):
+        fw = (
+            f"of the platform angle on moving {fr} only: an error in the frame of that sensor "
+            "(its mounting, its edges' timing), not of the platform or of the disks"
+        )
     else:
         fw = FRAME_WORDS.get(fr, fr)
     if line.kind == "order" and line.value == 0 and fr == "shaft":
         fw = "the same offset on every head: the reference or the shaft, not a head"
+    if line.kind == "order" and line.value == 0 and fr.startswith("sensor "):
+        fw = f"an offset of moving {fr} only: the timing of that sensor's edges"
+    if line.kind == "order" and line.value == 0 and fr == "platform":
+        fw = "the same offset on every moving sensor: the reference platform angle"
     if tm.modulation == "speed" and tm.beta is not None:
         S = len(cinfo["speed"])
         se = f" +- {tm.beta_se:.2g}" if tm.beta_se is not None else ""

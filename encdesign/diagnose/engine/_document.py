@@ -9,6 +9,7 @@ import numpy as np
 
 from ._fit import FitResult, Term
 from ._lattice import detect_lsb
+from ._located import describe as describe_located
 from ._protocol import Prepared
 from ._settings import FinderSettings
 from ._views import order_sums, run_spans
@@ -401,6 +402,10 @@ def report_text(doc: dict) -> str:
         )
         if e["channels"] is not None:
             lines.append(f"  on channels: {e['channels']}")
+        for name, p in e["params"].items():  # a parameter that is a time (issue 44 C)
+            if isinstance(p, dict) and "interval_s" in p:
+                lt = {"t_s": float(np.ravel(p["value"])[0]), **p}
+                lines.append(f"  {name}: {describe_located(lt)} ({p['clock']})")
         lines.append(f"  {e['explanation']}")
         for n in e["notes"]:
             lines.append(f"  note: {n}")
@@ -413,6 +418,8 @@ def report_text(doc: dict) -> str:
         w = x["where"]
         loc = ", ".join(f"{k} {[round(v, 4) for v in w[k]][:6]}" for k in w if w[k])
         lines.append(f"unexplained ({x['view']}): {loc}; rms {x['rms']:.4g} {u}")
+        if x.get("located_time"):
+            lines.append(f"  located at {describe_located(x['located_time'])}")
         if x.get("step_at"):
             lines.append(f"  {x['step_at']['note']}")
         lines += _model_lines(x.get("model"), u)

@@ -64,6 +64,7 @@ from ._protocol import FitDivergence, Prepared
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
+from ._steps import run_param_interval, time_param_interval
 from ._timing import stage, timing
 from ._views import locate
 
@@ -396,8 +397,9 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     return base_fit, order
 
 
-def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
-    """One named effect of the selection as its JSON entry."""
+def _effect_json(prep: Prepared, sel: Selection, s, fitter: Fitter | None = None) -> dict:
+    """One named effect of the selection as its JSON entry (with ``fitter``, each parameter
+    that is a time gains its interval: :func:`._steps.time_param_interval`)."""
     final = sel.final
     idx = next(i for i, t in enumerate(final.terms) if t.cand.name == s.name)
     term = final.terms[idx]
@@ -406,9 +408,20 @@ def _effect_json(prep: Prepared, sel: Selection, s) -> dict:
         derived = term.cand.derived(prep.ctx, term.values, se_dict(term, final, idx))
     chans = significant_channels(term, final, idx, prep.n_channels, prep.ctx.n_runs, prep.settings)
     names = prep.kd.channel_names
+    params = global_times_in_own_clock(prep, term, term_params(term, final, idx))
+    for q in term.cand.params:  # issue 44 C: a located time's interval
+        if fitter is None or q.name not in params or not (q.global_time or q.first_run):
+            continue
+        if q.global_time:
+            lt = time_param_interval(fitter, prep, final.terms, idx, q.name)
+            keys = ("interval_s", "interval_runs", "level", "convention")
+        else:
+            lt = run_param_interval(fitter, prep, final.terms, idx, q.name)
+            keys = ("t_s", "run", "interval_s", "interval_runs", "level", "clock", "convention")
+        params[q.name].update({k: lt[k] for k in keys})
     out = {
         "name": s.name,
-        "params": global_times_in_own_clock(prep, term, term_params(term, final, idx)),
+        "params": params,
         "derived": derived,
         "channels": [names[k] for k in chans] if chans is not None else None,
         "rms_after": s.fit.rms(prep),
@@ -503,7 +516,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     kd = prep.kd
     base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))
-    effects = [_effect_json(prep, sel, s) for s in sel.accepted]
+    effects = [_effect_json(prep, sel, s, fitter) for s in sel.accepted]
     unexplained = [
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
         for f in sel.findings[:12]

@@ -23,6 +23,8 @@ from ._html_base import (
     _e,
     _figure,
     _located,
+    _located_cell,
+    _located_intervals,
     _num,
     _param_cell,
     _png,
@@ -178,7 +180,28 @@ def fig_time(doc: Mapping[str, Any], rows: ReportRows) -> str:
     spans = _spans(~keep, tau)
     marks = [(_tau_of(rows, r, t), lab) for r, t, lab in _located_times(doc)]
     colors = {"located": "tab:purple", "glitch": "tab:orange", "count jump": "k", "gap": "0.4"}
+    # issue 44 C: each located time's interval shaded; each run's start on the recording's
+    # own t written at the top, so a time on the axis can be read on the recording's clock
+    bands = [
+        (_tau_of(rows, r0, t0), _tau_of(rows, r1, t1)) for r0, t0, r1, t1 in _located_intervals(doc)
+    ]
+    run_ids = np.asarray(rows["run"])
+    starts = np.flatnonzero(np.r_[True, run_ids[1:] != run_ids[:-1]])
+    for i in starts if starts.size <= 12 else starts[:0]:
+        axes[0].annotate(
+            f"run {run_ids[i]}: t = {float(rows['t'][i]):.6g} s",
+            (float(tau[i]), 1.0),
+            xycoords=("data", "axes fraction"),
+            fontsize=6,
+            va="bottom",
+        )
     for ax, k in zip(axes, ks):
+        for i, (a, b) in enumerate(x for x in bands if None not in x):
+            ax.axvspan(
+                a, b, color="tab:purple", alpha=0.25, label="located: interval" if i == 0 else None
+            )
+        for i in starts[1:]:
+            ax.axvline(float(tau[i]), color="0.3", lw=0.5)
         ax.plot(tau[s], rows["base_resid"][s, k], ".", ms=1.5, color="tab:red", label="base")
         kk = keep[s]
         ax.plot(
@@ -195,7 +218,9 @@ def fig_time(doc: Mapping[str, Any], rows: ReportRows) -> str:
                 seen.add(lab)
         ax.set_ylabel(f"{rows['channels'][k]} ({doc['unit']})", fontsize=8)
     axes[0].legend(fontsize=7, loc="upper right", ncol=5, markerscale=5)
-    axes[-1].set_xlabel("time, runs end to end (s)")
+    axes[-1].set_xlabel(
+        "time, runs end to end, pauses removed (s); each run's start on the recording's t above"
+    )
     return _png(fig)
 
 
@@ -520,7 +545,8 @@ def _located_parts(doc: dict) -> list[str]:
             [
                 [
                     _e(f.get("view", "-")),
-                    _where_text(f.get("where")),
+                    _where_text(f.get("where"))
+                    + ("<br>" + _located_cell(f["located_time"]) if f.get("located_time") else ""),
                     _num(f.get("rms")),
                     _e(
                         "-"

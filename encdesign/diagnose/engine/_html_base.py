@@ -14,6 +14,7 @@ import numpy as np
 from ..._html import escape as _e
 from ..._html import num as _num
 from ..._html import table as _table  # noqa: F401 (the report's modules import it from here)
+from ._located import describe
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -44,13 +45,17 @@ class ReportRows(TypedDict):
 
 
 def _param_cell(p: Mapping[str, Any]) -> str:
-    """``value ± se unit``; arrays as their size and largest magnitude, full in details."""
+    """``value ± se unit``; arrays as their size and largest magnitude, full in details; a
+    time with its run and interval on the recording's own ``t`` (issue 44 C)."""
     v, se, unit = p.get("value"), p.get("se"), p.get("unit", "")
     if v is None or np.ndim(v) == 0:
         s = _num(v, 6)
         if se is not None:
             s += f" ± {_num(se, 3)}"
-        return f"{s} {_e(unit)}"
+        s = f"{s} {_e(unit)}"
+        if "interval_s" in p and v is not None:
+            s += "<br>" + _located_cell({"t_s": float(v), **p})
+        return s
     va = np.asarray(v, dtype=float)
     sa = np.asarray(se, dtype=float) if se is not None else None
     shape = "×".join(str(n) for n in va.shape)
@@ -64,6 +69,28 @@ def _param_cell(p: Mapping[str, Any]) -> str:
         for a, b in zip(va.ravel(), sa.ravel() if sa is not None else va.ravel())
     ]
     return f"{s}<details><summary>all</summary>{_e(', '.join(flat))}</details>"
+
+
+def _located_cell(lt: Mapping[str, Any] | None) -> str:
+    """A located time with its run and interval on the recording's own ``t``."""
+    if not lt:
+        return ""
+    return _e(f"{describe(dict(lt))} ({lt.get('clock', 'the recording' + chr(39) + 's t')})")
+
+
+def _located_intervals(doc: Mapping[str, Any]) -> list[tuple[int, float, int, float]]:
+    """``(run, t, run, t)`` of the ends of every located time's interval: the findings',
+    the unexplained structure's, and the effects' parameters that are times."""
+    out = []
+    items = list(doc.get("findings_before") or []) + list(doc.get("unexplained") or [])
+    lts = [f["located_time"] for f in items if isinstance(f.get("located_time"), Mapping)]
+    for e in doc.get("effects") or []:
+        lts += [p for p in (e.get("params") or {}).values() if "interval_s" in p]
+    for lt in lts:
+        (t0, t1), (r0, r1) = lt["interval_s"], lt["interval_runs"]
+        if (r0, t0, r1, t1) not in [(a, b, c, d) for a, b, c, d in out]:
+            out.append((r0, float(t0), r1, float(t1)))
+    return out
 
 
 def _where_text(w: Mapping[str, Any] | None) -> str:

@@ -179,7 +179,7 @@ def fig_discovered(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
         others = [q for key, q in lines.items() if key != own]
         heads = t.get("heads") or []
         fr = str(t.get("frame", ""))
-        if fr.startswith("head ") and len(heads) == 1 and heads[0] in chans:
+        if fr.startswith(("head ", "sensor ")) and len(heads) == 1 and heads[0] in chans:
             k = chans.index(heads[0])
         else:
             r = np.where(keep[:, None], rows["final_resid"], np.nan)

@@ -62,8 +62,19 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
     fig, axes = new_figure(C, 1, figsize=(7, 1.6 * C + 1.0), sharex=True)
     axes = np.atleast_1d(axes)
     tau = prep.rows["tau"]
+    starts = np.flatnonzero(np.r_[True, prep.run[1:] != prep.run[:-1]])
+    for i in starts if starts.size <= 12 else starts[:0]:  # each run's start on its own t
+        axes[0].annotate(
+            f"run {prep.run_ids[prep.run[i]]}: t = {float(prep.rows['t'][i]):.6g} s",
+            (float(tau[i]), 1.0),
+            xycoords=("data", "axes fraction"),
+            fontsize=6,
+            va="bottom",
+        )
     for k in range(C):
         ax = axes[k]
+        for i in starts[1:]:
+            ax.axvline(float(tau[i]), color="0.3", lw=0.5)
         ax.plot(tau, r0[:, k], ",", color="tab:red", label="base")
         ax.plot(tau[prep.keep], r1[prep.keep, k], ",", color="tab:blue", label="final")
         bad = ~prep.keep
@@ -72,7 +83,9 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
             ax.fill_between(tau, lo, hi, where=bad, color="0.85", step="mid", label="excluded")
         ax.set_ylabel(prep.kd.channel_names[k], fontsize=8)
     axes[0].legend(fontsize=7, loc="upper right")
-    axes[-1].set_xlabel("time, runs end to end (s)")
+    axes[-1].set_xlabel(
+        "time, runs end to end, pauses removed (s); each run's start on the recording's t above"
+    )
     paths.append(save_figure(fig, out, "residuals.png"))
     fig, ax = new_figure(figsize=(7, 3.5))
     for res, lab in ((r0, "base"), (r1, "final")):

@@ -6,6 +6,7 @@ reported where it was located (:func:`place_step_refusals`)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from ._candidates import Candidate, Param
 from ._fit import FitResult, Fitter, Term, make_term
+from ._located import change_chi2, interval_of, located_time, profile_scan
 from ._protocol import Prepared
 
 
@@ -194,12 +196,16 @@ REFINE_STEP_SHIFTS = 3
 edge (each move one window width; not a threshold: a bound on the work)."""
 
 
-def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
+def refine_step(
+    fitter: Fitter, prep: Prepared, terms: list[Term], f, interval: bool = False
+) -> None:
     """Move a located step's time (``f``, a ``time`` finding) to the row where the model
     ``terms`` plus a step fits best: the time view's change point is read off a residual
     from which the base model has taken part of the step (and moved its change point). A
     scan of 32 rows over 4 time-view blocks (1/8 of the run) either side, then of the rows
-    between the best one's neighbours (at most 48)."""
+    between the best one's neighbours (at most 48). ``interval``: then the profile of the
+    model's chi-square over the step's row around it (:func:`._located.profile_scan`),
+    the finding's ``located_time`` (issue 44 C)."""
     r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
     rows = np.flatnonzero((prep.run == r) & prep.keep)
     tau = prep.rows.take("tau", rows)
@@ -235,6 +241,17 @@ def refine_step(fitter: Fitter, prep: Prepared, terms: list[Term], f) -> None:
     if fine.size > 48:
         fine = np.unique(np.linspace(a, b, 48).astype(int))
     best = best_of(fine)
+    if interval:
+
+        def chi2_of(idx: np.ndarray) -> np.ndarray:
+            steps = [
+                step_term(prep, dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)) for i in idx
+            ]
+            return fitter.column_chi2(held, steps)
+
+        c = change_chi2(prep.settings.change_time_level)
+        best, lo, hi = profile_scan(chi2_of, best, 1, rows.size - 1, c)
+        f.located_time = located_time(prep, rows, best, lo, hi)
     t = prep.rows["t"]
     f.detail["step_time_s"] = float(t[rows[best]])
     f.detail["global_step_time_s"] = float(tau[best])
@@ -263,10 +280,10 @@ def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
             <= max(g.where["times_s"]) + prep.settings.step_match_blocks * g.detail["block_s"]
         ]
         if seen:  # the final residual's own step: refined with the final model
-            refine_step(fitter, prep, current.terms, seen[0])
+            refine_step(fitter, prep, current.terms, seen[0], interval=True)
             seen[0].where["times_s"] = list(seen[0].detail["step_times_s"])
             continue
-        refine_step(fitter, prep, current.terms, f)
+        refine_step(fitter, prep, current.terms, f, interval=True)
         f.where["times_s"] = list(f.detail["step_times_s"])
         f.detail["shape"] = "step"
         if not any(h is f for h in findings):  # else a finding of the final residual
@@ -276,7 +293,87 @@ def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
     # model too (the view's change point is read off a residual from which smooth terms
     # took part of the step, and may lie blocks away from it)
     for g in findings:
-        if g.view == "time" and g.detail.get("shape") == "step" and not g.detail.get("placed"):
-            refine_step(fitter, prep, current.terms, g)
+        if (
+            g.view == "time"
+            and g.detail.get("shape") == "step"
+            and (not g.detail.get("placed") or g.located_time is None)
+        ):
+            refine_step(fitter, prep, current.terms, g, interval=True)
             g.where["times_s"] = list(g.detail["step_times_s"])
     return findings
+
+
+@functools.lru_cache(maxsize=32)
+def _scaled(cand: Candidate) -> Candidate:
+    """``cand`` with every parameter held and one free scale ``size``: its column at the
+    held values (a profile over a held time, the rest of its shape at its fitted values)."""
+
+    def fn(p: dict, x: dict):
+        return p["size"] * cand.fn({q.name: p[q.name] for q in cand.params}, x)
+
+    held = tuple(
+        Param(q.name, q.unit, q.shape, linear=False, fit=False, scale=q.scale) for q in cand.params
+    )
+    return Candidate(
+        name=f"{cand.name}.time_profile",
+        fn=fn,
+        params=(Param("size", "1", description="scale of the fitted term"), *held),
+        explanation=f"{cand.name} at its fitted shape, its time moved (a profile)",
+    )
+
+
+def time_param_interval(
+    fitter: Fitter, prep: Prepared, terms: list[Term], idx: int, name: str
+) -> dict:
+    """The ``located_time`` of a parameter ``name`` of ``terms[idx]`` that is a time on the
+    end-to-end axis (``Param.global_time``): the profile of chi-square over that time, at
+    the midpoints between kept rows, the other terms' linear parameters refitted and the
+    term itself scaled (its shape at the fitted values: one free column per candidate
+    time, :meth:`Fitter.column_chi2`); the interval at ``FinderSettings.change_time_level``
+    (:mod:`._located`)."""
+    term = terms[idx]
+    rows = np.flatnonzero(prep.keep)
+    tau = np.asarray(prep.rows.take("tau", rows), float)
+    mid = np.concatenate([[tau[0]], 0.5 * (tau[1:] + tau[:-1])])  # change before row i
+    held = frozen([t for i, t in enumerate(terms) if i != idx])
+    sc = _scaled(term.cand)
+    vals = {k: np.asarray(v, float) for k, v in term.values.items()}
+
+    def chi2_of(ix: np.ndarray) -> np.ndarray:
+        cols = []
+        for i in ix:
+            tm = make_term(sc, prep, {**vals, name: mid[i], "size": 1.0})
+            tm.values["size"][...] = 0.0
+            cols.append(tm)
+        return fitter.column_chi2(held, cols)
+
+    best = int(np.clip(np.searchsorted(tau, float(np.ravel(vals[name])[0])), 1, rows.size - 1))
+    c = change_chi2(prep.settings.change_time_level)
+    best, lo, hi = profile_scan(chi2_of, best, 1, rows.size - 1, c)
+    return located_time(prep, rows, best, lo, hi)
+
+
+def run_param_interval(
+    fitter: Fitter, prep: Prepared, terms: list[Term], idx: int, name: str
+) -> dict:
+    """The ``located_time`` of a held parameter ``name`` of ``terms[idx]`` that is the index
+    of the first run of a change (``Param.first_run``): the profile of chi-square over runs
+    ``0 .. R - 1`` as :func:`time_param_interval` (the term at its fitted shape, scaled),
+    the located time the first row of that run on the recording's own ``t``."""
+    term = terms[idx]
+    R = int(prep.ctx.n_runs)
+    firsts = np.concatenate([[0], np.flatnonzero(np.diff(prep.run) != 0) + 1])
+    held = frozen([t for i, t in enumerate(terms) if i != idx])
+    sc = _scaled(term.cand)
+    vals = {k: np.asarray(v, float) for k, v in term.values.items()}
+    ks = np.arange(R)  # 0: the term on every run (a change before the record)
+    cols = []
+    for k in ks:
+        tm = make_term(sc, prep, {**vals, name: float(k), "size": 1.0})
+        tm.values["size"][...] = 0.0
+        cols.append(tm)
+    chi = fitter.column_chi2(held, cols)
+    best = int(np.clip(round(float(np.ravel(vals[name])[0])), 0, R - 1))
+    c = change_chi2(prep.settings.change_time_level)
+    best, lo, hi = interval_of(ks, chi, c, best=best)
+    return located_time(prep, firsts, best, lo, hi)

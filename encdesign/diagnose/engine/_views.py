@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
 
 
@@ -42,11 +43,14 @@ class Finding:
     log10_p: float
     variance_share: float = 0.0
     detail: dict[str, Any] = dataclasses.field(default_factory=dict)
+    located_time: dict | None = None
+    """A located change: its time on the recording's own ``t``, run and interval
+    (:func:`._located.located_time`); ``None`` where the finding locates no change."""
 
     def to_json(self, sigma_mean: float) -> dict:
         """JSON form (rms in the unit of the residual)."""
         n = max(self.detail.get("n_values", 1), 1)
-        return {
+        out = {
             "view": self.view,
             "where": self.where,
             "rms": float(sigma_mean * math.sqrt(max(self.power - self.dof, 0.0) / n)),
@@ -54,6 +58,9 @@ class Finding:
             "log10_p": float(self.log10_p),
             "detail": self.detail,
         }
+        if self.located_time is not None:
+            out["located_time"] = self.located_time
+        return out
 
 
 def log10_tail_p(chi2: float, dof: int) -> float:
@@ -485,6 +492,7 @@ def view_time(prep, rw) -> list[Finding]:
         means = np.stack([rw[p].sum(0) / math.sqrt(p.size) for p in parts])  # ~N(0,1) each
         blocks_all.append((r, parts, means))
     n_tests = max(1, len(blocks_all) * C)
+    c_change = change_chi2(prep.settings.change_time_level)
     for r, parts, means in blocks_all:
         nb = len(parts)
         chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
@@ -507,7 +515,7 @@ def view_time(prep, rw) -> list[Finding]:
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
-            i_step = _change_row(rw[rows_r, k], parts, jb)
+            i_step, stat = change_row(rw[rows_r, k], parts, jb)
             tstep = float(prep.rows["t"][rows_r[i_step]])
             detail = {
                 "shape": "step" if is_step else "transient_or_drift",
@@ -523,6 +531,13 @@ def view_time(prep, rw) -> list[Finding]:
             detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
             if is_step:
                 t0, t1 = detail["step_times_s"]
+            located = None
+            if is_step or detail["step_significant"]:
+                # the profile of the step's chi-square over its row, this channel's rows
+                # (the CUSUM statistic is the chi-square a step there takes out)
+                cand = np.arange(1, rows_r.size)
+                _, lo, hi = interval_of(cand, -stat, c_change, best=i_step)
+                located = located_time(prep, rows_r, i_step, lo, hi)
             out.append(
                 Finding(
                     "time",
@@ -531,6 +546,7 @@ def view_time(prep, rw) -> list[Finding]:
                     nb - 1,
                     log10_tail_p(float(chi[k]), nb - 1),
                     detail=detail,
+                    located_time=located,
                 )
             )
     # merge channels that share a run and a time (report a structure on several heads once)
@@ -560,19 +576,6 @@ def view_time(prep, rw) -> list[Finding]:
         if note:
             g.detail["heads_note"] = note
     return merged
-
-
-def _change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> int:
-    """Row index (into the run's kept rows ``x``) of the most likely single step in ``x``,
-    searched over the blocks next to block edge ``jb``: the first row after the step."""
-    n = x.size
-    lo = int(sum(p.size for p in parts[: max(jb - 1, 0)]))
-    hi = int(sum(p.size for p in parts[: min(jb + 1, len(parts))]))
-    cs = np.cumsum(x - x.mean())[:-1]  # S_i: sum of the first i + 1 rows
-    i = np.arange(1, n, dtype=float)
-    stat = cs**2 * n / (i * (n - i))
-    lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
-    return int(lo + np.argmax(stat[lo - 1 : hi - 1]))
 
 
 def _regress_view(prep, rw, name: str, cols: list, extra: dict | None = None):

@@ -57,6 +57,7 @@ import numpy as np
 
 from ...engine._fit import valjac_fn as _valjac_fn
 from ...engine._kind import AbstractKind
+from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import Finding, KindView
@@ -109,14 +110,17 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
     R = r.shape[0]
     n_tests = max(1, 2 * M * (R - 1))
     thr = _thr(prep.settings.alpha, 1, n_tests)
+    c_change = change_chi2(prep.settings.change_time_level)
     out = []
     for m in range(M):
         x = r[:, m] - r[:, m].mean()
         best = (0.0, 1, "step")
+        prof = np.zeros(R)  # chi-square a step from run k on takes out (its profile)
         for k in range(1, R):
             s = (np.arange(R) >= k).astype(float)
             s -= s.mean()
             pw = float((s @ x) ** 2 / (s @ s))
+            prof[k] = pw
             if pw > best[0]:
                 best = (pw, k, "step")
         j = int(np.argmax(np.abs(x)))
@@ -125,6 +129,11 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
             best = (pw_out, j, "run_outlier")
         if best[0] > thr:
             k = best[1]
+            located = None
+            if best[2] == "step":  # issue 44 C: the runs within the profile's bound
+                ks = np.arange(1, R)
+                _, lo, hi = interval_of(ks, -prof[1:], c_change, best=k)
+                located = located_time(prep, np.arange(R), k, lo, hi)
             out.append(
                 Finding(
                     "run_step",
@@ -142,6 +151,7 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
                         "sensor": f"m{m}",
                         "n_values": int(R),
                     },
+                    located_time=located,
                 )
             )
     return out

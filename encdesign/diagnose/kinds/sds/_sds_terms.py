@@ -571,7 +571,7 @@ def _catalog(
                 Param("frequency_ratio", "1", linear=False, scale=0.01),
                 Param("sin_rad", "rad"),
                 Param("cos_rad", "rad"),
-                Param("first_run", "1", linear=False, fit=False),
+                Param("first_run", "1", linear=False, fit=False, first_run=True),
             ),
             signature=("sds_bearing_wobble",),
             kinds=("sds",),
@@ -599,7 +599,7 @@ def _catalog(
             _delay_fn,
             (
                 Param("delay_s", "s", (M,), scale=1e-10),
-                Param("first_run", "1", linear=False, fit=False),
+                Param("first_run", "1", linear=False, fit=False, first_run=True),
                 Param("ref_sensor", "1", linear=False, fit=False),
             ),
             signature=("run_step",),
