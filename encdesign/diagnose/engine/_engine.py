@@ -88,9 +88,11 @@ def _grow_base_order(
     error function has every order, and one left out would be reported as structure no
     effect explains. Not when the residual also shows a line at the signal period (aliased,
     it can pose as integer orders) or structure tied to the direction or speed (the
-    candidates' to explain); and the grown base must leave at most ``settings.growth_left_max`` of
-    what every view located (a line in Hz, a step or a drift that only leaks into high orders
-    stays the candidates'; a strong order's leakage into lines off the integers goes with it).
+    candidates' to explain) holding at least ``settings.growth_veto_share`` of what every
+    view located (less is leakage); and the grown base must leave at most
+    ``settings.growth_left_max`` of what every view located (a line in Hz, a step or a drift
+    that only leaks into high orders stays the candidates'; a strong order's leakage into
+    lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period
     (``interpolation_error``'s) stay out. Where held-out error lowered the base order
     (:func:`_choose_base_order`), growth is also undone when it raises the held-out
@@ -101,7 +103,10 @@ def _grow_base_order(
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     findings = locate(prep, fitter.residual(fit.terms), kind.views(prep), hi)
-    if any(f.view in ("line_phase", "direction", "speed", "angle_trend") for f in findings):
+    p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
+    veto = ("line_phase", "direction", "speed", "angle_trend")
+    pv = sum(max(f.power - f.dof, 0.0) for f in findings if f.view in veto)
+    if pv > 0 and pv >= prep.settings.growth_veto_share * p0:
         return None
     found = [
         round(f.where["orders"][0])
@@ -120,7 +125,6 @@ def _grow_base_order(
     _set_order(prep, M)
     fitter.clear()
     grown = fitter.fit(terms)
-    p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
     after = locate(
         prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M, prep.settings)
     )

@@ -119,6 +119,15 @@ class FinderSettings(eqx.Module):
     share of what every view located. 1af4a3c (strong high orders leak into the time,
     drift and order-step views)."""
 
+    growth_veto_share: float = eqx.field(default=0.01, static=True)
+    """The base model's order growth is not tried when the residual shows a line at the
+    signal period or structure tied to the direction or speed (views ``line_phase``,
+    ``direction``, ``speed``, ``angle_trend``) holding at least this share of what every view
+    located; below it that structure is leakage and cannot pose as the integer orders.
+    Session 14 (issue 44 H): on the `high` variation set's misses (disk orders 13-20, seeds
+    1302-1304) an aliased signal-period line or an angle trend of 0.005-0.23 % of the located
+    excess kept the base at order 12 and the record `unexplained`."""
+
     base_order_ratio: float = eqx.field(default=1.5, static=True)
     """multihead: when the base model's K-fold held-out residual RMS exceeds its fitted RMS
     by more than this factor, its orders may be ill-conditioned on this record (few samples
