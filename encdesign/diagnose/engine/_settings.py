@@ -772,26 +772,6 @@ DEFAULT_SETTINGS = FinderSettings()
 
 SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
 
-NAMED_RULES = ("identifiable", "better_candidate", "applies", "one_parameter_bic")
-"""Acceptance rules that are not a threshold: all parameters already taken
-(``identifiable``), another candidate lowers the criterion more (``better_candidate``), the
-candidate cannot be tested on this record (``applies``), an alternative fits within one
-parameter's information-criterion penalty ``log N`` and is confounded with it
-(``one_parameter_bic``: sds, a drift vs an order of the platform angle); with
-``<candidate>.plausible``."""
-
-
-def is_rule_name(name: object) -> bool:
-    """Whether ``name`` names an acceptance rule: a :class:`FinderSettings` field, one of
-    :data:`NAMED_RULES`, or ``<candidate>.plausible``."""
-    if not isinstance(name, str):
-        return False
-    if name in SETTINGS_FIELDS or name in NAMED_RULES:
-        return True
-    head, _, tail = name.rpartition(".")
-    return tail == "plausible" and head.isidentifier()
-
-
 CHUNK_ROWS = 8192
 CACHE_BYTES = 6.0e7
 """Budget of each of the fitter's two caches (Jacobians of linear terms, processed static
