@@ -19,7 +19,7 @@
    vibration, written to a ``--long-table`` file (Parquet by default) and diagnosed from
    it, with the wall time per stage in ``stages_s``: ``parsing`` (loading the file), then
    the engine's own ``timings_s`` (``data``, ``prepare``, ``base_fit``, ``views``,
-   ``candidates``, ``heldout``, ``select``, ``report``; exclusive, they add up to the
+   ``candidates``, ``heldout``, ``select``, ``discovery``, ``report``; exclusive, they add up to the
    diagnosis). One record by hand:
    ``python benchmarks/diagnose.py --child 1000000 --heads 4 --effect --table parquet``.
 5. One record on several processes (issue 43), by hand: ``--child N --processes P`` runs

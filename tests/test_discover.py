@@ -43,6 +43,7 @@ def test_speed_law_in_the_shaft_frame_with_its_exponent(cls, kind):
     d = diagnose(rec)
     validate_diagnosis(d.doc)
     assert d.verdict == "unexplained", d.doc["report"]
+    assert d.doc["timings_s"]["discovery"] > 0.0  # a stage of its own, not inside the report
     line = truth["line"][1]
     mine = [t for t in _terms(d.doc) if t["line_kind"] == "order" and t["value"] == line]
     assert mine, d.doc["report"]

@@ -525,7 +525,8 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
         if (ctx := step_context(prep, u)) is not None:
             u["step_at"] = ctx
     if fitter is not None and unexplained:  # issue 41: discovery after the catalog
-        models = discover(prep, fitter, sel.final.terms, sel.final_resid, sel.findings[:12])
+        with stage("discovery"):  # its own stage (was timed inside the report's)
+            models = discover(prep, fitter, sel.final.terms, sel.final_resid, sel.findings[:12])
         near = _nearest_catalog(sel.rejected)
         for u, m in zip(unexplained, models):
             if m is not None:
