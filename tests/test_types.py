@@ -1,37 +1,47 @@
-"""Shape annotations of the public physics signatures are true and checked: jaxtyping with
-beartype accepts the documented shapes and refuses axes that disagree (the same check the
-pytest hook in ``pyproject.toml`` runs on every call in the tests)."""
+"""Issue 40 item 7: the package's annotations name real types; ``Any`` only where a value is
+a JSON document or otherwise opaque. The count may only fall (355 of 4,398 annotations when
+the issue was filed; 279 of 5,265 at session 14's stop)."""
 
 from __future__ import annotations
 
-import jax.numpy as jnp
-import numpy as np
-import pytest
-from beartype import beartype
-from jaxtyping import TypeCheckError, jaxtyped
+import ast
+from pathlib import Path
 
-from encdesign.physics import _kinematics as kin
-from encdesign.physics import _theorem as th
+PACKAGE = Path(__file__).resolve().parent.parent / "encdesign"
+MAX_ANY = 300  # lower it when the count falls; never raise it
 
 
-def _checked(fn):
-    return jaxtyped(typechecker=beartype)(fn)
+def _annotations(tree: ast.AST) -> list[ast.expr]:
+    """Argument, return and variable annotations of a module."""
+    out: list[ast.expr] = []
+    for n in ast.walk(tree):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = n.args
+            args = [*a.posonlyargs, *a.args, *a.kwonlyargs, a.vararg, a.kwarg]
+            out += [x.annotation for x in args if x is not None and x.annotation is not None]
+            if n.returns is not None:
+                out.append(n.returns)
+        elif isinstance(n, ast.AnnAssign):
+            out.append(n.annotation)
+    return out
 
 
-def test_theorem_shapes_accept_documented_and_refuse_disagreeing_axes():
-    errors = jnp.zeros((5, 3))
-    assert _checked(th.averaged_error)(errors, [1.0, 1.0, 2.0]).shape == (5,)
-    with pytest.raises(TypeCheckError):  # 4 weights for 3 heads
-        _checked(th.averaged_error)(errors, np.ones(4))
-    assert _checked(th.surviving_orders)(np.array([0.0, 2.0, 4.0]), 6).shape == (6,)
-    with pytest.raises(TypeCheckError):  # head azimuths must be one axis
-        _checked(th.surviving_orders)(np.zeros((2, 2)), 6)
+def count_any(root: Path = PACKAGE) -> tuple[int, int]:
+    """``(annotations mentioning Any, all annotations)`` over ``root``'s modules."""
+    n_any = n_all = 0
+    for p in sorted(root.rglob("*.py")):
+        for an in _annotations(ast.parse(p.read_text(encoding="utf-8"))):
+            n_all += 1
+            n_any += "Any" in ast.unparse(an)
+    return n_any, n_all
 
 
-def test_kinematics_shapes_scalar_and_vector_angles():
-    m = kin.make_model(0.02, [0.0, 2.0, 4.0], grating_sin_rad=[1e-6])
-    f = _checked(kin.head_errors)
-    assert f(m, 0.3).shape == (3,)
-    assert f(m, np.linspace(0, 1, 7), np.linspace(0, 1, 7)).shape == (7, 3)
-    with pytest.raises(TypeCheckError):  # angles must be a scalar or one axis of floats
-        f(m, np.zeros(4, dtype=np.int64))
+def test_fewer_any_than_when_the_issue_was_filed():
+    n_any, n_all = count_any()
+    assert n_all > 4000  # the scan saw the package
+    assert n_any <= MAX_ANY, f"{n_any} of {n_all} annotations mention Any (at most {MAX_ANY})"
+
+
+def test_the_count_sees_an_any(tmp_path):
+    (tmp_path / "m.py").write_text("from typing import Any\ndef f(x: Any) -> int: ...\n")
+    assert count_any(tmp_path) == (1, 2)
