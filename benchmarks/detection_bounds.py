@@ -7,9 +7,17 @@ with fresh noise (other seeds) carry it at ``1.5x`` and ``0.5x`` that bound; a r
 as found when the effect is named. Acceptance (issue 44): >= 80 % found at 1.5x, <= 10 % at
 0.5x. Effects: ``sensor_delay_step`` on moving sensor ``m1`` of sds benches
 (``write_concealed_sds``, the step from a run in the middle half of the record, as the bound
-states), ``vibration`` on one head of multihead records (``vibration_record``)::
+states), ``vibration`` on one head of multihead records (``vibration_record``).
 
-    python benchmarks/detection_bounds.py --effect sds_delay --seed 600 --n 4 [--json out.json]
+``--same``: the effect is put in the very record the bound came from (same noise, same
+step run): the literal claim, "this record would have revealed it"; without it, in records of
+the same geometry with fresh noise, whose own noise estimate (and so their own bound) differs
+from the first record's (the sds run-mean level is known to about +-17 %). ``--factors``:
+the sizes, in multiples of the bound (``1.0`` shows the convention: about half found)::
+
+    python benchmarks/detection_bounds.py --effect sds_delay --seed 620 --n 4 [--json out.json]
+    python benchmarks/detection_bounds.py --effect vibration --same --factors 1.5,1.0,0.5 \
+        --seed 730 --n 3 --geometries 4
 """
 
 from __future__ import annotations
@@ -40,8 +48,46 @@ def _bound(doc: dict, effect: str, where: str) -> dict:
     return next(b for b in doc["detection_bounds"] if b["effect"] == effect and b["where"] == where)
 
 
-def sds_delay_trials(seed: int, n: int, geom: dict, folder: Path) -> list[dict]:
-    """The bound of one clean-equivalent sds bench and ``n`` records each at 1.5x and 0.5x."""
+def sds_same_record(seed: int, n: int, make, middle: tuple[int, int], factors) -> list[dict]:
+    """``same``: per key (from ``seed * 1000 + 1`` on, those whose step run lies in the middle
+    half), the bound of the clean-equivalent record and the same record (same noise, same
+    step run) with the step at each factor of its own bound."""
+    rows: list[dict] = []
+    key = seed * 1000
+    while len({r["key"] for r in rows}) < n:
+        key += 1
+        rec, truth = make(key, 0.0)
+        if not middle[0] <= truth["params"]["first_run"] <= middle[1]:
+            continue
+        d0 = diagnose(rec).doc
+        if d0["verdict"] != "consistent":
+            rows.append(dict(seed=seed, key=key, skipped=f"clean record {d0['verdict']}"))
+            continue
+        b = _bound(d0, "sensor_delay_step", "m1")
+        for factor in factors:
+            rec, truth = make(key, factor * b["bound"])
+            d = diagnose(rec).doc
+            found = any(e["name"] == "sensor_delay_step" for e in d["effects"])
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=found,
+                    bound=b["bound"],
+                    first_run=truth["params"]["first_run"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
+def sds_delay_trials(
+    seed: int, n: int, geom: dict, folder: Path, factors=(1.5, 0.5), same: bool = False
+) -> list[dict]:
+    """The bound of one clean-equivalent sds bench and ``n`` records of fresh noise each at
+    1.5x and 0.5x (``same``: :func:`sds_same_record`)."""
     R = geom["n_runs"]
     lo, hi = max(1, round(R / 4)), min(R - 1, round(3 * R / 4))
 
@@ -55,6 +101,8 @@ def sds_delay_trials(seed: int, n: int, geom: dict, folder: Path) -> list[dict]:
             **geom,
         )
 
+    if same:
+        return sds_same_record(seed, n, make, (lo, hi), factors)
     rec, _ = make(seed, 0.0)
     d0 = diagnose(rec).doc
     if d0["verdict"] != "consistent":
@@ -62,7 +110,7 @@ def sds_delay_trials(seed: int, n: int, geom: dict, folder: Path) -> list[dict]:
     b = _bound(d0, "sensor_delay_step", "m1")
     rows = []
     key = seed * 1000
-    for factor in (1.5, 0.5):
+    for factor in factors:
         got = 0
         while got < n:
             key += 1
@@ -135,10 +183,44 @@ def vibration_record(
     return Recording("multihead", meta, cols), rate
 
 
-def vibration_trials(seed: int, n: int) -> list[dict]:
+def vibration_same_record(seed: int, n: int, factors) -> list[dict]:
+    """``same``: per noise seed ``seed * 1000 + 900 + i``, the bound of the clean record of
+    geometry ``seed`` and the same record (same noise) with the line at each factor."""
+    rows: list[dict] = []
+    for i in range(n):
+        key = seed * 1000 + 900 + i
+        rec, _ = vibration_record(seed, key, 0.0, 1, None)
+        d0 = diagnose(rec).doc
+        if d0["verdict"] != "consistent":
+            rows.append(dict(seed=seed, key=key, skipped=f"clean record {d0['verdict']}"))
+            continue
+        b = _bound(d0, "vibration", "h1")
+        f_hz = float(b["at"].split()[3])
+        for factor in factors:
+            rec, _ = vibration_record(seed, key, factor * b["bound"], 1, f_hz)
+            d = diagnose(rec).doc
+            found = any(e["name"] == "vibration" for e in d["effects"])
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=found,
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
+def vibration_trials(seed: int, n: int, factors=(1.5, 0.5), same: bool = False) -> list[dict]:
     """The bound of one clean multihead record (geometry ``seed``) on head 1 and ``n``
     records of the same geometry with fresh noise each at 1.5x and 0.5x, at the bound's
-    frequency."""
+    frequency (``same``: :func:`vibration_same_record`)."""
+    if same:
+        return vibration_same_record(seed, n, factors)
     rec, _ = vibration_record(seed, seed, 0.0, 1, None)
     d0 = diagnose(rec).doc
     if d0["verdict"] != "consistent":
@@ -146,9 +228,10 @@ def vibration_trials(seed: int, n: int) -> list[dict]:
     b = _bound(d0, "vibration", "h1")
     f_hz = float(b["at"].split()[3])
     rows = []
-    for factor in (1.5, 0.5):
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
         for i in range(n):
-            key = seed * 1000 + i + (500 if factor < 1 else 0)
+            key = seed * 1000 + offset + i
             rec, _ = vibration_record(seed, key, factor * b["bound"], 1, f_hz)
             d = diagnose(rec).doc
             found = any(e["name"] == "vibration" for e in d["effects"])
@@ -174,19 +257,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=600)
     ap.add_argument("--n", type=int, default=4, help="records per size and geometry")
     ap.add_argument("--geometries", type=int, default=3)
+    ap.add_argument("--factors", default="1.5,0.5", help="sizes in multiples of the bound")
+    ap.add_argument(
+        "--same",
+        action="store_true",
+        help="the effect in the very record the bound came from (same noise), not in fresh ones",
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
+    factors = tuple(float(f) for f in args.factors.split(","))
     rows: list[dict] = []
     t0 = time.perf_counter()
     if args.effect == "vibration":
         for gi in range(args.geometries):
-            rows += vibration_trials(args.seed + gi, args.n)
+            rows += vibration_trials(args.seed + gi, args.n, factors, args.same)
     else:
         with tempfile.TemporaryDirectory() as tmp:
             for gi, geom in enumerate(SDS_GEOMETRIES[: args.geometries]):
-                rows += sds_delay_trials(args.seed + gi, args.n, geom, Path(tmp))
+                rows += sds_delay_trials(
+                    args.seed + gi, args.n, geom, Path(tmp), factors, args.same
+                )
     done = [r for r in rows if "found" in r]
-    for f in (1.5, 0.5):
+    for f in factors:
         k = [r["found"] for r in done if r["factor"] == f]
         print(f"{args.effect} at {f}x the bound: {sum(k)} / {len(k)} found", flush=True)
     print(f"{time.perf_counter() - t0:.0f} s")

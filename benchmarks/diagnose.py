@@ -22,6 +22,10 @@
    ``candidates``, ``heldout``, ``select``, ``report``; exclusive, they add up to the
    diagnosis). One record by hand:
    ``python benchmarks/diagnose.py --child 1000000 --heads 4 --effect --table parquet``.
+5. One record on several processes (issue 43), by hand: ``--child N --processes P`` runs
+   ``encdesign diagnose REC --processes P`` on the record written to Parquet and reports the
+   command's wall time, e.g.
+   ``python benchmarks/diagnose.py --child 200000 --heads 4 --effect --processes 2``.
 
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
         [--long-rows 1e6 1e7] [--long-table parquet]
@@ -284,6 +288,47 @@ def _terms_vs_numpy(repeats: int) -> dict:
     )
 
 
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int) -> dict:
+    """One diagnosis through the CLI on ``processes`` local processes
+    (``encdesign diagnose REC --processes N``; the fit's row passes split over them): the
+    record written to a Parquet file first (not timed). Wall time of the command, peak RSS
+    of its largest process, process 0's ``timings_s``, verdict and named effects."""
+    import tempfile
+
+    from encdesign import write_recording
+
+    rec = _bench_recording(n_rows, heads, 5, effect)
+    with tempfile.TemporaryDirectory(prefix="bench-diagnose-") as tmp:
+        path = Path(tmp) / "rec.toml"
+        write_recording(path, rec.kind, rec.columns, encoder=rec.encoder, parquet=True)
+        del rec
+        cmd = [sys.executable, "-m", "encdesign", "diagnose", str(path), "--quiet"]
+        cmd += ["--json", str(Path(tmp) / "d.json"), "--processes", str(processes)]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, capture_output=True, text=True, check=True)
+        wall = time.perf_counter() - t0
+        doc = json.loads((Path(tmp) / "d.json").read_text(encoding="utf-8"))
+    rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    return dict(
+        n_rows=n_rows,
+        n_heads=heads,
+        processes=processes,
+        effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
+        wall_s_command=wall,
+        cpu_s_all_processes=_children_cpu_s(),
+        stages_s=doc.get("timings_s") or {},
+        verdict=doc["verdict"],
+        named=[e["name"] for e in doc.get("effects", [])],
+        peak_rss_bytes_largest_process=rss,
+        load_avg_end=os.getloadavg(),
+    )
+
+
 def _spawn(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
     cmd = [sys.executable, __file__, "--child", str(n_rows), "--heads", str(heads)]
     cmd += ["--table", table]
@@ -321,6 +366,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--long-table", choices=("csv", "parquet"), default="parquet")
     ap.add_argument(
+        "--processes",
+        type=int,
+        default=None,
+        help="with --child: diagnose through the CLI on this many local processes "
+        "(encdesign diagnose --processes N, from a Parquet file)",
+    )
+    ap.add_argument(
         "--effects",
         nargs="*",
         default=None,
@@ -329,6 +381,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.child is not None:
         eff = args.effect_name if args.effect_name is not None else args.effect
+        if args.processes is not None:
+            print(json.dumps(_child_processes(args.child, args.heads, eff, args.processes)))
+            return 0
         print(json.dumps(_child(args.child, args.heads, eff, args.table)))
         return 0
     from encdesign.physics._effects import CATALOG_MULTIHEAD

@@ -39,9 +39,17 @@ def _sds(tmp_path, key: int, tau_s: float):
 
 
 def test_sds_delay_step_bound_holds(tmp_path):
-    """The bound per moving sensor of a clean sds bench; a step on m1 from a run in the
-    middle half (as the bound states) at 1.5x it is named, at half of it not."""
-    rec, _ = _sds(tmp_path, 901, 0.0)
+    """The bound per moving sensor of a clean sds bench is about this record: the same
+    record (same noise, the step run in the middle half, as the bound states) with a step on
+    m1 at 1.5x it is named, at half of it not. (Records with fresh noise have their own noise
+    estimate, known to about +-20 % from 8 runs, so their own bound: the benchmark counts
+    both, ``benchmarks/detection_bounds.py`` with and without ``--same``.)"""
+    key = 940
+    while True:
+        key += 1
+        rec, truth = _sds(tmp_path, key, 0.0)
+        if 2 <= truth["params"]["first_run"] <= 6:  # the bound's middle half of 8 runs
+            break
     d = diagnose(rec).doc
     validate_diagnosis(d)
     assert d["verdict"] == "consistent"
@@ -51,13 +59,8 @@ def test_sds_delay_step_bound_holds(tmp_path):
     assert b["unit"] == "s" and 1e-11 < b["bound"] < 1e-8
     assert "sensor_delay_step" in d["report"] and "smallest size" in d["report"]
     found = {}
-    key = 910
     for factor in (1.5, 0.5):
-        while True:
-            key += 1
-            rec, truth = _sds(tmp_path, key, factor * b["bound"])
-            if 2 <= truth["params"]["first_run"] <= 6:  # the bound's middle half of 8 runs
-                break
+        rec, _ = _sds(tmp_path, key, factor * b["bound"])
         found[factor] = "sensor_delay_step" in [e["name"] for e in diagnose(rec).doc["effects"]]
     assert found == {1.5: True, 0.5: False}, found
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from encdesign.diagnose import export_candidates
+from encdesign.diagnose import FinderSettings, export_candidates
 from encdesign.diagnose._dispatch import diagnose, load_candidates
 from encdesign.diagnose.engine._html import render_html
 from encdesign.physics._effects import CATALOG_MULTIHEAD
@@ -183,8 +183,8 @@ def test_drive_orders_next_to_a_located_line_enter_the_library():
     mult, side = drive_orders({"motor": {"pole_pairs": 7, "slots": 12}}, 30)
     assert mult == [7, 12, 14, 21, 24, 28] and 13 in side and 29 in side and 84 not in mult
     lines = [Line("order", 13.0), Line("frac", 27.8), Line("order", 10.0), Line("order", 0.0)]
-    near = drive_neighbours(lines, {"motor": {"pole_pairs": 7, "slots": 12}})
+    near = drive_neighbours(lines, {"motor": {"pole_pairs": 7, "slots": 12}}, FinderSettings())
     added = {i: [lines[j].value for j in js] for i, js in near.items()}
     assert added == {0: [12.0, 14.0], 1: [28.0]}, added
     assert all(not lines[j].located for js in near.values() for j in js)
-    assert drive_neighbours([Line("order", 13.0)], {}) == {}
+    assert drive_neighbours([Line("order", 13.0)], {}, FinderSettings()) == {}

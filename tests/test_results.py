@@ -163,7 +163,7 @@ def test_every_refusal_in_the_json_names_its_rule(make):
     """Issue 22 acceptance: each refusal (and not-testable candidate, confounded pair,
     doubt, alternative) in the JSON carries the name of the rule that decided it: a
     ``FinderSettings`` field, a named rule or ``<candidate>.plausible``."""
-    from encdesign.diagnose.engine._settings import is_rule_name
+    from encdesign.diagnose.engine._settings_table import is_rule_name
 
     d = make()
     validate_diagnosis(d.to_json())
@@ -175,7 +175,7 @@ def test_every_refusal_in_the_json_names_its_rule(make):
 
 def test_rule_names_are_checked():
     """The check above can fail: a missing or unknown rule is not a rule name."""
-    from encdesign.diagnose.engine._settings import is_rule_name
+    from encdesign.diagnose.engine._settings_table import is_rule_name
 
     assert is_rule_name("bic_min") and is_rule_name("bearing_wobble.plausible")
     assert is_rule_name("better_candidate") and is_rule_name("applies")

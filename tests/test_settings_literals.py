@@ -58,8 +58,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_bounds.py", 2): SHAPE
     + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
-    ("engine/_discover.py", 2): DOF + " (two cos / sin columns of one channel)",
-    ("engine/_discover.py", 1e-6): NUMERIC + " (two line values equal to rounding)",
     ("engine/_discover.py", 1e-12): GUARD + " (log of a speed)",
     ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
     "highest order)",
@@ -82,6 +80,9 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_html.py", 6): PLOT,
     ("engine/_html.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
     ("engine/_plots.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
+    ("engine/_discover.py", -3): SHAPE + " (the sentinel line index: beyond the lines modelled)",
+    ("engine/_discover_lines.py", 1e-06): NUMERIC + " (two line values equal to rounding)",
+    ("engine/_discover_lines.py", 2): COUNT + " (rows each side of a step); DOF (cos / sin pair)",
     ("engine/_located.py", 2): COUNT + " (a change searched over at least two rows)",
     ("engine/_located.py", 24): SEARCH
     + " (a profile's best row this far from the start: the scan is repeated around it)",
@@ -179,6 +180,12 @@ ALLOWED: dict[tuple[str, float], str] = {
 
 
 CONSTANTS: dict[tuple[str, str], str] = {
+    ("engine/_rowshare.py", "ROW_GROUPS"): BOUND
+    + " (groups a pass's chunks are cut into, shared over processes; fixed so that 1 and N "
+    "processes sum in the same order)",
+    ("engine/_discover_lines.py", "STEP_BINS"): SEARCH + " (change points a step term scans)",
+    ("engine/_discover_lines.py", "STEP_EXACT_ROWS"): BOUND
+    + " (rows up to which a step is located with the catalog model projected out)",
     ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
@@ -186,7 +193,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
     + " (the frequency at which the vibration's detection bound is stated, reported with it)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
-    ("engine/_discover.py", "MAX_LINES"): BOUND + " (located lines modelled)",
+    ("engine/_discover_lines.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
     ("engine/_discover.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
     ("engine/_discover.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
@@ -228,6 +235,7 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("_dispatch.py", "diagnose.max_effects"): ARGUMENT,
     ("engine/_engine.py", "run_engine.max_effects"): ARGUMENT,
     ("engine/_select.py", "select.max_effects"): ARGUMENT,
+    ("engine/_discover_lines.py", "_pinv.share"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_located.py", "scan_indices.near"): SEARCH
     + " (rows scanned one by one around a profile's best, then spaced out)",
     ("engine/_discover.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",

@@ -10,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..distributed import add_launch_flags, is_main_process, shutdown, start
 from ._main import guard_outputs, int_arg
 
 HELP = "find where a recording and the model disagree, name the missing physics, fit it"
@@ -51,6 +52,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--max-effects", type=int_arg(0, 100), default=3, help="most effects to name"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_launch_flags(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,7 +72,34 @@ def run(args: argparse.Namespace) -> int:
         ("--export-candidates", args.export_candidates),
     ]
     with guard_outputs(inputs, outputs, folders=[("--plots", args.plots)]):
-        return _run(args)
+        # --processes N / --coordinator: the fit's row passes split over the processes,
+        # every process runs the diagnosis, process 0 writes it (docs/scale.md)
+        rc = start(args, getattr(args, "command_argv", None) or [])
+        if rc is not None:  # spawned the processes, or could not join the runtime
+            return rc
+        rc = _run(args) if is_main_process() else _run_helper(args)
+        shutdown()
+        return rc
+
+
+def _run_helper(args: argparse.Namespace) -> int:
+    """A process other than 0: the same diagnosis (its share of the row passes), silent,
+    nothing written."""
+    from ..diagnose import diagnose, load_candidates
+    from ..io import check_runs_contiguous, load_recording
+
+    cands = load_candidates(args.candidates) if args.candidates is not None else ()
+    rec = load_recording(args.recording)
+    check_runs_contiguous(rec)
+    diagnose(
+        rec,
+        max_order=args.max_order,
+        max_effects=args.max_effects,
+        candidates=cands,
+        verbose=False,
+        plots=None,
+    )
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -30,7 +30,6 @@ is a copy of the prepared one, fitted by a fitter of its own).
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -213,25 +212,9 @@ def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
     return hi
 
 
-def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
-    """One ``detection_bounds`` entry: the largest bound over the probe's values and its
-    ``worst_of`` (``bound`` ``None`` with a ``note`` when the record cannot show the effect
-    at one of them at any size)."""
-    worst: dict | None = None
-    for values in (probe.values, *probe.worst_of):
-        e = _one_bound(prep, bench, cand, dataclasses.replace(probe, values=values), views, scan)
-        if e["bound"] is None:
-            return e
-        if worst is None or e["bound"] > worst["bound"]:
-            worst = e
-    assert worst is not None
-    return worst
-
-
-def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
-    """The bound of one parameter set of a probe."""
-    s = prep.settings
-    entry = {
+def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
+    """An entry without a bound, with the reason."""
+    return {
         "effect": cand.name,
         "parameter": probe.parameter,
         "unit": probe.unit,
@@ -241,7 +224,30 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
         "set_by": None,
         "noncentrality": None,
         "n_params": None,
+        "note": note,
     }
+
+
+def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
+    """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
+    (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
+    at any size); reported with the probe's own ``where`` and ``at``."""
+    worst: dict | None = None
+    for pr in (probe, *probe.worst_of):
+        e = _one_bound(prep, bench, cand, pr, views, scan)
+        if e["bound"] is None:
+            return e
+        if worst is None or e["bound"] > worst["bound"]:
+            worst = e
+    assert worst is not None
+    return {**worst, "where": probe.where, "at": probe.at}
+
+
+def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
+    """The bound of one parameter set of a probe."""
+    s = prep.settings
+    entry = _failed_entry(cand, probe, "")
+    del entry["note"]
     got = bench.probe(cand, probe)
     if got is None or got[0] <= 0:
         return {**entry, "note": "the effect vanishes on the kept rows"}
@@ -269,19 +275,27 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
     )
     a = a_crit
     if cand.signature:
-        a_view = _view_size(bench.prep, resid, run, sig, scan, a_crit)
+        # noise-free from the criterion's size at the record's noise: a view that fires there
+        # asks less than the criterion, at that noise and (``seen`` is monotone) at any
+        a0 = math.sqrt(need[rule] / lam_base)
+        a_view = _view_size(bench.prep, resid, run, sig, scan, a0)
         if a_view is None:
             return {
                 **entry,
                 "n_params": int(k),
                 "note": "no view of its signature locates it at any size tried",
             }
-        lam_view = _unseen(probe, a_view * a_view * lam_base)
-        if lam_view is None:
-            return {**entry, "n_params": int(k), "note": "the noise estimate takes it at any size"}
-        a_view = math.sqrt(lam_view / lam_base)
-        if a_view > a_crit:
-            a, rule = a_view, "view"
+        if a_view > a0:
+            lam_view = _unseen(probe, a_view * a_view * lam_base)
+            if lam_view is None:
+                return {
+                    **entry,
+                    "n_params": int(k),
+                    "note": "the noise estimate takes it at any size",
+                }
+            a_view = math.sqrt(lam_view / lam_base)
+            if a_view > a_crit:
+                a, rule = a_view, "view"
     return {
         **entry,
         "bound": float(a),
@@ -312,7 +326,11 @@ def detection_bounds(
         if bench is None:
             bench = _Bench(prep, fitter, base_terms)
         for probe in probes:
-            entry = _bound_entry(prep, bench, cand, probe, views, scan_order)
+            try:
+                entry = _bound_entry(prep, bench, cand, probe, views, scan_order)
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                # reporting only: a probe that fails numerically never fails the diagnosis
+                entry = _failed_entry(cand, probe, f"not computed: {exc}")
             out.append({**entry, "convention": CONVENTION_SHORT})
     return out
 

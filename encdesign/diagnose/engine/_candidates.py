@@ -168,8 +168,8 @@ class Probe:
         unit: SI unit of the size.
         where: the channel (head, sensor) it acts on, or ``"all"``.
         at: in words, where its other parameters are held (``"at 123.4 Hz"``).
-        worst_of: more values of the same effect (e.g. other change points): the bound is
-            the largest over ``values`` and these.
+        worst_of: more probes of the same effect (e.g. other change points): the bound is
+            the largest over this probe and these.
         seen: ``seen(lam) -> lam_seen``: the noncentrality the finder's tests see of an
             effect whose noncentrality at the record's noise is ``lam``, where the kind's
             noise estimate takes part of it (a level estimated from few values, which an
@@ -181,7 +181,7 @@ class Probe:
     unit: str
     where: str = "all"
     at: str = ""
-    worst_of: tuple[Mapping[str, Any], ...] = ()
+    worst_of: tuple[Probe, ...] = ()
     seen: Callable[[float], float] | None = None
 
 

@@ -551,7 +551,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     lines, first = lines_of(findings, L)
     if not lines:
         return None
-    near = drive_neighbours(lines, dict(prep.ctx.meta))
+    near = drive_neighbours(lines, dict(prep.ctx.meta), prep.settings)
     cell, cinfo = _cells(prep)
     C = prep.n_channels
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)

@@ -21,13 +21,6 @@ STEP_BINS = 32
 step term scans (plus the times the finder's views located); a record with fewer rows (an
 SDS record: one row per run) scans every row boundary."""
 
-STEP_MARGIN = 0.1
-"""Share of the kept rows (at least 2) a step leaves on either side of its change point: a
-change in the first or last tenth of a record is more often an end effect (a start-up or a
-stop the segmentation kept) than a change of the set-up. Set by hand, after the measured
-ODrive records: with 2 % a step at t = 9.48 s of a 10 s record (the last 5 % of its rows)
-took an order-13 "switching on" of 98 +- 19 mrad, not a physical size for that order."""
-
 STEP_VIEWS = ("time", "order_step", "run_step")
 """Views whose located change times a step term tries."""
 
@@ -55,13 +48,6 @@ class Line:
         return f"order {self.value:g}"
 
 
-DRIVE_NEAR = 1.0
-"""A located integer order within this many orders of a multiple of the declared pole
-pairs, slots or their lcm (a fractional one: within half an order of a drive order, the
-+-1 sidebands included) brings that drive order into the library as a line of its own: the
-finder's order is not exact (a line between bins, a fractional estimate, a leak)."""
-
-
 def drive_orders(meta: dict, max_order: float) -> tuple[list[int], list[int]]:
     """``(multiples, sidebands)``: the orders up to ``max_order`` tied to the drive the
     recording declares (``[motor] pole_pairs`` / ``slots``; an SDS ``[encoder]``
@@ -82,9 +68,10 @@ def drive_orders(meta: dict, max_order: float) -> tuple[list[int], list[int]]:
     )
 
 
-def drive_neighbours(lines: list[Line], meta: dict) -> dict[int, list[int]]:
+def drive_neighbours(lines: list[Line], meta: dict, settings) -> dict[int, list[int]]:
     """Appends to ``lines`` the drive orders (:func:`drive_orders`) next to a located line
-    but not located themselves (:data:`DRIVE_NEAR`), within :data:`MAX_LINES`; returns,
+    but not located themselves (``settings.discover_drive_near`` orders of an integer line,
+    ``discover_drive_near_frac`` of a fractional one), within :data:`MAX_LINES`; returns,
     per located line, the indices of the drive lines it brought."""
     top = max([ln.value for ln in lines if ln.kind in ("order", "frac")] + [0.0])
     mult, side = drive_orders(meta, top)
@@ -92,9 +79,10 @@ def drive_neighbours(lines: list[Line], meta: dict) -> dict[int, list[int]]:
     out: dict[int, list[int]] = {}
     for i, ln in enumerate(list(lines)):
         if ln.kind == "order" and ln.value > 0:
-            near = [d for d in mult if 0 < abs(d - ln.value) <= DRIVE_NEAR]
+            near = [d for d in mult if 0 < abs(d - ln.value) <= settings.discover_drive_near]
         elif ln.kind == "frac":
-            near = [d for d in mult + side if abs(d - ln.value) <= 0.5]
+            lim = settings.discover_drive_near_frac
+            near = [d for d in mult + side if abs(d - ln.value) <= lim]
         else:
             continue
         for d in near:
@@ -287,7 +275,7 @@ def locate_steps(
     tau = tau_of(prep)
     order = kidx[np.argsort(tau[kidx], kind="stable")]
     n = order.size
-    margin = max(2, int(STEP_MARGIN * n))
+    margin = max(2, int(prep.settings.discover_step_margin * n))
     if n < 2 * margin + 1:
         return [None] * len(lines)
     pos = set(np.unique(np.round(np.linspace(0, n, min(STEP_BINS, n) + 1)).astype(int))[1:-1])

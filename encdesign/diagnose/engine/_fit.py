@@ -15,6 +15,7 @@ from scipy import stats
 
 from ._candidates import Candidate
 from ._protocol import Prepared
+from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
 from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
 from ._timing import stage
 from ._views import SCAN_BLOCK
@@ -132,11 +133,17 @@ class Fitter:
         self._pbytes = 0
         self._gram: dict = {}
 
-    def chunks(self):
+    def n_chunks(self) -> int:
+        """Chunks of a pass over all rows."""
+        return -(-self.prep.n // self.chunk)
+
+    def chunks(self, first: int = 0, last: int | None = None):
+        """``(a, b, row columns of rows a:b)`` for chunks ``first … last - 1`` (all)."""
         prep = self.prep
         n = prep.n
         c = self.chunk
-        for a in range(0, n, c):
+        stop = n if last is None else min(n, last * c)
+        for a in range(first * c, stop, c):
             b = min(n, a + c)
             pad = c - (b - a)
             x = {}
@@ -302,64 +309,71 @@ class Fitter:
         sc_s, sc_d = scales(static), scales(dyn)
         skey = self._static_key(static)
         gram = self._gram.get(skey)
-        A = np.zeros((K, p, p))
-        g = np.zeros((K, p))
-        c = np.zeros(K)
-        ssr = np.zeros(K)
         sw = np.sqrt(self.w_ch)
-        new_gram = np.zeros((K, p_s, p_s)) if gram is None else None
-        for a, b, x in self.chunks():
-            ck = (skey, a)
-            hit = self._pcache.get(ck)
-            fresh = hit is None
-            if fresh and not jac:  # values only: the processed Jacobian is not needed
-                hit = (None, None, *self._fold_order(a, b))
-            elif fresh:
-                hit = self._processed(static, a, b, x, sc_s)
-                if self._pbytes + hit[1].nbytes < CACHE_BYTES:
-                    self._pcache[ck] = hit
-                    self._pbytes += hit[1].nbytes
-            _, Js_, order, edges = hit
-            # static prediction from current linear values (v0 + J p): made just now with
-            # the Jacobian (the same sum, term by term, as below), else from the cache
-            if fresh and jac:
-                pred = hit[0].copy()
-            else:
-                pred = np.zeros((b - a, prep.n_channels))
-                for tm in static:
-                    pred += self.eval_term(tm, a, b, x, jac=jac)[0]
-            if dyn:
-                if jac:
-                    pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
+        # the chunks in fixed groups; this process sums its share group by group and the
+        # groups' sums are gathered (_rowshare): the same sums for any number of processes
+        shapes = [(K, p, p), (K, p), (K,), (K,)] + ([(K, p_s, p_s)] if gram is None else [])
+        groups = row_groups(self.n_chunks())
+        parts = []
+        for grp in my_groups(len(groups)):
+            A, g, c, ssr, new_gram = [np.zeros(s) for s in shapes] + [None] * (5 - len(shapes))
+            for a, b, x in self.chunks(*groups[grp]):
+                ck = (skey, a)
+                hit = self._pcache.get(ck)
+                fresh = hit is None
+                if hit is None and not jac:  # values only: the processed Jacobian is not needed
+                    hit = (None, None, *self._fold_order(a, b))
+                elif hit is None:
+                    hit = self._processed(static, a, b, x, sc_s)
+                    if self._pbytes + hit[1].nbytes < CACHE_BYTES:
+                        self._pcache[ck] = hit
+                        self._pbytes += hit[1].nbytes
+                _, Js_, order, edges = hit
+                # static prediction from current linear values (v0 + J p): made just now with
+                # the Jacobian (the same sum, term by term, as below), else from the cache
+                if fresh and jac:
+                    pred = hit[0].copy()
                 else:
-                    pd = sum(self.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
-                    Jd = None
-                pred = pred + pd
-            else:
-                Jd = np.zeros((b - a, prep.n_channels, 0))[order]
-            r = prep.y[a:b] - pred
-            if prep.kd.project:
-                r = r - r.mean(1, keepdims=True)
-            rw = (r * sw)[order]
-            rr = r[order]
-            for k in range(K):
-                lo, hi = edges[k], edges[k + 1]
-                if hi <= lo:
-                    continue
-                c[k] += float(np.sum(rw[lo:hi] ** 2))
-                ssr[k] += float(np.sum(rr[lo:hi] ** 2))
-                if not jac:
-                    continue
-                rk = rw[lo:hi].ravel()
-                Sk = Js_[lo:hi].reshape(rk.size, p_s)
-                g[k, :p_s] += Sk.T @ rk
-                if new_gram is not None:
-                    new_gram[k] += Sk.T @ Sk
-                if Jd is not None and Jd.shape[2]:
-                    Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
-                    A[k, :p_s, p_s:] += Sk.T @ Dk
-                    A[k, p_s:, p_s:] += Dk.T @ Dk
-                    g[k, p_s:] += Dk.T @ rk
+                    pred = np.zeros((b - a, prep.n_channels))
+                    for tm in static:
+                        pred += self.eval_term(tm, a, b, x, jac=jac)[0]
+                if dyn:
+                    if jac:
+                        pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
+                    else:
+                        pd = sum(self.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
+                        Jd = None
+                    pred = pred + pd
+                else:
+                    Jd = np.zeros((b - a, prep.n_channels, 0))[order]
+                r = prep.y[a:b] - pred
+                if prep.kd.project:
+                    r = r - r.mean(1, keepdims=True)
+                rw = (r * sw)[order]
+                rr = r[order]
+                for k in range(K):
+                    lo, hi = edges[k], edges[k + 1]
+                    if hi <= lo:
+                        continue
+                    c[k] += float(np.sum(rw[lo:hi] ** 2))
+                    ssr[k] += float(np.sum(rr[lo:hi] ** 2))
+                    if not jac:
+                        continue
+                    rk = rw[lo:hi].ravel()
+                    Sk = Js_[lo:hi].reshape(rk.size, p_s)
+                    g[k, :p_s] += Sk.T @ rk
+                    if new_gram is not None:
+                        new_gram[k] += Sk.T @ Sk
+                    if Jd is not None and Jd.shape[2]:
+                        Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
+                        A[k, :p_s, p_s:] += Sk.T @ Dk
+                        A[k, p_s:, p_s:] += Dk.T @ Dk
+                        g[k, p_s:] += Dk.T @ rk
+            parts.append(
+                np.concatenate([v.ravel() for v in (A, g, c, ssr, new_gram) if v is not None])
+            )
+        total = reduce_groups(parts, len(groups), sum(math.prod(s) for s in shapes))
+        A, g, c, ssr, new_gram = unflatten(total, shapes) + [None] * (5 - len(shapes))
         if jac:
             if new_gram is not None:
                 gram = new_gram
@@ -421,35 +435,42 @@ class Fitter:
         sw = np.sqrt(self.w_ch)
         E = len(extra)
         p = At.shape[0]
-        Bj, jj, jr = np.zeros((p, E)), np.zeros(E), np.zeros(E)
-        for a, b, x in self.chunks():
-            hit = self._pcache.get((skey, a))
-            if hit is None:  # the prediction comes with the Jacobian: no second evaluation
-                pred, Js_, order, edges = self._processed(held, a, b, x, sc)
-                r = prep.y[a:b] - pred
-                if prep.kd.project:
-                    r = r - r.mean(1, keepdims=True)
-            else:
-                _, Js_, order, edges = hit
-                r = self.chunk_residual(held, a, b, x)
-            lo, hi = int(edges[0]), int(edges[K])
-            rw = (r * sw)[order][lo:hi].ravel()
-            S = Js_[lo:hi].reshape(rw.size, p)
-            cols = np.empty((rw.size, E))
-            for i, e in enumerate(extra):
-                pv = {k: jnp.asarray(v) for k, v in e.values.items()}
-                p0 = {
-                    q.name: (jnp.zeros_like(pv[q.name]) if q.linear else pv[q.name])
-                    for q in e.cand.params
-                }
-                _, J = valjac_fn(e.cand)(p0, x)
-                Je = self._gather(e, J, b - a, prep.n_channels)
-                if prep.kd.project:
-                    Je = Je - Je.mean(1, keepdims=True)
-                cols[:, i] = (Je[:, :, 0] * sw[None, :])[order][lo:hi].ravel()
-            Bj += S.T @ cols
-            jj += np.einsum("ij,ij->j", cols, cols)
-            jr += cols.T @ rw
+        shapes = [(p, E), (E,), (E,)]
+        groups = row_groups(self.n_chunks())  # split over processes as in stats
+        parts = []
+        for grp in my_groups(len(groups)):
+            Bj, jj, jr = (np.zeros(s) for s in shapes)
+            for a, b, x in self.chunks(*groups[grp]):
+                hit = self._pcache.get((skey, a))
+                if hit is None:  # the prediction comes with the Jacobian: no second evaluation
+                    pred, Js_, order, edges = self._processed(held, a, b, x, sc)
+                    r = prep.y[a:b] - pred
+                    if prep.kd.project:
+                        r = r - r.mean(1, keepdims=True)
+                else:
+                    _, Js_, order, edges = hit
+                    r = self.chunk_residual(held, a, b, x)
+                lo, hi = int(edges[0]), int(edges[K])
+                rw = (r * sw)[order][lo:hi].ravel()
+                S = Js_[lo:hi].reshape(rw.size, p)
+                cols = np.empty((rw.size, E))
+                for i, e in enumerate(extra):
+                    pv = {k: jnp.asarray(v) for k, v in e.values.items()}
+                    p0 = {
+                        q.name: (jnp.zeros_like(pv[q.name]) if q.linear else pv[q.name])
+                        for q in e.cand.params
+                    }
+                    _, J = valjac_fn(e.cand)(p0, x)
+                    Je = self._gather(e, J, b - a, prep.n_channels)
+                    if prep.kd.project:
+                        Je = Je - Je.mean(1, keepdims=True)
+                    cols[:, i] = (Je[:, :, 0] * sw[None, :])[order][lo:hi].ravel()
+                Bj += S.T @ cols
+                jj += np.einsum("ij,ij->j", cols, cols)
+                jr += cols.T @ rw
+            parts.append(np.concatenate([Bj.ravel(), jj, jr]))
+        total = reduce_groups(parts, len(groups), p * E + 2 * E)
+        Bj, jj, jr = unflatten(total, shapes)
         uw = _solve_many(At, np.column_stack([gt, Bj]))
         u, w = uw[:, 0], uw[:, 1:]
         jpj = jj - np.einsum("pe,pe->e", Bj, w)

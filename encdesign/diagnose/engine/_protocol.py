@@ -313,3 +313,16 @@ class FitDivergence(ArithmeticError):
     shaft-angle refinement) with the cause in its message; the engine reports it under
     ``base.fit_failures`` and goes on from the last sound fit, so it never reaches the
     verdict."""
+
+
+@dataclasses.dataclass(frozen=True)
+class KindView:
+    """A kind's own view, ``fn(prep, rw, scan_order) -> [Finding, ...]`` on the whitened
+    residual as an array, with the ``view`` names of the findings it reports (the detection
+    bounds run only the views a candidate's signature names)."""
+
+    fn: Any
+    names: tuple[str, ...]
+
+    def __call__(self, prep, rw: np.ndarray, scan_order: int) -> list:
+        return self.fn(prep, rw, scan_order)

@@ -483,6 +483,25 @@ class FinderSettings(eqx.Module):
     where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand in 0c3e0e7,
     moved unchanged in issue 44 G."""
 
+    discover_step_margin: float = eqx.field(default=0.1, static=True)
+    """Discovery: share of the kept rows (at least 2) a step term leaves on either side of
+    its change point: a change in the first or last tenth of a record is more often an end
+    effect (a start-up or a stop the segmentation kept) than a change of the set-up. Set by
+    hand after the measured ODrive records (issue 41): with 2 % a step at t = 9.48 s of a
+    10 s record (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a
+    physical size for that order."""
+
+    discover_drive_near: float = eqx.field(default=1.0, static=True)
+    """Discovery: a located integer order within this many orders of a multiple of the
+    declared pole pairs, slots or their lcm brings that drive order into the library as a
+    line of its own (the finder's order is not exact: a line between bins, a leak). Set by
+    hand (issue 41 item 3): one order, the spacing of the integer orders."""
+
+    discover_drive_near_frac: float = eqx.field(default=0.5, static=True)
+    """Discovery: a located fractional order within this many orders of a drive order (the
+    +-1 sidebands of the pole pairs' multiples included) brings it in. Set by hand (issue 41
+    item 3): half an order, the nearest integer."""
+
     change_time_level: float = eqx.field(default=0.95, static=True)
     """Level of the interval reported with every located time (a change point, a step, a
     parameter that is a time: ``located_time``, ``interval_s``): the candidate times whose
@@ -752,26 +771,6 @@ class FinderSettings(eqx.Module):
 DEFAULT_SETTINGS = FinderSettings()
 
 SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
-
-NAMED_RULES = ("identifiable", "better_candidate", "applies", "one_parameter_bic")
-"""Acceptance rules that are not a threshold: all parameters already taken
-(``identifiable``), another candidate lowers the criterion more (``better_candidate``), the
-candidate cannot be tested on this record (``applies``), an alternative fits within one
-parameter's information-criterion penalty ``log N`` and is confounded with it
-(``one_parameter_bic``: sds, a drift vs an order of the platform angle); with
-``<candidate>.plausible``."""
-
-
-def is_rule_name(name: object) -> bool:
-    """Whether ``name`` names an acceptance rule: a :class:`FinderSettings` field, one of
-    :data:`NAMED_RULES`, or ``<candidate>.plausible``."""
-    if not isinstance(name, str):
-        return False
-    if name in SETTINGS_FIELDS or name in NAMED_RULES:
-        return True
-    head, _, tail = name.rpartition(".")
-    return tail == "plausible" and head.isidentifier()
-
 
 CHUNK_ROWS = 8192
 CACHE_BYTES = 6.0e7

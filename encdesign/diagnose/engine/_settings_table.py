@@ -1,9 +1,29 @@
-"""The documentation table of :class:`~encdesign.diagnose.FinderSettings`: each field, its
-default and its docstring (read from the class's source), as ``docs/diagnose.md`` carries it."""
+"""What documents :class:`~encdesign.diagnose.FinderSettings`: the table of each field, its
+default and its docstring (read from the class's source), as ``docs/diagnose.md`` carries it;
+and the names of the acceptance rules (a field, or a rule that is not a threshold)."""
 
 from __future__ import annotations
 
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
+
+NAMED_RULES = ("identifiable", "better_candidate", "applies", "one_parameter_bic")
+"""Acceptance rules that are not a threshold: all parameters already taken
+(``identifiable``), another candidate lowers the criterion more (``better_candidate``), the
+candidate cannot be tested on this record (``applies``), an alternative fits within one
+parameter's information-criterion penalty ``log N`` and is confounded with it
+(``one_parameter_bic``: sds, a drift vs an order of the platform angle); with
+``<candidate>.plausible``."""
+
+
+def is_rule_name(name: object) -> bool:
+    """Whether ``name`` names an acceptance rule: a :class:`FinderSettings` field, one of
+    :data:`NAMED_RULES`, or ``<candidate>.plausible``."""
+    if not isinstance(name, str):
+        return False
+    if name in SETTINGS_FIELDS or name in NAMED_RULES:
+        return True
+    head, _, tail = name.rpartition(".")
+    return tail == "plausible" and head.isidentifier()
 
 
 def _field_docs() -> dict[str, str]:

@@ -741,19 +741,6 @@ class Whitened:
         return self.shape[0]
 
 
-@dataclasses.dataclass(frozen=True)
-class KindView:
-    """A kind's own view, ``fn(prep, rw, scan_order) -> [Finding, ...]`` on the whitened
-    residual as an array, with the ``view`` names of the findings it reports (the detection
-    bounds run only the views a candidate's signature names)."""
-
-    fn: Any
-    names: tuple[str, ...]
-
-    def __call__(self, prep, rw: np.ndarray, scan_order: int) -> list[Finding]:
-        return self.fn(prep, rw, scan_order)
-
-
 def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
     """Run ``views`` on the residual; findings strongest first, with variance shares."""
     with stage("views"):

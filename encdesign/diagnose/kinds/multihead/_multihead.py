@@ -37,9 +37,9 @@ from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
-from ...engine._protocol import FitDivergence, KindData, Prepared, steady_tolerance
+from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import KindView, run_spans
+from ...engine._views import run_spans
 from ._multihead_terms import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,

@@ -58,9 +58,9 @@ import numpy as np
 from ...engine._fit import valjac_fn as _valjac_fn
 from ...engine._kind import AbstractKind
 from ...engine._located import change_chi2, interval_of, located_time
-from ...engine._protocol import Prepared
+from ...engine._protocol import KindView, Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import Finding, KindView
+from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where

@@ -23,6 +23,7 @@ from ._sds_noise import (
     _delay_plausible,
     _drift_plausible,
     _no_transient,
+    _saturating_columns,
     base_orders,
     noise_info,
 )
@@ -425,23 +426,35 @@ def _middle_half(R: int) -> list[int]:
     return sorted({lo, R // 2, hi})
 
 
-def _run_mean_seen(ctx: Context, caught: bool):
-    """``seen(lam)`` of an effect on the run means (:class:`Probe`): their noise level is
-    estimated from ``nu`` values left by a saturated fit (``_level_sigma``), which an effect
-    inflates by ``lam / nu`` (the tests then see ``lam / (1 + lam / nu)``) unless
-    (``caught``: a step or an outlier) the estimate's own F test at ``1e-3 / n_tests`` finds
-    and removes it first."""
+def _run_mean_seen(ctx: Context, pattern: np.ndarray, caught: bool):
+    """``seen(lam)`` of an effect whose run means are ``pattern`` (R, M) (:class:`Probe`):
+    the run-mean noise level is estimated from the ``nu`` values a saturated fit leaves
+    (``_level_sigma``) and widened by ``c`` (``run_means_widening``), so ``lam`` at the
+    record's level is ``c^2 lam`` at the raw one; the share ``eta`` of the effect that fit
+    leaves inflates the level by ``eta c^2 lam / nu`` (the tests then see ``lam / (1 + eta
+    c^2 lam / nu)``) unless (``caught``: a step or an outlier) the estimate's own F test at
+    ``1e-3 / n_tests`` (``F ~ 1 + eta c^2 lam``) finds and removes it first. ``None`` without
+    a run-mean level."""
     lv = noise_info(ctx).levels
     nu = float(lv.get("run_means_dof", 0) or 0)
     if nu <= 0:
         return None
-    M, R = int(ctx.consts["psi_m"].size), int(ctx.n_runs)
+    c2 = float(lv.get("run_means_widening", 1.0) or 1.0) ** 2
+    R, M = pattern.shape
+    proj = float(ctx.consts["proj"]) > 0
+    e = pattern - pattern.mean(1, keepdims=True) if proj else pattern
+    orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
+    X, _ = _saturating_columns(ctx.rows, ctx.consts, orders, ctx.settings.sds_saturate_fraction)
+    e0 = e - e.mean(0, keepdims=True)  # what the base's pair constants leave
+    ev = e.reshape(-1)
+    left = ev - X @ np.linalg.lstsq(X, ev, rcond=None)[0]
+    eta = float(left @ left) / max(float(np.sum(e0 * e0)), 1e-300)
     f_crit = float(stats.f.isf(1e-3 / max(M * (2 * R - 1), 1), 1, max(nu - 1, 1)))
 
     def seen(lam: float) -> float:
-        if caught and lam + 1.0 > f_crit:
+        if caught and eta * c2 * lam + 1.0 > f_crit:
             return lam
-        return lam / (1.0 + lam / nu)
+        return lam / (1.0 + eta * c2 * lam / nu)
 
     return seen
 
@@ -454,40 +467,38 @@ def _delay_probes(ctx: Context) -> list[Probe]:
     R = int(ctx.n_runs)
     firsts = _middle_half(R)
     ids = ctx.data.table.run_ids if ctx.data is not None else np.arange(R)
+    at = (
+        f"a step from any run in the middle half of the record (runs {ids[firsts[0]]} to "
+        f"{ids[firsts[-1]]}; the worst of them)"
+    )
     out = []
     for m in range(M):
-        ref = float((m + 1) % M)
-        sets = [
-            {
+        probes = []
+        for k in firsts:
+            step = np.zeros((R, M))
+            step[k:, m] = 1.0
+            vals = {
                 "delay_s": np.eye(M)[m],
                 "first_run": np.asarray(float(k)),
-                "ref_sensor": np.asarray(ref),
+                "ref_sensor": np.asarray(float((m + 1) % M)),
             }
-            for k in firsts
-        ]
-        out.append(
-            Probe(
-                sets[0],
-                "delay_step_s",
-                "s",
-                where=f"m{m}",
-                at=f"a step from any run in the middle half of the record (runs "
-                f"{ids[firsts[0]]} to {ids[firsts[-1]]}; the worst of them)",
-                worst_of=tuple(sets[1:]),
-                seen=_run_mean_seen(ctx, caught=True),
-            )
-        )
+            seen = _run_mean_seen(ctx, step, caught=True)
+            probes.append(Probe(vals, "delay_step_s", "s", where=f"m{m}", at=at, seen=seen))
+        out.append(dataclasses.replace(probes[0], worst_of=tuple(probes[1:])))
     return out
 
 
 def _drift_probes(ctx: Context) -> list[Probe]:
     """A drift of the moving sensors' pair angles at 1 rad/s over the whole record."""
+    M = int(ctx.consts["psi_m"].size)
+    t = np.asarray(ctx.rows["tmid_c"], float).mean(1)
+    pattern = np.repeat(t[:, None], M, 1)
     return [
         Probe(
             {"drift_rate_rad_per_s": np.asarray(1.0)},
             "drift_rate_rad_per_s",
             "rad/s",
-            seen=_run_mean_seen(ctx, caught=False),
+            seen=_run_mean_seen(ctx, pattern, caught=False),
         )
     ]
 

@@ -1,0 +1,56 @@
+"""Row passes split over processes: the chunks in fixed groups, the groups' sums gathered.
+
+A pass that accumulates sums over the rows (the fit's per-fold normal equations, the
+column statistics of :meth:`Fitter.column_chi2`) cuts its chunks into at most
+:data:`ROW_GROUPS` contiguous groups. Each process sums the chunks of its share of the
+groups (:func:`~encdesign._distributed.split_range`), group by group; the groups' sums
+are gathered on every process (one all-gather through ``jax.distributed``) and added in
+group order. The grouping does not depend on the number of processes, so one process and
+N give the same sums to the last bit, and every process continues with the same numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax
+import numpy as np
+
+from ..._distributed import allgather_rows, split_range
+
+ROW_GROUPS = 16
+"""Most groups a pass's chunks are cut into: the unit of work split over processes (more
+processes than groups leave some idle) and the number of partial sums held at once."""
+
+
+def row_groups(n_chunks: int) -> list[tuple[int, int]]:
+    """Chunk index ranges ``[lo, hi)`` of the groups of a pass over ``n_chunks`` chunks."""
+    g = max(1, min(int(n_chunks), ROW_GROUPS))
+    return [(j * n_chunks // g, (j + 1) * n_chunks // g) for j in range(g)]
+
+
+def my_groups(n_groups: int) -> range:
+    """The groups this process sums (a contiguous share; all of them on one process)."""
+    lo, hi = split_range(n_groups, jax.process_count(), jax.process_index())
+    return range(lo, hi)
+
+
+def reduce_groups(parts: Sequence[np.ndarray], n_groups: int, size: int) -> np.ndarray:
+    """Sum over all groups of the flat per-group sums ``parts`` (this process's groups, in
+    order, each of ``size`` values), the same on every process and for any process count."""
+    rows = np.stack(parts) if len(parts) else np.zeros((0, size))
+    every = allgather_rows(rows, n_groups)
+    total = np.zeros(size)
+    for r in every:  # group order, one addition at a time: the same on one process
+        total += r
+    return total
+
+
+def unflatten(flat: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
+    """``flat`` cut into arrays of ``shapes`` (the inverse of concatenating their ravels)."""
+    out, at = [], 0
+    for s in shapes:
+        k = int(np.prod(s, dtype=np.int64))
+        out.append(flat[at : at + k].reshape(s).copy())
+        at += k
+    return out

@@ -1,0 +1,142 @@
+"""``encdesign diagnose --processes`` / ``--coordinator``: one recording split over processes.
+
+The fit's row passes (normal equations, column statistics) are summed in fixed groups of
+chunks, each process its share, the groups' sums gathered through ``jax.distributed``: the
+diagnosis on two processes must equal the one on one process (verdict, effects and every
+number within 1e-12 relative; timings aside)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from encdesign import _distributed as dist
+from encdesign import write_recording
+
+CHUNK = 512
+"""Rows per chunk in the spawned diagnoses (the engine's default is 8192): several groups
+of chunks, so each process has a share of a 4 x 4000-row record."""
+
+LAUNCH = (
+    "import sys, encdesign.diagnose.engine._fit as f; f.CHUNK_ROWS = {chunk}; "
+    "from encdesign.cli import main; sys.exit(main())"
+)
+
+TIMING_KEYS = ("timings_s", "timings_cpu_s")
+
+
+def _record(path: Path, seed: int) -> Path:
+    """4 heads x 4000 rows (4 runs, 1 kHz, 0.5 urad noise, disk errors of orders 1-5,
+    per-run zeros) with a 31 Hz vibration of 1.5 urad on every head."""
+    rng = np.random.default_rng(seed)
+    R, n, heads = 4, 1000, 4
+    alpha = np.array([0.0, 2.1, 4.2, 0.9])
+    cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []} | {
+        f"h{k}": [] for k in range(heads)
+    }
+    for r in range(R):
+        t = np.arange(n) / 1000.0
+        th = 2 * np.pi * (0.6 + 0.4 * r) * t + rng.uniform(0, 6)
+        zero = rng.uniform(-3, 3, heads)
+        cols["t"].append(t)
+        cols["run"].append(np.full(n, r))
+        cols["theta_ref"].append(th + rng.uniform(-3, 3))
+        for k in range(heads):
+            e = sum(4e-6 / m * np.sin(m * (th - alpha[k]) + m) for m in range(1, 6))
+            e = e + 1.5e-6 * np.sin(2 * np.pi * 31.0 * t + rng.uniform(0, 6))
+            cols[f"h{k}"].append(th + e + rng.normal(0, 0.5e-6, n) + zero[k])
+    columns = {k: np.concatenate(v) for k, v in cols.items()}
+    enc = {
+        "optical_radius_m": 0.0254,
+        "head_angles_deg": np.degrees(alpha).tolist(),
+        "signal_periods_per_rev": 2048,
+    }
+    write_recording(path, "multihead", columns, encoder=enc)
+    return path
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return env
+
+
+def _diagnose(rec: Path, out: Path, processes: int, port: int) -> dict:
+    """Run the diagnosis on ``processes`` processes joined by the ``--coordinator`` flags
+    (the launcher sets the small chunk size first) and return process 0's JSON."""
+    base = [sys.executable, "-c", LAUNCH.format(chunk=CHUNK), "diagnose", str(rec)]
+    base += ["--json", str(out), "--quiet"]
+    if processes == 1:
+        cmds = [base]
+    else:
+        cmds = [
+            [
+                *base,
+                "--coordinator",
+                f"localhost:{port}",
+                "--num-processes",
+                str(processes),
+                "--process-id",
+                str(i),
+            ]
+            for i in range(processes)
+        ]
+    procs = [
+        subprocess.Popen(c, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for c in cmds
+    ]
+    outs = [p.communicate(timeout=240) for p in procs]
+    for p, (so, se) in zip(procs, outs):
+        assert p.returncode == 0, f"status {p.returncode}\n{so[-2000:]}\n{se[-4000:]}"
+    return json.loads(out.read_text(encoding="utf-8"))
+
+
+def _differences(a, b, where: str = "") -> list[str]:
+    """Where the documents differ: strings, booleans and integers exactly, floats beyond
+    1e-12 relative; timings (wall and CPU seconds, the report's status line) are not
+    compared."""
+    if isinstance(a, dict):
+        if not isinstance(b, dict) or set(a) != set(b):
+            return [f"{where}: keys differ"]
+        return [
+            d
+            for k in a
+            if k not in TIMING_KEYS and not k.endswith("time_s")
+            for d in _differences(a[k], b[k], f"{where}.{k}")
+        ]
+    if isinstance(a, list):
+        if not isinstance(b, list) or len(a) != len(b):
+            return [f"{where}: lengths differ"]
+        return [
+            d for i, (x, y) in enumerate(zip(a, b)) for d in _differences(x, y, f"{where}[{i}]")
+        ]
+    if isinstance(a, str) and isinstance(b, str) and where == ".report":
+        a, b = (re.sub(r"status: (.*); [0-9.]+ s", r"status: \1", s) for s in (a, b))
+    if isinstance(a, float) and isinstance(b, float):
+        same = (np.isnan(a) and np.isnan(b)) or abs(a - b) <= 1e-12 * abs(a)
+        return [] if same else [f"{where}: {a!r} vs {b!r}"]
+    return [] if a == b and type(a) is type(b) else [f"{where}: {a!r} vs {b!r}"]
+
+
+def test_two_processes_give_the_one_process_diagnosis(tmp_path):
+    rec = _record(tmp_path / "rec.toml", seed=20261204)
+    one = _diagnose(rec, tmp_path / "one.json", 1, 0)
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port())
+    assert dist.process_count() == 1  # this test process joined nothing
+    assert one["verdict"] == two["verdict"]
+    assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
+    assert one["effects"], "the vibration is named"
+    diff = _differences(one, two)
+    if os.environ.get("ENCDESIGN_KEEP"):
+        Path(os.environ["ENCDESIGN_KEEP"]).mkdir(exist_ok=True)
+        for name, doc in (("one", one), ("two", two)):
+            Path(os.environ["ENCDESIGN_KEEP"], name + ".json").write_text(json.dumps(doc))
+    assert not diff, "\n".join(diff[:40])
