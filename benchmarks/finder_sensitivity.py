@@ -217,6 +217,25 @@ def merge(paths: list[str], out: str) -> dict:
     return json.loads(Path(out).read_text())
 
 
+def _void() -> dict:
+    """The measured fields of a row whose moved value the settings refuse: nothing was
+    diagnosed, nothing changed (``right`` stays the defaults' count, filled in by the
+    caller's ``delta`` of 0)."""
+    return dict(
+        same_as_default=False,
+        flipped=0,
+        share=0.0,
+        right=None,
+        right_rate=None,
+        delta_right=0,
+        delta_rate=0.0,
+        flips=[],
+        wrong=[],
+        time_s=0.0,
+        times_s={},
+    )
+
+
 def summarise(rows: list[dict], flip: float) -> dict:
     """Thresholds whose rate of right verdicts drops / rises by more than ``flip`` at some
     factor, and those that flip more than ``flip`` of the verdicts."""
@@ -326,7 +345,14 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         for fac in factors:
             t1 = time.perf_counter()
-            st = moved(base, name, fac)
+            try:
+                st = moved(base, name, fac)
+            except ValueError as ex:  # outside the field's domain (a level of 0.95 x2)
+                rows.append(
+                    dict(threshold=name, factor=fac, value=None, invalid=str(ex), **_void())
+                )
+                print(f"{name} x{fac:g}: not a valid value ({ex})", flush=True)
+                continue
             same = getattr(st, name) == getattr(base, name)
             flips = []
             wrong = []
