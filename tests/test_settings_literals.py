@@ -78,7 +78,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_fit.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_html.py", 2): SHAPE,
     ("engine/_html.py", 6): PLOT,
-    ("engine/_html.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
     ("engine/_plots.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
     ("engine/_discover.py", -3): SHAPE + " (the sentinel line index: beyond the lines modelled)",
     ("engine/_discover_lines.py", 1e-06): NUMERIC + " (two line values equal to rounding)",

@@ -39,6 +39,7 @@ from scipy import optimize, stats
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._protocol import Prepared
+from ._steps import frozen
 from ._views import locate
 
 CONVENTION = (
@@ -107,19 +108,6 @@ def _values(fitter: Fitter, terms: Sequence[Term]) -> np.ndarray:
     return out
 
 
-def _held(terms: Sequence[Term]) -> list[Term]:
-    """Copies with the nonlinear parameters held (as the selection's trial fits hold the
-    current model's)."""
-    out = []
-    for t in terms:
-        t2 = t.copy()
-        for q in t.cand.params:
-            if not q.linear:
-                t2.free[q.name][...] = False
-        out.append(t2)
-    return out
-
-
 def _n_nonlinear(cand: Candidate, prep: Prepared) -> int:
     """Fitted nonlinear scalars of ``cand`` (counted in its ``k``, held in the probe)."""
     C, R = prep.n_channels, prep.ctx.n_runs
@@ -184,7 +172,7 @@ class _Bench:
         prep.y = self.pred + c * v
         # the base's nonlinear parameters held, as the selection's trial fits hold them: a
         # linear refit whose Jacobians are cached across probes
-        base = fitter.fit(_held(self.base_terms))
+        base = fitter.fit(frozen(self.base_terms))
         resid = fitter.residual(base.terms)
         return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c
 

@@ -185,16 +185,9 @@ def fig_time(doc: Mapping[str, Any], rows: ReportRows) -> str:
     bands = [
         (_tau_of(rows, r0, t0), _tau_of(rows, r1, t1)) for r0, t0, r1, t1 in _located_intervals(doc)
     ]
-    run_ids = np.asarray(rows["run"])
-    starts = np.flatnonzero(np.r_[True, run_ids[1:] != run_ids[:-1]])
-    for i in starts if starts.size <= 12 else starts[:0]:
-        axes[0].annotate(
-            f"run {run_ids[i]}: t = {float(rows['t'][i]):.6g} s",
-            (float(tau[i]), 1.0),
-            xycoords=("data", "axes fraction"),
-            fontsize=6,
-            va="bottom",
-        )
+    from ._plots import annotate_run_starts
+
+    starts = annotate_run_starts(axes[0], tau, rows["t"], rows["run"])
     for ax, k in zip(axes, ks):
         for i, (a, b) in enumerate(x for x in bands if None not in x):
             ax.axvspan(

@@ -62,15 +62,7 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
     fig, axes = new_figure(C, 1, figsize=(7, 1.6 * C + 1.0), sharex=True)
     axes = np.atleast_1d(axes)
     tau = prep.rows["tau"]
-    starts = np.flatnonzero(np.r_[True, prep.run[1:] != prep.run[:-1]])
-    for i in starts if starts.size <= 12 else starts[:0]:  # each run's start on its own t
-        axes[0].annotate(
-            f"run {prep.run_ids[prep.run[i]]}: t = {float(prep.rows['t'][i]):.6g} s",
-            (float(tau[i]), 1.0),
-            xycoords=("data", "axes fraction"),
-            fontsize=6,
-            va="bottom",
-        )
+    starts = annotate_run_starts(axes[0], tau, prep.rows["t"], np.asarray(prep.run_ids)[prep.run])
     for k in range(C):
         ax = axes[k]
         for i in starts[1:]:
@@ -98,3 +90,20 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
     ax.legend(fontsize=8)
     paths.append(save_figure(fig, out, "residual_spectra.png"))
     return paths
+
+
+def annotate_run_starts(ax: Any, tau: Any, t: Any, runs: Any) -> np.ndarray:
+    """Each run's start written on ``ax`` with its own ``t`` (s), at its place on the
+    end-to-end axis ``tau`` (s); ``runs``: the run of each row. Not above 12 runs. Returns
+    the rows where the runs start."""
+    runs = np.asarray(runs)
+    starts = np.flatnonzero(np.r_[True, runs[1:] != runs[:-1]])
+    for i in starts if starts.size <= 12 else starts[:0]:
+        ax.annotate(
+            f"run {runs[i]}: t = {float(t[i]):.6g} s",
+            (float(tau[i]), 1.0),
+            xycoords=("data", "axes fraction"),
+            fontsize=6,
+            va="bottom",
+        )
+    return starts
