@@ -7,7 +7,10 @@ with fresh noise (other seeds) carry it at ``1.5x`` and ``0.5x`` that bound; a r
 as found when the effect is named. Acceptance (issue 44): >= 80 % found at 1.5x, <= 10 % at
 0.5x. Effects: ``sensor_delay_step`` on moving sensor ``m1`` of sds benches
 (``write_concealed_sds``, the step from a run in the middle half of the record, as the bound
-states), ``vibration`` on one head of multihead records (``vibration_record``).
+states), ``vibration`` on one head of multihead records (``vibration_record``),
+``interpolation_error`` (a signal offset at order L) on one head of the same records (found:
+named, or reported confounded with a named effect, :func:`_found`), ``scale_error`` of a
+sensor against a reference (``scale_record``, its sign alternating).
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -18,6 +21,9 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect sds_delay --seed 620 --n 4 [--json out.json]
     python benchmarks/detection_bounds.py --effect vibration --same --factors 1.5,1.0,0.5 \
         --seed 730 --n 3 --geometries 4
+    python benchmarks/detection_bounds.py --effect interpolation_error --seed 1501 --n 1 \
+        --geometries 10
+    python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from encdesign import Recording
 from encdesign.diagnose import diagnose
 from encdesign.physics import _effects as fx
 from encdesign.simulate import write_concealed_sds
+from encdesign.simulate._conceal_reference import write_sensor_reference
 from encdesign.simulate._conceal_sds import NOISE_RAD, SPEED_RAD_S
 
 SDS_GEOMETRIES = [
@@ -136,12 +143,19 @@ def sds_delay_trials(
 
 
 def vibration_record(
-    geom_seed: int, noise_seed: int, amp_rad: float, head: int, f_hz: float | None
+    geom_seed: int,
+    noise_seed: int,
+    amp_rad: float,
+    head: int,
+    f_hz: float | None,
+    offset_a: float = 0.0,
 ):
     """A multihead record of a geometry drawn from ``geom_seed`` (2-5 heads, 1-3 runs at
     different speeds, theta_ref or not, disk error orders 1-8), its noise from
     ``noise_seed``, with a vibration of ``amp_rad`` at ``f_hz`` on ``head`` alone (its own
-    phase per run; physics ``vibration_rad``). Returns ``(recording, rate_hz)``."""
+    phase per run; physics ``vibration_rad``) and a signal offset ``offset_a`` (an
+    interpolation error at order L = 4096 of the head's own reading, physics
+    ``interpolation_harmonics_rad``) on ``head``. Returns ``(recording, rate_hz)``."""
     g = np.random.default_rng([geom_seed, 7])
     H = int(g.integers(2, 6))
     R = int(g.integers(1, 4))
@@ -169,6 +183,11 @@ def vibration_record(
         c, s_ = (amp_rad * np.cos(ph))[:, None], (-amp_rad * np.sin(ph))[:, None]
         err[:, head] += np.asarray(fx.vibration_rad(t, f_hz, c, s_))[:, 0]
     y = th[:, None] + err + n.normal(0, noise, err.shape) + g.uniform(-3, 3, (R, H))[run]
+    if offset_a:
+        L = 4096
+        coef = np.zeros((4, t.size))
+        coef[0] = offset_a
+        y[:, head] += np.asarray(fx.interpolation_harmonics_rad(L * y[:, head], L, coef))
     cols = {"t": t, "run": run}
     if use_ref:
         cols["theta_ref"] = th + g.uniform(-3, 3, R)[run]
@@ -250,10 +269,124 @@ def vibration_trials(seed: int, n: int, factors=(1.5, 0.5), same: bool = False) 
     return rows
 
 
+def _found(doc: dict, effect: str) -> bool:
+    """``effect`` named, or reported confounded with a named one (the record shows it and
+    says it cannot tell it from the other: at one speed per run an interpolation error at
+    order L is a line in time, a vibration's)."""
+    named = {e["name"] for e in doc["effects"]}
+    if effect in named:
+        return True
+    return any(effect in c["pair"] and set(c["pair"]) & named for c in doc.get("confounded", []))
+
+
+def scale_record(geom_seed: int, noise_seed: int, scale: float, folder: Path):
+    """A sensor against a reference (``write_sensor_reference``) of a geometry drawn from
+    ``geom_seed`` (sensor, 2-20 turns in both directions, 1-3 runs at 0.2-3 rev/s, zeros
+    anywhere or on whole turns), its noise and error function from ``noise_seed``, with a
+    scale error ``scale``. Returns the recording."""
+    g = np.random.default_rng([geom_seed, 13])
+    sensor = str(g.choice(["magnetic", "resolver", "capacitive", "optical"]))
+    span = float(np.exp(g.uniform(np.log(2.0), np.log(20.0))))
+    n_runs = int(g.integers(1, 4))
+    speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
+    zeros = str(g.choice(["turns", "any"]))
+    rec, _ = write_sensor_reference(
+        folder / f"s{geom_seed}_{noise_seed}.toml",
+        key=jax.random.key(noise_seed),
+        sensor=sensor,
+        span_turns=span,
+        directions="both",
+        speeds_rev_s=speeds,
+        samples_per_run=2000,
+        effects={"scale_error": {"scale": scale}} if scale else None,
+        run_zeros=zeros,
+        reference_zeros="turns",
+    )
+    return rec
+
+
+def scale_trials(seed: int, n: int, folder: Path, factors=(1.5, 0.5)) -> list[dict]:
+    """The bound of ``scale_error`` of one clean sensor-against-reference record (geometry
+    ``seed``) and ``n`` records of the same geometry with fresh noise each at each factor."""
+    d0 = diagnose(scale_record(seed, seed, 0.0, folder)).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    b = next(b for b in d0["detection_bounds"] if b["effect"] == "scale_error")
+    if b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            sign = 1.0 if i % 2 == 0 else -1.0
+            d = diagnose(scale_record(seed, key, sign * factor * b["bound"], folder)).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=_found(d, "scale_error"),
+                    named=any(e["name"] == "scale_error" for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
+MULTIHEAD_EFFECTS = {"vibration": "amplitude", "interpolation_error": "offset_a"}
+"""The multihead effects :func:`multihead_trials` puts on head 1 (by the size's name)."""
+
+
+def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
+    """The bound of ``effect`` on head 1 of one clean multihead record (geometry ``seed``)
+    and ``n`` records of the same geometry with fresh noise each at each factor of it."""
+    rec, _ = vibration_record(seed, seed, 0.0, 1, None)
+    d0 = diagnose(rec).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    b = _bound(d0, effect, "h1")
+    if b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            size = factor * b["bound"]
+            if effect == "vibration":
+                f_hz = float(b["at"].split()[3])
+                rec, _ = vibration_record(seed, key, size, 1, f_hz)
+            else:
+                rec, _ = vibration_record(seed, key, 0.0, 1, None, offset_a=size)
+            d = diagnose(rec).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the trials; prints one line per record and the rates; returns 0."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--effect", choices=("sds_delay", "vibration"), default="sds_delay")
+    ap.add_argument(
+        "--effect",
+        choices=("sds_delay", "vibration", "interpolation_error", "scale_error"),
+        default="sds_delay",
+    )
     ap.add_argument("--seed", type=int, default=600)
     ap.add_argument("--n", type=int, default=4, help="records per size and geometry")
     ap.add_argument("--geometries", type=int, default=3)
@@ -271,6 +404,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.effect == "vibration":
         for gi in range(args.geometries):
             rows += vibration_trials(args.seed + gi, args.n, factors, args.same)
+    elif args.effect in MULTIHEAD_EFFECTS:
+        for gi in range(args.geometries):
+            rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
+    elif args.effect == "scale_error":
+        with tempfile.TemporaryDirectory() as tmp:
+            for gi in range(args.geometries):
+                rows += scale_trials(args.seed + gi, args.n, Path(tmp), factors)
     else:
         with tempfile.TemporaryDirectory() as tmp:
             for gi, geom in enumerate(SDS_GEOMETRIES[: args.geometries]):
@@ -280,7 +420,12 @@ def main(argv: list[str] | None = None) -> int:
     done = [r for r in rows if "found" in r]
     for f in factors:
         k = [r["found"] for r in done if r["factor"] == f]
-        print(f"{args.effect} at {f}x the bound: {sum(k)} / {len(k)} found", flush=True)
+        nm = [r.get("named", r["found"]) for r in done if r["factor"] == f]
+        print(
+            f"{args.effect} at {f}x the bound: {sum(k)} / {len(k)} found "
+            f"({sum(nm)} named, the rest confounded with a named effect)",
+            flush=True,
+        )
     print(f"{time.perf_counter() - t0:.0f} s")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=str))

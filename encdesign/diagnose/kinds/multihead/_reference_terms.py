@@ -148,6 +148,13 @@ def _scale_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
     return [{"center_rad": (onehot.T @ th) / n, "scale": np.asarray(0.0)}]
 
 
+def _scale_probes(ctx: Context) -> list[Probe]:
+    """A scale error of 1 (sensor turns per reference turn - 1) about each run's mid angle
+    (the bound: the smallest ``|s|``)."""
+    (start,) = _scale_start(ctx, np.zeros(0), [])
+    return [Probe({**start, "scale": np.asarray(1.0)}, "scale", "1", _sensor_name(ctx))]
+
+
 def _scale_plausible(ctx: Context, p: dict) -> str | None:
     s = abs(float(np.asarray(p["scale"])))
     if s > ctx.settings.scale_error_max:
@@ -461,6 +468,7 @@ def _candidates() -> tuple:
         applies=_need_ref,
         start=_scale_start,
         plausible=_scale_plausible,
+        probes=_scale_probes,
     )
     interp = Candidate(
         name="interpolation_error",
