@@ -10,7 +10,9 @@ as found when the effect is named. Acceptance (issue 44): >= 80 % found at 1.5x,
 states), ``vibration`` on one head of multihead records (``vibration_record``),
 ``interpolation_error`` (a signal offset at order L) on one head of the same records (found:
 named, or reported confounded with a named effect, :func:`_found`), ``scale_error`` of a
-sensor against a reference (``scale_record``, its sign alternating).
+sensor against a reference (``scale_record``, its sign alternating), and its
+``interpolation_error`` (``interpolation_error_sensor``: a signal offset at order P,
+``interp_ref_record``).
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -24,6 +26,8 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect interpolation_error --seed 1501 --n 1 \
         --geometries 10
     python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
+    python benchmarks/detection_bounds.py --effect interpolation_error_sensor --seed 1541 \
+        --n 1 --geometries 10
 """
 
 from __future__ import annotations
@@ -305,13 +309,55 @@ def scale_record(geom_seed: int, noise_seed: int, scale: float, folder: Path):
     return rec
 
 
-def scale_trials(seed: int, n: int, folder: Path, factors=(1.5, 0.5)) -> list[dict]:
-    """The bound of ``scale_error`` of one clean sensor-against-reference record (geometry
-    ``seed``) and ``n`` records of the same geometry with fresh noise each at each factor."""
-    d0 = diagnose(scale_record(seed, seed, 0.0, folder)).doc
+def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: Path):
+    """A sensor against a reference (``write_sensor_reference``) with a signal offset
+    ``offset_a`` (an interpolation error at order P, physics ``interpolation_exact_rad``),
+    of a geometry drawn from ``geom_seed`` as ``random_reference_bench`` draws one for it (a
+    multipole magnetic ring of 16-40 pole pairs or a capacitive sensor of 32 periods, 1-3
+    runs, at least 8 samples per signal period), its noise and error function from
+    ``noise_seed``. Returns the recording."""
+    g = np.random.default_rng([geom_seed, 17])
+    sensor = str(g.choice(["magnetic", "capacitive"]))
+    P = int(g.integers(16, 41)) if sensor == "magnetic" else 32
+    n_runs = int(g.integers(1, 4))
+    directions = str(g.choice(["forward", "backward", "both"]))
+    n_dir = 2 if directions == "both" else 1
+    span = float(np.exp(g.uniform(np.log(0.3), np.log(20.0))))
+    span = float(np.clip(span, 1.0, max(1.0, 2000 / (8.0 * P * n_dir))))
+    speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
+    zeros = str(g.choice(["turns", "any"]))
+    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else None
+    rec, _ = write_sensor_reference(
+        folder / f"i{geom_seed}_{noise_seed}.toml",
+        key=jax.random.key(noise_seed),
+        sensor=sensor,
+        periods_per_rev=P,
+        span_turns=span,
+        directions=directions,
+        speeds_rev_s=speeds,
+        samples_per_run=2000,
+        effects=eff,
+        run_zeros=zeros,
+        reference_zeros="turns",
+    )
+    return rec
+
+
+REFERENCE_RECORDS = {"scale_error": scale_record, "interpolation_error": interp_ref_record}
+"""Generators of sensor-against-reference records by effect (:func:`reference_trials`)."""
+
+
+def reference_trials(
+    effect: str, seed: int, n: int, folder: Path, factors=(1.5, 0.5)
+) -> list[dict]:
+    """The bound of ``effect`` of one clean sensor-against-reference record (geometry
+    ``seed``) and ``n`` records of the same geometry with fresh noise each at each factor
+    (the size's sign alternating)."""
+    make = REFERENCE_RECORDS[effect]
+    d0 = diagnose(make(seed, seed, 0.0, folder)).doc
     if d0["verdict"] != "consistent":
         return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
-    b = next(b for b in d0["detection_bounds"] if b["effect"] == "scale_error")
+    b = next(b for b in d0["detection_bounds"] if b["effect"] == effect)
     if b["bound"] is None:
         return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
     rows = []
@@ -320,14 +366,14 @@ def scale_trials(seed: int, n: int, folder: Path, factors=(1.5, 0.5)) -> list[di
         for i in range(n):
             key = seed * 1000 + offset + i
             sign = 1.0 if i % 2 == 0 else -1.0
-            d = diagnose(scale_record(seed, key, sign * factor * b["bound"], folder)).doc
+            d = diagnose(make(seed, key, sign * factor * b["bound"], folder)).doc
             rows.append(
                 dict(
                     seed=seed,
                     key=key,
                     factor=factor,
-                    found=_found(d, "scale_error"),
-                    named=any(e["name"] == "scale_error" for e in d["effects"]),
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
                     bound=b["bound"],
                     set_by=b["set_by"],
                     verdict=d["verdict"],
@@ -384,7 +430,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
         "--effect",
-        choices=("sds_delay", "vibration", "interpolation_error", "scale_error"),
+        choices=(
+            "sds_delay",
+            "vibration",
+            "interpolation_error",
+            "scale_error",
+            "interpolation_error_sensor",
+        ),
         default="sds_delay",
     )
     ap.add_argument("--seed", type=int, default=600)
@@ -407,10 +459,11 @@ def main(argv: list[str] | None = None) -> int:
     elif args.effect in MULTIHEAD_EFFECTS:
         for gi in range(args.geometries):
             rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
-    elif args.effect == "scale_error":
+    elif args.effect in ("scale_error", "interpolation_error_sensor"):
+        effect = args.effect.removesuffix("_sensor")
         with tempfile.TemporaryDirectory() as tmp:
             for gi in range(args.geometries):
-                rows += scale_trials(args.seed + gi, args.n, Path(tmp), factors)
+                rows += reference_trials(effect, args.seed + gi, args.n, Path(tmp), factors)
     else:
         with tempfile.TemporaryDirectory() as tmp:
             for gi, geom in enumerate(SDS_GEOMETRIES[: args.geometries]):

@@ -149,3 +149,21 @@ def test_reference_scale_error_bound(tmp_path):
         doc = diagnose(record(seed, key, factor * b["bound"], tmp_path)).doc
         got[factor] = "scale_error" in [e["name"] for e in doc["effects"]]
     assert got == {1.5: True, 0.5: False}, got
+
+
+def test_reference_interpolation_error_bound(tmp_path):
+    """The smallest signal offset (order P) a clean sensor-against-reference record would have
+    revealed; a record of the same geometry with fresh noise at 1.5x it shows it, at half of it
+    not."""
+    seed = 1533
+    record = _bench("interp_ref_record")
+    d = diagnose(record(seed, seed, 0.0, tmp_path)).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    (b,) = [b for b in d["detection_bounds"] if b["effect"] == "interpolation_error"]
+    assert b["parameter"] == "offset_a" and b["unit"] == "1" and 0 < b["bound"] < 0.1
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, factor * b["bound"], tmp_path)).doc
+        got[factor] = "interpolation_error" in [e["name"] for e in doc["effects"]]
+    assert got == {1.5: True, 0.5: False}, got

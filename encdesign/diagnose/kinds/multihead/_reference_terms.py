@@ -232,6 +232,16 @@ def _interp_applies(ctx: Context) -> str | None:
     return None
 
 
+def _interp_probes(ctx: Context) -> list[Probe]:
+    """A signal offset ``offset_a`` of 1 (an error ``cos(psi) / P`` rad at order P), the
+    same in every run, at the angle the sensor sees (held, as the fit holds it)."""
+    c = np.zeros((4, ctx.n_runs)) if ctx.n_runs > 1 else np.zeros(4)
+    c[0] = 1.0
+    vals = {**_sensor_angle_fit(ctx), "coef": c}
+    at = f"order {int(ctx.signal_periods)} (P)"
+    return [Probe(vals, "offset_a", "1", _sensor_name(ctx), at=at)]
+
+
 def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
     """The angle the sensor sees, held (:func:`_sensor_angle_fit`): the signal phase is then
     ``P`` times the reference angle plus the sensor's own error function."""
@@ -498,6 +508,7 @@ def _candidates() -> tuple:
         applies=_interp_applies,
         start=_interp_start,
         plausible=_interp_plausible,
+        probes=_interp_probes,
         derived=_interp_derived,
     )
     quant = Candidate(
