@@ -167,3 +167,25 @@ def test_reference_interpolation_error_bound(tmp_path):
         doc = diagnose(record(seed, key, factor * b["bound"], tmp_path)).doc
         got[factor] = "interpolation_error" in [e["name"] for e in doc["effects"]]
     assert got == {1.5: True, 0.5: False}, got
+
+
+@pytest.mark.parametrize("effect", ["cogging", "magnet_asymmetry", "coil_mismatch"])
+def test_motion_bounds_hold(effect):
+    """The smallest amplitude of each motion catalog effect at its lowest order a clean motion
+    record would have revealed; a record of the same motor with fresh noise at 1.5x it shows
+    it, at half of it not. (Motor 1537: 5 pole pairs, 12 slots, its cogging order 60 under
+    the sampling's Nyquist order; motor 1534's cogging order 168 is above it.)"""
+    seed = 1537
+    record = _bench("motion_record")
+    d = diagnose(record(seed, seed, 1, 0.0)).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    assert effect not in d.get("detection_bounds_not_covered", [])
+    (b,) = [b for b in d["detection_bounds"] if b["effect"] == effect]
+    assert b["parameter"] == "amplitude_rad" and b["unit"] == "rad" and 0 < b["bound"] < 1e-3
+    order = int(b["at"].split()[1])
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, order, factor * b["bound"])).doc
+        got[factor] = effect in [e["name"] for e in doc["effects"]]
+    assert got == {1.5: True, 0.5: False}, got
