@@ -7,7 +7,13 @@ with fresh noise (other seeds) carry it at ``1.5x`` and ``0.5x`` that bound; a r
 as found when the effect is named. Acceptance (issue 44): >= 80 % found at 1.5x, <= 10 % at
 0.5x. Effects: ``sensor_delay_step`` on moving sensor ``m1`` of sds benches
 (``write_concealed_sds``, the step from a run in the middle half of the record, as the bound
-states), ``vibration`` on one head of multihead records (``vibration_record``).
+states), ``vibration`` on one head of multihead records (``vibration_record``),
+``interpolation_error`` (a signal offset at order L) on one head of the same records (found:
+named, or reported confounded with a named effect, :func:`_found`), ``scale_error`` of a
+sensor against a reference (``scale_record``, its sign alternating), and its
+``interpolation_error`` (``interpolation_error_sensor``: a signal offset at order P,
+``interp_ref_record``), and the motion kind's ``cogging``, ``magnet_asymmetry`` and
+``coil_mismatch`` at their lowest orders (``--effect motion_NAME``, ``motion_record``).
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -18,6 +24,11 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect sds_delay --seed 620 --n 4 [--json out.json]
     python benchmarks/detection_bounds.py --effect vibration --same --factors 1.5,1.0,0.5 \
         --seed 730 --n 3 --geometries 4
+    python benchmarks/detection_bounds.py --effect interpolation_error --seed 1501 --n 1 \
+        --geometries 10
+    python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
+    python benchmarks/detection_bounds.py --effect interpolation_error_sensor --seed 1541 \
+        --n 1 --geometries 10
 """
 
 from __future__ import annotations
@@ -35,6 +46,7 @@ from encdesign import Recording
 from encdesign.diagnose import diagnose
 from encdesign.physics import _effects as fx
 from encdesign.simulate import write_concealed_sds
+from encdesign.simulate._conceal_reference import write_sensor_reference
 from encdesign.simulate._conceal_sds import NOISE_RAD, SPEED_RAD_S
 
 SDS_GEOMETRIES = [
@@ -136,12 +148,19 @@ def sds_delay_trials(
 
 
 def vibration_record(
-    geom_seed: int, noise_seed: int, amp_rad: float, head: int, f_hz: float | None
+    geom_seed: int,
+    noise_seed: int,
+    amp_rad: float,
+    head: int,
+    f_hz: float | None,
+    offset_a: float = 0.0,
 ):
     """A multihead record of a geometry drawn from ``geom_seed`` (2-5 heads, 1-3 runs at
     different speeds, theta_ref or not, disk error orders 1-8), its noise from
     ``noise_seed``, with a vibration of ``amp_rad`` at ``f_hz`` on ``head`` alone (its own
-    phase per run; physics ``vibration_rad``). Returns ``(recording, rate_hz)``."""
+    phase per run; physics ``vibration_rad``) and a signal offset ``offset_a`` (an
+    interpolation error at order L = 4096 of the head's own reading, physics
+    ``interpolation_harmonics_rad``) on ``head``. Returns ``(recording, rate_hz)``."""
     g = np.random.default_rng([geom_seed, 7])
     H = int(g.integers(2, 6))
     R = int(g.integers(1, 4))
@@ -169,6 +188,11 @@ def vibration_record(
         c, s_ = (amp_rad * np.cos(ph))[:, None], (-amp_rad * np.sin(ph))[:, None]
         err[:, head] += np.asarray(fx.vibration_rad(t, f_hz, c, s_))[:, 0]
     y = th[:, None] + err + n.normal(0, noise, err.shape) + g.uniform(-3, 3, (R, H))[run]
+    if offset_a:
+        L = 4096
+        coef = np.zeros((4, t.size))
+        coef[0] = offset_a
+        y[:, head] += np.asarray(fx.interpolation_harmonics_rad(L * y[:, head], L, coef))
     cols = {"t": t, "run": run}
     if use_ref:
         cols["theta_ref"] = th + g.uniform(-3, 3, R)[run]
@@ -250,10 +274,234 @@ def vibration_trials(seed: int, n: int, factors=(1.5, 0.5), same: bool = False) 
     return rows
 
 
+def _found(doc: dict, effect: str) -> bool:
+    """``effect`` named, or reported confounded with a named one (the record shows it and
+    says it cannot tell it from the other: at one speed per run an interpolation error at
+    order L is a line in time, a vibration's)."""
+    named = {e["name"] for e in doc["effects"]}
+    if effect in named:
+        return True
+    return any(effect in c["pair"] and set(c["pair"]) & named for c in doc.get("confounded", []))
+
+
+def scale_record(geom_seed: int, noise_seed: int, scale: float, folder: Path):
+    """A sensor against a reference (``write_sensor_reference``) of a geometry drawn from
+    ``geom_seed`` (sensor, 2-20 turns in both directions, 1-3 runs at 0.2-3 rev/s, zeros
+    anywhere or on whole turns), its noise and error function from ``noise_seed``, with a
+    scale error ``scale``. Returns the recording."""
+    g = np.random.default_rng([geom_seed, 13])
+    sensor = str(g.choice(["magnetic", "resolver", "capacitive", "optical"]))
+    span = float(np.exp(g.uniform(np.log(2.0), np.log(20.0))))
+    n_runs = int(g.integers(1, 4))
+    speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
+    zeros = str(g.choice(["turns", "any"]))
+    rec, _ = write_sensor_reference(
+        folder / f"s{geom_seed}_{noise_seed}.toml",
+        key=jax.random.key(noise_seed),
+        sensor=sensor,
+        span_turns=span,
+        directions="both",
+        speeds_rev_s=speeds,
+        samples_per_run=2000,
+        effects={"scale_error": {"scale": scale}} if scale else None,
+        run_zeros=zeros,
+        reference_zeros="turns",
+    )
+    return rec
+
+
+def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: Path):
+    """A sensor against a reference (``write_sensor_reference``) with a signal offset
+    ``offset_a`` (an interpolation error at order P, physics ``interpolation_exact_rad``),
+    of a geometry drawn from ``geom_seed`` as ``random_reference_bench`` draws one for it (a
+    multipole magnetic ring of 16-40 pole pairs or a capacitive sensor of 32 periods, 1-3
+    runs, at least 8 samples per signal period), its noise and error function from
+    ``noise_seed``. Returns the recording."""
+    g = np.random.default_rng([geom_seed, 17])
+    sensor = str(g.choice(["magnetic", "capacitive"]))
+    P = int(g.integers(16, 41)) if sensor == "magnetic" else 32
+    n_runs = int(g.integers(1, 4))
+    directions = str(g.choice(["forward", "backward", "both"]))
+    n_dir = 2 if directions == "both" else 1
+    span = float(np.exp(g.uniform(np.log(0.3), np.log(20.0))))
+    span = float(np.clip(span, 1.0, max(1.0, 2000 / (8.0 * P * n_dir))))
+    speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
+    zeros = str(g.choice(["turns", "any"]))
+    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else None
+    rec, _ = write_sensor_reference(
+        folder / f"i{geom_seed}_{noise_seed}.toml",
+        key=jax.random.key(noise_seed),
+        sensor=sensor,
+        periods_per_rev=P,
+        span_turns=span,
+        directions=directions,
+        speeds_rev_s=speeds,
+        samples_per_run=2000,
+        effects=eff,
+        run_zeros=zeros,
+        reference_zeros="turns",
+    )
+    return rec
+
+
+MOTION_EFFECTS = ("cogging", "magnet_asymmetry", "coil_mismatch")
+"""The motion catalog effects (``--effect motion_NAME``), each at its lowest order."""
+
+
+def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
+    """A motion recording (one run at constant speed, 2000 rows at 500 Hz, 3-20 turns, read
+    noise 0.2 mrad) of a motor drawn from ``geom_seed`` (4-8 pole pairs, 6-24 slots), its
+    noise from ``noise_seed``, with an error ``amp_rad cos(order theta + phase)`` (phase
+    from ``noise_seed``). Returns the recording."""
+    g = np.random.default_rng([geom_seed, 19])
+    p = int(g.integers(4, 9))
+    s = int(g.choice([6, 9, 12, 18, 24]))
+    turns = float(g.uniform(3, 20))
+    n, rate, noise = 2000, 500.0, 2e-4
+    t = np.arange(n) / rate
+    th = turns * 2 * np.pi * t / t[-1] + g.uniform(0, 2 * np.pi)
+    rn = np.random.default_rng([noise_seed, 23])
+    err = amp_rad * np.cos(order * th + rn.uniform(0, 2 * np.pi)) if amp_rad else 0.0
+    theta = th + err + rn.normal(0, noise, n)
+    meta = {
+        "format": "encdesign-recording/1",
+        "kind": "motion",
+        "motor": {"pole_pairs": p, "stator_slots": s},
+    }
+    return Recording("motion", meta, {"t": t, "theta": theta})
+
+
+def motion_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
+    """The bound of a motion ``effect`` at its lowest order on one clean record (motor
+    ``seed``) and ``n`` records of the same motor with fresh noise each at each factor."""
+    d0 = diagnose(motion_record(seed, seed, 1, 0.0)).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    bs = [b for b in d0["detection_bounds"] if b["effect"] == effect]
+    if not bs or bs[0]["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {bs[0].get('note') if bs else None}")]
+    b = bs[0]
+    order = int(b["at"].split()[1])
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            d = diagnose(motion_record(seed, key, order, factor * b["bound"])).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    order=order,
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
+REFERENCE_RECORDS = {"scale_error": scale_record, "interpolation_error": interp_ref_record}
+"""Generators of sensor-against-reference records by effect (:func:`reference_trials`)."""
+
+
+def reference_trials(
+    effect: str, seed: int, n: int, folder: Path, factors=(1.5, 0.5)
+) -> list[dict]:
+    """The bound of ``effect`` of one clean sensor-against-reference record (geometry
+    ``seed``) and ``n`` records of the same geometry with fresh noise each at each factor
+    (the size's sign alternating)."""
+    make = REFERENCE_RECORDS[effect]
+    d0 = diagnose(make(seed, seed, 0.0, folder)).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    b = next(b for b in d0["detection_bounds"] if b["effect"] == effect)
+    if b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            sign = 1.0 if i % 2 == 0 else -1.0
+            d = diagnose(make(seed, key, sign * factor * b["bound"], folder)).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
+MULTIHEAD_EFFECTS = {"vibration": "amplitude", "interpolation_error": "offset_a"}
+"""The multihead effects :func:`multihead_trials` puts on head 1 (by the size's name)."""
+
+
+def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
+    """The bound of ``effect`` on head 1 of one clean multihead record (geometry ``seed``)
+    and ``n`` records of the same geometry with fresh noise each at each factor of it."""
+    rec, _ = vibration_record(seed, seed, 0.0, 1, None)
+    d0 = diagnose(rec).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    b = _bound(d0, effect, "h1")
+    if b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            size = factor * b["bound"]
+            if effect == "vibration":
+                f_hz = float(b["at"].split()[3])
+                rec, _ = vibration_record(seed, key, size, 1, f_hz)
+            else:
+                rec, _ = vibration_record(seed, key, 0.0, 1, None, offset_a=size)
+            d = diagnose(rec).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the trials; prints one line per record and the rates; returns 0."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--effect", choices=("sds_delay", "vibration"), default="sds_delay")
+    ap.add_argument(
+        "--effect",
+        choices=(
+            "sds_delay",
+            "vibration",
+            "interpolation_error",
+            "scale_error",
+            "interpolation_error_sensor",
+            *(f"motion_{e}" for e in MOTION_EFFECTS),
+        ),
+        default="sds_delay",
+    )
     ap.add_argument("--seed", type=int, default=600)
     ap.add_argument("--n", type=int, default=4, help="records per size and geometry")
     ap.add_argument("--geometries", type=int, default=3)
@@ -271,6 +519,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.effect == "vibration":
         for gi in range(args.geometries):
             rows += vibration_trials(args.seed + gi, args.n, factors, args.same)
+    elif args.effect in MULTIHEAD_EFFECTS:
+        for gi in range(args.geometries):
+            rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
+    elif args.effect.startswith("motion_"):
+        for gi in range(args.geometries):
+            effect = args.effect.removeprefix("motion_")
+            rows += motion_trials(effect, args.seed + gi, args.n, factors)
+    elif args.effect in ("scale_error", "interpolation_error_sensor"):
+        effect = args.effect.removesuffix("_sensor")
+        with tempfile.TemporaryDirectory() as tmp:
+            for gi in range(args.geometries):
+                rows += reference_trials(effect, args.seed + gi, args.n, Path(tmp), factors)
     else:
         with tempfile.TemporaryDirectory() as tmp:
             for gi, geom in enumerate(SDS_GEOMETRIES[: args.geometries]):
@@ -280,7 +540,12 @@ def main(argv: list[str] | None = None) -> int:
     done = [r for r in rows if "found" in r]
     for f in factors:
         k = [r["found"] for r in done if r["factor"] == f]
-        print(f"{args.effect} at {f}x the bound: {sum(k)} / {len(k)} found", flush=True)
+        nm = [r.get("named", r["found"]) for r in done if r["factor"] == f]
+        print(
+            f"{args.effect} at {f}x the bound: {sum(k)} / {len(k)} found "
+            f"({sum(nm)} named, the rest confounded with a named effect)",
+            flush=True,
+        )
     print(f"{time.perf_counter() - t0:.0f} s")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=str))

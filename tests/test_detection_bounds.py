@@ -100,3 +100,92 @@ def test_multihead_vibration_bound_per_head(seed):
         # reaches the criterion's median (k = 2 R C + 1 parameters)
         assert b["set_by"] in ("bic_min", "view")
         assert 0.1 * s < b["bound"] < 100 * s
+
+
+def _bench(name: str):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    import detection_bounds
+
+    return getattr(detection_bounds, name)
+
+
+def test_multihead_interpolation_error_bound_per_head():
+    """Per head, the smallest signal offset (order L) a clean multihead record would have
+    revealed; a record of the same geometry with fresh noise and the offset at 1.5x it on head
+    1 shows it (named, or confounded with a vibration: at one speed per run order L is a line
+    in time), at half of it not."""
+    seed = 1531
+    record, found = _bench("vibration_record"), _bench("_found")
+    d = diagnose(record(seed, seed, 0.0, 1, None)[0]).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    ip = [b for b in d["detection_bounds"] if b["effect"] == "interpolation_error"]
+    assert [b["where"] for b in ip] == d["noise"]["channels"]
+    assert "interpolation_error" not in d.get("detection_bounds_not_covered", [])
+    b = ip[1]
+    assert b["parameter"] == "offset_a" and b["unit"] == "1" and b["bound"] > 0
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, 0.0, 1, None, factor * b["bound"])[0]).doc
+        got[factor] = found(doc, "interpolation_error")
+    assert got == {1.5: True, 0.5: False}, got
+
+
+def test_reference_scale_error_bound(tmp_path):
+    """The smallest scale error a clean sensor-against-reference record would have revealed;
+    a record of the same geometry with fresh noise at 1.5x it shows it, at half of it not."""
+    seed = 1532
+    record = _bench("scale_record")
+    d = diagnose(record(seed, seed, 0.0, tmp_path)).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    (b,) = [b for b in d["detection_bounds"] if b["effect"] == "scale_error"]
+    assert b["parameter"] == "scale" and b["unit"] == "1" and 0 < b["bound"] < 1e-3
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, factor * b["bound"], tmp_path)).doc
+        got[factor] = "scale_error" in [e["name"] for e in doc["effects"]]
+    assert got == {1.5: True, 0.5: False}, got
+
+
+def test_reference_interpolation_error_bound(tmp_path):
+    """The smallest signal offset (order P) a clean sensor-against-reference record would have
+    revealed; a record of the same geometry with fresh noise at 1.5x it shows it, at half of it
+    not."""
+    seed = 1533
+    record = _bench("interp_ref_record")
+    d = diagnose(record(seed, seed, 0.0, tmp_path)).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    (b,) = [b for b in d["detection_bounds"] if b["effect"] == "interpolation_error"]
+    assert b["parameter"] == "offset_a" and b["unit"] == "1" and 0 < b["bound"] < 0.1
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, factor * b["bound"], tmp_path)).doc
+        got[factor] = "interpolation_error" in [e["name"] for e in doc["effects"]]
+    assert got == {1.5: True, 0.5: False}, got
+
+
+@pytest.mark.parametrize("effect", ["cogging", "magnet_asymmetry", "coil_mismatch"])
+def test_motion_bounds_hold(effect):
+    """The smallest amplitude of each motion catalog effect at its lowest order a clean motion
+    record would have revealed; a record of the same motor with fresh noise at 1.5x it shows
+    it, at half of it not. (Motor 1537: 5 pole pairs, 12 slots, its cogging order 60 under
+    the sampling's Nyquist order; motor 1534's cogging order 168 is above it.)"""
+    seed = 1537
+    record = _bench("motion_record")
+    d = diagnose(record(seed, seed, 1, 0.0)).doc
+    validate_diagnosis(d)
+    assert d["verdict"] == "consistent"
+    assert effect not in d.get("detection_bounds_not_covered", [])
+    (b,) = [b for b in d["detection_bounds"] if b["effect"] == effect]
+    assert b["parameter"] == "amplitude_rad" and b["unit"] == "rad" and 0 < b["bound"] < 1e-3
+    order = int(b["at"].split()[1])
+    got = {}
+    for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
+        doc = diagnose(record(seed, key, order, factor * b["bound"])).doc
+        got[factor] = effect in [e["name"] for e in doc["effects"]]
+    assert got == {1.5: True, 0.5: False}, got

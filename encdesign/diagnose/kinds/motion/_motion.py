@@ -34,7 +34,7 @@ import numpy as np
 
 from ...._errors import input_error
 from ....io._recording import Recording
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import KindData, Prepared, drive_channel
@@ -182,6 +182,14 @@ def _fourier(
             }
         return out
 
+    def probes(ctx):
+        # at its lowest order: the fundamental its family is named by (the bound of each
+        # higher harmonic alone is about the same: one column pair each)
+        c = np.zeros(len(orders))
+        c[0] = 1.0
+        vals = {"cos_rad": c, "sin_rad": np.zeros(len(orders))}
+        return [Probe(vals, "amplitude_rad", "rad", where="theta", at=f"order {orders[0]}")]
+
     return Candidate(
         name,
         fn,
@@ -190,6 +198,7 @@ def _fourier(
         kinds=("motion",),
         explanation=explanation,
         derived=derived,
+        probes=probes,
     )
 
 

@@ -525,6 +525,24 @@ def _ip_derived(ctx, v, se):
     }
 
 
+def _ip_probes(ctx: Context) -> list[Probe]:
+    """Per head, a signal offset ``offset_a`` of 1 (an error ``cos(psi) / L`` rad at order
+    L) on that head alone, the same in every run."""
+    C, R = ctx.n_channels, ctx.n_runs
+    if ctx.signal_periods <= 0:
+        return []
+    names = ctx.data.channel_names if ctx.data is not None else [f"h{k}" for k in range(C)]
+    out = []
+    for k in range(C):
+        c = np.zeros((4, R, C))
+        c[0, :, k] = 1.0
+        vals = {"coef": c.reshape(4, R * C)}
+        out.append(
+            Probe(vals, "offset_a", "1", where=names[k], at=f"order {ctx.signal_periods} (L)")
+        )
+    return out
+
+
 INTERPOLATION_ERROR = Candidate(
     "interpolation_error",
     _ip_fn,
@@ -537,6 +555,7 @@ INTERPOLATION_ERROR = Candidate(
         None if ctx.signal_periods > 0 else "needs grating_lines or signal_periods_per_rev"
     ),
     derived=_ip_derived,
+    probes=_ip_probes,
 )
 
 

@@ -148,6 +148,13 @@ def _scale_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
     return [{"center_rad": (onehot.T @ th) / n, "scale": np.asarray(0.0)}]
 
 
+def _scale_probes(ctx: Context) -> list[Probe]:
+    """A scale error of 1 (sensor turns per reference turn - 1) about each run's mid angle
+    (the bound: the smallest ``|s|``)."""
+    (start,) = _scale_start(ctx, np.zeros(0), [])
+    return [Probe({**start, "scale": np.asarray(1.0)}, "scale", "1", _sensor_name(ctx))]
+
+
 def _scale_plausible(ctx: Context, p: dict) -> str | None:
     s = abs(float(np.asarray(p["scale"])))
     if s > ctx.settings.scale_error_max:
@@ -223,6 +230,16 @@ def _interp_applies(ctx: Context) -> str | None:
             f"eigenvalue {lam:.3f} of the harmonics' mean square, needs {spread})"
         )
     return None
+
+
+def _interp_probes(ctx: Context) -> list[Probe]:
+    """A signal offset ``offset_a`` of 1 (an error ``cos(psi) / P`` rad at order P), the
+    same in every run, at the angle the sensor sees (held, as the fit holds it)."""
+    c = np.zeros((4, ctx.n_runs)) if ctx.n_runs > 1 else np.zeros(4)
+    c[0] = 1.0
+    vals = {**_sensor_angle_fit(ctx), "coef": c}
+    at = f"order {int(ctx.signal_periods)} (P)"
+    return [Probe(vals, "offset_a", "1", _sensor_name(ctx), at=at)]
 
 
 def _interp_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
@@ -461,6 +478,7 @@ def _candidates() -> tuple:
         applies=_need_ref,
         start=_scale_start,
         plausible=_scale_plausible,
+        probes=_scale_probes,
     )
     interp = Candidate(
         name="interpolation_error",
@@ -490,6 +508,7 @@ def _candidates() -> tuple:
         applies=_interp_applies,
         start=_interp_start,
         plausible=_interp_plausible,
+        probes=_interp_probes,
         derived=_interp_derived,
     )
     quant = Candidate(
