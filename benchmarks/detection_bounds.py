@@ -44,6 +44,7 @@ import numpy as np
 
 from encdesign import Recording
 from encdesign.diagnose import diagnose
+from encdesign.diagnose.kinds.sds._sds_terms import middle_half_span
 from encdesign.physics import _effects as fx
 from encdesign.simulate import write_concealed_sds
 from encdesign.simulate._conceal_reference import write_sensor_reference
@@ -100,8 +101,7 @@ def sds_delay_trials(
 ) -> list[dict]:
     """The bound of one clean-equivalent sds bench and ``n`` records of fresh noise each at
     1.5x and 0.5x (``same``: :func:`sds_same_record`)."""
-    R = geom["n_runs"]
-    lo, hi = max(1, round(R / 4)), min(R - 1, round(3 * R / 4))
+    lo, hi = middle_half_span(geom["n_runs"])
 
     def make(key: int, tau_s: float):
         amp = max(tau_s * SPEED_RAD_S / NOISE_RAD, 1e-9)
@@ -371,6 +371,32 @@ def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
     return Recording("motion", meta, {"t": t, "theta": theta})
 
 
+def _fresh_trials(effect: str, seed: int, n: int, factors, b: dict, make, **extra) -> list[dict]:
+    """``n`` records of fresh noise at each factor of the bound ``b`` (``make(key, i, size)``
+    gives the record with the effect at ``size``), each diagnosed: found, named, verdict."""
+    rows = []
+    for factor in factors:
+        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
+        for i in range(n):
+            key = seed * 1000 + offset + i
+            d = diagnose(make(key, i, factor * b["bound"])).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    **extra,
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def motion_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
     """The bound of a motion ``effect`` at its lowest order on one clean record (motor
     ``seed``) and ``n`` records of the same motor with fresh noise each at each factor."""
@@ -382,27 +408,11 @@ def motion_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[di
         return [dict(seed=seed, skipped=f"no bound: {bs[0].get('note') if bs else None}")]
     b = bs[0]
     order = int(b["at"].split()[1])
-    rows = []
-    for factor in factors:
-        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
-        for i in range(n):
-            key = seed * 1000 + offset + i
-            d = diagnose(motion_record(seed, key, order, factor * b["bound"])).doc
-            rows.append(
-                dict(
-                    seed=seed,
-                    key=key,
-                    factor=factor,
-                    order=order,
-                    found=_found(d, effect),
-                    named=any(e["name"] == effect for e in d["effects"]),
-                    bound=b["bound"],
-                    set_by=b["set_by"],
-                    verdict=d["verdict"],
-                )
-            )
-            print(rows[-1], flush=True)
-    return rows
+
+    def make(key: int, i: int, size: float):
+        return motion_record(seed, key, order, size)
+
+    return _fresh_trials(effect, seed, n, factors, b, make, order=order)
 
 
 REFERENCE_RECORDS = {"scale_error": scale_record, "interpolation_error": interp_ref_record}
@@ -422,27 +432,11 @@ def reference_trials(
     b = next(b for b in d0["detection_bounds"] if b["effect"] == effect)
     if b["bound"] is None:
         return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
-    rows = []
-    for factor in factors:
-        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
-        for i in range(n):
-            key = seed * 1000 + offset + i
-            sign = 1.0 if i % 2 == 0 else -1.0
-            d = diagnose(make(seed, key, sign * factor * b["bound"], folder)).doc
-            rows.append(
-                dict(
-                    seed=seed,
-                    key=key,
-                    factor=factor,
-                    found=_found(d, effect),
-                    named=any(e["name"] == effect for e in d["effects"]),
-                    bound=b["bound"],
-                    set_by=b["set_by"],
-                    verdict=d["verdict"],
-                )
-            )
-            print(rows[-1], flush=True)
-    return rows
+
+    def make_noisy(key: int, i: int, size: float):
+        return make(seed, key, (1.0 if i % 2 == 0 else -1.0) * size, folder)
+
+    return _fresh_trials(effect, seed, n, factors, b, make_noisy)
 
 
 MULTIHEAD_EFFECTS = {"vibration": "amplitude", "interpolation_error": "offset_a"}
@@ -459,32 +453,14 @@ def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list
     b = _bound(d0, effect, "h1")
     if b["bound"] is None:
         return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
-    rows = []
-    for factor in factors:
-        offset = 0 if factor >= 1.5 else 500 if factor <= 0.5 else 250  # noise seeds per size
-        for i in range(n):
-            key = seed * 1000 + offset + i
-            size = factor * b["bound"]
-            if effect == "vibration":
-                f_hz = float(b["at"].split()[3])
-                rec, _ = vibration_record(seed, key, size, 1, f_hz)
-            else:
-                rec, _ = vibration_record(seed, key, 0.0, 1, None, offset_a=size)
-            d = diagnose(rec).doc
-            rows.append(
-                dict(
-                    seed=seed,
-                    key=key,
-                    factor=factor,
-                    found=_found(d, effect),
-                    named=any(e["name"] == effect for e in d["effects"]),
-                    bound=b["bound"],
-                    set_by=b["set_by"],
-                    verdict=d["verdict"],
-                )
-            )
-            print(rows[-1], flush=True)
-    return rows
+
+    def make(key: int, i: int, size: float):
+        if effect == "vibration":
+            f_hz = float(b["at"].split()[3])
+            return vibration_record(seed, key, size, 1, f_hz)[0]
+        return vibration_record(seed, key, 0.0, 1, None, offset_a=size)[0]
+
+    return _fresh_trials(effect, seed, n, factors, b, make)
 
 
 def main(argv: list[str] | None = None) -> int:

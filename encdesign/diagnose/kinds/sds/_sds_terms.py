@@ -419,10 +419,16 @@ def _delay_derived(ctx, v, se):
     }
 
 
+def middle_half_span(R: int) -> tuple[int, int]:
+    """``(lo, hi)``: the first runs of a step in the middle half of ``R`` runs, the span
+    the sds delay step's detection bound is stated for (its ends included)."""
+    return max(1, round(R / 4)), min(R - 1, round(3 * R / 4))
+
+
 def _middle_half(R: int) -> list[int]:
     """First runs of a step in the middle half of ``R`` runs: its ends and its middle (the
     step's noncentrality is smallest at the ends: ``k (R - k) / R`` runs' worth)."""
-    lo, hi = max(1, round(R / 4)), min(R - 1, round(3 * R / 4))
+    lo, hi = middle_half_span(R)
     return sorted({lo, R // 2, hi})
 
 
