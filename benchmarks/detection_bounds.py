@@ -29,6 +29,13 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
     python benchmarks/detection_bounds.py --effect interpolation_error_sensor --seed 1541 \
         --n 1 --geometries 10
+    python benchmarks/detection_bounds.py --effect quadrature_signal_shape --seed 3201 --n 2 \
+        --geometries 10 [--beside 20]
+
+``quadrature_signal_shape``: a radial error at order 3 or 4 (the ``signal_shape`` column) in
+quadrature captures (``quadrature_record``); ``--beside X``: beside structure no catalog
+effect explains (a radial order 17 at X times the clean bound), the bound of an
+``unexplained`` capture (the rule ``located_share_min`` against the final findings).
 """
 
 from __future__ import annotations
@@ -462,13 +469,19 @@ def quadrature_record(
     return Recording("quadrature", meta, cols)
 
 
-def quadrature_trials(seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
+def quadrature_trials(seed: int, n: int, factors=(1.5, 0.5), beside: float = 0.0) -> list[dict]:
     """The ``signal_shape`` bounds (radial orders 3 and 4) of one clean quadrature capture
     (geometry ``seed``) and ``n`` captures of the same geometry with fresh noise each at each
-    factor, at the order of the bound (3 for even seeds, 4 for odd ones)."""
+    factor, at the order of the bound (3 for even seeds, 4 for odd ones). ``beside``: every
+    capture also carries a radial order 17 (no catalog effect's) of ``beside`` times the
+    clean bound, the bound then comes from the capture with it alone (``unexplained``)."""
     d0 = diagnose(quadrature_record(seed, seed, 3, 0.0)).doc
-    if d0["verdict"] != "consistent":
-        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    more = ()
+    if beside and d0["verdict"] == "consistent":
+        more = ((17, beside * d0["detection_bounds"][0]["bound"]),)
+        d0 = diagnose(quadrature_record(seed, seed, 3, 0.0, more=more)).doc
+    if d0["verdict"] != ("unexplained" if more else "consistent"):
+        return [dict(seed=seed, skipped=f"reference capture {d0['verdict']}")]
     bs = [b for b in d0["detection_bounds"] if b["effect"] == "signal_shape"]
     b = bs[seed % 2] if len(bs) > 1 else bs[0] if bs else None
     if b is None or b["bound"] is None:
@@ -476,7 +489,7 @@ def quadrature_trials(seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
     order = int(b["at"].split()[-1])
 
     def make(key: int, i: int, size: float):
-        return quadrature_record(seed, key, order, size)
+        return quadrature_record(seed, key, order, size, more=more)
 
     return _fresh_trials("signal_shape", seed, n, factors, b, make, order=order)
 
@@ -554,6 +567,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the effect in the very record the bound came from (same noise), not in fresh ones",
     )
+    ap.add_argument(
+        "--beside",
+        type=float,
+        default=0.0,
+        help="quadrature: unexplained structure (radial order 17) in every capture, this many "
+        "times the clean bound",
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     factors = tuple(float(f) for f in args.factors.split(","))
@@ -567,7 +587,7 @@ def main(argv: list[str] | None = None) -> int:
             rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
     elif args.effect == "quadrature_signal_shape":
         for gi in range(args.geometries):
-            rows += quadrature_trials(args.seed + gi, args.n, factors)
+            rows += quadrature_trials(args.seed + gi, args.n, factors, args.beside)
     elif args.effect.startswith("motion_"):
         for gi in range(args.geometries):
             effect = args.effect.removeprefix("motion_")
