@@ -29,6 +29,13 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
     python benchmarks/detection_bounds.py --effect interpolation_error_sensor --seed 1541 \
         --n 1 --geometries 10
+    python benchmarks/detection_bounds.py --effect quadrature_signal_shape --seed 3201 --n 2 \
+        --geometries 10 [--beside 20]
+
+``quadrature_signal_shape``: a radial error at order 3 or 4 (the ``signal_shape`` column) in
+quadrature captures (``quadrature_record``); ``--beside X``: beside structure no catalog
+effect explains (a radial order 17 at X times the clean bound), the bound of an
+``unexplained`` capture (the rule ``located_share_min`` against the final findings).
 """
 
 from __future__ import annotations
@@ -310,13 +317,15 @@ def scale_record(geom_seed: int, noise_seed: int, scale: float, folder: Path):
     return rec
 
 
-def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: Path):
+def interp_ref_record(
+    geom_seed: int, noise_seed: int, offset_a: float, folder: Path, scale: float = 0.0
+):
     """A sensor against a reference (``write_sensor_reference``) with a signal offset
     ``offset_a`` (an interpolation error at order P, physics ``interpolation_exact_rad``),
     of a geometry drawn from ``geom_seed`` as ``random_reference_bench`` draws one for it (a
     multipole magnetic ring of 16-40 pole pairs or a capacitive sensor of 32 periods, 1-3
     runs, at least 8 samples per signal period), its noise and error function from
-    ``noise_seed``. Returns the recording."""
+    ``noise_seed``, and a scale error ``scale``. Returns the recording."""
     g = np.random.default_rng([geom_seed, 17])
     sensor = str(g.choice(["magnetic", "capacitive"]))
     P = int(g.integers(16, 41)) if sensor == "magnetic" else 32
@@ -327,7 +336,9 @@ def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: 
     span = float(np.clip(span, 1.0, max(1.0, 2000 / (8.0 * P * n_dir))))
     speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
     zeros = str(g.choice(["turns", "any"]))
-    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else None
+    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else {}
+    if scale:
+        eff["scale_error"] = {"scale": scale}
     rec, _ = write_sensor_reference(
         folder / f"i{geom_seed}_{noise_seed}.toml",
         key=jax.random.key(noise_seed),
@@ -337,7 +348,7 @@ def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: 
         directions=directions,
         speeds_rev_s=speeds,
         samples_per_run=2000,
-        effects=eff,
+        effects=eff or None,
         run_zeros=zeros,
         reference_zeros="turns",
     )
@@ -348,11 +359,12 @@ MOTION_EFFECTS = ("cogging", "magnet_asymmetry", "coil_mismatch")
 """The motion catalog effects (``--effect motion_NAME``), each at its lowest order."""
 
 
-def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
+def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float, more=()):
     """A motion recording (one run at constant speed, 2000 rows at 500 Hz, 3-20 turns, read
     noise 0.2 mrad) of a motor drawn from ``geom_seed`` (4-8 pole pairs, 6-24 slots), its
     noise from ``noise_seed``, with an error ``amp_rad cos(order theta + phase)`` (phase
-    from ``noise_seed``). Returns the recording."""
+    from ``noise_seed``) and one more such error per ``(order, amp_rad)`` of ``more``.
+    Returns the recording."""
     g = np.random.default_rng([geom_seed, 19])
     p = int(g.integers(4, 9))
     s = int(g.choice([6, 9, 12, 18, 24]))
@@ -362,6 +374,8 @@ def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
     th = turns * 2 * np.pi * t / t[-1] + g.uniform(0, 2 * np.pi)
     rn = np.random.default_rng([noise_seed, 23])
     err = amp_rad * np.cos(order * th + rn.uniform(0, 2 * np.pi)) if amp_rad else 0.0
+    for o, a in more:
+        err = err + a * np.cos(o * th + rn.uniform(0, 2 * np.pi))
     theta = th + err + rn.normal(0, noise, n)
     meta = {
         "format": "encdesign-recording/1",
@@ -413,6 +427,71 @@ def motion_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[di
         return motion_record(seed, key, order, size)
 
     return _fresh_trials(effect, seed, n, factors, b, make, order=order)
+
+
+def quadrature_record(
+    geom_seed: int, noise_seed: int, order: int, amp: float, more=()
+) -> Recording:
+    """A quadrature capture (two signals of one head) of a geometry drawn from ``geom_seed``
+    (1,500-6,000 samples; in time order at 5.3-250 samples per signal period, or a capture
+    without ``t``; an ellipse with offsets, amplitude mismatch and phase error; relative noise
+    1e-4-3e-3 per signal), its noise from ``noise_seed``, with a radial error
+    ``amp cos(order psi + phase)`` (relative to the mean amplitude, along each sample's ray:
+    the ``signal_shape`` column the bound is stated for; phase from ``noise_seed``), and one
+    more such error per ``(order, amp)`` of ``more`` (an order above ``signal_shape``'s is
+    structure no catalog effect explains)."""
+    g = np.random.default_rng([geom_seed, 29])
+    n = int(g.integers(1500, 6001))
+    noise = float(10 ** g.uniform(-4, -2.5))
+    scale = float(10 ** g.uniform(-1, 4))
+    timed = bool(g.random() < 0.6)
+    p, q = g.uniform(-0.05, 0.05, 2)
+    a, b = 1.0, float(g.uniform(0.9, 1.1))
+    alpha = float(g.uniform(-0.05, 0.05))
+    rn = np.random.default_rng([noise_seed, 31])
+    cols: dict[str, np.ndarray] = {}
+    if timed:
+        f_sig = 40.0  # signal periods per s
+        rate = f_sig * float(g.choice([5.3, 13.7, 40.0, 250.0]))
+        t = np.arange(n) / rate
+        phi = 2 * np.pi * f_sig * t + g.uniform(0, 2 * np.pi)
+        cols["t"] = t
+    else:
+        phi = np.sort(rn.uniform(0, 2 * np.pi, n))
+    xa, xb = a * np.cos(phi), b * np.sin(phi + alpha)
+    psi, r = np.arctan2(xb, xa), np.hypot(xa, xb)
+    for o, am in ((order, amp), *more):
+        r = r + 0.5 * (a + b) * am * np.cos(o * psi + rn.uniform(0, 2 * np.pi))
+    sa = p + r * np.cos(psi) + rn.normal(0, noise, n)
+    sb = q + r * np.sin(psi) + rn.normal(0, noise, n)
+    cols["sa"], cols["sb"] = sa * scale, sb * scale
+    meta = {"format": "encdesign-recording/1", "kind": "quadrature"}
+    return Recording("quadrature", meta, cols)
+
+
+def quadrature_trials(seed: int, n: int, factors=(1.5, 0.5), beside: float = 0.0) -> list[dict]:
+    """The ``signal_shape`` bounds (radial orders 3 and 4) of one clean quadrature capture
+    (geometry ``seed``) and ``n`` captures of the same geometry with fresh noise each at each
+    factor, at the order of the bound (3 for even seeds, 4 for odd ones). ``beside``: every
+    capture also carries a radial order 17 (no catalog effect's) of ``beside`` times the
+    clean bound, the bound then comes from the capture with it alone (``unexplained``)."""
+    d0 = diagnose(quadrature_record(seed, seed, 3, 0.0)).doc
+    more = ()
+    if beside and d0["verdict"] == "consistent":
+        more = ((17, beside * d0["detection_bounds"][0]["bound"]),)
+        d0 = diagnose(quadrature_record(seed, seed, 3, 0.0, more=more)).doc
+    if d0["verdict"] != ("unexplained" if more else "consistent"):
+        return [dict(seed=seed, skipped=f"reference capture {d0['verdict']}")]
+    bs = [b for b in d0["detection_bounds"] if b["effect"] == "signal_shape"]
+    b = bs[seed % 2] if len(bs) > 1 else bs[0] if bs else None
+    if b is None or b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b and b.get('note')}")]
+    order = int(b["at"].split()[-1])
+
+    def make(key: int, i: int, size: float):
+        return quadrature_record(seed, key, order, size, more=more)
+
+    return _fresh_trials("signal_shape", seed, n, factors, b, make, order=order)
 
 
 REFERENCE_RECORDS = {"scale_error": scale_record, "interpolation_error": interp_ref_record}
@@ -475,6 +554,7 @@ def main(argv: list[str] | None = None) -> int:
             "scale_error",
             "interpolation_error_sensor",
             *(f"motion_{e}" for e in MOTION_EFFECTS),
+            "quadrature_signal_shape",
         ),
         default="sds_delay",
     )
@@ -487,6 +567,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the effect in the very record the bound came from (same noise), not in fresh ones",
     )
+    ap.add_argument(
+        "--beside",
+        type=float,
+        default=0.0,
+        help="quadrature: unexplained structure (radial order 17) in every capture, this many "
+        "times the clean bound",
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     factors = tuple(float(f) for f in args.factors.split(","))
@@ -498,6 +585,9 @@ def main(argv: list[str] | None = None) -> int:
     elif args.effect in MULTIHEAD_EFFECTS:
         for gi in range(args.geometries):
             rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
+    elif args.effect == "quadrature_signal_shape":
+        for gi in range(args.geometries):
+            rows += quadrature_trials(args.seed + gi, args.n, factors, args.beside)
     elif args.effect.startswith("motion_"):
         for gi in range(args.geometries):
             effect = args.effect.removeprefix("motion_")

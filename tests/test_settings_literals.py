@@ -187,6 +187,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (rows up to which a step is located with the catalog model projected out)",
     ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
+    + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
     + " (the probe's whitened norm: the fits are linear in it)",
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH

@@ -68,9 +68,10 @@ class Diagnosis(eqx.Module):
         base_order: how the base model's order was chosen, each tried order's fitted and
             held-out RMS (:class:`BaseOrder`; ``None`` where the kind's order is fixed or
             the caller gave ``max_order``).
-        detection_bounds: on a ``consistent`` verdict, the smallest size of each catalog
-            effect (per head or sensor) this record would have revealed
-            (:class:`DetectionBound`; empty on other verdicts, where the document has none).
+        detection_bounds: the smallest size of each catalog effect not named (per head or
+            sensor) this record would have revealed, against the final model (the base and
+            the named effects: ``other["detection_bounds_reference"]``)
+            (:class:`DetectionBound`).
         other: every other key of the document (``docs/diagnose.md``), as JSON.
         key_order: the document's keys in order (:meth:`to_json` gives them back so).
         plot_data: what the figures need beyond the document (:class:`PlotData`).
@@ -99,10 +100,11 @@ class Diagnosis(eqx.Module):
             )
         if self.verdict == "consistent" and self.unexplained:
             raise DiagnosisError("diagnosis verdict 'consistent' with unexplained structure")
-        if self.verdict != "consistent" and self.detection_bounds:
+        named = {e.name for e in self.effects}
+        if any(b.effect in named for b in self.detection_bounds):
             raise DiagnosisError(
-                f"diagnosis verdict {self.verdict!r} with detection bounds: they are reported "
-                "on a consistent verdict only"
+                "diagnosis with a detection bound of a named effect: the bounds are of the "
+                "catalog effects the record did not name"
             )
 
     @classmethod

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import input_error
-from ._bounds import detection_bounds, not_covered
+from ._bounds import REFERENCE_DESCRIPTION, Reference, detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
 from ._document import (
@@ -484,6 +484,21 @@ def effect_contributions(prep: Prepared, fitter: Fitter, sel: Selection) -> dict
     return out
 
 
+def bounds_reference(doc: dict, sel: Selection, max_effects: int) -> Reference:
+    """The model the detection bounds are computed against (:mod:`._bounds`): the final one,
+    the base plus the named effects (and the partners each is named with), the findings the
+    final residual leaves (none on a consistent verdict)."""
+    named = {e["name"] for e in doc["effects"]}
+    named |= {c["name"] for e in doc["effects"] for c in e.get("confounded_with") or []}
+    return Reference(
+        terms=sel.final.terms,
+        n_base=len(sel.base.terms),
+        named=frozenset(named),
+        room=len(doc["effects"]) < max_effects,
+        findings=tuple(sel.findings) if doc["verdict"] != "consistent" else (),
+    )
+
+
 def decide_verdict(doc: dict) -> str:
     """The verdict, decided once from the finished document: ``missing_physics`` when an
     effect is named, ``unexplained`` when structure is located that none explains or the
@@ -681,13 +696,14 @@ def run_engine(
                 pg.stage("report")
                 doc = kind.finish(prep, doc, settings)
                 doc["verdict"] = decide_verdict(doc)
-            if doc["verdict"] == "consistent":  # issue 44 F: what the record could have shown
-                with stage("bounds"):
-                    cands = list(seen.values())
-                    doc["detection_bounds"] = detection_bounds(
-                        prep, fitter, sel.base.terms, cands, kind.views(prep), scan
-                    )
-                    doc["detection_bounds_not_covered"] = not_covered(cands, prep)
+            with stage("bounds"):  # issue 44 F: what the record could have shown
+                ref = bounds_reference(doc, sel, max_effects)
+                cands = list(seen.values())
+                doc["detection_bounds"] = detection_bounds(
+                    prep, fitter, ref, cands, kind.views(prep), scan
+                )
+                doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
+                doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)
             with stage("report"):
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0
