@@ -286,7 +286,7 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
                 a, rule = a_view, "view"
     return {
         **entry,
-        "bound": float(a),
+        "bound": float(a * probe.size),
         "set_by": rule,
         "noncentrality": float(a * a * lam_base),
         "n_params": int(k),
