@@ -193,6 +193,16 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (the probe's whitened norm: the fits are linear in it)",
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
     + " (the frequency at which the vibration's detection bound is stated, reported with it)",
+    ("kinds/multihead/_multihead_probes.py", "WOBBLE_PROBE_FRACTION"): SEARCH
+    + " (the fractional order at which the bearing wobble's detection bound is stated, "
+    "reported with it)",
+    ("kinds/multihead/_multihead_probes.py", "SHIFT_PROBE_QUANTILES"): SEARCH
+    + " (the shift times an eccentricity shift's detection bound is the worst of, stated)",
+    ("kinds/sds/_sds_probes.py", "TILT_PROBE_RAD"): NUMERIC
+    + " (the small tilt the axis tilt's probe is evaluated at: its error is linear in "
+    "beta^2 / 4 there)",
+    ("kinds/sds/_sds_probes.py", "WOBBLE_PROBE_RATIO"): SEARCH
+    + " (the cage ratio at which a bearing wobble's detection bound is stated, reported)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover_lines.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
