@@ -76,10 +76,13 @@ def _add_effect(name: str, e: np.ndarray, k: int, r: int, t: np.ndarray, th: np.
         raise ValueError(f"unknown effect {name!r}")
 
 
-def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
-    """A bench built in memory (no CSV): ``heads`` heads, 4 runs, 1 kHz, 0.5 urad noise,
-    disk errors of orders 1-5, per-run zeros; ``effect``: ``True`` a 31 Hz vibration of
-    1.5 urad, a catalog name: that effect (:func:`_add_effect`), ``False``: clean.
+def _bench_recording(
+    n_rows: int, heads: int, seed: int, effect: bool | str, rate_hz: float = 1000.0
+):
+    """A bench built in memory (no CSV): ``heads`` heads, 4 runs sampled at ``rate_hz``
+    (1 kHz unless given), 0.5 urad noise, disk errors of orders 1-5, per-run zeros;
+    ``effect``: ``True`` a 31 Hz vibration of 1.5 urad, a catalog name: that effect
+    (:func:`_add_effect`), ``False``: clean.
 
     The columns are allocated once and filled run by run in blocks of 2**20 rows, so the
     generator itself adds little to the peak memory being measured."""
@@ -108,7 +111,7 @@ def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
         for a in range(0, n, block):
             b = min(n, a + block)
             sl = slice(r * n + a, r * n + b)
-            t = np.arange(a, b) / 1000.0
+            t = np.arange(a, b) / rate_hz
             th = speed * t + th0
             cols["t"][sl] = t
             cols["run"][sl] = r

@@ -1,0 +1,210 @@
+"""Issue 43: a long record reduced to block means before the engine sees it.
+
+A record of more than ``FinderSettings.reduce_min_rows`` rows (of a kind in
+:data:`REDUCIBLE_KINDS`) is cut into blocks of ``B`` consecutive rows that never cross a run,
+a gap in ``t`` (a step over ``GAP_STEPS`` sampling intervals), a reversal of the shaft or a
+jump of a reading over half a turn; each block becomes one row holding the mean of every
+column (the run its own). Rows left over at the end of a stretch (fewer than ``B``) are left
+out and counted. The engine then runs on ``N / B`` rows; its noise estimate, taken from the
+reduced rows, is the block mean's (``sigma / sqrt(B)`` for white noise), so the weights
+follow without a correction.
+
+The error is bounded and stated: the mean of ``B`` rows multiplies a sinusoid of frequency
+``f`` by ``sin(pi f B dt) / (B sin(pi f dt))``, no further from 1 than ``sinc(pi f B dt)``
+(``1 - sinc(x) <= x^2 / 6``). ``B`` is the largest block for which the highest frequency any
+view or candidate needs is attenuated by at most ``FinderSettings.reduce_attenuation_max``:
+the highest order the base can grow to and the views scan (:func:`scan_orders_reached`) times
+the fastest shaft rate, and ``FinderSettings.reduce_line_hz`` (the band of lines in Hz kept
+within the bound). Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``, the
+``line_phase`` view) are far above that band: a reduced record cannot test them, and its
+diagnosis says so (``reduced.not_testable``). When ``B`` comes out below 2 the record is
+left as it is (``reduced.applied`` false, with the reason).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...io._recording import Recording
+from ._settings import FinderSettings
+
+REDUCIBLE_KINDS = ("multihead",)
+"""Kinds whose observations are smooth functions of the block's mean angle and time (the
+quadrature kind's raw signals, the sds and motion kinds' fine structure are not)."""
+
+GAP_STEPS = 1.5
+"""A time step over this many median sampling intervals ends a stretch (a gap)."""
+
+SPEED_QUANTILE = 0.99
+"""The fastest shaft rate is this quantile of ``|d shaft / dt|`` over the rows (a glitch or
+a count jump cannot set it)."""
+
+PASS_ROWS = 1 << 20
+"""Rows per slice of the reduction's passes (bounded temporary memory)."""
+
+
+def scan_orders_reached(default_order: int, grows: bool, settings: FinderSettings) -> int:
+    """Highest integer order the engine can scan on a record when the user sets no order:
+    the base grows at most twice (to the orders the views find, each time up to twice its
+    order or ``scan_order_min``) and the views scan twice the final order."""
+    o = int(default_order)
+    for _ in range(2 if grows else 0):
+        o = max(2 * o, settings.scan_order_min)
+    return max(2 * o, settings.scan_order_min)
+
+
+def _angle_columns(rec: Recording) -> list[str]:
+    cols = list(rec.head_columns)
+    return [*cols, "theta_ref"] if "theta_ref" in rec.columns else cols
+
+
+def _shaft(rec: Recording, a: int, b: int) -> np.ndarray:
+    if "theta_ref" in rec.columns:
+        return np.asarray(rec.columns["theta_ref"][a:b], float)
+    return np.mean([np.asarray(rec.columns[h][a:b], float) for h in rec.head_columns], 0)
+
+
+def _boundaries(rec: Recording) -> tuple[np.ndarray, float, float]:
+    """``(starts, dt, rate)``: a flag per row that starts a new stretch, the median sampling
+    interval (s) and the fastest shaft rate (rev/s, :data:`SPEED_QUANTILE`)."""
+    n = rec.n_rows
+    t = np.asarray(rec.columns["t"], float)
+    run = np.asarray(rec.runs)
+    start = np.zeros(n, bool)
+    start[0] = True
+    dts, rates = [], []
+    for a in range(0, n, PASS_ROWS):
+        b = min(n, a + PASS_ROWS)
+        lo = max(a - 1, 0)
+        dtt = np.diff(t[lo:b])
+        ok = np.isfinite(dtt) & (dtt > 0)
+        dts.append(np.median(dtt[ok]) if ok.any() else np.nan)
+    dt = float(np.nanmedian(dts))
+    last = 0.0
+    for a in range(0, n, PASS_ROWS):
+        b = min(n, a + PASS_ROWS)
+        lo = max(a - 1, 0)
+        sl = slice(lo + 1, b)
+        dtt = np.diff(t[lo:b])
+        s = start[sl]
+        s |= np.diff(run[lo:b]) != 0
+        s |= ~(np.abs(dtt) <= GAP_STEPS * dt)
+        sh = _shaft(rec, lo, b)
+        dsh = np.diff(sh)
+        for c in _angle_columns(rec):
+            s |= ~(np.abs(np.diff(np.asarray(rec.columns[c][lo:b], float))) < math.pi)
+        sg = np.where(s, 0.0, np.sign(dsh))  # a step across a boundary has no direction
+        prev = np.concatenate([[last], sg[:-1]])
+        s |= (sg * prev) < 0  # a reversal
+        last = sg[-1] if sg.size else 0.0
+        fin = np.isfinite(dsh) & (np.abs(dsh) < math.pi)
+        if fin.any():
+            rates.append(np.quantile(np.abs(dsh[fin]), SPEED_QUANTILE))
+    rate = float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0
+    return start, dt, rate
+
+
+def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettings) -> dict:
+    """Whether and how ``rec`` is reduced: the JSON entry ``reduced`` of the diagnosis
+    (``applied``, ``block_rows``, the bound, the frequencies it covers, the reason), with the
+    row flags ``_starts`` (removed before the document)."""
+    n = rec.n_rows
+    tol = float(settings.reduce_attenuation_max)
+    out: dict = {"applied": False, "rows": int(n), "min_rows": int(settings.reduce_min_rows)}
+    if rec.kind not in REDUCIBLE_KINDS:
+        out["reason"] = f"kind {rec.kind!r} is not reduced (only {', '.join(REDUCIBLE_KINDS)})"
+        return out
+    if n <= settings.reduce_min_rows:
+        out["reason"] = (
+            f"{n} rows, at most FinderSettings.reduce_min_rows = {settings.reduce_min_rows}"
+        )
+        return out
+    starts, dt, rate = _boundaries(rec)
+    M = scan_orders_reached(default_order, grows, settings)
+    f_need = max(M * rate, float(settings.reduce_line_hz))
+    # 1 - sinc(x) <= x^2 / 6 <= tol  with  x = pi f_need B dt
+    B = int(math.floor(math.sqrt(6.0 * tol) / (math.pi * f_need * dt))) if dt > 0 else 1
+    B_hi = int(settings.reduce_min_rows)
+    B = max(1, min(B, B_hi))
+    x = math.pi * f_need * B * dt
+    out.update(
+        block_rows=B,
+        dt_s=dt,
+        shaft_rate_max_rev_s=rate,
+        orders_needed=int(M),
+        line_band_hz=float(settings.reduce_line_hz),
+        f_needed_hz=f_need,
+        attenuation_max=tol,
+        attenuation_at_f_needed=1.0 - (math.sin(x) / x if x > 0 else 1.0),
+        bound="the block mean multiplies a sinusoid of frequency f by sin(pi f B dt) / "
+        "(B sin(pi f dt)), within 1 - sinc(pi f B dt) <= (pi f B dt)^2 / 6 of 1; at the "
+        "highest frequency needed (orders_needed x shaft_rate_max_rev_s, and line_band_hz) "
+        "that is at most attenuation_max (FinderSettings.reduce_attenuation_max)",
+    )
+    if B < 2:
+        out["reason"] = (
+            f"a block of 2 rows attenuates {f_need:.4g} Hz by more than "
+            f"FinderSettings.reduce_attenuation_max = {tol:g} at {1 / dt:.4g} Hz sampling"
+        )
+        return out
+    out["applied"] = True
+    out["_starts"] = starts
+    return out
+
+
+def reduce_recording(rec: Recording, info: dict) -> Recording:
+    """The record of block means ``info`` plans (:func:`plan`); ``info`` gains the counts
+    (``reduced_rows``, ``rows_left_out``, ``stretches``) and ``not_testable``."""
+    B = int(info["block_rows"])
+    starts = info.pop("_starts")
+    n = rec.n_rows
+    # block id per row: within each stretch, rows [s, s + B) ... ; the tail (< B) gets -1
+    idx = np.flatnonzero(starts)
+    ends = np.append(idx[1:], n)
+    full = (ends - idx) // B
+    n_blocks = int(full.sum())
+    first_block = np.concatenate([[0], np.cumsum(full)[:-1]])
+    bid = np.full(n, -1, np.int64)
+    for s, k, f0 in zip(idx, full, first_block):
+        if k:
+            bid[s : s + k * B] = f0 + np.arange(k * B) // B
+    cols: dict[str, np.ndarray] = {}
+    run = np.asarray(rec.columns["run"]) if "run" in rec.columns else None
+    keep = bid >= 0
+    for name, col in rec.columns.items():
+        if name == "run":
+            continue
+        acc = np.zeros(n_blocks)
+        for a in range(0, n, PASS_ROWS):
+            b = min(n, a + PASS_ROWS)
+            k = keep[a:b]
+            acc += np.bincount(bid[a:b][k], np.asarray(col[a:b], float)[k], minlength=n_blocks)
+        cols[name] = acc / B
+    if run is not None:
+        r = np.empty(n_blocks, run.dtype)
+        r[bid[keep]] = run[keep]  # every row of a block is of one run
+        cols["run"] = r
+    cols = {k: cols[k] for k in rec.columns}  # the record's own column order
+    info.update(
+        reduced_rows=n_blocks,
+        rows_left_out=int(n - n_blocks * B),
+        stretches=int(idx.size),
+    )
+    meta = dict(rec.meta)
+    enc = dict(rec.encoder)
+    L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
+    if L > 0:
+        info["not_testable"] = [
+            {
+                "name": "interpolation_error",
+                "reason": f"orders L = {L} and 2L of the signal period are averaged out by "
+                f"blocks of {B} rows (the reduced record keeps {info['f_needed_hz']:.4g} Hz)",
+                "rule": "reduce_attenuation_max",
+            }
+        ]
+        for k in ("signal_periods_per_rev", "grating_lines"):
+            enc.pop(k, None)
+    meta["encoder"] = enc
+    return Recording(rec.kind, meta, cols, path=rec.path)
