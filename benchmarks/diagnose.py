@@ -188,18 +188,30 @@ def _through_file(rec, table: str) -> tuple:
     return back, t1 - t0, t2 - t1, size
 
 
-def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
+def _child(
+    n_rows: int,
+    heads: int,
+    effect: bool | str,
+    table: str = "memory",
+    rate_hz: float = 1000.0,
+    reduce_min_rows: int | None = None,
+) -> dict:
     """Run one diagnosis in this (fresh) process; report wall and CPU time (user + system,
     s: robust to a loaded machine, where wall time is inflated), the time JAX spent
     compiling, peak RSS and the wall time per stage (``stages_s``: the engine's
     ``timings_s``, and ``parsing`` when ``table`` is ``csv`` or ``parquet``: the record is
-    then written to a file of that format and loaded back first)."""
+    then written to a file of that format and loaded back first). ``rate_hz``: the
+    record's sampling rate; ``reduce_min_rows``: ``FinderSettings.reduce_min_rows`` (issue 43:
+    the record is diagnosed on block means above it; ``reduced`` in the output)."""
     t0 = time.perf_counter()
     import encdesign  # noqa: F401  (import time counts: a fresh process)
     from encdesign.diagnose import diagnose
 
     stats = _compile_listener()
-    rec = _bench_recording(n_rows, heads, 5, effect)
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    rec = _bench_recording(n_rows, heads, 5, effect, rate_hz=rate_hz)
+    settings = None if reduce_min_rows is None else FinderSettings(reduce_min_rows=reduce_min_rows)
     stages: dict[str, float] = {}
     io: dict = {"table": table}
     if table != "memory":
@@ -207,7 +219,7 @@ def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -
         stages["parsing"] = parse_s
         io.update(write_s=write_s, file_bytes=size)
     t1, c1 = time.perf_counter(), _cpu_s()
-    d = diagnose(rec, verbose=False)
+    d = diagnose(rec, verbose=False, settings=settings)
     t2, c2 = time.perf_counter(), _cpu_s()
     stages.update(d.doc.get("timings_s") or {})
     stages_cpu = dict(d.doc.get("timings_cpu_s") or {})
@@ -226,6 +238,8 @@ def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -
         effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
         verdict=d.verdict,
         named=[e["name"] for e in d.effects],
+        rate_hz=rate_hz,
+        reduced=d.doc.get("reduced"),
         wall_s_diagnose=t2 - t1,
         wall_s_with_import=t2 - t0,
         peak_rss_bytes=rss,
@@ -369,6 +383,15 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--long-table", choices=("csv", "parquet"), default="parquet")
     ap.add_argument(
+        "--rate", type=float, default=1000.0, help="with --child: the record's sampling rate, Hz"
+    )
+    ap.add_argument(
+        "--reduce-min-rows",
+        type=int,
+        default=None,
+        help="with --child: FinderSettings.reduce_min_rows (block means above it, issue 43)",
+    )
+    ap.add_argument(
         "--processes",
         type=int,
         default=None,
@@ -387,7 +410,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.processes is not None:
             print(json.dumps(_child_processes(args.child, args.heads, eff, args.processes)))
             return 0
-        print(json.dumps(_child(args.child, args.heads, eff, args.table)))
+        kw = dict(rate_hz=args.rate, reduce_min_rows=args.reduce_min_rows)
+        print(json.dumps(_child(args.child, args.heads, eff, args.table, **kw)))
         return 0
     from encdesign.physics._effects import CATALOG_MULTIHEAD
 

@@ -53,9 +53,9 @@ def test_block_is_the_longest_within_the_bound_and_never_crosses_a_run():
     assert dt == pytest.approx(5e-5)
     assert info["shaft_rate_max_rev_s"] == pytest.approx(3.0, rel=1e-3)
 
-    def atten(b: int) -> float:
-        x = math.pi * f * b * dt
-        return 1.0 - math.sin(x) / x
+    def atten(b: int) -> float:  # the mean of b samples of a sinusoid of f Hz
+        k = np.arange(b)
+        return 1.0 - abs(np.mean(np.exp(2j * math.pi * f * dt * k)))
 
     assert atten(B) <= LOW.reduce_attenuation_max < atten(B + 1)
     red = reduce_recording(rec, info)

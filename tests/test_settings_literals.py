@@ -64,6 +64,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_engine.py", 2): PHYSICS,
     ("engine/_reduce.py", 2): PHYSICS + " (the base grows to twice its order, the views scan twice "
     "the base's order, as in _document.scan_order_of; a block of at least two rows)",
+    ("engine/_reduce.py", 6.0): NUMERIC + " (the leading order of the Dirichlet kernel, "
+    "(B^2 - 1) x^2 / 6: a start the exact check then moves)",
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",
     ("engine/_evidence.py", 3): REPORT + " (at most three alternatives)",
     ("engine/_fit.py", 1e-200): NUMERIC + " (a zero diagonal of the normal matrix)",

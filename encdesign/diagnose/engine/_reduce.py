@@ -10,15 +10,16 @@ reduced rows, is the block mean's (``sigma / sqrt(B)`` for white noise), so the 
 follow without a correction.
 
 The error is bounded and stated: the mean of ``B`` rows multiplies a sinusoid of frequency
-``f`` by ``sin(pi f B dt) / (B sin(pi f dt))``, no further from 1 than ``sinc(pi f B dt)``
-(``1 - sinc(x) <= x^2 / 6``). ``B`` is the largest block for which the highest frequency any
-view or candidate needs is attenuated by at most ``FinderSettings.reduce_attenuation_max``:
-the highest order the base can grow to and the views scan (:func:`scan_orders_reached`) times
-the fastest shaft rate, and ``FinderSettings.reduce_line_hz`` (the band of lines in Hz kept
-within the bound). Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``, the
-``line_phase`` view) are far above that band: a reduced record cannot test them, and its
-diagnosis says so (``reduced.not_testable``). When ``B`` comes out below 2 the record is
-left as it is (``reduced.applied`` false, with the reason).
+``f`` by ``D = sin(pi f B dt) / (B sin(pi f dt))`` (:func:`attenuation`; ``1 - D`` is
+``(B^2 - 1) (pi f dt)^2 / 6`` to leading order). ``B`` is the largest block for which the
+highest frequency any view or candidate needs is attenuated by at most
+``FinderSettings.reduce_attenuation_max``: the highest order the base can grow to and the
+views scan (:func:`scan_orders_reached`) times the fastest shaft rate, and
+``FinderSettings.reduce_line_hz`` (the band of lines in Hz kept within the bound). Orders
+``L`` and ``2 L`` of the signal period (``interpolation_error``, the ``line_phase`` view) are
+far above that band: a reduced record cannot test them, and its diagnosis says so
+(``not_testable``). When ``B`` comes out below 2 the record is left as it is
+(``reduced.applied`` false, with the reason).
 """
 
 from __future__ import annotations
@@ -53,6 +54,30 @@ def scan_orders_reached(default_order: int, grows: bool, settings: FinderSetting
     for _ in range(2 if grows else 0):
         o = max(2 * o, settings.scan_order_min)
     return max(2 * o, settings.scan_order_min)
+
+
+def attenuation(f_hz: float, dt: float, B: int) -> float:
+    """``1 - D``: how much the mean of ``B`` rows sampled every ``dt`` s attenuates a
+    sinusoid of ``f_hz`` Hz (``D = sin(pi f B dt) / (B sin(pi f dt))``, the Dirichlet
+    kernel; ``(B^2 - 1) (pi f dt)^2 / 6`` to leading order)."""
+    x = math.pi * f_hz * dt
+    if B <= 1 or x == 0.0:
+        return 0.0
+    return 1.0 - math.sin(B * x) / (B * math.sin(x))
+
+
+def _longest_block(f_hz: float, dt: float, tol: float, B_max: int) -> int:
+    """The longest block (rows, at most ``B_max``) whose mean attenuates ``f_hz`` by at most
+    ``tol`` (:func:`attenuation`): from the leading order, then checked exactly."""
+    x = math.pi * f_hz * dt
+    if not (dt > 0 and x > 0):
+        return 1
+    B = max(1, min(B_max, int(math.sqrt(1.0 + 6.0 * tol / x**2))))
+    while B > 1 and attenuation(f_hz, dt, B) > tol:
+        B -= 1
+    while B < B_max and attenuation(f_hz, dt, B + 1) <= tol:
+        B += 1
+    return B
 
 
 def _angle_columns(rec: Recording) -> list[str]:
@@ -124,11 +149,7 @@ def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettin
     starts, dt, rate = _boundaries(rec)
     M = scan_orders_reached(default_order, grows, settings)
     f_need = max(M * rate, float(settings.reduce_line_hz))
-    # 1 - sinc(x) <= x^2 / 6 <= tol  with  x = pi f_need B dt
-    B = int(math.floor(math.sqrt(6.0 * tol) / (math.pi * f_need * dt))) if dt > 0 else 1
-    B_hi = int(settings.reduce_min_rows)
-    B = max(1, min(B, B_hi))
-    x = math.pi * f_need * B * dt
+    B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
     out.update(
         block_rows=B,
         dt_s=dt,
@@ -137,11 +158,12 @@ def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettin
         line_band_hz=float(settings.reduce_line_hz),
         f_needed_hz=f_need,
         attenuation_max=tol,
-        attenuation_at_f_needed=1.0 - (math.sin(x) / x if x > 0 else 1.0),
-        bound="the block mean multiplies a sinusoid of frequency f by sin(pi f B dt) / "
-        "(B sin(pi f dt)), within 1 - sinc(pi f B dt) <= (pi f B dt)^2 / 6 of 1; at the "
-        "highest frequency needed (orders_needed x shaft_rate_max_rev_s, and line_band_hz) "
-        "that is at most attenuation_max (FinderSettings.reduce_attenuation_max)",
+        attenuation_at_f_needed=attenuation(f_need, dt, B),
+        bound="the mean of B rows sampled every dt multiplies a sinusoid of frequency f by "
+        "D = sin(pi f B dt) / (B sin(pi f dt)) (its phase at the block's mean time); 1 - D "
+        "grows with f, and at the highest frequency needed (orders_needed x "
+        "shaft_rate_max_rev_s, and line_band_hz) it is at most attenuation_max "
+        "(FinderSettings.reduce_attenuation_max)",
     )
     if B < 2:
         out["reason"] = (
