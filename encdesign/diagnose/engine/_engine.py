@@ -644,10 +644,14 @@ def run_engine(
     extra_candidates: Sequence[Candidate] = (),
     verbose: bool = False,
     settings: FinderSettings | None = None,
+    reduced: dict | None = None,
 ) -> tuple[dict[str, Any], PlotData]:
     """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
     document (a dict, ``diagnosis.schema.json``) and what the figures need
     (:class:`~encdesign.diagnose.engine._results.PlotData`).
+
+    ``reduced``: the ``reduced`` entry of a record already reduced to block means as it was
+    read (:func:`._reduce_stream.stream_reduce`); else a long record is reduced here.
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,
@@ -665,9 +669,10 @@ def run_engine(
             with stage("reduce"):  # issue 43: a long record on block means
                 own = max_order is None
                 order0 = kind.default_max_order if own else max_order
-                reduced = reduce_plan(rec, order0, kind.grows_orders and own, settings)
-                if reduced["applied"]:
-                    rec = reduce_recording(rec, reduced)
+                if reduced is None:  # (else reduced as it was read: _reduce_stream)
+                    reduced = reduce_plan(rec, order0, kind.grows_orders and own, settings)
+                    if reduced["applied"]:
+                        rec = reduce_recording(rec, reduced)
             with stage("data"):
                 kd = kind.data(rec, settings)
             meta = dict(rec.meta)

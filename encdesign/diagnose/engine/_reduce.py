@@ -85,68 +85,86 @@ def _angle_columns(rec: Recording) -> list[str]:
     return [*cols, "theta_ref"] if "theta_ref" in rec.columns else cols
 
 
-def _shaft(rec: Recording, a: int, b: int) -> np.ndarray:
-    if "theta_ref" in rec.columns:
-        return np.asarray(rec.columns["theta_ref"][a:b], float)
-    return np.mean([np.asarray(rec.columns[h][a:b], float) for h in rec.head_columns], 0)
+def shaft_of(cols: dict, heads: list[str]) -> np.ndarray:
+    """The shaft angle of rows ``cols``: ``theta_ref``, or the heads' mean without it."""
+    if "theta_ref" in cols:
+        return np.asarray(cols["theta_ref"], float)
+    return np.mean([np.asarray(cols[h], float) for h in heads], 0)
+
+
+def step_stats(t: np.ndarray, shaft: np.ndarray) -> tuple[float, float]:
+    """``(median time step, SPEED_QUANTILE of |shaft step|)`` of consecutive rows (nan
+    where none is finite)."""
+    dtt = np.diff(np.asarray(t, float))
+    ok = np.isfinite(dtt) & (dtt > 0)
+    dsh = np.abs(np.diff(shaft))
+    fin = np.isfinite(dsh) & (dsh < math.pi)
+    return (
+        float(np.median(dtt[ok])) if ok.any() else math.nan,
+        float(np.quantile(dsh[fin], SPEED_QUANTILE)) if fin.any() else math.nan,
+    )
+
+
+def stretch_starts(cols: dict, angles: list[str], shaft: np.ndarray, dt: float) -> np.ndarray:
+    """A flag per row of ``cols`` (consecutive rows; the first is flagged) that starts a new
+    stretch: a new run, a time step off the sampling interval, a jump of a reading by half a
+    turn or more, a reversal of the shaft."""
+    n = len(shaft)
+    start = np.zeros(n, bool)
+    start[0] = True
+    s = start[1:]
+    if "run" in cols:
+        s |= np.diff(np.asarray(cols["run"])) != 0
+    s |= ~(np.abs(np.diff(np.asarray(cols["t"], float))) <= GAP_STEPS * dt)
+    for c in angles:
+        s |= ~(np.abs(np.diff(np.asarray(cols[c], float))) < math.pi)
+    sg = np.where(s, 0.0, np.sign(np.diff(shaft)))  # a step across a boundary has no direction
+    prev = np.concatenate([[0.0], sg[:-1]])
+    s |= (sg * prev) < 0  # a reversal
+    return start
 
 
 def _boundaries(rec: Recording) -> tuple[np.ndarray, float, float]:
-    """``(starts, dt, rate)``: a flag per row that starts a new stretch, the median sampling
-    interval (s) and the fastest shaft rate (rev/s, :data:`SPEED_QUANTILE`)."""
+    """``(starts, dt, rate)``: a flag per row that starts a new stretch
+    (:func:`stretch_starts`), the median sampling interval (s) and the fastest shaft rate
+    (rev/s, :data:`SPEED_QUANTILE`), in slices of :data:`PASS_ROWS` rows."""
     n = rec.n_rows
-    t = np.asarray(rec.columns["t"], float)
-    run = np.asarray(rec.runs)
-    start = np.zeros(n, bool)
-    start[0] = True
-    dts, rates = [], []
+    angles = _angle_columns(rec)
+    stats = []
     for a in range(0, n, PASS_ROWS):
-        b = min(n, a + PASS_ROWS)
-        lo = max(a - 1, 0)
-        dtt = np.diff(t[lo:b])
-        ok = np.isfinite(dtt) & (dtt > 0)
-        dts.append(np.median(dtt[ok]) if ok.any() else np.nan)
-    dt = float(np.nanmedian(dts))
-    last = 0.0
-    for a in range(0, n, PASS_ROWS):
-        b = min(n, a + PASS_ROWS)
-        lo = max(a - 1, 0)
-        sl = slice(lo + 1, b)
-        dtt = np.diff(t[lo:b])
-        s = start[sl]
-        s |= np.diff(run[lo:b]) != 0
-        s |= ~(np.abs(dtt) <= GAP_STEPS * dt)
-        sh = _shaft(rec, lo, b)
-        dsh = np.diff(sh)
-        for c in _angle_columns(rec):
-            s |= ~(np.abs(np.diff(np.asarray(rec.columns[c][lo:b], float))) < math.pi)
-        sg = np.where(s, 0.0, np.sign(dsh))  # a step across a boundary has no direction
-        prev = np.concatenate([[last], sg[:-1]])
-        s |= (sg * prev) < 0  # a reversal
-        last = sg[-1] if sg.size else 0.0
-        fin = np.isfinite(dsh) & (np.abs(dsh) < math.pi)
-        if fin.any():
-            rates.append(np.quantile(np.abs(dsh[fin]), SPEED_QUANTILE))
+        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
+        part = {c: rec.columns[c][lo:b] for c in rec.columns}
+        stats.append(step_stats(part["t"], shaft_of(part, rec.head_columns)))
+    dt = float(np.nanmedian([d for d, _ in stats]))
+    rates = [r for _, r in stats if np.isfinite(r)]
     rate = float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0
+    start = np.zeros(n, bool)
+    for a in range(0, n, PASS_ROWS):
+        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
+        part = {c: rec.columns[c][lo:b] for c in rec.columns}
+        st = stretch_starts(part, angles, shaft_of(part, rec.head_columns), dt)
+        start[lo + 1 : b] = st[1:]
+    start[0] = True
     return start, dt, rate
 
 
-def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettings) -> dict:
-    """Whether and how ``rec`` is reduced: the JSON entry ``reduced`` of the diagnosis
-    (``applied``, ``block_rows``, the bound, the frequencies it covers, the reason), with the
-    row flags ``_starts`` (removed before the document)."""
-    n = rec.n_rows
+def plan_for(
+    kind: str, n: int, default_order: int, grows: bool, settings: FinderSettings, steps=None
+) -> dict:
+    """The ``reduced`` entry of a record of kind ``kind`` and ``n`` rows (without
+    ``block_rows`` when it is not reduced for its kind or size); ``steps``: a function that
+    returns the record's ``(dt, rate)`` (s, rev/s), called only when they are needed."""
     tol = float(settings.reduce_attenuation_max)
     out: dict = {"applied": False, "rows": int(n), "min_rows": int(settings.reduce_min_rows)}
-    if rec.kind not in REDUCIBLE_KINDS:
-        out["reason"] = f"kind {rec.kind!r} is not reduced (only {', '.join(REDUCIBLE_KINDS)})"
+    if kind not in REDUCIBLE_KINDS:
+        out["reason"] = f"kind {kind!r} is not reduced (only {', '.join(REDUCIBLE_KINDS)})"
         return out
     if n <= settings.reduce_min_rows:
         out["reason"] = (
             f"{n} rows, at most FinderSettings.reduce_min_rows = {settings.reduce_min_rows}"
         )
         return out
-    starts, dt, rate = _boundaries(rec)
+    dt, rate = steps()
     M = scan_orders_reached(default_order, grows, settings)
     f_need = max(M * rate, float(settings.reduce_line_hz))
     B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
@@ -172,8 +190,45 @@ def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettin
         )
         return out
     out["applied"] = True
-    out["_starts"] = starts
     return out
+
+
+def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettings) -> dict:
+    """Whether and how ``rec`` is reduced: the JSON entry ``reduced`` of the diagnosis
+    (``applied``, ``block_rows``, the bound, the frequencies it covers, the reason), with the
+    row flags ``_starts`` (removed before the document)."""
+    found: dict = {}
+
+    def steps() -> tuple[float, float]:
+        found["starts"], dt, rate = _boundaries(rec)
+        return dt, rate
+
+    out = plan_for(rec.kind, rec.n_rows, default_order, grows, settings, steps)
+    if out["applied"]:
+        out["_starts"] = found["starts"]
+    return out
+
+
+def signal_period_tests(meta: dict, info: dict) -> dict:
+    """``meta`` of the reduced record: without the signal period (its orders ``L``, ``2 L``
+    are averaged out), and ``info["not_testable"]`` saying so."""
+    meta = dict(meta)
+    enc = dict(meta.get("encoder", {}))
+    L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
+    if L > 0:
+        info["not_testable"] = [
+            {
+                "name": "interpolation_error",
+                "reason": f"orders L = {L} and 2L of the signal period are averaged out by "
+                f"blocks of {info['block_rows']} rows (the reduced record keeps "
+                f"{info['f_needed_hz']:.4g} Hz)",
+                "rule": "reduce_attenuation_max",
+            }
+        ]
+        for k in ("signal_periods_per_rev", "grating_lines"):
+            enc.pop(k, None)
+    meta["encoder"] = enc
+    return meta
 
 
 def reduce_recording(rec: Recording, info: dict) -> Recording:
@@ -214,19 +269,5 @@ def reduce_recording(rec: Recording, info: dict) -> Recording:
         rows_left_out=int(n - n_blocks * B),
         stretches=int(idx.size),
     )
-    meta = dict(rec.meta)
-    enc = dict(rec.encoder)
-    L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
-    if L > 0:
-        info["not_testable"] = [
-            {
-                "name": "interpolation_error",
-                "reason": f"orders L = {L} and 2L of the signal period are averaged out by "
-                f"blocks of {B} rows (the reduced record keeps {info['f_needed_hz']:.4g} Hz)",
-                "rule": "reduce_attenuation_max",
-            }
-        ]
-        for k in ("signal_periods_per_rev", "grating_lines"):
-            enc.pop(k, None)
-    meta["encoder"] = enc
+    meta = signal_period_tests(rec.meta, info)
     return Recording(rec.kind, meta, cols, path=rec.path)
