@@ -76,6 +76,44 @@ def _add_effect(name: str, e: np.ndarray, k: int, r: int, t: np.ndarray, th: np.
         raise ValueError(f"unknown effect {name!r}")
 
 
+def _bench_blocks(n_rows: int, heads: int, seed: int, effect: bool | str, rate_hz: float):
+    """The rows of :func:`_bench_recording`, in blocks of at most 2**20 rows: yields
+    ``(first row, columns)``; then returns the encoder table (``StopIteration.value``)."""
+    rng = np.random.default_rng(seed)
+    R = 4
+    n = n_rows // R
+    alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
+    name = "vibration" if effect is True else (effect or "clean")
+    ctx = dict(
+        alpha=alpha,
+        vib_phase=rng.uniform(0, 6, (R, heads)),
+        beta=np.array([1.0, -0.6, 0.3, -0.8][:heads]),
+        phase=rng.uniform(0, 6),
+    )
+    block = 1 << 20
+    for r in range(R):
+        speed, th0 = 2 * np.pi * (0.6 + 0.4 * r), rng.uniform(0, 6)
+        zero = rng.uniform(-3, 3, heads) + 2 * np.pi * rng.integers(-2, 3, heads)
+        ref_zero = rng.uniform(-3, 3)
+        for a in range(0, n, block):
+            b = min(n, a + block)
+            t = np.arange(a, b) / rate_hz
+            th = speed * t + th0
+            cols = {"t": t, "run": np.full(b - a, r, np.int64), "theta_ref": th + ref_zero}
+            for k in range(heads):
+                e = np.zeros(b - a)
+                for m in range(1, 6):
+                    e += 4e-6 / m * np.sin(m * (th - alpha[k]) + m)
+                _add_effect(name, e, k, r, t, th, ctx)
+                cols[f"h{k}"] = th + e + rng.normal(0, 0.5e-6, b - a) + zero[k]
+            yield r * n + a, cols
+    return {
+        "optical_radius_m": 0.0254,
+        "head_angles_deg": np.degrees(alpha).tolist(),
+        "signal_periods_per_rev": LINES,
+    }
+
+
 def _bench_recording(
     n_rows: int, heads: int, seed: int, effect: bool | str, rate_hz: float = 1000.0
 ):
@@ -88,47 +126,86 @@ def _bench_recording(
     generator itself adds little to the peak memory being measured."""
     from encdesign import Recording
 
-    rng = np.random.default_rng(seed)
-    R = 4
-    n = n_rows // R
-    N = n * R
-    alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
-    name = "vibration" if effect is True else (effect or "clean")
-    ctx = dict(
-        alpha=alpha,
-        vib_phase=rng.uniform(0, 6, (R, heads)),
-        beta=np.array([1.0, -0.6, 0.3, -0.8][:heads]),
-        phase=rng.uniform(0, 6),
-    )
-    cols = {"t": np.empty(N), "run": np.empty(N, dtype=np.int64), "theta_ref": np.empty(N)}
-    for k in range(heads):
-        cols[f"h{k}"] = np.empty(N)
-    block = 1 << 20
-    for r in range(R):
-        speed, th0 = 2 * np.pi * (0.6 + 0.4 * r), rng.uniform(0, 6)
-        zero = rng.uniform(-3, 3, heads) + 2 * np.pi * rng.integers(-2, 3, heads)
-        ref_zero = rng.uniform(-3, 3)
-        for a in range(0, n, block):
-            b = min(n, a + block)
-            sl = slice(r * n + a, r * n + b)
-            t = np.arange(a, b) / rate_hz
-            th = speed * t + th0
-            cols["t"][sl] = t
-            cols["run"][sl] = r
-            cols["theta_ref"][sl] = th + ref_zero
-            for k in range(heads):
-                e = np.zeros(b - a)
-                for m in range(1, 6):
-                    e += 4e-6 / m * np.sin(m * (th - alpha[k]) + m)
-                _add_effect(name, e, k, r, t, th, ctx)
-                cols[f"h{k}"][sl] = th + e + rng.normal(0, 0.5e-6, b - a) + zero[k]
-    enc = {
-        "optical_radius_m": 0.0254,
-        "head_angles_deg": np.degrees(alpha).tolist(),
-        "signal_periods_per_rev": LINES,
-    }
+    N = (n_rows // 4) * 4
+    cols: dict[str, np.ndarray] = {}
+    gen = _bench_blocks(n_rows, heads, seed, effect, rate_hz)
+    while True:
+        try:
+            at, part = next(gen)
+        except StopIteration as stop:
+            enc = stop.value
+            break
+        for c, v in part.items():
+            if c not in cols:
+                cols[c] = np.empty(N, v.dtype)
+            cols[c][at : at + v.size] = v
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
+
+
+def _write_bench_parquet(folder: Path, n_rows: int, heads: int, effect, rate_hz: float) -> Path:
+    """:func:`_bench_recording`'s record written to ``folder`` as a Parquet recording one
+    row group (2**20 rows) at a time, never whole in memory: the TOML file's path."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data = folder / "rec.parquet"
+    writer = None
+    gen = _bench_blocks(n_rows, heads, 5, effect, rate_hz)
+    while True:
+        try:
+            _, part = next(gen)
+        except StopIteration as stop:
+            enc = stop.value
+            break
+        tab = pa.table(part)
+        if writer is None:
+            writer = pq.ParquetWriter(data, tab.schema)
+        writer.write_table(tab)
+    writer.close()
+    angles = ", ".join(repr(a) for a in enc["head_angles_deg"])
+    toml = folder / "rec.toml"
+    toml.write_text(
+        'format = "encdesign-recording/1"\nkind = "multihead"\ndata = "rec.parquet"\n\n'
+        f"[encoder]\noptical_radius_m = 0.0254\nhead_angles_deg = [{angles}]\n"
+        f"signal_periods_per_rev = {LINES}\n"
+    )
+    return toml
+
+
+def _child_stream(n_rows: int, heads: int, effect, rate_hz: float, run: bool) -> dict:
+    """Issue 43: write the record to Parquet row group by row group, then reduce it as it is
+    read (``open_recording``) and, with ``run``, diagnose it; wall time per step and peak
+    RSS (the record is never whole in memory)."""
+    import tempfile
+
+    from encdesign.diagnose import diagnose, open_recording
+
+    out: dict = dict(n_rows=n_rows, n_heads=heads, rate_hz=rate_hz, effect=str(effect))
+    with tempfile.TemporaryDirectory(prefix="bench-stream-") as tmp:
+        t0 = time.perf_counter()
+        path = _write_bench_parquet(Path(tmp), n_rows, heads, effect, rate_hz)
+        t1 = time.perf_counter()
+        out["write_s"] = t1 - t0
+        out["file_bytes"] = (Path(tmp) / "rec.parquet").stat().st_size
+        out["peak_rss_bytes_after_write"] = (
+            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        )
+        rec, reduced = open_recording(path)
+        t2 = time.perf_counter()
+        out["read_and_reduce_s"] = t2 - t1
+        out["reduced"] = reduced
+        out["peak_rss_bytes_after_reduce"] = (
+            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        )
+        if run:
+            d = diagnose(rec, reduced=reduced)
+            out["wall_s_diagnose"] = time.perf_counter() - t2
+            out["stages_s"] = d.doc["timings_s"]
+            out["verdict"] = d.verdict
+            out["named"] = [e["name"] for e in d.effects]
+    out["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return out
 
 
 TARGET_4X16000_S = 20.0
@@ -386,6 +463,13 @@ def main(argv: list[str] | None = None) -> int:
         "--rate", type=float, default=1000.0, help="with --child: the record's sampling rate, Hz"
     )
     ap.add_argument(
+        "--stream",
+        choices=("reduce", "diagnose"),
+        default=None,
+        help="with --child: write the record to Parquet row group by row group and reduce it "
+        "as it is read (issue 43); 'diagnose' diagnoses it too",
+    )
+    ap.add_argument(
         "--reduce-min-rows",
         type=int,
         default=None,
@@ -409,6 +493,10 @@ def main(argv: list[str] | None = None) -> int:
         eff = args.effect_name if args.effect_name is not None else args.effect
         if args.processes is not None:
             print(json.dumps(_child_processes(args.child, args.heads, eff, args.processes)))
+            return 0
+        if args.stream is not None:
+            run = args.stream == "diagnose"
+            print(json.dumps(_child_stream(args.child, args.heads, eff, args.rate, run)))
             return 0
         kw = dict(rate_hz=args.rate, reduce_min_rows=args.reduce_min_rows)
         print(json.dumps(_child(args.child, args.heads, eff, args.table, **kw)))
