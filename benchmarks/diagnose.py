@@ -22,6 +22,13 @@
    ``candidates``, ``heldout``, ``select``, ``discovery``, ``report``; exclusive, they add up to the
    diagnosis). One record by hand:
    ``python benchmarks/diagnose.py --child 1000000 --heads 4 --effect --table parquet``.
+6. Long records on block means (issue 43, ``engine/_reduce.py``), by hand: ``--rate HZ``
+   samples the generator's record at ``HZ`` (the block grows with the samples per
+   revolution: 1 kHz is never reduced, 50 kHz in blocks of 7 rows), ``--reduce-min-rows N``
+   sets ``FinderSettings.reduce_min_rows``, and ``--stream reduce|diagnose`` writes the record
+   to Parquet row group by row group and reduces it as it is read (never whole in memory),
+   e.g. ``python benchmarks/diagnose.py --child 10000000 --heads 4 --effect --rate 50000``;
+   ``benchmarks/reduce_agreement.py`` compares one record reduced and unreduced.
 5. One record on several processes (issue 43), by hand: ``--child N --processes P`` runs
    ``encdesign diagnose REC --processes P`` on the record written to Parquet and reports the
    command's wall time, e.g.
