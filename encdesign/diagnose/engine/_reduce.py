@@ -25,6 +25,7 @@ far above that band: a reduced record cannot test them, and its diagnosis says s
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -149,7 +150,12 @@ def _boundaries(rec: Recording) -> tuple[np.ndarray, float, float]:
 
 
 def plan_for(
-    kind: str, n: int, default_order: int, grows: bool, settings: FinderSettings, steps=None
+    kind: str,
+    n: int,
+    default_order: int,
+    grows: bool,
+    settings: FinderSettings,
+    steps: Callable[[], tuple[float, float]],
 ) -> dict:
     """The ``reduced`` entry of a record of kind ``kind`` and ``n`` rows (without
     ``block_rows`` when it is not reduced for its kind or size); ``steps``: a function that
