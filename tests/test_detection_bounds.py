@@ -283,3 +283,112 @@ def test_second_effect_bound_against_the_named_one():
         got[factor] = [e["name"] for e in doc["effects"]]
     assert sorted(got[1.5]) == ["cogging", "magnet_asymmetry"], got
     assert got[0.5] == ["magnet_asymmetry"], got
+
+
+def _runout_record(noise_rad: float):
+    """A multihead record (3 heads, theta_ref, 2 runs of 1500 rows at two speeds, disk error
+    at orders 1-4) with white noise ``noise_rad`` (the same draws at every level)."""
+    from encdesign import Recording
+
+    g = np.random.default_rng([2401, 1])
+    alpha = np.radians([0.0, 97.0, 221.0])
+    ts, ths, runs = [], [], []
+    for r in range(2):
+        t = np.arange(1500) / 400.0
+        ths.append(2 * np.pi * 6 * (1 + 0.5 * r) * t / t[-1] + g.uniform(0, 6.3))
+        ts.append(t + r * (t[-1] + 2))
+        runs.append(np.full(1500, r))
+    t, th, run = np.concatenate(ts), np.concatenate(ths), np.concatenate(runs)
+    err = sum(
+        2e-6 / m * np.sin(m * (th[:, None] - alpha[None, :]) + g.uniform(0, 6.3))
+        for m in range(1, 5)
+    )
+    y = th[:, None] + err + noise_rad * g.normal(size=err.shape)
+    cols = {"t": t, "run": run, "theta_ref": th} | {f"h{k}": y[:, k] for k in range(3)}
+    enc = {
+        "head_angles_deg": np.degrees(alpha).tolist(),
+        "optical_radius_m": 0.03,
+        "grating_lines": 4096,
+    }
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
+def _bounds_at(doc: dict, effects) -> dict:
+    return {(b["effect"], b["where"]): b for b in doc["detection_bounds"] if b["effect"] in effects}
+
+
+def test_multihead_runout_bounds_grow_with_the_noise():
+    """``beam_tilt_axial`` (per head), ``bearing_wobble`` and ``eccentricity_shift`` (one each,
+    their order or time held and stated in ``at``) are bounded on a clean multihead record,
+    not listed as uncovered; at twice the noise (same draws) each bound about doubles."""
+    effects = ("beam_tilt_axial", "bearing_wobble", "eccentricity_shift")
+    got = []
+    for noise in (1e-7, 2e-7):
+        d = diagnose(_runout_record(noise)).doc
+        validate_diagnosis(d)
+        assert d["verdict"] == "consistent"
+        assert not set(effects) & set(d.get("detection_bounds_not_covered", []))
+        got.append(_bounds_at(d, effects))
+    lo, hi = got
+    assert (
+        set(lo)
+        == set(hi)
+        == {
+            *(("beam_tilt_axial", h) for h in ("h0", "h1", "h2")),
+            ("bearing_wobble", "all"),
+            ("eccentricity_shift", "all"),
+        }
+    )
+    assert lo[("bearing_wobble", "all")]["unit"] == "m"
+    assert "order" in lo[("bearing_wobble", "all")]["at"]
+    for key, b in lo.items():
+        assert b["bound"] is not None and 0 < b["bound"] < 1e-3, (key, b)
+        assert b["at"], key
+        assert 1.5 < hi[key]["bound"] / b["bound"] < 3.0, (key, b["bound"], hi[key]["bound"])
+
+
+def _sds_noisier(tmp_path, key: int, jitter_s: float, run_offset_s: float):
+    """A clean sds bench (8 runs, 3 moving and 2 fixed sensors, phi_ref) with more noise of
+    both kinds its levels estimate: ``jitter_s`` more timing noise on every edge (the
+    revolution contrasts) and a random delay of ``run_offset_s`` per run and moving sensor
+    (the run means), the same draws at every level, stamped on its clock again."""
+    from encdesign import Recording
+
+    rec, _ = write_concealed_sds(tmp_path / f"j{key}.toml", key=jax.random.key(key), **GEOM)
+    clock = 1.0 / float(rec.meta["encoder"]["clock_hz"])
+    t = np.asarray(rec.columns["t"], float)
+    g = np.random.default_rng([key, 3])
+    run = np.asarray(rec.columns["run"])
+    sensor = np.asarray(rec.columns["sensor"])
+    moving = np.char.startswith(sensor.astype(str), "m")
+    m = np.where(moving, np.char.lstrip(sensor.astype(str), "mf"), "0").astype(int)
+    offsets = g.normal(size=(int(run.max()) + 1, int(m.max()) + 1))
+    t = t + jitter_s * g.normal(size=t.size) + run_offset_s * offsets[run, m] * moving
+    cols = dict(rec.columns) | {"t": np.round(t / clock) * clock}
+    meta = {k: v for k, v in rec.meta.items() if k != "data"}
+    return Recording("sds", meta, cols)
+
+
+def test_sds_platform_bounds_grow_with_the_noise(tmp_path):
+    """``axis_tilt`` (on ``beta^2 / 4``: a small tilt's error is linear in it),
+    ``bearing_wobble``, ``beam_tilt_axial`` and ``coil_mismatch`` are bounded on a clean sds
+    bench, not listed as uncovered; with both noise levels (run means, revolution contrasts)
+    raised on the same bench each bound grows."""
+    effects = ("axis_tilt", "bearing_wobble", "beam_tilt_axial", "coil_mismatch")
+    got, lv = [], []
+    for jitter, offset in ((0.0, 0.0), (6e-9, 2e-10)):
+        d = diagnose(_sds_noisier(tmp_path, 2402, jitter, offset)).doc
+        validate_diagnosis(d)
+        assert d["verdict"] == "consistent"
+        assert not set(effects) & set(d.get("detection_bounds_not_covered", []))
+        got.append(_bounds_at(d, effects))
+        e = d["noise"]["estimate"]
+        lv.append(np.array([e["run_means_rad"], e["contrasts_common_rad"]]))
+    lo, hi = got
+    assert {e for e, _ in lo} == set(effects) and set(lo) == set(hi)
+    assert lo[("axis_tilt", "all")]["parameter"] == "tilt_squared_over_4_rad"
+    assert np.all(lv[1] > 1.5 * lv[0]), lv
+    for key, b in lo.items():
+        assert b["bound"] is not None and 0 < b["bound"] < 1e-5, (key, b)
+        assert hi[key]["bound"] > 1.3 * b["bound"], (key, b["bound"], hi[key]["bound"])

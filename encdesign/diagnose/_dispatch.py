@@ -25,6 +25,7 @@ from ._registry import KINDS
 from .engine._candidates import Candidate
 from .engine._engine import run_engine
 from .engine._plots import engine_plots
+from .engine._reduce_stream import stream_reduce
 from .engine._results import (
     VERDICTS,
     BaseOrder,
@@ -35,7 +36,7 @@ from .engine._results import (
     PlotData,
     Refusal,
 )
-from .engine._settings import FinderSettings
+from .engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 TYPED_KEYS = (
     "verdict",
@@ -185,6 +186,32 @@ def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
     )
 
 
+def open_recording(
+    path: str | os.PathLike,
+    *,
+    max_order: int | None = None,
+    settings: FinderSettings | None = None,
+) -> tuple[Recording, dict | None]:
+    """The recording of the TOML file ``path`` and its ``reduced`` entry: a long Parquet
+    record is reduced to block means as it is read, row group by row group (issue 43,
+    ``FinderSettings.reduce_min_rows``; the whole table is never in memory); any other is
+    loaded whole (``None``).
+
+    Raises:
+        EncdesignInputError: the file breaks the format (the message names the file, the
+            row group and the column).
+    """
+    s = DEFAULT_SETTINGS if settings is None else settings
+
+    def order_of(name: str) -> tuple[int, bool]:
+        k = KINDS[name]
+        own = max_order is None
+        return (k.default_max_order if own else int(max_order)), k.grows_orders and own
+
+    got = stream_reduce(path, s, order_of)
+    return got if got is not None else (load_recording(path), None)
+
+
 def diagnose(
     recording: Recording | str | os.PathLike,
     *,
@@ -195,6 +222,7 @@ def diagnose(
     plots: str | os.PathLike | None = None,
     throw: bool = False,
     settings: FinderSettings | None = None,
+    reduced: dict | None = None,
 ) -> Diagnosis:
     """Diagnose a recording of any kind.
 
@@ -209,11 +237,15 @@ def diagnose(
         throw: raise ``RuntimeError`` when a fit did not converge (else ``status`` says so).
         settings: the finder's decision thresholds (:class:`FinderSettings`; default: the
             tuned defaults).
+        reduced: with a ``recording`` that :func:`open_recording` reduced, its entry (the
+            record is not reduced again).
 
     Raises:
         EncdesignInputError: a recording that cannot be diagnosed.
     """
-    rec = recording if isinstance(recording, Recording) else load_recording(recording)
+    if not isinstance(recording, Recording):
+        recording, reduced = open_recording(recording, max_order=max_order, settings=settings)
+    rec = recording
     kind = KINDS.get(rec.kind)
     if kind is None:
         raise input_error(
@@ -227,6 +259,7 @@ def diagnose(
         extra_candidates=candidates,
         verbose=verbose,
         settings=settings,
+        reduced=reduced,
     )
     d = Diagnosis.from_json(doc, plot_data)
     if plots is not None:

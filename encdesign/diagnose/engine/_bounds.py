@@ -501,7 +501,7 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             a, rule = a_ho, "heldout_min"
     out = {
         **entry,
-        "bound": float(a),
+        "bound": float(a * probe.size),
         "set_by": rule,
         "noncentrality": float(a * a * lam_base),
         "n_params": int(k),

@@ -23,7 +23,9 @@ Stages (``docs/diagnose.md``):
    view finds anything.
 
 The wall time of each stage goes to the document's ``timings_s`` (:mod:`._timing`; exclusive:
-they add up to the diagnosis, less the report's text): ``data`` (the kind's observations
+they add up to the diagnosis, less the report's text): ``reduce`` (issue 43: a record over
+``FinderSettings.reduce_min_rows`` rows to block means, :mod:`._reduce`; ``reduced`` in the
+document says whether, ``B`` and the bound), ``data`` (the kind's observations
 from the recording's columns), ``prepare`` (segments, glitches, noise, folds), ``base_fit``
 (with the base's order growth and noise), ``views`` (every scan of a residual, wherever it
 runs), ``candidates`` (each candidate's starts and trial fits), ``heldout`` (the K-fold
@@ -61,6 +63,8 @@ from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
 from ._protocol import FitDivergence, Prepared
+from ._reduce import plan as reduce_plan
+from ._reduce import reduce_recording
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -631,6 +635,21 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     return doc
 
 
+def _state_reduction(doc: dict, reduced: dict) -> None:
+    """The document says whether the record was reduced to block means (``reduced``:
+    :func:`._reduce.plan`); the tests a reduced record cannot make are ``not_testable``."""
+    doc["reduced"] = reduced
+    lost = reduced.get("not_testable") or []
+    names = {e["name"] for e in lost}
+    doc["not_testable"] = [e for e in doc["not_testable"] if e["name"] not in names] + lost
+    if reduced["applied"]:
+        doc["notes"].append(
+            f"reduced to the means of blocks of {reduced['block_rows']} rows "
+            f"({reduced['rows']} rows to {reduced['reduced_rows']}; attenuation at most "
+            f"{reduced['attenuation_max']:g} up to {reduced['f_needed_hz']:.4g} Hz)"
+        )
+
+
 def run_engine(
     kind: Kind,
     rec,
@@ -640,10 +659,14 @@ def run_engine(
     extra_candidates: Sequence[Candidate] = (),
     verbose: bool = False,
     settings: FinderSettings | None = None,
+    reduced: dict | None = None,
 ) -> tuple[dict[str, Any], PlotData]:
     """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
     document (a dict, ``diagnosis.schema.json``) and what the figures need
     (:class:`~encdesign.diagnose.engine._results.PlotData`).
+
+    ``reduced``: the ``reduced`` entry of a record already reduced to block means as it was
+    read (:func:`._reduce_stream.stream_reduce`); else a long record is reduced here.
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,
@@ -658,6 +681,13 @@ def run_engine(
     pg = _Progress(verbose)
     try:
         with timing() as timer:
+            with stage("reduce"):  # issue 43: a long record on block means
+                own = max_order is None
+                order0 = kind.default_max_order if own else max_order
+                if reduced is None:  # (else reduced as it was read: _reduce_stream)
+                    reduced = reduce_plan(rec, order0, kind.grows_orders and own, settings)
+                    if reduced["applied"]:
+                        rec = reduce_recording(rec, reduced)
             with stage("data"):
                 kd = kind.data(rec, settings)
             meta = dict(rec.meta)
@@ -695,6 +725,7 @@ def run_engine(
                 doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
                 pg.stage("report")
                 doc = kind.finish(prep, doc, settings)
+                _state_reduction(doc, reduced)
                 doc["verdict"] = decide_verdict(doc)
             with stage("bounds"):  # issue 44 F: what the record could have shown
                 ref = bounds_reference(doc, sel, max_effects)
