@@ -513,7 +513,7 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
         a_max = s.plausible_rms_min / own
         why = (
             f"its own size is {ratio:.3g}x the residual it explains (the model takes most of "
-            f"it): plausible_ratio refuses it above {a_max:.3g} {probe.unit}"
+            f"it): plausible_ratio refuses it above {a_max * probe.size:.3g} {probe.unit}"
         )
         if a > a_max:
             return {**entry, "n_params": int(k), "note": f"not named at any size: {why}"}
