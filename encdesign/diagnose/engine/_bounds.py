@@ -52,6 +52,15 @@ ask for a size (``set_by`` names them):
    orders another effect holds, which the rule sets aside) must stay under the share ``m``
    of the total: its own excess reaches ``(1 / m - 1)`` of that structure.
 
+6. **the held-out gain beside that structure** (``heldout_min``): unexplained structure can
+   cost a candidate its held-out gain (a fold that misses part of the structure leaves the
+   candidate's columns bent to it: phase sectors of a capture, a strong order beside the
+   candidate's). The trial fit of a later round is then run on the record itself with the
+   effect added at the size so far (the final model held as in the trial fits, the probe's
+   nonlinear values held): the size is raised (doubling, then bisection) until its held-out
+   gain reaches ``heldout_min``. This one uses the record's own noise: it is the literal
+   "this record would have revealed it".
+
 And the view condition (1) is met at any size when a finding of the final residual is in
 one of the candidate's signature views already (the candidate is then tried anyway).
 
@@ -213,6 +222,7 @@ class _Bench:
         self.fitter.w_ch = fitter.w_ch
         self.base_terms = [t.copy() for t in ref.terms]
         self.pred = _values(fitter, ref.terms)
+        self.y0 = prep.y  # the record itself (read only): the held-out check beside structure
         # the base holds a constant per run and channel: an effect's own size is then net of
         # its run means (``_select._term_rms``)
         self.per_run = _has_run_constants(ref.terms[: ref.n_base])
@@ -279,6 +289,49 @@ class _Bench:
         base = fitter.fit(frozen(self.base_terms))
         resid = fitter.residual(base.terms)
         return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c, self.own_rms(v)
+
+    def heldout_gain(self, cand: Candidate, probe: Probe, a: float) -> float:
+        """The held-out gain of ``cand`` (its probe's nonlinear values held, its linear
+        parameters fitted) on the record itself with the effect added at size ``a``: the
+        trial fit of a later round, with the record's own noise and unexplained structure
+        (which can cost a candidate its held-out gain: a fold misses part of the structure
+        the candidate then bends to)."""
+        prep, fitter = self.prep, self.fitter
+        term = make_term(cand, prep, dict(probe.values))
+        for q in cand.params:
+            if not q.linear:
+                term.free[q.name][...] = False
+        v = _values(fitter, [term])
+        prep.y = self.y0 + a * v
+        try:
+            r0 = fitter.fit(frozen(self.base_terms))
+            r1 = fitter.fit([*frozen(self.base_terms), term])
+        finally:
+            prep.y = self.pred
+        return float(r0.heldout_chi2 - r1.heldout_chi2)
+
+
+def _heldout_size(bench: _Bench, cand, probe: Probe, a0: float, need: float) -> float | None:
+    """The smallest size from ``a0`` up whose held-out gain on the record itself
+    (:meth:`_Bench.heldout_gain`) reaches ``need`` (doublings, then bisections as the views'
+    sizes); ``None`` when none within :data:`VIEW_DOUBLINGS` doublings does."""
+
+    def ok(a: float) -> bool:
+        return bench.heldout_gain(cand, probe, a) >= need
+
+    if ok(a0):
+        return a0
+    lo, hi = a0, 2.0 * a0
+    for _ in range(VIEW_DOUBLINGS):
+        if ok(hi):
+            break
+        lo, hi = hi, 2.0 * hi
+    else:
+        return None
+    for _ in range(VIEW_BISECTIONS):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (lo, mid) if ok(mid) else (mid, hi)
+    return hi
 
 
 def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
@@ -440,6 +493,12 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             return {**entry, "n_params": int(k), "note": "no view locates it at any size tried"}
         if a_share > a:
             a, rule = a_share, ("located_share_min", "signature_left_max")[i]
+        # and the held-out gain on the record itself, beside the structure it leaves
+        a_ho = _heldout_size(bench, cand, probe, a, s.heldout_min)
+        if a_ho is None:
+            return {**entry, "n_params": int(k), "note": "no held-out gain at any size tried"}
+        if a_ho > a:
+            a, rule = a_ho, "heldout_min"
     out = {
         **entry,
         "bound": float(a * probe.size),
@@ -454,7 +513,7 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
         a_max = s.plausible_rms_min / own
         why = (
             f"its own size is {ratio:.3g}x the residual it explains (the model takes most of "
-            f"it): plausible_ratio refuses it above {a_max:.3g} {probe.unit}"
+            f"it): plausible_ratio refuses it above {a_max * probe.size:.3g} {probe.unit}"
         )
         if a > a_max:
             return {**entry, "n_params": int(k), "note": f"not named at any size: {why}"}

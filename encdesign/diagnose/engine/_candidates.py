@@ -157,8 +157,9 @@ class Context:
 
 @dataclasses.dataclass(frozen=True)
 class Probe:
-    """One unit-size effect of a candidate, whose smallest detectable size a clean verdict
-    reports (``detection_bounds``, issue 44 F; :mod:`encdesign.diagnose.engine._bounds`).
+    """One unit-size effect of a candidate, whose smallest detectable size a verdict that
+    does not name it reports (``detection_bounds``, issue 44 F;
+    :mod:`encdesign.diagnose.engine._bounds`).
 
     Attributes:
         values: parameter values of the effect at size 1 (in ``unit``): its linear
@@ -192,7 +193,8 @@ class Probe:
 
 
 ProbeFn = Callable[[Context], list[Probe]]
-"""``probes(ctx) -> [Probe, ...]``: the unit-size effects a clean verdict bounds."""
+"""``probes(ctx) -> [Probe, ...]``: the unit-size effects a verdict bounds (when it does not
+name the candidate)."""
 
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]
 """``start(ctx, residual, findings) -> [params, ...]``: starting values for the nonlinear
@@ -230,8 +232,8 @@ class Candidate:
             parameter through every intermediate) it is several times faster; it must
             agree with ``jax.jacfwd(fn)`` (tested).
         probes: ``probes(ctx) -> [Probe, ...]`` (:data:`ProbeFn`): the unit-size effects
-            whose smallest detectable size a clean verdict reports (``detection_bounds``),
-            or ``None`` (default: no bound reported for it).
+            whose smallest detectable size a verdict that does not name it reports
+            (``detection_bounds``), or ``None`` (default: no bound reported for it).
     """
 
     name: str
