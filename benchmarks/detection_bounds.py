@@ -188,7 +188,7 @@ def sds_coil_gain(folder: Path, key: int, geom: dict) -> float:
     """The fitted order-1 ``coil_mismatch`` amplitude (rad) per unit of ``amplitude_noise``
     of ``write_concealed_sds`` (whose torque ripple makes an order-1 error of about, not
     exactly, that many noise units, beside orders 2-5): measured on a clear record (40 noise
-    units) of the geometry, key ``key``."""
+    units) of the same bench (key ``key``: its disks and platform positions)."""
     rec, _ = _sds_record(folder, key, "coil_mismatch", 40.0, geom)
     d = diagnose(rec).doc
     e = next((e for e in d["effects"] if e["name"] == "coil_mismatch"), None)
@@ -212,7 +212,7 @@ def sds_effect_trials(
     ``bearing_wobble``, the amplitude before the window's ``sinc`` attenuation (the
     generator's ratio, 0.35-0.45, read from its truth); ``beam_tilt_axial``, its order 1 (the
     generator adds order 3 at half of it); ``coil_mismatch``, its order 1, the generator's
-    amplitude scaled by :func:`sds_coil_gain` (its orders 2-5 added).
+    amplitude scaled by :func:`sds_coil_gain` of the same key (its orders 2-5 added).
 
     ``same``: per key (``seed * 1000 + i``) the bound of the clean bench of that key and the
     same bench (same noise, same platform positions) with the effect at each factor of its
@@ -236,7 +236,7 @@ def _sds_maker(effect: str, seed: int, geom: dict, folder: Path):
     """``make(key, i, size)``: the bench of ``key`` with ``effect`` at ``size`` as its bound
     states it (:func:`sds_effect_trials`)."""
     noise = NOISE_RAD
-    gain = sds_coil_gain(folder, seed * 1000 + 999, geom) if effect == "coil_mismatch" else 1.0
+    gains: dict[int, float] = {}
 
     def make(key: int, i: int, size: float):
         amp = size / noise
@@ -244,7 +244,10 @@ def _sds_maker(effect: str, seed: int, geom: dict, folder: Path):
             rho = _sds_record(folder, key, effect, 1.0, geom)[1]["params"]["frequency_ratio"]
             amp *= float(np.sinc(rho))
         elif effect == "coil_mismatch":
-            amp = size / gain
+            # the gain moves with the bench's disks and platform positions: its own key's
+            if key not in gains:
+                gains[key] = sds_coil_gain(folder, key, geom)
+            amp = size / gains[key]
         return _sds_record(folder, key, effect, amp, geom)[0]
 
     return make

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...engine._candidates import Candidate, Context, Probe
-from ._sds_noise import BEAM_ORDERS
+from ._sds_noise import BEAM_ORDERS, _sensor_helmert
 from ._sds_terms import _jx, _run_mean_seen
 
 TILT_PROBE_RAD = 2e-3
@@ -36,22 +36,39 @@ ratios (0.35-0.45), where the window's ``sinc`` attenuates it most (probing both
 upper one was the larger bound; one probe halves the matched view's cost)."""
 
 
+def _contrast_parts(v: np.ndarray, M: int) -> list[tuple[float, int]]:
+    """``(power, values)`` of the whitened revolution contrasts ``v[:, M:]`` in each part
+    the contrast level is estimated from (``_level_sigma``: common to the moving sensors,
+    and their differences)."""
+    R, C = v.shape
+    if C <= M:
+        return []
+    z = v[:, M:].reshape(R, C // M - 1, M) @ _sensor_helmert(M)
+    parts = [z[..., :1]] + ([z[..., 1:]] if M > 1 else [])
+    return [(float(np.sum(x * x)), int(x.size)) for x in parts]
+
+
 def _seen(ctx: Context, cand: Candidate, values: dict):
-    """``seen(lam)`` of the effect at ``values``: its run means (the revolution-mean
-    channels, a share ``s`` of its whitened power) are seen as ``_run_mean_seen`` says (a
-    smooth pattern, not caught by the level's step test), the rest (the revolution
-    contrasts, whose level is a robust scale of many values) all of it."""
+    """``seen(lam)`` of the effect at ``values``, whose two noise levels it inflates: its
+    run means (a share ``s`` of its whitened power) as ``_run_mean_seen`` says (a smooth
+    pattern, not caught by the level's step test); its revolution contrasts through their
+    level, a robust scale of ``n`` values per part (common, differences; the larger is
+    used), which an effect carrying ``lam_p`` there widens by ``1 + lam_p / n`` in variance
+    (the tests then see ``lam_c / max_p(1 + lam_p / n_p)`` of them)."""
     M = int(ctx.consts["psi_m"].size)
     p = {k: jnp.asarray(v, float) for k, v in values.items()}
     v = np.asarray(cand.fn(p, _jx(ctx))) / np.asarray(ctx.noise, float)[None, :]
     total = float(np.sum(v * v))
+    if not total > 0:
+        return None
     inner = _run_mean_seen(ctx, v[:, :M], caught=False)
-    if inner is None or not total > 0:
-        return inner
     s = float(np.sum(v[:, :M] ** 2)) / total
+    parts = [(pw / total, n) for pw, n in _contrast_parts(v, M) if n > 0]
 
     def seen(lam: float) -> float:
-        return (1.0 - s) * lam + (inner(s * lam) if s > 0 else 0.0)
+        widen = max([1.0] + [1.0 + f * lam / n for f, n in parts])
+        run_means = s * lam if inner is None else inner(s * lam) if s > 0 else 0.0
+        return (1.0 - s) * lam / widen + run_means
 
     return seen
 
