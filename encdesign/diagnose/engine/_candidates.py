@@ -174,6 +174,11 @@ class Probe:
             effect whose noncentrality at the record's noise is ``lam``, where the kind's
             noise estimate takes part of it (a level estimated from few values, which an
             effect below its own step test inflates: the sds run means); ``None``: all of it.
+        size: the effect's size (in ``unit``) at ``values`` (default 1). Where the size is
+            not a linear parameter (an axis tilt's ``beta^2 / 4``), ``values`` hold the
+            nonlinear ones where the effect is still linear in its size (a small tilt) and
+            ``size`` says how large it is there: the bound is that many times the multiple
+            of the effect at ``values`` the finder would reveal.
     """
 
     values: Mapping[str, Any]
@@ -183,6 +188,7 @@ class Probe:
     at: str = ""
     worst_of: tuple[Probe, ...] = ()
     seen: Callable[[float], float] | None = None
+    size: float = 1.0
 
 
 ProbeFn = Callable[[Context], list[Probe]]
