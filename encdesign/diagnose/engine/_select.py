@@ -327,17 +327,36 @@ def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> t
     return reasons, trms, erms, col
 
 
+def _reaches(f, own) -> bool:
+    """Whether finding ``f`` lies where the candidate's own fitted error is located (``own``:
+    the findings of that error alone): a finding of the same view at the same integer order
+    (or both at none), on a head and in a run that one shows."""
+    key = _order_key(f)
+    for g in own:
+        if g.view != f.view or _order_key(g) != key:
+            continue
+        if (
+            f.where["heads"]
+            and g.where["heads"]
+            and not set(f.where["heads"]) & set(g.where["heads"])
+        ):
+            continue
+        if f.where["runs"] and g.where["runs"] and not set(f.where["runs"]) & set(g.where["runs"]):
+            continue
+        return True
+    return False
+
+
 def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
     """The rules on what the candidate leaves of the located structure: ``(rule or None,
     steps it leaves)``."""
     s = prep.settings
-    p0 = sum(f.power - f.dof for f in findings)
-    if p0 <= 0:
+    if sum(f.power - f.dof for f in findings) <= 0:
         return None, []
-    after = locate(prep, fitter.residual(fr.terms), views, scan_order)
+    resid1 = fitter.residual(fr.terms)
+    after = locate(prep, resid1, views, scan_order)
     # steps it leaves (a smooth model fitted to a step moves its change point)
     steps_left = free_steps(prep, after)
-    p1 = sum(f.power - f.dof for f in after)
     # and clear the places its own signature located (not a larger structure there that it
     # only dents, e.g. a step fitted by a drift)
     sig = set(cand.signature) or {f.view for f in findings}
@@ -352,11 +371,19 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order):
             f"leaves {100 * m1 / m0:.0f}% of the structure its signature views "
             f"({', '.join(sorted(sig))}) located in place",
         ), steps_left
-    if p1 > (1.0 - s.located_share_min) * p0:
+    # the share it must explain is of the structure located where its own fitted error shows
+    # (view, integer order, heads, runs), not of everything located: with several effects at
+    # once the others' structure is not its to explain (issue 44 B); a larger structure it
+    # only dents lies where it shows, and still refuses it
+    own = locate(prep, fitter.residual(fr.terms[:-1]) - resid1, views, scan_order)
+    del resid1
+    p0 = sum(f.power - f.dof for f in findings if _reaches(f, own))
+    p1 = sum(f.power - f.dof for f in after if _reaches(f, own))
+    if p0 > 0 and p1 > (1.0 - s.located_share_min) * p0:
         return (
             "located_share_min",
-            f"explains only {100 * (1 - p1 / p0):.0f}% of the located structure (needs "
-            f"{100 * s.located_share_min:.0f}%)",
+            f"explains only {100 * (1 - p1 / p0):.0f}% of the structure located where its own "
+            f"fitted error shows (needs {100 * s.located_share_min:.0f}%)",
         ), steps_left
     return None, steps_left
 

@@ -62,8 +62,11 @@ class FinderSettings(eqx.Module):
 
     located_share_min: float = eqx.field(default=0.2, static=True)
     """Rule ``located_share_min``: a candidate must explain at least this share of the
-    excess chi-square every view located, so that a larger structure is not pinned on it
-    through a small part of it. From the first engine (96be348)."""
+    excess chi-square located where its own fitted error shows (the views, integer orders,
+    heads and runs in which that error alone is located), so that a larger structure is not
+    pinned on it through a small part of it. From the first engine (96be348), measured
+    against everything located until issue 44 B (a weak effect among two strong ones at once
+    was refused for the others' structure); the value is unchanged."""
 
     signature_left_max: float = eqx.field(default=0.5, static=True)
     """Rule ``signature_left_max``: a candidate may leave at most this share of what its own
@@ -543,12 +546,6 @@ class FinderSettings(eqx.Module):
     """multihead (no reference): a disk order whose head pattern ``exp(-i m alpha)`` varies
     over the heads by at most this mean square is reported unidentifiable (the heads' mean
     takes it). Was an inline 0.05 in ``_multihead.multihead_base``; set by hand in 96be348."""
-
-    runout_order_share: float = eqx.field(default=0.1, static=True)
-    """multihead: ``beam_tilt_axial`` is fitted at the runout orders (1-3) located with at
-    least this share of the strongest one's power (a strong order leaks a little into its
-    neighbours over a few turns). Was an inline 0.1 in ``_multihead_terms._bt_start``;
-    45c7e65."""
 
     wobble_revolutions_min: float = eqx.field(default=2.0, static=True)
     """multihead: ``bearing_wobble`` is testable (rule ``applies``) with at least this many
