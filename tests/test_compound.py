@@ -90,7 +90,10 @@ def test_a_weak_effect_is_not_refused_for_unrelated_structure(seed):
     d = diagnose(rec).doc
     names = {e["name"] for e in d["effects"]}
     assert {"vibration", "interpolation_error"} <= names, d["rejected"]
-    assert not [r for r in d["rejected"] if r["rule"] == "located_share_min"], d["rejected"]
+    # (a candidate that is not in the record may still be refused by it: a beam tilt fitted
+    # to a part of another structure)
+    refused = [r for r in d["rejected"] if r["rule"] == "located_share_min"]
+    assert not [r for r in refused if r["name"] in truth["effects"]], refused
     m, k = truth["where"]["orders"][0], truth["where"]["heads"][0]
     at_m = [
         u

@@ -186,6 +186,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover_lines.py", "STEP_EXACT_ROWS"): BOUND
     + " (rows up to which a step is located with the catalog model projected out)",
     ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
+    ("engine/_spill.py", "TRIAL_STEPS"): BOUND
+    + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
     + " (the probe's whitened norm: the fits are linear in it)",
