@@ -13,7 +13,12 @@ named, or reported confounded with a named effect, :func:`_found`), ``scale_erro
 sensor against a reference (``scale_record``, its sign alternating), and its
 ``interpolation_error`` (``interpolation_error_sensor``: a signal offset at order P,
 ``interp_ref_record``), and the motion kind's ``cogging``, ``magnet_asymmetry`` and
-``coil_mismatch`` at their lowest orders (``--effect motion_NAME``, ``motion_record``).
+``coil_mismatch`` at their lowest orders (``--effect motion_NAME``, ``motion_record``), the
+multihead runout effects ``beam_tilt_axial`` (head 1), ``bearing_wobble`` and
+``eccentricity_shift`` (:func:`runout_error`, on ``vibration_record``'s geometries), and the
+sds ``axis_tilt``, ``bearing_wobble``, ``beam_tilt_axial`` and ``coil_mismatch``
+(``--effect sds_NAME``, :func:`sds_effect_trials`, small benches of
+``SDS_EFFECT_GEOMETRIES``).
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -29,6 +34,17 @@ the sizes, in multiples of the bound (``1.0`` shows the convention: about half f
     python benchmarks/detection_bounds.py --effect scale_error --seed 1511 --n 1 --geometries 10
     python benchmarks/detection_bounds.py --effect interpolation_error_sensor --seed 1541 \
         --n 1 --geometries 10
+    python benchmarks/detection_bounds.py --effect eccentricity_shift --seed 2221 --n 2 \
+        --geometries 10
+    python benchmarks/detection_bounds.py --effect sds_axis_tilt --seed 2301 --n 4 \
+        --geometries 5
+    python benchmarks/detection_bounds.py --effect quadrature_signal_shape --seed 3201 --n 2 \
+        --geometries 10 [--beside 20]
+
+``quadrature_signal_shape``: a radial error at order 3 or 4 (the ``signal_shape`` column) in
+quadrature captures (``quadrature_record``); ``--beside X``: beside structure no catalog
+effect explains (a radial order 17 at X times the clean bound), the bound of an
+``unexplained`` capture (the rule ``located_share_min`` against the final findings).
 """
 
 from __future__ import annotations
@@ -147,6 +163,132 @@ def sds_delay_trials(
     return rows
 
 
+SDS_EFFECTS = ("axis_tilt", "bearing_wobble", "beam_tilt_axial", "coil_mismatch")
+"""The sds effects of ``--effect sds_NAME`` (:func:`sds_effect_trials`)."""
+
+SDS_EFFECT_GEOMETRIES = [
+    dict(n_runs=8, n_moving=3, n_fixed=2, phi_ref=True),
+    dict(n_runs=12, n_moving=4, n_fixed=1, phi_ref=False),
+    dict(n_runs=10, n_moving=3, n_fixed=2, phi_ref=True),
+]
+"""Small sds benches for :func:`sds_effect_trials` (``beam_tilt_axial`` needs phi_ref)."""
+
+
+def _sds_record(folder: Path, key: int, effect: str, amplitude_noise: float, geom: dict):
+    return write_concealed_sds(
+        folder / f"e{key}.toml",
+        key=jax.random.key(key),
+        effect=effect,
+        amplitude_noise=max(amplitude_noise, 1e-9),
+        **geom,
+    )
+
+
+def sds_coil_gain(folder: Path, key: int, geom: dict) -> float:
+    """The fitted order-1 ``coil_mismatch`` amplitude (rad) per unit of ``amplitude_noise``
+    of ``write_concealed_sds`` (whose torque ripple makes an order-1 error of about, not
+    exactly, that many noise units, beside orders 2-5): measured on a clear record (40 noise
+    units) of the same bench (key ``key``: its disks and platform positions)."""
+    rec, _ = _sds_record(folder, key, "coil_mismatch", 40.0, geom)
+    d = diagnose(rec).doc
+    e = next((e for e in d["effects"] if e["name"] == "coil_mismatch"), None)
+    if e is None:
+        raise RuntimeError(f"coil_mismatch not named on the clear record {key}: {d['verdict']}")
+    return float(e["derived"]["order_1_amplitude_rad"]["value"]) / 40.0
+
+
+def sds_effect_trials(
+    effect: str,
+    seed: int,
+    n: int,
+    geom: dict,
+    folder: Path,
+    factors=(1.5, 0.5),
+    same: bool = False,
+) -> list[dict]:
+    """The bound of an sds ``effect`` on one clean bench (key ``seed``) and ``n`` benches of
+    the same layout with fresh noise (and platform positions) at each factor of it. The
+    size as the bound states it: ``axis_tilt``, ``beta^2 / 4`` (the generator's amplitude);
+    ``bearing_wobble``, the amplitude before the window's ``sinc`` attenuation (the
+    generator's ratio, 0.35-0.45, read from its truth); ``beam_tilt_axial``, its order 1 (the
+    generator adds order 3 at half of it); ``coil_mismatch``, its order 1, the generator's
+    amplitude scaled by :func:`sds_coil_gain` of the same key (its orders 2-5 added).
+
+    ``same``: per key (``seed * 1000 + i``) the bound of the clean bench of that key and the
+    same bench (same noise, same platform positions) with the effect at each factor of its
+    own bound: the literal claim. Without it the bound of one bench is applied to others,
+    whose run-mean level (estimated from about 10 values, known to +-25 %) differs."""
+    if same:
+        return sds_effect_same(effect, seed, n, geom, folder, factors)
+    d0 = diagnose(_sds_record(folder, seed, None, 1e-9, geom)[0]).doc
+    if d0["verdict"] != "consistent":
+        return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
+    bs = [b for b in d0["detection_bounds"] if b["effect"] == effect]
+    if not bs or bs[0]["bound"] is None:
+        note = bs[0].get("note") if bs else d0.get("detection_bounds_not_covered")
+        return [dict(seed=seed, skipped=f"no bound: {note}")]
+    b = bs[0]
+    make = _sds_maker(effect, seed, geom, folder)
+    return _fresh_trials(effect, seed, n, factors, b, make, layout=str(geom))
+
+
+def _sds_maker(effect: str, seed: int, geom: dict, folder: Path):
+    """``make(key, i, size)``: the bench of ``key`` with ``effect`` at ``size`` as its bound
+    states it (:func:`sds_effect_trials`)."""
+    noise = NOISE_RAD
+    gains: dict[int, float] = {}
+
+    def make(key: int, i: int, size: float):
+        amp = size / noise
+        if effect == "bearing_wobble":
+            rho = _sds_record(folder, key, effect, 1.0, geom)[1]["params"]["frequency_ratio"]
+            amp *= float(np.sinc(rho))
+        elif effect == "coil_mismatch":
+            # the gain moves with the bench's disks and platform positions: its own key's
+            if key not in gains:
+                gains[key] = sds_coil_gain(folder, key, geom)
+            amp = size / gains[key]
+        return _sds_record(folder, key, effect, amp, geom)[0]
+
+    return make
+
+
+def sds_effect_same(
+    effect: str, seed: int, n: int, geom: dict, folder: Path, factors
+) -> list[dict]:
+    """``same`` of :func:`sds_effect_trials`: ``n`` keys, each its own clean bench's bound
+    and the same bench with the effect at each factor of it."""
+    make = _sds_maker(effect, seed, geom, folder)
+    rows: list[dict] = []
+    for i in range(n):
+        key = seed * 1000 + i
+        d0 = diagnose(_sds_record(folder, key, None, 1e-9, geom)[0]).doc
+        if d0["verdict"] != "consistent":
+            rows.append(dict(seed=seed, key=key, skipped=f"clean record {d0['verdict']}"))
+            continue
+        b = next((b for b in d0["detection_bounds"] if b["effect"] == effect), None)
+        if b is None or b["bound"] is None:
+            rows.append(dict(seed=seed, key=key, skipped=f"no bound: {b and b.get('note')}"))
+            continue
+        for factor in factors:
+            d = diagnose(make(key, i, factor * b["bound"])).doc
+            rows.append(
+                dict(
+                    seed=seed,
+                    key=key,
+                    factor=factor,
+                    layout=str(geom),
+                    found=_found(d, effect),
+                    named=any(e["name"] == effect for e in d["effects"]),
+                    bound=b["bound"],
+                    set_by=b["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def vibration_record(
     geom_seed: int,
     noise_seed: int,
@@ -154,13 +296,16 @@ def vibration_record(
     head: int,
     f_hz: float | None,
     offset_a: float = 0.0,
+    extra=None,
 ):
     """A multihead record of a geometry drawn from ``geom_seed`` (2-5 heads, 1-3 runs at
     different speeds, theta_ref or not, disk error orders 1-8), its noise from
     ``noise_seed``, with a vibration of ``amp_rad`` at ``f_hz`` on ``head`` alone (its own
     phase per run; physics ``vibration_rad``) and a signal offset ``offset_a`` (an
     interpolation error at order L = 4096 of the head's own reading, physics
-    ``interpolation_harmonics_rad``) on ``head``. Returns ``(recording, rate_hz)``."""
+    ``interpolation_harmonics_rad``) on ``head``; ``extra(t, theta, run, alpha)`` (rad,
+    (n, H)), when given, is added to the errors (:func:`runout_error`). Returns
+    ``(recording, rate_hz)``."""
     g = np.random.default_rng([geom_seed, 7])
     H = int(g.integers(2, 6))
     R = int(g.integers(1, 4))
@@ -187,6 +332,8 @@ def vibration_record(
         ph = n.uniform(0, 2 * np.pi, R)[run]
         c, s_ = (amp_rad * np.cos(ph))[:, None], (-amp_rad * np.sin(ph))[:, None]
         err[:, head] += np.asarray(fx.vibration_rad(t, f_hz, c, s_))[:, 0]
+    if extra is not None:
+        err += extra(t, th, run, alpha)
     y = th[:, None] + err + n.normal(0, noise, err.shape) + g.uniform(-3, 3, (R, H))[run]
     if offset_a:
         L = 4096
@@ -310,13 +457,15 @@ def scale_record(geom_seed: int, noise_seed: int, scale: float, folder: Path):
     return rec
 
 
-def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: Path):
+def interp_ref_record(
+    geom_seed: int, noise_seed: int, offset_a: float, folder: Path, scale: float = 0.0
+):
     """A sensor against a reference (``write_sensor_reference``) with a signal offset
     ``offset_a`` (an interpolation error at order P, physics ``interpolation_exact_rad``),
     of a geometry drawn from ``geom_seed`` as ``random_reference_bench`` draws one for it (a
     multipole magnetic ring of 16-40 pole pairs or a capacitive sensor of 32 periods, 1-3
     runs, at least 8 samples per signal period), its noise and error function from
-    ``noise_seed``. Returns the recording."""
+    ``noise_seed``, and a scale error ``scale``. Returns the recording."""
     g = np.random.default_rng([geom_seed, 17])
     sensor = str(g.choice(["magnetic", "capacitive"]))
     P = int(g.integers(16, 41)) if sensor == "magnetic" else 32
@@ -327,7 +476,9 @@ def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: 
     span = float(np.clip(span, 1.0, max(1.0, 2000 / (8.0 * P * n_dir))))
     speeds = tuple(float(v) for v in np.sort(g.uniform(0.2, 3.0, n_runs)))
     zeros = str(g.choice(["turns", "any"]))
-    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else None
+    eff = {"interpolation_error": {"offset_a": offset_a}} if offset_a else {}
+    if scale:
+        eff["scale_error"] = {"scale": scale}
     rec, _ = write_sensor_reference(
         folder / f"i{geom_seed}_{noise_seed}.toml",
         key=jax.random.key(noise_seed),
@@ -337,7 +488,7 @@ def interp_ref_record(geom_seed: int, noise_seed: int, offset_a: float, folder: 
         directions=directions,
         speeds_rev_s=speeds,
         samples_per_run=2000,
-        effects=eff,
+        effects=eff or None,
         run_zeros=zeros,
         reference_zeros="turns",
     )
@@ -348,11 +499,12 @@ MOTION_EFFECTS = ("cogging", "magnet_asymmetry", "coil_mismatch")
 """The motion catalog effects (``--effect motion_NAME``), each at its lowest order."""
 
 
-def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
+def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float, more=()):
     """A motion recording (one run at constant speed, 2000 rows at 500 Hz, 3-20 turns, read
     noise 0.2 mrad) of a motor drawn from ``geom_seed`` (4-8 pole pairs, 6-24 slots), its
     noise from ``noise_seed``, with an error ``amp_rad cos(order theta + phase)`` (phase
-    from ``noise_seed``). Returns the recording."""
+    from ``noise_seed``) and one more such error per ``(order, amp_rad)`` of ``more``.
+    Returns the recording."""
     g = np.random.default_rng([geom_seed, 19])
     p = int(g.integers(4, 9))
     s = int(g.choice([6, 9, 12, 18, 24]))
@@ -362,6 +514,8 @@ def motion_record(geom_seed: int, noise_seed: int, order: int, amp_rad: float):
     th = turns * 2 * np.pi * t / t[-1] + g.uniform(0, 2 * np.pi)
     rn = np.random.default_rng([noise_seed, 23])
     err = amp_rad * np.cos(order * th + rn.uniform(0, 2 * np.pi)) if amp_rad else 0.0
+    for o, a in more:
+        err = err + a * np.cos(o * th + rn.uniform(0, 2 * np.pi))
     theta = th + err + rn.normal(0, noise, n)
     meta = {
         "format": "encdesign-recording/1",
@@ -415,6 +569,71 @@ def motion_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[di
     return _fresh_trials(effect, seed, n, factors, b, make, order=order)
 
 
+def quadrature_record(
+    geom_seed: int, noise_seed: int, order: int, amp: float, more=()
+) -> Recording:
+    """A quadrature capture (two signals of one head) of a geometry drawn from ``geom_seed``
+    (1,500-6,000 samples; in time order at 5.3-250 samples per signal period, or a capture
+    without ``t``; an ellipse with offsets, amplitude mismatch and phase error; relative noise
+    1e-4-3e-3 per signal), its noise from ``noise_seed``, with a radial error
+    ``amp cos(order psi + phase)`` (relative to the mean amplitude, along each sample's ray:
+    the ``signal_shape`` column the bound is stated for; phase from ``noise_seed``), and one
+    more such error per ``(order, amp)`` of ``more`` (an order above ``signal_shape``'s is
+    structure no catalog effect explains)."""
+    g = np.random.default_rng([geom_seed, 29])
+    n = int(g.integers(1500, 6001))
+    noise = float(10 ** g.uniform(-4, -2.5))
+    scale = float(10 ** g.uniform(-1, 4))
+    timed = bool(g.random() < 0.6)
+    p, q = g.uniform(-0.05, 0.05, 2)
+    a, b = 1.0, float(g.uniform(0.9, 1.1))
+    alpha = float(g.uniform(-0.05, 0.05))
+    rn = np.random.default_rng([noise_seed, 31])
+    cols: dict[str, np.ndarray] = {}
+    if timed:
+        f_sig = 40.0  # signal periods per s
+        rate = f_sig * float(g.choice([5.3, 13.7, 40.0, 250.0]))
+        t = np.arange(n) / rate
+        phi = 2 * np.pi * f_sig * t + g.uniform(0, 2 * np.pi)
+        cols["t"] = t
+    else:
+        phi = np.sort(rn.uniform(0, 2 * np.pi, n))
+    xa, xb = a * np.cos(phi), b * np.sin(phi + alpha)
+    psi, r = np.arctan2(xb, xa), np.hypot(xa, xb)
+    for o, am in ((order, amp), *more):
+        r = r + 0.5 * (a + b) * am * np.cos(o * psi + rn.uniform(0, 2 * np.pi))
+    sa = p + r * np.cos(psi) + rn.normal(0, noise, n)
+    sb = q + r * np.sin(psi) + rn.normal(0, noise, n)
+    cols["sa"], cols["sb"] = sa * scale, sb * scale
+    meta = {"format": "encdesign-recording/1", "kind": "quadrature"}
+    return Recording("quadrature", meta, cols)
+
+
+def quadrature_trials(seed: int, n: int, factors=(1.5, 0.5), beside: float = 0.0) -> list[dict]:
+    """The ``signal_shape`` bounds (radial orders 3 and 4) of one clean quadrature capture
+    (geometry ``seed``) and ``n`` captures of the same geometry with fresh noise each at each
+    factor, at the order of the bound (3 for even seeds, 4 for odd ones). ``beside``: every
+    capture also carries a radial order 17 (no catalog effect's) of ``beside`` times the
+    clean bound, the bound then comes from the capture with it alone (``unexplained``)."""
+    d0 = diagnose(quadrature_record(seed, seed, 3, 0.0)).doc
+    more = ()
+    if beside and d0["verdict"] == "consistent":
+        more = ((17, beside * d0["detection_bounds"][0]["bound"]),)
+        d0 = diagnose(quadrature_record(seed, seed, 3, 0.0, more=more)).doc
+    if d0["verdict"] != ("unexplained" if more else "consistent"):
+        return [dict(seed=seed, skipped=f"reference capture {d0['verdict']}")]
+    bs = [b for b in d0["detection_bounds"] if b["effect"] == "signal_shape"]
+    b = bs[seed % 2] if len(bs) > 1 else bs[0] if bs else None
+    if b is None or b["bound"] is None:
+        return [dict(seed=seed, skipped=f"no bound: {b and b.get('note')}")]
+    order = int(b["at"].split()[-1])
+
+    def make(key: int, i: int, size: float):
+        return quadrature_record(seed, key, order, size, more=more)
+
+    return _fresh_trials("signal_shape", seed, n, factors, b, make, order=order)
+
+
 REFERENCE_RECORDS = {"scale_error": scale_record, "interpolation_error": interp_ref_record}
 """Generators of sensor-against-reference records by effect (:func:`reference_trials`)."""
 
@@ -439,8 +658,49 @@ def reference_trials(
     return _fresh_trials(effect, seed, n, factors, b, make_noisy)
 
 
-MULTIHEAD_EFFECTS = {"vibration": "amplitude", "interpolation_error": "offset_a"}
-"""The multihead effects :func:`multihead_trials` puts on head 1 (by the size's name)."""
+MULTIHEAD_EFFECTS = {
+    "vibration": "amplitude",
+    "interpolation_error": "offset_a",
+    "beam_tilt_axial": "amplitude_rad",
+    "bearing_wobble": "runout_m",
+    "eccentricity_shift": "shift_m",
+}
+"""The multihead effects :func:`multihead_trials` puts in a record (by the size's name): on
+head 1 where the bound is per head, else on the disk every head reads."""
+
+RADIUS_M = 0.03
+"""The optical radius of :func:`vibration_record`'s encoder."""
+
+
+def runout_error(effect: str, size: float, noise_seed: int, head: int, b: dict):
+    """``extra`` for :func:`vibration_record`: a runout effect of ``size`` as its bound
+    ``b`` states it, its phase (and the shift's direction and time) from ``noise_seed``:
+    ``beam_tilt_axial``, an error ``size cos(theta + phase)`` on ``head`` alone (axial
+    runout at order 1 through a tilted beam); ``bearing_wobble``, a radial runout ``size``
+    (m) at the bound's order, its own phase per run (physics ``bearing_wobble_rad``);
+    ``eccentricity_shift``, the disk centre moved by ``size`` (m) in a random direction at a
+    row drawn from the middle half of the rows (physics ``eccentricity_rad``)."""
+    r = np.random.default_rng([noise_seed, 29])
+
+    def extra(t, th, run, alpha):
+        out = np.zeros((t.size, alpha.size))
+        if effect == "beam_tilt_axial":
+            out[:, head] = size * np.cos(th + r.uniform(0, 2 * np.pi))
+        elif effect == "bearing_wobble":
+            nu = float(b["at"].split()[1])
+            ph = r.uniform(0, 2 * np.pi, int(run.max()) + 1)[run]
+            a, c = size * np.cos(ph), size * np.sin(ph)
+            out += np.asarray(fx.bearing_wobble_rad(th, alpha, RADIUS_M, nu, a, c))
+        elif effect == "eccentricity_shift":
+            j = int(r.integers(t.size // 4, 3 * t.size // 4))
+            d = r.uniform(0, 2 * np.pi)
+            e = fx.eccentricity_rad(th, alpha, RADIUS_M, size * np.cos(d), size * np.sin(d))
+            out[j:] += np.asarray(e)[j:]
+        else:
+            raise ValueError(f"runout_error: unknown effect {effect!r}")
+        return out
+
+    return extra
 
 
 def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list[dict]:
@@ -450,7 +710,10 @@ def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list
     d0 = diagnose(rec).doc
     if d0["verdict"] != "consistent":
         return [dict(seed=seed, skipped=f"clean record {d0['verdict']}")]
-    b = _bound(d0, effect, "h1")
+    bs = [b for b in d0["detection_bounds"] if b["effect"] == effect]
+    if not bs:
+        return [dict(seed=seed, skipped=f"no bound: {d0.get('detection_bounds_not_covered')}")]
+    b = next((b for b in bs if b["where"] == "h1"), bs[0])
     if b["bound"] is None:
         return [dict(seed=seed, skipped=f"no bound: {b.get('note')}")]
 
@@ -458,7 +721,10 @@ def multihead_trials(effect: str, seed: int, n: int, factors=(1.5, 0.5)) -> list
         if effect == "vibration":
             f_hz = float(b["at"].split()[3])
             return vibration_record(seed, key, size, 1, f_hz)[0]
-        return vibration_record(seed, key, 0.0, 1, None, offset_a=size)[0]
+        if effect == "interpolation_error":
+            return vibration_record(seed, key, 0.0, 1, None, offset_a=size)[0]
+        extra = runout_error(effect, size, key, 1, b)
+        return vibration_record(seed, key, 0.0, 1, None, extra=extra)[0]
 
     return _fresh_trials(effect, seed, n, factors, b, make)
 
@@ -472,9 +738,14 @@ def main(argv: list[str] | None = None) -> int:
             "sds_delay",
             "vibration",
             "interpolation_error",
+            "beam_tilt_axial",
+            "bearing_wobble",
+            "eccentricity_shift",
             "scale_error",
             "interpolation_error_sensor",
             *(f"motion_{e}" for e in MOTION_EFFECTS),
+            *(f"sds_{e}" for e in SDS_EFFECTS),
+            "quadrature_signal_shape",
         ),
         default="sds_delay",
     )
@@ -487,6 +758,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the effect in the very record the bound came from (same noise), not in fresh ones",
     )
+    ap.add_argument(
+        "--beside",
+        type=float,
+        default=0.0,
+        help="quadrature: unexplained structure (radial order 17) in every capture, this many "
+        "times the clean bound",
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     factors = tuple(float(f) for f in args.factors.split(","))
@@ -498,10 +776,21 @@ def main(argv: list[str] | None = None) -> int:
     elif args.effect in MULTIHEAD_EFFECTS:
         for gi in range(args.geometries):
             rows += multihead_trials(args.effect, args.seed + gi, args.n, factors)
+    elif args.effect == "quadrature_signal_shape":
+        for gi in range(args.geometries):
+            rows += quadrature_trials(args.seed + gi, args.n, factors, args.beside)
     elif args.effect.startswith("motion_"):
         for gi in range(args.geometries):
             effect = args.effect.removeprefix("motion_")
             rows += motion_trials(effect, args.seed + gi, args.n, factors)
+    elif args.effect.startswith("sds_") and args.effect != "sds_delay":
+        effect = args.effect.removeprefix("sds_")
+        with tempfile.TemporaryDirectory() as tmp:
+            for gi in range(args.geometries):
+                geom = SDS_EFFECT_GEOMETRIES[gi % len(SDS_EFFECT_GEOMETRIES)]
+                rows += sds_effect_trials(
+                    effect, args.seed + gi, args.n, geom, Path(tmp), factors, args.same
+                )
     elif args.effect in ("scale_error", "interpolation_error_sensor"):
         effect = args.effect.removesuffix("_sensor")
         with tempfile.TemporaryDirectory() as tmp:

@@ -22,6 +22,13 @@
    ``candidates``, ``heldout``, ``select``, ``discovery``, ``report``; exclusive, they add up to the
    diagnosis). One record by hand:
    ``python benchmarks/diagnose.py --child 1000000 --heads 4 --effect --table parquet``.
+6. Long records on block means (issue 43, ``engine/_reduce.py``), by hand: ``--rate HZ``
+   samples the generator's record at ``HZ`` (the block grows with the samples per
+   revolution: 1 kHz is never reduced, 50 kHz in blocks of 7 rows), ``--reduce-min-rows N``
+   sets ``FinderSettings.reduce_min_rows``, and ``--stream reduce|diagnose`` writes the record
+   to Parquet row group by row group and reduces it as it is read (never whole in memory),
+   e.g. ``python benchmarks/diagnose.py --child 10000000 --heads 4 --effect --rate 50000``;
+   ``benchmarks/reduce_agreement.py`` compares one record reduced and unreduced.
 5. One record on several processes (issue 43), by hand: ``--child N --processes P`` runs
    ``encdesign diagnose REC --processes P`` on the record written to Parquet and reports the
    command's wall time, e.g.
@@ -76,19 +83,12 @@ def _add_effect(name: str, e: np.ndarray, k: int, r: int, t: np.ndarray, th: np.
         raise ValueError(f"unknown effect {name!r}")
 
 
-def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
-    """A bench built in memory (no CSV): ``heads`` heads, 4 runs, 1 kHz, 0.5 urad noise,
-    disk errors of orders 1-5, per-run zeros; ``effect``: ``True`` a 31 Hz vibration of
-    1.5 urad, a catalog name: that effect (:func:`_add_effect`), ``False``: clean.
-
-    The columns are allocated once and filled run by run in blocks of 2**20 rows, so the
-    generator itself adds little to the peak memory being measured."""
-    from encdesign import Recording
-
+def _bench_blocks(n_rows: int, heads: int, seed: int, effect: bool | str, rate_hz: float):
+    """The rows of :func:`_bench_recording`, in blocks of at most 2**20 rows: yields
+    ``(first row, columns)``; then returns the encoder table (``StopIteration.value``)."""
     rng = np.random.default_rng(seed)
     R = 4
     n = n_rows // R
-    N = n * R
     alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
     name = "vibration" if effect is True else (effect or "clean")
     ctx = dict(
@@ -97,9 +97,6 @@ def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
         beta=np.array([1.0, -0.6, 0.3, -0.8][:heads]),
         phase=rng.uniform(0, 6),
     )
-    cols = {"t": np.empty(N), "run": np.empty(N, dtype=np.int64), "theta_ref": np.empty(N)}
-    for k in range(heads):
-        cols[f"h{k}"] = np.empty(N)
     block = 1 << 20
     for r in range(R):
         speed, th0 = 2 * np.pi * (0.6 + 0.4 * r), rng.uniform(0, 6)
@@ -107,25 +104,115 @@ def _bench_recording(n_rows: int, heads: int, seed: int, effect: bool | str):
         ref_zero = rng.uniform(-3, 3)
         for a in range(0, n, block):
             b = min(n, a + block)
-            sl = slice(r * n + a, r * n + b)
-            t = np.arange(a, b) / 1000.0
+            t = np.arange(a, b) / rate_hz
             th = speed * t + th0
-            cols["t"][sl] = t
-            cols["run"][sl] = r
-            cols["theta_ref"][sl] = th + ref_zero
+            cols = {"t": t, "run": np.full(b - a, r, np.int64), "theta_ref": th + ref_zero}
             for k in range(heads):
                 e = np.zeros(b - a)
                 for m in range(1, 6):
                     e += 4e-6 / m * np.sin(m * (th - alpha[k]) + m)
                 _add_effect(name, e, k, r, t, th, ctx)
-                cols[f"h{k}"][sl] = th + e + rng.normal(0, 0.5e-6, b - a) + zero[k]
-    enc = {
+                cols[f"h{k}"] = th + e + rng.normal(0, 0.5e-6, b - a) + zero[k]
+            yield r * n + a, cols
+    return {
         "optical_radius_m": 0.0254,
         "head_angles_deg": np.degrees(alpha).tolist(),
         "signal_periods_per_rev": LINES,
     }
+
+
+def _bench_recording(
+    n_rows: int, heads: int, seed: int, effect: bool | str, rate_hz: float = 1000.0
+):
+    """A bench built in memory (no CSV): ``heads`` heads, 4 runs sampled at ``rate_hz``
+    (1 kHz unless given), 0.5 urad noise, disk errors of orders 1-5, per-run zeros;
+    ``effect``: ``True`` a 31 Hz vibration of 1.5 urad, a catalog name: that effect
+    (:func:`_add_effect`), ``False``: clean.
+
+    The columns are allocated once and filled run by run in blocks of 2**20 rows, so the
+    generator itself adds little to the peak memory being measured."""
+    from encdesign import Recording
+
+    N = (n_rows // 4) * 4
+    cols: dict[str, np.ndarray] = {}
+    gen = _bench_blocks(n_rows, heads, seed, effect, rate_hz)
+    while True:
+        try:
+            at, part = next(gen)
+        except StopIteration as stop:
+            enc = stop.value
+            break
+        for c, v in part.items():
+            if c not in cols:
+                cols[c] = np.empty(N, v.dtype)
+            cols[c][at : at + v.size] = v
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
+
+
+def _write_bench_parquet(folder: Path, n_rows: int, heads: int, effect, rate_hz: float) -> Path:
+    """:func:`_bench_recording`'s record written to ``folder`` as a Parquet recording one
+    row group (2**20 rows) at a time, never whole in memory: the TOML file's path."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data = folder / "rec.parquet"
+    writer = None
+    gen = _bench_blocks(n_rows, heads, 5, effect, rate_hz)
+    while True:
+        try:
+            _, part = next(gen)
+        except StopIteration as stop:
+            enc = stop.value
+            break
+        tab = pa.table(part)
+        if writer is None:
+            writer = pq.ParquetWriter(data, tab.schema)
+        writer.write_table(tab)
+    writer.close()
+    angles = ", ".join(repr(a) for a in enc["head_angles_deg"])
+    toml = folder / "rec.toml"
+    toml.write_text(
+        'format = "encdesign-recording/1"\nkind = "multihead"\ndata = "rec.parquet"\n\n'
+        f"[encoder]\noptical_radius_m = 0.0254\nhead_angles_deg = [{angles}]\n"
+        f"signal_periods_per_rev = {LINES}\n"
+    )
+    return toml
+
+
+def _child_stream(n_rows: int, heads: int, effect, rate_hz: float, run: bool) -> dict:
+    """Issue 43: write the record to Parquet row group by row group, then reduce it as it is
+    read (``open_recording``) and, with ``run``, diagnose it; wall time per step and peak
+    RSS (the record is never whole in memory)."""
+    import tempfile
+
+    from encdesign.diagnose import diagnose, open_recording
+
+    out: dict = dict(n_rows=n_rows, n_heads=heads, rate_hz=rate_hz, effect=str(effect))
+    with tempfile.TemporaryDirectory(prefix="bench-stream-") as tmp:
+        t0 = time.perf_counter()
+        path = _write_bench_parquet(Path(tmp), n_rows, heads, effect, rate_hz)
+        t1 = time.perf_counter()
+        out["write_s"] = t1 - t0
+        out["file_bytes"] = (Path(tmp) / "rec.parquet").stat().st_size
+        out["peak_rss_bytes_after_write"] = (
+            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        )
+        rec, reduced = open_recording(path)
+        t2 = time.perf_counter()
+        out["read_and_reduce_s"] = t2 - t1
+        out["reduced"] = reduced
+        out["peak_rss_bytes_after_reduce"] = (
+            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        )
+        if run:
+            d = diagnose(rec, reduced=reduced)
+            out["wall_s_diagnose"] = time.perf_counter() - t2
+            out["stages_s"] = d.doc["timings_s"]
+            out["verdict"] = d.verdict
+            out["named"] = [e["name"] for e in d.effects]
+    out["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return out
 
 
 TARGET_4X16000_S = 20.0
@@ -185,18 +272,30 @@ def _through_file(rec, table: str) -> tuple:
     return back, t1 - t0, t2 - t1, size
 
 
-def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
+def _child(
+    n_rows: int,
+    heads: int,
+    effect: bool | str,
+    table: str = "memory",
+    rate_hz: float = 1000.0,
+    reduce_min_rows: int | None = None,
+) -> dict:
     """Run one diagnosis in this (fresh) process; report wall and CPU time (user + system,
     s: robust to a loaded machine, where wall time is inflated), the time JAX spent
     compiling, peak RSS and the wall time per stage (``stages_s``: the engine's
     ``timings_s``, and ``parsing`` when ``table`` is ``csv`` or ``parquet``: the record is
-    then written to a file of that format and loaded back first)."""
+    then written to a file of that format and loaded back first). ``rate_hz``: the
+    record's sampling rate; ``reduce_min_rows``: ``FinderSettings.reduce_min_rows`` (issue 43:
+    the record is diagnosed on block means above it; ``reduced`` in the output)."""
     t0 = time.perf_counter()
     import encdesign  # noqa: F401  (import time counts: a fresh process)
     from encdesign.diagnose import diagnose
 
     stats = _compile_listener()
-    rec = _bench_recording(n_rows, heads, 5, effect)
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    rec = _bench_recording(n_rows, heads, 5, effect, rate_hz=rate_hz)
+    settings = None if reduce_min_rows is None else FinderSettings(reduce_min_rows=reduce_min_rows)
     stages: dict[str, float] = {}
     io: dict = {"table": table}
     if table != "memory":
@@ -204,7 +303,7 @@ def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -
         stages["parsing"] = parse_s
         io.update(write_s=write_s, file_bytes=size)
     t1, c1 = time.perf_counter(), _cpu_s()
-    d = diagnose(rec, verbose=False)
+    d = diagnose(rec, verbose=False, settings=settings)
     t2, c2 = time.perf_counter(), _cpu_s()
     stages.update(d.doc.get("timings_s") or {})
     stages_cpu = dict(d.doc.get("timings_cpu_s") or {})
@@ -223,6 +322,8 @@ def _child(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -
         effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
         verdict=d.verdict,
         named=[e["name"] for e in d.effects],
+        rate_hz=rate_hz,
+        reduced=d.doc.get("reduced"),
         wall_s_diagnose=t2 - t1,
         wall_s_with_import=t2 - t0,
         peak_rss_bytes=rss,
@@ -366,6 +467,22 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--long-table", choices=("csv", "parquet"), default="parquet")
     ap.add_argument(
+        "--rate", type=float, default=1000.0, help="with --child: the record's sampling rate, Hz"
+    )
+    ap.add_argument(
+        "--stream",
+        choices=("reduce", "diagnose"),
+        default=None,
+        help="with --child: write the record to Parquet row group by row group and reduce it "
+        "as it is read (issue 43); 'diagnose' diagnoses it too",
+    )
+    ap.add_argument(
+        "--reduce-min-rows",
+        type=int,
+        default=None,
+        help="with --child: FinderSettings.reduce_min_rows (block means above it, issue 43)",
+    )
+    ap.add_argument(
         "--processes",
         type=int,
         default=None,
@@ -384,7 +501,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.processes is not None:
             print(json.dumps(_child_processes(args.child, args.heads, eff, args.processes)))
             return 0
-        print(json.dumps(_child(args.child, args.heads, eff, args.table)))
+        if args.stream is not None:
+            run = args.stream == "diagnose"
+            print(json.dumps(_child_stream(args.child, args.heads, eff, args.rate, run)))
+            return 0
+        kw = dict(rate_hz=args.rate, reduce_min_rows=args.reduce_min_rows)
+        print(json.dumps(_child(args.child, args.heads, eff, args.table, **kw)))
         return 0
     from encdesign.physics._effects import CATALOG_MULTIHEAD
 

@@ -62,6 +62,10 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
     "highest order)",
     ("engine/_engine.py", 2): PHYSICS,
+    ("engine/_reduce.py", 2): PHYSICS + " (the base grows to twice its order, the views scan twice "
+    "the base's order, as in _document.scan_order_of; a block of at least two rows)",
+    ("engine/_reduce.py", 6.0): NUMERIC + " (the leading order of the Dirichlet kernel, "
+    "(B^2 - 1) x^2 / 6: a start the exact check then moves)",
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",
     ("engine/_evidence.py", 3): REPORT + " (at most three alternatives)",
     ("engine/_fit.py", 1e-200): NUMERIC + " (a zero diagonal of the normal matrix)",
@@ -189,10 +193,22 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_spill.py", "TRIAL_STEPS"): BOUND
     + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
+    + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
     + " (the probe's whitened norm: the fits are linear in it)",
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
     + " (the frequency at which the vibration's detection bound is stated, reported with it)",
+    ("kinds/multihead/_multihead_probes.py", "WOBBLE_PROBE_FRACTION"): SEARCH
+    + " (the fractional order at which the bearing wobble's detection bound is stated, "
+    "reported with it)",
+    ("kinds/multihead/_multihead_probes.py", "SHIFT_PROBE_QUANTILES"): SEARCH
+    + " (the shift times an eccentricity shift's detection bound is the worst of, stated)",
+    ("kinds/sds/_sds_probes.py", "TILT_PROBE_RAD"): NUMERIC
+    + " (the small tilt the axis tilt's probe is evaluated at: its error is linear in "
+    "beta^2 / 4 there)",
+    ("kinds/sds/_sds_probes.py", "WOBBLE_PROBE_RATIO"): SEARCH
+    + " (the cage ratio at which a bearing wobble's detection bound is stated, reported)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover_lines.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
@@ -200,6 +216,11 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
     ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
     ("engine/_document.py", "LATTICE_ROWS"): BOUND,
+    ("engine/_reduce.py", "PASS_ROWS"): BOUND + " (rows per slice of the reduction's passes)",
+    ("engine/_reduce.py", "GAP_STEPS"): NUMERIC + " (a block is evenly sampled, as the "
+    "attenuation bound assumes: one missed sample, a step of 2 intervals, ends a stretch)",
+    ("engine/_reduce.py", "SPEED_QUANTILE"): "estimator: the fastest shaft rate as a high "
+    "quantile (a glitch cannot set it)",
     ("engine/_html.py", "MAX_POINTS"): PLOT,
     ("engine/_html.py", "MAX_PANELS"): PLOT,
     ("engine/_html_discovery.py", "MAX_SPECTRUM_ORDER"): PLOT,

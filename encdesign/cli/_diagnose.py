@@ -85,14 +85,15 @@ def run(args: argparse.Namespace) -> int:
 def _run_helper(args: argparse.Namespace) -> int:
     """A process other than 0: the same diagnosis (its share of the row passes), silent,
     nothing written."""
-    from ..diagnose import diagnose, load_candidates
-    from ..io import check_runs_contiguous, load_recording
+    from ..diagnose import diagnose, load_candidates, open_recording
+    from ..io import check_runs_contiguous
 
     cands = load_candidates(args.candidates) if args.candidates is not None else ()
-    rec = load_recording(args.recording)
+    rec, reduced = open_recording(args.recording, max_order=args.max_order)
     check_runs_contiguous(rec)
     diagnose(
         rec,
+        reduced=reduced,
         max_order=args.max_order,
         max_effects=args.max_effects,
         candidates=cands,
@@ -103,14 +104,15 @@ def _run_helper(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ..diagnose import diagnose, load_candidates
-    from ..io import atomic_write_text, check_runs_contiguous, load_recording, write_json
+    from ..diagnose import diagnose, load_candidates, open_recording
+    from ..io import atomic_write_text, check_runs_contiguous, write_json
 
     cands = load_candidates(args.candidates) if args.candidates is not None else ()
-    rec = load_recording(args.recording)
+    rec, reduced = open_recording(args.recording, max_order=args.max_order)
     check_runs_contiguous(rec)
     d = diagnose(
         rec,
+        reduced=reduced,
         max_order=args.max_order,
         max_effects=args.max_effects,
         candidates=cands,

@@ -19,6 +19,9 @@ from ._dispatch import (
     diagnose as diagnose,
     load_candidates as load_candidates,
 )
+from ._dispatch import (
+    open_recording as open_recording,
+)
 from .engine._discover_export import (
     discovered_candidate as discovered_candidate,
 )

@@ -25,6 +25,7 @@ from ._registry import KINDS
 from .engine._candidates import Candidate
 from .engine._engine import run_engine
 from .engine._plots import engine_plots
+from .engine._reduce_stream import stream_reduce
 from .engine._results import (
     VERDICTS,
     BaseOrder,
@@ -35,7 +36,7 @@ from .engine._results import (
     PlotData,
     Refusal,
 )
-from .engine._settings import FinderSettings
+from .engine._settings import DEFAULT_SETTINGS, FinderSettings
 
 TYPED_KEYS = (
     "verdict",
@@ -68,9 +69,10 @@ class Diagnosis(eqx.Module):
         base_order: how the base model's order was chosen, each tried order's fitted and
             held-out RMS (:class:`BaseOrder`; ``None`` where the kind's order is fixed or
             the caller gave ``max_order``).
-        detection_bounds: on a ``consistent`` verdict, the smallest size of each catalog
-            effect (per head or sensor) this record would have revealed
-            (:class:`DetectionBound`; empty on other verdicts, where the document has none).
+        detection_bounds: the smallest size of each catalog effect not named (per head or
+            sensor) this record would have revealed, against the final model (the base and
+            the named effects: ``other["detection_bounds_reference"]``)
+            (:class:`DetectionBound`).
         other: every other key of the document (``docs/diagnose.md``), as JSON.
         key_order: the document's keys in order (:meth:`to_json` gives them back so).
         plot_data: what the figures need beyond the document (:class:`PlotData`).
@@ -99,10 +101,11 @@ class Diagnosis(eqx.Module):
             )
         if self.verdict == "consistent" and self.unexplained:
             raise DiagnosisError("diagnosis verdict 'consistent' with unexplained structure")
-        if self.verdict != "consistent" and self.detection_bounds:
+        named = {e.name for e in self.effects}
+        if any(b.effect in named for b in self.detection_bounds):
             raise DiagnosisError(
-                f"diagnosis verdict {self.verdict!r} with detection bounds: they are reported "
-                "on a consistent verdict only"
+                "diagnosis with a detection bound of a named effect: the bounds are of the "
+                "catalog effects the record did not name"
             )
 
     @classmethod
@@ -183,6 +186,32 @@ def load_candidates(path: str | os.PathLike) -> tuple[Candidate, ...]:
     )
 
 
+def open_recording(
+    path: str | os.PathLike,
+    *,
+    max_order: int | None = None,
+    settings: FinderSettings | None = None,
+) -> tuple[Recording, dict | None]:
+    """The recording of the TOML file ``path`` and its ``reduced`` entry: a long Parquet
+    record is reduced to block means as it is read, row group by row group (issue 43,
+    ``FinderSettings.reduce_min_rows``; the whole table is never in memory); any other is
+    loaded whole (``None``).
+
+    Raises:
+        EncdesignInputError: the file breaks the format (the message names the file, the
+            row group and the column).
+    """
+    s = DEFAULT_SETTINGS if settings is None else settings
+
+    def order_of(name: str) -> tuple[int, bool]:
+        k = KINDS[name]
+        own = max_order is None
+        return (k.default_max_order if own else int(max_order)), k.grows_orders and own
+
+    got = stream_reduce(path, s, order_of)
+    return got if got is not None else (load_recording(path), None)
+
+
 def diagnose(
     recording: Recording | str | os.PathLike,
     *,
@@ -193,6 +222,7 @@ def diagnose(
     plots: str | os.PathLike | None = None,
     throw: bool = False,
     settings: FinderSettings | None = None,
+    reduced: dict | None = None,
 ) -> Diagnosis:
     """Diagnose a recording of any kind.
 
@@ -207,11 +237,15 @@ def diagnose(
         throw: raise ``RuntimeError`` when a fit did not converge (else ``status`` says so).
         settings: the finder's decision thresholds (:class:`FinderSettings`; default: the
             tuned defaults).
+        reduced: with a ``recording`` that :func:`open_recording` reduced, its entry (the
+            record is not reduced again).
 
     Raises:
         EncdesignInputError: a recording that cannot be diagnosed.
     """
-    rec = recording if isinstance(recording, Recording) else load_recording(recording)
+    if not isinstance(recording, Recording):
+        recording, reduced = open_recording(recording, max_order=max_order, settings=settings)
+    rec = recording
     kind = KINDS.get(rec.kind)
     if kind is None:
         raise input_error(
@@ -225,6 +259,7 @@ def diagnose(
         extra_candidates=candidates,
         verbose=verbose,
         settings=settings,
+        reduced=reduced,
     )
     d = Diagnosis.from_json(doc, plot_data)
     if plots is not None:

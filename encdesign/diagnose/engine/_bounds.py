@@ -1,13 +1,14 @@
-"""Detection bounds of a clean verdict (issue 44 F): per catalog effect and per head or
-sensor, the smallest size this record would have revealed at the finder's own thresholds.
+"""Detection bounds of a verdict (issue 44 F): per catalog effect not named and per head
+or sensor, the smallest size this record would have revealed at the finder's own thresholds,
+against the final model (below).
 
 A candidate offers :class:`~._candidates.Probe` s (``Candidate.probes``): a unit-size
 effect, its linear parameters at one unit where it acts and its nonlinear ones held at a
-stated value. The effect is added, free of noise, to the base model's prediction and the
-base model refitted (its nonlinear parameters held, as the selection's trial fits hold
-them); what the base leaves, ``P v``, carries the noncentrality
+stated value. The effect is added, free of noise, to the reference model's prediction and
+that model refitted (its nonlinear parameters held, as the selection's trial fits hold
+them); what it leaves, ``P v``, carries the noncentrality
 ``lambda(a) = a^2 ||P v / sigma||^2`` of the effect at size ``a`` (the chi-square an effect
-of that size adds to the base residual on average, beyond the noise). The finder names an
+of that size adds to the model's residual on average, beyond the noise). The finder names an
 effect when all of these hold, and the bound is the smallest size where each is met at its
 median (about 50 % power, :data:`CONVENTION`):
 
@@ -21,7 +22,47 @@ median (about 50 % power, :data:`CONVENTION`):
    nonlinear ones counted) and noncentrality ``lambda``; its median reaches
    ``bic_min + k ln N``;
 3. **the held-out gain** (``heldout_min``): ``lambda >= heldout_min + k K / (K - 1)``, the
-   held-out cost of ``k`` fitted parameters over ``K`` folds.
+   held-out cost of ``k`` fitted parameters over ``K`` folds;
+
+and it is not refused by **its own size** (``plausible_ratio``): the effect's own RMS (noise
+units, net of run means where the base has run constants) against the RMS it explains,
+``sqrt(lambda / N)``, is a ratio the size does not change; above ``plausible_ratio`` the
+finder refuses it wherever its own RMS exceeds ``plausible_rms_min``, so the bound is null
+(with the note) when that holds at the bound, and the note states the size above which it
+is refused otherwise.
+
+**Against which model.** A candidate is tried against the model of its selection round, the
+base plus the effects named before it, their nonlinear parameters held and their linear ones
+refitted with it (``_select``'s trial fits). The bounds of a record are therefore computed
+against the *final* model (:class:`Reference`): on a ``consistent`` verdict the base model,
+on any other verdict the base plus the named effects (and their confounded partners: named as
+a pair), each unnamed catalog effect's unit probe added to that model's prediction and the
+model refitted as the trial fits refit it. A named effect is not bounded (its size is
+measured). Where the selection already named ``max_effects``, no further effect would be
+named at any size (``bound`` null, with the note). Where structure is left unexplained, the
+final residual's findings are what a later round's candidate meets, and two more rules then
+ask for a size (``set_by`` names them):
+
+4. **its share of what is located** (``located_share_min``): the excess chi-square the
+   effect adds to the views (noise-free, the views run on ``a P v``: its findings' power)
+   must reach ``s / (1 - s)`` of the excess the final residual's findings carry, so that
+   the candidate explains the share ``s`` of everything located;
+5. **what its signature views keep** (``signature_left_max``): in its own signature views,
+   the located structure the candidate would leave (the final findings there, less integer
+   orders another effect holds, which the rule sets aside) must stay under the share ``m``
+   of the total: its own excess reaches ``(1 / m - 1)`` of that structure.
+
+6. **the held-out gain beside that structure** (``heldout_min``): unexplained structure can
+   cost a candidate its held-out gain (a fold that misses part of the structure leaves the
+   candidate's columns bent to it: phase sectors of a capture, a strong order beside the
+   candidate's). The trial fit of a later round is then run on the record itself with the
+   effect added at the size so far (the final model held as in the trial fits, the probe's
+   nonlinear values held): the size is raised (doubling, then bisection) until its held-out
+   gain reaches ``heldout_min``. This one uses the record's own noise: it is the literal
+   "this record would have revealed it".
+
+And the view condition (1) is met at any size when a finding of the final residual is in
+one of the candidate's signature views already (the candidate is then tried anyway).
 
 Only reported; nothing here changes a fit, a finding or the verdict (the noise-free record
 is a copy of the prepared one, fitted by a fitter of its own).
@@ -30,6 +71,7 @@ is a copy of the prepared one, fitted by a fitter of its own).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -39,12 +81,14 @@ from scipy import optimize, stats
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._protocol import Prepared
+from ._select import _has_run_constants, _order_key
 from ._steps import frozen
 from ._views import locate
 
 CONVENTION = (
     "the size detected with about 50 % probability: its noncentrality (the chi-square it "
-    "adds to the base residual beyond the noise, after the base model takes its share) "
+    "adds to the residual beyond the noise, after the final model, the base and the named "
+    "effects, takes its share) "
     "reaches the median of every test the finder asks of it (a view of its signature at "
     "alpha with the view's Bonferroni count, found noise-free; the information criterion "
     "bic_min + k ln N; the held-out gain heldout_min); 1.5x the bound is found almost "
@@ -65,6 +109,53 @@ VIEW_BISECTIONS = 5
 PROBE_NORM = 10.0
 """The whitened norm of the effect added to the base prediction (the fits are linear in
 it; any size well inside the base model's linear range does)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """The model the bounds are computed against (module doc): its terms (the base's
+    ``n_base`` first, then the named effects), the names not bounded (named, or named as a
+    pair), whether the selection had room for another effect, and the findings the final
+    residual leaves."""
+
+    terms: Sequence[Term]
+    n_base: int
+    named: frozenset[str] = frozenset()
+    room: bool = True
+    findings: Sequence = ()
+
+    def excess(self, views: set[str] | None = None) -> float:
+        """The excess chi-square (power less degrees of freedom) of the final findings, in
+        ``views`` and off integer orders (what ``signature_left_max`` counts) when given."""
+        out = 0.0
+        for f in self.findings:
+            if views is not None and (f.view not in views or _order_key(f) is not None):
+                continue
+            out += max(float(f.power) - float(f.dof), 0.0)
+        return out
+
+    def to_json(self, description: str) -> dict:
+        """``detection_bounds_reference`` (``diagnosis.schema.json``)."""
+        base = [t.cand.name for t in self.terms if t.cand.name not in self.named]
+        return {
+            "model": "base" if not self.named else "base and named effects",
+            "terms": [t.cand.name for t in self.terms],
+            "base_terms": base,
+            "named": sorted(self.named),
+            "room_for_another_effect": bool(self.room),
+            "located_excess_chi2": self.excess(),
+            "description": description,
+        }
+
+
+REFERENCE_DESCRIPTION = (
+    "the final model: the base plus every named effect (none on a consistent verdict), "
+    "their nonlinear parameters held and their linear ones refitted with the probe, as the "
+    "selection's trial fits of a later round; on a record with unexplained structure also "
+    "the rules located_share_min and signature_left_max against the excess the final "
+    "residual's findings carry"
+)
+"""What ``detection_bounds_reference.description`` says."""
 
 
 def median_noncentrality(k: int, target: float) -> float:
@@ -121,24 +212,47 @@ def _n_nonlinear(cand: Candidate, prep: Prepared) -> int:
 
 
 class _Bench:
-    """A noise-free copy of the prepared record: its ``y`` is the base model's prediction
-    plus one probe; a fitter of its own (the base Jacobians cached across probes)."""
+    """A noise-free copy of the prepared record: its ``y`` is the reference model's
+    prediction plus one probe; a fitter of its own (the model's Jacobians cached across
+    probes)."""
 
-    def __init__(self, prep: Prepared, fitter: Fitter, base_terms: Sequence[Term]):
+    def __init__(self, prep: Prepared, fitter: Fitter, ref: Reference):
         self.prep = copy.copy(prep)
         self.fitter = Fitter(self.prep)
         self.fitter.w_ch = fitter.w_ch
-        self.base_terms = [t.copy() for t in base_terms]
-        self.pred = _values(fitter, base_terms)
+        self.base_terms = [t.copy() for t in ref.terms]
+        self.pred = _values(fitter, ref.terms)
+        self.y0 = prep.y  # the record itself (read only): the held-out check beside structure
+        # the base holds a constant per run and channel: an effect's own size is then net of
+        # its run means (``_select._term_rms``)
+        self.per_run = _has_run_constants(ref.terms[: ref.n_base])
+
+    def own_rms(self, v: np.ndarray) -> float:
+        """The own RMS of the unit effect ``v`` in noise units, as the rule
+        ``plausible_ratio`` measures a fitted term's (``_select._term_rms``)."""
+        prep = self.prep
+        keep = prep.keep
+        w = v[keep] / prep.sigma[None, :]
+        tot = float(np.sum(w * w))
+        if self.per_run:
+            run = np.asarray(prep.run)[keep]
+            R = prep.ctx.n_runs
+            cnt = np.bincount(run, minlength=R)
+            for c in range(w.shape[1]):
+                s1 = np.bincount(run, weights=w[:, c], minlength=R)
+                tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1)))
+        C = prep.n_channels
+        eff = (C - 1) / C if prep.kd.project else 1.0
+        return math.sqrt(max(tot, 0.0) / max(float(keep.sum()) * C * eff, 1.0))
 
     def probe(self, cand: Candidate, probe: Probe):
-        """``(lam, k, residual)``: the noncentrality of the unit effect after the base
+        """``(lam, k, residual, own)``: the noncentrality of the unit effect after the reference
         model's refit (per unit size squared; the candidate's fit at the probe's nonlinear
         values takes all of it: the probe lies in its span), the candidate's determined
         parameters (the rank of its whitened columns on the kept rows, the nonlinear ones
-        counted; a column the base also spans still counts: conservative) and the base
-        residual of the unit effect (n, C); ``None`` when the effect vanishes on the kept
-        rows."""
+        counted; a column the model also spans still counts: conservative) and the model's
+        residual of the unit effect (n, C) and its own RMS (:meth:`own_rms`); ``None`` when
+        the effect vanishes on the kept rows."""
         prep, fitter = self.prep, self.fitter
         term = make_term(cand, prep, dict(probe.values))
         for q in cand.params:  # held: value and Jacobian of the linear part in one pass
@@ -174,7 +288,50 @@ class _Bench:
         # linear refit whose Jacobians are cached across probes
         base = fitter.fit(frozen(self.base_terms))
         resid = fitter.residual(base.terms)
-        return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c
+        return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c, self.own_rms(v)
+
+    def heldout_gain(self, cand: Candidate, probe: Probe, a: float) -> float:
+        """The held-out gain of ``cand`` (its probe's nonlinear values held, its linear
+        parameters fitted) on the record itself with the effect added at size ``a``: the
+        trial fit of a later round, with the record's own noise and unexplained structure
+        (which can cost a candidate its held-out gain: a fold misses part of the structure
+        the candidate then bends to)."""
+        prep, fitter = self.prep, self.fitter
+        term = make_term(cand, prep, dict(probe.values))
+        for q in cand.params:
+            if not q.linear:
+                term.free[q.name][...] = False
+        v = _values(fitter, [term])
+        prep.y = self.y0 + a * v
+        try:
+            r0 = fitter.fit(frozen(self.base_terms))
+            r1 = fitter.fit([*frozen(self.base_terms), term])
+        finally:
+            prep.y = self.pred
+        return float(r0.heldout_chi2 - r1.heldout_chi2)
+
+
+def _heldout_size(bench: _Bench, cand, probe: Probe, a0: float, need: float) -> float | None:
+    """The smallest size from ``a0`` up whose held-out gain on the record itself
+    (:meth:`_Bench.heldout_gain`) reaches ``need`` (doublings, then bisections as the views'
+    sizes); ``None`` when none within :data:`VIEW_DOUBLINGS` doublings does."""
+
+    def ok(a: float) -> bool:
+        return bench.heldout_gain(cand, probe, a) >= need
+
+    if ok(a0):
+        return a0
+    lo, hi = a0, 2.0 * a0
+    for _ in range(VIEW_DOUBLINGS):
+        if ok(hi):
+            break
+        lo, hi = hi, 2.0 * hi
+    else:
+        return None
+    for _ in range(VIEW_BISECTIONS):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (lo, mid) if ok(mid) else (mid, hi)
+    return hi
 
 
 def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
@@ -216,13 +373,13 @@ def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
     }
 
 
-def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
+def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
     """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
     (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
     at any size); reported with the probe's own ``where`` and ``at``."""
     worst: dict | None = None
     for pr in (probe, *probe.worst_of):
-        e = _one_bound(prep, bench, cand, pr, views, scan)
+        e = _one_bound(prep, bench, cand, pr, views, scan, ref)
         if e["bound"] is None:
             return e
         if worst is None or e["bound"] > worst["bound"]:
@@ -231,17 +388,55 @@ def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
     return {**worst, "where": probe.where, "at": probe.at}
 
 
-def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
+def _located_power(prep, resid, views, scan, a: float, sig: set[str]) -> tuple[float, float]:
+    """The excess chi-square the views locate in ``a`` times the noise-free unit residual
+    ``resid`` (its findings' power: no noise, no degrees of freedom to subtract): in every
+    view, and in the signature views ``sig`` alone."""
+    found = locate(prep, resid * a, views, scan)
+    return sum(f.power for f in found), sum(f.power for f in found if f.view in sig)
+
+
+def _share_size(prep, resid, views, scan, a0: float, sig: set[str], need: tuple):
+    """``(size, i)``: the smallest size from ``a0`` up at which the effect's located excess
+    reaches ``need`` (in every view, in its signature views; rules 4 and 5 of the module
+    doc), and the index of the rule that asked most at ``a0``: the power scales as the size
+    squared once located, so a few rescalings reach it; ``(None, i)`` when no view locates
+    it within :data:`VIEW_DOUBLINGS` doublings."""
+    a, first = a0, None
+    for _ in range(VIEW_DOUBLINGS):
+        got = _located_power(prep, resid, views, scan, a, sig)
+        ratios = [n / g if g > 0 else (math.inf if n > 0 else 0.0) for n, g in zip(need, got)]
+        if first is None:
+            first = int(np.argmax(ratios))
+        worst = max(ratios)
+        if worst <= 1 + SHARE_TOL:
+            return a, first
+        a *= 2.0 if not math.isfinite(worst) else math.sqrt(worst)
+    return None, first or 0
+
+
+SHARE_TOL = 0.02
+"""Relative shortfall of the located excess accepted when rescaling to the share rules'
+size (the power is quadratic in the size: about 1 % of the size)."""
+
+
+def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
     """The bound of one parameter set of a probe."""
     s = prep.settings
     entry = _failed_entry(cand, probe, "")
     del entry["note"]
+    if not ref.room:
+        return {
+            **entry,
+            "note": "the selection names at most max_effects effects, and this record has "
+            "that many: no further effect is named at any size",
+        }
     got = bench.probe(cand, probe)
     if got is None or got[0] <= 0:
         return {**entry, "note": "the effect vanishes on the kept rows"}
-    lam_base, k, resid = got
+    lam_base, k, resid, own = got
     if k == 0 or lam_base <= 1e-12 * PROBE_NORM**2:
-        return {**entry, "note": "the base model takes all of it (not identifiable here)"}
+        return {**entry, "note": "the final model takes all of it (not identifiable here)"}
     N = max(prep.n_values, 2.0)
     K = s.n_folds
     need = {
@@ -262,7 +457,9 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
         if (v in sig if isinstance(v, str) else set(getattr(v, "names", sig)) & sig)
     )
     a = a_crit
-    if cand.signature:
+    # a final finding in its signature views: the candidate is tried at any size
+    tried = bool(sig & {f.view for f in ref.findings})
+    if cand.signature and not tried:
         # noise-free from the criterion's size at the record's noise: a view that fires there
         # asks less than the criterion, at that noise and (``seen`` is monotone) at any
         a0 = math.sqrt(need[rule] / lam_base)
@@ -284,38 +481,70 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan) -> dict:
             a_view = math.sqrt(lam_view / lam_base)
             if a_view > a_crit:
                 a, rule = a_view, "view"
-    return {
+    # structure left unexplained: the share rules against what the final residual carries
+    sh, sl = s.located_share_min, s.signature_left_max
+    share_need = (
+        sh / (1.0 - sh) * ref.excess(),
+        (1.0 / sl - 1.0) * ref.excess(sig or None) if sl > 0 else 0.0,
+    )
+    if max(share_need) > 0:
+        a_share, i = _share_size(bench.prep, resid, views, scan, a, sig, share_need)
+        if a_share is None:
+            return {**entry, "n_params": int(k), "note": "no view locates it at any size tried"}
+        if a_share > a:
+            a, rule = a_share, ("located_share_min", "signature_left_max")[i]
+        # and the held-out gain on the record itself, beside the structure it leaves
+        a_ho = _heldout_size(bench, cand, probe, a, s.heldout_min)
+        if a_ho is None:
+            return {**entry, "n_params": int(k), "note": "no held-out gain at any size tried"}
+        if a_ho > a:
+            a, rule = a_ho, "heldout_min"
+    out = {
         **entry,
-        "bound": float(a),
+        "bound": float(a * probe.size),
         "set_by": rule,
         "noncentrality": float(a * a * lam_base),
         "n_params": int(k),
     }
+    # rule plausible_ratio: its own size against what it explains (sqrt(lambda / N)), the
+    # same ratio at any size; it refuses only above plausible_rms_min noise units
+    ratio = own / math.sqrt(lam_base / N)
+    if ratio > s.plausible_ratio:
+        a_max = s.plausible_rms_min / own
+        why = (
+            f"its own size is {ratio:.3g}x the residual it explains (the model takes most of "
+            f"it): plausible_ratio refuses it above {a_max * probe.size:.3g} {probe.unit}"
+        )
+        if a > a_max:
+            return {**entry, "n_params": int(k), "note": f"not named at any size: {why}"}
+        out["note"] = why
+    return out
 
 
 def detection_bounds(
     prep: Prepared,
     fitter: Fitter,
-    base_terms: Sequence[Term],
+    ref: Reference,
     candidates: Sequence[Candidate],
     views: tuple,
     scan_order: int,
 ) -> list[dict]:
-    """The ``detection_bounds`` of a record: one entry per probe of every candidate that
-    applies and offers probes (``Candidate.probes``), in catalog order (module doc)."""
+    """The ``detection_bounds`` of a record against the reference model ``ref``: one entry
+    per probe of every candidate that applies, offers probes (``Candidate.probes``) and is
+    not named, in catalog order (module doc)."""
     out: list[dict] = []
     bench = None
-    for cand in candidates:
-        if cand.probes is None or (cand.applies is not None and cand.applies(prep.ctx)):
+    for cand in _bounded(candidates, prep, ref):
+        if cand.probes is None:
             continue
         probes = cand.probes(prep.ctx)
         if not probes:
             continue
         if bench is None:
-            bench = _Bench(prep, fitter, base_terms)
+            bench = _Bench(prep, fitter, ref)
         for probe in probes:
             try:
-                entry = _bound_entry(prep, bench, cand, probe, views, scan_order)
+                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
             except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                 # reporting only: a probe that fails numerically never fails the diagnosis
                 entry = _failed_entry(cand, probe, f"not computed: {exc}")
@@ -323,20 +552,27 @@ def detection_bounds(
     return out
 
 
-def not_covered(candidates: Sequence[Candidate], prep: Prepared) -> list[str]:
-    """Names of the candidates that apply to this record and offer no probe (the report
-    says their sizes are not bounded)."""
+def _bounded(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list:
+    """The candidates a record's bounds are about: those that apply and are not named."""
     return [
-        c.name
+        c
         for c in candidates
-        if c.probes is None and not (c.applies is not None and c.applies(prep.ctx))
+        if c.name not in ref.named and not (c.applies is not None and c.applies(prep.ctx))
     ]
+
+
+def not_covered(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list[str]:
+    """Names of the candidates that apply to this record, are not named and offer no probe
+    (the report says their sizes are not bounded)."""
+    return [c.name for c in _bounded(candidates, prep, ref) if c.probes is None]
 
 
 __all__ = [
     "CONVENTION",
     "CONVENTION_SHORT",
+    "REFERENCE_DESCRIPTION",
     "Probe",
+    "Reference",
     "detection_bounds",
     "median_noncentrality",
     "not_covered",

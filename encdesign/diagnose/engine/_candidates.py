@@ -157,8 +157,9 @@ class Context:
 
 @dataclasses.dataclass(frozen=True)
 class Probe:
-    """One unit-size effect of a candidate, whose smallest detectable size a clean verdict
-    reports (``detection_bounds``, issue 44 F; :mod:`encdesign.diagnose.engine._bounds`).
+    """One unit-size effect of a candidate, whose smallest detectable size a verdict that
+    does not name it reports (``detection_bounds``, issue 44 F;
+    :mod:`encdesign.diagnose.engine._bounds`).
 
     Attributes:
         values: parameter values of the effect at size 1 (in ``unit``): its linear
@@ -174,6 +175,11 @@ class Probe:
             effect whose noncentrality at the record's noise is ``lam``, where the kind's
             noise estimate takes part of it (a level estimated from few values, which an
             effect below its own step test inflates: the sds run means); ``None``: all of it.
+        size: the effect's size (in ``unit``) at ``values`` (default 1). Where the size is
+            not a linear parameter (an axis tilt's ``beta^2 / 4``), ``values`` hold the
+            nonlinear ones where the effect is still linear in its size (a small tilt) and
+            ``size`` says how large it is there: the bound is that many times the multiple
+            of the effect at ``values`` the finder would reveal.
     """
 
     values: Mapping[str, Any]
@@ -183,10 +189,12 @@ class Probe:
     at: str = ""
     worst_of: tuple[Probe, ...] = ()
     seen: Callable[[float], float] | None = None
+    size: float = 1.0
 
 
 ProbeFn = Callable[[Context], list[Probe]]
-"""``probes(ctx) -> [Probe, ...]``: the unit-size effects a clean verdict bounds."""
+"""``probes(ctx) -> [Probe, ...]``: the unit-size effects a verdict bounds (when it does not
+name the candidate)."""
 
 StartFn = Callable[[Context, np.ndarray, list], list[dict[str, np.ndarray]]]
 """``start(ctx, residual, findings) -> [params, ...]``: starting values for the nonlinear
@@ -224,8 +232,8 @@ class Candidate:
             parameter through every intermediate) it is several times faster; it must
             agree with ``jax.jacfwd(fn)`` (tested).
         probes: ``probes(ctx) -> [Probe, ...]`` (:data:`ProbeFn`): the unit-size effects
-            whose smallest detectable size a clean verdict reports (``detection_bounds``),
-            or ``None`` (default: no bound reported for it).
+            whose smallest detectable size a verdict that does not name it reports
+            (``detection_bounds``), or ``None`` (default: no bound reported for it).
     """
 
     name: str

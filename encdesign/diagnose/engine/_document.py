@@ -323,14 +323,28 @@ def _model_lines(m: dict | None, u: str) -> list[str]:
     return out
 
 
+def bounds_against(doc: dict) -> str:
+    """In words, the model the detection bounds are computed against (issue 44 F)."""
+    ref = doc.get("detection_bounds_reference") or {}
+    if not ref.get("named"):
+        return "against the base model"
+    out = "against the base model and the named effects (" + ", ".join(ref["named"]) + ")"
+    if ref.get("located_excess_chi2"):
+        chi2 = ref["located_excess_chi2"]
+        out += f", beside the structure left unexplained (excess chi2 {chi2:.3g})"
+    return out
+
+
 def bound_lines(doc: dict) -> list[str]:
-    """The report's lines on the detection bounds of a clean verdict (issue 44 F)."""
+    """The report's lines on the detection bounds (issue 44 F): of each catalog effect not
+    named, against the final model."""
     bounds = doc.get("detection_bounds")
     if not bounds:
         return []
     lines = [
-        "smallest size this record would have revealed (about 50 % power at the finder's "
-        "thresholds; 1.5x it is found almost always, half of it almost never):"
+        f"smallest size this record would have revealed, {bounds_against(doc)} (about 50 % "
+        "power at the finder's thresholds; 1.5x it is found almost always, half of it almost "
+        "never):"
     ]
     for b in bounds:
         size = "not revealed at any size" if b["bound"] is None else f"{b['bound']:.3g} {b['unit']}"
@@ -385,7 +399,6 @@ def report_text(doc: dict) -> str:
     if doc["base"]["unidentifiable"]:
         lines.append("unidentifiable from this recording:")
         lines += [f"  - {s}" for s in doc["base"]["unidentifiable"][:12]]
-    lines += bound_lines(doc)
     for i, e in enumerate(doc["effects"], 1):
         col = e["collinearity"]
         col_s = "n/a" if col is None else f"{col:.3f}"
@@ -423,5 +436,6 @@ def report_text(doc: dict) -> str:
         if x.get("step_at"):
             lines.append(f"  {x['step_at']['note']}")
         lines += _model_lines(x.get("model"), u)
+    lines += bound_lines(doc)  # after what the record showed: what else it could have
     lines.append(f"status: {doc['status']}; {doc['time_s']:.1f} s")
     return "\n".join(lines) + "\n"

@@ -23,7 +23,9 @@ Stages (``docs/diagnose.md``):
    view finds anything.
 
 The wall time of each stage goes to the document's ``timings_s`` (:mod:`._timing`; exclusive:
-they add up to the diagnosis, less the report's text): ``data`` (the kind's observations
+they add up to the diagnosis, less the report's text): ``reduce`` (issue 43: a record over
+``FinderSettings.reduce_min_rows`` rows to block means, :mod:`._reduce`; ``reduced`` in the
+document says whether, ``B`` and the bound), ``data`` (the kind's observations
 from the recording's columns), ``prepare`` (segments, glitches, noise, folds), ``base_fit``
 (with the base's order growth and noise), ``views`` (every scan of a residual, wherever it
 runs), ``candidates`` (each candidate's starts and trial fits), ``heldout`` (the K-fold
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import input_error
-from ._bounds import detection_bounds, not_covered
+from ._bounds import REFERENCE_DESCRIPTION, Reference, detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
 from ._document import (
@@ -61,6 +63,8 @@ from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
 from ._protocol import FitDivergence, Prepared
+from ._reduce import plan as reduce_plan
+from ._reduce import reduce_recording
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -484,6 +488,21 @@ def effect_contributions(prep: Prepared, fitter: Fitter, sel: Selection) -> dict
     return out
 
 
+def bounds_reference(doc: dict, sel: Selection, max_effects: int) -> Reference:
+    """The model the detection bounds are computed against (:mod:`._bounds`): the final one,
+    the base plus the named effects (and the partners each is named with), the findings the
+    final residual leaves (none on a consistent verdict)."""
+    named = {e["name"] for e in doc["effects"]}
+    named |= {c["name"] for e in doc["effects"] for c in e.get("confounded_with") or []}
+    return Reference(
+        terms=sel.final.terms,
+        n_base=len(sel.base.terms),
+        named=frozenset(named),
+        room=len(doc["effects"]) < max_effects,
+        findings=tuple(sel.findings) if doc["verdict"] != "consistent" else (),
+    )
+
+
 def decide_verdict(doc: dict) -> str:
     """The verdict, decided once from the finished document: ``missing_physics`` when an
     effect is named, ``unexplained`` when structure is located that none explains or the
@@ -616,6 +635,21 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     return doc
 
 
+def _state_reduction(doc: dict, reduced: dict) -> None:
+    """The document says whether the record was reduced to block means (``reduced``:
+    :func:`._reduce.plan`); the tests a reduced record cannot make are ``not_testable``."""
+    doc["reduced"] = reduced
+    lost = reduced.get("not_testable") or []
+    names = {e["name"] for e in lost}
+    doc["not_testable"] = [e for e in doc["not_testable"] if e["name"] not in names] + lost
+    if reduced["applied"]:
+        doc["notes"].append(
+            f"reduced to the means of blocks of {reduced['block_rows']} rows "
+            f"({reduced['rows']} rows to {reduced['reduced_rows']}; attenuation at most "
+            f"{reduced['attenuation_max']:g} up to {reduced['f_needed_hz']:.4g} Hz)"
+        )
+
+
 def run_engine(
     kind: Kind,
     rec,
@@ -625,10 +659,14 @@ def run_engine(
     extra_candidates: Sequence[Candidate] = (),
     verbose: bool = False,
     settings: FinderSettings | None = None,
+    reduced: dict | None = None,
 ) -> tuple[dict[str, Any], PlotData]:
     """Diagnose ``rec`` with ``kind``; returns ``(document, plot data)``: the diagnosis JSON
     document (a dict, ``diagnosis.schema.json``) and what the figures need
     (:class:`~encdesign.diagnose.engine._results.PlotData`).
+
+    ``reduced``: the ``reduced`` entry of a record already reduced to block means as it was
+    read (:func:`._reduce_stream.stream_reduce`); else a long record is reduced here.
 
     The kind's ``finish`` additions (floors named from a lattice, clipping, ...) come
     before the verdict, which :func:`decide_verdict` decides once, and before the report,
@@ -643,6 +681,13 @@ def run_engine(
     pg = _Progress(verbose)
     try:
         with timing() as timer:
+            with stage("reduce"):  # issue 43: a long record on block means
+                own = max_order is None
+                order0 = kind.default_max_order if own else max_order
+                if reduced is None:  # (else reduced as it was read: _reduce_stream)
+                    reduced = reduce_plan(rec, order0, kind.grows_orders and own, settings)
+                    if reduced["applied"]:
+                        rec = reduce_recording(rec, reduced)
             with stage("data"):
                 kd = kind.data(rec, settings)
             meta = dict(rec.meta)
@@ -680,14 +725,16 @@ def run_engine(
                 doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
                 pg.stage("report")
                 doc = kind.finish(prep, doc, settings)
+                _state_reduction(doc, reduced)
                 doc["verdict"] = decide_verdict(doc)
-            if doc["verdict"] == "consistent":  # issue 44 F: what the record could have shown
-                with stage("bounds"):
-                    cands = list(seen.values())
-                    doc["detection_bounds"] = detection_bounds(
-                        prep, fitter, sel.base.terms, cands, kind.views(prep), scan
-                    )
-                    doc["detection_bounds_not_covered"] = not_covered(cands, prep)
+            with stage("bounds"):  # issue 44 F: what the record could have shown
+                ref = bounds_reference(doc, sel, max_effects)
+                cands = list(seen.values())
+                doc["detection_bounds"] = detection_bounds(
+                    prep, fitter, ref, cands, kind.views(prep), scan
+                )
+                doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
+                doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)
             with stage("report"):
                 contributions = effect_contributions(prep, fitter, sel)
         doc["time_s"] = time.perf_counter() - t0

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..._html import result_html
-from ._document import nuisance_rows
+from ._document import bounds_against, nuisance_rows
 from ._html_base import (
     ReportRows,
     _e,
@@ -402,8 +402,8 @@ def _summary_parts(doc: dict) -> list[str]:
 
 
 def _bound_parts(doc: dict) -> list[str]:
-    """A consistent verdict's detection bounds (issue 44 F): the smallest size of each
-    catalog effect, per head or sensor, this record would have revealed."""
+    """The detection bounds (issue 44 F): the smallest size of each catalog effect not named,
+    per head or sensor, this record would have revealed against the final model."""
     bounds = doc.get("detection_bounds")
     if not bounds:
         return []
@@ -424,8 +424,8 @@ def _bound_parts(doc: dict) -> list[str]:
         _table(["effect", "size", "on", "smallest revealed", "unit", "set by", "at"], rows)
     )
     note = (
-        "About 50 % power at the finder's own thresholds: 1.5x the bound is found almost "
-        "always, half of it almost never."
+        f"Computed {bounds_against(doc)}. About 50 % power at the finder's own thresholds: "
+        "1.5x the bound is found almost always, half of it almost never."
     )
     if doc.get("detection_bounds_not_covered"):
         note += " Not bounded (no probe yet): " + ", ".join(doc["detection_bounds_not_covered"])
@@ -671,9 +671,9 @@ def render_html(d: Diagnosed) -> str:
         f"{_e(doc.get('status', '-'))} · {_e(doc.get('format', ''))}</p>",
     ]
     parts += _summary_parts(doc)
-    parts += _bound_parts(doc)
     parts += _effect_parts(doc)
     parts += _located_parts(doc)
+    parts += _bound_parts(doc)  # after what the record showed: what else it could have
     parts += _figure_parts(doc, rows)
     parts.append("</body></html>\n")
     return "\n".join(parts)
@@ -695,7 +695,7 @@ def notebook_html(d: Diagnosed) -> str:
     return result_html(
         title,
         headline,
-        sections=_summary_parts(doc) + _bound_parts(doc) + _effect_parts(doc) + _located_parts(doc),
+        sections=_summary_parts(doc) + _effect_parts(doc) + _located_parts(doc) + _bound_parts(doc),
     )
 
 

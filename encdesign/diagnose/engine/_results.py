@@ -346,8 +346,8 @@ class Refusal(_Entry):
 @final
 class DetectionBound(_Entry):
     """The smallest size of one catalog effect this record would have revealed (an entry
-    of ``detection_bounds``, only on a ``consistent`` verdict; issue 44 F,
-    :mod:`encdesign.diagnose.engine._bounds`).
+    of ``detection_bounds``, of a catalog effect the record did not name, against the final
+    model; issue 44 F, :mod:`encdesign.diagnose.engine._bounds`).
 
     Attributes:
         effect: the candidate's name.
@@ -357,7 +357,8 @@ class DetectionBound(_Entry):
         at: where its other parameters are held, in words.
         bound: the size detected with about 50 % probability (``unit``), or ``None`` (with a
             ``note`` in ``extra``) when no size would be revealed.
-        set_by: the test that sets it (``view``, ``bic_min``, ``heldout_min``).
+        set_by: the test that sets it (``view``, ``bic_min``, ``heldout_min``, and where
+            structure is left unexplained ``located_share_min``, ``signature_left_max``).
         noncentrality: the effect's noncentrality at the bound.
         n_params: the candidate's fitted parameters ``k``.
         convention: what the bound means.

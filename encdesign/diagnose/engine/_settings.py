@@ -764,6 +764,17 @@ class FinderSettings(eqx.Module):
     sinusoid puts there (``sqrt(2 band) / pi`` of them). Set by hand in e0d3df4. Was the
     default ``band`` of ``_quadrature.detect_clipping`` (moved unchanged in issue 44 G)."""
 
+    reduce_min_rows: int = eqx.field(default=1_000_000, static=True)
+    """A multihead record of more rows is diagnosed on block means (issue 43, ``_reduce``;
+    ``reduced`` in the JSON); any shorter record is untouched. Set in issue 43."""
+
+    reduce_attenuation_max: float = eqx.field(default=1e-3, static=True)
+    """... the block is the longest whose mean attenuates the highest frequency any view or
+    candidate needs by at most this (``1 - sinc``). Issue 43."""
+
+    reduce_line_hz: float = eqx.field(default=100.0, static=True)
+    """... lines in Hz up to this frequency are kept within that bound. Issue 43."""
+
     def __check_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)

@@ -40,11 +40,13 @@ from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import run_spans
-from ._multihead_terms import (
+from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
     BEARING_WOBBLE,
     ECCENTRICITY_SHIFT,
+)
+from ._multihead_terms import (
     INTERPOLATION_ERROR,
     THERMAL_DRIFT,
     VIBRATION,

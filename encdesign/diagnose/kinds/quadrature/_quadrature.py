@@ -47,7 +47,7 @@ import numpy as np
 
 from ...._errors import input_error
 from ....io._recording import Recording
-from ...engine._candidates import Candidate, Context, Param
+from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import KindData, NoiseEstimate, Prepared, drive_channel
@@ -395,6 +395,15 @@ def _signal_shape(orders: tuple[int, ...]) -> Candidate:
             return f"a radial harmonic of {amp:.2f} of the radius is not a signal shape"
         return None
 
+    def probes(ctx: Context) -> list[Probe]:
+        # radial orders 3 (even signal harmonics 2, 4) and 4 (odd ones 3, 5 of one shape):
+        # one column pair each, the bound of a higher order alone is about the same
+        out = []
+        for i, m in enumerate(orders[:2]):
+            vals = {"cos": np.eye(len(orders))[i], "sin": np.zeros(len(orders))}
+            out.append(Probe(vals, "radial_amplitude", "1", "radius", f"radial order {m}"))
+        return out
+
     return Candidate(
         "signal_shape",
         fn,
@@ -407,6 +416,7 @@ def _signal_shape(orders: tuple[int, ...]) -> Candidate:
         explanation=EXPLANATIONS["signal_shape"],
         derived=derived,
         plausible=plausible,
+        probes=probes,
     )
 
 

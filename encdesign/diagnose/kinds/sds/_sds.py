@@ -81,6 +81,7 @@ from ._sds_noise import (
     sds_noise,
     view_common_orders,
 )
+from ._sds_probes import with_probes
 from ._sds_terms import (
     _const_term,
     _jx,
@@ -347,7 +348,7 @@ class SDSKind(AbstractKind):
         return sds_base(prep, max_order)
 
     def candidates(self, ctx):
-        return sds_candidates(ctx)
+        return with_probes(sds_candidates(ctx))
 
     def max_order_limit(self, prep):
         return sds_limit(prep)

@@ -1,0 +1,279 @@
+"""Issue 43: a long record reduced to block means before the engine sees it.
+
+A record of more than ``FinderSettings.reduce_min_rows`` rows (of a kind in
+:data:`REDUCIBLE_KINDS`) is cut into blocks of ``B`` consecutive rows that never cross a run,
+a gap in ``t`` (a step over ``GAP_STEPS`` sampling intervals), a reversal of the shaft or a
+jump of a reading over half a turn; each block becomes one row holding the mean of every
+column (the run its own). Rows left over at the end of a stretch (fewer than ``B``) are left
+out and counted. The engine then runs on ``N / B`` rows; its noise estimate, taken from the
+reduced rows, is the block mean's (``sigma / sqrt(B)`` for white noise), so the weights
+follow without a correction.
+
+The error is bounded and stated: the mean of ``B`` rows multiplies a sinusoid of frequency
+``f`` by ``D = sin(pi f B dt) / (B sin(pi f dt))`` (:func:`attenuation`; ``1 - D`` is
+``(B^2 - 1) (pi f dt)^2 / 6`` to leading order). ``B`` is the largest block for which the
+highest frequency any view or candidate needs is attenuated by at most
+``FinderSettings.reduce_attenuation_max``: the highest order the base can grow to and the
+views scan (:func:`scan_orders_reached`) times the fastest shaft rate, and
+``FinderSettings.reduce_line_hz`` (the band of lines in Hz kept within the bound). Orders
+``L`` and ``2 L`` of the signal period (``interpolation_error``, the ``line_phase`` view) are
+far above that band: a reduced record cannot test them, and its diagnosis says so
+(``not_testable``). When ``B`` comes out below 2 the record is left as it is
+(``reduced.applied`` false, with the reason).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from ...io._recording import Recording
+from ._settings import FinderSettings
+
+REDUCIBLE_KINDS = ("multihead",)
+"""Kinds whose observations are smooth functions of the block's mean angle and time (the
+quadrature kind's raw signals, the sds and motion kinds' fine structure are not)."""
+
+GAP_STEPS = 1.5
+"""A time step over this many median sampling intervals ends a stretch (a gap)."""
+
+SPEED_QUANTILE = 0.99
+"""The fastest shaft rate is this quantile of ``|d shaft / dt|`` over the rows (a glitch or
+a count jump cannot set it)."""
+
+PASS_ROWS = 1 << 20
+"""Rows per slice of the reduction's passes (bounded temporary memory)."""
+
+
+def scan_orders_reached(default_order: int, grows: bool, settings: FinderSettings) -> int:
+    """Highest integer order the engine can scan on a record when the user sets no order:
+    the base grows at most twice (to the orders the views find, each time up to twice its
+    order or ``scan_order_min``) and the views scan twice the final order."""
+    o = int(default_order)
+    for _ in range(2 if grows else 0):
+        o = max(2 * o, settings.scan_order_min)
+    return max(2 * o, settings.scan_order_min)
+
+
+def attenuation(f_hz: float, dt: float, B: int) -> float:
+    """``1 - D``: how much the mean of ``B`` rows sampled every ``dt`` s attenuates a
+    sinusoid of ``f_hz`` Hz (``D = sin(pi f B dt) / (B sin(pi f dt))``, the Dirichlet
+    kernel; ``(B^2 - 1) (pi f dt)^2 / 6`` to leading order)."""
+    x = math.pi * f_hz * dt
+    if B <= 1 or x == 0.0:
+        return 0.0
+    return 1.0 - math.sin(B * x) / (B * math.sin(x))
+
+
+def _longest_block(f_hz: float, dt: float, tol: float, B_max: int) -> int:
+    """The longest block (rows, at most ``B_max``) whose mean attenuates ``f_hz`` by at most
+    ``tol`` (:func:`attenuation`): from the leading order, then checked exactly."""
+    x = math.pi * f_hz * dt
+    if not (dt > 0 and x > 0):
+        return 1
+    B = max(1, min(B_max, int(math.sqrt(1.0 + 6.0 * tol / x**2))))
+    while B > 1 and attenuation(f_hz, dt, B) > tol:
+        B -= 1
+    while B < B_max and attenuation(f_hz, dt, B + 1) <= tol:
+        B += 1
+    return B
+
+
+def _angle_columns(rec: Recording) -> list[str]:
+    cols = list(rec.head_columns)
+    return [*cols, "theta_ref"] if "theta_ref" in rec.columns else cols
+
+
+def shaft_of(cols: dict, heads: list[str]) -> np.ndarray:
+    """The shaft angle of rows ``cols``: ``theta_ref``, or the heads' mean without it."""
+    if "theta_ref" in cols:
+        return np.asarray(cols["theta_ref"], float)
+    return np.mean([np.asarray(cols[h], float) for h in heads], 0)
+
+
+def step_stats(t: np.ndarray, shaft: np.ndarray) -> tuple[float, float]:
+    """``(median time step, SPEED_QUANTILE of |shaft step|)`` of consecutive rows (nan
+    where none is finite)."""
+    dtt = np.diff(np.asarray(t, float))
+    ok = np.isfinite(dtt) & (dtt > 0)
+    dsh = np.abs(np.diff(shaft))
+    fin = np.isfinite(dsh) & (dsh < math.pi)
+    return (
+        float(np.median(dtt[ok])) if ok.any() else math.nan,
+        float(np.quantile(dsh[fin], SPEED_QUANTILE)) if fin.any() else math.nan,
+    )
+
+
+def stretch_starts(cols: dict, angles: list[str], shaft: np.ndarray, dt: float) -> np.ndarray:
+    """A flag per row of ``cols`` (consecutive rows; the first is flagged) that starts a new
+    stretch: a new run, a time step off the sampling interval, a jump of a reading by half a
+    turn or more, a reversal of the shaft."""
+    n = len(shaft)
+    start = np.zeros(n, bool)
+    start[0] = True
+    s = start[1:]
+    if "run" in cols:
+        s |= np.diff(np.asarray(cols["run"])) != 0
+    s |= ~(np.abs(np.diff(np.asarray(cols["t"], float))) <= GAP_STEPS * dt)
+    for c in angles:
+        s |= ~(np.abs(np.diff(np.asarray(cols[c], float))) < math.pi)
+    sg = np.where(s, 0.0, np.sign(np.diff(shaft)))  # a step across a boundary has no direction
+    prev = np.concatenate([[0.0], sg[:-1]])
+    s |= (sg * prev) < 0  # a reversal
+    return start
+
+
+def _boundaries(rec: Recording) -> tuple[np.ndarray, float, float]:
+    """``(starts, dt, rate)``: a flag per row that starts a new stretch
+    (:func:`stretch_starts`), the median sampling interval (s) and the fastest shaft rate
+    (rev/s, :data:`SPEED_QUANTILE`), in slices of :data:`PASS_ROWS` rows."""
+    n = rec.n_rows
+    angles = _angle_columns(rec)
+    stats = []
+    for a in range(0, n, PASS_ROWS):
+        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
+        part = {c: rec.columns[c][lo:b] for c in rec.columns}
+        stats.append(step_stats(part["t"], shaft_of(part, rec.head_columns)))
+    dt = float(np.nanmedian([d for d, _ in stats]))
+    rates = [r for _, r in stats if np.isfinite(r)]
+    rate = float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0
+    start = np.zeros(n, bool)
+    for a in range(0, n, PASS_ROWS):
+        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
+        part = {c: rec.columns[c][lo:b] for c in rec.columns}
+        st = stretch_starts(part, angles, shaft_of(part, rec.head_columns), dt)
+        start[lo + 1 : b] = st[1:]
+    start[0] = True
+    return start, dt, rate
+
+
+def plan_for(
+    kind: str,
+    n: int,
+    default_order: int,
+    grows: bool,
+    settings: FinderSettings,
+    steps: Callable[[], tuple[float, float]],
+) -> dict:
+    """The ``reduced`` entry of a record of kind ``kind`` and ``n`` rows (without
+    ``block_rows`` when it is not reduced for its kind or size); ``steps``: a function that
+    returns the record's ``(dt, rate)`` (s, rev/s), called only when they are needed."""
+    tol = float(settings.reduce_attenuation_max)
+    out: dict = {"applied": False, "rows": int(n), "min_rows": int(settings.reduce_min_rows)}
+    if kind not in REDUCIBLE_KINDS:
+        out["reason"] = f"kind {kind!r} is not reduced (only {', '.join(REDUCIBLE_KINDS)})"
+        return out
+    if n <= settings.reduce_min_rows:
+        out["reason"] = (
+            f"{n} rows, at most FinderSettings.reduce_min_rows = {settings.reduce_min_rows}"
+        )
+        return out
+    dt, rate = steps()
+    M = scan_orders_reached(default_order, grows, settings)
+    f_need = max(M * rate, float(settings.reduce_line_hz))
+    B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
+    out.update(
+        block_rows=B,
+        dt_s=dt,
+        shaft_rate_max_rev_s=rate,
+        orders_needed=int(M),
+        line_band_hz=float(settings.reduce_line_hz),
+        f_needed_hz=f_need,
+        attenuation_max=tol,
+        attenuation_at_f_needed=attenuation(f_need, dt, B),
+        bound="the mean of B rows sampled every dt multiplies a sinusoid of frequency f by "
+        "D = sin(pi f B dt) / (B sin(pi f dt)) (its phase at the block's mean time); 1 - D "
+        "grows with f, and at the highest frequency needed (orders_needed x "
+        "shaft_rate_max_rev_s, and line_band_hz) it is at most attenuation_max "
+        "(FinderSettings.reduce_attenuation_max)",
+    )
+    if B < 2:
+        out["reason"] = (
+            f"a block of 2 rows attenuates {f_need:.4g} Hz by more than "
+            f"FinderSettings.reduce_attenuation_max = {tol:g} at {1 / dt:.4g} Hz sampling"
+        )
+        return out
+    out["applied"] = True
+    return out
+
+
+def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettings) -> dict:
+    """Whether and how ``rec`` is reduced: the JSON entry ``reduced`` of the diagnosis
+    (``applied``, ``block_rows``, the bound, the frequencies it covers, the reason), with the
+    row flags ``_starts`` (removed before the document)."""
+    found: dict = {}
+
+    def steps() -> tuple[float, float]:
+        found["starts"], dt, rate = _boundaries(rec)
+        return dt, rate
+
+    out = plan_for(rec.kind, rec.n_rows, default_order, grows, settings, steps)
+    if out["applied"]:
+        out["_starts"] = found["starts"]
+    return out
+
+
+def signal_period_tests(meta: dict, info: dict) -> dict:
+    """``meta`` of the reduced record: without the signal period (its orders ``L``, ``2 L``
+    are averaged out), and ``info["not_testable"]`` saying so."""
+    meta = dict(meta)
+    enc = dict(meta.get("encoder", {}))
+    L = int(enc.get("signal_periods_per_rev", enc.get("grating_lines", 0)) or 0)
+    if L > 0:
+        info["not_testable"] = [
+            {
+                "name": "interpolation_error",
+                "reason": f"orders L = {L} and 2L of the signal period are averaged out by "
+                f"blocks of {info['block_rows']} rows (the reduced record keeps "
+                f"{info['f_needed_hz']:.4g} Hz)",
+                "rule": "reduce_attenuation_max",
+            }
+        ]
+        for k in ("signal_periods_per_rev", "grating_lines"):
+            enc.pop(k, None)
+    meta["encoder"] = enc
+    return meta
+
+
+def reduce_recording(rec: Recording, info: dict) -> Recording:
+    """The record of block means ``info`` plans (:func:`plan`); ``info`` gains the counts
+    (``reduced_rows``, ``rows_left_out``, ``stretches``) and ``not_testable``."""
+    B = int(info["block_rows"])
+    starts = info.pop("_starts")
+    n = rec.n_rows
+    # block id per row: within each stretch, rows [s, s + B) ... ; the tail (< B) gets -1
+    idx = np.flatnonzero(starts)
+    ends = np.append(idx[1:], n)
+    full = (ends - idx) // B
+    n_blocks = int(full.sum())
+    first_block = np.concatenate([[0], np.cumsum(full)[:-1]])
+    bid = np.full(n, -1, np.int64)
+    for s, k, f0 in zip(idx, full, first_block):
+        if k:
+            bid[s : s + k * B] = f0 + np.arange(k * B) // B
+    cols: dict[str, np.ndarray] = {}
+    run = np.asarray(rec.columns["run"]) if "run" in rec.columns else None
+    keep = bid >= 0
+    for name, col in rec.columns.items():
+        if name == "run":
+            continue
+        acc = np.zeros(n_blocks)
+        for a in range(0, n, PASS_ROWS):
+            b = min(n, a + PASS_ROWS)
+            k = keep[a:b]
+            acc += np.bincount(bid[a:b][k], np.asarray(col[a:b], float)[k], minlength=n_blocks)
+        cols[name] = acc / B
+    if run is not None:
+        r = np.empty(n_blocks, run.dtype)
+        r[bid[keep]] = run[keep]  # every row of a block is of one run
+        cols["run"] = r
+    cols = {k: cols[k] for k in rec.columns}  # the record's own column order
+    info.update(
+        reduced_rows=n_blocks,
+        rows_left_out=int(n - n_blocks * B),
+        stretches=int(idx.size),
+    )
+    meta = signal_period_tests(rec.meta, info)
+    return Recording(rec.kind, meta, cols, path=rec.path)
