@@ -62,25 +62,17 @@ class FinderSettings(eqx.Module):
 
     located_share_min: float = eqx.field(default=0.2, static=True)
     """Rule ``located_share_min``: a candidate must explain at least this share of the
-    excess chi-square located where its own fitted error shows (the views, integer orders,
-    heads and runs in which that error alone is located), each such place weighted by that
-    error's own excess chi-square there, so that a larger structure is not pinned on it
-    through a small part of it. From the first engine (96be348), measured against everything
-    located until issue 44 B (a weak effect among two strong ones at once was refused for the
-    others' structure), weighted since session 15 (unweighted, a noise-free fitted error's
-    leakage into others' structure decided: twin ODrive records got opposite verdicts). It
-    must also keep this share of its chi-square gain once the integer orders it leaves that
-    located more than that gain are fitted with the model (``_spill.kept_gain_share``: a part
-    of a larger structure made through the base model is not its own). The value is
-    unchanged."""
+    excess chi-square located where its own fitted error shows (views, integer orders, heads,
+    runs), each place weighted by that error's own excess there, and keep this share of its
+    gain once the larger integer orders it leaves are fitted (``_spill``): a larger structure
+    is not pinned on it through a small part of it. 96be348 (of all located structure until
+    issue 44 B; weighted since session 15: twin ODrive records got opposite verdicts)."""
 
     signature_left_max: float = eqx.field(default=0.5, static=True)
     """Rule ``signature_left_max``: a candidate may leave at most this share of what its own
-    signature views located where its own fitted error shows, weighted as for
-    ``located_share_min`` (all its signature views located where its error shows at none of
-    their places; a drift denting a step is refused). 362be7c (half the structure its
-    signature views located; concealed benches); weighted since session 15 (issue 44 B: a
-    non-integer line of another effect counted against cogging on one ODrive twin)."""
+    signature views located where its fitted error shows, weighted as ``located_share_min``
+    (a drift denting a step is refused). 362be7c (concealed benches); weighted since session
+    15 (issue 44 B: another effect's line counted against cogging on one ODrive twin)."""
 
     untouched_share: float = eqx.field(default=0.8, static=True)
     """An integer order a candidate leaves at this share or more of its located power is
