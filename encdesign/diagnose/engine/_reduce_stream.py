@@ -126,7 +126,8 @@ def stream_reduce(
         rows = np.concatenate(sel) if sel else np.zeros(0, np.int64)
         for h in names:
             v = cols[h][rows]
-            parts[h].append(v[::B] if h == "run" else v.reshape(-1, B).mean(1))
+            # (a copy: a view of the run column would keep the whole group alive)
+            parts[h].append(v[::B].copy() if h == "run" else v.reshape(-1, B).mean(1))
         del cols
     out = {h: np.concatenate(parts.pop(h)) for h in names}
     info.update(
