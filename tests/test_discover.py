@@ -84,11 +84,27 @@ def test_clean_records_get_nothing(kind):
 def test_catalog_physics_stays_the_catalogs():
     """A vibration at a fixed frequency is a catalog effect: named by the catalog, and
     discovery models nothing there."""
-    rec, truth = outside_record(np.random.default_rng(44), "fixed_hz", 8.0, "multihead", 3000)
+    rec, truth = outside_record(
+        np.random.default_rng(44), "catalog_vibration", 8.0, "multihead", 3000
+    )
     d = diagnose(rec)
     assert "vibration" in [e["name"] for e in d.effects], d.doc["report"]
     f0 = truth["line"][1]
     assert not [t for t in _terms(d.doc) if t["line_kind"] == "hz" and abs(t["value"] - f0) < 1]
+
+
+def test_a_rung_mode_is_fixed_in_hz_and_rings():
+    """A structural mode rung at the start of every run, decaying at its own Q, is modelled
+    in its own frame (fixed in Hz) with its amplitude changing within the run: not the
+    catalog's steady vibration, and not a shaft order."""
+    rec, truth = outside_record(np.random.default_rng(47), "fixed_hz", 8.0, "multihead", 3000)
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    f0 = truth["line"][1]
+    mine = [t for t in _terms(d.doc) if t["line_kind"] == "hz" and abs(t["value"] - f0) < 0.5]
+    assert mine and mine[0]["frame"] == "hz", d.doc["report"]
+    assert mine[0]["modulation"] == "ringing" and "own Q" in mine[0]["reading"]
+    _no_catalog_name(d.doc)
 
 
 def test_export_candidates_round_trip(tmp_path):

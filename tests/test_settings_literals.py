@@ -59,6 +59,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
     ("engine/_discover.py", 1e-12): GUARD + " (log of a speed)",
+    ("engine/_discover_law.py", 1e-12): GUARD + " (log of a speed)",
     ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
     "highest order)",
     ("engine/_engine.py", 2): PHYSICS,
@@ -212,8 +213,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover_lines.py", "MAX_LINES"): BOUND + " (located lines modelled)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
-    ("engine/_discover.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
-    ("engine/_discover.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
+    ("engine/_discover_law.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
+    ("engine/_discover_law.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
     ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
     ("engine/_document.py", "LATTICE_ROWS"): BOUND,
     ("engine/_reduce.py", "PASS_ROWS"): BOUND + " (rows per slice of the reduction's passes)",
@@ -260,7 +261,7 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("engine/_discover_lines.py", "_pinv.share"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_located.py", "scan_indices.near"): SEARCH
     + " (rows scanned one by one around a profile's best, then spaced out)",
-    ("engine/_discover.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
+    ("engine/_discover_law.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_fit.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",
     ("engine/_document.py", "_g.digits"): REPORT + " (significant digits printed)",

@@ -38,7 +38,9 @@ CLASSES = (
 )
 """The out-of-catalog classes: torque ripple at a drive order falling as speed^-2 (a shaft
 motion); a defect of one head; an error in one direction only; a structure at a fixed
-frequency with its own Q (excited in every run with its own phase); a slow growth over the
+frequency with its own Q (``fixed_hz``: a mode rung at the start of every run with its own
+phase, decaying as ``exp(-pi f t / Q)``; a steady line of constant amplitude is the catalog's
+``vibration``: :data:`CONTROLS`); a slow growth over the
 record; an order present in one run only; an error of opposite sign in the two directions;
 a lag growing as speed^+1; an order that switches on at one time of the middle run
 (``order_step``); and on an SDS bench: a periodic error of the platform angle in the frame
@@ -49,6 +51,15 @@ on (``sensor_step``)."""
 
 KINDS = ("multihead", "sensor", "sds")
 
+CONTROLS = ("catalog_vibration",)
+"""Classes of catalog physics, to check that discovery leaves them to the catalog: a
+steady line at a fixed frequency with its own amplitude and phase in every run (the
+catalog's ``vibration``)."""
+
+Q_RANGE = (20.0, 60.0)
+"""Quality factor of the ``fixed_hz`` mode (its ring-down time ``Q / (pi f)``: 0.2 to 0.8 s
+at 23 to 37 Hz, inside a run of 2 s at 3000 rows)."""
+
 SDS_CLASSES = ("sensor_frame", "platform_order", "sensor_step", "platform_step", "slow_growth")
 """The classes an SDS bench (one steady speed, one direction, one row per run) carries."""
 
@@ -57,7 +68,10 @@ def classes_for(kind: str) -> tuple[str, ...]:
     """The classes of :data:`CLASSES` a bench of ``kind`` can carry."""
     if kind == "sds":
         return SDS_CLASSES
-    return tuple(c for c in CLASSES if c not in SDS_CLASSES or c == "slow_growth")
+    out = tuple(c for c in CLASSES if c not in SDS_CLASSES or c == "slow_growth")
+    if kind == "sensor":  # one sensor: a static order of its one head is its own error
+        out = tuple(c for c in out if c != "head_defect")  # function (the base model's)
+    return out
 
 
 SDS_NOISE_RAD = 1.3e-8
@@ -82,6 +96,10 @@ def _truth(cls: str, C: int, rng) -> dict:
     if cls == "one_direction":
         return dict(line=("order", m), frame="shaft", modulation="forward")
     if cls == "fixed_hz":
+        f = float(rng.uniform(23.0, 37.0))
+        q = float(rng.uniform(*Q_RANGE))
+        return dict(line=("hz", f), frame="hz", modulation="ringing", q=q)
+    if cls == "catalog_vibration":
         return dict(line=("hz", float(rng.uniform(23.0, 37.0))), frame="hz", modulation="per_cell")
     if cls == "slow_growth":
         return dict(line=("order", m), frame="disk" if C > 1 else "shaft", modulation="growth")
@@ -112,7 +130,7 @@ def outside_record(
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
-    if cls != "clean" and cls not in classes_for(kind):
+    if cls not in ("clean", *CONTROLS) and cls not in classes_for(kind):
         raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
     if kind == "sds":
         return _sds_record(rng, cls, size)
@@ -149,6 +167,8 @@ def outside_record(
         if kind_l == "hz":
             phr = rng.uniform(0, 2 * np.pi, R)[run]
             s = A * np.sin(2 * np.pi * val * t + phr)[:, None] * np.ones(C)
+            if truth["modulation"] == "ringing":  # rung at the run's start, its own Q
+                s = s * np.exp(-np.pi * val * t / truth["q"])[:, None]
         else:
             fr = truth["frame"]
             if fr == "disk":

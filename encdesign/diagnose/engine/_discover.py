@@ -16,7 +16,9 @@ generic library organised by **frame** and **modulation**:
   ``static``, ``speed`` (amplitude ``(|omega| / omega_0)^beta``, the exponent fitted with a
   standard error), ``direction`` (opposite sign in the two directions), ``forward`` /
   ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
-  own amplitude and phase), ``growth`` (amplitude linear in the time across runs),
+  own amplitude and phase), ``ringing`` (a fixed-Hz line only: each run its own amplitude
+  and phase and their own linear change within the run: a mode rung and decaying at its own
+  Q), ``growth`` (amplitude linear in the time across runs),
   ``temperature`` (linear in ``temp_c``), ``step`` (the amplitude switches on at one change
   time: the best of the times the finder's views located (``time``, ``order_step``,
   ``run_step``) and :data:`STEP_BINS` change points over the kept rows, scanned per line on
@@ -50,8 +52,9 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
+from ._discover_export import discovered_candidate
+from ._discover_law import Sums, Term, _fit_beta, _gain, _psolve, _scatter_se, _sibling
 from ._discover_lines import (
     MAX_LINES,
     STEP_EXACT_ROWS,
@@ -69,6 +72,7 @@ from ._discover_lines import (
     thresholds,
 )
 from ._discover_words import reading
+from ._fit import make_term
 from ._settings import FinderSettings
 
 MAX_TERMS = 4
@@ -76,29 +80,6 @@ MAX_TERMS = 4
 
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
-
-BETA_RANGE = (-4.0, 4.0)
-"""Range searched for a speed exponent."""
-
-
-@dataclasses.dataclass
-class Term:
-    """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
-    the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
-    change time (``step`` modulation, :func:`locate_steps`)."""
-
-    line: int
-    frame: str
-    modulation: str
-    H: np.ndarray
-    beta: float | None = None
-    beta_se: float | None = None
-    H0: np.ndarray | None = None
-    step: dict | None = None
-
-    @property
-    def name(self) -> str:
-        return f"{self.frame} / {self.modulation} @ line {self.line}"
 
 
 # ----------------------------------------------------------------------------- lines
@@ -133,27 +114,6 @@ def _cells(prep) -> tuple[np.ndarray, dict]:
 
 
 # ----------------------------------------------------------------------------- sums
-
-
-@dataclasses.dataclass
-class Sums:
-    """Per-fold sums of the full blocks, made orthogonal to the catalog model's Jacobian.
-
-    ``A`` (K, Q, Q), ``b`` (K, Q): Gram and products with the whitened residual; ``raw``
-    (K, Q, Q): the Gram before the projection (a direction the catalog model spans keeps
-    nothing of its raw norm, and is dropped); ``rr``
-    (K,): the residual's chi-square per fold; ``slices``: each line's columns in ``Q``;
-    ``layout``: per line ``(n_blocks, S, C, n_basis)``; ``scales``: the centres and half
-    spans of the growth (``tau``) and temperature (``driver``) modulations."""
-
-    A: np.ndarray
-    b: np.ndarray
-    rr: np.ndarray
-    raw: np.ndarray
-    slices: list[slice]
-    layout: list[tuple[int, int, int, int]]
-    blocks: list[str]
-    scales: dict
 
 
 def _jac_chunk(prep, fitter, terms: Sequence[Any], a: int, b: int, x: dict) -> np.ndarray:
@@ -307,33 +267,6 @@ def accumulate(
     )
 
 
-KEEP_SHARE = 1e-6
-"""A direction of a term keeps at least this share of its raw norm after the projection on
-the catalog model, else the catalog model spans it and it is dropped."""
-
-
-def _psolve(
-    A: np.ndarray, B: np.ndarray, rtol: float = 1e-10, raw: np.ndarray | None = None
-) -> np.ndarray:
-    """``A^+ B`` for a symmetric positive semi-definite ``A``, on the unit-diagonal scaled
-    matrix (columns of very different sizes): eigenvalues under ``rtol`` times the largest
-    dropped; with ``raw`` (the Gram before a projection), scaled by its diagonal instead and
-    eigenvalues under :data:`KEEP_SHARE` dropped (directions the projection took)."""
-    if A.size == 0:
-        return np.zeros((0,) + B.shape[1:])
-    d = np.sqrt(np.maximum(np.diag(A if raw is None else raw), 0.0))
-    d = np.where(d > 0, d, 1.0)
-    An = A / d[:, None] / d[None, :]
-    ev, V = np.linalg.eigh(An)
-    tol = rtol * max(float(ev.max()), 1e-300) if raw is None else KEEP_SHARE
-    keep = ev > tol
-    inv = np.where(keep, 1.0 / np.where(keep, ev, 1.0), 0.0)
-    Bn = B / d.reshape((-1,) + (1,) * (B.ndim - 1))
-    VB = V.T @ Bn
-    X = V @ (inv.reshape((-1,) + (1,) * (VB.ndim - 1)) * VB)
-    return X / d.reshape((-1,) + (1,) * (X.ndim - 1))
-
-
 # ----------------------------------------------------------------------------- library
 
 
@@ -359,7 +292,11 @@ def library(
             name = "hz" if ln.kind == "hz" and fr == "shaft" else fr
             if per_cell_phase:
                 if S <= MAX_CELLS:
-                    out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
+                    eye = np.eye(S)
+                    out.append(Term(li, name, "per_cell", hmap(lay, 0, M, eye)))
+                    if ln.kind == "hz":  # a mode's amplitude changing within every run
+                        H = np.concatenate([hmap(lay, 0, M, eye), hmap(lay, 1, M, eye)], 1)
+                        out.append(Term(li, name, "ringing", H))
                 continue
             one = np.ones(S)
             out.append(Term(li, name, "static", hmap(lay, 0, M, one)))
@@ -388,46 +325,6 @@ def library(
 
 
 # ----------------------------------------------------------------------------- fits
-
-
-def _speed_H(term: Term, lay, beta: float, speed: np.ndarray) -> np.ndarray:
-    """The speed term's restriction: the frame scaled per cell by ``(speed / geometric
-    mean)^beta`` (``term.H0``: the static restriction). Where the catalog model already
-    spans the static frame, the projection leaves only the law's shape; near ``beta = 0``
-    that shape has no norm left and is dropped (:data:`KEEP_SHARE`)."""
-    if term.H0 is None:
-        raise ValueError(f"discovery: speed term of line {term.line} has no static restriction H0")
-    f = (speed / math.exp(np.mean(np.log(np.maximum(speed, 1e-12))))) ** beta
-    nb, S, C, nj = lay
-    scale = np.broadcast_to(f[None, :, None, None], (nb, S, C, nj)).reshape(-1)
-    return term.H0 * scale[:, None]
-
-
-def _gain(A: np.ndarray, b: np.ndarray, raw: np.ndarray | None = None) -> float:
-    """In-sample chi-square drop ``b' A^+ b`` (``raw``: see :func:`_psolve`)."""
-    return float(b @ _psolve(A, b, raw=raw)) if b.size else 0.0
-
-
-def _fit_beta(term: Term, lay, sl: slice, sums: Sums, speed: np.ndarray, infl: float) -> None:
-    """The speed exponent minimising chi-square, and its standard error (profile curvature,
-    inflated by ``infl``, the residual's chi-square per value when above 1)."""
-    At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
-
-    def g(beta: float) -> float:
-        H = _speed_H(term, lay, beta, speed)
-        return -_gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
-
-    grid = np.linspace(*BETA_RANGE, 33)
-    vals = [g(v) for v in grid]
-    i = int(np.argmin(vals))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-    res = optimize.minimize_scalar(g, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
-    bh = float(res.x)
-    h = 1e-3
-    curv = (g(bh + h) - 2 * g(bh) + g(bh - h)) / h**2
-    term.beta = bh
-    term.beta_se = float(math.sqrt(2.0 / curv) * math.sqrt(max(infl, 1.0))) if curv > 0 else None
-    term.H = _speed_H(term, lay, bh, speed)
 
 
 def _embed(sums: Sums, terms: Sequence[Term]) -> np.ndarray:
@@ -566,6 +463,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
+            _scatter_se(tm, lib, sums)
     th = thresholds(lib, prep.settings.discover_alpha)
     return State(lines, first, cinfo, sums, lib, th, infl, L, prep.settings, near)
 
@@ -591,10 +489,52 @@ def discover(
             )
         return [None] * len(findings)
     kept, incl = select_terms(st)
+    if kept:  # the catalog model refitted with the terms kept, and the selection again
+        cat, resid2 = _refit(prep, fitter, terms, st, kept, incl)
+        st2 = build(prep, fitter, cat, resid2, findings)
+        if st2 is not None:  # taken where its model gains more (held out)
+            k2, i2 = select_terms(st2)
+            if _whole_gain(st2, k2) > _whole_gain(st, kept):
+                st, kept, incl = st2, k2, i2
     gains = _gains(st, kept)
     terms_json = [_term_json(prep, st, kept, i, incl, gains) for i in kept]
     near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
     return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
+
+
+def _whole_gain(st: State, kept: list[int]) -> float:
+    """Held-out gain (chi-square, K folds) of the kept terms together."""
+    if not kept:
+        return 0.0
+    folds = list(range(st.sums.A.shape[0]))
+    H = _embed(st.sums, [st.lib[j] for j in kept])
+    return _heldout(st.sums.A, st.sums.b, H, folds, st.sums.raw)
+
+
+def _refit(
+    prep, fitter, terms: Sequence[Any], st: State, kept: list[int], incl: np.ndarray
+) -> tuple[list[Any], np.ndarray]:
+    """The final catalog model fitted jointly (nonlinear, the engine's fitter) with the
+    kept terms as candidates (:func:`discovered_candidate`), and the residual of its catalog
+    part: ``(catalog terms, residual)``. The projection of the sums is the linearised joint
+    fit at the catalog's optimum without the terms; a nonlinear catalog parameter can have
+    moved far from where it belongs to absorb part of the structure (a head placement or a
+    run's angle offset of up to ``pi / m`` turns the disk's order ``m`` into another phase),
+    and the structure's own law is then measured on what is left. Refitted jointly, it
+    moves back. :func:`discover` takes the second selection where its model's held-out gain
+    is the larger (a catalog parameter that the terms make degenerate, e.g. one sensor's own
+    error function at the order of a speed law, can land anywhere in the joint fit)."""
+    gains = _gains(st, kept)
+    new = []
+    for i in kept:
+        spec = _term_json(prep, st, kept, i, incl, gains)
+        b0 = st.lib[i].beta
+        new.append(
+            make_term(discovered_candidate(spec), prep, None if b0 is None else {"beta": b0})
+        )
+    res = fitter.fit([*terms, *new])
+    cat = res.terms[: len(terms)]
+    return cat, fitter.residual(cat)
 
 
 def select_terms(st: State) -> tuple[list[int], np.ndarray]:
@@ -678,11 +618,15 @@ def _term_json(
     elif prep.ctx.kind == "sds":  # the moving sensors' run-mean channels
         heads = [c for c in names if "." not in c]
     scaling = None
-    if tm.beta is not None:
+    law = tm if tm.beta is not None else None
+    if tm.modulation == "per_cell":  # the best law across the runs, described, not chosen
+        law = _sibling(tm, lib, "speed")
+    if law is not None:
         scaling = {
-            "law": "amplitude ~ (speed / geometric-mean speed)^beta",
-            "beta": tm.beta,
-            "beta_se": tm.beta_se,
+            "law": "amplitude ~ (speed / geometric-mean speed)^beta"
+            + ("" if law is tm else " (fitted to describe the runs' own amplitudes)"),
+            "beta": law.beta,
+            "beta_se": law.beta_se,
             "speeds_rad_s": [float(v) for v in cinfo["speed"]],
         }
     return {

@@ -120,11 +120,22 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             b = (x["run_onehot"] @ p["sin_rad"])[:, None]
         else:
             a, b = p["cos_rad"], p["sin_rad"]
+        if ringing:  # each run's amplitude changing linearly within the run
+            ex = spec["export"]
+            u = ((x["tau"] - ex["tau_mid_s"]) / ex["tau_half_s"])[:, None]
+            a = a + u * (x["run_onehot"] @ p["cos_rate_rad"])[:, None]
+            b = b + u * (x["run_onehot"] @ p["sin_rate_rad"])[:, None]
         return g * (a * cpart + b * spart)
 
+    ringing = spec["modulation"] == "ringing"
     params = [Param("cos_rad", unit, shape, description="cos amplitude")]
     if not offset:
         params.append(Param("sin_rad", unit, shape, description="sin amplitude"))
+    if ringing:
+        for nm in ("cos_rate_rad", "sin_rate_rad"):
+            params.append(
+                Param(nm, unit, shape, description="change within the run (per half span)")
+            )
     start = None
     if spec["modulation"] == "speed":
         b0 = float(spec["scaling"]["beta"])

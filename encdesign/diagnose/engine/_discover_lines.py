@@ -117,7 +117,7 @@ def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Lin
         if f.view in ("orders", "common_orders") and orders:
             idx = add(Line("order", float(round(orders[0]))))
         elif f.view == "spectrum" and (orders or freqs):
-            if d.get("fixed_in") == "frequency" and freqs:
+            if d.get("fixed_in") == "hz" and freqs:  # _views: "hz", "order", ...
                 idx = add(Line("hz", float(np.median(freqs))))
             elif d.get("integer_order") and orders:
                 m = float(round(np.median(orders)))

@@ -54,6 +54,8 @@ MOD_WORDS = {
     "forward": "in the positive direction only",
     "reverse": "in the negative direction only",
     "per_cell": "its own amplitude and phase in every run (intermittent)",
+    "ringing": "its own amplitude and phase in every run, changing within the run: a "
+    "structural mode rung (by the start of the run, an impact) and decaying at its own Q",
     "growth": "growing linearly with the time across the record (a slow growth or drift)",
     "temperature": "linear in the temperature",
     "step": "switching on at one change time (a change of the set-up: a part that loosened, "

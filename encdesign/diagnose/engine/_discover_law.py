@@ -1,0 +1,156 @@
+"""Discovery's linear algebra and speed law (issue 41): the pseudo-inverse on the scaled
+Gram (directions the catalog model spans dropped), a term's chi-square gain, and the speed
+exponent's fit and standard error, and the library's term and per-fold sums (split from
+:mod:`._discover` for the module size)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import optimize
+
+
+@dataclasses.dataclass
+class Term:
+    """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
+    the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
+    change time (``step`` modulation, :func:`locate_steps`)."""
+
+    line: int
+    frame: str
+    modulation: str
+    H: np.ndarray
+    beta: float | None = None
+    beta_se: float | None = None
+    H0: np.ndarray | None = None
+    step: dict | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.frame} / {self.modulation} @ line {self.line}"
+
+
+@dataclasses.dataclass
+class Sums:
+    """Per-fold sums of the full blocks, made orthogonal to the catalog model's Jacobian.
+
+    ``A`` (K, Q, Q), ``b`` (K, Q): Gram and products with the whitened residual; ``raw``
+    (K, Q, Q): the Gram before the projection (a direction the catalog model spans keeps
+    nothing of its raw norm, and is dropped); ``rr``
+    (K,): the residual's chi-square per fold; ``slices``: each line's columns in ``Q``;
+    ``layout``: per line ``(n_blocks, S, C, n_basis)``; ``scales``: the centres and half
+    spans of the growth (``tau``) and temperature (``driver``) modulations."""
+
+    A: np.ndarray
+    b: np.ndarray
+    rr: np.ndarray
+    raw: np.ndarray
+    slices: list[slice]
+    layout: list[tuple[int, int, int, int]]
+    blocks: list[str]
+    scales: dict
+
+
+BETA_RANGE = (-4.0, 4.0)
+"""Range searched for a speed exponent."""
+
+
+KEEP_SHARE = 1e-6
+"""A direction of a term keeps at least this share of its raw norm after the projection on
+the catalog model, else the catalog model spans it and it is dropped."""
+
+
+def _psolve(
+    A: np.ndarray, B: np.ndarray, rtol: float = 1e-10, raw: np.ndarray | None = None
+) -> np.ndarray:
+    """``A^+ B`` for a symmetric positive semi-definite ``A``, on the unit-diagonal scaled
+    matrix (columns of very different sizes): eigenvalues under ``rtol`` times the largest
+    dropped; with ``raw`` (the Gram before a projection), scaled by its diagonal instead and
+    eigenvalues under :data:`KEEP_SHARE` dropped (directions the projection took)."""
+    if A.size == 0:
+        return np.zeros((0,) + B.shape[1:])
+    d = np.sqrt(np.maximum(np.diag(A if raw is None else raw), 0.0))
+    d = np.where(d > 0, d, 1.0)
+    An = A / d[:, None] / d[None, :]
+    ev, V = np.linalg.eigh(An)
+    tol = rtol * max(float(ev.max()), 1e-300) if raw is None else KEEP_SHARE
+    keep = ev > tol
+    inv = np.where(keep, 1.0 / np.where(keep, ev, 1.0), 0.0)
+    Bn = B / d.reshape((-1,) + (1,) * (B.ndim - 1))
+    VB = V.T @ Bn
+    X = V @ (inv.reshape((-1,) + (1,) * (VB.ndim - 1)) * VB)
+    return X / d.reshape((-1,) + (1,) * (X.ndim - 1))
+
+
+def _speed_H(term: Term, lay, beta: float, speed: np.ndarray) -> np.ndarray:
+    """The speed term's restriction: the frame scaled per cell by ``(speed / geometric
+    mean)^beta`` (``term.H0``: the static restriction). Where the catalog model already
+    spans the static frame, the projection leaves only the law's shape; near ``beta = 0``
+    that shape has no norm left and is dropped (:data:`KEEP_SHARE`)."""
+    if term.H0 is None:
+        raise ValueError(f"discovery: speed term of line {term.line} has no static restriction H0")
+    f = (speed / math.exp(np.mean(np.log(np.maximum(speed, 1e-12))))) ** beta
+    nb, S, C, nj = lay
+    scale = np.broadcast_to(f[None, :, None, None], (nb, S, C, nj)).reshape(-1)
+    return term.H0 * scale[:, None]
+
+
+def _gain(A: np.ndarray, b: np.ndarray, raw: np.ndarray | None = None) -> float:
+    """In-sample chi-square drop ``b' A^+ b`` (``raw``: see :func:`_psolve`)."""
+    return float(b @ _psolve(A, b, raw=raw)) if b.size else 0.0
+
+
+def _fit_beta(term: Term, lay, sl: slice, sums: Sums, speed: np.ndarray, infl: float) -> None:
+    """The speed exponent minimising chi-square, and its standard error (profile curvature,
+    inflated by ``infl``, the residual's chi-square per value when above 1)."""
+    At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
+
+    def g(beta: float) -> float:
+        H = _speed_H(term, lay, beta, speed)
+        return -_gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+
+    grid = np.linspace(*BETA_RANGE, 33)
+    vals = [g(v) for v in grid]
+    i = int(np.argmin(vals))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(g, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
+    bh = float(res.x)
+    h = 1e-3
+    curv = (g(bh + h) - 2 * g(bh) + g(bh - h)) / h**2
+    term.beta = bh
+    term.beta_se = float(math.sqrt(2.0 / curv) * math.sqrt(max(infl, 1.0))) if curv > 0 else None
+    term.H = _speed_H(term, lay, bh, speed)
+
+
+def _sibling(tm: Term, lib: Sequence[Term], modulation: str) -> Term | None:
+    """The term of ``lib`` at ``tm``'s line and frame with ``modulation``."""
+    return next(
+        (
+            u
+            for u in lib
+            if u.line == tm.line and u.frame == tm.frame and u.modulation == modulation
+        ),
+        None,
+    )
+
+
+def _scatter_se(tm: Term, lib: Sequence[Term], sums: Sums) -> None:
+    """The speed exponent's standard error with the run-to-run scatter about the law: scaled
+    by the square root of the chi-square per degree of freedom by which each run's own
+    amplitude and phase (the ``per_cell`` term of the same frame) beats the law, when above
+    1 (a Birge ratio: the law's own misfit across the runs, not only the noise)."""
+    pc = _sibling(tm, lib, "per_cell")
+    if pc is None or tm.beta_se is None:
+        return
+    sl = sums.slices[tm.line]
+    At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
+
+    def g(H: np.ndarray) -> float:
+        return _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+
+    dof = pc.H.shape[1] - tm.H.shape[1] - 1
+    if dof > 0:
+        tm.beta_se *= math.sqrt(max((g(pc.H) - g(tm.H)) / dof, 1.0))
