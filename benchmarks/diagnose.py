@@ -394,7 +394,9 @@ def _children_cpu_s() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int) -> dict:
+def _child_processes(
+    n_rows: int, heads: int, effect: bool | str, processes: int, rate_hz: float = 1000.0
+) -> dict:
     """One diagnosis through the CLI on ``processes`` local processes
     (``encdesign diagnose REC --processes N``; the fit's row passes split over them): the
     record written to a Parquet file first (not timed). Wall time of the command, peak RSS
@@ -403,7 +405,7 @@ def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int
 
     from encdesign import write_recording
 
-    rec = _bench_recording(n_rows, heads, 5, effect)
+    rec = _bench_recording(n_rows, heads, 5, effect, rate_hz=rate_hz)
     with tempfile.TemporaryDirectory(prefix="bench-diagnose-") as tmp:
         path = Path(tmp) / "rec.toml"
         write_recording(path, rec.kind, rec.columns, encoder=rec.encoder, parquet=True)
@@ -418,6 +420,8 @@ def _child_processes(n_rows: int, heads: int, effect: bool | str, processes: int
     return dict(
         n_rows=n_rows,
         n_heads=heads,
+        rate_hz=rate_hz,
+        reduced=doc.get("reduced"),
         processes=processes,
         effect=effect if isinstance(effect, str) else ("vibration" if effect else "clean"),
         wall_s_command=wall,
@@ -499,7 +503,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.child is not None:
         eff = args.effect_name if args.effect_name is not None else args.effect
         if args.processes is not None:
-            print(json.dumps(_child_processes(args.child, args.heads, eff, args.processes)))
+            got = _child_processes(args.child, args.heads, eff, args.processes, args.rate)
+            print(json.dumps(got))
             return 0
         if args.stream is not None:
             run = args.stream == "diagnose"

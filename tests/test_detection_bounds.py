@@ -230,13 +230,18 @@ def test_quadrature_signal_shape_bound():
     assert got == {1.5: True, 0.5: False}, got
 
 
-@pytest.mark.parametrize(("seed", "rule"), [(3103, "located_share_min"), (3220, "heldout_min")])
-def test_bound_beside_unexplained_structure_holds(seed, rule):
+@pytest.mark.parametrize(
+    ("seed", "rule", "raised"), [(3103, "heldout_min", 1.0), (3220, "heldout_min", 3.0)]
+)
+def test_bound_beside_unexplained_structure_holds(seed, rule, raised):
     """Beside structure no catalog effect explains (a radial order above ``signal_shape``'s),
-    a later round's candidate must explain its share of everything located
-    (``located_share_min``) and still gain on held-out data with that structure in the
-    folds (``heldout_min`` on the record itself: 3220, a capture without ``t``, whose folds
-    are phase sectors): the bound says which, and holds on captures with fresh noise."""
+    a later round's candidate must still gain on held-out data with that structure in the
+    folds (``heldout_min`` on the record itself; 3220 is a capture without ``t``, whose folds
+    are phase sectors): the bound says so, and holds on captures with fresh noise. Its share
+    (``located_share_min``) is measured where its own error shows (issue 44 B, session 15):
+    a structure at another radial order does not raise it (3103 was set by the share of
+    everything located before, at over 3x the clean bound; now by the held-out gain, at
+    about 1.2x)."""
     record = _bench("quadrature_record")
     d0 = diagnose(record(seed, seed, 3, 0.0)).doc
     clean = d0["detection_bounds"][0]["bound"]
@@ -247,7 +252,7 @@ def test_bound_beside_unexplained_structure_holds(seed, rule):
     ref = d["detection_bounds_reference"]
     assert ref["model"] == "base" and ref["located_excess_chi2"] > 0
     b = d["detection_bounds"][0]
-    assert b["set_by"] == rule and b["bound"] > 3 * clean
+    assert b["set_by"] == rule and b["bound"] > raised * clean
     got = {}
     for factor, key in ((1.5, seed * 1000), (0.5, seed * 1000 + 500)):
         doc = diagnose(record(seed, key, 3, factor * b["bound"], more=extra)).doc

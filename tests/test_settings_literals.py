@@ -141,7 +141,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
-    ("kinds/multihead/_multihead_terms.py", 3): PHYSICS,
+    ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
@@ -191,6 +191,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover_lines.py", "STEP_EXACT_ROWS"): BOUND
     + " (rows up to which a step is located with the catalog model projected out)",
     ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
+    ("engine/_spill.py", "TRIAL_STEPS"): BOUND
+    + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
     ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
     + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
@@ -235,7 +237,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
     ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
     ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",
-    ("kinds/multihead/_multihead_terms.py", "RUNOUT_ORDERS"): PHYSICS,
+    ("kinds/multihead/_runout.py", "RUNOUT_ORDERS"): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
     ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,

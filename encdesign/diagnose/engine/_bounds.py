@@ -43,14 +43,15 @@ named at any size (``bound`` null, with the note). Where structure is left unexp
 final residual's findings are what a later round's candidate meets, and two more rules then
 ask for a size (``set_by`` names them):
 
-4. **its share of what is located** (``located_share_min``): the excess chi-square the
-   effect adds to the views (noise-free, the views run on ``a P v``: its findings' power)
-   must reach ``s / (1 - s)`` of the excess the final residual's findings carry, so that
-   the candidate explains the share ``s`` of everything located;
+4. **its share of what is located** (``located_share_min``): at each place its own error is
+   located (noise-free, the views run on ``a P v``), weighted by its power there, the share
+   of the structure there that is its own (its power over its power and the final findings'
+   excess at that place) must reach ``s``: structure at other places does not count (stage
+   4 measures the share where the candidate's own error shows, issue 44 B);
 5. **what its signature views keep** (``signature_left_max``): in its own signature views,
-   the located structure the candidate would leave (the final findings there, less integer
-   orders another effect holds, which the rule sets aside) must stay under the share ``m``
-   of the total: its own excess reaches ``(1 / m - 1)`` of that structure.
+   weighted alike, the share of the structure at its places that is the final findings'
+   must stay under ``m`` (a place where they keep ``untouched_share`` or more is another
+   effect's, which the rule sets aside).
 
 6. **the held-out gain beside that structure** (``heldout_min``): unexplained structure can
    cost a candidate its held-out gain (a fold that misses part of the structure leaves the
@@ -81,7 +82,7 @@ from scipy import optimize, stats
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._protocol import Prepared
-from ._select import _has_run_constants, _order_key
+from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
 
@@ -388,24 +389,43 @@ def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refe
     return {**worst, "where": probe.where, "at": probe.at}
 
 
-def _located_power(prep, resid, views, scan, a: float, sig: set[str]) -> tuple[float, float]:
-    """The excess chi-square the views locate in ``a`` times the noise-free unit residual
-    ``resid`` (its findings' power: no noise, no degrees of freedom to subtract): in every
-    view, and in the signature views ``sig`` alone."""
-    found = locate(prep, resid * a, views, scan)
-    return sum(f.power for f in found), sum(f.power for f in found if f.view in sig)
+def _own_shares(prep, resid, views, scan, a: float, sig: set[str], ref) -> tuple[float, float]:
+    """``(share, left)`` of rules 4 and 5 for the effect at size ``a`` (``resid`` its
+    noise-free unit residual) beside the final findings ``ref``: at each place its own error
+    is located, weighted by its power there, the share of the structure there that is its
+    own (what its fit clears), and in its signature views the share it leaves (a place where
+    the final findings keep ``untouched_share`` or more is another effect's and set aside):
+    the rules of stage 4 (``_select.own_share``) on a record that holds it and that structure."""
+    s = prep.settings
+    num = den = num_s = den_s = 0.0
+    for g in locate(prep, resid * a, views, scan):
+        w = float(g.power)
+        if w <= 0:
+            continue
+        other = sum(max(float(f.power) - float(f.dof), 0.0) for f in ref if _reaches(f, (g,)))
+        num += w * w / (w + other)
+        den += w
+        if g.view in sig and other < s.untouched_share * (w + other):
+            num_s += w * other / (w + other)
+            den_s += w
+    return (num / den if den > 0 else 0.0), (num_s / den_s if den_s > 0 else 0.0)
 
 
-def _share_size(prep, resid, views, scan, a0: float, sig: set[str], need: tuple):
-    """``(size, i)``: the smallest size from ``a0`` up at which the effect's located excess
-    reaches ``need`` (in every view, in its signature views; rules 4 and 5 of the module
-    doc), and the index of the rule that asked most at ``a0``: the power scales as the size
-    squared once located, so a few rescalings reach it; ``(None, i)`` when no view locates
-    it within :data:`VIEW_DOUBLINGS` doublings."""
+def _share_size(prep, resid, views, scan, a0: float, sig: set[str], ref):
+    """``(size, i)``: the smallest size from ``a0`` up at which the effect passes rules 4 and
+    5 of the module doc beside the final findings ``ref`` (:func:`_own_shares`), and the
+    index of the rule that asked most at ``a0``: its share grows with the size squared while
+    the structure beside it dominates, so a few rescalings reach it; ``(None, i)`` when no
+    view locates it within :data:`VIEW_DOUBLINGS` doublings."""
+    s = prep.settings
+    sh, sl = s.located_share_min, s.signature_left_max
     a, first = a0, None
     for _ in range(VIEW_DOUBLINGS):
-        got = _located_power(prep, resid, views, scan, a, sig)
-        ratios = [n / g if g > 0 else (math.inf if n > 0 else 0.0) for n, g in zip(need, got)]
+        share, left = _own_shares(prep, resid, views, scan, a, sig, ref)
+        ratios = [
+            sh / share if share > 0 else math.inf,
+            left / sl if sl > 0 else (math.inf if left > 0 else 0.0),
+        ]
         if first is None:
             first = int(np.argmax(ratios))
         worst = max(ratios)
@@ -484,13 +504,8 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             if a_view > a_crit:
                 a, rule = a_view, "view"
     # structure left unexplained: the share rules against what the final residual carries
-    sh, sl = s.located_share_min, s.signature_left_max
-    share_need = (
-        sh / (1.0 - sh) * ref.excess(),
-        (1.0 / sl - 1.0) * ref.excess(sig or None) if sl > 0 else 0.0,
-    )
-    if max(share_need) > 0:
-        a_share, i = _share_size(bench.prep, resid, views, scan, a, sig, share_need)
+    if ref.excess() > 0:
+        a_share, i = _share_size(bench.prep, resid, views, scan, a, sig, ref.findings)
         if a_share is None:
             return {**entry, "n_params": int(k), "note": "no view locates it at any size tried"}
         if a_share > a:

@@ -103,7 +103,12 @@ def stream_reduce(
         return None
     B, dt = int(info["block_rows"]), float(info["dt_s"])
     angles = [*heads, "theta_ref"] if "theta_ref" in names else heads
-    parts: dict[str, list[np.ndarray]] = {h: [] for h in names}
+    # the reduced columns allocated once (at most N // B blocks; pages never written are
+    # never resident): pieces kept per group would interleave with each group's temporaries
+    # and fragment the heap, so the peak grew with the rows (2.2 GB at 10^8 rows)
+    n_max = int(pf.metadata.num_rows) // B
+    out: dict[str, np.ndarray] = {}
+    at = 0
     carry: dict[str, np.ndarray] | None = None
     left = stretches = 0
     for g in range(G):
@@ -124,13 +129,17 @@ def stream_reduce(
         left += int(np.sum(ends - idx - full * B))
         sel = [np.arange(i, i + k * B) for i, k in zip(idx, full) if k]
         rows = np.concatenate(sel) if sel else np.zeros(0, np.int64)
+        k = rows.size // B
         for h in names:
             v = cols[h][rows]
-            parts[h].append(v[::B] if h == "run" else v.reshape(-1, B).mean(1))
+            if h not in out:
+                out[h] = np.empty(n_max, v.dtype)
+            out[h][at : at + k] = v[::B] if h == "run" else v.reshape(-1, B).mean(1)
+        at += k
         del cols
-    out = {h: np.concatenate(parts.pop(h)) for h in names}
+    out = {h: out[h][:at] if h in out else np.zeros(0) for h in names}
     info.update(
-        reduced_rows=int(len(out["t"])),
+        reduced_rows=int(at),
         rows_left_out=left,
         stretches=stretches,
         streamed_row_groups=G,

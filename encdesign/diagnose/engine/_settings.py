@@ -62,13 +62,17 @@ class FinderSettings(eqx.Module):
 
     located_share_min: float = eqx.field(default=0.2, static=True)
     """Rule ``located_share_min``: a candidate must explain at least this share of the
-    excess chi-square every view located, so that a larger structure is not pinned on it
-    through a small part of it. From the first engine (96be348)."""
+    excess chi-square located where its own fitted error shows (views, integer orders, heads,
+    runs), each place weighted by that error's own excess there, and keep this share of its
+    gain once the larger integer orders it leaves are fitted (``_spill``): a larger structure
+    is not pinned on it through a small part of it. 96be348 (of all located structure until
+    issue 44 B; weighted since session 15: twin ODrive records got opposite verdicts)."""
 
     signature_left_max: float = eqx.field(default=0.5, static=True)
     """Rule ``signature_left_max``: a candidate may leave at most this share of what its own
-    signature views located (a drift denting a step is refused). 362be7c (half the
-    structure its signature views located; concealed benches)."""
+    signature views located where its fitted error shows, weighted as ``located_share_min``
+    (a drift denting a step is refused). 362be7c (concealed benches); weighted since session
+    15 (issue 44 B: another effect's line counted against cogging on one ODrive twin)."""
 
     untouched_share: float = eqx.field(default=0.8, static=True)
     """An integer order a candidate leaves at this share or more of its located power is
@@ -543,12 +547,6 @@ class FinderSettings(eqx.Module):
     """multihead (no reference): a disk order whose head pattern ``exp(-i m alpha)`` varies
     over the heads by at most this mean square is reported unidentifiable (the heads' mean
     takes it). Was an inline 0.05 in ``_multihead.multihead_base``; set by hand in 96be348."""
-
-    runout_order_share: float = eqx.field(default=0.1, static=True)
-    """multihead: ``beam_tilt_axial`` is fitted at the runout orders (1-3) located with at
-    least this share of the strongest one's power (a strong order leaks a little into its
-    neighbours over a few turns). Was an inline 0.1 in ``_multihead_terms._bt_start``;
-    45c7e65."""
 
     wobble_revolutions_min: float = eqx.field(default=2.0, static=True)
     """multihead: ``bearing_wobble`` is testable (rule ``applies``) with at least this many

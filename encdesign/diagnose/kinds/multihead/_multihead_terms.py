@@ -13,9 +13,7 @@ from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
-
-RUNOUT_ORDERS = (1.0, 2.0, 3.0)
-"""Runout orders of the axial beam tilt."""
+from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
 
 # ----------------------------------------------------------------------------- candidates
 
@@ -104,21 +102,23 @@ def _bt_make(project: bool) -> Candidate:
 
 
 def _bt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
-    """The runout orders (1-3) the rotation-locked orders view located (else the spectrum's
-    lines within ``FinderSettings.integer_order_tol`` of an integer order), with at least
-    ``runout_order_share`` of the strongest one's power (a strong order leaks a little into
-    its neighbours over a few turns); all three when none is."""
+    """The runout orders (:data:`RUNOUT_ORDERS`) the record supports
+    (:func:`_bt_orders_supported`, all of them tested together); when it supports none, those
+    the rotation-locked orders view located (else the spectrum's lines within
+    ``FinderSettings.integer_order_tol`` of an integer order, else all of them)."""
 
     def located(views, tol):
-        pw = np.zeros(3)
+        on = np.zeros(len(RUNOUT_ORDERS), bool)
         for f in findings:
             if f.view in views and (f.view == "orders" or f.detail.get("integer_order")):
                 for o in f.where["orders"]:
-                    if np.isfinite(o) and round(o) in (1, 2, 3) and abs(o - round(o)) < tol:
-                        j = int(round(o)) - 1
-                        pw[j] = max(pw[j], f.power - f.dof)
-        return (pw > 0) & (pw >= ctx.settings.runout_order_share * pw.max())
+                    if np.isfinite(o) and abs(o - round(o)) < tol and round(o) in RUNOUT_ORDERS:
+                        on[RUNOUT_ORDERS.index(round(o))] = True
+        return on
 
+    sup = _bt_orders_supported(ctx, resid, np.ones(len(RUNOUT_ORDERS), bool))
+    if sup.any():
+        return [{"orders_on": sup.astype(float)}]
     on = located(("orders",), 0.5)  # the orders view: nearest integer
     if not on.any():
         on = located(("spectrum",), ctx.settings.integer_order_tol)
@@ -144,9 +144,13 @@ def _bt_derived(ctx: Context, v: dict, se: dict) -> dict:
             "(what the base model's disk error cannot take)",
         },
         "orders_fitted": {
-            "value": [int(m) for m, o in zip(RUNOUT_ORDERS, on) if o],
+            "value": _bt_orders_significant(ctx, amp, on),
             "se": None,
             "unit": "1",
+            "note": "the runout orders fitted whose head-specific part is significant against "
+            "the noise (chi-square over the heads at FinderSettings.alpha, Bonferroni over the "
+            "orders fitted); an order the residual showed only through the base model's "
+            "reaction to the others is fitted at about zero and not listed",
         },
     }
     if ctx.radius_m:
@@ -272,14 +276,6 @@ def _one_speed(ctx) -> float | None:
     if w.size and np.ptp(w) <= ctx.settings.one_speed_spread * np.max(w):
         return float(np.median(w))
     return None
-
-
-def _gain(rw: np.ndarray, X: np.ndarray) -> float:
-    """Whitened chi-square that regressors ``X`` (n, q) take out of ``rw`` (n, C)."""
-    if X.shape[0] <= X.shape[1]:
-        return 0.0
-    Q, _ = np.linalg.qr(X)
-    return float(np.sum((Q.T @ rw) ** 2))
 
 
 def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
