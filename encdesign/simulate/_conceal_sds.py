@@ -83,13 +83,15 @@ def sds_bench_design(
     coil_torque: float = 0.0,
     n_moving: int = 3,
     n_fixed: int = 2,
+    coil_max_order: int = 5,
 ):
-    """The bench's instrument (see module doc); ``coil_torque`` adds coil-mismatch ripple;
-    ``n_fixed`` fixed and ``n_moving`` moving sensors, each set equally spaced."""
+    """The bench's instrument (see module doc); ``coil_torque`` adds coil-mismatch ripple at
+    orders ``1 … coil_max_order``; ``n_fixed`` fixed and ``n_moving`` moving sensors, each set
+    equally spaced."""
     torque_c = {6: 0.01, 12: 0.005, 18: 0.0033, 36: 0.02}
     torque_s = {6: 0.004, 12: -0.002, 18: 0.001, 36: 0.005}
     if coil_torque:
-        for n in range(1, 6):
+        for n in range(1, coil_max_order + 1):
             torque_c[n] = coil_torque / n
             torque_s[n] = 0.5 * coil_torque / n
     motor = Motor(
@@ -120,6 +122,7 @@ def write_concealed_sds(
     n_fixed: int = 2,
     clock_factor: float | None = None,
     amplitude_noise: float | None = None,
+    coil_max_order: int = 5,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -143,6 +146,8 @@ def write_concealed_sds(
         amplitude_noise: the effect's amplitude in multiples of the per-pair reading noise
             (about 9 nrad), in place of the concealment's (4, 6 or 40); e.g. for
             ``axis_tilt`` the tilt is ``2 sqrt(amplitude_noise × noise)`` rad.
+        coil_max_order: ``coil_mismatch`` only: the torque ripple's highest order (1-5; 1:
+            order 1 alone, the effect a detection bound of order 1 is about).
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -167,7 +172,9 @@ def write_concealed_sds(
         raise input_error("n_moving", f"got {n_moving}", ">= 2")
     if n_fixed < 1:
         raise input_error("n_fixed", f"got {n_fixed}", ">= 1")
-    design = sds_bench_design(kd, marks_per_rev, coil, n_moving, n_fixed)
+    if not 1 <= coil_max_order <= 5:
+        raise input_error("coil_max_order", f"got {coil_max_order!r}", "1 to 5")
+    design = sds_bench_design(kd, marks_per_rev, coil, n_moving, n_fixed, coil_max_order)
     # platform positions stepped by the golden angle (about 137.5°, jittered by ±2°): every
     # subset of runs (e.g. the held-out folds) covers the circle without aliasing the
     # motor's orders (multiples of 6) onto a constant, as an equally spaced grid would

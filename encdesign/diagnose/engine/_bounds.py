@@ -455,6 +455,8 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
     if got is None or got[0] <= 0:
         return {**entry, "note": "the effect vanishes on the kept rows"}
     lam_base, k, resid, own = got
+    if probe.seen_of is not None:
+        probe = dataclasses.replace(probe, seen=probe.seen_of(resid[prep.keep], lam_base))
     if k == 0 or lam_base <= 1e-12 * PROBE_NORM**2:
         return {**entry, "note": "the final model takes all of it (not identifiable here)"}
     N = max(prep.n_values, 2.0)

@@ -175,6 +175,9 @@ class Probe:
             effect whose noncentrality at the record's noise is ``lam``, where the kind's
             noise estimate takes part of it (a level estimated from few values, which an
             effect below its own step test inflates: the sds run means); ``None``: all of it.
+        seen_of: instead of ``seen``, ``seen_of(resid, lam_unit) -> seen``: built by the
+            bound from the model's residual of the unit effect on the kept rows (n, C; what the
+            kind's noise stage would see of it) and that residual's noncentrality.
         size: the effect's size (in ``unit``) at ``values`` (default 1). Where the size is
             not a linear parameter (an axis tilt's ``beta^2 / 4``), ``values`` hold the
             nonlinear ones where the effect is still linear in its size (a small tilt) and
@@ -189,6 +192,7 @@ class Probe:
     at: str = ""
     worst_of: tuple[Probe, ...] = ()
     seen: Callable[[float], float] | None = None
+    seen_of: Callable[[np.ndarray, float], Callable[[float], float] | None] | None = None
     size: float = 1.0
 
 

@@ -116,12 +116,15 @@ class SDSNoiseInfo:
         drift_vs_orders: a drift in time against the best common order, or ``None``.
         run_change_power: per moving sensor, the best step and single-run outlier of its
             whitened base run means (:func:`_step_or_outlier`).
+        base_resid: the base residual over the kept rows the levels were estimated from,
+            for the probes' re-estimates (:func:`levels_of`); ``None`` before the stage ran.
     """
 
     levels: dict = dataclasses.field(default_factory=dict)
     common_order_power: tuple[float, ...] = ()
     drift_vs_orders: dict | None = None
     run_change_power: tuple[tuple, ...] = ()
+    base_resid: np.ndarray | None = dataclasses.field(default=None, compare=False, repr=False)
 
 
 def noise_info(ctx: Context) -> SDSNoiseInfo:
@@ -306,6 +309,32 @@ def _level_sigma(
     return out
 
 
+def levels_of(ctx: Context):
+    """``levels(resid) -> sigma (C,)``: the noise stage's own estimate (:func:`_level_sigma`,
+    same saturating columns and settings) on another residual of the kept rows (``None``
+    before the stage ran): what a probe's effect added to the base residual makes of it."""
+    base = noise_info(ctx).base_resid
+    if base is None:
+        return None
+    X, _ = _saturating_columns(
+        ctx.rows,
+        ctx.consts,
+        base_orders(ctx.meta, ctx.consts, ctx.max_order)[0],
+        ctx.settings.sds_saturate_fraction,
+    )
+    M = int(np.asarray(ctx.consts["psi_m"]).size)
+    K = base.shape[1] // M
+    proj = float(ctx.consts["proj"]) > 0
+    s = ctx.settings
+
+    def levels(resid: np.ndarray) -> np.ndarray:
+        return _level_sigma(
+            resid, K, X, proj, test_p=s.sds_sigma_test_p, level_alpha=s.sds_level_alpha
+        )
+
+    return levels
+
+
 def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     """Noise hook: the two levels of :func:`_level_sigma` on the base residual, with what
     the candidates' rules need (:class:`SDSNoiseInfo`: the base residual's common-order
@@ -334,6 +363,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         common_order_power=tuple(float(v) for v in pw),
         drift_vs_orders=_drift_vs_orders(prep, rwm, pw),
         run_change_power=tuple(_step_or_outlier(rwm[:, m]) for m in range(M)),
+        base_resid=np.asarray(resid[prep.keep], float),
     )
     return NoiseEstimate(sig, found)
 

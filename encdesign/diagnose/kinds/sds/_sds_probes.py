@@ -4,22 +4,20 @@ effect with its nonlinear parameters held at a stated value (``Probe.at``), atta
 catalog candidates of :mod:`._sds_terms` that offer none (``engine._bounds`` computes the
 bounds; the delay step's and the drift's probes live with their terms).
 
-These effects are constant over a run's revolutions or nearly so (a function of the platform
-angle ``phi + psi_m``): their run means are what the run-mean noise level is estimated from,
-so each probe says how much of it that estimate takes (``_run_mean_seen``, of the effect's
-own run means)."""
+These effects reach the values the noise levels are estimated from (their run means, and the
+wobble's revolution contrasts), so each probe says how much of the effect those estimates
+take by re-running them with the effect added (``_seen``)."""
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
-import jax.numpy as jnp
 import numpy as np
 
 from ...engine._candidates import Candidate, Context, Probe
-from ._sds_noise import BEAM_ORDERS, _sensor_helmert
-from ._sds_terms import _jx, _run_mean_seen
+from ._sds_noise import BEAM_ORDERS, levels_of, noise_info
 
 TILT_PROBE_RAD = 2e-3
 """The tilt the axis tilt's probe is evaluated at (rad): its error ``T`` is ``beta^2 / 4``
@@ -36,45 +34,42 @@ ratios (0.35-0.45), where the window's ``sinc`` attenuates it most (probing both
 upper one was the larger bound; one probe halves the matched view's cost)."""
 
 
-def _contrast_parts(v: np.ndarray, M: int) -> list[tuple[float, int]]:
-    """``(power, values)`` of the whitened revolution contrasts ``v[:, M:]`` in each part
-    the contrast level is estimated from (``_level_sigma``: common to the moving sensors,
-    and their differences)."""
-    R, C = v.shape
-    if C <= M:
-        return []
-    z = v[:, M:].reshape(R, C // M - 1, M) @ _sensor_helmert(M)
-    parts = [z[..., :1]] + ([z[..., 1:]] if M > 1 else [])
-    return [(float(np.sum(x * x)), int(x.size)) for x in parts]
+def _seen_of(ctx: Context):
+    """``seen_of(e, lam_unit) -> seen(lam)`` (:class:`Probe`) of an effect whose model residual
+    is ``e`` (n, C) on the kept rows: the effect inflates the kind's two noise levels (run
+    means, revolution contrasts), so at each trial ``lam`` the noise stage's own estimate
+    (``levels_of``: the saturated fit, its step and outlier tests, the robust contrast
+    scales, the widening for its dof) is re-run on the base residual plus ``e`` at the size
+    giving ``lam``; the tests see each channel's share of ``lam`` at the squared ratio of the
+    base levels to the inflated ones. No first-order variance approximation: an effect
+    several times the level widens it as much as the estimator does."""
+    levels = levels_of(ctx)
+    base = noise_info(ctx).base_resid
+    noise = np.asarray(ctx.noise, float)
 
+    def seen_of(e: np.ndarray, lam_unit: float):
+        e = np.asarray(e, float)
+        share = np.sum((e / noise[None, :]) ** 2, 0)
+        total = float(share.sum())
+        if levels is None or base is None or base.shape != e.shape or not total > 0:
+            return None
+        share = share / total
+        s0 = levels(base)
 
-def _seen(ctx: Context, cand: Candidate, values: dict):
-    """``seen(lam)`` of the effect at ``values``, whose two noise levels it inflates: its
-    run means (a share ``s`` of its whitened power) as ``_run_mean_seen`` says (a smooth
-    pattern, not caught by the level's step test); its revolution contrasts through their
-    level, a robust scale of ``n`` values per part (common, differences; the larger is
-    used), which an effect carrying ``lam_p`` there widens by ``1 + lam_p / n`` in variance
-    (the tests then see ``lam_c / max_p(1 + lam_p / n_p)`` of them)."""
-    M = int(ctx.consts["psi_m"].size)
-    p = {k: jnp.asarray(v, float) for k, v in values.items()}
-    v = np.asarray(cand.fn(p, _jx(ctx))) / np.asarray(ctx.noise, float)[None, :]
-    total = float(np.sum(v * v))
-    if not total > 0:
-        return None
-    inner = _run_mean_seen(ctx, v[:, :M], caught=False)
-    s = float(np.sum(v[:, :M] ** 2)) / total
-    parts = [(pw / total, n) for pw, n in _contrast_parts(v, M) if n > 0]
+        @functools.lru_cache(maxsize=4096)
+        def seen(lam: float) -> float:
+            if lam <= 0:
+                return 0.0
+            s1 = levels(base + math.sqrt(lam / total) * e)
+            return float(lam * np.sum(share * (s0 / s1) ** 2))
 
-    def seen(lam: float) -> float:
-        widen = max([1.0] + [1.0 + f * lam / n for f, n in parts])
-        run_means = s * lam if inner is None else inner(s * lam) if s > 0 else 0.0
-        return (1.0 - s) * lam / widen + run_means
+        return seen
 
-    return seen
+    return seen_of
 
 
 def _probe(ctx: Context, cand: Candidate, values: dict, parameter: str, unit: str, **kw):
-    return Probe(values, parameter, unit, seen=_seen(ctx, cand, values), **kw)
+    return Probe(values, parameter, unit, seen_of=_seen_of(ctx), **kw)
 
 
 def _worst(probes: list[Probe]) -> list[Probe]:
