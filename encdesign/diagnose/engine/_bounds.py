@@ -74,7 +74,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy import optimize, stats
@@ -312,14 +312,10 @@ class _Bench:
         return float(r0.heldout_chi2 - r1.heldout_chi2)
 
 
-def _heldout_size(bench: _Bench, cand, probe: Probe, a0: float, need: float) -> float | None:
-    """The smallest size from ``a0`` up whose held-out gain on the record itself
-    (:meth:`_Bench.heldout_gain`) reaches ``need`` (doublings, then bisections as the views'
-    sizes); ``None`` when none within :data:`VIEW_DOUBLINGS` doublings does."""
-
-    def ok(a: float) -> bool:
-        return bench.heldout_gain(cand, probe, a) >= need
-
+def _first_size(ok: Callable[[float], bool], a0: float) -> float | None:
+    """The smallest size from ``a0`` up where ``ok`` holds (assumed monotone in the size):
+    ``a0`` when it holds there, else doublings up to :data:`VIEW_DOUBLINGS`, then
+    :data:`VIEW_BISECTIONS` geometric bisections; ``None`` when no doubling reaches it."""
     if ok(a0):
         return a0
     lo, hi = a0, 2.0 * a0
@@ -335,27 +331,18 @@ def _heldout_size(bench: _Bench, cand, probe: Probe, a0: float, need: float) -> 
     return hi
 
 
+def _heldout_size(bench: _Bench, cand, probe: Probe, a0: float, need: float) -> float | None:
+    """The smallest size from ``a0`` up whose held-out gain on the record itself
+    (:meth:`_Bench.heldout_gain`) reaches ``need`` (:func:`_first_size`)."""
+    return _first_size(lambda a: bench.heldout_gain(cand, probe, a) >= need, a0)
+
+
 def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
     """The smallest size (multiple of the unit residual ``resid``) at which ``views``
-    locate something in a view of ``signature``, from ``a0`` up (``a0`` when they do there
-    already); ``None`` when none does within :data:`VIEW_DOUBLINGS` doublings."""
-
-    def fires(a: float) -> bool:
-        return any(f.view in signature for f in locate(prep, resid * a, views, scan))
-
-    if fires(a0):
-        return a0
-    lo, hi = a0, 2.0 * a0
-    for _ in range(VIEW_DOUBLINGS):
-        if fires(hi):
-            break
-        lo, hi = hi, 2.0 * hi
-    else:
-        return None
-    for _ in range(VIEW_BISECTIONS):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (lo, mid) if fires(mid) else (mid, hi)
-    return hi
+    locate something in a view of ``signature``, from ``a0`` up (:func:`_first_size`)."""
+    return _first_size(
+        lambda a: any(f.view in signature for f in locate(prep, resid * a, views, scan)), a0
+    )
 
 
 def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
