@@ -54,13 +54,14 @@ def _seen_of(ctx: Context):
         if levels is None or base is None or base.shape != e.shape or not total > 0:
             return None
         share = share / total
-        s0 = levels(base)
+        estimate, resid0 = levels, base  # narrowed: not None past the check above
+        s0 = estimate(resid0)
 
         @functools.lru_cache(maxsize=4096)
         def seen(lam: float) -> float:
             if lam <= 0:
                 return 0.0
-            s1 = levels(base + math.sqrt(lam / total) * e)
+            s1 = estimate(resid0 + math.sqrt(lam / total) * e)
             return float(lam * np.sum(share * (s0 / s1) ** 2))
 
         return seen
