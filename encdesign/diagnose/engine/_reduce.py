@@ -125,24 +125,26 @@ def stretch_starts(cols: dict, angles: list[str], shaft: np.ndarray, dt: float) 
     return start
 
 
+def _slices(rec: Recording):
+    """``(lo, b, cols)`` per slice of :data:`PASS_ROWS` rows, each starting one row early
+    (its first step joins it to the slice before); ``cols`` are views of the columns."""
+    n = rec.n_rows
+    for a in range(0, n, PASS_ROWS):
+        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
+        yield lo, b, {c: rec.columns[c][lo:b] for c in rec.columns}
+
+
 def _boundaries(rec: Recording) -> tuple[np.ndarray, float, float]:
     """``(starts, dt, rate)``: a flag per row that starts a new stretch
     (:func:`stretch_starts`), the median sampling interval (s) and the fastest shaft rate
     (rev/s, :data:`SPEED_QUANTILE`), in slices of :data:`PASS_ROWS` rows."""
-    n = rec.n_rows
     angles = _angle_columns(rec)
-    stats = []
-    for a in range(0, n, PASS_ROWS):
-        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
-        part = {c: rec.columns[c][lo:b] for c in rec.columns}
-        stats.append(step_stats(part["t"], shaft_of(part, rec.head_columns)))
+    stats = [step_stats(part["t"], shaft_of(part, rec.head_columns)) for *_, part in _slices(rec)]
     dt = float(np.nanmedian([d for d, _ in stats]))
     rates = [r for _, r in stats if np.isfinite(r)]
     rate = float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0
-    start = np.zeros(n, bool)
-    for a in range(0, n, PASS_ROWS):
-        lo, b = max(a - 1, 0), min(n, a + PASS_ROWS)
-        part = {c: rec.columns[c][lo:b] for c in rec.columns}
+    start = np.zeros(rec.n_rows, bool)
+    for lo, b, part in _slices(rec):
         st = stretch_starts(part, angles, shaft_of(part, rec.head_columns), dt)
         start[lo + 1 : b] = st[1:]
     start[0] = True
