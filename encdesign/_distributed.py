@@ -447,6 +447,23 @@ def allgather_rows(rows: np.ndarray, n_total: int) -> np.ndarray:
     return got.reshape(-1, *rows.shape[1:])[:n_total]
 
 
+def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
+    """Concatenate every process's ``rows [m_p, ...]`` in process order on every process,
+    ``counts[p]`` being ``m_p`` (known to all, e.g. from :func:`allgather_objects`); the
+    dtype is kept. One collective, padded to the largest share."""
+    rows = np.asarray(rows)
+    if jax.process_count() == 1:
+        return rows
+    from jax.experimental import multihost_utils
+
+    size = max(int(max(counts)), 1)
+    pad = np.zeros((size, *rows.shape[1:]), rows.dtype)
+    pad[: rows.shape[0]] = rows
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    del pad
+    return np.concatenate([got[p, : int(c)] for p, c in enumerate(counts)])
+
+
 def allgather_objects(items: Sequence[Any]) -> list[Any]:
     """Every process's list of JSON-able ``items`` (its share of tasks, e.g. benchmark rows),
     concatenated in process order on every process (two collectives: lengths, then bytes).
