@@ -33,10 +33,12 @@ REDUCE = (
     "import encdesign.diagnose._dispatch as d, encdesign.diagnose.engine._settings as s; "
     "d.DEFAULT_SETTINGS = s.FinderSettings(reduce_min_rows=1000, "
     "reduce_attenuation_max=0.02, reduce_line_hz=10.0); "
+    "import encdesign._distributed as g; g.GATHER_ROWS = 700; "
 )
 """Launcher setup that lowers the reduction's threshold and widens its bound, so that a
 12,000-row record at 1 kHz (1,000-2,500 rows per revolution) is reduced to blocks of a few
-rows as it is read (``open_recording``)."""
+rows as it is read (``open_recording``), and gathers the reduced rows 700 at a time (several
+collectives per column, as at 10^8 rows)."""
 
 TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
