@@ -42,7 +42,8 @@
    reduction of its share of the row groups, ``open_recording``); process 0 adds the
    engine's ``timings_s``/``timings_cpu_s``, the verdict and the named effects. Sizes above
    ``--reduce-only-above`` rows are reduced only (``open_recording``, no diagnosis);
-   ``--case-timeout`` stops a case (``timed_out``) and goes on; ``--reduce-min-rows`` sets
+   (``--reduce-only-effects``: their effects); ``--case-timeout`` stops a case
+   (``timed_out``) and goes on; ``--reduce-min-rows`` sets
    ``FinderSettings.reduce_min_rows`` in the processes. All cases go into one JSON
    (``long_processes``).
 
@@ -571,7 +572,10 @@ def _long_processes(args: argparse.Namespace) -> list[dict]:
     for n in args.long_rows:
         n = int(n)
         mode = "reduce" if n > args.reduce_only_above else "diagnose"
-        for eff in args.long_effects:
+        effects = args.long_effects
+        if mode == "reduce" and args.reduce_only_effects is not None:
+            effects = args.reduce_only_effects
+        for eff in effects:
             with tempfile.TemporaryDirectory(prefix="bench-long-") as tmp:
                 t0 = time.perf_counter()
                 effect = False if eff == "clean" else eff
@@ -663,6 +667,13 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         default=float("inf"),
         help="with --long-processes: sizes above this many rows are reduced only",
+    )
+    ap.add_argument(
+        "--reduce-only-effects",
+        nargs="*",
+        default=None,
+        help="with --reduce-only-above: the effects of the sizes reduced only (default: "
+        "--long-effects; the reduction's cost does not depend on the effect)",
     )
     ap.add_argument("--case-timeout", type=float, default=600.0)
     ap.add_argument("--proc-child", nargs=7, default=None, help=argparse.SUPPRESS)
