@@ -44,8 +44,9 @@
    ``--reduce-only-above`` rows are reduced only (``open_recording``, no diagnosis);
    (``--reduce-only-effects``: their effects); ``--case-timeout`` stops a case
    (``timed_out``) and goes on; ``--reduce-min-rows`` sets
-   ``FinderSettings.reduce_min_rows`` in the processes. All cases go into one JSON
-   (``long_processes``).
+   ``FinderSettings.reduce_min_rows`` in the processes. Each diagnosis is compared with the
+   first process count's (``max_relative_difference`` of every number but the timings, and
+   the ``differing`` strings or counts). All cases go into one JSON (``long_processes``).
 
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
         [--long-rows 1e6 1e7] [--long-table parquet]
@@ -559,9 +560,36 @@ def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s:
                 verdict=doc["verdict"],
                 named=[e["name"] for e in doc.get("effects", [])],
                 reduced={k: v for k, v in red.items() if k not in ("bound", "not_testable")},
+                doc=doc,
             )
     out["load_avg_end"] = os.getloadavg()
     return out
+
+
+def _doc_difference(a, b, where: str = "") -> tuple[float, list[str]]:
+    """``(largest relative difference of the numbers, paths whose strings, booleans,
+    integers, keys or lengths differ)`` between two diagnosis documents, timings (keys
+    ``timings_s``, ``timings_cpu_s``, ``*time_s``) and the report's text left out."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        if set(a) != set(b):
+            return 0.0, [f"{where}: keys"]
+        rel, bad = 0.0, []
+        for k in a:
+            if k in ("timings_s", "timings_cpu_s", "report") or k.endswith("time_s"):
+                continue
+            r, d = _doc_difference(a[k], b[k], f"{where}.{k}")
+            rel, bad = max(rel, r), bad + d
+        return rel, bad
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return 0.0, [f"{where}: lengths"]
+        got = [_doc_difference(x, y, f"{where}[{i}]") for i, (x, y) in enumerate(zip(a, b))]
+        return max([r for r, _ in got], default=0.0), [d for _, ds in got for d in ds]
+    if isinstance(a, float) and isinstance(b, float):
+        if a == b or (a != a and b != b):
+            return 0.0, []
+        return abs(a - b) / max(abs(a), abs(b)), []
+    return 0.0, [] if a == b and type(a) is type(b) else [f"{where}: {a!r} vs {b!r}"]
 
 
 def _long_processes(args: argparse.Namespace) -> list[dict]:
@@ -582,12 +610,21 @@ def _long_processes(args: argparse.Namespace) -> list[dict]:
                 path = _write_bench_parquet(Path(tmp), n, 4, effect, args.long_rate)
                 write_s = time.perf_counter() - t0
                 size = (Path(tmp) / "rec.parquet").stat().st_size
+                first = None
                 for P in args.long_processes:
                     r = dict(n_rows=n, n_heads=4, effect=eff, rate_hz=args.long_rate)
                     r.update(file_bytes=size, write_s=write_s)
                     r.update(
                         _split_case(path, mode, P, args.reduce_min_rows or 0, args.case_timeout)
                     )
+                    doc = r.pop("doc", None)
+                    if first is None:
+                        first = (P, doc)
+                    elif doc is not None and first[1] is not None:
+                        rel, bad = _doc_difference(first[1], doc)
+                        r["vs_processes"] = first[0]
+                        r["max_relative_difference"] = rel
+                        r["differing"] = bad[:20]
                     rows.append(r)
                     print(json.dumps(r), file=sys.stderr, flush=True)
     return rows

@@ -177,9 +177,10 @@ def _split_reduce(cols: dict, sizes: list[int], P: int, B: int, flags) -> tuple[
 
 
 def test_a_split_record_is_reduced_to_the_same_blocks_bit_for_bit():
-    """Row groups of any size (some shorter than a block) split over 1-5 processes give the
-    blocks of the whole record, bit for bit: a run change, a gap, a reversal and a jump over
-    half a turn sit at and next to the groups' and the processes' boundaries."""
+    """Row groups of any size (some shorter than a block; fewer groups than processes) split
+    over 1-5 processes give the blocks of the whole record, bit for bit: a run change, a
+    gap, a reversal and a jump over half a turn sit at and next to the groups' and the
+    processes' boundaries."""
     from encdesign.diagnose.engine._reduce import block_means, full_blocks, stretch_starts
 
     rng = np.random.default_rng(4700)
@@ -197,11 +198,14 @@ def test_a_split_record_is_reduced_to_the_same_blocks_bit_for_bit():
         full = full_blocks(st[: n // B * B], B)
         ref = {h: block_means(v[: n // B * B], B, full, h == "run") for h, v in cols.items()}
         assert int(st.sum()) == 3 + 1 + 2 + 1
+        splits = []
         for trial in range(4):
             cuts = np.sort(rng.choice(np.arange(1, n), size=12 + trial, replace=False))
             near = np.flatnonzero(st)[1:, None] + np.arange(-2, 2)[None, :]  # around each
             cuts = np.unique(np.concatenate([cuts, near[trial::4].ravel()]))
-            sizes = np.diff(np.concatenate([[0], cuts, [n]])).tolist()
+            splits.append(np.diff(np.concatenate([[0], cuts, [n]])).tolist())
+        splits += [[n], [1, 2, n - 3]]  # more processes than row groups: some have none
+        for trial, sizes in enumerate(splits):
             for P in (1, 2, 3, 5):
                 got, starts = _split_reduce(cols, sizes, P, B, flags)
                 assert starts == int(st.sum()), (B, trial, P)

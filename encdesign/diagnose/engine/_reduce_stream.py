@@ -22,7 +22,8 @@ first two rows, need the rows before the share: each process also keeps its shar
 and last ``B + 2`` rows, these edges are gathered (one small collective), and the process
 that holds a straddling block's last row computes it from the same rows in the same way as
 one process would. The reduced rows of all processes are then gathered in process order
-(one collective per column), so every process continues with the same reduced record, bit
+(column by column, :data:`~encdesign._distributed.GATHER_ROWS` rows per process at a time),
+so every process continues with the same reduced record, bit
 for bit the record one process reduces (the block means are computed by
 :func:`._reduce.block_means`, whose result for a block does not depend on its neighbours).
 A bad row group on any process stops every process with its message. Memory per process:
