@@ -20,10 +20,15 @@ the finder; discovery's model of the located line is scored against the truth:
 * ``detectable`` (every case): the truth's own model at the truth's line (whether the finder
   located it or not), fitted jointly with the **base** model on that record, takes more
   held-out chi-square (``gain_true_after_base_chi2``) than its multiple-testing threshold
-  (``threshold_true_chi2``: what a discovered term must take to enter). An undetectable case
-  is one where the record does not hold the effect at the finder's significance (e.g. a
-  2x SDS step on a few runs); ``frame_right_detectable_not_confounded`` scores the
-  detectable cases the catalog does not legitimately take, next to ``frame_right_all``.
+  (``threshold_true_chi2``: what a discovered term must take to enter: ``nameable``) and,
+  for an order line, than the chi-square the finder's ``orders`` view needs to locate it at
+  all (``threshold_locate_chi2``: its Bonferroni threshold over the orders x channels it
+  scans). The truth's own model is the best any view can do, so the mark errs towards
+  detectable. An undetectable case is one where the record does not hold the effect at
+  the finder's significance (e.g. a 2x SDS step on a few runs);
+  ``frame_right_detectable_not_confounded`` scores the detectable cases the catalog does
+  not legitimately take (``..._nameable_...``: with the naming threshold only), next to
+  ``frame_right_all``.
 
 Clean records (``--clean N`` per kind) count the records where discovery adds a term.
 Each kind runs the classes of ``--classes`` its bench can carry
@@ -47,6 +52,8 @@ import numpy as np
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine import _discover as D
 from encdesign.diagnose.engine import _engine
+from encdesign.diagnose.engine._views import chi2_threshold
+from encdesign.diagnose.kinds.sds._sds import sds_limit
 from encdesign.simulate._outside import CLASSES, KINDS, classes_for, outside_record
 
 SIZES = (2.0, 5.0, 20.0)
@@ -63,6 +70,7 @@ def _capture_document(kind, rec, prep, sel, *a, **kw):
         base_fitter=kw.get("fitter", a[-1] if len(a) >= 5 else None),
         base_terms=sel.base.terms,
         base_resid=sel.base_resid,
+        scan=a[3] if len(a) >= 4 else None,
     )
     return _DOCUMENT(kind, rec, prep, sel, *a, **kw)
 
@@ -161,6 +169,18 @@ def _gains(truth: dict, base: bool = False) -> tuple[float, float, float]:
     return got, best, thr
 
 
+def _locate_threshold(truth: dict, kind: str) -> float:
+    """The chi-square the finder's ``orders`` view needs to locate an order line on this
+    record (its Bonferroni threshold over the orders scanned x channels,
+    ``_views.view_orders``; an SDS record scans its run-mean channels' orders up to
+    ``sds_limit``); nan for a line in Hz (located by the spectrum view, not scored here)."""
+    prep, scan = _CAP.get("base_prep"), _CAP.get("scan")
+    if prep is None or scan is None or truth["line"][0] != "order":
+        return float("nan")
+    orders = min(scan, sds_limit(prep)) if kind == "sds" else scan
+    return chi2_threshold(prep.settings.alpha, 2, orders * prep.n_channels)
+
+
 def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
     rec, truth = outside_record(np.random.default_rng(seed), cls, size, kind, rows)
     _CAP.clear()
@@ -206,8 +226,11 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
     # line (located or not), takes more held-out chi-square than its multiple-testing
     # threshold: the record holds the effect at the finder's significance
     _, bg, bthr = _gains(truth, base=True)
+    lthr = _locate_threshold(truth, kind)
     out["gain_true_after_base_chi2"], out["threshold_true_chi2"] = bg, bthr
-    out["detectable"] = bool(np.isfinite(bg) and bg > bthr)
+    out["threshold_locate_chi2"] = lthr
+    out["nameable"] = bool(np.isfinite(bg) and bg > bthr)
+    out["detectable"] = out["nameable"] and not (np.isfinite(lthr) and bg <= lthr)
     # a static order of one sensor is its own error function: the base model takes it
     out["base"] = d.verdict == "consistent"
     if terms:
@@ -242,6 +265,7 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
     disc = [c for c in cases if not c["catalog"] and not c.get("base")]
     ident = [c for c in cases if not c.get("confounded")]
     fair = [c for c in ident if c.get("detectable")]
+    nameable = [c for c in ident if c.get("nameable", c.get("detectable"))]
     ratios = [c["gain_ratio"] for c in disc if c.get("gain_ratio") is not None]
     by = {}
     for key in ("class", "size", "kind"):
@@ -251,7 +275,9 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
         "frame_right_all": rate([c["frame_right"] for c in cases]),
         "frame_right_excluding_confounded": rate([c["frame_right"] for c in ident]),
         "frame_right_detectable_not_confounded": rate([c["frame_right"] for c in fair]),
+        "frame_right_nameable_not_confounded": rate([c["frame_right"] for c in nameable]),
         "undetectable": rate([not c.get("detectable") for c in cases]),
+        "not_nameable": rate([not c.get("nameable", c.get("detectable")) for c in cases]),
         "missed_detectable_not_confounded": [
             f"{c['kind']} {c['class']} {c['size']:g}x verdict={c['verdict']}"
             for c in fair
