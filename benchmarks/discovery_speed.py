@@ -12,7 +12,8 @@ every thread: the number to compare on a loaded machine) and wall seconds:
 * ``added_share_cpu``: ``discovery_cpu_s / (cpu_with_s - discovery_cpu_s)`` (the stage's
   share over the rest of the same run: no noise from a second run);
 * ``added_share_cpu_runs``: ``cpu_with_s / cpu_without_s - 1`` (the two runs compared;
-  noisier: the bounds stage and the views can differ by a few percent from run to run)::
+  biased low: the run without discovery comes first and carries the compilation for the
+  record's own sizes, so this can be negative; ``added_share_cpu`` is the number)::
 
     python benchmarks/discovery_speed.py torque_ripple,head_defect,direction_lag out.json
 """
