@@ -682,6 +682,12 @@ class FinderSettings(eqx.Module):
     physical one by fitting that small model error. Was ``_discover.MODEL_ERROR_PER_PARAM``;
     set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
 
+    discover_refit_share: float = eqx.field(default=0.01, static=True)
+    """Discovery: the catalog model is refitted jointly with the kept terms (and they are
+    selected again) only where its Jacobian spans at least this share of their fitted signal;
+    below it the linear joint fit of the sums is the joint fit. Set by hand (issue 41, s16):
+    refits that changed the model had shares 0.84-1, the others 1e-4-1e-3 (seeds 4105)."""
+
     discover_size_ratio_max: float = eqx.field(default=100.0, static=True)
     """Discovery: an exported candidate whose refit amplitude is more than this many times
     the discovered one (or less than its inverse) is refused (rule
