@@ -18,7 +18,13 @@ multihead runout effects ``beam_tilt_axial`` (head 1), ``bearing_wobble`` and
 ``eccentricity_shift`` (:func:`runout_error`, on ``vibration_record``'s geometries), and the
 sds ``axis_tilt``, ``bearing_wobble``, ``beam_tilt_axial`` and ``coil_mismatch``
 (``--effect sds_NAME``, :func:`sds_effect_trials`, small benches of
-``SDS_EFFECT_GEOMETRIES``).
+``SDS_EFFECT_GEOMETRIES``). ``--unlocked-clock``: each sds bench of ``--effect sds_NAME``
+runs its motor at a speed offset drawn from its key (``SDS_CLOCK``,
+``write_concealed_sds(speed_offset=)``): at the generator's default speed a revolution is
+exactly 10^7 clock ticks, so the clean record's clock rounding of the run means is a locked
+pattern, lower on some layouts than what the effect's record (its edges moved by a tick or
+more) gets. A real clock is not locked to the motor, but with it unlocked about 5 % of clean
+benches are not ``consistent`` (session 16; skipped here), so the default stays locked.
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -51,6 +57,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import tempfile
 import time
 from pathlib import Path
@@ -174,6 +181,41 @@ SDS_EFFECT_GEOMETRIES = [
 """Small sds benches for :func:`sds_effect_trials` (``beam_tilt_axial`` needs phi_ref)."""
 
 
+SDS_CLOCK = {"locked": True}
+"""``locked`` (the default): the generator's default motor speed, exactly 10^7 clock ticks a
+revolution; else (``--unlocked-clock``) each key's bench runs ``speed_offset``
+(:func:`_sds_speed_offset`) off it, so its clean record's clock rounding is at the level its
+effect records have (``write_concealed_sds``, ``speed_offset``)."""
+
+
+SDS_OWN_SHAPE = {"on": False}
+"""``--own-shape``: the sds effect's size in multiples of the bound of its own shape (the
+entry of ``each`` for the generated order 1 of ``beam_tilt_axial``, the probed azimuth
+nearest the generated one of ``axis_tilt``), not of the worst over shapes (``bound``)."""
+
+
+def _own_bound(effect: str, b: dict, azimuth_rad: float | None) -> float:
+    """The bound of the generated shape (:data:`SDS_OWN_SHAPE`) from ``b["each"]``."""
+    each = {e["label"]: e["bound"] for e in b.get("each", [])}
+    if effect == "beam_tilt_axial" and "order 1" in each:
+        return float(each["order 1"])
+    if effect == "axis_tilt" and azimuth_rad is not None and each:
+        deg = math.degrees(azimuth_rad) % 90.0
+
+        def dist(label: str) -> float:
+            d = abs(float(label.split()[1]) - deg)
+            return min(d, 90.0 - d)
+
+        return float(each[min(each, key=dist)])
+    return float(b["bound"])
+
+
+def _sds_speed_offset(key: int) -> float:
+    """The bench's motor speed offset, drawn from its key: +-(1e-5 … 1e-3)."""
+    rng = np.random.default_rng([key, 4242])
+    return float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
+
+
 def _sds_record(folder: Path, key: int, effect: str, amplitude_noise: float, geom: dict):
     return write_concealed_sds(
         folder / f"e{key}.toml",
@@ -181,6 +223,7 @@ def _sds_record(folder: Path, key: int, effect: str, amplitude_noise: float, geo
         effect=effect,
         amplitude_noise=max(amplitude_noise, 1e-9),
         coil_max_order=1,  # the coil bound's effect: order 1 alone (no orders 2-5)
+        speed_offset=0.0 if SDS_CLOCK["locked"] else _sds_speed_offset(key),
         **geom,
     )
 
@@ -231,17 +274,25 @@ def sds_effect_trials(
         note = bs[0].get("note") if bs else d0.get("detection_bounds_not_covered")
         return [dict(seed=seed, skipped=f"no bound: {note}")]
     b = bs[0]
-    make = _sds_maker(effect, seed, geom, folder)
+    make = _sds_maker(effect, seed, geom, folder, b)
     return _fresh_trials(effect, seed, n, factors, b, make, layout=str(geom))
 
 
-def _sds_maker(effect: str, seed: int, geom: dict, folder: Path):
+def _sds_maker(effect: str, seed: int, geom: dict, folder: Path, b: dict | None = None):
     """``make(key, i, size)``: the bench of ``key`` with ``effect`` at ``size`` as its bound
-    states it (:func:`sds_effect_trials`)."""
+    states it (:func:`sds_effect_trials`); with :data:`SDS_OWN_SHAPE`, ``size`` in units of
+    the worst bound ``b`` is put at as many of the generated shape's own."""
     noise = NOISE_RAD
     gains: dict[int, float] = {}
 
     def make(key: int, i: int, size: float):
+        if SDS_OWN_SHAPE["on"] and b is not None and b.get("each"):
+            az = None
+            if effect == "axis_tilt":
+                az = _sds_record(folder, key, effect, 1.0, geom)[1]["params"]["azimuth_rad"]
+            own = _own_bound(effect, b, az)
+            print(f"  key {key}: own-shape bound {own:.3g} (worst {b['bound']:.3g})", flush=True)
+            size *= own / b["bound"]
         amp = size / noise
         if effect == "bearing_wobble":
             rho = _sds_record(folder, key, effect, 1.0, geom)[1]["params"]["frequency_ratio"]
@@ -261,7 +312,6 @@ def sds_effect_same(
 ) -> list[dict]:
     """``same`` of :func:`sds_effect_trials`: ``n`` keys, each its own clean bench's bound
     and the same bench with the effect at each factor of it."""
-    make = _sds_maker(effect, seed, geom, folder)
     rows: list[dict] = []
     for i in range(n):
         key = seed * 1000 + i
@@ -273,6 +323,7 @@ def sds_effect_same(
         if b is None or b["bound"] is None:
             rows.append(dict(seed=seed, key=key, skipped=f"no bound: {b and b.get('note')}"))
             continue
+        make = _sds_maker(effect, seed, geom, folder, b)
         for factor in factors:
             d = diagnose(make(key, i, factor * b["bound"])).doc
             rows.append(
@@ -768,8 +819,22 @@ def main(argv: list[str] | None = None) -> int:
         help="quadrature: unexplained structure (radial order 17) in every capture, this many "
         "times the clean bound",
     )
+    ap.add_argument(
+        "--unlocked-clock",
+        action="store_true",
+        help="sds_NAME: a motor speed offset drawn per bench, not exactly 10^7 clock ticks a "
+        "revolution (the generator's default; session 15's benches)",
+    )
+    ap.add_argument(
+        "--own-shape",
+        action="store_true",
+        help="sds_axis_tilt, sds_beam_tilt_axial: sizes in multiples of the generated shape's "
+        "own bound (its azimuth's, order 1's: the entry of `each`), not the worst over shapes",
+    )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
+    SDS_CLOCK["locked"] = not args.unlocked_clock
+    SDS_OWN_SHAPE["on"] = args.own_shape
     factors = tuple(float(f) for f in args.factors.split(","))
     rows: list[dict] = []
     t0 = time.perf_counter()

@@ -397,3 +397,12 @@ def test_sds_platform_bounds_grow_with_the_noise(tmp_path):
     for key, b in lo.items():
         assert b["bound"] is not None and 0 < b["bound"] < 1e-5, (key, b)
         assert hi[key]["bound"] > 1.3 * b["bound"], (key, b["bound"], hi[key]["bound"])
+    # the worst of several shapes: each one's own bound beside it, the largest the bound
+    for name, labels in (
+        ("axis_tilt", {f"azimuth {a} deg" for a in ("0", "22.5", "45", "67.5")}),
+        ("beam_tilt_axial", {"order 1", "order 2", "order 3"}),
+    ):
+        each = lo[(name, "all")]["each"]
+        assert {e["label"] for e in each} == labels, each
+        assert max(e["bound"] for e in each) == lo[(name, "all")]["bound"]
+    assert "each" not in lo[("coil_mismatch", "all")]

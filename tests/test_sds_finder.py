@@ -389,6 +389,43 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
     assert 1.25 < widen[1] < 1.4 and widen[0] > widen[2] > 1.0
 
 
+@pytest.mark.parametrize("seed", [4298, 4299])
+def test_run_mean_level_takes_all_of_a_spanned_pattern_without_phi_ref(seed):
+    """Without phi_ref the saturated columns are projected on the moving-sensor differences
+    (the per-sensor constants then have rank M - 1). A pattern they span, 100x the noise
+    (order 1 and a design order in phi + psi_m, as a coil mismatch and the base ripple put
+    there), must leave the run-mean level at the noise's: a QR basis that dropped the
+    dependent column's direction left part of it in the first run's values (the level then
+    read well above the noise)."""
+    rng = np.random.default_rng(seed)
+    R, M, K, sig = 12, 4, 5, 4e-9
+    phi = np.mod(2.39996 * np.arange(R) + rng.uniform(0, 6.28), 2 * np.pi)
+    rows = {"phi": phi, "tmid_c": np.repeat(np.linspace(-5, 5, R)[:, None], K, 1)}
+    consts = {"psi_m": 2 * np.pi * np.arange(M) / M, "proj": np.asarray(1.0)}
+    X, _ = _saturating_columns(rows, consts, [6, 18], DEFAULT_SETTINGS.sds_saturate_fraction)
+    x = phi[:, None] + consts["psi_m"][None, :]
+    a1, b1, a6 = rng.normal(0, 100 * sig, 3)
+    pattern = a1 * np.cos(x) + b1 * np.sin(x) + a6 * np.cos(6 * x) + rng.normal(0, sig, M)
+    levels = []
+    for y0 in (np.zeros((R, M)), pattern):
+        y = rng.normal(0, sig, (R, K * M))
+        y[:, :M] += y0
+        y[:, :M] -= y[:, :M].mean(1, keepdims=True)
+        info: dict = {}
+        _level_sigma(
+            y,
+            K,
+            X,
+            proj=True,
+            info=info,
+            test_p=DEFAULT_SETTINGS.sds_sigma_test_p,
+            level_alpha=DEFAULT_SETTINGS.sds_level_alpha,
+        )
+        levels.append(info["run_means_rad"])
+    assert levels[1] < 2 * sig, levels
+    assert levels[0] < 2 * sig, levels
+
+
 def test_order_in_platform_angle_is_not_a_drift(sds_bench):
     """Order 5 of the platform angle with golden-angle platform steps is nearly a trend over
     12 runs: it is not named thermal_drift without a word (refused when the order fits

@@ -84,10 +84,11 @@ def sds_bench_design(
     n_moving: int = 3,
     n_fixed: int = 2,
     coil_max_order: int = 5,
+    speed_rad_s: float = SPEED_RAD_S,
 ):
     """The bench's instrument (see module doc); ``coil_torque`` adds coil-mismatch ripple at
     orders ``1 … coil_max_order``; ``n_fixed`` fixed and ``n_moving`` moving sensors, each set
-    equally spaced."""
+    equally spaced; the motor's mean speed ``speed_rad_s`` (rad/s)."""
     torque_c = {6: 0.01, 12: 0.005, 18: 0.0033, 36: 0.02}
     torque_s = {6: 0.004, 12: -0.002, 18: 0.001, 36: 0.005}
     if coil_torque:
@@ -95,7 +96,7 @@ def sds_bench_design(
             torque_c[n] = coil_torque / n
             torque_s[n] = 0.5 * coil_torque / n
     motor = Motor(
-        6, 18, 6, speed_rad_s=SPEED_RAD_S, torque_cos=torque_c, torque_sin=torque_s,
+        6, 18, 6, speed_rad_s=speed_rad_s, torque_cos=torque_c, torque_sin=torque_s,
         corner_order=4.0,
     )  # fmt: skip
     ka, kb = jax.random.split(key)
@@ -123,6 +124,7 @@ def write_concealed_sds(
     clock_factor: float | None = None,
     amplitude_noise: float | None = None,
     coil_max_order: int = 5,
+    speed_offset: float = 0.0,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -148,6 +150,15 @@ def write_concealed_sds(
             ``axis_tilt`` the tilt is ``2 sqrt(amplitude_noise × noise)`` rad.
         coil_max_order: ``coil_mismatch`` only: the torque ripple's highest order (1-5; 1:
             order 1 alone, the effect a detection bound of order 1 is about).
+        speed_offset: the motor's mean speed relative to the nominal 10 rev/s, minus 1
+            (|offset| < 0.01). At 0 a revolution is exactly 10^7 ticks of the 10 ns clock and
+            a mark spacing 2 10^4: every revolution's edges fall at the same clock phases, and
+            the clock's rounding of a run's mean is a fixed function of the edges' sub-tick
+            phases, lower than a clock not locked to the motor gives. Any effect that moves
+            the edges by a tick re-draws it at the unlocked level (an order-1
+            ``coil_mismatch`` of 0.5-2 noise units raised the clock's share of a 12-run
+            bench's run means from 3.5-4.4 to 4.4-5.6 nrad RMS). A real clock is not locked
+            to the motor; an offset (e.g. 1e-4) gives clean and effect records one level.
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -158,6 +169,9 @@ def write_concealed_sds(
         raise input_error("concealment", f"got {concealment!r}", f"one of {SDS_CONCEALMENTS}")
     if n_runs < 4:
         raise input_error("n_runs", f"got {n_runs}", ">= 4")
+    if not abs(speed_offset) < 0.01:
+        raise input_error("speed_offset", f"got {speed_offset!r}", "|speed_offset| < 0.01")
+    speed = SPEED_RAD_S * (1.0 + speed_offset)
     amp = {"near_noise": 4.0, "partial": 6.0, "clear": 40.0}[concealment] * NOISE_RAD
     if amplitude_noise is not None:
         if not amplitude_noise > 0:
@@ -174,14 +188,14 @@ def write_concealed_sds(
         raise input_error("n_fixed", f"got {n_fixed}", ">= 1")
     if not 1 <= coil_max_order <= 5:
         raise input_error("coil_max_order", f"got {coil_max_order!r}", "1 to 5")
-    design = sds_bench_design(kd, marks_per_rev, coil, n_moving, n_fixed, coil_max_order)
+    design = sds_bench_design(kd, marks_per_rev, coil, n_moving, n_fixed, coil_max_order, speed)
     # platform positions stepped by the golden angle (about 137.5°, jittered by ±2°): every
     # subset of runs (e.g. the held-out folds) covers the circle without aliasing the
     # motor's orders (multiples of 6) onto a constant, as an equally spaced grid would
     golden = np.pi * (3 - math.sqrt(5))
     phis = golden * np.arange(n_runs) + np.radians(rng.uniform(-2, 2, n_runs))
     phis = np.mod(phis + rng.uniform(0, 2 * np.pi), 2 * np.pi)
-    period = 2 * np.pi / SPEED_RAD_S
+    period = 2 * np.pi / speed
     t_end = n_runs * (n_revs + 1 + RUN_SPACING_REVS) * period
     kw: dict[str, Any] = dict(clock_period_s=CLOCK_S, jitter_s=1e-9)
     truth: dict[str, Any] = {"effect": effect, "concealment": concealment, "params": {}}
@@ -253,11 +267,11 @@ def write_concealed_sds(
 
     def hook(i: int, phi: float, f: np.ndarray, m: np.ndarray):
         if effect == "order_5":
-            m = m + amp * math.sin(5 * phi + 0.7) / SPEED_RAD_S
+            m = m + amp * math.sin(5 * phi + 0.7) / speed
         if effect == "run_step" and i == step_run:
-            m[1] = m[1] + 8 * amp / SPEED_RAD_S
+            m[1] = m[1] + 8 * amp / speed
         if effect == "sensor_delay_step" and i >= step_run:
-            m[1] = m[1] + amp / SPEED_RAD_S
+            m[1] = m[1] + amp / speed
         if effect in ("order_5", "run_step", "sensor_delay_step"):
             f, m = np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
         return f, m
@@ -271,7 +285,7 @@ def write_concealed_sds(
         truth["where"] = {"orders": [5]}
     if effect == "sensor_delay_step":
         truth["where"] = {"runs": [step_run], "heads": ["m1"]}
-        truth["params"] = {"delay_step_s": amp / SPEED_RAD_S, "first_run": step_run}
+        truth["params"] = {"delay_step_s": amp / speed, "first_run": step_run}
     if not phi_ref:
         del data["phi_ref"]
     encoder = sds_encoder_table(design, CLOCK_S)

@@ -364,16 +364,23 @@ def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
 def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
     """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
     (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
-    at any size); reported with the probe's own ``where`` and ``at``."""
+    at any size); reported with the probe's own ``where`` and ``at``, and, where there are
+    several, each one's own bound (``each``: ``label``, ``bound``, ``set_by``): the worst is
+    what the record guarantees for any of them, and an effect whose shape is one of them
+    (an order, an azimuth) is revealed from its own, which can be well below the worst."""
     worst: dict | None = None
+    each = []
     for pr in (probe, *probe.worst_of):
         e = _one_bound(prep, bench, cand, pr, views, scan, ref)
         if e["bound"] is None:
             return e
+        each.append({"label": pr.label or pr.at, "bound": e["bound"], "set_by": e["set_by"]})
         if worst is None or e["bound"] > worst["bound"]:
             worst = e
     assert worst is not None
-    return {**worst, "where": probe.where, "at": probe.at}
+    return {**worst, "where": probe.where, "at": probe.at} | (
+        {"each": each} if probe.worst_of else {}
+    )
 
 
 def _own_shares(prep, resid, views, scan, a: float, sig: set[str], ref) -> tuple[float, float]:

@@ -178,6 +178,9 @@ class Probe:
         seen_of: instead of ``seen``, ``seen_of(resid, lam_unit) -> seen``: built by the
             bound from the model's residual of the unit effect on the kept rows (n, C; what the
             kind's noise stage would see of it) and that residual's noncentrality.
+        label: in words, what sets this probe apart from the others of its ``worst_of``
+            (``"order 2"``, ``"azimuth 45 deg"``): each one's own bound is reported beside the
+            worst (``each``), so an effect of a known shape can be read against its own.
         size: the effect's size (in ``unit``) at ``values`` (default 1). Where the size is
             not a linear parameter (an axis tilt's ``beta^2 / 4``), ``values`` hold the
             nonlinear ones where the effect is still linear in its size (a small tilt) and
@@ -194,6 +197,7 @@ class Probe:
     seen: Callable[[float], float] | None = None
     seen_of: Callable[[np.ndarray, float], Callable[[float], float] | None] | None = None
     size: float = 1.0
+    label: str = ""
 
 
 ProbeFn = Callable[[Context], list[Probe]]

@@ -85,6 +85,7 @@ def _es_probes(ctx: Context) -> list[Probe]:
             "m",
             at="a shift in the middle half of the samples (the worst of its ends and middle, "
             "in x or y; its time held)",
+            label=f"at {ts:.6g} s in {'x' if x else 'y'}",
         )
         for ts in times
         for x, y in ((1.0, np.asarray(0.0)), (0.0, np.asarray(1.0)))

@@ -133,6 +133,22 @@ def noise_info(ctx: Context) -> SDSNoiseInfo:
     return info if isinstance(info, SDSNoiseInfo) else SDSNoiseInfo()
 
 
+def span_basis(X: np.ndarray) -> np.ndarray:
+    """Orthonormal basis ``(n, rank)`` of the column span of ``X`` (n, q), from its SVD
+    (singular values above ``1e-10`` of the largest). Not a QR with small diagonals dropped:
+    where a column depends on earlier ones (the per-sensor constants projected on the
+    moving-sensor differences without ``phi_ref`` have rank ``M - 1``) Householder QR puts
+    an arbitrary direction there (mostly the first run's rows), and every later column's
+    part along it is lost with it: the saturated fit then left part of every pattern it
+    spans in the first run's values, and the run-mean level grew with a catalog effect (an
+    order-1 ``coil_mismatch`` at about 1.5x its bound raised it by 45-75 % on 12-run benches
+    without ``phi_ref``, so it was not named)."""
+    if X.shape[1] == 0:
+        return np.zeros((X.shape[0], 0))
+    U, s, _ = np.linalg.svd(X, full_matrices=False)
+    return U[:, s > 1e-10 * max(float(s.max(initial=0.0)), 1e-300)]
+
+
 def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
     """Power (chi-square) the columns ``(n, C, q)`` take out of ``rw`` (n, C)."""
     X = cols.reshape(-1, cols.shape[-1])
@@ -140,9 +156,7 @@ def _ls_power_flat(rw: np.ndarray, cols: np.ndarray) -> float:
     X = X[:, keep]
     if X.shape[1] == 0:
         return 0.0
-    Q, Rm = np.linalg.qr(X)
-    ok = np.abs(np.diag(Rm)) > 1e-10 * np.abs(np.diag(Rm)).max()
-    Q = Q[:, ok]
+    Q = span_basis(X)
     return float(np.sum((Q.T @ rw.ravel()) ** 2))
 
 
@@ -241,11 +255,6 @@ def _level_sigma(
     ym = resid[:, :M].ravel()
     n_ind = R * (M - 1) if proj else R * M
 
-    def basis(X):
-        Q, Rm = np.linalg.qr(X)
-        d = np.abs(np.diag(Rm))
-        return Q[:, d > 1e-10 * max(float(d.max(initial=0.0)), 1e-300)]
-
     # candidate columns: a change point per sensor and run, a single value per sensor and run
     cols = []
     for m in range(M):
@@ -262,7 +271,7 @@ def _level_sigma(
         A = A - A.mean(1, keepdims=True)
     A = A.reshape(R * M, -1)
     n_tests = max(1, A.shape[1])
-    Q = basis(X)
+    Q = span_basis(X)
     added = 0
     for _ in range(2 * M):
         e = ym - Q @ (Q.T @ ym)
@@ -278,7 +287,7 @@ def _level_sigma(
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
         if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
             break
-        Q = basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
+        Q = span_basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
         added += 1
     e = ym - Q @ (Q.T @ ym)
     ssr0, rk0 = float(e @ e), Q.shape[1]

@@ -489,7 +489,12 @@ def _delay_probes(ctx: Context) -> list[Probe]:
                 "ref_sensor": np.asarray(float((m + 1) % M)),
             }
             seen = _run_mean_seen(ctx, step, caught=True)
-            probes.append(Probe(vals, "delay_step_s", "s", where=f"m{m}", at=at, seen=seen))
+            probes.append(
+                Probe(
+                    vals, "delay_step_s", "s", where=f"m{m}", at=at, seen=seen,
+                    label=f"from run {k}",
+                )
+            )  # fmt: skip
         out.append(dataclasses.replace(probes[0], worst_of=tuple(probes[1:])))
     return out
 
