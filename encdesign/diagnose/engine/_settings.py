@@ -487,7 +487,10 @@ class FinderSettings(eqx.Module):
     discover_step_margin: float = eqx.field(default=0.1, static=True)
     """Discovery: share of the kept rows (at least 2) a step term leaves on either side of
     its change point: a change in the first or last tenth of a record is more often an end
-    effect (a start-up or a stop the segmentation kept) than a change of the set-up. Set by
+    effect (a start-up or a stop the segmentation kept) than a change of the set-up, so a
+    line whose best change point (scanned over all kept rows) falls there gets no step term
+    (session 16: restricting the scan to the middle put such a transient's change at the
+    margin's edge instead; ``tests/test_discover.py``, start-up and stop). Set by
     hand after the measured ODrive records (issue 41): with 2 % a step at t = 9.48 s of a
     10 s record (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a
     physical size for that order."""
