@@ -34,8 +34,25 @@
    command's wall time, e.g.
    ``python benchmarks/diagnose.py --child 200000 --heads 4 --effect --processes 2``.
 
+7. Long records split over processes (issue 43), ``--long-rows 1e6 1e7 1e8 --long-processes
+   1 2``: each size and effect (``--long-effects``, default clean and vibration) written once
+   to Parquet row group by row group at ``--long-rate`` Hz, then diagnosed on each process
+   count, every process launched here (``--coordinator localhost:PORT``) and reporting its
+   own wall s, CPU s (user + system), peak RSS and its ``read_reduce`` stage (the streamed
+   reduction of its share of the row groups, ``open_recording``); process 0 adds the
+   engine's ``timings_s``/``timings_cpu_s``, the verdict and the named effects. Sizes above
+   ``--reduce-only-above`` rows are reduced only (``open_recording``, no diagnosis);
+   (``--reduce-only-effects``: their effects); ``--case-timeout`` stops a case
+   (``timed_out``) and goes on; ``--reduce-min-rows`` sets
+   ``FinderSettings.reduce_min_rows`` in the processes. Each diagnosis is compared with the
+   first process count's (``max_relative_difference`` of every number but the timings, and
+   the ``differing`` strings or counts). All cases go into one JSON (``long_processes``).
+
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
         [--long-rows 1e6 1e7] [--long-table parquet]
+    python benchmarks/diagnose.py --json results/long.json --effects none --rows \\
+        --long-rows 1e6 1e7 1e8 --long-processes 1 2 --long-rate 50000 \\
+        --reduce-only-above 2e7 --case-timeout 900
 """
 
 from __future__ import annotations
@@ -434,6 +451,185 @@ def _child_processes(
     )
 
 
+def _proc_child(
+    path: str, stats: str, mode: str, processes: int, index: int, port: int, min_rows: int
+) -> int:
+    """One process of a split case (``--proc-child``): ``mode`` ``diagnose`` runs
+    ``encdesign diagnose`` (joined by ``--coordinator`` with ``processes`` > 1; process 0
+    writes ``stats``.json's diagnosis), ``reduce`` only joins the runtime and reduces its
+    share (``open_recording``). Writes its own wall s, CPU s, peak RSS and
+    ``read_reduce`` time to ``stats``."""
+    t0 = time.perf_counter()
+    import encdesign.diagnose as D
+    import encdesign.diagnose._dispatch as dispatch
+    from encdesign import _distributed as dist
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    if min_rows > 0:
+        dispatch.DEFAULT_SETTINGS = FinderSettings(reduce_min_rows=min_rows)
+    stages: dict = {}
+    opened = D.open_recording
+
+    def timed(*a, **k):
+        w, c = time.perf_counter(), _cpu_s()
+        got = opened(*a, **k)
+        stages.update(read_reduce=time.perf_counter() - w, read_reduce_cpu=_cpu_s() - c)
+        stages["reduced_rows"] = (got[1] or {}).get("reduced_rows")
+        return got
+
+    D.open_recording = timed
+    flags = []
+    if processes > 1:
+        flags = ["--coordinator", f"localhost:{port}", "--num-processes", str(processes)]
+        flags += ["--process-id", str(index)]
+    rc = 0
+    if mode == "reduce":
+        launch = dist.Launch()
+        if processes > 1:
+            launch = dist.Launch(1, f"localhost:{port}", processes, index)
+        dist.initialize(launch)
+        D.open_recording(path)
+        dist.shutdown()
+    else:
+        from encdesign.cli import main as cli
+
+        out = stats + ".doc.json"
+        rc = cli(["diagnose", path, "--json", out, "--quiet", *flags])
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    got = dict(
+        process=index,
+        exit_status=rc,
+        wall_s=time.perf_counter() - t0,
+        cpu_s=ru.ru_utime + ru.ru_stime,
+        peak_rss_bytes=ru.ru_maxrss * 1024,
+        **{k + ("_s" if k.startswith("read") else ""): v for k, v in stages.items()},
+    )
+    Path(stats).write_text(json.dumps(got))
+    return rc
+
+
+def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s: float) -> dict:
+    """Run one split case (``processes`` :func:`_proc_child` processes on ``path``) and
+    collect what each process reported; a case over ``timeout_s`` is stopped."""
+    import tempfile
+
+    from encdesign._distributed import free_port
+
+    port = free_port()
+    with tempfile.TemporaryDirectory(prefix="bench-split-") as tmp:
+        st = [str(Path(tmp) / f"p{i}.json") for i in range(processes)]
+        procs = []
+        for i in range(processes):
+            cmd = [sys.executable, __file__, "--proc-child", str(path), st[i], mode]
+            cmd += [str(processes), str(i), str(port), str(min_rows)]
+            procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
+        t0, timed_out, errs = time.perf_counter(), False, []
+        for p in procs:
+            try:
+                _, err = p.communicate(timeout=max(1.0, timeout_s - (time.perf_counter() - t0)))
+                if p.returncode:
+                    errs.append(err.decode(errors="replace")[-1500:])
+            except subprocess.TimeoutExpired:
+                timed_out = True
+                for q in procs:
+                    if q.poll() is None:
+                        q.kill()
+                        q.wait()
+        wall = time.perf_counter() - t0
+        per = [json.loads(Path(f).read_text()) for f in st if Path(f).is_file()]
+        out: dict = dict(
+            mode=mode,
+            processes=processes,
+            wall_s_case=wall,
+            timed_out=timed_out,
+            timeout_s=timeout_s,
+            per_process=per,
+            cpu_s_all_processes=sum(r["cpu_s"] for r in per),
+            peak_rss_bytes_per_process=[r["peak_rss_bytes"] for r in per],
+        )
+        if errs:
+            out["errors"] = errs
+        doc_path = Path(st[0] + ".doc.json")
+        if doc_path.is_file():
+            doc = json.loads(doc_path.read_text(encoding="utf-8"))
+            red = doc.get("reduced") or {}
+            stages = {"read_reduce": per[0].get("read_reduce_s") if per else None}
+            out.update(
+                stages_s=stages | (doc.get("timings_s") or {}),
+                stages_cpu_s=(doc.get("timings_cpu_s") or {}),
+                verdict=doc["verdict"],
+                named=[e["name"] for e in doc.get("effects", [])],
+                reduced={k: v for k, v in red.items() if k not in ("bound", "not_testable")},
+                doc=doc,
+            )
+    out["load_avg_end"] = os.getloadavg()
+    return out
+
+
+def _doc_difference(a, b, where: str = "") -> tuple[float, list[str]]:
+    """``(largest relative difference of the numbers, paths whose strings, booleans,
+    integers, keys or lengths differ)`` between two diagnosis documents, timings (keys
+    ``timings_s``, ``timings_cpu_s``, ``*time_s``) and the report's text left out."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        if set(a) != set(b):
+            return 0.0, [f"{where}: keys"]
+        rel, bad = 0.0, []
+        for k in a:
+            if k in ("timings_s", "timings_cpu_s", "report") or k.endswith("time_s"):
+                continue
+            r, d = _doc_difference(a[k], b[k], f"{where}.{k}")
+            rel, bad = max(rel, r), bad + d
+        return rel, bad
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return 0.0, [f"{where}: lengths"]
+        got = [_doc_difference(x, y, f"{where}[{i}]") for i, (x, y) in enumerate(zip(a, b))]
+        return max([r for r, _ in got], default=0.0), [d for _, ds in got for d in ds]
+    if isinstance(a, float) and isinstance(b, float):
+        if a == b or (a != a and b != b):
+            return 0.0, []
+        return abs(a - b) / max(abs(a), abs(b)), []
+    return 0.0, [] if a == b and type(a) is type(b) else [f"{where}: {a!r} vs {b!r}"]
+
+
+def _long_processes(args: argparse.Namespace) -> list[dict]:
+    """Section 7 of the module docstring: every size x effect x process count."""
+    import tempfile
+
+    rows: list[dict] = []
+    for n in args.long_rows:
+        n = int(n)
+        mode = "reduce" if n > args.reduce_only_above else "diagnose"
+        effects = args.long_effects
+        if mode == "reduce" and args.reduce_only_effects is not None:
+            effects = args.reduce_only_effects
+        for eff in effects:
+            with tempfile.TemporaryDirectory(prefix="bench-long-") as tmp:
+                t0 = time.perf_counter()
+                effect = False if eff == "clean" else eff
+                path = _write_bench_parquet(Path(tmp), n, 4, effect, args.long_rate)
+                write_s = time.perf_counter() - t0
+                size = (Path(tmp) / "rec.parquet").stat().st_size
+                first = None
+                for P in args.long_processes:
+                    r = dict(n_rows=n, n_heads=4, effect=eff, rate_hz=args.long_rate)
+                    r.update(file_bytes=size, write_s=write_s)
+                    r.update(
+                        _split_case(path, mode, P, args.reduce_min_rows or 0, args.case_timeout)
+                    )
+                    doc = r.pop("doc", None)
+                    if first is None:
+                        first = (P, doc)
+                    elif doc is not None and first[1] is not None:
+                        rel, bad = _doc_difference(first[1], doc)
+                        r["vs_processes"] = first[0]
+                        r["max_relative_difference"] = rel
+                        r["differing"] = bad[:20]
+                    rows.append(r)
+                    print(json.dumps(r), file=sys.stderr, flush=True)
+    return rows
+
+
 def _spawn(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
     cmd = [sys.executable, __file__, "--child", str(n_rows), "--heads", str(heads)]
     cmd += ["--table", table]
@@ -494,12 +690,40 @@ def main(argv: list[str] | None = None) -> int:
         "(encdesign diagnose --processes N, from a Parquet file)",
     )
     ap.add_argument(
+        "--long-processes",
+        type=int,
+        nargs="*",
+        default=[],
+        help="long records split over processes: each --long-rows size on these process "
+        "counts, from Parquet at --long-rate Hz (section 7)",
+    )
+    ap.add_argument("--long-rate", type=float, default=1000.0)
+    ap.add_argument("--long-effects", nargs="*", default=["clean", "vibration"])
+    ap.add_argument(
+        "--reduce-only-above",
+        type=float,
+        default=float("inf"),
+        help="with --long-processes: sizes above this many rows are reduced only",
+    )
+    ap.add_argument(
+        "--reduce-only-effects",
+        nargs="*",
+        default=None,
+        help="with --reduce-only-above: the effects of the sizes reduced only (default: "
+        "--long-effects; the reduction's cost does not depend on the effect)",
+    )
+    ap.add_argument("--case-timeout", type=float, default=600.0)
+    ap.add_argument("--proc-child", nargs=7, default=None, help=argparse.SUPPRESS)
+    ap.add_argument(
         "--effects",
         nargs="*",
         default=None,
         help="catalog effects for the 4 x 16,000 timing (default: clean and all; 'none': skip)",
     )
     args = ap.parse_args(argv)
+    if args.proc_child is not None:
+        path, stats, mode, *nums = args.proc_child
+        return _proc_child(path, stats, mode, *(int(x) for x in nums))
     if args.child is not None:
         eff = args.effect_name if args.effect_name is not None else args.effect
         if args.processes is not None:
@@ -537,7 +761,9 @@ def main(argv: list[str] | None = None) -> int:
         out["scaling"].append(r)
         print(json.dumps(r), file=sys.stderr, flush=True)
     out["long_records"] = []
-    for n in args.long_rows:
+    if args.long_processes:
+        out["long_processes"] = _long_processes(args)
+    for n in [] if args.long_processes else args.long_rows:
         for eff in ("clean", "vibration"):
             r = _spawn(int(n), 4, eff, args.long_table)
             out["long_records"].append(r)

@@ -16,7 +16,19 @@ the finder; discovery's model of the located line is scored against the truth:
   the named catalog physics explains the record as well as the truth does, and the record
   cannot tell them apart (e.g. an order present in one steady run is a line at one
   frequency in that run, which the catalog's ``vibration`` with its per-run amplitudes
-  fits exactly). ``frame_right_excluding_confounded`` scores the other cases.
+  fits exactly). ``frame_right_excluding_confounded`` scores the other cases;
+* ``detectable`` (every case): the truth's own model at the truth's line (whether the finder
+  located it or not), fitted jointly with the **base** model on that record, takes more
+  held-out chi-square (``gain_true_after_base_chi2``) than its multiple-testing threshold
+  (``threshold_true_chi2``: what a discovered term must take to enter: ``nameable``) and,
+  for an order line, than the chi-square the finder's ``orders`` view needs to locate it at
+  all (``threshold_locate_chi2``: its Bonferroni threshold over the orders x channels it
+  scans). The truth's own model is the best any view can do, so the mark errs towards
+  detectable. An undetectable case is one where the record does not hold the effect at
+  the finder's significance (e.g. a 2x SDS step on a few runs);
+  ``frame_right_detectable_not_confounded`` scores the detectable cases the catalog does
+  not legitimately take (``..._nameable_...``: with the naming threshold only), next to
+  ``frame_right_all``.
 
 Clean records (``--clean N`` per kind) count the records where discovery adds a term.
 Each kind runs the classes of ``--classes`` its bench can carry
@@ -31,6 +43,7 @@ after each record (``complete``: false until the last)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 
@@ -39,11 +52,44 @@ import numpy as np
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine import _discover as D
 from encdesign.diagnose.engine import _engine
+from encdesign.diagnose.engine._views import chi2_threshold
+from encdesign.diagnose.kinds.sds._sds import sds_limit
 from encdesign.simulate._outside import CLASSES, KINDS, classes_for, outside_record
 
 SIZES = (2.0, 5.0, 20.0)
 
 _CAP: dict = {}
+
+_DOCUMENT = _engine._document
+
+
+def _capture_document(kind, rec, prep, sel, *a, **kw):
+    """The engine's document stage, capturing the base model (for :func:`_detectability`)."""
+    _CAP.update(
+        base_prep=prep,
+        base_fitter=kw.get("fitter", a[-1] if len(a) >= 5 else None),
+        base_terms=sel.base.terms,
+        base_resid=sel.base_resid,
+        scan=a[3] if len(a) >= 4 else None,
+    )
+    return _DOCUMENT(kind, rec, prep, sel, *a, **kw)
+
+
+@dataclasses.dataclass
+class _AtTruth:
+    """A finding at the truth's line (the form :func:`D.lines_of` reads), for the
+    detectability of a record where the finder located nothing there."""
+
+    view: str
+    where: dict
+    detail: dict
+
+
+def _truth_finding(truth: dict) -> _AtTruth:
+    kind, val = truth["line"]
+    if kind == "hz":
+        return _AtTruth("spectrum", {"frequencies_hz": [val]}, {"fixed_in": "hz"})
+    return _AtTruth("orders", {"orders": [val]}, {})
 
 
 def _capture(prep, fitter, terms, resid, findings):
@@ -61,13 +107,26 @@ def _at_line(t: dict, truth: dict) -> bool:
     return t["line_kind"] == "order" and abs(t["value"] - val) < 1e-6
 
 
-def _gains(truth: dict) -> tuple[float, float, float]:
+def _gains(truth: dict, base: bool = False) -> tuple[float, float, float]:
     """``(discovered, true, threshold)``: held-out gains, on the same sums, of the
     discovered terms at the truth's line (jointly) and of the truth's frame and modulation
     there (fitted jointly with the final catalog model), and the multiple-testing threshold
-    of that true term (what a term must take to enter)."""
+    of that true term (what a term must take to enter). ``base``: the truth's model fitted
+    jointly with the base model instead, at the truth's line whatever the finder located
+    (``discovered``: nan)."""
     nan = float("nan")
-    st = D.build(_CAP["prep"], _CAP["fitter"], _CAP["terms"], _CAP["resid"], _CAP["findings"])
+    if base:
+        if _CAP.get("base_fitter") is None:
+            return nan, nan, nan
+        st = D.build(
+            _CAP["base_prep"],
+            _CAP["base_fitter"],
+            _CAP["base_terms"],
+            _CAP["base_resid"],
+            [_truth_finding(truth)],
+        )
+    else:
+        st = D.build(_CAP["prep"], _CAP["fitter"], _CAP["terms"], _CAP["resid"], _CAP["findings"])
     if st is None:
         return nan, nan, nan
     kind, val = truth["line"]
@@ -75,9 +134,11 @@ def _gains(truth: dict) -> tuple[float, float, float]:
     if not li:
         return nan, nan, nan
     folds = list(range(st.sums.A.shape[0]))
-    kept, _ = D.select_terms(st)
-    mine = [st.lib[i] for i in kept if st.lib[i].line == li[0]]
-    got = D._heldout(st.sums.A, st.sums.b, D._embed(st.sums, mine), folds, st.sums.raw)
+    got = nan
+    if not base:
+        kept, _ = D.select_terms(st)
+        mine = [st.lib[i] for i in kept if st.lib[i].line == li[0]]
+        got = D._heldout(st.sums.A, st.sums.b, D._embed(st.sums, mine), folds, st.sums.raw)
     mod = truth["modulation"]
     best = thr = nan
     for ti, tm in enumerate(st.lib):
@@ -106,6 +167,18 @@ def _gains(truth: dict) -> tuple[float, float, float]:
             if not np.isfinite(best) or g > best:
                 best, thr = g, float(st.thresh[ti])
     return got, best, thr
+
+
+def _locate_threshold(truth: dict, kind: str) -> float:
+    """The chi-square the finder's ``orders`` view needs to locate an order line on this
+    record (its Bonferroni threshold over the orders scanned x channels,
+    ``_views.view_orders``; an SDS record scans its run-mean channels' orders up to
+    ``sds_limit``); nan for a line in Hz (located by the spectrum view, not scored here)."""
+    prep, scan = _CAP.get("base_prep"), _CAP.get("scan")
+    if prep is None or scan is None or truth["line"][0] != "order":
+        return float("nan")
+    orders = min(scan, sds_limit(prep)) if kind == "sds" else scan
+    return chi2_threshold(prep.settings.alpha, 2, orders * prep.n_channels)
 
 
 def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
@@ -149,6 +222,15 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         _, tg, thr = _gains(truth) if "fitter" in _CAP else (0.0, float("nan"), 0.0)
         out["gain_true_after_catalog_chi2"] = tg
         out["confounded"] = not (np.isfinite(tg) and tg > thr)
+    # detectable: the truth's own model, fitted jointly with the base model at the truth's
+    # line (located or not), takes more held-out chi-square than its multiple-testing
+    # threshold: the record holds the effect at the finder's significance
+    _, bg, bthr = _gains(truth, base=True)
+    lthr = _locate_threshold(truth, kind)
+    out["gain_true_after_base_chi2"], out["threshold_true_chi2"] = bg, bthr
+    out["threshold_locate_chi2"] = lthr
+    out["nameable"] = bool(np.isfinite(bg) and bg > bthr)
+    out["detectable"] = out["nameable"] and not (np.isfinite(lthr) and bg <= lthr)
     # a static order of one sensor is its own error function: the base model takes it
     out["base"] = d.verdict == "consistent"
     if terms:
@@ -182,6 +264,8 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
 
     disc = [c for c in cases if not c["catalog"] and not c.get("base")]
     ident = [c for c in cases if not c.get("confounded")]
+    fair = [c for c in ident if c.get("detectable")]
+    nameable = [c for c in ident if c.get("nameable", c.get("detectable"))]
     ratios = [c["gain_ratio"] for c in disc if c.get("gain_ratio") is not None]
     by = {}
     for key in ("class", "size", "kind"):
@@ -190,6 +274,15 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
     return {
         "frame_right_all": rate([c["frame_right"] for c in cases]),
         "frame_right_excluding_confounded": rate([c["frame_right"] for c in ident]),
+        "frame_right_detectable_not_confounded": rate([c["frame_right"] for c in fair]),
+        "frame_right_nameable_not_confounded": rate([c["frame_right"] for c in nameable]),
+        "undetectable": rate([not c.get("detectable") for c in cases]),
+        "not_nameable": rate([not c.get("nameable", c.get("detectable")) for c in cases]),
+        "missed_detectable_not_confounded": [
+            f"{c['kind']} {c['class']} {c['size']:g}x verdict={c['verdict']}"
+            for c in fair
+            if not c["frame_right"]
+        ],
         "frame_right_excluding_catalog_and_base": rate([c["frame_right"] for c in disc]),
         "modulation_right": rate([c.get("modulation_right", False) for c in disc]),
         "beta_within_2se": rate([c["beta_within_2se"] for c in disc if "beta_within_2se" in c]),
@@ -218,6 +311,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-cases", action="store_true", help="clean records only")
     a = ap.parse_args(argv)
     _engine.discover = _capture
+    _engine._document = _capture_document
     classes, kinds = ([] if a.no_cases else a.classes.split(",")), a.kinds.split(",")
     sizes = [float(s) for s in a.sizes.split(",")]
     cases, clean = [], []
@@ -243,6 +337,7 @@ def main(argv=None) -> int:
                     print(
                         f"{kind:9s} {cls:14s} {size:4g}x  found={c['found']!s:5s} "
                         f"frame={c['frame_right']!s:5s} catalog={c['catalog']!s:5s} "
+                        f"detectable={c['detectable']!s:5s} "
                         f"beta2se={c.get('beta_within_2se', '-')!s:5s} "
                         f"ratio={c.get('gain_ratio')} {c['wall_s']:.1f}s",
                         flush=True,

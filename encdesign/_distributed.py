@@ -447,6 +447,37 @@ def allgather_rows(rows: np.ndarray, n_total: int) -> np.ndarray:
     return got.reshape(-1, *rows.shape[1:])[:n_total]
 
 
+GATHER_ROWS = 1 << 20
+"""Rows per process in one collective of :func:`allgather_concat` (bounds its temporaries)."""
+
+
+def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
+    """Concatenate every process's ``rows [m_p, ...]`` in process order on every process,
+    ``counts[p]`` being ``m_p`` (known to all, e.g. from :func:`allgather_objects`); the
+    dtype is kept. The result is allocated once and filled by collectives of at most
+    :data:`GATHER_ROWS` rows per process, so the temporaries stay within
+    ``processes x GATHER_ROWS`` rows whatever the total."""
+    rows = np.asarray(rows)
+    if jax.process_count() == 1:
+        return rows
+    from jax.experimental import multihost_utils
+
+    counts = [int(c) for c in counts]
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    out = np.empty((int(starts[-1]), *rows.shape[1:]), rows.dtype)
+    step = min(GATHER_ROWS, max(max(counts), 1))
+    for a in range(0, max(max(counts), 1), step):
+        pad = np.zeros((step, *rows.shape[1:]), rows.dtype)
+        mine = rows[a : a + step]
+        pad[: mine.shape[0]] = mine
+        got = np.asarray(multihost_utils.process_allgather(pad))
+        for p, c in enumerate(counts):
+            k = max(0, min(step, c - a))
+            out[starts[p] + a : starts[p] + a + k] = got[p, :k]
+        del got, pad
+    return out
+
+
 def allgather_objects(items: Sequence[Any]) -> list[Any]:
     """Every process's list of JSON-able ``items`` (its share of tasks, e.g. benchmark rows),
     concatenated in process order on every process (two collectives: lengths, then bytes).

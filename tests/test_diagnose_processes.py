@@ -18,31 +18,47 @@ import numpy as np
 
 from encdesign import _distributed as dist
 from encdesign import write_recording
+from encdesign.io._parquet import write_parquet_table
 
 CHUNK = 512
 """Rows per chunk in the spawned diagnoses (the engine's default is 8192): several groups
 of chunks, so each process has a share of a 4 x 4000-row record."""
 
 LAUNCH = (
-    "import sys, encdesign.diagnose.engine._fit as f; f.CHUNK_ROWS = {chunk}; "
+    "import sys, encdesign.diagnose.engine._fit as f; f.CHUNK_ROWS = {chunk}; {setup}"
     "from encdesign.cli import main; sys.exit(main())"
 )
+
+REDUCE = (
+    "import encdesign.diagnose._dispatch as d, encdesign.diagnose.engine._settings as s; "
+    "d.DEFAULT_SETTINGS = s.FinderSettings(reduce_min_rows=1000, "
+    "reduce_attenuation_max=0.02, reduce_line_hz=10.0); "
+    "import encdesign._distributed as g; g.GATHER_ROWS = 700; "
+)
+"""Launcher setup that lowers the reduction's threshold and widens its bound, so that a
+12,000-row record at 1 kHz (1,000-2,500 rows per revolution) is reduced to blocks of a few
+rows as it is read (``open_recording``), and gathers the reduced rows 700 at a time (several
+collectives per column, as at 10^8 rows)."""
 
 TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
 
-def _record(path: Path, seed: int) -> Path:
-    """4 heads x 4000 rows (4 runs, 1 kHz, 0.5 urad noise, disk errors of orders 1-5,
-    per-run zeros) with a 31 Hz vibration of 1.5 urad on every head."""
+def _record(
+    path: Path, seed: int, n: int = 1000, speed_rev_s: float = 0.6, group_rows: int = 0
+) -> Path:
+    """4 heads x 4 runs of ``n`` rows (1 kHz, ``speed_rev_s`` + 0.4 r rev/s in run ``r``,
+    0.5 urad noise, disk errors of orders 1-5, per-run zeros) with a 31 Hz vibration of
+    1.5 urad on every head; with ``group_rows`` a Parquet table in row groups of that many
+    rows (else a CSV)."""
     rng = np.random.default_rng(seed)
-    R, n, heads = 4, 1000, 4
+    R, heads = 4, 4
     alpha = np.array([0.0, 2.1, 4.2, 0.9])
     cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []} | {
         f"h{k}": [] for k in range(heads)
     }
     for r in range(R):
         t = np.arange(n) / 1000.0
-        th = 2 * np.pi * (0.6 + 0.4 * r) * t + rng.uniform(0, 6)
+        th = 2 * np.pi * (speed_rev_s + 0.4 * r) * t + rng.uniform(0, 6)
         zero = rng.uniform(-3, 3, heads)
         cols["t"].append(t)
         cols["run"].append(np.full(n, r))
@@ -57,7 +73,10 @@ def _record(path: Path, seed: int) -> Path:
         "head_angles_deg": np.degrees(alpha).tolist(),
         "signal_periods_per_rev": 2048,
     }
-    write_recording(path, "multihead", columns, encoder=enc)
+    back = write_recording(path, "multihead", columns, encoder=enc, parquet=group_rows > 0)
+    if group_rows:
+        with open(path.parent / back.meta["data"], "wb") as fh:
+            write_parquet_table(fh, columns, row_group_rows=group_rows)
     return path
 
 
@@ -69,10 +88,12 @@ def _env() -> dict[str, str]:
     return env
 
 
-def _diagnose(rec: Path, out: Path, processes: int, port: int) -> dict:
+def _diagnose(rec: Path, out: Path, processes: int, port: int, setup: str = "", *flags) -> dict:
     """Run the diagnosis on ``processes`` processes joined by the ``--coordinator`` flags
-    (the launcher sets the small chunk size first) and return process 0's JSON."""
-    base = [sys.executable, "-c", LAUNCH.format(chunk=CHUNK), "diagnose", str(rec)]
+    (the launcher sets the small chunk size and runs ``setup`` first) and return process 0's
+    JSON."""
+    code = LAUNCH.format(chunk=CHUNK, setup=setup)
+    base = [sys.executable, "-c", code, "diagnose", str(rec), *flags]
     base += ["--json", str(out), "--quiet"]
     if processes == 1:
         cmds = [base]
@@ -126,6 +147,13 @@ def _differences(a, b, where: str = "") -> list[str]:
     return [] if a == b and type(a) is type(b) else [f"{where}: {a!r} vs {b!r}"]
 
 
+def _keep(one: dict, two: dict) -> None:
+    if os.environ.get("ENCDESIGN_KEEP"):
+        Path(os.environ["ENCDESIGN_KEEP"]).mkdir(exist_ok=True)
+        for name, doc in (("one", one), ("two", two)):
+            Path(os.environ["ENCDESIGN_KEEP"], name + ".json").write_text(json.dumps(doc))
+
+
 def test_two_processes_give_the_one_process_diagnosis(tmp_path):
     rec = _record(tmp_path / "rec.toml", seed=20261204)
     one = _diagnose(rec, tmp_path / "one.json", 1, 0)
@@ -135,8 +163,25 @@ def test_two_processes_give_the_one_process_diagnosis(tmp_path):
     assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
     assert one["effects"], "the vibration is named"
     diff = _differences(one, two)
-    if os.environ.get("ENCDESIGN_KEEP"):
-        Path(os.environ["ENCDESIGN_KEEP"]).mkdir(exist_ok=True)
-        for name, doc in (("one", one), ("two", two)):
-            Path(os.environ["ENCDESIGN_KEEP"], name + ".json").write_text(json.dumps(doc))
+    _keep(one, two)
+    assert not diff, "\n".join(diff[:40])
+
+
+def test_a_parquet_record_reduced_on_two_processes_gives_the_one_process_diagnosis(tmp_path):
+    """A Parquet record reduced as it is read, each process reading its share of the row
+    groups (997 rows each: the shares meet at row 6,979, inside a block), gives the one-process
+    diagnosis: the same reduced rows (counts in ``reduced``), verdict and numbers."""
+    rec = _record(tmp_path / "rec.toml", 4703, n=3000, speed_rev_s=0.4, group_rows=997)
+    flags = ("--max-order", "6")
+    one = _diagnose(rec, tmp_path / "one.json", 1, 0, REDUCE, *flags)
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), REDUCE, *flags)
+    red = one["reduced"]
+    assert red["applied"] and red["streamed_row_groups"] == 13 and red["block_rows"] >= 3
+    assert red["stretches"] == 4  # the runs
+    blocks = 12_000 // red["block_rows"]
+    assert blocks - red["stretches"] <= red["reduced_rows"] <= blocks
+    assert one["verdict"] == two["verdict"] == "missing_physics"
+    assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
+    diff = _differences(one, two)
+    _keep(one, two)
     assert not diff, "\n".join(diff[:40])

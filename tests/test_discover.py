@@ -94,10 +94,13 @@ def test_catalog_physics_stays_the_catalogs():
     assert not [t for t in _terms(d.doc) if t["line_kind"] == "hz" and abs(t["value"] - f0) < 1]
 
 
-def test_a_rung_mode_is_fixed_in_hz_and_rings():
+def test_a_rung_mode_is_fixed_in_hz_and_rings(tmp_path):
     """A structural mode rung at the start of every run, decaying at its own Q, is modelled
     in its own frame (fixed in Hz) with its amplitude changing within the run: not the
-    catalog's steady vibration, and not a shaft order."""
+    catalog's steady vibration, and not a shaft order. The ``ringing`` modulation's round
+    trip: written as a --candidates file, it is named under its own name in a later
+    diagnosis of another record of the same bench (another seed: other phases, amplitudes
+    and noise; the same mode frequency and Q)."""
     rec, truth = outside_record(np.random.default_rng(47), "fixed_hz", 8.0, "multihead", 3000)
     d = diagnose(rec)
     validate_diagnosis(d.doc)
@@ -106,6 +109,18 @@ def test_a_rung_mode_is_fixed_in_hz_and_rings():
     assert mine and mine[0]["frame"] == "hz", d.doc["report"]
     assert mine[0]["modulation"] == "ringing" and "own Q" in mine[0]["reading"]
     _no_catalog_name(d.doc)
+    path = tmp_path / "mode.py"
+    names = export_candidates(d.doc, path)
+    ring = [n for n in names if n.endswith("_hz_ringing")]
+    assert ring, names
+    cands = [c for c in load_candidates(path) if c.name in ring]
+    assert {p.name for p in cands[0].params} >= {"cos_rate_rad", "sin_rate_rad"}
+    mode = (f0, truth["q"])
+    rec2, _ = outside_record(np.random.default_rng(48), "fixed_hz", 8.0, "multihead", 3000, mode)
+    d2 = diagnose(rec2, candidates=cands)
+    validate_diagnosis(d2.doc)
+    assert d2.verdict == "missing_physics", d2.doc["report"]
+    assert [e["name"] for e in d2.effects if e["name"] in ring], d2.doc["report"]
 
 
 def test_export_candidates_round_trip(tmp_path):

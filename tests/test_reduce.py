@@ -146,3 +146,69 @@ def test_a_parquet_record_is_reduced_row_group_by_row_group(tmp_path):
         write_parquet_table(fh, bad, row_group_rows=7_000)
     with pytest.raises(Exception, match=r"row group 2.*h1"):
         open_recording(path, max_order=6, settings=LOW)
+
+
+def _split_reduce(cols: dict, sizes: list[int], P: int, B: int, flags) -> tuple[dict, int]:
+    """The streamed reduction of ``cols`` in row groups of ``sizes`` rows on ``P``
+    processes, each process's share (``_reduce_stream._Share``) run here in turn and their
+    edges and reduced rows handed over as the collectives would."""
+    from encdesign._distributed import split_range
+    from encdesign.diagnose.engine._reduce_stream import _Share
+
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    types = {h: v.dtype.type for h, v in cols.items()}
+    shares, edges = [], []
+    for p in range(P):
+        g0, g1 = split_range(len(sizes), P, p)
+        sh = _Share(types, B, int(off[g0]), int(off[g1]))
+        edges.append(
+            sh.run(
+                lambda g: {h: v[off[g] : off[g + 1]] for h, v in cols.items()},
+                range(g0, g1),
+                off,
+                flags,
+            )
+        )
+        shares.append(sh)
+    for p, sh in enumerate(shares):
+        sh.finish(edges[:p], flags)
+    out = {h: np.concatenate([sh.take(h) for sh in shares]) for h in cols}
+    return out, sum(sh.n_starts for sh in shares)
+
+
+def test_a_split_record_is_reduced_to_the_same_blocks_bit_for_bit():
+    """Row groups of any size (some shorter than a block; fewer groups than processes) split
+    over 1-5 processes give the blocks of the whole record, bit for bit: a run change, a
+    gap, a reversal and a jump over half a turn sit at and next to the groups' and the
+    processes' boundaries."""
+    from encdesign.diagnose.engine._reduce import block_means, full_blocks, stretch_starts
+
+    rng = np.random.default_rng(4700)
+    rec = _record(4701, 3_000, 20_000.0)
+    cols = {h: np.asarray(v).copy() for h, v in rec.columns.items()}
+    n, dt = rec.n_rows, 5e-5
+    cols["t"][4_000:6_000] += 0.01  # a gap in run 1 (rows 3,000-5,999)
+    for c in ("theta_ref", "h0", "h1"):  # two reversals in run 1
+        for at in (3_500, 4_600):
+            cols[c][at:] = 2 * cols[c][at] - cols[c][at:]
+    cols["h1"][7_000:] += 4.0  # a jump of a reading over half a turn in run 2
+    flags = lambda c: stretch_starts(c, ["h0", "h1", "theta_ref"], c["theta_ref"], dt)  # noqa: E731
+    for B in (3, 7):
+        st = flags(cols)
+        full = full_blocks(st[: n // B * B], B)
+        ref = {h: block_means(v[: n // B * B], B, full, h == "run") for h, v in cols.items()}
+        assert int(st.sum()) == 3 + 1 + 2 + 1
+        splits = []
+        for trial in range(4):
+            cuts = np.sort(rng.choice(np.arange(1, n), size=12 + trial, replace=False))
+            near = np.flatnonzero(st)[1:, None] + np.arange(-2, 2)[None, :]  # around each
+            cuts = np.unique(np.concatenate([cuts, near[trial::4].ravel()]))
+            splits.append(np.diff(np.concatenate([[0], cuts, [n]])).tolist())
+        splits += [[n], [1, 2, n - 3]]  # more processes than row groups: some have none
+        for trial, sizes in enumerate(splits):
+            for P in (1, 2, 3, 5):
+                got, starts = _split_reduce(cols, sizes, P, B, flags)
+                assert starts == int(st.sum()), (B, trial, P)
+                for h in cols:
+                    assert got[h].dtype == ref[h].dtype
+                    assert np.array_equal(got[h], ref[h]), (B, trial, P, h)

@@ -65,6 +65,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_engine.py", 2): PHYSICS,
     ("engine/_reduce.py", 2): PHYSICS + " (the base grows to twice its order, the views scan twice "
     "the base's order, as in _document.scan_order_of; a block of at least two rows)",
+    ("engine/_reduce_stream.py", 2): SHAPE + " (a row's stretch-start flag depends on it and "
+    "the two rows before it: the rows of context carried into a row group or a share)",
     ("engine/_reduce.py", 6.0): NUMERIC + " (the leading order of the Dirichlet kernel, "
     "(B^2 - 1) x^2 / 6: a start the exact check then moves)",
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",

@@ -195,7 +195,9 @@ def open_recording(
     """The recording of the TOML file ``path`` and its ``reduced`` entry: a long Parquet
     record is reduced to block means as it is read, row group by row group (issue 43,
     ``FinderSettings.reduce_min_rows``; the whole table is never in memory); any other is
-    loaded whole (``None``).
+    loaded whole (``None``). In a program that joined ``jax.distributed`` (``--processes``,
+    ``--coordinator``) every process must call it: each reads and reduces its share of the
+    row groups, and every process gets the same reduced record.
 
     Raises:
         EncdesignInputError: the file breaks the format (the message names the file, the

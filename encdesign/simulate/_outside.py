@@ -86,7 +86,7 @@ SDS_MARKS = 200
 POLE_PAIRS = 7
 
 
-def _truth(cls: str, C: int, rng) -> dict:
+def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> dict:
     m = int(rng.choice([9, 11, 13, 17]))
     if cls == "torque_ripple":
         return dict(line=("order", 2 * POLE_PAIRS), frame="shaft", modulation="speed", beta=-2.0)
@@ -98,6 +98,8 @@ def _truth(cls: str, C: int, rng) -> dict:
     if cls == "fixed_hz":
         f = float(rng.uniform(23.0, 37.0))
         q = float(rng.uniform(*Q_RANGE))
+        if mode is not None:  # the bench's own mode (drawn all the same: the same stream)
+            f, q = float(mode[0]), float(mode[1])
         return dict(line=("hz", f), frame="hz", modulation="ringing", q=q)
     if cls == "catalog_vibration":
         return dict(line=("hz", float(rng.uniform(23.0, 37.0))), frame="hz", modulation="per_cell")
@@ -122,9 +124,12 @@ def outside_record(
     size: float,
     kind: str = "multihead",
     n_rows: int = 6000,
+    mode: tuple[float, float] | None = None,
 ) -> tuple[Recording, dict]:
     """``(recording, truth)``: a bench of ``kind`` with one structure of class ``cls``
     (:data:`CLASSES`; ``"clean"``: none) of peak amplitude ``size`` x the noise.
+    ``mode``: ``(frequency Hz, Q)`` of the ``fixed_hz`` class's mode (a property of the
+    bench: another record of the same bench; default: drawn).
 
     ``truth``: ``line`` (``("order", m)`` or ``("hz", f)``), ``frame``, ``modulation``,
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
@@ -142,7 +147,7 @@ def outside_record(
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.4, 5.9, C - 1))]) if C > 1 else np.zeros(1)
     truth = {"alpha": alpha, "class": cls, "size": size, "kind": kind}
     if cls != "clean":
-        truth.update(_truth(cls, C, rng))
+        truth.update(_truth(cls, C, rng, mode))
     speeds = np.array([1.0, 1.7, 2.9]) * 2 * np.pi * rng.uniform(0.8, 1.2)
     signs = np.array([1.0, -1.0, 1.0]) if both else np.ones(R)
     if both:

@@ -496,7 +496,8 @@ def discover(
             )
         return [None] * len(findings)
     kept, incl = select_terms(st)
-    if kept:  # the catalog model refitted with the terms kept, and the selection again
+    if kept and spanned_share(st, kept) >= st.settings.discover_refit_share:
+        # the catalog model refitted with the terms kept, and the selection again
         cat, resid2 = _refit(prep, fitter, terms, st, kept, incl)
         st2 = build(prep, fitter, cat, resid2, findings)
         if st2 is not None:  # taken where its model gains more (held out)
@@ -507,6 +508,20 @@ def discover(
     terms_json = [_term_json(prep, st, kept, i, incl, gains) for i in kept]
     near: dict[int, list[dict]] = {}  # per line: the best other terms (computed once)
     return [_model_json(st, kept, terms_json, fi, near) for fi in range(len(findings))]
+
+
+def spanned_share(st: State, kept: list[int]) -> float:
+    """The share of the kept terms' fitted signal (jointly, all folds) that the catalog
+    model's Jacobian spans: the chi-square of its projection on the Jacobian (the raw Gram
+    less the projected one) over its raw chi-square (0: orthogonal, the catalog model cannot
+    have moved to take any of it; 1: the catalog spans it all). Read from the sums, no pass
+    over the rows."""
+    H = _embed(st.sums, [st.lib[j] for j in kept])
+    At = H.T @ st.sums.A.sum(0) @ H
+    Rt = H.T @ st.sums.raw.sum(0) @ H
+    g = _psolve(At, H.T @ st.sums.b.sum(0), raw=Rt)
+    raw = float(g @ Rt @ g)
+    return float(g @ (Rt - At) @ g) / raw if raw > 0 else 0.0
 
 
 def _whole_gain(st: State, kept: list[int]) -> float:

@@ -1,12 +1,16 @@
 """Issue 43: a long record reduced to block means before the engine sees it.
 
 A record of more than ``FinderSettings.reduce_min_rows`` rows (of a kind in
-:data:`REDUCIBLE_KINDS`) is cut into blocks of ``B`` consecutive rows that never cross a run,
-a gap in ``t`` (a step over ``GAP_STEPS`` sampling intervals), a reversal of the shaft or a
-jump of a reading over half a turn; each block becomes one row holding the mean of every
-column (the run its own). Rows left over at the end of a stretch (fewer than ``B``) are left
-out and counted. The engine then runs on ``N / B`` rows; its noise estimate, taken from the
-reduced rows, is the block mean's (``sigma / sqrt(B)`` for white noise), so the weights
+:data:`REDUCIBLE_KINDS`) is cut into blocks of ``B`` consecutive rows on a fixed grid (rows
+``[k B, (k + 1) B)`` of the record, counted from its first row); a block that would cross a
+run, a gap in ``t`` (a step over ``GAP_STEPS`` sampling intervals), a reversal of the shaft
+or a jump of a reading over half a turn (the start of a new *stretch*) is left out, and so are
+the last ``N mod B`` rows. Each block kept becomes one row holding the mean of every column
+(the run its own); the rows left out (fewer than ``2 B`` per stretch) are counted. The grid
+does not depend on where a stretch starts, so a record split into shares (row groups,
+processes: :mod:`._reduce_stream`) is cut into the same blocks whatever the split.
+The engine then runs on ``N / B`` rows; its noise estimate, taken from the reduced rows, is
+the block mean's (``sigma / sqrt(B)`` for white noise), so the weights
 follow without a correction.
 
 The error is bounded and stated: the mean of ``B`` rows multiplies a sinusoid of frequency
@@ -239,43 +243,47 @@ def signal_period_tests(meta: dict, info: dict) -> dict:
     return meta
 
 
+def full_blocks(starts: np.ndarray, B: int) -> np.ndarray:
+    """Which blocks of ``B`` consecutive rows (``starts``: the rows' stretch-start flags, a
+    whole number of blocks) hold one stretch: no row but a block's first starts one."""
+    return np.logical_not(starts.reshape(-1, B)[:, 1:].any(1))
+
+
+def block_means(v: np.ndarray, B: int, full: np.ndarray, first: bool = False) -> np.ndarray:
+    """The means of the blocks ``full`` (:func:`full_blocks`) of column ``v`` (a whole
+    number of blocks of ``B`` rows), or with ``first`` their first values (the run). Each
+    block's mean is the same bits wherever it lies in ``v`` (a contiguous row of the kept
+    blocks, reduced on its own), so any split of the record gives the same means."""
+    m = np.asarray(v).reshape(-1, B)[full]
+    return m[:, 0] if first else m.mean(1)
+
+
 def reduce_recording(rec: Recording, info: dict) -> Recording:
     """The record of block means ``info`` plans (:func:`plan`); ``info`` gains the counts
     (``reduced_rows``, ``rows_left_out``, ``stretches``) and ``not_testable``."""
     B = int(info["block_rows"])
     starts = info.pop("_starts")
     n = rec.n_rows
-    # block id per row: within each stretch, rows [s, s + B) ... ; the tail (< B) gets -1
-    idx = np.flatnonzero(starts)
-    ends = np.append(idx[1:], n)
-    full = (ends - idx) // B
-    n_blocks = int(full.sum())
-    first_block = np.concatenate([[0], np.cumsum(full)[:-1]])
-    bid = np.full(n, -1, np.int64)
-    for s, k, f0 in zip(idx, full, first_block):
-        if k:
-            bid[s : s + k * B] = f0 + np.arange(k * B) // B
+    end = n // B * B  # the last n mod B rows make no whole block
+    step = max(PASS_ROWS // B, 1) * B  # slices of whole blocks (bounded temporaries)
+    cuts = [(a, min(a + step, end)) for a in range(0, end, step)]
+    keep = [full_blocks(starts[a:b], B) for a, b in cuts]
+    n_blocks = int(sum(int(k.sum()) for k in keep))
     cols: dict[str, np.ndarray] = {}
-    run = np.asarray(rec.columns["run"]) if "run" in rec.columns else None
-    keep = bid >= 0
     for name, col in rec.columns.items():
-        if name == "run":
-            continue
-        acc = np.zeros(n_blocks)
-        for a in range(0, n, PASS_ROWS):
-            b = min(n, a + PASS_ROWS)
-            k = keep[a:b]
-            acc += np.bincount(bid[a:b][k], np.asarray(col[a:b], float)[k], minlength=n_blocks)
-        cols[name] = acc / B
-    if run is not None:
-        r = np.empty(n_blocks, run.dtype)
-        r[bid[keep]] = run[keep]  # every row of a block is of one run
-        cols["run"] = r
-    cols = {k: cols[k] for k in rec.columns}  # the record's own column order
+        first = name == "run"
+        out = np.empty(n_blocks, np.asarray(col[:1]).dtype if first else float)
+        at = 0
+        for (a, b), full in zip(cuts, keep):
+            v = np.asarray(col[a:b]) if first else np.asarray(col[a:b], float)
+            m = block_means(v, B, full, first)
+            out[at : at + m.size] = m
+            at += m.size
+        cols[name] = out
     info.update(
         reduced_rows=n_blocks,
         rows_left_out=int(n - n_blocks * B),
-        stretches=int(idx.size),
+        stretches=int(np.count_nonzero(starts)),
     )
     meta = signal_period_tests(rec.meta, info)
     return Recording(rec.kind, meta, cols, path=rec.path)

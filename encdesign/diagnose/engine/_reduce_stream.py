@@ -1,14 +1,33 @@
 """Issue 43: a long Parquet record reduced to block means as it is read, one row group at a
-time (:mod:`._reduce` holds the rule; the whole table is never in memory).
+time (:mod:`._reduce` holds the rule; the whole table is never in memory), its row groups
+split over the processes of a distributed run.
 
-Two passes over the row groups: the first reads ``t`` and the shaft's columns (``theta_ref``,
-or the heads) for the sampling interval and the fastest shaft rate, which set the block
-(:func:`._reduce.plan_for`); the second reads every column of a group, checks it as
-:func:`~encdesign.io.load_recording` would (the message names the file, the row group and the
-column), and replaces it by its block means. The rows of a stretch that continues into the
-next group (fewer than ``B`` after its last whole block) are carried over, so the blocks are
-those of the in-memory reduction (:func:`._reduce.reduce_recording`) except that a reversal
-exactly at a row-group boundary is not seen.
+Each process takes a contiguous share of the row groups (:func:`~encdesign._distributed.
+split_range`; all of them on one process) and makes two passes over its share only:
+
+1. ``t`` and the shaft's columns (``theta_ref``, or the heads): each row group's median time
+   step and fastest shaft step (:func:`._reduce.step_stats`). The groups' values are gathered
+   in group order, so every process finds the same sampling interval and shaft rate, which
+   set the block ``B`` (:func:`._reduce.plan_for`).
+2. Every column of a group, checked as :func:`~encdesign.io.load_recording` would (the
+   message names the file, the row group and the column), replaced by its block means. The
+   blocks lie on the record's fixed grid of ``B`` rows, so a process knows its blocks without
+   knowing where the stretch it starts in began; a block is kept when no row but its first
+   starts a stretch (:func:`._reduce.stretch_starts`: a row's flag depends on it and the two
+   rows before it). The rows of the block still open at a group's end, and the two rows
+   before the next group, are carried into it.
+
+The one block that straddles the start of a process's share, and the flags of the share's
+first two rows, need the rows before the share: each process also keeps its share's first
+and last ``B + 2`` rows, these edges are gathered (one small collective), and the process
+that holds a straddling block's last row computes it from the same rows in the same way as
+one process would. The reduced rows of all processes are then gathered in process order
+(column by column, :data:`~encdesign._distributed.GATHER_ROWS` rows per process at a time),
+so every process continues with the same reduced record, bit
+for bit the record one process reduces (the block means are computed by
+:func:`._reduce.block_means`, whose result for a block does not depend on its neighbours).
+A bad row group on any process stops every process with its message. Memory per process:
+one row group, its share of the reduced rows, then the whole reduced record.
 """
 
 from __future__ import annotations
@@ -17,14 +36,20 @@ import math
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
+import jax
 import numpy as np
 
+from ..._distributed import allgather_concat, allgather_objects, split_range
+from ..._errors import EncdesignInputError
 from ...io._parquet import _to_numpy, is_parquet
 from ...io._recording import KINDS as SPECS
 from ...io._recording import Recording, read_toml, validate_columns, validate_meta
 from ._reduce import (
     REDUCIBLE_KINDS,
+    block_means,
+    full_blocks,
     plan_for,
     shaft_of,
     signal_period_tests,
@@ -86,13 +111,21 @@ def stream_reduce(
         return out
 
     G = pf.num_row_groups
+    offsets = np.concatenate(
+        [[0], np.cumsum([pf.metadata.row_group(g).num_rows for g in range(G)])]
+    )
+    g0, g1 = split_range(G, jax.process_count(), jax.process_index())
     shaft_cols = ["theta_ref"] if "theta_ref" in names else heads
 
     def steps() -> tuple[float, float]:
-        stats = []
-        for g in range(G):
-            part = read(g, ["t", *shaft_cols])
-            stats.append(step_stats(part["t"], shaft_of(part, heads)))
+        def mine() -> list[list[float]]:
+            out = []
+            for g in range(g0, g1):
+                part = read(g, ["t", *shaft_cols])
+                out.append(list(step_stats(part["t"], shaft_of(part, heads))))
+            return out
+
+        stats = [r for share in _agreed(mine) for r in share]  # group order
         dt = float(np.nanmedian([d for d, _ in stats]))
         rates = [r for _, r in stats if np.isfinite(r)]
         return dt, (float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0)
@@ -103,46 +136,147 @@ def stream_reduce(
         return None
     B, dt = int(info["block_rows"]), float(info["dt_s"])
     angles = [*heads, "theta_ref"] if "theta_ref" in names else heads
-    # the reduced columns allocated once (at most N // B blocks; pages never written are
-    # never resident): pieces kept per group would interleave with each group's temporaries
-    # and fragment the heap, so the peak grew with the rows (2.2 GB at 10^8 rows)
-    n_max = int(pf.metadata.num_rows) // B
-    out: dict[str, np.ndarray] = {}
-    at = 0
-    carry: dict[str, np.ndarray] | None = None
-    left = stretches = 0
-    for g in range(G):
-        cols = validate_columns(f"{dwhere}, row group {g}", kind, meta, read(g, names))
-        if carry is not None:
-            cols = {h: np.concatenate([carry[h], cols[h]]) for h in names}
-        m = len(cols["t"])
-        st = stretch_starts(cols, angles, shaft_of(cols, heads), dt)
-        stretches += int(st.sum()) - (carry is not None)
-        idx = np.flatnonzero(st)
-        ends = np.append(idx[1:], m)
-        full = (ends - idx) // B
-        carry = None
-        if g < G - 1:  # the last stretch may go on in the next group
-            cut = int(idx[-1] + full[-1] * B)
-            carry = {h: cols[h][cut:].copy() for h in names}
-            ends[-1] = cut
-        left += int(np.sum(ends - idx - full * B))
-        sel = [np.arange(i, i + k * B) for i, k in zip(idx, full) if k]
-        rows = np.concatenate(sel) if sel else np.zeros(0, np.int64)
-        k = rows.size // B
-        for h in names:
-            v = cols[h][rows]
-            if h not in out:
-                out[h] = np.empty(n_max, v.dtype)
-            out[h][at : at + k] = v[::B] if h == "run" else v.reshape(-1, B).mean(1)
-        at += k
-        del cols
-    out = {h: out[h][:at] if h in out else np.zeros(0) for h in names}
+
+    def flags(cols: dict[str, np.ndarray]) -> np.ndarray:
+        return stretch_starts(cols, angles, shaft_of(cols, heads), dt)
+
+    def group(g: int) -> dict[str, np.ndarray]:
+        return validate_columns(f"{dwhere}, row group {g}", kind, meta, read(g, names))
+
+    types = {h: np.int64 if h in spec.int_columns else np.float64 for h in names}
+    share = _Share(types, B, int(offsets[g0]), int(offsets[g1]))
+    edges = _agreed(lambda: share.run(group, range(g0, g1), offsets, flags))
+    share.finish(edges[: jax.process_index()], flags)
+    counts = allgather_objects([[share.n_blocks, share.n_starts]])
+    out = {h: allgather_concat(share.take(h), [c for c, _ in counts]) for h in names}
+    n_blocks = sum(c for c, _ in counts)
     info.update(
-        reduced_rows=int(at),
-        rows_left_out=left,
-        stretches=stretches,
+        reduced_rows=int(n_blocks),
+        rows_left_out=int(pf.metadata.num_rows - n_blocks * B),
+        stretches=int(sum(s for _, s in counts)),
         streamed_row_groups=G,
     )
     meta = signal_period_tests(meta, info)
     return Recording(kind, meta, out, path=path), info
+
+
+_T = TypeVar("_T")
+
+
+def _agreed(work: Callable[[], _T]) -> list[_T]:
+    """Every process's ``work()`` (JSON-able), in process order; when it raised an input error
+    on any process, every process raises the first one's message (so none waits forever)."""
+    try:
+        got, err = work(), None
+    except EncdesignInputError as exc:
+        if jax.process_count() == 1:
+            raise
+        got, err = None, str(exc)
+    every = allgather_objects([[err, got]])
+    errs = [e for e, _ in every if e is not None]
+    if errs:
+        raise EncdesignInputError(errs[0])
+    return [g for _, g in every]
+
+
+Columns = dict[str, np.ndarray]
+
+
+class _Share:
+    """One process's share of the rows, ``[lo, hi)``, reduced to the means of the grid
+    blocks whose last row is in it (:func:`stream_reduce`, pass 2); ``types``: the columns
+    and their dtypes."""
+
+    def __init__(self, types: dict[str, type], B: int, lo: int, hi: int):
+        self.names, self.B, self.lo, self.hi = list(types), B, lo, hi
+        self.n_starts = 0  # rows of the share that start a stretch
+        # slot 0: the block that straddles lo (finish); allocated once (pages never
+        # written are never resident)
+        self.out = {h: np.empty(max(hi - lo, 0) // B + 2, t) for h, t in types.items()}
+        self.at = 1
+        self.head: Columns = {}  # the share's first B + 2 rows
+        self.edge: Columns = {}  # and its last B + 2 rows
+
+    def _put(self, cols: Columns, full: np.ndarray, at: int) -> None:
+        for h in self.names:
+            v = block_means(cols[h], self.B, full, h == "run")
+            self.out[h][at : at + v.size] = v
+
+    def run(
+        self,
+        group: Callable[[int], Columns],
+        groups: range,
+        offsets: np.ndarray,
+        flags: Callable[[Columns], np.ndarray],
+    ) -> dict[str, list]:
+        """Pass 2 over the share's row groups (``group(g)``: its checked columns;
+        ``flags(cols)``: the stretch starts of consecutive rows): the blocks that lie wholly
+        after the share's first row; returns the share's last ``B + 2`` rows (its edge)."""
+        B, lo, keep = self.B, self.lo, self.B + 2
+        k = lo // B + 1  # the next block to close (block lo // B: finish)
+        tail: Columns | None = None
+        base = lo  # the row of the record that cols[...][0] is
+        for g in groups:
+            part = group(g)
+            gs, ge = int(offsets[g]), int(offsets[g + 1])
+            for h in self.names:
+                v = part[h][-keep:]
+                if v.size < keep and h in self.edge:
+                    v = np.concatenate([self.edge[h], v])[-keep:]
+                self.edge[h] = v.copy()
+                if gs - lo < keep:
+                    old = self.head.get(h, part[h][:0])
+                    self.head[h] = np.concatenate([old, part[h][: keep - old.size]])
+            cols = part if tail is None else {h: np.concatenate([tail[h], part[h]]) for h in part}
+            del part
+            st = flags(cols)  # exact from row lo + 2 on (two rows before each)
+            first = max(gs, lo + 2)
+            if first < ge:
+                self.n_starts += int(st[first - base :].sum())
+            k_end = ge // B  # blocks k < k_end end in rows read so far
+            if k_end > k:
+                a, b = k * B - base, k_end * B - base
+                full = full_blocks(st[a:b], B)
+                self._put({h: cols[h][a:b] for h in self.names}, full, self.at)
+                self.at += int(full.sum())
+                k = k_end
+            # the open block and the row before it (its second row's flag needs two rows
+            # before it), and the group's last two rows (the next group's first rows' flags)
+            cut = max(base, min(k * B - 1, ge - 2))
+            tail = {h: cols[h][cut - base :].copy() for h in self.names}
+            base = cut
+            del cols, st
+        return {h: v.tolist() for h, v in self.edge.items()}
+
+    def finish(self, before: list[dict[str, list]], flags: Callable[[Columns], np.ndarray]) -> None:
+        """The block that straddles the share's first row (when its last row is in the
+        share) and the flags of the share's first two rows, from ``before``: the edges of
+        the processes before this one, in order."""
+        B, lo, hi = self.B, self.lo, self.hi
+        kd, kept = lo // B, False
+        if hi > lo:
+            w0 = max(0, kd * B - 2)  # the rows from two before the block on
+            w = {}
+            for h in self.names:
+                mine = self.head[h]
+                prev = [np.asarray(e[h], mine.dtype) for e in before if e]
+                prev = np.concatenate(prev) if prev else mine[:0]
+                w[h] = np.concatenate([prev[prev.size - (lo - w0) :], mine])
+            st = flags(w)  # exact from row w0 + 2 on, and from the record's first row
+            self.n_starts += int(st[lo - w0 : min(lo + 2, hi) - w0].sum())
+            if (kd + 1) * B <= hi:  # its last row is in the share
+                a = kd * B - w0
+                full = full_blocks(st[a : a + B], B)
+                self._put({h: w[h][a : a + B] for h in self.names}, full, 0)
+                kept = bool(full[0])
+        if not kept:
+            self.out = {h: v[1:] for h, v in self.out.items()}
+            self.at -= 1
+
+    @property
+    def n_blocks(self) -> int:
+        return self.at
+
+    def take(self, h: str) -> np.ndarray:
+        """The share's block means of column ``h`` (released from the share)."""
+        return self.out.pop(h)[: self.at]

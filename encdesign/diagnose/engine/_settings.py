@@ -485,15 +485,12 @@ class FinderSettings(eqx.Module):
     moved unchanged in issue 44 G."""
 
     discover_step_margin: float = eqx.field(default=0.1, static=True)
-    """Discovery: share of the kept rows (at least 2) a step term leaves on either side of
-    its change point: a change in the first or last tenth of a record is more often an end
-    effect (a start-up or a stop the segmentation kept) than a change of the set-up, so a
-    line whose best change point (scanned over all kept rows) falls there gets no step term
-    (session 16: restricting the scan to the middle put such a transient's change at the
-    margin's edge instead; ``tests/test_discover.py``, start-up and stop). Set by
-    hand after the measured ODrive records (issue 41): with 2 % a step at t = 9.48 s of a
-    10 s record (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a
-    physical size for that order."""
+    """Discovery: a change point in the first or last this share of the kept rows (at least
+    2) is an end effect (a start-up or a stop the segmentation kept), not a change of the
+    set-up: a line whose best change (scanned over all kept rows) falls there gets no step
+    term (session 16; a scan restricted to the middle put it at the margin's edge). Set by
+    hand after the ODrive records (issue 41): with 2 % a step at t = 9.48 s of a 10 s record
+    (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a physical size."""
 
     discover_drive_near: float = eqx.field(default=1.0, static=True)
     """Discovery: a located integer order within this many orders of a multiple of the
@@ -684,6 +681,12 @@ class FinderSettings(eqx.Module):
     ratio a term with more parameters (its own phase per run) would otherwise win over the
     physical one by fitting that small model error. Was ``_discover.MODEL_ERROR_PER_PARAM``;
     set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+
+    discover_refit_share: float = eqx.field(default=0.01, static=True)
+    """Discovery: the catalog model is refitted jointly with the kept terms (and they are
+    selected again) only where its Jacobian spans at least this share of their fitted signal;
+    below it the linear joint fit of the sums is the joint fit. Set by hand (issue 41, s16):
+    refits that changed the model had shares 0.84-1, the others 1e-4-1e-3 (seeds 4105)."""
 
     discover_size_ratio_max: float = eqx.field(default=100.0, static=True)
     """Discovery: an exported candidate whose refit amplitude is more than this many times
