@@ -246,15 +246,22 @@ def accumulate(
     uu, ss, cc = comp_a[:, 0], comp_a[:, 1], comp_a[:, 2]
     w = 1.0 / sig
     same_s = ss[:, None] == ss[None, :]
-    same_c = cc[:, None] == cc[None, :]
+    # a column on channel c is projected as the data are, before whitening (no reference:
+    # less the head mean; ``P``), then whitened: on channel c'' it is P[c'', c] x / sigma_c''.
+    # Its Gram is x x' (P W^2 P)[c, c'], its products with the (already projected and
+    # whitened) residual and Jacobian sum w P over the channels. Projecting after whitening
+    # instead (W P W) leaves a term common to all heads a small norm where the heads' noise
+    # levels differ (it has none) and fitted it at a non-physical size.
+    P = np.eye(C) - (1.0 / C if prep.kd.project else 0.0)
+    PW2P = P @ np.diag(w**2) @ P
+    wP = w[:, None] * P  # (c'', c): w_c'' P[c'', c]
     for k in range(K):
         Gk = G[k][ss[:, None], uu[:, None], uu[None, :]]  # (Q, Q) on the same cell
-        fac = same_c * (w[cc][:, None] ** 2)
-        if prep.kd.project:
-            fac = fac - w[cc][:, None] * w[cc][None, :] / C
-        A[k] = np.where(same_s, Gk * fac, 0.0)
-        bvec[k] = XR[k][ss, uu, cc] * w[cc]
-        JXf[k] = JX[k][:, ss, uu, cc] * w[cc][None, :]
+        A[k] = np.where(same_s, Gk * PW2P[cc[:, None], cc[None, :]], 0.0)
+        XRp = np.einsum("suc,cd->sud", XR[k], wP)
+        bvec[k] = XRp[ss, uu, cc]
+        JXp = np.einsum("psuc,cd->psud", JX[k], wP)
+        JXf[k] = JXp[:, ss, uu, cc]
     # Frisch-Waugh: columns orthogonal to the catalog model's Jacobian (all folds' sums)
     JJt, JXt = JJ.sum(0), JXf.sum(0)
     P = _psolve(JJt, JXt)

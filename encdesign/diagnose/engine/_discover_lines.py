@@ -266,7 +266,12 @@ def locate_steps(
     :data:`STEP_BINS` equal-count bin edges of the kept rows and the times the finder's
     views located (:func:`located_steps`), where a step of the line's cos / sin (each
     channel its own, the constant line projected out) takes the most chi-square from the
-    residual; a scanned edge is refined to the row between its neighbours. With ``J``
+    residual; a scanned edge is refined to the row between its neighbours. The scan runs
+    over all kept rows (2 at least on either side); where its best change point falls in the
+    first or last ``settings.discover_step_margin`` of them, the line gets no step term (an
+    end effect: a start-up or a stop the segmentation kept; restricting the scan instead put
+    such a transient's change at the margin's edge, a change time that is nowhere in the
+    record). With ``J``
     (all rows, (n, C, p): the whitened Jacobian of the final catalog model, given for
     records of at most :data:`STEP_EXACT_ROWS` rows) the catalog model is projected out
     too, as in the fit. ``n_tests``: the change points tried (the term's multiple-testing
@@ -288,7 +293,7 @@ def locate_steps(
             p = int(np.searchsorted(ts, v))
         src[p] = view
         pos.add(p)
-    cand = np.array(sorted(p for p in pos if margin <= p <= n - margin), dtype=int)
+    cand = np.array(sorted(p for p in pos if 2 <= p <= n - 2), dtype=int)
     if cand.size == 0:
         return [None] * len(lines)
     sig = np.asarray(prep.sigma, float)
@@ -314,11 +319,14 @@ def locate_steps(
         bi = int(np.argmax(gains(cand)))
         p, n_tests = int(cand[bi]), int(cand.size)
         if p not in src:  # refined to the row between the neighbouring change points
-            lo = int(cand[bi - 1]) + 1 if bi > 0 else margin
-            hi = int(cand[bi + 1]) if bi + 1 < cand.size else n - margin + 1
+            lo = int(cand[bi - 1]) + 1 if bi > 0 else 2
+            hi = int(cand[bi + 1]) if bi + 1 < cand.size else n - 1
             if hi - lo > 1:
                 p = lo + int(np.argmax(gains(range(lo, hi))))
                 n_tests += hi - lo - 1
+        if not margin <= p <= n - margin:  # an end effect, not a change of the set-up
+            out.append(None)
+            continue
         out.append(
             {
                 "row": int(order[p]),

@@ -485,12 +485,12 @@ class FinderSettings(eqx.Module):
     moved unchanged in issue 44 G."""
 
     discover_step_margin: float = eqx.field(default=0.1, static=True)
-    """Discovery: share of the kept rows (at least 2) a step term leaves on either side of
-    its change point: a change in the first or last tenth of a record is more often an end
-    effect (a start-up or a stop the segmentation kept) than a change of the set-up. Set by
-    hand after the measured ODrive records (issue 41): with 2 % a step at t = 9.48 s of a
-    10 s record (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a
-    physical size for that order."""
+    """Discovery: a change point in the first or last this share of the kept rows (at least
+    2) is an end effect (a start-up or a stop the segmentation kept), not a change of the
+    set-up: a line whose best change (scanned over all kept rows) falls there gets no step
+    term (session 16; a scan restricted to the middle put it at the margin's edge). Set by
+    hand after the ODrive records (issue 41): with 2 % a step at t = 9.48 s of a 10 s record
+    (its last 5 %) took an order-13 "switching on" of 98 +- 19 mrad, not a physical size."""
 
     discover_drive_near: float = eqx.field(default=1.0, static=True)
     """Discovery: a located integer order within this many orders of a multiple of the
