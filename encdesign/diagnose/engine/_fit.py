@@ -295,10 +295,10 @@ class Fitter:
         Terms whose free parameters are all linear form a *static* block: its processed
         Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
         costs the products with the candidate's columns only. Each pass with the Jacobian
-        also sums the block's normal equations per fold and channel (:mod:`._normal`): a
+        also sums the block's normal equations per fold (:mod:`._normal`): a
         static block alone on the same observations then needs no pass at all."""
         prep = self.prep
-        K, C = prep.settings.n_folds, prep.n_channels
+        K = prep.settings.n_folds
         terms = list(terms)
         static = [t for t in terms if self._linear_only(t)]
         dyn = [t for t in terms if not self._linear_only(t)]
@@ -319,18 +319,20 @@ class Fitter:
             got = acc.stats(prep.y, held, z_s, sc_s, self.w_ch, jac)
             if got is not None:
                 return self._caller_order(terms, static, dyn, *got, sc_s, sc_d)
-        gram = None if acc is None else acc.G
+        gram = None if acc is None else (acc.G, acc.Gu)
         sw = np.sqrt(self.w_ch)
         # the chunks in fixed groups; this process sums its share group by group and the
         # groups' sums are gathered (_rowshare): the same sums for any number of processes
         shapes = [(K, p, p), (K, p), (K,), (K,)]
-        if jac:  # the static block's own normal equations, per fold and channel
-            shapes += [(K, C, p_s), (K, C)] + ([(K, C, p_s, p_s)] if gram is None else [])
+        if jac:  # the static block's own normal equations, whitened and not (for ssr)
+            shapes += [(K, p_s), (K,), (K, p_s), (K,)]
+            shapes += [(K, p_s, p_s), (K, p_s, p_s)] if gram is None else []
         n_out = len(shapes)
         groups = row_groups(self.n_chunks())
         parts = []
         for grp in my_groups(len(groups)):
-            A, g, c, ssr, h, q, new_gram = [np.zeros(s) for s in shapes] + [None] * (7 - n_out)
+            sums = [np.zeros(s) for s in shapes] + [None] * (10 - n_out)
+            A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = sums
             for a, b, x in self.chunks(*groups[grp]):
                 ck = (skey, a)
                 hit = self._pcache.get(ck)
@@ -382,37 +384,41 @@ class Fitter:
                     rk = rw[lo:hi].ravel()
                     Sk = Js_[lo:hi].reshape(rk.size, p_s)
                     g[k, :p_s] += Sk.T @ rk
-                    for ch in range(C):
-                        Sc, rc = Js_[lo:hi, ch, :], rs[lo:hi, ch]
-                        h[k, ch] += Sc.T @ rc
-                        q[k, ch] += float(rc @ rc)
-                        if new_gram is not None:
-                            new_gram[k, ch] += Sc.T @ Sc
+                    rsk = rs[lo:hi].ravel()
+                    rsu = (rs[lo:hi] / self.w_ch[None, :]).ravel()
+                    h[k] += Sk.T @ rsk
+                    q[k] += float(rsk @ rsk)
+                    hu[k] += Sk.T @ rsu
+                    qu[k] += float(rsk @ rsu)
+                    if new_gram is not None:
+                        new_gram[k] += Sk.T @ Sk
+                        Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
+                        new_gu[k] += Su.T @ Su
                     if Jd is not None and Jd.shape[2]:
                         Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
                         A[k, :p_s, p_s:] += Sk.T @ Dk
                         A[k, p_s:, p_s:] += Dk.T @ Dk
                         g[k, p_s:] += Dk.T @ rk
-            parts.append(
-                np.concatenate([v.ravel() for v in (A, g, c, ssr, h, q, new_gram)[:n_out]])
-            )
+            parts.append(np.concatenate([v.ravel() for v in sums[:n_out]]))
         total = reduce_groups(parts, len(groups), sum(math.prod(s) for s in shapes))
-        A, g, c, ssr, h, q, new_gram = unflatten(total, shapes) + [None] * (7 - n_out)
+        A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = unflatten(total, shapes) + [None] * (
+            10 - n_out
+        )
         if jac:
-            gram = gram if new_gram is None else new_gram
-            A[:, :p_s, :p_s] = gram.sum(1)
+            gram = gram if new_gram is None else (new_gram, new_gu)
+            A[:, :p_s, :p_s] = gram[0]
             A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
-            self._keep_acc(skey, Accumulated(prep.y, held, z_s, sc_s, gram, h, q))
+            self._keep_acc(skey, Accumulated(prep.y, held, z_s, sc_s, *gram, h, q, hu, qu))
         return self._caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d)
 
     def _keep_acc(self, skey: tuple, acc: Accumulated) -> None:
         """Cache ``acc`` for ``skey``, the oldest blocks dropped past :data:`CACHE_BYTES`."""
         old = self._acc.pop(skey, None)
-        self._abytes -= 0 if old is None else old.G.nbytes
-        while self._acc and self._abytes + acc.G.nbytes > CACHE_BYTES:
-            self._abytes -= self._acc.pop(next(iter(self._acc))).G.nbytes
+        self._abytes -= 0 if old is None else old.nbytes()
+        while self._acc and self._abytes + acc.nbytes() > CACHE_BYTES:
+            self._abytes -= self._acc.pop(next(iter(self._acc))).nbytes()
         self._acc[skey] = acc
-        self._abytes += acc.G.nbytes
+        self._abytes += acc.nbytes()
 
     @staticmethod
     def _caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d):

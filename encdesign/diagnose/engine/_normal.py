@@ -6,12 +6,14 @@ and ``J`` fixed by the held values. Its whitened, projected, scaled residual at 
 free values ``z`` is ``r(z) = r_ref - S (z - z_ref)`` (``S`` the processed Jacobian,
 ``r_ref`` the residual at the values ``z_ref`` of the last pass over the rows), so the
 per-fold statistics the fitter needs at any ``z`` follow from sums made in that pass,
-per fold ``k`` and channel ``c``: ``G_kc = S_kc^T S_kc``, ``h_kc = S_kc^T r_ref,kc`` and
-``q_kc = |r_ref,kc|^2``. With ``dz = z - z_ref``::
+per fold ``k``: ``G_k = S_k^T S_k`` (the fit's own Gram matrix, summed as the fit sums
+it), ``h_k = S_k^T r_ref,k``, ``q_k = |r_ref,k|^2``, and the same unwhitened (each row and
+channel divided by ``sqrt(w_c)``, the channel's weight): ``Gu_k``, ``hu_k``, ``qu_k``. With
+``dz = z - z_ref``::
 
-    c_kc = q_kc - 2 dz.h_kc + dz^T G_kc dz       (whitened chi-square)
-    g_k  = sum_c (h_kc - G_kc dz),  A_k = sum_c G_kc
-    ssr_k = sum_c c_kc / w_c                     (unwhitened: w_c the channel's weight)
+    c_k = q_k - 2 dz.h_k + dz^T G_k dz            (whitened chi-square)
+    g_k = h_k - G_k dz,  A_k = G_k
+    ssr_k = qu_k - 2 dz.hu_k + dz^T Gu_k dz       (unwhitened)
 
 The identities are exact; only their rounding differs from a pass over the rows. The
 rounding error of ``c`` is of order ``eps`` times the magnitude of its terms (``q`` and
@@ -62,9 +64,11 @@ class Accumulated:
         held: :func:`held_key` of the block.
         z_ref: the free values at the reference (parameter units).
         sc: the scales of the free values (scaled = value / sc).
-        G: ``(K, C, p, p)`` per-fold, per-channel Gram matrices of the processed Jacobian.
-        h: ``(K, C, p)`` its products with the reference residual.
-        q: ``(K, C)`` the reference residual's whitened sums of squares.
+        G: ``(K, p, p)`` per-fold Gram matrices of the processed (whitened) Jacobian.
+        Gu: ``(K, p, p)`` the same unwhitened.
+        h: ``(K, p)`` its products with the reference residual (whitened).
+        q: ``(K,)`` the reference residual's whitened sums of squares.
+        hu, qu: ``h`` and ``q`` unwhitened.
     """
 
     y: np.ndarray
@@ -72,8 +76,15 @@ class Accumulated:
     z_ref: np.ndarray
     sc: np.ndarray
     G: np.ndarray
+    Gu: np.ndarray
     h: np.ndarray
     q: np.ndarray
+    hu: np.ndarray
+    qu: np.ndarray
+
+    def nbytes(self) -> int:
+        """Bytes held (the two Gram matrices)."""
+        return int(self.G.nbytes + self.Gu.nbytes)
 
     def stats(self, y, held: tuple, z: np.ndarray, sc: np.ndarray, w_ch, jac: bool):
         """``(A, g, c, ssr)`` per fold at free values ``z`` (parameter units, scales ``sc``)
@@ -83,16 +94,16 @@ class Accumulated:
         if y is not self.y or held != self.held or not np.array_equal(sc, self.sc):
             return None
         dz = (z - self.z_ref) / np.where(sc != 0, sc, 1.0)
-        lin = np.einsum("kcp,p->kc", self.h, dz)
-        Gdz = np.einsum("kcpq,q->kcp", self.G, dz)
-        quad = np.einsum("kcp,p->kc", Gdz, dz)
-        ckc = self.q - 2.0 * lin + quad
-        c = ckc.sum(1)
+        del w_ch  # (in the unwhitened sums)
+        lin = self.h @ dz
+        Gdz = self.G @ dz
+        quad = Gdz @ dz
+        c = self.q - 2.0 * lin + quad
         size = float(np.sum(self.q) + 2.0 * np.sum(np.abs(lin)) + np.sum(np.abs(quad)))
         if not size <= CANCEL_MAX * max(float(c.sum()), 1e-300):
             return None
-        ssr = (ckc / np.asarray(w_ch)[None, :]).sum(1)
+        ssr = self.qu - 2.0 * (self.hu @ dz) + (self.Gu @ dz) @ dz
         K, p = self.G.shape[0], self.G.shape[2]
         if not jac:
             return np.zeros((K, p, p)), np.zeros((K, p)), c, ssr
-        return self.G.sum(1), (self.h - Gdz).sum(1), c, ssr
+        return self.G.copy(), self.h - Gdz, c, ssr
