@@ -108,3 +108,40 @@ def test_the_caches_change_no_bit_of_a_diagnosis(monkeypatch, seed):
     cached, uncached = doc(_fit.CACHE_BYTES), doc(0.0)
     assert [e["name"] for e in cached["effects"]] == ["vibration"]
     assert uncached == cached
+
+
+@pytest.mark.parametrize("ref", [True, False])
+def test_accumulated_stats_equal_a_pass_over_the_rows(ref):
+    """Issue 43: a static block's statistics at other linear values, from the normal
+    equations summed in the last pass (:mod:`engine._normal`), equal those of a pass over
+    the rows (a fresh fitter, nothing cached); new observations or held values make a pass."""
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._prepare import prepare
+    from encdesign.diagnose.engine._steps import frozen
+    from encdesign.diagnose.kinds.multihead._multihead import multihead_base, multihead_data
+    from tests.test_engine import _bench
+
+    rec = _bench(1500, 3, ref)
+    prep = prepare(multihead_data(rec), dict(rec.meta))
+    (cand, start), *_ = multihead_base(prep, 4)[0]
+    base = Fitter(prep).fit([make_term(cand, prep, start)])
+    held = frozen(base.terms)
+    fitter = Fitter(prep)
+    fitter.stats(held)  # one pass: sums the normal equations at these values
+    rng = np.random.default_rng(7)
+    moved = [t.copy() for t in held]
+    for q in cand.params:
+        m = moved[0].free[q.name]
+        moved[0].values[q.name][m] += rng.normal(0, 1e-6, int(m.sum()))
+    calls = []
+    orig = fitter.chunks
+    fitter.chunks = lambda *a: calls.append(a) or orig(*a)  # type: ignore[method-assign]
+    got = fitter.stats(moved)
+    assert not calls  # no pass over the rows
+    want = Fitter(prep).stats(moved)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-9 * np.abs(w).max())
+    assert abs(want[2].sum() - fitter.stats(held)[2].sum()) > 1e-3 * want[2].sum()  # it moved
+    prep.y = prep.y + 1e-7  # other observations: a pass
+    fitter.stats(moved)
+    assert calls

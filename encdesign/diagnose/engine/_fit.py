@@ -14,6 +14,7 @@ import scipy.linalg as sla
 from scipy import stats
 
 from ._candidates import Candidate
+from ._normal import Accumulated, free_values, held_key
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
 from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
@@ -131,7 +132,8 @@ class Fitter:
         self._jbytes = 0
         self._pcache: dict = {}
         self._pbytes = 0
-        self._gram: dict = {}
+        self._acc: dict = {}  # static block -> its normal equations (Gram matrices)
+        self._abytes = 0
 
     def n_chunks(self) -> int:
         """Chunks of a pass over all rows."""
@@ -161,8 +163,8 @@ class Fitter:
         """Drop the cached Jacobians (after a row column changed)."""
         self._jcache.clear()
         self._pcache.clear()
-        self._gram.clear()
-        self._jbytes = self._pbytes = 0
+        self._acc.clear()
+        self._jbytes = self._pbytes = self._abytes = 0
 
     @staticmethod
     def _linear_only(term: Term) -> bool:
@@ -183,6 +185,8 @@ class Fitter:
             fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
             key = (id(term.cand), a, held, fmask)
             hit = self._jcache.get(key)
+            if hit is None and not jac:  # a value only (the Jacobian is not cached): no Jacobian
+                return np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None
             if hit is None:
                 p = params()
                 p0 = {
@@ -290,13 +294,14 @@ class Fitter:
 
         Terms whose free parameters are all linear form a *static* block: its processed
         Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
-        costs the products with the candidate's columns only."""
+        costs the products with the candidate's columns only. Each pass with the Jacobian
+        also sums the block's normal equations per fold (:mod:`._normal`): a
+        static block alone on the same observations then needs no pass at all."""
         prep = self.prep
         K = prep.settings.n_folds
         terms = list(terms)
         static = [t for t in terms if self._linear_only(t)]
         dyn = [t for t in terms if not self._linear_only(t)]
-        perm_terms = static + dyn
         p_s = sum(t.n_free() for t in static)
         p = sum(t.n_free() for t in terms)
 
@@ -308,15 +313,26 @@ class Fitter:
 
         sc_s, sc_d = scales(static), scales(dyn)
         skey = self._static_key(static)
-        gram = self._gram.get(skey)
+        held, z_s = held_key(static), free_values(static)
+        acc = self._acc.get(skey)
+        if not dyn and acc is not None:
+            got = acc.stats(prep.y, held, z_s, sc_s, self.w_ch, jac)
+            if got is not None:
+                return self._caller_order(terms, static, dyn, *got, sc_s, sc_d)
+        gram = None if acc is None else (acc.G, acc.Gu)
         sw = np.sqrt(self.w_ch)
         # the chunks in fixed groups; this process sums its share group by group and the
         # groups' sums are gathered (_rowshare): the same sums for any number of processes
-        shapes = [(K, p, p), (K, p), (K,), (K,)] + ([(K, p_s, p_s)] if gram is None else [])
+        shapes = [(K, p, p), (K, p), (K,), (K,)]
+        if jac:  # the static block's own normal equations, whitened and not (for ssr)
+            shapes += [(K, p_s), (K,), (K, p_s), (K,)]
+            shapes += [(K, p_s, p_s), (K, p_s, p_s)] if gram is None else []
+        n_out = len(shapes)
         groups = row_groups(self.n_chunks())
         parts = []
         for grp in my_groups(len(groups)):
-            A, g, c, ssr, new_gram = [np.zeros(s) for s in shapes] + [None] * (5 - len(shapes))
+            sums = [np.zeros(s) for s in shapes] + [None] * (10 - n_out)
+            A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = sums
             for a, b, x in self.chunks(*groups[grp]):
                 ck = (skey, a)
                 hit = self._pcache.get(ck)
@@ -336,7 +352,13 @@ class Fitter:
                 else:
                     pred = np.zeros((b - a, prep.n_channels))
                     for tm in static:
-                        pred += self.eval_term(tm, a, b, x, jac=jac)[0]
+                        pred += self.eval_term(tm, a, b, x, jac=False)[0]
+                rs = None
+                if jac:  # the static block's own residual (whitened, fold-sorted)
+                    rs = prep.y[a:b] - pred
+                    if prep.kd.project:
+                        rs = rs - rs.mean(1, keepdims=True)
+                    rs = (rs * sw)[order]
                 if dyn:
                     if jac:
                         pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
@@ -357,34 +379,55 @@ class Fitter:
                         continue
                     c[k] += float(np.sum(rw[lo:hi] ** 2))
                     ssr[k] += float(np.sum(rr[lo:hi] ** 2))
-                    if not jac:
+                    if rs is None:
                         continue
                     rk = rw[lo:hi].ravel()
                     Sk = Js_[lo:hi].reshape(rk.size, p_s)
                     g[k, :p_s] += Sk.T @ rk
+                    rsk = rs[lo:hi].ravel()
+                    rsu = (rs[lo:hi] / self.w_ch[None, :]).ravel()
+                    h[k] += Sk.T @ rsk
+                    q[k] += float(rsk @ rsk)
+                    hu[k] += Sk.T @ rsu
+                    qu[k] += float(rsk @ rsu)
                     if new_gram is not None:
                         new_gram[k] += Sk.T @ Sk
+                        Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
+                        new_gu[k] += Su.T @ Su
                     if Jd is not None and Jd.shape[2]:
                         Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
                         A[k, :p_s, p_s:] += Sk.T @ Dk
                         A[k, p_s:, p_s:] += Dk.T @ Dk
                         g[k, p_s:] += Dk.T @ rk
-            parts.append(
-                np.concatenate([v.ravel() for v in (A, g, c, ssr, new_gram) if v is not None])
-            )
+            parts.append(np.concatenate([v.ravel() for v in sums[:n_out]]))
         total = reduce_groups(parts, len(groups), sum(math.prod(s) for s in shapes))
-        A, g, c, ssr, new_gram = unflatten(total, shapes) + [None] * (5 - len(shapes))
+        A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = unflatten(total, shapes) + [None] * (
+            10 - n_out
+        )
         if jac:
-            if new_gram is not None:
-                gram = new_gram
-                self._gram[skey] = gram
-            A[:, :p_s, :p_s] = gram
+            gram = gram if new_gram is None else (new_gram, new_gu)
+            A[:, :p_s, :p_s] = gram[0]
             A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
-        # back to the caller's term order
+            self._keep_acc(skey, Accumulated(prep.y, held, z_s, sc_s, *gram, h, q, hu, qu))
+        return self._caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d)
+
+    def _keep_acc(self, skey: tuple, acc: Accumulated) -> None:
+        """Cache ``acc`` for ``skey``, the oldest blocks dropped past :data:`CACHE_BYTES`."""
+        old = self._acc.pop(skey, None)
+        self._abytes -= 0 if old is None else old.nbytes()
+        while self._acc and self._abytes + acc.nbytes() > CACHE_BYTES:
+            self._abytes -= self._acc.pop(next(iter(self._acc))).nbytes()
+        self._acc[skey] = acc
+        self._abytes += acc.nbytes()
+
+    @staticmethod
+    def _caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d):
+        """``(A, g, c, ssr, sc)`` with the parameters back in the caller's term order (the
+        static block first in the sums)."""
         idx = []
         pos = {}
         s0 = 0
-        for t in perm_terms:
+        for t in static + dyn:
             pos[id(t)] = (s0, s0 + t.n_free())
             s0 += t.n_free()
         for t in terms:
