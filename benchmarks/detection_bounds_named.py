@@ -18,9 +18,10 @@ confounded with a named effect
 * ``reference``: a sensor against a reference, ``scale_error+interpolation_error`` and
   ``interpolation_error+scale_error`` (``interp_ref_record``);
 * ``multihead``: ``vibration+interpolation_error`` on head 1 (``vibration_record``);
-* ``sds``: ``axis_tilt+coil_mismatch`` and ``bearing_wobble+coil_mismatch`` on the small sds
-  benches of ``SDS_EFFECT_GEOMETRIES`` (geometry ``S mod 3``, ``_sds_record``, the clock
-  locked to the motor): the tilt or wobble and an order-1 coil mismatch beside it
+* ``sds``: ``axis_tilt+coil_mismatch``, ``bearing_wobble+coil_mismatch`` and the two the
+  other way round on the small sds benches of ``SDS_EFFECT_GEOMETRIES`` (geometry
+  ``S mod 3``, ``_sds_record``, the clock locked to the motor): the tilt or wobble and an
+  order-1 coil mismatch beside it
   (``write_concealed_sds(coil_beside_noise=)``, the motor's torque ripple, a code path apart
   from the platform's errors), each size as ``detection_bounds.sds_effect_trials`` states it
   (the wobble before its ``sinc`` attenuation; the coil's fitted order 1, through
@@ -65,7 +66,12 @@ PAIRS = {
     ],
     "reference": [("scale_error", "interpolation_error"), ("interpolation_error", "scale_error")],
     "multihead": [("vibration", "interpolation_error")],
-    "sds": [("axis_tilt", "coil_mismatch"), ("bearing_wobble", "coil_mismatch")],
+    "sds": [
+        ("axis_tilt", "coil_mismatch"),
+        ("bearing_wobble", "coil_mismatch"),
+        ("coil_mismatch", "axis_tilt"),
+        ("coil_mismatch", "bearing_wobble"),
+    ],
 }
 """The pairs ``(named, second)`` per family."""
 
