@@ -216,7 +216,14 @@ def _sds_speed_offset(key: int) -> float:
     return float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
 
 
-def _sds_record(folder: Path, key: int, effect: str, amplitude_noise: float, geom: dict):
+def _sds_record(
+    folder: Path,
+    key: int,
+    effect: str | None,
+    amplitude_noise: float,
+    geom: dict,
+    coil_beside_noise: float | None = None,
+):
     return write_concealed_sds(
         folder / f"e{key}.toml",
         key=jax.random.key(key),
@@ -224,6 +231,7 @@ def _sds_record(folder: Path, key: int, effect: str, amplitude_noise: float, geo
         amplitude_noise=max(amplitude_noise, 1e-9),
         coil_max_order=1,  # the coil bound's effect: order 1 alone (no orders 2-5)
         speed_offset=0.0 if SDS_CLOCK["locked"] else _sds_speed_offset(key),
+        coil_beside_noise=coil_beside_noise,
         **geom,
     )
 

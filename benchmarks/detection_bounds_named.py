@@ -17,11 +17,20 @@ confounded with a named effect
   (``magnet_asymmetry+cogging``, ``cogging+coil_mismatch``, ``coil_mismatch+magnet_asymmetry``);
 * ``reference``: a sensor against a reference, ``scale_error+interpolation_error`` and
   ``interpolation_error+scale_error`` (``interp_ref_record``);
-* ``multihead``: ``vibration+interpolation_error`` on head 1 (``vibration_record``).
+* ``multihead``: ``vibration+interpolation_error`` on head 1 (``vibration_record``);
+* ``sds``: ``axis_tilt+coil_mismatch``, ``bearing_wobble+coil_mismatch`` and the two the
+  other way round on the small sds benches of ``SDS_EFFECT_GEOMETRIES`` (geometry
+  ``S mod 3``, ``_sds_record``, the clock locked to the motor): the tilt or wobble and an
+  order-1 coil mismatch beside it
+  (``write_concealed_sds(coil_beside_noise=)``, the motor's torque ripple, a code path apart
+  from the platform's errors), each size as ``detection_bounds.sds_effect_trials`` states it
+  (the wobble before its ``sinc`` attenuation; the coil's fitted order 1, through
+  ``sds_coil_gain`` of each record's key).
 
 ::
 
     python benchmarks/detection_bounds_named.py --pairs motion --seed 3401 --geometries 10 --n 2
+    python benchmarks/detection_bounds_named.py --pairs sds --seed 4801 --geometries 3 --n 2
 """
 
 from __future__ import annotations
@@ -35,15 +44,20 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+import numpy as np  # noqa: E402
 from detection_bounds import (  # noqa: E402
     MOTION_EFFECTS,
+    SDS_EFFECT_GEOMETRIES,
     _found,
+    _sds_record,
     interp_ref_record,
     motion_record,
+    sds_coil_gain,
     vibration_record,
 )
 
 from encdesign.diagnose import diagnose  # noqa: E402
+from encdesign.simulate._conceal_sds import NOISE_RAD  # noqa: E402
 
 PAIRS = {
     "motion": [
@@ -52,6 +66,12 @@ PAIRS = {
     ],
     "reference": [("scale_error", "interpolation_error"), ("interpolation_error", "scale_error")],
     "multihead": [("vibration", "interpolation_error")],
+    "sds": [
+        ("axis_tilt", "coil_mismatch"),
+        ("bearing_wobble", "coil_mismatch"),
+        ("coil_mismatch", "axis_tilt"),
+        ("coil_mismatch", "bearing_wobble"),
+    ],
 }
 """The pairs ``(named, second)`` per family."""
 
@@ -71,7 +91,24 @@ def family_maker(family: str, seed: int, folder: Path):
     """``make(key, sizes)``: the record of geometry ``seed`` and noise ``key`` with each
     effect of ``sizes`` (``{name: (size, bound entry)}``) at its size."""
 
+    gains: dict[int, float] = {}
+    geom = SDS_EFFECT_GEOMETRIES[seed % len(SDS_EFFECT_GEOMETRIES)]
+
+    def make_sds(key: int, sizes: dict):
+        named = next((e for e in sizes if e != "coil_mismatch"), None)
+        amp = sizes[named][0] / NOISE_RAD if named else 1e-9
+        if named == "bearing_wobble":
+            rho = _sds_record(folder, key, named, 1.0, geom)[1]["params"]["frequency_ratio"]
+            amp *= float(np.sinc(rho))
+        coil = sizes.get("coil_mismatch", (0.0, None))[0]
+        if coil and key not in gains:
+            gains[key] = sds_coil_gain(folder, key, geom)
+        beside = coil / gains[key] if coil else None
+        return _sds_record(folder, key, named, amp, geom, coil_beside_noise=beside)[0]
+
     def make(key: int, sizes: dict):
+        if family == "sds":
+            return make_sds(key, sizes)
         if family == "motion":
             errs = [(_order(b), a) for a, b in sizes.values() if a]
             return motion_record(seed, key, 1, 0.0, more=errs)
@@ -156,6 +193,9 @@ def main(argv: list[str] | None = None) -> int:
                 rows += pair_trials(
                     family, named, second, args.seed + gi, args.n, factors, args.named_factor
                 )
+    for r in rows:
+        if "skipped" in r:
+            print(r, flush=True)
     done = [r for r in rows if "found" in r]
     for pair in dict.fromkeys(r["pair"] for r in rows):
         skipped = sum(1 for r in rows if r["pair"] == pair and "skipped" in r)

@@ -406,3 +406,28 @@ def test_sds_platform_bounds_grow_with_the_noise(tmp_path):
         assert {e["label"] for e in each} == labels, each
         assert max(e["bound"] for e in each) == lo[(name, "all")]["bound"]
     assert "each" not in lo[("coil_mismatch", "all")]
+
+
+def test_sds_coil_beside_another_effect(tmp_path):
+    """``coil_beside_noise`` puts the generator's own ``coil_mismatch`` beside another effect
+    without drawing anything: alone it is the ``coil_mismatch`` record of the same key and
+    size, beside an axis tilt it leaves the tilt's draws (platform positions, azimuth) as
+    they are, and beside a coil mismatch it is refused."""
+    key = jax.random.key(4810)
+
+    def rec(name, **kw):
+        return write_concealed_sds(tmp_path / f"{name}.toml", key=key, **dict(GEOM, n_runs=4), **kw)
+
+    coil, t_coil = rec("coil", effect="coil_mismatch", amplitude_noise=3.0)
+    beside, t_beside = rec("beside", coil_beside_noise=3.0)
+    tilt, t_tilt = rec("tilt", effect="axis_tilt", amplitude_noise=5.0)
+    both, t_both = rec("both", effect="axis_tilt", amplitude_noise=5.0, coil_beside_noise=3.0)
+    for col in coil.columns:
+        np.testing.assert_array_equal(beside.columns[col], coil.columns[col])
+    assert t_beside["beside"]["torque_order_1"] == t_coil["params"]["torque_order_1"]
+    assert t_both["params"] == t_tilt["params"] and "beside" not in t_tilt
+    np.testing.assert_array_equal(both.columns["phi_ref"], tilt.columns["phi_ref"])
+    moved = [c for c in tilt.columns if not np.array_equal(both.columns[c], tilt.columns[c])]
+    assert moved, "the coil beside the tilt changed no column"
+    with pytest.raises(ValueError, match="coil_beside_noise"):
+        rec("bad", effect="coil_mismatch", coil_beside_noise=3.0)

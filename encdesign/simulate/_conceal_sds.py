@@ -125,6 +125,7 @@ def write_concealed_sds(
     amplitude_noise: float | None = None,
     coil_max_order: int = 5,
     speed_offset: float = 0.0,
+    coil_beside_noise: float | None = None,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -159,6 +160,10 @@ def write_concealed_sds(
             ``coil_mismatch`` of 0.5-2 noise units raised the clock's share of a 12-run
             bench's run means from 3.5-4.4 to 4.4-5.6 nrad RMS). A real clock is not locked
             to the motor; an offset (e.g. 1e-4) gives clean and effect records one level.
+        coil_beside_noise: a second effect, a ``coil_mismatch`` (orders 1 …
+            ``coil_max_order``) at this many noise units beside ``effect`` (not itself
+            ``coil_mismatch``); it draws nothing, so the record of a key with and without it
+            has the same platform positions, disks, noise and ``effect`` (``truth["beside"]``).
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -182,6 +187,14 @@ def write_concealed_sds(
     coil = 0.0
     if effect == "coil_mismatch":
         coil = amp / 2e-3 * 1.2  # φ error ≈ speed ripple × eccentricity 2e-3
+    if coil_beside_noise is not None:
+        if effect == "coil_mismatch" or not coil_beside_noise > 0:
+            raise input_error(
+                "coil_beside_noise",
+                f"got {coil_beside_noise!r} beside {effect!r}",
+                "> 0, beside an effect other than coil_mismatch",
+            )
+        coil = float(coil_beside_noise) * NOISE_RAD / 2e-3 * 1.2
     if n_moving < 2:
         raise input_error("n_moving", f"got {n_moving}", ">= 2")
     if n_fixed < 1:
@@ -286,6 +299,14 @@ def write_concealed_sds(
     if effect == "sensor_delay_step":
         truth["where"] = {"runs": [step_run], "heads": ["m1"]}
         truth["params"] = {"delay_step_s": amp / speed, "first_run": step_run}
+    if coil_beside_noise is not None:
+        eps_c, eps_s = design.motor.speed_ripple()
+        o = list(design.motor.orders).index(1)
+        truth["beside"] = {
+            "effect": "coil_mismatch",
+            "torque_order_1": coil,
+            "speed_ripple_order_1": float(jnp.hypot(eps_c[o], eps_s[o])),
+        }
     if not phi_ref:
         del data["phi_ref"]
     encoder = sds_encoder_table(design, CLOCK_S)
