@@ -182,13 +182,21 @@ reaches it at (0.5 % apart)."""
 
 def _unseen(probe: Probe, lam: float) -> float | None:
     """The smallest noncentrality at the record's noise whose part the finder sees
-    (``probe.seen``) reaches ``lam``; ``None`` when none within :data:`SEEN_GRID` does."""
+    (``probe.seen``) reaches ``lam`` (to :data:`SEEN_RTOL`); ``None`` when none within
+    :data:`SEEN_GRID` does."""
     if probe.seen is None or lam <= 0:
         return lam
     for x in lam * SEEN_GRID:
-        if probe.seen(float(x)) >= lam:
+        if probe.seen(float(x)) >= lam - SEEN_RTOL * lam:
             return float(x)
     return None
+
+
+SEEN_RTOL = 1e-12
+"""Relative rounding accepted when a probe's ``seen`` is compared with the noncentrality it
+must reach: where the effect leaves the noise estimate as it is, ``seen(lam)`` is ``lam``
+up to rounding, and rounding alone (the order of a sum) would otherwise decide between two
+points of :data:`SEEN_GRID` (a 1.2 % step in the noncentrality)."""
 
 
 def _values(fitter: Fitter, terms: Sequence[Term]) -> np.ndarray:
