@@ -196,6 +196,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_spill.py", "TRIAL_STEPS"): BOUND
     + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_bounds.py", "SEEN_RTOL"): NUMERIC + " (rounding of a noncentrality comparison)",
     ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
     + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC

@@ -81,6 +81,7 @@ from scipy import optimize, stats
 
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
+from ._normal import Accumulated, free_values, held_key
 from ._protocol import Prepared
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
@@ -182,13 +183,21 @@ reaches it at (0.5 % apart)."""
 
 def _unseen(probe: Probe, lam: float) -> float | None:
     """The smallest noncentrality at the record's noise whose part the finder sees
-    (``probe.seen``) reaches ``lam``; ``None`` when none within :data:`SEEN_GRID` does."""
+    (``probe.seen``) reaches ``lam`` (to :data:`SEEN_RTOL`); ``None`` when none within
+    :data:`SEEN_GRID` does."""
     if probe.seen is None or lam <= 0:
         return lam
     for x in lam * SEEN_GRID:
-        if probe.seen(float(x)) >= lam:
+        if probe.seen(float(x)) >= lam - SEEN_RTOL * lam:
             return float(x)
     return None
+
+
+SEEN_RTOL = 1e-12
+"""Relative rounding accepted when a probe's ``seen`` is compared with the noncentrality it
+must reach: where the effect leaves the noise estimate as it is, ``seen(lam)`` is ``lam``
+up to rounding, and rounding alone (the order of a sum) would otherwise decide between two
+points of :data:`SEEN_GRID` (a 1.2 % step in the noncentrality)."""
 
 
 def _values(fitter: Fitter, terms: Sequence[Term]) -> np.ndarray:
@@ -212,6 +221,44 @@ def _n_nonlinear(cand: Candidate, prep: Prepared) -> int:
     )
 
 
+def _held_term(cand: Candidate, prep: Prepared, probe: Probe) -> Term:
+    """The probe's term, its nonlinear parameters held at the probe's values."""
+    term = make_term(cand, prep, dict(probe.values))
+    for q in cand.params:
+        if not q.linear:
+            term.free[q.name][...] = False
+    return term
+
+
+def _scales(terms: Sequence[Term]) -> np.ndarray:
+    """The scales of the free scalars of ``terms`` (as ``Fitter.stats`` orders them)."""
+    return np.concatenate(
+        [t.scale[q.name][t.free[q.name]].ravel() for t in terms for q in t.cand.params]
+        or [np.zeros(0)]
+    )
+
+
+def _add_gram(prep: Prepared, gram: np.ndarray, J, a: int, b: int, sw: np.ndarray) -> None:
+    """Add the whitened Gram matrix of the Jacobian ``J`` of rows ``a:b`` (kept rows,
+    projected where the kind projects) to ``gram``."""
+    p = gram.shape[0]
+    k = prep.keep[a:b]
+    if p and k.any():
+        Jk = J[k]
+        if prep.kd.project:
+            Jk = Jk - Jk.mean(1, keepdims=True)
+        Jw = (Jk * sw[None, :, None]).reshape(-1, p)
+        gram += Jw.T @ Jw
+
+
+def _rank(gram: np.ndarray) -> int:
+    """The numerical rank of a Gram matrix (columns normalized; relative 1e-10)."""
+    d = np.sqrt(np.maximum(np.diag(gram), 0.0))
+    ok = d > 0
+    ev = np.linalg.eigvalsh(gram[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])) if ok.any() else []
+    return int(np.sum(np.asarray(ev) > 1e-10 * max(float(np.max(ev, initial=0.0)), 1e-300)))
+
+
 class _Bench:
     """A noise-free copy of the prepared record: its ``y`` is the reference model's
     prediction plus one probe; a fitter of its own (the model's Jacobians cached across
@@ -227,6 +274,63 @@ class _Bench:
         # the base holds a constant per run and channel: an effect's own size is then net of
         # its run means (``_select._term_rms``)
         self.per_run = _has_run_constants(ref.terms[: ref.n_base])
+        self._pre: dict[int, tuple] = {}  # id(probe) -> its sums from the shared pass
+
+    def prepare(self, probes: Sequence[tuple[Candidate, Probe]]) -> None:
+        """One pass over the rows for all ``probes`` (issue 43): each one's own Jacobian (its
+        rank) and, per fold, the sums of the base's processed (whitened, projected, scaled)
+        Jacobian ``S`` with the probe's processed unit effect ``u``: ``S^T u``, ``|u|^2``
+        and the same unwhitened, and ``S^T S``. A probe's observations are the base
+        prediction plus ``c v``, whose residual at the base's values is ``c u``: its refit's
+        normal equations are these sums scaled (:mod:`._normal`), so it needs no pass over
+        the rows of its own (each probe used to recompute ``S`` where the cache does not
+        hold it: the largest cost of the bounds on long records). :meth:`probe` uses them
+        and falls back to its own pass for a probe not prepared."""
+        prep, fitter = self.prep, self.fitter
+        K = prep.settings.n_folds
+        static = frozen(self.base_terms)
+        sc = _scales(static)
+        skey = fitter._static_key(static)
+        p = sc.size
+        terms = [_held_term(c, prep, pr) for c, pr in probes]
+        grams = [np.zeros((t.n_free(), t.n_free())) for t in terms]
+        m = len(terms)
+        G, Gu = np.zeros((K, p, p)), np.zeros((K, p, p))
+        hv, huv, qv, quv = (
+            np.zeros((m, K, p)),
+            np.zeros((m, K, p)),
+            np.zeros((m, K)),
+            np.zeros((m, K)),
+        )
+        w = fitter.w_ch
+        sw = np.sqrt(w)
+        for a, b, x in fitter.chunks():
+            hit = fitter._pcache.get((skey, a))
+            if hit is None:
+                hit = fitter._processed(static, a, b, x, sc)
+            _, S, order, edges = hit
+            rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
+            for k, lo, hi in rows:  # summed as Fitter.stats sums the Gram matrices
+                Sk = S[lo:hi].reshape(-1, p)
+                G[k] += Sk.T @ Sk
+                Su = (S[lo:hi] / sw[None, :, None]).reshape(-1, p)
+                Gu[k] += Su.T @ Su
+            for i, t in enumerate(terms):
+                va, J = fitter.eval_term(t, a, b, x, jac=True)
+                _add_gram(prep, grams[i], J, a, b, 1.0 / prep.sigma)
+                if prep.kd.project:
+                    va = va - va.mean(1, keepdims=True)
+                uw = (va * sw)[order]
+                for k, lo, hi in rows:
+                    uk = uw[lo:hi].ravel()
+                    uu = (uw[lo:hi] / w[None, :]).ravel()
+                    Sk = S[lo:hi].reshape(-1, p)
+                    hv[i, k] += Sk.T @ uk
+                    huv[i, k] += Sk.T @ uu
+                    qv[i, k] += float(uk @ uk)
+                    quv[i, k] += float(uk @ uu)
+        for i, (_, pr) in enumerate(probes):
+            self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
     def own_rms(self, v: np.ndarray) -> float:
         """The own RMS of the unit effect ``v`` in noise units, as the rule
@@ -255,39 +359,40 @@ class _Bench:
         residual of the unit effect (n, C) and its own RMS (:meth:`own_rms`); ``None`` when
         the effect vanishes on the kept rows."""
         prep, fitter = self.prep, self.fitter
-        term = make_term(cand, prep, dict(probe.values))
-        for q in cand.params:  # held: value and Jacobian of the linear part in one pass
-            if not q.linear:
-                term.free[q.name][...] = False
-        v = np.zeros_like(self.pred)
-        p = term.n_free()
-        gram = np.zeros((p, p))
+        term = _held_term(cand, prep, probe)
+        pre = self._pre.pop(id(probe), None)
         sw = 1.0 / prep.sigma
-        for a, b, x in fitter.chunks():
-            va, J = fitter.eval_term(term, a, b, x, jac=True)
-            v[a:b] = va
-            k = prep.keep[a:b]
-            if p and k.any():
-                Jk = J[k]
-                if prep.kd.project:
-                    Jk = Jk - Jk.mean(1, keepdims=True)
-                Jw = (Jk * sw[None, :, None]).reshape(-1, p)
-                gram += Jw.T @ Jw
+        if pre is None:  # its own pass: value and Jacobian of the linear part
+            v = np.zeros_like(self.pred)
+            gram = np.zeros((term.n_free(), term.n_free()))
+            for a, b, x in fitter.chunks():
+                va, J = fitter.eval_term(term, a, b, x, jac=True)
+                v[a:b] = va
+                _add_gram(prep, gram, J, a, b, sw)
+            k_lin = _rank(gram)
+        else:  # the Jacobian's rank and the base's sums from the shared pass (prepare)
+            k_lin = pre[0]
+            v = _values(fitter, [term])
         if prep.kd.project:
             v = v - v.mean(1, keepdims=True)
         keep = prep.keep
         norm = math.sqrt(float(np.sum((v[keep] * sw[None, :]) ** 2)))
         if not (norm > 0 and math.isfinite(norm)):
             return None
-        d = np.sqrt(np.maximum(np.diag(gram), 0.0))
-        ok = d > 0
-        ev = np.linalg.eigvalsh(gram[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])) if ok.any() else []
-        k_lin = int(np.sum(np.asarray(ev) > 1e-10 * max(float(np.max(ev, initial=0.0)), 1e-300)))
         c = PROBE_NORM / norm
         prep.y = self.pred + c * v
         # the base's nonlinear parameters held, as the selection's trial fits hold them: a
         # linear refit whose Jacobians are cached across probes
-        base = fitter.fit(frozen(self.base_terms))
+        static = frozen(self.base_terms)
+        if pre is not None:  # its normal equations at the base's values: no pass over the rows
+            G, Gu, hv, huv, qv, quv = pre[1]
+            sc = _scales(static)
+            h, q, hu, qu = c * hv, c * c * qv, c * huv, c * c * quv
+            acc = Accumulated(
+                prep.y, held_key(static), free_values(static), sc, G, Gu, h, q, hu, qu
+            )
+            fitter._keep_acc(fitter._static_key(static), acc)
+        base = fitter.fit(static)
         resid = fitter.residual(base.terms)
         return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c, self.own_rms(v)
 
@@ -298,10 +403,7 @@ class _Bench:
         (which can cost a candidate its held-out gain: a fold misses part of the structure
         the candidate then bends to)."""
         prep, fitter = self.prep, self.fitter
-        term = make_term(cand, prep, dict(probe.values))
-        for q in cand.params:
-            if not q.linear:
-                term.free[q.name][...] = False
+        term = _held_term(cand, prep, probe)
         v = _values(fitter, [term])
         prep.y = self.y0 + a * v
         try:
@@ -544,15 +646,20 @@ def detection_bounds(
     per probe of every candidate that applies, offers probes (``Candidate.probes``) and is
     not named, in catalog order (module doc)."""
     out: list[dict] = []
-    bench = None
-    for cand in _bounded(candidates, prep, ref):
-        if cand.probes is None:
-            continue
-        probes = cand.probes(prep.ctx)
-        if not probes:
-            continue
-        if bench is None:
-            bench = _Bench(prep, fitter, ref)
+    work = [
+        (c, c.probes(prep.ctx)) for c in _bounded(candidates, prep, ref) if c.probes is not None
+    ]
+    work = [(c, probes) for c, probes in work if probes]
+    if not work:
+        return out
+    bench = _Bench(prep, fitter, ref)
+    if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare)
+        items = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
+        try:
+            bench.prepare(items)
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+            bench._pre.clear()  # each probe then makes its own pass
+    for cand, probes in work:
         for probe in probes:
             try:
                 entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
