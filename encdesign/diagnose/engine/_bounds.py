@@ -81,7 +81,7 @@ from scipy import optimize, stats
 
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
-from ._normal import Accumulated, free_values, held_key
+from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
@@ -230,14 +230,6 @@ def _held_term(cand: Candidate, prep: Prepared, probe: Probe) -> Term:
     return term
 
 
-def _scales(terms: Sequence[Term]) -> np.ndarray:
-    """The scales of the free scalars of ``terms`` (as ``Fitter.stats`` orders them)."""
-    return np.concatenate(
-        [t.scale[q.name][t.free[q.name]].ravel() for t in terms for q in t.cand.params]
-        or [np.zeros(0)]
-    )
-
-
 def _add_gram(prep: Prepared, gram: np.ndarray, J, a: int, b: int, sw: np.ndarray) -> None:
     """Add the whitened Gram matrix of the Jacobian ``J`` of rows ``a:b`` (kept rows,
     projected where the kind projects) to ``gram``."""
@@ -289,7 +281,7 @@ class _Bench:
         prep, fitter = self.prep, self.fitter
         K = prep.settings.n_folds
         static = frozen(self.base_terms)
-        sc = _scales(static)
+        sc = free_scales(static)
         skey = fitter._static_key(static)
         p = sc.size
         terms = [_held_term(c, prep, pr) for c, pr in probes]
@@ -386,7 +378,7 @@ class _Bench:
         static = frozen(self.base_terms)
         if pre is not None:  # its normal equations at the base's values: no pass over the rows
             G, Gu, hv, huv, qv, quv = pre[1]
-            sc = _scales(static)
+            sc = free_scales(static)
             h, q, hu, qu = c * hv, c * c * qv, c * huv, c * c * quv
             acc = Accumulated(
                 prep.y, held_key(static), free_values(static), sc, G, Gu, h, q, hu, qu

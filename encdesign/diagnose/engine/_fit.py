@@ -14,7 +14,7 @@ import scipy.linalg as sla
 from scipy import stats
 
 from ._candidates import Candidate
-from ._normal import Accumulated, free_values, held_key
+from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
 from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
@@ -305,13 +305,7 @@ class Fitter:
         p_s = sum(t.n_free() for t in static)
         p = sum(t.n_free() for t in terms)
 
-        def scales(ts):
-            return np.concatenate(
-                [t.scale[q.name][t.free[q.name]].ravel() for t in ts for q in t.cand.params]
-                or [np.zeros(0)]
-            )
-
-        sc_s, sc_d = scales(static), scales(dyn)
+        sc_s, sc_d = free_scales(static), free_scales(dyn)
         skey = self._static_key(static)
         held, z_s = held_key(static), free_values(static)
         acc = self._acc.get(skey)

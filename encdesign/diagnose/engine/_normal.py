@@ -53,6 +53,15 @@ def free_values(terms: Sequence) -> np.ndarray:
     )
 
 
+def free_scales(terms: Sequence) -> np.ndarray:
+    """The scales of the free scalars of ``terms``, in the order of :func:`free_values`
+    (scaled value = value / scale, as :meth:`Fitter.stats` scales its columns)."""
+    return np.concatenate(
+        [t.scale[q.name][t.free[q.name]].ravel() for t in terms for q in t.cand.params]
+        or [np.zeros(0)]
+    )
+
+
 @dataclasses.dataclass
 class Accumulated:
     """The normal equations of one static block on one set of observations, per fold and
