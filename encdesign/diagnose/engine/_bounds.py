@@ -300,7 +300,8 @@ class _Bench:
         w = fitter.w_ch
         sw = np.sqrt(w)
         for a, b, x in fitter.chunks():
-            _, S, order, edges = fitter.processed_block(static, a, b, x, sc, pred=False)
+            got = fitter.processed_block(static, a, b, x, sc, pred=False, keep=False)
+            _, S, order, edges = got
             rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
             for k, lo, hi in rows if kept is None else ():
                 Sk = S[lo:hi].reshape(-1, p)

@@ -301,16 +301,25 @@ class Fitter:
         return order, edges
 
     def processed_block(
-        self, static: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray, pred: bool = True
+        self,
+        static: Sequence[Term],
+        a: int,
+        b: int,
+        x: dict,
+        sc: np.ndarray,
+        pred: bool = True,
+        keep: bool = True,
     ):
         """:meth:`_processed` of the static block ``static`` on one chunk, from the cache
-        where it is kept (and kept where the budget allows): ``(pred, S, order, edges)``, the
-        prediction at the block's current values (``None`` unless ``pred``)."""
+        where it is kept (and, with ``keep``, kept where the budget allows): ``(pred, S,
+        order, edges)``, the prediction at the block's current values (``None`` unless
+        ``pred``)."""
         skey = static_key(static)
         hit = self.blocks.processed(skey, a)
         if hit is None:
             hit = self._processed(static, a, b, x, sc)
-            self.blocks.keep_processed(skey, a, (None, *hit[1:]))
+            if keep:
+                self.blocks.keep_processed(skey, a, (None, *hit[1:]))
             return hit
         return (self._values(static, a, b, x) if pred else None, *hit[1:])
 
