@@ -386,7 +386,9 @@ NOISE_METHOD = (
     "patterns in the platform angle, drift, significant change points and single-value "
     "outliers), sqrt(SSR / dof) with dof = independent values - rank (R(M-1) values without "
     "phi_ref), widened by sqrt(q F(q, dof) / chi2(q)) at p = 1e-4 for its estimation error "
-    "(estimate, dof and factor under 'estimate'); revolution contrasts: 1.4826 MAD, the larger "
+    "(estimate, dof and factor under 'estimate'), with phi_ref raised for the noise common to "
+    "the moving sensors (run_means_common_factor: the contrasts' and the fixed sensors' "
+    "excess); revolution contrasts: 1.4826 MAD, the larger "
     "of the parts common to the moving sensors and their differences"
 )
 
