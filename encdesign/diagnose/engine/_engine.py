@@ -500,6 +500,7 @@ def bounds_reference(doc: dict, sel: Selection, max_effects: int) -> Reference:
         named=frozenset(named),
         room=len(doc["effects"]) < max_effects,
         findings=tuple(sel.findings) if doc["verdict"] != "consistent" else (),
+        n_params=int(sel.final.n_params),
     )
 
 
