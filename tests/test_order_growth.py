@@ -69,16 +69,18 @@ def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
     assert d["base"]["max_order"] >= M - 1, d["base"]["max_order"]
 
 
+BLOCKED = [(1403, 18, 0.7), (1410, 18, 0.9)]
+"""Two of :data:`CASES` whose growth the rule before blocks (1409 does too; 1401, 1402 and
+1404 grow under it as well): the control runs these only (session 17: 5.2 s CPU of the
+17.8 s all six cost)."""
+
+
 def test_growth_blocked_by_any_trace_leaves_the_record_unexplained():
     """The control: a share of 1e-12 is the rule before (any such finding stops the growth)."""
     st = dataclasses.replace(FinderSettings(), growth_veto_share=1e-12)
-    blocked = 0
-    for seed, M, turns in CASES:
+    for seed, M, turns in BLOCKED:
         d = diagnose(_high_order_record(seed, M, turns), settings=st).doc
-        blocked += d["verdict"] != "consistent" and d["base"]["max_order"] == 12
-        if blocked >= 2:  # enough to show the old rule's miss: the rest would cost time only
-            break
-    assert blocked >= 2, "no generated record shows the old rule's miss: the test cannot fail"
+        assert d["verdict"] != "consistent" and d["base"]["max_order"] == 12, (seed, d["verdict"])
 
 
 def _wide_error_record(seed: int, H: int = 4, n: int = 1000, M: int = 15) -> Recording:
