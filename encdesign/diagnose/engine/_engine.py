@@ -370,6 +370,18 @@ def _fit_failure(base_info: dict, stage: str, cause: str) -> None:
     )
 
 
+def _checked(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, info: dict):
+    """``fit``, or its refit where the kind held a nuisance it had moved (``check_base``;
+    the note in the base info's ``held``)."""
+    note = kind.check_base(fit.terms, prep)
+    if note is None:
+        return fit
+    if note not in info.setdefault("held", []):
+        info["held"].append(note)
+    fitter.clear()
+    return fitter.fit(fit.terms)
+
+
 def _refine(kind, prep, fitter, base_fit, base_info: dict):
     """The kind's refinement of the angle the base is evaluated at, and the base refit from
     the fitted values (undone, with a fit failure recorded, where it would diverge); run on
@@ -408,20 +420,21 @@ def _refine(kind, prep, fitter, base_fit, base_info: dict):
 def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
     """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
     growth. Returns ``(base_fit, order)``."""
-    base_fit = _refine(kind, prep, fitter, fitter.fit(base_terms), base_info)
+    base_fit = _checked(kind, prep, fitter, fitter.fit(base_terms), base_info)
+    base_fit = _refine(kind, prep, fitter, base_fit, base_info)
     _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     if grow:  # issue 44 E: an ill-conditioned base's order is chosen by held-out error
         chosen = _choose_base_order(kind, prep, fitter, base_fit, order, base_info)
         if chosen is not None:
-            order, base_fit = chosen
+            order, base_fit = chosen[0], _checked(kind, prep, fitter, chosen[1], base_info)
             _align(kind, prep, fitter, base_fit)
             _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
-        order, base_fit = grown
+        order, base_fit = grown[0], _checked(kind, prep, fitter, grown[1], base_info)
         # the refinement evaluated the fitted error before the orders grown: again with them
         base_fit = _refine(kind, prep, fitter, base_fit, base_info)
         _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little

@@ -224,11 +224,21 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
     return view_orders(prep, r, min(scan_order, sds_limit(prep)))
 
 
+def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """The engine's ``modulated_orders`` view (an order that grows or switches over the
+    runs) on the run-mean channels, orders as :func:`view_mean_orders` scans them."""
+    from ...engine._views_modulated import scan_modulated
+
+    M = prep.consts["psi_m"].size
+    return scan_modulated(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)), rw.shape[1])
+
+
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
 # strong structure; among equals the most specific location (one sensor, one run) leads
 SDS_VIEWS = (
     KindView(view_run_step, ("run_step",)),
     KindView(view_mean_orders, ("orders",)),
+    KindView(view_mean_modulated, ("modulated_orders",)),
     KindView(view_common_orders, ("common_orders",)),
     *(
         KindView(_matched_view(n), (f"sds_{n}",))
