@@ -86,6 +86,7 @@ from ._protocol import Prepared
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
+from ._workshare import deal
 
 CONVENTION = (
     "the size detected with about 50 % probability: its noncentrality (the chi-square it "
@@ -645,21 +646,26 @@ def detection_bounds(
     if not work:
         return out
     bench = _Bench(prep, fitter, ref)
-    if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare)
-        items = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
-        try:
-            bench.prepare(items)
-        except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-            bench._pre.clear()  # each probe then makes its own pass
-    for cand, probes in work:
-        for probe in probes:
+
+    def bounds_of(mine: list) -> list[dict]:  # this process's probes (_workshare.deal)
+        if ref.room and mine:  # one pass over the rows for every probe's refit (_Bench.prepare)
+            items = [(c, q) for c, pr in mine for q in (pr, *pr.worst_of)]
+            try:
+                bench.prepare(items)
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+                bench._pre.clear()  # each probe then makes its own pass
+        got = []
+        for cand, probe in mine:
             try:
                 entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
             except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                 # reporting only: a probe that fails numerically never fails the diagnosis
                 entry = _failed_entry(cand, probe, f"not computed: {exc}")
-            out.append({**entry, "convention": CONVENTION_SHORT})
-    return out
+            got.append({**entry, "convention": CONVENTION_SHORT})
+        return got
+
+    tasks = [(c, pr) for c, probes in work for pr in probes]
+    return out + deal(tasks, bounds_of, lambda t: 1 + len(t[1].worst_of))
 
 
 def _bounded(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list:

@@ -7,11 +7,16 @@ groups (:func:`~encdesign._distributed.split_range`), group by group; the groups
 are gathered on every process (one all-gather through ``jax.distributed``) and added in
 group order. The grouping does not depend on the number of processes, so one process and
 N give the same sums to the last bit, and every process continues with the same numbers.
+
+Inside :func:`alone` (a stage split over processes by work items, :mod:`._workshare`) a
+process sums every group itself, in the same order, and gathers nothing: the same sums
+again, while the other processes work on other items.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 import jax
 import numpy as np
@@ -23,6 +28,25 @@ ROW_GROUPS = 16
 processes than groups leave some idle) and the number of partial sums held at once."""
 
 
+_ALONE: list[bool] = []
+"""One entry per :func:`alone` block entered (module state: one diagnosis per process)."""
+
+
+@contextmanager
+def alone() -> Iterator[None]:
+    """Row passes made inside sum all of the groups on this process and gather nothing."""
+    _ALONE.append(True)
+    try:
+        yield
+    finally:
+        _ALONE.pop()
+
+
+def _parts() -> tuple[int, int]:
+    """``(process count, this process's index)`` of the row passes (one alone)."""
+    return (1, 0) if _ALONE else (jax.process_count(), jax.process_index())
+
+
 def row_groups(n_chunks: int) -> list[tuple[int, int]]:
     """Chunk index ranges ``[lo, hi)`` of the groups of a pass over ``n_chunks`` chunks."""
     g = max(1, min(int(n_chunks), ROW_GROUPS))
@@ -31,7 +55,7 @@ def row_groups(n_chunks: int) -> list[tuple[int, int]]:
 
 def my_groups(n_groups: int) -> range:
     """The groups this process sums (a contiguous share; all of them on one process)."""
-    lo, hi = split_range(n_groups, jax.process_count(), jax.process_index())
+    lo, hi = split_range(n_groups, *_parts())
     return range(lo, hi)
 
 
@@ -39,7 +63,7 @@ def reduce_groups(parts: Sequence[np.ndarray], n_groups: int, size: int) -> np.n
     """Sum over all groups of the flat per-group sums ``parts`` (this process's groups, in
     order, each of ``size`` values), the same on every process and for any process count."""
     rows = np.stack(parts) if len(parts) else np.zeros((0, size))
-    every = allgather_rows(rows, n_groups)
+    every = rows if _ALONE else allgather_rows(rows, n_groups)
     total = np.zeros(size)
     for r in every:  # group order, one addition at a time: the same on one process
         total += r

@@ -1,0 +1,142 @@
+"""Stages split over processes by work items (issue 43): a selection round's trial fits and
+the detection bounds' probes, each process its share, the results gathered.
+
+Row passes (:mod:`._rowshare`) split the rows of every fit over the processes; what is left
+of the trial fits and of the bounds (the residuals, the views that scan them, the starts,
+the probes' own refits and bisections) runs whole on every process. These items are
+independent of each other, so :func:`deal` hands them out instead: each process works on its
+share of the items alone (every row pass of its items sums all rows on that process,
+:func:`._rowshare.alone`, in the same groups and order as a split pass: the same sums), and
+the results are gathered through ``jax.distributed`` in the items' order, so every process
+continues with the results one process computes, to the last bit.
+
+An item's work must not leave state behind that a later stage reads (a fitter's caches
+differ between processes afterwards, and a pass one process makes from its cache another
+would make over the rows, with a collective the first never joins): :func:`private`
+gives the work a fitter of its own, its caches copied from the shared one.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import pickle
+from collections.abc import Callable, Sequence
+from typing import TypeVar, cast
+
+import jax
+import numpy as np
+
+from ._candidates import Candidate
+from ._fit import FitResult, Fitter
+from ._rowshare import alone
+
+_T = TypeVar("_T")
+_R = TypeVar("_R")
+
+
+def shares(weights: Sequence[float], n_processes: int) -> list[list[int]]:
+    """The items (indices, ascending) of each process: the heaviest item first to the least
+    loaded process (ties: the lower index), the same on every process."""
+    load = [0.0] * n_processes
+    out: list[list[int]] = [[] for _ in range(n_processes)]
+    for i in sorted(range(len(weights)), key=lambda j: (-float(weights[j]), j)):
+        p = min(range(n_processes), key=lambda q: (load[q], q))
+        out[p].append(i)
+        load[p] += float(weights[i])
+    return [sorted(o) for o in out]
+
+
+def deal(
+    items: Sequence[_T],
+    work: Callable[[list[_T]], list[_R]],
+    weight: Callable[[_T], float] | None = None,
+) -> list[_R]:
+    """``work(items)`` (one result per item, in order), each process working on its share
+    of the items (:func:`shares` by ``weight``, 1 each by default) alone and the results
+    gathered (picklable). An exception on any process is raised on every process (the first
+    in process order; its message when it does not pickle). Fewer items than processes
+    (one on two: a round with one candidate) are not dealt: every process then works on all
+    of them, each row pass split over the processes as everywhere else."""
+    items = list(items)
+    n = jax.process_count()
+    if len(items) < n:  # too few to deal: all of them on every process, row passes split
+        return list(work(items))
+    mine = shares([1.0 if weight is None else weight(x) for x in items], n)[jax.process_index()]
+    try:
+        with alone():
+            got = list(work([items[i] for i in mine]))
+        if len(got) != len(mine):
+            raise ValueError(f"deal: {len(got)} results for {len(mine)} items")
+        msg = pickle.dumps((None, list(zip(mine, got))), protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as exc:  # every process must reach the gather, or the others wait
+        try:
+            msg = pickle.dumps((exc, None), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:
+            msg = pickle.dumps((RuntimeError(repr(exc)), None))
+    out: list = [None] * len(items)
+    errors = []
+    for blob in _allgather_bytes(msg):
+        err, pairs = pickle.loads(blob)
+        if err is not None:
+            errors.append(err)
+            continue
+        for i, r in pairs:
+            out[i] = r
+    if errors:
+        raise errors[0]
+    return out
+
+
+def _allgather_bytes(data: bytes) -> list[bytes]:
+    """Every process's ``data``, in process order (two collectives: sizes, then bytes)."""
+    from jax.experimental import multihost_utils
+
+    buf = np.frombuffer(data, dtype=np.uint8)
+    sizes = np.asarray(multihost_utils.process_allgather(np.array([buf.size], np.int64)))
+    pad = np.zeros(int(sizes.max()), np.uint8)
+    pad[: buf.size] = buf
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    return [bytes(row[: int(s)]) for row, s in zip(got, sizes.reshape(-1))]
+
+
+def private(fitter: Fitter) -> Fitter:
+    """A fitter of its own for a share of work items: ``fitter``'s state with its caches
+    (every dict, list and set it holds) copied, so that what the work caches stays there."""
+    out = copy.copy(fitter)
+    for k, v in vars(fitter).items():
+        if isinstance(v, dict | list | set):
+            setattr(out, k, copy.copy(v))
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class PackedFit:
+    """A :class:`FitResult` without its candidates (which hold functions): its terms'
+    candidates by name, in order."""
+
+    names: tuple[str, ...]
+    fit: FitResult
+
+
+def pack_fit(fr: FitResult | None) -> PackedFit | None:
+    """``fr`` ready to pickle (:func:`unpack_fit` restores it)."""
+    if fr is None:
+        return None
+    terms = [dataclasses.replace(t, cand=cast(Candidate, None)) for t in fr.terms]
+    return PackedFit(tuple(t.cand.name for t in fr.terms), dataclasses.replace(fr, terms=terms))
+
+
+def unpack_fit(packed: PackedFit | None, cands: Sequence[Candidate]) -> FitResult | None:
+    """The fit of ``packed`` with its terms' candidates ``cands`` (this process's objects,
+    in the terms' order; the names must match)."""
+    if packed is None:
+        return None
+    if tuple(c.name for c in cands) != packed.names:
+        raise ValueError(f"unpack_fit: terms {packed.names} against {[c.name for c in cands]}")
+    fr = copy.copy(packed.fit)
+    fr.terms = [dataclasses.replace(t, cand=c) for t, c in zip(fr.terms, cands)]
+    return fr
+
+
+__all__ = ["PackedFit", "deal", "pack_fit", "private", "shares", "unpack_fit"]
