@@ -42,6 +42,11 @@ def alone() -> Iterator[None]:
         _ALONE.pop()
 
 
+def is_alone() -> bool:
+    """Whether this process works alone now (inside :func:`alone`)."""
+    return bool(_ALONE)
+
+
 def _parts() -> tuple[int, int]:
     """``(process count, this process's index)`` of the row passes (one alone)."""
     return (1, 0) if _ALONE else (jax.process_count(), jax.process_index())

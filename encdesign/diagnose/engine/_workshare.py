@@ -29,7 +29,7 @@ import numpy as np
 
 from ._candidates import Candidate
 from ._fit import FitResult, Fitter
-from ._rowshare import alone
+from ._rowshare import alone, is_alone
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -57,11 +57,12 @@ def deal(
     gathered (picklable). An exception on any process is raised on every process (the first
     in process order; its message when it does not pickle). Fewer items than processes
     (one on two: a round with one candidate) are not dealt: every process then works on all
-    of them, each row pass split over the processes as everywhere else."""
+    of them, each row pass split over the processes as everywhere else; nor are items met
+    inside a share of items (a process alone works on all of them)."""
     items = list(items)
     n = jax.process_count()
-    if len(items) < n:  # too few to deal: all of them on every process, row passes split
-        return list(work(items))
+    if len(items) < n or is_alone():  # too few to deal (all of them on every process, row
+        return list(work(items))  # passes split), or inside a share of items dealt already
     mine = shares([1.0 if weight is None else weight(x) for x in items], n)[jax.process_index()]
     try:
         with alone():
