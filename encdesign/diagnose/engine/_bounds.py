@@ -83,6 +83,7 @@ from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
+from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
@@ -297,7 +298,9 @@ class _Bench:
         )
         w = fitter.w_ch
         sw = np.sqrt(w)
-        for a, b, x in fitter.chunks():
+
+        def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
+            G, Gu, hv, huv, qv, quv, *grams = sums
             hit = fitter._pcache.get((skey, a))
             if hit is None:
                 hit = fitter._processed(static, a, b, x, sc)
@@ -322,6 +325,8 @@ class _Bench:
                     huv[i, k] += Sk.T @ uu
                     qv[i, k] += float(uk @ uk)
                     quv[i, k] += float(uk @ uu)
+
+        G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
         for i, (_, pr) in enumerate(probes):
             self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
@@ -646,14 +651,14 @@ def detection_bounds(
     if not work:
         return out
     bench = _Bench(prep, fitter, ref)
+    if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare)
+        items = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
+        try:
+            bench.prepare(items)
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+            bench._pre.clear()  # each probe then makes its own pass
 
     def bounds_of(mine: list) -> list[dict]:  # this process's probes (_workshare.deal)
-        if ref.room and mine:  # one pass over the rows for every probe's refit (_Bench.prepare)
-            items = [(c, q) for c, pr in mine for q in (pr, *pr.worst_of)]
-            try:
-                bench.prepare(items)
-            except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-                bench._pre.clear()  # each probe then makes its own pass
         got = []
         for cand, probe in mine:
             try:

@@ -15,7 +15,7 @@ again, while the other processes work on other items.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 
 import jax
@@ -73,6 +73,22 @@ def reduce_groups(parts: Sequence[np.ndarray], n_groups: int, size: int) -> np.n
     for r in every:  # group order, one addition at a time: the same on one process
         total += r
     return total
+
+
+def summed(fitter, zeros: Sequence[np.ndarray], add: Callable) -> list[np.ndarray]:
+    """Sums over the rows of arrays shaped as ``zeros``: ``add(sums, a, b, x)`` adds chunk
+    ``a:b`` (``x``: its row columns) to ``sums`` in place, for the chunks of ``fitter`` in
+    the groups of this process; the groups' sums are reduced as :func:`reduce_groups`
+    reduces them (the same on every process and for any process count)."""
+    groups = row_groups(fitter.n_chunks())
+    parts = []
+    for grp in my_groups(len(groups)):
+        sums = [np.zeros_like(z) for z in zeros]
+        for a, b, x in fitter.chunks(*groups[grp]):
+            add(sums, a, b, x)
+        parts.append(np.concatenate([v.ravel() for v in sums]) if sums else np.zeros(0))
+    total = reduce_groups(parts, len(groups), sum(int(z.size) for z in zeros))
+    return unflatten(total, [z.shape for z in zeros])
 
 
 def unflatten(flat: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
