@@ -1,5 +1,6 @@
-"""Stages split over processes by work items (issue 43): a selection round's trial fits and
-the detection bounds' probes, each process its share, the results gathered.
+"""Stages split over processes by work items (issue 43): a selection round's trial fits,
+the detection bounds' probes and the views of a residual, each process its share, the
+results gathered.
 
 Row passes (:mod:`._rowshare`) split the rows of every fit over the processes; what is left
 of the trial fits and of the bounds (the residuals, the views that scan them, the starts,
@@ -22,14 +23,16 @@ import copy
 import dataclasses
 import pickle
 from collections.abc import Callable, Sequence
-from typing import TypeVar, cast
+from typing import TYPE_CHECKING, TypeVar, cast
 
 import jax
 import numpy as np
 
-from ._candidates import Candidate
-from ._fit import FitResult, Fitter
 from ._rowshare import alone, is_alone
+
+if TYPE_CHECKING:  # (the views deal their scans: no import of the fit at run time)
+    from ._candidates import Candidate
+    from ._fit import FitResult, Fitter
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -124,7 +127,7 @@ def pack_fit(fr: FitResult | None) -> PackedFit | None:
     """``fr`` ready to pickle (:func:`unpack_fit` restores it)."""
     if fr is None:
         return None
-    terms = [dataclasses.replace(t, cand=cast(Candidate, None)) for t in fr.terms]
+    terms = [dataclasses.replace(t, cand=cast("Candidate", None)) for t in fr.terms]
     return PackedFit(tuple(t.cand.name for t in fr.terms), dataclasses.replace(fr, terms=terms))
 
 
