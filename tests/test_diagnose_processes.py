@@ -241,8 +241,9 @@ def test_a_trial_fit_is_gathered_whole_and_rejoins_its_candidates():
     import pickle
     from types import SimpleNamespace
 
+    from encdesign.diagnose.engine._dealt_fits import pack_fit, unpack_fit
     from encdesign.diagnose.engine._fit import FitResult, Term
-    from encdesign.diagnose.engine._workshare import deal, pack_fit, unpack_fit
+    from encdesign.diagnose.engine._workshare import deal
 
     a, b = SimpleNamespace(name="a"), SimpleNamespace(name="b")
     rng = np.random.default_rng(5101)

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
+from ._dealt_fits import pack_fit, private, unpack_fit
 from ._document import jsonable
 from ._evidence import (
     Chosen,
@@ -32,7 +33,7 @@ from ._spill import kept_gain_share
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
-from ._workshare import deal, pack_fit, private, unpack_fit
+from ._workshare import deal
 
 # ----------------------------------------------------------------------------- selection
 

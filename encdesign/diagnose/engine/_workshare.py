@@ -13,26 +13,21 @@ continues with the results one process computes, to the last bit.
 
 An item's work must not leave state behind that a later stage reads (a fitter's caches
 differ between processes afterwards, and a pass one process makes from its cache another
-would make over the rows, with a collective the first never joins): :func:`private`
-gives the work a fitter of its own, its caches copied from the shared one.
+would make over the rows, with a collective the first never joins):
+:func:`._dealt_fits.private` gives the work a fitter of its own, its caches copied from the
+shared one, and :func:`._dealt_fits.pack_fit` readies a fit to travel.
 """
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import pickle
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, TypeVar, cast
+from typing import TypeVar
 
 import jax
 import numpy as np
 
 from ._rowshare import alone, is_alone
-
-if TYPE_CHECKING:  # (the views deal their scans: no import of the fit at run time)
-    from ._candidates import Candidate
-    from ._fit import FitResult, Fitter
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -104,43 +99,4 @@ def _allgather_bytes(data: bytes) -> list[bytes]:
     return [bytes(row[: int(s)]) for row, s in zip(got, sizes.reshape(-1))]
 
 
-def private(fitter: Fitter) -> Fitter:
-    """A fitter of its own for a share of work items: ``fitter``'s state with its caches
-    (every dict, list and set it holds) copied, so that what the work caches stays there."""
-    out = copy.copy(fitter)
-    for k, v in vars(fitter).items():
-        if isinstance(v, dict | list | set):
-            setattr(out, k, copy.copy(v))
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class PackedFit:
-    """A :class:`FitResult` without its candidates (which hold functions): its terms'
-    candidates by name, in order."""
-
-    names: tuple[str, ...]
-    fit: FitResult
-
-
-def pack_fit(fr: FitResult | None) -> PackedFit | None:
-    """``fr`` ready to pickle (:func:`unpack_fit` restores it)."""
-    if fr is None:
-        return None
-    terms = [dataclasses.replace(t, cand=cast("Candidate", None)) for t in fr.terms]
-    return PackedFit(tuple(t.cand.name for t in fr.terms), dataclasses.replace(fr, terms=terms))
-
-
-def unpack_fit(packed: PackedFit | None, cands: Sequence[Candidate]) -> FitResult | None:
-    """The fit of ``packed`` with its terms' candidates ``cands`` (this process's objects,
-    in the terms' order; the names must match)."""
-    if packed is None:
-        return None
-    if tuple(c.name for c in cands) != packed.names:
-        raise ValueError(f"unpack_fit: terms {packed.names} against {[c.name for c in cands]}")
-    fr = copy.copy(packed.fit)
-    fr.terms = [dataclasses.replace(t, cand=c) for t, c in zip(fr.terms, cands)]
-    return fr
-
-
-__all__ = ["PackedFit", "deal", "pack_fit", "private", "shares", "unpack_fit"]
+__all__ = ["deal", "shares"]
