@@ -461,17 +461,23 @@ def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
     }
 
 
-def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
+def _bound_entry(
+    prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference, got=None
+) -> dict:
     """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
     (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
     at any size); reported with the probe's own ``where`` and ``at``, and, where there are
     several, each one's own bound (``each``: ``label``, ``bound``, ``set_by``): the worst is
     what the record guarantees for any of them, and an effect whose shape is one of them
-    (an order, an azimuth) is revealed from its own, which can be well below the worst."""
+    (an order, an azimuth) is revealed from its own, which can be well below the worst.
+    ``got``: each one's :func:`_one_bound` computed already (dealt over processes), in
+    order; an exception there is raised where it would have been."""
     worst: dict | None = None
     each = []
-    for pr in (probe, *probe.worst_of):
-        e = _one_bound(prep, bench, cand, pr, views, scan, ref)
+    for j, pr in enumerate((probe, *probe.worst_of)):
+        e = _one_bound(prep, bench, cand, pr, views, scan, ref) if got is None else got[j]
+        if isinstance(e, Exception):
+            raise e
         if e["bound"] is None:
             return e
         each.append({"label": pr.label or pr.at, "bound": e["bound"], "set_by": e["set_by"]})
@@ -658,19 +664,28 @@ def detection_bounds(
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):
             bench._pre.clear()  # each probe then makes its own pass
 
-    def bounds_of(mine: list) -> list[dict]:  # this process's probes (_workshare.deal)
+    def bounds_of(mine: list) -> list:  # this process's parameter sets (_workshare.deal)
         got = []
-        for cand, probe in mine:
+        for cand, pr in mine:
             try:
-                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
+                got.append(_one_bound(prep, bench, cand, pr, views, scan_order, ref))
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                got.append(type(exc)(*exc.args))  # raised by _bound_entry, in its order
+        return got
+
+    # every parameter set of every probe (a probe and its worst_of) is one work item
+    sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
+    done = iter(deal(sets, bounds_of))
+    for cand, probes in work:
+        for probe in probes:
+            got = [next(done) for _ in range(1 + len(probe.worst_of))]
+            try:
+                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref, got)
             except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                 # reporting only: a probe that fails numerically never fails the diagnosis
                 entry = _failed_entry(cand, probe, f"not computed: {exc}")
-            got.append({**entry, "convention": CONVENTION_SHORT})
-        return got
-
-    tasks = [(c, pr) for c, probes in work for pr in probes]
-    return out + deal(tasks, bounds_of, lambda t: 1 + len(t[1].worst_of))
+            out.append({**entry, "convention": CONVENTION_SHORT})
+    return out
 
 
 def _bounded(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list:
