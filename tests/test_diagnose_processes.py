@@ -262,3 +262,21 @@ def test_a_trial_fit_is_gathered_whole_and_rejoins_its_candidates():
         unpack_fit(pack_fit(fr), [b, a])  # type: ignore[list-item]
     assert pack_fit(None) is None and unpack_fit(None, []) is None
     assert deal([3, 1, 2], lambda xs: [x * x for x in xs]) == [9, 1, 4]
+
+
+def test_a_private_fitter_caches_apart_from_the_shared_one():
+    """What a trial fit caches on its own fitter (``_dealt_fits.private``) never reaches the
+    shared fitter's caches: each process's shared fitter stays as the others' are."""
+    from types import SimpleNamespace
+
+    from encdesign.diagnose.engine._dealt_fits import private
+    from encdesign.diagnose.engine._fit import Fitter
+
+    prep = SimpleNamespace(sigma=np.ones(2), n=100)
+    shared = Fitter(prep)  # type: ignore[arg-type]
+    shared.blocks.keep_gram(("a",), np.eye(2), np.eye(2))
+    own = private(shared)
+    own.blocks.keep_gram(("b",), np.eye(2), np.eye(2))
+    own._jcache["x"] = 1
+    assert own.blocks.gram(("a",)) is not None and own.blocks.gram(("b",)) is not None
+    assert shared.blocks.gram(("b",)) is None and "x" not in shared._jcache

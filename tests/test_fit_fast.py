@@ -4,6 +4,9 @@ held model's normal equations) against a refit per column."""
 
 from __future__ import annotations
 
+import copy
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,23 +39,39 @@ def test_base_hand_jacobian_equals_jacfwd(C, R, M):
         np.testing.assert_allclose(np.asarray(J[k]), np.asarray(Jf[k]), rtol=0, atol=1e-15)
 
 
-@pytest.mark.parametrize("ref", [True, False])
-def test_column_chi2_equals_a_refit_per_column(ref):
-    """A step scanned over rows (the located-step refinement): the chi-square of held base +
-    one step column, for every row, equals the fit of that model; without a reference the
-    head mean is projected out of the columns too."""
+@functools.lru_cache(maxsize=2)
+def _fitted(ref: bool) -> tuple:
+    """The 1,500-row 3-head bench prepared and its base fitted, once per module."""
     from encdesign.diagnose.engine._fit import Fitter, make_term
     from encdesign.diagnose.engine._prepare import prepare
-    from encdesign.diagnose.engine._steps import frozen, step_term
+    from encdesign.diagnose.engine._steps import frozen
     from encdesign.diagnose.kinds.multihead._multihead import multihead_base, multihead_data
     from tests.test_engine import _bench
 
     rec = _bench(1500, 3, ref)
     prep = prepare(multihead_data(rec), dict(rec.meta))
-    fitter = Fitter(prep)
     (cand, start), *_ = multihead_base(prep, 4)[0]
-    base = fitter.fit([make_term(cand, prep, start)])
-    held = frozen(base.terms)
+    base = Fitter(prep).fit([make_term(cand, prep, start)])
+    return prep, cand, tuple(frozen(base.terms))
+
+
+def _bench_base(ref: bool) -> tuple:
+    """``(prep, cand, held)`` of :func:`_fitted`: copies (a test may give ``prep`` other
+    observations), the base term's nonlinear parameters held."""
+    prep, cand, held = _fitted(ref)
+    return copy.copy(prep), cand, [t.copy() for t in held]
+
+
+@pytest.mark.parametrize("ref", [True, False])
+def test_column_chi2_equals_a_refit_per_column(ref):
+    """A step scanned over rows (the located-step refinement): the chi-square of held base +
+    one step column, for every row, equals the fit of that model; without a reference the
+    head mean is projected out of the columns too."""
+    from encdesign.diagnose.engine._fit import Fitter
+    from encdesign.diagnose.engine._steps import step_term
+
+    prep, _, held = _bench_base(ref)
+    fitter = Fitter(prep)
     rows = np.flatnonzero((prep.run == 1) & prep.keep)
     tau = prep.rows.take("tau", rows)
     ch = np.array([0.0, 1.0, 0.0])
@@ -97,10 +116,11 @@ def test_the_caches_change_no_bit_of_a_diagnosis(monkeypatch, seed):
     """Every chunk recomputed (no cache: the static prediction is the one made with the
     Jacobian, column_chi2's residual too) against the default cache: the same document."""
     from encdesign.diagnose import diagnose
-    from encdesign.diagnose.engine import _fit
+    from encdesign.diagnose.engine import _fit, _normal
 
     def doc(cache_bytes: float) -> dict:
         monkeypatch.setattr(_fit, "CACHE_BYTES", cache_bytes)
+        monkeypatch.setattr(_normal, "CACHE_BYTES", cache_bytes)
         d = diagnose(_vibration_record(seed))
         skip = ("time_s", "timings_s", "timings_cpu_s", "report")
         return {k: v for k, v in d.doc.items() if k not in skip}
@@ -115,17 +135,9 @@ def test_accumulated_stats_equal_a_pass_over_the_rows(ref):
     """Issue 43: a static block's statistics at other linear values, from the normal
     equations summed in the last pass (:mod:`engine._normal`), equal those of a pass over
     the rows (a fresh fitter, nothing cached); new observations or held values make a pass."""
-    from encdesign.diagnose.engine._fit import Fitter, make_term
-    from encdesign.diagnose.engine._prepare import prepare
-    from encdesign.diagnose.engine._steps import frozen
-    from encdesign.diagnose.kinds.multihead._multihead import multihead_base, multihead_data
-    from tests.test_engine import _bench
+    from encdesign.diagnose.engine._fit import Fitter
 
-    rec = _bench(1500, 3, ref)
-    prep = prepare(multihead_data(rec), dict(rec.meta))
-    (cand, start), *_ = multihead_base(prep, 4)[0]
-    base = Fitter(prep).fit([make_term(cand, prep, start)])
-    held = frozen(base.terms)
+    prep, cand, held = _bench_base(ref)
     fitter = Fitter(prep)
     fitter.stats(held)  # one pass: sums the normal equations at these values
     rng = np.random.default_rng(7)
@@ -145,3 +157,51 @@ def test_accumulated_stats_equal_a_pass_over_the_rows(ref):
     prep.y = prep.y + 1e-7  # other observations: a pass
     fitter.stats(moved)
     assert calls
+
+
+def test_block_gram_cache_equals_a_fresh_pass():
+    """Issue 43: a static block that starts with one whose Gram matrices are kept (the model
+    and a candidate start) sums only the new columns' products, the model's processed
+    Jacobian not remade; its statistics, and those of its accumulated normal equations at
+    other values, equal a fresh fitter's pass. A longer block's Gram leaves its leading
+    block's own."""
+    from encdesign.diagnose.engine._fit import Fitter
+    from encdesign.diagnose.engine._steps import step_term
+
+    prep, _, held = _bench_base(True)
+    tau = prep.rows.take("tau", np.flatnonzero(prep.run == 1))
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[1] = 1.0
+    steps = [
+        step_term(prep, dict(tau_s=float(tau[i]), channels=np.ones(3), run_sel=sel))
+        for i in (300, 900)
+    ]
+    fitter = Fitter(prep)
+    fitter.stats(held)  # the model's Gram matrices and processed Jacobians kept
+    made = []
+    orig = fitter._processed
+    fitter._processed = lambda ts, *a: made.append(list(ts)) or orig(ts, *a)  # type: ignore
+    rng = np.random.default_rng(11)
+    for st in steps:
+        block = [*held, st]
+        assert fitter.blocks.longest_prefix(block) == 1
+        got = fitter.stats(block)
+        assert made and all(len(ts) == 1 and ts[0] is st for ts in made)  # its columns only
+        moved = [t.copy() for t in block]
+        moved[-1].values["size"][...] = rng.normal(0, 1e-6)
+        moved[0].values["offset_rad"][...] += rng.normal(0, 1e-7)
+        made.clear()
+        again = fitter.stats(moved)  # the accumulated normal equations: no pass
+        assert not made
+        for g, w in zip(got, Fitter(prep).stats(block)):
+            np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12 * np.abs(w).max())
+        for g, w in zip(again, Fitter(prep).stats(moved)):  # (as the test above)
+            np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-9 * np.abs(w).max())
+    fresh = Fitter(prep)
+    fresh.stats([*held, steps[0]])  # the whole block's Gram: the model's is its leading square
+    want = Fitter(prep)
+    want.stats(held)
+    got_g, want_g = fresh.gram(held), want.gram(held)
+    assert got_g is not None and want_g is not None
+    for g, w in zip(got_g, want_g):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=0)

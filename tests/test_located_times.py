@@ -176,11 +176,13 @@ def test_located_time_on_the_recordings_clock_with_its_interval(seed, change, H,
     assert "95 % interval" in render_html(d)  # the full report, its figures drawn
 
 
-COVERAGE_SEEDS = tuple(range(700, 720))  # fresh seeds 720-759: benchmarks/located_times.py
+# 10 training seeds here (CI time); the rate over 40 fresh seeds (720-759) is
+# benchmarks/located_times.py
+COVERAGE_SEEDS = tuple(range(700, 710))
 
 
 def test_located_times_cover_the_truth_on_generated_records():
-    """Issue 44 C acceptance: over 20 generated records (head steps and eccentricity shifts,
+    """Issue 44 C acceptance: over 10 generated records (head steps and eccentricity shifts,
     2-5 heads, 1-3 runs, a clock per run or one clock with pauses, with and without a
     reference, sizes from a few rows' interval to many), the change is located in >= 90 %
     and the located times hold the truth within their stated interval in >= 90 %."""

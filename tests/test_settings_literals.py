@@ -71,7 +71,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     "(B^2 - 1) x^2 / 6: a start the exact check then moves)",
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",
     ("engine/_evidence.py", 3): REPORT + " (at most three alternatives)",
-    ("engine/_fit.py", 1e-200): NUMERIC + " (a zero diagonal of the normal matrix)",
+    ("engine/_normal.py", 1e-200): NUMERIC + " (a zero diagonal of the normal matrix)",
     ("engine/_fit.py", 1e-10): NUMERIC + " (a Jacobian column lost in rounding)",
     ("engine/_fit.py", 1e-7): NUMERIC + " (Levenberg-Marquardt convergence)",
     ("engine/_fit.py", 1e-2): NUMERIC + " (LM convergence: 0.01 of chi-square)",
@@ -267,7 +267,7 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("engine/_located.py", "scan_indices.near"): SEARCH
     + " (rows scanned one by one around a profile's best, then spaced out)",
     ("engine/_discover_law.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
-    ("engine/_fit.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
+    ("engine/_normal.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",
     ("engine/_document.py", "_g.digits"): REPORT + " (significant digits printed)",
     ("engine/_html_discovery.py", "order_amplitudes.chunk"): PLOT,

@@ -262,6 +262,7 @@ class _Bench:
         self.prep = copy.copy(prep)
         self.fitter = Fitter(self.prep)
         self.fitter.w_ch = fitter.w_ch
+        self.engine_fitter = fitter  # (its kept Gram matrices: the same rows and weights)
         self.base_terms = [t.copy() for t in ref.terms]
         self.pred = _values(fitter, ref.terms)
         self.y0 = prep.y  # the record itself (read only): the held-out check beside structure
@@ -284,12 +285,14 @@ class _Bench:
         K = prep.settings.n_folds
         static = frozen(self.base_terms)
         sc = free_scales(static)
-        skey = fitter._static_key(static)
         p = sc.size
         terms = [_held_term(c, prep, pr) for c, pr in probes]
         grams = [np.zeros((t.n_free(), t.n_free())) for t in terms]
         m = len(terms)
-        G, Gu = np.zeros((K, p, p)), np.zeros((K, p, p))
+        # the base's Gram matrices where a fit kept them (this fitter's or the record's: the
+        # same rows, folds and weights), else summed here as Fitter.stats sums them
+        kept = fitter.gram(static) or self.engine_fitter.gram(static)
+        G, Gu = (np.zeros((K, p, p)), np.zeros((K, p, p))) if kept is None else kept
         hv, huv, qv, quv = (
             np.zeros((m, K, p)),
             np.zeros((m, K, p)),
@@ -301,12 +304,10 @@ class _Bench:
 
         def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
             G, Gu, hv, huv, qv, quv, *grams = sums
-            hit = fitter._pcache.get((skey, a))
-            if hit is None:
-                hit = fitter._processed(static, a, b, x, sc)
-            _, S, order, edges = hit
+            got = fitter.processed_block(static, a, b, x, sc, pred=False, keep=False)
+            _, S, order, edges = got
             rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
-            for k, lo, hi in rows:  # summed as Fitter.stats sums the Gram matrices
+            for k, lo, hi in rows if kept is None else ():
                 Sk = S[lo:hi].reshape(-1, p)
                 G[k] += Sk.T @ Sk
                 Su = (S[lo:hi] / sw[None, :, None]).reshape(-1, p)
@@ -327,6 +328,8 @@ class _Bench:
                     quv[i, k] += float(uk @ uu)
 
         G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+        if kept is not None:  # (not summed in the pass: zeros there)
+            G, Gu = kept
         for i, (_, pr) in enumerate(probes):
             self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
@@ -389,7 +392,7 @@ class _Bench:
             acc = Accumulated(
                 prep.y, held_key(static), free_values(static), sc, G, Gu, h, q, hu, qu
             )
-            fitter._keep_acc(fitter._static_key(static), acc)
+            fitter.keep_accumulated(static, acc)
         base = fitter.fit(static)
         resid = fitter.residual(base.terms)
         return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c, self.own_rms(v)

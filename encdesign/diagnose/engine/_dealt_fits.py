@@ -10,16 +10,27 @@ from typing import cast
 
 from ._candidates import Candidate
 from ._fit import FitResult, Fitter
+from ._normal import BlockCache
 
 
 def private(fitter: Fitter) -> Fitter:
     """A fitter of its own for a share of work items: ``fitter``'s state with its caches
-    (every dict, list and set it holds) copied, so that what the work caches stays there."""
+    copied (every dict, list and set it holds, and those of its
+    :class:`~._normal.BlockCache`), so that what the work caches stays there."""
     out = copy.copy(fitter)
     for k, v in vars(fitter).items():
-        if isinstance(v, dict | list | set):
-            setattr(out, k, copy.copy(v))
+        if isinstance(v, BlockCache):
+            v = _copied(copy.copy(v))
+        setattr(out, k, copy.copy(v) if isinstance(v, dict | list | set) else v)
     return out
+
+
+def _copied(obj):
+    """``obj`` with each dict, list and set attribute replaced by a shallow copy."""
+    for k, v in vars(obj).items():
+        if isinstance(v, dict | list | set):
+            setattr(obj, k, copy.copy(v))
+    return obj
 
 
 @dataclasses.dataclass(frozen=True)

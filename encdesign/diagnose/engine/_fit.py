@@ -14,7 +14,17 @@ import scipy.linalg as sla
 from scipy import stats
 
 from ._candidates import Candidate
-from ._normal import Accumulated, free_scales, free_values, held_key
+from ._normal import (
+    Accumulated,
+    BlockCache,
+    free_scales,
+    free_values,
+    held_key,
+    linear_only,
+    solve_determined,
+    solve_determined_many,
+    static_key,
+)
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
 from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
@@ -130,10 +140,7 @@ class Fitter:
         self.progress = progress
         self._jcache: dict = {}
         self._jbytes = 0
-        self._pcache: dict = {}
-        self._pbytes = 0
-        self._acc: dict = {}  # static block -> its normal equations (Gram matrices)
-        self._abytes = 0
+        self.blocks = BlockCache()  # static blocks: processed Jacobians, Gram matrices
 
     def n_chunks(self) -> int:
         """Chunks of a pass over all rows."""
@@ -162,13 +169,17 @@ class Fitter:
     def clear(self) -> None:
         """Drop the cached Jacobians (after a row column changed)."""
         self._jcache.clear()
-        self._pcache.clear()
-        self._acc.clear()
-        self._jbytes = self._pbytes = self._abytes = 0
+        self.blocks.clear()
+        self._jbytes = 0
 
-    @staticmethod
-    def _linear_only(term: Term) -> bool:
-        return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
+    def keep_accumulated(self, static: Sequence[Term], acc: Accumulated) -> None:
+        """Use ``acc`` as the normal equations of the static block ``static`` (a refit of
+        the block on ``acc.y`` then makes no pass over the rows)."""
+        self.blocks.keep_accumulated(static_key(static), acc)
+
+    def gram(self, static: Sequence[Term]):
+        """The kept ``(G, Gu)`` of the static block ``static`` (:mod:`._normal`) or ``None``."""
+        return self.blocks.gram(static_key(static))
 
     def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
         """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
@@ -180,7 +191,7 @@ class Fitter:
         def params() -> dict:  # device arrays only where a compiled function is called
             return {k: jnp.asarray(v) for k, v in term.values.items()}
 
-        if self._linear_only(term):
+        if linear_only(term):
             held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
             fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
             key = (id(term.cand), a, held, fmask)
@@ -289,38 +300,86 @@ class Fitter:
         edges = np.searchsorted(f[order], np.arange(self.prep.settings.n_folds + 1) - 0.5)
         return order, edges
 
+    def processed_block(
+        self,
+        static: Sequence[Term],
+        a: int,
+        b: int,
+        x: dict,
+        sc: np.ndarray,
+        pred: bool = True,
+        keep: bool = True,
+    ):
+        """:meth:`_processed` of the static block ``static`` on one chunk, from the cache
+        where it is kept (and, with ``keep``, kept where the budget allows): ``(pred, S,
+        order, edges)``, the prediction at the block's current values (``None`` unless
+        ``pred``)."""
+        skey = static_key(static)
+        hit = self.blocks.processed(skey, a)
+        if hit is None:
+            hit = self._processed(static, a, b, x, sc)
+            if keep:
+                self.blocks.keep_processed(skey, a, (None, *hit[1:]))
+            return hit
+        return (self._values(static, a, b, x) if pred else None, *hit[1:])
+
+    def _values(self, terms: Sequence[Term], a: int, b: int, x: dict) -> np.ndarray:
+        out = np.zeros((b - a, self.prep.n_channels))
+        for tm in terms:
+            out += self.eval_term(tm, a, b, x, jac=False)[0]
+        return out
+
+    def _split_processed(self, static, k0: int, a: int, b: int, x: dict, sc: np.ndarray):
+        """:meth:`processed_block` of the static block, from its leading ``k0`` terms' (kept)
+        beside the rest's, made now, where the whole block's is not kept (processing is
+        column by column: the same numbers as the whole block's)."""
+        if not 0 < k0 < len(static) or self.blocks.processed(static_key(static), a):
+            return self.processed_block(static, a, b, x, sc)
+        p0 = sum(t.n_free() for t in static[:k0])
+        pred, S0, _, _ = self.processed_block(static[:k0], a, b, x, sc[:p0])
+        pt, St, order, edges = self._processed(static[k0:], a, b, x, sc[p0:])
+        assert pred is not None  # (asked for)
+        return pred + pt, np.concatenate([S0, St], axis=2), order, edges
+
     def stats(self, terms: Sequence[Term], jac: bool = True):
         """Per-fold ``(A_f, g_f, c_f, ssr_f)`` over kept rows; parameters in scaled units.
 
         Terms whose free parameters are all linear form a *static* block: its processed
-        Jacobian and per-fold Gram matrix are cached, so a trial fit of one more candidate
-        costs the products with the candidate's columns only. Each pass with the Jacobian
-        also sums the block's normal equations per fold (:mod:`._normal`): a
-        static block alone on the same observations then needs no pass at all."""
+        Jacobian and per-fold Gram matrix are cached (:class:`._normal.BlockCache`), so a
+        trial fit of one more candidate costs the products with the candidate's columns
+        only, and a block that starts with a kept one (the model and a candidate start)
+        sums only its new columns' Gram products. Each pass with the Jacobian also sums the
+        block's normal equations per fold (:mod:`._normal`): a static block alone on the
+        same observations then needs no pass at all."""
         prep = self.prep
         K = prep.settings.n_folds
         terms = list(terms)
-        static = [t for t in terms if self._linear_only(t)]
-        dyn = [t for t in terms if not self._linear_only(t)]
+        static = [t for t in terms if linear_only(t)]
+        dyn = [t for t in terms if not linear_only(t)]
         p_s = sum(t.n_free() for t in static)
         p = sum(t.n_free() for t in terms)
 
         sc_s, sc_d = free_scales(static), free_scales(dyn)
-        skey = self._static_key(static)
+        skey = static_key(static)
         held, z_s = held_key(static), free_values(static)
-        acc = self._acc.get(skey)
+        acc = self.blocks.accumulated(skey)
         if not dyn and acc is not None:
-            got = acc.stats(prep.y, held, z_s, sc_s, self.w_ch, jac)
+            got = acc.stats(prep.y, held, z_s, sc_s, jac)
             if got is not None:
                 return self._caller_order(terms, static, dyn, *got, sc_s, sc_d)
-        gram = None if acc is None else (acc.G, acc.Gu)
-        sw = np.sqrt(self.w_ch)
+        gram = self.blocks.gram(skey)
+        # the longest leading block with kept Gram matrices: only the other columns' products
+        k0 = self.blocks.longest_prefix(static)
+        p0 = sum(t.n_free() for t in static[:k0]) if gram is None else p_s
+        p_t = p_s - p0
+        w = self.w_ch
+        sw = np.sqrt(w)
         # the chunks in fixed groups; this process sums its share group by group and the
         # groups' sums are gathered (_rowshare): the same sums for any number of processes
         shapes = [(K, p, p), (K, p), (K,), (K,)]
         if jac:  # the static block's own normal equations, whitened and not (for ssr)
             shapes += [(K, p_s), (K,), (K, p_s), (K,)]
-            shapes += [(K, p_s, p_s), (K, p_s, p_s)] if gram is None else []
+            shapes += [(K, p_s, p_t), (K, p_s, p_t)] if gram is None else []
         n_out = len(shapes)
         groups = row_groups(self.n_chunks())
         parts = []
@@ -328,27 +387,15 @@ class Fitter:
             sums = [np.zeros(s) for s in shapes] + [None] * (10 - n_out)
             A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = sums
             for a, b, x in self.chunks(*groups[grp]):
-                ck = (skey, a)
-                hit = self._pcache.get(ck)
-                fresh = hit is None
-                if hit is None and not jac:  # values only: the processed Jacobian is not needed
-                    hit = (None, None, *self._fold_order(a, b))
-                elif hit is None:
-                    hit = self._processed(static, a, b, x, sc_s)
-                    if self._pbytes + hit[1].nbytes < CACHE_BYTES:
-                        self._pcache[ck] = hit
-                        self._pbytes += hit[1].nbytes
-                _, Js_, order, edges = hit
-                # static prediction from current linear values (v0 + J p): made just now with
-                # the Jacobian (the same sum, term by term, as below), else from the cache
-                if fresh and jac:
-                    pred = hit[0].copy()
+                # the static prediction from current linear values (v0 + J p), with the
+                # processed Jacobian where it is needed
+                if jac:
+                    pred, Js_, order, edges = self._split_processed(static, k0, a, b, x, sc_s)
                 else:
-                    pred = np.zeros((b - a, prep.n_channels))
-                    for tm in static:
-                        pred += self.eval_term(tm, a, b, x, jac=False)[0]
+                    pred, Js_ = self._values(static, a, b, x), None
+                    order, edges = self._fold_order(a, b)
                 rs = None
-                if jac:  # the static block's own residual (whitened, fold-sorted)
+                if jac and dyn:  # the static block's own residual (whitened, fold-sorted)
                     rs = prep.y[a:b] - pred
                     if prep.kd.project:
                         rs = rs - rs.mean(1, keepdims=True)
@@ -361,7 +408,7 @@ class Fitter:
                         Jd = None
                     pred = pred + pd
                 else:
-                    Jd = np.zeros((b - a, prep.n_channels, 0))[order]
+                    Jd = None
                 r = prep.y[a:b] - pred
                 if prep.kd.project:
                     r = r - r.mean(1, keepdims=True)
@@ -373,21 +420,26 @@ class Fitter:
                         continue
                     c[k] += float(np.sum(rw[lo:hi] ** 2))
                     ssr[k] += float(np.sum(rr[lo:hi] ** 2))
-                    if rs is None:
+                    if not jac:
                         continue
                     rk = rw[lo:hi].ravel()
                     Sk = Js_[lo:hi].reshape(rk.size, p_s)
                     g[k, :p_s] += Sk.T @ rk
-                    rsk = rs[lo:hi].ravel()
-                    rsu = (rs[lo:hi] / self.w_ch[None, :]).ravel()
-                    h[k] += Sk.T @ rsk
-                    q[k] += float(rsk @ rsk)
-                    hu[k] += Sk.T @ rsu
-                    qu[k] += float(rsk @ rsu)
-                    if new_gram is not None:
+                    # alone, the block's residual is the whole one (h = g, q = c, qu = ssr)
+                    rsk = rk if rs is None else rs[lo:hi].ravel()
+                    hu[k] += Sk.T @ (rsk.reshape(-1, prep.n_channels) / w[None, :]).ravel()
+                    if rs is not None:
+                        h[k] += Sk.T @ rsk
+                        q[k] += float(rsk @ rsk)
+                        qu[k] += float(rsk @ (rs[lo:hi] / w[None, :]).ravel())
+                    if new_gram is not None and p0 == 0:  # the whole block's
                         new_gram[k] += Sk.T @ Sk
                         Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
                         new_gu[k] += Su.T @ Su
+                    elif new_gram is not None:  # the new columns' products only
+                        Tk = Js_[lo:hi, :, p0:]
+                        new_gram[k] += Sk.T @ Tk.reshape(rk.size, p_t)
+                        new_gu[k] += Sk.T @ (Tk / w[None, :, None]).reshape(rk.size, p_t)
                     if Jd is not None and Jd.shape[2]:
                         Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
                         A[k, :p_s, p_s:] += Sk.T @ Dk
@@ -399,20 +451,38 @@ class Fitter:
             10 - n_out
         )
         if jac:
-            gram = gram if new_gram is None else (new_gram, new_gu)
+            if not dyn:
+                h, q, qu = g[:, :p_s].copy(), c.copy(), ssr.copy()
+            if gram is None:
+                gram = self._assemble(static, p0, new_gram, new_gu, self.gram(static[:k0]))
             A[:, :p_s, :p_s] = gram[0]
             A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
-            self._keep_acc(skey, Accumulated(prep.y, held, z_s, sc_s, *gram, h, q, hu, qu))
+            acc = Accumulated(prep.y, held, z_s, sc_s, *gram, h, q, hu, qu)
+            self.blocks.keep_accumulated(skey, acc)
         return self._caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d)
 
-    def _keep_acc(self, skey: tuple, acc: Accumulated) -> None:
-        """Cache ``acc`` for ``skey``, the oldest blocks dropped past :data:`CACHE_BYTES`."""
-        old = self._acc.pop(skey, None)
-        self._abytes -= 0 if old is None else old.nbytes()
-        while self._acc and self._abytes + acc.nbytes() > CACHE_BYTES:
-            self._abytes -= self._acc.pop(next(iter(self._acc))).nbytes()
-        self._acc[skey] = acc
-        self._abytes += acc.nbytes()
+    def _assemble(self, static, p0: int, cross, cross_u, lead) -> tuple:
+        """The block's ``(G, Gu)`` from its leading block's kept ones ``lead`` (its first
+        ``p0`` columns) and the new columns' products ``cross`` (``S^T S_new``); each
+        leading block's own kept."""
+        if p0 and lead is not None:
+            G0, Gu0 = lead
+            out = []
+            for M0, X in ((G0, cross), (Gu0, cross_u)):
+                M = np.concatenate(
+                    [np.concatenate([M0, X[:, :p0]], 2), np.transpose(X, (0, 2, 1))], 1
+                )
+                tail = M[:, p0:, p0:]
+                M[:, p0:, p0:] = 0.5 * (tail + np.transpose(tail, (0, 2, 1)))
+                out.append(M)
+            G, Gu = out
+        else:
+            G, Gu = cross, cross_u
+        s = 0
+        for k, t in enumerate(static[:-1], start=1):  # leading squares: leading blocks' own
+            s += t.n_free()
+            self.blocks.keep_gram(static_key(static[:k]), G[:, :s, :s].copy(), Gu[:, :s, :s].copy())
+        return G, Gu
 
     @staticmethod
     def _caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d):
@@ -433,17 +503,6 @@ class Fitter:
         sc = np.concatenate([sc_s, sc_d])[idx]
         return A, g, c, ssr, sc
 
-    @staticmethod
-    def _static_key(static: Sequence[Term]) -> tuple:
-        return tuple(
-            (
-                id(t.cand),
-                tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
-                tuple(t.free[q.name].tobytes() for q in t.cand.params),
-            )
-            for t in static
-        )
-
     def column_chi2(self, held: Sequence[Term], extra: Sequence[Term]) -> np.ndarray:
         """``fit([*held, e]).chi2`` for each term ``e`` of ``extra``, without the fits.
 
@@ -457,18 +516,14 @@ class Fitter:
         nothing."""
         prep = self.prep
         held = list(held)
-        if not all(self._linear_only(t) for t in held) or any(
-            e.n_free() != 1 or not self._linear_only(e) for e in extra
+        if not all(linear_only(t) for t in held) or any(
+            e.n_free() != 1 or not linear_only(e) for e in extra
         ):
             raise ValueError("column_chi2: held terms linear, one free linear scalar each")
         K = prep.settings.n_folds
         A, gb, c, _, _ = self.stats(held)  # caches the held Gram and processed Jacobians
         At, gt = A.sum(0), gb.sum(0)
-        sc = np.concatenate(
-            [t.scale[q.name][t.free[q.name]].ravel() for t in held for q in t.cand.params]
-            or [np.zeros(0)]
-        )
-        skey = self._static_key(held)
+        sc = free_scales(held)
         sw = np.sqrt(self.w_ch)
         E = len(extra)
         p = At.shape[0]
@@ -478,15 +533,10 @@ class Fitter:
         for grp in my_groups(len(groups)):
             Bj, jj, jr = (np.zeros(s) for s in shapes)
             for a, b, x in self.chunks(*groups[grp]):
-                hit = self._pcache.get((skey, a))
-                if hit is None:  # the prediction comes with the Jacobian: no second evaluation
-                    pred, Js_, order, edges = self._processed(held, a, b, x, sc)
-                    r = prep.y[a:b] - pred
-                    if prep.kd.project:
-                        r = r - r.mean(1, keepdims=True)
-                else:
-                    _, Js_, order, edges = hit
-                    r = self.chunk_residual(held, a, b, x)
+                pred, Js_, order, edges = self.processed_block(held, a, b, x, sc)
+                r = prep.y[a:b] - pred
+                if prep.kd.project:
+                    r = r - r.mean(1, keepdims=True)
                 lo, hi = int(edges[0]), int(edges[K])
                 rw = (r * sw)[order][lo:hi].ravel()
                 S = Js_[lo:hi].reshape(rw.size, p)
@@ -508,7 +558,7 @@ class Fitter:
             parts.append(np.concatenate([Bj.ravel(), jj, jr]))
         total = reduce_groups(parts, len(groups), p * E + 2 * E)
         Bj, jj, jr = unflatten(total, shapes)
-        uw = _solve_many(At, np.column_stack([gt, Bj]))
+        uw = solve_determined_many(At, np.column_stack([gt, Bj]))
         u, w = uw[:, 0], uw[:, 1:]
         jpj = jj - np.einsum("pe,pe->e", Bj, w)
         num = jr - Bj.T @ u
@@ -530,13 +580,13 @@ class Fitter:
         unident: list[str] = []
         for it in range(max_steps):
             At, gt, ct = A.sum(0), g.sum(0), c.sum()
-            dz, keep_idx = _solve(At, gt, lam if nonlinear else 0.0)
+            dz, keep_idx = solve_determined(At, gt, lam if nonlinear else 0.0)
             if it == 0:
                 unident = _names_of(terms, np.setdiff1d(np.arange(At.shape[0]), keep_idx))
                 if nonlinear:
                     # converged already (e.g. a refit from the optimum): the Gauss-Newton
                     # step's predicted decrease of chi-square is negligible
-                    dz0, _ = _solve(At, gt, 0.0)
+                    dz0, _ = solve_determined(At, gt, 0.0)
                     if float(dz0 @ gt) < min(1e-2, 1e-7 * max(ct, 1e-300)):
                         break
             new = _apply(terms, dz * sc)
@@ -555,7 +605,7 @@ class Fitter:
                 if rel < 1e-7 or (ct - c2.sum()) < 1e-2:
                     break
                 # the next Gauss-Newton step would lower chi-square negligibly: converged
-                dz1, _ = _solve(A.sum(0), g.sum(0), 0.0)
+                dz1, _ = solve_determined(A.sum(0), g.sum(0), 0.0)
                 if float(dz1 @ g.sum(0)) < min(1e-2, 1e-7 * max(c.sum(), 1e-300)):
                     break
             else:
@@ -576,7 +626,7 @@ class Fitter:
         ho_c, ho_ssr = 0.0, 0.0
         # one held-out step per fold from the full solution (exact for linear terms):
         # delta_f = (A - A_f)^+ (g - g_f); held-out chi2 = c_f - 2 delta.g_f + delta A_f delta
-        _, kidx = _solve(At, gt, 0.0)
+        _, kidx = solve_determined(At, gt, 0.0)
         for k in range(K):
             Ak = (At - A[k])[np.ix_(kidx, kidx)]
             gk = (gt - g[k])[kidx]
@@ -625,59 +675,6 @@ class Fitter:
             slices=slices,
             determined=kidx,
         )
-
-
-def _solve(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
-    """Solve ``(A + lam diag A) dz = g`` on the columns the data determine (pivoted Cholesky,
-    relative tolerance 1e-10); the others get 0. Returns (dz, determined indices)."""
-    p = A.shape[0]
-    if p == 0:
-        return np.zeros(0), np.zeros(0, dtype=int)
-    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
-    An = A / np.outer(d, d)
-    piv, rank = _pivoted_rank(An)
-    keep = np.sort(piv[:rank])
-    sub = An[np.ix_(keep, keep)] + lam * np.eye(keep.size)
-    dz = np.zeros(p)
-    try:
-        dz[keep] = sla.solve(sub, (g / d)[keep], assume_a="pos") / d[keep]
-    except (np.linalg.LinAlgError, ValueError):
-        dz[keep] = np.linalg.lstsq(sub, (g / d)[keep], rcond=None)[0] / d[keep]
-    return dz, keep
-
-
-def _solve_many(A: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """:func:`_solve` (``lam = 0``) for the columns of ``G`` at once."""
-    p = A.shape[0]
-    out = np.zeros((p, G.shape[1]))
-    if p == 0:
-        return out
-    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
-    An = A / np.outer(d, d)
-    piv, rank = _pivoted_rank(An)
-    keep = np.sort(piv[:rank])
-    sub = An[np.ix_(keep, keep)]
-    rhs = (G / d[:, None])[keep]
-    try:
-        out[keep] = sla.solve(sub, rhs, assume_a="pos") / d[keep, None]
-    except (np.linalg.LinAlgError, ValueError):
-        out[keep] = np.linalg.lstsq(sub, rhs, rcond=None)[0] / d[keep, None]
-    return out
-
-
-def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:
-    from scipy.linalg import lapack
-
-    c, piv, rank, info = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
-    zero_diag = np.diag(An) < 1e-200
-    piv = piv - 1
-    rank = int(rank)
-    if zero_diag.any():
-        good = [i for i in piv[:rank] if not zero_diag[i]]
-        rest = [i for i in piv if i not in good]
-        piv = np.array(good + rest)
-        rank = len(good)
-    return piv, rank
 
 
 def _apply(terms: list[Term], dz: np.ndarray) -> list[Term]:

@@ -24,6 +24,12 @@ chi-square it would return: ``c`` then carries a relative rounding error of abou
 ``|G dz|``. A refit of the same static block on the same observations (the linear step
 of a fit, a candidate screened at held values, the backward check, a probe's second
 statistics) then costs no pass over the rows.
+
+The Gram matrices of a block do not depend on the observations or the free values: a
+block's ``G`` and ``Gu`` are kept (:class:`BlockCache`, keyed by :func:`static_key`) and a
+longer block that starts with it (the model and one candidate, one candidate start after
+another) sums only its new columns' products (``S^T S_new``); the leading square of any
+block's Gram matrix is its leading terms' own, kept too.
 """
 
 from __future__ import annotations
@@ -32,11 +38,33 @@ import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
+import scipy.linalg as sla
+from scipy.linalg import lapack
+
+from ._settings import CACHE_BYTES
 
 CANCEL_MAX = 1e4
 """The accumulated statistics are used only while the magnitude of the terms of the
 chi-square (``q + 2 |dz.h| + dz^T G dz``) is at most this many times the chi-square itself
 (a rounding error of about ``CANCEL_MAX * eps`` relative); beyond it, a pass over the rows."""
+
+
+def linear_only(term) -> bool:
+    """Whether every free parameter of ``term`` is linear (it then joins the static block)."""
+    return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
+
+
+def static_key(static: Sequence) -> tuple:
+    """The identity of a static block's Jacobian: per term its candidate, its nonlinear
+    values and its free masks (the linear values do not change the Jacobian)."""
+    return tuple(
+        (
+            id(t.cand),
+            tuple(t.values[q.name].tobytes() for q in t.cand.params if not q.linear),
+            tuple(t.free[q.name].tobytes() for q in t.cand.params),
+        )
+        for t in static
+    )
 
 
 def held_key(terms: Sequence) -> tuple:
@@ -95,7 +123,7 @@ class Accumulated:
         """Bytes held (the two Gram matrices)."""
         return int(self.G.nbytes + self.Gu.nbytes)
 
-    def stats(self, y, held: tuple, z: np.ndarray, sc: np.ndarray, w_ch, jac: bool):
+    def stats(self, y, held: tuple, z: np.ndarray, sc: np.ndarray, jac: bool):
         """``(A, g, c, ssr)`` per fold at free values ``z`` (parameter units, scales ``sc``)
         as a pass over the rows would give them, or ``None`` where these sums do not apply
         (other observations, held values or scales) or would round too coarsely
@@ -103,7 +131,6 @@ class Accumulated:
         if y is not self.y or held != self.held or not np.array_equal(sc, self.sc):
             return None
         dz = (z - self.z_ref) / np.where(sc != 0, sc, 1.0)
-        del w_ch  # (in the unwhitened sums)
         lin = self.h @ dz
         Gdz = self.G @ dz
         quad = Gdz @ dz
@@ -116,3 +143,127 @@ class Accumulated:
         if not jac:
             return np.zeros((K, p, p)), np.zeros((K, p)), c, ssr
         return self.G.copy(), self.h - Gdz, c, ssr
+
+
+class BlockCache:
+    """A fitter's caches of its static blocks, each within :data:`CACHE_BYTES` (the oldest
+    entries dropped first): per chunk the processed Jacobian (``(pred, S, order, edges)`` of
+    ``Fitter.processed_block``), per block its Gram matrices ``(G, Gu)`` and its
+    :class:`Accumulated` normal equations. Keys are :func:`static_key` s."""
+
+    def __init__(self) -> None:
+        self._proc: dict = {}
+        self._pbytes = 0
+        self._gram: dict = {}
+        self._gbytes = 0
+        self._acc: dict = {}
+        self._abytes = 0
+
+    def clear(self) -> None:
+        """Drop everything (after a row column or the weights changed)."""
+        self._proc.clear()
+        self._gram.clear()
+        self._acc.clear()
+        self._pbytes = self._gbytes = self._abytes = 0
+
+    def processed(self, skey: tuple, a: int):
+        """The processed Jacobian of block ``skey`` on the chunk from row ``a``, or ``None``."""
+        return self._proc.get((skey, a))
+
+    def keep_processed(self, skey: tuple, a: int, hit: tuple) -> None:
+        """Keep ``hit`` while the budget allows (never evicts: every pass walks the chunks
+        in the same order, so the first chunks stay)."""
+        if (skey, a) not in self._proc and self._pbytes + hit[1].nbytes < CACHE_BYTES:
+            self._proc[(skey, a)] = hit
+            self._pbytes += hit[1].nbytes
+
+    def gram(self, skey: tuple) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(G, Gu)`` of block ``skey`` (``(K, p, p)`` each) or ``None``."""
+        acc = self._acc.get(skey)
+        return (acc.G, acc.Gu) if acc is not None else self._gram.get(skey)
+
+    def keep_gram(self, skey: tuple, G: np.ndarray, Gu: np.ndarray) -> None:
+        """Keep the Gram matrices of block ``skey``."""
+        if skey in self._acc or skey in self._gram:
+            return
+        nb = int(G.nbytes + Gu.nbytes)
+        while self._gram and self._gbytes + nb > CACHE_BYTES:
+            old = self._gram.pop(next(iter(self._gram)))
+            self._gbytes -= int(old[0].nbytes + old[1].nbytes)
+        self._gram[skey] = (G, Gu)
+        self._gbytes += nb
+
+    def accumulated(self, skey: tuple) -> Accumulated | None:
+        """The normal equations kept for block ``skey``, or ``None``."""
+        return self._acc.get(skey)
+
+    def keep_accumulated(self, skey: tuple, acc: Accumulated) -> None:
+        """Keep ``acc`` for block ``skey`` (replacing an older one)."""
+        old = self._acc.pop(skey, None)
+        self._abytes -= 0 if old is None else old.nbytes()
+        while self._acc and self._abytes + acc.nbytes() > CACHE_BYTES:
+            self._abytes -= self._acc.pop(next(iter(self._acc))).nbytes()
+        self._acc[skey] = acc
+        self._abytes += acc.nbytes()
+
+    def longest_prefix(self, static: Sequence) -> int:
+        """The most leading terms of ``static`` (fewer than all) whose Gram matrices are
+        kept; 0 when none."""
+        for k in range(len(static) - 1, 0, -1):
+            if self.gram(static_key(static[:k])) is not None:
+                return k
+        return 0
+
+
+# ----------------------------------------------------------------------------- solving
+
+
+def solve_determined(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Solve ``(A + lam diag A) dz = g`` on the columns the data determine (pivoted Cholesky,
+    relative tolerance 1e-10); the others get 0. Returns (dz, determined indices)."""
+    p = A.shape[0]
+    if p == 0:
+        return np.zeros(0), np.zeros(0, dtype=int)
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)] + lam * np.eye(keep.size)
+    dz = np.zeros(p)
+    try:
+        dz[keep] = sla.solve(sub, (g / d)[keep], assume_a="pos") / d[keep]
+    except (np.linalg.LinAlgError, ValueError):
+        dz[keep] = np.linalg.lstsq(sub, (g / d)[keep], rcond=None)[0] / d[keep]
+    return dz, keep
+
+
+def solve_determined_many(A: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """:func:`solve_determined` (``lam = 0``) for the columns of ``G`` at once."""
+    p = A.shape[0]
+    out = np.zeros((p, G.shape[1]))
+    if p == 0:
+        return out
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    piv, rank = _pivoted_rank(An)
+    keep = np.sort(piv[:rank])
+    sub = An[np.ix_(keep, keep)]
+    rhs = (G / d[:, None])[keep]
+    try:
+        out[keep] = sla.solve(sub, rhs, assume_a="pos") / d[keep, None]
+    except (np.linalg.LinAlgError, ValueError):
+        out[keep] = np.linalg.lstsq(sub, rhs, rcond=None)[0] / d[keep, None]
+    return out
+
+
+def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:
+    c, piv, rank, info = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
+    zero_diag = np.diag(An) < 1e-200
+    piv = piv - 1
+    rank = int(rank)
+    if zero_diag.any():
+        good = [i for i in piv[:rank] if not zero_diag[i]]
+        rest = [i for i in piv if i not in good]
+        piv = np.array(good + rest)
+        rank = len(good)
+    return piv, rank
