@@ -127,6 +127,7 @@ class Reference:
     named: frozenset[str] = frozenset()
     room: bool = True
     findings: Sequence = ()
+    n_params: int | None = None  # the fitted model's parameters (its free columns kept)
 
     def excess(self, views: set[str] | None = None) -> float:
         """The excess chi-square (power less degrees of freedom) of the final findings, in
@@ -543,6 +544,24 @@ SHARE_TOL = 0.02
 size (the power is quadratic in the size: about 1 % of the size)."""
 
 
+def _over_budget(prep, cand, probe: Probe, ref: Reference) -> str | None:
+    """The selection's parameter budget (``max_param_fraction``, ``_select``): an effect
+    whose parameters beside the reference model's exceed it is refused at any size, so it
+    has no bound (an sds ``beam_tilt_axial``, 6 parameters, beside a 5-parameter base on
+    8 runs x 3 sensors with 4 complete revolutions, 96 values: a bound was reported and the
+    effect was never named, ``max_param_fraction``)."""
+    n_ref = ref.n_params if ref.n_params is not None else sum(t.n_free() for t in ref.terms)
+    n_cand = make_term(cand, prep, dict(probe.values)).n_free()
+    N = prep.n_values
+    frac = prep.settings.max_param_fraction
+    if N - n_ref - n_cand < 0 or n_ref + n_cand > frac * N:
+        return (
+            f"more parameters ({n_ref} + {n_cand}) than {frac:.0%} of the {N:.0f} fitted "
+            "values (max_param_fraction): not named at any size"
+        )
+    return None
+
+
 def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
     """The bound of one parameter set of a probe."""
     s = prep.settings
@@ -554,6 +573,9 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             "note": "the selection names at most max_effects effects, and this record has "
             "that many: no further effect is named at any size",
         }
+    over = _over_budget(prep, cand, probe, ref)
+    if over:
+        return {**entry, "note": over}
     got = bench.probe(cand, probe)
     if got is None or got[0] <= 0:
         return {**entry, "note": "the effect vanishes on the kept rows"}

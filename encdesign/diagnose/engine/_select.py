@@ -29,7 +29,7 @@ from ._evidence import (
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
-from ._spill import kept_gain_share
+from ._spill import band_share, edge_beyond, kept_gain_share
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
@@ -440,6 +440,24 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
             "located_share_min",
             f"explains only {100 * share:.0f}% of the structure located where its own fitted "
             f"error shows (weighted by that error; needs {100 * s.located_share_min:.0f}%)",
+        ), steps_left
+    # nor the one tooth inside its orders of a comb that continues above them
+    edge = edge_beyond(cand.orders, own, findings, left, _order_key)
+    if edge is not None and edge[2] > dchi:
+        return (
+            "edge_order",
+            f"its fitted error is mostly its top order {edge[0]}, and a larger located "
+            f"structure it leaves continues above it (orders {', '.join(map(str, edge[1][:8]))}"
+            f", excess chi-square {edge[2]:.0f} against its gain {dchi:.0f}): a piece of it",
+        ), steps_left
+    # nor a slice of a broad band its own line sits in (a chirp through a line's frequency)
+    band = band_share(findings, after, own)
+    if band is not None and band[1] > dchi and band[0] < s.located_share_min:
+        return (
+            "located_share_min",
+            f"clears only {100 * band[0]:.0f}% of the broad band its own line sits in "
+            f"(excess chi-square {band[1]:.0f} against its gain {dchi:.0f}): a slice of a "
+            f"broadband structure (needs {100 * s.located_share_min:.0f}%)",
         ), steps_left
     # nor a part of a larger structure it leaves: the integer orders it leaves untouched that
     # located more than its whole gain, fitted with the model, must leave it that share of its

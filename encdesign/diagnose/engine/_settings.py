@@ -61,12 +61,12 @@ class FinderSettings(eqx.Module):
     21 n 4, clean seed 21 n 5)."""
 
     located_share_min: float = eqx.field(default=0.2, static=True)
-    """Rule ``located_share_min``: a candidate must explain at least this share of the
-    excess chi-square located where its own fitted error shows (views, integer orders, heads,
-    runs), each place weighted by that error's own excess there, and keep this share of its
-    gain once the larger integer orders it leaves are fitted (``_spill``): a larger structure
-    is not pinned on it through a small part of it. 96be348 (of all located structure until
-    issue 44 B; weighted since session 15: twin ODrive records got opposite verdicts)."""
+    """Rule ``located_share_min``: a candidate must explain this share of the excess
+    chi-square located where its own fitted error shows (views, integer orders, heads, runs;
+    each place weighted by its own excess there), keep this share of its gain once the larger
+    orders it leaves are fitted (``_spill``) and clear this share of a broad band its own line
+    sits in (a line in Hz is no slice of a chirp, session 17): a larger structure is not pinned
+    on it. 96be348 (of all located structure until 44 B; weighted since session 15)."""
 
     signature_left_max: float = eqx.field(default=0.5, static=True)
     """Rule ``signature_left_max``: a candidate may leave at most this share of what its own

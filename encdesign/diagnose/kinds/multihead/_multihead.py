@@ -40,6 +40,7 @@ from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import run_spans
+from ._confound import own_order_confound
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -708,7 +709,7 @@ class MultiheadKind(AbstractKind):
         return multihead_summary(prep, base_params)
 
     def finish(self, prep, doc, settings):
-        return doc
+        return own_order_confound(prep, doc)
 
     def report_lines(self, doc):
         return ""
