@@ -83,9 +83,11 @@ from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
+from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
+from ._workshare import deal
 
 CONVENTION = (
     "the size detected with about 50 % probability: its noncentrality (the chi-square it "
@@ -300,7 +302,9 @@ class _Bench:
         )
         w = fitter.w_ch
         sw = np.sqrt(w)
-        for a, b, x in fitter.chunks():
+
+        def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
+            G, Gu, hv, huv, qv, quv, *grams = sums
             got = fitter.processed_block(static, a, b, x, sc, pred=False, keep=False)
             _, S, order, edges = got
             rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
@@ -323,6 +327,10 @@ class _Bench:
                     huv[i, k] += Sk.T @ uu
                     qv[i, k] += float(uk @ uk)
                     quv[i, k] += float(uk @ uu)
+
+        G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+        if kept is not None:  # (not summed in the pass: zeros there)
+            G, Gu = kept
         for i, (_, pr) in enumerate(probes):
             self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
@@ -457,17 +465,23 @@ def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
     }
 
 
-def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
+def _bound_entry(
+    prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference, got=None
+) -> dict:
     """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
     (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
     at any size); reported with the probe's own ``where`` and ``at``, and, where there are
     several, each one's own bound (``each``: ``label``, ``bound``, ``set_by``): the worst is
     what the record guarantees for any of them, and an effect whose shape is one of them
-    (an order, an azimuth) is revealed from its own, which can be well below the worst."""
+    (an order, an azimuth) is revealed from its own, which can be well below the worst.
+    ``got``: each one's :func:`_one_bound` computed already (dealt over processes), in
+    order; an exception there is raised where it would have been."""
     worst: dict | None = None
     each = []
-    for pr in (probe, *probe.worst_of):
-        e = _one_bound(prep, bench, cand, pr, views, scan, ref)
+    for j, pr in enumerate((probe, *probe.worst_of)):
+        e = _one_bound(prep, bench, cand, pr, views, scan, ref) if got is None else got[j]
+        if isinstance(e, Exception):
+            raise e
         if e["bound"] is None:
             return e
         each.append({"label": pr.label or pr.at, "bound": e["bound"], "set_by": e["set_by"]})
@@ -674,10 +688,24 @@ def detection_bounds(
             bench.prepare(items)
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):
             bench._pre.clear()  # each probe then makes its own pass
+
+    def bounds_of(mine: list) -> list:  # this process's parameter sets (_workshare.deal)
+        got = []
+        for cand, pr in mine:
+            try:
+                got.append(_one_bound(prep, bench, cand, pr, views, scan_order, ref))
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                got.append(type(exc)(*exc.args))  # raised by _bound_entry, in its order
+        return got
+
+    # every parameter set of every probe (a probe and its worst_of) is one work item
+    sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
+    done = iter(deal(sets, bounds_of))
     for cand, probes in work:
         for probe in probes:
+            got = [next(done) for _ in range(1 + len(probe.worst_of))]
             try:
-                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
+                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref, got)
             except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                 # reporting only: a probe that fails numerically never fails the diagnosis
                 entry = _failed_entry(cand, probe, f"not computed: {exc}")

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
+from ._dealt_fits import pack_fit, private, unpack_fit
 from ._document import jsonable
 from ._evidence import (
     Chosen,
@@ -32,6 +33,7 @@ from ._spill import band_share, edge_beyond, kept_gain_share
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
+from ._workshare import deal
 
 # ----------------------------------------------------------------------------- selection
 
@@ -269,6 +271,24 @@ def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
         best = fitter.fit([*frozen(current.terms), t2], max_steps=12)
         held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
     return best
+
+
+def _trial_fits(st, cands: list, current, n_base_terms: int, log) -> list:
+    """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit: dealt
+    over the processes (:mod:`._workshare`), each on a fitter of its own."""
+
+    def work(mine: list) -> list:
+        st2 = dict(st, fitter=private(st["fitter"]))
+        out = []
+        for cand in mine:
+            refused: list[dict] = []
+            notes: dict[str, list[str]] = {}
+            best = _trial_fit(st2, cand, current, n_base_terms, refused, notes, log)
+            out.append((pack_fit(best), refused, notes.get(cand.name)))
+        return out
+
+    base = [t.cand for t in current.terms]
+    return [(unpack_fit(b, [*base, c]), r, n) for c, (b, r, n) in zip(cands, deal(cands, work))]
 
 
 def _sort_trials(trials: list, applicable: list) -> None:
@@ -680,6 +700,7 @@ def select(
             change_steps=free_steps(prep, findings, at_changes=True),
         )
         trials: list[Trial] = []
+        todo = []
         for cand in applicable:
             if cand.name in {s.name for s in accepted}:
                 continue
@@ -688,7 +709,13 @@ def select(
             if not cand.signature and gof["passes"]:
                 continue
             tried_names.add(cand.name)
-            best = _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log)
+            todo.append(cand)
+        for cand, (best, refused, notes) in zip(
+            todo, _trial_fits(st, todo, current, n_base_terms, log)
+        ):
+            rejected += refused
+            if notes is not None:
+                held_notes[cand.name] = notes
             if best is None:
                 continue
             dchi = current.chi2 - best.chi2
