@@ -23,8 +23,10 @@ runs its motor at a speed offset drawn from its key (``SDS_CLOCK``,
 ``write_concealed_sds(speed_offset=)``): at the generator's default speed a revolution is
 exactly 10^7 clock ticks, so the clean record's clock rounding of the run means is a locked
 pattern, lower on some layouts than what the effect's record (its edges moved by a tick or
-more) gets. A real clock is not locked to the motor, but with it unlocked about 5 % of clean
-benches are not ``consistent`` (session 16; skipped here), so the default stays locked.
+more) gets. A real clock is not locked to the motor: since session 17 (the run-mean level
+covers the fixed sensors' noise common to the moving sensors, ``_sds_noise._common_factor``)
+the unlocked clock is the default; ``--locked-clock`` gives the former benches (before it,
+about 5 % of clean unlocked benches were not ``consistent``; skipped here).
 
 ``--same``: the effect is put in the very record the bound came from (same noise, same
 step run): the literal claim, "this record would have revealed it"; without it, in records of
@@ -181,11 +183,11 @@ SDS_EFFECT_GEOMETRIES = [
 """Small sds benches for :func:`sds_effect_trials` (``beam_tilt_axial`` needs phi_ref)."""
 
 
-SDS_CLOCK = {"locked": True}
-"""``locked`` (the default): the generator's default motor speed, exactly 10^7 clock ticks a
-revolution; else (``--unlocked-clock``) each key's bench runs ``speed_offset``
-(:func:`_sds_speed_offset`) off it, so its clean record's clock rounding is at the level its
-effect records have (``write_concealed_sds``, ``speed_offset``)."""
+SDS_CLOCK = {"locked": False}
+"""``locked`` (``--locked-clock``): the generator's default motor speed, exactly 10^7 clock
+ticks a revolution; else (the default since session 17, the realistic case) each key's bench
+runs ``speed_offset`` (:func:`_sds_speed_offset`) off it, so its clean record's clock rounding
+is at the level its effect records have (``write_concealed_sds``, ``speed_offset``)."""
 
 
 SDS_OWN_SHAPE = {"on": False}
@@ -830,8 +832,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--unlocked-clock",
         action="store_true",
-        help="sds_NAME: a motor speed offset drawn per bench, not exactly 10^7 clock ticks a "
-        "revolution (the generator's default; session 15's benches)",
+        help="sds_NAME: a motor speed offset drawn per bench (the default since session 17; "
+        "kept so that older commands run unchanged)",
+    )
+    ap.add_argument(
+        "--locked-clock",
+        action="store_true",
+        help="sds_NAME: exactly 10^7 clock ticks a revolution (the generator's default "
+        "speed; the benchmark's default before session 17)",
     )
     ap.add_argument(
         "--own-shape",
@@ -841,7 +849,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    SDS_CLOCK["locked"] = not args.unlocked_clock
+    if args.locked_clock and args.unlocked_clock:
+        ap.error("--locked-clock and --unlocked-clock: one of them")
+    SDS_CLOCK["locked"] = args.locked_clock
     SDS_OWN_SHAPE["on"] = args.own_shape
     factors = tuple(float(f) for f in args.factors.split(","))
     rows: list[dict] = []

@@ -20,7 +20,8 @@ confounded with a named effect
 * ``multihead``: ``vibration+interpolation_error`` on head 1 (``vibration_record``);
 * ``sds``: ``axis_tilt+coil_mismatch``, ``bearing_wobble+coil_mismatch`` and the two the
   other way round on the small sds benches of ``SDS_EFFECT_GEOMETRIES`` (geometry
-  ``S mod 3``, ``_sds_record``, the clock locked to the motor): the tilt or wobble and an
+  ``S mod 3``, ``_sds_record``, the clock unlocked from the motor since session 17, as
+``detection_bounds``' default): the tilt or wobble and an
   order-1 coil mismatch beside it
   (``write_concealed_sds(coil_beside_noise=)``, the motor's torque ripple, a code path apart
   from the platform's errors), each size as ``detection_bounds.sds_effect_trials`` states it

@@ -294,6 +294,7 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
         "base_took_it": rate([c.get("base", False) for c in cases]),
         "frame_right_by": by,
         "clean_with_a_term": rate([c["found_any"] for c in clean]),
+        "clean_not_consistent": rate([c.get("verdict") != "consistent" for c in clean]),
         "discovery_s_max": max([c["discovery_s"] for c in cases + clean], default=0.0),
     }
 
@@ -351,7 +352,12 @@ def main(argv=None) -> int:
             d = diagnose(rec)
             found = any(u.get("model") and u["model"]["terms"] for u in d.doc["unexplained"])
             clean.append(
-                {"kind": kind, "found_any": found, "discovery_s": _CAP.get("discovery_s", 0.0)}
+                {
+                    "kind": kind,
+                    "found_any": found,
+                    "verdict": d.verdict,
+                    "discovery_s": _CAP.get("discovery_s", 0.0),
+                }
             )
             write(False)
     print(json.dumps(write(True), indent=1))

@@ -10,10 +10,11 @@ glitches. Cases: ``clean``; ``single`` (one effect at 1x the noise); ``weak`` (0
 ``compound`` (2-3 effects); ``out_of_catalog`` (an integer order, a step or a chirp on one
 head). ``encdesign.diagnose`` never sees the truth. ``--kinds`` adds ``sds`` (the engine's
 ``sds`` kind on the concealed SDS benches of ``encdesign.simulate``: 12 platform positions
-each, to keep them cheap; ``--sds-runs`` sets another count) and ``quadrature`` (two signals of
-one head: ``signal_shape`` of 1 or 3 harmonics; a radial order above 12, an amplitude step or
-clipping out of catalog; captures sorted by phase or in time order with a dwell or a reversal);
-their confusion tables are in ``confusion.png``.
+each, to keep them cheap; ``--sds-runs`` sets another count; ``--sds-unlocked-clock`` draws a
+motor speed offset per recording, so the clock is not locked to the motor) and
+``quadrature`` (two signals of one head: ``signal_shape`` of 1 or 3 harmonics; a radial order
+above 12, an amplitude step or clipping out of catalog; captures sorted by phase or in time
+order with a dwell or a reversal); their confusion tables are in ``confusion.png``.
 
 Scored per kind and overall: single effects at >= 1x noise named correctly (the named set is
 exactly the truth), effects of compound records found, clean records ``consistent``,
@@ -81,6 +82,13 @@ def _sds_located(truth: dict, unexplained: list[dict]) -> bool:
     return False
 
 
+def _sds_speed_offset(seed: int) -> float:
+    """``--sds-unlocked-clock``: the bench's motor speed offset drawn from its seed,
+    +-(1e-5 … 1e-3) (as ``benchmarks/detection_bounds.py`` draws it per key)."""
+    rng = np.random.default_rng([seed, 4242])
+    return float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
+
+
 def _sds_block(args, plan, seeds) -> dict:
     rows = []
     total = sum(len(v) for v in plan.values()) * len(seeds)
@@ -99,6 +107,7 @@ def _sds_block(args, plan, seeds) -> dict:
             concealment=conc,
             phi_ref=ref,
             n_runs=args.sds_runs,
+            speed_offset=_sds_speed_offset(seed) if args.sds_unlocked_clock else 0.0,
         )
         t0 = time.perf_counter()
         d = diagnose(rec).doc
@@ -421,6 +430,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help="seeds (each a full plan)")
     parser.add_argument(
         "--sds-runs", type=int, default=12, help="platform positions per sds recording"
+    )
+    parser.add_argument(
+        "--sds-unlocked-clock",
+        action="store_true",
+        help="sds: a motor speed offset drawn per recording (write_concealed_sds "
+        "speed_offset), not exactly 10^7 clock ticks a revolution",
     )
     args = parser.parse_args(argv)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]

@@ -1,9 +1,12 @@
 """``encdesign diagnose --processes`` / ``--coordinator``: one recording split over processes.
 
 The fit's row passes (normal equations, column statistics) are summed in fixed groups of
-chunks, each process its share, the groups' sums gathered through ``jax.distributed``: the
+chunks, each process its share, the groups' sums gathered through ``jax.distributed``; a
+selection round's trial fits and the detection bounds' probes are dealt over the processes
+(``engine._workshare``), each process fitting its share alone, the results gathered: the
 diagnosis on two processes must equal the one on one process (verdict, effects and every
-number within 1e-12 relative; timings aside)."""
+number within 1e-12 relative; timings aside), and each process must have had a share of
+the dealt items."""
 
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from encdesign import _distributed as dist
 from encdesign import write_recording
@@ -39,6 +43,15 @@ REDUCE = (
 12,000-row record at 1 kHz (1,000-2,500 rows per revolution) is reduced to blocks of a few
 rows as it is read (``open_recording``), and gathers the reduced rows 700 at a time (several
 collectives per column, as at 10^8 rows)."""
+
+DEALT = (
+    "import jax, encdesign.diagnose.engine._workshare as w; "
+    "w.shares = lambda ws, n, _s=w.shares: (lambda r: (open({log!r}, 'a').write("
+    "f'{{jax.process_index()}} {{len(ws)}} {{len(r[jax.process_index()])}}\\n'), r)[1])"
+    "(_s(ws, n)); "
+)
+"""Launcher setup that logs each dealing of work items (``_workshare.shares``): the process,
+the items and its share, one line each to the file ``log``."""
 
 TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
@@ -154,11 +167,29 @@ def _keep(one: dict, two: dict) -> None:
             Path(os.environ["ENCDESIGN_KEEP"], name + ".json").write_text(json.dumps(doc))
 
 
+def _dealt(log: Path) -> dict[int, list[tuple[int, int]]]:
+    """Per process, ``(items, its share)`` of each dealing logged by :data:`DEALT`."""
+    out: dict[int, list[tuple[int, int]]] = {}
+    for line in log.read_text(encoding="utf-8").splitlines():
+        p, n, k = (int(v) for v in line.split())
+        out.setdefault(p, []).append((n, k))
+    return out
+
+
 def test_two_processes_give_the_one_process_diagnosis(tmp_path):
     rec = _record(tmp_path / "rec.toml", seed=20261204)
+    log = tmp_path / "dealt.txt"
     one = _diagnose(rec, tmp_path / "one.json", 1, 0)
-    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port())
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), DEALT.format(log=str(log)))
     assert dist.process_count() == 1  # this test process joined nothing
+    # the trial fits of each round and the bounds' probes were dealt: the same dealings on
+    # both processes, their shares adding up, each with work in all of them
+    dealt = _dealt(log)
+    assert sorted(dealt) == [0, 1] and [n for n, _ in dealt[0]] == [n for n, _ in dealt[1]]
+    assert len(dealt[0]) >= 2  # the first round's trial fits and the bounds' probes
+    for (n, k0), (_, k1) in zip(dealt[0], dealt[1]):
+        assert k0 + k1 == n and (k0 >= 1 and k1 >= 1 or n < 2)
+    assert len(two["detection_bounds"]) >= 2
     assert one["verdict"] == two["verdict"]
     assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
     assert one["effects"], "the vibration is named"
@@ -185,3 +216,67 @@ def test_a_parquet_record_reduced_on_two_processes_gives_the_one_process_diagnos
     diff = _differences(one, two)
     _keep(one, two)
     assert not diff, "\n".join(diff[:40])
+
+
+def test_shares_deal_every_item_once_the_heaviest_first():
+    """The dealing (``_workshare.shares``) gives each item to one process, the heaviest first
+    to the least loaded: loads differ by at most the heaviest item."""
+    from encdesign.diagnose.engine._workshare import shares
+
+    rng = np.random.default_rng(5100)
+    for n in (1, 2, 3):
+        for m in (0, 1, 5, 17):
+            w = rng.uniform(1, 4, m).tolist()
+            got = shares(w, n)
+            assert len(got) == n and sorted(i for s in got for i in s) == list(range(m))
+            loads = [sum(w[i] for i in s) for s in got]
+            assert max(loads) - min(loads) <= max(w, default=0.0)
+    assert shares([1.0] * 5, 2) == [[0, 2, 4], [1, 3]]
+
+
+def test_a_trial_fit_is_gathered_whole_and_rejoins_its_candidates():
+    """A fit travels without its candidates (``pack_fit``: they hold functions) and comes
+    back with this process's candidate objects, every number as it was; another candidate
+    list is refused; on one process ``deal`` is the work itself."""
+    import pickle
+    from types import SimpleNamespace
+
+    from encdesign.diagnose.engine._dealt_fits import pack_fit, unpack_fit
+    from encdesign.diagnose.engine._fit import FitResult, Term
+    from encdesign.diagnose.engine._workshare import deal
+
+    a, b = SimpleNamespace(name="a"), SimpleNamespace(name="b")
+    rng = np.random.default_rng(5101)
+    terms = [
+        Term(c, {"x": rng.normal(size=3)}, {"x": np.ones(3, bool)}, {"x": np.ones(3)})  # type: ignore[arg-type]
+        for c in (a, b)
+    ]
+    A = rng.normal(size=(6, 6))
+    fr = FitResult(terms, 1.25, 6, A @ A.T, 2.5, 0.1, 0.05, 400, True, A, [], [(0, 3), (3, 6)])
+    back = unpack_fit(pickle.loads(pickle.dumps(pack_fit(fr))), [a, b])  # type: ignore[list-item]
+    assert back is not None and [t.cand for t in back.terms] == [a, b]
+    assert np.array_equal(back.terms[1].values["x"], fr.terms[1].values["x"])
+    assert np.array_equal(back.cov, fr.cov) and back.chi2 == fr.chi2
+    assert fr.terms[0].cand is a  # the original is untouched
+    with pytest.raises(ValueError, match="terms"):
+        unpack_fit(pack_fit(fr), [b, a])  # type: ignore[list-item]
+    assert pack_fit(None) is None and unpack_fit(None, []) is None
+    assert deal([3, 1, 2], lambda xs: [x * x for x in xs]) == [9, 1, 4]
+
+
+def test_a_private_fitter_caches_apart_from_the_shared_one():
+    """What a trial fit caches on its own fitter (``_dealt_fits.private``) never reaches the
+    shared fitter's caches: each process's shared fitter stays as the others' are."""
+    from types import SimpleNamespace
+
+    from encdesign.diagnose.engine._dealt_fits import private
+    from encdesign.diagnose.engine._fit import Fitter
+
+    prep = SimpleNamespace(sigma=np.ones(2), n=100)
+    shared = Fitter(prep)  # type: ignore[arg-type]
+    shared.blocks.keep_gram(("a",), np.eye(2), np.eye(2))
+    own = private(shared)
+    own.blocks.keep_gram(("b",), np.eye(2), np.eye(2))
+    own._jcache["x"] = 1
+    assert own.blocks.gram(("a",)) is not None and own.blocks.gram(("b",)) is not None
+    assert shared.blocks.gram(("b",)) is None and "x" not in shared._jcache

@@ -69,11 +69,64 @@ def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
     assert d["base"]["max_order"] >= M - 1, d["base"]["max_order"]
 
 
+BLOCKED = [(1403, 18, 0.7), (1410, 18, 0.9)]
+"""Two of :data:`CASES` whose growth the rule before blocks (1409 does too; 1401, 1402 and
+1404 grow under it as well): the control runs these only (session 17: 5.2 s CPU of the
+17.8 s all six cost)."""
+
+
 def test_growth_blocked_by_any_trace_leaves_the_record_unexplained():
     """The control: a share of 1e-12 is the rule before (any such finding stops the growth)."""
     st = dataclasses.replace(FinderSettings(), growth_veto_share=1e-12)
-    blocked = 0
-    for seed, M, turns in CASES:
+    for seed, M, turns in BLOCKED:
         d = diagnose(_high_order_record(seed, M, turns), settings=st).doc
-        blocked += d["verdict"] != "consistent" and d["base"]["max_order"] == 12
-    assert blocked >= 2, "no generated record shows the old rule's miss: the test cannot fail"
+        assert d["verdict"] != "consistent" and d["base"]["max_order"] == 12, (seed, d["verdict"])
+
+
+def _wide_error_record(seed: int, H: int = 4, n: int = 1000, M: int = 15) -> Recording:
+    """A clean record without ``theta_ref``: H heads, disk error orders 1..M of 100-300x the
+    noise at order 1 (the shaft refinement's second-order part is many times the noise)."""
+    rng = np.random.default_rng(seed)
+    noise = 2e-5
+    t = np.arange(n) / 50.0
+    th = 2 * np.pi * 25.0 * t / t[-1] + rng.uniform(0, 6.3)
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.2, 6.1, H - 1))])
+    err = np.zeros((n, H))
+    amp0 = noise * 10 ** rng.uniform(2.0, 2.5)
+    for m in range(1, M + 1):
+        a = amp0 / m ** rng.uniform(0.5, 1.5)
+        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, H)
+    cols = {"t": t, "run": np.zeros(n, int), **{f"h{k}": y[:, k] for k in range(H)}}
+    enc = {"head_angles_deg": [float(np.degrees(a)) for a in alpha], "optical_radius_m": 0.05}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)
+
+
+def test_shaft_refined_again_once_the_base_grows():
+    # the refinement of the shaft angle (heads' mean less the fitted error's head mean) was
+    # computed from the base before its growth: the grown orders' second-order part stayed
+    # in the residual and was reported at orders no effect has (main: missing_physics, a
+    # beam tilt named, orders 6 and 13 unexplained)
+    d = diagnose(_wide_error_record(5553)).doc
+    assert d["verdict"] == "consistent", (d["verdict"], [e["name"] for e in d["effects"]])
+    assert d["base"]["max_order"] >= 15
+
+
+def test_one_sensor_base_grows_past_its_signal_period_inside_the_disk_orders():
+    # one sensor against its reference, 7 signal periods, a disk error at orders 1-15: the
+    # disk's order 14 is the sensor's 2 L. The line at the signal period is those shaft
+    # orders, not an aliased line: the base grows past it (main left orders 13-15
+    # unexplained and named interpolation_error for order 14)
+    rng = np.random.default_rng(5501)
+    n, noise = 1500, 2e-7
+    t = np.arange(n) / 200.0
+    th = 2 * np.pi * 15.0 * t / t[-1] + 0.3
+    err = sum(noise * 40 / m * np.sin(m * th + rng.uniform(0, 2 * np.pi)) for m in range(1, 16))
+    cols = {"t": t, "run": np.zeros(n, int), "theta_ref": th}
+    cols["h0"] = th + err + rng.normal(0, noise, n) + 1.0
+    enc = {"head_angles_deg": [0.0], "sensor": "magnetic", "signal_periods_per_rev": 7}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    d = diagnose(Recording("multihead", meta, cols)).doc
+    assert d["verdict"] == "consistent", (d["verdict"], [e["name"] for e in d["effects"]])
+    assert d["base"]["max_order"] >= 15

@@ -59,6 +59,11 @@ ALLOWED: dict[tuple[str, float], str] = {
     + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
     ("engine/_discover.py", 1e-12): GUARD + " (log of a speed)",
+    ("engine/_discover.py", 1e-6): NUMERIC + " (rank of two terms' projected Gram: same span; "
+    "a direction keeping less of its raw norm is dropped, as in _pinv)",
+    ("engine/_views_modulated.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
+    ("engine/_views_modulated.py", 2): DOF + " (a squared trace)",
+    ("engine/_views_modulated.py", 4): COUNT + " (a change with 2 rows on either side)",
     ("engine/_discover_law.py", 1e-12): GUARD + " (log of a speed)",
     ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
     "highest order)",
@@ -239,6 +244,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_settings.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,
+    ("engine/_views_modulated.py", "BLOCK_VALUES"): BOUND,
     ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
     ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
     ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",

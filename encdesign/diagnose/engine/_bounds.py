@@ -83,9 +83,11 @@ from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
+from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
+from ._workshare import deal
 
 CONVENTION = (
     "the size detected with about 50 % probability: its noncentrality (the chi-square it "
@@ -125,6 +127,7 @@ class Reference:
     named: frozenset[str] = frozenset()
     room: bool = True
     findings: Sequence = ()
+    n_params: int | None = None  # the fitted model's parameters (its free columns kept)
 
     def excess(self, views: set[str] | None = None) -> float:
         """The excess chi-square (power less degrees of freedom) of the final findings, in
@@ -299,7 +302,9 @@ class _Bench:
         )
         w = fitter.w_ch
         sw = np.sqrt(w)
-        for a, b, x in fitter.chunks():
+
+        def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
+            G, Gu, hv, huv, qv, quv, *grams = sums
             got = fitter.processed_block(static, a, b, x, sc, pred=False, keep=False)
             _, S, order, edges = got
             rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
@@ -322,6 +327,10 @@ class _Bench:
                     huv[i, k] += Sk.T @ uu
                     qv[i, k] += float(uk @ uk)
                     quv[i, k] += float(uk @ uu)
+
+        G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+        if kept is not None:  # (not summed in the pass: zeros there)
+            G, Gu = kept
         for i, (_, pr) in enumerate(probes):
             self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
@@ -456,17 +465,23 @@ def _failed_entry(cand: Candidate, probe: Probe, note: str) -> dict:
     }
 
 
-def _bound_entry(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
+def _bound_entry(
+    prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference, got=None
+) -> dict:
     """One ``detection_bounds`` entry: the largest bound over the probe and its ``worst_of``
     (``bound`` ``None`` with a ``note`` when the record cannot show the effect at one of them
     at any size); reported with the probe's own ``where`` and ``at``, and, where there are
     several, each one's own bound (``each``: ``label``, ``bound``, ``set_by``): the worst is
     what the record guarantees for any of them, and an effect whose shape is one of them
-    (an order, an azimuth) is revealed from its own, which can be well below the worst."""
+    (an order, an azimuth) is revealed from its own, which can be well below the worst.
+    ``got``: each one's :func:`_one_bound` computed already (dealt over processes), in
+    order; an exception there is raised where it would have been."""
     worst: dict | None = None
     each = []
-    for pr in (probe, *probe.worst_of):
-        e = _one_bound(prep, bench, cand, pr, views, scan, ref)
+    for j, pr in enumerate((probe, *probe.worst_of)):
+        e = _one_bound(prep, bench, cand, pr, views, scan, ref) if got is None else got[j]
+        if isinstance(e, Exception):
+            raise e
         if e["bound"] is None:
             return e
         each.append({"label": pr.label or pr.at, "bound": e["bound"], "set_by": e["set_by"]})
@@ -529,6 +544,24 @@ SHARE_TOL = 0.02
 size (the power is quadratic in the size: about 1 % of the size)."""
 
 
+def _over_budget(prep, cand, probe: Probe, ref: Reference) -> str | None:
+    """The selection's parameter budget (``max_param_fraction``, ``_select``): an effect
+    whose parameters beside the reference model's exceed it is refused at any size, so it
+    has no bound (an sds ``beam_tilt_axial``, 6 parameters, beside a 5-parameter base on
+    8 runs x 3 sensors with 4 complete revolutions, 96 values: a bound was reported and the
+    effect was never named, ``max_param_fraction``)."""
+    n_ref = ref.n_params if ref.n_params is not None else sum(t.n_free() for t in ref.terms)
+    n_cand = make_term(cand, prep, dict(probe.values)).n_free()
+    N = prep.n_values
+    frac = prep.settings.max_param_fraction
+    if N - n_ref - n_cand < 0 or n_ref + n_cand > frac * N:
+        return (
+            f"more parameters ({n_ref} + {n_cand}) than {frac:.0%} of the {N:.0f} fitted "
+            "values (max_param_fraction): not named at any size"
+        )
+    return None
+
+
 def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Reference) -> dict:
     """The bound of one parameter set of a probe."""
     s = prep.settings
@@ -540,6 +573,9 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             "note": "the selection names at most max_effects effects, and this record has "
             "that many: no further effect is named at any size",
         }
+    over = _over_budget(prep, cand, probe, ref)
+    if over:
+        return {**entry, "note": over}
     got = bench.probe(cand, probe)
     if got is None or got[0] <= 0:
         return {**entry, "note": "the effect vanishes on the kept rows"}
@@ -652,10 +688,24 @@ def detection_bounds(
             bench.prepare(items)
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):
             bench._pre.clear()  # each probe then makes its own pass
+
+    def bounds_of(mine: list) -> list:  # this process's parameter sets (_workshare.deal)
+        got = []
+        for cand, pr in mine:
+            try:
+                got.append(_one_bound(prep, bench, cand, pr, views, scan_order, ref))
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                got.append(type(exc)(*exc.args))  # raised by _bound_entry, in its order
+        return got
+
+    # every parameter set of every probe (a probe and its worst_of) is one work item
+    sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
+    done = iter(deal(sets, bounds_of))
     for cand, probes in work:
         for probe in probes:
+            got = [next(done) for _ in range(1 + len(probe.worst_of))]
             try:
-                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref)
+                entry = _bound_entry(prep, bench, cand, probe, views, scan_order, ref, got)
             except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                 # reporting only: a probe that fails numerically never fails the diagnosis
                 entry = _failed_entry(cand, probe, f"not computed: {exc}")

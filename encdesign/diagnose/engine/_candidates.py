@@ -242,6 +242,10 @@ class Candidate:
         probes: ``probes(ctx) -> [Probe, ...]`` (:data:`ProbeFn`): the unit-size effects
             whose smallest detectable size a verdict that does not name it reports
             (``detection_bounds``), or ``None`` (default: no bound reported for it).
+        orders: the integer orders it is a set of lines at (``signal_shape``: its radial
+            orders), or ``()`` (default): named only if its fitted error is not dominated by
+            its top order while a larger located structure it leaves continues above it
+            (rule ``edge_order``: a piece of an out-of-catalog comb).
     """
 
     name: str
@@ -257,6 +261,7 @@ class Candidate:
     doubt_overruled: bool = True
     valjac: Callable[[dict, dict], Any] | None = None
     probes: ProbeFn | None = None
+    orders: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         names = [p.name for p in self.params]

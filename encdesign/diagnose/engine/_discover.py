@@ -561,19 +561,46 @@ def _refit(
 
 def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     """Forward selection on all folds, and each term's inclusion probability over the
-    selections repeated without each fold; the terms kept (chosen on all folds and
-    included at least ``settings.discover_inclusion_min``)."""
+    selections repeated without each fold (a repeat that takes a term of the same span
+    includes it: :func:`_same_span`); the terms kept (chosen on all folds and included at
+    least ``settings.discover_inclusion_min``)."""
     sums, lib = st.sums, st.lib
     K = sums.A.shape[0]
     folds = list(range(K))
     me = st.settings.discover_model_error
     chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
+    # of terms the record cannot tell apart, the first of the library (not rounding's pick)
+    chosen = [next(j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])) for i in chosen]
     incl = np.zeros(len(lib))
     for k in folds:
         rest = [f for f in folds if f != k]
-        for i in _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me):
+        got = _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me)
+        same = {i for i in chosen if any(_same_span(sums, lib[i], lib[j]) for j in got)}
+        for i in set(got) | same:
             incl[i] += 1.0 / K
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
+
+
+def _same_span(sums: Sums, a: Term, b: Term) -> bool:
+    """Whether two terms at one line span the same columns once the catalog model is
+    projected out (e.g. one sensor's ``forward``, ``reverse``, ``direction`` and the one
+    reverse run's ``cell`` where the base holds the static order): the record cannot tell
+    them apart, so a repeat of the selection that takes either includes both (ties broken
+    by rounding would otherwise split the inclusion probability)."""
+    q = a.H.shape[1]
+    if a is b or a.line != b.line or b.H.shape[1] != q or a.beta is not None or b.beta is not None:
+        return a is b
+    sl = sums.slices[a.line]
+    At, Rt = sums.A.sum(0)[sl, sl], sums.raw.sum(0)[sl, sl]
+
+    def rank(H: np.ndarray) -> int:
+        # on the unit-diagonal form of the raw Gram (as _pinv: a direction that keeps less
+        # than 1e-6 of its raw norm after the catalog's projection is not there)
+        d = np.sqrt(np.maximum(np.diag(H.T @ Rt @ H), 1e-300))
+        ev = np.linalg.eigvalsh((H.T @ At @ H) / d[:, None] / d[None, :])
+        return int(np.sum(ev > 1e-6))
+
+    return rank(a.H) == q == rank(b.H) and rank(np.concatenate([a.H, b.H], 1)) == q
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:

@@ -78,6 +78,22 @@ def _set_order(prep: Prepared, order: int) -> None:
     prep.ctx = dataclasses.replace(prep.ctx, max_order=int(order))
 
 
+def _phase_at_orders(findings: list, L: int) -> float:
+    """The excess of the ``line_phase`` view that the ``orders`` view locates too, at the
+    integer orders ``L`` and ``2 L``: where the signal phase is ``L`` times the shaft angle
+    (one sensor against its reference) the line at the signal period is those shaft orders,
+    rotation locked, the disk's own error there as much as ``interpolation_error``'s (a disk
+    error whose orders run past ``2 L``): the same structure, not an aliased line that only
+    poses as integer orders."""
+    lp = sum(max(f.power - f.dof, 0.0) for f in findings if f.view == "line_phase")
+    at = sum(
+        max(f.power - f.dof, 0.0)
+        for f in findings
+        if L > 0 and f.view == "orders" and {round(o) for o in f.where["orders"]} & {L, 2 * L}
+    )
+    return min(lp, at)
+
+
 def _grow_base_order(
     kind: Kind,
     prep: Prepared,
@@ -110,6 +126,7 @@ def _grow_base_order(
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
     veto = ("line_phase", "direction", "speed", "angle_trend")
     pv = sum(max(f.power - f.dof, 0.0) for f in findings if f.view in veto)
+    pv -= min(_phase_at_orders(findings, L), pv)
     if pv > 0 and pv >= prep.settings.growth_veto_share * p0:
         return None
     found = [
@@ -353,10 +370,24 @@ def _fit_failure(base_info: dict, stage: str, cause: str) -> None:
     )
 
 
-def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
-    """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
-    growth. Returns ``(base_fit, order)``."""
-    base_fit = fitter.fit(base_terms)
+def _checked(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, info: dict):
+    """``fit``, or its refit where the kind held a nuisance it had moved (``check_base``;
+    the note in the base info's ``held``)."""
+    note = kind.check_base(fit.terms, prep)
+    if note is None:
+        return fit
+    if note not in info.setdefault("held", []):
+        info["held"].append(note)
+    fitter.clear()
+    return fitter.fit(fit.terms)
+
+
+def _refine(kind, prep, fitter, base_fit, base_info: dict):
+    """The kind's refinement of the angle the base is evaluated at, and the base refit from
+    the fitted values (undone, with a fit failure recorded, where it would diverge); run on
+    the first base fit and again after the base's orders grow (the refinement evaluates the
+    fitted error: without the grown orders its second-order part stays in the residual).
+    Returns the base fit."""
     state = prep.rows.snapshot()
     try:
         refined = kind.refine(base_fit.terms, prep)
@@ -383,19 +414,29 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
                 f"{base_fit.chi2:.6g} to {trial.chi2:.6g} (more than "
                 f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
             )
+    return base_fit
+
+
+def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
+    """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
+    growth. Returns ``(base_fit, order)``."""
+    base_fit = _checked(kind, prep, fitter, fitter.fit(base_terms), base_info)
+    base_fit = _refine(kind, prep, fitter, base_fit, base_info)
     _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     if grow:  # issue 44 E: an ill-conditioned base's order is chosen by held-out error
         chosen = _choose_base_order(kind, prep, fitter, base_fit, order, base_info)
         if chosen is not None:
-            order, base_fit = chosen
+            order, base_fit = chosen[0], _checked(kind, prep, fitter, chosen[1], base_info)
             _align(kind, prep, fitter, base_fit)
             _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
-        order, base_fit = grown
+        order, base_fit = grown[0], _checked(kind, prep, fitter, grown[1], base_info)
+        # the refinement evaluated the fitted error before the orders grown: again with them
+        base_fit = _refine(kind, prep, fitter, base_fit, base_info)
         _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little
         _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
     return base_fit, order
@@ -500,6 +541,7 @@ def bounds_reference(doc: dict, sel: Selection, max_effects: int) -> Reference:
         named=frozenset(named),
         room=len(doc["effects"]) < max_effects,
         findings=tuple(sel.findings) if doc["verdict"] != "consistent" else (),
+        n_params=int(sel.final.n_params),
     )
 
 

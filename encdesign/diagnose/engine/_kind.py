@@ -93,6 +93,12 @@ class AbstractKind(eqx.Module):
         """After the base fit: move the angle the base is evaluated at (a note, or
         ``None`` when nothing moved; the engine then refits)."""
 
+    def check_base(self, terms: list, prep: Prepared) -> str | None:
+        """After each base fit: hold a nuisance the fit moved where the kind's own evidence
+        rejects it (values and free masks of ``terms`` changed in place: a note, the engine
+        then refits), or ``None`` (nothing held; the default)."""
+        return None
+
     @abc.abstractmethod
     def align(self, terms: list, prep: Prepared) -> np.ndarray | Callable[..., Any] | None:
         """After each base fit: the aligned angle rotation-locked candidates see (an array

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
+from ._dealt_fits import pack_fit, private, unpack_fit
 from ._document import jsonable
 from ._evidence import (
     Chosen,
@@ -28,10 +29,11 @@ from ._evidence import (
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
-from ._spill import kept_gain_share
+from ._spill import band_share, edge_beyond, kept_gain_share
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
+from ._workshare import deal
 
 # ----------------------------------------------------------------------------- selection
 
@@ -271,6 +273,24 @@ def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
     return best
 
 
+def _trial_fits(st, cands: list, current, n_base_terms: int, log) -> list:
+    """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit: dealt
+    over the processes (:mod:`._workshare`), each on a fitter of its own."""
+
+    def work(mine: list) -> list:
+        st2 = dict(st, fitter=private(st["fitter"]))
+        out = []
+        for cand in mine:
+            refused: list[dict] = []
+            notes: dict[str, list[str]] = {}
+            best = _trial_fit(st2, cand, current, n_base_terms, refused, notes, log)
+            out.append((pack_fit(best), refused, notes.get(cand.name)))
+        return out
+
+    base = [t.cand for t in current.terms]
+    return [(unpack_fit(b, [*base, c]), r, n) for c, (b, r, n) in zip(cands, deal(cands, work))]
+
+
 def _sort_trials(trials: list, applicable: list) -> None:
     """By dBIC; candidates equal to rounding (the same fitted error, e.g. an offset per
     direction and a delay at one speed), wherever they stand: the catalog's order decides,
@@ -420,6 +440,24 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
             "located_share_min",
             f"explains only {100 * share:.0f}% of the structure located where its own fitted "
             f"error shows (weighted by that error; needs {100 * s.located_share_min:.0f}%)",
+        ), steps_left
+    # nor the one tooth inside its orders of a comb that continues above them
+    edge = edge_beyond(cand.orders, own, findings, left, _order_key)
+    if edge is not None and edge[2] > dchi:
+        return (
+            "edge_order",
+            f"its fitted error is mostly its top order {edge[0]}, and a larger located "
+            f"structure it leaves continues above it (orders {', '.join(map(str, edge[1][:8]))}"
+            f", excess chi-square {edge[2]:.0f} against its gain {dchi:.0f}): a piece of it",
+        ), steps_left
+    # nor a slice of a broad band its own line sits in (a chirp through a line's frequency)
+    band = band_share(findings, after, own)
+    if band is not None and band[1] > dchi and band[0] < s.located_share_min:
+        return (
+            "located_share_min",
+            f"clears only {100 * band[0]:.0f}% of the broad band its own line sits in "
+            f"(excess chi-square {band[1]:.0f} against its gain {dchi:.0f}): a slice of a "
+            f"broadband structure (needs {100 * s.located_share_min:.0f}%)",
         ), steps_left
     # nor a part of a larger structure it leaves: the integer orders it leaves untouched that
     # located more than its whole gain, fitted with the model, must leave it that share of its
@@ -662,6 +700,7 @@ def select(
             change_steps=free_steps(prep, findings, at_changes=True),
         )
         trials: list[Trial] = []
+        todo = []
         for cand in applicable:
             if cand.name in {s.name for s in accepted}:
                 continue
@@ -670,7 +709,13 @@ def select(
             if not cand.signature and gof["passes"]:
                 continue
             tried_names.add(cand.name)
-            best = _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log)
+            todo.append(cand)
+        for cand, (best, refused, notes) in zip(
+            todo, _trial_fits(st, todo, current, n_base_terms, log)
+        ):
+            rejected += refused
+            if notes is not None:
+                held_notes[cand.name] = notes
             if best is None:
                 continue
             dchi = current.chi2 - best.chi2

@@ -61,12 +61,12 @@ class FinderSettings(eqx.Module):
     21 n 4, clean seed 21 n 5)."""
 
     located_share_min: float = eqx.field(default=0.2, static=True)
-    """Rule ``located_share_min``: a candidate must explain at least this share of the
-    excess chi-square located where its own fitted error shows (views, integer orders, heads,
-    runs), each place weighted by that error's own excess there, and keep this share of its
-    gain once the larger integer orders it leaves are fitted (``_spill``): a larger structure
-    is not pinned on it through a small part of it. 96be348 (of all located structure until
-    issue 44 B; weighted since session 15: twin ODrive records got opposite verdicts)."""
+    """Rule ``located_share_min``: a candidate must explain this share of the excess
+    chi-square located where its own fitted error shows (views, integer orders, heads, runs;
+    each place weighted by its own excess there), keep this share of its gain once the larger
+    orders it leaves are fitted (``_spill``) and clear this share of a broad band its own line
+    sits in (a line in Hz is no slice of a chirp, session 17): a larger structure is not pinned
+    on it. 96be348 (of all located structure until 44 B; weighted since session 15)."""
 
     signature_left_max: float = eqx.field(default=0.5, static=True)
     """Rule ``signature_left_max``: a candidate may leave at most this share of what its own
@@ -648,31 +648,26 @@ class FinderSettings(eqx.Module):
     issue 44 G. ``stepped_max_steady_rows`` has the same default by construction."""
 
     discover_speed_ratio: float = eqx.field(default=1.2, static=True)
-    """Discovery (``_discover``): a located line gets a speed-modulated term (amplitude ~
-    speed^beta) when the steady speeds of its cells span more than this ratio. Was an inline
-    ``math.log(1.2)`` in ``_discover.library``; set by hand in 3ff0f02 (moved unchanged in
-    issue 44 G)."""
+    """Discovery: a located line gets a speed-modulated term (amplitude ~ speed^beta) when
+    the steady speeds of its cells span more than this ratio. Was ``math.log(1.2)`` in
+    ``_discover.library``; by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
 
     discover_beta_max: float = eqx.field(default=4.0, static=True)
-    """Discovery: a discovered term's speed exponent beta is implausible (rule
-    ``<discovered>.plausible``) outside ``[-this, this]``. Was an inline ``4.0`` in
-    ``_discover_export``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+    """Discovery: a discovered term's speed exponent is implausible (``<discovered>.plausible``)
+    outside ``[-this, this]``. Was ``4.0`` in ``_discover_export`` (3ff0f02; issue 44 G)."""
 
     speed_cause_se: float = eqx.field(default=2.0, static=True)
-    """Discovery words: a fitted speed exponent is read as a simple mechanism (-2, -1, 0, 1
-    or 2) when within this many standard errors of it. Words, not a verdict. Was an inline
-    ``2`` in ``_discover_words._speed_cause``; set by hand in 3ff0f02 (moved unchanged in
-    issue 44 G)."""
+    """Discovery words: a fitted speed exponent is read as a simple mechanism (-2 .. 2) when
+    within this many SE of it (words, not a verdict). Was ``2`` in ``_discover_words``
+    (3ff0f02, by hand; moved unchanged in issue 44 G)."""
 
     discover_alpha: float = eqx.field(default=0.01, static=True)
-    """Discovery: family-wise false-alarm rate of the forward selection over the whole
-    library of terms (Bonferroni: ``chi2.isf(discover_alpha / N, q)``). Was the module
-    constant ``_discover.ALPHA``; set by hand in 3ff0f02 (moved unchanged in issue 44 G)."""
+    """Discovery: family-wise false-alarm rate of the forward selection over the library
+    (``chi2.isf(discover_alpha / N, q)``). Was ``_discover.ALPHA`` (3ff0f02; issue 44 G)."""
 
     discover_inclusion_min: float = eqx.field(default=0.6, static=True)
-    """Discovery: a term is kept only when the selection repeated without each fold keeps
-    it at least this often. Was ``_discover.INCLUSION_MIN``; set by hand in 3ff0f02 (moved
-    unchanged in issue 44 G)."""
+    """Discovery: a term is kept only when kept this often by the selection repeated without
+    each fold. Was ``_discover.INCLUSION_MIN`` (3ff0f02; issue 44 G)."""
 
     discover_model_error: float = eqx.field(default=5e-3, static=True)
     """Discovery: share of a term's chi-square drop discounted per parameter when terms are
@@ -692,8 +687,7 @@ class FinderSettings(eqx.Module):
     """Discovery: an exported candidate whose refit amplitude is more than this many times
     the discovered one (or less than its inverse) is refused (rule
     ``<discovered>.plausible``): another physics, not the one discovered. Was
-    ``_discover_export.SIZE_RATIO_MAX``; set by hand in 3ff0f02 (moved unchanged in issue 44
-    G)."""
+    ``_discover_export.SIZE_RATIO_MAX`` (3ff0f02, by hand; issue 44 G)."""
 
     signal_first_order_max_rad: float = eqx.field(default=0.3, static=True)
     """``interpolation_error``: above this harmonic (rad of signal phase) the first-order
@@ -711,8 +705,7 @@ class FinderSettings(eqx.Module):
 
     drift_degree_max: int = eqx.field(default=15, static=True)
     """motion: the speed-drift polynomial's degree stops growing here (a long run's slow
-    wander, not its orders, which the Legendre degree would start to absorb). 3a1c6be. Was an
-    inline 15 in ``_motion.drift_degree`` (moved unchanged in issue 44 G)."""
+    wander, not its orders). 3a1c6be. Was 15 in ``_motion.drift_degree`` (issue 44 G)."""
 
     drift_growth_turns: float = eqx.field(default=3.0, static=True)
     """motion: the speed-drift polynomial keeps ``drift_degree_min`` up to this many
@@ -722,8 +715,7 @@ class FinderSettings(eqx.Module):
     scan_order_min: int = eqx.field(default=24, static=True)
     """The views scan the integer orders up to twice the base's order and at least up to
     this order (within what the record resolves): a disk error or a runout above a low base
-    order is located. 4be389a (the base grows its order). Was an inline 24 in
-    ``_document.scan_order_of`` (moved unchanged in issue 44 G)."""
+    order is located. 4be389a. Was 24 in ``_document.scan_order_of`` (issue 44 G)."""
 
     spectrum_order_max: int = eqx.field(default=400, static=True)
     """The report's order spectrum (base and final residual amplitudes per integer order)
@@ -737,8 +729,7 @@ class FinderSettings(eqx.Module):
     ``_quadrature.quadrature_limit`` (moved unchanged in issue 44 G)."""
 
     quad_order_max: int = eqx.field(default=400, static=True)
-    """... and at most this. 7d728be. Was an inline 400 in ``_quadrature.quadrature_limit``
-    (moved unchanged in issue 44 G)."""
+    """... and at most this. 7d728be. Was 400 in ``_quadrature.quadrature_limit`` (44 G)."""
 
     run_offset_start_orders: int = eqx.field(default=6, static=True)
     """multihead: the start of the run offsets ``delta_r`` fits each run's orders up to this
@@ -772,6 +763,15 @@ class FinderSettings(eqx.Module):
 
     reduce_line_hz: float = eqx.field(default=100.0, static=True)
     """... lines in Hz up to this frequency are kept within that bound. Issue 43."""
+
+    modulated_orders_alpha: float = eqx.field(default=1e-3, static=True)
+    """``modulated_orders`` view (``_views_modulated``): family-wise false-alarm rate of its
+    scan of orders whose amplitude grows or switches (Bonferroni over orders x channels x
+    shapes), beside ``alpha``'s static scan. Issue 41 (s17): equal to ``alpha``."""
+
+    modulated_orders_steps: int = eqx.field(default=8, static=True)
+    """... it tests a switching order at this many equal-count edges of the kept rows (SDS,
+    24 rows: every third run). Issue 41 (s17), by hand."""
 
     def __check_init__(self):
         for f in dataclasses.fields(self):

@@ -52,3 +52,70 @@ def kept_gain_share(prep, fitter, base: list, term, orders) -> float | None:
     c1 = fitter.fit([*base, lines], max_steps=TRIAL_STEPS).chi2
     g1 = c1 - fitter.fit([*base, lines, term], max_steps=TRIAL_STEPS).chi2
     return g1 / g0
+
+
+def _same_place(f, g) -> bool:
+    """Whether findings ``f`` and ``g`` share a head and a run (or one of them names none)."""
+    for key in ("heads", "runs"):
+        a, b = f.where.get(key) or [], g.where.get(key) or []
+        if a and b and not set(a) & set(b):
+            return False
+    return True
+
+
+def band_share(findings, after, own) -> tuple[float, float] | None:
+    """``(share, power)``: the share of the excess chi-square of the broad bands located
+    before a candidate's fit (``findings``, view ``band``) that contain a line of its own
+    fitted error (``own``: a ``spectrum`` finding of that error alone, on the band's head and
+    run) which is gone after its fit (``after``), and those bands' excess before it; ``None``
+    where no such band was located.
+
+    A line fixed in Hz fitted to a slice of a broadband structure (a chirp sweeping through
+    its frequency) clears that slice's spectrum lines but leaves the band it sits in nearly
+    whole; a line of its own is most of the band it sits in, and its fit clears it."""
+    lines = [
+        (g, x) for g in own if g.view == "spectrum" for x in g.where.get("frequencies_hz") or []
+    ]
+    a = b = 0.0
+    for f in findings:
+        lo_hi = f.where.get("frequencies_hz") or []
+        if f.view != "band" or not lo_hi:
+            continue
+        if not any(lo_hi[0] <= x <= lo_hi[-1] and _same_place(f, g) for g, x in lines):
+            continue
+        a += max(f.power - f.dof, 0.0)
+        for h in after:
+            if h.view == "band" and h.where.get("frequencies_hz") == lo_hi and _same_place(h, f):
+                b += max(h.power - h.dof, 0.0)
+    if a <= 0:
+        return None
+    return max(1.0 - b / a, 0.0), a
+
+
+def edge_beyond(orders, own, findings, left, key) -> tuple[int, list[int], float] | None:
+    """``(top, beyond, power)`` where a candidate that is a set of lines at integer
+    ``orders`` has its own fitted error (``own``) mostly at its top order ``top`` (more
+    excess chi-square there than at all its other orders together), and the integer orders
+    above ``top`` located before its fit that it leaves (``left``) carry ``power``; else
+    ``None``. ``key(finding)``: a finding's integer order, or ``None``.
+
+    A comb that continues beyond a catalog effect's orders (an out-of-catalog radial order
+    with its sidebands) lends it the one tooth inside its range: its fit is then that tooth,
+    its top order, while the larger rest of the comb stays above it."""
+    if not orders:
+        return None
+    top = max(orders)
+    own_p: dict = {}
+    for g in own:
+        k = key(g)
+        if k is not None and k in orders:
+            own_p[k] = own_p.get(k, 0.0) + max(g.power - g.dof, 0.0)
+    at_top = own_p.get(top, 0.0)
+    if at_top <= sum(own_p.values()) - at_top:
+        return None
+    beyond: dict = {}
+    for f in findings:
+        k = key(f)
+        if k is not None and k > top and k in left:
+            beyond[k] = beyond.get(k, 0.0) + max(f.power - f.dof, 0.0)
+    return top, sorted(beyond), float(sum(beyond.values()))

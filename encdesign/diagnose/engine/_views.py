@@ -30,6 +30,7 @@ from scipy import stats
 
 from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
+from ._workshare import deal
 
 
 @dataclasses.dataclass
@@ -751,14 +752,20 @@ def _locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) ->
     rw = Whitened(resid, prep.sigma)
     tot = float(sum(np.sum(rw[a:b][prep.keep[a:b]] ** 2) for a, b in _blocks(rw.shape[0])))
     out: list[Finding] = []
-    rw_array = None
-    for v in views:
-        if isinstance(v, str):
-            out += VIEWS[v](prep, rw, scan_order)
-        else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
-            if rw_array is None:
-                rw_array = np.asarray(rw)
-            out += v(prep, rw_array, scan_order)
+
+    def scans(mine: list) -> list[list[Finding]]:  # this process's views (_workshare.deal)
+        got, rw_array = [], None
+        for v in mine:
+            if isinstance(v, str):
+                got.append(VIEWS[v](prep, rw, scan_order))
+            else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
+                if rw_array is None:
+                    rw_array = np.asarray(rw)
+                got.append(v(prep, rw_array, scan_order))
+        return got
+
+    for found in deal(list(views), scans):
+        out += found
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of
     # that order (the orders view), which sees every run at once
     by_order = {

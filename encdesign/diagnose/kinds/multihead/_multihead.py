@@ -39,7 +39,9 @@ from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import run_spans
+from ...engine._views import chi2_threshold, run_spans
+from ...engine._views_modulated import view_modulated_orders
+from ._confound import own_order_confound
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -324,19 +326,22 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
     )
 
 
-def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
-    """Start for ``delta_r``: each run's low orders fitted alone, phase-aligned to run 0
-    on a 0.05 deg grid (the orders' phases advance by ``m delta``), with the orders up to
-    ``settings.run_offset_start_orders``."""
+def _low_order_phases(prep: Prepared, M: int, M_fit: int = 0):
+    """Each run's orders ``1..max(Mz, M_fit)`` fitted alone, ``Mz`` =
+    ``settings.run_offset_start_orders`` (or ``M``): ``(Z, V, m)``, per run the complex
+    coefficients ``a - i b`` of the disk error's low orders ``m = 1..Mz`` in the run's own
+    angle ``theta_raw`` (their phases advance by ``m delta`` with the run's angle zero
+    ``delta``) and their variances (white noise at the mean ``sigma``); the orders above
+    ``Mz`` are fitted so that they do not leak into the low ones (a run of part turns)."""
     R = prep.ctx.n_runs
-    if R < 2:
-        return np.zeros(0)
     C = prep.n_channels
     alpha = prep.consts["alpha"]
     Mz = int(min(M, prep.settings.run_offset_start_orders))
-    Z = []
-    P = 2 * Mz + C
+    Mf = max(Mz, int(M_fit))
+    Z, V = [], []
+    P = 2 * Mf + C
     spans = dict(run_spans(prep.run))
+    s2 = float(np.mean(np.asarray(prep.sigma, float) ** 2))
     for r in range(R):
         # least squares on the normal equations, accumulated in blocks of rows (the design
         # (rows, C, 2 Mz + C) is never built whole)
@@ -351,10 +356,10 @@ def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
             cols = []
             for k in range(C):
                 ck = []
-                for mm in range(1, Mz + 1):
+                for mm in range(1, Mf + 1):
                     ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
                 cols.append(np.stack(ck, 1))
-            X = np.stack(cols, 1)  # (n, C, 2Mz)
+            X = np.stack(cols, 1)  # (n, C, 2Mf)
             const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
             X = np.concatenate([X, const], 2)
             if prep.kd.project:
@@ -366,15 +371,76 @@ def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
         coef = np.linalg.lstsq(G, h, rcond=None)[0]
         a, b = coef[0 : 2 * Mz : 2], coef[1 : 2 * Mz : 2]
         Z.append(a - 1j * b)
+        d = np.diag(np.linalg.pinv(G))
+        V.append(s2 * (d[0 : 2 * Mz : 2] + d[1 : 2 * Mz : 2]))
+    return Z, V, np.arange(1, Mz + 1)
+
+
+def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
+    """Start for ``delta_r``: each run's low orders fitted alone (:func:`_low_order_phases`),
+    phase-aligned to run 0 on a 0.05 deg grid."""
+    if prep.ctx.n_runs < 2:
+        return np.zeros(0)
+    Z, _, mm = _low_order_phases(prep, M)
     grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
-    mm = np.arange(1, Mz + 1)
     out = []
-    for r in range(1, R):
+    for r in range(1, len(Z)):
         score = np.real(
             (Z[r] * np.conj(Z[0]))[None, :] * np.exp(-1j * mm[None, :] * grid[:, None])
         ).sum(1)
         out.append(grid[int(np.argmax(score))])
     return np.asarray(out)
+
+
+def _hold_run_offsets(terms, prep: Prepared) -> str | None:
+    """After a base fit: a run's fitted angle zero ``delta_r`` that its low orders reject
+    is held at their alignment (issue 41). The disk error's low orders (the start's) are
+    common to every run and set the runs' alignment; a strong order that is not the same in
+    every run (an error of opposite sign in the two directions, an order switching on) pulls
+    the fit to ``delta_r = pi / m``, where it flips, and misaligns the whole disk error of that
+    run. The test: the chi-square of run ``r``'s low-order coefficients against run 0's,
+    rotated by ``delta``, at the fitted ``delta_r`` less its minimum (scaled by the minimum
+    per degree of freedom where that exceeds 1: model error, e.g. higher orders leaking into
+    a run that is not whole turns) above ``chi2_threshold(settings.alpha, 1, R - 1)``; then
+    every run's zero is held at its low orders' alignment. Returns a note (the terms' values
+    and free masks changed: the engine refits), or ``None``."""
+    R = prep.ctx.n_runs
+    base = next((t for t in terms if t.cand.name == "base"), None)
+    name = "run_angle_offset_rad"
+    if R < 2 or base is None or name not in base.values:
+        return None
+    M = int(np.asarray(base.values["fourier_cos_rad"]).size)
+    Z, V, mm = _low_order_phases(prep, M, M)
+    fitted = np.asarray(base.values[name], float).copy()
+    thr = chi2_threshold(prep.settings.alpha, 1, R - 1)
+    grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
+    held, low = [], fitted.copy()
+    for r in range(1, R):
+        w = 1.0 / np.maximum(V[r] + V[0], 1e-300)
+
+        def chi(d, r=r, w=w):
+            e = Z[r][None, :] * np.exp(-1j * mm[None, :] * np.atleast_1d(d)[:, None]) - Z[0]
+            return np.sum(np.abs(e) ** 2 * w[None, :], axis=1)
+
+        g = chi(grid)
+        i = int(np.argmin(g))
+        fine = grid[i] + np.linspace(-1, 1, 201) * (grid[1] - grid[0])
+        cf = chi(fine)
+        d_min, c_min = float(fine[int(np.argmin(cf))]), float(cf.min())
+        scale = max(1.0, c_min / max(2 * mm.size - 1, 1))
+        low[r - 1] = d_min
+        if float(chi(fitted[r - 1])[0] - c_min) / scale > thr:
+            held.append(r)
+    if not held:
+        return None
+    # every run's zero from its low orders: what pulled one run can pull the others
+    base.values[name] = low
+    base.free[name][...] = False
+    return (
+        f"the runs' angle zeros held at the alignment of the disk error's low orders "
+        f"(1..{mm.size}): the fit had moved run(s) {held} where they reject it (structure "
+        "not the same in every run pulled it)"
+    )
 
 
 def _align(terms, prep: Prepared):
@@ -675,6 +741,7 @@ MULTIHEAD_VIEWS = (
     "speed",
     "angle_trend",
     KindView(view_order_step, ("order_step",)),
+    KindView(view_modulated_orders, ("modulated_orders",)),
 )
 """The views run on a multihead record's residual."""
 
@@ -716,6 +783,9 @@ class MultiheadKind(AbstractKind):
     def refine(self, terms, prep):
         return _refine_shaft(terms, prep)
 
+    def check_base(self, terms, prep):
+        return _hold_run_offsets(terms, prep)
+
     def align(self, terms, prep):
         return _align(terms, prep)
 
@@ -723,7 +793,7 @@ class MultiheadKind(AbstractKind):
         return multihead_summary(prep, base_params)
 
     def finish(self, prep, doc, settings):
-        return doc
+        return own_order_confound(prep, doc)
 
     def report_lines(self, doc):
         return ""

@@ -417,6 +417,7 @@ def _signal_shape(orders: tuple[int, ...]) -> Candidate:
         derived=derived,
         plausible=plausible,
         probes=probes,
+        orders=tuple(orders),
     )
 
 

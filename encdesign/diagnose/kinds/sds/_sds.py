@@ -224,11 +224,21 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
     return view_orders(prep, r, min(scan_order, sds_limit(prep)))
 
 
+def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """The engine's ``modulated_orders`` view (an order that grows or switches over the
+    runs) on the run-mean channels, orders as :func:`view_mean_orders` scans them."""
+    from ...engine._views_modulated import scan_modulated
+
+    M = prep.consts["psi_m"].size
+    return scan_modulated(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)), rw.shape[1])
+
+
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
 # strong structure; among equals the most specific location (one sensor, one run) leads
 SDS_VIEWS = (
     KindView(view_run_step, ("run_step",)),
     KindView(view_mean_orders, ("orders",)),
+    KindView(view_mean_modulated, ("modulated_orders",)),
     KindView(view_common_orders, ("common_orders",)),
     *(
         KindView(_matched_view(n), (f"sds_{n}",))
@@ -386,7 +396,9 @@ NOISE_METHOD = (
     "patterns in the platform angle, drift, significant change points and single-value "
     "outliers), sqrt(SSR / dof) with dof = independent values - rank (R(M-1) values without "
     "phi_ref), widened by sqrt(q F(q, dof) / chi2(q)) at p = 1e-4 for its estimation error "
-    "(estimate, dof and factor under 'estimate'); revolution contrasts: 1.4826 MAD, the larger "
+    "(estimate, dof and factor under 'estimate'), with phi_ref raised for the noise common to "
+    "the moving sensors (run_means_common_factor: the contrasts' and the fixed sensors' "
+    "excess); revolution contrasts: 1.4826 MAD, the larger "
     "of the parts common to the moving sensors and their differences"
 )
 
@@ -419,6 +431,7 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
     dv = doc.pop("drift_vs_orders", None)
     if doc.pop("moving_opposed", False):
         _tilt_beam_opposed(doc, settings)
+    _tilt_coil_pair(doc, settings)
     for e in doc.get("effects", []):
         if e["name"] == "thermal_drift" and dv:
             lim = math.log(max(dv["n_values"], 2))
@@ -600,6 +613,94 @@ def _opposed_pair_from_refusals(doc: dict, settings: FinderSettings) -> None:
                 "correlation": 1.0,
                 "delta_bic": float(db - db0),
                 "separate_by": TILT_BEAM_SEPARATE_BY,
+                "reason": why + f"; {e['name']} is named",
+                "rule": "tie_chi2",
+            }
+        )
+
+
+TILT_COIL_SEPARATE_BY = (
+    "the shaft speed ripple at order 2 (a coil mismatch moves the speed, which the moving "
+    "sensors' edge intervals show: speed_ripple_relative_order_2; an axis tilt does not), "
+    "or the axis aligned by a separate measurement"
+)
+
+
+def _tilt_coil_pair(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> None:
+    """``axis_tilt`` (order 2 in ``φ + ψ_m``; its part at the fixed sensors a constant,
+    taken by the pair constants) lies in the columns of ``coil_mismatch`` where the coil
+    fits order 2 (Fourier terms in ``φ + ψ_m``): a tilt and a coil's order 2 give the same
+    record. The engine's tie rule compares the two whole fits: with a coil's order 1 (or
+    3 …) in the record beside a tilt, the coil lowers the criterion by more than
+    ``tie_chi2`` beyond the tilt, the tilt is refused as the worse candidate and then adds
+    nothing to the coil: one name, silently (a 10x tilt beside a 1.5x coil named only the
+    coil). So a named ``coil_mismatch`` that fits order 2 is confounded with a tried
+    ``axis_tilt`` refused only because the coil lowers the criterion more (its order-2
+    part may be the tilt); a named ``axis_tilt`` is confounded with a tried
+    ``coil_mismatch`` so refused when the coil's other orders do not lower the criterion
+    by ``tie_chi2`` more than the tilt does (the record does not support them). Each such
+    pair is the named one's ``confounded_with`` entry and one ``confounded`` pair."""
+    rejected = doc.get("rejected", [])
+    pair = ("axis_tilt", "coil_mismatch")
+    for e in doc.get("effects", []):
+        if e["name"] not in pair:
+            continue
+        other = pair[1 - pair.index(e["name"])]
+        if any(c.get("name") == other for c in e.get("confounded_with") or []):
+            continue
+        rej = next((r for r in rejected if r["name"] == other), None)
+        if rej is None or rej.get("rule") != "better_candidate":
+            continue
+        db, db0 = rej.get("delta_bic"), e.get("delta_bic")
+        if db is None or db0 is None:
+            continue
+        coil = e if e["name"] == "coil_mismatch" else None
+        if coil is not None and "order_2_amplitude_rad" not in (coil.get("derived") or {}):
+            continue  # the coil fits order 1 alone: the tilt is not in its columns
+        if coil is None and not db - db0 < settings.tie_chi2:
+            continue  # the coil's other orders are supported: told apart by the criterion
+        speed = ((coil or {}).get("derived") or {}).get("speed_ripple_relative_order_2")
+        why = (
+            "an axis tilt's error is order 2 of phi + psi_m (its part at the fixed sensors a "
+            "constant), the coil's order 2 the same columns; "
+            f"{e['name']} lowers the criterion by {db - db0:.1f} more (needs "
+            f"{settings.tie_chi2:.0f} to decide"
+            + (
+                "; the fitted order 2 of the coil may be the tilt's)"
+                if coil is not None
+                else ": the coil's other orders are not supported by the record)"
+            )
+            + (
+                f"; the shaft speed ripple at order 2 from the edge intervals: "
+                f"{speed['value']:.3g} +- {speed['se']:.2g} (relative)"
+                if speed and speed.get("se") is not None
+                else ""
+            )
+        )
+        e["confounded_with"] = [
+            *(e.get("confounded_with") or []),
+            {
+                "name": other,
+                "reason": why,
+                "rule": "tie_chi2",
+                "delta_bic": float(db),
+                "params": {},
+                "correlation": 1.0,
+                "separate_by": TILT_COIL_SEPARATE_BY,
+            },
+        ]
+        e["notes"] = [
+            *e.get("notes", []),
+            f"confounded with {other} (order 2 of phi + psi_m): the fitted values are those "
+            f"of {e['name']} alone. Separated by {TILT_COIL_SEPARATE_BY}",
+        ]
+        rejected.remove(rej)
+        doc.setdefault("confounded", []).append(
+            {
+                "pair": [e["name"], other],
+                "correlation": 1.0,
+                "delta_bic": float(db - db0),
+                "separate_by": TILT_COIL_SEPARATE_BY,
                 "reason": why + f"; {e['name']} is named",
                 "rule": "tie_chi2",
             }

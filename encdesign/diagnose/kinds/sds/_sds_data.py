@@ -369,6 +369,9 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
         tm_c=tm - t_mean,
         tmid_c=tmid - t_mean,
         run_index=np.arange(R, dtype=float),
+        # each fixed sensor's run mean (over revolutions and moving sensors), centred: its
+        # differences between fixed sensors are the fixed sensors' run-to-run noise
+        fixed_c=v.mean(axis=(1, 3)) - v.mean(axis=(0, 1, 3)),
     )
     constants = dict(
         psi_f=np.asarray(tab.psi_fixed_rad, float),
@@ -484,6 +487,7 @@ def sds_prepare(
         float(consts["proj"]) > 0,
         test_p=settings.sds_sigma_test_p,
         level_alpha=settings.sds_level_alpha,
+        fixed=np.asarray(rows["fixed_c"], float),
     )
     ctx = Context(
         kind="sds",

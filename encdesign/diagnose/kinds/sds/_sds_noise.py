@@ -220,6 +220,64 @@ def _sensor_helmert(M: int) -> np.ndarray:
     return H
 
 
+def _common_factor(
+    contrast_levels: list[float],
+    proj: bool,
+    fixed: np.ndarray | None,
+    s_raw: float,
+    M: int,
+    K: int,
+) -> float:
+    """Factor on the run-mean level for the part of the noise common to the moving sensors
+    (at least 1; 1 without ``phi_ref``, where the run means are projected on the
+    differences).
+
+    The fixed sensors' timing noise (jitter, and the clock's rounding of their edges where
+    the clock is not locked to the motor) enters every pair of a run alike: it adds a part
+    common to the moving sensors, so the run means' common component (one per run) varies
+    more than their differences. The saturated fit takes every common pattern up to order
+    ``(R - 1) // 2`` in φ and leaves that component (nearly) no degrees of freedom: the
+    run-mean level is in effect the differences' level, and a pattern common to the moving
+    sensors (beam tilt x axial runout, a drift, coil orders at multiples of ``M``) was
+    tested against too small a level (clean benches with the clock unlocked, dev seeds
+    5330-5359: the common variance 3.8 times the differences' on average; false alarms,
+    and bounds below where detection starts). The factor is ``sqrt(1 + e / s_raw²)`` with
+    ``e`` the larger of two estimates of what the common part adds to the common
+    component's variance (``M`` times its per-value variance) at the run-mean level:
+
+    * from the revolution contrasts, ``(s_common² − s_differences²) / K``: the noise from
+      one revolution to the next (many degrees of freedom), averaged over the ``K``
+      revolutions of a run mean;
+    * from the fixed sensors' own run means (``fixed`` (R, F), :func:`sds_data`'s
+      ``fixed_c``), ``M s_f² / F``: their differences between fixed sensors (Helmert over
+      ``F``, ``(R − 1)(F − 1)`` degrees of freedom; the moving sensors' noise cancels
+      there) give the variance ``s_f²`` of one fixed sensor's run mean. This one sees
+      noise constant within a run and changing between runs, which the contrasts do not:
+      with the clock nearly locked to the motor (speed offsets of 1-2e-5) the fixed
+      sensors' rounding drifts slowly within a run, the contrasts' ratio² was 0.8 and 3.5
+      and the run means' common variance 61 and 45 times the differences' (dev keys
+      5354000, 5323002).
+
+    Absolute excesses, not ratios: with the clock locked to the motor the moving sensors'
+    rounding, fixed within a run, dominates the run means' differences and the fixed
+    sensors' is one constant over the runs, so the contrasts' ratio (2.8 on average) does
+    not carry over to the run means (their common variance 0.75 times the differences').
+
+    The larger per-value level is used, as for the contrasts themselves (the engine weighs
+    channels as independent: conservative for common and differential patterns alike)."""
+    if proj or not s_raw > 0:
+        return 1.0
+    excess = 0.0
+    if len(contrast_levels) > 1:
+        excess = (contrast_levels[0] ** 2 - contrast_levels[1] ** 2) / K
+    if fixed is not None and fixed.ndim == 2 and fixed.shape[1] > 1:
+        R, F = fixed.shape
+        d = (fixed - fixed.mean(0)) @ _sensor_helmert(F)[:, 1:]
+        s_f2 = float(np.sum(d**2)) / max((R - 1) * (F - 1), 1)
+        excess = max(excess, M * s_f2 / F)
+    return math.sqrt(1.0 + max(excess, 0.0) / s_raw**2)
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -229,6 +287,7 @@ def _level_sigma(
     *,
     test_p: float,
     level_alpha: float,
+    fixed: np.ndarray | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -242,7 +301,10 @@ def _level_sigma(
     ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
     1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
     its estimation error: with ~12 platform positions it is known to ~±17 %, which the
-    engine's known-level tests would otherwise turn into false alarms.
+    engine's known-level tests would otherwise turn into false alarms. With ``phi_ref`` it
+    is then raised by :func:`_common_factor` (from the contrasts and the fixed sensors' run
+    means ``fixed``): the saturated fit leaves the run means' common component no degrees
+    of freedom.
 
     Contrasts: the robust scale (1.4826 MAD) of the contrasts themselves (nothing constant
     within a run reaches them), separately for the part common to the moving sensors (the
@@ -294,24 +356,26 @@ def _level_sigma(
     nu = max(n_ind - rk0, 1)
     s_raw = math.sqrt(ssr0 / nu) if ssr0 > 0 else 0.0
     c = dof_widening(nu, p=test_p)
-    out[:M] = s_raw * c
+    lv: list[float] = []
     if C > M:
         H = _sensor_helmert(M)
         z = resid[:, M:].reshape(R, K - 1, M) @ H
         parts = [z[..., :1].ravel()] + ([z[..., 1:].ravel()] if M > 1 else [])
-        lv = []
         for x in parts:
             s = 1.4826 * float(np.median(np.abs(x)))
             lv.append(s if s > 0 else float(np.sqrt(np.mean(x**2))))
         out[M:] = max(lv)
+    g = _common_factor(lv, proj, fixed, s_raw, M, K)
+    out[:M] = s_raw * c * g
     if info is not None:
         info.update(
             run_means_rad=s_raw,
             run_means_dof=int(nu),
             run_means_widening=c,
+            run_means_common_factor=g,
             run_means_steps_or_outliers=added,
-            contrasts_common_rad=lv[0] if C > M else None,
-            contrasts_differences_rad=lv[1] if C > M and M > 1 else None,
+            contrasts_common_rad=lv[0] if lv else None,
+            contrasts_differences_rad=lv[1] if len(lv) > 1 else None,
         )
     if not np.all(np.isfinite(out)) or np.any(out <= 0):
         out = np.full(C, float(np.std(resid)) or 1e-12)
@@ -336,9 +400,17 @@ def levels_of(ctx: Context):
     proj = float(ctx.consts["proj"]) > 0
     s = ctx.settings
 
+    fixed = np.asarray(ctx.rows["fixed_c"], float)
+
     def levels(resid: np.ndarray) -> np.ndarray:
         return _level_sigma(
-            resid, K, X, proj, test_p=s.sds_sigma_test_p, level_alpha=s.sds_level_alpha
+            resid,
+            K,
+            X,
+            proj,
+            test_p=s.sds_sigma_test_p,
+            level_alpha=s.sds_level_alpha,
+            fixed=fixed,
         )
 
     return levels
@@ -363,6 +435,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         info=info,
         test_p=prep.settings.sds_sigma_test_p,
         level_alpha=prep.settings.sds_level_alpha,
+        fixed=np.asarray(prep.rows["fixed_c"], float)[prep.keep],
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]

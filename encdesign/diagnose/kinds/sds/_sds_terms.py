@@ -435,7 +435,8 @@ def _middle_half(R: int) -> list[int]:
 def _run_mean_seen(ctx: Context, pattern: np.ndarray, caught: bool):
     """``seen(lam)`` of an effect whose run means are ``pattern`` (R, M) (:class:`Probe`):
     the run-mean noise level is estimated from the ``nu`` values a saturated fit leaves
-    (``_level_sigma``) and widened by ``c`` (``run_means_widening``), so ``lam`` at the
+    (``_level_sigma``) and widened by ``c`` (``run_means_widening`` times
+    ``run_means_common_factor``), so ``lam`` at the
     record's level is ``c^2 lam`` at the raw one; the share ``eta`` of the effect that fit
     leaves inflates the level by ``eta c^2 lam / nu`` (the tests then see ``lam / (1 + eta
     c^2 lam / nu)``) unless (``caught``: a step or an outlier) the estimate's own F test at
@@ -445,7 +446,10 @@ def _run_mean_seen(ctx: Context, pattern: np.ndarray, caught: bool):
     nu = float(lv.get("run_means_dof", 0) or 0)
     if nu <= 0:
         return None
-    c2 = float(lv.get("run_means_widening", 1.0) or 1.0) ** 2
+    c2 = (
+        float(lv.get("run_means_widening", 1.0) or 1.0)
+        * float(lv.get("run_means_common_factor", 1.0) or 1.0)
+    ) ** 2
     R, M = pattern.shape
     proj = float(ctx.consts["proj"]) > 0
     e = pattern - pattern.mean(1, keepdims=True) if proj else pattern

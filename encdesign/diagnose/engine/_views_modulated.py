@@ -1,0 +1,181 @@
+"""A view of integer shaft orders whose amplitude changes over the record (engine stage 3).
+
+The ``orders`` view (:func:`._views.view_orders`) fits each order with one amplitude and
+phase over the whole record. An order whose amplitude grows linearly in time keeps only
+3/4 of its power in that fit, one that switches on half-way through 1/2, so a structure
+the record holds clearly can stay below the static scan's threshold (issue 41: a slow
+growth or a switching order on an SDS sensor, the truth's model 34-37 chi-square against a
+locating threshold of 25-26). This view fits, per order ``m`` and channel, the cos / sin of
+``m theta`` times one amplitude *shape* over the kept rows in time order (the end-to-end
+axis ``tau``):
+
+* ``growth``: linear from 0 at the first kept row to 1 at the last; ``decay``: ``1 -`` that;
+* ``switch_on`` at change point ``k``: 0 before, 1 from it; ``switch_off``: 1 before, 0 from
+  it; the change points are ``settings.modulated_orders_steps`` equal-count edges of the
+  kept rows (a change between two edges keeps most of its power at the nearer one).
+
+Each shape is 2 regressors (chi-square with 2 dof under white noise); the view's own
+family-wise false-alarm rate ``settings.modulated_orders_alpha`` (beside the static scan's)
+is split in halves between the two families, each tested at its half over its count of
+tests (Bonferroni over orders x channels x shapes: 2 shapes of growth, ``2 K`` switches), so
+a growth is not charged for the many change points of the switches. An order is reported only
+where the static fit at the ``orders`` view's own threshold shows nothing (that view
+reports it), so a record the static scan already reads is read as before. The sums are
+accumulated in blocks of rows (per change-point segment), so nothing per row is held.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._views import Finding, chi2_threshold, log10_tail_p, make_where
+
+BLOCK_VALUES = 1 << 16
+"""Rows x orders per block of the accumulation (its temporaries: that times the channels)."""
+
+
+def _power2(G: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Chi-square two regressors with Gram ``G`` (..., 2, 2) take out of ``B`` (..., 2, C)
+    (their projection; 0 where the Gram matrix is singular)."""
+    g00, g01, g11 = G[..., 0, 0, None], G[..., 0, 1, None], G[..., 1, 1, None]
+    det = g00 * g11 - g01 * g01
+    ok = det > 1e-9 * np.maximum(g00 + g11, 1e-300) ** 2
+    b0, b1 = B[..., 0, :], B[..., 1, :]
+    q = (b0 * b0 * g11 - 2 * b0 * b1 * g01 + b1 * b1 * g00) / np.where(ok, det, 1.0)
+    return np.where(ok, np.maximum(q, 0.0), 0.0)
+
+
+def _gram(cc, cs, ss) -> np.ndarray:
+    return np.stack([np.stack([cc, cs], -1), np.stack([cs, ss], -1)], -2)
+
+
+def _sums(prep, rw, name: str, idx, m, seg, K: int, ch):
+    """Sums over the kept rows ``idx`` (time order) of ``c = cos(m theta)``, ``s``: per
+    change-point segment (``seg``: each row's, 0..K) ``cc, cs, ss`` (K+1, M) and ``c r``,
+    ``s r`` (K+1, M, C) on the channels ``ch``; weighted by the growth ``g`` (0..1 over the
+    rows) and ``g^2``."""
+    n, M, C = idx.size, m.size, ch.size
+    S = np.zeros((3, K + 1, M))
+    Bs = np.zeros((2, K + 1, M, C))
+    Sg, Sgg = np.zeros((3, M)), np.zeros((3, M))
+    Bg = np.zeros((2, M, C))
+    g_all = np.arange(n) / max(n - 1, 1)
+    step = max(1, BLOCK_VALUES // M)
+    for a in range(0, n, step):
+        b = min(n, a + step)
+        rows = idx[a:b]
+        th = np.asarray(prep.rows.take(name, rows), float)
+        ang = th[:, None] * m[None, :]
+        c, s = np.cos(ang), np.sin(ang)
+        del ang
+        r = np.asarray(rw[rows], float)[:, ch]
+        g = g_all[a:b]
+        prods = (c * c, c * s, s * s)
+        sb = seg[a:b]
+        st = np.flatnonzero(np.r_[True, sb[1:] != sb[:-1]])
+        for i, p in enumerate(prods):
+            S[i, sb[st]] += np.add.reduceat(p, st, axis=0)
+            Sg[i] += g @ p
+            Sgg[i] += (g * g) @ p
+        for i, x in enumerate((c, s)):
+            xr = x[:, :, None] * r[:, None, :]  # (rows, M, C)
+            Bs[i, sb[st]] += np.add.reduceat(xr, st, axis=0)
+            Bg[i] += np.einsum("n,nmc->mc", g, xr)
+    return S, Bs, Sg, Sgg, Bg
+
+
+def scan_modulated(
+    prep, rw, max_order: int, channels: list[int], n_channels_static: int
+) -> list[Finding]:
+    """The view on ``channels`` of the whitened residual ``rw`` (rows indexable by an index
+    array), orders ``1..max_order``; the static fit skips an order it finds at
+    ``chi2_threshold(alpha, 2, max_order * n_channels_static)`` (the ``orders`` view's)."""
+    s = prep.settings
+    kidx = np.flatnonzero(prep.keep)
+    if max_order < 1 or not channels or kidx.size < 4:  # a change with 2 rows either side
+        return []
+    tau = np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
+    tk = tau[kidx]
+    if np.any(np.diff(tk) < 0):
+        kidx = kidx[np.argsort(tk, kind="stable")]
+    n = kidx.size
+    K = int(min(s.modulated_orders_steps, n - 1))
+    edges = np.unique(np.round(np.arange(1, K + 1) * n / (K + 1)).astype(int))
+    edges = edges[(edges > 0) & (edges < n)]
+    K = edges.size
+    seg = np.searchsorted(edges, np.arange(n), side="right")
+    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+    m = np.arange(1, max_order + 1, dtype=float)
+    ch = np.asarray(channels, int)
+    S, Bs, Sg, Sgg, Bg = _sums(prep, rw, name, kidx, m, seg, K, ch)
+    # totals, prefix (before each edge) and suffix (from each edge) sums
+    tot_S, tot_B = S.sum(1), Bs.sum(1)  # (3, M), (2, M, C)
+    on_S, on_B = np.cumsum(S[:, ::-1], 1)[:, ::-1][:, 1:], np.cumsum(Bs[:, ::-1], 1)[:, ::-1][:, 1:]
+    off_S, off_B = tot_S[:, None] - on_S, tot_B[:, None] - on_B  # (3, K, M), (2, K, M, C)
+    G_tot = _gram(*tot_S)  # (M, 2, 2)
+    static = _power2(G_tot, np.moveaxis(tot_B, 0, -2))  # (M, C)
+    # shapes: growth g, decay 1 - g, switch on / off at each edge
+    dec_S = tot_S - 2 * Sg + Sgg
+    dec_B = tot_B - Bg
+    shapes = [
+        ("growth", None, _power2(_gram(*Sgg), np.moveaxis(Bg, 0, -2))),
+        ("decay", None, _power2(_gram(*dec_S), np.moveaxis(dec_B, 0, -2))),
+    ]
+    pw_on = _power2(_gram(*on_S), np.moveaxis(on_B, 0, -2))  # (K, M, C)
+    pw_off = _power2(_gram(*off_S), np.moveaxis(off_B, 0, -2))
+    for k in range(K):
+        shapes.append(("switch_on", k, pw_on[k]))
+        shapes.append(("switch_off", k, pw_off[k]))
+    # half the false-alarm rate to each family (growth and decay; the switches)
+    n_tests = [max_order * ch.size * 2, max_order * ch.size * 2 * K]
+    thr = [chi2_threshold(s.modulated_orders_alpha / 2, 2, nt) for nt in n_tests]
+    thr_static = chi2_threshold(s.alpha, 2, max_order * n_channels_static)
+    P = np.stack([p for _, _, p in shapes])  # (shapes, M, C)
+    T = np.array([thr[0] if k is None else thr[1] for _, k, _ in shapes])
+    out = []
+    for i in range(m.size):
+        if static[i].max() > thr_static:
+            continue  # the orders view reports this order
+        margin = P[:, i] - T[:, None]  # (shapes, C): past each family's threshold
+        j = int(np.argmax(margin.max(1)))
+        if margin[j].max() <= 0:
+            continue
+        pw = P[j, i]
+        carry = [k for k in range(ch.size) if margin[j, k] > 0]
+        shape, k, _ = shapes[j]
+        detail = {
+            "integer_order": True,
+            "modulation": shape,
+            "n_values": int(n),
+            "n_tests": int(n_tests[0 if k is None else 1]),
+            "threshold_chi2": float(T[j]),
+            "power_per_channel": pw.tolist(),
+            "static_power_per_channel": static[i].tolist(),
+        }
+        times: list[float] = []
+        if k is not None:  # the change: between the last row before the edge and the first after
+            r0, r1 = int(kidx[edges[k] - 1]), int(kidx[edges[k]])
+            detail["global_step_time_s"] = float(0.5 * (tau[r0] + tau[r1]))
+            times = [float(prep.rows["t"][r0]), float(prep.rows["t"][r1])]
+        out.append(
+            Finding(
+                "modulated_orders",
+                make_where(
+                    orders=[float(m[i])],
+                    heads=[int(ch[k]) for k in carry],
+                    runs=prep.run_ids.tolist(),
+                    times_s=times,
+                ),
+                float(pw[carry].sum()),
+                2 * len(carry),
+                log10_tail_p(float(pw.max()), 2),
+                detail=detail,
+            )
+        )
+    return out
+
+
+def view_modulated_orders(prep, rw, scan_order: int) -> list[Finding]:
+    """The view on every channel, orders up to the scan order (a kind's ``KindView``)."""
+    C = rw.shape[1]
+    return scan_modulated(prep, rw, scan_order, list(range(C)), C)

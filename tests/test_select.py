@@ -1,0 +1,51 @@
+"""Stage 4 (``_select``) rules on pieces of larger structures (issue 44, session 17): a line
+fixed in Hz in a broad band, and a catalog order set's top order in an out-of-catalog comb."""
+
+import numpy as np
+
+from encdesign.diagnose import diagnose
+from encdesign.simulate import draw_plan, fix_plan, simulate_plan
+
+
+def _bench(seed: int, kind: str, case: str, effect: str | None = None):
+    rng = np.random.default_rng([seed, 17])
+    plan = draw_plan(rng, kind, case)
+    if effect is not None:
+        plan["effects"] = [effect]
+        plan = fix_plan(plan, rng)
+    return simulate_plan(rng, plan)
+
+
+def test_a_line_fixed_in_hz_is_not_named_for_a_slice_of_a_chirp():
+    # a chirp on a sensor sweeps through a band; a vibration line at one frequency in it
+    # lowers the criterion (main named it) but clears only a sliver of the band
+    rec, truth = _bench(5524, "sensor", "out_of_catalog", "chirp_one_head")
+    d = diagnose(rec).doc
+    assert [e["name"] for e in d["effects"]] == []
+    assert d["verdict"] == "unexplained"
+    ref = [r for r in d["rejected"] if r["name"] == "vibration"]
+    assert ref and "broad band" in ref[0]["reason"]
+    lo, hi = truth["where"]["frequencies_hz"]
+    bands = [u["where"]["frequencies_hz"] for u in d["unexplained"] if u["view"] == "band"]
+    assert any(a <= hi and b >= lo for a, b in bands)
+
+
+def test_a_vibration_line_of_its_own_is_still_named():
+    rec, _ = _bench(5528, "sensor", "single", "vibration")
+    assert [e["name"] for e in diagnose(rec).doc["effects"]] == ["vibration"]
+
+
+def test_signal_shape_is_not_named_for_the_tooth_of_a_comb_above_its_orders():
+    # an out-of-catalog radial order 14 with its sidebands: signal_shape (orders 3-12) fitted
+    # mostly at its top order 12, the sideband (main named it)
+    rec, truth = _bench(5518, "quadrature", "out_of_catalog", "radial_order")
+    d = diagnose(rec).doc
+    assert [e["name"] for e in d["effects"]] == []
+    assert any(r["rule"] == "edge_order" for r in d["rejected"] if r["name"] == "signal_shape")
+    m = truth["where"]["orders"][0]
+    assert any(m in u["where"]["orders"] for u in d["unexplained"])
+
+
+def test_a_signal_shape_of_its_own_is_still_named():
+    rec, _ = _bench(5503, "quadrature", "compound")
+    assert [e["name"] for e in diagnose(rec).doc["effects"]] == ["signal_shape"]
