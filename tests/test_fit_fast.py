@@ -205,3 +205,54 @@ def test_block_gram_cache_equals_a_fresh_pass():
     assert got_g is not None and want_g is not None
     for g, w in zip(got_g, want_g):
         np.testing.assert_allclose(g, w, rtol=1e-12, atol=0)
+
+
+def test_linear_valjac_equals_the_linear_columns_of_jacfwd():
+    """Issue 43: a linear-only term's Jacobian over its linear parameters alone
+    (``linear_valjac``, no nonlinear tangents) against the full ``jacfwd``'s linear columns,
+    for catalog candidates (:data:`CHECKED`; a hand-written Jacobian where the candidate has
+    one), at a probe's nonlinear values (the detection bounds' terms)."""
+    from encdesign.diagnose.engine._fit import Fitter
+    from encdesign.diagnose.engine._normal import linear_valjac
+    from encdesign.diagnose.kinds.multihead._multihead import multihead_candidates
+
+    prep, _, _ = _bench_base(True)
+    ctx = prep.ctx
+    C, R = prep.n_channels, ctx.n_runs
+    rng = np.random.default_rng(5700)
+    fitter = Fitter(prep)
+    fitter.chunk = 200
+    _, _, x = next(fitter.chunks())
+    checked = 0
+    for cand in multihead_candidates(ctx):
+        if cand.name not in CHECKED:
+            continue
+        probes = cand.probes(ctx) if cand.probes is not None else ()
+        for vals in [dict(pr.values) for pr in probes[:1]] or [{}]:
+            p = {}
+            for q in cand.params:
+                shape = q.resolved_shape(C, R)
+                v = vals.get(q.name) if not q.linear else None
+                v = rng.normal(0, 1e-3, shape) if v is None else np.broadcast_to(v, shape)
+                p[q.name] = jnp.asarray(v, dtype=jnp.float64)
+            v, J = linear_valjac(cand)(p, x)
+            vf, Jf = jax.jit(functools.partial(_full_valjac, cand.fn))(p, x)
+            atol = 1e-12 * max(float(np.max(np.abs(vf))), 1e-300)
+            np.testing.assert_allclose(np.asarray(v), np.asarray(vf), rtol=0, atol=atol)
+            assert set(J) == {q.name for q in cand.params if q.linear}, cand.name
+            for k in J:
+                ref = np.asarray(Jf[k])
+                tol = 1e-12 * max(float(np.max(np.abs(ref))), 1e-300)
+                np.testing.assert_allclose(np.asarray(J[k]), ref, rtol=0, atol=tol)
+            checked += 1
+    assert checked == len(CHECKED)
+
+
+def _full_valjac(fn, p, x):
+    return fn(p, x), jax.jacfwd(fn)(p, x)
+
+
+CHECKED = ("thermal_drift", "vibration", "interpolation_error")
+"""Candidates whose linear-only Jacobian is checked (``interpolation_error``'s written by
+hand; a few seconds of compiling: the others are covered by
+``test_the_caches_change_no_bit_of_a_diagnosis``)."""

@@ -21,6 +21,7 @@ from ._normal import (
     free_values,
     held_key,
     linear_only,
+    linear_valjac,
     solve_determined,
     solve_determined_many,
     static_key,
@@ -204,7 +205,7 @@ class Fitter:
                     q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
                     for q in term.cand.params
                 }
-                v0, J = valjac_fn(term.cand)(p0, x)
+                v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
                 v0 = np.asarray(v0)[: b - a]
                 Jt = self._gather(term, J, b - a, v0.shape[1])
                 hit = (v0, Jt)
@@ -240,9 +241,10 @@ class Fitter:
     def _gather(term: Term, J: dict, rows: int, C: int) -> np.ndarray:
         cols = []
         for par in term.cand.params:
-            Jp = np.asarray(J[par.name])[:rows]
-            Jp = Jp.reshape(rows, C, -1)
             free = term.free[par.name].ravel()
+            if par.name not in J and not free.any():  # (linear_valjac: held, no tangent)
+                continue
+            Jp = np.asarray(J[par.name])[:rows].reshape(rows, C, -1)
             cols.append(Jp if free.all() else Jp[:, :, free])  # no copy when all are free
         return np.concatenate(cols, axis=2) if cols else np.zeros((rows, C, 0))
 

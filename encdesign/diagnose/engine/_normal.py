@@ -35,8 +35,10 @@ block's Gram matrix is its leading terms' own, kept too.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
+import jax
 import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import lapack
@@ -52,6 +54,33 @@ chi-square (``q + 2 |dz.h| + dz^T G dz``) is at most this many times the chi-squ
 def linear_only(term) -> bool:
     """Whether every free parameter of ``term`` is linear (it then joins the static block)."""
     return all(q.linear or not term.free[q.name].any() for q in term.cand.params)
+
+
+@functools.lru_cache(maxsize=256)
+def linear_valjac(cand):
+    """``f(p, x) -> (v, J)``, compiled: the value of ``cand`` at ``p`` and its Jacobian over
+    its *linear* parameters only (a dict by name), the nonlinear ones held at ``p``'s
+    values: what a term whose free parameters are all linear needs (:func:`linear_only`),
+    without the forward tangents of its nonlinear parameters (the probes' and the static
+    block's Jacobians were most of the detection bounds' time, issue 43). A candidate's
+    hand-written ``valjac`` is used as it is. (Only the linear tangents are taken here, in a
+    function of their own: jax 0.10.2 mis-evaluated the *nonlinear* half of a split
+    Jacobian, ``_fit.valjac_fn``; ``tests/test_fit_fast.py`` checks this one against the
+    full ``jacfwd``.)"""
+    if cand.valjac is not None:
+        return jax.jit(cand.valjac)
+    lin = frozenset(q.name for q in cand.params if q.linear)
+
+    def vj(p, x):
+        held = {k: v for k, v in p.items() if k not in lin}
+
+        def f(pl):
+            return cand.fn({**held, **pl}, x)
+
+        pl = {k: v for k, v in p.items() if k in lin}
+        return f(pl), (jax.jacfwd(f)(pl) if pl else {})
+
+    return jax.jit(vj)
 
 
 def static_key(static: Sequence) -> tuple:
