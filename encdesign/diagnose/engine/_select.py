@@ -450,8 +450,9 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
             f"structure it leaves continues above it (orders {', '.join(map(str, edge[1][:8]))}"
             f", excess chi-square {edge[2]:.0f} against its gain {dchi:.0f}): a piece of it",
         ), steps_left
-    # nor a slice of a broad band its own line sits in (a chirp through a line's frequency)
-    band = band_share(findings, after, own)
+    # nor, a line fixed in Hz, a slice of a broad band it sits in (a chirp through its
+    # frequency); a set of shaft orders is tested against the orders it leaves, not a band
+    band = band_share(findings, after, own) if "orders" not in cand.signature else None
     if band is not None and band[1] > dchi and band[0] < s.located_share_min:
         return (
             "located_share_min",

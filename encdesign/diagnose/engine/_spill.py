@@ -72,7 +72,10 @@ def band_share(findings, after, own) -> tuple[float, float] | None:
 
     A line fixed in Hz fitted to a slice of a broadband structure (a chirp sweeping through
     its frequency) clears that slice's spectrum lines but leaves the band it sits in nearly
-    whole; a line of its own is most of the band it sits in, and its fit clears it."""
+    whole; a line of its own is most of the band it sits in, and its fit clears it. The
+    selection asks it of lines fixed in Hz only (no ``orders`` in the signature): a set of
+    shaft orders among a motor's many lines (ODrive's cogging at order 84) is judged by the
+    orders it leaves, not by the band of other lines it sits in."""
     lines = [
         (g, x) for g in own if g.view == "spectrum" for x in g.where.get("frequencies_hz") or []
     ]
