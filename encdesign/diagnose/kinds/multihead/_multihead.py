@@ -377,8 +377,7 @@ def _low_order_phases(prep: Prepared, M: int, M_fit: int = 0):
 
 
 def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
-    """Start for ``delta_r``: each run's low orders fitted alone (:func:`_low_order_phases`),
-    phase-aligned to run 0 on a 0.05 deg grid."""
+    """Start for ``delta_r``: each run's low orders (:func:`_low_order_phases`) aligned to run 0."""
     if prep.ctx.n_runs < 2:
         return np.zeros(0)
     Z, _, mm = _low_order_phases(prep, M)
@@ -411,6 +410,8 @@ def _hold_run_offsets(terms, prep: Prepared) -> str | None:
         return None
     M = int(np.asarray(base.values["fourier_cos_rad"]).size)
     Z, V, mm = _low_order_phases(prep, M, M)
+    ok = ~np.isin(mm, _symmetric_orders(prep, int(np.max(mm))))  # alike on every head: no phase
+    Z, V, mm = [z[ok] for z in Z], [v[ok] for v in V], mm[ok]
     fitted = np.asarray(base.values[name], float).copy()
     thr = chi2_threshold(prep.settings.alpha, 1, R - 1)
     grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
