@@ -393,9 +393,8 @@ class CaseRecorder:
 
         barrier("encdesign-cases-closed")
         if self.path is not None:
-            part = part_path(self.path, self.process)
-            if part.exists():
-                part.unlink()
+            # process 0 may remove every shard at once: missing here is not an error
+            part_path(self.path, self.process).unlink(missing_ok=True)
             if self.write:  # shards left by an interrupted run are now merged
                 for f in _part_files(self.path):
                     f.unlink(missing_ok=True)
