@@ -562,24 +562,49 @@ def _tilt_beam_opposed(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -
             c["separate_by"] = TILT_BEAM_SEPARATE_BY
 
 
-def _opposed_pair_from_refusals(doc: dict, settings: FinderSettings) -> None:
-    """A tried partner of the tilt / beam-tilt pair refused only because the named one
-    lowers the criterion more becomes the named one's ``confounded_with`` entry and one
-    ``confounded`` pair (see :func:`_tilt_beam_opposed`)."""
-    pair = ("axis_tilt", "beam_tilt_axial")
-    rejected = doc.get("rejected", [])
+def _refused_partners(doc: dict, pair: tuple[str, str]):
+    """``(named, other, refusal, other's dBIC, named's dBIC)`` for each named effect of
+    ``pair`` whose partner was tried and refused only because the named one lowers the
+    criterion more (rule ``better_candidate``), not already its ``confounded_with``."""
     for e in doc.get("effects", []):
         if e["name"] not in pair:
             continue
         other = pair[1 - pair.index(e["name"])]
         if any(c.get("name") == other for c in e.get("confounded_with") or []):
             continue
-        rej = next((r for r in rejected if r["name"] == other), None)
+        rej = next((r for r in doc.get("rejected", []) if r["name"] == other), None)
         if rej is None or rej.get("rule") != "better_candidate":
             continue
         db, db0 = rej.get("delta_bic"), e.get("delta_bic")
-        if db is None or db0 is None:
-            continue
+        if db is not None and db0 is not None:
+            yield e, other, rej, db, db0
+
+
+def _record_pair(doc: dict, e: dict, other: str, rej: dict, why: str, separate_by: str) -> None:
+    """The refused partner ``other`` as the named ``e``'s ``confounded_with`` entry (its
+    refusal removed) and one ``confounded`` pair of the two, rule ``tie_chi2``."""
+    db, db0 = float(rej["delta_bic"]), float(e["delta_bic"])
+    entry = {"name": other, "reason": why, "rule": "tie_chi2", "delta_bic": db, "params": {}}
+    entry.update(correlation=1.0, separate_by=separate_by)
+    e["confounded_with"] = [*(e.get("confounded_with") or []), entry]
+    doc["rejected"].remove(rej)
+    doc.setdefault("confounded", []).append(
+        {
+            "pair": [e["name"], other],
+            "correlation": 1.0,
+            "delta_bic": db - db0,
+            "separate_by": separate_by,
+            "reason": why + f"; {e['name']} is named",
+            "rule": "tie_chi2",
+        }
+    )
+
+
+def _opposed_pair_from_refusals(doc: dict, settings: FinderSettings) -> None:
+    """A tried partner of the tilt / beam-tilt pair refused only because the named one
+    lowers the criterion more becomes the named one's ``confounded_with`` entry and one
+    ``confounded`` pair (see :func:`_tilt_beam_opposed`)."""
+    for e, other, rej, db, db0 in _refused_partners(doc, ("axis_tilt", "beam_tilt_axial")):
         if e["name"] == "beam_tilt_axial" and not db - db0 < settings.tie_chi2:
             continue  # its orders 1 and 3 are supported: told apart by the criterion
         why = (
@@ -594,29 +619,7 @@ def _opposed_pair_from_refusals(doc: dict, settings: FinderSettings) -> None:
                 else "; beam tilt's orders 1 and 3 only add parameters)"
             )
         )
-        e["confounded_with"] = [
-            *(e.get("confounded_with") or []),
-            {
-                "name": other,
-                "reason": why,
-                "rule": "tie_chi2",
-                "delta_bic": float(db),
-                "params": {},
-                "correlation": 1.0,
-                "separate_by": TILT_BEAM_SEPARATE_BY,
-            },
-        ]
-        rejected.remove(rej)
-        doc.setdefault("confounded", []).append(
-            {
-                "pair": [e["name"], other],
-                "correlation": 1.0,
-                "delta_bic": float(db - db0),
-                "separate_by": TILT_BEAM_SEPARATE_BY,
-                "reason": why + f"; {e['name']} is named",
-                "rule": "tie_chi2",
-            }
-        )
+        _record_pair(doc, e, other, rej, why, TILT_BEAM_SEPARATE_BY)
 
 
 TILT_COIL_SEPARATE_BY = (
@@ -640,20 +643,7 @@ def _tilt_coil_pair(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> N
     ``coil_mismatch`` so refused when the coil's other orders do not lower the criterion
     by ``tie_chi2`` more than the tilt does (the record does not support them). Each such
     pair is the named one's ``confounded_with`` entry and one ``confounded`` pair."""
-    rejected = doc.get("rejected", [])
-    pair = ("axis_tilt", "coil_mismatch")
-    for e in doc.get("effects", []):
-        if e["name"] not in pair:
-            continue
-        other = pair[1 - pair.index(e["name"])]
-        if any(c.get("name") == other for c in e.get("confounded_with") or []):
-            continue
-        rej = next((r for r in rejected if r["name"] == other), None)
-        if rej is None or rej.get("rule") != "better_candidate":
-            continue
-        db, db0 = rej.get("delta_bic"), e.get("delta_bic")
-        if db is None or db0 is None:
-            continue
+    for e, other, rej, db, db0 in _refused_partners(doc, ("axis_tilt", "coil_mismatch")):
         coil = e if e["name"] == "coil_mismatch" else None
         if coil is not None and "order_2_amplitude_rad" not in (coil.get("derived") or {}):
             continue  # the coil fits order 1 alone: the tilt is not in its columns
@@ -677,34 +667,12 @@ def _tilt_coil_pair(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> N
                 else ""
             )
         )
-        e["confounded_with"] = [
-            *(e.get("confounded_with") or []),
-            {
-                "name": other,
-                "reason": why,
-                "rule": "tie_chi2",
-                "delta_bic": float(db),
-                "params": {},
-                "correlation": 1.0,
-                "separate_by": TILT_COIL_SEPARATE_BY,
-            },
-        ]
         e["notes"] = [
             *e.get("notes", []),
             f"confounded with {other} (order 2 of phi + psi_m): the fitted values are those "
             f"of {e['name']} alone. Separated by {TILT_COIL_SEPARATE_BY}",
         ]
-        rejected.remove(rej)
-        doc.setdefault("confounded", []).append(
-            {
-                "pair": [e["name"], other],
-                "correlation": 1.0,
-                "delta_bic": float(db - db0),
-                "separate_by": TILT_COIL_SEPARATE_BY,
-                "reason": why + f"; {e['name']} is named",
-                "rule": "tie_chi2",
-            }
-        )
+        _record_pair(doc, e, other, rej, why, TILT_COIL_SEPARATE_BY)
 
 
 def _scale(v, s):
