@@ -39,7 +39,7 @@ def _prep(n: int, runs: int = 1, seed: int = 0, sigma: float = 1.0, C: int = 1):
         sigma=np.full(C, sigma),
         consts={"alpha": np.zeros(C)},
         kd=types.SimpleNamespace(project=False),
-        ctx=types.SimpleNamespace(n_runs=runs),
+        ctx=types.SimpleNamespace(n_runs=runs, has_ref=False),
     )
 
 
