@@ -487,8 +487,6 @@ def allgather_objects(items: Sequence[Any]) -> list[Any]:
         return items
     import json
 
-    from jax.experimental import multihost_utils
-
     def plain(x: Any) -> Any:
         if isinstance(x, np.ndarray):
             return x.tolist()
@@ -496,15 +494,23 @@ def allgather_objects(items: Sequence[Any]) -> list[Any]:
             return x.item()
         raise TypeError(f"not JSON-able: {type(x).__name__}")
 
-    data = np.frombuffer(json.dumps(items, default=plain).encode("utf-8"), dtype=np.uint8)
-    sizes = np.asarray(multihost_utils.process_allgather(np.array([data.size], np.int64)))
-    pad = np.zeros(int(sizes.max()), np.uint8)
-    pad[: data.size] = data
-    got = np.asarray(multihost_utils.process_allgather(pad))
     out: list[Any] = []
-    for row, size in zip(got, sizes.reshape(-1)):
-        out += json.loads(bytes(row[: int(size)]).decode("utf-8"))
+    for blob in allgather_bytes(json.dumps(items, default=plain).encode("utf-8")):
+        out += json.loads(blob.decode("utf-8"))
     return out
+
+
+def allgather_bytes(data: bytes) -> list[bytes]:
+    """Every process's ``data``, in process order, on every process (two collectives:
+    sizes, then the bytes padded to the largest)."""
+    from jax.experimental import multihost_utils
+
+    buf = np.frombuffer(data, dtype=np.uint8)
+    sizes = np.asarray(multihost_utils.process_allgather(np.array([buf.size], np.int64)))
+    pad = np.zeros(int(sizes.max()), np.uint8)
+    pad[: buf.size] = buf
+    got = np.asarray(multihost_utils.process_allgather(pad))
+    return [bytes(row[: int(n)]) for row, n in zip(got, sizes.reshape(-1))]
 
 
 def is_my_task(i: int) -> bool:

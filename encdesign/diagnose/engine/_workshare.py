@@ -25,8 +25,8 @@ from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 import jax
-import numpy as np
 
+from ..._distributed import allgather_bytes
 from ._rowshare import alone, is_alone
 
 _T = TypeVar("_T")
@@ -75,7 +75,7 @@ def deal(
             msg = pickle.dumps((RuntimeError(repr(exc)), None))
     out: list = [None] * len(items)
     errors = []
-    for blob in _allgather_bytes(msg):
+    for blob in allgather_bytes(msg):
         err, pairs = pickle.loads(blob)
         if err is not None:
             errors.append(err)
@@ -85,18 +85,6 @@ def deal(
     if errors:
         raise errors[0]
     return out
-
-
-def _allgather_bytes(data: bytes) -> list[bytes]:
-    """Every process's ``data``, in process order (two collectives: sizes, then bytes)."""
-    from jax.experimental import multihost_utils
-
-    buf = np.frombuffer(data, dtype=np.uint8)
-    sizes = np.asarray(multihost_utils.process_allgather(np.array([buf.size], np.int64)))
-    pad = np.zeros(int(sizes.max()), np.uint8)
-    pad[: buf.size] = buf
-    got = np.asarray(multihost_utils.process_allgather(pad))
-    return [bytes(row[: int(s)]) for row, s in zip(got, sizes.reshape(-1))]
 
 
 __all__ = ["deal", "shares"]
