@@ -29,7 +29,7 @@ from ._evidence import (
 from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
-from ._spill import band_share, edge_beyond, kept_gain_share
+from ._spill import band_share, edge_beyond, kept_gain_share, same_place
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
@@ -354,17 +354,8 @@ def _reaches(f, own) -> bool:
     (or both at none), on a head and in a run that one shows."""
     key = _order_key(f)
     for g in own:
-        if g.view != f.view or _order_key(g) != key:
-            continue
-        if (
-            f.where["heads"]
-            and g.where["heads"]
-            and not set(f.where["heads"]) & set(g.where["heads"])
-        ):
-            continue
-        if f.where["runs"] and g.where["runs"] and not set(f.where["runs"]) & set(g.where["runs"]):
-            continue
-        return True
+        if g.view == f.view and _order_key(g) == key and same_place(f, g):
+            return True
     return False
 
 

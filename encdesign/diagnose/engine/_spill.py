@@ -54,7 +54,7 @@ def kept_gain_share(prep, fitter, base: list, term, orders) -> float | None:
     return g1 / g0
 
 
-def _same_place(f, g) -> bool:
+def same_place(f, g) -> bool:
     """Whether findings ``f`` and ``g`` share a head and a run (or one of them names none)."""
     for key in ("heads", "runs"):
         a, b = f.where.get(key) or [], g.where.get(key) or []
@@ -84,11 +84,11 @@ def band_share(findings, after, own) -> tuple[float, float] | None:
         lo_hi = f.where.get("frequencies_hz") or []
         if f.view != "band" or not lo_hi:
             continue
-        if not any(lo_hi[0] <= x <= lo_hi[-1] and _same_place(f, g) for g, x in lines):
+        if not any(lo_hi[0] <= x <= lo_hi[-1] and same_place(f, g) for g, x in lines):
             continue
         a += max(f.power - f.dof, 0.0)
         for h in after:
-            if h.view == "band" and h.where.get("frequencies_hz") == lo_hi and _same_place(h, f):
+            if h.view == "band" and h.where.get("frequencies_hz") == lo_hi and same_place(h, f):
                 b += max(h.power - h.dof, 0.0)
     if a <= 0:
         return None
