@@ -15,9 +15,10 @@ every thread: the number to compare on a loaded machine) and wall seconds:
   biased low: the run without discovery comes first and carries the compilation for the
   record's own sizes, so this can be negative; ``added_share_cpu`` is the number)::
 
-    python benchmarks/discovery_speed.py torque_ripple,head_defect,direction_lag out.json
+    python benchmarks/discovery_speed.py torque_ripple,head_defect,direction_lag --out out.json
 """
 
+import argparse
 import json
 import resource
 import sys
@@ -31,6 +32,7 @@ import numpy as np  # noqa: E402
 from encdesign.diagnose._dispatch import diagnose  # noqa: E402
 from encdesign.diagnose.engine import _discover as D  # noqa: E402
 from encdesign.diagnose.engine import _engine  # noqa: E402
+from encdesign.simulate._outside import classes_for  # noqa: E402
 
 
 def cpu() -> float:
@@ -60,21 +62,36 @@ def _run(rec, disc) -> tuple[float, float, str]:
     return time.perf_counter() - t0, cpu() - c0, d.verdict
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "classes",
+        nargs="?",
+        default="torque_ripple,head_defect,direction_lag",
+        help="comma-separated out-of-catalog classes of a multihead bench (default: %(default)s)",
+    )
+    ap.add_argument("--out", default="benchmarks/discovery_speed.json", help="JSON written")
+    ap.add_argument("--rows", type=int, default=16000, help="samples per record (4 heads)")
+    ap.add_argument("--seed", type=int, default=7, help="generator seed of the outside records")
+    args = ap.parse_args(argv)
+    known = classes_for("multihead")
+    classes = [c for c in args.classes.split(",") if c]
+    if set(classes) - set(known):
+        ap.error(f"unknown classes {sorted(set(classes) - set(known))}; expected {known}")
     out = []
-    warm = BD._bench_recording(16000, 4, 5, False)
+    warm = BD._bench_recording(args.rows, 4, 5, False)
     _run(warm, _without)  # warm-up (compilation)
     _run(warm, _with)
     cases = [
-        ("bench clean", lambda: BD._bench_recording(16000, 4, 5, False)),
-        ("bench vibration", lambda: BD._bench_recording(16000, 4, 5, True)),
+        ("bench clean", lambda: BD._bench_recording(args.rows, 4, 5, False)),
+        ("bench vibration", lambda: BD._bench_recording(args.rows, 4, 5, True)),
     ]
-    for cls in sys.argv[1].split(","):
+    for cls in classes:
         cases.append(
             (
                 cls + " 5x",
                 lambda cls=cls: B.outside_record(
-                    np.random.default_rng(7), cls, 5.0, "multihead", 16000
+                    np.random.default_rng(args.seed), cls, 5.0, "multihead", args.rows
                 )[0],
             )
         )
@@ -98,7 +115,7 @@ def main() -> None:
         )
         out.append(row)
         print(json.dumps(row), flush=True)
-    with open(sys.argv[2], "w") as f:
+    with open(args.out, "w") as f:
         json.dump(out, f, indent=1)
 
 
