@@ -49,7 +49,7 @@ def valjac_fn(cand: Candidate):
 
 @functools.lru_cache(maxsize=256)
 def _val_fn(cand: Candidate):
-    return jax.jit(cand.fn)
+    return jax.jit(cand.fn if cand.value is None else cand.value)
 
 
 @dataclasses.dataclass
