@@ -286,11 +286,12 @@ class Fitter:
             J = Js[0]  # not copied here: the fold sort below makes the copy
         else:
             J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
-        if prep.kd.project:
-            J = J - J.mean(1, keepdims=True)
         order, edges = self._fold_order(a, b)
-        # sorted first, then scaled in place: each element is (J sc) sqrt(w) as before
+        # sorted first (the copy), then projected and scaled in place, row by row as before:
+        # each element is ((J - mean) sc) sqrt(w)
         J = J[order]
+        if prep.kd.project:
+            J -= J.mean(1, keepdims=True)
         J *= sc[None, None, :]
         J *= np.sqrt(self.w_ch)[None, :, None]
         return pred, J, order, edges
