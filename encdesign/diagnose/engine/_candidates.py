@@ -239,6 +239,9 @@ class Candidate:
             For a term with many parameters (the base: forward mode carries one tangent per
             parameter through every intermediate) it is several times faster; it must
             agree with ``jax.jacfwd(fn)`` (tested).
+        value: ``value(params, x) -> (n, C)``, ``fn`` computed another way, faster, or ``None``
+            (default: ``fn``): what the fitter evaluates where it needs no Jacobian (a
+            residual, a trial point); it must equal ``fn`` to rounding (tested).
         probes: ``probes(ctx) -> [Probe, ...]`` (:data:`ProbeFn`): the unit-size effects
             whose smallest detectable size a verdict that does not name it reports
             (``detection_bounds``), or ``None`` (default: no bound reported for it).
@@ -260,6 +263,7 @@ class Candidate:
     derived: Callable[[Context, dict, dict], dict] | None = None
     doubt_overruled: bool = True
     valjac: Callable[[dict, dict], Any] | None = None
+    value: Callable[[dict, dict], Any] | None = None
     probes: ProbeFn | None = None
     orders: tuple[int, ...] = ()
 

@@ -8,7 +8,6 @@ import math
 from collections.abc import Callable, Sequence
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import scipy.linalg as sla
 from scipy import stats
@@ -50,7 +49,7 @@ def valjac_fn(cand: Candidate):
 
 @functools.lru_cache(maxsize=256)
 def _val_fn(cand: Candidate):
-    return jax.jit(cand.fn)
+    return jax.jit(cand.fn if cand.value is None else cand.value)
 
 
 @dataclasses.dataclass
@@ -189,8 +188,8 @@ class Fitter:
         depending only on the held (nonlinear) parameters: those are cached (within a
         memory budget), so refits with other terms cost one matrix product."""
 
-        def params() -> dict:  # device arrays only where a compiled function is called
-            return {k: jnp.asarray(v) for k, v in term.values.items()}
+        def params() -> dict:  # NumPy values: the compiled function transfers them itself
+            return dict(term.values)  # (a jnp.asarray each was ~10% of a long diagnosis)
 
         if linear_only(term):
             held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
@@ -202,7 +201,7 @@ class Fitter:
             if hit is None:
                 p = params()
                 p0 = {
-                    q.name: (jnp.zeros_like(p[q.name]) if q.linear else p[q.name])
+                    q.name: (np.zeros_like(p[q.name]) if q.linear else p[q.name])
                     for q in term.cand.params
                 }
                 v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
@@ -287,11 +286,12 @@ class Fitter:
             J = Js[0]  # not copied here: the fold sort below makes the copy
         else:
             J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
-        if prep.kd.project:
-            J = J - J.mean(1, keepdims=True)
         order, edges = self._fold_order(a, b)
-        # sorted first, then scaled in place: each element is (J sc) sqrt(w) as before
+        # sorted first (the copy), then projected and scaled in place, row by row as before:
+        # each element is ((J - mean) sc) sqrt(w)
         J = J[order]
+        if prep.kd.project:
+            J -= J.mean(1, keepdims=True)
         J *= sc[None, None, :]
         J *= np.sqrt(self.w_ch)[None, :, None]
         return pred, J, order, edges
@@ -544,9 +544,9 @@ class Fitter:
                 S = Js_[lo:hi].reshape(rw.size, p)
                 cols = np.empty((rw.size, E))
                 for i, e in enumerate(extra):
-                    pv = {k: jnp.asarray(v) for k, v in e.values.items()}
+                    pv = e.values
                     p0 = {
-                        q.name: (jnp.zeros_like(pv[q.name]) if q.linear else pv[q.name])
+                        q.name: (np.zeros_like(pv[q.name]) if q.linear else pv[q.name])
                         for q in e.cand.params
                     }
                     _, J = valjac_fn(e.cand)(p0, x)

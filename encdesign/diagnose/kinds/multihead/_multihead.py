@@ -42,18 +42,14 @@ from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import chi2_threshold, run_spans
 from ...engine._views_modulated import view_modulated_orders
 from ._confound import own_order_confound
+from ._fourier import base_value
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
     BEARING_WOBBLE,
     ECCENTRICITY_SHIFT,
 )
-from ._multihead_terms import (
-    INTERPOLATION_ERROR,
-    THERMAL_DRIFT,
-    VIBRATION,
-    view_order_step,
-)
+from ._multihead_terms import INTERPOLATION_ERROR, THERMAL_DRIFT, VIBRATION, view_order_step
 
 
 def make_where(rec: Recording) -> str:
@@ -323,6 +319,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
         kinds=("multihead",),
         explanation="base model: disk error function, head placements, zeros",
         valjac=valjac,
+        value=base_value(shifted, mask),
     )
 
 

@@ -581,14 +581,8 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     w = 1.0 / np.asarray(prep.sigma, float)[None, :, None]
     X, B = X * w, B * w
     r = rw[idx]
-    return (
-        X,
-        np.einsum("nck,nc->nk", X, r),
-        np.einsum("nck,ncl->nkl", X, X),
-        np.einsum("nck,ncp->nkp", X, B),
-        np.einsum("ncp,ncq->pq", B, B),
-        np.einsum("ncp,nc->p", B, r),
-    )
+    Xt, Bf = X.transpose(0, 2, 1), B.reshape(-1, P)  # (matmul: einsum's loops were 5x slower)
+    return X, np.einsum("nck,nc->nk", X, r), Xt @ X, Xt @ B, Bf.T @ Bf, Bf.T @ r.ravel()
 
 
 def _step_gain(Sa, SG, SXB, BBi, Br):
