@@ -18,7 +18,12 @@ from encdesign.diagnose import DEFAULT_SETTINGS, diagnose
 from encdesign.diagnose.engine._candidates import Context
 from encdesign.diagnose.kinds.sds._sds import finish_sds
 from encdesign.diagnose.kinds.sds._sds_data import sds_data, sds_prepare, stamp_lattice
-from encdesign.diagnose.kinds.sds._sds_noise import _level_sigma, _saturating_columns, dof_widening
+from encdesign.diagnose.kinds.sds._sds_noise import (
+    _level_sigma,
+    _saturating_columns,
+    common_base_columns,
+    dof_widening,
+)
 from encdesign.diagnose.kinds.sds._sds_terms import _axis_tilt_fn, _wobble_fn, coil_order_count
 from encdesign.diagnose.kinds.sds._sds_terms import sds_candidates as _sds_candidates
 from encdesign.io._recording import load_recording, write_recording
@@ -420,7 +425,7 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
     consts = {"psi_m": 2 * np.pi * np.arange(M) / M, "proj": np.asarray(0.0 if phi_ref else 1.0)}
     X, _ = _saturating_columns(rows, consts, [6, 12], DEFAULT_SETTINGS.sds_saturate_fraction)
     est = []
-    for _ in range(150):  # 300 before session 17 (CI time; the mean's sd about 2 %)
+    for _ in range(100):  # 300 before s17, 150 before s18 (CI time; the mean's sd ~2.4 %)
         y = rng.normal(0, sig, (R, K * M))
         y[3, 1] += 40 * sig  # one sensor in one run: an outlier column, not a wider level
         if not phi_ref:
@@ -445,6 +450,71 @@ def test_run_mean_noise_level_is_unbiased(phi_ref):
     assert dof_widening(1e9, p=p) == 1.0
     widen = [dof_widening(nu, p=p) for nu in (10, 18, 30)]
     assert 1.25 < widen[1] < 1.4 and widen[0] > widen[2] > 1.0
+
+
+def test_common_factor_is_capped_by_what_the_common_component_supports():
+    """Issue 44 F, session 18. With phi_ref the run-mean level is raised for noise common to
+    the moving sensors, estimated indirectly (revolution contrasts, fixed sensors). Where
+    the run means' common component is in fact quieter than their differences (the clock
+    locked to the motor: the moving sensors' rounding cancels in their mean) but the
+    contrasts' common part is loud, the factor is capped near 1 by the base residual's own
+    common component; where the common component carries the excess (an unlocked clock)
+    the indirect factor stands. 10 runs, 3 moving sensors, 5 revolutions, 24 draws each."""
+    rng = np.random.default_rng(6131)
+    R, M, K, sig = 10, 3, 5, 5e-9
+    phi = np.mod(2.39996 * np.arange(R) + 0.7, 2 * np.pi)
+    psi = 2 * np.pi * np.arange(M) / M
+    rows = {"phi": phi, "tmid_c": np.repeat(np.linspace(-5, 5, R)[:, None], K, 1)}
+    consts = {"psi_m": psi, "proj": np.asarray(0.0)}
+    X, _ = _saturating_columns(rows, consts, [], DEFAULT_SETTINGS.sds_saturate_fraction)
+    common = common_base_columns(phi, psi, [])
+    Hm = np.linalg.qr(np.c_[np.ones(M), np.eye(M)[:, : M - 1]])[0]  # column 0 common
+    Hm[:, 0] = np.abs(Hm[:, 0])
+    s = DEFAULT_SETTINGS
+
+    def factors(common_var: float) -> tuple[np.ndarray, np.ndarray]:
+        got, ind = [], []
+        for _ in range(24):
+            z = rng.normal(0, sig, (R, M))
+            z[:, 0] *= np.sqrt(common_var)  # the run means' common component
+            y = np.zeros((R, K * M))
+            y[:, :M] = z @ Hm.T
+            cz = rng.normal(0, sig * np.sqrt(K), (R, K - 1, M))
+            cz[..., 0] *= 2.0  # contrasts: common part twice the differences'
+            y[:, M:] = (cz @ Hm.T).reshape(R, -1)
+            info: dict = {}
+            _level_sigma(  # no quantile: the indirect factor alone, as before
+                y,
+                K,
+                X,
+                info=info,
+                test_p=s.sds_sigma_test_p,
+                level_alpha=s.sds_level_alpha,
+                common_base=common,
+            )
+            ind.append(info["run_means_common_factor"])
+            info = {}
+            out = _level_sigma(
+                y,
+                K,
+                X,
+                info=info,
+                test_p=s.sds_sigma_test_p,
+                level_alpha=s.sds_level_alpha,
+                common_base=common,
+                common_quantile=s.sds_common_level_quantile,
+            )
+            assert info["run_means_common_factor_indirect"] == pytest.approx(ind[-1])
+            g = info["run_means_common_factor"]
+            assert out[0] == pytest.approx(info["run_means_rad"] * info["run_means_widening"] * g)
+            got.append(g)
+        return np.asarray(got), np.asarray(ind)
+
+    quiet, quiet_ind = factors(0.3)
+    assert np.median(quiet_ind) > 1.6  # the contrasts' excess, (4 - 1) sig^2: factor ~2
+    assert np.median(quiet) < 1.1 and np.all(quiet <= quiet_ind + 1e-12)
+    loud, loud_ind = factors(4.0)  # the common component carries the excess
+    assert np.median(loud / loud_ind) > 0.95
 
 
 @pytest.mark.parametrize("per_revolution", [True, False])

@@ -24,8 +24,7 @@ class FinderSettings(eqx.Module):
 
     Thresholds on chi-square are in units of the noise-whitened chi-square; shares and
     correlations are fractions in (0, 1]. A rule that refuses a candidate names its field
-    in the refusal (``rejected[].rule`` in the JSON).
-    """
+    in the refusal (``rejected[].rule`` in the JSON)."""
 
     max_param_fraction: float = eqx.field(default=0.1, static=True)
     """The model never has more parameters than this fraction of the fitted values (rule
@@ -225,6 +224,10 @@ class FinderSettings(eqx.Module):
     """sds: the level at which a noise estimate is widened for its degrees of freedom
     (F vs chi-square). fc0e1ba."""
 
+    sds_common_level_quantile: float = eqx.field(default=0.2, static=True)
+    """sds with phi_ref: chi-square quantile of the base residual's common-component variance
+    bound that caps the run means' common factor (``_sds_noise._direct_common_factor``)."""
+
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
     take change points and single-value outliers out of the run-mean noise level
@@ -265,10 +268,9 @@ class FinderSettings(eqx.Module):
     rule ``scale_error.plausible``). Was ``_reference_terms.MAX_SCALE``."""
 
     signal_error_max_rad: float = eqx.field(default=0.5 * math.pi, static=True)
-    """Largest harmonic (rad of signal phase) of an interpolation error: an arctangent
-    reading is off by less than a quarter period for any signal error that leaves the
-    quadrature readable (rule ``interpolation_error.plausible``). Was
-    ``_reference_terms.MAX_SIGNAL_ERROR``."""
+    """Largest harmonic (rad of signal phase) of an interpolation error: an arctangent reading is
+    off by less than a quarter period for any signal error that leaves the quadrature readable (rule
+    ``interpolation_error.plausible``). Was ``_reference_terms.MAX_SIGNAL_ERROR``."""
 
     interp_spread_min: float = eqx.field(default=0.1, static=True)
     """Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin
@@ -371,9 +373,8 @@ class FinderSettings(eqx.Module):
     ``steady_tolerance_drive``). Was an inline 10 % in ``_prepare``."""
 
     settling_share: float = eqx.field(default=0.02, static=True)
-    """Each excluded stretch is widened by this share of the run (or the speed window, if
-    wider) on both sides: the settling after a move. Was an inline ``n // 50`` in
-    ``_prepare``."""
+    """Each excluded stretch is widened by this share of the run (or the speed window, if wider) on
+    both sides: the settling after a move. Was an inline ``n // 50`` in ``_prepare``."""
 
     vibration_cycles_min: float = eqx.field(default=3.0, static=True)
     """Rule ``vibration.plausible``: a vibration needs at least this many cycles of its
@@ -607,10 +608,9 @@ class FinderSettings(eqx.Module):
 
     sds_common_order_ratio: float = eqx.field(default=2.0, static=True)
     """sds: rules ``coil_mismatch.plausible`` (an order common to the moving sensors) and
-    ``beam_tilt_axial.plausible``: refused when the common structure's strongest
-    platform-angle order is another one with more than this many times the power of the
-    effect's own.
-    Was an inline 2 (twice) in ``_sds_noise``; set by hand in 8e334ac."""
+    ``beam_tilt_axial.plausible``: refused when the common structure's strongest platform-angle
+    order is another one with more than this many times the power of the effect's own. Was an inline
+    2 (twice) in ``_sds_noise``; set by hand in 8e334ac."""
 
     sds_transient_share: float = eqx.field(default=0.5, static=True)
     """sds: a significant one-run deviation on one sensor that fits better than any step

@@ -15,7 +15,13 @@ from ....io._recording import Recording
 from ...engine._candidates import Context
 from ...engine._protocol import KindData, Prepared, RowColumns
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ._sds_noise import REFERENCE_RADIUS_M, _level_sigma, _saturating_columns, design_orders
+from ._sds_noise import (
+    REFERENCE_RADIUS_M,
+    _level_sigma,
+    _saturating_columns,
+    common_base_columns,
+    design_orders,
+)
 
 # ----------------------------------------------------------------------------- data
 
@@ -488,6 +494,8 @@ def sds_prepare(
         test_p=settings.sds_sigma_test_p,
         level_alpha=settings.sds_level_alpha,
         fixed=np.asarray(rows["fixed_c"], float),
+        common_base=common_base_columns(rows["phi"], kd.constants["psi_m"], orders),
+        common_quantile=settings.sds_common_level_quantile,
     )
     ctx = Context(
         kind="sds",

@@ -278,6 +278,50 @@ def _common_factor(
     return math.sqrt(1.0 + max(excess, 0.0) / s_raw**2)
 
 
+def common_base_columns(phi: np.ndarray, psi_m: np.ndarray, orders_base: list[int]) -> np.ndarray:
+    """Columns ``(R, k)`` the base model puts in the run means' part common to the moving
+    sensors (with ``phi_ref``): the constant and, per design order ``n`` of the base, the
+    mean over the moving sensors of its columns ``cos / sin n (φ + ψ_m)`` where that mean
+    is not zero (``n ψ_m`` not spread evenly: e.g. ``n`` a multiple of ``M`` for equally
+    spaced sensors)."""
+    phi = np.asarray(phi, float)
+    psi = np.asarray(psi_m, float)
+    cols = [np.ones(phi.size)]
+    for n in orders_base:
+        z = np.mean(np.exp(1j * n * (phi[:, None] + psi[None, :])), 1)
+        if float(np.max(np.abs(z))) > 1e-9:
+            cols += [z.real, z.imag]
+    return np.stack(cols, 1)
+
+
+def _direct_common_factor(
+    resid_means: np.ndarray, common_base: np.ndarray, s_raw: float, quantile: float
+) -> float | None:
+    """What the base residual's own common component supports as the common factor (at
+    least 1; ``None`` without degrees of freedom): its variance over the ``R − k``
+    degrees of freedom the base's common columns (``common_base``, :func:`common_base_columns`)
+    leave, at its upper confidence limit ``SS / χ²⁻¹(quantile; R − k)``, over ``s_raw²``.
+
+    :func:`_common_factor` estimates the common excess indirectly (revolution contrasts,
+    fixed sensors) and assumes the run-constant noise is as large in the common component
+    as in the differences. With the clock locked to the motor it is not: the moving
+    sensors' rounding nearly cancels in their mean, the common component's variance was
+    0.4-1.1 times the differences' on clean benches while the indirect factor² was 1.4-2.2
+    (session 17 dev seeds 5330-5349, session 18 training seeds 6120-6127), and every
+    run-mean test paid for it. A catalog effect common to the moving sensors raises this
+    estimate (the probes re-run it on the residual with the effect,
+    :func:`levels_of`), so it caps the indirect factor, never raises it."""
+    R, M = resid_means.shape
+    z0 = resid_means.mean(1) * math.sqrt(M)  # the common Helmert component
+    A = span_basis(common_base)
+    dof = R - A.shape[1]
+    if dof <= 0 or not s_raw > 0:
+        return None
+    z = z0 - A @ (A.T @ z0)
+    ucl = float(z @ z) / float(stats.chi2.ppf(quantile, dof))
+    return math.sqrt(max(1.0, ucl / s_raw**2))
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -288,6 +332,8 @@ def _level_sigma(
     test_p: float,
     level_alpha: float,
     fixed: np.ndarray | None = None,
+    common_base: np.ndarray | None = None,
+    common_quantile: float | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -304,7 +350,9 @@ def _level_sigma(
     engine's known-level tests would otherwise turn into false alarms. With ``phi_ref`` it
     is then raised by :func:`_common_factor` (from the contrasts and the fixed sensors' run
     means ``fixed``): the saturated fit leaves the run means' common component no degrees
-    of freedom.
+    of freedom. With ``common_base`` (the base's common columns, :func:`common_base_columns`)
+    and ``common_quantile`` that factor is capped at what the common component of ``resid``
+    itself supports (:func:`_direct_common_factor`).
 
     Contrasts: the robust scale (1.4826 MAD) of the contrasts themselves (nothing constant
     within a run reaches them), separately for the part common to the moving sensors (the
@@ -365,7 +413,11 @@ def _level_sigma(
             s = 1.4826 * float(np.median(np.abs(x)))
             lv.append(s if s > 0 else float(np.sqrt(np.mean(x**2))))
         out[M:] = max(lv)
-    g = _common_factor(lv, proj, fixed, s_raw, M, K)
+    g = g_ind = _common_factor(lv, proj, fixed, s_raw, M, K)
+    g_dir = None
+    if not proj and common_base is not None and common_quantile is not None:
+        g_dir = _direct_common_factor(resid[:, :M], common_base, s_raw, common_quantile)
+        g = min(g, g_dir) if g_dir is not None else g
     out[:M] = s_raw * c * g
     if info is not None:
         info.update(
@@ -373,6 +425,8 @@ def _level_sigma(
             run_means_dof=int(nu),
             run_means_widening=c,
             run_means_common_factor=g,
+            run_means_common_factor_indirect=g_ind,
+            run_means_common_factor_direct=g_dir,
             run_means_steps_or_outliers=added,
             contrasts_common_rad=lv[0] if lv else None,
             contrasts_differences_rad=lv[1] if len(lv) > 1 else None,
@@ -401,6 +455,9 @@ def levels_of(ctx: Context):
     s = ctx.settings
 
     fixed = np.asarray(ctx.rows["fixed_c"], float)
+    common = common_base_columns(
+        ctx.rows["phi"], ctx.consts["psi_m"], base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
+    )
 
     def levels(resid: np.ndarray) -> np.ndarray:
         return _level_sigma(
@@ -411,6 +468,8 @@ def levels_of(ctx: Context):
             test_p=s.sds_sigma_test_p,
             level_alpha=s.sds_level_alpha,
             fixed=fixed,
+            common_base=common,
+            common_quantile=s.sds_common_level_quantile,
         )
 
     return levels
@@ -420,12 +479,8 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     """Noise hook: the two levels of :func:`_level_sigma` on the base residual, with what
     the candidates' rules need (:class:`SDSNoiseInfo`: the base residual's common-order
     powers (:func:`common_order_power`) for the plausibility of ``beam_tilt_axial``, ...)."""
-    X, _ = _saturating_columns(
-        prep.rows,
-        prep.consts,
-        base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0],
-        prep.settings.sds_saturate_fraction,
-    )
+    orders = base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0]
+    X, _ = _saturating_columns(prep.rows, prep.consts, orders, prep.settings.sds_saturate_fraction)
     info: dict = {}
     sig = _level_sigma(
         resid[prep.keep],
@@ -436,6 +491,10 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         test_p=prep.settings.sds_sigma_test_p,
         level_alpha=prep.settings.sds_level_alpha,
         fixed=np.asarray(prep.rows["fixed_c"], float)[prep.keep],
+        common_base=common_base_columns(
+            np.asarray(prep.rows["phi"], float)[prep.keep], prep.consts["psi_m"], orders
+        ),
+        common_quantile=prep.settings.sds_common_level_quantile,
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
