@@ -39,7 +39,7 @@ from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import chi2_threshold, run_spans
+from ...engine._views import chi2_threshold
 from ...engine._views_modulated import view_modulated_orders
 from ._confound import own_order_confound
 from ._multihead_probes import (
@@ -54,6 +54,7 @@ from ._multihead_terms import (
     VIBRATION,
     view_order_step,
 )
+from ._run_align import low_order_phases, run_offsets_start
 
 
 def make_where(rec: Recording) -> str:
@@ -326,71 +327,6 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
     )
 
 
-def _low_order_phases(prep: Prepared, M: int, M_fit: int = 0):
-    """Each run's orders ``1..max(Mz, M_fit)`` fitted alone, ``Mz`` =
-    ``settings.run_offset_start_orders`` (or ``M``): ``(Z, V, m)``, per run the complex
-    coefficients ``a - i b`` of the disk error's low orders ``m = 1..Mz`` in the run's own
-    angle ``theta_raw`` (their phases advance by ``m delta`` with the run's angle zero
-    ``delta``) and their variances (white noise at the mean ``sigma``); the orders above
-    ``Mz`` are fitted so that they do not leak into the low ones (a run of part turns)."""
-    R = prep.ctx.n_runs
-    C = prep.n_channels
-    alpha = prep.consts["alpha"]
-    Mz = int(min(M, prep.settings.run_offset_start_orders))
-    Mf = max(Mz, int(M_fit))
-    Z, V = [], []
-    P = 2 * Mf + C
-    spans = dict(run_spans(prep.run))
-    s2 = float(np.mean(np.asarray(prep.sigma, float) ** 2))
-    for r in range(R):
-        # least squares on the normal equations, accumulated in blocks of rows (the design
-        # (rows, C, 2 Mz + C) is never built whole)
-        G = np.zeros((P, P))
-        h = np.zeros(P)
-        a0, b0 = spans.get(r, (0, 0))
-        for a in range(a0, b0, 1 << 16):
-            b = min(b0, a + (1 << 16))
-            kb = prep.keep[a:b]
-            th = prep.rows.column("theta_raw", a, b)[kb]
-            y = prep.y[a:b][kb]
-            cols = []
-            for k in range(C):
-                ck = []
-                for mm in range(1, Mf + 1):
-                    ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
-                cols.append(np.stack(ck, 1))
-            X = np.stack(cols, 1)  # (n, C, 2Mf)
-            const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
-            X = np.concatenate([X, const], 2)
-            if prep.kd.project:
-                X = X - X.mean(1, keepdims=True)
-                y = y - y.mean(1, keepdims=True)
-            Xf = X.reshape(-1, P)
-            G += Xf.T @ Xf
-            h += Xf.T @ y.ravel()
-        coef = np.linalg.lstsq(G, h, rcond=None)[0]
-        a, b = coef[0 : 2 * Mz : 2], coef[1 : 2 * Mz : 2]
-        Z.append(a - 1j * b)
-        d = np.diag(np.linalg.pinv(G))
-        V.append(s2 * (d[0 : 2 * Mz : 2] + d[1 : 2 * Mz : 2]))
-    return Z, V, np.arange(1, Mz + 1)
-
-
-def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
-    """Start for ``delta_r``: each run's low orders (:func:`_low_order_phases`) aligned to run 0."""
-    if prep.ctx.n_runs < 2:
-        return np.zeros(0)
-    Z, _, mm = _low_order_phases(prep, M)
-    grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
-    out = []
-    for r in range(1, len(Z)):
-        score = np.real(
-            (Z[r] * np.conj(Z[0]))[None, :] * np.exp(-1j * mm[None, :] * grid[:, None])
-        ).sum(1)
-        out.append(grid[int(np.argmax(score))])
-    return np.asarray(out)
-
-
 def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     """After a base fit: a run's fitted angle zero ``delta_r`` that its low orders reject
     is held at their alignment (issue 41). The disk error's low orders (the start's) are
@@ -409,7 +345,7 @@ def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     if R < 2 or base is None or name not in base.values:
         return None
     M = int(np.asarray(base.values["fourier_cos_rad"]).size)
-    Z, V, mm = _low_order_phases(prep, M, M)
+    Z, V, mm, resolved = low_order_phases(prep, M, M)
     ok = ~np.isin(mm, _symmetric_orders(prep, int(np.max(mm))))  # alike on every head: no phase
     Z, V, mm = [z[ok] for z in Z], [v[ok] for v in V], mm[ok]
     fitted = np.asarray(base.values[name], float).copy()
@@ -417,6 +353,8 @@ def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
     held, low = [], fitted.copy()
     for r in range(1, R):
+        if not (resolved[r] and resolved[0]):  # part of a turn: its own orders cannot judge
+            continue
         w = 1.0 / np.maximum(V[r] + V[0], 1e-300)
 
         def chi(d, r=r, w=w):
@@ -585,7 +523,7 @@ def multihead_base(prep: Prepared, M: int):
     cand = _base_candidate(C, R, M, tuple(held))
     start = {}
     if R > 1:
-        start["run_angle_offset_rad"] = _run_offsets_start(prep, M)
+        start["run_angle_offset_rad"] = run_offsets_start(prep, M)
     terms = [(cand, start)]
     if prep.count_jumps:
         terms.append((_jump_candidate(prep), {}))
