@@ -35,6 +35,7 @@ from ....io._recording import Recording
 from ....physics import _effects as fx
 from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
+from ...engine._document import part_turn_span
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
@@ -234,13 +235,16 @@ def max_order_limit(prep: Prepared) -> int:
 
 
 @functools.lru_cache(maxsize=64)
-def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candidate:
+def _base_candidate(
+    C: int, R: int, M: int, held: tuple[int, ...] = (), placed: bool = True
+) -> Candidate:
     """The base term for C heads, R runs and orders 1..M (one object per shape, so one
     compiled Jacobian serves every record of that shape). The disk orders in ``held`` are
     held at zero (their Jacobian columns are exactly zero, so the fitter lists them as
     undetermined): without ``theta_ref``, orders seen the same at every head (multiples of
     the symmetry of equally spaced heads) cancel in head differences, and a fit of their
-    rounding-level columns would give them any size (issue 44 A)."""
+    rounding-level columns would give them any size (issue 44 A). Without ``placed`` the
+    heads sit at their nominal azimuths (no placements fitted)."""
     live = np.ones(M)
     for m in held:
         if 1 <= m <= M:
@@ -254,7 +258,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
         if R > 1:
             th = th + oh[:, 1:] @ p["run_angle_offset_rad"]
         alpha = x["alpha"]
-        if C > 1:
+        if C > 1 and placed:
             alpha = alpha + jnp.concatenate([jnp.zeros(1), p["placement_rad"]])
         return oh, th, alpha
 
@@ -284,7 +288,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
             "fourier_sin_rad": sn,
         }
         slope = jnp.sum(m * (b * cs - a * sn), axis=-1)  # (n, C)
-        if C > 1:
+        if C > 1 and placed:
             J["placement_rad"] = -slope[:, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, 1:]
         if R > 1:
             J["run_angle_offset_rad"] = slope[:, :, None] * oh[:, None, 1:]
@@ -295,7 +299,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
         Param("fourier_cos_rad", "rad", (M,), description="disk error, cos of orders 1..M"),
         Param("fourier_sin_rad", "rad", (M,), description="disk error, sin of orders 1..M"),
     ]
-    if C > 1:
+    if C > 1 and placed:
         params.append(
             Param(
                 "placement_rad",
@@ -409,7 +413,7 @@ def _head_mean_error(
     from the base term's values ``v``; with ``slope``, also its largest slope over the heads
     and the slope of the mean (both 1), as ``(mean, slope, mean_slope)``."""
     R_off = np.concatenate([[0.0], np.asarray(v.get("run_angle_offset_rad", []))])
-    pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", []))])
+    pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", np.zeros(alpha.size - 1)))])
     a, b = np.asarray(v["fourier_cos_rad"]), np.asarray(v["fourier_sin_rad"])
     m = np.arange(1, a.size + 1)
     x = th + R_off[run]
@@ -444,9 +448,11 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     (the fitted error is not small, or its head mean holds orders the heads cannot
     separate), and :class:`FitDivergence` says so (the angle is left as it was). Orders
     every head sees alike (equally spaced heads) are held out of the head mean: the base
-    holds them at zero, since the common rotation they make is unobservable (issue 44 A)."""
-    if prep.ctx.has_ref or prep.n_channels < 2:
-        return None
+    holds them at zero, since the common rotation they make is unobservable (issue 44 A).
+    Not where every run covers less than one turn (``part_turn_span``): the disk orders are
+    not separable there, and neither is the fitted error's head mean (issue 44)."""
+    if prep.ctx.has_ref or prep.n_channels < 2 or part_turn_span(prep) is not None:
+        return None  # part of a turn: the fitted error's head mean is not determined there
     base = next((t for t in terms if t.cand.name == "base"), None)
     if base is None:
         return None
@@ -520,7 +526,8 @@ def multihead_base(prep: Prepared, M: int):
     if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
         prep.rows["theta_raw"] = prep.rows["theta"]
     held = _symmetric_orders(prep, M)
-    cand = _base_candidate(C, R, M, tuple(held))
+    span = part_turn_span(prep)  # issue 44: part of a turn, placements not separable
+    cand = _base_candidate(C, R, M, tuple(held), span is None)
     start = {}
     if R > 1:
         start["run_angle_offset_rad"] = run_offsets_start(prep, M)
@@ -545,6 +552,13 @@ def multihead_base(prep: Prepared, M: int):
     info["unidentifiable"].append(
         "the common rotation of all heads (head 0's placement is the reference)"
     )
+    if span is not None:
+        info["unidentifiable"].append(
+            f"the disk error's orders 1..{M} one by one"
+            + (" and the head placements (held at the nominal azimuths)" if C > 1 else "")
+            + f": every run covers {span / (2 * math.pi):.2f} turn or less, where they are "
+            "not separable (only the error's sum over the arcs seen is fitted)"
+        )
     return terms, info
 
 
