@@ -4,9 +4,10 @@ runs' own low orders can judge them; issue 44, records of less than one turn).
 Each run's disk error orders fitted alone give the low-order phases the start aligns to run 0
 (:func:`low_order_phases`). On a run of part of a turn those orders are not separable (their
 columns against the run's constants are ill-conditioned over the arc it covers), so their
-phases say nothing about the run's zero: such a run's start is the zero at which the base
-model fitted to it and to run 0 together explains the most (:func:`profile_offset`, the same
-disk error seen on both arcs), and :func:`resolved_runs` tells the issue-41 hold which runs'
+phases say nothing about the run's zero: such a run's start is the zero at which its
+observations match run 0's at the same disk angle (:func:`match_offset`), or, where no zero
+makes the runs share an arc, at which the base fitted to both explains the most
+(:func:`profile_offset`), and :func:`resolved_runs` tells the issue-41 hold which runs'
 low orders may judge a fitted zero at all.
 """
 
@@ -139,9 +140,51 @@ def profile_offset(normals, r: int, Mf: int) -> float:
     return float(fine[int(np.argmax(ef))])
 
 
+def _kept(prep: Prepared, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """Run ``r``'s kept rows: its angle ``theta_raw`` (rad) and observations ``y``."""
+    a, b = dict(run_spans(prep.run)).get(r, (0, 0))
+    kb = prep.keep[a:b]
+    return prep.rows.column("theta_raw", a, b)[kb], np.asarray(prep.y[a:b])[kb]
+
+
+def match_offset(prep: Prepared, r: int, M: int) -> float | None:
+    """Run ``r``'s angle zero (rad, against run 0) at which its observations best match run
+    0's at the same disk angle (run 0's interpolated there, each head's constant free; the
+    mismatch's chi-square per degree of freedom in the noise), over the zeros where the two
+    runs share an arc of at least half the period of the base's highest order ``M`` (a
+    shorter one cannot tell a zero); ``None`` where no zero makes them share one."""
+    th0, y0 = _kept(prep, 0)
+    thr, yr = _kept(prep, r)
+    if th0.size < 2 or thr.size < 2:
+        return None
+    o = np.argsort(th0)
+    xp, fp = th0[o], y0[o]
+    w = 1.0 / (2.0 * np.asarray(prep.sigma, float) ** 2)
+    C = fp.shape[1]
+
+    def mismatch(d: float) -> float:
+        x = xp[0] + np.mod(thr + d - xp[0], 2 * np.pi)
+        on = x <= xp[-1]
+        if on.sum() <= C or np.ptp(x[on]) < np.pi / max(M, 1):
+            return np.inf
+        e = yr[on] - np.stack([np.interp(x[on], xp, fp[:, k]) for k in range(C)], 1)
+        e -= e.mean(0)
+        return float(np.sum(e**2 * w) / (e.size - C))
+
+    grid = np.linspace(-np.pi, np.pi, ALIGN_GRID, endpoint=False)
+    g = np.array([mismatch(d) for d in grid])
+    if not np.isfinite(g).any():
+        return None
+    step = grid[1] - grid[0]
+    fine = grid[int(np.argmin(g))] + np.linspace(-step, step, 41)
+    return float(fine[int(np.argmin([mismatch(d) for d in fine]))])
+
+
 def run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     """Start for ``delta_r``: each run's low orders (:func:`low_order_phases`) aligned to run
-    0; a run whose own orders (or run 0's) are not separable gets :func:`profile_offset`."""
+    0; a run whose own orders (or run 0's) are not separable is matched to run 0 at the same
+    disk angle (:func:`match_offset`), or where it shares no arc with it gets
+    :func:`profile_offset`."""
     if prep.ctx.n_runs < 2:
         return np.zeros(0)
     Z, _, mm, ok = low_order_phases(prep, M)
@@ -150,7 +193,8 @@ def run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     out = []
     for r in range(1, len(Z)):
         if normals is not None and not (ok[r] and ok[0]):
-            out.append(profile_offset(normals, r, M))
+            d = match_offset(prep, r, M)
+            out.append(profile_offset(normals, r, M) if d is None else d)
             continue
         score = np.real(
             (Z[r] * np.conj(Z[0]))[None, :] * np.exp(-1j * mm[None, :] * grid[:, None])
