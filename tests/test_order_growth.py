@@ -70,17 +70,20 @@ def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
 
 
 BLOCKED = [(1403, 18, 0.7), (1410, 18, 0.9)]
-"""Two of :data:`CASES` whose growth the rule before blocks (1409 does too; 1401, 1402 and
-1404 grow under it as well): the control runs these only (session 17: 5.2 s CPU of the
-17.8 s all six cost)."""
+"""Two of :data:`CASES` whose growth a share of 1e-12 blocked while the direction, speed and
+angle-trend views were judged before the growth (session 17: 5.2 s CPU of the 17.8 s all six
+cost)."""
 
 
-def test_growth_blocked_by_any_trace_leaves_the_record_unexplained():
-    """The control: a share of 1e-12 is the rule before (any such finding stops the growth)."""
+def test_traces_the_growth_takes_with_it_do_not_block_it_at_any_share():
+    """The control, since session 18 (issue 44, records of part of a turn): the direction,
+    speed and angle-trend views are judged on the grown base's residual, so even a share of
+    1e-12 lets these records grow: the traces that once blocked it were the missing orders'
+    leakage and go with them (before, both stayed ``unexplained`` at order 12)."""
     st = dataclasses.replace(FinderSettings(), growth_veto_share=1e-12)
     for seed, M, turns in BLOCKED:
         d = diagnose(_high_order_record(seed, M, turns), settings=st).doc
-        assert d["verdict"] != "consistent" and d["base"]["max_order"] == 12, (seed, d["verdict"])
+        assert d["verdict"] == "consistent" and d["base"]["max_order"] >= M - 1, seed
 
 
 def _wide_error_record(seed: int, H: int = 4, n: int = 1000, M: int = 15) -> Recording:

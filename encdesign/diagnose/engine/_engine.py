@@ -52,6 +52,7 @@ from ._document import (
     global_times_in_own_clock,
     lattice_effect,
     order_spectrum,
+    part_turn_span,
     report_text,
     scan_order_of,
     se_dict,
@@ -107,27 +108,27 @@ def _grow_base_order(
     ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
     error function has every order, and one left out would be reported as structure no
     effect explains. Not when the residual also shows a line at the signal period (aliased,
-    it can pose as integer orders) or structure tied to the direction or speed (the
-    candidates' to explain) holding at least ``settings.growth_veto_share`` of what every
-    view located (less is leakage); and the grown base must leave at most
-    ``settings.growth_left_max`` of what every view located (a line in Hz, a step or a drift
-    that only leaks into high orders stays the candidates'; a strong order's leakage into
-    lines off the integers goes with it).
-    Orders ``L`` and ``2 L`` of the signal period
-    (``interpolation_error``'s) stay out. Where held-out error lowered the base order
-    (:func:`_choose_base_order`), growth is also undone when it raises the held-out
-    chi-square. Returns ``(order, fit)``, grown and refitted from the fitted values, or
-    ``None`` (nothing changed)."""
+    it can pose as integer orders) holding at least ``settings.growth_veto_share`` of what
+    every view located (less is leakage), nor when the grown base leaves that share in
+    structure tied to the direction, the speed or the angle's trend (the candidates' to
+    explain; judged after the growth, since on part of a turn the missing orders leak into
+    it, issue 44); and the grown base must leave at most ``settings.growth_left_max`` of what
+    every view located (a line in Hz, a step or a drift that only leaks into high orders stays
+    the candidates'; a strong order's leakage into lines off the integers goes with it).
+    Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
+    held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
+    when it raises the held-out chi-square, unless every run covers less than one turn
+    (:func:`part_turn_span`: the orders are not separable there; the kind's base says so).
+    Returns ``(order, fit)``, grown and refitted, or ``None``."""
     hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
         return None
     L = int(getattr(prep.ctx, "signal_periods", 0) or 0)
     findings = locate(prep, fitter.residual(fit.terms), kind.views(prep), hi)
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
-    veto = ("line_phase", "direction", "speed", "angle_trend")
-    pv = sum(max(f.power - f.dof, 0.0) for f in findings if f.view in veto)
-    pv -= min(_phase_at_orders(findings, L), pv)
-    if pv > 0 and pv >= prep.settings.growth_veto_share * p0:
+    veto = prep.settings.growth_veto_share * p0
+    pv = sum(max(f.power - f.dof, 0.0) for f in findings if f.view == "line_phase")
+    if pv - min(_phase_at_orders(findings, L), pv) > max(veto, 0.0):
         return None
     found = [
         round(f.where["orders"][0])
@@ -150,7 +151,9 @@ def _grow_base_order(
         prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M, prep.settings)
     )
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
-    worse = grown.heldout_chi2 > ho0
+    tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
+    tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
+    worse = (grown.heldout_chi2 > ho0 and part_turn_span(prep) is None) or tied > max(veto, 0.0)
     if p1 > prep.settings.growth_left_max * p0 or worse:
         _set_order(prep, order)
         fitter.clear()

@@ -35,11 +35,12 @@ from ....io._recording import Recording
 from ....physics import _effects as fx
 from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
+from ...engine._document import part_turn_span
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ...engine._views import chi2_threshold, run_spans
+from ...engine._views import chi2_threshold
 from ...engine._views_modulated import view_modulated_orders
 from ._confound import own_order_confound
 from ._fourier import base_value
@@ -50,6 +51,7 @@ from ._multihead_probes import (
     ECCENTRICITY_SHIFT,
 )
 from ._multihead_terms import INTERPOLATION_ERROR, THERMAL_DRIFT, VIBRATION, view_order_step
+from ._run_align import low_order_phases, run_offsets_start
 
 
 def make_where(rec: Recording) -> str:
@@ -229,13 +231,16 @@ def max_order_limit(prep: Prepared) -> int:
 
 
 @functools.lru_cache(maxsize=64)
-def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candidate:
+def _base_candidate(
+    C: int, R: int, M: int, held: tuple[int, ...] = (), placed: bool = True
+) -> Candidate:
     """The base term for C heads, R runs and orders 1..M (one object per shape, so one
     compiled Jacobian serves every record of that shape). The disk orders in ``held`` are
     held at zero (their Jacobian columns are exactly zero, so the fitter lists them as
     undetermined): without ``theta_ref``, orders seen the same at every head (multiples of
     the symmetry of equally spaced heads) cancel in head differences, and a fit of their
-    rounding-level columns would give them any size (issue 44 A)."""
+    rounding-level columns would give them any size (issue 44 A). Without ``placed`` the
+    heads sit at their nominal azimuths (no placements fitted)."""
     live = np.ones(M)
     for m in held:
         if 1 <= m <= M:
@@ -249,7 +254,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
         if R > 1:
             th = th + oh[:, 1:] @ p["run_angle_offset_rad"]
         alpha = x["alpha"]
-        if C > 1:
+        if C > 1 and placed:
             alpha = alpha + jnp.concatenate([jnp.zeros(1), p["placement_rad"]])
         return oh, th, alpha
 
@@ -279,7 +284,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
             "fourier_sin_rad": sn,
         }
         slope = jnp.sum(m * (b * cs - a * sn), axis=-1)  # (n, C)
-        if C > 1:
+        if C > 1 and placed:
             J["placement_rad"] = -slope[:, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, 1:]
         if R > 1:
             J["run_angle_offset_rad"] = slope[:, :, None] * oh[:, None, 1:]
@@ -290,7 +295,7 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
         Param("fourier_cos_rad", "rad", (M,), description="disk error, cos of orders 1..M"),
         Param("fourier_sin_rad", "rad", (M,), description="disk error, sin of orders 1..M"),
     ]
-    if C > 1:
+    if C > 1 and placed:
         params.append(
             Param(
                 "placement_rad",
@@ -323,71 +328,6 @@ def _base_candidate(C: int, R: int, M: int, held: tuple[int, ...] = ()) -> Candi
     )
 
 
-def _low_order_phases(prep: Prepared, M: int, M_fit: int = 0):
-    """Each run's orders ``1..max(Mz, M_fit)`` fitted alone, ``Mz`` =
-    ``settings.run_offset_start_orders`` (or ``M``): ``(Z, V, m)``, per run the complex
-    coefficients ``a - i b`` of the disk error's low orders ``m = 1..Mz`` in the run's own
-    angle ``theta_raw`` (their phases advance by ``m delta`` with the run's angle zero
-    ``delta``) and their variances (white noise at the mean ``sigma``); the orders above
-    ``Mz`` are fitted so that they do not leak into the low ones (a run of part turns)."""
-    R = prep.ctx.n_runs
-    C = prep.n_channels
-    alpha = prep.consts["alpha"]
-    Mz = int(min(M, prep.settings.run_offset_start_orders))
-    Mf = max(Mz, int(M_fit))
-    Z, V = [], []
-    P = 2 * Mf + C
-    spans = dict(run_spans(prep.run))
-    s2 = float(np.mean(np.asarray(prep.sigma, float) ** 2))
-    for r in range(R):
-        # least squares on the normal equations, accumulated in blocks of rows (the design
-        # (rows, C, 2 Mz + C) is never built whole)
-        G = np.zeros((P, P))
-        h = np.zeros(P)
-        a0, b0 = spans.get(r, (0, 0))
-        for a in range(a0, b0, 1 << 16):
-            b = min(b0, a + (1 << 16))
-            kb = prep.keep[a:b]
-            th = prep.rows.column("theta_raw", a, b)[kb]
-            y = prep.y[a:b][kb]
-            cols = []
-            for k in range(C):
-                ck = []
-                for mm in range(1, Mf + 1):
-                    ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
-                cols.append(np.stack(ck, 1))
-            X = np.stack(cols, 1)  # (n, C, 2Mf)
-            const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
-            X = np.concatenate([X, const], 2)
-            if prep.kd.project:
-                X = X - X.mean(1, keepdims=True)
-                y = y - y.mean(1, keepdims=True)
-            Xf = X.reshape(-1, P)
-            G += Xf.T @ Xf
-            h += Xf.T @ y.ravel()
-        coef = np.linalg.lstsq(G, h, rcond=None)[0]
-        a, b = coef[0 : 2 * Mz : 2], coef[1 : 2 * Mz : 2]
-        Z.append(a - 1j * b)
-        d = np.diag(np.linalg.pinv(G))
-        V.append(s2 * (d[0 : 2 * Mz : 2] + d[1 : 2 * Mz : 2]))
-    return Z, V, np.arange(1, Mz + 1)
-
-
-def _run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
-    """Start for ``delta_r``: each run's low orders (:func:`_low_order_phases`) aligned to run 0."""
-    if prep.ctx.n_runs < 2:
-        return np.zeros(0)
-    Z, _, mm = _low_order_phases(prep, M)
-    grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
-    out = []
-    for r in range(1, len(Z)):
-        score = np.real(
-            (Z[r] * np.conj(Z[0]))[None, :] * np.exp(-1j * mm[None, :] * grid[:, None])
-        ).sum(1)
-        out.append(grid[int(np.argmax(score))])
-    return np.asarray(out)
-
-
 def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     """After a base fit: a run's fitted angle zero ``delta_r`` that its low orders reject
     is held at their alignment (issue 41). The disk error's low orders (the start's) are
@@ -406,7 +346,7 @@ def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     if R < 2 or base is None or name not in base.values:
         return None
     M = int(np.asarray(base.values["fourier_cos_rad"]).size)
-    Z, V, mm = _low_order_phases(prep, M, M)
+    Z, V, mm, resolved = low_order_phases(prep, M, M)
     ok = ~np.isin(mm, _symmetric_orders(prep, int(np.max(mm))))  # alike on every head: no phase
     Z, V, mm = [z[ok] for z in Z], [v[ok] for v in V], mm[ok]
     fitted = np.asarray(base.values[name], float).copy()
@@ -414,6 +354,8 @@ def _hold_run_offsets(terms, prep: Prepared) -> str | None:
     grid = np.linspace(-np.pi, np.pi, 7200, endpoint=False)
     held, low = [], fitted.copy()
     for r in range(1, R):
+        if not (resolved[r] and resolved[0]):  # part of a turn: its own orders cannot judge
+            continue
         w = 1.0 / np.maximum(V[r] + V[0], 1e-300)
 
         def chi(d, r=r, w=w):
@@ -468,7 +410,7 @@ def _head_mean_error(
     from the base term's values ``v``; with ``slope``, also its largest slope over the heads
     and the slope of the mean (both 1), as ``(mean, slope, mean_slope)``."""
     R_off = np.concatenate([[0.0], np.asarray(v.get("run_angle_offset_rad", []))])
-    pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", []))])
+    pl = np.concatenate([[0.0], np.asarray(v.get("placement_rad", np.zeros(alpha.size - 1)))])
     a, b = np.asarray(v["fourier_cos_rad"]), np.asarray(v["fourier_sin_rad"])
     m = np.arange(1, a.size + 1)
     x = th + R_off[run]
@@ -503,9 +445,11 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     (the fitted error is not small, or its head mean holds orders the heads cannot
     separate), and :class:`FitDivergence` says so (the angle is left as it was). Orders
     every head sees alike (equally spaced heads) are held out of the head mean: the base
-    holds them at zero, since the common rotation they make is unobservable (issue 44 A)."""
-    if prep.ctx.has_ref or prep.n_channels < 2:
-        return None
+    holds them at zero, since the common rotation they make is unobservable (issue 44 A).
+    Not where every run covers less than one turn (``part_turn_span``): the disk orders are
+    not separable there, and neither is the fitted error's head mean (issue 44)."""
+    if prep.ctx.has_ref or prep.n_channels < 2 or part_turn_span(prep) is not None:
+        return None  # part of a turn: the fitted error's head mean is not determined there
     base = next((t for t in terms if t.cand.name == "base"), None)
     if base is None:
         return None
@@ -579,10 +523,11 @@ def multihead_base(prep: Prepared, M: int):
     if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
         prep.rows["theta_raw"] = prep.rows["theta"]
     held = _symmetric_orders(prep, M)
-    cand = _base_candidate(C, R, M, tuple(held))
+    span = part_turn_span(prep)  # issue 44: part of a turn, placements not separable
+    cand = _base_candidate(C, R, M, tuple(held), span is None)
     start = {}
     if R > 1:
-        start["run_angle_offset_rad"] = _run_offsets_start(prep, M)
+        start["run_angle_offset_rad"] = run_offsets_start(prep, M)
     terms = [(cand, start)]
     if prep.count_jumps:
         terms.append((_jump_candidate(prep), {}))
@@ -604,6 +549,13 @@ def multihead_base(prep: Prepared, M: int):
     info["unidentifiable"].append(
         "the common rotation of all heads (head 0's placement is the reference)"
     )
+    if span is not None:
+        info["unidentifiable"].append(
+            f"the disk error's orders 1..{M} one by one"
+            + (" and the head placements (held at the nominal azimuths)" if C > 1 else "")
+            + f": every run covers {span / (2 * math.pi):.2f} turn or less, where they are "
+            "not separable (only the error's sum over the arcs seen is fitted)"
+        )
     return terms, info
 
 
