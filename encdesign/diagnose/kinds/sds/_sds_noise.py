@@ -312,18 +312,23 @@ def _best_pair(
     dof = n_ind - Q.shape[1] - 2
     if dof < 3 or ssr0 <= 0:
         return None
-    Ap = A - np.einsum("np,pgc->ngc", Q, np.einsum("np,ngc->pgc", Q, A))
-    G = np.einsum("ngi,ngj->gij", Ap, Ap)
-    b = np.einsum("ngi,n->gi", Ap, e)
-    det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] ** 2
-    ok = det > 1e-10 * np.einsum("ngi,ngi->g", A, A) ** 2
-    q = b[:, 0] ** 2 * G[:, 1, 1] - 2 * b[:, 0] * b[:, 1] * G[:, 0, 1] + b[:, 1] ** 2 * G[:, 0, 0]
-    q = np.where(ok, q / np.where(ok, det, 1.0), 0.0)
+    # the pairs less their part in the span of Q: Gram blocks from Q's sums (e is already
+    # orthogonal to Q, so the pairs' sums with it need no projection)
+    x, y = A[:, :, 0], A[:, :, 1]
+    cx, cy = Q.T @ x, Q.T @ y
+    g00 = np.sum(x * x, 0) - np.sum(cx * cx, 0)
+    g01 = np.sum(x * y, 0) - np.sum(cx * cy, 0)
+    g11 = np.sum(y * y, 0) - np.sum(cy * cy, 0)
+    b0, b1 = e @ x, e @ y
+    det = g00 * g11 - g01**2
+    ok = det > 1e-10 * (np.sum(x * x, 0) + np.sum(y * y, 0)) ** 2
+    q = np.where(ok, (b0**2 * g11 - 2 * b0 * b1 * g01 + b1**2 * g00) / np.where(ok, det, 1.0), 0.0)
     j = int(np.argmax(q))
     if not ok[j]:
         return None
     f = (q[j] / 2) / ((ssr0 - q[j]) / dof) if ssr0 > q[j] else np.inf
-    return float(stats.f.logsf(f, 2, dof)) + math.log(A.shape[1]), Ap[:, j]
+    Aj = A[:, j]
+    return float(stats.f.logsf(f, 2, dof)) + math.log(A.shape[1]), Aj - Q @ (Q.T @ Aj)
 
 
 def _level_sigma(
