@@ -488,7 +488,6 @@ def sds_prepare(
         test_p=settings.sds_sigma_test_p,
         level_alpha=settings.sds_level_alpha,
         fixed=np.asarray(rows["fixed_c"], float),
-        phi=np.asarray(kd.shaft, float),
     )
     ctx = Context(
         kind="sds",

@@ -278,59 +278,6 @@ def _common_factor(
     return math.sqrt(1.0 + max(excess, 0.0) / s_raw**2)
 
 
-def _order_groups(phi: np.ndarray, R: int, M: int, proj: bool) -> np.ndarray:
-    """``(R*M, G, 2)``: pairs of columns of the run means (rows in time order), each the
-    cos / sin of an order ``1 .. R*M/2 - 1`` of the platform angle ``phi`` on one moving
-    sensor times a shape over the runs: 1 (there throughout), a linear growth from the first
-    run to the last, or switching on at run ``j`` (2 runs at least either side); projected on
-    the moving-sensor differences where the run means are (``proj``)."""
-    i = np.arange(R, dtype=float)
-    shapes = [np.ones(R), i / max(R - 1, 1)] + [(i >= j).astype(float) for j in range(2, R - 1)]
-    W = np.stack(shapes, 1)  # (R, S)
-    m = np.arange(1, max(R * M // 2 - 1, 1) + 1)
-    cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
-    per = W[:, :, None, None] * cs[:, None]  # (R, S, L, 2)
-    A = np.zeros((R, M, M) + per.shape[1:])
-    for k in range(M):
-        A[:, k, k] = per
-    if proj:
-        A = A - A.mean(1, keepdims=True)
-    return A.reshape(R * M, -1, 2)
-
-
-def _best_pair(
-    ym: np.ndarray, Q: np.ndarray, A: np.ndarray, n_ind: int
-) -> tuple[float, np.ndarray] | None:
-    """The pair of columns of ``A`` (R*M, G, 2; :func:`_order_groups`) that takes the most
-    of what the basis ``Q`` leaves of ``ym``: ``(log p, columns)``, ``p`` its ``F(2, dof)``
-    tail probability times ``G`` (Bonferroni over the pairs); ``None`` where none is left.
-    An order of one sensor that grows or switches on is in no saturating column: left in,
-    it raised the run-mean level 1.8-1.95 times on 5x records of the discovery benchmark
-    (issue 41, session 18), and the structure fell below every threshold with it."""
-    e = ym - Q @ (Q.T @ ym)
-    ssr0 = float(e @ e)
-    dof = n_ind - Q.shape[1] - 2
-    if dof < 3 or ssr0 <= 0:
-        return None
-    # the pairs less their part in the span of Q: Gram blocks from Q's sums (e is already
-    # orthogonal to Q, so the pairs' sums with it need no projection)
-    x, y = A[:, :, 0], A[:, :, 1]
-    cx, cy = Q.T @ x, Q.T @ y
-    g00 = np.sum(x * x, 0) - np.sum(cx * cx, 0)
-    g01 = np.sum(x * y, 0) - np.sum(cx * cy, 0)
-    g11 = np.sum(y * y, 0) - np.sum(cy * cy, 0)
-    b0, b1 = e @ x, e @ y
-    det = g00 * g11 - g01**2
-    ok = det > 1e-10 * (np.sum(x * x, 0) + np.sum(y * y, 0)) ** 2
-    q = np.where(ok, (b0**2 * g11 - 2 * b0 * b1 * g01 + b1**2 * g00) / np.where(ok, det, 1.0), 0.0)
-    j = int(np.argmax(q))
-    if not ok[j]:
-        return None
-    f = (q[j] / 2) / ((ssr0 - q[j]) / dof) if ssr0 > q[j] else np.inf
-    Aj = A[:, j]
-    return float(stats.f.logsf(f, 2, dof)) + math.log(A.shape[1]), Aj - Q @ (Q.T @ Aj)
-
-
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -341,7 +288,6 @@ def _level_sigma(
     test_p: float,
     level_alpha: float,
     fixed: np.ndarray | None = None,
-    phi: np.ndarray | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -351,11 +297,7 @@ def _level_sigma(
     no low order can inflate it), plus the significant change points (a step on one sensor
     from one run on) and single-value outliers (one sensor in one run), each searched for
     and tested as F(1, dof) against what is left (Bonferroni), so neither can inflate it
-    either; with the platform angles ``phi`` (one per run, rows in time order) also an order
-    of ``phi`` on one sensor that is there throughout, grows or switches on (a pair of
-    columns, :func:`_order_groups`, F(2, dof); each step takes the column or pair of least
-    Bonferroni-adjusted p-value; issue 41, session 18). The level is ``sqrt(SSR / nu)``
-    with ``nu`` = independent values − rank (without
+    either. The level is ``sqrt(SSR / nu)`` with ``nu`` = independent values − rank (without
     ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
     1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
     its estimation error: with ~12 platform positions it is known to ~±17 %, which the
@@ -392,9 +334,8 @@ def _level_sigma(
     A = A.reshape(R * M, -1)
     n_tests = max(1, A.shape[1])
     Q = span_basis(X)
-    pairs = _order_groups(phi, R, M, proj) if phi is not None else None
-    added = orders = 0
-    for _ in range(3 * M):
+    added = 0
+    for _ in range(2 * M):
         e = ym - Q @ (Q.T @ ym)
         ssr0 = float(e @ e)
         dof = n_ind - Q.shape[1] - 1
@@ -406,16 +347,7 @@ def _level_sigma(
         gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
         j = int(np.argmax(gain))
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
-        # Bonferroni-adjusted log p-values: the single column, and the best pair of orders
-        lp = stats.f.logsf(f, 1, dof) + math.log(n_tests) if ok[j] else 0.0
-        pair = _best_pair(ym, Q, pairs, n_ind) if pairs is not None else None
-        if pair is not None and pair[0] < lp:
-            if pair[0] >= math.log(level_alpha):
-                break
-            Q = span_basis(np.concatenate([Q, pair[1]], 1))
-            orders += 1
-            continue
-        if lp >= math.log(level_alpha):
+        if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
             break
         Q = span_basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
         added += 1
@@ -442,7 +374,6 @@ def _level_sigma(
             run_means_widening=c,
             run_means_common_factor=g,
             run_means_steps_or_outliers=added,
-            run_means_sensor_orders=orders,
             contrasts_common_rad=lv[0] if lv else None,
             contrasts_differences_rad=lv[1] if len(lv) > 1 else None,
         )
@@ -470,7 +401,6 @@ def levels_of(ctx: Context):
     s = ctx.settings
 
     fixed = np.asarray(ctx.rows["fixed_c"], float)
-    phi = np.asarray(ctx.rows["theta"], float)
 
     def levels(resid: np.ndarray) -> np.ndarray:
         return _level_sigma(
@@ -481,7 +411,6 @@ def levels_of(ctx: Context):
             test_p=s.sds_sigma_test_p,
             level_alpha=s.sds_level_alpha,
             fixed=fixed,
-            phi=phi,
         )
 
     return levels
@@ -507,7 +436,6 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         test_p=prep.settings.sds_sigma_test_p,
         level_alpha=prep.settings.sds_level_alpha,
         fixed=np.asarray(prep.rows["fixed_c"], float)[prep.keep],
-        phi=np.asarray(prep.rows["theta"], float)[prep.keep],
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
