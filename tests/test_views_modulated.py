@@ -124,7 +124,7 @@ def test_regressors_are_made_orthogonal_to_the_base_model():
     chi-square; read with the raw regressors (no Jacobian) it stays below the threshold
     (issue 41, session 18: 3-6 of 30 chi-square lost on SDS steps)."""
     n, m, C = 600, 5, 1
-    prep = _prep(n, seed=7, C=C)
+    prep = _prep(n, runs=n, seed=7, C=C)  # one row per run (SDS run means)
     th = prep.rows["theta"]
     J = np.stack([np.ones(n), np.cos(m * th), np.sin(m * th)], 1)[:, None, :]  # (n, C, p)
     g = np.arange(n) / (n - 1)
