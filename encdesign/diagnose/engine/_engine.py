@@ -72,6 +72,7 @@ from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
 from ._steps import run_param_interval, time_param_interval
 from ._timing import stage, timing
 from ._views import locate
+from ._views_modulated import base_jacobian
 
 
 def _set_order(prep: Prepared, order: int) -> None:
@@ -752,6 +753,7 @@ def run_engine(
                     kind, prep, fitter, base_terms, base_info, order, limit, grow
                 )
                 scan = scan_order_of(limit, order, prep.settings)
+                prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
             pg.stage("base fitted")
             with stage("select"):
                 sel = select(

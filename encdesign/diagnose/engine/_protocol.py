@@ -284,6 +284,9 @@ class Prepared:
     settings: FinderSettings = DEFAULT_SETTINGS  # the thresholds of this diagnosis
     # steps of a channel's error function of the angle (recurring count jumps), in the base
     angle_steps: list[dict] = dataclasses.field(default_factory=list)
+    # the base model's Jacobian on every row (n, C, p), projected like the data, not whitened;
+    # set after the base fit on a record small enough (``_views_modulated.base_jacobian``)
+    base_jacobian: np.ndarray | None = None
 
     @property
     def n(self) -> int:

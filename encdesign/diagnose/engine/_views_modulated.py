@@ -35,9 +35,9 @@ BLOCK_VALUES = 1 << 16
 
 
 def _power2(G: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Chi-square two regressors with Gram ``G`` (..., 2, 2) take out of ``B`` (..., 2, C)
-    (their projection; 0 where the Gram matrix is singular)."""
-    g00, g01, g11 = G[..., 0, 0, None], G[..., 0, 1, None], G[..., 1, 1, None]
+    """Chi-square two regressors with Gram ``G`` (..., C or 1, 2, 2) take out of ``B``
+    (..., 2, C) (their projection; 0 where the Gram matrix is singular)."""
+    g00, g01, g11 = G[..., 0, 0], G[..., 0, 1], G[..., 1, 1]
     det = g00 * g11 - g01 * g01
     ok = det > 1e-9 * np.maximum(g00 + g11, 1e-300) ** 2
     b0, b1 = B[..., 0, :], B[..., 1, :]
@@ -45,22 +45,36 @@ def _power2(G: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.where(ok, np.maximum(q, 0.0), 0.0)
 
 
+def _projected(G: np.ndarray, B: np.ndarray, V, u) -> tuple[np.ndarray, np.ndarray]:
+    """Gram (..., C, 2, 2) and sums (..., 2, C) of the regressors made orthogonal to the base
+    model's whitened Jacobian (orthonormal basis ``Q``): ``V`` (2, ..., C, p) are the
+    regressors' sums with ``Q``, ``u`` (p,) the residual's (0 up to the fit's convergence).
+    Without a basis (``V`` None) the raw Gram, shared by the channels."""
+    if V is None:
+        return G[..., None, :, :], B
+    corr = np.einsum("i...p,j...p->...ij", V, V)
+    return G[..., None, :, :] - corr, B - np.einsum("i...cp,p->...ic", V, u)
+
+
 def _gram(cc, cs, ss) -> np.ndarray:
     return np.stack([np.stack([cc, cs], -1), np.stack([cs, ss], -1)], -2)
 
 
-def _sums(prep, rw, name: str, idx, m, seg, K: int, ch):
+def _sums(prep, rw, name: str, idx, m, seg, K: int, ch, Q=None):
     """Sums over the kept rows ``idx`` (time order) of ``c = cos(m theta)``, ``s``: per
     change-point segment (``seg``: each row's, 0..K) ``cc, cs, ss`` (K+1, M) and ``c r``,
     ``s r`` (K+1, M, C) on the channels ``ch``; weighted by the growth ``g`` (0..1 over the
-    rows) and ``g^2``."""
+    rows) and ``g^2``. With ``Q`` (rows of ``idx``, channels ``ch``, p: the base's whitened
+    basis) also ``c Q``, ``s Q`` per segment (2, K+1, M, C, p) and weighted by ``g``."""
     n, M, C = idx.size, m.size, ch.size
     S = np.zeros((3, K + 1, M))
     Bs = np.zeros((2, K + 1, M, C))
     Sg, Sgg = np.zeros((3, M)), np.zeros((3, M))
     Bg = np.zeros((2, M, C))
+    p = 0 if Q is None else Q.shape[2]
+    Vs, Vg = np.zeros((2, K + 1, M, C, p)), np.zeros((2, M, C, p))
     g_all = np.arange(n) / max(n - 1, 1)
-    step = max(1, BLOCK_VALUES // M)
+    step = max(1, BLOCK_VALUES // (M * max(1, C * p)))
     for a in range(0, n, step):
         b = min(n, a + step)
         rows = idx[a:b]
@@ -73,15 +87,49 @@ def _sums(prep, rw, name: str, idx, m, seg, K: int, ch):
         prods = (c * c, c * s, s * s)
         sb = seg[a:b]
         st = np.flatnonzero(np.r_[True, sb[1:] != sb[:-1]])
-        for i, p in enumerate(prods):
-            S[i, sb[st]] += np.add.reduceat(p, st, axis=0)
-            Sg[i] += g @ p
-            Sgg[i] += (g * g) @ p
+        for i, pr in enumerate(prods):
+            S[i, sb[st]] += np.add.reduceat(pr, st, axis=0)
+            Sg[i] += g @ pr
+            Sgg[i] += (g * g) @ pr
         for i, x in enumerate((c, s)):
             xr = x[:, :, None] * r[:, None, :]  # (rows, M, C)
             Bs[i, sb[st]] += np.add.reduceat(xr, st, axis=0)
             Bg[i] += np.einsum("n,nmc->mc", g, xr)
-    return S, Bs, Sg, Sgg, Bg
+            if p:
+                xq = x[:, :, None, None] * Q[a:b][:, None]  # (rows, M, C, p)
+                Vs[i, sb[st]] += np.add.reduceat(xq, st, axis=0)
+                Vg[i] += np.einsum("n,nmcp->mcp", g, xq)
+    return S, Bs, Sg, Sgg, Bg, (Vs, Vg) if p else None
+
+
+def base_jacobian(prep, fitter, terms) -> np.ndarray | None:
+    """The Jacobian of ``terms`` on every row (n, C, p), projected like the data, not
+    whitened (:attr:`Prepared.base_jacobian`), for a record of one row per run (the SDS run
+    means; else ``None``: on a 3000-row multihead record its evaluation and the view's sums
+    with it took the diagnosis from 3.1 to 5.8 s CPU, session 18)."""
+    if prep.n > len(prep.run_ids) or not terms:
+        return None
+    parts = []
+    for a, b, x in fitter.chunks():
+        Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
+        J = np.concatenate(Js, axis=2)
+        parts.append(J - J.mean(1, keepdims=True) if prep.kd.project else J)
+    return np.concatenate(parts, 0)
+
+
+def _basis(prep, kidx, rw) -> tuple[np.ndarray, np.ndarray] | None:
+    """The base model's whitened Jacobian on the kept rows ``kidx``: an orthonormal basis
+    (rows, C, r) of its span over rows x channels, and the residual's sums with it (r,)."""
+    J = getattr(prep, "base_jacobian", None)
+    if J is None or J.shape[0] != rw.shape[0] or J.shape[1] != rw.shape[1]:
+        return None
+    Jw = J[kidx] / np.asarray(prep.sigma, float)[None, :, None]
+    U, sv, _ = np.linalg.svd(Jw.reshape(-1, J.shape[2]), full_matrices=False)
+    U = U[:, sv > sv.max(initial=0.0) * 1e-9 * np.sqrt(U.shape[0])]
+    if U.shape[1] == 0:
+        return None
+    Q = U.reshape(kidx.size, J.shape[1], -1)
+    return Q, np.einsum("ncp,nc->p", Q, np.asarray(rw[kidx], float))
 
 
 def scan_modulated(
@@ -107,22 +155,34 @@ def scan_modulated(
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
     m = np.arange(1, max_order + 1, dtype=float)
     ch = np.asarray(channels, int)
-    S, Bs, Sg, Sgg, Bg = _sums(prep, rw, name, kidx, m, seg, K, ch)
+    basis = _basis(prep, kidx, rw)
+    Q, u = (None, None) if basis is None else (basis[0][:, ch], basis[1])
+    S, Bs, Sg, Sgg, Bg, V = _sums(prep, rw, name, kidx, m, seg, K, ch, Q)
     # totals, prefix (before each edge) and suffix (from each edge) sums
     tot_S, tot_B = S.sum(1), Bs.sum(1)  # (3, M), (2, M, C)
     on_S, on_B = np.cumsum(S[:, ::-1], 1)[:, ::-1][:, 1:], np.cumsum(Bs[:, ::-1], 1)[:, ::-1][:, 1:]
     off_S, off_B = tot_S[:, None] - on_S, tot_B[:, None] - on_B  # (3, K, M), (2, K, M, C)
     G_tot = _gram(*tot_S)  # (M, 2, 2)
-    static = _power2(G_tot, np.moveaxis(tot_B, 0, -2))  # (M, C)
-    # shapes: growth g, decay 1 - g, switch on / off at each edge
+    static = _power2(G_tot[:, None], np.moveaxis(tot_B, 0, -2))  # (M, C)
+    # shapes: growth g, decay 1 - g, switch on / off at each edge; with the base's basis
+    # each shape's regressors are made orthogonal to the base model first (the residual
+    # is: a part the base takes is no evidence, and the chi-square is then exactly 2 dof)
     dec_S = tot_S - 2 * Sg + Sgg
     dec_B = tot_B - Bg
-    shapes = [
-        ("growth", None, _power2(_gram(*Sgg), np.moveaxis(Bg, 0, -2))),
-        ("decay", None, _power2(_gram(*dec_S), np.moveaxis(dec_B, 0, -2))),
-    ]
-    pw_on = _power2(_gram(*on_S), np.moveaxis(on_B, 0, -2))  # (K, M, C)
-    pw_off = _power2(_gram(*off_S), np.moveaxis(off_B, 0, -2))
+    if V is None:
+        v_g = v_d = v_on = v_off = None
+    else:
+        Vs, v_g = V
+        v_tot = Vs.sum(1)
+        v_on = np.cumsum(Vs[:, ::-1], 1)[:, ::-1][:, 1:]
+        v_d, v_off = v_tot - v_g, v_tot[:, None] - v_on
+
+    def power(Sx, Bx, Vx):
+        return _power2(*_projected(_gram(*Sx), np.moveaxis(Bx, 0, -2), Vx, u))
+
+    shapes = [("growth", None, power(Sgg, Bg, v_g)), ("decay", None, power(dec_S, dec_B, v_d))]
+    pw_on = power(on_S, on_B, v_on)  # (K, M, C)
+    pw_off = power(off_S, off_B, v_off)
     for k in range(K):
         shapes.append(("switch_on", k, pw_on[k]))
         shapes.append(("switch_off", k, pw_off[k]))
