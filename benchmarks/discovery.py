@@ -172,13 +172,17 @@ def _gains(truth: dict, base: bool = False) -> tuple[float, float, float]:
 def _locate_threshold(truth: dict, kind: str) -> float:
     """The chi-square the finder's ``orders`` view needs to locate an order line on this
     record (its Bonferroni threshold over the orders scanned x channels,
-    ``_views.view_orders``; an SDS record scans its run-mean channels' orders up to
-    ``sds_limit``); nan for a line in Hz (located by the spectrum view, not scored here)."""
+    ``_views.view_orders``; an SDS record scans its M run-mean channels' orders up to
+    ``sds_limit`` and counts only those channels); nan for a line in Hz (located by the
+    spectrum view, not scored here)."""
     prep, scan = _CAP.get("base_prep"), _CAP.get("scan")
     if prep is None or scan is None or truth["line"][0] != "order":
         return float("nan")
-    orders = min(scan, sds_limit(prep)) if kind == "sds" else scan
-    return chi2_threshold(prep.settings.alpha, 2, orders * prep.n_channels)
+    if kind == "sds":
+        n_tests = min(scan, sds_limit(prep)) * prep.consts["psi_m"].size
+    else:
+        n_tests = scan * prep.n_channels
+    return chi2_threshold(prep.settings.alpha, 2, n_tests)
 
 
 def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:

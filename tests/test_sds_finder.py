@@ -391,6 +391,35 @@ def test_delay_reference_sensor_column_is_zero(sds_bench):
         assert np.all(np.delete(norms, ref) > 0)
 
 
+def test_run_mean_orders_counted_over_the_scanned_channels_only(sds_bench):
+    """The SDS orders view scans only the M run-mean channels: its Bonferroni count is
+    orders x M, not orders x all channels (issue 41). An order on one run-mean channel with
+    power between the two thresholds is located; the engine's default (all channels
+    counted) still misses it, and the channels not scanned show zero power."""
+    from encdesign.diagnose.engine._views import chi2_threshold, view_orders
+    from encdesign.diagnose.kinds.sds._sds import sds_limit, view_mean_orders
+
+    rec, _ = sds_bench(None, "clear", False)
+    prep = sds_prepare(sds_data(rec), dict(rec.meta, kind="sds"))
+    M = prep.consts["psi_m"].size
+    n_ord = min(3, sds_limit(prep))
+    C = len(prep.kd.channel_names)
+    assert C > M
+    alpha = prep.settings.alpha
+    thr_m, thr_c = (chi2_threshold(alpha, 2, n_ord * n) for n in (M, C))
+    assert thr_m < thr_c
+    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+    c = np.cos(np.asarray(prep.rows[name], float))[prep.keep]
+    rw = np.zeros((prep.keep.size, C))
+    amp = np.sqrt(0.5 * (thr_m + thr_c) / np.sum(c**2))
+    rw[prep.keep, 0] = amp * c
+    got = view_mean_orders(prep, rw, 3)
+    assert [f.where["orders"] for f in got] == [[1.0]], got
+    pw = got[0].detail["power_per_channel"]
+    assert thr_m < pw[0] < thr_c and not np.any(pw[M:])
+    assert view_orders(prep, rw, n_ord) == []
+
+
 def test_no_phi_ref_diagnoses(sds_bench, tmp_path):
     """Without phi_ref: a document (no NaN), common terms held and listed."""
     rec, _ = sds_bench(None, "clear", False)

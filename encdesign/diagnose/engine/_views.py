@@ -216,16 +216,20 @@ def _carrying(prep, pw: np.ndarray, thr: float) -> list[int]:
     return [k for k in range(pw.size) if pw[k] > thr and pw[k] >= top]
 
 
-def view_orders(prep, rw, max_order: int) -> list[Finding]:
+def view_orders(prep, rw, max_order: int, channels: list[int] | None = None) -> list[Finding]:
     """Integer shaft orders per channel, rotation locked over all runs (least squares of
-    cos / sin of each order, from sums accumulated in blocks of rows)."""
+    cos / sin of each order, from sums accumulated in blocks of rows). Only ``channels``
+    (default all) are scanned and counted in the threshold's tests; the others show 0."""
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
     C = rw.shape[1]
+    ch_in = list(range(C)) if channels is None else list(channels)
     out = []
-    n_tests = max_order * C
-    thr = chi2_threshold(prep.settings.alpha, 2, n_tests)
+    thr = chi2_threshold(prep.settings.alpha, 2, max_order * len(ch_in))
     orders = np.arange(1, max_order + 1)
-    N, Scc, Sss, Scs, ((Bc, Bs),) = order_sums(prep, name, [rw], orders)
+    sub = rw if channels is None else rw[:, ch_in]
+    N, Scc, Sss, Scs, ((Bc_in, Bs_in),) = order_sums(prep, name, [sub], orders)
+    Bc, Bs = np.zeros((orders.size, C)), np.zeros((orders.size, C))
+    Bc[:, ch_in], Bs[:, ch_in] = Bc_in, Bs_in
     for i, m in enumerate(orders):
         G = np.array([[Scc[i], Scs[i]], [Scs[i], Sss[i]]])
         B = np.stack([Bc[i], Bs[i]])  # (2, C)

@@ -219,9 +219,7 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
     from ...engine._views import view_orders
 
     M = prep.consts["psi_m"].size
-    r = np.zeros_like(rw)
-    r[:, :M] = rw[:, :M]
-    return view_orders(prep, r, min(scan_order, sds_limit(prep)))
+    return view_orders(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)))
 
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
@@ -230,7 +228,7 @@ def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list
     from ...engine._views_modulated import scan_modulated
 
     M = prep.consts["psi_m"].size
-    return scan_modulated(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)), rw.shape[1])
+    return scan_modulated(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)), M)
 
 
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
