@@ -14,6 +14,7 @@ import pytest
 
 from encdesign import Recording
 from encdesign.diagnose import FinderSettings, diagnose
+from encdesign.diagnose.engine._prepare import part_turn_span
 from encdesign.diagnose.kinds.multihead._multihead import _hold_run_offsets, multihead_base
 
 
@@ -58,6 +59,7 @@ def _short_runs(seed: int, C: int, turns: float, M: int = 9, n: int = 1200):
         ctx=types.SimpleNamespace(n_runs=2, has_ref=False),
         count_jumps=[],
         angle_steps=[],
+        part_turn_span=part_turn_span(raw, np.ones(n, bool), run),
     )
     return prep, float(np.angle(np.exp(1j * (zero[0] - zero[1]))))
 

@@ -88,17 +88,6 @@ def scan_order_of(limit: int, order: int, settings: FinderSettings) -> int:
     return int(min(limit, max(2 * order, settings.scan_order_min)))
 
 
-def part_turn_span(prep) -> float | None:
-    """The widest shaft-angle span (rad) of a run's kept rows where every run covers less than
-    one turn (the base's orders are then not separable: their held-out error measures that
-    ill-conditioning, not their fit; issue 44), else ``None``."""
-    shaft, keep, widest = np.asarray(prep.kd.shaft, float), prep.keep, 0.0
-    for _, (a, b) in run_spans(prep.run):
-        th = shaft[a:b][keep[a:b]]
-        widest = max(widest, float(np.ptp(th)) if th.size else 0.0)
-    return widest if widest < 2 * np.pi else None
-
-
 SWEEP_WINDOW = 9
 """Rows of the centred moving mean of :func:`_sweep_grid` (odd)."""
 

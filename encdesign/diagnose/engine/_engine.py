@@ -52,7 +52,6 @@ from ._document import (
     global_times_in_own_clock,
     lattice_effect,
     order_spectrum,
-    part_turn_span,
     report_text,
     scan_order_of,
     se_dict,
@@ -119,7 +118,7 @@ def _grow_base_order(
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
     held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
     when it raises the held-out chi-square, unless every run covers less than one turn
-    (:func:`part_turn_span`: the orders are not separable there; the kind's base says so).
+    (``Prepared.part_turn_span``: the orders are not separable there; the kind's base says so).
     Returns ``(order, fit)``, grown and refitted, or ``None``."""
     hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
@@ -154,7 +153,7 @@ def _grow_base_order(
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
     tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
-    worse = (grown.heldout_chi2 > ho0 and part_turn_span(prep) is None) or tied > max(veto, 0.0)
+    worse = (grown.heldout_chi2 > ho0 and prep.part_turn_span is None) or tied > max(veto, 0.0)
     if p1 > prep.settings.growth_left_max * p0 or worse:
         _set_order(prep, order)
         fitter.clear()

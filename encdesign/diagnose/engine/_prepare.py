@@ -639,7 +639,19 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
         run_ids=order_runs,
         run=run,
         settings=settings,
+        part_turn_span=part_turn_span(np.asarray(kd.shaft, float), keep, run),
     )
+
+
+def part_turn_span(shaft: np.ndarray, keep: np.ndarray, run: np.ndarray) -> float | None:
+    """The widest shaft-angle span (rad) of a run's kept rows where every run covers less than
+    one turn (the base's orders are then not separable: their held-out error measures that
+    ill-conditioning, not their fit; issue 44), else ``None`` (``Prepared.part_turn_span``)."""
+    widest = 0.0
+    for _, (a, b) in run_spans(run):
+        th = shaft[a:b][keep[a:b]]
+        widest = max(widest, float(np.ptp(th)) if th.size else 0.0)
+    return widest if widest < 2 * np.pi else None
 
 
 def _detrend(y: np.ndarray, seg: np.ndarray) -> np.ndarray:

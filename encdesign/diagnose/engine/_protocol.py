@@ -287,6 +287,10 @@ class Prepared:
     # the base model's Jacobian on every row (n, C, p), projected like the data, not whitened;
     # set after the base fit on a record small enough (``_views_modulated.base_jacobian``)
     base_jacobian: np.ndarray | None = None
+    # the widest shaft-angle span (rad) of a run's kept rows where every run covers less than
+    # one turn, else None (``_prepare.part_turn_span``; computed once where the record is
+    # prepared)
+    part_turn_span: float | None = None
 
     @property
     def n(self) -> int:

@@ -35,7 +35,6 @@ from ....io._recording import Recording
 from ....physics import _effects as fx
 from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
-from ...engine._document import part_turn_span
 from ...engine._kind import AbstractKind
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
@@ -446,9 +445,9 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     separate), and :class:`FitDivergence` says so (the angle is left as it was). Orders
     every head sees alike (equally spaced heads) are held out of the head mean: the base
     holds them at zero, since the common rotation they make is unobservable (issue 44 A).
-    Not where every run covers less than one turn (``part_turn_span``): the disk orders are
+    Not where every run covers less than one turn (``Prepared.part_turn_span``): the disk orders are
     not separable there, and neither is the fitted error's head mean (issue 44)."""
-    if prep.ctx.has_ref or prep.n_channels < 2 or part_turn_span(prep) is not None:
+    if prep.ctx.has_ref or prep.n_channels < 2 or prep.part_turn_span is not None:
         return None  # part of a turn: the fitted error's head mean is not determined there
     base = next((t for t in terms if t.cand.name == "base"), None)
     if base is None:
@@ -523,7 +522,7 @@ def multihead_base(prep: Prepared, M: int):
     if "theta_raw" not in prep.rows:  # the angle before alignment (never changed in place)
         prep.rows["theta_raw"] = prep.rows["theta"]
     held = _symmetric_orders(prep, M)
-    span = part_turn_span(prep)  # issue 44: part of a turn, placements not separable
+    span = prep.part_turn_span  # issue 44: part of a turn, placements not separable
     cand = _base_candidate(C, R, M, tuple(held), span is None)
     start = {}
     if R > 1:
