@@ -17,10 +17,8 @@ from ...engine._protocol import KindData, Prepared, RowColumns
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ._sds_noise import (
     REFERENCE_RADIUS_M,
-    _level_sigma,
-    _saturating_columns,
-    common_base_columns,
     design_orders,
+    run_mean_levels,
 )
 
 # ----------------------------------------------------------------------------- data
@@ -485,18 +483,7 @@ def sds_prepare(
         if pp > 0
         else []
     )
-    X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
-    sigma = _level_sigma(
-        kd.y,
-        kd.n_revs,
-        X,
-        float(consts["proj"]) > 0,
-        test_p=settings.sds_sigma_test_p,
-        level_alpha=settings.sds_level_alpha,
-        fixed=np.asarray(rows["fixed_c"], float),
-        common_base=common_base_columns(rows["phi"], kd.constants["psi_m"], orders),
-        common_quantile=settings.sds_common_level_quantile,
-    )
+    sigma = run_mean_levels(kd.y, kd.n_revs, rows, consts, orders, settings)
     ctx = Context(
         kind="sds",
         n_channels=C,

@@ -13,6 +13,7 @@ from scipy import stats
 
 from ...engine._candidates import Context
 from ...engine._protocol import NoiseEstimate, Prepared
+from ...engine._settings import FinderSettings
 from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
@@ -436,41 +437,48 @@ def _level_sigma(
     return out
 
 
+def run_mean_levels(
+    resid: np.ndarray,
+    K: int,
+    rows: Mapping[str, Any],
+    consts: Mapping[str, Any],
+    orders: list[int],
+    settings: FinderSettings,
+    info: dict | None = None,
+) -> np.ndarray:
+    """:func:`_level_sigma` on ``resid`` (R, C: one row per run, ``K`` revolution columns
+    per moving sensor) with the kind's settings spelled once: the saturating columns of the
+    design ``orders`` (:func:`_saturating_columns`), the fixed sensors' run means
+    (``rows["fixed_c"]``), the base's common columns (:func:`common_base_columns`) and the
+    thresholds of ``settings``. Used by the prepare stage, the noise hook and the probes'
+    re-estimates (:func:`levels_of`), so that they cannot drift apart."""
+    X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
+    return _level_sigma(
+        resid,
+        K,
+        X,
+        float(consts["proj"]) > 0,
+        info=info,
+        test_p=settings.sds_sigma_test_p,
+        level_alpha=settings.sds_level_alpha,
+        fixed=np.asarray(rows["fixed_c"], float),
+        common_base=common_base_columns(rows["phi"], consts["psi_m"], orders),
+        common_quantile=settings.sds_common_level_quantile,
+    )
+
+
 def levels_of(ctx: Context):
-    """``levels(resid) -> sigma (C,)``: the noise stage's own estimate (:func:`_level_sigma`,
-    same saturating columns and settings) on another residual of the kept rows (``None``
-    before the stage ran): what a probe's effect added to the base residual makes of it."""
+    """``levels(resid) -> sigma (C,)``: the noise stage's own estimate (:func:`run_mean_levels`,
+    same orders and settings) on another residual of the kept rows (``None`` before the stage
+    ran): what a probe's effect added to the base residual makes of it."""
     base = noise_info(ctx).base_resid
     if base is None:
         return None
-    X, _ = _saturating_columns(
-        ctx.rows,
-        ctx.consts,
-        base_orders(ctx.meta, ctx.consts, ctx.max_order)[0],
-        ctx.settings.sds_saturate_fraction,
-    )
-    M = int(np.asarray(ctx.consts["psi_m"]).size)
-    K = base.shape[1] // M
-    proj = float(ctx.consts["proj"]) > 0
-    s = ctx.settings
-
-    fixed = np.asarray(ctx.rows["fixed_c"], float)
-    common = common_base_columns(
-        ctx.rows["phi"], ctx.consts["psi_m"], base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
-    )
+    orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
+    K = base.shape[1] // int(np.asarray(ctx.consts["psi_m"]).size)
 
     def levels(resid: np.ndarray) -> np.ndarray:
-        return _level_sigma(
-            resid,
-            K,
-            X,
-            proj,
-            test_p=s.sds_sigma_test_p,
-            level_alpha=s.sds_level_alpha,
-            fixed=fixed,
-            common_base=common,
-            common_quantile=s.sds_common_level_quantile,
-        )
+        return run_mean_levels(resid, K, ctx.rows, ctx.consts, orders, ctx.settings)
 
     return levels
 
@@ -479,22 +487,11 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     """Noise hook: the two levels of :func:`_level_sigma` on the base residual, with what
     the candidates' rules need (:class:`SDSNoiseInfo`: the base residual's common-order
     powers (:func:`common_order_power`) for the plausibility of ``beam_tilt_axial``, ...)."""
+    # one row per run, every run kept (sds_prepare): the rows are the residual's rows
     orders = base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0]
-    X, _ = _saturating_columns(prep.rows, prep.consts, orders, prep.settings.sds_saturate_fraction)
     info: dict = {}
-    sig = _level_sigma(
-        resid[prep.keep],
-        prep.kd.n_revs,
-        X,
-        float(prep.consts["proj"]) > 0,
-        info=info,
-        test_p=prep.settings.sds_sigma_test_p,
-        level_alpha=prep.settings.sds_level_alpha,
-        fixed=np.asarray(prep.rows["fixed_c"], float)[prep.keep],
-        common_base=common_base_columns(
-            np.asarray(prep.rows["phi"], float)[prep.keep], prep.consts["psi_m"], orders
-        ),
-        common_quantile=prep.settings.sds_common_level_quantile,
+    sig = run_mean_levels(
+        resid[prep.keep], prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings, info
     )
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
