@@ -445,7 +445,10 @@ def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
     """The smallest size (multiple of the unit residual ``resid``) at which ``views``
     locate something in a view of ``signature``, from ``a0`` up (:func:`_first_size`)."""
     return _first_size(
-        lambda a: any(f.view in signature for f in locate(prep, resid * a, views, scan)), a0
+        lambda a: any(
+            f.view in signature for f in locate(prep, resid, views, scan, scale=a, reuse=True)
+        ),
+        a0,
     )
 
 
@@ -502,7 +505,7 @@ def _own_shares(prep, resid, views, scan, a: float, sig: set[str], ref) -> tuple
     the rules of stage 4 (``_select.own_share``) on a record that holds it and that structure."""
     s = prep.settings
     num = den = num_s = den_s = 0.0
-    for g in locate(prep, resid * a, views, scan):
+    for g in locate(prep, resid, views, scan, scale=a, reuse=True):
         w = float(g.power)
         if w <= 0:
             continue
