@@ -313,20 +313,24 @@ class _Bench:
                 G[k] += Sk.T @ Sk
                 Su = (S[lo:hi] / sw[None, :, None]).reshape(-1, p)
                 Gu[k] += Su.T @ Su
+            if not m:
+                return
+            U = np.empty((b - a, prep.n_channels, m))
             for i, t in enumerate(terms):
                 va, J = fitter.eval_term(t, a, b, x, jac=True)
                 _add_gram(prep, grams[i], J, a, b, 1.0 / prep.sigma)
                 if prep.kd.project:
                     va = va - va.mean(1, keepdims=True)
-                uw = (va * sw)[order]
-                for k, lo, hi in rows:
-                    uk = uw[lo:hi].ravel()
-                    uu = (uw[lo:hi] / w[None, :]).ravel()
-                    Sk = S[lo:hi].reshape(-1, p)
-                    hv[i, k] += Sk.T @ uk
-                    huv[i, k] += Sk.T @ uu
-                    qv[i, k] += float(uk @ uk)
-                    quv[i, k] += float(uk @ uu)
+                U[:, :, i] = va * sw
+            U = U[order]
+            for k, lo, hi in rows:  # every probe at once (a matrix product per fold)
+                Uk = U[lo:hi].reshape(-1, m)
+                UUk = (U[lo:hi] / w[None, :, None]).reshape(-1, m)
+                Sk = S[lo:hi].reshape(-1, p)
+                hv[:, k] += (Sk.T @ Uk).T
+                huv[:, k] += (Sk.T @ UUk).T
+                qv[:, k] += np.einsum("ij,ij->j", Uk, Uk)
+                quv[:, k] += np.einsum("ij,ij->j", Uk, UUk)
 
         G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
         if kept is not None:  # (not summed in the pass: zeros there)

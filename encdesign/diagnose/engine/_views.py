@@ -22,6 +22,7 @@ with nothing missing gives no finding.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any
 
@@ -76,7 +77,12 @@ def log10_tail_p(chi2: float, dof: int) -> float:
 
 
 def chi2_threshold(alpha: float, dof: int, n_tests: int) -> float:
-    return float(stats.chi2.isf(alpha / max(n_tests, 1), dof))
+    return _chi2_isf(float(alpha / max(n_tests, 1)), float(dof))
+
+
+@functools.lru_cache(maxsize=4096)
+def _chi2_isf(p: float, dof: float) -> float:  # (the views ask for the same ones each scan)
+    return float(stats.chi2.isf(p, dof))
 
 
 SCAN_BLOCK = 1 << 18

@@ -65,10 +65,29 @@ def time_order(prep) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return kidx, edges, seg, tau
 
 
-def _pass(prep, rw, name: str, kidx, m, seg, K: int, ch, geom: bool) -> list[np.ndarray]:
+def harmonics(th: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """``cos, sin (m th)`` (M, rows) for ``m = 1..M``, by rotation from ``cos, sin th``
+    (``e^{i m th} = e^{i (m - 1) th} e^{i th}``): a few products per value instead of a
+    trigonometric function of a large argument, and closer to the exact value (the error
+    grows as ``m`` ulps, where ``m th`` alone is rounded to ``|m th|`` ulps)."""
+    c, s = np.empty((M, th.size)), np.empty((M, th.size))
+    if M == 0:
+        return c, s
+    c1, s1 = np.cos(th), np.sin(th)
+    c[0], s[0] = c1, s1
+    tmp = np.empty(th.size)
+    for k in range(1, M):
+        np.multiply(c[k - 1], c1, out=c[k])
+        c[k] -= np.multiply(s[k - 1], s1, out=tmp)
+        np.multiply(s[k - 1], c1, out=s[k])
+        s[k] += np.multiply(c[k - 1], s1, out=tmp)
+    return c, s
+
+
+def _pass(prep, rw, name: str, kidx, M: int, seg, K: int, ch, geom: bool) -> list[np.ndarray]:
     """The sums of one pass over the rows ``kidx`` (module doc); the Gram sums (zeros
     unless ``geom``) then the residual's."""
-    n, M, C = kidx.size, m.size, ch.size
+    n, C = kidx.size, ch.size
     S, Sg, Sgg = np.zeros((3, K + 1, M)), np.zeros((3, M)), np.zeros((3, M))
     B, Bg = np.zeros((2, K + 1, M, C)), np.zeros((2, M, C))
     g_all = np.arange(n) / max(n - 1, 1)
@@ -76,25 +95,24 @@ def _pass(prep, rw, name: str, kidx, m, seg, K: int, ch, geom: bool) -> list[np.
     for a in range(0, n, step):
         b = min(n, a + step)
         rows = kidx[a:b]
-        ang = np.asarray(prep.rows.take(name, rows), float)[:, None] * m[None, :]
-        c, s = np.cos(ang), np.sin(ang)
-        del ang
+        c, s = harmonics(np.asarray(prep.rows.take(name, rows), float), M)  # (M, rows)
         r = np.asarray(rw[rows], float)[:, ch]
         g = g_all[a:b]
         sb = seg[a:b]
         st = np.flatnonzero(np.r_[True, sb[1:] != sb[:-1]])
-        for j0, j1 in zip(st, np.r_[st[1:], b - a]):
-            k = int(sb[j0])
-            B[0, k] += c[j0:j1].T @ r[j0:j1]
-            B[1, k] += s[j0:j1].T @ r[j0:j1]
+        pieces = [(int(sb[j0]), j0, j1) for j0, j1 in zip(st, np.r_[st[1:], b - a])]
+        for k, j0, j1 in pieces:
+            B[0, k] += c[:, j0:j1] @ r[j0:j1]
+            B[1, k] += s[:, j0:j1] @ r[j0:j1]
         gr = g[:, None] * r
-        Bg[0] += c.T @ gr
-        Bg[1] += s.T @ gr
+        Bg[0] += c @ gr
+        Bg[1] += s @ gr
         if geom:
             for i, pr in enumerate((c * c, c * s, s * s)):
-                S[i, sb[st]] += np.add.reduceat(pr, st, axis=0)
-                Sg[i] += g @ pr
-                Sgg[i] += (g * g) @ pr
+                for k, j0, j1 in pieces:
+                    S[i, k] += pr[:, j0:j1].sum(1)
+                Sg[i] += pr @ g
+                Sgg[i] += pr @ (g * g)
     return [S, Sg, Sgg, B, Bg]
 
 
@@ -105,7 +123,7 @@ def order_scan(prep, rw, max_order: int, channels) -> OrderSums:
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
     kidx, edges, seg, tau = time_order(prep)
     K = int(edges.size)
-    m = np.arange(1, max_order + 1, dtype=float)
+    M = int(max_order)
     ch = np.asarray(channels, int)
     th = np.asarray(prep.rows.take(name, kidx), float) if kidx.size else np.zeros(0)
     gkey = ("order_scan", name, int(max_order), fingerprint(kidx, th, edges))
@@ -113,17 +131,17 @@ def order_scan(prep, rw, max_order: int, channels) -> OrderSums:
     first: list = []
 
     def geo():
-        first.append(_pass(prep, rw, name, kidx, m, seg, K, ch, True))
+        first.append(_pass(prep, rw, name, kidx, M, seg, K, ch, True))
         return first[0][:3]
 
     S, Sg, Sgg = geometry(gkey, geo)
 
     def lin():
-        got = first[0] if first else _pass(prep, rw, name, kidx, m, seg, K, ch, False)
+        got = first[0] if first else _pass(prep, rw, name, kidx, M, seg, K, ch, False)
         return got[3:]
 
     B, Bg = linear((*gkey, tuple(ch.tolist())), lin)
     return OrderSums(kidx, edges, tau, S, Sg, Sgg, B, Bg)
 
 
-__all__ = ["OrderSums", "order_scan", "time_order"]
+__all__ = ["OrderSums", "harmonics", "order_scan", "time_order"]

@@ -24,9 +24,10 @@ BIN_ROWS = 1 << 14
 def _columns(prep, idx: np.ndarray) -> np.ndarray:
     """The whitened (and, without a reference, projected) eccentricity columns ``X``
     (rows, C, 2): ``sin, cos (theta - alpha_k)``."""
-    th = np.asarray(prep.rows.take("theta", idx), float)
-    d = th[:, None] - np.asarray(prep.consts["alpha"], float)[None, :]
-    X = np.stack([np.sin(d), np.cos(d)], 2)
+    th = np.asarray(prep.rows.take("theta", idx), float)[:, None]
+    al = np.asarray(prep.consts["alpha"], float)[None, :]
+    c, s, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)  # (the difference formulas)
+    X = np.stack([s * ca - c * sa, c * ca + s * sa], 2)
     if prep.kd.project:
         X = X - X.mean(1, keepdims=True)
     return X * (1.0 / np.asarray(prep.sigma, float)[None, :, None])
