@@ -87,6 +87,7 @@ from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
+from ._views_sums import forget
 from ._workshare import deal
 
 CONVENTION = (
@@ -707,7 +708,10 @@ def detection_bounds(
 
     # every parameter set of every probe (a probe and its worst_of) is one work item
     sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
-    done = iter(deal(sets, bounds_of))
+    try:
+        done = iter(deal(sets, bounds_of))
+    finally:
+        forget()  # the last probe's residual and its views' sums
     for cand, probes in work:
         for probe in probes:
             got = [next(done) for _ in range(1 + len(probe.worst_of))]

@@ -92,6 +92,11 @@ def scanning(resid: Any, scale: float = 1.0, reuse: bool = False) -> Iterator[No
         _SCAN.reset(token)
 
 
+def forget() -> None:
+    """Drop the last reused scan's residual and sums (after the detection bounds)."""
+    _LAST.clear()
+
+
 def linear(key: tuple, compute: Callable[[], list[np.ndarray]]) -> list[np.ndarray]:
     """``compute()`` (arrays linear in the residual the views see) once per scan (and per
     residual of a reused scan, scaled to the scan's size); outside a scan, computed."""
@@ -134,4 +139,4 @@ class Whitened:
         return self.shape[0]
 
 
-__all__ = ["Whitened", "fingerprint", "geometry", "linear", "scanning"]
+__all__ = ["Whitened", "fingerprint", "forget", "geometry", "linear", "scanning"]
