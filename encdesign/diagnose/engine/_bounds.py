@@ -87,6 +87,7 @@ from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
+from ._views_sums import forget
 from ._workshare import deal
 
 CONVENTION = (
@@ -313,20 +314,24 @@ class _Bench:
                 G[k] += Sk.T @ Sk
                 Su = (S[lo:hi] / sw[None, :, None]).reshape(-1, p)
                 Gu[k] += Su.T @ Su
+            if not m:
+                return
+            U = np.empty((b - a, prep.n_channels, m))
             for i, t in enumerate(terms):
                 va, J = fitter.eval_term(t, a, b, x, jac=True)
                 _add_gram(prep, grams[i], J, a, b, 1.0 / prep.sigma)
                 if prep.kd.project:
                     va = va - va.mean(1, keepdims=True)
-                uw = (va * sw)[order]
-                for k, lo, hi in rows:
-                    uk = uw[lo:hi].ravel()
-                    uu = (uw[lo:hi] / w[None, :]).ravel()
-                    Sk = S[lo:hi].reshape(-1, p)
-                    hv[i, k] += Sk.T @ uk
-                    huv[i, k] += Sk.T @ uu
-                    qv[i, k] += float(uk @ uk)
-                    quv[i, k] += float(uk @ uu)
+                U[:, :, i] = va * sw
+            U = U[order]
+            for k, lo, hi in rows:  # every probe at once (a matrix product per fold)
+                Uk = U[lo:hi].reshape(-1, m)
+                UUk = (U[lo:hi] / w[None, :, None]).reshape(-1, m)
+                Sk = S[lo:hi].reshape(-1, p)
+                hv[:, k] += (Sk.T @ Uk).T
+                huv[:, k] += (Sk.T @ UUk).T
+                qv[:, k] += np.einsum("ij,ij->j", Uk, Uk)
+                quv[:, k] += np.einsum("ij,ij->j", Uk, UUk)
 
         G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
         if kept is not None:  # (not summed in the pass: zeros there)
@@ -445,7 +450,10 @@ def _view_size(prep, resid, views, signature, scan, a0: float) -> float | None:
     """The smallest size (multiple of the unit residual ``resid``) at which ``views``
     locate something in a view of ``signature``, from ``a0`` up (:func:`_first_size`)."""
     return _first_size(
-        lambda a: any(f.view in signature for f in locate(prep, resid * a, views, scan)), a0
+        lambda a: any(
+            f.view in signature for f in locate(prep, resid, views, scan, scale=a, reuse=True)
+        ),
+        a0,
     )
 
 
@@ -502,7 +510,7 @@ def _own_shares(prep, resid, views, scan, a: float, sig: set[str], ref) -> tuple
     the rules of stage 4 (``_select.own_share``) on a record that holds it and that structure."""
     s = prep.settings
     num = den = num_s = den_s = 0.0
-    for g in locate(prep, resid * a, views, scan):
+    for g in locate(prep, resid, views, scan, scale=a, reuse=True):
         w = float(g.power)
         if w <= 0:
             continue
@@ -700,7 +708,10 @@ def detection_bounds(
 
     # every parameter set of every probe (a probe and its worst_of) is one work item
     sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
-    done = iter(deal(sets, bounds_of))
+    try:
+        done = iter(deal(sets, bounds_of))
+    finally:
+        forget()  # the last probe's residual and its views' sums
     for cand, probes in work:
         for probe in probes:
             got = [next(done) for _ in range(1 + len(probe.worst_of))]

@@ -22,6 +22,7 @@ with nothing missing gives no finding.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any
 
@@ -30,6 +31,8 @@ from scipy import stats
 
 from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
+from ._views_orders import order_scan
+from ._views_sums import Whitened, linear, scanning
 from ._workshare import deal
 
 
@@ -74,7 +77,12 @@ def log10_tail_p(chi2: float, dof: int) -> float:
 
 
 def chi2_threshold(alpha: float, dof: int, n_tests: int) -> float:
-    return float(stats.chi2.isf(alpha / max(n_tests, 1), dof))
+    return _chi2_isf(float(alpha / max(n_tests, 1)), float(dof))
+
+
+@functools.lru_cache(maxsize=4096)
+def _chi2_isf(p: float, dof: float) -> float:  # (the views ask for the same ones each scan)
+    return float(stats.chi2.isf(p, dof))
 
 
 SCAN_BLOCK = 1 << 18
@@ -220,14 +228,14 @@ def view_orders(prep, rw, max_order: int, channels: list[int] | None = None) -> 
     """Integer shaft orders per channel, rotation locked over all runs (least squares of
     cos / sin of each order, from sums accumulated in blocks of rows). Only ``channels``
     (default all) are scanned and counted in the threshold's tests; the others show 0."""
-    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
     C = rw.shape[1]
     ch_in = list(range(C)) if channels is None else list(channels)
     out = []
     thr = chi2_threshold(prep.settings.alpha, 2, max_order * len(ch_in))
     orders = np.arange(1, max_order + 1)
-    sub = rw if channels is None else rw[:, ch_in]
-    N, Scc, Sss, Scs, ((Bc_in, Bs_in),) = order_sums(prep, name, [sub], orders)
+    sums = order_scan(prep, rw, max_order, ch_in)
+    N = sums.n
+    Scc, Sss, Scs, Bc_in, Bs_in = sums.totals()
     Bc, Bs = np.zeros((orders.size, C)), np.zeros((orders.size, C))
     Bc[:, ch_in], Bs[:, ch_in] = Bc_in, Bs_in
     for i, m in enumerate(orders):
@@ -284,9 +292,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         t = _col(prep, "t", a, b)
         dt = float(np.median(np.diff(t)))
         kr = keep[a:b]
-        x = np.where(kr[:, None], rw[a:b], 0.0)
-        X = np.fft.rfft(x, axis=0)
-        del x
+        X = _run_rfft(rw, kr, a, b)
         P = 2.0 * np.abs(X) ** 2 / nk  # ~ chi2(2) per channel
         P[0] = 0.0
         if (b - a) % 2 == 0:
@@ -298,7 +304,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         frev = float(np.median(np.abs(om))) / (2 * np.pi)
         # a run turning backwards sees exp(+i m alpha_k) at positive frequencies
         if np.median(om) < 0:
-            np.conj(X, out=X)
+            X = np.conj(X)  # (a copy: the transform is shared with the band view)
         per_run.append((r, frev))
         Ps = P.sum(1)
         # power of each line: three bins (leakage), tested on the centre
@@ -426,6 +432,14 @@ def _run_slices(prep):
     return run_spans(prep.run)
 
 
+def _run_rfft(rw, kr: np.ndarray, a: int, b: int) -> np.ndarray:
+    """The transform of rows ``a:b`` (a run; excluded rows zero), shared by the spectrum and
+    band views within a scan (:func:`._views_sums.linear`; read only)."""
+    return linear(
+        ("rfft", a, b), lambda: [np.fft.rfft(np.where(kr[:, None], rw[a:b], 0.0), axis=0)]
+    )[0]
+
+
 def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
     """Broadband excess: periodogram power per run, channel and frequency band (1/16 of the
     band to Nyquist), for structure spread over many bins (a chirp, a wideband noise)."""
@@ -448,10 +462,8 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
         return found
     for r, a, b, nk in runs:  # one run's transform at a time
         kr = keep[a:b]
-        x = np.where(kr[:, None], rw[a:b], 0.0)
-        m = x.shape[0]
-        Xf = np.fft.rfft(x, axis=0)
-        del x
+        m = b - a
+        Xf = _run_rfft(rw, kr, a, b)
         P = 2.0 * np.abs(Xf) ** 2 / nk
         dt = float(np.median(np.diff(_col(prep, "t", a, b))))
         f = np.fft.rfftfreq(m, dt)
@@ -721,39 +733,18 @@ VIEWS = {
 }
 
 
-class Whitened:
-    """The whitened residual ``resid / sigma`` (n, C), whitened where it is indexed: the
-    engine's views read it by row ranges or row indices, so no whitened copy of the whole
-    residual is made (``np.asarray`` makes one, for a kind's own views)."""
-
-    def __init__(self, resid: np.ndarray, sigma: np.ndarray):
-        self.resid = resid
-        self.inv = 1.0 / np.asarray(sigma, float)[None, :]
-        self.shape = resid.shape
-        self.ndim = resid.ndim
-        self.dtype = resid.dtype
-
-    def __getitem__(self, idx):
-        if isinstance(idx, tuple):
-            return (self.resid[idx[0]] * self.inv)[(slice(None), *idx[1:])]
-        return self.resid[idx] * self.inv
-
-    def __array__(self, dtype=None, copy=None):
-        out = self.resid * self.inv
-        return out if dtype is None else out.astype(dtype)
-
-    def __len__(self) -> int:
-        return self.shape[0]
+def locate(
+    prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float = 1.0, reuse=False
+) -> list[Finding]:
+    """Run ``views`` on the residual ``scale * resid``; findings strongest first, with
+    variance shares. The views share their sums within the scan, and with ``reuse`` across
+    the scans of one ``resid`` object at several sizes (:mod:`._views_sums`)."""
+    with stage("views"), scanning(resid, scale, reuse):
+        return _locate(prep, resid, views, scan_order, scale)
 
 
-def locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
-    """Run ``views`` on the residual; findings strongest first, with variance shares."""
-    with stage("views"):
-        return _locate(prep, resid, views, scan_order)
-
-
-def _locate(prep, resid: np.ndarray, views: tuple[str, ...], scan_order: int) -> list[Finding]:
-    rw = Whitened(resid, prep.sigma)
+def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float) -> list[Finding]:
+    rw = Whitened(resid, prep.sigma, scale)
     tot = float(sum(np.sum(rw[a:b][prep.keep[a:b]] ** 2) for a, b in _blocks(rw.shape[0])))
     out: list[Finding] = []
 

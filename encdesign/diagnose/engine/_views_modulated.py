@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._views import Finding, chi2_threshold, log10_tail_p, make_where
+from ._views_orders import order_scan, time_order
 
 BLOCK_VALUES = 1 << 16
 """Rows x orders per block of the accumulation (its temporaries: that times the channels)."""
@@ -139,25 +140,21 @@ def scan_modulated(
     array), orders ``1..max_order``; the static fit skips an order it finds at
     ``chi2_threshold(alpha, 2, max_order * n_channels_static)`` (the ``orders`` view's)."""
     s = prep.settings
-    kidx = np.flatnonzero(prep.keep)
-    if max_order < 1 or not channels or kidx.size < 4:  # a change with 2 rows either side
+    if max_order < 1 or not channels or int(prep.keep.sum()) < 4:  # 2 rows either side
         return []
-    tau = np.asarray(prep.rows["tau"] if "tau" in prep.rows else prep.rows["t"], float)
-    tk = tau[kidx]
-    if np.any(np.diff(tk) < 0):
-        kidx = kidx[np.argsort(tk, kind="stable")]
+    kidx, edges, seg, tau = time_order(prep)
     n = kidx.size
-    K = int(min(s.modulated_orders_steps, n - 1))
-    edges = np.unique(np.round(np.arange(1, K + 1) * n / (K + 1)).astype(int))
-    edges = edges[(edges > 0) & (edges < n)]
     K = edges.size
-    seg = np.searchsorted(edges, np.arange(n), side="right")
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
     m = np.arange(1, max_order + 1, dtype=float)
     ch = np.asarray(channels, int)
     basis = _basis(prep, kidx, rw)
     Q, u = (None, None) if basis is None else (basis[0][:, ch], basis[1])
-    S, Bs, Sg, Sgg, Bg, V = _sums(prep, rw, name, kidx, m, seg, K, ch, Q)
+    if Q is None:  # the sums the orders view shares (issue 43: one pass for both)
+        sums = order_scan(prep, rw, max_order, ch)
+        S, Bs, Sg, Sgg, Bg, V = sums.S, sums.B, sums.Sg, sums.Sgg, sums.Bg, None
+    else:
+        S, Bs, Sg, Sgg, Bg, V = _sums(prep, rw, name, kidx, m, seg, K, ch, Q)
     # totals, prefix (before each edge) and suffix (from each edge) sums
     tot_S, tot_B = S.sum(1), Bs.sum(1)  # (3, M), (2, M, C)
     on_S, on_B = np.cumsum(S[:, ::-1], 1)[:, ::-1][:, 1:], np.cumsum(Bs[:, ::-1], 1)[:, ::-1][:, 1:]

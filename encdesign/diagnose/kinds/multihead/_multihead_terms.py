@@ -13,6 +13,7 @@ from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
+from ._order_step_bins import order_step_bins
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
 
 # ----------------------------------------------------------------------------- candidates
@@ -623,25 +624,8 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         return []
     P = R * C + 2
     nb = int(min(ORDER_STEP_BINS, kidx.size // 8))
-    edges = np.linspace(0, kidx.size, nb + 1).astype(int)
-    a = np.zeros((nb, 2))
-    G = np.zeros((nb, 2, 2))
-    XB = np.zeros((nb, 2, P))
-    BB = np.zeros((P, P))
-    Br = np.zeros(P)
-    pos_bin = np.repeat(np.arange(nb), np.diff(edges))
-    step = 1 << 14
-    for lo in range(0, kidx.size, step):
-        hi = min(kidx.size, lo + step)
-        _, ai, Gi, XBi, BBc, Brc = _order_step_sums(prep, rw, kidx[lo:hi], P)
-        # the kept rows are in time order, so a chunk's bins are contiguous and ascending
-        bi = pos_bin[lo:hi]
-        st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
-        a[bi[st]] += np.add.reduceat(ai, st, axis=0)
-        G[bi[st]] += np.add.reduceat(Gi, st, axis=0)
-        XB[bi[st]] += np.add.reduceat(XBi, st, axis=0)
-        BB += BBc
-        Br += Brc
+    # per bin of kept rows (time order); the geometry kept across scans (issue 43)
+    a, G, XB, BB, Br, edges = order_step_bins(prep, rw, kidx, P, nb, _order_step_sums)
     BBi = np.linalg.pinv(BB)
 
     def suffix(x):

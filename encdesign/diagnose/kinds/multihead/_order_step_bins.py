@@ -1,0 +1,93 @@
+"""The ``order_step`` view's sums per bin of kept rows (issue 43): geometry kept, the
+residual's linear part alone per scan.
+
+The view (:func:`._multihead_terms.view_order_step`) needs per bin of kept rows the sums
+``X^T r`` (2,), ``X^T X`` (2, 2) and ``X^T B`` (2, P) of the whitened eccentricity columns
+``X`` and base columns ``B`` (a constant per run and head, then ``X``), and over the record
+``B^T B`` and ``B^T r``. All but ``X^T r`` and ``B^T r`` are geometry: they depend on the
+kept rows, the angle, the head angles and the noise weights, not on the residual, and are
+kept across scans (:func:`...engine._views_sums.geometry`; building ``B`` per row and its
+products were most of the view's cost). ``B^T r`` follows from ``X^T r`` and the residual's
+sums per run and head.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...engine._views_sums import fingerprint, geometry, linear
+
+BIN_ROWS = 1 << 14
+"""Kept rows per block of the pass (bounded temporaries)."""
+
+
+def _columns(prep, idx: np.ndarray) -> np.ndarray:
+    """The whitened (and, without a reference, projected) eccentricity columns ``X``
+    (rows, C, 2): ``sin, cos (theta - alpha_k)``."""
+    th = np.asarray(prep.rows.take("theta", idx), float)[:, None]
+    al = np.asarray(prep.consts["alpha"], float)[None, :]
+    c, s, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)  # (the difference formulas)
+    X = np.stack([s * ca - c * sa, c * ca + s * sa], 2)
+    if prep.kd.project:
+        X = X - X.mean(1, keepdims=True)
+    return X * (1.0 / np.asarray(prep.sigma, float)[None, :, None])
+
+
+def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tuple:
+    """``(a, G, XB, BB, Br)``: per bin (``nb`` equal-count bins of ``kidx``, in order) the
+    sums ``X^T r``, ``X^T X``, ``X^T B``, and over the record ``B^T B``, ``B^T r``;
+    ``sums_of(prep, rw, idx, P)``: the view's own per-row sums (used for the geometry)."""
+    C, R = prep.n_channels, prep.ctx.n_runs
+    edges = np.linspace(0, kidx.size, nb + 1).astype(int)
+    pos_bin = np.repeat(np.arange(nb), np.diff(edges))
+    th = np.asarray(prep.rows.take("theta", kidx), float)
+    key = (
+        "order_step",
+        int(nb),
+        int(P),
+        bool(prep.kd.project),
+        fingerprint(kidx, th, prep.sigma, prep.consts["alpha"], prep.run[kidx]),
+    )
+    del th
+
+    def bins(x, bi, st):
+        return bi[st], np.add.reduceat(x, st, axis=0)
+
+    def geo():
+        G, XB, BB = np.zeros((nb, 2, 2)), np.zeros((nb, 2, P)), np.zeros((P, P))
+        for lo in range(0, kidx.size, BIN_ROWS):
+            hi = min(kidx.size, lo + BIN_ROWS)
+            _, _, Gi, XBi, BBc, _ = sums_of(prep, rw, kidx[lo:hi], P)
+            bi = pos_bin[lo:hi]  # kept rows in time order: a block's bins ascend
+            st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
+            G[bi[st]] += np.add.reduceat(Gi, st, axis=0)
+            XB[bi[st]] += np.add.reduceat(XBi, st, axis=0)
+            BB += BBc
+        return G, XB, BB
+
+    G, XB, BB = geometry(key, geo)
+
+    def lin():
+        a, Br = np.zeros((nb, 2)), np.zeros(P)
+        w = 1.0 / np.asarray(prep.sigma, float)
+        for lo in range(0, kidx.size, BIN_ROWS):
+            hi = min(kidx.size, lo + BIN_ROWS)
+            idx = kidx[lo:hi]
+            X = _columns(prep, idx)
+            r = np.asarray(rw[idx], float)
+            ai = (X * r[:, :, None]).sum(1)
+            bi = pos_bin[lo:hi]
+            st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
+            a[bi[st]] += np.add.reduceat(ai, st, axis=0)
+            # the run and head constants: B = (delta_ck - 1/C [projected]) w_c
+            v = r * w[None, :]
+            if prep.kd.project:
+                v = v - (r @ w)[:, None] / C
+            run = prep.run[idx]
+            for k in range(C):
+                Br[k : R * C : C] += np.bincount(run, weights=v[:, k], minlength=R)
+            Br[R * C :] += ai.sum(0)
+        return [a, Br]
+
+    a, Br = linear(key, lin)
+    return a, G, XB, BB, Br, edges

@@ -1,0 +1,102 @@
+"""The sums the views share (issue 43, ``engine._views_sums`` and ``engine._views_orders``):
+the shaft orders' sums of one pass equal the direct ones, their geometry is kept across
+residuals, and a residual scanned at several sizes reuses its sums scaled."""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+
+from encdesign.diagnose import FinderSettings
+from encdesign.diagnose.engine import _views_sums
+from encdesign.diagnose.engine._views_orders import harmonics, order_scan
+from encdesign.diagnose.engine._views_sums import Whitened, linear, scanning
+
+
+class _Rows(dict):
+    def take(self, name, idx):
+        return self[name][idx]
+
+    def column(self, name, a, b):
+        return self[name][a:b]
+
+
+def _prep(n: int, C: int = 2, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    th = 2 * np.pi * 1.3 * t + rng.uniform(0, 2 * np.pi)
+    keep = rng.random(n) > 0.1
+    return types.SimpleNamespace(
+        settings=FinderSettings(),
+        keep=keep,
+        rows=_Rows(t=t, tau=t, theta=th),
+        run=np.zeros(n, int),
+        sigma=np.full(C, 0.5),
+    )
+
+
+def test_harmonics_are_the_cos_and_sin_of_the_orders():
+    th = np.linspace(-40.0, 900.0, 5001)
+    c, s = harmonics(th, 30)
+    m = np.arange(1, 31)[:, None]
+    assert np.allclose(c, np.cos(m * th), atol=1e-11, rtol=0)
+    assert np.allclose(s, np.sin(m * th), atol=1e-11, rtol=0)
+
+
+def test_order_sums_equal_the_direct_sums_and_keep_their_geometry():
+    """One pass gives the whole record's sums (the ``orders`` view's) as the totals over the
+    change-point segments; a second residual on the same rows reuses the Gram sums (the
+    same arrays) and gets its own residual sums."""
+    n, M = 3000, 9
+    prep = _prep(n)
+    rng = np.random.default_rng(1)
+    r1, r2 = rng.normal(size=(n, 2)), rng.normal(size=(n, 2))
+    got = order_scan(prep, r1, M, [0, 1])
+    k = np.flatnonzero(prep.keep)
+    ang = prep.rows["theta"][k][:, None] * np.arange(1, M + 1)[None, :]
+    c, s = np.cos(ang), np.sin(ang)
+    Scc, Sss, Scs, Bc, Bs = got.totals()
+    assert got.n == k.size
+    np.testing.assert_allclose(Scc, (c * c).sum(0), rtol=1e-10)
+    np.testing.assert_allclose(Scs, (c * s).sum(0), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(Bc, c.T @ r1[k], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(Bs, s.T @ r1[k], rtol=1e-9, atol=1e-9)
+    again = order_scan(prep, r2, M, [0, 1])
+    assert again.S is got.S  # the geometry, kept
+    np.testing.assert_allclose(again.totals()[3], c.T @ r2[k], rtol=1e-9, atol=1e-9)
+    # other kept rows: other geometry
+    prep.keep = prep.keep.copy()
+    prep.keep[:100] = False
+    other = order_scan(prep, r1, M, [0, 1])
+    assert other.S is not got.S and other.n == got.n - int((got.kidx < 100).sum())
+
+
+def test_a_residual_scanned_at_several_sizes_reuses_its_sums_scaled():
+    """Within a scan a sum is computed once; a reused scan of the same residual at another
+    size returns it scaled (no pass), a new residual computes its own."""
+    n = 2000
+    prep = _prep(n, seed=2)
+    resid = np.random.default_rng(3).normal(size=(n, 2))
+    calls = []
+
+    def sums(rw):
+        def compute():
+            calls.append(1)
+            return [np.asarray(rw[np.arange(n)]).sum(0)]
+
+        return linear(("test",), compute)[0]
+
+    with scanning(resid, 1.0, reuse=True):
+        one = sums(Whitened(resid, prep.sigma))
+        assert np.array_equal(sums(Whitened(resid, prep.sigma)), one) and len(calls) == 1
+    with scanning(resid, 3.0, reuse=True):
+        three = sums(Whitened(resid, prep.sigma, 3.0))
+    assert len(calls) == 1
+    np.testing.assert_allclose(three, 3.0 * one, rtol=1e-14)
+    with scanning(resid.copy(), 3.0, reuse=True):  # another residual object
+        sums(Whitened(resid, prep.sigma, 3.0))
+    assert len(calls) == 2
+    _views_sums.forget()
+    sums(Whitened(resid, prep.sigma))  # outside a scan: computed each time
+    assert len(calls) == 3
