@@ -239,11 +239,11 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_noise.py", "TRIM_QUANTILE"): "estimator: the trimmed RMS's quantile, with its "
     "consistency factor _TRIM_RMS (a definition of the noise scale, not a threshold)",
     ("engine/_noise.py", "ROBUST_ROWS"): BOUND,
-    ("engine/_settings.py", "CHUNK_ROWS"): BOUND,
-    ("engine/_settings.py", "CACHE_BYTES"): BOUND,
+    ("engine/_constants.py", "CHUNK_ROWS"): BOUND,
+    ("engine/_constants.py", "CACHE_BYTES"): BOUND,
     ("engine/_normal.py", "CANCEL_MAX"): NUMERIC
     + " (accumulated normal equations used only while their rounding stays ~2e-12 relative)",
-    ("engine/_settings.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
+    ("engine/_constants.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,
     ("engine/_views_modulated.py", "BLOCK_VALUES"): BOUND,

@@ -62,9 +62,10 @@ from ._fit import FitResult, Fitter, goodness_of_fit, make_term
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
-from ._protocol import FitDivergence, Prepared
+from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
 from ._reduce import reduce_recording
+from ._refine import checked_fit, refine_base
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -365,81 +366,26 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
         fitter.clear()
 
 
-def _fit_failure(base_info: dict, stage: str, cause: str) -> None:
-    """Record a fit stage that would have diverged (``base.fit_failures``; the report
-    lists them): the stage, its cause and how the fit recovered."""
-    base_info.setdefault("fit_failures", []).append(
-        {"stage": stage, "cause": cause, "recovery": "undone; the fit before it is kept"}
-    )
-
-
-def _checked(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, info: dict):
-    """``fit``, or its refit where the kind held a nuisance it had moved (``check_base``;
-    the note in the base info's ``held``)."""
-    note = kind.check_base(fit.terms, prep)
-    if note is None:
-        return fit
-    if note not in info.setdefault("held", []):
-        info["held"].append(note)
-    fitter.clear()
-    return fitter.fit(fit.terms)
-
-
-def _refine(kind, prep, fitter, base_fit, base_info: dict):
-    """The kind's refinement of the angle the base is evaluated at, and the base refit from
-    the fitted values (undone, with a fit failure recorded, where it would diverge); run on
-    the first base fit and again after the base's orders grow (the refinement evaluates the
-    fitted error: without the grown orders its second-order part stays in the residual).
-    Returns the base fit."""
-    state = prep.rows.snapshot()
-    try:
-        refined = kind.refine(base_fit.terms, prep)
-    except FitDivergence as exc:  # the kind's own check: it moved nothing
-        prep.rows.restore(state)
-        _fit_failure(base_info, "refine", str(exc))
-        refined = None
-    if refined:
-        # the kind moved the angle its base model is evaluated at (e.g. the shaft from the
-        # heads' mean less the fitted error's mean): refit from the fitted values
-        fitter.clear()
-        trial = fitter.fit(base_fit.terms)
-        rise = prep.settings.refine_chi2_rise_max
-        if np.isfinite(trial.chi2) and trial.chi2 <= base_fit.chi2 * (1.0 + rise):
-            base_info["refined"] = refined
-            base_fit = trial
-        else:  # a divergence never reaches the verdict: undo it, keep the fit before
-            prep.rows.restore(state)
-            fitter.clear()
-            _fit_failure(
-                base_info,
-                "refine",
-                f"the refit after the kind's refinement ({refined}) raised chi-square from "
-                f"{base_fit.chi2:.6g} to {trial.chi2:.6g} (more than "
-                f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
-            )
-    return base_fit
-
-
 def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
     """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
     growth. Returns ``(base_fit, order)``."""
-    base_fit = _checked(kind, prep, fitter, fitter.fit(base_terms), base_info)
-    base_fit = _refine(kind, prep, fitter, base_fit, base_info)
+    base_fit = checked_fit(kind, prep, fitter, fitter.fit(base_terms), base_info)
+    base_fit = refine_base(kind, prep, fitter, base_fit, base_info)
     _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     if grow:  # issue 44 E: an ill-conditioned base's order is chosen by held-out error
         chosen = _choose_base_order(kind, prep, fitter, base_fit, order, base_info)
         if chosen is not None:
-            order, base_fit = chosen[0], _checked(kind, prep, fitter, chosen[1], base_info)
+            order, base_fit = chosen[0], checked_fit(kind, prep, fitter, chosen[1], base_info)
             _align(kind, prep, fitter, base_fit)
             _estimate_noise(kind, prep, fitter, base_fit)
     for _ in range(2 if grow else 0):
         grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
         if grown is None:
             break
-        order, base_fit = grown[0], _checked(kind, prep, fitter, grown[1], base_info)
+        order, base_fit = grown[0], checked_fit(kind, prep, fitter, grown[1], base_info)
         # the refinement evaluated the fitted error before the orders grown: again with them
-        base_fit = _refine(kind, prep, fitter, base_fit, base_info)
+        base_fit = refine_base(kind, prep, fitter, base_fit, base_info)
         _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little
         _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
     return base_fit, order

@@ -13,6 +13,7 @@ import scipy.linalg as sla
 from scipy import stats
 
 from ._candidates import Candidate
+from ._constants import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -27,7 +28,6 @@ from ._normal import (
 )
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
-from ._settings import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
 from ._timing import stage
 from ._views import SCAN_BLOCK
 

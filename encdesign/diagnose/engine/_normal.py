@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import lapack
 
-from ._settings import CACHE_BYTES
+from ._constants import CACHE_BYTES
 
 CANCEL_MAX = 1e4
 """The accumulated statistics are used only while the magnitude of the terms of the

@@ -1,6 +1,6 @@
 """The finder's decision thresholds, in one frozen :class:`FinderSettings`, and its fixed
-numerical constants (not decisions: chunk sizes, cache budgets, the variances of noise
-estimators).
+numerical constants are in ``_constants`` (not decisions: chunk sizes, cache budgets, the
+variances of noise estimators).
 
 ``diagnose(rec, settings=FinderSettings(bic_min=20.0))`` changes a threshold for one call;
 the defaults are the finder's tuned behaviour. Every field's docstring says what it controls
@@ -538,6 +538,14 @@ class FinderSettings(eqx.Module):
     (1; the fixed point contracts only below 1, and three passes leave ``slope**3`` of the
     error). Issue 44 A; set by hand, not tuned."""
 
+    refine_part_turn_chi2_drop: float = eqx.field(default=10.0, static=True)
+    """Engine, where every run covers less than one turn (``Prepared.part_turn_span``): the
+    kind's refinement (multihead: the shaft from the heads' mean less the fitted error's head
+    mean, which the heads do not determine there) is kept only where the base refit lowers
+    the whitened chi-square by at least this (it adds no parameter); else it is undone and
+    ``base.refine_refused`` says so. Issue 44 (s19: skipped outright it left second-order
+    orders unexplained); by hand, the scale of ``bic_min``."""
+
     refine_chi2_rise_max: float = eqx.field(default=0.01, static=True)
     """Engine: a base refit after the kind's refinement that raises the whitened chi-square
     by more than this share of the fit before (or makes it non-finite) is a divergence: the
@@ -789,12 +797,3 @@ class FinderSettings(eqx.Module):
 DEFAULT_SETTINGS = FinderSettings()
 
 SETTINGS_FIELDS = tuple(f.name for f in dataclasses.fields(FinderSettings))
-
-CHUNK_ROWS = 8192
-CACHE_BYTES = 6.0e7
-"""Budget of each of the fitter's two caches (Jacobians of linear terms, processed static
-blocks): what does not fit is recomputed, so memory stays bounded on long records."""
-D2_VAR = 2.0 * (70.0 / 36.0 - 1.0)
-"""Variance of log(residual variance / second-difference variance) times N (white noise)."""
-MEDIAN_VAR = 2.0 / math.log(2.0) ** 2
-"""Variance of log(median periodogram level) times the number of periodogram bins."""

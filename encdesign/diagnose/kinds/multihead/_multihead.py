@@ -445,10 +445,11 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
     separate), and :class:`FitDivergence` says so (the angle is left as it was). Orders
     every head sees alike (equally spaced heads) are held out of the head mean: the base
     holds them at zero, since the common rotation they make is unobservable (issue 44 A).
-    Not where every run covers less than one turn (``Prepared.part_turn_span``): the disk orders are
-    not separable there, and neither is the fitted error's head mean (issue 44)."""
-    if prep.ctx.has_ref or prep.n_channels < 2 or prep.part_turn_span is not None:
-        return None  # part of a turn: the fitted error's head mean is not determined there
+    Where every run covers less than one turn (``Prepared.part_turn_span``) the heads do not
+    determine the head mean: the engine keeps the refinement only where the data prefer it
+    (``FinderSettings.refine_part_turn_chi2_drop``; issue 44)."""
+    if prep.ctx.has_ref or prep.n_channels < 2:
+        return None
     base = next((t for t in terms if t.cand.name == "base"), None)
     if base is None:
         return None
