@@ -433,10 +433,12 @@ def _run_slices(prep):
 
 
 def _run_rfft(rw, kr: np.ndarray, a: int, b: int) -> np.ndarray:
-    """The transform of rows ``a:b`` (a run; excluded rows zero), shared by the spectrum and
-    band views within a scan (:func:`._views_sums.linear`; read only)."""
+    """The transform of rows ``a:b`` (a run; excluded rows zero), kept for the sizes of a
+    reused scan (:func:`._views_sums.linear`; read only)."""
     return linear(
-        ("rfft", a, b), lambda: [np.fft.rfft(np.where(kr[:, None], rw[a:b], 0.0), axis=0)]
+        ("rfft", a, b),
+        lambda: [np.fft.rfft(np.where(kr[:, None], rw[a:b], 0.0), axis=0)],
+        large=True,
     )[0]
 
 

@@ -10,10 +10,11 @@ A view's statistics are of two kinds:
   (:func:`fingerprint`), so a changed angle or set of kept rows computes them anew;
 * **linear** in the residual (the regressors' sums with it): within one scan
   (:func:`scanning`, opened by ``_views.locate``) a sum two views need (the ``orders`` and
-  ``modulated_orders`` views share their cos / sin sums, the ``spectrum`` and ``band``
-  views their transforms) is computed once (:func:`linear`). The detection bounds scan one
-  residual at many sizes (a bisection): a scan opened with ``reuse`` keeps the sums of its
-  residual, computed at unit size, and scales them, so the rows are read once per residual.
+  ``modulated_orders`` views share their cos / sin sums) is computed once (:func:`linear`).
+  The detection bounds scan one residual at many sizes (a bisection): a scan opened with
+  ``reuse`` keeps the sums of its residual, computed at unit size, and scales them, so the
+  rows are read once per residual (there also the runs' transforms of the ``spectrum`` and
+  ``band`` views, as large as the residual: a plain scan does not keep those).
 
 Either way the numbers are those a view computes on its own, up to the order of a sum
 (float64 rounding); both are deterministic, so every process of a split diagnosis gets the
@@ -61,10 +62,11 @@ def geometry(key: tuple, compute: Callable[[], Any]) -> Any:
 class _Scan:
     """One scan of a residual: its memo of linear sums (at unit size) and its size."""
 
-    def __init__(self, resid: Any, scale: float, memo: dict):
+    def __init__(self, resid: Any, scale: float, memo: dict, reuse: bool):
         self.resid = resid  # held: its identity keys the memo of a reused scan
         self.scale = float(scale)
         self.memo = memo
+        self.reuse = reuse
 
 
 _SCAN: contextvars.ContextVar[_Scan | None] = contextvars.ContextVar(
@@ -82,7 +84,7 @@ def scanning(resid: Any, scale: float = 1.0, reuse: bool = False) -> Iterator[No
     memo: dict = {}
     if reuse and _LAST and _LAST[0].resid is resid:
         memo = _LAST[0].memo
-    scan = _Scan(resid, scale, memo)
+    scan = _Scan(resid, scale, memo, reuse)
     if reuse:
         _LAST[:] = [scan]
     token = _SCAN.set(scan)
@@ -97,11 +99,16 @@ def forget() -> None:
     _LAST.clear()
 
 
-def linear(key: tuple, compute: Callable[[], list[np.ndarray]]) -> list[np.ndarray]:
+def linear(
+    key: tuple, compute: Callable[[], list[np.ndarray]], large: bool = False
+) -> list[np.ndarray]:
     """``compute()`` (arrays linear in the residual the views see) once per scan (and per
-    residual of a reused scan, scaled to the scan's size); outside a scan, computed."""
+    residual of a reused scan, scaled to the scan's size); outside a scan, computed.
+    ``large`` (arrays of the residual's size): kept only in a reused scan, where the rows
+    would otherwise be read once per size (a plain scan computes them where they are
+    needed: the peak memory of a long record's scans stays as it was)."""
     scan = _SCAN.get()
-    if scan is None:
+    if scan is None or (large and not scan.reuse):
         return compute()
     if key not in scan.memo:
         s = scan.scale

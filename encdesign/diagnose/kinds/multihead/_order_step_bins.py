@@ -21,16 +21,21 @@ BIN_ROWS = 1 << 14
 """Kept rows per block of the pass (bounded temporaries)."""
 
 
-def _columns(prep, idx: np.ndarray) -> np.ndarray:
-    """The whitened (and, without a reference, projected) eccentricity columns ``X``
-    (rows, C, 2): ``sin, cos (theta - alpha_k)``."""
-    th = np.asarray(prep.rows.take("theta", idx), float)[:, None]
-    al = np.asarray(prep.consts["alpha"], float)[None, :]
-    c, s, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)  # (the difference formulas)
-    X = np.stack([s * ca - c * sa, c * ca + s * sa], 2)
+def _row_sums(prep, idx: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``X^T r`` per row (rows, 2) of the whitened (and, without a reference, projected over
+    the heads) eccentricity columns ``X = sin, cos (theta - alpha_k)`` and the whitened
+    residual ``r`` (rows, C), by the difference formulas: ``sin (theta - alpha) = sin theta
+    cos alpha - cos theta sin alpha``, so the heads enter through two weighted sums of ``r``
+    per row (no per-head column is formed)."""
+    th = np.asarray(prep.rows.take("theta", idx), float)
+    al = np.asarray(prep.consts["alpha"], float)
+    ca, sa = np.cos(al), np.sin(al)
     if prep.kd.project:
-        X = X - X.mean(1, keepdims=True)
-    return X * (1.0 / np.asarray(prep.sigma, float)[None, :, None])
+        ca, sa = ca - ca.mean(), sa - sa.mean()
+    w = 1.0 / np.asarray(prep.sigma, float)
+    P, Q = r @ (ca * w), r @ (sa * w)
+    c, s = np.cos(th), np.sin(th)
+    return np.stack([s * P - c * Q, c * P + s * Q], 1)
 
 
 def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tuple:
@@ -73,9 +78,8 @@ def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tup
         for lo in range(0, kidx.size, BIN_ROWS):
             hi = min(kidx.size, lo + BIN_ROWS)
             idx = kidx[lo:hi]
-            X = _columns(prep, idx)
             r = np.asarray(rw[idx], float)
-            ai = (X * r[:, :, None]).sum(1)
+            ai = _row_sums(prep, idx, r)
             bi = pos_bin[lo:hi]
             st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
             a[bi[st]] += np.add.reduceat(ai, st, axis=0)
