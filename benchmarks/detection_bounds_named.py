@@ -28,9 +28,20 @@ confounded with a named effect
   (the wobble before its ``sinc`` attenuation; the coil's fitted order 1, through
   ``sds_coil_gain`` of each record's key).
 
+``--same`` (the literal claim, issue 44 F): per key ``S * 1000 + i`` the record with the named
+effect alone gives the second's bound, and the very same record (same noise, same draws of
+the named effect) carries the second at each factor of it (:func:`same_trials`). Without it
+one record's bound is applied to records of other noise and other draws of the named
+effect; on the sds benches a named wobble or coil leaks into the noise levels the kind
+estimates on the base residual (a 10x wobble: the run-mean level 2.8x and the contrasts'
+9.5x the clean record's on training key 7258), by as much as its own draw makes it, so the
+bound beside it moved 2.3-3.1x between two keys of one geometry (training 7264, 7267), and
+the transfer measured that spread.
+
 ::
 
     python benchmarks/detection_bounds_named.py --pairs motion --seed 3401 --geometries 10 --n 2
+    python benchmarks/detection_bounds_named.py --pairs sds --seed 4801 --geometries 3 --n 2 --same
     python benchmarks/detection_bounds_named.py --pairs sds --seed 4801 --geometries 3 --n 2
 """
 
@@ -130,10 +141,18 @@ def family_maker(family: str, seed: int, folder: Path):
 
 
 def pair_trials(
-    family: str, named: str, second: str, seed: int, n: int, factors, named_factor: float
+    family: str,
+    named: str,
+    second: str,
+    seed: int,
+    n: int,
+    factors,
+    named_factor: float,
+    same: bool = False,
 ) -> list[dict]:
     """The bound of ``second`` on the record of geometry ``seed`` where ``named`` is named,
-    and ``n`` records of fresh noise with both, ``second`` at each factor of that bound."""
+    and ``n`` records of fresh noise with both, ``second`` at each factor of that bound
+    (``same``: :func:`same_trials`, each record its own bound)."""
     where = "h1" if family == "multihead" else None
     head = dict(family=family, pair=f"{named}+{second}", seed=seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -143,6 +162,8 @@ def pair_trials(
         if d0["verdict"] != "consistent" or b_named is None or b_named["bound"] is None:
             return [dict(**head, skipped=f"clean record {d0['verdict']}, bound {b_named}")]
         a_named = named_factor * b_named["bound"]
+        if same:
+            return same_trials(make, head, named, second, a_named, b_named, n, factors, where)
         d1 = diagnose(make(seed, {named: (a_named, b_named)})).doc if a_named else d0
         names = [e["name"] for e in d1["effects"]]
         b2 = _bound(d1, second, where)
@@ -174,6 +195,55 @@ def pair_trials(
     return rows
 
 
+def same_trials(
+    make,
+    head: dict,
+    named: str,
+    second: str,
+    a_named: float,
+    b_named: dict,
+    n: int,
+    factors,
+    where: str | None,
+) -> list[dict]:
+    """``--same``, the literal claim: per key ``seed * 1000 + i`` the record with ``named``
+    alone (at ``a_named``, as :func:`pair_trials` sizes it) is diagnosed, ``named`` named,
+    and the very same record (same noise, same draws of the named effect) is diagnosed with
+    ``second`` added at each factor of the bound that diagnosis reports for it. The bound
+    beside a named effect is the record's own: the named effect's leak into the noise
+    estimate (the sds run-mean and contrast levels, estimated on the base residual that
+    carries it) is a draw of its own, and one record's bound applied to another's noise and
+    named-effect draws measures that spread, not the bound."""
+    rows: list[dict] = []
+    for i in range(n):
+        key = int(head["seed"]) * 1000 + i
+        d1 = diagnose(make(key, {named: (a_named, b_named)})).doc
+        names = [e["name"] for e in d1["effects"]]
+        b2 = _bound(d1, second, where)
+        if names != [named] or b2 is None or b2["bound"] is None:
+            note = b2 and b2.get("note")
+            rows.append(dict(**head, key=key, skipped=f"named {names}, bound None: {note}"))
+            continue
+        for factor in factors:
+            sizes = {named: (a_named, b_named), second: (factor * b2["bound"], b2)}
+            d = diagnose(make(key, sizes)).doc
+            rows.append(
+                dict(
+                    **head,
+                    key=key,
+                    factor=factor,
+                    found=_found(d, second),
+                    named=any(e["name"] == second for e in d["effects"]),
+                    named_still=any(e["name"] == named for e in d["effects"]),
+                    bound=b2["bound"],
+                    set_by=b2["set_by"],
+                    verdict=d["verdict"],
+                )
+            )
+            print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the trials; prints one line per record and the rates per pair; returns 0."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -184,6 +254,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--factors", default="1.5,0.5")
     ap.add_argument("--named-factor", type=float, default=10.0)
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--same",
+        action="store_true",
+        help="each key's own bound in the same record (same noise and named-effect draws)",
+    )
     args = ap.parse_args(argv)
     factors = tuple(float(f) for f in args.factors.split(","))
     rows: list[dict] = []
@@ -192,7 +267,14 @@ def main(argv: list[str] | None = None) -> int:
         for named, second in PAIRS[family]:
             for gi in range(args.geometries):
                 rows += pair_trials(
-                    family, named, second, args.seed + gi, args.n, factors, args.named_factor
+                    family,
+                    named,
+                    second,
+                    args.seed + gi,
+                    args.n,
+                    factors,
+                    args.named_factor,
+                    args.same,
                 )
     for r in rows:
         if "skipped" in r:

@@ -19,6 +19,8 @@ from encdesign.diagnose.engine._candidates import Context
 from encdesign.diagnose.kinds.sds._sds import finish_sds
 from encdesign.diagnose.kinds.sds._sds_data import sds_data, sds_prepare, stamp_lattice
 from encdesign.diagnose.kinds.sds._sds_noise import (
+    SDSNoiseInfo,
+    _coil_plausible,
     _level_sigma,
     _saturating_columns,
     common_base_columns,
@@ -788,6 +790,43 @@ def test_coil_order_count_follows_the_parameter_budget():
     assert coil_order_count(ctx(5), 6, [6, 12]) == 5
     assert coil_order_count(ctx(4), 6, [6, 12]) == 3
     assert coil_order_count(ctx(2, R=4), 6, [6, 12]) == 5
+
+
+def test_coil_orders_that_vanish_without_phi_ref_are_left_out():
+    """Without phi_ref the values of a run are projected on the moving-sensor differences: a
+    coil order with one phase at every moving sensor (order 4 of four equally spaced ones)
+    has columns of rounding only, which a fit took at any amplitude (2.6e6 rad on a wobble
+    record of training key 7258500, where that coil then tied with the named wobble); it is
+    left out of ``coil_mismatch`` as the base leaves such design orders out. With phi_ref it
+    is fitted."""
+
+    def ctx(proj: float) -> Context:
+        ns = types.SimpleNamespace(
+            n_runs=12,
+            n_channels=5 * 4,
+            consts=dict(psi_m=np.arange(4) * np.pi / 2, proj=proj),
+            meta={"encoder": {"pole_pairs": 6}},
+            max_order=12,
+            settings=DEFAULT_SETTINGS,
+            # the common structure peaks at order 1: a coil whose main order is a multiple
+            # of the 4 sensors is refused, any other is not
+            noise_info=SDSNoiseInfo(common_order_power=(100.0, 1.0, 1.0, 1.0, 1.0, 1.0)),
+        )
+        return cast(Context, ns)
+
+    def coil_orders(proj: float) -> tuple[int, ...]:
+        cand = next(c for c in _sds_candidates(ctx(proj)) if c.name == "coil_mismatch")
+        ones = {"cos_rad": np.ones(9), "sin_rad": np.ones(9)}
+        d = cand.derived(types.SimpleNamespace(data=None), ones, ones)
+        return tuple(int(k.split("_")[1]) for k in d if k.endswith("_amplitude_rad"))
+
+    assert coil_orders(1.0) == (1, 2, 3, 5)
+    assert coil_orders(0.0) == (1, 2, 3, 4, 5)
+    # its plausibility rule reads the main order among the fitted ones: the last is order 5
+    last = {"cos_rad": np.eye(4)[3], "sin_rad": np.zeros(4)}
+    assert _coil_plausible(ctx(1.0), last) is None
+    fourth = {"cos_rad": np.eye(5)[3], "sin_rad": np.zeros(5)}
+    assert "order 4" in (_coil_plausible(ctx(0.0), fourth) or "")
 
 
 def test_clear_coil_mismatch_named_when_a_short_run_leaves_four_revolutions(tmp_path):

@@ -33,9 +33,10 @@ Candidates (``docs/effects.md``, "SDS timing model"), each a differentiable term
 * ``bearing_wobble``: ``w(t_m, φ+ψ_m) − w(t_f, ψ_f)``,
   ``w = sinc(ρ) [A sin(ρΩt − ψ) + B cos(ρΩt − ψ)]`` (window mean over one revolution);
 * ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors;
-* ``coil_mismatch``: Fourier terms in ``x`` at the coil orders ``1 … pole_pairs − 1``, the
-  lowest as many as the parameter budget leaves
-  (:func:`~encdesign.diagnose.kinds.sds._sds_terms.coil_order_count`);
+* ``coil_mismatch``: Fourier terms in ``x`` at the coil orders ``1 … pole_pairs − 1`` (less
+  those with one phase at every moving sensor without phi_ref,
+  :func:`~encdesign.diagnose.kinds.sds._sds_noise.coil_orders`), the lowest as many as the
+  parameter budget leaves (:func:`~encdesign.diagnose.kinds.sds._sds_terms.coil_order_count`);
 * ``sensor_delay_step``: one moving sensor's edges delayed by ``τ_m`` from one run on
   (electronics, cable, a re-plugged connector): ``+Ω τ_m`` on that sensor's pairs;
 * ``timing_quantization``: the time stamps lie on a lattice coarser than the declared clock

@@ -87,6 +87,17 @@ def common_x_orders(consts: Mapping[str, Any], orders) -> list[int]:
     return out
 
 
+def coil_orders(meta: Mapping[str, Any], consts: Mapping[str, Any]) -> tuple[int, ...]:
+    """The coil orders ``1 … pole_pairs − 1`` ``coil_mismatch`` may fit, less those with one
+    phase at every moving sensor without phi_ref (:func:`common_x_orders`): on the projected
+    values their columns are rounding, which a fit takes at any amplitude (2.6e6 rad at order
+    4 of four equally spaced sensors, training key 7258500), as the base leaves such design
+    orders out."""
+    pp = int(meta.get("encoder", {}).get("pole_pairs", 0) or 0)
+    gone = set(common_x_orders(consts, range(1, pp)))
+    return tuple(o for o in range(1, pp) if o not in gone)
+
+
 def base_orders(
     meta: Mapping[str, Any], consts: Mapping[str, Any], max_order: int
 ) -> tuple[list[int], list[int]]:
@@ -607,7 +618,7 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
     positions)."""
     M = int(ctx.consts["psi_m"].size)
     amp = np.hypot(np.asarray(params["cos_rad"]), np.asarray(params["sin_rad"]))
-    n = int(np.argmax(amp)) + 1
+    n = coil_orders(ctx.meta, ctx.consts)[int(np.argmax(amp))]  # its fitted orders, lowest first
     pw = np.asarray(noise_info(ctx).common_order_power, float)
     if M < 2 or n % M or pw.size == 0:
         return None

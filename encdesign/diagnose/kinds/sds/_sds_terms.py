@@ -25,6 +25,7 @@ from ._sds_noise import (
     _no_transient,
     _saturating_columns,
     base_orders,
+    coil_orders,
     noise_info,
 )
 
@@ -524,10 +525,14 @@ def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
     pp = int(ctx.meta.get("encoder", {}).get("pole_pairs", 0) or 0)
     orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
     opposed = moving_opposed(ctx.consts["psi_m"])
-    return _catalog(M, pp, coil_order_count(ctx, pp, orders), opposed)
+    coil = coil_orders(ctx.meta, ctx.consts)  # less those that vanish without phi_ref
+    n = coil_order_count(ctx, pp, orders, len(coil))
+    return _catalog(M, pp, coil[:n], opposed)
 
 
-def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
+def coil_order_count(
+    ctx: Context, pp: int, orders_base: Sequence[int], n_orders: int | None = None
+) -> int:
     """How many of the coil orders ``1 … pp − 1`` ``coil_mismatch`` fits, the lowest first:
     as many as the parameter budget leaves (``max_param_fraction`` of the fitted values
     ``R × K × M``, less the base model's pair constants and design-ripple pairs), all of
@@ -539,8 +544,9 @@ def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
     orders); a refusal of the whole effect then hid a coil ripple 15-50x the noise. A
     torque ripple of order ``n`` moves the speed by about ripple / (``n`` x inertia), so
     the low orders carry the most of it; the orders left out are reported
-    (``coil_orders_left_out``) and stay in the order views."""
-    n = max(pp - 1, 0)
+    (``coil_orders_left_out``) and stay in the order views. ``n_orders``: the coil orders
+    there are to fit (``pp − 1`` when not given; fewer where some vanish on the record)."""
+    n = max(pp - 1, 0) if n_orders is None else int(n_orders)
     R, C = int(ctx.n_runs), int(ctx.n_channels)
     M = int(ctx.consts["psi_m"].size)
     base = M + 2 * len(orders_base)
@@ -550,7 +556,7 @@ def coil_order_count(ctx: Context, pp: int, orders_base: Sequence[int]) -> int:
 
 @functools.lru_cache(maxsize=16)
 def _catalog(
-    M: int, pp: int, n_coil: int | None = None, opposed: bool = False
+    M: int, pp: int, coil_orders: tuple[int, ...] = (), opposed: bool = False
 ) -> tuple[Candidate, ...]:
     """One set of candidate objects per layout (one compiled Jacobian each). Every
     candidate but the delay step is refused when one run's deviation on one sensor
@@ -637,8 +643,8 @@ def _catalog(
             probes=_delay_probes,
         ),
     ]
-    if pp > 1:
-        orders = tuple(range(1, pp))[: n_coil or None]
+    if pp > 1 and coil_orders:
+        orders = tuple(coil_orders)
         coil = _ripple_term(orders, "coil_mismatch", EXPLANATIONS["coil_mismatch"])
         out.append(
             dataclasses.replace(
