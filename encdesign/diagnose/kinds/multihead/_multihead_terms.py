@@ -14,6 +14,7 @@ from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
+from ._vibration_jac import vibration_valjac
 
 # ----------------------------------------------------------------------------- candidates
 
@@ -443,6 +444,7 @@ VIBRATION = Candidate(
     plausible=_vb_plausible,
     doubt_overruled=False,  # the locked-order margin is a test on the data
     probes=_vb_probes,
+    valjac=vibration_valjac,
 )
 
 
