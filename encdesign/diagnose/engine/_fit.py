@@ -218,7 +218,7 @@ class Fitter:
                 or [np.zeros(0)]
             )
             # held linear parameters (fit=False) enter through v0 only when zero: add them
-            v = v0 + Jt @ lin if lin.size else v0.copy()
+            v = v0 + (Jt.reshape(-1, lin.size) @ lin).reshape(v0.shape) if lin.size else v0.copy()
             held_lin = [
                 q
                 for q in term.cand.params
@@ -287,13 +287,12 @@ class Fitter:
         else:
             J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
         order, edges = self._fold_order(a, b)
-        # sorted first (the copy), then projected and scaled in place, row by row as before:
-        # each element is ((J - mean) sc) sqrt(w)
+        # sorted first (the copy), then projected and scaled in place (one pass each):
+        # each element is (J - mean) (sc sqrt(w))
         J = J[order]
         if prep.kd.project:
             J -= J.mean(1, keepdims=True)
-        J *= sc[None, None, :]
-        J *= np.sqrt(self.w_ch)[None, :, None]
+        J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]
         return pred, J, order, edges
 
     def _fold_order(self, a: int, b: int):

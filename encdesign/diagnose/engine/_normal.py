@@ -63,13 +63,20 @@ def linear_valjac(cand):
     values: what a term whose free parameters are all linear needs (:func:`linear_only`),
     without the forward tangents of its nonlinear parameters (the probes' and the static
     block's Jacobians were most of the detection bounds' time, issue 43). A candidate's
-    hand-written ``valjac`` is used as it is. (Only the linear tangents are taken here, in a
+    hand-written ``valjac`` is used for its linear tangents only (the compiler drops the
+    work of the others). (Only the linear tangents are taken here, in a
     function of their own: jax 0.10.2 mis-evaluated the *nonlinear* half of a split
     Jacobian, ``_fit.valjac_fn``; ``tests/test_fit_fast.py`` checks this one against the
     full ``jacfwd``.)"""
-    if cand.valjac is not None:
-        return jax.jit(cand.valjac)
     lin = frozenset(q.name for q in cand.params if q.linear)
+    if cand.valjac is not None:
+        hand = cand.valjac
+
+        def hv(p, x):  # the linear tangents only: the compiler drops the others' work
+            v, J = hand(p, x)
+            return v, {k: J[k] for k in J if k in lin}
+
+        return jax.jit(hv)
 
     def vj(p, x):
         held = {k: v for k, v in p.items() if k not in lin}

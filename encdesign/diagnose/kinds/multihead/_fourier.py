@@ -3,6 +3,7 @@ fifth of a long record's diagnosis, two sines and cosines per order and sample).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import jax.numpy as jnp
@@ -21,6 +22,27 @@ def fourier_sum(phi, a, b):
         qr, qi = pr + a[m], pi - b[m]
         pr, pi = qr * zr - qi * zi, qr * zi + qi * zr
     return pr
+
+
+def fourier_columns(phi, M: int):
+    """``(cos(m phi), sin(m phi))`` for ``m = 1..M``, each of shape ``phi.shape + (M,)``:
+    ``exp(i m phi)`` for ``m = j B + k`` (``B = ceil(sqrt(M))``, ``k = 1..B``) as the product
+    of ``exp(i j B phi)`` and ``exp(i k phi)``, so about ``2 sqrt(M)`` sines and cosines per
+    angle instead of ``2 M`` (issue 43: they were most of the base term's Jacobian, which
+    every pass of a trial fit evaluates). Each carries the roundings of its two factors'
+    arguments and of one complex product: it equals ``cos(m phi)`` to about ``|m phi| eps``
+    (tested, as :func:`fourier_sum`)."""
+    B = max(1, math.isqrt(M - 1) + 1) if M > 1 else 1
+    J = -(-M // B)
+    k = jnp.arange(1, B + 1, dtype=phi.dtype)
+    j = jnp.arange(J, dtype=phi.dtype) * B
+    ph = phi[..., None]
+    er, ei = jnp.cos(k * ph), jnp.sin(k * ph)
+    fr, fi = jnp.cos(j * ph), jnp.sin(j * ph)
+    shape = (*phi.shape, J * B)
+    cr = (fr[..., :, None] * er[..., None, :] - fi[..., :, None] * ei[..., None, :]).reshape(shape)
+    ci = (fr[..., :, None] * ei[..., None, :] + fi[..., :, None] * er[..., None, :]).reshape(shape)
+    return cr[..., :M], ci[..., :M]
 
 
 def base_value(shifted: Callable, mask) -> Callable:

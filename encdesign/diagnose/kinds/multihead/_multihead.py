@@ -42,7 +42,7 @@ from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import chi2_threshold
 from ...engine._views_modulated import view_modulated_orders
 from ._confound import own_order_confound
-from ._fourier import base_value
+from ._fourier import base_value, fourier_columns, fourier_sum
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -274,9 +274,10 @@ def _base_candidate(
         oh, th, alpha = shifted(p, x)
         a, b = p["fourier_cos_rad"] * mask, p["fourier_sin_rad"] * mask
         m = jnp.arange(1, M + 1, dtype=th.dtype)
-        arg = m[None, None, :] * (th[:, None, None] - alpha[None, :, None])
-        cs, sn = jnp.cos(arg) * mask, jnp.sin(arg) * mask
-        v = jnp.sum(a * cs + b * sn, axis=-1) + oh @ p["offset_rad"]
+        phi = th[:, None] - alpha[None, :]
+        cs, sn = fourier_columns(phi, M)  # issue 43: one sine and cosine per angle
+        cs, sn = cs * mask, sn * mask
+        v = fourier_sum(phi, a, b) + oh @ p["offset_rad"]
         J = {
             "offset_rad": oh[:, None, :, None] * jnp.eye(C, dtype=th.dtype)[None, :, None, :],
             "fourier_cos_rad": cs,

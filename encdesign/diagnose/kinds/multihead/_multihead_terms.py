@@ -15,6 +15,7 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._order_step_bins import order_step_bins
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
+from ._vibration_jac import vibration_valjac
 
 # ----------------------------------------------------------------------------- candidates
 
@@ -444,6 +445,7 @@ VIBRATION = Candidate(
     plausible=_vb_plausible,
     doubt_overruled=False,  # the locked-order margin is a test on the data
     probes=_vb_probes,
+    valjac=vibration_valjac,
 )
 
 
