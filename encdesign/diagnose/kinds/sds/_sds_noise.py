@@ -323,6 +323,54 @@ def _direct_common_factor(
     return math.sqrt(max(1.0, ucl / s_raw**2))
 
 
+def _order_groups(phi: np.ndarray, R: int, M: int, proj: bool) -> np.ndarray:
+    """``(R*M, G, 2)``: pairs of columns of the run means (rows in time order), each the
+    cos / sin of an order ``1 .. R*M/2 - 1`` of the platform angle ``phi`` on one moving
+    sensor times a shape over the runs: 1 (there throughout), a linear growth from the first
+    run to the last, or switching on at run ``j`` (2 runs at least either side); projected on
+    the moving-sensor differences where the run means are (``proj``)."""
+    i = np.arange(R, dtype=float)
+    shapes = [np.ones(R), i / max(R - 1, 1)] + [(i >= j).astype(float) for j in range(2, R - 1)]
+    W = np.stack(shapes, 1)  # (R, S)
+    m = np.arange(1, max(R * M // 2 - 1, 1) + 1)
+    cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
+    per = W[:, :, None, None] * cs[:, None]  # (R, S, L, 2)
+    A = np.zeros((R, M, M) + per.shape[1:])
+    for k in range(M):
+        A[:, k, k] = per
+    if proj:
+        A = A - A.mean(1, keepdims=True)
+    return A.reshape(R * M, -1, 2)
+
+
+def _best_pair(
+    ym: np.ndarray, Q: np.ndarray, A: np.ndarray, n_ind: int
+) -> tuple[float, np.ndarray] | None:
+    """The pair of columns of ``A`` (R*M, G, 2; :func:`_order_groups`) that takes the most
+    of what the basis ``Q`` leaves of ``ym``: ``(log p, columns)``, ``p`` its ``F(2, dof)``
+    tail probability times ``G`` (Bonferroni over the pairs); ``None`` where none is left.
+    An order of one sensor that grows or switches on is in no saturating column: left in,
+    it raised the run-mean level 1.8-1.95 times on 5x records of the discovery benchmark
+    (issue 41, session 18), and the structure fell below every threshold with it."""
+    e = ym - Q @ (Q.T @ ym)
+    ssr0 = float(e @ e)
+    dof = n_ind - Q.shape[1] - 2
+    if dof < 3 or ssr0 <= 0:
+        return None
+    Ap = A - np.einsum("np,pgc->ngc", Q, np.einsum("np,ngc->pgc", Q, A))
+    G = np.einsum("ngi,ngj->gij", Ap, Ap)
+    b = np.einsum("ngi,n->gi", Ap, e)
+    det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] ** 2
+    ok = det > 1e-10 * np.einsum("ngi,ngi->g", A, A) ** 2
+    q = b[:, 0] ** 2 * G[:, 1, 1] - 2 * b[:, 0] * b[:, 1] * G[:, 0, 1] + b[:, 1] ** 2 * G[:, 0, 0]
+    q = np.where(ok, q / np.where(ok, det, 1.0), 0.0)
+    j = int(np.argmax(q))
+    if not ok[j]:
+        return None
+    f = (q[j] / 2) / ((ssr0 - q[j]) / dof) if ssr0 > q[j] else np.inf
+    return float(stats.f.logsf(f, 2, dof)) + math.log(A.shape[1]), Ap[:, j]
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -335,6 +383,7 @@ def _level_sigma(
     fixed: np.ndarray | None = None,
     common_base: np.ndarray | None = None,
     common_quantile: float | None = None,
+    phi: np.ndarray | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -344,7 +393,11 @@ def _level_sigma(
     no low order can inflate it), plus the significant change points (a step on one sensor
     from one run on) and single-value outliers (one sensor in one run), each searched for
     and tested as F(1, dof) against what is left (Bonferroni), so neither can inflate it
-    either. The level is ``sqrt(SSR / nu)`` with ``nu`` = independent values − rank (without
+    either; with the platform angles ``phi`` (one per run, rows in time order) also an order
+    of ``phi`` on one sensor that is there throughout, grows or switches on (a pair of
+    columns, :func:`_order_groups`, F(2, dof); each step takes the column or pair of least
+    Bonferroni-adjusted p-value; issue 41, session 18). The level is ``sqrt(SSR / nu)``
+    with ``nu`` = independent values − rank (without
     ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
     1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
     its estimation error: with ~12 platform positions it is known to ~±17 %, which the
@@ -383,8 +436,9 @@ def _level_sigma(
     A = A.reshape(R * M, -1)
     n_tests = max(1, A.shape[1])
     Q = span_basis(X)
-    added = 0
-    for _ in range(2 * M):
+    pairs = _order_groups(phi, R, M, proj) if phi is not None else None
+    added = orders = 0
+    for _ in range(3 * M):
         e = ym - Q @ (Q.T @ ym)
         ssr0 = float(e @ e)
         dof = n_ind - Q.shape[1] - 1
@@ -396,7 +450,16 @@ def _level_sigma(
         gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
         j = int(np.argmax(gain))
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
-        if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
+        # Bonferroni-adjusted log p-values: the single column, and the best pair of orders
+        lp = stats.f.logsf(f, 1, dof) + math.log(n_tests) if ok[j] else 0.0
+        pair = _best_pair(ym, Q, pairs, n_ind) if pairs is not None else None
+        if pair is not None and pair[0] < lp:
+            if pair[0] >= math.log(level_alpha):
+                break
+            Q = span_basis(np.concatenate([Q, pair[1]], 1))
+            orders += 1
+            continue
+        if lp >= math.log(level_alpha):
             break
         Q = span_basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
         added += 1
@@ -429,6 +492,7 @@ def _level_sigma(
             run_means_common_factor_indirect=g_ind,
             run_means_common_factor_direct=g_dir,
             run_means_steps_or_outliers=added,
+            run_means_sensor_orders=orders,
             contrasts_common_rad=lv[0] if lv else None,
             contrasts_differences_rad=lv[1] if len(lv) > 1 else None,
         )
@@ -464,6 +528,7 @@ def run_mean_levels(
         fixed=np.asarray(rows["fixed_c"], float),
         common_base=common_base_columns(rows["phi"], consts["psi_m"], orders),
         common_quantile=settings.sds_common_level_quantile,
+        phi=np.asarray(rows["theta"], float),
     )
 
 
