@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
+from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
 REFERENCE_RADIUS_M = 0.0254
 BEAM_ORDERS = (1, 2, 3)
@@ -323,54 +324,6 @@ def _direct_common_factor(
     return math.sqrt(max(1.0, ucl / s_raw**2))
 
 
-def _order_groups(phi: np.ndarray, R: int, M: int, proj: bool) -> np.ndarray:
-    """``(R*M, G, 2)``: pairs of columns of the run means (rows in time order), each the
-    cos / sin of an order ``1 .. R*M/2 - 1`` of the platform angle ``phi`` on one moving
-    sensor times a shape over the runs: 1 (there throughout), a linear growth from the first
-    run to the last, or switching on at run ``j`` (2 runs at least either side); projected on
-    the moving-sensor differences where the run means are (``proj``)."""
-    i = np.arange(R, dtype=float)
-    shapes = [np.ones(R), i / max(R - 1, 1)] + [(i >= j).astype(float) for j in range(2, R - 1)]
-    W = np.stack(shapes, 1)  # (R, S)
-    m = np.arange(1, max(R * M // 2 - 1, 1) + 1)
-    cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
-    per = W[:, :, None, None] * cs[:, None]  # (R, S, L, 2)
-    A = np.zeros((R, M, M) + per.shape[1:])
-    for k in range(M):
-        A[:, k, k] = per
-    if proj:
-        A = A - A.mean(1, keepdims=True)
-    return A.reshape(R * M, -1, 2)
-
-
-def _best_pair(
-    ym: np.ndarray, Q: np.ndarray, A: np.ndarray, n_ind: int
-) -> tuple[float, np.ndarray] | None:
-    """The pair of columns of ``A`` (R*M, G, 2; :func:`_order_groups`) that takes the most
-    of what the basis ``Q`` leaves of ``ym``: ``(log p, columns)``, ``p`` its ``F(2, dof)``
-    tail probability times ``G`` (Bonferroni over the pairs); ``None`` where none is left.
-    An order of one sensor that grows or switches on is in no saturating column: left in,
-    it raised the run-mean level 1.8-1.95 times on 5x records of the discovery benchmark
-    (issue 41, session 18), and the structure fell below every threshold with it."""
-    e = ym - Q @ (Q.T @ ym)
-    ssr0 = float(e @ e)
-    dof = n_ind - Q.shape[1] - 2
-    if dof < 3 or ssr0 <= 0:
-        return None
-    Ap = A - np.einsum("np,pgc->ngc", Q, np.einsum("np,ngc->pgc", Q, A))
-    G = np.einsum("ngi,ngj->gij", Ap, Ap)
-    b = np.einsum("ngi,n->gi", Ap, e)
-    det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] ** 2
-    ok = det > 1e-10 * np.einsum("ngi,ngi->g", A, A) ** 2
-    q = b[:, 0] ** 2 * G[:, 1, 1] - 2 * b[:, 0] * b[:, 1] * G[:, 0, 1] + b[:, 1] ** 2 * G[:, 0, 0]
-    q = np.where(ok, q / np.where(ok, det, 1.0), 0.0)
-    j = int(np.argmax(q))
-    if not ok[j]:
-        return None
-    f = (q[j] / 2) / ((ssr0 - q[j]) / dof) if ssr0 > q[j] else np.inf
-    return float(stats.f.logsf(f, 2, dof)) + math.log(A.shape[1]), Ap[:, j]
-
-
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -384,6 +337,7 @@ def _level_sigma(
     common_base: np.ndarray | None = None,
     common_quantile: float | None = None,
     phi: np.ndarray | None = None,
+    pairs: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -436,7 +390,9 @@ def _level_sigma(
     A = A.reshape(R * M, -1)
     n_tests = max(1, A.shape[1])
     Q = span_basis(X)
-    pairs = _order_groups(phi, R, M, proj) if phi is not None else None
+    if pairs is None and phi is not None:
+        pairs = _projected_pairs(_order_groups(phi, R, M, proj), Q)
+    Qa = np.zeros((Q.shape[0], 0))  # the columns taken, orthogonal to the saturating ones
     added = orders = 0
     for _ in range(3 * M):
         e = ym - Q @ (Q.T @ ym)
@@ -452,17 +408,19 @@ def _level_sigma(
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
         # Bonferroni-adjusted log p-values: the single column, and the best pair of orders
         lp = stats.f.logsf(f, 1, dof) + math.log(n_tests) if ok[j] else 0.0
-        pair = _best_pair(ym, Q, pairs, n_ind) if pairs is not None else None
+        pair = _best_pair(e, dof - 1, Qa, pairs) if pairs is not None else None
         if pair is not None and pair[0] < lp:
             if pair[0] >= math.log(level_alpha):
                 break
-            Q = span_basis(np.concatenate([Q, pair[1]], 1))
+            new = pair[1]
             orders += 1
-            continue
-        if lp >= math.log(level_alpha):
+        elif lp >= math.log(level_alpha):
             break
-        Q = span_basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
-        added += 1
+        else:
+            new = Ap[:, j : j + 1]
+            added += 1
+        Q = span_basis(np.concatenate([Q, new], 1))
+        Qa = np.concatenate([Qa, span_basis(new)], 1)
     e = ym - Q @ (Q.T @ ym)
     ssr0, rk0 = float(e @ e), Q.shape[1]
     nu = max(n_ind - rk0, 1)
@@ -502,34 +460,46 @@ def _level_sigma(
 
 
 def run_mean_levels(
-    resid: np.ndarray,
     K: int,
     rows: Mapping[str, Any],
     consts: Mapping[str, Any],
     orders: list[int],
     settings: FinderSettings,
-    info: dict | None = None,
-) -> np.ndarray:
-    """:func:`_level_sigma` on ``resid`` (R, C: one row per run, ``K`` revolution columns
-    per moving sensor) with the kind's settings spelled once: the saturating columns of the
-    design ``orders`` (:func:`_saturating_columns`), the fixed sensors' run means
-    (``rows["fixed_c"]``), the base's common columns (:func:`common_base_columns`) and the
-    thresholds of ``settings``. Used by the prepare stage, the noise hook and the probes'
-    re-estimates (:func:`levels_of`), so that they cannot drift apart."""
+) -> Callable[..., np.ndarray]:
+    """``levels(resid, info=None) -> sigma (C,)``: :func:`_level_sigma` on a residual (R, C:
+    one row per run, ``K`` revolution columns per moving sensor) with the kind's settings
+    spelled once: the saturating columns of the design ``orders``
+    (:func:`_saturating_columns`), the one-sensor order pairs in the platform angles
+    ``rows["theta"]`` (:func:`_order_groups`, projected off those columns once: the probes
+    re-run the level many times), the fixed sensors' run means (``rows["fixed_c"]``), the
+    base's common columns (:func:`common_base_columns`) and the thresholds of ``settings``.
+    Used by the prepare stage, the noise hook and the probes' re-estimates
+    (:func:`levels_of`), so that they cannot drift apart."""
     X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
-    return _level_sigma(
-        resid,
-        K,
-        X,
-        float(consts["proj"]) > 0,
-        info=info,
-        test_p=settings.sds_sigma_test_p,
-        level_alpha=settings.sds_level_alpha,
-        fixed=np.asarray(rows["fixed_c"], float),
-        common_base=common_base_columns(rows["phi"], consts["psi_m"], orders),
-        common_quantile=settings.sds_common_level_quantile,
-        phi=np.asarray(rows["theta"], float),
+    proj = float(consts["proj"]) > 0
+    phi = np.asarray(rows["theta"], float)
+    pairs = _projected_pairs(
+        _order_groups(phi, phi.size, int(np.asarray(consts["psi_m"]).size), proj), span_basis(X)
     )
+    fixed = np.asarray(rows["fixed_c"], float)
+    common = common_base_columns(rows["phi"], consts["psi_m"], orders)
+
+    def levels(resid: np.ndarray, info: dict | None = None) -> np.ndarray:
+        return _level_sigma(
+            resid,
+            K,
+            X,
+            proj,
+            info=info,
+            test_p=settings.sds_sigma_test_p,
+            level_alpha=settings.sds_level_alpha,
+            fixed=fixed,
+            common_base=common,
+            common_quantile=settings.sds_common_level_quantile,
+            pairs=pairs,
+        )
+
+    return levels
 
 
 def levels_of(ctx: Context):
@@ -541,11 +511,7 @@ def levels_of(ctx: Context):
         return None
     orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
     K = base.shape[1] // int(np.asarray(ctx.consts["psi_m"]).size)
-
-    def levels(resid: np.ndarray) -> np.ndarray:
-        return run_mean_levels(resid, K, ctx.rows, ctx.consts, orders, ctx.settings)
-
-    return levels
+    return run_mean_levels(K, ctx.rows, ctx.consts, orders, ctx.settings)
 
 
 def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
@@ -555,9 +521,8 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     # one row per run, every run kept (sds_prepare): the rows are the residual's rows
     orders = base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0]
     info: dict = {}
-    sig = run_mean_levels(
-        resid[prep.keep], prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings, info
-    )
+    levels = run_mean_levels(prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings)
+    sig = levels(resid[prep.keep], info)
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
     pw = common_order_power(prep, rwm)
