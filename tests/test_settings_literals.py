@@ -178,6 +178,9 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_noise.py", 1e4): NUMERIC + " (F tends to chi-square: no widening)",
     ("kinds/sds/_sds_noise.py", 4): DOF + " (a rotating and a common cos / sin pair per order)",
     ("kinds/sds/_sds_noise.py", 1e-12): GUARD + " (a zero time span)",
+    ("kinds/sds/_sds_pairs.py", 2): COUNT + " (a pair of columns; half the values); a squared norm",
+    ("kinds/sds/_sds_pairs.py", 3): COUNT + " (degrees of freedom of an F-test)",
+    ("kinds/sds/_sds_pairs.py", 1e-10): NUMERIC + " (a singular pair's Gram determinant)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
     ("kinds/sds/_sds_terms.py", 4): SEARCH
     + " (detection-bound probes: a step's first run at the quartiles of the runs)",

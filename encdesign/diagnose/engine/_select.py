@@ -460,7 +460,15 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
         k = _order_key(f)
         if k in left:
             power[k] = power.get(k, 0.0) + max(f.power - f.dof, 0.0)
-    larger = sorted(k for k, v in power.items() if v > dchi)
+    larger = {k for k, v in power.items() if v > dchi}
+    # and those it dents but leaves with more than its whole gain (a static order of one SDS
+    # sensor, which bearing_wobble and sensor_delay_step each took a part of, session 19)
+    p_after: dict = {}
+    for f in after:
+        k = _order_key(f)
+        if k is not None:
+            p_after[k] = p_after.get(k, 0.0) + max(f.power - f.dof, 0.0)
+    larger = sorted(larger | {k for k, v in p_after.items() if v > dchi})
     base = _unfrozen(fr.terms[:-1], current.terms)
     kept = kept_gain_share(prep, fitter, base, fr.terms[-1], larger)
     if kept is not None and kept < s.located_share_min:

@@ -483,7 +483,7 @@ def sds_prepare(
         if pp > 0
         else []
     )
-    sigma = run_mean_levels(kd.y, kd.n_revs, rows, consts, orders, settings)
+    sigma = run_mean_levels(kd.n_revs, rows, consts, orders, settings)(kd.y)
     ctx = Context(
         kind="sds",
         n_channels=C,

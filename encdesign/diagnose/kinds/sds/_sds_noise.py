@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
+from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
 REFERENCE_RADIUS_M = 0.0254
 BEAM_ORDERS = (1, 2, 3)
@@ -346,6 +347,8 @@ def _level_sigma(
     fixed: np.ndarray | None = None,
     common_base: np.ndarray | None = None,
     common_quantile: float | None = None,
+    phi: np.ndarray | None = None,
+    pairs: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -355,7 +358,11 @@ def _level_sigma(
     no low order can inflate it), plus the significant change points (a step on one sensor
     from one run on) and single-value outliers (one sensor in one run), each searched for
     and tested as F(1, dof) against what is left (Bonferroni), so neither can inflate it
-    either. The level is ``sqrt(SSR / nu)`` with ``nu`` = independent values − rank (without
+    either; with the platform angles ``phi`` (one per run, rows in time order) also an order
+    of ``phi`` on one sensor that is there throughout, grows or switches on (a pair of
+    columns, :func:`_order_groups`, F(2, dof); each step takes the column or pair of least
+    Bonferroni-adjusted p-value; issue 41, session 18). The level is ``sqrt(SSR / nu)``
+    with ``nu`` = independent values − rank (without
     ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
     1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
     its estimation error: with ~12 platform positions it is known to ~±17 %, which the
@@ -394,8 +401,11 @@ def _level_sigma(
     A = A.reshape(R * M, -1)
     n_tests = max(1, A.shape[1])
     Q = span_basis(X)
-    added = 0
-    for _ in range(2 * M):
+    if pairs is None and phi is not None:
+        pairs = _projected_pairs(_order_groups(phi, R, M, proj), Q)
+    Qa = np.zeros((Q.shape[0], 0))  # the columns taken, orthogonal to the saturating ones
+    added = orders = 0
+    for _ in range(3 * M):
         e = ym - Q @ (Q.T @ ym)
         ssr0 = float(e @ e)
         dof = n_ind - Q.shape[1] - 1
@@ -407,10 +417,21 @@ def _level_sigma(
         gain = np.where(ok, (e @ Ap) ** 2 / np.where(ok, nn, 1.0), 0.0)
         j = int(np.argmax(gain))
         f = gain[j] / ((ssr0 - gain[j]) / dof) if ssr0 > gain[j] else np.inf
-        if not ok[j] or f <= stats.f.isf(level_alpha / n_tests, 1, dof):
+        # Bonferroni-adjusted log p-values: the single column, and the best pair of orders
+        lp = stats.f.logsf(f, 1, dof) + math.log(n_tests) if ok[j] else 0.0
+        pair = _best_pair(e, dof - 1, Qa, pairs) if pairs is not None else None
+        if pair is not None and pair[0] < lp:
+            if pair[0] >= math.log(level_alpha):
+                break
+            new = pair[1]
+            orders += 1
+        elif lp >= math.log(level_alpha):
             break
-        Q = span_basis(np.concatenate([Q, Ap[:, j : j + 1]], 1))
-        added += 1
+        else:
+            new = Ap[:, j : j + 1]
+            added += 1
+        Q = span_basis(np.concatenate([Q, new], 1))
+        Qa = np.concatenate([Qa, span_basis(new)], 1)
     e = ym - Q @ (Q.T @ ym)
     ssr0, rk0 = float(e @ e), Q.shape[1]
     nu = max(n_ind - rk0, 1)
@@ -440,6 +461,7 @@ def _level_sigma(
             run_means_common_factor_indirect=g_ind,
             run_means_common_factor_direct=g_dir,
             run_means_steps_or_outliers=added,
+            run_means_sensor_orders=orders,
             contrasts_common_rad=lv[0] if lv else None,
             contrasts_differences_rad=lv[1] if len(lv) > 1 else None,
         )
@@ -449,33 +471,46 @@ def _level_sigma(
 
 
 def run_mean_levels(
-    resid: np.ndarray,
     K: int,
     rows: Mapping[str, Any],
     consts: Mapping[str, Any],
     orders: list[int],
     settings: FinderSettings,
-    info: dict | None = None,
-) -> np.ndarray:
-    """:func:`_level_sigma` on ``resid`` (R, C: one row per run, ``K`` revolution columns
-    per moving sensor) with the kind's settings spelled once: the saturating columns of the
-    design ``orders`` (:func:`_saturating_columns`), the fixed sensors' run means
-    (``rows["fixed_c"]``), the base's common columns (:func:`common_base_columns`) and the
-    thresholds of ``settings``. Used by the prepare stage, the noise hook and the probes'
-    re-estimates (:func:`levels_of`), so that they cannot drift apart."""
+) -> Callable[..., np.ndarray]:
+    """``levels(resid, info=None) -> sigma (C,)``: :func:`_level_sigma` on a residual (R, C:
+    one row per run, ``K`` revolution columns per moving sensor) with the kind's settings
+    spelled once: the saturating columns of the design ``orders``
+    (:func:`_saturating_columns`), the one-sensor order pairs in the platform angles
+    ``rows["theta"]`` (:func:`_order_groups`, projected off those columns once: the probes
+    re-run the level many times), the fixed sensors' run means (``rows["fixed_c"]``), the
+    base's common columns (:func:`common_base_columns`) and the thresholds of ``settings``.
+    Used by the prepare stage, the noise hook and the probes' re-estimates
+    (:func:`levels_of`), so that they cannot drift apart."""
     X, _ = _saturating_columns(rows, consts, orders, settings.sds_saturate_fraction)
-    return _level_sigma(
-        resid,
-        K,
-        X,
-        float(consts["proj"]) > 0,
-        info=info,
-        test_p=settings.sds_sigma_test_p,
-        level_alpha=settings.sds_level_alpha,
-        fixed=np.asarray(rows["fixed_c"], float),
-        common_base=common_base_columns(rows["phi"], consts["psi_m"], orders),
-        common_quantile=settings.sds_common_level_quantile,
+    proj = float(consts["proj"]) > 0
+    phi = np.asarray(rows["theta"], float)
+    pairs = _projected_pairs(
+        _order_groups(phi, phi.size, int(np.asarray(consts["psi_m"]).size), proj), span_basis(X)
     )
+    fixed = np.asarray(rows["fixed_c"], float)
+    common = common_base_columns(rows["phi"], consts["psi_m"], orders)
+
+    def levels(resid: np.ndarray, info: dict | None = None) -> np.ndarray:
+        return _level_sigma(
+            resid,
+            K,
+            X,
+            proj,
+            info=info,
+            test_p=settings.sds_sigma_test_p,
+            level_alpha=settings.sds_level_alpha,
+            fixed=fixed,
+            common_base=common,
+            common_quantile=settings.sds_common_level_quantile,
+            pairs=pairs,
+        )
+
+    return levels
 
 
 def levels_of(ctx: Context):
@@ -487,11 +522,7 @@ def levels_of(ctx: Context):
         return None
     orders = base_orders(ctx.meta, ctx.consts, ctx.max_order)[0]
     K = base.shape[1] // int(np.asarray(ctx.consts["psi_m"]).size)
-
-    def levels(resid: np.ndarray) -> np.ndarray:
-        return run_mean_levels(resid, K, ctx.rows, ctx.consts, orders, ctx.settings)
-
-    return levels
+    return run_mean_levels(K, ctx.rows, ctx.consts, orders, ctx.settings)
 
 
 def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
@@ -501,9 +532,8 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     # one row per run, every run kept (sds_prepare): the rows are the residual's rows
     orders = base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0]
     info: dict = {}
-    sig = run_mean_levels(
-        resid[prep.keep], prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings, info
-    )
+    levels = run_mean_levels(prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings)
+    sig = levels(resid[prep.keep], info)
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
     pw = common_order_power(prep, rwm)
