@@ -177,22 +177,39 @@ def pair_trials(
                 sizes = {named: (a_named, b_named), second: (factor * b2["bound"], b2)}
                 d = diagnose(make(key, sizes)).doc
                 rows.append(
-                    dict(
-                        **head,
-                        key=key,
-                        factor=factor,
-                        found=_found(d, second),
-                        named=any(e["name"] == second for e in d["effects"]),
-                        named_still=any(e["name"] == named for e in d["effects"]),
-                        bound=b2["bound"],
+                    _row(
+                        head,
+                        key,
+                        factor,
+                        d,
+                        named,
+                        second,
+                        b2,
                         bound_clean=(_bound(d0, second, where) or {}).get("bound"),
-                        set_by=b2["set_by"],
                         reference=d1["detection_bounds_reference"]["model"],
-                        verdict=d["verdict"],
                     )
                 )
                 print(rows[-1], flush=True)
     return rows
+
+
+def _row(
+    head: dict, key: int, factor: float, d: dict, named: str, second: str, b2: dict, **extra
+) -> dict:
+    """One trial's row: whether ``second`` (added at ``factor`` x its bound ``b2``) was found
+    or named in the diagnosis document ``d``, and whether ``named`` still was."""
+    return dict(
+        **head,
+        key=key,
+        factor=factor,
+        found=_found(d, second),
+        named=any(e["name"] == second for e in d["effects"]),
+        named_still=any(e["name"] == named for e in d["effects"]),
+        bound=b2["bound"],
+        set_by=b2["set_by"],
+        verdict=d["verdict"],
+        **extra,
+    )
 
 
 def same_trials(
@@ -227,19 +244,7 @@ def same_trials(
         for factor in factors:
             sizes = {named: (a_named, b_named), second: (factor * b2["bound"], b2)}
             d = diagnose(make(key, sizes)).doc
-            rows.append(
-                dict(
-                    **head,
-                    key=key,
-                    factor=factor,
-                    found=_found(d, second),
-                    named=any(e["name"] == second for e in d["effects"]),
-                    named_still=any(e["name"] == named for e in d["effects"]),
-                    bound=b2["bound"],
-                    set_by=b2["set_by"],
-                    verdict=d["verdict"],
-                )
-            )
+            rows.append(_row(head, key, factor, d, named, second, b2))
             print(rows[-1], flush=True)
     return rows
 
