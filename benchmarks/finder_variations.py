@@ -100,6 +100,20 @@ def clean_record(rng, orders_lo: int = 3, orders_hi: int = 12):
     return Recording("multihead", meta, cols), desc
 
 
+def even_runs(R: int, nr: int, rate: float, path, rng):
+    """``R`` runs of ``nr`` evenly spaced samples at ``rate`` (Hz), each followed by a 2 s
+    pause: the run's shaft angle ``path(r, t)`` (rad, ``t`` from 0 s within the run) plus a
+    random start in [0, 6.3) rad drawn from ``rng`` after it. Returns the concatenated time
+    (s), angle (rad) and run index."""
+    ts, ths, runs = [], [], []
+    for r in range(R):
+        t = np.arange(nr) / rate
+        ths.append(path(r, t) + rng.uniform(0, 6.3))
+        ts.append(t + r * (t[-1] + 2))
+        runs.append(np.full(nr, r))
+    return np.concatenate(ts), np.concatenate(ths), np.concatenate(runs)
+
+
 def effect_record(rng, eff: str):
     sensor = eff in ("direction_hysteresis", "scale_error")
     H = 1 if sensor else int(rng.integers(2, 7))
@@ -114,22 +128,15 @@ def effect_record(rng, eff: str):
     both = sensor
     rate = float(10 ** rng.uniform(2, 3.3))
     nr = n // R
-    ts, ths, runs = [], [], []
-    for r in range(R):
-        t = np.arange(nr) / rate
+
+    def path(r: int, t: np.ndarray) -> np.ndarray:
         sp = turns * 2 * np.pi / t[-1] * (1 + 0.5 * r)
         if both:
             half = nr // 2
-            th = np.where(np.arange(nr) < half, sp * t, sp * t[half] - sp * (t - t[half]))
-        else:
-            th = sp * t
-        th = th + rng.uniform(0, 6.3)
-        ts.append(t + r * (t[-1] + 2))
-        ths.append(th)
-        runs.append(np.full(nr, r))
-    t = np.concatenate(ts)
-    th = np.concatenate(ths)
-    run = np.concatenate(runs)
+            return np.where(np.arange(nr) < half, sp * t, sp * t[half] - sp * (t - t[half]))
+        return sp * t
+
+    t, th, run = even_runs(R, nr, rate, path, rng)
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
     err = np.zeros((t.size, H))
     for m in range(1, int(rng.integers(3, 10))):

@@ -16,6 +16,7 @@ import sys
 import time
 
 import numpy as np
+from finder_variations import even_runs
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
@@ -33,22 +34,14 @@ def short_record(rng, eff: str | None = None):
     both = bool(rng.random() < 0.4)
     rate = float(10 ** rng.uniform(1.5, 3.5))
     nr = n // R
-    ts, ths, runs = [], [], []
-    for r in range(R):
-        t = np.arange(nr) / rate
-        span = turns * 2 * np.pi
+
+    def path(r: int, t: np.ndarray) -> np.ndarray:
         if both:
             half = nr // 2
-            u = np.where(np.arange(nr) < half, t / t[half], 2 - t / t[half])
-        else:
-            u = t / t[-1]
-        th = span * u + rng.uniform(0, 6.3)
-        ts.append(t + r * (t[-1] + 2))
-        ths.append(th)
-        runs.append(np.full(nr, r))
-    t = np.concatenate(ts)
-    th = np.concatenate(ths)
-    run = np.concatenate(runs)
+            return turns * 2 * np.pi * np.where(np.arange(nr) < half, t / t[half], 2 - t / t[half])
+        return turns * 2 * np.pi * (t / t[-1])
+
+    t, th, run = even_runs(R, nr, rate, path, rng)
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
     M = int(rng.integers(3, 21))
     err = np.zeros((t.size, H))
