@@ -1,6 +1,7 @@
 """Trial fits side by side (issue 43, ``engine/_stats_pass.py``): one pass over the rows
 answers a round's requests of several fits, the static block's per-chunk Jacobian computed
-once; every fit gets the numbers it gets alone."""
+once; every fit gets the numbers it gets when the fits run one after another on one
+fitter."""
 
 from __future__ import annotations
 
@@ -10,13 +11,14 @@ import encdesign  # noqa: F401  (float64)
 from tests.test_fit_fast import _bench_base
 
 
-def test_fits_side_by_side_equal_each_fit_alone(monkeypatch):
+def test_fits_side_by_side_equal_the_fits_one_after_another(monkeypatch):
     """A frozen base with three candidates (a line fitted in frequency from two starts, and
     one at a held frequency: nonlinear and linear fits, rounds of different lengths), no
     cache and chunks of 1024 rows (the shared Jacobians come from the memo, chunk by chunk):
-    side by side, each fit's values, chi-square, normal matrix and held-out chi-square equal
-    its fit alone to the last bit, and the memo was read (no reference angle: the head
-    mean projected out of every column)."""
+    side by side on one fitter, each fit's values, chi-square, normal matrix and held-out
+    chi-square equal the fits one after another on one fitter to the last bit (the later
+    fits start from the base's Gram matrices the first one kept), and the memo was read
+    (no reference angle: the head mean projected out of every column)."""
     from encdesign.diagnose.engine import _fit, _normal, _stats_pass
     from encdesign.diagnose.engine._fit import Fitter, make_term
     from encdesign.diagnose.engine._steps import frozen
@@ -35,7 +37,8 @@ def test_fits_side_by_side_equal_each_fit_alone(monkeypatch):
         assert f.n_chunks() > 1
         return f
 
-    alone = [fitter().fit([*held, t], max_steps=6) for t in terms]
+    f1 = fitter()
+    alone = [f1.fit([*held, t], max_steps=6) for t in terms]  # one after another
     hits = []
     get = _stats_pass.ChunkMemo.get
 

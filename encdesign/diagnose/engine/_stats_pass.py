@@ -241,9 +241,20 @@ def drive(steps: FitSteps):
         return stop.value
 
 
+def _waits(sp: StatsPass, kept: set) -> bool:
+    """Whether the request of ``sp`` would start from a longer leading block's kept Gram
+    matrices (``kept``: those the round's earlier passes will keep) than it found: it then
+    waits one round, so that it sums what it would sum after those passes, alone."""
+    return any(static_key(sp.static[:k]) in kept for k in range(sp.k0 + 1, len(sp.static)))
+
+
 def drive_many(all_steps: Sequence[FitSteps]) -> list:
     """Run several fits side by side: each round, the next request of every fit not done,
-    answered in one pass (:func:`run_passes`); their results, in order."""
+    answered in one pass (:func:`run_passes`); their results, in order. A request that
+    would sum a block's Gram matrices an earlier request of the round keeps (the frozen base
+    of a candidate's first pass, before the base's own first pass) waits for the next round:
+    one after another, it would have found them kept and summed the new columns only (the
+    same numbers as one fit after another, not the whole block's rounding)."""
     out: list = [None] * len(all_steps)
     reqs: dict[int, StatsRequest] = {}
     for i, steps in enumerate(all_steps):
@@ -252,8 +263,16 @@ def drive_many(all_steps: Sequence[FitSteps]) -> list:
         except StopIteration as stop:
             out[i] = stop.value
     while reqs:
-        idx = list(reqs)
-        answers = run_passes([StatsPass(*reqs[i]) for i in idx])
+        idx, passes, kept = [], [], set()
+        for i in reqs:
+            sp = StatsPass(*reqs[i])
+            if sp.done is None and _waits(sp, kept):
+                continue  # (next round, as it would run after that pass alone)
+            idx.append(i)
+            passes.append(sp)
+            if sp.done is None and sp.gram is None:  # the leading blocks' Gram it keeps
+                kept |= {static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)}
+        answers = run_passes(passes)
         for i, ans in zip(idx, answers):
             try:
                 reqs[i] = all_steps[i].send(ans)
