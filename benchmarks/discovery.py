@@ -365,7 +365,11 @@ def main(argv=None) -> int:
         summary["complete"] = complete
         if a.json:
             with open(a.json, "w") as f:
-                json.dump({"args": vars(a), "summary": summary, "cases": cases}, f, indent=1)
+                json.dump(
+                    {"args": vars(a), "summary": summary, "cases": cases, "clean": clean},
+                    f,
+                    indent=1,
+                )
         return summary
 
     for ki, kind in enumerate(kinds):
