@@ -30,6 +30,21 @@ the finder; discovery's model of the located line is scored against the truth:
   not legitimately take (``..._nameable_...``: with the naming threshold only), next to
   ``frame_right_all``.
 
+The ``intermittent`` class (session 20): an order of the shaft on in two of the three runs,
+at their different speeds, off in the third, with its own phase in each run it is on in
+(the finder's ``per_cell``; ``modulation_right`` also takes a ``cell <i>`` term of one of
+those runs; the true model is the better of ``per_cell`` and the joint ``cell`` terms of its
+runs). Until session 19 it was an order on in one steady run only: within a run at one speed
+an order ``m`` is a line at one frequency, ``m`` x the run's speed, which the catalog's
+``vibration`` (one frequency, each run and head its own amplitudes) fits exactly (to 1e-18 of
+the structure's energy on training seeds 7461-7470, with each head's own static order m); its
+misses were the benchmark's confound, not the finder's. Its order is now seen at two speeds,
+which no one frequency is, and with phases a quarter to three quarters of a turn apart it is
+not a static order plus a vibration in one run either (on one sensor a static order is the
+sensor's own error function): at least 25 % of its energy is left by the best such catalog fit
+on those seeds. The old class stays runnable by name (``--classes intermittent_one_run``,
+:data:`~encdesign.simulate._outside.CONFOUNDED`, scored the old way: ``modulation`` ``cell``).
+
 Clean records (``--clean N`` per kind) count the records where discovery adds a term.
 Each kind runs the classes of ``--classes`` its bench can carry
 (:func:`~encdesign.simulate._outside.classes_for`: an SDS bench has the sensor-frame,
@@ -54,7 +69,7 @@ from encdesign.diagnose.engine import _discover as D
 from encdesign.diagnose.engine import _engine
 from encdesign.diagnose.engine._views import chi2_threshold
 from encdesign.diagnose.kinds.sds._sds import sds_limit
-from encdesign.simulate._outside import CLASSES, KINDS, classes_for, outside_record
+from encdesign.simulate._outside import CLASSES, CONFOUNDED, KINDS, classes_for, outside_record
 
 SIZES = (2.0, 5.0, 20.0)
 
@@ -166,6 +181,21 @@ def _gains(truth: dict, base: bool = False) -> tuple[float, float, float]:
             g = D._single_heldout(st.sums, tm, folds)
             if not np.isfinite(best) or g > best:
                 best, thr = g, float(st.thresh[ti])
+    if mod == "per_cell" and truth.get("runs") is not None:  # or its exact form: its own
+        # amplitude and phase in each of its runs, none elsewhere (one cell term per run)
+        cells = [
+            (ti, tm)
+            for ti, tm in enumerate(st.lib)
+            if tm.line == li[0]
+            and tm.frame == truth["frame"]
+            and tm.modulation.startswith("cell ")
+            and st.cinfo["run"][int(tm.modulation.split()[1])] in truth["runs"]
+        ]
+        if cells:
+            H = D._embed(st.sums, [tm for _, tm in cells])
+            g = D._heldout(st.sums.A, st.sums.b, H, folds, st.sums.raw)
+            if not np.isfinite(best) or g > best:
+                best, thr = g, max(float(st.thresh[ti]) for ti, _ in cells)
     return got, best, thr
 
 
@@ -206,7 +236,8 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         "size": size,
         "kind": kind,
         "truth": {
-            k: truth.get(k) for k in ("line", "frame", "modulation", "beta", "run", "step_time_s")
+            k: truth.get(k)
+            for k in ("line", "frame", "modulation", "beta", "run", "runs", "step_time_s")
         },
         "verdict": d.verdict,
         "effects": [e["name"] for e in d.effects],
@@ -214,7 +245,10 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         "discovery_s": _CAP.get("discovery_s", 0.0),
         "found": bool(terms),
         "terms": [
-            {k: t.get(k) for k in ("frame", "modulation", "heldout_gain_chi2", "scaling", "step")}
+            {
+                k: t.get(k)
+                for k in ("frame", "modulation", "runs", "heldout_gain_chi2", "scaling", "step")
+            }
             for t in terms
         ],
     }
@@ -244,6 +278,9 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         out["modulation_right"] = (
             t["modulation"].startswith("cell ") if mod == "cell" else t["modulation"] == mod
         )
+        if mod == "per_cell" and truth.get("runs") is not None:  # or one of its runs only
+            on = t["modulation"].startswith("cell ") and set(t["runs"]) <= set(truth["runs"])
+            out["modulation_right"] = out["modulation_right"] or on
         if mod == "step" and t.get("step"):
             out["step_run_right"] = t["step"]["run"] == truth["run"]
             out["step_time_s"] = t["step"]["time_s"]
@@ -328,12 +365,16 @@ def main(argv=None) -> int:
         summary["complete"] = complete
         if a.json:
             with open(a.json, "w") as f:
-                json.dump({"args": vars(a), "summary": summary, "cases": cases}, f, indent=1)
+                json.dump(
+                    {"args": vars(a), "summary": summary, "cases": cases, "clean": clean},
+                    f,
+                    indent=1,
+                )
         return summary
 
     for ki, kind in enumerate(kinds):
         for ci, cls in enumerate(classes):
-            if cls not in classes_for(kind):
+            if cls not in classes_for(kind) and not (cls in CONFOUNDED and kind != "sds"):
                 continue
             for si, size in enumerate(sizes):
                 for i in range(a.seeds):

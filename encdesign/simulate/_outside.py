@@ -41,7 +41,10 @@ motion); a defect of one head; an error in one direction only; a structure at a 
 frequency with its own Q (``fixed_hz``: a mode rung at the start of every run with its own
 phase, decaying as ``exp(-pi f t / Q)``; a steady line of constant amplitude is the catalog's
 ``vibration``: :data:`CONTROLS`); a slow growth over the
-record; an order present in one run only; an error of opposite sign in the two directions;
+record; an order present in two of the three runs, at their different speeds, with its own
+phase in each (``intermittent``: a contact that engages in some runs only, re-seated at
+another angle each time; the finder's ``per_cell``); an error of opposite sign in the two
+directions;
 a lag growing as speed^+1; an order that switches on at one time of the middle run
 (``order_step``); and on an SDS bench: a periodic error of the platform angle in the frame
 of one moving sensor (``sensor_frame``: an SDS sensor-frame error), an order of the platform
@@ -55,6 +58,15 @@ CONTROLS = ("catalog_vibration",)
 """Classes of catalog physics, to check that discovery leaves them to the catalog: a
 steady line at a fixed frequency with its own amplitude and phase in every run (the
 catalog's ``vibration``)."""
+
+CONFOUNDED = ("intermittent_one_run",)
+"""Classes no record of this bench can tell from catalog physics, kept to be run by name
+(not in :data:`CLASSES`): ``intermittent_one_run`` (``intermittent`` before session 20) is
+an order present in one steady run only, which within that run is a line at one fixed
+frequency, ``m`` x the run's speed: exactly the catalog's ``vibration`` with that run's own
+amplitudes and none in the others (and on one sensor, whose static orders are its own error
+function, any pattern of one order over 3 runs that is on in one and off in two, or on in
+two with one phase, is that error function plus such a vibration)."""
 
 Q_RANGE = (20.0, 60.0)
 """Quality factor of the ``fixed_hz`` mode (its ring-down time ``Q / (pi f)``: 0.2 to 0.8 s
@@ -105,7 +117,11 @@ def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> di
         return dict(line=("hz", float(rng.uniform(23.0, 37.0))), frame="hz", modulation="per_cell")
     if cls == "slow_growth":
         return dict(line=("order", m), frame="disk" if C > 1 else "shaft", modulation="growth")
-    if cls == "intermittent":
+    if cls == "intermittent":  # on in two runs (speeds apart), off in the third
+        off = int(rng.integers(0, 3))
+        runs = tuple(r for r in range(3) if r != off)
+        return dict(line=("order", m), frame="shaft", modulation="per_cell", runs=runs)
+    if cls == "intermittent_one_run":
         return dict(
             line=("order", m), frame="shaft", modulation="cell", run=int(rng.integers(0, 3))
         )
@@ -115,7 +131,7 @@ def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> di
         return dict(line=("order", m), frame="shaft", modulation="speed", beta=1.0)
     if cls == "order_step":
         return dict(line=("order", m), frame="shaft", modulation="step", step_run=1)
-    raise ValueError(f"unknown class {cls!r}; expected one of {CLASSES}")
+    raise ValueError(f"unknown class {cls!r}; expected one of {CLASSES + CONFOUNDED}")
 
 
 def outside_record(
@@ -135,7 +151,9 @@ def outside_record(
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
-    if cls not in ("clean", *CONTROLS) and cls not in classes_for(kind):
+    if cls in CONFOUNDED and kind == "sds":
+        raise ValueError(f"class {cls!r} not on an sds bench; expected {classes_for(kind)}")
+    if cls not in ("clean", *CONTROLS, *CONFOUNDED) and cls not in classes_for(kind):
         raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
     if kind == "sds":
         return _sds_record(rng, cls, size)
@@ -194,6 +212,12 @@ def outside_record(
                 g = tau / tau.max()
             elif mod == "cell":
                 g = (run == truth["run"]) * 1.0
+            elif mod == "per_cell":  # its runs only, each with its own phase (at least a
+                # quarter turn from the first's: not one phase over the runs it is on in)
+                dph = np.zeros(R)
+                dph[list(truth["runs"][1:])] = rng.uniform(0.5 * np.pi, 1.5 * np.pi)
+                s = np.sin(val * th + ph + dph[run])[:, None] * np.ones(C)
+                g = np.isin(run, truth["runs"]) * 1.0
             elif mod == "step":  # on from a time inside the run (a third to two thirds in)
                 ts = float(rng.uniform(0.33, 0.67)) * n / fs
                 truth["step_time_s"], truth["run"] = ts, truth["step_run"]
