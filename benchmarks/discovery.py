@@ -44,6 +44,13 @@ not a static order plus a vibration in one run either (on one sensor a static or
 sensor's own error function): at least 25 % of its energy is left by the best such catalog fit
 on those seeds. The old class stays runnable by name (``--classes intermittent_one_run``,
 :data:`~encdesign.simulate._outside.CONFOUNDED`, scored the old way: ``modulation`` ``cell``).
+The direction classes (``one_direction``, ``direction_lag``) had the same confound: 3 runs,
+one of them reverse at one steady speed, so the order was a static order (the catalog's
+``beam_tilt_axial``; one sensor's own error function) plus a line at one frequency in the
+reverse run (``vibration``), exactly (1e-19 of its energy left on seeds 7461-7470; named so
+at 20x on session 20's fresh multihead seeds); since session 20 their bench has 4 runs, each
+direction at two speeds (:data:`~encdesign.simulate._outside.DIRECTION_RUNS`: 25 % and 50 %
+of the energy left by that fit).
 
 Clean records (``--clean N`` per kind) count the records where discovery adds a term.
 Each kind runs the classes of ``--classes`` its bench can carry
