@@ -1,12 +1,13 @@
 """Recordings with physics outside the finder's catalog (issue 41's discovery benchmark).
 
 :func:`outside_record` draws a multihead bench (4 heads and a reference angle, ``multihead``)
-or one sensor against a reference (``sensor``), 3 steady runs at different speeds (and, for
-the direction classes, both directions), with a disk error of orders 1-5, white noise, and
-one structure of a class nobody wrote into the catalog; or (``sds``) a shifted-delta-sum
-bench (the concealed benchmark's instrument: a 6-pole-pair motor, 2 fixed and 3 moving
-sensors, 24 platform positions stepped by the golden angle, 1 ns jitter, a 100 MHz clock)
-whose moving sensors' edges carry the structure as a delay. The truth says the frame and
+or one sensor against a reference (``sensor``), 3 steady runs at different speeds (for the
+direction classes 4: each direction at two speeds, :data:`DIRECTION_RUNS`), with a disk
+error of orders 1-5, white noise, and one structure of a class nobody wrote into the
+catalog; or (``sds``) a shifted-delta-sum bench (the concealed benchmark's instrument: a
+6-pole-pair motor, 2 fixed and 3 moving sensors, 24 platform positions stepped by the golden
+angle, 1 ns jitter, a 100 MHz clock) whose moving sensors' edges carry the structure as a
+delay. The truth says the frame and
 modulation a correct model has, and the speed exponent where there is one.
 """
 
@@ -71,6 +72,14 @@ two with one phase, is that error function plus such a vibration)."""
 Q_RANGE = (20.0, 60.0)
 """Quality factor of the ``fixed_hz`` mode (its ring-down time ``Q / (pi f)``: 0.2 to 0.8 s
 at 23 to 37 Hz, inside a run of 2 s at 3000 rows)."""
+
+DIRECTION_RUNS = ((1.0, 1.0, 1.7, 1.7), (1, -1, 1, -1))
+"""Speeds (x the first run's) and directions of the direction classes' 4 runs (session 20):
+each direction at two speeds. Until session 19 they had 3 runs, ``(1, 1, 1.7)`` x
+``(+, -, +)``: the one reverse run was one steady speed, so an order in one direction only, or
+of opposite sign in the two, was a static order (the catalog's ``beam_tilt_axial``; on one
+sensor its own error function) plus a line at one frequency in that run (``vibration``),
+exactly."""
 
 SDS_CLASSES = ("sensor_frame", "platform_order", "sensor_step", "platform_step", "slow_growth")
 """The classes an SDS bench (one steady speed, one direction, one row per run) carries."""
@@ -158,18 +167,18 @@ def outside_record(
     if kind == "sds":
         return _sds_record(rng, cls, size)
     C = 4 if kind == "multihead" else 1
-    R = 3
+    both = cls in ("one_direction", "direction_lag")
+    R = 4 if both else 3
     n = n_rows // R
     fs = 500.0
-    both = cls in ("one_direction", "direction_lag")
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.4, 5.9, C - 1))]) if C > 1 else np.zeros(1)
     truth = {"alpha": alpha, "class": cls, "size": size, "kind": kind}
     if cls != "clean":
         truth.update(_truth(cls, C, rng, mode))
     speeds = np.array([1.0, 1.7, 2.9]) * 2 * np.pi * rng.uniform(0.8, 1.2)
-    signs = np.array([1.0, -1.0, 1.0]) if both else np.ones(R)
-    if both:
-        speeds = np.array([1.0, 1.0, 1.7]) * speeds[0]
+    signs = np.array(DIRECTION_RUNS[1], float) if both else np.ones(R)
+    if both:  # each direction at two speeds
+        speeds = np.array(DIRECTION_RUNS[0]) * speeds[0]
     ts, ths, runs, ws = [], [], [], []
     for r in range(R):
         t = np.arange(n) / fs
