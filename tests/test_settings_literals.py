@@ -246,6 +246,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_constants.py", "CACHE_BYTES"): BOUND,
     ("engine/_normal.py", "CANCEL_MAX"): NUMERIC
     + " (accumulated normal equations used only while their rounding stays ~2e-12 relative)",
+    ("engine/_normal.py", "PIVOT_TIE"): NUMERIC
+    + " (pivots within it are ties broken by column order: far above the rounding of sums)",
     ("engine/_constants.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,

@@ -118,8 +118,8 @@ def _without_times(doc: dict) -> dict:
 def test_two_diagnoses_in_one_process_share_no_sums():
     """A record diagnosed after another gives the document it gives first in the process:
     each diagnosis keeps its own sums (``Prepared.view_sums``), none carries over."""
-    a, _ = late_stamps_record(7450, n_gaps=1)
-    b, _ = late_stamps_record(7451, n_gaps=2)
+    a, _ = late_stamps_record(7450, n_gaps=3)  # 1710 and 1245 rows: one chunk size
+    b, _ = late_stamps_record(7451, n_gaps=1)
     da = diagnose(a)
     db = diagnose(b)
     again = diagnose(a)
