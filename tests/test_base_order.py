@@ -168,14 +168,14 @@ def sensor_arcs_record(seed: int):
     return Recording("multihead", meta, cols), M
 
 
-@pytest.mark.parametrize("seed", [2, 9])
+@pytest.mark.parametrize("seed", [9])  # 2 too on main and the branch (9 s: left out)
 def test_a_single_pass_over_part_of_a_turn_is_not_lowered_by_heldout_error(seed):
     """One rule on part of a turn (session 20): held-out error decides the base's orders
     (the choice here, the growth after it) only where each run's held-out rows lie on angles
     its other folds see. On a single pass a held-out block's arc is seen by no other fold
-    and its error measures how the orders extrapolate: on ``main`` it lowered these bases
-    below the disk's own order (4 -> 3, 5 -> 4); the forward-and-back records above are
-    still lowered."""
+    and its error measures how the orders extrapolate: on ``main`` it lowered this base
+    below the disk's own order (5 -> 4; seed 2: 4 -> 3); the forward-and-back records above
+    are still lowered."""
     rec, M = sensor_arcs_record(seed)
     d = diagnose(rec)
     bo = d.base_order
