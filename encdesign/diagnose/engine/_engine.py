@@ -58,7 +58,8 @@ from ._document import (
     significant_channels,
     term_params,
 )
-from ._fit import FitResult, Fitter, goodness_of_fit, make_term
+from ._fit import FitResult, Fitter, make_term
+from ._goodness import goodness_of_fit
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
