@@ -81,13 +81,13 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_fit.py", 1e-7): NUMERIC + " (Levenberg-Marquardt convergence)",
     ("engine/_fit.py", 1e-2): NUMERIC + " (LM convergence: 0.01 of chi-square)",
     ("engine/_fit.py", 1e8): NUMERIC + " (LM damping gives up)",
-    ("engine/_fit.py", 16): COUNT + " (a block of the goodness-of-fit test)",
-    ("engine/_fit.py", 2): COUNT + " (Bonferroni over the two goodness-of-fit tests); guard"
-    " of a log2",
+    ("engine/_fit.py", 2): GUARD + " (of a log2: the smallest chunk)",
+    ("engine/_goodness.py", 16): COUNT + " (a block of the goodness-of-fit test)",
+    ("engine/_goodness.py", 2): COUNT + " (Bonferroni over the two goodness-of-fit tests)",
+    ("engine/_goodness.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_fit.py", 5): BOUND + " (the smallest chunk: 2^5 rows)",
     ("engine/_fit.py", 10): NUMERIC + " (LM damping divided by 10 on success)",
     ("engine/_fit.py", 1e-9): NUMERIC + " (LM damping floor)",
-    ("engine/_fit.py", 64): COUNT + " (at least 64 rows per goodness-of-fit block)",
     ("engine/_html.py", 2): SHAPE,
     ("engine/_html.py", 6): PLOT,
     ("engine/_plots.py", 12): PLOT + " (runs' starts labelled on a figure when at most 12)",
@@ -246,6 +246,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_constants.py", "CACHE_BYTES"): BOUND,
     ("engine/_normal.py", "CANCEL_MAX"): NUMERIC
     + " (accumulated normal equations used only while their rounding stays ~2e-12 relative)",
+    ("engine/_normal.py", "PIVOT_TIE"): NUMERIC
+    + " (pivots within it are ties broken by column order: far above the rounding of sums)",
     ("engine/_constants.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,

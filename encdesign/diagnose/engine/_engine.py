@@ -58,10 +58,12 @@ from ._document import (
     significant_channels,
     term_params,
 )
-from ._fit import FitResult, Fitter, goodness_of_fit, make_term
+from ._fit import FitResult, Fitter, make_term
+from ._goodness import goodness_of_fit
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
+from ._prepare import folds_see_each_others_arcs
 from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
 from ._reduce import reduce_recording
@@ -118,9 +120,10 @@ def _grow_base_order(
     the candidates'; a strong order's leakage into lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
     held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
-    when it raises the held-out chi-square, unless every run covers less than one turn
-    (``Prepared.part_turn_span``: the orders are not separable there; the kind's base says so).
-    Returns ``(order, fit)``, grown and refitted, or ``None``."""
+    when it raises the held-out chi-square; on part of a turn (``Prepared.part_turn_span``:
+    the orders are not separable there; the kind's base says so) held-out error decides
+    neither (it never lowers the order there). Returns ``(order, fit)``, grown and refitted,
+    or ``None``."""
     hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
         return None
@@ -154,7 +157,7 @@ def _grow_base_order(
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
     tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
-    worse = (grown.heldout_chi2 > ho0 and prep.part_turn_span is None) or tied > max(veto, 0.0)
+    worse = grown.heldout_chi2 > ho0 or tied > max(veto, 0.0)
     if p1 > prep.settings.growth_left_max * p0 or worse:
         _set_order(prep, order)
         fitter.clear()
@@ -203,6 +206,18 @@ def _order_row(prep: Prepared, M: int, f: FitResult) -> dict:
     }
 
 
+def heldout_decides_orders(prep: Prepared) -> bool:
+    """Whether held-out error may decide the base's orders (lower them, or undo their growth
+    after a lowering): always on records of a turn or more; on part of a turn
+    (``Prepared.part_turn_span``) only where every run's held-out rows lie on angles its
+    other folds see (:func:`._prepare.folds_see_each_others_arcs`: a pass forward and back).
+    Issue 44 (session 20): one rule for the choice and the growth."""
+    if prep.part_turn_span is None:
+        return True
+    shaft = np.asarray(prep.kd.shaft, float)
+    return folds_see_each_others_arcs(shaft, prep.keep, prep.run, prep.fold)
+
+
 def _choose_base_order(
     kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, order: int, base_info: dict
 ):
@@ -227,6 +242,14 @@ def _choose_base_order(
         "tried": [row0],
     }
     base_info["order_choice"] = choice
+    if not heldout_decides_orders(prep):
+        choice["reason"] = (
+            f"every run covers less than one turn (widest {prep.part_turn_span:.3g} rad) in a "
+            "single pass: a held-out block's arc is seen by no other fold, so held-out error "
+            "measures how the orders extrapolate over it, not their need; the default order "
+            "kept (growth follows the orders the residual shows)"
+        )
+        return None
     if not (math.isfinite(ratio) and ratio > s.base_order_ratio) or order <= 1:
         choice["reason"] = (
             f"held-out RMS {ratio:.3g}x the fitted RMS (at most "

@@ -27,7 +27,8 @@ from ._evidence import (
     tie_gap,
     tie_reason,
 )
-from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._fit import FitResult, Fitter, Term, make_term
+from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._spill import band_share, edge_beyond, kept_gain_share, same_place

@@ -567,8 +567,8 @@ class FinderSettings(eqx.Module):
     ``eccentricity_shift`` starts) runs with at least this many kept rows ... Was an inline
     64 in ``_multihead_terms``; set by hand in 1e3f0c4."""
 
-    order_step_revolutions_min: float = eqx.field(default=1.0, static=True)
-    """... and at least this many revolutions in all. Was an inline 1.0; 1e3f0c4."""
+    order_step_revolutions_min: float = eqx.field(default=0.25, static=True)
+    """... and this many revolutions in all (1.0 in 1e3f0c4; 0.25 in s20, issue 44: part turns)."""
 
     clip_excess_ratio: float = eqx.field(default=3.0, static=True)
     """quadrature: a signal extreme is clipped when more than this many times the samples a
