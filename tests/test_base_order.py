@@ -196,3 +196,21 @@ def test_folds_see_each_others_arcs_on_a_pass_forward_and_back_only():
     fold, _ = _fold_blocks(keep, run, FinderSettings().n_folds)
     assert not folds_see_each_others_arcs(fwd, keep, run, fold)
     assert folds_see_each_others_arcs(back * 1.0, keep, run, fold)
+
+
+@pytest.mark.parametrize("n", [50, 200, 1000])
+def test_a_sampled_whole_turn_is_not_part_of_a_turn(n):
+    """N rows evenly spaced over one turn span only 2 pi (N - 1) / N of it, yet they cover the
+    turn (``magalpha_cal``: 200 rows); 0.9 turn, or a whole turn less two steps, is part of
+    one, and a few rows left out inside the turn do not make it part of one."""
+    from encdesign.diagnose.engine._prepare import part_turn_span
+
+    run, keep = np.zeros(n, int), np.ones(n, bool)
+    turn = 2 * np.pi * np.arange(n) / n
+    assert part_turn_span(turn + 0.3, keep, run) is None
+    gap = keep.copy()
+    gap[n // 3 : n // 3 + n // 10] = False
+    assert part_turn_span(turn, gap, run) is None
+    assert part_turn_span(turn[: n - 2], keep[: n - 2], run[: n - 2]) is not None
+    span = part_turn_span(0.9 * turn, keep, run)
+    assert span is not None and abs(span - 0.9 * 2 * np.pi) < 1e-9

@@ -646,11 +646,20 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
 def part_turn_span(shaft: np.ndarray, keep: np.ndarray, run: np.ndarray) -> float | None:
     """The widest shaft-angle span (rad) of a run's kept rows where every run covers less than
     one turn (the base's orders are then not separable: their held-out error measures that
-    ill-conditioning, not their fit; issue 44), else ``None`` (``Prepared.part_turn_span``)."""
+    ill-conditioning, not their fit; issue 44), else ``None`` (``Prepared.part_turn_span``).
+    A run's span is its kept angles' range plus its median step between neighbouring rows:
+    N rows evenly spaced over a whole turn have a range of only ``2 pi (N - 1) / N``, and
+    they cover the turn (session 20: a 200-row turn of ``magalpha_cal`` counted as part of
+    one)."""
     widest = 0.0
     for _, (a, b) in run_spans(run):
         th = shaft[a:b][keep[a:b]]
-        widest = max(widest, float(np.ptp(th)) if th.size else 0.0)
+        if th.size == 0:
+            continue
+        steps = np.abs(np.diff(th))
+        steps = steps[steps > 0]
+        step = float(np.median(steps)) if steps.size else 0.0
+        widest = max(widest, float(np.ptp(th)) + step)
     return widest if widest < 2 * np.pi else None
 
 
