@@ -654,6 +654,36 @@ def part_turn_span(shaft: np.ndarray, keep: np.ndarray, run: np.ndarray) -> floa
     return widest if widest < 2 * np.pi else None
 
 
+def folds_see_each_others_arcs(
+    shaft: np.ndarray, keep: np.ndarray, run: np.ndarray, fold: np.ndarray
+) -> bool:
+    """Whether, in every run, the rows each held-out fold leaves out lie on shaft angles the
+    other folds see: the median distance (rad) from a held-out row's angle to the nearest
+    angle of the same run's other folds is at most the run's median step between neighbouring
+    rows (a pass forward and back over the arc; on a single pass the blocks' own arcs are seen
+    by no other fold). Where they do not, held-out error on part of a turn measures how the
+    orders extrapolate over a held-out block's arc, not their need (issue 44, session 20)."""
+    for _, (a, b) in run_spans(run):
+        k = keep[a:b] & (fold[a:b] >= 0)
+        th, fo = shaft[a:b][k], fold[a:b][k]
+        steps = np.abs(np.diff(th))
+        steps = steps[steps > 0]
+        if steps.size == 0:
+            continue
+        dist = []
+        for f in np.unique(fo):
+            other = np.sort(th[fo != f])
+            if other.size == 0:
+                return False
+            x = th[fo == f]
+            j = np.clip(np.searchsorted(other, x), 1, max(other.size - 1, 1))
+            lo, hi = other[j - 1], other[np.minimum(j, other.size - 1)]
+            dist.append(np.minimum(np.abs(x - lo), np.abs(x - hi)))
+        if float(np.median(np.concatenate(dist))) > float(np.median(steps)):
+            return False
+    return True
+
+
 def _detrend(y: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """``y`` less a per-segment quadratic in the row's rank within its segment, mapped to
     [-1, 1] (for the noise and glitch scans only). Normal equations accumulated in blocks:

@@ -25,6 +25,7 @@ from ._evidence import (
     rule_args,
     separate_by,
     tie_gap,
+    tie_reason,
 )
 from ._fit import FitResult, Fitter, Term, make_term
 from ._goodness import goodness_of_fit
@@ -491,9 +492,7 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
         return None
     return {
         "name": cand.name,
-        "reason": f"the data cannot tell it from {chosen.cand.name}: it fits as well "
-        f"(chi-square {gap:+.1f}, needs {s.tie_chi2:.0f} to decide) and its fitted error is "
-        f"the same (correlation {corr:.3f})",
+        "reason": tie_reason(chosen.cand.name, gap, corr, dbic, chosen.dbic, s),
         "rule": "tie_chi2",
         "delta_bic": float(dbic),
         "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},
