@@ -217,6 +217,22 @@ def test_sds_platform_order_is_common_to_the_moving_sensors():
     _no_catalog_name(d.doc)
 
 
+def test_sds_step_located_at_an_alias_order_is_modelled_at_its_own():
+    """A platform order 5 switching on at run 12 of 24 golden-angle positions: the finder
+    locates order 8 (its alias on those positions: 5 and 8 golden angles apart by 13, 4.97
+    turns); discovery tests the lower orders it may alias, and the held-out gain takes the
+    step at order 5, on every moving sensor, switched on within a run of the truth's."""
+    _, truth, d, mine = _sds("platform_step", 7509)
+    located = [o for u in d.doc["unexplained"] for o in u["where"].get("orders", [])]
+    assert 5.0 not in located and 8.0 in located, located  # the record's alias, as located
+    assert mine, d.doc["report"]
+    t = mine[0]
+    assert (t["frame"], t["modulation"]) == ("platform", "step"), d.doc["report"]
+    assert not t["located"] and "alias" in t["reading"], t["reading"]
+    assert abs(t["step"]["run"] - truth["run"]) <= 1, t["step"]
+    assert not [x for x in _terms(d.doc) if x["value"] == 8.0], d.doc["report"]
+
+
 def test_sds_clean_record_gets_nothing():
     rec, _ = outside_record(np.random.default_rng(803), "clean", 0.0, "sds")
     d = diagnose(rec)
