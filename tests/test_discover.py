@@ -63,6 +63,39 @@ def test_speed_law_in_the_shaft_frame_with_its_exponent(cls, kind):
         assert "7 pole pairs" in t["reading"] and "inertia" in t["reading"], t["reading"]
 
 
+def _left_after_order_and_one_vibration(cls: str, kind: str, seed: int) -> float:
+    """Share of a class's structure (the record less the same draw at size 0) left by the best
+    catalog-like fit at its order: each head's own static order plus one vibration (one
+    frequency, each run and head its own amplitudes) at any of the runs' ``m`` x speed."""
+    r1, tr = outside_record(np.random.default_rng(seed), cls, 5.0, kind, 3000)
+    r0, _ = outside_record(np.random.default_rng(seed), cls, 0.0, kind, 3000)
+    c1, c0 = r1.columns, r0.columns
+    heads = [k for k in c1 if k.startswith("h")]
+    s = np.stack([c1[k] - c0[k] for k in heads], 1)
+    th, t, run, m = c1["theta_ref"], c1["t"], c1["run"], tr["line"][1]
+    best = 1.0
+    for w in tr["speeds_rad_s"]:
+        ph = m * w * t  # the line of order m in a run at speed w (rad)
+        X = np.stack(
+            [np.cos(m * th), np.sin(m * th)]
+            + [(run == q) * f(ph) for q in np.unique(run) for f in (np.cos, np.sin)],
+            1,
+        )
+        coef, *_ = np.linalg.lstsq(X, s, rcond=None)
+        best = min(best, float(np.sum((s - X @ coef) ** 2) / np.sum(s**2)))
+    return best
+
+
+@pytest.mark.parametrize("kind", ["multihead", "sensor"])
+def test_the_run_and_direction_classes_are_not_one_vibration(kind):
+    # an order on in one steady run only is a line at one frequency there: the catalog's
+    # vibration fits it exactly; the benchmark's classes are on at two speeds at least (the
+    # direction classes: each direction at two speeds)
+    assert _left_after_order_and_one_vibration("intermittent_one_run", kind, 7461) < 1e-12
+    for cls in ("intermittent", "one_direction", "direction_lag"):
+        assert _left_after_order_and_one_vibration(cls, kind, 7461) > 0.2, cls
+
+
 def test_a_defect_of_one_head_is_on_that_head_only():
     rec, truth = outside_record(np.random.default_rng(42), "head_defect", 5.0, "multihead", 3000)
     d = diagnose(rec)
@@ -182,6 +215,22 @@ def test_sds_platform_order_is_common_to_the_moving_sensors():
     assert mine and mine[0]["frame"] == "platform", d.doc["report"]
     assert mine[0]["heads"] == ["m0", "m1", "m2"]
     _no_catalog_name(d.doc)
+
+
+def test_sds_step_located_at_an_alias_order_is_modelled_at_its_own():
+    """A platform order 5 switching on at run 12 of 24 golden-angle positions: the finder
+    locates order 8 (its alias on those positions: 5 and 8 golden angles apart by 13, 4.97
+    turns); discovery tests the lower orders it may alias, and the held-out gain takes the
+    step at order 5, on every moving sensor, switched on within a run of the truth's."""
+    _, truth, d, mine = _sds("platform_step", 7509)
+    located = [o for u in d.doc["unexplained"] for o in u["where"].get("orders", [])]
+    assert 5.0 not in located and 8.0 in located, located  # the record's alias, as located
+    assert mine, d.doc["report"]
+    t = mine[0]
+    assert (t["frame"], t["modulation"]) == ("platform", "step"), d.doc["report"]
+    assert not t["located"] and "alias" in t["reading"], t["reading"]
+    assert abs(t["step"]["run"] - truth["run"]) <= 1, t["step"]
+    assert not [x for x in _terms(d.doc) if x["value"] == 8.0], d.doc["report"]
 
 
 def test_sds_clean_record_gets_nothing():

@@ -343,3 +343,29 @@ def test_wobble_and_shift_hand_jacobians_equal_jacfwd(name):
         scale = float(np.max(np.abs(b)))
         assert scale > 0, q.name
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-14 * scale)
+
+
+def test_equivalent_columns_keep_the_same_ones_whatever_the_rounding():
+    """A design with a common offset beside per-run offsets (equal runs) and a repeated
+    column: which columns the fit keeps follows their order (the first of tied pivots,
+    ``_normal.PIVOT_TIE``), however its sums are rounded (other summation orders, 1e-15
+    relative noise); LAPACK's pivoting alone kept 5 different sets on these draws."""
+    from encdesign.diagnose.engine._normal import solve_determined
+
+    n_per, R = 40, 3
+    t = np.arange(R * n_per) * 0.013
+    run = np.repeat(np.arange(R), n_per)
+    offsets = [(run == r).astype(float) for r in range(R)]
+    c, s = np.cos(2.1 * t), np.sin(2.1 * t)
+    X = np.column_stack([np.ones(t.size), *offsets, c, s, c])
+    g = X.T @ np.random.default_rng(7453).normal(size=t.size)
+    kept = set()
+    for k in range(40):
+        rng = np.random.default_rng([7453, k])
+        rows = rng.permutation(t.size)
+        A = X[rows].T @ X[rows]
+        E = rng.normal(size=A.shape)
+        A = A * (1.0 + 1e-15 * (E + E.T) / 2)
+        kept.add(tuple(solve_determined(A, g, 0.0)[1].tolist()))
+    # the common offset and the first two runs' offsets, the first cos, the sin
+    assert kept == {(0, 1, 2, 4, 5)}

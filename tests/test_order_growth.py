@@ -62,17 +62,20 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize(("seed", "M", "turns"), CASES)
-def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
-    d = diagnose(_high_order_record(seed, M, turns)).doc
-    assert d["verdict"] == "consistent", d["report"]
-    assert d["base"]["max_order"] >= M - 1, d["base"]["max_order"]
-
-
 BLOCKED = [(1403, 18, 0.7), (1410, 18, 0.9)]
 """Two of :data:`CASES` whose growth a share of 1e-12 blocked while the direction, speed and
 angle-trend views were judged before the growth (session 17: 5.2 s CPU of the 17.8 s all six
 cost)."""
+
+
+@pytest.mark.parametrize(("seed", "M", "turns"), [c for c in CASES if c not in BLOCKED])
+def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
+    # (the two BLOCKED cases run in the test below at a share of 1e-12: the share only
+    # enters the growth's vetoes, each a test `x > share * located`, so a record that grows
+    # there grows alike at the default; session 20 left their default run out, 2 records)
+    d = diagnose(_high_order_record(seed, M, turns)).doc
+    assert d["verdict"] == "consistent", d["report"]
+    assert d["base"]["max_order"] >= M - 1, d["base"]["max_order"]
 
 
 def test_traces_the_growth_takes_with_it_do_not_block_it_at_any_share():
@@ -133,3 +136,56 @@ def test_one_sensor_base_grows_past_its_signal_period_inside_the_disk_orders():
     d = diagnose(Recording("multihead", meta, cols)).doc
     assert d["verdict"] == "consistent", (d["verdict"], [e["name"] for e in d["effects"]])
     assert d["base"]["max_order"] >= 15
+
+
+def _budget_record(seed: int, jitter: float, n: int = 400) -> tuple[Recording, float, int]:
+    """One sensor against ``theta_ref`` on a few hundred rows: 2-3 runs at 1-1.6x speed,
+    15-40 turns each at 60-150 Hz (sampling times jittered by ``jitter`` of a step, or
+    even), disk orders 1..M (M 19-22) of 30-300x the noise at order 1, falling as
+    1/m^0.5..1/m^1 (the orders past 16-17 cost more than ``max_param_fraction`` of the
+    values). Returns the record, its noise (rad) and M."""
+    rng = np.random.default_rng(seed)
+    R = int(rng.integers(2, 4))
+    nr = n // R
+    noise = float(10 ** rng.uniform(-7, -5))
+    turns, rate, M = (
+        float(rng.uniform(15, 40)),
+        float(rng.uniform(60, 150)),
+        int(rng.integers(19, 23)),
+    )
+    ts, ths, runs = [], [], []
+    for r in range(R):
+        t = np.cumsum((1 + jitter * rng.uniform(-1, 1, nr)) / rate)
+        sp = turns * 2 * np.pi * (1 + 0.3 * r) / (t[-1] - t[0])
+        ths.append(sp * (t - t[0]) + rng.uniform(0, 6.3))
+        ts.append(t + r * (t[-1] + 5))
+        runs.append(np.full(nr, r))
+    t, th, run = np.concatenate(ts), np.concatenate(ths), np.concatenate(runs)
+    amp0 = noise * 10 ** rng.uniform(1.5, 2.5)
+    err = sum(
+        amp0 / m ** rng.uniform(0.5, 1.0) * np.sin(m * th + rng.uniform(0, 6.3))
+        for m in range(1, M + 1)
+    )
+    y = th + err + rng.normal(0, noise, t.size) + rng.uniform(-3, 3, R)[run]
+    cols = {"t": t, "run": run, "theta_ref": th + rng.uniform(-3, 3, R)[run], "h0": y}
+    enc = {"head_angles_deg": [0.0], "sensor": "optical", "signal_periods_per_rev": 2048}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), noise, M
+
+
+@pytest.mark.parametrize(("seed", "jitter"), [(7410, 0.0), (7411, 0.3)])
+def test_disk_orders_past_the_parameter_budget_join_the_base(seed, jitter):
+    # session 20 (issue 44, `high` 6237/7): the orders past the budget (max_param_fraction)
+    # of a few hundred rows were left out of the base: evenly sampled, they alias into lines
+    # and bands no effect explains (main: unexplained, or a false quantization, scale_error
+    # or vibration, the noise estimate 4-30x the truth); jittered, they hid in a noise
+    # estimate 10-30x the truth (main: consistent). The base grows past the budget where the
+    # held-out chi-square says so, and the noise estimate, corrected for the share of its
+    # parameters (about 0.88 of the truth without it: a line reported on seed 7411), is the
+    # noise's.
+    rec, noise, M = _budget_record(seed, jitter)
+    d = diagnose(rec).doc
+    b = d["base"]
+    assert d["verdict"] == "consistent", (d["verdict"], [e["name"] for e in d["effects"]])
+    assert b["max_order"] >= M - 1 and b["grown_past_budget"]["budget_order"] < M - 1, b
+    assert 0.85 < d["noise"]["per_channel"][0] / noise < 1.15, d["noise"]

@@ -132,3 +132,48 @@ def test_part_of_a_turn_takes_a_large_errors_second_order_term_where_the_data_sh
     d = diagnose(_arc_record(seed, H=H, n=600, M=8, turns=turns, size=3e3)).doc
     assert d["verdict"] == "consistent", ([e["name"] for e in d["effects"]], d["unexplained"])
     assert "heads' mean reading" in d["base"]["refined"]
+
+
+def _part_turn_shift_record(seed: int):
+    """3-4 heads without a reference, one run of 0.4-0.9 turn in one direction (600 rows),
+    disk error orders 1..M (M 3-8) of 10-100x the noise, and an eccentricity shift of 10-15x
+    the noise at 30-70 % of the run. Returns ``(recording, shift time s)``."""
+    rng = np.random.default_rng(seed)
+    H, n = int(rng.integers(3, 5)), 600
+    turns, rate = rng.uniform(0.4, 0.9), 10 ** rng.uniform(2, 3)
+    noise = 10 ** rng.uniform(-7, -6)
+    t = np.arange(n) / rate
+    th = turns * 2 * np.pi * t / t[-1] + rng.uniform(0, 6.3)
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.5, 5.8, H - 1))])
+    M = int(rng.integers(3, 9))
+    amp0 = noise * 10 ** rng.uniform(1.0, 2.0)
+    err = np.zeros((n, H))
+    for m in range(1, M + 1):
+        err += amp0 / m * np.sin(m * (th[:, None] - alpha) + rng.uniform(0, 6.3))
+    ts = t[-1] * rng.uniform(0.3, 0.7)
+    A = rng.uniform(10, 15) * noise
+    err += (t >= ts)[:, None] * A * np.sin(th[:, None] - alpha + rng.uniform(0, 6.3))
+    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, H)
+    cols = {"t": t, **{f"h{k}": y[:, k] for k in range(H)}}
+    enc = {
+        "head_angles_deg": [float(a) for a in np.degrees(alpha)],
+        "optical_radius_m": 0.03,
+        "grating_lines": 4096,
+    }
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), float(ts)
+
+
+@pytest.mark.parametrize("seed", [5, 12])
+def test_an_eccentricity_shift_on_part_of_a_turn_is_named_alone_at_its_time(seed):
+    """Session 20: the ``order_step`` view (the order-1 change's time) runs from a quarter
+    turn in all (``order_step_revolutions_min``; it needed a full turn): without it the
+    shift's start came from the time view alone, and on ``main`` these records name a false
+    ``beam_tilt_axial`` (and ``vibration``) instead of the shift."""
+    rec, ts = _part_turn_shift_record(seed)
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["eccentricity_shift"], doc["report"]
+    p = doc["effects"][0]["params"]["shift_time_s"]
+    lo, hi = p["interval_s"]
+    step = float(np.median(np.diff(np.asarray(rec.columns["t"]))))
+    assert lo - step <= ts <= hi + step, (ts, p)

@@ -49,3 +49,18 @@ def test_signal_shape_is_not_named_for_the_tooth_of_a_comb_above_its_orders():
 def test_a_signal_shape_of_its_own_is_still_named():
     rec, _ = _bench(5503, "quadrature", "compound")
     assert [e["name"] for e in diagnose(rec).doc["effects"]] == ["signal_shape"]
+
+
+def test_a_tie_that_fits_better_says_the_criterion_decided():
+    """A ``tie_chi2`` partner that fits better than the named effect (its chi-square lower,
+    only its extra parameters charged more) is never said to fit "as well" (issue 44: the
+    truth fitted 56.7 lower and read as "fits as well (chi-square -56.7)")."""
+    from encdesign.diagnose.engine._evidence import tie_reason
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    s = FinderSettings()
+    better = tie_reason("vibration", -56.7, 0.984, -1631.7, -1669.1, s)
+    assert "fits as well" not in better and "lower by 56.7" in better
+    assert "information criterion" in better and "-1631.7" in better
+    alike = tie_reason("vibration", 3.2, 0.984, -1631.7, -1669.1, s)
+    assert "fits as well (chi-square +3.2" in alike

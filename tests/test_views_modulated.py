@@ -13,6 +13,7 @@ import pytest
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose.engine._views import chi2_threshold
 from encdesign.diagnose.engine._views_modulated import scan_modulated
+from encdesign.diagnose.engine._views_sums import ViewSums
 from encdesign.diagnose.kinds.multihead._multihead import _hold_run_offsets
 
 
@@ -41,6 +42,7 @@ def _prep(n: int, runs: int = 1, seed: int = 0, sigma: float = 1.0, C: int = 1):
         consts={"alpha": np.zeros(C)},
         kd=types.SimpleNamespace(project=False),
         ctx=types.SimpleNamespace(n_runs=runs, has_ref=False),
+        view_sums=ViewSums(),
     )
 
 

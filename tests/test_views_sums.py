@@ -1,17 +1,21 @@
 """The sums the views share (issue 43, ``engine._views_sums`` and ``engine._views_orders``):
 the shaft orders' sums of one pass equal the direct ones, their geometry is kept across
-residuals, and a residual scanned at several sizes reuses its sums scaled."""
+residuals, and a residual scanned at several sizes reuses its sums scaled; the sums are kept
+by each prepared record (``Prepared.view_sums``), never in the module."""
 
 from __future__ import annotations
 
 import types
+import typing
 
 import numpy as np
 
 from encdesign.diagnose import FinderSettings
+from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine import _views_sums
 from encdesign.diagnose.engine._views_orders import harmonics, order_scan
-from encdesign.diagnose.engine._views_sums import Whitened, linear, scanning
+from encdesign.diagnose.engine._views_sums import ViewSums, Whitened, linear
+from tests.helpers import late_stamps_record
 
 
 class _Rows(dict):
@@ -33,6 +37,7 @@ def _prep(n: int, C: int = 2, seed: int = 0):
         rows=_Rows(t=t, tau=t, theta=th),
         run=np.zeros(n, int),
         sigma=np.full(C, 0.5),
+        view_sums=ViewSums(),
     )
 
 
@@ -85,8 +90,9 @@ def test_a_residual_scanned_at_several_sizes_reuses_its_sums_scaled():
             calls.append(1)
             return [np.asarray(rw[np.arange(n)]).sum(0)]
 
-        return linear(("test",), compute)[0]
+        return linear(prep, ("test",), compute)[0]
 
+    scanning = prep.view_sums.scanning
     with scanning(resid, 1.0, reuse=True):
         one = sums(Whitened(resid, prep.sigma))
         assert np.array_equal(sums(Whitened(resid, prep.sigma)), one) and len(calls) == 1
@@ -97,6 +103,40 @@ def test_a_residual_scanned_at_several_sizes_reuses_its_sums_scaled():
     with scanning(resid.copy(), 3.0, reuse=True):  # another residual object
         sums(Whitened(resid, prep.sigma, 3.0))
     assert len(calls) == 2
-    _views_sums.forget()
+    prep.view_sums.forget()
     sums(Whitened(resid, prep.sigma))  # outside a scan: computed each time
     assert len(calls) == 3
+
+
+def _without_times(doc: dict) -> dict:
+    """The document but its times (the report's last line, ``status: ok; 0.4 s``, too)."""
+    out = {k: v for k, v in doc.items() if k not in ("time_s", "timings_s", "timings_cpu_s")}
+    out["report"] = [x for x in doc["report"].splitlines() if not x.startswith("status:")]
+    return out
+
+
+def test_two_diagnoses_in_one_process_share_no_sums():
+    """A record diagnosed after another gives the document it gives first in the process:
+    each diagnosis keeps its own sums (``Prepared.view_sums``), none carries over."""
+    a, _ = late_stamps_record(7450, n_gaps=3)  # 1710 and 1245 rows: one chunk size
+    b, _ = late_stamps_record(7451, n_gaps=1)
+    da = diagnose(a)
+    db = diagnose(b)
+    again = diagnose(a)
+    assert _without_times(again.doc) == _without_times(da.doc)
+    assert _without_times(db.doc) != _without_times(da.doc)  # another record
+    assert da.plot_data is not None and db.plot_data is not None and again.plot_data is not None
+    sa, sb = da.plot_data.prep.view_sums, db.plot_data.prep.view_sums
+    assert sa is not sb and sa is not again.plot_data.prep.view_sums
+    assert sa._geom and sb._geom and not set(sa._geom) & set(sb._geom)
+
+
+def test_the_module_keeps_no_state():
+    """No mutable object at the module's top level (a dict, a list, a context variable of
+    scans): only modules, functions, classes and immutable constants."""
+    constants = (int, float, str, bytes, bool, tuple, frozenset, type(None))
+    for name, v in vars(_views_sums).items():
+        if name.startswith("__") or type(v).__module__ == "__future__":
+            continue
+        ok = isinstance(v, (types.ModuleType, types.FunctionType, type, *constants))
+        assert ok or v is typing.Any, (name, type(v))

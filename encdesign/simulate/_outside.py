@@ -1,12 +1,13 @@
 """Recordings with physics outside the finder's catalog (issue 41's discovery benchmark).
 
 :func:`outside_record` draws a multihead bench (4 heads and a reference angle, ``multihead``)
-or one sensor against a reference (``sensor``), 3 steady runs at different speeds (and, for
-the direction classes, both directions), with a disk error of orders 1-5, white noise, and
-one structure of a class nobody wrote into the catalog; or (``sds``) a shifted-delta-sum
-bench (the concealed benchmark's instrument: a 6-pole-pair motor, 2 fixed and 3 moving
-sensors, 24 platform positions stepped by the golden angle, 1 ns jitter, a 100 MHz clock)
-whose moving sensors' edges carry the structure as a delay. The truth says the frame and
+or one sensor against a reference (``sensor``), 3 steady runs at different speeds (for the
+direction classes 4: each direction at two speeds, :data:`DIRECTION_RUNS`), with a disk
+error of orders 1-5, white noise, and one structure of a class nobody wrote into the
+catalog; or (``sds``) a shifted-delta-sum bench (the concealed benchmark's instrument: a
+6-pole-pair motor, 2 fixed and 3 moving sensors, 24 platform positions stepped by the golden
+angle, 1 ns jitter, a 100 MHz clock) whose moving sensors' edges carry the structure as a
+delay. The truth says the frame and
 modulation a correct model has, and the speed exponent where there is one.
 """
 
@@ -41,7 +42,10 @@ motion); a defect of one head; an error in one direction only; a structure at a 
 frequency with its own Q (``fixed_hz``: a mode rung at the start of every run with its own
 phase, decaying as ``exp(-pi f t / Q)``; a steady line of constant amplitude is the catalog's
 ``vibration``: :data:`CONTROLS`); a slow growth over the
-record; an order present in one run only; an error of opposite sign in the two directions;
+record; an order present in two of the three runs, at their different speeds, with its own
+phase in each (``intermittent``: a contact that engages in some runs only, re-seated at
+another angle each time; the finder's ``per_cell``); an error of opposite sign in the two
+directions;
 a lag growing as speed^+1; an order that switches on at one time of the middle run
 (``order_step``); and on an SDS bench: a periodic error of the platform angle in the frame
 of one moving sensor (``sensor_frame``: an SDS sensor-frame error), an order of the platform
@@ -56,9 +60,26 @@ CONTROLS = ("catalog_vibration",)
 steady line at a fixed frequency with its own amplitude and phase in every run (the
 catalog's ``vibration``)."""
 
+CONFOUNDED = ("intermittent_one_run",)
+"""Classes no record of this bench can tell from catalog physics, kept to be run by name
+(not in :data:`CLASSES`): ``intermittent_one_run`` (``intermittent`` before session 20) is
+an order present in one steady run only, which within that run is a line at one fixed
+frequency, ``m`` x the run's speed: exactly the catalog's ``vibration`` with that run's own
+amplitudes and none in the others (and on one sensor, whose static orders are its own error
+function, any pattern of one order over 3 runs that is on in one and off in two, or on in
+two with one phase, is that error function plus such a vibration)."""
+
 Q_RANGE = (20.0, 60.0)
 """Quality factor of the ``fixed_hz`` mode (its ring-down time ``Q / (pi f)``: 0.2 to 0.8 s
 at 23 to 37 Hz, inside a run of 2 s at 3000 rows)."""
+
+DIRECTION_RUNS = ((1.0, 1.0, 1.7, 1.7), (1, -1, 1, -1))
+"""Speeds (x the first run's) and directions of the direction classes' 4 runs (session 20):
+each direction at two speeds. Until session 19 they had 3 runs, ``(1, 1, 1.7)`` x
+``(+, -, +)``: the one reverse run was one steady speed, so an order in one direction only, or
+of opposite sign in the two, was a static order (the catalog's ``beam_tilt_axial``; on one
+sensor its own error function) plus a line at one frequency in that run (``vibration``),
+exactly."""
 
 SDS_CLASSES = ("sensor_frame", "platform_order", "sensor_step", "platform_step", "slow_growth")
 """The classes an SDS bench (one steady speed, one direction, one row per run) carries."""
@@ -105,7 +126,11 @@ def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> di
         return dict(line=("hz", float(rng.uniform(23.0, 37.0))), frame="hz", modulation="per_cell")
     if cls == "slow_growth":
         return dict(line=("order", m), frame="disk" if C > 1 else "shaft", modulation="growth")
-    if cls == "intermittent":
+    if cls == "intermittent":  # on in two runs (speeds apart), off in the third
+        off = int(rng.integers(0, 3))
+        runs = tuple(r for r in range(3) if r != off)
+        return dict(line=("order", m), frame="shaft", modulation="per_cell", runs=runs)
+    if cls == "intermittent_one_run":
         return dict(
             line=("order", m), frame="shaft", modulation="cell", run=int(rng.integers(0, 3))
         )
@@ -115,7 +140,7 @@ def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> di
         return dict(line=("order", m), frame="shaft", modulation="speed", beta=1.0)
     if cls == "order_step":
         return dict(line=("order", m), frame="shaft", modulation="step", step_run=1)
-    raise ValueError(f"unknown class {cls!r}; expected one of {CLASSES}")
+    raise ValueError(f"unknown class {cls!r}; expected one of {CLASSES + CONFOUNDED}")
 
 
 def outside_record(
@@ -135,23 +160,25 @@ def outside_record(
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
-    if cls not in ("clean", *CONTROLS) and cls not in classes_for(kind):
+    if cls in CONFOUNDED and kind == "sds":
+        raise ValueError(f"class {cls!r} not on an sds bench; expected {classes_for(kind)}")
+    if cls not in ("clean", *CONTROLS, *CONFOUNDED) and cls not in classes_for(kind):
         raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
     if kind == "sds":
         return _sds_record(rng, cls, size)
     C = 4 if kind == "multihead" else 1
-    R = 3
+    both = cls in ("one_direction", "direction_lag")
+    R = 4 if both else 3
     n = n_rows // R
     fs = 500.0
-    both = cls in ("one_direction", "direction_lag")
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.4, 5.9, C - 1))]) if C > 1 else np.zeros(1)
     truth = {"alpha": alpha, "class": cls, "size": size, "kind": kind}
     if cls != "clean":
         truth.update(_truth(cls, C, rng, mode))
     speeds = np.array([1.0, 1.7, 2.9]) * 2 * np.pi * rng.uniform(0.8, 1.2)
-    signs = np.array([1.0, -1.0, 1.0]) if both else np.ones(R)
-    if both:
-        speeds = np.array([1.0, 1.0, 1.7]) * speeds[0]
+    signs = np.array(DIRECTION_RUNS[1], float) if both else np.ones(R)
+    if both:  # each direction at two speeds
+        speeds = np.array(DIRECTION_RUNS[0]) * speeds[0]
     ts, ths, runs, ws = [], [], [], []
     for r in range(R):
         t = np.arange(n) / fs
@@ -194,6 +221,12 @@ def outside_record(
                 g = tau / tau.max()
             elif mod == "cell":
                 g = (run == truth["run"]) * 1.0
+            elif mod == "per_cell":  # its runs only, each with its own phase (at least a
+                # quarter turn from the first's: not one phase over the runs it is on in)
+                dph = np.zeros(R)
+                dph[list(truth["runs"][1:])] = rng.uniform(0.5 * np.pi, 1.5 * np.pi)
+                s = np.sin(val * th + ph + dph[run])[:, None] * np.ones(C)
+                g = np.isin(run, truth["runs"]) * 1.0
             elif mod == "step":  # on from a time inside the run (a third to two thirds in)
                 ts = float(rng.uniform(0.33, 0.67)) * n / fs
                 truth["step_time_s"], truth["run"] = ts, truth["step_run"]

@@ -87,7 +87,7 @@ from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
 from ._steps import frozen
 from ._views import locate
-from ._views_sums import forget
+from ._views_sums import sums_of
 from ._workshare import deal
 
 CONVENTION = (
@@ -711,7 +711,7 @@ def detection_bounds(
     try:
         done = iter(deal(sets, bounds_of))
     finally:
-        forget()  # the last probe's residual and its views' sums
+        sums_of(prep).forget()  # the last probe's residual and its views' sums
     for cand, probes in work:
         for probe in probes:
             got = [next(done) for _ in range(1 + len(probe.worst_of))]

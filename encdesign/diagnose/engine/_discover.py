@@ -59,6 +59,7 @@ from ._discover_lines import (
     MAX_LINES,
     STEP_EXACT_ROWS,
     Line,
+    alias_neighbours,
     drive_neighbours,
     frame_maps,
     hmap,
@@ -78,6 +79,10 @@ from ._settings import FinderSettings
 MAX_TERMS = 4
 """Terms the forward selection may add over all lines."""
 
+_NOT_LOCATED = (
+    "the drive order next to a located line.",
+    "an order the located line may be an alias of on the record's platform positions.",
+)
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
 
@@ -456,6 +461,8 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     if not lines:
         return None
     near = drive_neighbours(lines, dict(prep.ctx.meta), prep.settings)
+    for li, extra in alias_neighbours(lines, prep).items():
+        near.setdefault(li, []).extend(extra)
     cell, cinfo = _cells(prep)
     C = prep.n_channels
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
@@ -705,7 +712,7 @@ def _term_json(
             ln, tm, dict(prep.ctx.meta), st.signal_periods, cinfo, len(names), prep.settings
         )
         + (step_words(prep, tm.step) if tm.step is not None else "")
-        + ("" if ln.located else " Not located itself: the drive order next to a located line."),
+        + ("" if ln.located else " Not located itself: " + _NOT_LOCATED[ln.alias]),
         "export": {
             **sums.scales,
             "kind": prep.ctx.kind,

@@ -16,6 +16,18 @@ from scipy import stats
 MAX_LINES = 10
 """Located lines modelled (the strongest findings first)."""
 
+ALIAS_SHARE = 0.5
+"""SDS: a lower order whose columns on the record's platform positions carry at least this
+share of a located order's columns (:func:`alias_neighbours`) is tested as a line beside
+it, and the held-out gain chooses. Set on training seed 20261354 (a step at order 5 on 24
+golden-angle positions, located at order 8: the true order's share 0.59), not tuned
+further; the search space, not a finding's threshold (each alias is a line of the library,
+counted in its multiple-testing threshold)."""
+
+MAX_ALIASES = 5
+"""SDS: alias orders (:data:`ALIAS_SHARE`) tested per located order, the largest shares
+first."""
+
 STEP_BINS = 32
 """Equal-count bins of the kept rows (in time order) whose edges are the change points a
 step term scans (plus the times the finder's views located); a record with fewer rows (an
@@ -39,6 +51,7 @@ class Line:
     kind: str
     value: float
     located: bool = True
+    alias: bool = False  # not located: an order the located one may alias (SDS)
 
     def label(self) -> str:
         if self.kind == "hz":
@@ -90,6 +103,64 @@ def drive_neighbours(lines: list[Line], meta: dict, settings) -> dict[int, list[
                 continue
             have.add(d)
             lines.append(Line("order", float(d), located=False))
+            out.setdefault(i, []).append(len(lines) - 1)
+    return out
+
+
+def _alias_share(A: np.ndarray, B: np.ndarray) -> float:
+    """The largest squared canonical correlation between the column spans of ``A`` and
+    ``B`` (1: a common direction)."""
+    qa, qb = np.linalg.qr(A)[0], np.linalg.qr(B)[0]
+    return float(np.linalg.svd(qa.T @ qb, compute_uv=False)[0] ** 2)
+
+
+def alias_neighbours(lines: list[Line], prep) -> dict[int, list[int]]:
+    """SDS: appends to ``lines`` the lower orders that a located integer order may be an
+    alias of on the record's platform positions (one per run): those whose columns (static,
+    growing linearly over the runs, or switched on at a run boundary) share at least
+    :data:`ALIAS_SHARE` of the located order's static columns, the largest first
+    (:data:`MAX_ALIASES` per order), within :data:`MAX_LINES`; returns,
+    per located line, the indices of the lines it brought. Empty on another kind.
+
+    Only orders below the located one: a few golden-angle positions make many pairs of
+    orders near-aliases, and the held-out gain of a higher alias over the true order is
+    then the noise's (training seeds 7501 and 7503: order 5 read as 29 or 26); the lower
+    order is the simpler reading of the same columns. A located order that is the
+    alias of a higher true order stays as located."""
+    sds = sds_channels(prep)
+    if sds is None:
+        return {}
+    tau = tau_of(prep)[prep.keep]
+    phi = np.asarray(prep.rows["theta"], float)[prep.keep][np.argsort(tau, kind="stable")]
+    R = phi.size
+    top = int(prep.ctx.n_runs) * sds[0] // 2 - 1
+    mods = [np.ones(R), np.linspace(-1.0, 1.0, R)] + [
+        (np.arange(R) >= b) * 1.0 for b in range(1, R)
+    ]
+
+    def cols(m: float, g: np.ndarray) -> np.ndarray:
+        return np.stack([g * np.cos(m * phi), g * np.sin(m * phi)], 1)
+
+    have = {ln.value for ln in lines if ln.kind == "order"}
+    out: dict[int, list[int]] = {}
+    for i, ln in enumerate(list(lines)):
+        if ln.kind != "order" or ln.value <= 0 or not ln.located:
+            continue
+        own = cols(ln.value, mods[0])
+        if R <= own.shape[1]:  # no more positions than an order's columns: all alias
+            continue
+        shares = []
+        for m in range(1, min(top + 1, int(ln.value))):
+            if m in have:
+                continue
+            sh = max(_alias_share(own, cols(m, g)) for g in mods)
+            if sh >= ALIAS_SHARE:
+                shares.append((sh, m))
+        for _, m in sorted(shares, reverse=True)[:MAX_ALIASES]:
+            if len(lines) >= MAX_LINES:
+                break
+            have.add(m)
+            lines.append(Line("order", float(m), located=False, alias=True))
             out.setdefault(i, []).append(len(lines) - 1)
     return out
 

@@ -58,14 +58,15 @@ from ._document import (
     significant_channels,
     term_params,
 )
-from ._fit import FitResult, Fitter, goodness_of_fit, make_term
+from ._fit import FitResult, Fitter, make_term
+from ._goodness import goodness_of_fit
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
 from ._reduce import reduce_recording
-from ._refine import checked_fit, refine_base
+from ._refine import checked_fit, heldout_decides_orders, refine_base
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -102,8 +103,30 @@ def _grow_base_order(
     fitter: Fitter,
     fit: FitResult,
     order: int,
+    limits: tuple[int, int],
+    base_info: dict,
+):
+    """The base's order growth (:func:`_grow_to`) within ``limits = (budget limit, growth
+    limit)``: past the budget (``max_param_fraction``) up to the kind's growth limit
+    (``growth_param_fraction``) first, where the record's budget binds; else, as before it,
+    within the budget. Returns ``(order, fit)``, grown and refitted, or ``None``."""
+    limit, glimit = limits
+    if glimit > limit:
+        grown = _grow_to(kind, prep, fitter, fit, order, glimit, base_info, past=limit)
+        if grown is not None:
+            return grown
+    return _grow_to(kind, prep, fitter, fit, order, limit, base_info)
+
+
+def _grow_to(
+    kind: Kind,
+    prep: Prepared,
+    fitter: Fitter,
+    fit: FitResult,
+    order: int,
     limit: int,
     base_info: dict,
+    past: int | None = None,
 ):
     """Integer orders above ``order`` that the base residual shows significantly (the
     ``orders`` view, up to ``min(limit, max(2 order, 24))``) join the base model: a disk's
@@ -118,9 +141,13 @@ def _grow_base_order(
     the candidates'; a strong order's leakage into lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
     held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
-    when it raises the held-out chi-square, unless every run covers less than one turn
-    (``Prepared.part_turn_span``: the orders are not separable there; the kind's base says so).
-    Returns ``(order, fit)``, grown and refitted, or ``None``."""
+    when it raises the held-out chi-square; on part of a turn (``Prepared.part_turn_span``:
+    the orders are not separable there; the kind's base says so) held-out error decides
+    neither (it never lowers the order there). ``past``: the budget's order
+    (``max_param_fraction``); the growth is then tried only to an order above it, and kept
+    only where it lowers the held-out chi-square by ``settings.heldout_min`` (the orders past
+    the budget earn their parameters on held-out rows). Returns ``(order, fit)``, grown and
+    refitted, or ``None``."""
     hi = scan_order_of(limit, order, prep.settings)
     if hi <= order:
         return None
@@ -140,10 +167,12 @@ def _grow_base_order(
     if not found:
         return None
     M = int(max(found))
+    if past is not None and M <= past:
+        return None
     lowered = (base_info.get("order_choice") or {}).get("lowered", False)
-    # (an order the held-out choice lowered grows back only where held-out error allows;
-    # the two held-out chi-squares in the same noise weights)
-    ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered else math.inf
+    # (an order the held-out choice lowered, or one past the budget, grows only where
+    # held-out error allows; the two held-out chi-squares in the same noise weights)
+    ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered or past is not None else math.inf
     terms, info = _terms_at_order(kind, prep, fit, M)
     _set_order(prep, M)
     fitter.clear()
@@ -154,12 +183,17 @@ def _grow_base_order(
     p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
     tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
-    worse = (grown.heldout_chi2 > ho0 and prep.part_turn_span is None) or tied > max(veto, 0.0)
+    worse = grown.heldout_chi2 > ho0 or tied > max(veto, 0.0)
+    drop = ho0 - grown.heldout_chi2
+    if past is not None and not drop >= prep.settings.heldout_min:
+        worse = True
     if p1 > prep.settings.growth_left_max * p0 or worse:
         _set_order(prep, order)
         fitter.clear()
         return None
     base_info.update(info)
+    if past is not None:  # the orders past the parameter budget, and what they earned
+        base_info["grown_past_budget"] = {"budget_order": past, "heldout_chi2_drop": drop}
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
     return M, grown
 
@@ -227,6 +261,14 @@ def _choose_base_order(
         "tried": [row0],
     }
     base_info["order_choice"] = choice
+    if not heldout_decides_orders(prep):
+        choice["reason"] = (
+            f"every run covers less than one turn (widest {prep.part_turn_span:.3g} rad) in a "
+            "single pass: a held-out block's arc is seen by no other fold, so held-out error "
+            "measures how the orders extrapolate over it, not their need; the default order "
+            "kept (growth follows the orders the residual shows)"
+        )
+        return None
     if not (math.isfinite(ratio) and ratio > s.base_order_ratio) or order <= 1:
         choice["reason"] = (
             f"held-out RMS {ratio:.3g}x the fitted RMS (at most "
@@ -355,7 +397,7 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
     if own is not None and kind.noise_replaces:
         sig = np.asarray(own, float)
     else:
-        sig = noise_spectral(prep, r_base)
+        sig = noise_spectral(prep, r_base, fit.n_params)
         if own is not None:  # the kind's second estimate: the smaller of the two
             sig = np.fmin(sig, np.asarray(own, float))
     del r_base
@@ -368,7 +410,8 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
 
 def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: bool):
     """Base fit, the kind's refinement, alignment, noise and (``grow``) the base's order
-    growth. Returns ``(base_fit, order)``."""
+    growth. Returns ``(base_fit, order, limit)``: the limit is the kind's growth limit
+    (``growth_param_fraction``) where the base grew past ``limit``."""
     base_fit = checked_fit(kind, prep, fitter, fitter.fit(base_terms), base_info)
     base_fit = refine_base(kind, prep, fitter, base_fit, base_info)
     _align(kind, prep, fitter, base_fit)
@@ -379,8 +422,9 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
             order, base_fit = chosen[0], checked_fit(kind, prep, fitter, chosen[1], base_info)
             _align(kind, prep, fitter, base_fit)
             _estimate_noise(kind, prep, fitter, base_fit)
+    limits = (limit, max(limit, int(kind.growth_order_limit(prep)))) if grow else (limit, limit)
     for _ in range(2 if grow else 0):
-        grown = _grow_base_order(kind, prep, fitter, base_fit, order, limit, base_info)
+        grown = _grow_base_order(kind, prep, fitter, base_fit, order, limits, base_info)
         if grown is None:
             break
         order, base_fit = grown[0], checked_fit(kind, prep, fitter, grown[1], base_info)
@@ -388,7 +432,7 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
         base_fit = refine_base(kind, prep, fitter, base_fit, base_info)
         _align(kind, prep, fitter, base_fit)  # the refit moved the run offsets a little
         _estimate_noise(kind, prep, fitter, base_fit)  # the orders it left out were there
-    return base_fit, order
+    return base_fit, order, (limits[1] if order > limit else limit)
 
 
 def _effect_json(prep: Prepared, sel: Selection, s, fitter: Fitter | None = None) -> dict:
@@ -694,7 +738,7 @@ def run_engine(
                 for c in [*kind.candidates(prep.ctx), *extra_candidates]:
                     seen[c.name] = c  # later ones (reference, user terms) override by name
                 grow = kind.grows_orders and max_order is None
-                base_fit, order = _fit_base(
+                base_fit, order, limit = _fit_base(
                     kind, prep, fitter, base_terms, base_info, order, limit, grow
                 )
                 scan = scan_order_of(limit, order, prep.settings)

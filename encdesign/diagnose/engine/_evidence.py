@@ -15,6 +15,7 @@ from ._candidates import Candidate
 from ._document import jsonable
 from ._fit import FitResult, Fitter
 from ._protocol import Prepared
+from ._settings import FinderSettings
 
 
 class Trial(NamedTuple):
@@ -82,6 +83,25 @@ def tie_gap(
     den = math.sqrt(saa * sbb)
     corr = float(abs(sab) / den) if den > 0 else 0.0
     return float(b.chi2 - a.chi2), corr
+
+
+def tie_reason(
+    chosen: str, gap: float, corr: float, dbic: float, dbic_chosen: float, s: FinderSettings
+) -> str:
+    """The reason of a ``tie_chi2`` entry beside ``chosen``: ``gap`` is how much worse the
+    candidate fits (chi-square; negative: it fits better, and only the criterion's charge
+    for its extra parameters put ``chosen`` first, issue 44)."""
+    same = f"its fitted error is the same (correlation {corr:.3f})"
+    if gap >= 0:
+        return (
+            f"the data cannot tell it from {chosen}: it fits as well (chi-square {gap:+.1f}, "
+            f"needs {s.tie_chi2:.0f} to decide) and {same}"
+        )
+    return (
+        f"the information criterion, not the fit, puts {chosen} first: it fits better "
+        f"(chi-square lower by {-gap:.1f}) with more parameters (dBIC {dbic:.1f} against "
+        f"{dbic_chosen:.1f}), and {same}"
+    )
 
 
 def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confounded: list):

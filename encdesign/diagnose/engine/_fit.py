@@ -1,4 +1,5 @@
-"""Stage 2 of the engine, **fit**: terms, the chunked Gauss-Newton fitter, goodness of fit."""
+"""Stage 2 of the engine, **fit**: terms, the chunked Gauss-Newton fitter (the goodness of fit:
+:mod:`._goodness`)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,9 @@ from collections.abc import Callable, Sequence
 import jax
 import numpy as np
 import scipy.linalg as sla
-from scipy import stats
 
 from ._candidates import Candidate
-from ._constants import CACHE_BYTES, CHUNK_ROWS, MEDIAN_VAR
+from ._constants import CACHE_BYTES, CHUNK_ROWS
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -28,7 +28,6 @@ from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
 from ._stats_pass import ChunkMemo, FitSteps, StatsPass, drive, run_passes
 from ._timing import stage
-from ._views import SCAN_BLOCK
 
 # ----------------------------------------------------------------------------- fitting
 
@@ -277,9 +276,15 @@ class Fitter:
             out[a:b] = r
         return out
 
-    def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
-        """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
-        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
+    def jacobian(
+        self, terms: Sequence[Term], a: int, b: int, x: dict, order: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Prediction (rows, C) and Jacobian (rows, C, p) of ``terms`` on rows ``a:b`` (the
+        chunk's row columns ``x``, as :meth:`chunks` yields them), the Jacobian projected like
+        the data (where the kind projects), neither scaled nor whitened, its rows in
+        ``order`` (a permutation of the chunk's rows) where given. A new array: the terms'
+        cached Jacobians are not touched. The one place the fit's Jacobian is assembled
+        (:meth:`_processed`, ``_views_modulated.base_jacobian``)."""
         prep = self.prep
         pred = np.zeros((b - a, prep.n_channels))
         Js = []
@@ -287,23 +292,32 @@ class Fitter:
             v, J = self.eval_term(tm, a, b, x, jac=True)
             pred += v
             Js.append(J)
+        if len(Js) == 1:  # the term's own (maybe cached): the row order or a copy
+            J = Js[0][order] if order is not None else Js[0].copy()
+        else:
+            J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
+            if order is not None:
+                J = J[order]
+        # sorted first (the copy), then projected in place (one pass): (J - mean)
+        if prep.kd.project:
+            J -= J.mean(1, keepdims=True)
+        return pred, J
+
+    def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
+        """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
+        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
         memo = self.memo if all(linear_only(t) for t in terms) else None
         mkey = ("processed", static_key(terms), a, sc.tobytes()) if memo is not None else ()
         if memo is not None:  # a static block's: another fit's of this pass, this chunk
             got = memo.get(mkey)
             if got is not None:
+                pred = np.zeros((b - a, self.prep.n_channels))
+                for tm in terms:
+                    pred += self.eval_term(tm, a, b, x, jac=True)[0]
                 return (pred, *got)
-        if len(Js) == 1:
-            J = Js[0]  # not copied here: the fold sort below makes the copy
-        else:
-            J = np.concatenate(Js, axis=2) if Js else np.zeros((b - a, prep.n_channels, 0))
         order, edges = self._fold_order(a, b)
-        # sorted first (the copy), then projected and scaled in place (one pass each):
-        # each element is (J - mean) (sc sqrt(w))
-        J = J[order]
-        if prep.kd.project:
-            J -= J.mean(1, keepdims=True)
-        J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]
+        pred, J = self.jacobian(terms, a, b, x, order)
+        J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
         if memo is not None:
             memo.put(mkey, (J, order, edges))
         return pred, J, order, edges
@@ -618,81 +632,3 @@ def _names_of(terms: list[Term], idx: np.ndarray) -> list[str]:
                     names.append(f"{t.cand.name}.{q.name}{ij_s if ij_s else ''}")
             s += int(m.sum())
     return names
-
-
-# ----------------------------------------------------------------------------- goodness of fit
-
-
-def _row_chi2(resid: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """``sum_c (resid / sigma_c)^2`` per row (n,), in blocks (no (n, C) temporary)."""
-    out = np.empty(resid.shape[0])
-    w = 1.0 / np.asarray(sigma, float) ** 2
-    for a in range(0, resid.shape[0], SCAN_BLOCK):
-        r = resid[a : a + SCAN_BLOCK]
-        out[a : a + SCAN_BLOCK] = (r * r) @ w
-    return out
-
-
-def goodness_of_fit(prep: Prepared, resid: np.ndarray, n_params: int) -> dict:
-    """Variance-ratio test of the residual against the noise level.
-
-    ``z = log(s_r^2) / sqrt(v / N)`` with ``s_r^2`` the residual variance per fitted value
-    (dof-corrected) whitened by the noise per channel (the periodogram-median estimate,
-    :func:`noise_spectral`, which structure in fewer than half the frequency bins cannot
-    inflate), and ``v = 2 + 2 MEDIAN_VAR`` (residual and noise estimate treated as
-    independent: conservative). Under white noise ``z ~ N(0, 1)``; structure the model misses
-    raises ``s_r^2``. Applied to the whole record and to each time block of each run
-    (Bonferroni); ``p`` is the smaller of the two (times 2).
-    """
-    keep = prep.keep
-    q = _row_chi2(resid, prep.sigma)  # whitened chi-square per row (n,)
-    C = prep.n_channels
-    eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
-    N = float(keep.sum() * C * eff)
-    v = 2.0 + 2.0 * MEDIAN_VAR / eff
-    sr = float(np.sum(q, where=keep)) / max(N - n_params, 1.0)
-    z = math.log(sr) / math.sqrt(v / max(N, 1.0))
-    p_global = float(stats.norm.sf(z))
-    blocks = []
-    for r in range(prep.ctx.n_runs):
-        rows = np.flatnonzero((prep.run == r) & keep)
-        nb = int(min(16, max(1, rows.size // 64)))
-        for part in np.array_split(rows, nb):
-            if part.size < 16:
-                continue
-            Nb = part.size * C * eff
-            srb = float(np.sum(q[part])) / max(Nb * (1 - n_params / max(N, 1)), 1.0)
-            zb = math.log(max(srb, 1e-300)) / math.sqrt(2.0 / Nb + (v - 2.0) / N)
-            blocks.append(
-                (
-                    float(stats.norm.sf(zb)),
-                    zb,
-                    int(prep.run_ids[r]),
-                    float(prep.rows["t"][part[0]]),
-                    float(prep.rows["t"][part[-1]]),
-                )
-            )
-    nbk = max(len(blocks), 1)
-    worst = min(blocks, default=(1.0, 0.0, 0, 0.0, 0.0))
-    p_block = min(1.0, worst[0] * nbk)
-    p = min(1.0, 2 * min(p_global, p_block))
-    return {
-        "test": "variance ratio of the whitened residual to the noise (median of the "
-        "periodogram per channel); log ratio ~ N(0, v/N) under white noise, whole record and "
-        "per time block (16 per run, Bonferroni)",
-        "statistic_z": z,
-        "variance_ratio": sr,
-        "p_value": p,
-        "p_value_whole": p_global,
-        "p_value_blocks": p_block,
-        "worst_block": {
-            "run": worst[2],
-            "t_start_s": worst[3],
-            "t_end_s": worst[4],
-            "z": worst[1],
-        },
-        "n_values": N,
-        "n_params": n_params,
-        "alpha": prep.settings.alpha,
-        "passes": bool(p >= prep.settings.alpha),
-    }

@@ -81,6 +81,12 @@ class AbstractKind(eqx.Module):
     def max_order_limit(self, prep: Prepared) -> int:
         """The highest base order this record resolves."""
 
+    def growth_order_limit(self, prep: Prepared) -> int:
+        """The highest order the base's growth (``grows_orders``) may reach, past the
+        parameter budget of :meth:`max_order_limit` (``settings.growth_param_fraction``);
+        the default: :meth:`max_order_limit`."""
+        return self.max_order_limit(prep)
+
     @abc.abstractmethod
     def noise(self, prep: Prepared, base_resid: np.ndarray) -> NoiseEstimate | None:
         """A second noise estimate the kind's own structure cannot inflate (the engine

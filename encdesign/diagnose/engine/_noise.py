@@ -118,13 +118,18 @@ def noise_sigma(
     return np.sqrt(np.einsum("ij,ij->j", d2, d2) / d2.shape[0] / 6.0)
 
 
-def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
+def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarray:
     """Noise std per channel from the median of the residual's periodogram, run by run.
 
     For white noise each periodogram bin ``|X_j|^2 / n`` is ``sigma^2`` times a unit
     exponential, whose median is ``ln 2``; structure in fewer than half of the bins (lines,
     a band, a slow drift, a step) cannot inflate the median much, at any frequency (second
-    differences are inflated by structure near the Nyquist frequency)."""
+    differences are inflated by structure near the Nyquist frequency). ``n_params``: the
+    parameters fitted to ``resid``'s model, which took their share ``n_params / N`` of the
+    noise's power out of the bins (on average over the bins: spread by aliased or jittered
+    orders, the median is low by that share); the variance is divided by ``1 - share``, as
+    the residual variance's dof (session 20, issue 44: 0.88-0.89 of ``sigma^2`` measured at a
+    share of 0.11-0.12 on a few hundred jittered rows, a line the views then reported)."""
     C = resid.shape[1]
     bins = [[] for _ in range(C)]
     for r in range(prep.ctx.n_runs):
@@ -141,9 +146,11 @@ def noise_spectral(prep: Prepared, resid: np.ndarray) -> np.ndarray:
             bins[k].append(P[:, k])
     out = np.full(C, np.nan)
     eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
+    share = n_params / prep.n_values if prep.n_values > 0 else 0.0
+    dof = 1.0 - share if 0 <= share < 1 else 1.0
     for k in range(C):
         if bins[k]:
             allb = np.concatenate(bins[k])
             if allb.size >= 8:
-                out[k] = math.sqrt(np.median(allb) / math.log(2.0) / eff)
+                out[k] = math.sqrt(np.median(allb) / math.log(2.0) / eff / dof)
     return out

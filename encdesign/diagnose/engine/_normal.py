@@ -253,6 +253,15 @@ class BlockCache:
 
 # ----------------------------------------------------------------------------- solving
 
+PIVOT_TIE = 1e-9
+"""Remaining diagonals of the unit-diagonal normal matrix within this of the largest are
+tied pivots, broken by column order (:func:`_ordered_pivots`). Equivalent columns (a gauge:
+per-run offsets beside a common one, a column repeated) have equal diagonals up to the
+rounding of their sums, ~1e-13 at most for another summation order of the same rows: which
+of them is kept, and so the gauge-dependent values and the ``unidentifiable`` names, then
+follow the columns' order, not the rounding. Far above rounding, far below a difference
+between columns that matters to a pivot's size (LAPACK takes the largest)."""
+
 
 def solve_determined(A: np.ndarray, g: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``(A + lam diag A) dz = g`` on the columns the data determine (pivoted Cholesky,
@@ -293,13 +302,39 @@ def solve_determined_many(A: np.ndarray, G: np.ndarray) -> np.ndarray:
 
 
 def _pivoted_rank(An: np.ndarray, tol: float = 1e-10) -> tuple[np.ndarray, int]:
-    c, piv, rank, info = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
-    zero_diag = np.diag(An) < 1e-200
-    piv = piv - 1
-    rank = int(rank)
-    if zero_diag.any():
-        good = [i for i in piv[:rank] if not zero_diag[i]]
-        rest = [i for i in piv if i not in good]
-        piv = np.array(good + rest)
-        rank = len(good)
-    return piv, rank
+    """Pivot order and numerical rank of the unit-diagonal normal matrix ``An``: LAPACK's
+    pivoted Cholesky (relative tolerance ``tol``); where it leaves columns out (the data do
+    not determine them all), the order of :func:`_ordered_pivots` instead, so that which of
+    several equivalent columns is kept follows the columns' order, not the rounding of
+    their sums (:data:`PIVOT_TIE`)."""
+    _, piv, rank, _ = lapack.dpstrf(np.array(An, order="F"), tol=tol, lower=0)
+    if int(rank) < An.shape[0] or bool(np.any(np.diag(An) < 1e-200)):
+        return _ordered_pivots(An, tol)
+    return piv - 1, int(rank)
+
+
+def _ordered_pivots(An: np.ndarray, tol: float) -> tuple[np.ndarray, int]:
+    """Pivoted Cholesky of ``An`` (unit diagonal) whose pivot at each step is the first
+    column (in ``An``'s order) of those whose remaining diagonal is within
+    :data:`PIVOT_TIE` of the largest; stops where the largest is ``tol`` or less (as
+    LAPACK's ``dpstrf``). A column with a zero diagonal is never a pivot. Returns the pivots
+    then the other columns (ascending), and the rank."""
+    An = np.asarray(An, float)
+    p = An.shape[0]
+    d = np.diag(An)
+    left = np.where(d < 1e-200, -np.inf, d)  # remaining diagonal; -inf: a pivot or zero
+    L = np.empty((p, p))
+    piv: list[int] = []
+    for k in range(p):
+        top = float(left.max(initial=-np.inf))
+        if not top > tol:  # (a NaN stops too)
+            break
+        j = int(np.argmax(left >= max(top - PIVOT_TIE, tol)))  # the first of the ties
+        col = (An[:, j] - L[:, :k] @ L[j, :k]) * (1.0 / np.sqrt(left[j]))
+        L[:, k] = col  # (the rows of earlier pivots: rounding, never read)
+        col *= col
+        left -= col  # (-inf stays)
+        left[j] = -np.inf
+        piv.append(j)
+    rest = np.setdiff1d(np.arange(p), piv)
+    return np.concatenate([np.asarray(piv, int), rest]).astype(int), len(piv)

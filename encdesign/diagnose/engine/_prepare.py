@@ -646,12 +646,51 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
 def part_turn_span(shaft: np.ndarray, keep: np.ndarray, run: np.ndarray) -> float | None:
     """The widest shaft-angle span (rad) of a run's kept rows where every run covers less than
     one turn (the base's orders are then not separable: their held-out error measures that
-    ill-conditioning, not their fit; issue 44), else ``None`` (``Prepared.part_turn_span``)."""
+    ill-conditioning, not their fit; issue 44), else ``None`` (``Prepared.part_turn_span``).
+    A run's span is its kept angles' range plus its median step between neighbouring rows:
+    N rows evenly spaced over a whole turn have a range of only ``2 pi (N - 1) / N``, and
+    they cover the turn (session 20: a 200-row turn of ``magalpha_cal`` counted as part of
+    one)."""
     widest = 0.0
     for _, (a, b) in run_spans(run):
         th = shaft[a:b][keep[a:b]]
-        widest = max(widest, float(np.ptp(th)) if th.size else 0.0)
+        if th.size == 0:
+            continue
+        steps = np.abs(np.diff(th))
+        steps = steps[steps > 0]
+        step = float(np.median(steps)) if steps.size else 0.0
+        widest = max(widest, float(np.ptp(th)) + step)
     return widest if widest < 2 * np.pi else None
+
+
+def folds_see_each_others_arcs(
+    shaft: np.ndarray, keep: np.ndarray, run: np.ndarray, fold: np.ndarray
+) -> bool:
+    """Whether, in every run, the rows each held-out fold leaves out lie on shaft angles the
+    other folds see: the median distance (rad) from a held-out row's angle to the nearest
+    angle of the same run's other folds is at most the run's median step between neighbouring
+    rows (a pass forward and back over the arc; on a single pass the blocks' own arcs are seen
+    by no other fold). Where they do not, held-out error on part of a turn measures how the
+    orders extrapolate over a held-out block's arc, not their need (issue 44, session 20)."""
+    for _, (a, b) in run_spans(run):
+        k = keep[a:b] & (fold[a:b] >= 0)
+        th, fo = shaft[a:b][k], fold[a:b][k]
+        steps = np.abs(np.diff(th))
+        steps = steps[steps > 0]
+        if steps.size == 0:
+            continue
+        dist = []
+        for f in np.unique(fo):
+            other = np.sort(th[fo != f])
+            if other.size == 0:
+                return False
+            x = th[fo == f]
+            j = np.clip(np.searchsorted(other, x), 1, max(other.size - 1, 1))
+            lo, hi = other[j - 1], other[np.minimum(j, other.size - 1)]
+            dist.append(np.minimum(np.abs(x - lo), np.abs(x - hi)))
+        if float(np.median(np.concatenate(dist))) > float(np.median(steps)):
+            return False
+    return True
 
 
 def _detrend(y: np.ndarray, seg: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ import numpy as np
 
 from ._candidates import Context
 from ._settings import DEFAULT_SETTINGS, FinderSettings
+from ._views_sums import ViewSums
 
 # ----------------------------------------------------------------------------- kind data
 
@@ -291,6 +292,9 @@ class Prepared:
     # one turn, else None (``_prepare.part_turn_span``; computed once where the record is
     # prepared)
     part_turn_span: float | None = None
+    # the sums the views keep across this record's scans (``_views_sums``): owned by this
+    # diagnosis alone, never shared with another record's
+    view_sums: ViewSums = dataclasses.field(default_factory=ViewSums, compare=False, repr=False)
 
     @property
     def n(self) -> int:

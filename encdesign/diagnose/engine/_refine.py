@@ -9,6 +9,7 @@ import numpy as np
 
 from ._fit import FitResult, Fitter
 from ._kind import AbstractKind as Kind
+from ._prepare import folds_see_each_others_arcs
 from ._protocol import FitDivergence, Prepared
 
 
@@ -83,3 +84,15 @@ def refine_base(kind, prep: Prepared, fitter: Fitter, base_fit: FitResult, base_
                 f"FinderSettings.refine_chi2_rise_max = {rise:g} of it)",
             )
     return base_fit
+
+
+def heldout_decides_orders(prep: Prepared) -> bool:
+    """Whether held-out error may decide the base's orders (lower them, or undo their growth
+    after a lowering): always on records of a turn or more; on part of a turn
+    (``Prepared.part_turn_span``) only where every run's held-out rows lie on angles its
+    other folds see (:func:`._prepare.folds_see_each_others_arcs`: a pass forward and back).
+    Issue 44 (session 20): one rule for the choice and the growth."""
+    if prep.part_turn_span is None:
+        return True
+    shaft = np.asarray(prep.kd.shaft, float)
+    return folds_see_each_others_arcs(shaft, prep.keep, prep.run, prep.fold)

@@ -25,8 +25,10 @@ from ._evidence import (
     rule_args,
     separate_by,
     tie_gap,
+    tie_reason,
 )
-from ._fit import FitResult, Fitter, Term, goodness_of_fit, make_term
+from ._fit import FitResult, Fitter, Term, make_term
+from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._spill import band_share, edge_beyond, kept_gain_share, same_place
@@ -494,9 +496,7 @@ def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
         return None
     return {
         "name": cand.name,
-        "reason": f"the data cannot tell it from {chosen.cand.name}: it fits as well "
-        f"(chi-square {gap:+.1f}, needs {s.tie_chi2:.0f} to decide) and its fitted error is "
-        f"the same (correlation {corr:.3f})",
+        "reason": tie_reason(chosen.cand.name, gap, corr, dbic, chosen.dbic, s),
         "rule": "tie_chi2",
         "delta_bic": float(dbic),
         "params": {q.name: jsonable(fr.terms[-1].values[q.name]) for q in cand.params},

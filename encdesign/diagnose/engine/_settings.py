@@ -16,7 +16,7 @@ import math
 
 import equinox as eqx
 
-VERDICTS = ("consistent", "missing_physics", "unexplained")
+from ._settings_check import check_settings
 
 
 class FinderSettings(eqx.Module):
@@ -127,6 +127,13 @@ class FinderSettings(eqx.Module):
     Session 14 (issue 44 H): on the `high` variation set's misses (disk orders 13-20, seeds
     1302-1304) an aliased signal-period line or an angle trend of 0.005-0.23 % of the located
     excess kept the base at order 12 and the record `unexplained`."""
+
+    growth_param_fraction: float = eqx.field(default=0.2, static=True)
+    """The base model's order growth may pass the ``max_param_fraction`` budget up to this
+    fraction of the fitted values, where every order past the budget is one the residual
+    shows and the grown base lowers the held-out chi-square by ``heldout_min``. Session 20
+    (issue 44): a disk's orders 15-20 on 400 rows of one sensor (`high` 6237/7, budget
+    order 14) were left as aliased lines no effect explains; 20 orders need 12.5 %."""
 
     base_order_ratio: float = eqx.field(default=1.5, static=True)
     """multihead: when the base model's K-fold held-out residual RMS exceeds its fitted RMS
@@ -567,8 +574,8 @@ class FinderSettings(eqx.Module):
     ``eccentricity_shift`` starts) runs with at least this many kept rows ... Was an inline
     64 in ``_multihead_terms``; set by hand in 1e3f0c4."""
 
-    order_step_revolutions_min: float = eqx.field(default=1.0, static=True)
-    """... and at least this many revolutions in all. Was an inline 1.0; 1e3f0c4."""
+    order_step_revolutions_min: float = eqx.field(default=0.25, static=True)
+    """... and this many revolutions in all (1.0 in 1e3f0c4; 0.25 in s20, issue 44: part turns)."""
 
     clip_excess_ratio: float = eqx.field(default=3.0, static=True)
     """quadrature: a signal extreme is clipped when more than this many times the samples a
@@ -782,16 +789,7 @@ class FinderSettings(eqx.Module):
     24 rows: every third run). Issue 41 (s17), by hand."""
 
     def __check_init__(self):
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ValueError(f"FinderSettings.{f.name}: got {v!r}, expected a number > 0")
-        if self.n_folds < 2:
-            raise ValueError(f"FinderSettings.n_folds: got {self.n_folds}, expected >= 2")
-        if self.change_time_level >= 1:
-            raise ValueError(
-                f"FinderSettings.change_time_level: got {self.change_time_level!r}, expected < 1"
-            )
+        check_settings(self)
 
 
 DEFAULT_SETTINGS = FinderSettings()

@@ -32,7 +32,7 @@ from scipy import stats
 from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
 from ._views_orders import order_scan
-from ._views_sums import Whitened, linear, scanning
+from ._views_sums import Whitened, linear, sums_of
 from ._workshare import deal
 
 
@@ -292,7 +292,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         t = _col(prep, "t", a, b)
         dt = float(np.median(np.diff(t)))
         kr = keep[a:b]
-        X = _run_rfft(rw, kr, a, b)
+        X = _run_rfft(prep, rw, kr, a, b)
         P = 2.0 * np.abs(X) ** 2 / nk  # ~ chi2(2) per channel
         P[0] = 0.0
         if (b - a) % 2 == 0:
@@ -432,10 +432,11 @@ def _run_slices(prep):
     return run_spans(prep.run)
 
 
-def _run_rfft(rw, kr: np.ndarray, a: int, b: int) -> np.ndarray:
+def _run_rfft(prep, rw, kr: np.ndarray, a: int, b: int) -> np.ndarray:
     """The transform of rows ``a:b`` (a run; excluded rows zero), kept for the sizes of a
-    reused scan (:func:`._views_sums.linear`; read only)."""
+    reused scan (:meth:`._views_sums.ViewSums.linear`; read only)."""
     return linear(
+        prep,
         ("rfft", a, b),
         lambda: [np.fft.rfft(np.where(kr[:, None], rw[a:b], 0.0), axis=0)],
         large=True,
@@ -465,7 +466,7 @@ def view_band(prep, rw, n_bands: int = 16) -> list[Finding]:
     for r, a, b, nk in runs:  # one run's transform at a time
         kr = keep[a:b]
         m = b - a
-        Xf = _run_rfft(rw, kr, a, b)
+        Xf = _run_rfft(prep, rw, kr, a, b)
         P = 2.0 * np.abs(Xf) ** 2 / nk
         dt = float(np.median(np.diff(_col(prep, "t", a, b))))
         f = np.fft.rfftfreq(m, dt)
@@ -741,7 +742,7 @@ def locate(
     """Run ``views`` on the residual ``scale * resid``; findings strongest first, with
     variance shares. The views share their sums within the scan, and with ``reuse`` across
     the scans of one ``resid`` object at several sizes (:mod:`._views_sums`)."""
-    with stage("views"), scanning(resid, scale, reuse):
+    with stage("views"), sums_of(prep).scanning(resid, scale, reuse):
         return _locate(prep, resid, views, scan_order, scale)
 
 

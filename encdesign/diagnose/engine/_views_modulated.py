@@ -110,12 +110,7 @@ def base_jacobian(prep, fitter, terms) -> np.ndarray | None:
     with it took the diagnosis from 3.1 to 5.8 s CPU, session 18)."""
     if prep.n > len(prep.run_ids) or not terms:
         return None
-    parts = []
-    for a, b, x in fitter.chunks():
-        Js = [fitter.eval_term(tm, a, b, x, jac=True)[1] for tm in terms]
-        J = np.concatenate(Js, axis=2)
-        parts.append(J - J.mean(1, keepdims=True) if prep.kd.project else J)
-    return np.concatenate(parts, 0)
+    return np.concatenate([fitter.jacobian(terms, a, b, x)[1] for a, b, x in fitter.chunks()], 0)
 
 
 def _basis(prep, kidx, rw) -> tuple[np.ndarray, np.ndarray] | None:

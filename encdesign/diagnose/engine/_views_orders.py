@@ -134,13 +134,13 @@ def order_scan(prep, rw, max_order: int, channels) -> OrderSums:
         first.append(_pass(prep, rw, name, kidx, M, seg, K, ch, True))
         return first[0][:3]
 
-    S, Sg, Sgg = geometry(gkey, geo)
+    S, Sg, Sgg = geometry(prep, gkey, geo)
 
     def lin():
         got = first[0] if first else _pass(prep, rw, name, kidx, M, seg, K, ch, False)
         return got[3:]
 
-    B, Bg = linear((*gkey, tuple(ch.tolist())), lin)
+    B, Bg = linear(prep, (*gkey, tuple(ch.tolist())), lin)
     return OrderSums(kidx, edges, tau, S, Sg, Sgg, B, Bg)
 
 

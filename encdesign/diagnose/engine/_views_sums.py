@@ -9,7 +9,7 @@ A view's statistics are of two kinds:
   scan the same rows), keyed by a fingerprint of what they are computed from
   (:func:`fingerprint`), so a changed angle or set of kept rows computes them anew;
 * **linear** in the residual (the regressors' sums with it): within one scan
-  (:func:`scanning`, opened by ``_views.locate``) a sum two views need (the ``orders`` and
+  (:meth:`ViewSums.scanning`, opened by ``_views.locate``) a sum two views need (the ``orders`` and
   ``modulated_orders`` views share their cos / sin sums) is computed once (:func:`linear`).
   The detection bounds scan one residual at many sizes (a bisection): a scan opened with
   ``reuse`` keeps the sums of its residual, computed at unit size, and scales them, so the
@@ -19,12 +19,14 @@ A view's statistics are of two kinds:
 Either way the numbers are those a view computes on its own, up to the order of a sum
 (float64 rounding); both are deterministic, so every process of a split diagnosis gets the
 same bits.
+
+Both are kept by the record's :class:`ViewSums` (``Prepared.view_sums``, made with the
+prepared record), never in this module: two diagnoses in one process share nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import hashlib
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -33,8 +35,6 @@ import numpy as np
 
 GEOMETRY_KEPT = 8
 """Geometry entries kept (the oldest goes first): a few records or angle refinements."""
-
-_GEOM: dict[tuple, Any] = {}
 
 
 def fingerprint(*arrays) -> str:
@@ -47,18 +47,6 @@ def fingerprint(*arrays) -> str:
     return h.hexdigest()
 
 
-def geometry(key: tuple, compute: Callable[[], Any]) -> Any:
-    """The residual-free sums ``compute()`` under ``key`` (a fingerprint in it), computed
-    once while the key is among the last :data:`GEOMETRY_KEPT` used."""
-    if key in _GEOM:
-        return _GEOM[key]
-    value = compute()
-    _GEOM[key] = value
-    while len(_GEOM) > GEOMETRY_KEPT:
-        _GEOM.pop(next(iter(_GEOM)))
-    return value
-
-
 class _Scan:
     """One scan of a residual: its memo of linear sums (at unit size) and its size."""
 
@@ -69,54 +57,94 @@ class _Scan:
         self.reuse = reuse
 
 
-_SCAN: contextvars.ContextVar[_Scan | None] = contextvars.ContextVar(
-    "encdesign_views_scan", default=None
-)
-_LAST: list[_Scan] = []
-"""The last scan opened with ``reuse`` (its residual and memo), for the next one."""
+class ViewSums:
+    """The sums one diagnosis keeps across its scans (``Prepared.view_sums``, one per
+    prepared record): the geometry entries (:meth:`geometry`), the scan open now
+    (:meth:`scanning`) and the last scan opened with ``reuse`` (its residual and memo, for
+    the next one). Nothing is shared between diagnoses: two records diagnosed in one
+    process (or in two threads) each have their own."""
+
+    def __init__(self) -> None:
+        self._geom: dict[tuple, Any] = {}
+        self._scan: _Scan | None = None
+        self._last: _Scan | None = None
+
+    def geometry(self, key: tuple, compute: Callable[[], Any]) -> Any:
+        """The residual-free sums ``compute()`` under ``key`` (a fingerprint in it),
+        computed once while the key is among the last :data:`GEOMETRY_KEPT` used."""
+        if key in self._geom:
+            return self._geom[key]
+        value = compute()
+        self._geom[key] = value
+        while len(self._geom) > GEOMETRY_KEPT:
+            self._geom.pop(next(iter(self._geom)))
+        return value
+
+    @contextlib.contextmanager
+    def scanning(self, resid: Any, scale: float = 1.0, reuse: bool = False) -> Iterator[None]:
+        """Views run inside share their linear sums (:meth:`linear`); with ``reuse``, the
+        memo of the last reused scan of the same residual object (``resid``, not mutated
+        between scans: the detection bounds' unit residual at several sizes) carries
+        over."""
+        memo: dict = {}
+        last = self._last
+        if reuse and last is not None and last.resid is resid:
+            memo = last.memo
+        scan = _Scan(resid, scale, memo, reuse)
+        if reuse:
+            self._last = scan
+        outer, self._scan = self._scan, scan
+        try:
+            yield
+        finally:
+            self._scan = outer
+
+    def forget(self) -> None:
+        """Drop the last reused scan's residual and sums (after the detection bounds)."""
+        self._last = None
+
+    def linear(
+        self, key: tuple, compute: Callable[[], list[np.ndarray]], large: bool = False
+    ) -> list[np.ndarray]:
+        """``compute()`` (arrays linear in the residual the views see) once per scan (and
+        per residual of a reused scan, scaled to the scan's size); outside a scan,
+        computed. ``large`` (arrays of the residual's size): kept only in a reused scan,
+        where the rows would otherwise be read once per size (a plain scan computes them
+        where they are needed: the peak memory of a long record's scans stays as it
+        was)."""
+        scan = self._scan
+        if scan is None or (large and not scan.reuse):
+            return compute()
+        if key not in scan.memo:
+            s = scan.scale
+            got = compute()
+            scan.memo[key] = got if s == 1.0 else [np.asarray(v) / s for v in got]
+            return got
+        got = scan.memo[key]
+        return got if scan.scale == 1.0 else [v * scan.scale for v in got]
 
 
-@contextlib.contextmanager
-def scanning(resid: Any, scale: float = 1.0, reuse: bool = False) -> Iterator[None]:
-    """Views run inside share their linear sums (:func:`linear`); with ``reuse``, the memo
-    of the last reused scan of the same residual object (``resid``, not mutated between
-    scans: the detection bounds' unit residual at several sizes) carries over."""
-    memo: dict = {}
-    if reuse and _LAST and _LAST[0].resid is resid:
-        memo = _LAST[0].memo
-    scan = _Scan(resid, scale, memo, reuse)
-    if reuse:
-        _LAST[:] = [scan]
-    token = _SCAN.set(scan)
-    try:
-        yield
-    finally:
-        _SCAN.reset(token)
+def sums_of(prep: Any) -> ViewSums:
+    """The :class:`ViewSums` of a prepared record (``prep.view_sums``)."""
+    got = getattr(prep, "view_sums", None)
+    if not isinstance(got, ViewSums):
+        raise TypeError(
+            f"sums_of: the prepared record {type(prep).__name__} has no view_sums "
+            f"(a ViewSums), got {type(got).__name__}"
+        )
+    return got
 
 
-def forget() -> None:
-    """Drop the last reused scan's residual and sums (after the detection bounds)."""
-    _LAST.clear()
+def geometry(prep: Any, key: tuple, compute: Callable[[], Any]) -> Any:
+    """:meth:`ViewSums.geometry` of ``prep``'s sums."""
+    return sums_of(prep).geometry(key, compute)
 
 
 def linear(
-    key: tuple, compute: Callable[[], list[np.ndarray]], large: bool = False
+    prep: Any, key: tuple, compute: Callable[[], list[np.ndarray]], large: bool = False
 ) -> list[np.ndarray]:
-    """``compute()`` (arrays linear in the residual the views see) once per scan (and per
-    residual of a reused scan, scaled to the scan's size); outside a scan, computed.
-    ``large`` (arrays of the residual's size): kept only in a reused scan, where the rows
-    would otherwise be read once per size (a plain scan computes them where they are
-    needed: the peak memory of a long record's scans stays as it was)."""
-    scan = _SCAN.get()
-    if scan is None or (large and not scan.reuse):
-        return compute()
-    if key not in scan.memo:
-        s = scan.scale
-        got = compute()
-        scan.memo[key] = got if s == 1.0 else [np.asarray(v) / s for v in got]
-        return got
-    got = scan.memo[key]
-    return got if scan.scale == 1.0 else [v * scan.scale for v in got]
+    """:meth:`ViewSums.linear` of ``prep``'s sums."""
+    return sums_of(prep).linear(key, compute, large)
 
 
 class Whitened:
@@ -146,4 +174,4 @@ class Whitened:
         return self.shape[0]
 
 
-__all__ = ["Whitened", "fingerprint", "forget", "geometry", "linear", "scanning"]
+__all__ = ["ViewSums", "Whitened", "fingerprint", "geometry", "linear", "sums_of"]

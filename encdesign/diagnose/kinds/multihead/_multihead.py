@@ -202,11 +202,11 @@ def coverage_limit(
     return best
 
 
-def max_order_limit(prep: Prepared) -> int:
-    """Highest order the record resolves, and ``2 M + constants <= MAX_PARAM_FRACTION`` of
-    the values: below half the samples per revolution of the sparsest-sampled run, or higher
-    where the samples of all runs together cover the circle well enough that orders 1..M
-    are well conditioned (:func:`coverage_limit`)."""
+def max_order_limit(prep: Prepared, fraction: float | None = None) -> int:
+    """Highest order the record resolves, and ``2 M + constants <= fraction`` of the values
+    (default ``settings.max_param_fraction``): below half the samples per revolution of the
+    sparsest-sampled run, or higher where the samples of all runs together cover the circle
+    well enough that orders 1..M are well conditioned (:func:`coverage_limit`)."""
     keep = prep.keep
     spr = []
     for r in range(prep.ctx.n_runs):
@@ -216,7 +216,8 @@ def max_order_limit(prep: Prepared) -> int:
             spr.append(m.sum() / revs)
     nyq = int(math.floor(min(spr) / 2.0)) - 1 if spr else 1
     C, R = prep.n_channels, prep.ctx.n_runs
-    budget = int((prep.settings.max_param_fraction * prep.n_values - R * C - C - R) // 2)
+    frac = prep.settings.max_param_fraction if fraction is None else fraction
+    budget = int((frac * prep.n_values - R * C - C - R) // 2)
     want = min(budget, COVERAGE_ORDER_MAX)
     if nyq < want:
         idx = np.flatnonzero(keep)
@@ -724,6 +725,9 @@ class MultiheadKind(AbstractKind):
 
     def max_order_limit(self, prep):
         return max_order_limit(prep)
+
+    def growth_order_limit(self, prep):
+        return max_order_limit(prep, prep.settings.growth_param_fraction)
 
     def noise(self, prep, base_resid):
         return None

@@ -13,6 +13,7 @@ from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
+from ._aliases import catalog_orders_at
 from ._order_step_bins import order_step_bins
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
 from ._vibration_jac import bearing_wobble_valjac, eccentricity_shift_valjac, vibration_valjac
@@ -325,8 +326,20 @@ def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float
         g_lock = 0.0  # in the base model: what the line takes beyond it is its own
     else:
         g_lock = _gain(rw, locked)
+    # a catalog order the sampling folds onto the line (interpolation_error's L, 2 L) is a
+    # locked alternative too (issue 44), its gain taken as the line's (over a base order m
+    # refitted with it): the strongest alternative sets the margin
+    for mk in catalog_orders_at(ctx, f_best, w, _order_res(ctx) * w / (2 * np.pi)):
+        Xk = np.stack([np.cos(mk * th), np.sin(mk * th)], 1)
+        gk = _gain(rw, np.concatenate([Xk, locked], 1)) - g0 if in_base else _gain(rw, Xk)
+        g_lock = max(g_lock, gk)
     margin = (g_vib - k_vib * math.log(N)) - (g_lock - k_lock * math.log(N))
     return f_best, float(margin)
+
+
+def _order_res(ctx) -> float:
+    """The span's resolution in shaft orders (``integer_order_tol`` if wider)."""
+    return max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
 
 
 def _vb_start(ctx, resid, findings):
@@ -353,20 +366,20 @@ def _vb_plausible(ctx, v):
     w = _one_speed(ctx)
     if w is not None:
         order = f / (w / (2 * np.pi))
-        res = max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
+        res = _order_res(ctx)
         margin = float(np.asarray(v.get("locked_margin", 0.0)))
         # within the span's resolution of an integer order, the data must show that it is
-        # not rotation locked (the line beats the locked order by FinderSettings.locked_margin)
-        if (
-            abs(order - round(order)) < res
-            and round(order) >= 1
-            and margin < ctx.settings.locked_margin
-        ):
+        # not rotation locked (the line beats the locked order by FinderSettings.locked_margin);
+        # so too at a catalog order the sampling folds onto it (issue 44)
+        folded = catalog_orders_at(ctx, f, w, res * w / (2 * np.pi))
+        near = abs(order - round(order)) < res and round(order) >= 1
+        if (near or folded) and margin < ctx.settings.locked_margin:
+            m = folded[0] if folded else round(order)
+            at = f" folded by the sampling (apparent order {order:.3f})" if folded else ""
             return (
-                f"at one speed a line at {f:.4g} Hz is shaft order {order:.3f}: a "
-                f"rotation-locked error at order {round(order)} fits as well (chi-square "
-                f"margin {margin:.1f}, needs {ctx.settings.locked_margin:.0f}; two speeds "
-                "separate them)"
+                f"at one speed a line at {f:.4g} Hz is shaft order {m if folded else order:.6g}"
+                f"{at}: a rotation-locked error at order {m} fits as well (chi-square margin "
+                f"{margin:.1f}, needs {ctx.settings.locked_margin:.0f}; two speeds separate them)"
             )
     T = float(np.max(_run_durations(ctx)))
     need = ctx.settings.vibration_cycles_min

@@ -70,7 +70,7 @@ def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tup
             BB += BBc
         return G, XB, BB
 
-    G, XB, BB = geometry(key, geo)
+    G, XB, BB = geometry(prep, key, geo)
 
     def lin():
         a, Br = np.zeros((nb, 2)), np.zeros(P)
@@ -93,5 +93,5 @@ def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tup
             Br[R * C :] += ai.sum(0)
         return [a, Br]
 
-    a, Br = linear(key, lin)
+    a, Br = linear(prep, key, lin)
     return a, G, XB, BB, Br, edges

@@ -1,0 +1,22 @@
+"""The checks of a :class:`~encdesign.diagnose.engine._settings.FinderSettings` at
+construction (out of ``_settings.py``, which holds the fields and their evidence)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+
+def check_settings(s) -> None:
+    """Raise ``ValueError`` naming the field when a setting is not a finite number > 0, the
+    K-fold has fewer than two folds, or the change-time level is not below 1."""
+    for f in dataclasses.fields(s):
+        v = getattr(s, f.name)
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise ValueError(f"FinderSettings.{f.name}: got {v!r}, expected a number > 0")
+    if s.n_folds < 2:
+        raise ValueError(f"FinderSettings.n_folds: got {s.n_folds}, expected >= 2")
+    if s.change_time_level >= 1:
+        raise ValueError(
+            f"FinderSettings.change_time_level: got {s.change_time_level!r}, expected < 1"
+        )
