@@ -305,6 +305,46 @@ def test_vibration_hand_jacobian_equals_jacfwd():
         np.testing.assert_array_equal(np.asarray(J[k]), np.asarray(Jf[k]))
 
 
+@pytest.mark.parametrize("name", ["bearing_wobble", "eccentricity_shift"])
+def test_wobble_and_shift_hand_jacobians_equal_jacfwd(name):
+    """Issue 43: the hand-written values and Jacobians of ``bearing_wobble`` and
+    ``eccentricity_shift`` against ``jax.jacfwd`` of their ``fn`` (values to 1e-15 relative,
+    every column to 1e-14 relative: compiled apart, the arguments of the sines fuse
+    differently), with the shift inside the record (its column not all zero)."""
+    from encdesign.diagnose.kinds.multihead import _multihead_terms as mt
+
+    cand = {"bearing_wobble": mt.BEARING_WOBBLE, "eccentricity_shift": mt.ECCENTRICITY_SHIFT}[name]
+    rng = np.random.default_rng(7442)
+    n, C, R = 300, 4, 2
+    oh = np.zeros((n, R))
+    oh[np.arange(n), rng.integers(0, R, n)] = 1.0
+    x = {
+        "run_onehot": jnp.asarray(oh),
+        "theta": jnp.asarray(np.sort(rng.uniform(0, 300, n))),
+        "tau": jnp.asarray(np.sort(rng.uniform(0, 20, n))),
+        "alpha": jnp.asarray([0.0, 1.5, 3.1, 4.7]),
+        "radius_m": jnp.asarray(0.03),
+        "step_width_s": jnp.asarray(0.05),
+        "reading": jnp.zeros((n, C)),
+    }
+    p = {q.name: jnp.asarray(rng.normal(0, 1e-6, q.resolved_shape(C, R))) for q in cand.params}
+    p["frequency_ratio"] = jnp.asarray(0.437)
+    p["shift_time_s"] = jnp.asarray(9.99)
+    p = {q.name: p[q.name] for q in cand.params}
+    assert cand.valjac is not None
+    v, J = jax.jit(cand.valjac)(p, x)
+    Jf = jax.jit(jax.jacfwd(cand.fn))(p, x)
+    want = np.asarray(jax.jit(cand.fn)(p, x))  # (compiled apart: fused to rounding)
+    np.testing.assert_allclose(np.asarray(v), want, rtol=0, atol=1e-15 * np.max(np.abs(want)))
+    assert set(J) == set(Jf)
+    for q in cand.params:
+        a, b = np.asarray(J[q.name]), np.asarray(Jf[q.name])
+        assert a.shape == b.shape, q.name
+        scale = float(np.max(np.abs(b)))
+        assert scale > 0, q.name
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-14 * scale)
+
+
 def test_equivalent_columns_keep_the_same_ones_whatever_the_rounding():
     """A design with a common offset beside per-run offsets (equal runs) and a repeated
     column: which columns the fit keeps follows their order (the first of tied pivots,

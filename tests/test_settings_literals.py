@@ -289,6 +289,7 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("engine/_discover_law.py", "_psolve.rtol"): NUMERIC + " (a pseudo-inverse's rank cut-off)",
     ("engine/_normal.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",
+    ("engine/_fit.py", "fit_steps.max_steps"): BOUND + " (the same steps, fit as a generator)",
     ("engine/_document.py", "_g.digits"): REPORT + " (significant digits printed)",
     ("engine/_html_discovery.py", "order_amplitudes.chunk"): PLOT,
     ("engine/_lattice.py", "_approximate_gcd.max_iter"): BOUND,

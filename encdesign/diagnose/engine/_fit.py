@@ -18,8 +18,6 @@ from ._normal import (
     Accumulated,
     BlockCache,
     free_scales,
-    free_values,
-    held_key,
     linear_only,
     linear_valjac,
     solve_determined,
@@ -28,6 +26,7 @@ from ._normal import (
 )
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
+from ._stats_pass import ChunkMemo, FitSteps, StatsPass, drive, run_passes
 from ._timing import stage
 
 # ----------------------------------------------------------------------------- fitting
@@ -140,6 +139,7 @@ class Fitter:
         self._jcache: dict = {}
         self._jbytes = 0
         self.blocks = BlockCache()  # static blocks: processed Jacobians, Gram matrices
+        self.memo: ChunkMemo | None = None  # during a pass for several fits (_stats_pass)
 
     def n_chunks(self) -> int:
         """Chunks of a pass over all rows."""
@@ -198,15 +198,20 @@ class Fitter:
             if hit is None and not jac:  # a value only (the Jacobian is not cached): no Jacobian
                 return np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None
             if hit is None:
-                p = params()
-                p0 = {
-                    q.name: (np.zeros_like(p[q.name]) if q.linear else p[q.name])
-                    for q in term.cand.params
-                }
-                v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
-                v0 = np.asarray(v0)[: b - a]
-                Jt = self._gather(term, J, b - a, v0.shape[1])
-                hit = (v0, Jt)
+                memo = self.memo  # during a pass for several fits: another fit's, this chunk
+                hit = memo.get(("jac", *key)) if memo is not None else None
+                if hit is None:
+                    p = params()
+                    p0 = {
+                        q.name: (np.zeros_like(p[q.name]) if q.linear else p[q.name])
+                        for q in term.cand.params
+                    }
+                    v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
+                    v0 = np.asarray(v0)[: b - a]
+                    hit = (v0, self._gather(term, J, b - a, v0.shape[1]))
+                    if memo is not None:
+                        memo.put(("jac", *key), hit)
+                v0, Jt = hit
                 nbytes = Jt.nbytes + v0.nbytes
                 if self._jbytes + nbytes < CACHE_BYTES:
                     self._jcache[key] = hit
@@ -301,9 +306,20 @@ class Fitter:
     def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
         """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
         one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
+        memo = self.memo if all(linear_only(t) for t in terms) else None
+        mkey = ("processed", static_key(terms), a, sc.tobytes()) if memo is not None else ()
+        if memo is not None:  # a static block's: another fit's of this pass, this chunk
+            got = memo.get(mkey)
+            if got is not None:
+                pred = np.zeros((b - a, self.prep.n_channels))
+                for tm in terms:
+                    pred += self.eval_term(tm, a, b, x, jac=True)[0]
+                return (pred, *got)
         order, edges = self._fold_order(a, b)
         pred, J = self.jacobian(terms, a, b, x, order)
         J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
+        if memo is not None:
+            memo.put(mkey, (J, order, edges))
         return pred, J, order, edges
 
     def _fold_order(self, a: int, b: int):
@@ -363,115 +379,7 @@ class Fitter:
         sums only its new columns' Gram products. Each pass with the Jacobian also sums the
         block's normal equations per fold (:mod:`._normal`): a static block alone on the
         same observations then needs no pass at all."""
-        prep = self.prep
-        K = prep.settings.n_folds
-        terms = list(terms)
-        static = [t for t in terms if linear_only(t)]
-        dyn = [t for t in terms if not linear_only(t)]
-        p_s = sum(t.n_free() for t in static)
-        p = sum(t.n_free() for t in terms)
-
-        sc_s, sc_d = free_scales(static), free_scales(dyn)
-        skey = static_key(static)
-        held, z_s = held_key(static), free_values(static)
-        acc = self.blocks.accumulated(skey)
-        if not dyn and acc is not None:
-            got = acc.stats(prep.y, held, z_s, sc_s, jac)
-            if got is not None:
-                return self._caller_order(terms, static, dyn, *got, sc_s, sc_d)
-        gram = self.blocks.gram(skey)
-        # the longest leading block with kept Gram matrices: only the other columns' products
-        k0 = self.blocks.longest_prefix(static)
-        p0 = sum(t.n_free() for t in static[:k0]) if gram is None else p_s
-        p_t = p_s - p0
-        w = self.w_ch
-        sw = np.sqrt(w)
-        # the chunks in fixed groups; this process sums its share group by group and the
-        # groups' sums are gathered (_rowshare): the same sums for any number of processes
-        shapes = [(K, p, p), (K, p), (K,), (K,)]
-        if jac:  # the static block's own normal equations, whitened and not (for ssr)
-            shapes += [(K, p_s), (K,), (K, p_s), (K,)]
-            shapes += [(K, p_s, p_t), (K, p_s, p_t)] if gram is None else []
-        n_out = len(shapes)
-        groups = row_groups(self.n_chunks())
-        parts = []
-        for grp in my_groups(len(groups)):
-            sums = [np.zeros(s) for s in shapes] + [None] * (10 - n_out)
-            A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = sums
-            for a, b, x in self.chunks(*groups[grp]):
-                # the static prediction from current linear values (v0 + J p), with the
-                # processed Jacobian where it is needed
-                if jac:
-                    pred, Js_, order, edges = self._split_processed(static, k0, a, b, x, sc_s)
-                else:
-                    pred, Js_ = self._values(static, a, b, x), None
-                    order, edges = self._fold_order(a, b)
-                rs = None
-                if jac and dyn:  # the static block's own residual (whitened, fold-sorted)
-                    rs = prep.y[a:b] - pred
-                    if prep.kd.project:
-                        rs = rs - rs.mean(1, keepdims=True)
-                    rs = (rs * sw)[order]
-                if dyn:
-                    if jac:
-                        pd, Jd, _, _ = self._processed(dyn, a, b, x, sc_d)
-                    else:
-                        pd = sum(self.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
-                        Jd = None
-                    pred = pred + pd
-                else:
-                    Jd = None
-                r = prep.y[a:b] - pred
-                if prep.kd.project:
-                    r = r - r.mean(1, keepdims=True)
-                rw = (r * sw)[order]
-                rr = r[order]
-                for k in range(K):
-                    lo, hi = edges[k], edges[k + 1]
-                    if hi <= lo:
-                        continue
-                    c[k] += float(np.sum(rw[lo:hi] ** 2))
-                    ssr[k] += float(np.sum(rr[lo:hi] ** 2))
-                    if not jac:
-                        continue
-                    rk = rw[lo:hi].ravel()
-                    Sk = Js_[lo:hi].reshape(rk.size, p_s)
-                    g[k, :p_s] += Sk.T @ rk
-                    # alone, the block's residual is the whole one (h = g, q = c, qu = ssr)
-                    rsk = rk if rs is None else rs[lo:hi].ravel()
-                    hu[k] += Sk.T @ (rsk.reshape(-1, prep.n_channels) / w[None, :]).ravel()
-                    if rs is not None:
-                        h[k] += Sk.T @ rsk
-                        q[k] += float(rsk @ rsk)
-                        qu[k] += float(rsk @ (rs[lo:hi] / w[None, :]).ravel())
-                    if new_gram is not None and p0 == 0:  # the whole block's
-                        new_gram[k] += Sk.T @ Sk
-                        Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
-                        new_gu[k] += Su.T @ Su
-                    elif new_gram is not None:  # the new columns' products only
-                        Tk = Js_[lo:hi, :, p0:]
-                        new_gram[k] += Sk.T @ Tk.reshape(rk.size, p_t)
-                        new_gu[k] += Sk.T @ (Tk / w[None, :, None]).reshape(rk.size, p_t)
-                    if Jd is not None and Jd.shape[2]:
-                        Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
-                        A[k, :p_s, p_s:] += Sk.T @ Dk
-                        A[k, p_s:, p_s:] += Dk.T @ Dk
-                        g[k, p_s:] += Dk.T @ rk
-            parts.append(np.concatenate([v.ravel() for v in sums[:n_out]]))
-        total = reduce_groups(parts, len(groups), sum(math.prod(s) for s in shapes))
-        A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = unflatten(total, shapes) + [None] * (
-            10 - n_out
-        )
-        if jac:
-            if not dyn:
-                h, q, qu = g[:, :p_s].copy(), c.copy(), ssr.copy()
-            if gram is None:
-                gram = self._assemble(static, p0, new_gram, new_gu, self.gram(static[:k0]))
-            A[:, :p_s, :p_s] = gram[0]
-            A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
-            acc = Accumulated(prep.y, held, z_s, sc_s, *gram, h, q, hu, qu)
-            self.blocks.keep_accumulated(skey, acc)
-        return self._caller_order(terms, static, dyn, A, g, c, ssr, sc_s, sc_d)
+        return run_passes([StatsPass(self, terms, jac)])[0]
 
     def _assemble(self, static, p0: int, cross, cross_u, lead) -> tuple:
         """The block's ``(G, Gu)`` from its leading block's kept ones ``lead`` (its first
@@ -582,13 +490,19 @@ class Fitter:
         """Levenberg-Marquardt on the chunked normal equations; exact in one step for linear
         terms. Parameters that the data cannot determine (pivoted Cholesky of the scaled
         normal matrix) are held and listed."""
+        return drive(self.fit_steps(terms, max_steps))
+
+    def fit_steps(self, terms: list[Term], max_steps: int = 30) -> FitSteps:
+        """:meth:`fit` as a generator of its :meth:`stats` requests (``(fitter, terms,
+        jac)``, sent their answers; :func:`._stats_pass.drive_many` runs several side by
+        side); it returns the :class:`FitResult`."""
         terms = [t.copy() for t in terms]
         nonlinear = any(
             (not q.linear) and t.free[q.name].any() for t in terms for q in t.cand.params
         )
         lam = 1e-6
         converged = True
-        A, g, c, ssr, sc = self.stats(terms)
+        A, g, c, ssr, sc = yield (self, terms, True)
         unident: list[str] = []
         for it in range(max_steps):
             At, gt, ct = A.sum(0), g.sum(0), c.sum()
@@ -604,15 +518,15 @@ class Fitter:
             new = _apply(terms, dz * sc)
             if not nonlinear:
                 terms = new
-                A, g, c, ssr, sc = self.stats(terms)
+                A, g, c, ssr, sc = yield (self, terms, True)
                 break
             # the trial point's chi-square first (values only); the Jacobian only where the
             # step is taken
-            _, _, c2, _, _ = self.stats(new, jac=False)
+            _, _, c2, _, _ = yield (self, new, False)
             if c2.sum() <= ct:
                 rel = (ct - c2.sum()) / max(ct, 1e-300)
                 terms = new
-                A, g, c, ssr, sc = self.stats(new)
+                A, g, c, ssr, sc = yield (self, new, True)
                 lam = max(lam / 10, 1e-9)
                 if rel < 1e-7 or (ct - c2.sum()) < 1e-2:
                     break

@@ -32,6 +32,7 @@ from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._spill import band_share, edge_beyond, kept_gain_share, same_place
+from ._stats_pass import drive_many
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
@@ -230,12 +231,9 @@ def _applicable(prep: Prepared, candidates: Sequence[Candidate], not_testable: l
 
 
 def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
-    """The full fit of one candidate from the best of its (screened) starts, or ``None``."""
-    with stage("candidates"):
-        return _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
-
-
-def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log):
+    """The full fit of one candidate from the best of its (screened) starts, or ``None``: a
+    generator of its fits' statistics requests (:func:`._stats_pass.drive_many` runs a
+    round's trial fits side by side, one pass over the rows for all)."""
     prep, fitter = st["prep"], st["fitter"]
     N = prep.n_values
     starts = cand.start(prep.ctx, st["kept_resid"](), st["findings"]) if cand.start else [{}]
@@ -253,7 +251,7 @@ def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
             break
         if len(starts) > 1:
             held = frozen([term])[0]
-            fr0 = fitter.fit([*frozen(current.terms), held])
+            fr0 = yield from fitter.fit_steps([*frozen(current.terms), held])
             screened.append((fr0.chi2, term, fr0))
         else:
             screened.append((0.0, term, None))
@@ -264,30 +262,36 @@ def _trial_fit_timed(st, cand, current, n_base_terms, rejected, held_notes, log)
     if screened[0][2] is not None:
         term = _unfrozen(screened[0][2].terms[-1:], [term])[0]
     log(f"trying {cand.name}")
-    best = fitter.fit([*frozen(current.terms), term], max_steps=12)
+    best = yield from fitter.fit_steps([*frozen(current.terms), term], max_steps=12)
     # columns of the candidate the base model already spans are held at zero (reported),
     # so the rest of it can still be tested
     held = _collinear_columns(best, n_base_terms, prep.settings.collinear_refuse)
     if held.size and held.size < best.terms[-1].n_free():
         t2 = _hold(best.terms[-1], held)
-        best = fitter.fit([*frozen(current.terms), t2], max_steps=12)
+        best = yield from fitter.fit_steps([*frozen(current.terms), t2], max_steps=12)
         held_notes[cand.name] = _local_names(t2, held, best.terms[-1])
     return best
 
 
 def _trial_fits(st, cands: list, current, n_base_terms: int, log) -> list:
     """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit: dealt
-    over the processes (:mod:`._workshare`), each on a fitter of its own."""
+    over the processes (:mod:`._workshare`), each share on a fitter of its own, its trial
+    fits side by side (:func:`._stats_pass.drive_many`)."""
 
     def work(mine: list) -> list:
         st2 = dict(st, fitter=private(st["fitter"]))
-        out = []
-        for cand in mine:
-            refused: list[dict] = []
-            notes: dict[str, list[str]] = {}
-            best = _trial_fit(st2, cand, current, n_base_terms, refused, notes, log)
-            out.append((pack_fit(best), refused, notes.get(cand.name)))
-        return out
+        refused: list[list[dict]] = [[] for _ in mine]
+        notes: list[dict[str, list[str]]] = [{} for _ in mine]
+        steps = [
+            _trial_fit(st2, cand, current, n_base_terms, refused[i], notes[i], log)
+            for i, cand in enumerate(mine)
+        ]
+        with stage("candidates"):
+            bests = drive_many(steps)
+        return [
+            (pack_fit(best), refused[i], notes[i].get(cand.name))
+            for i, (cand, best) in enumerate(zip(mine, bests))
+        ]
 
     base = [t.cand for t in current.terms]
     return [(unpack_fit(b, [*base, c]), r, n) for c, (b, r, n) in zip(cands, deal(cands, work))]

@@ -16,7 +16,7 @@ from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
 from ._order_step_bins import order_step_bins
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
-from ._vibration_jac import vibration_valjac
+from ._vibration_jac import bearing_wobble_valjac, eccentricity_shift_valjac, vibration_valjac
 
 # ----------------------------------------------------------------------------- candidates
 
@@ -257,6 +257,7 @@ BEARING_WOBBLE = Candidate(
     start=_wb_start,
     plausible=_wb_plausible,
     derived=_wb_derived,
+    valjac=bearing_wobble_valjac,
 )
 
 
@@ -783,4 +784,5 @@ ECCENTRICITY_SHIFT = Candidate(
     "axis, runs end to end, and reported on the recording's own t with its run).",
     start=_es_start,
     plausible=_es_plausible,
+    valjac=eccentricity_shift_valjac,
 )

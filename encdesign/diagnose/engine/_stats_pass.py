@@ -1,0 +1,285 @@
+"""The fitter's passes over the rows (:meth:`._fit.Fitter.stats`), several fits in one
+(issue 43).
+
+A selection round fits each candidate on top of the same frozen base model: every pass of
+every trial fit evaluates the base's Jacobian (the static block, linear in its free
+parameters) on every chunk, and processes it (fold order, projection, scaling) before the
+candidate's own columns join it; on a long record the fitter's caches hold only the first
+chunks of it. :func:`drive_many` runs the trial fits side by side instead, each a generator
+of its fit's statistics requests (:meth:`._fit.Fitter.fit_steps`), and answers the requests
+of one round in one pass (:func:`run_passes`): each chunk's row columns are built once, and
+the static block's Jacobian and processed Jacobian, the same numbers for every fit of the
+round (they depend only on the block's held values, its free masks and the scales), are
+computed once per chunk (:class:`ChunkMemo`) and read by the others. Each request's sums
+are its own and made in the same order as alone, so every fit gets the numbers it would get
+alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Generator, Sequence
+from typing import Any
+
+import numpy as np
+
+from ._normal import Accumulated, free_scales, free_values, held_key, linear_only, static_key
+from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
+
+StatsRequest = tuple[Any, Sequence[Any], bool]
+"""``(fitter, terms, jac)``: what :meth:`._fit.Fitter.stats` is asked."""
+
+
+class ChunkMemo:
+    """Within one pass for several requests: the results of pure per-chunk computations of
+    the static blocks (keys say what they depend on, the chunk's first row included), kept
+    for the current chunk only."""
+
+    def __init__(self) -> None:
+        self._a: int | None = None
+        self._kept: dict = {}
+
+    def at(self, a: int) -> None:
+        """The pass moved to the chunk from row ``a`` (the previous chunk's entries go)."""
+        if a != self._a:
+            self._kept.clear()
+            self._a = a
+
+    def get(self, key: tuple):
+        """The kept result for ``key`` or ``None``."""
+        return self._kept.get(key)
+
+    def put(self, key: tuple, value) -> None:
+        """Keep ``value`` for ``key`` until the pass moves on."""
+        self._kept[key] = value
+
+
+class StatsPass:
+    """One request of :meth:`._fit.Fitter.stats`: per-fold ``(A_f, g_f, c_f, ssr_f)`` over
+    the kept rows, parameters in scaled units (see there). :attr:`done` holds the answer
+    once known: at once where the kept normal equations give it, else after a pass
+    (:meth:`open_group`, :meth:`chunk` per chunk, :meth:`close_group` per row group,
+    :meth:`finish`)."""
+
+    def __init__(self, fitter, terms: Sequence[Any], jac: bool = True) -> None:
+        self.fitter = fitter
+        self.jac = jac
+        prep = fitter.prep
+        self.K = K = prep.settings.n_folds
+        self.terms = terms = list(terms)
+        self.static = static = [t for t in terms if linear_only(t)]
+        self.dyn = dyn = [t for t in terms if not linear_only(t)]
+        self.p_s = p_s = sum(t.n_free() for t in static)
+        self.p = p = sum(t.n_free() for t in terms)
+        self.sc_s, self.sc_d = free_scales(static), free_scales(dyn)
+        self.skey = static_key(static)
+        self.held, self.z_s = held_key(static), free_values(static)
+        self.done: tuple | None = None
+        acc = fitter.blocks.accumulated(self.skey)
+        if not dyn and acc is not None:
+            got = acc.stats(prep.y, self.held, self.z_s, self.sc_s, jac)
+            if got is not None:
+                self.done = fitter._caller_order(terms, static, dyn, *got, self.sc_s, self.sc_d)
+                return
+        self.gram = gram = fitter.blocks.gram(self.skey)
+        # the longest leading block with kept Gram matrices: only the other columns' products
+        self.k0 = k0 = fitter.blocks.longest_prefix(static)
+        self.p0 = p0 = sum(t.n_free() for t in static[:k0]) if gram is None else p_s
+        self.p_t = p_t = p_s - p0
+        shapes = [(K, p, p), (K, p), (K,), (K,)]
+        if jac:  # the static block's own normal equations, whitened and not (for ssr)
+            shapes += [(K, p_s), (K,), (K, p_s), (K,)]
+            shapes += [(K, p_s, p_t), (K, p_s, p_t)] if gram is None else []
+        self.shapes = shapes
+        self.parts: list[np.ndarray] = []
+        self.sums: list = []
+
+    def open_group(self) -> None:
+        """Start the sums of one row group."""
+        self.sums = [np.zeros(s) for s in self.shapes] + [None] * (10 - len(self.shapes))
+
+    def close_group(self) -> None:
+        """End the row group's sums."""
+        self.parts.append(np.concatenate([v.ravel() for v in self.sums[: len(self.shapes)]]))
+
+    def chunk(self, a: int, b: int, x: dict) -> None:
+        """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums."""
+        fitter, prep, jac, K = self.fitter, self.fitter.prep, self.jac, self.K
+        static, dyn, p, p_s, p0, p_t = self.static, self.dyn, self.p, self.p_s, self.p0, self.p_t
+        A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = self.sums
+        w = fitter.w_ch
+        sw = np.sqrt(w)
+        # the static prediction from current linear values (v0 + J p), with the processed
+        # Jacobian where it is needed
+        if jac:
+            pred, Js_, order, edges = fitter._split_processed(static, self.k0, a, b, x, self.sc_s)
+        else:
+            pred, Js_ = fitter._values(static, a, b, x), None
+            order, edges = fitter._fold_order(a, b)
+        rs = None
+        if jac and dyn:  # the static block's own residual (whitened, fold-sorted)
+            rs = prep.y[a:b] - pred
+            if prep.kd.project:
+                rs = rs - rs.mean(1, keepdims=True)
+            rs = (rs * sw)[order]
+        if dyn:
+            if jac:
+                pd, Jd, _, _ = fitter._processed(dyn, a, b, x, self.sc_d)
+            else:
+                pd = sum(fitter.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
+                Jd = None
+            pred = pred + pd
+        else:
+            Jd = None
+        r = prep.y[a:b] - pred
+        if prep.kd.project:
+            r = r - r.mean(1, keepdims=True)
+        rw = (r * sw)[order]
+        rr = r[order]
+        for k in range(K):
+            lo, hi = edges[k], edges[k + 1]
+            if hi <= lo:
+                continue
+            c[k] += float(np.sum(rw[lo:hi] ** 2))
+            ssr[k] += float(np.sum(rr[lo:hi] ** 2))
+            if not jac:
+                continue
+            rk = rw[lo:hi].ravel()
+            Sk = Js_[lo:hi].reshape(rk.size, p_s)
+            g[k, :p_s] += Sk.T @ rk
+            # alone, the block's residual is the whole one (h = g, q = c, qu = ssr)
+            rsk = rk if rs is None else rs[lo:hi].ravel()
+            hu[k] += Sk.T @ (rsk.reshape(-1, prep.n_channels) / w[None, :]).ravel()
+            if rs is not None:
+                h[k] += Sk.T @ rsk
+                q[k] += float(rsk @ rsk)
+                qu[k] += float(rsk @ (rs[lo:hi] / w[None, :]).ravel())
+            if new_gram is not None and p0 == 0:  # the whole block's
+                new_gram[k] += Sk.T @ Sk
+                Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
+                new_gu[k] += Su.T @ Su
+            elif new_gram is not None:  # the new columns' products only
+                Tk = Js_[lo:hi, :, p0:]
+                new_gram[k] += Sk.T @ Tk.reshape(rk.size, p_t)
+                new_gu[k] += Sk.T @ (Tk / w[None, :, None]).reshape(rk.size, p_t)
+            if Jd is not None and Jd.shape[2]:
+                Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
+                A[k, :p_s, p_s:] += Sk.T @ Dk
+                A[k, p_s:, p_s:] += Dk.T @ Dk
+                g[k, p_s:] += Dk.T @ rk
+
+    def finish(self, n_groups: int) -> None:
+        """Gather the groups' sums (over the processes) and set :attr:`done`."""
+        fitter, static, dyn, p_s, shapes = self.fitter, self.static, self.dyn, self.p_s, self.shapes
+        n_out = len(shapes)
+        total = reduce_groups(self.parts, n_groups, sum(math.prod(s) for s in shapes))
+        A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = unflatten(total, shapes) + [None] * (
+            10 - n_out
+        )
+        if self.jac:
+            if not dyn:
+                h, q, qu = g[:, :p_s].copy(), c.copy(), ssr.copy()
+            gram = self.gram
+            if gram is None:
+                lead = fitter.gram(static[: self.k0])
+                gram = fitter._assemble(static, self.p0, new_gram, new_gu, lead)
+            A[:, :p_s, :p_s] = gram[0]
+            A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
+            acc = Accumulated(fitter.prep.y, self.held, self.z_s, self.sc_s, *gram, h, q, hu, qu)
+            fitter.blocks.keep_accumulated(self.skey, acc)
+        self.done = fitter._caller_order(
+            self.terms, static, dyn, A, g, c, ssr, self.sc_s, self.sc_d
+        )
+
+
+def run_passes(passes: Sequence[StatsPass]) -> list[tuple]:
+    """The answers of ``passes`` (requests of fitters on one prepared record), those that
+    need the rows in one pass over them; with more than one, the static blocks' per-chunk
+    Jacobians are computed once (:class:`ChunkMemo`)."""
+    live = [s for s in passes if s.done is None]
+    if live:
+        f0 = live[0].fitter
+        fitters = list({id(s.fitter): s.fitter for s in live}.values())
+        memo = ChunkMemo() if len(live) > 1 else None
+        for f in fitters:
+            if f.prep is not f0.prep or f.chunk != f0.chunk:
+                raise ValueError("run_passes: the requests' fitters must share their record")
+            f.memo = memo
+        try:
+            groups = row_groups(f0.n_chunks())
+            # the chunks in fixed groups; this process sums its share group by group and the
+            # groups' sums are gathered (_rowshare): the same sums for any number of processes
+            for grp in my_groups(len(groups)):
+                for s in live:
+                    s.open_group()
+                for a, b, x in f0.chunks(*groups[grp]):
+                    if memo is not None:
+                        memo.at(a)
+                    for s in live:
+                        s.chunk(a, b, x)
+                for s in live:
+                    s.close_group()
+        finally:
+            for f in fitters:
+                f.memo = None
+        for s in live:
+            s.finish(len(groups))
+    return [s.done for s in passes]  # type: ignore[misc]
+
+
+FitSteps = Generator[StatsRequest, tuple, Any]
+"""A fit as a generator: it yields its statistics requests and receives their answers."""
+
+
+def drive(steps: FitSteps):
+    """Run one fit's requests one by one; its result."""
+    try:
+        req = next(steps)
+        while True:
+            req = steps.send(run_passes([StatsPass(*req)])[0])
+    except StopIteration as stop:
+        return stop.value
+
+
+def _waits(sp: StatsPass, kept: set) -> bool:
+    """Whether the request of ``sp`` would start from a longer leading block's kept Gram
+    matrices (``kept``: those the round's earlier passes will keep) than it found: it then
+    waits one round, so that it sums what it would sum after those passes, alone."""
+    return any(static_key(sp.static[:k]) in kept for k in range(sp.k0 + 1, len(sp.static)))
+
+
+def drive_many(all_steps: Sequence[FitSteps]) -> list:
+    """Run several fits side by side: each round, the next request of every fit not done,
+    answered in one pass (:func:`run_passes`); their results, in order. A request that
+    would sum a block's Gram matrices an earlier request of the round keeps (the frozen base
+    of a candidate's first pass, before the base's own first pass) waits for the next round:
+    one after another, it would have found them kept and summed the new columns only (the
+    same numbers as one fit after another, not the whole block's rounding)."""
+    out: list = [None] * len(all_steps)
+    reqs: dict[int, StatsRequest] = {}
+    for i, steps in enumerate(all_steps):
+        try:
+            reqs[i] = next(steps)
+        except StopIteration as stop:
+            out[i] = stop.value
+    while reqs:
+        idx, passes, kept = [], [], set()
+        for i in reqs:
+            sp = StatsPass(*reqs[i])
+            if sp.done is None and _waits(sp, kept):
+                continue  # (next round, as it would run after that pass alone)
+            idx.append(i)
+            passes.append(sp)
+            if sp.done is None and sp.gram is None:  # the leading blocks' Gram it keeps
+                kept |= {static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)}
+        answers = run_passes(passes)
+        for i, ans in zip(idx, answers):
+            try:
+                reqs[i] = all_steps[i].send(ans)
+            except StopIteration as stop:
+                out[i] = stop.value
+                del reqs[i]
+    return out
+
+
+__all__ = ["ChunkMemo", "StatsPass", "drive", "drive_many", "run_passes"]

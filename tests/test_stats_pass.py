@@ -1,0 +1,60 @@
+"""Trial fits side by side (issue 43, ``engine/_stats_pass.py``): one pass over the rows
+answers a round's requests of several fits, the static block's per-chunk Jacobian computed
+once; every fit gets the numbers it gets when the fits run one after another on one
+fitter."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import encdesign  # noqa: F401  (float64)
+from tests.test_fit_fast import _bench_base
+
+
+def test_fits_side_by_side_equal_the_fits_one_after_another(monkeypatch):
+    """A frozen base with three candidates (a line fitted in frequency from two starts, and
+    one at a held frequency: nonlinear and linear fits, rounds of different lengths), no
+    cache and chunks of 1024 rows (the shared Jacobians come from the memo, chunk by chunk):
+    side by side on one fitter, each fit's values, chi-square, normal matrix and held-out
+    chi-square equal the fits one after another on one fitter to the last bit (the later
+    fits start from the base's Gram matrices the first one kept), and the memo was read
+    (no reference angle: the head mean projected out of every column)."""
+    from encdesign.diagnose.engine import _fit, _normal, _stats_pass
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._steps import frozen
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+
+    monkeypatch.setattr(_fit, "CACHE_BYTES", 0.0)
+    monkeypatch.setattr(_normal, "CACHE_BYTES", 0.0)
+    prep, _, held = _bench_base(False)
+    starts = [{"frequency_hz": 3.7}, {"frequency_hz": 11.2}]
+    terms = [make_term(VIBRATION, prep, s) for s in starts]
+    terms.append(frozen([make_term(VIBRATION, prep, {"frequency_hz": 5.3})])[0])
+
+    def fitter() -> Fitter:
+        f = Fitter(prep)
+        f.chunk = 1024  # (the shape test_fit_fast's vibration records compile)
+        assert f.n_chunks() > 1
+        return f
+
+    f1 = fitter()
+    alone = [f1.fit([*held, t], max_steps=6) for t in terms]  # one after another
+    hits = []
+    get = _stats_pass.ChunkMemo.get
+
+    def counted(self, key):
+        got = get(self, key)
+        hits.append(got is not None)
+        return got
+
+    monkeypatch.setattr(_stats_pass.ChunkMemo, "get", counted)
+    f = fitter()
+    together = _stats_pass.drive_many([f.fit_steps([*held, t], max_steps=6) for t in terms])
+    assert any(hits)
+    for a, b in zip(alone, together):
+        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
+        np.testing.assert_array_equal(a.A, b.A)
+        for ta, tb in zip(a.terms, b.terms):
+            for k in ta.values:
+                np.testing.assert_array_equal(ta.values[k], tb.values[k])
+    assert alone[0].chi2 != alone[1].chi2  # the fits differ: the test can tell them apart
