@@ -16,14 +16,20 @@ import encdesign  # noqa: F401  (float64)
 from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
 
+def _random_runs(rng: np.random.Generator, n: int, R: int) -> jax.Array:
+    """One-hot run membership (``n`` rows by ``R`` runs) drawn at random: the hand
+    Jacobians' test records."""
+    oh = np.zeros((n, R))
+    oh[np.arange(n), rng.integers(0, R, n)] = 1.0
+    return jnp.asarray(oh)
+
+
 @pytest.mark.parametrize("C,R,M", [(4, 4, 12), (1, 3, 4)])
 def test_base_hand_jacobian_equals_jacfwd(C, R, M):
     rng = np.random.default_rng(C * 100 + R * 10 + M)
     n = 300
-    oh = np.zeros((n, R))
-    oh[np.arange(n), rng.integers(0, R, n)] = 1.0
     x = {
-        "run_onehot": jnp.asarray(oh),
+        "run_onehot": _random_runs(rng, n, R),
         "theta_raw": jnp.asarray(rng.uniform(0, 40, n)),
         "alpha": jnp.asarray(rng.uniform(0, 6, C)),
     }
@@ -283,10 +289,8 @@ def test_vibration_hand_jacobian_equals_jacfwd():
 
     rng = np.random.default_rng(7150)
     n, C, R = 200, 3, 2
-    oh = np.zeros((n, R))
-    oh[np.arange(n), rng.integers(0, R, n)] = 1.0
     x = {
-        "run_onehot": jnp.asarray(oh),
+        "run_onehot": _random_runs(rng, n, R),
         "t": jnp.asarray(np.sort(rng.uniform(0, 20, n))),
         "reading": jnp.zeros((n, C)),
     }
@@ -316,10 +320,8 @@ def test_wobble_and_shift_hand_jacobians_equal_jacfwd(name):
     cand = {"bearing_wobble": mt.BEARING_WOBBLE, "eccentricity_shift": mt.ECCENTRICITY_SHIFT}[name]
     rng = np.random.default_rng(7442)
     n, C, R = 300, 4, 2
-    oh = np.zeros((n, R))
-    oh[np.arange(n), rng.integers(0, R, n)] = 1.0
     x = {
-        "run_onehot": jnp.asarray(oh),
+        "run_onehot": _random_runs(rng, n, R),
         "theta": jnp.asarray(np.sort(rng.uniform(0, 300, n))),
         "tau": jnp.asarray(np.sort(rng.uniform(0, 20, n))),
         "alpha": jnp.asarray([0.0, 1.5, 3.1, 4.7]),
