@@ -623,6 +623,19 @@ class FinderSettings(AbstractSelectionSettings):
     """... it tests a switching order at this many equal-count edges of the kept rows (SDS,
     24 rows: every third run). Issue 41 (s17), by hand."""
 
+    discover_alias_share: float = eqx.field(default=0.5, static=True)
+    """Discovery, SDS: a lower order whose columns on the record's platform positions carry
+    at least this share (squared canonical correlation, in (0, 1]) of a located order's
+    columns is tested as a line beside it, and the held-out gain chooses
+    (``_discover_lines.alias_neighbours``). Set on training seed 20261354 (a step at order 5
+    on 24 golden-angle positions, located at order 8: the true order's share 0.59), not tuned
+    further; each alias is a line of the library, counted in its multiple-testing threshold.
+    Was the constant ``ALIAS_SHARE`` (s20-alias41; a field since s20-set44, unchanged)."""
+
+    discover_max_aliases: int = eqx.field(default=5, static=True)
+    """... at most this many alias orders (lines) per located order, the largest shares
+    first. s20-alias41, by hand; was ``MAX_ALIASES`` (a field since s20-set44, unchanged)."""
+
     def __check_init__(self):
         check_settings(self)
 
