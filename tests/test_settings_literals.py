@@ -225,9 +225,6 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (the cage ratio at which a bearing wobble's detection bound is stated, reported)",
     ("engine/_discover.py", "MAX_TERMS"): BOUND + " (terms the forward selection may add)",
     ("engine/_discover_lines.py", "MAX_LINES"): BOUND + " (located lines modelled)",
-    ("engine/_discover_lines.py", "MAX_ALIASES"): BOUND + " (alias orders per located order)",
-    ("engine/_discover_lines.py", "ALIAS_SHARE"): SEARCH
-    + " (lines an SDS order may alias: tested, the held-out gain and threshold choose)",
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
     ("engine/_discover_law.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
     ("engine/_discover_law.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",

@@ -16,18 +16,6 @@ from scipy import stats
 MAX_LINES = 10
 """Located lines modelled (the strongest findings first)."""
 
-ALIAS_SHARE = 0.5
-"""SDS: a lower order whose columns on the record's platform positions carry at least this
-share of a located order's columns (:func:`alias_neighbours`) is tested as a line beside
-it, and the held-out gain chooses. Set on training seed 20261354 (a step at order 5 on 24
-golden-angle positions, located at order 8: the true order's share 0.59), not tuned
-further; the search space, not a finding's threshold (each alias is a line of the library,
-counted in its multiple-testing threshold)."""
-
-MAX_ALIASES = 5
-"""SDS: alias orders (:data:`ALIAS_SHARE`) tested per located order, the largest shares
-first."""
-
 STEP_BINS = 32
 """Equal-count bins of the kept rows (in time order) whose edges are the change points a
 step term scans (plus the times the finder's views located); a record with fewer rows (an
@@ -118,8 +106,8 @@ def alias_neighbours(lines: list[Line], prep) -> dict[int, list[int]]:
     """SDS: appends to ``lines`` the lower orders that a located integer order may be an
     alias of on the record's platform positions (one per run): those whose columns (static,
     growing linearly over the runs, or switched on at a run boundary) share at least
-    :data:`ALIAS_SHARE` of the located order's static columns, the largest first
-    (:data:`MAX_ALIASES` per order), within :data:`MAX_LINES`; returns,
+    ``settings.discover_alias_share`` of the located order's static columns, the largest
+    first (``settings.discover_max_aliases`` per order), within :data:`MAX_LINES`; returns,
     per located line, the indices of the lines it brought. Empty on another kind.
 
     Only orders below the located one: a few golden-angle positions make many pairs of
@@ -154,9 +142,9 @@ def alias_neighbours(lines: list[Line], prep) -> dict[int, list[int]]:
             if m in have:
                 continue
             sh = max(_alias_share(own, cols(m, g)) for g in mods)
-            if sh >= ALIAS_SHARE:
+            if sh >= prep.settings.discover_alias_share:
                 shares.append((sh, m))
-        for _, m in sorted(shares, reverse=True)[:MAX_ALIASES]:
+        for _, m in sorted(shares, reverse=True)[: prep.settings.discover_max_aliases]:
             if len(lines) >= MAX_LINES:
                 break
             have.add(m)

@@ -26,13 +26,29 @@ def is_rule_name(name: object) -> bool:
     return tail == "plausible" and head.isidentifier()
 
 
+_SOURCES = (
+    ("_settings_selection.py", "AbstractSelectionSettings"),
+    ("_settings.py", "FinderSettings"),
+)
+"""The files and classes that declare :class:`FinderSettings`' fields (its base first)."""
+
+
 def _field_docs() -> dict[str, str]:
-    """Each field's docstring (the string literal after its annotation), from this file."""
+    """Each field's docstring (the string literal after its annotation), from the source of
+    :class:`FinderSettings` and of its base (:data:`_SOURCES`)."""
+    out: dict[str, str] = {}
+    for file, name in _SOURCES:
+        out.update(_class_field_docs(file, name))
+    return out
+
+
+def _class_field_docs(file: str, name: str) -> dict[str, str]:
+    """The field docstrings of class ``name`` in ``file`` (beside this module)."""
     import ast
     from pathlib import Path
 
-    tree = ast.parse((Path(__file__).parent / "_settings.py").read_text(encoding="utf-8"))
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "FinderSettings")
+    tree = ast.parse((Path(__file__).parent / file).read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name)
     out, last = {}, None
     for node in cls.body:
         if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
