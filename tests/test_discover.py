@@ -179,9 +179,9 @@ def test_export_candidates_round_trip(tmp_path):
     assert not (tmp_path / "none.py").exists()
 
 
-def _sds(cls: str, seed: int, size: float = 5.0):
+def _sds(cls: str, seed: int, size: float = 5.0, settings: FinderSettings | None = None):
     rec, truth = outside_record(np.random.default_rng(seed), cls, size, "sds")
-    d = diagnose(rec)
+    d = diagnose(rec) if settings is None else diagnose(rec, settings=settings)
     validate_diagnosis(d.doc)
     line = truth["line"][1]
     mine = [t for t in _terms(d.doc) if t["line_kind"] == "order" and t["value"] == line]
@@ -221,8 +221,9 @@ def test_sds_step_located_at_an_alias_order_is_modelled_at_its_own():
     """A platform order 5 switching on at run 12 of 24 golden-angle positions: the finder
     locates order 8 (its alias on those positions: 5 and 8 golden angles apart by 13, 4.97
     turns); discovery tests the lower orders it may alias, and the held-out gain takes the
-    step at order 5, on every moving sensor, switched on within a run of the truth's."""
-    _, truth, d, mine = _sds("platform_step", 7509)
+    step at order 5, on every moving sensor, switched on within a run of the truth's (the
+    alias search is off by default: ``FinderSettings.discover_max_aliases``)."""
+    _, truth, d, mine = _sds("platform_step", 7509, settings=FinderSettings(discover_max_aliases=5))
     located = [o for u in d.doc["unexplained"] for o in u["where"].get("orders", [])]
     assert 5.0 not in located and 8.0 in located, located  # the record's alias, as located
     assert mine, d.doc["report"]

@@ -328,6 +328,11 @@ def test_finder_settings_invariants():
         FinderSettings(bic_min=-1.0)
     with pytest.raises(ValueError, match="n_folds"):
         FinderSettings(n_folds=1)
+    assert FinderSettings(discover_max_aliases=0).discover_max_aliases == 0  # a search off
+    with pytest.raises(ValueError, match="discover_max_aliases.*integer >= 0"):
+        FinderSettings(discover_max_aliases=-1)
+    with pytest.raises(ValueError, match="discover_max_aliases"):
+        FinderSettings(discover_max_aliases=2.5)
 
 
 def test_settings_change_the_decision_and_a_refusal_names_its_rule():

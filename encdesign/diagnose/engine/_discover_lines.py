@@ -116,7 +116,7 @@ def alias_neighbours(lines: list[Line], prep) -> dict[int, list[int]]:
     order is the simpler reading of the same columns. A located order that is the
     alias of a higher true order stays as located."""
     sds = sds_channels(prep)
-    if sds is None:
+    if sds is None or not prep.settings.discover_max_aliases:  # another kind, or off
         return {}
     tau = tau_of(prep)[prep.keep]
     phi = np.asarray(prep.rows["theta"], float)[prep.keep][np.argsort(tau, kind="stable")]

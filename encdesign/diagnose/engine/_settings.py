@@ -632,9 +632,13 @@ class FinderSettings(AbstractSelectionSettings):
     further; each alias is a line of the library, counted in its multiple-testing threshold.
     Was the constant ``ALIAS_SHARE`` (s20-alias41; a field since s20-set44, unchanged)."""
 
-    discover_max_aliases: int = eqx.field(default=5, static=True)
+    discover_max_aliases: int = eqx.field(default=0, static=True)
     """... at most this many alias orders (lines) per located order, the largest shares
-    first. s20-alias41, by hand; was ``MAX_ALIASES`` (a field since s20-set44, unchanged)."""
+    first; 0 (the default) tests none. s20-alias41 set it to 5 by hand; on fresh seeds
+    (20261359-20261361, `benchmarks/discovery_sds_alias*_s20.json`) that changed one SDS case
+    of 30, for the worse (a `slow_growth` 5x lost its term to the larger library's
+    threshold) and fixed none, so it is off by default (session 20): set it (e.g. 5) where a
+    bench's platform positions make near-aliases of the orders (few golden-angle runs)."""
 
     def __check_init__(self):
         check_settings(self)
