@@ -654,13 +654,17 @@ def part_turn_span(shaft: np.ndarray, keep: np.ndarray, run: np.ndarray) -> floa
     widest = 0.0
     for _, (a, b) in run_spans(run):
         th = shaft[a:b][keep[a:b]]
-        if th.size == 0:
-            continue
-        steps = np.abs(np.diff(th))
-        steps = steps[steps > 0]
-        step = float(np.median(steps)) if steps.size else 0.0
-        widest = max(widest, float(np.ptp(th)) + step)
+        if th.size:
+            widest = max(widest, float(np.ptp(th)) + _median_step(th))
     return widest if widest < 2 * np.pi else None
+
+
+def _median_step(th: np.ndarray) -> float:
+    """The median step (rad) between neighbouring rows' angles ``th`` that differ; 0.0
+    where none do."""
+    steps = np.abs(np.diff(th))
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else 0.0
 
 
 def folds_see_each_others_arcs(
@@ -675,9 +679,8 @@ def folds_see_each_others_arcs(
     for _, (a, b) in run_spans(run):
         k = keep[a:b] & (fold[a:b] >= 0)
         th, fo = shaft[a:b][k], fold[a:b][k]
-        steps = np.abs(np.diff(th))
-        steps = steps[steps > 0]
-        if steps.size == 0:
+        step = _median_step(th)
+        if not step:  # (no two rows at different angles)
             continue
         dist = []
         for f in np.unique(fo):
@@ -688,7 +691,7 @@ def folds_see_each_others_arcs(
             j = np.clip(np.searchsorted(other, x), 1, max(other.size - 1, 1))
             lo, hi = other[j - 1], other[np.minimum(j, other.size - 1)]
             dist.append(np.minimum(np.abs(x - lo), np.abs(x - hi)))
-        if float(np.median(np.concatenate(dist))) > float(np.median(steps)):
+        if float(np.median(np.concatenate(dist))) > step:
             return False
     return True
 

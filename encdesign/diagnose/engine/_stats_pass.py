@@ -232,13 +232,8 @@ FitSteps = Generator[StatsRequest, tuple, Any]
 
 
 def drive(steps: FitSteps):
-    """Run one fit's requests one by one; its result."""
-    try:
-        req = next(steps)
-        while True:
-            req = steps.send(run_passes([StatsPass(*req)])[0])
-    except StopIteration as stop:
-        return stop.value
+    """Run one fit's requests one by one; its result (:func:`drive_many` of one fit)."""
+    return drive_many([steps])[0]
 
 
 def _waits(sp: StatsPass, kept: set) -> bool:
