@@ -6,9 +6,12 @@ Each run's disk error orders fitted alone give the low-order phases the start al
 columns against the run's constants are ill-conditioned over the arc it covers), so their
 phases say nothing about the run's zero: such a run's start is the zero at which its
 observations match run 0's at the same disk angle (:func:`match_offset`), or, where no zero
-makes the runs share an arc, at which the base fitted to both explains the most
-(:func:`profile_offset`), and :func:`resolved_runs` tells the issue-41 hold which runs'
-low orders may judge a fitted zero at all.
+makes the runs share an arc, or where the observations contradict the match and the base
+fitted to both runs prefers another zero (:func:`matched_zero_refused`: the true zero may
+make the runs share no shaft arc while each head's arc overlaps other heads' arcs of the
+other run), at which the base fitted to both explains the most (:func:`profile_offset`),
+and :func:`resolved_runs` tells the issue-41 hold which runs' low orders may judge a fitted
+zero at all.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...engine._protocol import Prepared
-from ...engine._views import run_spans
+from ...engine._views import chi2_threshold, run_spans
 
 ALIGN_GRID = 720
 """Angle zeros tried per run by :func:`profile_offset` (0.5 degree steps; the nearest is then
@@ -153,6 +156,13 @@ def match_offset(prep: Prepared, r: int, M: int) -> float | None:
     mismatch's chi-square per degree of freedom in the noise), over the zeros where the two
     runs share an arc of at least half the period of the base's highest order ``M`` (a
     shorter one cannot tell a zero); ``None`` where no zero makes them share one."""
+    found = _match(prep, r, M)
+    return None if found is None else found[0]
+
+
+def _match(prep: Prepared, r: int, M: int) -> tuple[float, float, int] | None:
+    """:func:`match_offset`'s zero (rad) with its mismatch: the chi-square (in the noise of
+    both runs) and its degrees of freedom."""
     th0, y0 = _kept(prep, 0)
     thr, yr = _kept(prep, r)
     if th0.size < 2 or thr.size < 2:
@@ -162,29 +172,77 @@ def match_offset(prep: Prepared, r: int, M: int) -> float | None:
     w = 1.0 / (2.0 * np.asarray(prep.sigma, float) ** 2)
     C = fp.shape[1]
 
-    def mismatch(d: float) -> float:
+    def mismatch(d: float) -> tuple[float, int]:
         x = xp[0] + np.mod(thr + d - xp[0], 2 * np.pi)
         on = x <= xp[-1]
         if on.sum() <= C or np.ptp(x[on]) < np.pi / max(M, 1):
-            return np.inf
+            return np.inf, 0
         e = yr[on] - np.stack([np.interp(x[on], xp, fp[:, k]) for k in range(C)], 1)
         e -= e.mean(0)
-        return float(np.sum(e**2 * w) / (e.size - C))
+        return float(np.sum(e**2 * w)), int(e.size - C)
+
+    def per_dof(d: float) -> float:
+        chi, dof = mismatch(d)
+        return chi / dof if dof > 0 else np.inf
 
     grid = np.linspace(-np.pi, np.pi, ALIGN_GRID, endpoint=False)
-    g = np.array([mismatch(d) for d in grid])
+    g = np.array([per_dof(d) for d in grid])
     if not np.isfinite(g).any():
         return None
     step = grid[1] - grid[0]
     fine = grid[int(np.argmin(g))] + np.linspace(-step, step, 41)
-    return float(fine[int(np.argmin([mismatch(d) for d in fine]))])
+    best = float(fine[int(np.argmin([per_dof(d) for d in fine]))])
+    return (best, *mismatch(best))
+
+
+def _sum_squares(prep: Prepared, r: int) -> tuple[float, int]:
+    """Run ``r``'s kept observations: their sum of squares (rad^2; head differences without
+    ``theta_ref``, as :func:`run_normals` sees them) and how many values they hold."""
+    _, y = _kept(prep, r)
+    if prep.kd.project:
+        y = y - y.mean(1, keepdims=True)
+    return float(np.sum(y**2)), int(y.shape[0] * (y.shape[1] - int(prep.kd.project)))
+
+
+def matched_zero_refused(prep: Prepared, normals, r: int, Mf: int, match) -> float | None:
+    """The profile's zero (:func:`profile_offset`) where run ``r``'s matched zero (``match``:
+    :func:`_match`'s zero, chi-square and degrees of freedom) is refused for it, else
+    ``None``. Both must say so: the observations contradict the match (its mismatch chi-square over
+    ``chi2_threshold(settings.alpha, dof, 1)``: the runs differ at the same disk angle by
+    more than the noise), and the base fitted to run 0 and run ``r`` together (orders
+    ``1..Mf``, each run its head constants) leaves a residual sum of squares at the matched
+    zero that exceeds the profile's by more than ``chi2_threshold(settings.alpha, 1,
+    ALIGN_GRID)`` times the profile's own residual per degree of freedom (a quasi-likelihood
+    ratio: the same parameters at both zeros, the profile's the best of the grid's zeros, and
+    the dispersion its own, so orders the base leaves out or an effect it does not model
+    cannot by themselves refuse the match). The match compares a run's heads with run 0's
+    at the same shaft angle only: where the true zero makes the runs share no shaft arc it
+    cannot see it, and takes the best of the zeros that do, at a short shared arc (issue 44,
+    ``short_arcs.py --set effects --seed 6215`` record 1: a zero 0.92 rad off, the base 29x
+    the noise), while the profile sees the heads' arcs overlap across the runs."""
+    matched, chi, dof_m = match
+    if dof_m <= 0 or chi <= chi2_threshold(prep.settings.alpha, dof_m, 1):
+        return None
+    prof = profile_offset(normals, r, Mf)
+    (G0, h0), (Gr, hr) = normals[0], normals[r]
+    y0, n0 = _sum_squares(prep, 0)
+    yr, nr = _sum_squares(prep, r)
+    res = y0 + yr - _explained(G0, h0, Gr, hr, Mf, np.array([matched, prof]))
+    dof = n0 + nr - G0.shape[0] - Gr.shape[0] + 2 * Mf
+    if dof <= 0:
+        return None
+    disp = max(float(res[1]), 0.0) / dof
+    drop = float(res[0] - res[1])
+    thr = chi2_threshold(prep.settings.alpha, 1, ALIGN_GRID)
+    return prof if (drop > thr * disp if disp > 0 else drop > 0) else None
 
 
 def run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     """Start for ``delta_r``: each run's low orders (:func:`low_order_phases`) aligned to run
     0; a run whose own orders (or run 0's) are not separable is matched to run 0 at the same
-    disk angle (:func:`match_offset`), or where it shares no arc with it gets
-    :func:`profile_offset`."""
+    disk angle (:func:`match_offset`), unless the observations contradict that zero and the
+    base fitted to both runs prefers another (:func:`matched_zero_refused`), or where it
+    shares no arc with it gets :func:`profile_offset`."""
     if prep.ctx.n_runs < 2:
         return np.zeros(0)
     Z, _, mm, ok = low_order_phases(prep, M)
@@ -193,8 +251,12 @@ def run_offsets_start(prep: Prepared, M: int) -> np.ndarray:
     out = []
     for r in range(1, len(Z)):
         if normals is not None and not (ok[r] and ok[0]):
-            d = match_offset(prep, r, M)
-            out.append(profile_offset(normals, r, M) if d is None else d)
+            d = _match(prep, r, M)
+            if d is None:
+                out.append(profile_offset(normals, r, M))
+                continue
+            p = matched_zero_refused(prep, normals, r, M, d)
+            out.append(d[0] if p is None else p)
             continue
         score = np.real(
             (Z[r] * np.conj(Z[0]))[None, :] * np.exp(-1j * mm[None, :] * grid[:, None])
