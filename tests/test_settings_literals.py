@@ -154,6 +154,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
+    ("kinds/multihead/_vibration_doubt.py", 1e-9): GUARD + " (a zero span of revolutions)",
+    ("kinds/multihead/_vibration_doubt.py", 2): COUNT + " (two angles make a gap)",
     ("kinds/multihead/_reference_data.py", 2): COUNT,
     ("kinds/multihead/_reference_terms.py", 2): SHAPE,
     ("kinds/multihead/_reference_terms.py", 8): COUNT,
@@ -211,6 +213,9 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
     + " (the probe's whitened norm: the fits are linear in it)",
+    ("kinds/multihead/_vibration_doubt.py", "NO_DOUBT"): GUARD
+    + " (the margin reported where a vibration doubt rule does not apply: no one speed, no "
+    "value lattice; it passes any margin setting)",
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
     + " (the frequency at which the vibration's detection bound is stated, reported with it)",
     ("kinds/multihead/_multihead_probes.py", "WOBBLE_PROBE_FRACTION"): SEARCH

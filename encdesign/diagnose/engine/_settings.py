@@ -43,6 +43,28 @@ class FinderSettings(AbstractSelectionSettings):
     """multihead: a vibration near an integer order at one speed must beat the
     rotation-locked order there by this chi-square (rule ``locked_margin``). c0988bd."""
 
+    arc_passes_min: float = eqx.field(default=1.5, static=True)
+    """multihead, at one speed on part of a turn: a vibration is tested against the integer
+    orders within the arc's resolution of its apparent order (rule ``vibration.plausible``,
+    ``locked_margin``) only where the kept rows pass over the arc at least this many times
+    (their travel in turns over the share of the circle they cover: 1 on one pass, 2 forward
+    and back). On one pass a line and those orders are the same samples to any test on the
+    data (the rule would only measure how well the orders approximate it); a return or a
+    second pass sees each angle again, where a rotation-locked error repeats and a line
+    does not. Set by hand in s21-vib44 (issue 44), between one pass and two."""
+
+    vibration_staircase_harmonics: int = eqx.field(default=2, static=True)
+    """multihead, one quantized sensor against a reference: a vibration must take
+    ``locked_margin`` in chi-square (less ``k ln N``) beyond this many harmonics of the
+    quantization staircase at the sensor's reading angle, each with its own phase in every
+    run and direction (rule ``vibration.plausible``; 0 turns the check off). The staircase,
+    sampled, folds to lines at any apparent frequency; a reading delay shifts it by
+    ``omega tau`` in each direction, which the quantization term's rebuilt reading does not
+    follow. Set by hand in s21-vib44 (issue 44): on the training record sensor 6252/12
+    (``quantization`` + ``reading_delay``) the false line at 116.2 Hz takes 78 beyond the
+    first harmonic with one phase per run, 2-4 with one per run and direction, K = 1, 2 or
+    3 alike; 2 covers a staircase sharper than its first harmonic."""
+
     wobble_cycles_min: float = eqx.field(default=3.0, static=True)
     """multihead: ``bearing_wobble`` needs this many cycles of its fractional order in the
     longest run (rule ``bearing_wobble.plausible``: with fewer, a slow drift or a step fits

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-MAY_BE_ZERO = ("discover_max_aliases",)
+MAY_BE_ZERO = ("discover_max_aliases", "vibration_staircase_harmonics")
 """Counts where 0 turns a search off (checked as integers >= 0)."""
 
 

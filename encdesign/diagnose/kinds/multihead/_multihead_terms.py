@@ -15,7 +15,18 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
 from ._order_step_bins import order_step_bins
-from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
+from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
+from ._vibration_doubt import (
+    NO_DOUBT,
+    arc_orders,
+    covered_turns,
+    locked_margin,
+    one_speed,
+    order_res,
+    run_durations,
+    staircase_columns,
+    staircase_margin,
+)
 from ._vibration_jac import bearing_wobble_valjac, eccentricity_shift_valjac, vibration_valjac
 
 # ----------------------------------------------------------------------------- candidates
@@ -273,115 +284,64 @@ def _vb_fn(p, x):
     )
 
 
-def _one_speed(ctx) -> float | None:
-    """The steady speed (rad/s) when every kept row turns at one |speed|, else ``None``."""
-    w = np.abs(np.asarray(ctx.rows["omega"], float))
-    w = w[w > 0]
-    if w.size and np.ptp(w) <= ctx.settings.one_speed_spread * np.max(w):
-        return float(np.median(w))
-    return None
-
-
-def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
-    """``(frequency, margin)``: the line's frequency refined on a grid of +-2 Rayleigh bins
-    (the spectrum's peak of a record with excluded stretches, set to zero, can split in two
-    and sit a bin off: a frequency fit started there does not find the line), and at one
-    speed by how much (whitened chi-square less ``k ln N`` for its parameters) a line fixed
-    in time at it beats a rotation-locked error at the nearest integer order (the same phase
-    in every run: ``cos m theta, sin m theta`` per channel). A line at a non-integer order
-    that the record resolves beats it clearly; a rotation-locked error (any number of turns)
-    or a line that the span cannot tell from one (``|order - m| * turns`` small) does not.
-    When the base model has order ``m`` the locked error is already fitted, so what the line
-    takes out of this residual is all its own (the locked alternative gains nothing).
-    ``1e9`` when not at one speed."""
-    t = np.asarray(ctx.rows["t"], float)
-    th = np.asarray(ctx.rows["theta"], float)
-    oh = np.asarray(ctx.rows["run_onehot"], float)
-    rw = np.asarray(resid, float).reshape(t.size, -1) / np.asarray(ctx.noise)[None, :]
-    rw = rw - oh @ np.linalg.lstsq(oh, rw, rcond=None)[0]  # the run constants are the base's
-    T = float(np.max(_run_durations(ctx)))
-    if T <= 0:
-        return f_hz, 1e9
-    N = rw.size
-    w = _one_speed(ctx)
-    m = round(f_hz / (w / (2 * np.pi))) if w is not None else 0
-    in_base = 1 <= m <= int(ctx.max_order)
-    locked = np.stack([np.cos(m * th), np.sin(m * th)], 1)
-    # at one speed near a base order the base's order m is refitted with the line (as the
-    # engine's trial fit does): the line's gain is over it (the base residual alone shows
-    # the line less the base's share of it, split around a reversal)
-    g0 = _gain(rw, locked) if in_base else 0.0
-    best = (-math.inf, f_hz)
-    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
-        c, s_ = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
-        X = np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
-        g = _gain(rw, np.concatenate([X, locked], 1)) - g0 if in_base else _gain(rw, X)
-        best = max(best, (g, float(f)))
-    g_vib, f_best = best
-    if w is None or m < 1:
-        return f_best, 1e9
-    k_vib = 2 * oh.shape[1] * rw.shape[1]
-    k_lock = 2 * rw.shape[1]
-    if in_base:
-        g_lock = 0.0  # in the base model: what the line takes beyond it is its own
-    else:
-        g_lock = _gain(rw, locked)
-    # a catalog order the sampling folds onto the line (interpolation_error's L, 2 L) is a
-    # locked alternative too (issue 44), its gain taken as the line's (over a base order m
-    # refitted with it): the strongest alternative sets the margin
-    for mk in catalog_orders_at(ctx, f_best, w, _order_res(ctx) * w / (2 * np.pi)):
-        Xk = np.stack([np.cos(mk * th), np.sin(mk * th)], 1)
-        gk = _gain(rw, np.concatenate([Xk, locked], 1)) - g0 if in_base else _gain(rw, Xk)
-        g_lock = max(g_lock, gk)
-    margin = (g_vib - k_vib * math.log(N)) - (g_lock - k_lock * math.log(N))
-    return f_best, float(margin)
-
-
-def _order_res(ctx) -> float:
-    """The span's resolution in shaft orders (``integer_order_tol`` if wider)."""
-    return max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
-
-
 def _vb_start(ctx, resid, findings):
     out = []
+    stair = None
     for f in findings:
         if f.view == "spectrum" and f.detail.get("fixed_in") != "order":
             fr = [v for v in f.where["frequencies_hz"] if v > 0]
             if fr:
-                f0, margin = _vb_locked_margin(ctx, resid, float(np.median(fr)))
-                out.append({"frequency_hz": f0, "locked_margin": margin})
+                f0, margin = locked_margin(ctx, resid, float(np.median(fr)))
+                if stair is None:
+                    stair = staircase_columns(ctx)
+                out.append(
+                    {
+                        "frequency_hz": f0,
+                        "locked_margin": margin,
+                        "staircase_margin": staircase_margin(ctx, resid, f0, stair),
+                    }
+                )
     return out[:3]
-
-
-def _run_durations(ctx: Context) -> np.ndarray:
-    oh = ctx.rows["run_onehot"] > 0
-    t = ctx.rows["t"]
-    return np.array([np.ptp(t[oh[:, r]]) if oh[:, r].any() else 0.0 for r in range(oh.shape[1])])
 
 
 def _vb_plausible(ctx, v):
     f = float(v["frequency_hz"])
     if f <= 0:
         return "frequency is not positive"
-    w = _one_speed(ctx)
+    w = one_speed(ctx)
     if w is not None:
         order = f / (w / (2 * np.pi))
-        res = _order_res(ctx)
+        res = order_res(ctx)
         margin = float(np.asarray(v.get("locked_margin", 0.0)))
         # within the span's resolution of an integer order, the data must show that it is
         # not rotation locked (the line beats the locked order by FinderSettings.locked_margin);
-        # so too at a catalog order the sampling folds onto it (issue 44)
+        # so too at a catalog order the sampling folds onto it, and on part of a turn at the
+        # orders within the arc's resolution (issue 44)
         folded = catalog_orders_at(ctx, f, w, res * w / (2 * np.pi))
         near = abs(order - round(order)) < res and round(order) >= 1
-        if (near or folded) and margin < ctx.settings.locked_margin:
+        arc = arc_orders(ctx, order)
+        wide = any(m != round(order) for m in arc)  # part of a turn: more than the nearest
+        if (near or folded or wide) and margin < ctx.settings.locked_margin:
             m = folded[0] if folded else round(order)
             at = f" folded by the sampling (apparent order {order:.3f})" if folded else ""
+            alt = f"order {m}"
+            if wide and not folded:
+                alt = f"orders {arc[0]}-{arc[-1]} (part of a turn, {covered_turns(ctx):.2f})"
             return (
                 f"at one speed a line at {f:.4g} Hz is shaft order {m if folded else order:.6g}"
-                f"{at}: a rotation-locked error at order {m} fits as well (chi-square margin "
+                f"{at}: a rotation-locked error at {alt} fits as well (chi-square margin "
                 f"{margin:.1f}, needs {ctx.settings.locked_margin:.0f}; two speeds separate them)"
             )
-    T = float(np.max(_run_durations(ctx)))
+    stair = float(np.asarray(v.get("staircase_margin", NO_DOUBT)))
+    if stair < ctx.settings.locked_margin:
+        return (
+            f"a line at {f:.4g} Hz takes {stair:.1f} in chi-square (less k ln N) beyond the "
+            f"quantization staircase's first {ctx.settings.vibration_staircase_harmonics} "
+            "harmonics at the sensor's reading angle (their own phase in each run and "
+            f"direction; needs {ctx.settings.locked_margin:.0f}): the staircase, sampled, "
+            "folds to lines; this one is what the quantization leaves"
+        )
+    T = float(np.max(run_durations(ctx)))
     need = ctx.settings.vibration_cycles_min
     if f * T < need:
         return (
@@ -429,7 +389,8 @@ def _vb_probes(ctx: Context) -> list[Probe]:
             "frequency_hz": np.asarray(f),
             "cos_rad": cos,
             "sin_rad": np.zeros((R, C)),
-            "locked_margin": np.asarray(1e9),
+            "locked_margin": np.asarray(NO_DOUBT),
+            "staircase_margin": np.asarray(NO_DOUBT),
         }
         out.append(Probe(vals, "amplitude_rad", "rad", where=names[k], at=f"a line at {f:.6g} Hz"))
     return out
@@ -448,7 +409,16 @@ VIBRATION = Candidate(
             linear=False,
             fit=False,
             description="at one speed: whitened chi-square (less k ln N) by which a line fixed "
-            "in time beats a rotation-locked error at the nearest integer order (held)",
+            "in time beats a rotation-locked error at the nearest integer order (on part of a "
+            "turn the orders within the arc's resolution) (held)",
+        ),
+        Param(
+            "staircase_margin",
+            "1",
+            linear=False,
+            fit=False,
+            description="a quantized sensor: whitened chi-square (less k ln N) the line takes "
+            "beyond the quantization staircase's harmonics at the sensor's reading angle (held)",
         ),
     ),
     signature=("spectrum",),

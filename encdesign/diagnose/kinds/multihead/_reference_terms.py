@@ -347,15 +347,13 @@ def _quant_applies(ctx: Context) -> str | None:
     return None
 
 
-def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
-    """Rebuild the unquantized reading as a smooth least-squares fit of the reading itself
-    (``QUANT_SMOOTH_ORDERS`` Fourier orders of the angle and per-run Legendre polynomials of
-    degree ``QUANT_POLY_DEGREE``, for part of a turn; the staircase, about white, averages
-    out), take the lattice of the readings, and pick the blur (noise ahead of the quantizer)
-    on a grid ``0 … q`` by least squares of the engine's residual on the staircase."""
+def smooth_reading(ctx: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The unquantized reading (rad) rebuilt as a smooth least-squares fit of the reading
+    itself: ``QUANT_SMOOTH_ORDERS`` Fourier orders of the angle and per-run Legendre
+    polynomials of degree ``QUANT_POLY_DEGREE`` (part of a turn); the staircase, about white,
+    averages out. Returns ``(coefficients, run_mid_rad, run_half_rad, smooth_rad)``, the
+    last the rebuilt reading per kept row."""
     rows = ctx.rows
-    lat = _quant_lattice(ctx)
-    q = float(lat.lsb_rad)
     th = np.asarray(rows["theta"], dtype=np.float64)
     onehot = np.asarray(rows["run_onehot"], dtype=np.float64)
     reading = np.asarray(rows["reading"], dtype=np.float64)[:, 0]
@@ -368,7 +366,23 @@ def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
     mid, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
     F = np.asarray(_smooth_basis(jnp.asarray(th), QUANT_SMOOTH_ORDERS))
     Pb = np.asarray(_poly_basis(*(jnp.asarray(v) for v in (th, onehot, mid, half))))
-    coef, *_ = np.linalg.lstsq(np.concatenate([F, Pb], 1), reading - th, rcond=None)
+    A = np.concatenate([F, Pb], 1)
+    coef, *_ = np.linalg.lstsq(A, reading - th, rcond=None)
+    return coef, mid, half, th + A @ coef
+
+
+def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
+    """Rebuild the unquantized reading as a smooth least-squares fit of the reading itself
+    (``QUANT_SMOOTH_ORDERS`` Fourier orders of the angle and per-run Legendre polynomials of
+    degree ``QUANT_POLY_DEGREE``, for part of a turn; the staircase, about white, averages
+    out), take the lattice of the readings, and pick the blur (noise ahead of the quantizer)
+    on a grid ``0 … q`` by least squares of the engine's residual on the staircase."""
+    rows = ctx.rows
+    lat = _quant_lattice(ctx)
+    q = float(lat.lsb_rad)
+    reading = np.asarray(rows["reading"], dtype=np.float64)[:, 0]
+    n_runs = np.asarray(rows["run_onehot"]).shape[1]
+    coef, mid, half, _ = smooth_reading(ctx)
     nf = 2 * QUANT_SMOOTH_ORDERS
     poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
     p0 = {

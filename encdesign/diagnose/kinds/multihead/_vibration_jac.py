@@ -30,6 +30,7 @@ def vibration_valjac(p, x):
         "cos_rad": at * cw[:, :, None, None],
         "sin_rad": at * sw[:, :, None, None],
         "locked_margin": jnp.zeros_like(v),
+        "staircase_margin": jnp.zeros_like(v),
     }
 
 

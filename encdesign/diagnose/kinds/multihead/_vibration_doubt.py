@@ -1,0 +1,203 @@
+"""Doubt rules of ``vibration`` that test the line on the data against what else makes a
+line in a sampled record (issue 44).
+
+A vibration is a line fixed in time (Hz). Two catalog structures are lines in time too:
+
+* At one steady speed a rotation-locked error at shaft order ``m`` is a line at
+  ``m f_rot``. Over whole turns the integer orders are orthogonal and the nearest one (and
+  the catalog's orders far above the base that the sampling folds onto the line:
+  ``interpolation_error``'s ``L``, ``2 L``) is the alternative. Over part of a turn (an arc
+  of ``c`` turns) they are not: a line at apparent order ``nu`` is a sum of the integer
+  orders within about ``1 / c`` of it (the arc's resolution in orders), and only the rows
+  that see the same angle at other times (a return, a second pass) or another speed tell the
+  line from them. :func:`locked_margin` fits those orders as the alternative.
+* A quantized sensor (its readings on a value lattice of step ``q``) carries a staircase of
+  period ``q`` in its own reading angle ``s``: harmonics ``k 2 pi / q`` of ``s``, which at a
+  steady speed, sampled, fold to lines at any apparent frequency. The quantization term
+  rebuilds ``s`` from the reading; a reading delay shifts the staircase by ``omega tau`` in
+  each direction, so whatever of the staircase its fit leaves has its own phase in each run
+  and direction. :func:`staircase_margin` is what the line takes beyond those harmonics.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...engine._candidates import Context
+from ._aliases import catalog_orders_at
+from ._runout import _gain
+
+NO_DOUBT = 1e9
+"""The margin reported where a rule does not apply (not at one speed, no value lattice)."""
+
+
+def one_speed(ctx: Context) -> float | None:
+    """The steady speed (rad/s) when every kept row turns at one |speed|, else ``None``."""
+    w = np.abs(np.asarray(ctx.rows["omega"], float))
+    w = w[w > 0]
+    if w.size and np.ptp(w) <= ctx.settings.one_speed_spread * np.max(w):
+        return float(np.median(w))
+    return None
+
+
+def run_durations(ctx: Context) -> np.ndarray:
+    """Each run's span of ``t`` (s) over the kept rows (0 for a run without rows)."""
+    oh = ctx.rows["run_onehot"] > 0
+    t = ctx.rows["t"]
+    return np.array([np.ptp(t[oh[:, r]]) if oh[:, r].any() else 0.0 for r in range(oh.shape[1])])
+
+
+def order_res(ctx: Context) -> float:
+    """The span's resolution in shaft orders (``integer_order_tol`` if wider)."""
+    return max(ctx.settings.integer_order_tol, 1.0 / max(float(np.sum(ctx.revolutions)), 1e-9))
+
+
+def covered_turns(ctx: Context) -> float:
+    """The share of the circle (turns, at most 1) the kept rows' shaft angles cover: one less
+    the largest gap between them around the circle, over ``2 pi``."""
+    th = np.sort(np.mod(np.asarray(ctx.rows["theta"], float), 2 * np.pi))
+    if th.size < 2:
+        return 0.0
+    gaps = np.diff(np.concatenate([th, th[:1] + 2 * np.pi]))
+    return float(1.0 - np.max(gaps) / (2 * np.pi))
+
+
+def arc_orders(ctx: Context, order: float) -> list[int]:
+    """The integer orders (``>= 1``) a line at apparent ``order`` is a sum of on part of a
+    turn: those within the arc's resolution of it, ``1 / c - 1 / 2`` orders for an arc of
+    ``c`` turns (the main lobe ``1 / c`` of a line on the arc, less the half order the
+    nearest integer is within anyway: over a whole turn none but the nearest). Only where the
+    kept rows pass over the arc ``arc_passes_min`` times (their travel over ``c``): seen once,
+    a line and those orders are the same samples to any test on the data, and the rule stays
+    silent (as before it)."""
+    c = covered_turns(ctx)
+    if c <= 0 or float(np.sum(ctx.revolutions)) < ctx.settings.arc_passes_min * c:
+        return []
+    h = 1.0 / c - 0.5
+    return [m for m in range(max(1, math.ceil(order - h)), math.floor(order + h) + 1)]
+
+
+def locked_orders(ctx: Context, order: float) -> list[int]:
+    """The rotation-locked orders a line at apparent ``order`` (one speed) is tested against:
+    the nearest integer (``>= 1``) and, on part of a turn, :func:`arc_orders`."""
+    m = round(order)
+    return sorted(({m} if m >= 1 else set()) | set(arc_orders(ctx, order)))
+
+
+def _whitened(ctx: Context, resid: np.ndarray) -> np.ndarray:
+    """The residual over the noise, less each run's constant (the base's)."""
+    oh = np.asarray(ctx.rows["run_onehot"], float)
+    n = oh.shape[0]
+    rw = np.asarray(resid, float).reshape(n, -1) / np.asarray(ctx.noise)[None, :]
+    return rw - oh @ np.linalg.lstsq(oh, rw, rcond=None)[0]
+
+
+def _orders_cols(th: np.ndarray, orders: list[int]) -> np.ndarray:
+    """``cos m theta, sin m theta`` of every order, shape ``(n, 2 len(orders))``."""
+    if not orders:
+        return np.zeros((th.size, 0))
+    return np.concatenate([np.stack([np.cos(m * th), np.sin(m * th)], 1) for m in orders], 1)
+
+
+def _line_cols(t: np.ndarray, oh: np.ndarray, f_hz: float) -> np.ndarray:
+    """A line at ``f_hz`` with its own amplitude and phase in every run."""
+    c, s_ = np.cos(2 * np.pi * f_hz * t), np.sin(2 * np.pi * f_hz * t)
+    return np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
+
+
+def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
+    """``(frequency, margin)``: the line's frequency refined on a grid of +-2 Rayleigh bins
+    (the spectrum's peak of a record with excluded stretches, set to zero, can split in two
+    and sit a bin off: a frequency fit started there does not find the line), and at one
+    speed by how much (whitened chi-square less ``k ln N`` for its parameters) a line fixed
+    in time at it beats rotation-locked errors at :func:`locked_orders` (the same phase in
+    every run: ``cos m theta, sin m theta`` per channel). A line at a non-integer order
+    that the record resolves beats them clearly; a rotation-locked error (any number of
+    turns) or a line that the span cannot tell from one (``|order - m| * turns`` small, or
+    part of a turn seen once) does not. Orders the base model has are already fitted, so
+    they are refitted with the line (as the engine's trial fit does) and with each
+    alternative: what the line takes beyond them is its own. :data:`NO_DOUBT` when not at
+    one speed."""
+    t = np.asarray(ctx.rows["t"], float)
+    th = np.asarray(ctx.rows["theta"], float)
+    oh = np.asarray(ctx.rows["run_onehot"], float)
+    rw = _whitened(ctx, resid)
+    T = float(np.max(run_durations(ctx)))
+    if T <= 0:
+        return f_hz, NO_DOUBT
+    N = rw.size
+    w = one_speed(ctx)
+    orders = locked_orders(ctx, f_hz / (w / (2 * np.pi))) if w is not None else []
+    in_base = [m for m in orders if m <= int(ctx.max_order)]
+    beyond = [m for m in orders if m > int(ctx.max_order)]
+    B = _orders_cols(th, in_base)
+    g0 = _gain(rw, B) if in_base else 0.0
+
+    def over_base(X: np.ndarray) -> float:
+        return _gain(rw, np.concatenate([X, B], 1)) - g0 if in_base else _gain(rw, X)
+
+    best = (-math.inf, f_hz)
+    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
+        best = max(best, (over_base(_line_cols(t, oh, float(f))), float(f)))
+    g_vib, f_best = best
+    if w is None or not orders:
+        return f_best, NO_DOUBT
+    k_vib = 2 * oh.shape[1] * rw.shape[1]
+    own = g_vib - k_vib * math.log(N)
+    # each alternative less k ln N for its own parameters; the line must beat every one:
+    # each order beyond the base alone, and all of them together (on part of a turn). In
+    # the base model an order is already fitted: what the line takes beyond it is its own
+    # (the alternative gains nothing, at the parameters of one order)
+    alts = [[m] for m in beyond] + ([beyond] if len(beyond) > 1 else [])
+    # a catalog order the sampling folds onto the line (interpolation_error's L, 2 L) is a
+    # locked alternative too (issue 44), its gain taken as the line's (over the base orders
+    # refitted with it)
+    alts += [[mk] for mk in catalog_orders_at(ctx, f_best, w, order_res(ctx) * w / (2 * np.pi))]
+    k1 = 2 * rw.shape[1]
+    margin = own + k1 * math.log(N)  # no order beyond the base: the base's order alone
+    for a in alts:
+        margin = min(margin, own - (over_base(_orders_cols(th, a)) - k1 * len(a) * math.log(N)))
+    return f_best, float(margin)
+
+
+def staircase_columns(ctx: Context) -> np.ndarray | None:
+    """The quantization staircase's harmonics ``k = 1 … vibration_staircase_harmonics`` at
+    the sensor's own reading angle (rebuilt as the quantization term does), each with its own
+    phase in every run and direction: ``(n, 4 K segments)``; ``None`` unless one sensor
+    against a reference whose readings lie on a value lattice."""
+    from ._reference_terms import _need_ref, _quant_lattice, smooth_reading
+
+    K = int(ctx.settings.vibration_staircase_harmonics)
+    if K < 1 or _need_ref(ctx):
+        return None
+    q = _quant_lattice(ctx).lsb_rad
+    if q is None:
+        return None
+    s = smooth_reading(ctx)[3]
+    run = np.argmax(np.asarray(ctx.rows["run_onehot"], float), axis=1)
+    way = np.sign(np.asarray(ctx.rows["omega"], float))
+    cols = []
+    for r, d in sorted(set(zip(run.tolist(), way.tolist()))):
+        seg = ((run == r) & (way == d)).astype(float)
+        for k in range(1, K + 1):
+            a = k * (2 * np.pi / float(q)) * s
+            cols += [np.cos(a) * seg, np.sin(a) * seg]
+    return np.stack(cols, 1)
+
+
+def staircase_margin(
+    ctx: Context, resid: np.ndarray, f_hz: float, stair: np.ndarray | None
+) -> float:
+    """The whitened chi-square a line at ``f_hz`` (its own amplitude and phase in every run)
+    takes beyond the staircase's harmonics ``stair`` (:func:`staircase_columns`), less
+    ``k ln N`` for its parameters; :data:`NO_DOUBT` without a staircase."""
+    if stair is None:
+        return NO_DOUBT
+    t = np.asarray(ctx.rows["t"], float)
+    oh = np.asarray(ctx.rows["run_onehot"], float)
+    rw = _whitened(ctx, resid)
+    X = _line_cols(t, oh, f_hz)
+    g = _gain(rw, np.concatenate([X, stair], 1)) - _gain(rw, stair)
+    return float(g - 2 * oh.shape[1] * rw.shape[1] * math.log(rw.size))
