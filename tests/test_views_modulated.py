@@ -88,6 +88,28 @@ def test_an_order_the_static_scan_finds_is_left_to_it():
     assert scan_modulated(prep, rw, 24, [0], 1) == []
 
 
+def test_beside_the_static_scan_an_order_is_reported_where_its_shape_is_the_stronger():
+    """``beside_static`` (SDS): an order switching on at 5/9 of the record, whose static
+    fit passes the ``orders`` view's threshold with a part of its chi-square, is reported
+    here too with its switch (the whole of it), so it does not rank below its near-aliases;
+    a static order of the same size is left to the ``orders`` view (its switches and growth
+    keep less of it and are charged for more tests), and the default leaves both."""
+    n, M = 4000, 24
+    thr_static = chi2_threshold(FinderSettings().alpha, 2, M)
+    prep = _prep(n, seed=11)
+    noise = np.random.default_rng(12).normal(size=(n, 1))
+    a = math.sqrt(2 * 90.0 / (n * 4 / 9))  # full-shape chi-square 90, static 40
+    step = noise + _growing(prep, 11, a, "switch_on")
+    assert scan_modulated(prep, step, M, [0], 1) == []
+    found = scan_modulated(prep, step, M, [0], 1, beside_static=True)
+    assert [f.where["orders"] for f in found] == [[11.0]], found
+    f = found[0]
+    assert f.detail["modulation"] == "switch_on"
+    assert thr_static < max(f.detail["static_power_per_channel"]) < f.power
+    static = noise + a * np.sin(11 * prep.rows["theta"] + 0.4)[:, None]
+    assert scan_modulated(prep, static, M, [0], 1, beside_static=True) == []
+
+
 def _base_term(offsets):
     name = "run_angle_offset_rad"
     return types.SimpleNamespace(

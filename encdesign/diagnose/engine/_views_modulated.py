@@ -20,8 +20,13 @@ is split in halves between the two families, each tested at its half over its co
 tests (Bonferroni over orders x channels x shapes: 2 shapes of growth, ``2 K`` switches), so
 a growth is not charged for the many change points of the switches. An order is reported only
 where the static fit at the ``orders`` view's own threshold shows nothing (that view
-reports it), so a record the static scan already reads is read as before. The sums are
-accumulated in blocks of rows (per change-point segment), so nothing per row is held.
+reports it), so a record the static scan already reads is read as before; on an SDS record
+(``beside_static``) also where its shape is the stronger evidence than its static fit, each
+charged for its own tests: on a few platform positions a switching order's near-aliases
+are reported here with its whole chi-square while its own order, which the static scan
+reads, is reported with a part of it, and ranked below them it fell off the findings the
+diagnosis keeps (issue 41, session 21). The sums are accumulated in blocks of rows (per
+change-point segment), so nothing per row is held.
 """
 
 from __future__ import annotations
@@ -129,11 +134,27 @@ def _basis(prep, kidx, rw) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def scan_modulated(
-    prep, rw, max_order: int, channels: list[int], n_channels_static: int
+    prep,
+    rw,
+    max_order: int,
+    channels: list[int],
+    n_channels_static: int,
+    beside_static: bool = False,
 ) -> list[Finding]:
     """The view on ``channels`` of the whitened residual ``rw`` (rows indexable by an index
     array), orders ``1..max_order``; the static fit skips an order it finds at
-    ``chi2_threshold(alpha, 2, max_order * n_channels_static)`` (the ``orders`` view's)."""
+    ``chi2_threshold(alpha, 2, max_order * n_channels_static)`` (the ``orders`` view's).
+
+    ``beside_static`` (SDS, few platform positions): such an order is reported too where
+    its best shape is the stronger evidence, each family's tail probability times its own
+    count of tests (the static scan's ``max_order * n_channels_static``): the ``orders``
+    view reports the order with its static chi-square only, while a switching order's
+    near-aliases on the positions, which the static scan misses, come here with the
+    step's whole chi-square and so outrank it (training seed 20261359: a step at order 7
+    of one SDS sensor, static 33 and switched 71 chi-square, came 24th of the located
+    structures, after its aliases 28, 14, 6, 20 at 60-63; the diagnosis keeps 12). A
+    static order does not pass this: with raw regressors a switch or a growth keeps at most
+    ``(K-1)/K`` or 3/4 of its chi-square, and it is charged for more tests."""
     s = prep.settings
     if max_order < 1 or not channels or int(prep.keep.sum()) < 4:  # 2 rows either side
         return []
@@ -185,13 +206,19 @@ def scan_modulated(
     P = np.stack([p for _, _, p in shapes])  # (shapes, M, C)
     T = np.array([thr[0] if k is None else thr[1] for _, k, _ in shapes])
     out = []
+    n_static = max_order * n_channels_static
     for i in range(m.size):
-        if static[i].max() > thr_static:
-            continue  # the orders view reports this order
         margin = P[:, i] - T[:, None]  # (shapes, C): past each family's threshold
         j = int(np.argmax(margin.max(1)))
         if margin[j].max() <= 0:
             continue
+        if static[i].max() > thr_static:  # the orders view reports this order
+            if not beside_static:
+                continue
+            nt = n_tests[0 if shapes[j][1] is None else 1]
+            mine = log10_tail_p(float(P[j, i].max()), 2) + np.log10(nt)
+            if mine >= log10_tail_p(float(static[i].max()), 2) + np.log10(n_static):
+                continue
         pw = P[j, i]
         carry = [k for k in range(ch.size) if margin[j, k] > 0]
         shape, k, _ = shapes[j]

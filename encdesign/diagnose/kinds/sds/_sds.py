@@ -225,11 +225,15 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
     """The engine's ``modulated_orders`` view (an order that grows or switches over the
-    runs) on the run-mean channels, orders as :func:`view_mean_orders` scans them."""
+    runs) on the run-mean channels, orders as :func:`view_mean_orders` scans them; an order
+    that view reports is reported here too where its shape is the stronger evidence
+    (``beside_static``: the 24 golden-angle positions make a switching order's
+    near-aliases outrank it otherwise)."""
     from ...engine._views_modulated import scan_modulated
 
     M = prep.consts["psi_m"].size
-    return scan_modulated(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)), M)
+    top = min(scan_order, sds_limit(prep))
+    return scan_modulated(prep, rw, top, list(range(M)), M, beside_static=True)
 
 
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a
