@@ -29,7 +29,7 @@ that defines ``CANDIDATES = [...]`` with ``encdesign diagnose --candidates FILE`
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -249,6 +249,12 @@ class Candidate:
             orders), or ``()`` (default): named only if its fitted error is not dominated by
             its top order while a larger located structure it leaves continues above it
             (rule ``edge_order``: a piece of an out-of-catalog comb).
+        rivals: ``rivals(ctx) -> [Candidate, ...]``, or ``None`` (default: none): located
+            structure of this record that no catalog effect makes (an SDS one-run transient
+            on one sensor) as terms of its own; the candidate must keep
+            ``FinderSettings.located_share_min`` of its gain once each is fitted with it
+            (rule ``located_share_min``, :func:`._spill.rival_rule`): a smooth effect with
+            many parameters takes a part of a transient, and dominance must not name it.
     """
 
     name: str
@@ -266,6 +272,7 @@ class Candidate:
     value: Callable[[dict, dict], Any] | None = None
     probes: ProbeFn | None = None
     orders: tuple[int, ...] = ()
+    rivals: Callable[[Context], Sequence[Candidate]] | None = None
 
     def __post_init__(self) -> None:
         names = [p.name for p in self.params]

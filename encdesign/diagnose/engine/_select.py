@@ -31,7 +31,7 @@ from ._fit import FitResult, Fitter, Term, make_term
 from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
-from ._spill import band_share, edge_beyond, kept_gain_share, same_place
+from ._spill import band_share, edge_beyond, kept_gain_share, rival_rule, same_place
 from ._stats_pass import drive_many
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
@@ -484,7 +484,7 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
             f"leaves (orders {', '.join(map(str, larger[:8]))}) is fitted too: a part of that "
             f"structure (needs {100 * s.located_share_min:.0f}%)",
         ), steps_left
-    return None, steps_left
+    return rival_rule(prep, fitter, cand, base, fr.terms[-1]), steps_left  # nor a rival's part
 
 
 def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:

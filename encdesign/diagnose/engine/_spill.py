@@ -44,14 +44,47 @@ def kept_gain_share(prep, fitter, base: list, term, orders) -> float | None:
     theta = "theta_eff" if "theta_eff" in rows else "theta"
     if not orders or theta not in rows:
         return None
+    lines = make_term(_lines(sorted(orders), prep.n_channels, theta), prep)
+    return _kept(fitter, base, term, lines)
+
+
+def _kept(fitter, base: list, term, other) -> float | None:
+    """The share of its chi-square gain beside ``base`` that ``term`` keeps once ``other``
+    (a term) is fitted with them; ``None`` without a gain."""
     c0 = fitter.fit(list(base), max_steps=TRIAL_STEPS).chi2
     g0 = c0 - fitter.fit([*base, term], max_steps=TRIAL_STEPS).chi2
     if g0 <= 0:
         return None
-    lines = make_term(_lines(sorted(orders), prep.n_channels, theta), prep)
-    c1 = fitter.fit([*base, lines], max_steps=TRIAL_STEPS).chi2
-    g1 = c1 - fitter.fit([*base, lines, term], max_steps=TRIAL_STEPS).chi2
+    c1 = fitter.fit([*base, other], max_steps=TRIAL_STEPS).chi2
+    g1 = c1 - fitter.fit([*base, other, term], max_steps=TRIAL_STEPS).chi2
     return g1 / g0
+
+
+def rival_rule(prep, fitter, cand: Candidate, base: list, term) -> tuple[str, str] | None:
+    """Rule ``located_share_min`` against the candidate's rivals (``Candidate.rivals``:
+    located structure of the record that no catalog effect makes, as terms of their own):
+    ``(rule, reason)`` where the fitted candidate ``term`` keeps less than
+    ``located_share_min`` of its gain beside ``base`` once a rival is fitted with it, else
+    ``None``.
+
+    A smooth effect with many parameters fitted to a one-run transient on one SDS sensor
+    (its coil orders in ``phi + psi_m`` reach every single value) takes most of it and
+    lowers the criterion far more than any other candidate, so the transient's doubt was
+    overruled and the effect named (issue 44, session 21); the transient's own offset takes
+    that gain back. An effect of its own beside a transient keeps its gain."""
+    if cand.rivals is None:
+        return None
+    share = prep.settings.located_share_min
+    for rival in cand.rivals(prep.ctx):
+        kept = _kept(fitter, base, term, make_term(rival, prep))
+        if kept is not None and kept < share:
+            return (
+                "located_share_min",
+                f"keeps only {100 * max(kept, 0.0):.0f}% of its gain when fitted together "
+                f"with {rival.name} ({rival.explanation}): a part of that structure (needs "
+                f"{100 * share:.0f}%)",
+            )
+    return None
 
 
 def same_place(f, g) -> bool:

@@ -27,6 +27,7 @@ from ._sds_noise import (
     base_orders,
     coil_orders,
     noise_info,
+    transient_cells,
 )
 
 # ----------------------------------------------------------------------------- terms
@@ -198,6 +199,41 @@ def _delay_fn(p, x):
     # a later edge of the moving sensor reads a larger angle: +Omega tau
     d = x["omega"] * tau[None, :] * on[:, None]  # (n, M)
     return _to_channels(jnp.broadcast_to(d[:, None, None, :], shp), x)
+
+
+@functools.lru_cache(maxsize=32)
+def _one_run_offsets(M: int, cells: tuple[tuple[int, int], ...]) -> Candidate:
+    """An offset of each ``(sensor, run index)`` of ``cells`` alone (that moving sensor's
+    run mean in that run, rad): transients no catalog effect makes (a bracket knocked and
+    restored, a glitch of one run), as a term of their own for :func:`_transient_rivals`."""
+    sensor = jnp.asarray([c[0] for c in cells])
+    run = jnp.asarray([c[1] for c in cells], dtype=float)
+
+    def fn(p, x):
+        _, _, shp = _xk(x)
+        on = (jnp.abs(x["run_index"][:, None] - run[None, :]) < 0.5).astype(float)  # (n, k)
+        at = (jnp.arange(M)[:, None] == sensor[None, :]).astype(float)  # (M, k)
+        d = (on * p["offset_rad"][None, :]) @ at.T  # (n, M)
+        return _to_channels(jnp.broadcast_to(d[:, None, None, :], shp), x)
+
+    where = ", ".join(f"m{m} in run index {j}" for m, j in cells)
+    return Candidate(
+        f"the one-run offset{'s' if len(cells) > 1 else ''} of {where}",
+        fn,
+        (Param("offset_rad", "rad", (len(cells),)),),
+        kinds=("sds",),
+        explanation="the transients that dominate those sensors' base run means",
+    )
+
+
+def _transient_rivals(ctx: Context) -> list[Candidate]:
+    """``Candidate.rivals`` of the smooth SDS candidates: the one-run offsets of the
+    transients that dominate sensors' base run means (:func:`transient_cells`), if any. A
+    coil ripple's orders in ``phi + psi_m`` (10 parameters at 12 runs) reach a single run
+    mean and took 60 % of a 334 chi-square transient, far more than any other candidate:
+    the transient's doubt was overruled and the coil named (issue 44, session 21)."""
+    cells = tuple((m, j) for m, j, _, _ in transient_cells(ctx))
+    return [_one_run_offsets(int(ctx.consts["psi_m"].size), cells)] if cells else []
 
 
 def _tilt_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
@@ -583,6 +619,7 @@ def _catalog(
             applies=_no_ref_tilt,
             start=_tilt_start,
             plausible=_no_transient(),
+            rivals=_transient_rivals,
             derived=_tilt_derived,
         ),
         Candidate(
@@ -594,6 +631,7 @@ def _catalog(
             explanation=EXPLANATIONS["thermal_drift"],
             applies=_no_ref_drift,
             plausible=_no_transient(_drift_plausible),
+            rivals=_transient_rivals,
             probes=_drift_probes,
         ),
         Candidate(
@@ -610,6 +648,7 @@ def _catalog(
             explanation=EXPLANATIONS["bearing_wobble"],
             start=_wobble_start,
             plausible=_no_transient(),
+            rivals=_transient_rivals,
             derived=_wobble_derived,
         ),
         Candidate(
@@ -624,6 +663,7 @@ def _catalog(
             explanation=EXPLANATIONS["beam_tilt_axial"],
             applies=_no_ref_beam,
             plausible=_no_transient(_beam_plausible),
+            rivals=_transient_rivals,
             derived=_beam_derived,
         ),
         Candidate(
@@ -639,6 +679,10 @@ def _catalog(
             explanation=EXPLANATIONS["sensor_delay_step"],
             start=_delay_start,
             plausible=_delay_plausible,
+            # a step shared by the moving sensors, or confined to one run, is not one
+            # sensor's persisting delay: a test of the fitted pattern, never overruled by
+            # dominance (a ramp common to the sensors was named a delay step, session 21)
+            doubt_overruled=False,
             derived=_delay_derived,
             probes=_delay_probes,
         ),
@@ -650,6 +694,7 @@ def _catalog(
             dataclasses.replace(
                 coil,
                 plausible=_no_transient(_coil_plausible),
+                rivals=_transient_rivals,
                 signature=("sds_coil_mismatch", "run_step"),
                 derived=_coil_derived(orders, pp),
             )
