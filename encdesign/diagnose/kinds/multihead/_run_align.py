@@ -219,8 +219,15 @@ def matched_zero_refused(prep: Prepared, normals, r: int, Mf: int, match) -> flo
     at the same shaft angle only: where the true zero makes the runs share no shaft arc it
     cannot see it, and takes the best of the zeros that do, at a short shared arc (issue 44,
     ``short_arcs.py --set effects --seed 6215`` record 1: a zero 0.92 rad off, the base 29x
-    the noise), while the profile sees the heads' arcs overlap across the runs."""
+    the noise), while the profile sees the heads' arcs overlap across the runs. With one head
+    there is no other head's arc: the profile knows no more than the match, and where the
+    base leaves orders out it favours zeros that keep the runs' arcs apart (one sensor, three
+    runs of 0.73 turn, orders to 13 over the base's 12: ``finder_variations.py --set high
+    --seed 6290`` record 0, the match right and the profile 1.4 rad off), so the match
+    stands."""
     matched, chi, dof_m = match
+    if prep.n_channels < 2:  # (one head: no other head's arc, the match sees all there is)
+        return None
     if dof_m <= 0 or chi <= chi2_threshold(prep.settings.alpha, dof_m, 1):
         return None
     prof = profile_offset(normals, r, Mf)
