@@ -15,7 +15,13 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
 from ._order_step_bins import order_step_bins
-from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported, _gain
+from ._runout import (
+    RUNOUT_ORDERS,
+    _bt_orders_significant,
+    _bt_orders_supported,
+    _gain,
+    split_gains,
+)
 from ._vibration_jac import bearing_wobble_valjac, eccentricity_shift_valjac, vibration_valjac
 
 # ----------------------------------------------------------------------------- candidates
@@ -307,25 +313,31 @@ def _vb_locked_margin(ctx, resid: np.ndarray, f_hz: float) -> tuple[float, float
     m = round(f_hz / (w / (2 * np.pi))) if w is not None else 0
     in_base = 1 <= m <= int(ctx.max_order)
     locked = np.stack([np.cos(m * th), np.sin(m * th)], 1)
-    # at one speed near a base order the base's order m is refitted with the line (as the
-    # engine's trial fit does): the line's gain is over it (the base residual alone shows
-    # the line less the base's share of it, split around a reversal)
-    g0 = _gain(rw, locked) if in_base else 0.0
+    fs = f_hz + np.linspace(-2.0, 2.0, 41) / T
+
+    def sets(a: int, b: int) -> list:  # rows a:b of the locked order, then of each line
+        lk, o, ta = locked[a:b], oh[a:b], t[a:b]
+        ph = (2 * np.pi * f * ta for f in fs)
+        Xs = [np.concatenate([np.cos(p)[:, None] * o, np.sin(p)[:, None] * o], 1) for p in ph]
+        return ([lk] if m >= 1 else []) + [np.concatenate([X, lk], 1) if in_base else X for X in Xs]
+
+    # the rows split over the processes (split_gains); at one speed near a base order the
+    # base's order m is refitted with the line (as the engine's trial fit does): the line's
+    # gain is over it (the base residual alone shows the line less the base's share of it,
+    # split around a reversal)
+    gains = split_gains(t.size, sets, rw)
+    g_locked = gains.pop(0) if m >= 1 else 0.0
+    g0 = g_locked if in_base else 0.0
     best = (-math.inf, f_hz)
-    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
-        c, s_ = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
-        X = np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
-        g = _gain(rw, np.concatenate([X, locked], 1)) - g0 if in_base else _gain(rw, X)
-        best = max(best, (g, float(f)))
+    for g, f in zip(gains, fs):
+        best = max(best, (g - g0, float(f)))
     g_vib, f_best = best
     if w is None or m < 1:
         return f_best, 1e9
     k_vib = 2 * oh.shape[1] * rw.shape[1]
     k_lock = 2 * rw.shape[1]
-    if in_base:
-        g_lock = 0.0  # in the base model: what the line takes beyond it is its own
-    else:
-        g_lock = _gain(rw, locked)
+    # in the base model: what the line takes beyond it is its own
+    g_lock = 0.0 if in_base else g_locked
     # a catalog order the sampling folds onto the line (interpolation_error's L, 2 L) is a
     # locked alternative too (issue 44), its gain taken as the line's (over a base order m
     # refitted with it): the strongest alternative sets the margin
