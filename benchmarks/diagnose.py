@@ -47,6 +47,16 @@
    ``FinderSettings.reduce_min_rows`` in the processes. Each diagnosis is compared with the
    first process count's (``max_relative_difference`` of every number but the timings, and
    the ``differing`` strings or counts). All cases go into one JSON (``long_processes``).
+   ``cpu_speedup_vs_first``: the first process count's CPU s over the largest CPU s of one
+   process of this count (what the split achieves where each process has a core to itself).
+   Every process also reports its own engine stages (``stages_cpu_s``, ``stages_wall_s``:
+   the document has process 0's) and its JAX compilations (``compile``). By environment:
+   ``ENCDESIGN_BENCH_STAGES=engine._fit:Fitter.chunk_residual=resid_rows*,...`` charges
+   the named functions (modules under ``encdesign.diagnose``) to stages of their own (a
+   name ending in ``*`` gains ``_alone`` inside a share of dealt items), to see which work
+   runs whole on every process; ``ENCDESIGN_BENCH_PROFILE=DIR`` writes each process's
+   cProfile (CPU s) to ``DIR/pP-I.pstats``; ``ENCDESIGN_BENCH_DOCS=DIR`` keeps the
+   documents (``DIR/ROWS-EFFECT-P.json``).
 
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
         [--long-rows 1e6 1e7] [--long-table parquet]
@@ -58,6 +68,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -451,6 +462,43 @@ def _child_processes(
     )
 
 
+def _split_stages(spec: str) -> None:
+    """Charge the functions named in ``spec`` (``module:Name.attr=stage,...``, modules under
+    ``encdesign.diagnose``; a stage name ending in ``*`` gains ``_alone`` inside a share of
+    dealt items) to stages of their own (exclusive, as the engine's stages): every
+    process's CPU per finer stage, to see which run whole on every process (issue 43). A
+    function is replaced wherever a module of the package holds it by that name."""
+    import importlib
+
+    from encdesign.diagnose.engine._rowshare import is_alone as alone_now
+    from encdesign.diagnose.engine._timing import stage
+
+    for item in filter(None, (x.strip() for x in spec.split(","))):
+        target, name = item.split("=")
+        mod_name, attr = target.split(":")
+        mod = importlib.import_module("encdesign.diagnose." + mod_name)
+        *owner_path, leaf = attr.split(".")
+        owner = mod
+        for o in owner_path:
+            owner = getattr(owner, o)
+        fn = getattr(owner, leaf)
+
+        def wrapped(*a, _fn=fn, _name=name, **k):
+            # a name ending in "*": "_alone" added inside a share of dealt items
+            if _name.endswith("*"):
+                _name = _name[:-1] + ("_alone" if alone_now() else "")
+            with stage(_name):
+                return _fn(*a, **k)
+
+        setattr(owner, leaf, wrapped)
+        if not owner_path:  # a module function: also where it was imported by name
+            for m in list(sys.modules.values()):
+                if (getattr(m, "__name__", "") or "").startswith("encdesign") and (
+                    getattr(m, leaf, None) is fn
+                ):
+                    setattr(m, leaf, wrapped)
+
+
 def _proc_child(
     path: str, stats: str, mode: str, processes: int, index: int, port: int, min_rows: int
 ) -> int:
@@ -478,6 +526,27 @@ def _proc_child(
         return got
 
     D.open_recording = timed
+    import encdesign.diagnose.engine._engine as engine
+
+    opened_timing = engine.timing
+
+    @contextlib.contextmanager
+    def kept_timing():  # every process's own stage times (the document has process 0's)
+        with opened_timing() as timer:
+            yield timer
+        stages["stages_cpu"] = dict(timer.cpu_totals)
+        stages["stages_wall"] = dict(timer.totals)
+
+    engine.timing = kept_timing
+    _split_stages(os.environ.get("ENCDESIGN_BENCH_STAGES", ""))
+    stages["compile"] = _compile_listener()
+    profile = os.environ.get("ENCDESIGN_BENCH_PROFILE")  # a folder: each process's pstats
+    prof = None
+    if profile:
+        import cProfile
+
+        prof = cProfile.Profile(time.process_time)  # CPU s (wall is waits on a loaded machine)
+        prof.enable()
     flags = []
     if processes > 1:
         flags = ["--coordinator", f"localhost:{port}", "--num-processes", str(processes)]
@@ -495,6 +564,9 @@ def _proc_child(
 
         out = stats + ".doc.json"
         rc = cli(["diagnose", path, "--json", out, "--quiet", *flags])
+    if prof is not None:
+        prof.disable()
+        prof.dump_stats(str(Path(profile) / f"p{processes}-{index}.pstats"))
     ru = resource.getrusage(resource.RUSAGE_SELF)
     got = dict(
         process=index,
@@ -502,7 +574,7 @@ def _proc_child(
         wall_s=time.perf_counter() - t0,
         cpu_s=ru.ru_utime + ru.ru_stime,
         peak_rss_bytes=ru.ru_maxrss * 1024,
-        **{k + ("_s" if k.startswith("read") else ""): v for k, v in stages.items()},
+        **{k + ("_s" if k.startswith(("read", "stages")) else ""): v for k, v in stages.items()},
     )
     Path(stats).write_text(json.dumps(got))
     return rc
@@ -610,7 +682,7 @@ def _long_processes(args: argparse.Namespace) -> list[dict]:
                 path = _write_bench_parquet(Path(tmp), n, 4, effect, args.long_rate)
                 write_s = time.perf_counter() - t0
                 size = (Path(tmp) / "rec.parquet").stat().st_size
-                first = None
+                first, cpu_first = None, 0.0
                 for P in args.long_processes:
                     r = dict(n_rows=n, n_heads=4, effect=eff, rate_hz=args.long_rate)
                     r.update(file_bytes=size, write_s=write_s)
@@ -618,9 +690,16 @@ def _long_processes(args: argparse.Namespace) -> list[dict]:
                         _split_case(path, mode, P, args.reduce_min_rows or 0, args.case_timeout)
                     )
                     doc = r.pop("doc", None)
+                    keep = os.environ.get("ENCDESIGN_BENCH_DOCS")  # a folder: the documents
+                    if keep and doc is not None:
+                        Path(keep, f"{n}-{eff}-{P}.json").write_text(json.dumps(doc))
+                    cpu = max((q["cpu_s"] for q in r.get("per_process", [])), default=0.0)
                     if first is None:
                         first = (P, doc)
-                    elif doc is not None and first[1] is not None:
+                        cpu_first = cpu
+                    elif cpu > 0:  # on a loaded machine the number to compare, not wall s
+                        r["cpu_speedup_vs_first"] = cpu_first / cpu
+                    if first[0] != P and doc is not None and first[1] is not None:
                         rel, bad = _doc_difference(first[1], doc)
                         r["vs_processes"] = first[0]
                         r["max_relative_difference"] = rel

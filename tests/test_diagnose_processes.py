@@ -1,12 +1,13 @@
 """``encdesign diagnose --processes`` / ``--coordinator``: one recording split over processes.
 
-The fit's row passes (normal equations, column statistics) are summed in fixed groups of
-chunks, each process its share, the groups' sums gathered through ``jax.distributed``; a
-selection round's trial fits and the detection bounds' probes are dealt over the processes
-(``engine._workshare``), each process fitting its share alone, the results gathered: the
-diagnosis on two processes must equal the one on one process (verdict, effects and every
-number within 1e-12 relative; timings aside), and each process must have had a share of
-the dealt items."""
+The fit's row passes (normal equations, column statistics; a selection round's trial fits
+side by side, the rules' and the runs' alignment's row sums, the vibration start's line
+search) are summed in fixed groups of chunks, each process its share, the groups' sums
+gathered through ``jax.distributed``; the views and the detection bounds' probes are dealt
+over the processes (``engine._workshare``), each process working on its share alone, the
+results gathered: the diagnosis on two processes must equal the one on one process
+(verdict, effects and every number within 1e-12 relative; timings aside), and each process
+must have had a share of the dealt items and of every row pass's groups."""
 
 from __future__ import annotations
 
@@ -52,6 +53,15 @@ DEALT = (
 )
 """Launcher setup that logs each dealing of work items (``_workshare.shares``): the process,
 the items and its share, one line each to the file ``log``."""
+
+SPLIT = (
+    "import jax, encdesign.diagnose.engine._rowshare as rs; "
+    "rs.allgather_rows = lambda rows, n, _g=rs.allgather_rows: (open({log!r}, 'a').write("
+    "f'{{jax.process_index()}} {{n}} {{len(rows)}}\\n'), _g(rows, n))[1]; "
+)
+"""Launcher setup that logs each gather of a pass's row groups (``_rowshare.reduce_groups``
+on several processes): the process, the groups and how many it summed, one line each to
+the file ``log``."""
 
 TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
@@ -180,13 +190,23 @@ def test_two_processes_give_the_one_process_diagnosis(tmp_path):
     rec = _record(tmp_path / "rec.toml", seed=20261204)
     log = tmp_path / "dealt.txt"
     one = _diagnose(rec, tmp_path / "one.json", 1, 0)
-    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), DEALT.format(log=str(log)))
+    split = tmp_path / "split.txt"
+    setup = DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
     assert dist.process_count() == 1  # this test process joined nothing
-    # the trial fits of each round and the bounds' probes were dealt: the same dealings on
-    # both processes, their shares adding up, each with work in all of them
+    # every row pass, the trial fits' (side by side, their starts dealt) and the row sums of
+    # the rules and the runs' alignment among them, split: the same gathers on both
+    # processes, each having summed its share of the groups
+    rows = _dealt(split)
+    assert sorted(rows) == [0, 1] and [n for n, _ in rows[0]] == [n for n, _ in rows[1]]
+    assert len(rows[0]) >= 20
+    for (n, k0), (_, k1) in zip(rows[0], rows[1]):
+        assert k0 + k1 == n and k0 >= 1 and (k1 >= 1 or n < 2)
+    # the views and the bounds' probes were dealt: the same dealings on both processes,
+    # their shares adding up, each with work in all of them
     dealt = _dealt(log)
     assert sorted(dealt) == [0, 1] and [n for n, _ in dealt[0]] == [n for n, _ in dealt[1]]
-    assert len(dealt[0]) >= 2  # the first round's trial fits and the bounds' probes
+    assert len(dealt[0]) >= 2  # the views of each residual and the bounds' probes
     for (n, k0), (_, k1) in zip(dealt[0], dealt[1]):
         assert k0 + k1 == n and (k0 >= 1 and k1 >= 1 or n < 2)
     assert len(two["detection_bounds"]) >= 2
@@ -232,6 +252,60 @@ def test_shares_deal_every_item_once_the_heaviest_first():
             loads = [sum(w[i] for i in s) for s in got]
             assert max(loads) - min(loads) <= max(w, default=0.0)
     assert shares([1.0] * 5, 2) == [[0, 2, 4], [1, 3]]
+
+
+def test_items_summed_in_groups_equal_their_sum():
+    """``_rowshare.summed_items`` (the runs' alignment sums, split over the processes by
+    blocks of rows) gives the sum of the items on one process, whatever their number, and
+    the same inside a share of dealt items (``alone``)."""
+    from encdesign.diagnose.engine._rowshare import alone, summed_items
+
+    rng = np.random.default_rng(5102)
+    for n in (0, 1, 3, 16, 17, 40):
+        x = rng.normal(size=(n, 3, 2))
+
+        def add(sums, i, x=x):
+            sums[0] += x[i]
+            sums[1][i % 2] += 1.0
+
+        got = summed_items(n, [np.zeros((3, 2)), np.zeros(2)], add)
+        assert np.allclose(got[0], x.sum(0), rtol=1e-13, atol=1e-13)
+        assert got[1].tolist() == [float((n + 1) // 2), float(n // 2)]
+        with alone():
+            again = summed_items(n, [np.zeros((3, 2)), np.zeros(2)], add)
+        assert all(np.array_equal(a, b) for a, b in zip(got, again))
+
+
+def test_gains_of_a_tall_skinny_qr_over_groups_equal_one_qr():
+    """``_runout.split_gains`` (the vibration start's line search, rows split over the
+    processes): the groups' QRs, factored again, give the gain of one QR of the whole
+    design, also where a group holds rows of one run only (its design rank deficient)."""
+    import encdesign.diagnose.kinds.multihead._runout as ro
+
+    rng = np.random.default_rng(7530)
+    n = 40_000
+    t = np.sort(rng.uniform(0, 10, n))
+    oh = np.zeros((n, 4))
+    oh[np.arange(n), (t // 2.5).astype(int)] = 1.0
+    rw = rng.normal(size=(n, 4)) + np.sin(2 * np.pi * 3.1 * t)[:, None]
+    fs = 3.1 + np.linspace(-0.2, 0.2, 5)
+
+    def sets(a, b):
+        ph = [2 * np.pi * f * t[a:b] for f in fs]
+        return [
+            np.concatenate([np.cos(p)[:, None] * oh[a:b], np.sin(p)[:, None] * oh[a:b]], 1)
+            for p in ph
+        ]
+
+    old = ro.SPLIT_ROWS
+    ro.SPLIT_ROWS = 1000  # 40 blocks in 16 groups, most of one run
+    try:
+        got = ro.split_gains(n, sets, rw)
+    finally:
+        ro.SPLIT_ROWS = old
+    want = [ro._gain(rw, X) for X in sets(0, n)]
+    assert np.allclose(got, want, rtol=1e-13, atol=0.0)
+    assert ro.split_gains(3, sets, rw[:3]) == [0.0] * 5  # fewer rows than columns
 
 
 def test_a_trial_fit_is_gathered_whole_and_rejoins_its_candidates():

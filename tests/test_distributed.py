@@ -113,6 +113,25 @@ def test_chunk_plan_spreads_the_builds_evenly():
         assert (block - 8) * chunks * shards < n  # no more than 8 builds padding per block
 
 
+def test_collectives_are_padded_to_few_shapes():
+    """A collective of ``n`` values is padded to ``bucket(n)``: at least ``n``, at most half
+    as much again, and only two lengths per power of two (each compiled once)."""
+    got = [dist.bucket(n) for n in range(1, 5000)]
+    assert all(n <= b <= max(1, 3 * n // 2) for n, b in zip(range(1, 5000), got))
+    assert len(set(got)) <= 2 * 13
+    assert [dist.bucket(n) for n in (0, 1, 2, 3, 5, 7, 1024, 1025, 1537)] == [
+        1,
+        1,
+        2,
+        3,
+        6,
+        8,
+        1024,
+        1536,
+        2048,
+    ]
+
+
 def test_a_dead_process_stops_the_run_in_bounded_time(tmp_path, capsys):
     t0 = time.monotonic()
     rc = dist.spawn_local(

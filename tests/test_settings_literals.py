@@ -148,7 +148,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_run_align.py", 2): COUNT + " (two runs)",
-    ("kinds/multihead/_run_align.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
@@ -264,6 +263,10 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
     ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",
     ("kinds/multihead/_run_align.py", "ALIGN_GRID"): SEARCH + " (run zeros tried for a start)",
+    ("kinds/multihead/_run_align.py", "RUN_NORMAL_ROWS"): BOUND
+    + " (rows per block of the runs' normal equations: the items split over the processes)",
+    ("kinds/multihead/_runout.py", "SPLIT_ROWS"): BOUND
+    + " (rows per block of the vibration start's gains: the items split over the processes)",
     ("kinds/multihead/_runout.py", "RUNOUT_ORDERS"): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
     ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,

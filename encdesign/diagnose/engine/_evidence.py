@@ -13,8 +13,9 @@ import numpy as np
 
 from ._candidates import Candidate
 from ._document import jsonable
-from ._fit import FitResult, Fitter
+from ._fit import FitResult, Fitter, Term
 from ._protocol import Prepared
+from ._rowshare import summed
 from ._settings import FinderSettings
 
 
@@ -62,6 +63,35 @@ class Chosen(NamedTuple):
     """``{rule, reason}`` when a plausibility rule doubted it and it was named as dominant."""
 
 
+def term_rms(fitter: Fitter, term: Term, prep: Prepared, per_run: bool = False) -> float:
+    """RMS of one term's own contribution (projected, whitened by the noise).
+
+    ``per_run``: less its mean per run and channel over the kept rows, the part a constant
+    per run and channel of the base model absorbs (e.g. a drift over the whole record seen
+    through runs, each with its own zero): not a size the data could see."""
+    R, C = prep.ctx.n_runs, prep.n_channels
+
+    def add(sums, a, b, x):  # chunk by chunk (nothing per row is held), rows split (summed)
+        v = fitter.eval_term(term, a, b, x, jac=False)[0]
+        if prep.kd.project:
+            v = v - v.mean(1, keepdims=True)
+        k = prep.keep[a:b]
+        w = v[k] / prep.sigma[None, :]
+        sums[0] += np.sum(w * w)
+        if per_run:  # sums per run and channel (bincount: np.add.at is slow per row)
+            run = np.asarray(prep.run[a:b])[k]
+            sums[2] += np.bincount(run, minlength=R)
+            for c in range(C):
+                sums[1][:, c] += np.bincount(run, weights=w[:, c], minlength=R)
+
+    tot1, s1, cnt = summed(fitter, [np.zeros(1), np.zeros((R, C)), np.zeros(R)], add)
+    tot = float(tot1[0])
+    if per_run:
+        tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1.0)[:, None]))
+    eff = (C - 1) / C if prep.kd.project else 1.0
+    return float(np.sqrt(max(tot, 0.0) / max(prep.keep.sum() * C * eff, 1)))
+
+
 def tie_gap(
     fitter: Fitter, prep: Prepared, cur_resid: np.ndarray, a: FitResult, b: FitResult
 ) -> tuple[float, float]:
@@ -70,16 +100,17 @@ def tie_gap(
     residual (kept rows, noise-whitened). Near 0 and near 1: the data cannot tell them."""
     keep = prep.keep
     w = 1.0 / prep.sigma[None, :]
-    saa = sbb = sab = 0.0
-    for lo, hi, x in fitter.chunks():  # one pass: both fits on each chunk
+
+    def add(sums, lo, hi, x):  # one pass: both fits on each chunk
         ra = fitter.chunk_residual(a.terms, lo, hi, x)
         rb = fitter.chunk_residual(b.terms, lo, hi, x)
         k = keep[lo:hi]
         ca = ((cur_resid[lo:hi] - ra) * w)[k]
         cb = ((cur_resid[lo:hi] - rb) * w)[k]
-        saa += float(np.sum(ca * ca))
-        sbb += float(np.sum(cb * cb))
-        sab += float(np.sum(ca * cb))
+        sums[0] += [np.sum(ca * ca), np.sum(cb * cb), np.sum(ca * cb)]
+
+    # the rows split over the processes (_rowshare): the same sums on any number of them
+    saa, sbb, sab = (float(v) for v in summed(fitter, [np.zeros(3)], add)[0])
     den = math.sqrt(saa * sbb)
     corr = float(abs(sab) / den) if den > 0 else 0.0
     return float(b.chi2 - a.chi2), corr

@@ -64,15 +64,39 @@ def my_groups(n_groups: int) -> range:
     return range(lo, hi)
 
 
+def gathered_groups(parts: Sequence[np.ndarray], n_groups: int, size: int) -> np.ndarray:
+    """``(n_groups, size)``: the flat per-group values ``parts`` of every process (this
+    process's groups, in order, each of ``size`` values), in group order on every process."""
+    rows = np.stack(parts) if len(parts) else np.zeros((0, size))
+    return rows if _ALONE else allgather_rows(rows, n_groups)
+
+
 def reduce_groups(parts: Sequence[np.ndarray], n_groups: int, size: int) -> np.ndarray:
     """Sum over all groups of the flat per-group sums ``parts`` (this process's groups, in
     order, each of ``size`` values), the same on every process and for any process count."""
-    rows = np.stack(parts) if len(parts) else np.zeros((0, size))
-    every = rows if _ALONE else allgather_rows(rows, n_groups)
+    every = gathered_groups(parts, n_groups, size)
     total = np.zeros(size)
     for r in every:  # group order, one addition at a time: the same on one process
         total += r
     return total
+
+
+def summed_items(n_items: int, zeros: Sequence[np.ndarray], add: Callable) -> list[np.ndarray]:
+    """Sums over ``n_items`` work items (blocks of rows in a fixed order, whatever the
+    number of processes) of arrays shaped as ``zeros``: ``add(sums, i)`` adds item ``i`` to
+    ``sums`` in place. The items are cut into groups as a pass's chunks are
+    (:func:`row_groups`), this process sums its groups' items and the groups' sums are
+    reduced as :func:`reduce_groups` reduces them (the same on every process and for any
+    process count)."""
+    groups = row_groups(n_items)
+    parts = []
+    for grp in my_groups(len(groups)):
+        sums = [np.zeros_like(z) for z in zeros]
+        for i in range(*groups[grp]):
+            add(sums, i)
+        parts.append(np.concatenate([v.ravel() for v in sums]) if sums else np.zeros(0))
+    total = reduce_groups(parts, len(groups), sum(int(z.size) for z in zeros))
+    return unflatten(total, [z.shape for z in zeros])
 
 
 def summed(fitter, zeros: Sequence[np.ndarray], add: Callable) -> list[np.ndarray]:

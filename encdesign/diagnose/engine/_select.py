@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
-from ._dealt_fits import pack_fit, private, unpack_fit
+from ._dealt_fits import private
 from ._document import jsonable
 from ._evidence import (
     Chosen,
@@ -27,6 +27,7 @@ from ._evidence import (
     tie_gap,
     tie_reason,
 )
+from ._evidence import term_rms as _term_rms
 from ._fit import FitResult, Fitter, Term, make_term
 from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
@@ -36,7 +37,6 @@ from ._stats_pass import drive_many
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
 from ._views import locate
-from ._workshare import deal
 
 # ----------------------------------------------------------------------------- selection
 
@@ -153,32 +153,6 @@ def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
     return out
 
 
-def _term_rms(fitter: Fitter, term: Term, prep: Prepared, per_run: bool = False) -> float:
-    """RMS of one term's own contribution (projected, whitened by the noise).
-
-    ``per_run``: less its mean per run and channel over the kept rows, the part a constant
-    per run and channel of the base model absorbs (e.g. a drift over the whole record seen
-    through runs, each with its own zero): not a size the data could see."""
-    R, C = prep.ctx.n_runs, prep.n_channels
-    tot, s1, cnt = 0.0, np.zeros((R, C)), np.zeros(R)
-    for a, b, x in fitter.chunks():  # chunk by chunk: nothing per row is held
-        v = fitter.eval_term(term, a, b, x, jac=False)[0]
-        if prep.kd.project:
-            v = v - v.mean(1, keepdims=True)
-        k = prep.keep[a:b]
-        w = v[k] / prep.sigma[None, :]
-        tot += float(np.sum(w * w))
-        if per_run:  # sums per run and channel (bincount: np.add.at is slow per row)
-            run = np.asarray(prep.run[a:b])[k]
-            cnt += np.bincount(run, minlength=R)
-            for c in range(C):
-                s1[:, c] += np.bincount(run, weights=w[:, c], minlength=R)
-    if per_run:
-        tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1.0)[:, None]))
-    eff = (C - 1) / C if prep.kd.project else 1.0
-    return float(np.sqrt(max(tot, 0.0) / max(prep.keep.sum() * C * eff, 1)))
-
-
 def _has_run_constants(terms: Sequence[Term]) -> bool:
     """Whether these (base) terms hold a free linear constant per run and channel."""
     return any(
@@ -230,13 +204,12 @@ def _applicable(prep: Prepared, candidates: Sequence[Candidate], not_testable: l
     return out
 
 
-def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
-    """The full fit of one candidate from the best of its (screened) starts, or ``None``: a
-    generator of its fits' statistics requests (:func:`._stats_pass.drive_many` runs a
-    round's trial fits side by side, one pass over the rows for all)."""
+def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log, starts):
+    """The full fit of one candidate from the best of its (screened) ``starts``, or
+    ``None``: a generator of its fits' statistics requests (:func:`._stats_pass.drive_many`
+    runs a round's trial fits side by side, one pass over the rows for all)."""
     prep, fitter = st["prep"], st["fitter"]
     N = prep.n_values
-    starts = cand.start(prep.ctx, st["kept_resid"](), st["findings"]) if cand.start else [{}]
     # screen the starts with the nonlinear parameters held (one linear pass each), then run
     # the full fit from the best one
     screened = []
@@ -274,27 +247,24 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log):
 
 
 def _trial_fits(st, cands: list, current, n_base_terms: int, log) -> list:
-    """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit: dealt
-    over the processes (:mod:`._workshare`), each share on a fitter of its own, its trial
-    fits side by side (:func:`._stats_pass.drive_many`)."""
-
-    def work(mine: list) -> list:
+    """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit, side
+    by side (:func:`._stats_pass.drive_many`, on a fitter of their own) on every process,
+    each pass's rows split over the processes (:mod:`._rowshare`: the base's per-chunk
+    Jacobian made once per row, not on every process over every row as when the fits were
+    dealt); so are the starts' (the vibration's line search, ``_runout.split_gains``)."""
+    prep, resid, findings = st["prep"], st["kept_resid"], st["findings"]
+    with stage("candidates"):
+        starts = [c.start(prep.ctx, resid(), findings) if c.start else [{}] for c in cands]
         st2 = dict(st, fitter=private(st["fitter"]))
-        refused: list[list[dict]] = [[] for _ in mine]
-        notes: list[dict[str, list[str]]] = [{} for _ in mine]
-        steps = [
-            _trial_fit(st2, cand, current, n_base_terms, refused[i], notes[i], log)
-            for i, cand in enumerate(mine)
-        ]
-        with stage("candidates"):
-            bests = drive_many(steps)
-        return [
-            (pack_fit(best), refused[i], notes[i].get(cand.name))
-            for i, (cand, best) in enumerate(zip(mine, bests))
-        ]
-
-    base = [t.cand for t in current.terms]
-    return [(unpack_fit(b, [*base, c]), r, n) for c, (b, r, n) in zip(cands, deal(cands, work))]
+        refused: list[list[dict]] = [[] for _ in cands]
+        notes: list[dict[str, list[str]]] = [{} for _ in cands]
+        bests = drive_many(
+            [
+                _trial_fit(st2, c, current, n_base_terms, refused[i], notes[i], log, starts[i])
+                for i, c in enumerate(cands)
+            ]
+        )
+    return [(b, refused[i], notes[i].get(c.name)) for i, (c, b) in enumerate(zip(cands, bests))]
 
 
 def _sort_trials(trials: list, applicable: list) -> None:

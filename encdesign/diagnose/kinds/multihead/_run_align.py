@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...engine._protocol import Prepared
+from ...engine._rowshare import summed_items
 from ...engine._views import chi2_threshold, run_spans
 
 ALIGN_GRID = 720
@@ -26,42 +27,52 @@ ALIGN_GRID = 720
 refined on a grid as fine again around it, and the fit refines it further)."""
 
 
+RUN_NORMAL_ROWS = 1 << 14
+"""Rows per block of :func:`run_normals` (bounded temporaries; the blocks are the work
+items its sums are split over the processes by)."""
+
+
 def run_normals(prep: Prepared, Mf: int):
     """Per run, the normal equations ``(G, h)`` of the disk error's orders ``1..Mf`` (columns
     ``cos, sin`` of each order in turn) and one constant per head (last ``C`` columns), in the
     run's own angle ``theta_raw`` (head differences without ``theta_ref``), accumulated in
-    blocks of rows (the design is never built whole)."""
+    blocks of :data:`RUN_NORMAL_ROWS` rows (the design is never built whole), the blocks
+    split over the processes (``engine._rowshare.summed_items``: the same sums on any
+    number of them)."""
     R, C = prep.ctx.n_runs, prep.n_channels
     alpha = prep.consts["alpha"]
     P = 2 * Mf + C
     spans = dict(run_spans(prep.run))
-    out = []
-    for r in range(R):
-        G = np.zeros((P, P))
-        h = np.zeros(P)
-        a0, b0 = spans.get(r, (0, 0))
-        for a in range(a0, b0, 1 << 16):
-            b = min(b0, a + (1 << 16))
-            kb = prep.keep[a:b]
-            th = prep.rows.column("theta_raw", a, b)[kb]
-            y = prep.y[a:b][kb]
-            cols = []
-            for k in range(C):
-                ck = []
-                for mm in range(1, Mf + 1):
-                    ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
-                cols.append(np.stack(ck, 1))
-            X = np.stack(cols, 1)  # (n, C, 2Mf)
-            const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
-            X = np.concatenate([X, const], 2)
-            if prep.kd.project:
-                X = X - X.mean(1, keepdims=True)
-                y = y - y.mean(1, keepdims=True)
-            Xf = X.reshape(-1, P)
-            G += Xf.T @ Xf
-            h += Xf.T @ y.ravel()
-        out.append((G, h))
-    return out
+    blocks = [
+        (r, a, min(b0, a + RUN_NORMAL_ROWS))
+        for r in range(R)
+        for a0, b0 in [spans.get(r, (0, 0))]
+        for a in range(a0, b0, RUN_NORMAL_ROWS)
+    ]
+
+    def add(sums, i):
+        r, a, b = blocks[i]
+        kb = prep.keep[a:b]
+        th = prep.rows.column("theta_raw", a, b)[kb]
+        y = prep.y[a:b][kb]
+        cols = []
+        for k in range(C):
+            ck = []
+            for mm in range(1, Mf + 1):
+                ck += [np.cos(mm * (th - alpha[k])), np.sin(mm * (th - alpha[k]))]
+            cols.append(np.stack(ck, 1))
+        X = np.stack(cols, 1)  # (n, C, 2Mf)
+        const = np.broadcast_to(np.eye(C)[None], (th.size, C, C))
+        X = np.concatenate([X, const], 2)
+        if prep.kd.project:
+            X = X - X.mean(1, keepdims=True)
+            y = y - y.mean(1, keepdims=True)
+        Xf = X.reshape(-1, P)
+        sums[0][r] += Xf.T @ Xf
+        sums[1][r] += Xf.T @ y.ravel()
+
+    G, h = summed_items(len(blocks), [np.zeros((R, P, P)), np.zeros((R, P))], add)
+    return [(G[r], h[r]) for r in range(R)]
 
 
 def resolved(G: np.ndarray, project: bool, coverage_min: float) -> bool:

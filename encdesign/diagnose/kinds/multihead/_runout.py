@@ -3,9 +3,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ...engine._candidates import Context
+from ...engine._rowshare import gathered_groups, my_groups, row_groups
 from ...engine._views import chi2_threshold
 
 RUNOUT_ORDERS = (1.0, 2.0, 3.0)
@@ -18,6 +21,43 @@ def _gain(rw: np.ndarray, X: np.ndarray) -> float:
         return 0.0
     Q, _ = np.linalg.qr(X)
     return float(np.sum((Q.T @ rw) ** 2))
+
+
+SPLIT_ROWS = 1 << 14
+"""Rows per block of :func:`split_gains` (the work items its rows are split over the
+processes by)."""
+
+
+def split_gains(n: int, sets: Callable[[int, int], list[np.ndarray]], rw: np.ndarray) -> list:
+    """:func:`_gain` of ``rw`` (n, C) and each regressor set ``sets(a, b)`` gives rows
+    ``a:b`` of (each (b - a, q_s)), the rows split over the processes: the blocks of
+    :data:`SPLIT_ROWS` rows in the fixed groups of ``engine._rowshare``, each group's QR
+    ``(R, Q^T rw)`` gathered and the groups' stacked ``R`` factored again (a tall-skinny QR:
+    its basis spans the whole design), so the gains are the same on any number of
+    processes."""
+    blocks = [(a, min(n, a + SPLIT_ROWS)) for a in range(0, n, SPLIT_ROWS)]
+    groups, C = row_groups(len(blocks)), rw.shape[1]
+    qs = [X.shape[1] for X in sets(0, 0)]
+    parts = []
+    for grp in my_groups(len(groups)):
+        i0, i1 = groups[grp]
+        a, b = (blocks[i0][0], blocks[i1 - 1][1]) if i1 > i0 else (0, 0)
+        flat = []
+        for X, q in zip(sets(a, b), qs):
+            R, T = np.zeros((q, q)), np.zeros((q, C))
+            if b > a:
+                Q, Rg = np.linalg.qr(X)
+                R[: Rg.shape[0]], T[: Q.shape[1]] = Rg, Q.T @ rw[a:b]
+            flat += [R.ravel(), T.ravel()]
+        parts.append(np.concatenate(flat) if flat else np.zeros(0))
+    every = gathered_groups(parts, len(groups), sum(q * q + q * C for q in qs))
+    out, at = [], 0
+    for q in qs:
+        Rs = every[:, at : at + q * q].reshape(-1, q)
+        Ts = every[:, at + q * q : at + q * q + q * C].reshape(-1, C)
+        at += q * q + q * C
+        out.append(float(np.sum((np.linalg.qr(Rs)[0].T @ Ts) ** 2)) if n > q else 0.0)
+    return out
 
 
 def _bt_orders_supported(ctx: Context, resid: np.ndarray, cand: np.ndarray) -> np.ndarray:

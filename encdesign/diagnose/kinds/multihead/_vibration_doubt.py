@@ -27,7 +27,7 @@ import numpy as np
 
 from ...engine._candidates import Context
 from ._aliases import catalog_orders_at
-from ._runout import _gain
+from ._runout import _gain, split_gains
 
 NO_DOUBT = 1e9
 """The margin reported where a rule does not apply (not at one speed, no value lattice)."""
@@ -138,9 +138,21 @@ def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, 
     def over_base(X: np.ndarray) -> float:
         return _gain(rw, np.concatenate([X, B], 1)) - g0 if in_base else _gain(rw, X)
 
+    fs = f_hz + np.linspace(-2.0, 2.0, 41) / T
+
+    def sets(a: int, b: int) -> list:  # rows a:b of the base's orders, then of each line
+        Bs, o, ta = B[a:b], oh[a:b], t[a:b]
+        Xs = [_line_cols(ta, o, float(f)) for f in fs]
+        return ([Bs] if in_base else []) + [np.concatenate([X, Bs], 1) for X in Xs]
+
+    # the frequency grid's gains with the rows split over the processes (split_gains, a
+    # tall-skinny QR: the same on any number of processes); over the base's orders refitted
+    # with the line where it has them
+    gains = split_gains(t.size, sets, rw)
+    gb = gains.pop(0) if in_base else 0.0
     best = (-math.inf, f_hz)
-    for f in f_hz + np.linspace(-2.0, 2.0, 41) / T:
-        best = max(best, (over_base(_line_cols(t, oh, float(f))), float(f)))
+    for g, f in zip(gains, fs):
+        best = max(best, (g - gb, float(f)))
     g_vib, f_best = best
     if w is None or not orders:
         return f_best, NO_DOUBT
