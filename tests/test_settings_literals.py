@@ -254,6 +254,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (pivots within it are ties broken by column order: far above the rounding of sums)",
     ("engine/_constants.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
+    ("engine/_change_rival.py", "ORDER_STEP_ORDER"): PHYSICS
+    + " (the order_step view's order: a disk moved on its hub changes its order 1)",
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,
     ("engine/_views_modulated.py", "BLOCK_VALUES"): BOUND,
     ("engine/_views_orders.py", "SCAN_VALUES"): BOUND + " (rows x orders per block of a pass)",

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._candidates import Candidate
+from ._change_rival import rivals_rule
 from ._dealt_fits import private
 from ._document import jsonable
 from ._evidence import (
@@ -32,7 +33,7 @@ from ._fit import FitResult, Fitter, Term, make_term
 from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
-from ._spill import band_share, edge_beyond, kept_gain_share, rival_rule, same_place
+from ._spill import band_share, edge_beyond, kept_gain_share, same_place
 from ._stats_pass import drive_many
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
@@ -454,7 +455,7 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
             f"leaves (orders {', '.join(map(str, larger[:8]))}) is fitted too: a part of that "
             f"structure (needs {100 * s.located_share_min:.0f}%)",
         ), steps_left
-    return rival_rule(prep, fitter, cand, base, fr.terms[-1]), steps_left  # nor a rival's part
+    return rivals_rule(prep, fitter, cand, findings, base, fr.terms[-1]), steps_left  # rivals
 
 
 def _tie_entry(prep, fitter, cur_resid, chosen, cand, fr, dbic) -> dict | None:
