@@ -274,6 +274,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_POLY_DEGREE"): MODEL,
+    ("kinds/multihead/_reference_terms.py", "STAIRCASE_BLURS"): MODEL,
     ("kinds/sds/_sds_noise.py", "REFERENCE_RADIUS_M"): PHYSICS + " (1 inch: a unit of the "
     "reported sizes)",
     ("kinds/sds/_sds_noise.py", "BEAM_ORDERS"): PHYSICS,

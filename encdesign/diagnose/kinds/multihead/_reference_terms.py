@@ -430,6 +430,62 @@ def _quant_derived(ctx: Context, p: dict, se: dict) -> dict:
     }
 
 
+STAIRCASE_BLURS = (0.0, 0.25, 0.5)
+"""Blurs (in LSB) of the staircase columns :func:`_staircase_rivals` fits, each with an
+amplitude of its own: the staircase's harmonics at their own phases, in the proportions of
+noise ahead of the quantizer from none to half an LSB."""
+
+
+def _staircase_rivals(ctx: Context) -> list[Candidate]:
+    """``Candidate.rivals`` of ``interpolation_error``: where the readings lie on a value
+    lattice of step ``q``, the quantization staircase of that lattice (the reading rebuilt as
+    :func:`smooth_reading`, the lattice's offset per run), as a term with a free amplitude per
+    blur of :data:`STAIRCASE_BLURS`; none without a lattice.
+
+    The staircase is a sawtooth of period ``q`` in the reading: lines at shaft orders
+    ``k 2 pi / q``. A sensor with ``2 pi / q`` counts per turn equal to ``L`` or ``2 L`` (a
+    resolver of ``L`` = 2048 signal periods read at 4096 counts per turn) puts its staircase's
+    fundamental at ``interpolation_error``'s own order, and the harmonic pair fits it with a
+    free phase and size, before ``quantization``, whose amplitude is held near 1, can: the
+    pair was named and quantization refused (issue 44, seed 7558). A signal error of its own
+    has its own phase and keeps its gain beside the staircase."""
+    lat = None if _need_ref(ctx) else _quant_lattice(ctx)
+    if lat is None or lat.lsb_rad is None:
+        return []
+    q = float(lat.lsb_rad)
+    n_runs = int(np.asarray(ctx.rows["run_onehot"]).shape[1])
+    coef, mid, half, _ = smooth_reading(ctx)
+    nf = 2 * QUANT_SMOOTH_ORDERS
+    poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
+    held = {
+        "lsb_rad": jnp.asarray(q),
+        "lattice_offset_rad": jnp.asarray([lat.offset_rad.get(r, 0.0) for r in range(n_runs)]),
+        "smooth_rad": jnp.asarray(coef[:nf]),
+        "run_mid_rad": jnp.asarray(mid),
+        "run_half_rad": jnp.asarray(half),
+        **{k: jnp.asarray(poly[:, i]) for i, k in enumerate(_POLY)},
+    }
+    blurs = jnp.asarray(STAIRCASE_BLURS, dtype=jnp.float64) * q
+
+    def fn(p: dict, x: dict) -> Array:
+        smooth = _quant_smooth(held, x)
+        off = x["run_onehot"] @ held["lattice_offset_rad"]
+        cols = jnp.stack([quantization_rad(smooth, q, off, b) for b in blurs], axis=1)
+        return (cols @ p["amplitude"])[:, None]
+
+    return [
+        Candidate(
+            "the quantization staircase",
+            fn,
+            (Param("amplitude", "1", (len(STAIRCASE_BLURS),), scale=1.0),),
+            explanation=(
+                f"the staircase of the readings' value lattice, {2 * np.pi / q:.6g} counts "
+                "per turn, at its own phases"
+            ),
+        )
+    ]
+
+
 def _candidates() -> tuple:
     hyst = Candidate(
         name="direction_hysteresis",
@@ -524,6 +580,7 @@ def _candidates() -> tuple:
         plausible=_interp_plausible,
         probes=_interp_probes,
         derived=_interp_derived,
+        rivals=_staircase_rivals,
     )
     quant = Candidate(
         name="quantization",
