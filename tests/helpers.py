@@ -375,3 +375,31 @@ def angle_step_record(seed: int, accumulate: bool = False, fs: float = 500.0, no
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     edges = [a0 % (2 * np.pi), (a0 + width) % (2 * np.pi)]
     return Recording("multihead", meta, cols), dict(angles_rad=edges, size_rad=size)
+
+
+def part_turn_record(rng, t, th, alpha, err, noise: float):
+    """One forward run of heads at ``alpha`` (rad) reading the shaft angle ``th`` (rad, per
+    row ``t`` s) with the errors ``err`` (rad, rows x heads), white noise ``noise`` (rad) and
+    a zero of its own per head; no reference column, a grating of 1000, 4096 or 36000 lines.
+    ``rng`` draws the noise, the zeros and the lines in that order (the part-turn records of
+    ``tests/test_vibration_doubt.py`` and ``tests/test_change_rival.py``)."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    y = (
+        th[:, None]
+        + err
+        + rng.normal(0, noise, err.shape)
+        + rng.uniform(-3, 3, len(alpha))[None, :]
+    )
+    cols = {"t": t, "run": np.zeros(t.size, int)}
+    for k in range(len(alpha)):
+        cols[f"h{k}"] = y[:, k]
+    enc = {
+        "head_angles_deg": [float(np.degrees(a)) for a in alpha],
+        "optical_radius_m": 0.03,
+        "grating_lines": int(rng.choice([1000, 4096, 36000])),
+    }
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols)

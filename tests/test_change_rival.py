@@ -9,6 +9,7 @@ import pytest
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
+from tests.helpers import part_turn_record
 
 
 def _arc(seed: int, eff: str) -> tuple[Recording, dict]:
@@ -50,18 +51,8 @@ def _arc(seed: int, eff: str) -> tuple[Recording, dict]:
             z += np.sin(m * th + rng.uniform(0, 6.3)) / m
         tilt = z[:, None] * beta[None, :]
         err += A * tilt / np.sqrt(np.mean(tilt**2))
-    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, H)[None, :]
-    cols = {"t": t, "run": np.zeros(n, int)}
-    for k in range(H):
-        cols[f"h{k}"] = y[:, k]
-    enc = {
-        "head_angles_deg": [float(np.degrees(a)) for a in alpha],
-        "optical_radius_m": 0.03,
-        "grating_lines": int(rng.choice([1000, 4096, 36000])),
-    }
-    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
-    desc = dict(H=H, n=n, turns=round(turns, 2), both=both, M=M, noise=noise)
-    return Recording("multihead", meta, cols), desc
+    rec = part_turn_record(rng, t, th, alpha, err, noise)
+    return rec, dict(H=H, n=n, turns=round(turns, 2), both=both, M=M, noise=noise)
 
 
 @pytest.mark.parametrize("seed", [7592, 7599])

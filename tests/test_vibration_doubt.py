@@ -26,6 +26,7 @@ from encdesign.diagnose import diagnose
 from encdesign.diagnose.engine._settings import DEFAULT_SETTINGS, FinderSettings
 from encdesign.diagnose.kinds.multihead._vibration_doubt import arc_orders, covered_turns
 from encdesign.simulate import draw_plan, fix_plan, simulate_plan
+from tests.helpers import part_turn_record
 
 
 def _ctx(theta: np.ndarray, revolutions: float, **settings) -> SimpleNamespace:
@@ -73,17 +74,8 @@ def _arc_record(seed: int) -> tuple[Recording, dict]:
     A = float(rng.uniform(8, 15)) * noise
     ts = t[0] + (t[-1] - t[0]) * rng.uniform(0.3, 0.7)
     err += (t >= ts)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
-    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, H)[None, :]
-    cols = {"t": t, "run": np.zeros(n, int)}
-    for k in range(H):
-        cols[f"h{k}"] = y[:, k]
-    enc = {
-        "head_angles_deg": [float(np.degrees(a)) for a in alpha],
-        "optical_radius_m": 0.03,
-        "grating_lines": int(rng.choice([1000, 4096, 36000])),
-    }
-    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
-    return Recording("multihead", meta, cols), dict(H=H, n=n, turns=turns, M=M, rate=rate)
+    rec = part_turn_record(rng, t, th, alpha, err, noise)
+    return rec, dict(H=H, n=n, turns=turns, M=M, rate=rate)
 
 
 ARC_SEEDS = [7550, 7555, 7559, 7557]

@@ -371,6 +371,26 @@ def smooth_reading(ctx: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     return coef, mid, half, th + A @ coef
 
 
+def _rebuilt_reading(ctx: Context, lat: Lattice, q: float) -> dict[str, np.ndarray]:
+    """The quantization term's parameters that hold the lattice and the rebuilt reading
+    (:func:`smooth_reading`): ``lsb_rad`` (``q``, rad), the lattice's offset per run, the
+    smooth orders' coefficients, each run's middle and half span, its polynomial
+    coefficients; shared by the term's start and the staircase rival of
+    ``interpolation_error``."""
+    n_runs = int(np.asarray(ctx.rows["run_onehot"]).shape[1])
+    coef, mid, half, _ = smooth_reading(ctx)
+    nf = 2 * QUANT_SMOOTH_ORDERS
+    poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
+    return {
+        "lsb_rad": np.asarray(q),
+        "lattice_offset_rad": np.array([lat.offset_rad.get(r, 0.0) for r in range(n_runs)]),
+        "smooth_rad": coef[:nf],
+        "run_mid_rad": mid,
+        "run_half_rad": half,
+        **{k: poly[:, i] for i, k in enumerate(_POLY)},
+    }
+
+
 def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dict]:
     """Rebuild the unquantized reading as a smooth least-squares fit of the reading itself
     (``QUANT_SMOOTH_ORDERS`` Fourier orders of the angle and per-run Legendre polynomials of
@@ -381,20 +401,11 @@ def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
     lat = _quant_lattice(ctx)
     q = float(lat.lsb_rad)
     reading = np.asarray(rows["reading"], dtype=np.float64)[:, 0]
-    n_runs = np.asarray(rows["run_onehot"]).shape[1]
-    coef, mid, half, _ = smooth_reading(ctx)
-    nf = 2 * QUANT_SMOOTH_ORDERS
-    poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
     p0 = {
-        "lsb_rad": np.asarray(q),
-        "lattice_offset_rad": np.array([lat.offset_rad.get(r, 0.0) for r in range(n_runs)]),
-        "smooth_rad": coef[:nf],
-        "run_mid_rad": mid,
-        "run_half_rad": half,
+        **_rebuilt_reading(ctx, lat, q),
         "blur_rad": np.asarray(0.0),
         "amplitude": np.asarray(1.0),
     }
-    p0.update({k: poly[:, i] for i, k in enumerate(_POLY)})
     x = {k: jnp.asarray(v) for k, v in rows.items()}
     r = np.asarray(residual, dtype=np.float64).reshape(reading.size, -1)[:, 0]
     best = (np.inf, 0.0)
@@ -453,18 +464,7 @@ def _staircase_rivals(ctx: Context) -> list[Candidate]:
     if lat is None or lat.lsb_rad is None:
         return []
     q = float(lat.lsb_rad)
-    n_runs = int(np.asarray(ctx.rows["run_onehot"]).shape[1])
-    coef, mid, half, _ = smooth_reading(ctx)
-    nf = 2 * QUANT_SMOOTH_ORDERS
-    poly = coef[nf:].reshape(n_runs, QUANT_POLY_DEGREE + 1)
-    held = {
-        "lsb_rad": jnp.asarray(q),
-        "lattice_offset_rad": jnp.asarray([lat.offset_rad.get(r, 0.0) for r in range(n_runs)]),
-        "smooth_rad": jnp.asarray(coef[:nf]),
-        "run_mid_rad": jnp.asarray(mid),
-        "run_half_rad": jnp.asarray(half),
-        **{k: jnp.asarray(poly[:, i]) for i, k in enumerate(_POLY)},
-    }
+    held = {k: jnp.asarray(v) for k, v in _rebuilt_reading(ctx, lat, q).items()}
     blurs = jnp.asarray(STAIRCASE_BLURS, dtype=jnp.float64) * q
 
     def fn(p: dict, x: dict) -> Array:
