@@ -403,3 +403,61 @@ def part_turn_record(rng, t, th, alpha, err, noise: float):
     }
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols)
+
+
+def quantized_line_record(
+    seed: int,
+    counts: int,
+    periods: int,
+    line: float = 0.0,
+    phase_rad: float = 0.0,
+    delay_s: float = 0.0,
+    blur: float = 0.05,
+    n_per_run: int = 1200,
+):
+    """One sensor against a reference, read on a lattice of ``counts`` per turn (LSB
+    ``q = 2 pi / counts``), ``periods`` signal periods per turn, two runs at 0.8 and 1.3
+    rev/s, each 3 turns forward and back (evenly sampled), a sensor error function of orders
+    1-4 (5-20 LSB), noise of ``blur`` LSB ahead of the quantizer and a reading delay
+    ``delay_s`` (s, a time shift). ``line``: a static error at shaft order ``counts`` (the
+    staircase's fundamental) of ``line`` times the fundamental's own size ``q / pi``, at
+    ``phase_rad`` from it (0: in phase, adding to it; an interpolation error there, made
+    additively so that its size is free). Returns the recording and ``q``."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    rng = np.random.default_rng([seed, 44, 7])
+    q = 2 * np.pi / counts
+    ts, ths, xs, runs = [], [], [], []
+    amps = q * rng.uniform(5, 20, 4) / np.arange(1, 5)
+    phs = rng.uniform(0, 2 * np.pi, 4)
+    zero = rng.uniform(-3, 3)
+    for r, v in enumerate((0.8, 1.3)):
+        w = 2 * np.pi * v
+        dur = 2 * 3.0 / v
+        t = np.arange(n_per_run) * dur / n_per_run
+        th0 = rng.uniform(0, 2 * np.pi)
+
+        def path(tt, th0=th0, w=w, dur=dur):
+            return th0 + w * np.minimum(tt, dur - tt)
+
+        th = path(t)
+        th_s = path(t - delay_s)  # what the sensor saw, delay_s ago
+        e = sum(a * np.sin(m * th_s + p) for m, a, p in zip(range(1, 5), amps, phs))
+        # the staircase's fundamental is -(q / pi) sin(counts x): the line at phase_rad from it
+        e = e - line * (q / np.pi) * np.sin(counts * (th_s + e + zero) + phase_rad)
+        x = th_s + e + zero + rng.normal(0, blur * q, t.size)
+        ts.append(t + r * (dur + 2.0))
+        ths.append(th)
+        xs.append(q * np.round(x / q))
+        runs.append(np.full(t.size, r))
+    cols = {
+        "t": np.concatenate(ts),
+        "run": np.concatenate(runs),
+        "theta_ref": np.concatenate(ths),
+        "h0": np.concatenate(xs),
+    }
+    enc = {"head_angles_deg": [0.0], "sensor": "resolver", "signal_periods_per_rev": periods}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, cols), q

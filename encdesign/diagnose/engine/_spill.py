@@ -51,13 +51,19 @@ def kept_gain_share(prep, fitter, base: list, term, orders) -> float | None:
 def _kept(fitter, base: list, term, other) -> float | None:
     """The share of its chi-square gain beside ``base`` that ``term`` keeps once ``other``
     (a term) is fitted with them; ``None`` without a gain."""
+    return _kept_fit(fitter, base, term, other)[0]
+
+
+def _kept_fit(fitter, base: list, term, other) -> tuple[float | None, dict | None]:
+    """:func:`_kept`, and the values ``other`` takes fitted beside ``base`` alone (where it
+    takes what it shares with ``term``); ``(None, None)`` without a gain."""
     c0 = fitter.fit(list(base), max_steps=TRIAL_STEPS).chi2
     g0 = c0 - fitter.fit([*base, term], max_steps=TRIAL_STEPS).chi2
     if g0 <= 0:
-        return None
-    c1 = fitter.fit([*base, other], max_steps=TRIAL_STEPS).chi2
-    g1 = c1 - fitter.fit([*base, other, term], max_steps=TRIAL_STEPS).chi2
-    return g1 / g0
+        return None, None
+    fo = fitter.fit([*base, other], max_steps=TRIAL_STEPS)
+    g1 = fo.chi2 - fitter.fit([*base, other, term], max_steps=TRIAL_STEPS).chi2
+    return g1 / g0, dict(fo.terms[-1].values)
 
 
 def rival_rule(prep, fitter, cand: Candidate, base: list, term) -> tuple[str, str] | None:
@@ -71,12 +77,20 @@ def rival_rule(prep, fitter, cand: Candidate, base: list, term) -> tuple[str, st
     (its coil orders in ``phi + psi_m`` reach every single value) takes most of it and
     lowers the criterion far more than any other candidate, so the transient's doubt was
     overruled and the effect named (issue 44, session 21); the transient's own offset takes
-    that gain back. An effect of its own beside a transient keeps its gain."""
+    that gain back. An effect of its own beside a transient keeps its gain.
+
+    A rival with a ``plausible`` hook that refuses the values it takes beside ``base`` (where
+    it takes what it shares with the candidate) cannot make that structure and refuses
+    nothing: the quantization staircase with a fundamental beyond what its LSB makes is not
+    the staircase (issue 44, session 22)."""
     if cand.rivals is None:
         return None
     share = prep.settings.located_share_min
     for rival in cand.rivals(prep.ctx):
-        kept = _kept(fitter, base, term, make_term(rival, prep))
+        kept, values = _kept_fit(fitter, base, term, make_term(rival, prep))
+        if rival.plausible is not None and values is not None:
+            if rival.plausible(prep.ctx, values) is not None:
+                continue
         if kept is not None and kept < share:
             return (
                 "located_share_min",

@@ -41,7 +41,7 @@ from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, ste
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import chi2_threshold
 from ...engine._views_modulated import view_modulated_orders
-from ._confound import own_order_confound
+from ._confound import own_order_confound, staircase_confound
 from ._fourier import base_value, fourier_columns, fourier_sum
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
@@ -745,7 +745,7 @@ class MultiheadKind(AbstractKind):
         return multihead_summary(prep, base_params)
 
     def finish(self, prep, doc, settings):
-        return own_order_confound(prep, doc)
+        return staircase_confound(prep, own_order_confound(prep, doc))
 
     def report_lines(self, doc):
         return ""
