@@ -282,6 +282,18 @@ def test_thermal_drift_and_axial_shift():
     per_rev = np.asarray(r.pair_error_rad).reshape(-1)
     slope = np.polyfit(np.arange(8) * float(d.motor.period_s), per_rev, 1)[0]
     assert slope == pytest.approx(0.7 * ARCSEC * rate, rel=1e-3)
+    # ΔT = offset + rate t (issue 44, session 22: the offset was left out, so a ramp from t0,
+    # offset = -rate t0, jumped by κ rate t0 at its onset): the offset moves the moving
+    # sensors by κ offset
+    off = -0.1  # K
+    errs = _errs(
+        thermal_drift_rad_per_k=0.7 * ARCSEC,
+        temperature_rate_k_per_s=rate,
+        temperature_offset_k=off,
+    )
+    r_off = simulate(d, 0.2, 8, errs, key=KEY, revs_per_reading=2)
+    shift = np.asarray(r_off.pair_error_rad).reshape(-1) - per_rev
+    np.testing.assert_allclose(shift, 0.7 * ARCSEC * off, rtol=1e-3)
     # axial runout (order 1 in φ) seen through a tilted optical axis: γ·dz/R
     errs = _errs(optical_tilt_moving_rad=0.01, axial_runout_cos_m=[2e-6])
     phi = jnp.asarray([0.0, math.pi / 2, math.pi])

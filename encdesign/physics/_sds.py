@@ -288,7 +288,8 @@ def _solve_edges(
     """Edge times of fixed (F, A) and moving (M, B) targets in one Newton solve.
 
     The time-dependent sensor shifts δ(t): bearing runout at each sensor's azimuth, and
-    thermal drift for the moving sensors.
+    thermal drift ``κ ΔT(t)`` (``ΔT = temperature_offset_k + temperature_rate_k_per_s t``)
+    for the moving sensors.
     """
     nf, nm = theta_f.size, theta_m.size
     target = jnp.concatenate([theta_f.reshape(-1), theta_m.reshape(-1)])
@@ -301,9 +302,12 @@ def _solve_edges(
     moving = jnp.concatenate([jnp.zeros(nf), jnp.ones(nm)])
     has_bearing = errors.has_time_shift
     drift = errors.thermal_drift_rad_per_k * errors.temperature_rate_k_per_s
+    # kappa dT(t) with dT = offset + rate t (its offset was left out: a temperature ramp from
+    # t0, offset = -rate t0, then moved the sensors by kappa rate t0 at its onset, a jump)
+    drift0 = errors.thermal_drift_rad_per_k * errors.temperature_offset_k
 
     def shift(t):
-        out = moving * drift * t
+        out = moving * (drift0 + drift * t)
         if has_bearing:
             out = out + errors.bearing_shift_rad(t, psi, design.motor.speed_rad_s, design.radius_m)
         return out

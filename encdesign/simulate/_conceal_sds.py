@@ -12,7 +12,9 @@ the later runs (``partial``):
 
 * ``axis_tilt``: tilt β with β²/4 = amplitude × noise;
 * ``thermal_drift``: a temperature ramp moving the moving sensors by amplitude × noise over
-  the record (``partial``: the ramp starts half-way);
+  the record (``partial``: the ramp starts half-way, from 0 K, and moves them as far by the
+  record's end: a drift with an onset, continuous there; ``drift_onset_run`` sets another
+  first run);
 * ``bearing_wobble``: one radial runout component at a cage ratio 0.35–0.45;
 * ``beam_tilt_axial``: 0.01 rad beam tilt on the moving sensors, platform axial runout at
   orders 1 and 3;
@@ -126,6 +128,7 @@ def write_concealed_sds(
     coil_max_order: int = 5,
     speed_offset: float = 0.0,
     coil_beside_noise: float | None = None,
+    drift_onset_run: int | None = None,
 ) -> tuple[Recording, dict[str, Any]]:
     """Simulate an sds bench with one hidden effect and write it (TOML + CSV).
 
@@ -164,6 +167,10 @@ def write_concealed_sds(
             ``coil_max_order``) at this many noise units beside ``effect`` (not itself
             ``coil_mismatch``); it draws nothing, so the record of a key with and without it
             has the same platform positions, disks, noise and ``effect`` (``truth["beside"]``).
+        drift_onset_run: ``thermal_drift`` only: the temperature ramp starts with this run
+            (0 … ``n_runs`` − 1; default half-way for ``partial``, else 0), from 0 K, so the
+            drift is continuous at its onset (``truth["params"]["onset_s"]``, on ``t``); it
+            draws nothing, so the record of a key differs only in the drift.
 
     Returns:
         ``(recording, truth)``; ``truth`` holds the effect, its parameters and where it is.
@@ -213,20 +220,28 @@ def write_concealed_sds(
     kw: dict[str, Any] = dict(clock_period_s=CLOCK_S, jitter_s=1e-9)
     truth: dict[str, Any] = {"effect": effect, "concealment": concealment, "params": {}}
     first_partial = n_runs // 2 if concealment == "partial" else 0
+    if drift_onset_run is not None:
+        if effect != "thermal_drift" or not 0 <= int(drift_onset_run) < n_runs:
+            raise input_error(
+                "drift_onset_run",
+                f"got {drift_onset_run!r} for {effect!r}",
+                f"0 … {n_runs - 1}, with thermal_drift",
+            )
+        first_partial = int(drift_onset_run)
     if effect == "axis_tilt":
         beta = 2 * math.sqrt(amp)
         kw.update(axis_tilt_rad=beta, axis_tilt_azimuth_rad=rng.uniform(0, np.pi))
         truth["params"] = {"tilt_rad": beta, "azimuth_rad": kw["axis_tilt_azimuth_rad"]}
     elif effect == "thermal_drift":
-        rate_k_s = 1.0 / t_end  # 1 K over the record
-        kappa = amp / 1.0
         t0 = first_partial * (n_revs + 1 + RUN_SPACING_REVS) * period
+        rate_k_s = 1.0 / (t_end - t0)  # 1 K from the onset to the record's end
+        kappa = amp / 1.0
         kw.update(
             thermal_drift_rad_per_k=kappa,
             temperature_rate_k_per_s=rate_k_s,
             temperature_offset_k=-rate_k_s * t0,
         )
-        truth["params"] = {"drift_rate_rad_per_s": kappa * rate_k_s}
+        truth["params"] = {"drift_rate_rad_per_s": kappa * rate_k_s, "onset_s": t0}
     elif effect == "bearing_wobble":
         rho = rng.uniform(0.35, 0.45)
         a_rad = amp / float(np.sinc(rho))

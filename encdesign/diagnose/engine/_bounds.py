@@ -213,14 +213,15 @@ def _values(fitter: Fitter, terms: Sequence[Term]) -> np.ndarray:
     return out
 
 
-def _n_nonlinear(cand: Candidate, prep: Prepared) -> int:
-    """Fitted nonlinear scalars of ``cand`` (counted in its ``k``, held in the probe)."""
+def _n_nonlinear(cand: Candidate, prep: Prepared, held: tuple[str, ...] = ()) -> int:
+    """Fitted nonlinear scalars of ``cand`` (counted in its ``k``, held in the probe), less
+    those the finder holds where the probe's effect is (``Probe.held``)."""
     C, R = prep.n_channels, prep.ctx.n_runs
     return int(
         sum(
             int(np.prod(q.resolved_shape(C, R), dtype=int))
             for q in cand.params
-            if q.fit and not q.linear
+            if q.fit and not q.linear and q.name not in held
         )
     )
 
@@ -401,7 +402,8 @@ class _Bench:
             fitter.keep_accumulated(static, acc)
         base = fitter.fit(static)
         resid = fitter.residual(base.terms)
-        return base.chi2 / c**2, k_lin + _n_nonlinear(cand, prep), resid / c, self.own_rms(v)
+        k = k_lin + _n_nonlinear(cand, prep, probe.held)
+        return base.chi2 / c**2, k, resid / c, self.own_rms(v)
 
     def heldout_gain(self, cand: Candidate, probe: Probe, a: float) -> float:
         """The held-out gain of ``cand`` (its probe's nonlinear values held, its linear

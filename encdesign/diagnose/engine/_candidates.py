@@ -181,6 +181,9 @@ class Probe:
         label: in words, what sets this probe apart from the others of its ``worst_of``
             (``"order 2"``, ``"azimuth 45 deg"``): each one's own bound is reported beside the
             worst (``each``), so an effect of a known shape can be read against its own.
+        held: nonlinear parameters the finder's fit holds where the effect has ``values``
+            (e.g. a drift's onset before the record, whose column the base spans): not
+            counted in the bound's ``k``.
         size: the effect's size (in ``unit``) at ``values`` (default 1). Where the size is
             not a linear parameter (an axis tilt's ``beta^2 / 4``), ``values`` hold the
             nonlinear ones where the effect is still linear in its size (a small tilt) and
@@ -198,6 +201,7 @@ class Probe:
     seen_of: Callable[[np.ndarray, float], Callable[[float], float] | None] | None = None
     size: float = 1.0
     label: str = ""
+    held: tuple[str, ...] = ()
 
 
 ProbeFn = Callable[[Context], list[Probe]]

@@ -29,7 +29,9 @@ Candidates (``docs/effects.md``, "SDS timing model"), each a differentiable term
 
 * ``axis_tilt``: ``T(φ+ψ_m) − T(ψ_f)``, ``T(ψ) = atan2(sin(ψ−χ), cos(ψ−χ) cos β) − (ψ−χ)``
   (seed eq. 26), parameters β (rad), χ (rad); χ is unidentifiable when β is not resolved;
-* ``thermal_drift``: ``k (t_m − t̄)`` (no temperature column in sds: time drives);
+* ``thermal_drift``: ``k (max(t_m − t_on, 0) − max(t̄ − t_on, 0))`` (no temperature column
+  in sds: time drives; a drift from an onset ``t_on``, fitted, or from the start,
+  ``k (t_m − t̄)``: :mod:`._sds_drift`);
 * ``bearing_wobble``: ``w(t_m, φ+ψ_m) − w(t_f, ψ_f)``,
   ``w = sinc(ρ) [A sin(ρΩt − ψ) + B cos(ρΩt − ψ)]`` (window mean over one revolution);
 * ``beam_tilt_axial``: ``Σ_{n=1..3} p_n cos nφ + q_n sin nφ`` common to the moving sensors;
@@ -438,7 +440,10 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
     for e in doc.get("effects", []):
         if e["name"] == "thermal_drift" and dv:
             lim = math.log(max(dv["n_values"], 2))
-            if dv["order_power"] >= dv["drift_power"] - lim:
+            # a drift with an onset in the record: its power at the best onset, 2 dof
+            onset = not e.get("derived", {}).get("drift_from_start", {}).get("value", True)
+            pd, kd = (dv["onset_power"], 2) if onset else (dv["drift_power"], 1)
+            if dv["order_power"] >= pd - lim:
                 # within one parameter's worth: the data cannot tell the two apart
                 e["confounded_with"] = [
                     *(e.get("confounded_with") or []),
@@ -447,7 +452,7 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
                         "reason": f"order {dv['order']} of the platform angle, common to the "
                         f"moving sensors, fits the base residual nearly as well (chi-square "
                         f"{dv['order_power']:.1f}, 2 dof, vs the drift's "
-                        f"{dv['drift_power']:.1f}, 1 dof; correlation "
+                        f"{pd:.1f}, {kd} dof; correlation "
                         f"{dv['correlation']:.2f}): with this platform stepping it is nearly "
                         "a trend over the runs",
                         "rule": "one_parameter_bic",
@@ -464,6 +469,9 @@ def finish_sds(doc: dict, settings: FinderSettings = DEFAULT_SETTINGS) -> dict:
         for q in e.get("params", {}).values():
             if isinstance(q.get("se"), list | float | int) and scale > 1:
                 q["se"] = _scale(q["se"], scale)
+        on = e.get("derived", {}).get("onset_s")
+        if e["name"] == "thermal_drift" and on is not None and on.get("se") is not None:
+            on["se"] = e["params"]["onset_from_start_s"]["se"]  # the same, scaled as it is
         if e["name"] == "axis_tilt":
             p = e["params"]
             # (tilt, azimuth) and (-tilt, azimuth + pi) are one tilt: report tilt >= 0 and

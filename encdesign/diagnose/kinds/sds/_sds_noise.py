@@ -18,6 +18,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
+from ._sds_drift import drift_power_at, onset_power
 from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
 REFERENCE_RADIUS_M = 0.0254
@@ -587,8 +588,10 @@ def _drift_vs_orders(prep: Prepared, rwm: np.ndarray, pw: np.ndarray) -> dict | 
     Q, _ = np.linalg.qr(X)
     dn = d / max(np.linalg.norm(d), 1e-300)
     rho = float(np.linalg.norm(Q.T @ dn))
+    op = onset_power(prep.rows, prep.consts, rwm)
     return {
         "drift_power": pd,
+        "onset_power": op["onset_power"],
         "order": n,
         "order_power": float(pw[n - 1]),
         "correlation": rho,
@@ -706,17 +709,25 @@ def _no_transient(fn=None):
 
 def _drift_plausible(ctx: Context, params: dict) -> str | None:
     """A drift in time is refused when an order of the platform angle (common to the
-    moving sensors) fits the base residual's common structure better by more than one
-    parameter's worth (BIC: ln of the number of run means): with the platform stepped by a
-    fixed angle such an order is nearly a trend over the runs, and the better fit is the
-    order (out of catalog: reported, not named)."""
-    dv = noise_info(ctx).drift_vs_orders
+    moving sensors) fits the base residual's common structure better by BIC (ln of the
+    number of run means per parameter; the order has 2, the drift 1, or 2 with an onset in
+    the record, its power then at the fitted onset): with the platform stepped by a fixed
+    angle such an order is nearly a trend over the runs, and the better fit is the order
+    (out of catalog: reported, not named)."""
+    info = noise_info(ctx)
+    dv = info.drift_vs_orders
     if not dv:
         return None
-    if dv["order_power"] - dv["drift_power"] > math.log(max(dv["n_values"], 2)):
+    pd, k = dv["drift_power"], 1
+    d = float(np.asarray(params.get("onset_from_start_s", 0.0)))
+    if d > 0 and info.base_resid is not None and ctx.noise is not None:
+        M = int(np.asarray(ctx.consts["psi_m"]).size)
+        rwm = info.base_resid[:, :M] / np.asarray(ctx.noise, float)[None, :M]
+        pd, k = drift_power_at(ctx.rows, ctx.consts, rwm, d), 2
+    if dv["order_power"] - pd > (2 - k) * math.log(max(dv["n_values"], 2)):
         return (
             f"order {dv['order']} of the platform angle fits the common structure better "
-            f"(chi-square {dv['order_power']:.0f}, 2 dof, vs {dv['drift_power']:.0f}, 1 dof) "
+            f"(chi-square {dv['order_power']:.0f}, 2 dof, vs {pd:.0f}, {k} dof) "
             f"and is nearly a trend over these runs (correlation {dv['correlation']:.2f} with "
             "a drift): not a drift in time"
         )

@@ -14,6 +14,7 @@ import numpy as np
 from scipy import stats
 
 from ...engine._candidates import Candidate, Context, Param, Probe
+from ._sds_drift import drift_derived, drift_fn, drift_probes, drift_start
 from ._sds_noise import (
     BEAM_ORDERS,
     EXPLANATIONS,
@@ -151,9 +152,7 @@ def _axis_tilt_fn(p, x):
 
 
 def _drift_fn(p, x):
-    xm, _, shp = _xk(x)
-    tm = jnp.broadcast_to(x["tm_c"][:, :, None, :], shp)
-    return _to_channels(p["drift_rate_rad_per_s"] * tm, x)
+    return drift_fn(p, x, _to_channels, _xk)
 
 
 def _wobble_fn(p, x):
@@ -541,18 +540,9 @@ def _delay_probes(ctx: Context) -> list[Probe]:
 
 
 def _drift_probes(ctx: Context) -> list[Probe]:
-    """A drift of the moving sensors' pair angles at 1 rad/s over the whole record."""
-    M = int(ctx.consts["psi_m"].size)
-    t = np.asarray(ctx.rows["tmid_c"], float).mean(1)
-    pattern = np.repeat(t[:, None], M, 1)
-    return [
-        Probe(
-            {"drift_rate_rad_per_s": np.asarray(1.0)},
-            "drift_rate_rad_per_s",
-            "rad/s",
-            seen=_run_mean_seen(ctx, pattern, caught=False),
-        )
-    ]
+    """A drift of the moving sensors' pair angles at 1 rad/s over the whole record
+    (:func:`._sds_drift.drift_probes`)."""
+    return drift_probes(ctx, _run_mean_seen)
 
 
 def sds_candidates(ctx: Context) -> tuple[Candidate, ...]:
@@ -625,11 +615,23 @@ def _catalog(
         Candidate(
             "thermal_drift",
             _drift_fn,
-            (Param("drift_rate_rad_per_s", "rad/s"),),
+            (
+                Param("drift_rate_rad_per_s", "rad/s"),
+                Param(
+                    "onset_from_start_s",
+                    "s",
+                    linear=False,
+                    scale=0.1,
+                    description="the drift's onset after the record's first window time "
+                    "(<= 0, held at 0: from the start); on t: derived onset_s",
+                ),
+            ),  # fmt: skip
             signature=("sds_thermal_drift", "run_step"),
             kinds=("sds",),
             explanation=EXPLANATIONS["thermal_drift"],
             applies=_no_ref_drift,
+            start=drift_start,
+            derived=drift_derived,
             plausible=_no_transient(_drift_plausible),
             rivals=_transient_rivals,
             probes=_drift_probes,
