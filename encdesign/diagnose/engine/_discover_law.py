@@ -17,7 +17,8 @@ from scipy import optimize
 class Term:
     """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
     the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
-    change time (``step`` modulation, :func:`locate_steps`)."""
+    change time (``step`` modulation, :func:`locate_steps`); ``level``: a ``growth`` term that
+    holds its own level (its first half of ``H``, :mod:`._discover_growth`)."""
 
     line: int
     frame: str
@@ -27,6 +28,7 @@ class Term:
     beta_se: float | None = None
     H0: np.ndarray | None = None
     step: dict | None = None
+    level: bool = False
 
     @property
     def name(self) -> str:
