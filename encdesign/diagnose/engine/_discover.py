@@ -562,7 +562,8 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
     # of terms the record cannot tell apart, the first of the library (not rounding's pick)
     chosen = [next(j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])) for i in chosen]
-    chosen = best_at_place(sums, lib, chosen, st.thresh, me)
+    if len(st.cinfo["speed"]) == 1:  # one cell (SDS): static, growth, step; no per-run terms
+        chosen = best_at_place(sums, lib, chosen, st.thresh, me)
     incl = np.zeros(len(lib))
     for k in folds:
         rest = [f for f in folds if f != k]
