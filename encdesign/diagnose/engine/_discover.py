@@ -18,7 +18,8 @@ generic library organised by **frame** and **modulation**:
   ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
   own amplitude and phase), ``ringing`` (a fixed-Hz line only: each run its own amplitude
   and phase and their own linear change within the run: a mode rung and decaying at its own
-  Q), ``growth`` (amplitude linear in the time across runs),
+  Q), ``growth`` (amplitude linear in the time across runs, with its own level where
+  the catalog model leaves it: :mod:`._discover_growth`),
   ``temperature`` (linear in ``temp_c``), ``step`` (the amplitude switches on at one change
   time: the best of the times the finder's views located (``time``, ``order_step``,
   ``run_step``) and :data:`STEP_BINS` change points over the kept rows, scanned per line on
@@ -54,7 +55,18 @@ from typing import Any
 import numpy as np
 
 from ._discover_export import discovered_candidate
-from ._discover_law import Sums, Term, _fit_beta, _gain, _psolve, _scatter_se, _sibling
+from ._discover_growth import best_at_place, growth_term, same_place
+from ._discover_law import (
+    Sums,
+    Term,
+    _embed,
+    _fit_beta,
+    _gain,
+    _heldout,
+    _psolve,
+    _scatter_se,
+    _sibling,
+)
 from ._discover_lines import (
     MAX_LINES,
     STEP_EXACT_ROWS,
@@ -327,7 +339,7 @@ def library(
                         Term(li, name, f"cell {s}", hmap(lay, 0, M, (np.arange(S) == s) * 1.0))
                     )
                 out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
-            out.append(Term(li, name, "growth", hmap(lay, 1, M, one)))
+            out.append(growth_term(sums, li, name, M))
             if "temperature" in sums.blocks:
                 out.append(Term(li, name, "temperature", hmap(lay, 2, M, one)))
             if steps[li] is not None:
@@ -337,35 +349,6 @@ def library(
 
 
 # ----------------------------------------------------------------------------- fits
-
-
-def _embed(sums: Sums, terms: Sequence[Term]) -> np.ndarray:
-    """The joint restriction ``(Q, sum q)`` of ``terms``."""
-    Q = sums.A.shape[1]
-    Hs = []
-    for tm in terms:
-        H = np.zeros((Q, tm.H.shape[1]))
-        H[sums.slices[tm.line]] = tm.H
-        Hs.append(H)
-    return np.concatenate(Hs, 1) if Hs else np.zeros((Q, 0))
-
-
-def _heldout(
-    A: np.ndarray, b: np.ndarray, H: np.ndarray, folds: Sequence[int], raw: np.ndarray
-) -> float:
-    """K-fold held-out chi-square drop of the model ``H`` over ``folds``: fitted without each
-    fold, scored on it (``raw``: the Gram before the projection, per fold)."""
-    rows = np.flatnonzero(np.any(H != 0, 1))  # the columns of the lines it touches
-    H = H[rows]
-    Af = H.T @ (A[:, rows][:, :, rows] @ H)
-    Rf = H.T @ (raw[:, rows][:, :, rows] @ H)
-    bf = b[:, rows] @ H
-    At, bt, Rt = Af[list(folds)].sum(0), bf[list(folds)].sum(0), Rf[list(folds)].sum(0)
-    out = 0.0
-    for k in folds:
-        beta = _psolve(At - Af[k], bt - bf[k], raw=Rt - Rf[k])
-        out += float(2 * beta @ bf[k] - beta @ Af[k] @ beta)
-    return out
 
 
 def _single_heldout(sums: Sums, tm: Term, folds) -> float:
@@ -567,10 +550,11 @@ def _refit(
 
 
 def select_terms(st: State) -> tuple[list[int], np.ndarray]:
-    """Forward selection on all folds, and each term's inclusion probability over the
-    selections repeated without each fold (a repeat that takes a term of the same span
-    includes it: :func:`_same_span`); the terms kept (chosen on all folds and included at
-    least ``settings.discover_inclusion_min``)."""
+    """Forward selection on all folds (of the terms at a chosen term's line and frame, the
+    held-out gain picks the modulation: :func:`best_at_place`), and each term's inclusion
+    probability over the selections repeated without each fold (a repeat that takes a term
+    of the same span, :func:`_same_span`, or of the same line and frame includes it); the
+    terms kept (chosen on all folds and included at least ``settings.discover_inclusion_min``)."""
     sums, lib = st.sums, st.lib
     K = sums.A.shape[0]
     folds = list(range(K))
@@ -578,11 +562,17 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
     # of terms the record cannot tell apart, the first of the library (not rounding's pick)
     chosen = [next(j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])) for i in chosen]
+    if len(st.cinfo["speed"]) == 1:  # one cell (SDS): static, growth, step; no per-run terms
+        chosen = best_at_place(sums, lib, chosen, st.thresh, me)
     incl = np.zeros(len(lib))
     for k in folds:
         rest = [f for f in folds if f != k]
         got = _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me)
-        same = {i for i in chosen if any(_same_span(sums, lib[i], lib[j]) for j in got)}
+        same = {
+            i
+            for i in chosen
+            if any(_same_span(sums, lib[i], lib[j]) or same_place(lib[i], lib[j]) for j in got)
+        }
         for i in set(got) | same:
             incl[i] += 1.0 / K
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
@@ -722,6 +712,7 @@ def _term_json(
             else None,
             "speed_ref_rad_s": float(np.exp(np.mean(np.log(np.maximum(cinfo["speed"], 1e-12))))),
             **({"step_tau_s": tm.step["tau_s"]} if tm.step is not None else {}),
+            **({"growth_level": True} if tm.level else {}),
             **({"n_moving": int(st_sds[0]), "projected": bool(st_sds[2])} if st_sds else {}),
         },
     }

@@ -113,6 +113,8 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             elif spec["export"].get("n_moving"):  # SDS: the frame's run-mean channels
                 base, _ = _sds_frame(spec, x, jnp.zeros(x["t"].shape[0]), C)
             a = x["run_onehot"] @ p["cos_rad"] if per_run else p["cos_rad"]
+            if level:  # a growth with its own level
+                return base * (a + g * p["cos_rate_rad"])
             return g * base * (a[:, None] if per_run else a)
         cpart, spart = _frame(spec, x, _phase(spec, x), C)
         if per_run:
@@ -125,12 +127,20 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             u = ((x["tau"] - ex["tau_mid_s"]) / ex["tau_half_s"])[:, None]
             a = a + u * (x["run_onehot"] @ p["cos_rate_rad"])[:, None]
             b = b + u * (x["run_onehot"] @ p["sin_rate_rad"])[:, None]
+        if level:  # a growth with its own level: a + rate x the centred time
+            return (
+                a * cpart + b * spart + g * (p["cos_rate_rad"] * cpart + p["sin_rate_rad"] * spart)
+            )
         return g * (a * cpart + b * spart)
 
     ringing = spec["modulation"] == "ringing"
+    level = spec["modulation"] == "growth" and bool(spec["export"].get("growth_level"))
     params = [Param("cos_rad", unit, shape, description="cos amplitude")]
     if not offset:
         params.append(Param("sin_rad", unit, shape, description="sin amplitude"))
+    if level:
+        for nm in ("cos_rate_rad",) if offset else ("cos_rate_rad", "sin_rate_rad"):
+            params.append(Param(nm, unit, shape, description="growth per half span of the time"))
     if ringing:
         for nm in ("cos_rate_rad", "sin_rate_rad"):
             params.append(

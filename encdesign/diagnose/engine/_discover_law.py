@@ -17,7 +17,8 @@ from scipy import optimize
 class Term:
     """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
     the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
-    change time (``step`` modulation, :func:`locate_steps`)."""
+    change time (``step`` modulation, :func:`locate_steps`); ``level``: a ``growth`` term that
+    holds its own level (its first half of ``H``, :mod:`._discover_growth`)."""
 
     line: int
     frame: str
@@ -27,6 +28,7 @@ class Term:
     beta_se: float | None = None
     H0: np.ndarray | None = None
     step: dict | None = None
+    level: bool = False
 
     @property
     def name(self) -> str:
@@ -154,3 +156,32 @@ def _scatter_se(tm: Term, lib: Sequence[Term], sums: Sums) -> None:
     dof = pc.H.shape[1] - tm.H.shape[1] - 1
     if dof > 0:
         tm.beta_se *= math.sqrt(max((g(pc.H) - g(tm.H)) / dof, 1.0))
+
+
+def _embed(sums: Sums, terms: Sequence[Term]) -> np.ndarray:
+    """The joint restriction ``(Q, sum q)`` of ``terms``."""
+    Q = sums.A.shape[1]
+    Hs = []
+    for tm in terms:
+        H = np.zeros((Q, tm.H.shape[1]))
+        H[sums.slices[tm.line]] = tm.H
+        Hs.append(H)
+    return np.concatenate(Hs, 1) if Hs else np.zeros((Q, 0))
+
+
+def _heldout(
+    A: np.ndarray, b: np.ndarray, H: np.ndarray, folds: Sequence[int], raw: np.ndarray
+) -> float:
+    """K-fold held-out chi-square drop of the model ``H`` over ``folds``: fitted without each
+    fold, scored on it (``raw``: the Gram before the projection, per fold)."""
+    rows = np.flatnonzero(np.any(H != 0, 1))  # the columns of the lines it touches
+    H = H[rows]
+    Af = H.T @ (A[:, rows][:, :, rows] @ H)
+    Rf = H.T @ (raw[:, rows][:, :, rows] @ H)
+    bf = b[:, rows] @ H
+    At, bt, Rt = Af[list(folds)].sum(0), bf[list(folds)].sum(0), Rf[list(folds)].sum(0)
+    out = 0.0
+    for k in folds:
+        beta = _psolve(At - Af[k], bt - bf[k], raw=Rt - Rf[k])
+        out += float(2 * beta @ bf[k] - beta @ Af[k] @ beta)
+    return out
