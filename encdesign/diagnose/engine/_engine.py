@@ -60,6 +60,7 @@ from ._document import (
 )
 from ._fit import FitResult, Fitter, make_term
 from ._goodness import goodness_of_fit
+from ._growth_line import growth_beside_line
 from ._kind import AbstractKind as Kind
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
@@ -133,12 +134,14 @@ def _grow_to(
     error function has every order, and one left out would be reported as structure no
     effect explains. Not when the residual also shows a line at the signal period (aliased,
     it can pose as integer orders) holding at least ``settings.growth_veto_share`` of what
-    every view located (less is leakage), nor when the grown base leaves that share in
-    structure tied to the direction, the speed or the angle's trend (the candidates' to
-    explain; judged after the growth, since on part of a turn the missing orders leak into
-    it, issue 44); and the grown base must leave at most ``settings.growth_left_max`` of what
-    every view located (a line in Hz, a step or a drift that only leaks into high orders stays
-    the candidates'; a strong order's leakage into lines off the integers goes with it).
+    every view located and staying significant beside the orders the growth would add (or
+    they not beside it: :func:`._growth_line.growth_beside_line`), nor when the grown base
+    leaves that share in structure tied to the direction, the speed or the angle's trend
+    (the candidates' to explain; judged after the growth, since on part of a turn the
+    missing orders leak into it, issue 44); and the grown base must leave at most
+    ``settings.growth_left_max`` of what every view located (a line in Hz, a step or a drift
+    that only leaks into high orders stays the candidates'; a strong order's leakage into
+    lines off the integers goes with it).
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
     held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
     when it raises the held-out chi-square; on part of a turn (``Prepared.part_turn_span``:
@@ -156,8 +159,7 @@ def _grow_to(
     p0 = sum(max(f.power - f.dof, 0.0) for f in findings)
     veto = prep.settings.growth_veto_share * p0
     pv = sum(max(f.power - f.dof, 0.0) for f in findings if f.view == "line_phase")
-    if pv - min(_phase_at_orders(findings, L), pv) > max(veto, 0.0):
-        return None
+    line = pv - min(_phase_at_orders(findings, L), pv) > max(veto, 0.0)
     found = [
         round(f.where["orders"][0])
         for f in findings
@@ -168,6 +170,8 @@ def _grow_to(
         return None
     M = int(max(found))
     if past is not None and M <= past:
+        return None
+    if line and not growth_beside_line(prep, fitter.residual(fit.terms), order, M, L, base_info):
         return None
     lowered = (base_info.get("order_choice") or {}).get("lowered", False)
     # (an order the held-out choice lowered, or one past the budget, grows only where
