@@ -14,7 +14,7 @@ from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
-from ._order_step_bins import order_step_bins
+from ._order_step_bins import base_columns, order_step_bins, order_step_width
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
 from ._vibration_doubt import (
     NO_DOUBT,
@@ -552,7 +552,8 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     the disk error as every head sees it: ``sin, cos (theta - alpha_k)``), and the sums a
     step in them needs: ``X^T r`` (rows, 2), ``X^T X`` (rows, 2, 2), ``X^T B`` (rows, 2, P)
     and ``B^T B``, ``B^T r`` with ``B`` the base columns a step must be told from (one
-    constant per run and head, and order 1 over the whole record)."""
+    constant per run and head, then order 1 over the whole record; on part of a turn the
+    base's own columns, :func:`._order_step_bins.order_step_width`)."""
     C, R = prep.n_channels, prep.ctx.n_runs
     th = np.asarray(prep.rows.take("theta", idx), float)
     d = th[:, None] - np.asarray(prep.consts["alpha"], float)[None, :]
@@ -561,7 +562,7 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     run = prep.run[idx]
     for k in range(C):
         B[np.arange(idx.size), k, run * C + k] = 1.0
-    B[:, :, R * C :] = X
+    B[:, :, R * C :] = X if P == R * C + 2 else base_columns(prep, d, run)
     if prep.kd.project:  # without theta_ref the head mean is projected out (data and terms)
         X = X - X.mean(1, keepdims=True)
         B = B - B.mean(1, keepdims=True)
@@ -594,7 +595,9 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     """A change at one instant of the disk's order-1 error (the disk moved on its hub): the
     step ``H(tau - t_s)`` times the eccentricity columns every head sees, ``sin, cos(theta -
     alpha_k)`` (so one displacement, phase shifted by the head angle), with the base model's
-    constant order 1 and run constants projected out, scanned over the change time on the
+    constant order 1 and run constants projected out (on part of a turn all the base's own
+    columns: the step's gain with the base refitted jointly, ``order_step_width``), scanned
+    over the change time on the
     global time axis (runs end to end). Its block means average out over each turn, so the
     ``time`` view does not see it; a line fitted to it is a detuned order 1. Chi-square with
     2 dof at the best change point, Bonferroni over the change points scanned."""
@@ -608,7 +611,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         s.order_step_revolutions_min
     ):
         return []
-    P = R * C + 2
+    P = R * C + order_step_width(prep)
     nb = int(min(ORDER_STEP_BINS, kidx.size // 8))
     # per bin of kept rows (time order); the geometry kept across scans (issue 43)
     a, G, XB, BB, Br, edges = order_step_bins(prep, rw, kidx, P, nb, _order_step_sums)
