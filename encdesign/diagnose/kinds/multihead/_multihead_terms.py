@@ -573,15 +573,27 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     return X, np.einsum("nck,nc->nk", X, r), Xt @ X, Xt @ B, Bf.T @ Bf, Bf.T @ r.ravel()
 
 
-def _step_gain(Sa, SG, SXB, BBi, Br):
+def _step_kept(SG, SXB, BBi):
+    """The least share of a step's (2-column) whitened norm squared that the base columns
+    leave, over its directions: ``1 - rho^2`` with ``rho`` the step's largest canonical
+    correlation with the base (the smaller root of ``det(Gp - l SG) = 0``, ``Gp`` its Gram
+    after the base columns are projected out; 0 where ``SG`` is singular)."""
+    Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
+    dB = SG[..., 0, 0] * SG[..., 1, 1] - SG[..., 0, 1] * SG[..., 1, 0]
+    lam = np.linalg.eigvals(np.linalg.pinv(SG) @ Gp).real.min(-1)
+    return np.where(dB > 0, np.clip(lam, 0.0, 1.0), 0.0)
+
+
+def _step_gain(Sa, SG, SXB, BBi, Br, kept_min: float = 0.0):
     """Whitened chi-square (2 dof) a step in the eccentricity columns takes out, given the
     suffix sums from the step on (arrays over candidate change points), the base columns
-    projected out."""
+    projected out; 0 where the base leaves less than ``kept_min`` of the step's norm
+    squared in some direction (:func:`_step_kept`: such a change point is not testable)."""
     g = Sa - SXB @ (BBi @ Br)
     Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
     det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
     tr = Gp[..., 0, 0] + Gp[..., 1, 1]
-    ok = det > 1e-9 * np.maximum(tr, 1e-300) ** 2
+    ok = (det > 1e-9 * np.maximum(tr, 1e-300) ** 2) & (_step_kept(SG, SXB, BBi) >= kept_min)
     det = np.where(ok, det, 1.0)
     q = (
         g[..., 0] ** 2 * Gp[..., 1, 1]
@@ -626,9 +638,16 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     e = np.arange(1, nb)
     margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
+    # a change point whose step the base columns nearly span is not testable: what the base
+    # leaves of it is amplified (rule collinear_refuse, the selection's canonical
+    # correlation with the base; issue 44 C, session 22: short_arcs clean 6334/0, two runs
+    # of a third of a turn, a false change 0.18 s into run 1 where the base's run zero and
+    # disk orders nearly spanned the step)
+    kept_min = 1.0 - s.collinear_refuse**2
+    e = e[_step_kept(SG[e], SXB[e], BBi) >= kept_min]
     if e.size == 0:
         return []
-    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br)
+    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br, kept_min)
     j = int(np.argmax(gain))
     chi = float(gain[j])
     n_tests = int(e.size)
@@ -645,8 +664,9 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     ra = base_a + np.cumsum(ai[::-1], 0)[::-1]
     rG = base_G + np.cumsum(Gi[::-1], 0)[::-1]
     rXB = base_XB + np.cumsum(XBi[::-1], 0)[::-1]
-    gi = _step_gain(ra, rG, rXB, BBi, Br)
+    gi = _step_gain(ra, rG, rXB, BBi, Br, kept_min)
     ok = (np.arange(lo, hi) >= margin) & (kidx.size - np.arange(lo, hi) >= margin)
+    ok &= _step_kept(rG, rXB, BBi) >= kept_min
     gi = np.where(ok, gi, -1.0)
     i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
     located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], gain)
