@@ -109,6 +109,30 @@ def test_column_chi2_equals_a_refit_per_column(ref):
     assert int(np.argmin(got)) == int(np.argmin(want))
 
 
+@pytest.mark.parametrize("ref", [True, False])
+def test_column_chi2_of_a_term_of_two_sizes_equals_a_refit(ref):
+    """A located time's profile with the term's own sizes refitted at each time (issue 44
+    C, session 22): an eccentricity shift at held times, its two sizes free, beside the
+    held base; :meth:`Fitter.column_chi2` equals the fit of each model."""
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.kinds.multihead._multihead_terms import ECCENTRICITY_SHIFT
+
+    prep, _, held = _bench_base(ref)
+    fitter = Fitter(prep)
+    tau = np.asarray(prep.rows["tau"], float)
+    times = np.linspace(tau.min(), tau.max(), 9)[1:-1]
+    terms = []
+    for t in times:
+        tm = make_term(ECCENTRICITY_SHIFT, prep, {"shift_time_s": t})
+        tm.free["shift_time_s"][...] = False
+        terms.append(tm)
+    assert all(tm.n_free() == 2 for tm in terms)
+    got = fitter.column_chi2(held, terms)
+    want = np.array([fitter.fit([*held, tm]).chi2 for tm in terms])
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    assert np.ptp(want) > 1e-6 * want.max()
+
+
 def _vibration_record(seed: int):
     """Three heads, two runs of 500 rows at 200 Hz, disk errors of orders 1-4 and a 23 Hz
     vibration at 4x the 0.5 urad noise (a nonlinear candidate: its fit takes several

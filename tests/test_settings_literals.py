@@ -149,6 +149,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_run_align.py", 2): COUNT + " (two runs)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
+    ("kinds/multihead/_order_step_bins.py", 2): DOF + " (order 1's sin and cos beside the run "
+    "constants: the view's base without the base's own columns)",
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",

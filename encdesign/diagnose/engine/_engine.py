@@ -62,6 +62,7 @@ from ._fit import FitResult, Fitter, make_term
 from ._goodness import goodness_of_fit
 from ._growth_line import growth_beside_line
 from ._kind import AbstractKind as Kind
+from ._located import value_in_interval
 from ._noise import noise_spectral
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
@@ -461,6 +462,8 @@ def _effect_json(prep: Prepared, sel: Selection, s, fitter: Fitter | None = None
             lt = run_param_interval(fitter, prep, final.terms, idx, q.name)
             keys = ("t_s", "run", "interval_s", "interval_runs", "level", "clock", "convention")
         params[q.name].update({k: lt[k] for k in keys})
+        if q.global_time:  # the value inside its own interval
+            params[q.name] = value_in_interval(params[q.name], lt)
     out = {
         "name": s.name,
         "params": params,
@@ -747,6 +750,7 @@ def run_engine(
                 )
                 scan = scan_order_of(limit, order, prep.settings)
                 prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
+                prep.base_terms = tuple(base_fit.terms)
             pg.stage("base fitted")
             with stage("select"):
                 sel = select(

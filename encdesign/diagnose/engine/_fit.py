@@ -426,28 +426,32 @@ class Fitter:
     def column_chi2(self, held: Sequence[Term], extra: Sequence[Term]) -> np.ndarray:
         """``fit([*held, e]).chi2`` for each term ``e`` of ``extra``, without the fits.
 
-        ``held`` must be linear in its free parameters and each ``e`` have one free (linear)
-        scalar: the fit is then linear least squares, and adding one column ``j`` to the
-        columns ``B`` of ``held`` lowers chi-square by ``(j.r - j.B u)^2 / (j.j - j.B w)``
-        (``u = A^+ B.r``, ``w = A^+ B.j``, ``A = B.B`` on the columns the data determine),
-        ``r`` the residual of ``held`` at its values. The Gram matrix of ``held`` is the
-        cached one; each extra column costs one product with ``B``. A column the others
-        span (relative ``j.P.j`` under ``1e-10``, as the fit's pivoted Cholesky) lowers
-        nothing."""
+        ``held`` must be linear in its free parameters and each ``e`` have free (linear)
+        scalars only: the fit is then linear least squares, and adding one column ``j`` to
+        the columns ``B`` of ``held`` lowers chi-square by ``(j.r - j.B u)^2 / (j.j - j.B
+        w)`` (``u = A^+ B.r``, ``w = A^+ B.j``, ``A = B.B`` on the columns the data
+        determine), ``r`` the residual of ``held`` at its values; a term of ``k`` free
+        scalars (columns ``J``) by ``n^T G^+ n``, ``n = J.r - J.B u``, ``G = J.J - J.B W``
+        (issue 44 C, session 22: a located time's profile with the term's own sizes refitted
+        jointly at each time). The Gram matrix of ``held`` is the cached one; each extra
+        column costs one product with ``B``. A column the others span (relative ``j.P.j``
+        under ``1e-10``, as the fit's pivoted Cholesky) lowers nothing."""
         prep = self.prep
         held = list(held)
         if not all(linear_only(t) for t in held) or any(
-            e.n_free() != 1 or not linear_only(e) for e in extra
+            e.n_free() < 1 or not linear_only(e) for e in extra
         ):
-            raise ValueError("column_chi2: held terms linear, one free linear scalar each")
+            raise ValueError("column_chi2: held terms linear, free linear scalars in each extra")
         K = prep.settings.n_folds
         A, gb, c, _, _ = self.stats(held)  # caches the held Gram and processed Jacobians
         At, gt = A.sum(0), gb.sum(0)
         sc = free_scales(held)
         sw = np.sqrt(self.w_ch)
-        E = len(extra)
+        ks = [e.n_free() for e in extra]
+        at = np.concatenate([[0], np.cumsum(ks)]).astype(int)
+        E = int(at[-1])
         p = At.shape[0]
-        shapes = [(p, E), (E,), (E,)]
+        shapes = [(p, E), (E, E), (E,)]
         groups = row_groups(self.n_chunks())  # split over processes as in stats
         parts = []
         for grp in my_groups(len(groups)):
@@ -471,19 +475,30 @@ class Fitter:
                     Je = self._gather(e, J, b - a, prep.n_channels)
                     if prep.kd.project:
                         Je = Je - Je.mean(1, keepdims=True)
-                    cols[:, i] = (Je[:, :, 0] * sw[None, :])[order][lo:hi].ravel()
+                    Jw = (Je * sw[None, :, None])[order][lo:hi]
+                    cols[:, at[i] : at[i + 1]] = Jw.reshape(rw.size, ks[i])
                 Bj += S.T @ cols
-                jj += np.einsum("ij,ij->j", cols, cols)
+                for i in range(len(extra)):  # each term's own block (no cross terms needed)
+                    sl = slice(at[i], at[i + 1])
+                    jj[sl, sl] += cols[:, sl].T @ cols[:, sl]
                 jr += cols.T @ rw
-            parts.append(np.concatenate([Bj.ravel(), jj, jr]))
-        total = reduce_groups(parts, len(groups), p * E + 2 * E)
+            parts.append(np.concatenate([Bj.ravel(), jj.ravel(), jr]))
+        total = reduce_groups(parts, len(groups), p * E + E * E + E)
         Bj, jj, jr = unflatten(total, shapes)
         uw = solve_determined_many(At, np.column_stack([gt, Bj]))
         u, w = uw[:, 0], uw[:, 1:]
-        jpj = jj - np.einsum("pe,pe->e", Bj, w)
+        dj = np.diag(jj).copy()
+        jpj = dj - np.einsum("pe,pe->e", Bj, w)
         num = jr - Bj.T @ u
-        ok = jpj > 1e-10 * np.maximum(jj, 1e-300)
-        gain = np.where(ok, num * num / np.where(ok, jpj, 1.0), 0.0)
+        ok = jpj > 1e-10 * np.maximum(dj, 1e-300)
+        gain = np.where(ok, num * num / np.where(ok, jpj, 1.0), 0.0)[at[:-1]]
+        for i in np.flatnonzero(np.asarray(ks) > 1):  # several columns: n^T G^+ n
+            sl = slice(at[i], at[i + 1])
+            G = jj[sl, sl] - Bj[:, sl].T @ w[:, sl]
+            ev, V = np.linalg.eigh(0.5 * (G + G.T))
+            good = ev > 1e-10 * max(float(np.max(np.diag(jj[sl, sl]))), 1e-300)
+            z = V[:, good].T @ num[sl]
+            gain[i] = float(np.sum(z * z / ev[good]))
         return float(c.sum()) - float(gt @ u) - gain
 
     def fit(self, terms: list[Term], max_steps: int = 30) -> FitResult:

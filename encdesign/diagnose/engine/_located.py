@@ -144,3 +144,26 @@ def change_row(x: np.ndarray, parts: list[np.ndarray], jb: int) -> tuple[int, np
     stat = cs**2 * n / (i * (n - i))
     lo, hi = max(lo, 1), min(max(hi, lo + 2), n)
     return int(lo + np.argmax(stat[lo - 1 : hi - 1])), stat
+
+
+def value_in_interval(entry: dict, lt: dict) -> dict:
+    """A time parameter's JSON ``entry`` (``value`` on the recording's ``t``, ``run``) given
+    its profile ``lt`` (:func:`._steps.time_param_interval`): where the fitted value lies
+    outside its own interval, the fit stopped on a step of chi-square away from where the
+    data put the change (the profile's best is more than ``c`` lower; the time enters the
+    model through a step between rows, so its gradient sees only the step's width): the
+    value becomes the profile's best ``t_s`` and ``run``, the fit's kept as
+    ``fitted_value`` and ``fitted_run`` (issue 44 C, session 22: generated records with a
+    shift on part of a turn, ``tests/test_order_step_part_turn.py``)."""
+    v = entry.get("value")
+    if np.ndim(v) != 0 or "run" not in entry:
+        return entry
+    if in_interval(lt, float(v), int(entry["run"])):
+        return entry
+    return {
+        **entry,
+        "value": float(lt["t_s"]),
+        "run": int(lt["run"]),
+        "fitted_value": float(v),
+        "fitted_run": int(entry["run"]),
+    }

@@ -288,6 +288,9 @@ class Prepared:
     # the base model's Jacobian on every row (n, C, p), projected like the data, not whitened;
     # set after the base fit on a record small enough (``_views_modulated.base_jacobian``)
     base_jacobian: np.ndarray | None = None
+    # the base model's terms as the base fit left them (the views that project the base's own
+    # columns out read them: ``kinds/multihead/_order_step_bins``)
+    base_terms: tuple | None = None
     # the widest shaft-angle span (rad) of a run's kept rows where every run covers less than
     # one turn, else None (``_prepare.part_turn_span``; computed once where the record is
     # prepared)

@@ -69,7 +69,8 @@ class AbstractSelectionSettings(eqx.Module):
     collinear_refuse: float = eqx.field(default=0.995, static=True)
     """Rule ``collinear_refuse``: canonical correlation with the base model above which a
     candidate is ill-conditioned and refused; its columns above it are held at zero first.
-    From the first engine (96be348)."""
+    From the first engine (96be348). The ``order_step`` view does not test a change point
+    whose step it is above with the base columns it projects out (issue 44 C, session 22)."""
 
     collinear_note: float = eqx.field(default=0.95, static=True)
     """Above this canonical correlation with the base model a named effect carries a note

@@ -328,24 +328,35 @@ def time_param_interval(
     """The ``located_time`` of a parameter ``name`` of ``terms[idx]`` that is a time on the
     end-to-end axis (``Param.global_time``): the profile of chi-square over that time, at
     the midpoints between kept rows, the other terms' linear parameters refitted and the
-    term itself scaled (its shape at the fitted values: one free column per candidate
-    time, :meth:`Fitter.column_chi2`); the interval at ``FinderSettings.change_time_level``
-    (:mod:`._located`)."""
+    term's own linear parameters refitted jointly at each time (its other nonlinear ones
+    held at the fitted values: :meth:`Fitter.column_chi2`; issue 44 C, session 22: with the
+    shape held at the fitted time, a profile of a shift on part of a turn missed a change
+    in the pause between runs); a term with no free linear parameter is scaled (its shape
+    at the fitted values, one free column). The interval at
+    ``FinderSettings.change_time_level`` (:mod:`._located`)."""
     term = terms[idx]
     rows = np.flatnonzero(prep.keep)
     tau = np.asarray(prep.rows.take("tau", rows), float)
     mid = np.concatenate([[tau[0]], 0.5 * (tau[1:] + tau[:-1])])  # change before row i
     held = frozen([t for i, t in enumerate(terms) if i != idx])
+    own = [q for q in term.cand.params if q.linear and term.free[q.name].any()]
     sc = _scaled(term.cand)
     vals = {k: np.asarray(v, float) for k, v in term.values.items()}
 
-    def chi2_of(ix: np.ndarray) -> np.ndarray:
-        cols = []
-        for i in ix:
-            tm = make_term(sc, prep, {**vals, name: mid[i], "size": 1.0})
+    def at_time(t: float):
+        if not own:  # scaled
+            tm = make_term(sc, prep, {**vals, name: t, "size": 1.0})
             tm.values["size"][...] = 0.0
-            cols.append(tm)
-        return fitter.column_chi2(held, cols)
+            return tm
+        tm = make_term(term.cand, prep, {**vals, name: t})
+        for q in term.cand.params:  # its own sizes free, the rest held
+            tm.free[q.name] = term.free[q.name].copy() if q in own else tm.free[q.name] & False
+            if q in own:
+                tm.values[q.name][...] = 0.0
+        return tm
+
+    def chi2_of(ix: np.ndarray) -> np.ndarray:
+        return fitter.column_chi2(held, [at_time(mid[i]) for i in ix])
 
     best = int(np.clip(np.searchsorted(tau, float(np.ravel(vals[name])[0])), 1, rows.size - 1))
     c = change_chi2(prep.settings.change_time_level)

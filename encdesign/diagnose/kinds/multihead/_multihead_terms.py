@@ -14,7 +14,7 @@ from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
-from ._order_step_bins import order_step_bins
+from ._order_step_bins import base_columns, order_step_bins, order_step_width
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
 from ._vibration_doubt import (
     NO_DOUBT,
@@ -552,7 +552,8 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     the disk error as every head sees it: ``sin, cos (theta - alpha_k)``), and the sums a
     step in them needs: ``X^T r`` (rows, 2), ``X^T X`` (rows, 2, 2), ``X^T B`` (rows, 2, P)
     and ``B^T B``, ``B^T r`` with ``B`` the base columns a step must be told from (one
-    constant per run and head, and order 1 over the whole record)."""
+    constant per run and head, then order 1 over the whole record; on part of a turn the
+    base's own columns, :func:`._order_step_bins.order_step_width`)."""
     C, R = prep.n_channels, prep.ctx.n_runs
     th = np.asarray(prep.rows.take("theta", idx), float)
     d = th[:, None] - np.asarray(prep.consts["alpha"], float)[None, :]
@@ -561,7 +562,7 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     run = prep.run[idx]
     for k in range(C):
         B[np.arange(idx.size), k, run * C + k] = 1.0
-    B[:, :, R * C :] = X
+    B[:, :, R * C :] = X if P == R * C + 2 else base_columns(prep, d, run)
     if prep.kd.project:  # without theta_ref the head mean is projected out (data and terms)
         X = X - X.mean(1, keepdims=True)
         B = B - B.mean(1, keepdims=True)
@@ -572,15 +573,27 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     return X, np.einsum("nck,nc->nk", X, r), Xt @ X, Xt @ B, Bf.T @ Bf, Bf.T @ r.ravel()
 
 
-def _step_gain(Sa, SG, SXB, BBi, Br):
+def _step_kept(SG, SXB, BBi):
+    """The least share of a step's (2-column) whitened norm squared that the base columns
+    leave, over its directions: ``1 - rho^2`` with ``rho`` the step's largest canonical
+    correlation with the base (the smaller root of ``det(Gp - l SG) = 0``, ``Gp`` its Gram
+    after the base columns are projected out; 0 where ``SG`` is singular)."""
+    Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
+    dB = SG[..., 0, 0] * SG[..., 1, 1] - SG[..., 0, 1] * SG[..., 1, 0]
+    lam = np.linalg.eigvals(np.linalg.pinv(SG) @ Gp).real.min(-1)
+    return np.where(dB > 0, np.clip(lam, 0.0, 1.0), 0.0)
+
+
+def _step_gain(Sa, SG, SXB, BBi, Br, kept_min: float = 0.0):
     """Whitened chi-square (2 dof) a step in the eccentricity columns takes out, given the
     suffix sums from the step on (arrays over candidate change points), the base columns
-    projected out."""
+    projected out; 0 where the base leaves less than ``kept_min`` of the step's norm
+    squared in some direction (:func:`_step_kept`: such a change point is not testable)."""
     g = Sa - SXB @ (BBi @ Br)
     Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
     det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
     tr = Gp[..., 0, 0] + Gp[..., 1, 1]
-    ok = det > 1e-9 * np.maximum(tr, 1e-300) ** 2
+    ok = (det > 1e-9 * np.maximum(tr, 1e-300) ** 2) & (_step_kept(SG, SXB, BBi) >= kept_min)
     det = np.where(ok, det, 1.0)
     q = (
         g[..., 0] ** 2 * Gp[..., 1, 1]
@@ -594,7 +607,9 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     """A change at one instant of the disk's order-1 error (the disk moved on its hub): the
     step ``H(tau - t_s)`` times the eccentricity columns every head sees, ``sin, cos(theta -
     alpha_k)`` (so one displacement, phase shifted by the head angle), with the base model's
-    constant order 1 and run constants projected out, scanned over the change time on the
+    constant order 1 and run constants projected out (on part of a turn all the base's own
+    columns: the step's gain with the base refitted jointly, ``order_step_width``), scanned
+    over the change time on the
     global time axis (runs end to end). Its block means average out over each turn, so the
     ``time`` view does not see it; a line fitted to it is a detuned order 1. Chi-square with
     2 dof at the best change point, Bonferroni over the change points scanned."""
@@ -608,7 +623,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         s.order_step_revolutions_min
     ):
         return []
-    P = R * C + 2
+    P = R * C + order_step_width(prep)
     nb = int(min(ORDER_STEP_BINS, kidx.size // 8))
     # per bin of kept rows (time order); the geometry kept across scans (issue 43)
     a, G, XB, BB, Br, edges = order_step_bins(prep, rw, kidx, P, nb, _order_step_sums)
@@ -623,9 +638,16 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     e = np.arange(1, nb)
     margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
+    # a change point whose step the base columns nearly span is not testable: what the base
+    # leaves of it is amplified (rule collinear_refuse, the selection's canonical
+    # correlation with the base; issue 44 C, session 22: short_arcs clean 6334/0, two runs
+    # of a third of a turn, a false change 0.18 s into run 1 where the base's run zero and
+    # disk orders nearly spanned the step)
+    kept_min = 1.0 - s.collinear_refuse**2
+    e = e[_step_kept(SG[e], SXB[e], BBi) >= kept_min]
     if e.size == 0:
         return []
-    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br)
+    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br, kept_min)
     j = int(np.argmax(gain))
     chi = float(gain[j])
     n_tests = int(e.size)
@@ -642,8 +664,9 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     ra = base_a + np.cumsum(ai[::-1], 0)[::-1]
     rG = base_G + np.cumsum(Gi[::-1], 0)[::-1]
     rXB = base_XB + np.cumsum(XBi[::-1], 0)[::-1]
-    gi = _step_gain(ra, rG, rXB, BBi, Br)
+    gi = _step_gain(ra, rG, rXB, BBi, Br, kept_min)
     ok = (np.arange(lo, hi) >= margin) & (kidx.size - np.arange(lo, hi) >= margin)
+    ok &= _step_kept(rG, rXB, BBi) >= kept_min
     gi = np.where(ok, gi, -1.0)
     i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
     located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], gain)

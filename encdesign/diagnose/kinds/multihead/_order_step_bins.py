@@ -21,6 +21,55 @@ BIN_ROWS = 1 << 14
 """Kept rows per block of the pass (bounded temporaries)."""
 
 
+def _layout(prep) -> tuple[int, np.ndarray | None]:
+    """``(M, ab)``: the disk orders ``1..M`` the ``order_step`` view projects out beside the
+    run constants, and the base's fitted disk coefficients ``ab`` (2, M) (cos, sin) where
+    the runs' angle zeros are fitted (their columns, the error's slope in each run, are
+    projected out too), else ``None``. See :func:`order_step_width`."""
+    base = next((t for t in prep.base_terms or () if t.cand.name == "base"), None)
+    if prep.part_turn_span is None or base is None or "fourier_cos_rad" not in base.values:
+        return 1, None
+    a = np.ravel(np.asarray(base.values["fourier_cos_rad"], float))
+    b = np.ravel(np.asarray(base.values["fourier_sin_rad"], float))
+    off = "run_angle_offset_rad"
+    ab = np.stack([a, b]) if prep.ctx.n_runs > 1 and off in base.values else None
+    return max(1, int(a.size)), ab
+
+
+def order_step_width(prep) -> int:
+    """Columns beside the run constants that the ``order_step`` view projects out (issue
+    44, session 22). Where every run covers less than one turn (``Prepared.part_turn_span``)
+    the base's own: its disk orders ``1..M`` and, with several runs, each later run's angle
+    zero (the disk error's slope on that run's rows, at the base's fitted coefficients);
+    else order 1 alone. On part of a turn those columns are far from orthogonal to a step of
+    order 1 in time: fitted before the scan they take part of the step and move its best
+    change point (training ``short_arcs.py --set effects --seed 6215`` record 1: a shift in
+    the pause between runs located 0.32 s into the later run; a run's angle zero takes a
+    step at the run's start, and the change was put some rows into the run); projected
+    out, the scan's gain is the step's chi-square with the base refitted jointly. Over
+    whole turns orders 2..M are orthogonal to it but for the turn the step falls in, and
+    their sums would cost rows x heads x M^2."""
+    M, ab = _layout(prep)
+    return 2 * M + (prep.ctx.n_runs - 1 if ab is not None else 0)
+
+
+def base_columns(prep, d: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """The columns :func:`order_step_width` counts (rows, C, E) at the head arguments ``d =
+    theta - alpha_k`` (rows, C) of rows of runs ``run``: ``sin, cos (m d)`` for ``m = 1..M``,
+    then per run after the first the slope ``sum_m m (b_m cos m d - a_m sin m d)`` on its
+    rows (the base's run angle zero, ``_multihead._base_candidate``)."""
+    M, ab = _layout(prep)
+    m = np.arange(1, M + 1, dtype=float)
+    md = d[:, :, None] * m
+    sn, cs = np.sin(md), np.cos(md)
+    out = [np.stack([sn, cs], 3).reshape(d.shape[0], d.shape[1], 2 * M)]
+    if ab is not None:
+        slope = np.einsum("ncm,m->nc", cs, m * ab[1]) - np.einsum("ncm,m->nc", sn, m * ab[0])
+        on = run[:, None] == np.arange(1, prep.ctx.n_runs)[None, :]  # (rows, R - 1)
+        out.append(slope[:, :, None] * on[:, None, :])
+    return np.concatenate(out, 2)
+
+
 def _row_sums(prep, idx: np.ndarray, r: np.ndarray) -> np.ndarray:
     """``X^T r`` per row (rows, 2) of the whitened (and, without a reference, projected over
     the heads) eccentricity columns ``X = sin, cos (theta - alpha_k)`` and the whitened
@@ -83,6 +132,9 @@ def order_step_bins(prep, rw, kidx: np.ndarray, P: int, nb: int, sums_of) -> tup
             bi = pos_bin[lo:hi]
             st = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
             a[bi[st]] += np.add.reduceat(ai, st, axis=0)
+            if P > R * C + 2:  # the base's own columns (part of a turn): as they are built
+                Br += sums_of(prep, rw, idx, P)[5]
+                continue
             # the run and head constants: B = (delta_ck - 1/C [projected]) w_c
             v = r * w[None, :]
             if prep.kd.project:

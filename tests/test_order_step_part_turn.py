@@ -1,0 +1,204 @@
+"""A change of the disk's order 1 on part of a turn located where the data put it (issue 44 C,
+session 22): in the pause between two runs, at the start of a run, or inside one, on the
+recording's own ``t`` with an interval that holds the truth (``order_step`` view with the
+base's disk orders projected out, ``kinds/multihead/_order_step_bins.order_step_orders``).
+
+Seeds 7620-7639 are this work's training seeds (``benchmarks/SEEDS.md``)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from encdesign import Recording
+from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose.engine._located import in_interval, value_in_interval
+
+WHERE = ("pause", "run_start", "inside")
+
+
+def shift_record(seed: int) -> tuple[Recording, dict]:
+    """2-3 runs of part of a turn each (0.3-0.9 turns, forward or forward and back, each
+    from its own angle), one clock with pauses of 1-3 s, 2-4 heads without a reference,
+    300-900 rows per run at 30-1000 Hz, disk orders 1..M (M 3-16) of 3-300x the noise, and
+    an eccentricity shift of 10-15x the noise at a time drawn in a pause between runs, at
+    the first row of a run after the first, or inside a run (``WHERE[seed % 3]``). Returns
+    the record and the truth (``change``, ``t_s``, ``run``: in a pause the earlier run's)."""
+    rng = np.random.default_rng([seed, 44, 22])
+    where = WHERE[seed % 3]
+    H = int(rng.integers(2, 5))
+    R = int(rng.integers(2, 4))
+    nr = int(rng.integers(300, 901))
+    rate = float(10 ** rng.uniform(1.5, 3.0))
+    noise = float(10 ** rng.uniform(-7.3, -5.5))
+    turns = float(rng.uniform(0.3, 0.9))
+    both = bool(rng.random() < 0.4)
+    pauses = rng.uniform(1.0, 3.0, R - 1)
+    ts, ths, runs, t0 = [], [], [], 0.0
+    for r in range(R):
+        u = np.arange(nr) / rate
+        if both:
+            half = nr // 2
+            th = turns * 2 * np.pi * np.where(np.arange(nr) < half, u / u[half], 2 - u / u[half])
+        else:
+            th = turns * 2 * np.pi * u / u[-1]
+        ths.append(th + rng.uniform(0, 2 * np.pi))
+        ts.append(t0 + u)
+        runs.append(np.full(nr, r))
+        t0 = t0 + u[-1] + (pauses[r] if r < R - 1 else 0.0)
+    t, th, run = np.concatenate(ts), np.concatenate(ths), np.concatenate(runs)
+    j = int(rng.integers(0, R - 1))  # the pause after run j, or the start of run j + 1
+    if where == "pause":
+        t_s = float(ts[j][-1] + rng.uniform(0.1, 0.9) * pauses[j])
+        truth_run = j
+    elif where == "run_start":
+        t_s = float(ts[j + 1][0])
+        truth_run = j + 1
+    else:
+        k = int(rng.integers(0, R))
+        t_s = float(ts[k][int(rng.uniform(0.3, 0.7) * nr)])
+        truth_run = k
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
+    M = int(rng.integers(3, 17))
+    err = np.zeros((t.size, H))
+    amp0 = noise * 10 ** rng.uniform(0.5, 2.5)
+    for m in range(1, M + 1):
+        a = amp0 / m ** rng.uniform(0.5, 1.5)
+        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    A = float(rng.uniform(10, 15)) * noise
+    err += (t >= t_s)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
+    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, (R, H))[run]
+    cols = {"t": t, "run": run}
+    for k in range(H):
+        cols[f"h{k}"] = y[:, k]
+    enc = {
+        "head_angles_deg": [float(np.degrees(a)) for a in alpha],
+        "optical_radius_m": 0.03,
+        "grating_lines": int(rng.choice([1000, 4096, 36000])),
+    }
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    truth = dict(change="ecc_shift", t_s=t_s, run=truth_run, where=where)
+    desc = dict(H=H, R=R, nr=nr, turns=round(turns, 2), both=both, M=M, noise=noise)
+    return Recording("multihead", meta, cols), {**truth, "desc": desc}
+
+
+SEEDS = list(range(7620, 7640))
+
+
+def _first_order_step(doc: dict) -> dict | None:
+    """The located time of the strongest ``order_step`` finding of the base residual."""
+    for f in doc.get("findings_before") or []:
+        if f.get("view") == "order_step" and f.get("located_time"):
+            return f["located_time"]
+    return None
+
+
+def _two_heads(seed: int) -> bool:
+    return shift_record(seed)[1]["desc"]["H"] == 2
+
+
+OPEN = pytest.mark.xfail(
+    reason="two heads without a reference on part of a turn: open (issue 44 C)", strict=False
+)
+
+
+UNTESTABLE = pytest.mark.xfail(
+    reason="7625 (3 runs of 0.34 turn, the shift inside run 0): since the order_step view "
+    "leaves untested the change points whose step the base spans above collinear_refuse "
+    "(the 6334/0 fix), it is located 0.12 s after the truth with a narrow interval: a drop, "
+    "open (issue 44 C)",
+    strict=False,
+)
+
+
+def _marks(seed: int):
+    return OPEN if _two_heads(seed) else UNTESTABLE if seed == 7625 else ()
+
+
+@pytest.mark.parametrize("seed", [pytest.param(s, marks=_marks(s)) for s in SEEDS])
+def test_the_order_change_is_located_where_the_data_put_it(seed):
+    """The ``order_step`` view's located change holds the truth in its interval on the
+    recording's own ``t``. Main put it outside on 7620, 7622, 7623, 7629 and 7630 (7623: a
+    shift in the pause put 0.8 s into run 0; 7629: one in the pause put 1.7 s before run 0's
+    end): the base's disk orders and run zeros, fitted before the scan, took part of the
+    step. Two heads without a reference (one difference channel; 7620, 7622, 7630) are
+    still open: their change is located some rows away with a narrow interval."""
+    rec, truth = shift_record(seed)
+    doc = diagnose(rec).doc
+    lt = _first_order_step(doc)
+    if lt is None:  # not located (nothing to check here; detection is not this test's)
+        return
+    assert lt["clock"] == "the recording's t", lt
+    assert in_interval(lt, truth["t_s"], truth["run"]), (truth, lt, doc["verdict"])
+
+
+def test_a_shift_in_the_pause_between_runs_is_named_alone_and_located_in_the_pause():
+    """Training ``short_arcs.py --set effects --seed 6215`` record 1 (3 heads, two runs of
+    0.39 turn, the shift at t = 2.21 s in the 2 s pause between them): main named
+    ``eccentricity_shift`` and ``beam_tilt_axial`` and put the shift 0.32 s into run 1, its
+    value outside its own interval. Now the shift alone, its interval the pause."""
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from short_arcs import short_record
+
+    rec, _ = short_record(np.random.default_rng([6215, 44, 1]), "eccentricity_shift")
+    doc = diagnose(rec).doc
+    assert [e["name"] for e in doc["effects"]] == ["eccentricity_shift"], doc["verdict"]
+    p = doc["effects"][0]["params"]["shift_time_s"]
+    lt = {**p, "t_s": float(p["value"])}
+    t, run = np.asarray(rec.columns["t"]), np.asarray(rec.columns["run"])
+    end0, start1 = float(t[run == 0][-1]), float(t[run == 1][0])
+    assert in_interval(lt, 2.2053, 0), lt  # the truth, in the pause
+    assert in_interval(lt, float(p["value"]), int(p["run"])), lt  # the value, in its interval
+    assert p["interval_runs"] == [0, 1], p
+    assert p["interval_s"][0] >= end0 - 0.01 and p["interval_s"][1] <= start1 + 0.01, p
+
+
+def test_a_fitted_time_outside_its_own_interval_becomes_the_profile_best():
+    """``_located.value_in_interval``: a fitted time inside its interval is kept; one
+    outside becomes the profile's best, the fit's kept beside it."""
+    lt = {"t_s": 3.0, "run": 1, "interval_s": [1.7, 3.1], "interval_runs": [0, 1]}
+    inside = {"value": 2.0, "run": 0, "se": 0.1, "unit": "s"}
+    assert value_in_interval(inside, lt) == inside
+    out = value_in_interval({"value": 4.05, "run": 1, "se": 0.1, "unit": "s"}, lt)
+    assert (out["value"], out["run"], out["fitted_value"], out["fitted_run"]) == (3.0, 1, 4.05, 1)
+    assert in_interval(lt, out["value"], out["run"])
+
+
+def test_a_step_the_base_nearly_spans_is_not_testable():
+    """``_multihead_terms._step_kept``: the share of a step's norm squared the base columns
+    leave, ``1 - rho^2``; a step the base spans to within ``collinear_refuse`` has no gain
+    (what the base leaves of it would be amplified), one orthogonal to it keeps its own."""
+    from encdesign.diagnose.engine._settings import FinderSettings
+    from encdesign.diagnose.kinds.multihead._multihead_terms import _step_gain, _step_kept
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(400, 2))
+    B = np.concatenate([X + 1e-3 * rng.normal(size=X.shape), rng.normal(size=(400, 3))], 1)
+    r = X @ [1.0, -2.0] + rng.normal(size=400)
+    SG, SXB, BBi, Br = X.T @ X, X.T @ B, np.linalg.inv(B.T @ B), B.T @ r
+    kept_min = 1.0 - FinderSettings().collinear_refuse ** 2
+    assert _step_kept(SG, SXB, BBi) < kept_min
+    assert _step_gain(X.T @ r, SG, SXB, BBi, Br, kept_min) == 0.0
+    B2 = rng.normal(size=(400, 3))
+    B2 -= X @ np.linalg.lstsq(X, B2, rcond=None)[0]  # orthogonal to the step
+    SXB2, BBi2, Br2 = X.T @ B2, np.linalg.inv(B2.T @ B2), B2.T @ r
+    assert np.isclose(_step_kept(SG, SXB2, BBi2), 1.0)
+    g = X.T @ r
+    assert np.isclose(_step_gain(g, SG, SXB2, BBi2, Br2, kept_min), g @ np.linalg.solve(SG, g))
+
+
+def test_a_clean_record_of_two_short_runs_has_no_false_order_change():
+    """Training ``short_arcs.py --set clean --seed 6334`` record 0 (2 heads, no reference,
+    two runs of 0.33 turn, disk orders to 13): with the base's own columns projected out
+    (c4a0ea7) a false ``order_step`` change 0.18 s into run 1 (log10 p = -8.4) made it
+    ``unexplained``: there the base's run zero and disk orders span the step to within
+    ``collinear_refuse``. Now not testable, and the record is ``consistent``."""
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from short_arcs import short_record
+
+    rec, _ = short_record(np.random.default_rng([6334, 44, 0]), None)
+    doc = diagnose(rec).doc
+    assert doc["verdict"] == "consistent", (doc["verdict"], doc.get("findings_before"))
