@@ -339,7 +339,7 @@ def library(
                         Term(li, name, f"cell {s}", hmap(lay, 0, M, (np.arange(S) == s) * 1.0))
                     )
                 out.append(Term(li, name, "per_cell", hmap(lay, 0, M, np.eye(S))))
-            out.append(growth_term(sums, li, name, M))
+            out.append(growth_term(sums, li, name, M, level=sds is not None))
             if "temperature" in sums.blocks:
                 out.append(Term(li, name, "temperature", hmap(lay, 2, M, one)))
             if steps[li] is not None:
