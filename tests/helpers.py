@@ -461,3 +461,25 @@ def quantized_line_record(
     enc = {"head_angles_deg": [0.0], "sensor": "resolver", "signal_periods_per_rev": periods}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, cols), q
+
+
+def concealed_sds_layout(tmp_path, seed: int, g: int, layout: dict, effect: str, **extra):
+    """Record ``g`` of seed ``seed`` in ``layout`` (the keywords of ``write_concealed_sds``):
+    key ``seed * 1000 + g``, a motor speed offset of +-(1e-5 … 1e-3) drawn from
+    ``[seed, g, 44]`` where the layout unlocks the clock (``unlocked``)."""
+    import jax
+    import numpy as np
+
+    from encdesign.simulate import write_concealed_sds
+
+    kw = dict(layout) | extra
+    rng = np.random.default_rng([seed, g, 44])
+    off = float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
+    unlocked = kw.pop("unlocked", False)
+    return write_concealed_sds(
+        tmp_path / f"r{seed}_{g}.toml",
+        key=jax.random.key(seed * 1000 + g),
+        effect=effect,
+        speed_offset=off if unlocked else 0.0,
+        **kw,
+    )

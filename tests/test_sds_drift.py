@@ -14,12 +14,10 @@ and clean records and records of other effects are not called a drift (controls,
 
 from __future__ import annotations
 
-import jax
-import numpy as np
 import pytest
+from helpers import concealed_sds_layout
 
 from encdesign.diagnose import diagnose
-from encdesign.simulate import write_concealed_sds
 
 # (geometry, first run of the ramp)
 ONSETS = (
@@ -31,20 +29,8 @@ ONSETS = (
 
 
 def _record(tmp_path, seed: int, g: int, geo: dict, effect="thermal_drift", **kw):
-    """Record ``g`` of training seed ``seed`` in layout ``geo``: key ``seed * 1000 + g``, a
-    motor speed offset of +-(1e-5 … 1e-3) drawn from ``[seed, g, 44]`` where the layout
-    unlocks the clock."""
-    kw = dict(geo) | kw
-    rng = np.random.default_rng([seed, g, 44])
-    off = float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
-    unlocked = kw.pop("unlocked", False)
-    return write_concealed_sds(
-        tmp_path / f"r{seed}_{g}.toml",
-        key=jax.random.key(seed * 1000 + g),
-        effect=effect,
-        speed_offset=off if unlocked else 0.0,
-        **kw,
-    )
+    """Record ``g`` of training seed ``seed`` in layout ``geo`` (``concealed_sds_layout``)."""
+    return concealed_sds_layout(tmp_path, seed, g, geo, effect, **kw)
 
 
 def _drift(d: dict) -> dict:

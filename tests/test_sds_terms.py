@@ -11,12 +11,10 @@ overruled); the other records are controls that were right on ``main`` and stay 
 
 from __future__ import annotations
 
-import jax
-import numpy as np
 import pytest
+from helpers import concealed_sds_layout
 
 from encdesign.diagnose import diagnose
-from encdesign.simulate import write_concealed_sds
 
 GEOMETRIES = (
     {"n_runs": 12},
@@ -27,19 +25,8 @@ GEOMETRIES = (
 
 
 def _record(tmp_path, effect: str, seed: int, g: int, geometries=GEOMETRIES, **extra):
-    """Record ``g`` of training seed ``seed``: key ``seed * 1000 + g``, a motor speed offset
-    of +-(1e-5 … 1e-3) drawn from ``[seed, g, 44]`` where the layout unlocks the clock."""
-    kw = dict(geometries[g]) | extra
-    rng = np.random.default_rng([seed, g, 44])
-    off = float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-5, -3))
-    unlocked = kw.pop("unlocked", False)
-    return write_concealed_sds(
-        tmp_path / f"r{seed}_{g}.toml",
-        key=jax.random.key(seed * 1000 + g),
-        effect=effect,
-        speed_offset=off if unlocked else 0.0,
-        **kw,
-    )
+    """Record ``g`` of training seed ``seed`` in ``geometries[g]`` (``concealed_sds_layout``)."""
+    return concealed_sds_layout(tmp_path, seed, g, geometries[g], effect, **extra)
 
 
 @pytest.mark.parametrize("seed, g", [(7541, 0), (7542, 3), (7540, 1), (7541, 2)])
