@@ -385,15 +385,24 @@ def part_turn_record(rng, t, th, alpha, err, noise: float):
     ``tests/test_vibration_doubt.py`` and ``tests/test_change_rival.py``)."""
     import numpy as np
 
-    from encdesign import Recording
-
     y = (
         th[:, None]
         + err
         + rng.normal(0, noise, err.shape)
         + rng.uniform(-3, 3, len(alpha))[None, :]
     )
-    cols = {"t": t, "run": np.zeros(t.size, int)}
+    return heads_recording(rng, t, np.zeros(t.size, int), alpha, y)
+
+
+def heads_recording(rng, t, run, alpha, y):
+    """A multihead ``Recording`` of readings ``y`` (rad, rows x heads) at ``alpha`` (rad),
+    times ``t`` (s) and runs ``run``, no reference column; ``rng`` draws its grating (1000,
+    4096 or 36000 lines), the last draw of the records built on it."""
+    import numpy as np
+
+    from encdesign import Recording
+
+    cols = {"t": t, "run": run}
     for k in range(len(alpha)):
         cols[f"h{k}"] = y[:, k]
     enc = {

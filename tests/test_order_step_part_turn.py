@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import heads_recording
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
@@ -71,18 +72,10 @@ def shift_record(seed: int) -> tuple[Recording, dict]:
     A = float(rng.uniform(10, 15)) * noise
     err += (t >= t_s)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
     y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, (R, H))[run]
-    cols = {"t": t, "run": run}
-    for k in range(H):
-        cols[f"h{k}"] = y[:, k]
-    enc = {
-        "head_angles_deg": [float(np.degrees(a)) for a in alpha],
-        "optical_radius_m": 0.03,
-        "grating_lines": int(rng.choice([1000, 4096, 36000])),
-    }
-    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    rec = heads_recording(rng, t, run, alpha, y)
     truth = dict(change="ecc_shift", t_s=t_s, run=truth_run, where=where)
     desc = dict(H=H, R=R, nr=nr, turns=round(turns, 2), both=both, M=M, noise=noise)
-    return Recording("multihead", meta, cols), {**truth, "desc": desc}
+    return rec, {**truth, "desc": desc}
 
 
 SEEDS = list(range(7620, 7640))
