@@ -492,3 +492,66 @@ def concealed_sds_layout(tmp_path, seed: int, g: int, layout: dict, effect: str,
         speed_offset=off if unlocked else 0.0,
         **kw,
     )
+
+
+WHERE = ("pause", "run_start", "inside")
+"""Where :func:`shift_arcs_record` puts the change."""
+
+
+def shift_arcs_record(rng, where: str) -> tuple:
+    """2-3 runs of part of a turn each (0.3-0.9 turns, forward or forward and back, each
+    from its own angle), one clock with pauses of 1-3 s, 2-4 heads without a reference,
+    300-900 rows per run at 30-1000 Hz, disk orders 1..M (M 3-16) of 3-300x the noise, and
+    an eccentricity shift of 10-15x the noise at a time drawn in a pause between runs, at
+    the first row of a run after the first, or inside a run (``where``, one of
+    :data:`WHERE`). Returns the record and the truth (``change``, ``t_s``, ``run``: in a
+    pause the earlier run's; issue 44 C, ``tests/test_order_step_part_turn.py``,
+    ``benchmarks/change_coverage.py``)."""
+    import numpy as np
+
+    H = int(rng.integers(2, 5))
+    R = int(rng.integers(2, 4))
+    nr = int(rng.integers(300, 901))
+    rate = float(10 ** rng.uniform(1.5, 3.0))
+    noise = float(10 ** rng.uniform(-7.3, -5.5))
+    turns = float(rng.uniform(0.3, 0.9))
+    both = bool(rng.random() < 0.4)
+    pauses = rng.uniform(1.0, 3.0, R - 1)
+    ts, ths, runs, t0 = [], [], [], 0.0
+    for r in range(R):
+        u = np.arange(nr) / rate
+        if both:
+            half = nr // 2
+            th = turns * 2 * np.pi * np.where(np.arange(nr) < half, u / u[half], 2 - u / u[half])
+        else:
+            th = turns * 2 * np.pi * u / u[-1]
+        ths.append(th + rng.uniform(0, 2 * np.pi))
+        ts.append(t0 + u)
+        runs.append(np.full(nr, r))
+        t0 = t0 + u[-1] + (pauses[r] if r < R - 1 else 0.0)
+    t, th, run = np.concatenate(ts), np.concatenate(ths), np.concatenate(runs)
+    j = int(rng.integers(0, R - 1))  # the pause after run j, or the start of run j + 1
+    if where == "pause":
+        t_s = float(ts[j][-1] + rng.uniform(0.1, 0.9) * pauses[j])
+        truth_run = j
+    elif where == "run_start":
+        t_s = float(ts[j + 1][0])
+        truth_run = j + 1
+    else:
+        k = int(rng.integers(0, R))
+        t_s = float(ts[k][int(rng.uniform(0.3, 0.7) * nr)])
+        truth_run = k
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
+    M = int(rng.integers(3, 17))
+    err = np.zeros((t.size, H))
+    amp0 = noise * 10 ** rng.uniform(0.5, 2.5)
+    for m in range(1, M + 1):
+        a = amp0 / m ** rng.uniform(0.5, 1.5)
+        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    A = float(rng.uniform(10, 15)) * noise
+    err += (t >= t_s)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
+    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, (R, H))[run]
+    rec = heads_recording(rng, t, run, alpha, y)
+    truth = dict(change="ecc_shift", t_s=t_s, run=truth_run, where=where)
+    desc = dict(H=H, R=R, nr=nr, turns=round(turns, 2), both=both, M=M, noise=noise)
+    return rec, {**truth, "desc": desc}

@@ -55,15 +55,7 @@ def _arc(seed: int, eff: str) -> tuple[Recording, dict]:
     return rec, dict(H=H, n=n, turns=round(turns, 2), both=both, M=M, noise=noise)
 
 
-UNTESTED_CHANGE = pytest.mark.xfail(
-    reason="since the order_step view leaves untested the change points whose step the base "
-    "spans above collinear_refuse (s22-arcs44, the fix of short_arcs clean 6334/0), 7592 is "
-    "named beam_tilt_axial and vibration again: a drop, open (issue 44 C)",
-    strict=False,
-)
-
-
-@pytest.mark.parametrize("seed", [pytest.param(7592, marks=UNTESTED_CHANGE), 7599])
+@pytest.mark.parametrize("seed", [7592, 7599])
 def test_a_shift_on_part_of_a_turn_is_not_named_beam_tilt_axial(seed):
     """Main names ``beam_tilt_axial`` (7599) or ``beam_tilt_axial`` and ``vibration``
     (7592) for the shift: the tilt's static orders 1-3 per head fit what the base leaves of

@@ -17,6 +17,7 @@ from ._candidates import Candidate, Param
 from ._fit import FitResult, Fitter, Term, make_term
 from ._located import change_chi2, interval_of, located_time, profile_scan
 from ._protocol import Prepared
+from ._tangent import tangent_terms
 
 
 def frozen(terms: list[Term]) -> list[Term]:
@@ -322,6 +323,34 @@ def _scaled(cand: Candidate) -> Candidate:
     )
 
 
+@functools.lru_cache(maxsize=32)
+def _sharp(cand: Candidate) -> Candidate:
+    """``cand`` with its steps in time sharp: the width ``step_width_s`` (half a row's
+    spacing, which the fit's gradient in the time needs) the smallest positive number, so
+    a change between two rows puts every row before it before the change and every row
+    after it after (issue 44 C, session 23: the smooth step put 27 % of a shift on each
+    row beside the change; at a run's start that spill falls on the earlier run's last
+    row, and a shift in the pause between runs was profiled a row into the later run,
+    11.6 chi-square above the row after it: training ``shift_record(7623)``)."""
+
+    def sharp(x: dict) -> dict:
+        if "step_width_s" not in x:
+            return x
+        w = jnp.asarray(x["step_width_s"])
+        return {**x, "step_width_s": jnp.zeros_like(w) + jnp.finfo(w.dtype).tiny}
+
+    def fn(p: dict, x: dict):
+        return cand.fn(p, sharp(x))
+
+    hand, val = cand.valjac, cand.value
+    return dataclasses.replace(
+        cand,
+        fn=fn,
+        valjac=None if hand is None else (lambda p, x: hand(p, sharp(x))),
+        value=None if val is None else (lambda p, x: val(p, sharp(x))),
+    )
+
+
 def time_param_interval(
     fitter: Fitter, prep: Prepared, terms: list[Term], idx: int, name: str
 ) -> dict:
@@ -331,16 +360,20 @@ def time_param_interval(
     term's own linear parameters refitted jointly at each time (its other nonlinear ones
     held at the fitted values: :meth:`Fitter.column_chi2`; issue 44 C, session 22: with the
     shape held at the fitted time, a profile of a shift on part of a turn missed a change
-    in the pause between runs); a term with no free linear parameter is scaled (its shape
-    at the fitted values, one free column). The interval at
+    in the pause between runs), and the other terms' fitted nonlinear parameters moved to
+    first order (their tangents, :mod:`._tangent`; session 23: a run's angle zero held at
+    the fitted time put a shift in the pause some rows into the later run); a term with no
+    free linear parameter is scaled (its shape at the fitted values, one free column). The
+    interval at
     ``FinderSettings.change_time_level`` (:mod:`._located`)."""
     term = terms[idx]
     rows = np.flatnonzero(prep.keep)
     tau = np.asarray(prep.rows.take("tau", rows), float)
     mid = np.concatenate([[tau[0]], 0.5 * (tau[1:] + tau[:-1])])  # change before row i
-    held = frozen([t for i, t in enumerate(terms) if i != idx])
+    others = [t for i, t in enumerate(terms) if i != idx]
+    held = frozen(others) + tangent_terms(prep, others)
     own = [q for q in term.cand.params if q.linear and term.free[q.name].any()]
-    sc = _scaled(term.cand)
+    sc = _scaled(_sharp(term.cand))
     vals = {k: np.asarray(v, float) for k, v in term.values.items()}
 
     def at_time(t: float):
@@ -348,7 +381,7 @@ def time_param_interval(
             tm = make_term(sc, prep, {**vals, name: t, "size": 1.0})
             tm.values["size"][...] = 0.0
             return tm
-        tm = make_term(term.cand, prep, {**vals, name: t})
+        tm = make_term(_sharp(term.cand), prep, {**vals, name: t})
         for q in term.cand.params:  # its own sizes free, the rest held
             tm.free[q.name] = term.free[q.name].copy() if q in own else tm.free[q.name] & False
             if q in own:

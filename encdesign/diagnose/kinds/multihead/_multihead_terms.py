@@ -584,16 +584,15 @@ def _step_kept(SG, SXB, BBi):
     return np.where(dB > 0, np.clip(lam, 0.0, 1.0), 0.0)
 
 
-def _step_gain(Sa, SG, SXB, BBi, Br, kept_min: float = 0.0):
+def _step_gain(Sa, SG, SXB, BBi, Br):
     """Whitened chi-square (2 dof) a step in the eccentricity columns takes out, given the
     suffix sums from the step on (arrays over candidate change points), the base columns
-    projected out; 0 where the base leaves less than ``kept_min`` of the step's norm
-    squared in some direction (:func:`_step_kept`: such a change point is not testable)."""
+    projected out (the step's likelihood ratio with the base refitted jointly)."""
     g = Sa - SXB @ (BBi @ Br)
     Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
     det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
     tr = Gp[..., 0, 0] + Gp[..., 1, 1]
-    ok = (det > 1e-9 * np.maximum(tr, 1e-300) ** 2) & (_step_kept(SG, SXB, BBi) >= kept_min)
+    ok = det > 1e-9 * np.maximum(tr, 1e-300) ** 2
     det = np.where(ok, det, 1.0)
     q = (
         g[..., 0] ** 2 * Gp[..., 1, 1]
@@ -601,6 +600,18 @@ def _step_gain(Sa, SG, SXB, BBi, Br, kept_min: float = 0.0):
         + g[..., 1] ** 2 * Gp[..., 0, 0]
     ) / det
     return np.where(ok, np.maximum(q, 0.0), 0.0)
+
+
+def _step_deflation(SG, SXB, BBi, kept_min: float):
+    """The factor on a step's chi-square as evidence of a change: ``min(1, kept /
+    kept_min)``, ``kept`` the least share of its norm squared the base leaves
+    (:func:`_step_kept`). Where the base nearly spans the step (``kept < kept_min``, rule
+    ``collinear_refuse``) what it leaves of it is small, and a misfit of the base along it
+    is amplified by ``1 / kept``; deflated, that amplification is bounded at the refusal
+    level, and the gain of a step the base does not nearly span is untouched (continuous
+    at ``kept_min``; issue 44 C, session 23: left out, such change points lost a shift that
+    lay among them)."""
+    return np.minimum(_step_kept(SG, SXB, BBi) / kept_min, 1.0)
 
 
 def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
@@ -638,23 +649,21 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     e = np.arange(1, nb)
     margin = max(s.order_step_margin_rows, int(kidx.size * s.order_step_margin_share))
     e = e[(edges[e] >= margin) & (kidx.size - edges[e] >= margin)]
-    # a change point whose step the base columns nearly span is not testable: what the base
-    # leaves of it is amplified (rule collinear_refuse, the selection's canonical
-    # correlation with the base; issue 44 C, session 22: short_arcs clean 6334/0, two runs
-    # of a third of a turn, a false change 0.18 s into run 1 where the base's run zero and
-    # disk orders nearly spanned the step)
-    kept_min = 1.0 - s.collinear_refuse**2
-    e = e[_step_kept(SG[e], SXB[e], BBi) >= kept_min]
     if e.size == 0:
         return []
-    gain = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br, kept_min)
-    j = int(np.argmax(gain))
-    chi = float(gain[j])
+    # the evidence: the gain deflated where the base nearly spans the step (rule
+    # collinear_refuse; issue 44 C, session 22: short_arcs clean 6334/0, a false change
+    # where the base's run zero and disk orders nearly spanned the step; session 23:
+    # deflated, not left out); the location and its interval: the likelihood's profile
+    # (the undeflated gain, which the interval's calibration assumes), every change point
+    kept_min = 1.0 - s.collinear_refuse**2
+    like = _step_gain(Sa[e], SG[e], SXB[e], BBi, Br)
+    chi = float(np.max(like * _step_deflation(SG[e], SXB[e], BBi, kept_min)))
     n_tests = int(e.size)
     if chi <= chi2_threshold(prep.settings.alpha, 2, n_tests):
         return []
-    # refine to the row: the rows of the bins either side of the best edge
-    eb = int(e[j])
+    # refine to the row: the rows of the bins either side of the likelihood's best edge
+    eb = int(e[int(np.argmax(like))])
     lo, hi = edges[max(eb - 1, 0)], edges[min(eb + 1, nb)]
     _, ai, Gi, XBi, _, _ = _order_step_sums(prep, rw, kidx[lo:hi], P)
     tail = min(eb + 1, nb)
@@ -664,12 +673,11 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     ra = base_a + np.cumsum(ai[::-1], 0)[::-1]
     rG = base_G + np.cumsum(Gi[::-1], 0)[::-1]
     rXB = base_XB + np.cumsum(XBi[::-1], 0)[::-1]
-    gi = _step_gain(ra, rG, rXB, BBi, Br, kept_min)
+    gi = _step_gain(ra, rG, rXB, BBi, Br)
     ok = (np.arange(lo, hi) >= margin) & (kidx.size - np.arange(lo, hi) >= margin)
-    ok &= _step_kept(rG, rXB, BBi) >= kept_min
     gi = np.where(ok, gi, -1.0)
     i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
-    located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], gain)
+    located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], like)
     i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
     tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
     tau_b = float(prep.rows.take("tau", np.array([i_before]))[0])
