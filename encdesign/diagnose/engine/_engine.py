@@ -63,7 +63,7 @@ from ._goodness import goodness_of_fit
 from ._growth_line import growth_beside_line
 from ._kind import AbstractKind as Kind
 from ._located import value_in_interval
-from ._noise import noise_spectral
+from ._noise import noise_spectral_dof
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
@@ -400,14 +400,12 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
         prep.ctx = dataclasses.replace(prep.ctx, noise_info=est.info)
     own = None if est is None else est.sigma
     if own is not None and kind.noise_replaces:
-        sig = np.asarray(own, float)
-    else:
-        sig = noise_spectral(prep, r_base, fit.n_params)
-        if own is not None:  # the kind's second estimate: the smaller of the two
-            sig = np.fmin(sig, np.asarray(own, float))
+        sig, dof = np.asarray(own, float), None
+    else:  # the kind's second estimate, where it has one: the smaller of the two
+        sig, dof = noise_spectral_dof(prep, r_base, fit.n_params, own)
     del r_base
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
-        prep.sigma = sig
+        prep.sigma, prep.noise_dof = sig, dof
         prep.ctx.noise[...] = sig
         fitter.w_ch = 1.0 / sig**2
         fitter.clear()
