@@ -61,9 +61,10 @@ from ._document import (
 from ._fit import FitResult, Fitter, make_term
 from ._goodness import goodness_of_fit
 from ._growth_line import growth_beside_line
+from ._growth_start import grown_base
 from ._kind import AbstractKind as Kind
 from ._located import value_in_interval
-from ._noise import noise_spectral
+from ._noise import noise_spectral_dof
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
@@ -142,7 +143,8 @@ def _grow_to(
     missing orders leak into it, issue 44); and the grown base must leave at most
     ``settings.growth_left_max`` of what every view located (a line in Hz, a step or a drift
     that only leaks into high orders stays the candidates'; a strong order's leakage into
-    lines off the integers goes with it).
+    lines off the integers goes with it; before it is undone, the grown base from the kind's
+    own start at the grown order: :func:`._growth_start.grown_base`).
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
     held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
     when it raises the held-out chi-square; on part of a turn (``Prepared.part_turn_span``:
@@ -180,19 +182,19 @@ def _grow_to(
     ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered or past is not None else math.inf
     terms, info = _terms_at_order(kind, prep, fit, M)
     _set_order(prep, M)
+    left = prep.settings.growth_left_max
     fitter.clear()
-    grown = fitter.fit(terms)
-    after = locate(
-        prep, fitter.residual(grown.terms), kind.views(prep), scan_order_of(limit, M, prep.settings)
+    hi1, fresh = scan_order_of(limit, M, prep.settings), lambda: _base_terms(kind, prep, M)[0]
+    grown, after, p1, restart = grown_base(  # (restarted from the kind's own start: session 23)
+        fitter, terms, fresh, lambda r: locate(prep, r, kind.views(prep), hi1), left * p0
     )
-    p1 = sum(max(f.power - f.dof, 0.0) for f in after)
     tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
     tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
     worse = grown.heldout_chi2 > ho0 or tied > max(veto, 0.0)
     drop = ho0 - grown.heldout_chi2
     if past is not None and not drop >= prep.settings.heldout_min:
         worse = True
-    if p1 > prep.settings.growth_left_max * p0 or worse:
+    if p1 > left * p0 or worse:
         _set_order(prep, order)
         fitter.clear()
         return None
@@ -200,6 +202,7 @@ def _grow_to(
     if past is not None:  # the orders past the parameter budget, and what they earned
         base_info["grown_past_budget"] = {"budget_order": past, "heldout_chi2_drop": drop}
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
+    base_info.update({"grown_from_start": True} if restart else {})
     return M, grown
 
 
@@ -400,14 +403,12 @@ def _estimate_noise(kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult) 
         prep.ctx = dataclasses.replace(prep.ctx, noise_info=est.info)
     own = None if est is None else est.sigma
     if own is not None and kind.noise_replaces:
-        sig = np.asarray(own, float)
-    else:
-        sig = noise_spectral(prep, r_base, fit.n_params)
-        if own is not None:  # the kind's second estimate: the smaller of the two
-            sig = np.fmin(sig, np.asarray(own, float))
+        sig, dof = np.asarray(own, float), None
+    else:  # the kind's second estimate, where it has one: the smaller of the two
+        sig, dof = noise_spectral_dof(prep, r_base, fit.n_params, own)
     del r_base
     if np.all(np.isfinite(sig)) and np.all(sig > 0):
-        prep.sigma = sig
+        prep.sigma, prep.noise_dof = sig, dof
         prep.ctx.noise[...] = sig
         fitter.w_ch = 1.0 / sig**2
         fitter.clear()

@@ -119,6 +119,20 @@ def noise_sigma(
 
 
 def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarray:
+    """Noise std per channel (:func:`noise_spectral_dof`'s ``sigma``)."""
+    return noise_spectral_dof(prep, resid, n_params)[0]
+
+
+MEDIAN_DOF_PER_BIN = 2.0 * math.log(2.0) ** 2
+"""Effective chi-square degrees of freedom per periodogram bin of a variance estimated from
+the bins' median (0.961): the sample median of ``M`` unit exponentials has variance ``1 / M``
+(``1 / (4 M f^2)``, density ``f = 1/2`` at the median ``ln 2``), so the estimate
+``median / ln 2`` has relative variance ``1 / (M ln^2 2)``, as ``chi2(d) / d`` has ``2 / d``."""
+
+
+def noise_spectral_dof(
+    prep: Prepared, resid: np.ndarray, n_params: int, own: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Noise std per channel from the median of the residual's periodogram, run by run.
 
     For white noise each periodogram bin ``|X_j|^2 / n`` is ``sigma^2`` times a unit
@@ -129,7 +143,13 @@ def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarr
     noise's power out of the bins (on average over the bins: spread by aliased or jittered
     orders, the median is low by that share); the variance is divided by ``1 - share``, as
     the residual variance's dof (session 20, issue 44: 0.88-0.89 of ``sigma^2`` measured at a
-    share of 0.11-0.12 on a few hundred jittered rows, a line the views then reported)."""
+    share of 0.11-0.12 on a few hundred jittered rows, a line the views then reported).
+
+    Returns ``(sigma, dof)`` (C,): ``dof`` the effective degrees of freedom of each channel's
+    variance estimate, :data:`MEDIAN_DOF_PER_BIN` per bin times ``1 - share`` (issue 44: a
+    test that whitens by an estimated ``sigma`` is an F test, not a chi-square one;
+    ``_views_estimated``). ``own``: the kind's second estimate (C,), where it has one: the
+    smaller of the two per channel, whose ``dof`` is then taken as unlimited (unknown)."""
     C = resid.shape[1]
     bins = [[] for _ in range(C)]
     for r in range(prep.ctx.n_runs):
@@ -145,6 +165,7 @@ def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarr
         for k in range(C):
             bins[k].append(P[:, k])
     out = np.full(C, np.nan)
+    n_dof = np.full(C, np.inf)
     eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
     share = n_params / prep.n_values if prep.n_values > 0 else 0.0
     dof = 1.0 - share if 0 <= share < 1 else 1.0
@@ -153,4 +174,9 @@ def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarr
             allb = np.concatenate(bins[k])
             if allb.size >= 8:
                 out[k] = math.sqrt(np.median(allb) / math.log(2.0) / eff / dof)
-    return out
+                n_dof[k] = MEDIAN_DOF_PER_BIN * allb.size * dof
+    if own is not None:
+        own = np.asarray(own, float)
+        n_dof = np.where(own < out, np.inf, n_dof)
+        out = np.fmin(out, own)
+    return out, n_dof

@@ -295,6 +295,11 @@ class Prepared:
     # one turn, else None (``_prepare.part_turn_span``; computed once where the record is
     # prepared)
     part_turn_span: float | None = None
+    # the effective degrees of freedom of each channel's noise estimate ``sigma`` (C,) where it
+    # is estimated from the residual's periodogram (``_noise.noise_spectral_dof``), else None
+    # (the views then treat ``sigma`` as known); the spectrum view's test reads it
+    # (``_views_estimated.estimated_test``)
+    noise_dof: np.ndarray | None = None
     # the sums the views keep across this record's scans (``_views_sums``): owned by this
     # diagnosis alone, never shared with another record's
     view_sums: ViewSums = dataclasses.field(default_factory=ViewSums, compare=False, repr=False)

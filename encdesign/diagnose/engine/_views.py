@@ -31,6 +31,7 @@ from scipy import stats
 
 from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
+from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
 from ._views_orders import order_scan
 from ._views_sums import Whitened, linear, sums_of
 from ._workshare import deal
@@ -275,8 +276,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
     C = rw.shape[1]
     dof_ch = C - 1 if prep.kd.project and C > 1 else C
     peaks = []
-    # the runs tested and the number of bins (the threshold), before any transform: then
-    # one run's transform at a time (memory of one run, not of the record)
+    # the runs and bins tested (the threshold) first, then one run's transform at a time
     runs = []
     for r, (a, b) in _run_slices(prep):
         nk = int(keep[a:b].sum())
@@ -285,8 +285,8 @@ def view_spectrum(prep, rw) -> list[Finding]:
     out: list[Finding] = []
     if not runs:
         return out
-    n_tests = sum((b - a) // 2 + 1 for _, a, b, _ in runs)
-    thr = chi2_threshold(prep.settings.alpha, 2 * dof_ch, n_tests)
+    n_tests, d_est = sum((b - a) // 2 + 1 for _, a, b, _ in runs), pooled_noise_dof(prep)
+    thr = estimated_threshold(prep.settings.alpha, 2 * dof_ch, n_tests, d_est)  # issue 44: F
     per_run = []
     for r, a, b, nk in runs:
         t = _col(prep, "t", a, b)
@@ -331,7 +331,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
                     bin_hz=float(f[1]),
                     bin_order=float(f[1] / frev) if frev > 0 else float("nan"),
                     nk=nk,
-                    logp=log10_tail_p(float(Ps[i]), 2 * dof_ch),
+                    logp=estimated_log10_p(Ps[i], 2 * dof_ch, d_est, log10_tail_p),
                 )
             )
     # group peaks across runs: fixed in Hz or in order
@@ -385,7 +385,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
             and all(round(o) >= 1 for o in orders if np.isfinite(o))
             and any(np.isfinite(o) for o in orders)
         )
-        thr_ch = chi2_threshold(prep.settings.alpha, 2, n_tests)
+        thr_ch = estimated_threshold(s.alpha, 2, n_tests, pooled_noise_dof(prep, True))
         ch = [
             k
             for k in range(C)
