@@ -58,3 +58,58 @@ def test_fits_side_by_side_equal_the_fits_one_after_another(monkeypatch):
             for k in ta.values:
                 np.testing.assert_array_equal(ta.values[k], tb.values[k])
     assert alone[0].chi2 != alone[1].chi2  # the fits differ: the test can tell them apart
+
+
+def test_fits_holding_the_same_free_nonlinear_terms_side_by_side_equal_them_alone(monkeypatch):
+    """The located-share rule's four fits (``_spill._kept_fit``: the model, the model with
+    the candidate, with a rival, with both; the model's nonlinear parameters free) side by
+    side: a round's requests that hold the same free nonlinear terms at the same values read
+    their value, processed Jacobian and per-fold Gram products from the memo (the model's at
+    its start, once per chunk), two that sum the same static block's Gram matrices (the
+    rival's) sum them once, and every fit equals the fits one after another on one fitter
+    to the last bit (issue 43, session 23)."""
+    from encdesign.diagnose.engine import _fit, _normal, _stats_pass
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._steps import frozen
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+
+    monkeypatch.setattr(_fit, "CACHE_BYTES", 0.0)
+    monkeypatch.setattr(_normal, "CACHE_BYTES", 0.0)
+    prep, _, held = _bench_base(False)
+    model = [t.copy() for t in held]
+    for t in model:  # the base's placements and run zeros free again
+        for q in t.cand.params:
+            t.free[q.name][...] = bool(q.fit)
+    assert any(not q.linear and t.free[q.name].any() for t in model for q in t.cand.params)
+    term = make_term(VIBRATION, prep, {"frequency_hz": 3.7})
+    other = frozen([make_term(VIBRATION, prep, {"frequency_hz": 5.3})])[0]
+    fits = [model, [*model, term], [*model, other], [*model, other, term]]
+
+    def fitter() -> Fitter:
+        f = Fitter(prep)
+        f.chunk = 1024
+        assert f.n_chunks() > 1
+        return f
+
+    f1 = fitter()
+    alone = [f1.fit(list(ts), max_steps=6) for ts in fits]
+    hits: list[str] = []
+    get = _stats_pass.ChunkMemo.get
+
+    def counted(self, key):
+        got = get(self, key)
+        if got is not None:
+            hits.append(key[0])
+        return got
+
+    monkeypatch.setattr(_stats_pass.ChunkMemo, "get", counted)
+    f = fitter()
+    together = _stats_pass.drive_many([f.fit_steps(list(ts), max_steps=6) for ts in fits])
+    assert {"term", "processed_dyn", "gram_d", "gram_s"} <= set(hits)
+    for a, b in zip(alone, together):
+        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
+        np.testing.assert_array_equal(a.A, b.A)
+        for ta, tb in zip(a.terms, b.terms):
+            for k in ta.values:
+                np.testing.assert_array_equal(ta.values[k], tb.values[k])
+    assert len({a.chi2 for a in alone}) == 4  # the fits differ: the test can tell them apart

@@ -26,7 +26,7 @@ from ._normal import (
 )
 from ._protocol import Prepared
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
-from ._stats_pass import ChunkMemo, FitSteps, StatsPass, drive, run_passes
+from ._stats_pass import ChunkMemo, FitSteps, StatsPass, drive, run_passes, term_key
 from ._timing import stage
 
 # ----------------------------------------------------------------------------- fitting
@@ -233,12 +233,20 @@ class Fitter:
             if held_lin:
                 v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
             return v, Jt
+        memo = self.memo  # during a pass for several fits: this term at these values, this chunk
+        mkey = ("term", id(term.cand), a, jac, term_key(term)) if memo is not None else ()
+        got = memo.get(mkey) if memo is not None else None
+        if got is not None:
+            return got
         if jac:
             v, J = valjac_fn(term.cand)(params(), x)
             v = np.asarray(v)[: b - a]
-            return v, self._gather(term, J, b - a, v.shape[1])
-        v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
-        return v, None
+            got = (v, self._gather(term, J, b - a, v.shape[1]))
+        else:
+            got = (np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None)
+        if memo is not None:
+            memo.put(mkey, got)
+        return got
 
     @staticmethod
     def _gather(term: Term, J: dict, rows: int, C: int) -> np.ndarray:
@@ -303,9 +311,20 @@ class Fitter:
             J -= J.mean(1, keepdims=True)
         return pred, J
 
-    def _processed(self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray):
+    def _processed(
+        self, terms: Sequence[Term], a: int, b: int, x: dict, sc: np.ndarray, key: tuple = ()
+    ):
         """Projected, scaled, whitened, fold-sorted Jacobian and prediction of ``terms`` on
-        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``."""
+        one chunk: ``(pred (rows, C), J (rows, C, p) sorted by fold, order, edges)``; with
+        ``key`` (terms with free nonlinear parameters: everything they depend on,
+        :func:`._stats_pass.term_key` and the scales), from or into the memo of a pass for
+        several fits."""
+        if key and self.memo is not None:
+            got = self.memo.get(("processed_dyn", key, a))
+            if got is None:
+                got = self._processed(terms, a, b, x, sc)
+                self.memo.put(("processed_dyn", key, a), got)
+            return got
         memo = self.memo if all(linear_only(t) for t in terms) else None
         mkey = ("processed", static_key(terms), a, sc.tobytes()) if memo is not None else ()
         if memo is not None:  # a static block's: another fit's of this pass, this chunk

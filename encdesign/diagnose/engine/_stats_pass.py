@@ -54,6 +54,16 @@ class ChunkMemo:
         self._kept[key] = value
 
 
+def term_key(term) -> tuple:
+    """Everything a term's value and Jacobian on a chunk depend on besides the chunk: its
+    values and free masks, as bytes (a term with free nonlinear parameters is read from the
+    :class:`ChunkMemo` by it: two fits of one round at the same values, e.g. the model's
+    first pass beside the model with a rival, evaluate it once per chunk)."""
+    return tuple(
+        (term.values[q.name].tobytes(), term.free[q.name].tobytes()) for q in term.cand.params
+    )
+
+
 class StatsPass:
     """One request of :meth:`._fit.Fitter.stats`: per-fold ``(A_f, g_f, c_f, ssr_f)`` over
     the kept rows, parameters in scaled units (see there). :attr:`done` holds the answer
@@ -73,6 +83,9 @@ class StatsPass:
         self.p = p = sum(t.n_free() for t in terms)
         self.sc_s, self.sc_d = free_scales(static), free_scales(dyn)
         self.skey = static_key(static)
+        # the free nonlinear terms' identity (a pass for several fits shares their
+        # processed Jacobian and its per-fold Gram products where two fits hold them alike)
+        self.dkey = tuple((id(t.cand), term_key(t)) for t in dyn) + (self.sc_d.tobytes(),)
         self.held, self.z_s = held_key(static), free_values(static)
         self.done: tuple | None = None
         acc = fitter.blocks.accumulated(self.skey)
@@ -105,7 +118,7 @@ class StatsPass:
     def chunk(self, a: int, b: int, x: dict) -> None:
         """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums."""
         fitter, prep, jac, K = self.fitter, self.fitter.prep, self.jac, self.K
-        static, dyn, p, p_s, p0, p_t = self.static, self.dyn, self.p, self.p_s, self.p0, self.p_t
+        static, dyn, p, p_s = self.static, self.dyn, self.p, self.p_s
         A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = self.sums
         w = fitter.w_ch
         sw = np.sqrt(w)
@@ -124,7 +137,7 @@ class StatsPass:
             rs = (rs * sw)[order]
         if dyn:
             if jac:
-                pd, Jd, _, _ = fitter._processed(dyn, a, b, x, self.sc_d)
+                pd, Jd, _, _ = fitter._processed(dyn, a, b, x, self.sc_d, self.dkey)
             else:
                 pd = sum(fitter.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
                 Jd = None
@@ -154,19 +167,51 @@ class StatsPass:
                 h[k] += Sk.T @ rsk
                 q[k] += float(rsk @ rsk)
                 qu[k] += float(rsk @ (rs[lo:hi] / w[None, :]).ravel())
-            if new_gram is not None and p0 == 0:  # the whole block's
-                new_gram[k] += Sk.T @ Sk
-                Su = (Js_[lo:hi] / sw[None, :, None]).reshape(rk.size, p_s)
-                new_gu[k] += Su.T @ Su
-            elif new_gram is not None:  # the new columns' products only
-                Tk = Js_[lo:hi, :, p0:]
-                new_gram[k] += Sk.T @ Tk.reshape(rk.size, p_t)
-                new_gu[k] += Sk.T @ (Tk / w[None, :, None]).reshape(rk.size, p_t)
+            if new_gram is not None:
+                gk, guk = self._gram_s(a, k, Sk, Js_[lo:hi])
+                new_gram[k] += gk
+                new_gu[k] += guk
             if Jd is not None and Jd.shape[2]:
                 Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
                 A[k, :p_s, p_s:] += Sk.T @ Dk
-                A[k, p_s:, p_s:] += Dk.T @ Dk
+                A[k, p_s:, p_s:] += self._gram_d(a, k, Dk)
                 g[k, p_s:] += Dk.T @ rk
+
+    def _gram_s(self, a: int, k: int, Sk: np.ndarray, Jk: np.ndarray) -> tuple:
+        """The static block's Gram products on fold ``k`` of the chunk from row ``a``
+        (``Sk``: its processed Jacobian there as a matrix, ``Jk`` by row and channel),
+        whitened and not: the whole block's, or its new columns' beside the kept leading
+        block's; from the memo of a pass for several fits where another fit's request sums
+        the same (the frozen model's first pass beside each candidate)."""
+        memo = self.fitter.memo
+        key = ("gram_s", self.skey, self.p0, self.sc_s.tobytes(), a, k)
+        got = memo.get(key) if memo is not None else None
+        if got is not None:
+            return got
+        w, p0 = self.fitter.w_ch, self.p0
+        if p0 == 0:  # the whole block's
+            Su = (Jk / np.sqrt(w)[None, :, None]).reshape(Sk.shape)
+            got = (Sk.T @ Sk, Su.T @ Su)
+        else:  # the new columns' products only
+            Tk = Jk[:, :, p0:]
+            got = (
+                Sk.T @ Tk.reshape(Sk.shape[0], self.p_t),
+                Sk.T @ (Tk / w[None, :, None]).reshape(Sk.shape[0], self.p_t),
+            )
+        if memo is not None:
+            memo.put(key, got)
+        return got
+
+    def _gram_d(self, a: int, k: int, Dk: np.ndarray) -> np.ndarray:
+        """``Dk^T Dk``, fold ``k`` of the chunk from row ``a``: from the memo of a pass for
+        several fits where another fit's request holds the same free nonlinear terms."""
+        memo = self.fitter.memo
+        got = memo.get(("gram_d", self.dkey, a, k)) if memo is not None else None
+        if got is None:
+            got = Dk.T @ Dk
+            if memo is not None:
+                memo.put(("gram_d", self.dkey, a, k), got)
+        return got
 
     def finish(self, n_groups: int) -> None:
         """Gather the groups' sums (over the processes) and set :attr:`done`."""
@@ -277,4 +322,4 @@ def drive_many(all_steps: Sequence[FitSteps]) -> list:
     return out
 
 
-__all__ = ["ChunkMemo", "StatsPass", "drive", "drive_many", "run_passes"]
+__all__ = ["ChunkMemo", "StatsPass", "drive", "drive_many", "run_passes", "term_key"]
