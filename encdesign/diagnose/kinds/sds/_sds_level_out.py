@@ -50,6 +50,7 @@ class LevelOut:
         self.ssr = float(e @ e)
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
+        self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
         self.sigma = sigma_of(math.sqrt(self.ssr / self.nu), self.nu) if ok else 0.0
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -112,6 +113,9 @@ def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: i
     ``orders`` view's chi-square (:class:`LevelOut` of that order on that moving sensor's
     run means; 1 on the other channels)."""
     phi = np.asarray(phi, float)
+    key = (phi.tobytes(), int(M), int(max_order), int(C))
+    if key in factor.memo:
+        return factor.memo[key]
     m = np.arange(1, max_order + 1)
     cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
     A = np.zeros((phi.size, M, M, max_order, 2))
@@ -119,4 +123,6 @@ def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: i
         A[:, k, k] = cs
     out = np.ones((max_order, C))
     out[:, :M] = factor.pairs(A.reshape(phi.size, M, M * max_order, 2)).reshape(M, max_order).T
+    out.setflags(write=False)
+    factor.memo[key] = out
     return out
