@@ -185,6 +185,12 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_pairs.py", 2): COUNT + " (a pair of columns; half the values); a squared norm",
     ("kinds/sds/_sds_pairs.py", 3): COUNT + " (degrees of freedom of an F-test)",
     ("kinds/sds/_sds_pairs.py", 1e-10): NUMERIC + " (a singular pair's Gram determinant)",
+    ("kinds/sds/_sds_level_out.py", 2): COUNT + " (a pair of columns)",
+    ("kinds/sds/_sds_level_out.py", 3): COUNT
+    + " (array dimensions; degrees of freedom left for a level, as _sds_pairs' F-test)",
+    ("kinds/sds/_sds_level_out.py", 1e-6): NUMERIC
+    + " (a direction of the columns the level's basis holds: its singular value off it)",
+    ("kinds/sds/_sds_level_out.py", 1e-12): NUMERIC + " (the same cut-off on a squared norm)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
     ("kinds/sds/_sds_terms.py", 4): SEARCH
     + " (detection-bound probes: a step's first run at the quartiles of the runs)",

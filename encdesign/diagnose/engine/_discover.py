@@ -67,6 +67,7 @@ from ._discover_law import (
     _scatter_se,
     _sibling,
 )
+from ._discover_level import level_thresholds
 from ._discover_lines import (
     MAX_LINES,
     STEP_EXACT_ROWS,
@@ -461,7 +462,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
             _scatter_se(tm, lib, sums)
-    th = thresholds(lib, prep.settings.discover_alpha)
+    th = level_thresholds(prep, lines, sums, lib, thresholds(lib, prep.settings.discover_alpha))
     return State(lines, first, cinfo, sums, lib, th, infl, L, prep.settings, near)
 
 

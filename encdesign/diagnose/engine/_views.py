@@ -225,10 +225,12 @@ def _carrying(prep, pw: np.ndarray, thr: float) -> list[int]:
     return [k for k in range(pw.size) if pw[k] > thr and pw[k] >= top]
 
 
-def view_orders(prep, rw, max_order: int, channels: list[int] | None = None) -> list[Finding]:
+def view_orders(prep, rw, max_order: int, channels=None, scale=None) -> list[Finding]:
     """Integer shaft orders per channel, rotation locked over all runs (least squares of
     cos / sin of each order, from sums accumulated in blocks of rows). Only ``channels``
-    (default all) are scanned and counted in the threshold's tests; the others show 0."""
+    (default all) are scanned and counted in the threshold's tests; the others show 0.
+    ``scale`` (max_order, C): a factor per order and channel on the chi-square (SDS: the
+    level without the tested columns, :mod:`..kinds.sds._sds_level_out`)."""
     C = rw.shape[1]
     ch_in = list(range(C)) if channels is None else list(channels)
     out = []
@@ -245,7 +247,7 @@ def view_orders(prep, rw, max_order: int, channels: list[int] | None = None) -> 
         if N <= 2:
             continue
         coef = np.linalg.lstsq(G, B, rcond=None)[0]  # (2, C): the cos / sin amplitudes
-        pw = np.maximum(np.sum(B * coef, axis=0), 0.0)
+        pw = np.maximum(np.sum(B * coef, axis=0), 0.0) * (1.0 if scale is None else scale[i])
         if pw.max() > thr:
             ch = _carrying(prep, pw, thr)
             Z = coef * math.sqrt(0.5 * N)

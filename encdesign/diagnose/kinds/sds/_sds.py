@@ -75,6 +75,7 @@ from ._sds_data import (
     sds_speed_harmonics,
     stamp_lattice,
 )
+from ._sds_level_out import orders_scale
 from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
@@ -218,11 +219,19 @@ def _matched_view(name: str):
 def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
     """The engine's ``orders`` view on the run-mean channels only (a pattern in the platform
     angle is constant within a run: it cannot reach the revolution contrasts, whose
-    scan would only add false alarms)."""
+    scan would only add false alarms). Each order on each sensor is read against the
+    run-mean level without its own columns (:mod:`._sds_level_out`, issue 41 session 23)."""
     from ...engine._views import view_orders
 
     M = prep.consts["psi_m"].size
-    return view_orders(prep, rw, min(scan_order, sds_limit(prep)), list(range(M)))
+    top = min(scan_order, sds_limit(prep))
+    factor = noise_info(prep.ctx).level_factor
+    scale = None
+    if factor is not None:
+        name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+        th = np.asarray(prep.rows[name], float)[prep.keep]
+        scale = orders_scale(factor, th, M, top, rw.shape[1])
+    return view_orders(prep, rw, top, list(range(M)), scale)
 
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:

@@ -169,3 +169,20 @@ def drift_probes(ctx: Context, seen_of) -> list[Probe]:
             held=("onset_from_start_s",),
         )
     ]
+
+
+def _step_or_outlier(x: np.ndarray) -> tuple[float, int, float, int, float]:
+    """``(power, first run index)`` of the best step over the runs and of the best
+    single-run outlier in one sensor's whitened run means (each 1 dof, less the mean), and
+    the sensor's total power."""
+    R = x.size
+    x = x - x.mean()
+    best_s, k_s = 0.0, 1
+    for k in range(1, R):
+        s = (np.arange(R) >= k).astype(float)
+        s -= s.mean()
+        pw = float((s @ x) ** 2 / (s @ s))
+        if pw > best_s:
+            best_s, k_s = pw, k
+    j = int(np.argmax(np.abs(x)))
+    return best_s, k_s, float(x[j] ** 2 * R / max(R - 1, 1)), j, float(x @ x)

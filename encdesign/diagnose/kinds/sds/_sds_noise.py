@@ -18,7 +18,8 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
-from ._sds_drift import drift_power_at, onset_power
+from ._sds_drift import _step_or_outlier, drift_power_at, onset_power
+from ._sds_level_out import LevelOut
 from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
 REFERENCE_RADIUS_M = 0.0254
@@ -132,6 +133,8 @@ class SDSNoiseInfo:
             whitened base run means (:func:`_step_or_outlier`).
         base_resid: the base residual over the kept rows the levels were estimated from,
             for the probes' re-estimates (:func:`levels_of`); ``None`` before the stage ran.
+        level_factor: ``factor(cols (R, M, q)) -> (sigma / sigma')^2``, the run-mean level
+            without a test's columns (:mod:`._sds_level_out`); ``None`` before the stage ran.
     """
 
     levels: dict = dataclasses.field(default_factory=dict)
@@ -139,6 +142,7 @@ class SDSNoiseInfo:
     drift_vs_orders: dict | None = None
     run_change_power: tuple[tuple, ...] = ()
     base_resid: np.ndarray | None = dataclasses.field(default=None, compare=False, repr=False)
+    level_factor: LevelOut | None = dataclasses.field(default=None, compare=False, repr=False)
 
 
 def noise_info(ctx: Context) -> SDSNoiseInfo:
@@ -350,6 +354,7 @@ def _level_sigma(
     common_quantile: float | None = None,
     phi: np.ndarray | None = None,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
+    state: dict | None = None,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -378,7 +383,8 @@ def _level_sigma(
     within a run reaches them), separately for the part common to the moving sensors (the
     fixed sensors' timing noise enters every pair alike) and for the differences; the larger
     per-value level is used (the engine weighs channels as independent: this keeps its tests
-    conservative for common and differential patterns alike)."""
+    conservative for common and differential patterns alike). ``state`` (a dict) receives
+    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
@@ -447,12 +453,19 @@ def _level_sigma(
             s = 1.4826 * float(np.median(np.abs(x)))
             lv.append(s if s > 0 else float(np.sqrt(np.mean(x**2))))
         out[M:] = max(lv)
-    g = g_ind = _common_factor(lv, proj, fixed, s_raw, M, K)
-    g_dir = None
-    if not proj and common_base is not None and common_quantile is not None:
-        g_dir = _direct_common_factor(resid[:, :M], common_base, s_raw, common_quantile)
-        g = min(g, g_dir) if g_dir is not None else g
+
+    def factors(s: float) -> tuple[float, float, float | None]:
+        g_i = _common_factor(lv, proj, fixed, s, M, K)
+        g_d = None
+        if not proj and common_base is not None and common_quantile is not None:
+            g_d = _direct_common_factor(resid[:, :M], common_base, s, common_quantile)
+        return (min(g_i, g_d) if g_d is not None else g_i), g_i, g_d
+
+    g, g_ind, g_dir = factors(s_raw)
     out[:M] = s_raw * c * g
+    if state is not None:
+        sigma_of = lambda s, n: s * dof_widening(n, p=test_p) * factors(s)[0]  # noqa: E731
+        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M)
     if info is not None:
         info.update(
             run_means_rad=s_raw,
@@ -496,7 +509,7 @@ def run_mean_levels(
     fixed = np.asarray(rows["fixed_c"], float)
     common = common_base_columns(rows["phi"], consts["psi_m"], orders)
 
-    def levels(resid: np.ndarray, info: dict | None = None) -> np.ndarray:
+    def levels(resid: np.ndarray, info: dict | None = None, state=None) -> np.ndarray:
         return _level_sigma(
             resid,
             K,
@@ -509,6 +522,7 @@ def run_mean_levels(
             common_base=common,
             common_quantile=settings.sds_common_level_quantile,
             pairs=pairs,
+            state=state,
         )
 
     return levels
@@ -533,8 +547,9 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
     # one row per run, every run kept (sds_prepare): the rows are the residual's rows
     orders = base_orders(prep.ctx.meta, prep.consts, prep.ctx.max_order)[0]
     info: dict = {}
+    state: dict = {}
     levels = run_mean_levels(prep.kd.n_revs, prep.rows, prep.consts, orders, prep.settings)
-    sig = levels(resid[prep.keep], info)
+    sig = levels(resid[prep.keep], info, state)
     M = prep.consts["psi_m"].size
     rwm = resid[:, :M] / sig[None, :M]
     pw = common_order_power(prep, rwm)
@@ -544,25 +559,9 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         drift_vs_orders=_drift_vs_orders(prep, rwm, pw),
         run_change_power=tuple(_step_or_outlier(rwm[:, m]) for m in range(M)),
         base_resid=np.asarray(resid[prep.keep], float),
+        level_factor=state.get("factor"),
     )
     return NoiseEstimate(sig, found)
-
-
-def _step_or_outlier(x: np.ndarray) -> tuple[float, int, float, int, float]:
-    """``(power, first run index)`` of the best step over the runs and of the best
-    single-run outlier in one sensor's whitened run means (each 1 dof, less the mean), and
-    the sensor's total power."""
-    R = x.size
-    x = x - x.mean()
-    best_s, k_s = 0.0, 1
-    for k in range(1, R):
-        s = (np.arange(R) >= k).astype(float)
-        s -= s.mean()
-        pw = float((s @ x) ** 2 / (s @ s))
-        if pw > best_s:
-            best_s, k_s = pw, k
-    j = int(np.argmax(np.abs(x)))
-    return best_s, k_s, float(x[j] ** 2 * R / max(R - 1, 1)), j, float(x @ x)
 
 
 def _drift_vs_orders(prep: Prepared, rwm: np.ndarray, pw: np.ndarray) -> dict | None:

@@ -1,0 +1,128 @@
+"""The SDS run-mean level without the structure a test is testing (issue 41, session 23).
+
+The run-mean level (:func:`._sds_noise._level_sigma`) is ``sqrt(SSR / nu)`` of the
+saturated fit's residual, widened for its ``nu`` degrees of freedom. A structure that no
+saturating column spans and that is too weak for the level's own search (an order of one
+moving sensor at 2x the noise: about a third of its power is left by the saturating
+columns) stays in ``SSR`` and is counted as noise: the test of that very structure then
+divides by a level it inflated itself (1.26-1.51x for a static one-sensor order at 2x on the
+discovery benchmark's records, session 22's audit), and its chi-square falls by that ratio
+squared.
+
+A test of columns ``X`` (a located order of one sensor, a discovered term) is therefore
+read against the level **without** ``X``: the saturated fit's residual ``e`` less its
+projection on ``X`` (made orthogonal to the saturating and taken columns ``Q``; rank ``r``),
+``s'^2 = (SSR - g_X) / (nu - r)``, widened for ``nu - r`` degrees of freedom
+(:func:`._sds_noise.dof_widening`), the common factor recomputed at ``s'``. This is the
+F-test's denominator: under noise alone ``g_X`` and ``SSR - g_X`` are independent
+chi-squares of ``r`` and ``nu - r`` degrees of freedom (``X`` reaches the test's residual
+only through directions orthogonal to ``Q``, the base's columns are inside ``Q``), so the
+test stays at its level (the widening turns the F-test's threshold into the engine's
+chi-square one, as for the level itself), while a structure in ``X`` no longer dilutes its
+own test. The factor a test's chi-square is multiplied by is ``(sigma / sigma')^2``
+(:func:`level_factor`), where ``sigma`` is the run-mean level the record is whitened with.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+
+class LevelOut:
+    """``factor(cols) -> (sigma / sigma')^2`` (module doc) for columns ``cols`` (R, M, q)
+    on the run means (rows in the level's order: the kept runs), projected on the
+    moving-sensor differences where the run means are (``proj``); :meth:`pairs` for many
+    pairs of columns at once.
+
+    ``e`` (R*M,): the saturated fit's residual; ``Q`` (R*M, k): the orthonormal basis it is
+    the residual of (saturating columns and the change points, outliers and one-sensor orders
+    the level took); ``n_ind``: the independent values; ``sigma_of(s_raw, nu)``: the run-mean
+    level from a raw level and its degrees of freedom (widening and common factor, as
+    :func:`._sds_noise._level_sigma` makes it). A direction of the columns that ``Q`` holds
+    (its part off ``Q`` below ``1e-6`` of the columns' norm) is no degree of freedom of the
+    level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1."""
+
+    def __init__(self, e, Q, n_ind: int, sigma_of: Callable[[float, float], float], proj, M):
+        self.e, self.Q, self.sigma_of, self.proj, self.M = e, Q, sigma_of, bool(proj), int(M)
+        self.ssr = float(e @ e)
+        self.nu = int(n_ind - Q.shape[1])
+        ok = self.nu > 0 and self.ssr > 0
+        self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
+        self.sigma = sigma_of(math.sqrt(self.ssr / self.nu), self.nu) if ok else 0.0
+
+    def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``X`` (R, M, ...) projected as the run means are, flattened to (R*M, -1), and
+        less its part in ``Q``; and the columns' squared norms before."""
+        if self.proj:
+            X = X - X.mean(1, keepdims=True)
+        X = X.reshape(X.shape[0] * X.shape[1], -1)
+        return X - self.Q @ (self.Q.T @ X), np.sum(X**2, 0)
+
+    def _factor(self, g: np.ndarray, r: np.ndarray) -> np.ndarray:
+        out = np.ones(g.shape)
+        for i in np.flatnonzero((r > 0) & (self.nu - r >= 3)):
+            s2 = max(self.ssr - float(g[i]), 0.0) / (self.nu - r[i])
+            if s2 > 0:
+                out[i] = (self.sigma / self.sigma_of(math.sqrt(s2), self.nu - r[i])) ** 2
+        return out
+
+    def __call__(self, cols: np.ndarray) -> float:
+        X = np.asarray(cols, float)
+        if X.ndim != 3 or X.shape[1] != self.M or not self.sigma > 0:
+            return 1.0
+        Xp, n2 = self._off(X)
+        if not np.any(n2 > 0):
+            return 1.0
+        U, s, _ = np.linalg.svd(Xp, full_matrices=False)
+        U = U[:, s > 1e-6 * math.sqrt(float(n2.max()))]
+        g = float(np.sum((U.T @ self.e) ** 2))
+        return float(self._factor(np.array([g]), np.array([U.shape[1]]))[0])
+
+    def pairs(self, A: np.ndarray) -> np.ndarray:
+        """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2)."""
+        if not self.sigma > 0:
+            return np.ones(A.shape[2])
+        Xp, n2 = self._off(A)
+        G = A.shape[2]
+        P = Xp.reshape(-1, G, 2)
+        gram = np.einsum("ngi,ngj->gij", P, P)
+        ev, V = np.linalg.eigh(gram)  # (G, 2), (G, 2, 2)
+        big = ev > 1e-12 * n2.reshape(G, 2).max(1)[:, None]
+        b = np.einsum("n,ngi->gi", self.e, P)
+        proj = np.einsum("gi,gij->gj", b, V)  # b along the eigenvectors
+        g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
+        return self._factor(g, big.sum(1))
+
+
+def order_columns(phi: np.ndarray, M: int, order: int, sensor: int) -> np.ndarray:
+    """``(R, M, 2)``: cos / sin of ``order`` times the platform angles ``phi`` (one per run)
+    on moving sensor ``sensor``'s run means only (the ``orders`` view's test on that
+    channel)."""
+    phi = np.asarray(phi, float)
+    X = np.zeros((phi.size, M, 2))
+    X[:, sensor, 0] = np.cos(order * phi)
+    X[:, sensor, 1] = np.sin(order * phi)
+    return X
+
+
+def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: int) -> np.ndarray:
+    """``(max_order, C)``: per order ``1..max_order`` and channel the factor on the
+    ``orders`` view's chi-square (:class:`LevelOut` of that order on that moving sensor's
+    run means; 1 on the other channels)."""
+    phi = np.asarray(phi, float)
+    key = (phi.tobytes(), int(M), int(max_order), int(C))
+    if key in factor.memo:
+        return factor.memo[key]
+    m = np.arange(1, max_order + 1)
+    cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
+    A = np.zeros((phi.size, M, M, max_order, 2))
+    for k in range(M):
+        A[:, k, k] = cs
+    out = np.ones((max_order, C))
+    out[:, :M] = factor.pairs(A.reshape(phi.size, M, M * max_order, 2)).reshape(M, max_order).T
+    out.setflags(write=False)
+    factor.memo[key] = out
+    return out
