@@ -15,9 +15,8 @@ chi-squares, and the start each candidate's full fit begins from, are the same t
 from __future__ import annotations
 
 from collections.abc import Generator, Sequence
-from typing import Any
 
-from ._stats_pass import FitSteps, Many
+from ._stats_pass import FitSteps, Many, StatsRequest
 
 
 def side_by_side(all_steps: Sequence[FitSteps]) -> Generator[Many, list, list]:
@@ -26,7 +25,7 @@ def side_by_side(all_steps: Sequence[FitSteps]) -> Generator[Many, list, list]:
     answers in order (``None``: that request waits a round); it returns the fits' results,
     in order."""
     out: list = [None] * len(all_steps)
-    reqs: dict[int, Any] = {}
+    reqs: dict[int, StatsRequest] = {}
     for i, steps in enumerate(all_steps):
         try:
             reqs[i] = next(steps)
@@ -46,7 +45,7 @@ def side_by_side(all_steps: Sequence[FitSteps]) -> Generator[Many, list, list]:
     return out
 
 
-def screened_starts(fitter, base: list, held: Sequence) -> Generator[Many, list, list[Any]]:
+def screened_starts(fitter, base: list, held: Sequence) -> Generator[Many, list, list]:
     """The fits of the frozen ``base`` terms with each of ``held`` (a candidate's terms at
     its starts, nonlinear parameters held) side by side: their :class:`._fit.FitResult` s,
     in order."""

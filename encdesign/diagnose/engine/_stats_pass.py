@@ -303,7 +303,7 @@ def drive_many(all_steps: Sequence[FitSteps]) -> list:
     and summed the new columns only (the same numbers as one fit after another, not the
     whole block's rounding)."""
     out: list = [None] * len(all_steps)
-    reqs: dict[int, Any] = {}
+    reqs: dict[int, StatsRequest | Many] = {}
 
     def advance(i: int, ans) -> None:
         try:
