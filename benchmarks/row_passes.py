@@ -12,7 +12,9 @@ the CPU s per asking function. E.g. on the long-record benchmark's record (writt
 Session 23 (10^6 rows, 142,854 block means, main 01b0a20): 66 passes; the trial fits 19
 rounds, 6.0 s; the located-share rule's fits (``_kept_fit``) 10 passes, 3.2 s (after
 s23-speed43: 3 rounds, 2.3 s); the located step's fits 4 passes, 2.0 s; the base fit 5
-passes, 1.5 s; of 21 s CPU.
+passes, 1.5 s; of 21 s CPU. After s23-starts43 (a candidate's screened starts side by side,
+``engine/_starts.py``; main 5c32af5 against c35b4cc): the trial fits 19 rounds 5.98 s -> 16
+rounds 5.28 s CPU, the diagnosis 20.2 -> 18.8 s CPU, the document equal to the last bit.
 """
 
 from __future__ import annotations

@@ -113,3 +113,54 @@ def test_fits_holding_the_same_free_nonlinear_terms_side_by_side_equal_them_alon
             for k in ta.values:
                 np.testing.assert_array_equal(ta.values[k], tb.values[k])
     assert len({a.chi2 for a in alone}) == 4  # the fits differ: the test can tell them apart
+
+
+def test_a_candidates_screened_starts_side_by_side_equal_them_one_after_another(monkeypatch):
+    """A candidate's screened starts (``_starts.screened_starts``: three vibration lines at
+    held frequencies on the frozen base, as ``_select._trial_fit`` screens them) beside
+    another candidate's full fit (a line with its frequency free), all in the rounds of one
+    :func:`drive_many`: every screening fit equals the fits one after another on one fitter
+    to the last bit (chi-square, held-out chi-square, normal matrix, values), and the three
+    take one pass over the rows together, not one each (issue 43, session 23)."""
+    from encdesign.diagnose.engine import _fit, _stats_pass
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._starts import screened_starts
+    from encdesign.diagnose.engine._steps import frozen
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+
+    monkeypatch.setattr(_fit, "CACHE_BYTES", 0.0)
+    prep, _, held = _bench_base(False)
+    starts = [{"frequency_hz": 3.7}, {"frequency_hz": 11.2}, {"frequency_hz": 5.3}]
+    screens = frozen([make_term(VIBRATION, prep, s) for s in starts])
+    free = make_term(VIBRATION, prep, {"frequency_hz": 7.9})
+
+    def fitter() -> Fitter:
+        f = Fitter(prep)
+        f.chunk = 1024
+        assert f.n_chunks() > 1
+        f.fit(list(held))  # the frozen base's Gram matrices kept, as after the base fit
+        return f
+
+    f1 = fitter()
+    alone = [f1.fit([*held, t]) for t in screens] + [f1.fit([*held, free], max_steps=6)]
+    f = fitter()
+    rounds: list[int] = []
+    run = _stats_pass.run_passes
+
+    def counted(passes):
+        rounds.append(sum(s.done is None for s in passes))
+        return run(passes)
+
+    monkeypatch.setattr(_stats_pass, "run_passes", counted)
+    got = _stats_pass.drive_many(
+        [screened_starts(f, list(held), screens), f.fit_steps([*held, free], max_steps=6)]
+    )
+    together = [*got[0], got[1]]
+    assert rounds[0] == 4  # the three screens and the free line's first pass, one pass
+    for a, b in zip(alone, together):
+        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
+        np.testing.assert_array_equal(a.A, b.A)
+        for ta, tb in zip(a.terms, b.terms):
+            for k in ta.values:
+                np.testing.assert_array_equal(ta.values[k], tb.values[k])
+    assert len({a.chi2 for a in alone}) == 4  # the fits differ: the test can tell them apart

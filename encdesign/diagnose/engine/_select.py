@@ -34,6 +34,7 @@ from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._spill import band_share, edge_beyond, kept_gain_share, same_place
+from ._starts import screened_starts
 from ._stats_pass import drive_many
 from ._steps import beaten_by_step, free_steps, frozen, place_step_refusals
 from ._timing import stage
@@ -211,9 +212,9 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log, start
     runs a round's trial fits side by side, one pass over the rows for all)."""
     prep, fitter = st["prep"], st["fitter"]
     N = prep.n_values
-    # screen the starts with the nonlinear parameters held (one linear pass each), then run
-    # the full fit from the best one
-    screened = []
+    # screen the starts with the nonlinear parameters held (one linear fit each, all side
+    # by side: _starts), then run the full fit from the best one
+    terms = []
     for s0 in starts[:4]:
         term = make_term(cand, prep, s0)
         frac = prep.settings.max_param_fraction
@@ -223,12 +224,11 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log, start
             reason = f"more parameters than {frac:.0%} of the fitted values"
             rejected.append(_refusal(cand.name, [("max_param_fraction", reason)]))
             break
-        if len(starts) > 1:
-            held = frozen([term])[0]
-            fr0 = yield from fitter.fit_steps([*frozen(current.terms), held])
-            screened.append((fr0.chi2, term, fr0))
-        else:
-            screened.append((0.0, term, None))
+        terms.append(term)
+    screened = [(0.0, term, None) for term in terms]
+    if len(starts) > 1 and terms:
+        fr0s = yield from screened_starts(fitter, frozen(current.terms), frozen(terms))
+        screened = [(fr0.chi2, term, fr0) for term, fr0 in zip(terms, fr0s)]
     if not screened:
         return None
     screened.sort(key=lambda z: z[0])

@@ -288,38 +288,50 @@ def _waits(sp: StatsPass, kept: set) -> bool:
     return any(static_key(sp.static[:k]) in kept for k in range(sp.k0 + 1, len(sp.static)))
 
 
+class Many(tuple):
+    """Several statistics requests of one fit generator (:func:`._starts.side_by_side`),
+    answered in the same round as everybody's: :func:`drive_many` sends it back a list of
+    the answers in order, ``None`` for a request that waits for the next round."""
+
+
 def drive_many(all_steps: Sequence[FitSteps]) -> list:
-    """Run several fits side by side: each round, the next request of every fit not done,
-    answered in one pass (:func:`run_passes`); their results, in order. A request that
-    would sum a block's Gram matrices an earlier request of the round keeps (the frozen base
-    of a candidate's first pass, before the base's own first pass) waits for the next round:
-    one after another, it would have found them kept and summed the new columns only (the
-    same numbers as one fit after another, not the whole block's rounding)."""
+    """Run several fits side by side: each round, the next request of every fit not done
+    (every request of a :class:`Many`), answered in one pass (:func:`run_passes`); their
+    results, in order. A request that would sum a block's Gram matrices an earlier request
+    of the round keeps (the frozen base of a candidate's first pass, before the base's own
+    first pass) waits for the next round: one after another, it would have found them kept
+    and summed the new columns only (the same numbers as one fit after another, not the
+    whole block's rounding)."""
     out: list = [None] * len(all_steps)
-    reqs: dict[int, StatsRequest] = {}
-    for i, steps in enumerate(all_steps):
+    reqs: dict[int, StatsRequest | Many] = {}
+
+    def advance(i: int, ans) -> None:
         try:
-            reqs[i] = next(steps)
+            reqs[i] = next(all_steps[i]) if ans is None else all_steps[i].send(ans)
         except StopIteration as stop:
             out[i] = stop.value
+            reqs.pop(i, None)
+
+    for i in range(len(all_steps)):
+        advance(i, None)
     while reqs:
         idx, passes, kept = [], [], set()
-        for i in reqs:
-            sp = StatsPass(*reqs[i])
-            if sp.done is None and _waits(sp, kept):
-                continue  # (next round, as it would run after that pass alone)
-            idx.append(i)
-            passes.append(sp)
-            if sp.done is None and sp.gram is None:  # the leading blocks' Gram it keeps
-                kept |= {static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)}
-        answers = run_passes(passes)
-        for i, ans in zip(idx, answers):
-            try:
-                reqs[i] = all_steps[i].send(ans)
-            except StopIteration as stop:
-                out[i] = stop.value
-                del reqs[i]
+        for i, req in reqs.items():
+            for j, one in enumerate(req if isinstance(req, Many) else [req]):
+                sp = StatsPass(*one)
+                if sp.done is None and _waits(sp, kept):
+                    continue  # (next round, as it would run after that pass alone)
+                idx.append((i, j))
+                passes.append(sp)
+                if sp.done is None and sp.gram is None:  # the leading blocks' Gram it keeps
+                    kept |= {static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)}
+        got: dict[int, dict[int, tuple]] = {}
+        for (i, j), ans in zip(idx, run_passes(passes)):
+            got.setdefault(i, {})[j] = ans
+        for i, ans in got.items():
+            req = reqs[i]
+            advance(i, [ans.get(j) for j in range(len(req))] if isinstance(req, Many) else ans[0])
     return out
 
 
-__all__ = ["ChunkMemo", "StatsPass", "drive", "drive_many", "run_passes", "term_key"]
+__all__ = ["ChunkMemo", "Many", "StatsPass", "drive", "drive_many", "run_passes", "term_key"]
