@@ -139,8 +139,10 @@ class FinderSettings(AbstractSelectionSettings):
     interp_spread_min: float = eqx.field(default=0.1, static=True)
     """Smallest eigenvalue of the mean of ``X X^T`` (``X = cos psi, sin psi, cos 2psi, sin
     2psi`` over the kept rows; 0.5 for phases spread over the period) for the interpolation
-    harmonics to be told apart (rule ``applies`` of ``interpolation_error``). Was
-    ``_reference_terms.INTERP_SPREAD_MIN``."""
+    harmonics to be told apart (rule ``applies`` of ``interpolation_error``); below it the
+    ``line_phase`` view locates nothing (a reading on a lattice as coarse as the signal
+    period, ``2 pi / q`` = ``L`` or ``2 L`` counts per turn, puts its phases on a few
+    points). Was ``_reference_terms.INTERP_SPREAD_MIN``."""
 
     quant_amplitude_tol: float = eqx.field(default=0.3, static=True)
     """The fitted staircase of a detected LSB must explain the residual with an amplitude

@@ -686,6 +686,10 @@ def view_line_phase(prep, rw):
             G[k] += X.T @ X
             B[k] += X.T @ r[:, k]
     pw = np.array([_gram_power(G[k], B[k][:, None], n_kept, 4)[0] for k in range(C)])
+    # read on a lattice as coarse as the signal period (2 pi / q = L or 2 L counts per turn)
+    # the phases sit on a few points: the view would see the staircase, not the signal phase
+    lam = np.array([np.linalg.eigvalsh(G[k] / max(n_kept, 1))[0] for k in range(C)])
+    pw = np.where(lam < prep.settings.interp_spread_min, 0.0, pw)
     if pw.max() > thr:
         ch = _carrying(prep, pw, thr)
         L = prep.ctx.signal_periods
