@@ -519,7 +519,9 @@ def shift_arcs_record(rng, where: str) -> tuple:
     an eccentricity shift of 10-15x the noise at a time drawn in a pause between runs, at
     the first row of a run after the first, or inside a run (``where``, one of
     :data:`WHERE`). Returns the record and the truth (``change``, ``t_s``, ``run``: in a
-    pause the earlier run's; issue 44 C, ``tests/test_order_step_part_turn.py``,
+    pause the earlier run's; ``run_zeros_rad``: each later run's angle zero of the head-mean
+    shaft angle, wrapped to (-pi, pi]; ``theta_rad``, ``err_rad``: the shaft angle and the
+    disk error with the shift, per row and head; issue 44 C, ``tests/test_order_step_part_turn.py``,
     ``benchmarks/change_coverage.py``)."""
     import numpy as np
 
@@ -560,8 +562,13 @@ def shift_arcs_record(rng, where: str) -> tuple:
     err = disk_order_error(rng, th, alpha, M, noise * 10 ** rng.uniform(0.5, 2.5))
     A = float(rng.uniform(10, 15)) * noise
     err += (t >= t_s)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
-    y = th[:, None] + err + rng.normal(0, noise, err.shape) + rng.uniform(-3, 3, (R, H))[run]
+    eps = rng.normal(0, noise, err.shape)
+    c = rng.uniform(-3, 3, (R, H))  # each run's head constants (rad)
+    y = th[:, None] + err + eps + c[run]
     rec = heads_recording(rng, t, run, alpha, y)
-    truth = dict(change="ecc_shift", t_s=t_s, run=truth_run, where=where)
+    # the runs' angle zeros of the head-mean shaft angle (the base's run_angle_offset_rad)
+    zeros = (c.mean(1)[0] - c.mean(1)[1:] + np.pi) % (2 * np.pi) - np.pi
+    truth = dict(change="ecc_shift", t_s=t_s, run=truth_run, where=where, run_zeros_rad=zeros)
+    truth.update(theta_rad=th, err_rad=err)
     desc = dict(H=H, R=R, nr=nr, turns=round(turns, 2), both=both, M=M, noise=noise)
     return rec, {**truth, "desc": desc}

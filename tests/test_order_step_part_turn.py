@@ -41,7 +41,10 @@ def _two_heads(seed: int) -> bool:
 
 
 OPEN = pytest.mark.xfail(
-    reason="two heads without a reference on part of a turn: open (issue 44 C)", strict=False
+    reason="two heads without a reference on part of a turn: open (issue 44 C): where the "
+    "change is missed (7620, 7622, 7630) the base fitted before the scan put a later run's "
+    "angle zero 1.1-3.1 rad from the truth (the step pulls it; benchmarks/run_zero_pull.py)",
+    strict=False,
 )
 
 
@@ -152,3 +155,22 @@ def test_a_clean_record_of_two_short_runs_has_no_false_order_change():
     rec, _ = short_record(np.random.default_rng([6334, 44, 0]), None)
     doc = diagnose(rec).doc
     assert doc["verdict"] == "consistent", (doc["verdict"], doc.get("findings_before"))
+
+
+@pytest.mark.parametrize("seed", [7622, 7625, 7630])
+def test_the_truth_run_zeros_and_step_fit_the_record_to_its_noise(seed):
+    """``helpers.shift_arcs_record``'s ``run_zeros_rad`` are the base's run angle zeros of
+    the head-mean shaft angle: the head-projected readings less a constant per run and
+    head, the disk orders ``1..M`` at those zeros and the shift at its time leave the noise
+    (chi-square per degree of freedom near 1), and a zero moved by a radian does not
+    (``benchmarks/run_zero_pull.py``, the diagnosis of the two-head misses)."""
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from run_zero_pull import base_chi2
+
+    rec, truth = shift_record(seed)
+    z = np.asarray(truth["run_zeros_rad"], float)
+    d = truth["desc"]
+    dof = d["R"] * d["nr"] * (d["H"] - 1) - d["R"] * (d["H"] - 1) - 2 * d["M"] - 2
+    chi = base_chi2(rec, truth, z, step=True)
+    assert abs(chi / dof - 1) < 5 * np.sqrt(2 / dof), (chi, dof)
+    assert base_chi2(rec, truth, z + 1.0, step=True) > dof + 10 * np.sqrt(2 * dof)
