@@ -498,6 +498,20 @@ WHERE = ("pause", "run_start", "inside")
 """Where :func:`shift_arcs_record` puts the change."""
 
 
+def disk_order_error(rng, th, alpha, M: int, amp0: float):
+    """A disk's error at orders 1..M seen by heads at azimuths ``alpha`` (rad) on the shaft
+    angle ``th`` (rad): order m at amplitude ``amp0 / m**u`` (u drawn in [0.5, 1.5]) and a
+    drawn phase, the draws in the order the part-turn generators have always made them.
+    Returns an array (rows, heads) in rad."""
+    import numpy as np
+
+    err = np.zeros((th.size, alpha.size))
+    for m in range(1, M + 1):
+        a = amp0 / m ** rng.uniform(0.5, 1.5)
+        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    return err
+
+
 def shift_arcs_record(rng, where: str) -> tuple:
     """2-3 runs of part of a turn each (0.3-0.9 turns, forward or forward and back, each
     from its own angle), one clock with pauses of 1-3 s, 2-4 heads without a reference,
@@ -545,11 +559,7 @@ def shift_arcs_record(rng, where: str) -> tuple:
         truth_run = k
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
     M = int(rng.integers(3, 17))
-    err = np.zeros((t.size, H))
-    amp0 = noise * 10 ** rng.uniform(0.5, 2.5)
-    for m in range(1, M + 1):
-        a = amp0 / m ** rng.uniform(0.5, 1.5)
-        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    err = disk_order_error(rng, th, alpha, M, noise * 10 ** rng.uniform(0.5, 2.5))
     A = float(rng.uniform(10, 15)) * noise
     err += (t >= t_s)[:, None] * A * np.sin(th[:, None] - alpha[None, :] + rng.uniform(0, 6.3))
     eps = rng.normal(0, noise, err.shape)

@@ -9,7 +9,7 @@ import pytest
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
-from tests.helpers import part_turn_record
+from tests.helpers import disk_order_error, part_turn_record
 
 
 def _arc(seed: int, eff: str) -> tuple[Recording, dict]:
@@ -35,11 +35,7 @@ def _arc(seed: int, eff: str) -> tuple[Recording, dict]:
     th = th + rng.uniform(0, 2 * np.pi)
     alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.3, 6.0, H - 1))])
     M = int(rng.integers(3, 21))
-    err = np.zeros((n, H))
-    amp0 = noise * 10 ** rng.uniform(0.5, 2.5)
-    for m in range(1, M + 1):
-        a = amp0 / m ** rng.uniform(0.5, 1.5)
-        err += a * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.3))
+    err = disk_order_error(rng, th, alpha, M, noise * 10 ** rng.uniform(0.5, 2.5))
     A = float(rng.uniform(8, 15)) * noise
     if eff == "eccentricity_shift":
         ts = t[0] + (t[-1] - t[0]) * rng.uniform(0.3, 0.7)

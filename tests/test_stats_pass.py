@@ -11,6 +11,19 @@ import encdesign  # noqa: F401  (float64)
 from tests.test_fit_fast import _bench_base
 
 
+def _assert_bit_equal(alone, together) -> None:
+    """Fits run side by side equal the same fits one after another to the last bit
+    (chi-square, held-out chi-square, normal matrix, every term's values), and the four
+    fits differ from each other, so the comparison can tell them apart."""
+    for a, b in zip(alone, together, strict=True):
+        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
+        np.testing.assert_array_equal(a.A, b.A)
+        for ta, tb in zip(a.terms, b.terms):
+            for k in ta.values:
+                np.testing.assert_array_equal(ta.values[k], tb.values[k])
+    assert len({a.chi2 for a in alone}) == 4
+
+
 def test_fits_side_by_side_equal_the_fits_one_after_another(monkeypatch):
     """A frozen base with three candidates (a line fitted in frequency from two starts, and
     one at a held frequency: nonlinear and linear fits, rounds of different lengths), no
@@ -106,13 +119,7 @@ def test_fits_holding_the_same_free_nonlinear_terms_side_by_side_equal_them_alon
     f = fitter()
     together = _stats_pass.drive_many([f.fit_steps(list(ts), max_steps=6) for ts in fits])
     assert {"term", "processed_dyn", "gram_d", "gram_s"} <= set(hits)
-    for a, b in zip(alone, together):
-        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
-        np.testing.assert_array_equal(a.A, b.A)
-        for ta, tb in zip(a.terms, b.terms):
-            for k in ta.values:
-                np.testing.assert_array_equal(ta.values[k], tb.values[k])
-    assert len({a.chi2 for a in alone}) == 4  # the fits differ: the test can tell them apart
+    _assert_bit_equal(alone, together)
 
 
 def test_a_candidates_screened_starts_side_by_side_equal_them_one_after_another(monkeypatch):
@@ -157,10 +164,4 @@ def test_a_candidates_screened_starts_side_by_side_equal_them_one_after_another(
     )
     together = [*got[0], got[1]]
     assert rounds[0] == 4  # the three screens and the free line's first pass, one pass
-    for a, b in zip(alone, together):
-        assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
-        np.testing.assert_array_equal(a.A, b.A)
-        for ta, tb in zip(a.terms, b.terms):
-            for k in ta.values:
-                np.testing.assert_array_equal(ta.values[k], tb.values[k])
-    assert len({a.chi2 for a in alone}) == 4  # the fits differ: the test can tell them apart
+    _assert_bit_equal(alone, together)
