@@ -140,6 +140,7 @@ def scan_modulated(
     channels: list[int],
     n_channels_static: int,
     beside_static: bool = False,
+    scale=None,
 ) -> list[Finding]:
     """The view on ``channels`` of the whitened residual ``rw`` (rows indexable by an index
     array), orders ``1..max_order``; the static fit skips an order it finds at
@@ -154,7 +155,12 @@ def scan_modulated(
     of one SDS sensor, static 33 and switched 71 chi-square, came 24th of the located
     structures, after its aliases 28, 14, 6, 20 at 60-63; the diagnosis keeps 12). A
     static order does not pass this: with raw regressors a switch or a growth keeps at most
-    ``(K-1)/K`` or 3/4 of its chi-square, and it is charged for more tests."""
+    ``(K-1)/K`` or 3/4 of its chi-square, and it is charged for more tests.
+
+    ``scale``: ``scale(kidx, edges) -> (per shape (2 + 2K, max_order, C), static
+    (max_order, C))``, factors on the chi-squares in the order of the shapes (growth,
+    decay, then switch on / off per edge) and on the static fit's (SDS: the level without
+    the tested columns, :mod:`..kinds.sds._sds_level_out`); ``None``: 1."""
     s = prep.settings
     if max_order < 1 or not channels or int(prep.keep.sum()) < 4:  # 2 rows either side
         return []
@@ -204,6 +210,10 @@ def scan_modulated(
     thr = [chi2_threshold(s.modulated_orders_alpha / 2, 2, nt) for nt in n_tests]
     thr_static = chi2_threshold(s.alpha, 2, max_order * n_channels_static)
     P = np.stack([p for _, _, p in shapes])  # (shapes, M, C)
+    if scale is not None:
+        f_shape, f_static = scale(kidx, edges)
+        P = P * f_shape[:, :, ch]
+        static = static * f_static[:, ch]
     T = np.array([thr[0] if k is None else thr[1] for _, k, _ in shapes])
     out = []
     n_static = max_order * n_channels_static

@@ -75,7 +75,7 @@ from ._sds_data import (
     sds_speed_harmonics,
     stamp_lattice,
 )
-from ._sds_level_out import orders_scale
+from ._sds_level_out import modulated_scale, orders_scale
 from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
@@ -244,7 +244,36 @@ def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list
 
     M = prep.consts["psi_m"].size
     top = min(scan_order, sds_limit(prep))
-    return scan_modulated(prep, rw, top, list(range(M)), M, beside_static=True)
+    factor = noise_info(prep.ctx).level_factor
+    scale = None
+    if factor is not None:
+        name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+        th = np.asarray(prep.rows[name], float)[prep.keep]
+        C = rw.shape[1]
+
+        def scale(kidx, edges):
+            return (
+                modulated_scale(factor, th, _mean_shapes(prep, kidx, edges), M, top, C),
+                orders_scale(factor, th, M, top, C),
+            )
+
+    return scan_modulated(prep, rw, top, list(range(M)), M, beside_static=True, scale=scale)
+
+
+def _mean_shapes(prep: Prepared, kidx: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``(2 + 2K, kept runs)``: the ``modulated_orders`` view's amplitude shapes (growth,
+    decay, then switch on / off at each edge of the kept rows ``kidx`` in time order), each
+    on the kept run means in the level's order (``prep.keep``)."""
+    n = kidx.size
+    j = np.arange(n)
+    g = j / max(n - 1, 1)
+    rows = [g, 1.0 - g]
+    for e in edges:
+        on = (j >= e).astype(float)
+        rows += [on, 1.0 - on]
+    out = np.zeros((len(rows), np.asarray(prep.keep).size))
+    out[:, kidx] = np.stack(rows)
+    return out[:, np.asarray(prep.keep, bool)]
 
 
 # the run-step view first: findings are ranked by p-value, which floors at 1e-999 for a

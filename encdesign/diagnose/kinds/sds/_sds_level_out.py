@@ -21,6 +21,9 @@ test stays at its level (the widening turns the F-test's threshold into the engi
 chi-square one, as for the level itself), while a structure in ``X`` no longer dilutes its
 own test. The factor a test's chi-square is multiplied by is ``(sigma / sigma')^2``
 (:func:`level_factor`), where ``sigma`` is the run-mean level the record is whitened with.
+The ``modulated_orders`` view's growths and switches are read the same way
+(:func:`modulated_scale`: the order's cos / sin times the shape), so a growing or switching
+order no longer dilutes its own test either (session 23, s23-mod41).
 """
 
 from __future__ import annotations
@@ -123,6 +126,34 @@ def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: i
         A[:, k, k] = cs
     out = np.ones((max_order, C))
     out[:, :M] = factor.pairs(A.reshape(phi.size, M, M * max_order, 2)).reshape(M, max_order).T
+    out.setflags(write=False)
+    factor.memo[key] = out
+    return out
+
+
+def modulated_scale(
+    factor: LevelOut, phi: np.ndarray, shapes: np.ndarray, M: int, max_order: int, C: int
+) -> np.ndarray:
+    """``(S, max_order, C)``: per amplitude shape (``shapes`` (S, R): the ``modulated_orders``
+    view's growth, decay and switches on the run means, rows in the level's order), order
+    ``1..max_order`` and channel the factor on that view's chi-square: :class:`LevelOut` of
+    the order's cos / sin times the shape on that moving sensor's run means (a growth or a
+    step is read against the level without itself, as a static order is in
+    :func:`orders_scale`); 1 on the other channels."""
+    phi = np.asarray(phi, float)
+    W = np.asarray(shapes, float)
+    key = ("modulated", phi.tobytes(), W.tobytes(), W.shape, int(M), int(max_order), int(C))
+    if key in factor.memo:
+        return factor.memo[key]
+    S, R = W.shape
+    m = np.arange(1, max_order + 1)
+    cs = np.stack([np.cos(np.outer(phi, m)), np.sin(np.outer(phi, m))], -1)  # (R, L, 2)
+    A = np.zeros((R, M, S, M, max_order, 2))
+    for k in range(M):
+        A[:, k, :, k] = W.T[:, :, None, None] * cs[:, None]
+    out = np.ones((S, max_order, C))
+    f = factor.pairs(A.reshape(R, M, S * M * max_order, 2)).reshape(S, M, max_order)
+    out[:, :, :M] = np.moveaxis(f, 1, 2)
     out.setflags(write=False)
     factor.memo[key] = out
     return out
