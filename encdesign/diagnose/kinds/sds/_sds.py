@@ -75,7 +75,7 @@ from ._sds_data import (
     sds_speed_harmonics,
     stamp_lattice,
 )
-from ._sds_level_out import modulated_scale, orders_scale
+from ._sds_level_out import LevelOut, modulated_scale, orders_scale
 from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
@@ -225,13 +225,22 @@ def view_mean_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fi
 
     M = prep.consts["psi_m"].size
     top = min(scan_order, sds_limit(prep))
-    factor = noise_info(prep.ctx).level_factor
+    level = _level_and_angle(prep)
     scale = None
-    if factor is not None:
-        name = "theta_eff" if "theta_eff" in prep.rows else "theta"
-        th = np.asarray(prep.rows[name], float)[prep.keep]
-        scale = orders_scale(factor, th, M, top, rw.shape[1])
+    if level is not None:
+        scale = orders_scale(*level, M, top, rw.shape[1])
     return view_orders(prep, rw, top, list(range(M)), scale)
+
+
+def _level_and_angle(prep: Prepared) -> tuple[LevelOut, np.ndarray] | None:
+    """The run-mean level's factor (:class:`._sds_level_out.LevelOut`) and the platform
+    angle (rad) on the kept rows it is read on; ``None`` where the kind's noise has no
+    factor."""
+    factor = noise_info(prep.ctx).level_factor
+    if factor is None:
+        return None
+    name = "theta_eff" if "theta_eff" in prep.rows else "theta"
+    return factor, np.asarray(prep.rows[name], float)[prep.keep]
 
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
@@ -244,11 +253,10 @@ def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list
 
     M = prep.consts["psi_m"].size
     top = min(scan_order, sds_limit(prep))
-    factor = noise_info(prep.ctx).level_factor
+    level = _level_and_angle(prep)
     scale = None
-    if factor is not None:
-        name = "theta_eff" if "theta_eff" in prep.rows else "theta"
-        th = np.asarray(prep.rows[name], float)[prep.keep]
+    if level is not None:
+        factor, th = level
         C = rw.shape[1]
 
         def scale(kidx, edges):
