@@ -53,17 +53,13 @@ def test_factor_is_the_f_tests_denominator():
     assert lo(Q[:, :2].reshape(R, M, 2)) == 1.0
 
 
-def test_factor_keeps_the_tests_false_alarm_rate():
-    """Under noise alone the view's chi-square times the factor is an F-statistic times 2:
-    its upper tail stays at the F distribution's (checked at the 1e-2 quantile over 4000
-    draws), where the factor itself averages about 1 (the structure-free level is not
-    biased low)."""
+def _assert_f_tail(rng, X, R: int, M: int, k: int, factor) -> None:
+    """Under noise alone (4000 draws of ``R * M`` run means less ``k`` random saturating
+    columns), a view's chi-square of the columns ``X`` times ``factor(LevelOut)`` is an
+    F-statistic times 2: its upper tail stays at the F distribution's 1e-2 quantile, and the
+    factor averages about 1 (the structure-free level is not biased low)."""
     from scipy import stats
 
-    rng = np.random.default_rng(1)
-    R, M, k = 24, 3, 30
-    phi = rng.uniform(0, 2 * np.pi, R)
-    X = order_columns(phi, M, 7, 0)
     Q = span_basis(rng.standard_normal((R * M, k)))
     Xp = X.reshape(R * M, 2) - Q @ (Q.T @ X.reshape(R * M, 2))
     U = span_basis(Xp)
@@ -72,14 +68,26 @@ def test_factor_keeps_the_tests_false_alarm_rate():
     for _ in range(4000):
         y = rng.standard_normal(R * M)
         e = y - Q @ (Q.T @ y)
-        lo = LevelOut(e, Q, R * M, lambda s, n: s, False, M)
-        f = lo(X)
+        f = factor(LevelOut(e, Q, R * M, lambda s, n: s, False, M))
         g = float(np.sum((U.T @ e) ** 2))
         f_all.append(f)
         stat.append(g / (float(e @ e) / nu) * f / 2)
     assert np.mean(f_all) == pytest.approx(1.0, abs=0.05)
     rate = np.mean(np.asarray(stat) > stats.f.isf(1e-2, 2, nu - 2))
     assert rate == pytest.approx(1e-2, abs=5e-3)
+
+
+def test_factor_keeps_the_tests_false_alarm_rate():
+    """Under noise alone the view's chi-square times the factor is an F-statistic times 2:
+    its upper tail stays at the F distribution's (checked at the 1e-2 quantile over 4000
+    draws), where the factor itself averages about 1 (the structure-free level is not
+    biased low)."""
+
+    rng = np.random.default_rng(1)
+    R, M, k = 24, 3, 30
+    phi = rng.uniform(0, 2 * np.pi, R)
+    X = order_columns(phi, M, 7, 0)
+    _assert_f_tail(rng, X, R, M, k, lambda lo: lo(X))
 
 
 def test_orders_scale_is_per_sensor_and_order():
@@ -163,26 +171,17 @@ def test_modulated_scale_keeps_the_false_alarm_rate(shape):
     times its factor is an F-statistic times 2 (the level without the shaped order's own
     columns): its upper tail stays at the F distribution's 1e-2 quantile over 4000 draws,
     and the factor averages about 1."""
-    from scipy import stats
 
     rng = np.random.default_rng(10 + shape)
     R, M, k = 24, 3, 30
     phi = rng.uniform(0, 2 * np.pi, R)
     W = _shapes(R)
     X = order_columns(phi, M, 7, 2) * W[shape][:, None, None]
-    Q = span_basis(rng.standard_normal((R * M, k)))
-    Xp = X.reshape(R * M, 2) - Q @ (Q.T @ X.reshape(R * M, 2))
-    U = span_basis(Xp)
-    nu = R * M - k
-    f_all, stat = [], []
-    for _ in range(4000):
-        y = rng.standard_normal(R * M)
-        e = y - Q @ (Q.T @ y)
-        lo = LevelOut(e, Q, R * M, lambda s, n: s, False, M)
-        f = float(modulated_scale(lo, phi, W[shape : shape + 1], M, 7, M)[0, 6, 2])
-        g = float(np.sum((U.T @ e) ** 2))
-        f_all.append(f)
-        stat.append(g / (float(e @ e) / nu) * f / 2)
-    assert np.mean(f_all) == pytest.approx(1.0, abs=0.05)
-    rate = np.mean(np.asarray(stat) > stats.f.isf(1e-2, 2, nu - 2))
-    assert rate == pytest.approx(1e-2, abs=5e-3)
+    _assert_f_tail(
+        rng,
+        X,
+        R,
+        M,
+        k,
+        lambda lo: float(modulated_scale(lo, phi, W[shape : shape + 1], M, 7, M)[0, 6, 2]),
+    )
