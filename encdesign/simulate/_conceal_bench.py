@@ -266,6 +266,9 @@ def simulate_plan(
             ph = rng.uniform(0, 2 * np.pi)
             extra += (tau >= ts)[:, None] * A * 1.5 * np.sin(theta[:, None] - alpha[None, :] + ph)
             truth["shift_time_s"] = float(ts)
+            # on the recording's own clock: the first row after the shift and its run
+            i = int(np.searchsorted(tau, ts))
+            truth["shift_at"] = {"time_s": float(t[i]), "run": int(run[i])}
         elif eff == "direction_hysteresis":
             extra += 0.5 * A * 2 * direction[:, None]
         elif eff == "reading_delay":
@@ -466,7 +469,8 @@ def simulate_quadrature(
         truth["where"] = {"orders": [m]}
     if "amplitude_step" in plan["effects"]:
         i0 = int(rng.uniform(0.5, 0.8) * n)
-        gain = np.where(np.arange(n) >= i0, 1 + 6 * noise, 1.0)
+        # the step in noise units (6 in the benchmark's plans; a plan may set its own)
+        gain = np.where(np.arange(n) >= i0, 1 + plan.get("step_noise", 6.0) * noise, 1.0)
         truth["where"] = {"times_s": [float(cols["t"][i0])], "runs": [0]}
     sa = p + gain * shape(phi)
     sb = q + ratio * gain * shape(phi + alpha - np.pi / 2)
