@@ -41,15 +41,17 @@ def _two_heads(seed: int) -> bool:
 
 
 OPEN = pytest.mark.xfail(
-    reason="two heads without a reference on part of a turn: open (issue 44 C): where the "
-    "change is missed (7620, 7622, 7630) the base fitted before the scan put a later run's "
-    "angle zero 1.1-3.1 rad from the truth (the step pulls it; benchmarks/run_zero_pull.py)",
+    reason="two heads without a reference on part of a turn: open (issue 44 C): the base "
+    "fitted before the scan put a later run's angle zero 1.1-3.1 rad from the truth (the "
+    "step pulls it; benchmarks/run_zero_pull.py); since session 24 the change is profiled "
+    "with the zeros chosen jointly with it (_order_step_zeros), which located 7622; 7620's "
+    "zero is unidentified (0.32 turn), 7630 still missed",
     strict=False,
 )
 
 
 def _marks(seed: int):
-    return OPEN if _two_heads(seed) else ()
+    return OPEN if _two_heads(seed) and seed in (7620, 7630) else ()
 
 
 @pytest.mark.parametrize("seed", [pytest.param(s, marks=_marks(s)) for s in SEEDS])
@@ -62,8 +64,9 @@ def test_the_order_change_is_located_where_the_data_put_it(seed):
     7623's fitted ``shift_time_s`` a row into run 1, its interval in run 1 alone: the
     profile's smooth step spilled a quarter of the shift on the rows beside the change
     (``_steps._sharp``). Two heads without a reference (one difference channel; 7620,
-    7622, 7630) are still open: their change is located some rows away with a narrow
-    interval."""
+    7622, 7630) were open: a later run's zero pulled by the shift; session 24's profile
+    with the zeros chosen jointly (``_order_step_zeros``) locates 7622; 7620 and 7630 are
+    still open."""
     rec, truth = shift_record(seed)
     doc = diagnose(rec).doc
     lt = _first_order_step(doc)

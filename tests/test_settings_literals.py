@@ -149,6 +149,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
     ("kinds/multihead/_run_align.py", 2): COUNT + " (two runs)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
+    ("kinds/multihead/_order_step_zeros.py", 2): "counts (several runs, several heads) and a "
+    "squared trace (the 2x2 step Gram's singularity test, as _multihead_terms._step_gain)",
     ("kinds/multihead/_order_step_bins.py", 2): DOF + " (order 1's sin and cos beside the run "
     "constants: the view's base without the base's own columns)",
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
@@ -270,6 +272,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_views_orders.py", "SCAN_VALUES"): BOUND + " (rows x orders per block of a pass)",
     ("engine/_views_sums.py", "GEOMETRY_KEPT"): BOUND + " (geometry entries cached)",
     ("kinds/multihead/_order_step_bins.py", "BIN_ROWS"): BOUND + " (rows per block of a pass)",
+    ("kinds/multihead/_order_step_zeros.py", "BLOCK_ROWS"): BOUND + " (rows per block of a pass)",
+    ("kinds/multihead/_order_step_zeros.py", "BATCH"): BOUND + " (zero settings per batch)",
     ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,
     ("kinds/multihead/_multihead.py", "COVERAGE_ROWS"): BOUND,
     ("kinds/multihead/_multihead.py", "SHAFT_ITERATIONS"): BOUND + " (fixed-point passes)",

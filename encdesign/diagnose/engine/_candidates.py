@@ -259,6 +259,11 @@ class Candidate:
             ``FinderSettings.located_share_min`` of its gain once each is fitted with it
             (rule ``located_share_min``, :func:`._spill.rival_rule`): a smooth effect with
             many parameters takes a part of a transient, and dominance must not name it.
+        time_profile: ``time_profile(fitter, prep, terms, idx, name) -> located_time or
+            None``: the kind's own profile of the time parameter ``name`` of ``terms[idx]``
+            (a ``global_time``), or ``None`` (default; also where it returns ``None``):
+            :func:`._steps.time_param_interval`'s (issue 44 C, session 24: a shift on part
+            of a turn profiled with the runs' angle zeros chosen jointly with it).
     """
 
     name: str
@@ -277,6 +282,7 @@ class Candidate:
     probes: ProbeFn | None = None
     orders: tuple[int, ...] = ()
     rivals: Callable[[Context], Sequence[Candidate]] | None = None
+    time_profile: Callable[..., dict | None] | None = None
 
     def __post_init__(self) -> None:
         names = [p.name for p in self.params]

@@ -621,6 +621,33 @@ class FinderSettings(AbstractSelectionSettings):
     offset, not a change). 1e3f0c4. Was an inline ``// 100`` in ``_multihead_terms`` (moved
     unchanged in issue 44 G)."""
 
+    zero_profile_grid: int = eqx.field(default=24, static=True)
+    """multihead, part of a turn without a reference head, several runs: the ``order_step``
+    view's change is located with the runs' angle zeros chosen jointly with it
+    (``_order_step_zeros``, issue 44 C, session 24): each later run's zero move is first
+    tried at this many points over one turn. Session 23's scan
+    (``benchmarks/zero_profile_scan.py``), not tuned. A bound on the work."""
+
+    zero_profile_configs_max: int = eqx.field(default=1024, static=True)
+    """... their product over the later runs where it has at most this many settings (two
+    later runs: 576), else sweeps of one run's grid at a time. Session 24, a bound on the
+    work."""
+
+    zero_profile_points: int = eqx.field(default=64, static=True)
+    """... at this many of the view's change points (equal-count bin edges) and every later
+    run's first row; the best one's neighbourhood is then scanned row by row. Session 24, a
+    bound on the work."""
+
+    zero_profile_refine: int = eqx.field(default=8, static=True)
+    """... the zeros of this many of them (the least chi-square on the grid) refined first,
+    then of every one whose grid value lies within the interval's bound plus the largest
+    drop a refinement gave. Session 24, a bound on the work."""
+
+    zero_profile_rounds: int = eqx.field(default=8, static=True)
+    """... each change point's zeros then refined by a coordinate search whose step (first
+    the grid's) halves this many times (and this many sweeps where the product is too
+    large). Session 24, a bound on the work."""
+
     clip_band: float = eqx.field(default=0.002, static=True)
     """quadrature: a sample is at a signal extreme when within this share of the amplitude
     of it: the band in which ``clip_excess_ratio`` compares the samples found with those a

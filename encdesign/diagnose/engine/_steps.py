@@ -365,8 +365,13 @@ def time_param_interval(
     the fitted time put a shift in the pause some rows into the later run); a term with no
     free linear parameter is scaled (its shape at the fitted values, one free column). The
     interval at
-    ``FinderSettings.change_time_level`` (:mod:`._located`)."""
+    ``FinderSettings.change_time_level`` (:mod:`._located`). Where the candidate has its own
+    profile (``Candidate.time_profile``) and it applies, that one."""
     term = terms[idx]
+    if term.cand.time_profile is not None:
+        own_lt = term.cand.time_profile(fitter, prep, terms, idx, name)
+        if own_lt is not None:
+            return own_lt
     rows = np.flatnonzero(prep.keep)
     tau = np.asarray(prep.rows.take("tau", rows), float)
     mid = np.concatenate([[tau[0]], 0.5 * (tau[1:] + tau[:-1])])  # change before row i

@@ -15,6 +15,7 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
 from ._order_step_bins import base_columns, order_step_bins, order_step_width
+from ._order_step_zeros import shift_time_profile, zero_profile
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
 from ._vibration_doubt import (
     NO_DOUBT,
@@ -678,6 +679,10 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     gi = np.where(ok, gi, -1.0)
     i_after = int(kidx[lo + int(np.argmax(gi))])  # first kept row after the change
     located = _order_step_interval(prep, kidx, lo, gi, ok, edges[e], like)
+    # issue 44 C, part turns: located with the runs' zeros re-chosen (the fit's start, the
+    # row below, stays the view's: the trial fits hold the base's zeros)
+    zp = zero_profile(prep, rw, kidx, edges[e], margin)
+    located = located if zp is None else zp[1]
     i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
     tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
     tau_b = float(prep.rows.take("tau", np.array([i_before]))[0])
@@ -786,4 +791,5 @@ ECCENTRICITY_SHIFT = Candidate(
     start=_es_start,
     plausible=_es_plausible,
     valjac=eccentricity_shift_valjac,
+    time_profile=shift_time_profile,
 )
