@@ -33,6 +33,35 @@ the finder; discovery's model of the located line is scored against the truth:
   ``frame_right_detectable_not_confounded`` scores the detectable cases the catalog does
   not legitimately take (``..._nameable_...``: with the naming threshold only), next to
   ``frame_right_all``.
+* ``oracle_detectable`` (session 24; every case): the same marks without the finder's noise
+  estimate, from what only the generator knows: the record rebuilt from the same draws
+  without its noise (``outside_record(..., noise=False)``) and without its structure too
+  (size 0) gives, through the finder's own prepare stage, the structure's exact part of the
+  data ``mu`` and the record's exact noise ``eps`` (the record less its noise-free twin);
+  the true noise levels are ``eps``'s RMS (less each channel's constant: the clock's
+  rounding delays every edge by half a tick on average, which the base's offsets take) over
+  the channels the finder gives one level; on
+  an SDS record over the moving sensors' common part and their differences separately (a
+  Helmert rotation of each block of ``M`` channels, run means and each revolution's
+  contrasts: the fixed sensors' timing noise is common to the moving sensors, so the two
+  parts have different levels). ``oracle_noncentrality`` is the noncentrality of the true
+  structure against that noise after projecting out the **base** model's columns (its
+  Jacobian on the record, the catalog-free fit discovery starts from; a weighted
+  projection, the components independent at their true levels): ``lambda = |mu'|^2``,
+  ``mu'`` the whitened ``mu`` less its part in the span of the whitened Jacobian. It is the
+  expected chi-square the true model takes beyond its degrees of freedom, whatever the
+  finder's level. The case
+  is ``oracle_nameable`` where ``lambda`` exceeds the true term's multiple-testing
+  threshold (``threshold_true_raw_chi2``: ``chi2.isf`` at the finder's ``discover_alpha``
+  over the library's size, before the noise hook's level factor, which corrects for the
+  finder's own level and has no place at the true one) and ``oracle_detectable`` where it
+  also exceeds the ``orders`` view's locating threshold (an order line); ``oracle_power``:
+  the chance a noncentral chi-square of the true term's degrees of freedom and ``lambda``
+  passes both; ``noise_finder_over_true``: the finder's level on the channel that carries
+  most of ``mu`` over the structure's true level (``noise_true_rad``: the level at which
+  channels weighed alike would give ``mu`` the same noncentrality before the projection).
+  ``frame_right_oracle_detectable`` scores the oracle-detectable cases the catalog does not
+  legitimately take.
 
 The ``intermittent`` class (session 20): an order of the shaft on in two of the three runs,
 at their different speeds, off in the third, with its own phase in each run it is on in
@@ -71,15 +100,20 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import time
+from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from encdesign.diagnose._dispatch import diagnose
+from encdesign.diagnose._registry import KINDS as FINDER_KINDS
 from encdesign.diagnose.engine import _discover as D
 from encdesign.diagnose.engine import _engine
 from encdesign.diagnose.engine._views import chi2_threshold
 from encdesign.diagnose.kinds.sds._sds import sds_limit
+from encdesign.diagnose.kinds.sds._sds_noise import _sensor_helmert
 from encdesign.simulate._outside import CLASSES, CONFOUNDED, KINDS, classes_for, outside_record
 
 SIZES = (2.0, 5.0, 20.0)
@@ -142,8 +176,11 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
     of that true term (what a term must take to enter). ``base``: the truth's model fitted
     jointly with the base model instead, at the truth's line whatever the finder located
     (``discovered``: nan); ``forced``: with the final catalog model, at the truth's line
-    whatever the finder located (``discovered``: nan)."""
+    whatever the finder located (``discovered``: nan). ``_CAP["true_term"]``: that
+    threshold before the noise hook's level factor (``chi2.isf`` at ``discover_alpha``
+    over the library, :func:`D.thresholds`) and its degrees of freedom."""
     nan = float("nan")
+    _CAP["true_term"] = (nan, 0)
     if base or forced:
         if _CAP.get("base_fitter") is None:
             return nan, nan, nan
@@ -170,6 +207,8 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
         got = D._heldout(st.sums.A, st.sums.b, D._embed(st.sums, mine), folds, st.sums.raw)
     mod = truth["modulation"]
     best = thr = nan
+    raw = D.thresholds(st.lib, st.settings.discover_alpha)
+    dof = [tm.H.shape[1] + (tm.beta is not None) for tm in st.lib]
     for ti, tm in enumerate(st.lib):
         if tm.line != li[0] or tm.frame != truth["frame"]:
             continue
@@ -188,6 +227,7 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
                 )
                 if not np.isfinite(best) or g > best:
                     best, thr = g, float(st.thresh[ti])
+                    _CAP["true_term"] = (float(raw[ti]), dof[ti])
                 continue
         else:
             ok = m == mod
@@ -195,6 +235,7 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
             g = D._single_heldout(st.sums, tm, folds)
             if not np.isfinite(best) or g > best:
                 best, thr = g, float(st.thresh[ti])
+                _CAP["true_term"] = (float(raw[ti]), dof[ti])
     if mod == "per_cell" and truth.get("runs") is not None:  # or its exact form: its own
         # amplitude and phase in each of its runs, none elsewhere (one cell term per run)
         cells = [
@@ -210,6 +251,10 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
             g = D._heldout(st.sums.A, st.sums.b, H, folds, st.sums.raw)
             if not np.isfinite(best) or g > best:
                 best, thr = g, max(float(st.thresh[ti]) for ti, _ in cells)
+                _CAP["true_term"] = (
+                    max(raw[ti] for ti, _ in cells),
+                    sum(dof[ti] for ti, _ in cells),
+                )
     return got, best, thr
 
 
@@ -227,6 +272,89 @@ def _locate_threshold(truth: dict, kind: str) -> float:
     else:
         n_tests = scan * prep.n_channels
     return chi2_threshold(prep.settings.alpha, 2, n_tests)
+
+
+def _prepared_y(rec, settings) -> np.ndarray:
+    """The data ``y`` (n, C) the finder's prepare stage makes of ``rec``."""
+    kind = FINDER_KINDS[rec.kind]
+    meta = dict(rec.meta)
+    meta.setdefault("kind", rec.kind)
+    return np.asarray(kind.prepare(kind.data(rec, settings), meta, settings).y, float)
+
+
+def _oracle(cls: str, size: float, kind: str, seed, rows: int) -> dict:
+    """The oracle detectability's numbers (module doc: ``oracle_noncentrality``, the true
+    noise and the finder's over it) of the case just diagnosed; empty where the base model
+    was not captured or the noise-free twin prepares to other rows."""
+    prep, fitter = _CAP.get("base_prep"), _CAP.get("base_fitter")
+    if prep is None or fitter is None:
+        return {}
+    y_s = _prepared_y(
+        outside_record(np.random.default_rng(seed), cls, size, kind, rows, noise=False)[0],
+        prep.settings,
+    )
+    y_0 = _prepared_y(
+        outside_record(np.random.default_rng(seed), cls, 0.0, kind, rows, noise=False)[0],
+        prep.settings,
+    )
+    y = np.asarray(prep.y, float)
+    if y_s.shape != y.shape or y_0.shape != y.shape:
+        return {}
+    keep = np.asarray(prep.keep, bool)
+    mu, eps = (y_s - y_0)[keep], (y - y_s)[keep]
+    if prep.kd.project:  # as the data are: less the channels' mean
+        mu, eps = mu - mu.mean(1, keepdims=True), eps - eps.mean(1, keepdims=True)
+    sig = np.asarray(prep.sigma, float)
+    C = sig.size
+    c = int(np.argmax(np.sum(mu**2, 0)))  # the channel carrying most of the structure
+    J = D._jacobian(prep, fitter, _CAP["base_terms"])[keep] * sig[None, :, None]  # unwhitened
+    T, group = np.eye(C), np.unique(sig, return_inverse=True)[1].ravel()
+    if kind == "sds":  # each block of M: the moving sensors' common part and differences
+        M = int(np.asarray(prep.consts["psi_m"]).size)
+        T = np.kron(np.eye(C // M), _sensor_helmert(M))
+        group = 2 * (np.arange(C) >= M) + (np.arange(C) % M == 0)
+    mu0 = mu
+    mu, eps, J = mu @ T, eps @ T, np.einsum("ncp,cd->ndp", J, T)
+    # less each channel's constant (the clock's rounding delays every edge by half a tick on
+    # average: a constant the base's offsets take, not noise), one degree of freedom each
+    eps = eps - eps.mean(0)
+    dof = {g: max(eps.shape[0] - 1, 1) * int(np.sum(group == g)) for g in set(group.tolist())}
+    true = np.array(
+        [math.sqrt(float(np.sum(eps[:, group == g] ** 2)) / dof[g]) for g in group.tolist()]
+    )
+    w = np.where(true > 0, 1.0 / np.where(true > 0, true, 1.0), 0.0)
+    m = (mu * w).ravel()
+    U, sv, _ = np.linalg.svd((J * w[None, :, None]).reshape(m.size, -1), full_matrices=False)
+    U = U[:, sv > 1e-9 * sv.max()] if sv.size else U[:, :0]
+    lam = float(m @ m - np.sum((U.T @ m) ** 2))
+    eff = math.sqrt(float(np.sum(mu0**2)) / max(float(m @ m), 1e-300))
+    out: dict[str, Any] = {
+        "oracle_noncentrality": lam,
+        "noise_true_rad": eff,
+        "noise_finder_over_true": float(sig[c] / eff),
+    }
+    # this record's draw: the true structure's matched chi-square (1 dof) on the base
+    # residual, at the true levels (mean lambda + 1) and at the finder's (one per channel)
+    base = _CAP.get("base_resid")
+    if base is not None and np.shape(base) == y.shape and lam > 0:
+        mp = m - U @ (U.T @ m)
+        r = ((np.asarray(base, float)[keep] @ T) * w).ravel()
+        out["oracle_matched_chi2"] = float((mp @ r) ** 2 / lam)
+        Jf = D._jacobian(prep, fitter, _CAP["base_terms"])[keep]
+        Uf, sf, _ = np.linalg.svd(Jf.reshape(m.size, -1), full_matrices=False)
+        Uf = Uf[:, sf > 1e-9 * sf.max()] if sf.size else Uf[:, :0]
+        mf = (mu0 / sig).ravel()
+        mf = mf - Uf @ (Uf.T @ mf)
+        rf = (np.asarray(base, float)[keep] / sig).ravel()
+        out["finder_matched_chi2"] = float((mf @ rf) ** 2 / max(float(mf @ mf), 1e-300))
+    if kind == "sds":  # the run means' true levels and the finder's level's parts
+        lv = getattr(getattr(prep.ctx, "noise_info", None), "levels", None) or {}
+        out["noise_true_run_means_rad"] = {"common": float(true[0]), "differences": float(true[1])}
+        out["noise_finder_run_means"] = {
+            k: lv.get(f"run_means_{k}")
+            for k in ("rad", "dof", "widening", "common_factor", "steps_or_outliers")
+        }
+    return out
 
 
 def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
@@ -283,11 +411,22 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
     # line (located or not), takes more held-out chi-square than its multiple-testing
     # threshold: the record holds the effect at the finder's significance
     _, bg, bthr = _gains(truth, base=True)
+    rthr, q = _CAP["true_term"]
     lthr = _locate_threshold(truth, kind)
     out["gain_true_after_base_chi2"], out["threshold_true_chi2"] = bg, bthr
     out["threshold_locate_chi2"] = lthr
     out["nameable"] = bool(np.isfinite(bg) and bg > bthr)
     out["detectable"] = out["nameable"] and not (np.isfinite(lthr) and bg <= lthr)
+    # the same marks at the true noise, from the noncentrality of the true structure
+    out.update(_oracle(cls, size, kind, seed, rows))
+    lam = out.get("oracle_noncentrality", float("nan"))
+    out["threshold_true_raw_chi2"], out["true_dof"] = rthr, q
+    out["oracle_nameable"] = bool(np.isfinite(lam) and lam > rthr)
+    out["oracle_detectable"] = out["oracle_nameable"] and not (np.isfinite(lthr) and lam <= lthr)
+    if (
+        np.isfinite(lam) and np.isfinite(rthr) and q > 0
+    ):  # the chance the true term's chi-square passes both
+        out["oracle_power"] = float(stats.ncx2.sf(np.nanmax([rthr, lthr]), q, max(lam, 1e-12)))
     # a static order of one sensor is its own error function: the base model takes it
     out["base"] = d.verdict == "consistent"
     if terms:
@@ -326,6 +465,7 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
     ident = [c for c in cases if not c.get("confounded")]
     fair = [c for c in ident if c.get("detectable")]
     nameable = [c for c in ident if c.get("nameable", c.get("detectable"))]
+    oracle = [c for c in ident if c.get("oracle_detectable")]
     ratios = [c["gain_ratio"] for c in disc if c.get("gain_ratio") is not None]
     by = {}
     for key in ("class", "size", "kind"):
@@ -336,7 +476,17 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
         "frame_right_excluding_confounded": rate([c["frame_right"] for c in ident]),
         "frame_right_detectable_not_confounded": rate([c["frame_right"] for c in fair]),
         "frame_right_nameable_not_confounded": rate([c["frame_right"] for c in nameable]),
+        "frame_right_oracle_detectable": rate([c["frame_right"] for c in oracle]),
         "undetectable": rate([not c.get("detectable") for c in cases]),
+        "oracle_undetectable": rate([not c.get("oracle_detectable") for c in cases]),
+        "oracle_power_sum": float(sum(c.get("oracle_power", 0.0) for c in cases)),
+        "missed_oracle_detectable": [
+            f"{c['kind']} {c['class']} {c['size']:g}x verdict={c['verdict']} "
+            f"lambda={c['oracle_noncentrality']:.1f} thresholds={c['threshold_true_raw_chi2']:.1f}/"
+            f"{c['threshold_locate_chi2']:.1f} finder/true noise={c['noise_finder_over_true']:.2f}"
+            for c in oracle
+            if not c["frame_right"]
+        ],
         "not_nameable": rate([not c.get("nameable", c.get("detectable")) for c in cases]),
         "missed_detectable_not_confounded": [
             f"{c['kind']} {c['class']} {c['size']:g}x verdict={c['verdict']}"
@@ -411,6 +561,8 @@ def main(argv=None) -> int:
                         f"{kind:9s} {cls:14s} {size:4g}x  found={c['found']!s:5s} "
                         f"frame={c['frame_right']!s:5s} catalog={c['catalog']!s:5s} "
                         f"detectable={c['detectable']!s:5s} "
+                        f"oracle={c['oracle_detectable']!s:5s} "
+                        f"lambda={c.get('oracle_noncentrality', float('nan')):.1f} "
                         f"beta2se={c.get('beta_within_2se', '-')!s:5s} "
                         f"ratio={c.get('gain_ratio')} {c['wall_s']:.1f}s",
                         flush=True,

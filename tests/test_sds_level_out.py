@@ -185,3 +185,88 @@ def test_modulated_scale_keeps_the_false_alarm_rate(shape):
         k,
         lambda lo: float(modulated_scale(lo, phi, W[shape : shape + 1], M, 7, M)[0, 6, 2]),
     )
+
+
+def _loop_factor(lo: LevelOut, sigma_of, g: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Session 23's ``LevelOut._factor``: one scalar ``sigma_of`` call per entry."""
+    import math
+
+    out = np.ones(g.shape)
+    for i in np.flatnonzero((r > 0) & (lo.nu - r >= 3)):
+        s2 = max(lo.ssr - float(g[i]), 0.0) / (lo.nu - r[i])
+        if s2 > 0:
+            out[i] = (lo.sigma / sigma_of(math.sqrt(s2), lo.nu - r[i])) ** 2
+    return out
+
+
+@pytest.mark.parametrize("proj", [False, True])
+def test_factor_on_arrays_equals_the_scalar_levels(proj):
+    """The run-mean level's factor read for many columns at once (:class:`RunMeanLevel`,
+    session 24) equals, within 1e-12 relative, the session 23 loop of one scalar level per
+    entry made of :func:`_sds_noise.dof_widening`, :func:`_sds_noise._common_factor` and
+    :func:`_sds_noise._direct_common_factor` at that entry's raw level; on a residual of
+    :func:`_sds_noise._level_sigma` where the common factor is raised by the fixed sensors
+    and capped by the run means' common component, both over raw levels on either side of
+    the cap (the cap and the indirect factor each decide some entries)."""
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel
+    from encdesign.diagnose.kinds.sds._sds_noise import (
+        _common_excess,
+        _common_factor,
+        _direct_common_factor,
+        _direct_ucl,
+        _level_sigma,
+        dof_widening,
+    )
+
+    rng = np.random.default_rng(24)
+    R, M, K, F, p, q = 24, 3, 4, 2, 1e-3, 0.9
+    phi = rng.uniform(0, 2 * np.pi, R)
+    X = np.repeat(np.stack([np.ones(R), np.cos(phi), np.sin(phi)], 1), M, axis=0)
+    resid = rng.standard_normal((R, M * K))
+    resid[:, :M] += 2.0 * rng.standard_normal((R, 1))  # a common component: the cap's ucl
+    fixed = 0.8 * rng.standard_normal((R, F))  # the fixed sensors' excess
+    common = np.stack([np.ones(R), np.cos(phi)], 1)
+    info, state = {}, {}
+    sig = _level_sigma(
+        resid,
+        K,
+        X,
+        proj,
+        info,
+        test_p=p,
+        level_alpha=1e-3,
+        fixed=fixed,
+        common_base=common,
+        common_quantile=q,
+        state=state,
+    )
+    lo = state["factor"]
+    assert isinstance(lo.sigma_of, RunMeanLevel)
+    lv = [info["contrasts_common_rad"], info["contrasts_differences_rad"]]
+
+    def scalar(s, n):
+        g_i = _common_factor(lv, proj, fixed, s, M, K)
+        g_d = None if proj else _direct_common_factor(resid[:, :M], common, s, q)
+        return s * dof_widening(n, p=p) * (min(g_i, g_d) if g_d is not None else g_i)
+
+    assert lo.sigma == pytest.approx(scalar(np.sqrt(lo.ssr / lo.nu), lo.nu), rel=1e-12)
+    assert lo.sigma == pytest.approx(sig[0], rel=1e-12)
+    excess, ucl = _common_excess(lv, fixed, M, K), _direct_ucl(resid[:, :M], common, q)
+    assert ucl is not None and ucl > excess > 0
+    # raw levels s'^2 from far below the cap's turn (s^2 = ucl - excess) to far above
+    s2 = np.geomspace(1e-3, 1e2, 300) * (ucl - excess)
+    r = rng.integers(0, 5, s2.size)
+    r[:3] = [lo.nu - 2, lo.nu - 3, 1]  # too few degrees of freedom left; the edge; ok
+    g = lo.ssr - s2 * (lo.nu - r)
+    g[-1] = 2 * lo.ssr  # more power than the residual holds: s'^2 = 0, factor 1
+    want = _loop_factor(lo, scalar, g, r)
+    got = lo._factor(g, r)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+    assert got[0] == 1.0 and got[-1] == 1.0 and np.sum(got != 1.0) > 200
+    if not proj:  # both sides of the cap decide some entries
+        s = np.sqrt(s2)
+        capped = np.sqrt(np.maximum(1.0, ucl / s2)) < np.sqrt(1.0 + excess / s2)
+        assert 10 < np.sum(capped) < s.size - 10
+    # through the batched pairs too: the same factors as one column pair at a time
+    A = np.stack([order_columns(phi, M, m, k) for k in range(M) for m in (2, 5, 11)], 2)
+    np.testing.assert_allclose(lo.pairs(A), [lo(A[:, :, i]) for i in range(A.shape[2])], 1e-12)

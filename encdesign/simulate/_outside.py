@@ -150,11 +150,17 @@ def outside_record(
     kind: str = "multihead",
     n_rows: int = 6000,
     mode: tuple[float, float] | None = None,
+    *,
+    noise: bool = True,
 ) -> tuple[Recording, dict]:
     """``(recording, truth)``: a bench of ``kind`` with one structure of class ``cls``
     (:data:`CLASSES`; ``"clean"``: none) of peak amplitude ``size`` x the noise.
     ``mode``: ``(frequency Hz, Q)`` of the ``fixed_hz`` class's mode (a property of the
-    bench: another record of the same bench; default: drawn).
+    bench: another record of the same bench; default: drawn). ``noise=False``: the same
+    record (the same draws) without its noise (the readings' white noise; on an SDS bench
+    the edges' timing jitter and the clock's rounding): with ``size`` 0 too, what is left
+    of the same ``rng`` is the bench alone, so the structure and the noise of a record are
+    known exactly (``benchmarks/discovery.py``'s oracle detectability).
 
     ``truth``: ``line`` (``("order", m)`` or ``("hz", f)``), ``frame``, ``modulation``,
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
@@ -165,7 +171,7 @@ def outside_record(
     if cls not in ("clean", *CONTROLS, *CONFOUNDED) and cls not in classes_for(kind):
         raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
     if kind == "sds":
-        return _sds_record(rng, cls, size)
+        return _sds_record(rng, cls, size, noise)
     C = 4 if kind == "multihead" else 1
     both = cls in ("one_direction", "direction_lag")
     R = 4 if both else 3
@@ -235,7 +241,7 @@ def outside_record(
                 g = np.ones(t.size)
             s = A * s * g[:, None]
         err += s
-    read = th[:, None] + err + rng.normal(0, NOISE_RAD, err.shape)
+    read = th[:, None] + err + rng.normal(0, NOISE_RAD, err.shape) * float(noise)
     cols = {"t": t, "run": run, "theta_ref": th.copy()}
     for k in range(C):
         cols[f"h{k}"] = read[:, k]
@@ -254,9 +260,12 @@ def outside_record(
     return Recording("multihead", meta, cols), truth
 
 
-def _sds_record(rng: np.random.Generator, cls: str, size: float) -> tuple[Recording, dict]:
+def _sds_record(
+    rng: np.random.Generator, cls: str, size: float, noise: bool = True
+) -> tuple[Recording, dict]:
     """An SDS bench (module doc) with one structure of ``cls`` on the moving sensors' edges:
-    a delay ``A f(phi) / Omega`` (``A`` = ``size`` x :data:`SDS_NOISE_RAD`)."""
+    a delay ``A f(phi) / Omega`` (``A`` = ``size`` x :data:`SDS_NOISE_RAD`); ``noise``:
+    the edges' 1 ns jitter and the clock's rounding (else exact edge times)."""
     import jax
 
     from ..physics._sds_errors import SDSErrors
@@ -302,9 +311,11 @@ def _sds_record(rng: np.random.Generator, cls: str, size: float) -> tuple[Record
                 m = m + d
             else:
                 m[k] = m[k] + d
+        if not noise:
+            return f, m
         return np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
 
-    errors = SDSErrors(clock_period_s=0.0, jitter_s=1e-9)
+    errors = SDSErrors(clock_period_s=0.0, jitter_s=1e-9 if noise else 0.0)
     cols = sds_bench_columns(design, phis, SDS_REVS, errors, key=kj, edge_hook=hook)
     meta = {
         "format": "encdesign-recording/1",

@@ -34,6 +34,30 @@ from collections.abc import Callable
 import numpy as np
 
 
+class RunMeanLevel:
+    """``sigma_of(s, nu)`` on arrays: the run-mean level (rad) of raw levels ``s`` (rad) with
+    ``nu`` degrees of freedom, ``s c(nu) g(s)``, as :func:`._sds_noise._level_sigma` makes
+    it: ``c = widen(nu)`` (:func:`._sds_noise.dof_widening`, once per distinct ``nu``) and
+    the common factor ``g(s) = sqrt(1 + excess / s^2)`` (:func:`._sds_noise._common_factor`,
+    ``excess`` (rad^2) its ``e``, 0 where the run means are projected on the differences),
+    capped by ``sqrt(max(1, ucl / s^2))`` (:func:`._sds_noise._direct_common_factor`, ``ucl``
+    (rad^2) its upper confidence limit; ``None``: no cap). Neither ``excess`` nor ``ucl``
+    depends on ``s``: :class:`LevelOut` reads hundreds of levels without a Python call
+    each, equal to those functions' (``tests/test_sds_level_out.py``)."""
+
+    def __init__(self, widen: Callable[[float], float], excess: float, ucl: float | None):
+        self.widen, self.excess, self.ucl = widen, float(excess), ucl
+
+    def __call__(self, s, nu) -> np.ndarray:
+        s, nu = np.asarray(s, float), np.asarray(nu)
+        vals, inv = np.unique(nu, return_inverse=True)
+        c = np.array([self.widen(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
+        g = np.sqrt(1.0 + self.excess / s**2)
+        if self.ucl is not None:
+            g = np.minimum(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)))
+        return s * c * g
+
+
 class LevelOut:
     """``factor(cols) -> (sigma / sigma')^2`` (module doc) for columns ``cols`` (R, M, q)
     on the run means (rows in the level's order: the kept runs), projected on the
@@ -43,18 +67,19 @@ class LevelOut:
     ``e`` (R*M,): the saturated fit's residual; ``Q`` (R*M, k): the orthonormal basis it is
     the residual of (saturating columns and the change points, outliers and one-sensor orders
     the level took); ``n_ind``: the independent values; ``sigma_of(s_raw, nu)``: the run-mean
-    level from a raw level and its degrees of freedom (widening and common factor, as
-    :func:`._sds_noise._level_sigma` makes it). A direction of the columns that ``Q`` holds
+    level from raw levels and their degrees of freedom, element by element on arrays
+    (widening and common factor, as :func:`._sds_noise._level_sigma` makes it:
+    :class:`RunMeanLevel`). A direction of the columns that ``Q`` holds
     (its part off ``Q`` below ``1e-6`` of the columns' norm) is no degree of freedom of the
     level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1."""
 
-    def __init__(self, e, Q, n_ind: int, sigma_of: Callable[[float, float], float], proj, M):
+    def __init__(self, e, Q, n_ind: int, sigma_of: Callable[..., float | np.ndarray], proj, M):
         self.e, self.Q, self.sigma_of, self.proj, self.M = e, Q, sigma_of, bool(proj), int(M)
         self.ssr = float(e @ e)
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
         self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
-        self.sigma = sigma_of(math.sqrt(self.ssr / self.nu), self.nu) if ok else 0.0
+        self.sigma = float(sigma_of(math.sqrt(self.ssr / self.nu), self.nu)) if ok else 0.0
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``X`` (R, M, ...) projected as the run means are, flattened to (R*M, -1), and
@@ -65,11 +90,18 @@ class LevelOut:
         return X - self.Q @ (self.Q.T @ X), np.sum(X**2, 0)
 
     def _factor(self, g: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """``(sigma / sigma')^2`` per power ``g`` taken by columns of rank ``r`` (arrays of
+        one shape): one call of ``sigma_of`` on all of them (session 24: a call per entry
+        was a fifth of an SDS record's discovery time)."""
+        g, r = np.asarray(g, float), np.asarray(r, int)
         out = np.ones(g.shape)
-        for i in np.flatnonzero((r > 0) & (self.nu - r >= 3)):
-            s2 = max(self.ssr - float(g[i]), 0.0) / (self.nu - r[i])
-            if s2 > 0:
-                out[i] = (self.sigma / self.sigma_of(math.sqrt(s2), self.nu - r[i])) ** 2
+        idx = np.flatnonzero((r > 0) & (self.nu - r >= 3))
+        n = self.nu - r.ravel()[idx]
+        s2 = np.maximum(self.ssr - g.ravel()[idx], 0.0) / n
+        idx, n, s2 = idx[s2 > 0], n[s2 > 0], s2[s2 > 0]
+        if idx.size:
+            sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
+            out.flat[idx] = (self.sigma / sig) ** 2
         return out
 
     def __call__(self, cols: np.ndarray) -> float:

@@ -19,7 +19,7 @@ from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
 from ._sds_drift import _step_or_outlier, drift_power_at, onset_power
-from ._sds_level_out import LevelOut
+from ._sds_level_out import LevelOut, RunMeanLevel
 from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
 REFERENCE_RADIUS_M = 0.0254
@@ -283,17 +283,21 @@ def _common_factor(
 
     The larger per-value level is used, as for the contrasts themselves (the engine weighs
     channels as independent: conservative for common and differential patterns alike)."""
-    if proj or not s_raw > 0:
-        return 1.0
+    ok = not proj and s_raw > 0
+    return math.sqrt(1.0 + _common_excess(contrast_levels, fixed, M, K) / s_raw**2) if ok else 1.0
+
+
+def _common_excess(lv: list[float], fixed: np.ndarray | None, M: int, K: int) -> float:
+    """:func:`_common_factor`'s ``e`` (rad², at least 0; independent of ``s_raw``)."""
     excess = 0.0
-    if len(contrast_levels) > 1:
-        excess = (contrast_levels[0] ** 2 - contrast_levels[1] ** 2) / K
+    if len(lv) > 1:
+        excess = (lv[0] ** 2 - lv[1] ** 2) / K
     if fixed is not None and fixed.ndim == 2 and fixed.shape[1] > 1:
         R, F = fixed.shape
         d = (fixed - fixed.mean(0)) @ _sensor_helmert(F)[:, 1:]
         s_f2 = float(np.sum(d**2)) / max((R - 1) * (F - 1), 1)
         excess = max(excess, M * s_f2 / F)
-    return math.sqrt(1.0 + max(excess, 0.0) / s_raw**2)
+    return max(excess, 0.0)
 
 
 def common_base_columns(phi: np.ndarray, psi_m: np.ndarray, orders_base: list[int]) -> np.ndarray:
@@ -329,15 +333,20 @@ def _direct_common_factor(
     run-mean test paid for it. A catalog effect common to the moving sensors raises this
     estimate (the probes re-run it on the residual with the effect,
     :func:`levels_of`), so it caps the indirect factor, never raises it."""
-    R, M = resid_means.shape
-    z0 = resid_means.mean(1) * math.sqrt(M)  # the common Helmert component
-    A = span_basis(common_base)
+    ucl = _direct_ucl(resid_means, common_base, quantile)
+    return None if ucl is None or not s_raw > 0 else math.sqrt(max(1.0, ucl / s_raw**2))
+
+
+def _direct_ucl(means: np.ndarray, base: np.ndarray | None, q: float | None) -> float | None:
+    """:func:`_direct_common_factor`'s upper confidence limit (rad²; independent of ``s_raw``)."""
+    R, M = means.shape
+    z0 = means.mean(1) * math.sqrt(M)  # the common Helmert component
+    A = span_basis(base) if base is not None else np.zeros((R, R))
     dof = R - A.shape[1]
-    if dof <= 0 or not s_raw > 0:
+    if dof <= 0 or q is None:
         return None
     z = z0 - A @ (A.T @ z0)
-    ucl = float(z @ z) / float(stats.chi2.ppf(quantile, dof))
-    return math.sqrt(max(1.0, ucl / s_raw**2))
+    return float(z @ z) / float(stats.chi2.ppf(q, dof))
 
 
 def _level_sigma(
@@ -463,8 +472,10 @@ def _level_sigma(
 
     g, g_ind, g_dir = factors(s_raw)
     out[:M] = s_raw * c * g
-    if state is not None:
-        sigma_of = lambda s, n: s * dof_widening(n, p=test_p) * factors(s)[0]  # noqa: E731
+    if state is not None:  # s * widening(nu) * factors(s)[0] on arrays of s and nu
+        ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
+        excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
+        sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
         state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M)
     if info is not None:
         info.update(
