@@ -265,6 +265,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (pivots within it are ties broken by column order: far above the rounding of sums)",
     ("engine/_constants.py", "D2_VAR"): "estimator: variance of a noise estimator (exact)",
     ("engine/_steps.py", "REFINE_STEP_SHIFTS"): BOUND,
+    ("engine/_steps_near.py", "OFF_CHANGE_GRID"): BOUND,
     ("engine/_change_rival.py", "ORDER_STEP_ORDER"): PHYSICS
     + " (the order_step view's order: a disk moved on its hub changes its order 1)",
     ("engine/_views.py", "SCAN_BLOCK"): BOUND,

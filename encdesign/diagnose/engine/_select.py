@@ -374,7 +374,7 @@ def _located_rule(prep, fitter, cand, fr, findings, views, scan_order, current, 
     resid1 = fitter.residual(fr.terms)
     after = locate(prep, resid1, views, scan_order)
     # steps it leaves (a smooth model fitted to a step moves its change point)
-    steps_left = free_steps(prep, after)
+    steps_left = free_steps(prep, after, fit=(fitter, fr.terms))
     # its own fitted error alone, located: where it shows (view, integer order, heads, runs)
     own = locate(prep, fitter.residual(fr.terms[:-1]) - resid1, views, scan_order)
     del resid1
@@ -671,8 +671,8 @@ def select(
             cur_resid=cur_resid,
             views=views,
             scan_order=scan_order,
-            free_steps=free_steps(prep, findings),
-            change_steps=free_steps(prep, findings, at_changes=True),
+            free_steps=free_steps(prep, findings, fit=(fitter, current.terms)),
+            change_steps=free_steps(prep, findings, at_changes=True, fit=(fitter, current.terms)),
         )
         trials: list[Trial] = []
         todo = []

@@ -103,6 +103,15 @@ class AbstractSelectionSettings(eqx.Module):
     alternative a candidate must beat). 8b1c946 (a step 0.85 s after a reversal had been
     exempted)."""
 
+    step_off_change_chi2: float = eqx.field(default=10.0, static=True)
+    """A located step within half a time-view block (kept rows / 64) of a change of
+    direction or speed but more than ``step_change_rows`` rows from it is still a free step
+    when a step at its best row off the change lowers chi-square by more than this below the
+    best step at the change (the model so far held; :mod:`._steps_near`). Issue 44, session
+    24 (training ``sensor`` seed 6422 row 15: a step 17 rows after an excluded reversal
+    dwell was left to ``direction_hysteresis``); 10, as ``tie_chi2``: the gap that decides
+    between two alternatives of one column each."""
+
     growth_left_max: float = eqx.field(default=0.2, static=True)
     """The base model's order growth is undone unless the grown base leaves at most this
     share of what every view located. 1af4a3c (strong high orders leak into the time,

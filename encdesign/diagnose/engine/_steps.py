@@ -17,6 +17,7 @@ from ._candidates import Candidate, Param
 from ._fit import FitResult, Fitter, Term, make_term
 from ._located import change_chi2, interval_of, located_time, profile_scan
 from ._protocol import Prepared
+from ._steps_near import off_change
 from ._tangent import tangent_terms
 
 
@@ -52,12 +53,17 @@ STEP_NUISANCE = Candidate(
 """A step of one size on the channels of a located step, from its row on within its run."""
 
 
-def at_change(prep: Prepared, r: int, tau0: float) -> bool | None:
+def at_change(
+    prep: Prepared, r: int, tau0: float, fit=None, channels: np.ndarray | None = None
+) -> bool | None:
     """Whether a step at ``tau0`` (end-to-end time, s) in run index ``r`` lies within
     ``settings.step_change_rows`` kept rows (or 1/64 of the run) of a kept row where the
     direction or the steady speed changes (a reversal or a speed change; the non-steady
     rows between them, e.g. an excluded dwell, left out: a reversal inside it counts);
-    ``None`` when it is not inside the run's kept rows."""
+    ``None`` when it is not inside the run's kept rows. ``fit`` (``(fitter, terms)``, with
+    the step's ``channels``): a step more than ``step_change_rows`` from the change but
+    within 1/64 of the run is settled on that model (:func:`._steps_near.off_change`: a
+    step off the change that fits better is not at it; issue 44, session 24)."""
     rows = np.flatnonzero((prep.run == r) & prep.keep)
     i = int(np.searchsorted(prep.rows.take("tau", rows), tau0))
     if i <= 0 or i >= rows.size:
@@ -75,10 +81,29 @@ def at_change(prep: Prepared, r: int, tau0: float) -> bool | None:
         + 1
     )
     near = max(prep.settings.step_change_rows, rows.size // 64)
-    return bool(ch_rows.size and np.min(np.abs(ch_rows - i)) <= near)
+    if not (ch_rows.size and np.min(np.abs(ch_rows - i)) <= near):
+        return False
+    if (
+        fit is None
+        or channels is None
+        or np.min(np.abs(ch_rows - i)) <= prep.settings.step_change_rows
+    ):
+        return True
+    fitter, held = fit[0], frozen(fit[1])
+    tau = prep.rows.take("tau", rows)
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[r] = 1.0
+
+    def chi2_of(idx: np.ndarray) -> np.ndarray:
+        steps = [
+            step_term(prep, dict(tau_s=float(tau[j]), channels=channels, run_sel=sel)) for j in idx
+        ]
+        return fitter.column_chi2(held, steps)
+
+    return not off_change(chi2_of, prep.settings, rows.size, i, ch_rows, near)
 
 
-def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list[dict]:
+def free_steps(prep: Prepared, findings: list, at_changes: bool = False, fit=None) -> list[dict]:
     """Steps the time view located at a time where nothing the catalog knows changes.
 
     A direction offset (backlash, hysteresis) is a step at a reversal and a reading delay a
@@ -88,7 +113,8 @@ def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list
     drift, a scale error, an order) can make; each is returned with its time, run and
     channels. ``at_changes``: only the steps at such a change instead (``at_change`` set),
     the alternative a drift in time must beat as well (``s9-nuis``:
-    ``_nuisances.drifts_in_time``)."""
+    ``_nuisances.drifts_in_time``). ``fit``: ``(fitter, terms)``, the model so far, which
+    settles a step near a change (:func:`at_change`)."""
     out = []
     for f in findings:
         if f.view != "time" or not (
@@ -99,11 +125,11 @@ def free_steps(prep: Prepared, findings: list, at_changes: bool = False) -> list
             break
         r = int(np.flatnonzero(prep.run_ids == f.where["runs"][0])[0])
         tau0 = float(f.detail["global_step_time_s"])
-        near = at_change(prep, r, tau0)
-        if near is None or near != at_changes:
-            continue
         ch = np.zeros(prep.n_channels)
         ch[list(f.where["heads"])] = 1.0
+        near = at_change(prep, r, tau0, fit, ch)
+        if near is None or near != at_changes:
+            continue
         sel = np.zeros(prep.ctx.n_runs)
         sel[r] = 1.0
         out.append(dict(tau_s=tau0, run=r, channels=ch, run_sel=sel, finding=f))
@@ -181,7 +207,9 @@ def beaten_by_step(
             st2 = cache[rkey]
             if st2["tau_s"] == st["tau_s"]:
                 break
-            if at_change(prep, st["run"], st2["tau_s"]) != bool(st.get("at_change")):
+            if at_change(
+                prep, st["run"], st2["tau_s"], (fitter, current.terms), st["channels"]
+            ) != bool(st.get("at_change")):
                 # placed on the model, the step moved to (or off) a reversal or change of
                 # speed: it is no longer the step this rule is about (issue 44 E)
                 return None
