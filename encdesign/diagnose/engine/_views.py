@@ -554,9 +554,9 @@ def view_time(prep, rw) -> list[Finding]:
             if is_step:
                 t0, t1 = detail["step_times_s"]
             located = None
-            if is_step or detail["step_significant"]:
-                # the profile of the step's chi-square over its row, this channel's rows
-                # (the CUSUM statistic is the chi-square a step there takes out)
+            if is_step:
+                # a step's profile of chi-square over its row (CUSUM); a transient or drift
+                # is no step, and that interval would not describe it (issue 44 C)
                 cand = np.arange(1, rows_r.size)
                 _, lo, hi = interval_of(cand, -stat, c_change, best=i_step)
                 located = located_time(prep, rows_r, i_step, lo, hi)
