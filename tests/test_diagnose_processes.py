@@ -34,11 +34,12 @@ LAUNCH = (
     "from encdesign.cli import main; sys.exit(main())"
 )
 
+REDUCE_SETTINGS = dict(reduce_min_rows=1000, reduce_attenuation_max=0.02, reduce_line_hz=10.0)
+REDUCE_GATHER_ROWS = 700
 REDUCE = (
     "import encdesign.diagnose._dispatch as d, encdesign.diagnose.engine._settings as s; "
-    "d.DEFAULT_SETTINGS = s.FinderSettings(reduce_min_rows=1000, "
-    "reduce_attenuation_max=0.02, reduce_line_hz=10.0); "
-    "import encdesign._distributed as g; g.GATHER_ROWS = 700; "
+    f"d.DEFAULT_SETTINGS = s.FinderSettings(**{REDUCE_SETTINGS!r}); "
+    f"import encdesign._distributed as g; g.GATHER_ROWS = {REDUCE_GATHER_ROWS}; "
 )
 """Launcher setup that lowers the reduction's threshold and widens its bound, so that a
 12,000-row record at 1 kHz (1,000-2,500 rows per revolution) is reduced to blocks of a few
@@ -143,6 +144,24 @@ def _diagnose(rec: Path, out: Path, processes: int, port: int, setup: str = "", 
     return json.loads(out.read_text(encoding="utf-8"))
 
 
+def _diagnose_here(monkeypatch, rec: Path, out: Path, reduce: bool = False, *flags) -> dict:
+    """The one-process diagnosis in this test process: ``main`` as the launcher calls it, with
+    its chunk size and, with ``reduce``, :data:`REDUCE`'s settings (patched for this test
+    only; no interpreter to start: CI time). Returns its JSON."""
+    import encdesign._distributed as g
+    import encdesign.diagnose._dispatch as d
+    import encdesign.diagnose.engine._fit as f
+    from encdesign.cli import main
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    monkeypatch.setattr(f, "CHUNK_ROWS", CHUNK)
+    if reduce:
+        monkeypatch.setattr(d, "DEFAULT_SETTINGS", FinderSettings(**REDUCE_SETTINGS))
+        monkeypatch.setattr(g, "GATHER_ROWS", REDUCE_GATHER_ROWS)
+    assert main(["diagnose", str(rec), *flags, "--json", str(out), "--quiet"]) == 0
+    return json.loads(out.read_text(encoding="utf-8"))
+
+
 def _differences(a, b, where: str = "") -> list[str]:
     """Where the documents differ: strings, booleans and integers exactly, floats beyond
     1e-12 relative; timings (wall and CPU seconds, the report's status line) are not
@@ -186,10 +205,10 @@ def _dealt(log: Path) -> dict[int, list[tuple[int, int]]]:
     return out
 
 
-def test_two_processes_give_the_one_process_diagnosis(tmp_path):
+def test_two_processes_give_the_one_process_diagnosis(tmp_path, monkeypatch):
     rec = _record(tmp_path / "rec.toml", seed=20261204)
     log = tmp_path / "dealt.txt"
-    one = _diagnose(rec, tmp_path / "one.json", 1, 0)
+    one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json")
     split = tmp_path / "split.txt"
     setup = DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
     two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
@@ -218,13 +237,15 @@ def test_two_processes_give_the_one_process_diagnosis(tmp_path):
     assert not diff, "\n".join(diff[:40])
 
 
-def test_a_parquet_record_reduced_on_two_processes_gives_the_one_process_diagnosis(tmp_path):
+def test_a_parquet_record_reduced_on_two_processes_gives_the_one_process_diagnosis(
+    tmp_path, monkeypatch
+):
     """A Parquet record reduced as it is read, each process reading its share of the row
     groups (997 rows each: the shares meet at row 6,979, inside a block), gives the one-process
     diagnosis: the same reduced rows (counts in ``reduced``), verdict and numbers."""
     rec = _record(tmp_path / "rec.toml", 4703, n=3000, speed_rev_s=0.4, group_rows=997)
     flags = ("--max-order", "6")
-    one = _diagnose(rec, tmp_path / "one.json", 1, 0, REDUCE, *flags)
+    one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json", True, *flags)
     two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), REDUCE, *flags)
     red = one["reduced"]
     assert red["applied"] and red["streamed_row_groups"] == 13 and red["block_rows"] >= 3

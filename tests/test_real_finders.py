@@ -1,5 +1,7 @@
 """Finders of the real-data kinds (motion, quadrature): synthetic truth, then shipped data."""
 
+import copy
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,20 @@ from encdesign.diagnose.kinds.quadrature._quadrature import ray_radius
 from tests.helpers import validate_diagnosis
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "real"
+
+
+@functools.cache
+def _shipped_doc(name: str) -> dict:
+    """The diagnosis document of the shipped record ``name`` (default settings), diagnosed
+    once per test process: the ``_1`` ODrive records are read by two tests each (CI time)."""
+    from encdesign import load_recording
+
+    return diagnose(load_recording(DATA / f"{name}.toml")).doc
+
+
+def shipped_doc(name: str) -> dict:
+    """A copy of :func:`_shipped_doc` the test may change."""
+    return copy.deepcopy(_shipped_doc(name))
 
 
 def _motion(tmp_path, ripple: dict[int, float], noise_rad=2e-4, seed=0, n=3000):
@@ -270,9 +286,7 @@ def test_second_motor_records_name_what_the_first_name(name, names):
     3e4-8e4 and is well conditioned (canonical correlation <= 0.15). Until issue 44 B it
     was refused for the others' structure (``located_share_min``: 4-17 % of all located
     structure, a larger share of its own)."""
-    from encdesign import load_recording
-
-    d = diagnose(load_recording(DATA / f"{name}.toml")).doc
+    d = shipped_doc(name)
     validate_diagnosis(d)
     assert [e["name"] for e in d["effects"]] == names, d["report"]
     start = [x for x in d["excluded_segments"] if x["t_start_s"] < 0.1]
@@ -290,7 +304,7 @@ def test_twin_records_over_one_span_get_one_verdict(pair):
     at least what the shorter span names.)"""
     from encdesign import Recording, load_recording
 
-    d1 = diagnose(load_recording(DATA / f"{pair}_1.toml")).doc
+    d1 = shipped_doc(f"{pair}_1")
     t_keep = max(x["t_end_s"] for x in d1["excluded_segments"] if x["t_start_s"] < 0.1)
     full = load_recording(DATA / f"{pair}.toml")
     t = np.asarray(full.columns["t"], float)
