@@ -155,7 +155,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     "constants: the view's base without the base's own columns)",
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
-    ("kinds/multihead/_multihead_terms.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
     ("kinds/multihead/_vibration_doubt.py", 1e-9): GUARD + " (a zero span of revolutions)",
     ("kinds/multihead/_vibration_doubt.py", 2): COUNT + " (two angles make a gap)",

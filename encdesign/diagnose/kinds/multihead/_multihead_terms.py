@@ -15,7 +15,7 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
 from ._order_step_bins import base_columns, order_step_bins, order_step_width
-from ._order_step_zeros import shift_time_profile, zero_profile
+from ._order_step_zeros import _gain, shift_time_profile, zero_profile
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
 from ._vibration_doubt import (
     NO_DOUBT,
@@ -588,19 +588,11 @@ def _step_kept(SG, SXB, BBi):
 def _step_gain(Sa, SG, SXB, BBi, Br):
     """Whitened chi-square (2 dof) a step in the eccentricity columns takes out, given the
     suffix sums from the step on (arrays over candidate change points), the base columns
-    projected out (the step's likelihood ratio with the base refitted jointly)."""
+    projected out (the step's likelihood ratio with the base refitted jointly); 0 where
+    the projected step is singular (relative determinant <= 1e-9)."""
     g = Sa - SXB @ (BBi @ Br)
     Gp = SG - SXB @ BBi @ np.swapaxes(SXB, -1, -2)
-    det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
-    tr = Gp[..., 0, 0] + Gp[..., 1, 1]
-    ok = det > 1e-9 * np.maximum(tr, 1e-300) ** 2
-    det = np.where(ok, det, 1.0)
-    q = (
-        g[..., 0] ** 2 * Gp[..., 1, 1]
-        - 2 * g[..., 0] * g[..., 1] * Gp[..., 0, 1]
-        + g[..., 1] ** 2 * Gp[..., 0, 0]
-    ) / det
-    return np.where(ok, np.maximum(q, 0.0), 0.0)
+    return _gain(Gp, g, rtol=1e-9, floor=1e-300)
 
 
 def _step_deflation(SG, SXB, BBi, kept_min: float):

@@ -278,12 +278,19 @@ class _Sums:
         return base[:, None] - _gain(XX - np.einsum("kniq,knjq->knij", h, h), g)
 
 
-def _gain(Gp: np.ndarray, g: np.ndarray) -> np.ndarray:
+def _gain(
+    Gp: np.ndarray,
+    g: np.ndarray,
+    rtol: float = float(np.finfo(float).eps),
+    floor: float = float(np.finfo(float).tiny),
+) -> np.ndarray:
     """``g^T Gp^-1 g`` (2 dof) per change point, 0 where ``Gp`` is singular (the step's
-    columns, the base's projected out, have no norm left there)."""
+    columns, the base's projected out, have no norm left there): ``det(Gp) <= rtol *
+    max(tr(Gp), floor)^2``. Also the ``order_step`` view's step gain
+    (:func:`._multihead_terms._step_gain`, with its own ``rtol``)."""
     det = Gp[..., 0, 0] * Gp[..., 1, 1] - Gp[..., 0, 1] * Gp[..., 1, 0]
     tr = Gp[..., 0, 0] + Gp[..., 1, 1]
-    ok = det > np.finfo(float).eps * np.maximum(tr, np.finfo(float).tiny) ** 2
+    ok = det > rtol * np.maximum(tr, floor) ** 2
     det = np.where(ok, det, 1.0)
     q = (
         g[..., 0] ** 2 * Gp[..., 1, 1]
