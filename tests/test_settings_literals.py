@@ -147,6 +147,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_multihead.py", 4): COUNT,
     ("kinds/multihead/_multihead.py", 1e-12): NUMERIC + " (a step at its own row)",
     ("kinds/multihead/_multihead.py", 16): BOUND + " (2^16 rows per block)",
+    ("kinds/multihead/_symmetry.py", 2): COUNT + " (two heads)",
     ("kinds/multihead/_run_align.py", 2): COUNT + " (two runs)",
     ("kinds/multihead/_multihead_terms.py", 2): PHYSICS + "; DOF; a squared trace",
     ("kinds/multihead/_order_step_zeros.py", 2): "counts (several runs, several heads) and a "

@@ -51,6 +51,7 @@ from ._multihead_probes import (
 )
 from ._multihead_terms import INTERPOLATION_ERROR, THERMAL_DRIFT, VIBRATION, view_order_step
 from ._run_align import low_order_phases, run_offsets_start
+from ._symmetry import _symmetric_orders
 
 
 def make_where(rec: Recording) -> str:
@@ -497,26 +498,6 @@ def _refine_shaft(terms, prep: Prepared) -> str | None:
         "shaft angle: the heads' mean reading less the fitted disk error's head mean "
         f"(it moved the fitted readings by {size:.3g} rad RMS, second order in the disk error)"
     )
-
-
-def _pattern_spread(alpha: np.ndarray, m: int) -> float:
-    """Mean square over the heads of the head pattern ``exp(-i m alpha_k)`` about its mean
-    (0: every head sees order ``m`` alike; 1: it cancels in the heads' mean)."""
-    v = np.exp(-1j * m * alpha)
-    return float(np.sum(np.abs(v - v.mean()) ** 2) / alpha.size)
-
-
-def _symmetric_orders(prep: Prepared, M: int, limit: float | None = None) -> list[int]:
-    """Without ``theta_ref`` (and more than one head): the disk orders 1..M whose head
-    pattern varies over the heads by at most ``limit`` (mean square; default
-    ``FinderSettings.symmetric_order_max``: exactly alike, up to the rounding of the
-    azimuths): the head differences cannot determine them (multiples of the symmetry of
-    equally spaced heads). Empty with a reference or one head."""
-    if prep.ctx.has_ref or prep.n_channels < 2:
-        return []
-    lim = prep.settings.symmetric_order_max if limit is None else limit
-    alpha = np.asarray(prep.consts["alpha"], float)
-    return [m for m in range(1, M + 1) if _pattern_spread(alpha, m) <= lim]
 
 
 def multihead_base(prep: Prepared, M: int):

@@ -54,14 +54,16 @@ import numpy as np
 from ...engine._located import change_chi2, interval_of, located_time, scan_indices
 from ...engine._normal import _pivoted_rank
 from ...engine._protocol import Prepared
+from ._symmetry import _symmetric_orders
 
 BLOCK_ROWS = 1 << 13
 """Kept rows per block of the pass over the rows (bounded temporaries)."""
 
 BATCH = 64
+"""Trial zero settings per batch of the evaluation (bounded temporaries)."""
+
 PIVOT_TOL = inspect.signature(_pivoted_rank).parameters["tol"].default
 """The fitter's relative pivot tolerance on its scaled Gram (one source: its default)."""
-"""Trial zero settings per batch of the evaluation (bounded temporaries)."""
 
 
 def _base(prep: Prepared, terms=None):
@@ -97,13 +99,9 @@ class _Sums:
         a = np.ravel(np.asarray(base.values["fourier_cos_rad"], float))
         b = np.ravel(np.asarray(base.values["fourier_sin_rad"], float))
         # the base's orders less those every head sees alike (held by the base: no column
-        # after the projection over the heads; ``_multihead._symmetric_orders``' rule),
-        # order 1 always (the step's)
-        alpha = np.asarray(prep.consts["alpha"], float)
-        mm = np.arange(1, a.size + 1)
-        v = np.exp(-1j * mm[:, None] * alpha[None, :])
-        spread = np.mean(np.abs(v - v.mean(1, keepdims=True)) ** 2, 1)
-        self.m = mm[(spread > prep.settings.symmetric_order_max) | (mm == 1)]
+        # after the projection over the heads), order 1 always (the step's)
+        held = set(_symmetric_orders(prep, a.size)) - {1}
+        self.m = np.array([m for m in range(1, a.size + 1) if m not in held])
         # a constant per head but the first (projected, the heads' constants sum to zero)
         self.nc = C - 1 if prep.kd.project else C
         self.C, self.R, self.M = C, R, self.m.size
