@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import jax.numpy as jnp
@@ -89,7 +90,17 @@ def at_change(
         or np.min(np.abs(ch_rows - i)) <= prep.settings.step_change_rows
     ):
         return True
-    fitter, held = fit[0], frozen(fit[1])
+    chi2_of = step_chi2_at(fit[0], prep, fit[1], r, rows, channels)
+    return not off_change(chi2_of, prep.settings, rows.size, i, ch_rows, near)
+
+
+def step_chi2_at(
+    fitter: Fitter, prep: Prepared, terms: list[Term], r: int, rows: np.ndarray, channels
+) -> Callable[[np.ndarray], np.ndarray]:
+    """``chi2_of(idx)``: the chi-square of the model ``terms`` (held) plus a step on
+    ``channels`` of run index ``r`` from each of its kept rows ``rows[idx]`` on, one
+    linear column each (:meth:`._fit.Fitter.column_chi2`)."""
+    held = frozen(terms)
     tau = prep.rows.take("tau", rows)
     sel = np.zeros(prep.ctx.n_runs)
     sel[r] = 1.0
@@ -100,7 +111,7 @@ def at_change(
         ]
         return fitter.column_chi2(held, steps)
 
-    return not off_change(chi2_of, prep.settings, rows.size, i, ch_rows, near)
+    return chi2_of
 
 
 def free_steps(prep: Prepared, findings: list, at_changes: bool = False, fit=None) -> list[dict]:
@@ -240,14 +251,11 @@ def refine_step(
     tau = prep.rows.take("tau", rows)
     ch = np.zeros(prep.n_channels)
     ch[list(f.where["heads"])] = 1.0
-    sel = np.zeros(prep.ctx.n_runs)
-    sel[r] = 1.0
-    held = frozen(terms)
+    # fit(terms + step at row i).chi2 for every row at once (one linear column each)
+    chi2_of = step_chi2_at(fitter, prep, terms, r, rows, ch)
 
     def best_of(idx: np.ndarray) -> int:
-        # fit(held + step at row i).chi2 for every row at once (one linear column each)
-        steps = [step_term(prep, dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)) for i in idx]
-        return int(idx[int(np.argmin(fitter.column_chi2(held, steps)))])
+        return int(idx[int(np.argmin(chi2_of(idx)))])
 
     # within 4 time-view blocks of the located row: a step and its mirror image about a
     # reversal differ by a function of the angle, which the base model takes (the two
@@ -271,13 +279,6 @@ def refine_step(
         fine = np.unique(np.linspace(a, b, 48).astype(int))
     best = best_of(fine)
     if interval:
-
-        def chi2_of(idx: np.ndarray) -> np.ndarray:
-            steps = [
-                step_term(prep, dict(tau_s=float(tau[i]), channels=ch, run_sel=sel)) for i in idx
-            ]
-            return fitter.column_chi2(held, steps)
-
         c = change_chi2(prep.settings.change_time_level)
         best, lo, hi = profile_scan(chi2_of, best, 1, rows.size - 1, c)
         f.located_time = located_time(prep, rows, best, lo, hi)
