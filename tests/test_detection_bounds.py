@@ -431,3 +431,57 @@ def test_sds_coil_beside_another_effect(tmp_path):
     assert moved, "the coil beside the tilt changed no column"
     with pytest.raises(ValueError, match="coil_beside_noise"):
         rec("bad", effect="coil_mismatch", coil_beside_noise=3.0)
+
+
+class _NoMemo:
+    """A chunk memo that keeps nothing."""
+
+    def at(self, a: int) -> None:
+        pass
+
+    def get(self, key: tuple):
+        return None
+
+    def put(self, key: tuple, value) -> None:
+        pass
+
+
+def test_probes_with_the_same_columns_share_one_jacobian(monkeypatch):
+    """Issue 43: in the bounds' one pass over the rows (``_Bench.prepare``), probes whose held
+    terms have the same columns (interpolation_error's, one per head) sum one Gram matrix
+    (their rank) and evaluate one Jacobian per chunk; every bound is the one of the probes
+    prepared one by one, to the last bit. The fitter's Jacobian cache is off, as on a long
+    record, where each probe used to evaluate the Jacobian again."""
+    import encdesign.diagnose.engine._bounds as bounds
+    import encdesign.diagnose.engine._fit as fit
+
+    monkeypatch.setattr(fit, "CACHE_BYTES", 0)
+    rec = _vibration_record(1531, 1531, 0.0, 1, None)[0]
+    calls: dict[str, int] = {"gram": 0, "jac": 0}
+    add_gram, valjac = bounds._add_gram, fit.linear_valjac
+
+    def counted_gram(*a, **k):
+        calls["gram"] += 1
+        return add_gram(*a, **k)
+
+    def counted_valjac(cand):
+        f = valjac(cand)
+
+        def g(*a, **k):
+            calls["jac"] += cand.name == "interpolation_error"
+            return f(*a, **k)
+
+        return g
+
+    monkeypatch.setattr(bounds, "_add_gram", counted_gram)
+    monkeypatch.setattr(fit, "linear_valjac", counted_valjac)
+    shared = diagnose(rec).doc
+    n_gram, n_jac = calls["gram"], calls["jac"]
+    # every probe its own columns and Jacobian: the pass as it was
+    monkeypatch.setattr(bounds, "_columns_key", lambda t: (id(t),), raising=False)
+    monkeypatch.setattr(bounds, "ChunkMemo", _NoMemo, raising=False)
+    calls.update(gram=0, jac=0)
+    alone = diagnose(rec).doc
+    heads = len(shared["noise"]["channels"])
+    assert heads > 1 and shared["detection_bounds"] == alone["detection_bounds"]
+    assert calls["gram"] > n_gram and calls["jac"] == heads * n_jac, (calls, n_gram, n_jac)

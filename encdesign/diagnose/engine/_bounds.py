@@ -85,6 +85,7 @@ from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
 from ._rowshare import summed
 from ._select import _has_run_constants, _order_key, _reaches
+from ._stats_pass import ChunkMemo
 from ._steps import frozen
 from ._views import locate
 from ._views_sums import sums_of
@@ -248,6 +249,14 @@ def _add_gram(prep: Prepared, gram: np.ndarray, J, a: int, b: int, sw: np.ndarra
         gram += Jw.T @ Jw
 
 
+def _columns_key(term: Term) -> tuple:
+    """What a linear-only term's Jacobian on a chunk depends on besides the chunk (the key
+    of :meth:`._fit.Fitter.eval_term`'s Jacobian cache): its candidate, its nonlinear
+    values and its free masks."""
+    held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
+    return id(term.cand), held, tuple(term.free[q.name].tobytes() for q in term.cand.params)
+
+
 def _rank(gram: np.ndarray) -> int:
     """The numerical rank of a Gram matrix (columns normalized; relative 1e-10)."""
     d = np.sqrt(np.maximum(np.diag(gram), 0.0))
@@ -290,7 +299,14 @@ class _Bench:
         sc = free_scales(static)
         p = sc.size
         terms = [_held_term(c, prep, pr) for c, pr in probes]
-        grams = [np.zeros((t.n_free(), t.n_free())) for t in terms]
+        # probes whose held terms have the same columns (a candidate's probes at the same
+        # nonlinear values: one per head or sensor) share one Gram matrix (their rank) and,
+        # through the chunk's memo, one Jacobian per chunk (issue 43: the same numbers)
+        same = [_columns_key(t) for t in terms]
+        owner: dict[tuple, int] = {}
+        gi = [owner.setdefault(key, len(owner)) for key in same]
+        firsts = [same.index(key) for key in owner]
+        grams = [np.zeros((terms[i].n_free(), terms[i].n_free())) for i in firsts]
         m = len(terms)
         # the base's Gram matrices where a fit kept them (this fitter's or the record's: the
         # same rows, folds and weights), else summed here as Fitter.stats sums them
@@ -304,6 +320,7 @@ class _Bench:
         )
         w = fitter.w_ch
         sw = np.sqrt(w)
+        memo = ChunkMemo()  # (the fitter's during the pass)
 
         def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
             G, Gu, hv, huv, qv, quv, *grams = sums
@@ -318,9 +335,11 @@ class _Bench:
             if not m:
                 return
             U = np.empty((b - a, prep.n_channels, m))
+            memo.at(a)
             for i, t in enumerate(terms):
                 va, J = fitter.eval_term(t, a, b, x, jac=True)
-                _add_gram(prep, grams[i], J, a, b, 1.0 / prep.sigma)
+                if firsts[gi[i]] == i:
+                    _add_gram(prep, grams[gi[i]], J, a, b, 1.0 / prep.sigma)
                 if prep.kd.project:
                     va = va - va.mean(1, keepdims=True)
                 U[:, :, i] = va * sw
@@ -334,11 +353,17 @@ class _Bench:
                 qv[:, k] += np.einsum("ij,ij->j", Uk, Uk)
                 quv[:, k] += np.einsum("ij,ij->j", Uk, UUk)
 
-        G, Gu, hv, huv, qv, quv, *grams = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+        fitter.memo = memo
+        try:
+            got = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+        finally:
+            fitter.memo = None
+        G, Gu, hv, huv, qv, quv, *grams = got
         if kept is not None:  # (not summed in the pass: zeros there)
             G, Gu = kept
+        ranks = [_rank(g) for g in grams]
         for i, (_, pr) in enumerate(probes):
-            self._pre[id(pr)] = (_rank(grams[i]), (G, Gu, hv[i], huv[i], qv[i], quv[i]))
+            self._pre[id(pr)] = (ranks[gi[i]], (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
     def own_rms(self, v: np.ndarray) -> float:
         """The own RMS of the unit effect ``v`` in noise units, as the rule
