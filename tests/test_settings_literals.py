@@ -157,6 +157,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
     ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
+    ("kinds/multihead/_order_step_head.py", 2): SHAPE + " (the order-1 pair: sin, cos)",
     ("kinds/multihead/_vibration_doubt.py", 1e-9): GUARD + " (a zero span of revolutions)",
     ("kinds/multihead/_vibration_doubt.py", 2): COUNT + " (two angles make a gap)",
     ("kinds/multihead/_reference_data.py", 2): COUNT,
@@ -273,6 +274,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_views_orders.py", "SCAN_VALUES"): BOUND + " (rows x orders per block of a pass)",
     ("engine/_views_sums.py", "GEOMETRY_KEPT"): BOUND + " (geometry entries cached)",
     ("kinds/multihead/_order_step_bins.py", "BIN_ROWS"): BOUND + " (rows per block of a pass)",
+    ("kinds/multihead/_order_step_head.py", "SINGULAR_RTOL"): NUMERIC
+    + " (a head step the base spans to rounding: gain 0)",
     ("kinds/multihead/_order_step_zeros.py", "BLOCK_ROWS"): BOUND + " (rows per block of a pass)",
     ("kinds/multihead/_order_step_zeros.py", "BATCH"): BOUND + " (zero settings per batch)",
     ("kinds/multihead/_multihead.py", "COVERAGE_ORDER_MAX"): BOUND,

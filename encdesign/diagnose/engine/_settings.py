@@ -621,6 +621,14 @@ class FinderSettings(AbstractSelectionSettings):
     offset, not a change). 1e3f0c4. Was an inline ``// 100`` in ``_multihead_terms`` (moved
     unchanged in issue 44 G)."""
 
+    order_step_head_ratio: float = eqx.field(default=1.0, static=True)
+    """multihead: the ``order_step`` view states its change's ``located_time`` only where the
+    order change's chi-square gain (its likelihood ratio over the base) exceeds this times
+    that of the best step of one head's constant over the same change points; else a
+    one-head step (a count jump) is the model that fits, and its time is the ``time``
+    view's (``_order_step_head``, issue 44 C, session 25). 1: the likelier of the two fitted
+    one-change models, no margin either way; not tuned."""
+
     zero_profile_grid: int = eqx.field(default=24, static=True)
     """multihead, part of a turn without a reference head, several runs: the ``order_step``
     view's change is located with the runs' angle zeros chosen jointly with it

@@ -525,8 +525,10 @@ def view_time(prep, rw) -> list[Finding]:
             # where: the block farthest from the mean, and the best step
             dev = np.abs(means[:, k] - means[:, k].mean())
             b = int(np.argmax(dev))
-            cs = np.cumsum(means[:, k] - means[:, k].mean())
-            jb = int(np.argmax(np.abs(cs[:-1]))) + 1 if nb > 2 else 1
+            # (the edge of the best step: its chi-square, cs^2 nb / (j (nb - j)); the CUSUM's
+            # size favours the middle, issue 44 C, session 25: a step 2 blocks from the end)
+            cs, j = np.cumsum(means[:, k] - means[:, k].mean())[:-1], np.arange(1, nb)
+            jb = int(np.argmax(cs**2 * nb / (j * (nb - j)))) + 1
             t0 = float(prep.rows["t"][parts[b][0]])
             t1 = float(prep.rows["t"][parts[b][-1]])
             # step vs transient: power a single step takes out of the block means

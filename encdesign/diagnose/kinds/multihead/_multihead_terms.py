@@ -14,7 +14,8 @@ from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ._aliases import catalog_orders_at
-from ._order_step_bins import base_columns, order_step_bins, order_step_width
+from ._order_step_bins import order_step_bins, order_step_width
+from ._order_step_head import base_rows, head_step_gain
 from ._order_step_zeros import _gain, shift_time_profile, zero_profile
 from ._runout import RUNOUT_ORDERS, _bt_orders_significant, _bt_orders_supported
 from ._vibration_doubt import (
@@ -555,20 +556,7 @@ def _order_step_sums(prep: Prepared, rw: np.ndarray, idx: np.ndarray, P: int):
     and ``B^T B``, ``B^T r`` with ``B`` the base columns a step must be told from (one
     constant per run and head, then order 1 over the whole record; on part of a turn the
     base's own columns, :func:`._order_step_bins.order_step_width`)."""
-    C, R = prep.n_channels, prep.ctx.n_runs
-    th = np.asarray(prep.rows.take("theta", idx), float)
-    d = th[:, None] - np.asarray(prep.consts["alpha"], float)[None, :]
-    X = np.stack([np.sin(d), np.cos(d)], 2)  # (n, C, 2)
-    B = np.zeros((idx.size, C, P))
-    run = prep.run[idx]
-    for k in range(C):
-        B[np.arange(idx.size), k, run * C + k] = 1.0
-    B[:, :, R * C :] = X if P == R * C + 2 else base_columns(prep, d, run)
-    if prep.kd.project:  # without theta_ref the head mean is projected out (data and terms)
-        X = X - X.mean(1, keepdims=True)
-        B = B - B.mean(1, keepdims=True)
-    w = 1.0 / np.asarray(prep.sigma, float)[None, :, None]
-    X, B = X * w, B * w
+    X, B = base_rows(prep, idx, P)
     r = rw[idx]
     Xt, Bf = X.transpose(0, 2, 1), B.reshape(-1, P)  # (matmul: einsum's loops were 5x slower)
     return X, np.einsum("nck,nc->nk", X, r), Xt @ X, Xt @ B, Bf.T @ Bf, Bf.T @ r.ravel()
@@ -675,6 +663,11 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     # row below, stays the view's: the trial fits hold the base's zeros)
     zp = zero_profile(prep, rw, kidx, edges[e], margin)
     located = located if zp is None else zp[1]
+    # issue 44 C, session 25: the time is the order change's only where that model fits
+    # better than a step of one head's constant (a count jump): else the time view's
+    hs, hk, hj = head_step_gain(prep, rw, kidx, P, edges, e, BBi, Br)
+    if float(np.max(like)) <= s.order_step_head_ratio * hs:
+        located = None
     i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
     tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
     tau_b = float(prep.rows.take("tau", np.array([i_before]))[0])
@@ -691,6 +684,9 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         "step_times_s": [t_b if prep.run[i_before] == r_after else t_a, t_a],
         "n_values": int(kidx.size * C),
         "n_change_points": n_tests,
+        "head_step_chi2": hs,
+        "head_step_head": hk,
+        "head_step_time_s": float(prep.rows.take("t", kidx[edges[e[hj]] : edges[e[hj]] + 1])[0]),
     }
     return [
         Finding(
