@@ -31,8 +31,13 @@ test: setup
 	# diagnoses, the notebook's kernel, CLI runs) reuse each other's compiled programs
 	# (compilation is most of a quick study's time; about 14 % less CPU on the slowest files);
 	# every program is cached, however quick its compile (a second process on the same tests:
-	# 12-14 % less CPU than with a 0.2 s floor, the first process within 4 %)
+	# 12-14 % less CPU than with a 0.2 s floor, the first process within 4 %); XLA compiles
+	# without LLVM's optimisation passes (--xla_backend_optimization_level=0): compiling is
+	# most of the suite's CPU; the programs run the same operations, up to round-off (two
+	# diagnoses' effects equal to 1e-11 relative); the tests' children that choose their own
+	# device count keep the flag (tests/helpers.py env_without_device_count)
 	JAX_COMPILATION_CACHE_DIR=$(CURDIR)/.cache/jax JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0 \
+	XLA_FLAGS=--xla_backend_optimization_level=0 \
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 tests
 
 lint: setup

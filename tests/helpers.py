@@ -572,3 +572,17 @@ def shift_arcs_record(rng, where: str) -> tuple:
     truth.update(theta_rad=th, err_rad=err)
     desc = dict(H=H, R=R, nr=nr, turns=round(turns, 2), both=both, M=M, noise=noise)
     return rec, {**truth, "desc": desc}
+
+
+def env_without_device_count(**extra: str) -> dict[str, str]:
+    """This process's environment for a child that picks its own CPU device count: the
+    ``--xla_force_host_platform_device_count`` flag left out of ``XLA_FLAGS``, the other XLA
+    flags kept (``make test`` compiles at ``--xla_backend_optimization_level=0``; a child
+    compiled otherwise could differ in the last bits from the values it is compared with),
+    then ``extra`` (an ``XLA_FLAGS`` there is added to the kept flags)."""
+    import os
+
+    env = dict(os.environ)
+    flags = [f for f in env.pop("XLA_FLAGS", "").split() if "device_count" not in f]
+    flags += extra.pop("XLA_FLAGS", "").split()
+    return env | ({"XLA_FLAGS": " ".join(flags)} if flags else {}) | extra

@@ -13,7 +13,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import SCALE_BUILDS, SCALE_DESIGN, SCALE_TOLERANCES, cramer_model
+from helpers import (
+    SCALE_BUILDS,
+    SCALE_DESIGN,
+    SCALE_TOLERANCES,
+    cramer_model,
+    env_without_device_count,
+)
 
 from encdesign import EncdesignInputError
 from encdesign._cpu import DEVICES_PER_CORE, ENV, choose_cpu_devices
@@ -96,7 +102,8 @@ def _child_results() -> dict:
 
 
 def test_default_devices_give_the_values_of_one_device(tmp_path):
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OMP_NUM_THREADS")}
+    env = env_without_device_count()
+    env.pop("OMP_NUM_THREADS", None)
     env[ENV] = "2"  # what the default gives on 2 cores, on any machine
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "tests"), env.get("PYTHONPATH", "")])
     out = tmp_path / "child.json"

@@ -8,7 +8,6 @@ once, and compared at 1e-12 relative.
 """
 
 import json
-import os
 import subprocess
 import sys
 import threading
@@ -17,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import env_without_device_count
 
 from encdesign import EncdesignInputError
 from encdesign import _distributed as dist
@@ -28,8 +28,7 @@ RTOL = 1e-12
 
 
 def _env(**extra: str) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    return {**env, **extra}
+    return env_without_device_count(**extra)
 
 
 @pytest.fixture(scope="module")
@@ -282,7 +281,7 @@ def test_sweep_on_two_processes_writes_the_same_case_file(uninterrupted, tmp_pat
         "2",
         *NO_FRESH,
     ]
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env = env_without_device_count()
     rc = dist.spawn_local(dist.strip_launch_flags(argv), 2, env=env)
     assert rc == 0
     got = read_cases(cases)

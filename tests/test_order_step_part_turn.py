@@ -50,8 +50,18 @@ OPEN = pytest.mark.xfail(
 )
 
 
+NOT_RUN = pytest.mark.xfail(
+    reason="two heads without a reference on part of a turn, still missed (issue 44 C, "
+    "see 7620's mark); not run: a non-strict xfail asserts nothing while it fails, and this "
+    "record's diagnosis is the file's slowest (about 20 s on CI); run it with --runxfail",
+    run=False,
+)
+
+
 def _marks(seed: int):
-    return OPEN if _two_heads(seed) and seed in (7620, 7630) else ()
+    if not (_two_heads(seed) and seed in (7620, 7630)):
+        return ()
+    return NOT_RUN if seed == 7630 else OPEN
 
 
 @pytest.mark.parametrize("seed", [pytest.param(s, marks=_marks(s)) for s in SEEDS])
