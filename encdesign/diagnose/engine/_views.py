@@ -525,17 +525,22 @@ def view_time(prep, rw) -> list[Finding]:
             # where: the block farthest from the mean, and the best step
             dev = np.abs(means[:, k] - means[:, k].mean())
             b = int(np.argmax(dev))
-            # (the edge of the best step: its chi-square, cs^2 nb / (j (nb - j)); the CUSUM's
-            # size favours the middle, issue 44 C, session 25: a step 2 blocks from the end)
-            cs, j = np.cumsum(means[:, k] - means[:, k].mean())[:-1], np.arange(1, nb)
-            jb = int(np.argmax(cs**2 * nb / (j * (nb - j)))) + 1
             t0 = float(prep.rows["t"][parts[b][0]])
             t1 = float(prep.rows["t"][parts[b][-1]])
-            # step vs transient: power a single step takes out of the block means
-            x = np.arange(nb) >= jb
-            xm = x - x.mean()
-            step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
+            # step vs transient: power a single step takes out of the block means, at the
+            # edge of the best step (its chi-square, cs^2 nb / (j (nb - j)), issue 44 C,
+            # session 25: the CUSUM's size favours the middle, and a step 2 blocks from a
+            # run's end read as a transient); where even that step is no step, the edge is
+            # the CUSUM's, as before (the best-step edge of a smooth structure sits at a
+            # run's end, and a step there would rival what an order explains)
+            cs, j = np.cumsum(means[:, k] - means[:, k].mean())[:-1], np.arange(1, nb)
+            stat_j = cs**2 * nb / (j * (nb - j))
+            jb = int(np.argmax(stat_j)) + 1
+            step_pw = float(stat_j[jb - 1])
             is_step = step_pw > prep.settings.step_shape_share * chi[k]
+            if not is_step:
+                jb = int(np.argmax(np.abs(cs))) + 1 if nb > 2 else 1
+                step_pw = float(stat_j[jb - 1])
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
