@@ -34,6 +34,7 @@ from ._timing import stage
 from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
 from ._views_orders import order_scan
 from ._views_sums import Whitened, linear, sums_of
+from ._views_time import best_step
 from ._workshare import deal
 
 
@@ -519,23 +520,20 @@ def view_time(prep, rw) -> list[Finding]:
         nb = len(parts)
         chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
         thr = chi2_threshold(prep.settings.alpha, nb - 1, n_tests)
+        # beside it the best single step (issue 44 C, session 25, ._views_time)
+        thr1 = chi2_threshold(prep.settings.time_step_alpha, 1, n_tests * (nb - 1))
+        rest = chi2_threshold(prep.settings.alpha, max(nb - 2, 1), n_tests)
         for k in range(C):
-            if chi[k] <= thr:
+            jb, step_pw = best_step(means[:, k])
+            if chi[k] <= thr and step_pw <= thr1:
                 continue
             # where: the block farthest from the mean, and the best step
             dev = np.abs(means[:, k] - means[:, k].mean())
             b = int(np.argmax(dev))
-            # (the edge of the best step: its chi-square, cs^2 nb / (j (nb - j)); the CUSUM's
-            # size favours the middle, issue 44 C, session 25: a step 2 blocks from the end)
-            cs, j = np.cumsum(means[:, k] - means[:, k].mean())[:-1], np.arange(1, nb)
-            jb = int(np.argmax(cs**2 * nb / (j * (nb - j)))) + 1
             t0 = float(prep.rows["t"][parts[b][0]])
             t1 = float(prep.rows["t"][parts[b][-1]])
-            # step vs transient: power a single step takes out of the block means
-            x = np.arange(nb) >= jb
-            xm = x - x.mean()
-            step_pw = float((xm @ means[:, k]) ** 2 / (xm @ xm)) if xm @ xm > 0 else 0.0
-            is_step = step_pw > prep.settings.step_shape_share * chi[k]
+            # or what the best step leaves is within chance (._views_time, session 25)
+            is_step = step_pw > prep.settings.step_shape_share * chi[k] or chi[k] - step_pw <= rest
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
@@ -562,13 +560,14 @@ def view_time(prep, rw) -> list[Finding]:
                 cand = np.arange(1, rows_r.size)
                 _, lo, hi = interval_of(cand, -stat, c_change, best=i_step)
                 located = located_time(prep, rows_r, i_step, lo, hi)
+            pw, dof = (float(chi[k]), nb - 1) if chi[k] > thr else (step_pw, 1)  # its test's
             out.append(
                 Finding(
                     "time",
                     make_where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
-                    float(chi[k]),
-                    nb - 1,
-                    log10_tail_p(float(chi[k]), nb - 1),
+                    pw,
+                    dof,
+                    log10_tail_p(pw, dof),
                     detail=detail,
                     located_time=located,
                 )

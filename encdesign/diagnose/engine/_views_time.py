@@ -1,0 +1,41 @@
+"""The ``time`` view's best single step over a run's block means (issue 44 C, session 25).
+
+The view (:func:`._views.view_time`) tests each run and channel's block means (each
+``~N(0, 1)`` in white noise) for any structure: their chi-square less the run constant,
+``nb - 1`` dof. A step spreads over those dof: a one-head step of 60-120 whitened
+chi-square on a run of 32 blocks sits near that test's threshold (about 65 at 31 dof),
+though as one step (1 dof) it is far beyond chance (training ``change_points.py --seed
+7923`` ``mh_bench_jump`` record 7: block chi-square 58 against 64.6, its best step 48).
+Beside the block test the view therefore tests the best single step over the block edges,
+Bonferroni over its edges, runs and channels, at ``FinderSettings.time_step_alpha``; the
+two tests together have a family-wise false-alarm rate of at most ``alpha +
+time_step_alpha``. On block means, not rows: structure within a block (a line, a
+vibration) averages out there, as in the block test.
+
+A finding is a step (``shape``, and so a ``located_time``) where its best step takes
+``step_shape_share`` of the block means' power, or where what the step leaves of it is
+within chance (``nb - 2`` dof at ``alpha``, Bonferroni over the view's runs and channels).
+The share alone compares the step with a power that holds ``nb - 2`` dof of noise (about
+30 on 32 blocks): a step of 40-80 chi-square was read ``transient_or_drift`` and had no
+located time; a transient or a drift leaves beyond chance what one step does not take.
+
+The best step is the edge of largest chi-square, ``S_j^2 nb / (j (nb - j))`` with ``S_j``
+the sum of the first ``j`` centred means; the largest ``|S_j|`` (the CUSUM's size, used
+before) favours a run's middle, and a step a few blocks before a run's end was read at
+the middle, as a transient.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def best_step(m: np.ndarray) -> tuple[int, float]:
+    """``(jb, chi2)``: the block edge (``1 .. nb - 1``: the first block after the step) of
+    the best single step over the block means ``m`` (nb,), and the chi-square (1 dof) it
+    takes out of them, the run constant refitted."""
+    nb = m.size
+    cs, j = np.cumsum(m - m.mean())[:-1], np.arange(1, nb)
+    stat = cs**2 * nb / (j * (nb - j))
+    i = int(np.argmax(stat))
+    return i + 1, float(stat[i])
