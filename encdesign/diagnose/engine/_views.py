@@ -34,7 +34,7 @@ from ._timing import stage
 from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
 from ._views_orders import order_scan
 from ._views_sums import Whitened, linear, sums_of
-from ._views_time import best_step
+from ._views_time import best_step, time_steps_beside_order_change
 from ._workshare import deal
 
 
@@ -523,6 +523,7 @@ def view_time(prep, rw) -> list[Finding]:
         # beside it the best single step (issue 44 C, session 25, ._views_time)
         thr1 = chi2_threshold(prep.settings.time_step_alpha, 1, n_tests * (nb - 1))
         rest = chi2_threshold(prep.settings.alpha, max(nb - 2, 1), n_tests)
+        shr = prep.settings.step_shape_share  # main's step: block test and share (._views_time)
         for k in range(C):
             jb, step_pw = best_step(means[:, k])
             if chi[k] <= thr and step_pw <= thr1:
@@ -544,10 +545,11 @@ def view_time(prep, rw) -> list[Finding]:
                 "step_time_s": tstep,
                 "global_step_time_s": float(prep.rows.take("tau", rows_r[i_step])),
                 "block_s": float(t1 - t0),
-                # the best single step alone is significant (a step a smooth model dents
-                # shows as a transient)
+                # the best single step alone is significant (a dented step: a transient)
                 "step_significant": bool(step_pw > chi2_threshold(prep.settings.alpha, 1, n_tests)),
                 "n_values": int(sum(p.size for p in parts)),
+                "block_test": bool(chi[k] > thr),  # found by it (else the best step's)
+                "by_best_step": bool(is_step and not (chi[k] > thr and step_pw > shr * chi[k])),
             }
             # where the step is: between the last row before it and the first row after it
             detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
@@ -771,6 +773,7 @@ def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float
 
     for found in deal(list(views), scans):
         out += found
+    out = time_steps_beside_order_change(out, prep.settings)
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of
     # that order (the orders view), which sees every run at once
     by_order = {

@@ -39,3 +39,51 @@ def best_step(m: np.ndarray) -> tuple[int, float]:
     stat = cs**2 * nb / (j * (nb - j))
     i = int(np.argmax(stat))
     return i + 1, float(stat[i])
+
+
+def order_change_fits_better(order_chi2: float, head_chi2: float, ratio: float) -> bool:
+    """Whether a change of the disk's order 1 fits a record's change better than a step of
+    one head's constant: its chi-square gain (likelihood ratio over the same base, same
+    change points) exceeds ``ratio`` (``FinderSettings.order_step_head_ratio``) times the
+    head step's. The one comparison of :mod:`...kinds.multihead._order_step_head` (the
+    ``order_step`` view's located time) and of :func:`time_steps_beside_order_change`."""
+    return order_chi2 > ratio * head_chi2
+
+
+def time_steps_beside_order_change(found: list, settings) -> list:
+    """The ``time`` view's best-step rule kept out of structure an order change explains
+    better (issue 44 C, session 25, symmetric to the ``order_step`` view's rule).
+
+    On part of a turn an eccentricity shift (a change of order 1) does not average out of
+    the block means; the best-step test and rule read parts of it as one head's step at
+    times that are not the change's (fresh 6480 / 6481: ``mh_part_ref``, ``mh_ecc_shift``,
+    ``mh_arcs_noref`` located ``time`` steps nearly all outside the truth). Where the
+    record's ``order_step`` finding fits better than the best step of one head's constant
+    over every change point it scans (:func:`order_change_fits_better` on its
+    ``detail.order_change_chi2`` and ``head_step_chi2``), no one-head step at any of those
+    times fits as well as the order change, and a ``time`` finding that is a located step
+    only by the best-step test or rule (``detail.by_best_step``) is read as the block test
+    and the share rule alone read it: dropped where the block test did not find it
+    (``detail.block_test``), else a ``transient_or_drift`` with no located time. A step
+    the block test and the share rule find keeps its located time; where no order change
+    fits better (a count jump, one head's step) the best-step rule stands."""
+    ratio = settings.order_step_head_ratio
+    if not any(
+        f.view == "order_step"
+        and "order_change_chi2" in f.detail
+        and order_change_fits_better(
+            f.detail["order_change_chi2"], f.detail["head_step_chi2"], ratio
+        )
+        for f in found
+    ):
+        return found
+    out = []
+    for f in found:
+        if f.view == "time" and f.detail.get("by_best_step"):
+            if not f.detail.get("block_test"):
+                continue
+            f.detail["shape"] = "transient_or_drift"
+            f.detail["by_best_step"] = False
+            f.located_time = None
+        out.append(f)
+    return out
