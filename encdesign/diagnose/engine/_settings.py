@@ -334,6 +334,14 @@ class FinderSettings(AbstractSelectionSettings):
     best single step takes more than this share of its block means' power. Was an inline
     0.7 in ``_views.view_time``; set by hand in 96be348."""
 
+    time_step_alpha: float = eqx.field(default=1e-3, static=True)
+    """Views: beside its block test the ``time`` view tests each run and channel's best
+    single step over its block means (1 dof), Bonferroni over the block edges, runs and
+    channels, at this family-wise false-alarm rate (``_views_time``, issue 44 C, session
+    25: a one-head step of 60-120 chi-square spreads over the block test's 31 dof and sat
+    below its threshold). The view's two tests together: at most ``alpha`` plus this. The
+    same rate as ``alpha``; not tuned."""
+
     time_merge_blocks: float = eqx.field(default=0.1, static=True)
     """Views: ``time`` findings of two channels in one run are one structure when their step
     times are within this share of a block (plus 1 ms). Was an inline 0.1 in

@@ -34,6 +34,7 @@ from ._timing import stage
 from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
 from ._views_orders import order_scan
 from ._views_sums import Whitened, linear, sums_of
+from ._views_time import best_step, cusum_edge, time_steps_beside_order_change
 from ._workshare import deal
 
 
@@ -519,28 +520,20 @@ def view_time(prep, rw) -> list[Finding]:
         nb = len(parts)
         chi = np.sum(means**2, 0) - np.sum(means, 0) ** 2 / nb  # less the run constant
         thr = chi2_threshold(prep.settings.alpha, nb - 1, n_tests)
+        # beside it the best single step (issue 44 C, session 25, ._views_time)
+        thr1 = chi2_threshold(prep.settings.time_step_alpha, 1, n_tests * (nb - 1))
+        rest = chi2_threshold(prep.settings.alpha, max(nb - 2, 1), n_tests)
+        shr = prep.settings.step_shape_share  # main's step: block test and share (._views_time)
         for k in range(C):
-            if chi[k] <= thr:
+            jb, step_pw = jb1, pw1 = best_step(means[:, k])
+            if chi[k] <= thr and pw1 <= thr1:
                 continue
-            # where: the block farthest from the mean, and the best step
-            dev = np.abs(means[:, k] - means[:, k].mean())
-            b = int(np.argmax(dev))
+            b = int(np.argmax(np.abs(means[:, k] - means[:, k].mean())))  # the farthest block
             t0 = float(prep.rows["t"][parts[b][0]])
             t1 = float(prep.rows["t"][parts[b][-1]])
-            # step vs transient: power a single step takes out of the block means, at the
-            # edge of the best step (its chi-square, cs^2 nb / (j (nb - j)), issue 44 C,
-            # session 25: the CUSUM's size favours the middle, and a step 2 blocks from a
-            # run's end read as a transient); where even that step is no step, the edge is
-            # the CUSUM's, as before (the best-step edge of a smooth structure sits at a
-            # run's end, and a step there would rival what an order explains)
-            cs, j = np.cumsum(means[:, k] - means[:, k].mean())[:-1], np.arange(1, nb)
-            stat_j = cs**2 * nb / (j * (nb - j))
-            jb = int(np.argmax(stat_j)) + 1
-            step_pw = float(stat_j[jb - 1])
-            is_step = step_pw > prep.settings.step_shape_share * chi[k]
-            if not is_step:
-                jb = int(np.argmax(np.abs(cs))) + 1 if nb > 2 else 1
-                step_pw = float(stat_j[jb - 1])
+            # or what the best step leaves is within chance; else the CUSUM's edge (._views_time)
+            is_step = step_pw > prep.settings.step_shape_share * chi[k] or chi[k] - step_pw <= rest
+            jb, step_pw = (jb, step_pw) if is_step else cusum_edge(means[:, k])
             # the step's row: the single change point of largest likelihood near the block
             # edge (CUSUM of the run's rows, white noise: S_i^2 n / (i (n - i)))
             rows_r = np.concatenate(parts)
@@ -551,10 +544,11 @@ def view_time(prep, rw) -> list[Finding]:
                 "step_time_s": tstep,
                 "global_step_time_s": float(prep.rows.take("tau", rows_r[i_step])),
                 "block_s": float(t1 - t0),
-                # the best single step alone is significant (a step a smooth model dents
-                # shows as a transient)
+                # the best single step alone is significant (a dented step: a transient)
                 "step_significant": bool(step_pw > chi2_threshold(prep.settings.alpha, 1, n_tests)),
                 "n_values": int(sum(p.size for p in parts)),
+                "block_test": bool(chi[k] > thr),  # found by it (else the best step's)
+                "by_best_step": bool(is_step and not (chi[k] > thr and step_pw > shr * chi[k])),
             }
             # where the step is: between the last row before it and the first row after it
             detail["step_times_s"] = [float(prep.rows["t"][rows_r[max(i_step - 1, 0)]]), tstep]
@@ -567,13 +561,14 @@ def view_time(prep, rw) -> list[Finding]:
                 cand = np.arange(1, rows_r.size)
                 _, lo, hi = interval_of(cand, -stat, c_change, best=i_step)
                 located = located_time(prep, rows_r, i_step, lo, hi)
+            pw, dof = (float(chi[k]), nb - 1) if chi[k] > thr else (pw1, 1)  # its test's
             out.append(
                 Finding(
                     "time",
                     make_where(heads=[k], runs=[int(prep.run_ids[r])], times_s=[t0, t1]),
-                    float(chi[k]),
-                    nb - 1,
-                    log10_tail_p(float(chi[k]), nb - 1),
+                    pw,
+                    dof,
+                    log10_tail_p(pw, dof),
                     detail=detail,
                     located_time=located,
                 )
@@ -777,6 +772,7 @@ def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float
 
     for found in deal(list(views), scans):
         out += found
+    out = time_steps_beside_order_change(out, prep.settings)
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of
     # that order (the orders view), which sees every run at once
     by_order = {

@@ -13,6 +13,7 @@ from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._located import change_chi2, interval_of, located_time
 from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
+from ...engine._views_time import order_change_fits_better
 from ._aliases import catalog_orders_at
 from ._order_step_bins import order_step_bins, order_step_width
 from ._order_step_head import base_rows, head_step_gain
@@ -666,7 +667,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
     # issue 44 C, session 25: the time is the order change's only where that model fits
     # better than a step of one head's constant (a count jump): else the time view's
     hs, hk, hj = head_step_gain(prep, rw, kidx, P, edges, e, BBi, Br)
-    if float(np.max(like)) <= s.order_step_head_ratio * hs:
+    if not order_change_fits_better(float(np.max(like)), hs, s.order_step_head_ratio):
         located = None
     i_before = int(kidx[max(np.searchsorted(kidx, i_after) - 1, 0)])
     tau_a = float(prep.rows.take("tau", np.array([i_after]))[0])
@@ -684,6 +685,7 @@ def view_order_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Fin
         "step_times_s": [t_b if prep.run[i_before] == r_after else t_a, t_a],
         "n_values": int(kidx.size * C),
         "n_change_points": n_tests,
+        "order_change_chi2": float(np.max(like)),
         "head_step_chi2": hs,
         "head_step_head": hk,
         "head_step_time_s": float(prep.rows.take("t", kidx[edges[e[hj]] : edges[e[hj]] + 1])[0]),
