@@ -586,3 +586,26 @@ def env_without_device_count(**extra: str) -> dict[str, str]:
     flags = [f for f in env.pop("XLA_FLAGS", "").split() if "device_count" not in f]
     flags += extra.pop("XLA_FLAGS", "").split()
     return env | ({"XLA_FLAGS": " ".join(flags)} if flags else {}) | extra
+
+
+def spinning_heads_base(rng, H: int, R: int, n: int, rate_hz: float, noise: float) -> tuple:
+    """``(t, run, th, alpha, err)`` of a multihead record's base: ``R`` runs of ``n`` rows at
+    ``rate_hz`` (s, each run's clock from 0), the shaft at 0.8-1.8 rev/s from a random angle
+    (rad), ``H`` heads (the first at 0, the others sorted in 0.5-5.8 rad) and disk errors at
+    orders 1-5 of ``8 * noise / m`` (rad) with random phases; drawn from ``rng`` in that order
+    (the generators of ``tests/test_time_located_shape`` and ``tests/test_order_step_head``)."""
+    import numpy as np
+
+    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.5, 5.8, H - 1))])
+    t = np.tile(np.arange(n) / rate_hz, R)
+    run = np.repeat(np.arange(R), n)
+    th = np.concatenate(
+        [
+            2 * np.pi * rng.uniform(0.8, 1.8) * np.arange(n) / rate_hz + rng.uniform(0, 6.28)
+            for _ in range(R)
+        ]
+    )
+    err = np.zeros((t.size, H))
+    for m in range(1, 6):
+        err += 8 * noise / m * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.28))
+    return t, run, th, alpha, err

@@ -31,7 +31,7 @@ import pytest
 import encdesign
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._located import in_interval
-from tests.helpers import validate_diagnosis
+from tests.helpers import spinning_heads_base, validate_diagnosis
 
 NOISE = 0.5e-6
 RATE_HZ = 200.0
@@ -98,18 +98,7 @@ def step_record(seed: int | list[int], at=(0.88, 0.95), chi2=(120.0, 250.0)):
     rng = np.random.default_rng(seed)
     H, R, n = int(rng.integers(3, 5)), int(rng.integers(1, 3)), int(rng.integers(1000, 1601))
     ref = bool(rng.random() < 0.5)
-    alpha = np.concatenate([[0.0], np.sort(rng.uniform(0.5, 5.8, H - 1))])
-    t = np.tile(np.arange(n) / RATE_HZ, R)
-    run = np.repeat(np.arange(R), n)
-    th = np.concatenate(
-        [
-            2 * np.pi * rng.uniform(0.8, 1.8) * np.arange(n) / RATE_HZ + rng.uniform(0, 6.28)
-            for _ in range(R)
-        ]
-    )
-    err = np.zeros((t.size, H))
-    for m in range(1, 6):
-        err += 8 * NOISE / m * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.28))
+    t, run, th, alpha, err = spinning_heads_base(rng, H, R, n, RATE_HZ, NOISE)
     ks, rs = int(rng.integers(H)), int(rng.integers(R))
     before = int(rng.uniform(*at) * n)
     i0, after = rs * n + before, n - before
