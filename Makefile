@@ -31,24 +31,12 @@ test: setup
 	# diagnoses, the notebook's kernel, CLI runs) reuse each other's compiled programs
 	# (compilation is most of a quick study's time; about 14 % less CPU on the slowest files);
 	# every program is cached, however quick its compile (a second process on the same tests:
-	# 12-14 % less CPU than with a 0.2 s floor, the first process within 4 %); XLA's CPU backend
-	# emits fusions without its MLIR fusion emitters (--xla_cpu_use_fusion_emitters=false):
-	# compiling is most of the suite's CPU (session 25, s25-ci25b, paired runs, fresh JAX cache,
-	# jaxlib 0.10.2: -18 % over the four heaviest files, measured beside the flag named below; alone
-	# 20.3 -> 16.9 s on a head-layout test); the same operations, up to round-off (five
-	# diagnoses: verdicts and reports equal, effects to 4e-11 relative); the tests' children
-	# that choose their own device count keep it (tests/helpers.py env_without_device_count).
-	# Not --xla_backend_optimization_level=0 (LLVM's passes off; s25-ci25: -22-24 % on the
-	# design files): under it the SDS seed instruments' forward-mode Jacobian had NaN entries
-	# (tests/test_seed_calibration.py, a fresh clone's CI, session 25), so it changes results.
-	# A jaxlib that does not know a flag aborts at start-up, so each flag is first tried on a
-	# one-line program and left out where that fails (slower, not red)
-	flags=""; for f in --xla_cpu_use_fusion_emitters=false; do \
-	  XLA_FLAGS="$$flags $$f" $(PY) -c "import jax; jax.jit(lambda x: x + 1)(1.0)" >/dev/null 2>&1 \
-	    && flags="$$flags $$f" || echo "XLA flag $$f unknown to this jaxlib: left out"; \
-	done; echo "tests compile with XLA_FLAGS=$$flags"; \
+	# 12-14 % less CPU than with a 0.2 s floor, the first process within 4 %). No XLA_FLAGS
+	# (session 25): --xla_backend_optimization_level=0 gave NaN in the SDS seed instruments'
+	# forward-mode Jacobian (tests/test_seed_calibration.py) and --xla_cpu_use_fusion_emitters=false
+	# made the Monte Carlo drivers' values depend on the chunking (tests/test_drivers.py), each
+	# on a fresh clone's CI, and the latter saved no wall time there (pytest 909 s)
 	JAX_COMPILATION_CACHE_DIR=$(CURDIR)/.cache/jax JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0 \
-	XLA_FLAGS="$$flags" \
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 tests
 
 lint: setup
