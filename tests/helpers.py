@@ -609,3 +609,19 @@ def spinning_heads_base(rng, H: int, R: int, n: int, rate_hz: float, noise: floa
     for m in range(1, 6):
         err += 8 * noise / m * np.sin(m * (th[:, None] - alpha[None, :]) + rng.uniform(0, 6.28))
     return t, run, th, alpha, err
+
+
+def time_view_findings(rec) -> tuple[dict, list[dict]]:
+    """``(doc, found)``: the diagnosis document of ``rec`` (validated against the schema) and
+    its ``time`` view findings, before the candidates and left ``unexplained``."""
+    from encdesign.diagnose._dispatch import diagnose
+
+    doc = diagnose(rec).doc
+    validate_diagnosis(doc)
+    found = [
+        f
+        for key in ("findings_before", "unexplained")
+        for f in doc.get(key) or []
+        if f.get("view") == "time"
+    ]
+    return doc, found

@@ -29,9 +29,8 @@ import numpy as np
 import pytest
 
 import encdesign
-from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._located import in_interval
-from tests.helpers import spinning_heads_base, validate_diagnosis
+from tests.helpers import spinning_heads_base, time_view_findings
 
 NOISE = 0.5e-6
 RATE_HZ = 200.0
@@ -116,14 +115,7 @@ def step_record(seed: int | list[int], at=(0.88, 0.95), chi2=(120.0, 250.0)):
 
 
 def _located_at_truth(rec, truth):
-    doc = diagnose(rec).doc
-    validate_diagnosis(doc)
-    found = [
-        f
-        for key in ("findings_before", "unexplained")
-        for f in doc.get(key) or []
-        if f.get("view") == "time"
-    ]
+    doc, found = time_view_findings(rec)
     lts = [f["located_time"] for f in found if "located_time" in f]
     assert any(in_interval(lt, truth["t_s"], truth["run"]) for lt in lts), (truth, found)
 

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 import encdesign
-from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._located import in_interval
-from tests.helpers import spinning_heads_base, validate_diagnosis
+from tests.helpers import spinning_heads_base, time_view_findings
 
 NOISE = 0.5e-6
 RATE_HZ = 200.0
@@ -46,14 +45,7 @@ def bump_record(seed: int):
 @pytest.mark.parametrize("seed", [7910, 7911, 7912, 7913])
 def test_a_transient_carries_no_step_interval_and_the_step_keeps_its_own(seed):
     rec, truth = bump_record(seed)
-    doc = diagnose(rec).doc
-    validate_diagnosis(doc)
-    found = [
-        f
-        for key in ("findings_before", "unexplained")
-        for f in doc.get(key) or []
-        if f.get("view") == "time"
-    ]
+    doc, found = time_view_findings(rec)
     shapes = [f["detail"].get("shape") for f in found]
     assert "transient_or_drift" in shapes, shapes  # the transient is found, as one
     for f in found:  # a located time only on a step: the interval is a step's
