@@ -22,7 +22,7 @@ import pytest
 
 from encdesign.diagnose.engine._settings import FinderSettings
 from encdesign.diagnose.engine._views import Finding
-from encdesign.diagnose.engine._views_time import time_steps_beside_order_change
+from encdesign.diagnose.engine._views_time import findings_listed, time_steps_beside_order_change
 
 
 def _cp():
@@ -95,3 +95,19 @@ def test_time_steps_lose_their_located_time_only_beside_a_better_order_change(fi
     assert block.detail["order_change_explains"]
     assert best.detail["shape"] == "transient_or_drift" and best.located_time is None
     assert drift.detail["shape"] == "transient_or_drift" and drift.located_time is None
+
+
+def test_the_order_change_a_listed_step_defers_to_is_listed():
+    """``findings_listed``: the first ``n`` findings; where a listed ``time`` step defers its
+    located time to the ``order_step`` finding, that finding is listed too, wherever it
+    ranks (on part of a turn the first 12 can all be ``time`` findings at the p-value's
+    floor: training 7951 ``mh_arcs_noref`` 0 lost the change's located time on the first
+    version of the rule); else nothing beyond ``n``."""
+    s = FinderSettings()
+    o = _finding("order_step", {"order_change_chi2": 2.0, "head_step_chi2": 1.0}, True)
+    steps = [_steps()[0] for _ in range(4)]
+    found = time_steps_beside_order_change([*steps, o], s)
+    assert findings_listed(found, 3) == [*found[:3], o]
+    assert findings_listed(found, 5) == found
+    plain = [_steps()[0] for _ in range(4)] + [_finding("order_step", {}, False)]
+    assert findings_listed(plain, 3) == plain[:3]

@@ -116,3 +116,17 @@ def time_steps_beside_order_change(found: list, settings) -> list:
             f.located_time = None
         out.append(f)
     return out
+
+
+def findings_listed(found: list, n: int) -> list:
+    """The findings a document lists (``findings_before``, ``unexplained``): the first
+    ``n`` (strongest first), and beyond them any ``order_step`` finding whose located time
+    a listed ``time`` step defers to (``detail.order_change_explains``,
+    :func:`time_steps_beside_order_change`). On part of a turn the base leaves the shift in
+    every run at chi-square beyond the p-value's floor, and the first ``n`` can be all
+    ``time`` findings (training ``change_points.py --seed 7951`` ``mh_arcs_noref`` 0): the
+    change's located time must not leave the document with them."""
+    listed = found[:n]
+    if not any(f.view == "time" and f.detail.get("order_change_explains") for f in listed):
+        return listed
+    return listed + [f for f in found[n:] if f.view == "order_step" and f.located_time]
