@@ -77,6 +77,7 @@ from ._steps import run_param_interval, time_param_interval
 from ._timing import stage, timing
 from ._views import locate
 from ._views_modulated import base_jacobian
+from ._views_time import findings_listed
 
 
 def _set_order(prep: Prepared, order: int) -> None:
@@ -581,7 +582,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     effects = [_effect_json(prep, sel, s, fitter) for s in sel.accepted]
     unexplained = [
         {**f.to_json(sig_mean), "note": "significant structure no named effect explains"}
-        for f in sel.findings[:12]
+        for f in findings_listed(sel.findings, 12)
     ]
     for u in unexplained:  # a located step: where it lies in the motion (issue 22 item 4)
         if (ctx := step_context(prep, u)) is not None:
@@ -649,7 +650,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
         "rejected": sel.rejected,
         "confounded": confounded_pairs(effects, sel.confounded),
         "not_testable": sel.not_testable,
-        "findings_before": [f.to_json(sig_mean) for f in sel.findings0[:12]],
+        "findings_before": [f.to_json(sig_mean) for f in findings_listed(sel.findings0, 12)],
         "base": {
             "terms": base_params,
             "max_order": order,

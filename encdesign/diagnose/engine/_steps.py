@@ -321,11 +321,14 @@ def place_step_refusals(prep, fitter, current, step_refusals, findings) -> list:
             findings = sorted([*findings, f], key=lambda g: g.log10_p)
     # issue 44 C: every step the final residual's time view locates is placed on the final
     # model too (the view's change point is read off a residual from which smooth terms
-    # took part of the step, and may lie blocks away from it)
+    # took part of the step, and may lie blocks away from it); not a step the residual's
+    # order change explains better (session 26, ``_views_time.time_steps_beside_order_change``:
+    # its located time is the ``order_step`` finding's)
     for g in findings:
         if (
             g.view == "time"
             and g.detail.get("shape") == "step"
+            and not g.detail.get("order_change_explains")
             and (not g.detail.get("placed") or g.located_time is None)
         ):
             refine_step(fitter, prep, current.terms, g, interval=True)
