@@ -79,6 +79,15 @@ def test_least_squares_recovers_the_disk_error_for_random_layouts(seed, n_heads)
     assert float(jnp.max(comp.fit_residual_rad)) < 1e-15
 
 
+@jax.jit  # one compile per head count, not one per operation (op by op: 16-55 compiles)
+def _cotangent_and_layout_maps(th, y, angles, w):
+    """Cramer's map of the ``N + 1`` layout and the least-squares map, at ``th``."""
+    n_sym = angles.shape[0] - 1
+    cot = encoder_map(self_compensate(th, y, angles, n_sym, M), angles[:n_sym])
+    ls = layout_map(least_squares_compensate(th, y, angles, M), w)
+    return ls(th), cot(th)
+
+
 @pytest.mark.parametrize("n_sym", [2, 3, 4])
 @pytest.mark.parametrize("seed", [0, 7])
 def test_cotangent_equations_are_the_n_plus_1_special_case(n_sym, seed):
@@ -89,10 +98,9 @@ def test_cotangent_equations_are_the_n_plus_1_special_case(n_sym, seed):
     w = np.r_[np.full(n_sym, 1.0 / n_sym), 0.0]  # Cramer averages the symmetric heads only
     for noise in (0.0, 1e-7):
         th, y = _readings(angles, s, c, noise=noise, seed=seed)
-        cot = encoder_map(self_compensate(th, jnp.asarray(y), angles, n_sym, M), angles[:n_sym])
-        ls = layout_map(least_squares_compensate(th, jnp.asarray(y), jnp.asarray(angles), M), w)
+        ls, cot = _cotangent_and_layout_maps(*map(jnp.asarray, (th, y, angles, w)))
         # with or without noise the two maps are the same linear function of the readings
-        np.testing.assert_allclose(ls(th), cot(th), rtol=0, atol=1e-18)
+        np.testing.assert_allclose(ls, cot, rtol=0, atol=1e-18)
     amp, _, agg = layout_noise_amplification(angles, M, w)
     amp_c, agg_c = cotangent_sensitivity(ref, symmetric_angles(n_sym), M)
     deg = np.arange(1, M + 1) % n_sym == 0
@@ -207,7 +215,7 @@ def test_problem_model_builds_both_designs_alike():
 def test_grating_only_build_is_compensated():
     lay = _layout(jnp.radians(jnp.array([0.0, 97.0, 211.0])))
     z = jax.random.normal(jax.random.key(0), (n_build_normals(lay),))
-    r = layout_residual(lay, Tolerances(grating=5e-6), z)
+    r = jax.jit(layout_residual)(lay, Tolerances(grating=5e-6), z)  # eager: ~100 compiles
     assert float(jnp.max(jnp.abs(r))) < 1e-10  # 5 urad grating modes, removed to 2e-5
 
 
@@ -228,14 +236,11 @@ def test_layout_objective_gradient_matches_finite_differences():
         for e in np.eye(a0.size)
     ]
     np.testing.assert_allclose(g, fd, rtol=1e-4)
-    _, _, agg = layout_noise_amplification(jnp.asarray(a0), 8)
-    ga = np.asarray(jax.grad(lambda a: layout_noise_amplification(a, 8)[2])(jnp.asarray(a0)))
+    agg_of = jax.jit(lambda a: layout_noise_amplification(a, 8)[2])  # one compile, not per op
+    agg = agg_of(jnp.asarray(a0))
+    ga = np.asarray(jax.jit(jax.grad(agg_of))(jnp.asarray(a0)))
     fda = [
-        (
-            float(layout_noise_amplification(jnp.asarray(a0 + h * e), 8)[2])
-            - float(layout_noise_amplification(jnp.asarray(a0 - h * e), 8)[2])
-        )
-        / (2 * h)
+        (float(agg_of(jnp.asarray(a0 + h * e))) - float(agg_of(jnp.asarray(a0 - h * e)))) / (2 * h)
         for e in np.eye(a0.size)
     ]
     assert math.isfinite(float(agg))

@@ -45,8 +45,9 @@ OPEN = pytest.mark.xfail(
     "fitted before the scan put a later run's angle zero 1.1-3.1 rad from the truth (the "
     "step pulls it; benchmarks/run_zero_pull.py); since session 24 the change is profiled "
     "with the zeros chosen jointly with it (_order_step_zeros), which located 7622; 7620's "
-    "zero is unidentified (0.32 turn), 7630 still missed",
-    strict=False,
+    "zero is unidentified (0.32 turn), 7630 still missed; not run: a non-strict xfail "
+    "asserts nothing while it fails (session 26, CI time, as 7630's); run it with --runxfail",
+    run=False,
 )
 
 
