@@ -188,6 +188,11 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_pairs.py", 2): COUNT + " (a pair of columns; half the values); a squared norm",
     ("kinds/sds/_sds_pairs.py", 3): COUNT + " (degrees of freedom of an F-test)",
     ("kinds/sds/_sds_pairs.py", 1e-10): NUMERIC + " (a singular pair's Gram determinant)",
+    ("kinds/sds/_sds_common_mod.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
+    ("kinds/sds/_sds_common_mod.py", 2): DOF
+    + " (2 dof of a cos / sin pair; half the runs: the common orders a record resolves;"
+    + " a squared trace)",
+    ("kinds/sds/_sds_common_mod.py", 4): COUNT + " (a change with 2 runs on either side)",
     ("kinds/sds/_sds_level_out.py", 2): COUNT + " (a pair of columns)",
     ("kinds/sds/_sds_level_out.py", 3): COUNT
     + " (array dimensions; degrees of freedom left for a level, as _sds_pairs' F-test)",

@@ -172,7 +172,7 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
     sig = (
         ("time", "drift", "direction", "speed", "run_step")
         if offset
-        else ("spectrum", "orders", "common_orders", "modulated_orders")
+        else ("spectrum", "orders", "common_orders", "modulated_orders", "common_modulated")
     )
     return Candidate(
         name=name,

@@ -173,7 +173,7 @@ def lines_of(findings: Sequence[Any], signal_periods: int = 0) -> tuple[list[Lin
         idx = -1
         orders = [o for o in w.get("orders", []) if math.isfinite(o)]
         freqs = [h for h in w.get("frequencies_hz", []) if math.isfinite(h)]
-        if f.view in ("orders", "common_orders", "modulated_orders") and orders:
+        if f.view in ("orders", "common_orders", "modulated_orders", "common_modulated") and orders:
             idx = add(Line("order", float(round(orders[0]))))
         elif f.view == "spectrum" and (orders or freqs):
             if d.get("fixed_in") == "hz" and freqs:  # _views: "hz", "order", ...

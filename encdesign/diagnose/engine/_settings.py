@@ -684,7 +684,10 @@ class FinderSettings(AbstractSelectionSettings):
     modulated_orders_alpha: float = eqx.field(default=1e-3, static=True)
     """``modulated_orders`` view (``_views_modulated``): family-wise false-alarm rate of its
     scan of orders whose amplitude grows or switches (Bonferroni over orders x channels x
-    shapes), beside ``alpha``'s static scan. Issue 41 (s17): equal to ``alpha``."""
+    shapes), beside ``alpha``'s static scan. Issue 41 (s17): equal to ``alpha``. The SDS
+    ``common_modulated`` view (``kinds/sds/_sds_common_mod``: an order common to the moving
+    sensors that grows or switches) is tested at the same rate, over its own library
+    (session 26)."""
 
     modulated_orders_steps: int = eqx.field(default=8, static=True)
     """... it tests a switching order at this many equal-count edges of the kept rows (SDS,

@@ -67,6 +67,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
+from ._sds_common_mod import view_common_modulated
 from ._sds_data import (
     SDSPairTable,
     sds_data,
@@ -291,6 +292,7 @@ SDS_VIEWS = (
     KindView(view_mean_orders, ("orders",)),
     KindView(view_mean_modulated, ("modulated_orders",)),
     KindView(view_common_orders, ("common_orders",)),
+    KindView(view_common_modulated, ("common_modulated",)),
     *(
         KindView(_matched_view(n), (f"sds_{n}",))
         for n in (
