@@ -118,7 +118,7 @@ class StatsPass:
     def chunk(self, a: int, b: int, x: dict) -> None:
         """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums."""
         fitter, prep, jac, K = self.fitter, self.fitter.prep, self.jac, self.K
-        static, dyn, p_s = self.static, self.dyn, self.p_s
+        static, dyn, p, p_s = self.static, self.dyn, self.p, self.p_s
         A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = self.sums
         w = fitter.w_ch
         sw = np.sqrt(w)
@@ -159,36 +159,21 @@ class StatsPass:
                 continue
             rk = rw[lo:hi].ravel()
             Sk = Js_[lo:hi].reshape(rk.size, p_s)
+            g[k, :p_s] += Sk.T @ rk
             # alone, the block's residual is the whole one (h = g, q = c, qu = ssr)
             rsk = rk if rs is None else rs[lo:hi].ravel()
-            # every product with the block's processed Jacobian in one (issue 43: its rows
-            # read once, not once per product): the residual (g), the block's own residual
-            # unwhitened (hu) and whitened (h), the free nonlinear terms' columns (A's cross
-            # block)
-            nd = 0 if Jd is None else Jd.shape[2]
-            at = 2 if rs is None else 3
-            V = np.empty((at + nd, rk.size))
-            V[0] = rk
-            V[1] = (rsk.reshape(-1, prep.n_channels) / w[None, :]).ravel()
+            hu[k] += Sk.T @ (rsk.reshape(-1, prep.n_channels) / w[None, :]).ravel()
             if rs is not None:
-                V[2] = rsk
+                h[k] += Sk.T @ rsk
                 q[k] += float(rsk @ rsk)
                 qu[k] += float(rsk @ (rs[lo:hi] / w[None, :]).ravel())
-            Dk = None
-            if nd:
-                Dk = Jd[lo:hi].reshape(rk.size, nd)
-                V[at:] = Dk.T
-            SV = V @ Sk
-            g[k, :p_s] += SV[0]
-            hu[k] += SV[1]
-            if rs is not None:
-                h[k] += SV[2]
             if new_gram is not None:
                 gk, guk = self._gram_s(a, k, Sk, Js_[lo:hi])
                 new_gram[k] += gk
                 new_gu[k] += guk
-            if Dk is not None:
-                A[k, :p_s, p_s:] += SV[at:].T
+            if Jd is not None and Jd.shape[2]:
+                Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
+                A[k, :p_s, p_s:] += Sk.T @ Dk
                 A[k, p_s:, p_s:] += self._gram_d(a, k, Dk)
                 g[k, p_s:] += Dk.T @ rk
 
@@ -208,11 +193,11 @@ class StatsPass:
             Su = (Jk / np.sqrt(w)[None, :, None]).reshape(Sk.shape)
             got = (Sk.T @ Sk, Su.T @ Su)
         else:  # the new columns' products only
-            Tk = Jk[:, :, p0:]  # whitened and not in one product (Sk's rows read once)
-            pt = self.p_t
-            both = np.concatenate([Tk, Tk / w[None, :, None]], axis=2)
-            prod = Sk.T @ both.reshape(Sk.shape[0], 2 * pt)
-            got = (prod[:, :pt], prod[:, pt:])
+            Tk = Jk[:, :, p0:]
+            got = (
+                Sk.T @ Tk.reshape(Sk.shape[0], self.p_t),
+                Sk.T @ (Tk / w[None, :, None]).reshape(Sk.shape[0], self.p_t),
+            )
         if memo is not None:
             memo.put(key, got)
         return got
