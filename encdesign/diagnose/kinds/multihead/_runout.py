@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import scipy.linalg as sla
 
 from ...engine._candidates import Context
 from ...engine._rowshare import gathered_groups, my_groups, row_groups
@@ -15,12 +16,23 @@ RUNOUT_ORDERS = (1.0, 2.0, 3.0)
 """Runout orders of the axial beam tilt."""
 
 
+def _qr_apply(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, Q^T Y)`` of the reduced QR factorisation ``X = Q R`` (``X`` (n, q), ``Y`` (n, C)),
+    with ``Q`` applied by its reflectors and never formed (issue 43: forming it and its product
+    were most of the vibration start's line search; ``R`` is LAPACK's same, ``Q^T Y`` equal to
+    rounding)."""
+    if X.shape[0] < X.shape[1] or X.shape[1] == 0:  # (a short block: Q formed, it is small)
+        Q, R = np.linalg.qr(X)
+        return R, Q.T @ Y
+    QtY, R = sla.qr_multiply(X, np.ascontiguousarray(Y.T), mode="right")
+    return R, np.asarray(QtY).T
+
+
 def _gain(rw: np.ndarray, X: np.ndarray) -> float:
     """Whitened chi-square that regressors ``X`` (n, q) take out of ``rw`` (n, C)."""
     if X.shape[0] <= X.shape[1]:
         return 0.0
-    Q, _ = np.linalg.qr(X)
-    return float(np.sum((Q.T @ rw) ** 2))
+    return float(np.sum(_qr_apply(X, rw)[1] ** 2))
 
 
 SPLIT_ROWS = 1 << 14
@@ -46,8 +58,8 @@ def split_gains(n: int, sets: Callable[[int, int], list[np.ndarray]], rw: np.nda
         for X, q in zip(sets(a, b), qs):
             R, T = np.zeros((q, q)), np.zeros((q, C))
             if b > a:
-                Q, Rg = np.linalg.qr(X)
-                R[: Rg.shape[0]], T[: Q.shape[1]] = Rg, Q.T @ rw[a:b]
+                Rg, QtY = _qr_apply(X, rw[a:b])
+                R[: Rg.shape[0]], T[: QtY.shape[0]] = Rg, QtY
             flat += [R.ravel(), T.ravel()]
         parts.append(np.concatenate(flat) if flat else np.zeros(0))
     every = gathered_groups(parts, len(groups), sum(q * q + q * C for q in qs))

@@ -101,10 +101,20 @@ def _orders_cols(th: np.ndarray, orders: list[int]) -> np.ndarray:
     return np.concatenate([np.stack([np.cos(m * th), np.sin(m * th)], 1) for m in orders], 1)
 
 
-def _line_cols(t: np.ndarray, oh: np.ndarray, f_hz: float) -> np.ndarray:
-    """A line at ``f_hz`` with its own amplitude and phase in every run."""
+def _line_cols(
+    t: np.ndarray, oh: np.ndarray, f_hz: float, more: np.ndarray | None = None
+) -> np.ndarray:
+    """A line at ``f_hz`` with its own amplitude and phase in every run, then the columns
+    ``more`` where given (written in place: no joined copy, issue 43)."""
     c, s_ = np.cos(2 * np.pi * f_hz * t), np.sin(2 * np.pi * f_hz * t)
-    return np.concatenate([c[:, None] * oh, s_[:, None] * oh], 1)
+    R = oh.shape[1]
+    k = 0 if more is None else more.shape[1]
+    out = np.empty((t.size, 2 * R + k))
+    np.multiply(c[:, None], oh, out=out[:, :R])
+    np.multiply(s_[:, None], oh, out=out[:, R : 2 * R])
+    if k:
+        out[:, 2 * R :] = more
+    return out
 
 
 def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, float]:
@@ -142,8 +152,7 @@ def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, 
 
     def sets(a: int, b: int) -> list:  # rows a:b of the base's orders, then of each line
         Bs, o, ta = B[a:b], oh[a:b], t[a:b]
-        Xs = [_line_cols(ta, o, float(f)) for f in fs]
-        return ([Bs] if in_base else []) + [np.concatenate([X, Bs], 1) for X in Xs]
+        return ([Bs] if in_base else []) + [_line_cols(ta, o, float(f), Bs) for f in fs]
 
     # the frequency grid's gains with the rows split over the processes (split_gains, a
     # tall-skinny QR: the same on any number of processes); over the base's orders refitted
