@@ -1,0 +1,134 @@
+"""A located order of one channel that grows or switches as the rival of a catalog effect
+of the run means (stage 4, :mod:`._select`; issue 41, session 26).
+
+On an SDS record an order-5 pattern of one moving sensor that grows over the record or
+switches on at one time moves that sensor's run means in steps from run to run, and the
+catalog's ``sensor_delay_step`` (a step of one sensor's run-mean delay, order 0 from one
+run on) takes a part of it: on the fresh seeds 20261415-17 four of the eleven SDS misses of
+the discovery benchmark (a slow growth or a step at order 5 on one sensor, 5x the noise)
+were named ``sensor_delay_step``, the structure never reaching discovery. The
+``modulated_orders`` view locates that growth or switch on its channel; here it is fitted
+as a term of its own (:func:`_modulated_term`) and the two compared by a likelihood ratio
+at the finder's own ``alpha``: where the located form fits better than the catalog effect
+(a larger chi-square gain beside the same base) and the catalog effect beside it no longer
+gains what a term of its degrees of freedom needs (``chi2_threshold(alpha, dof, 1)``), the
+catalog name is refused with that reason and the structure goes on to discovery. A true
+catalog effect (a constant delay step from one run on) is not an order of the platform
+angle: the located form takes a part of it at most, and the effect keeps its name."""
+
+from __future__ import annotations
+
+import functools
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._candidates import Candidate, Param
+from ._fit import make_term
+from ._spill import TRIAL_STEPS
+from ._stats_pass import drive_many
+from ._views import chi2_threshold
+
+RIVAL_OF = ("run_step",)
+"""Signature views of the catalog effects this rival is asked of (those of the run means)."""
+
+SHAPES = ("growth", "decay", "switch_on", "switch_off")
+"""The ``modulated_orders`` view's amplitude shapes (:mod:`._views_modulated`)."""
+
+
+@functools.lru_cache(maxsize=64)
+def _modulated_term(
+    order: int, channel: int, n_channels: int, shape: str, t0: float, t1: float, theta: str
+) -> Candidate:
+    """A line at shaft ``order`` on ``channel`` alone (rad, ``cos_rad`` / ``sin_rad`` of
+    ``order theta``), times the amplitude shape the ``modulated_orders`` view located:
+    ``growth`` linear from 0 at the global time ``t0`` (s) to 1 at ``t1``, ``decay`` 1 minus
+    that, ``switch_on`` 0 before ``t0`` and 1 from it, ``switch_off`` the reverse."""
+
+    def fn(p, x):
+        tau = x["tau"]
+        if shape in ("growth", "decay"):
+            g = jnp.clip((tau - t0) / (t1 - t0), 0.0, 1.0)
+            g = g if shape == "growth" else 1.0 - g
+        else:
+            on = jnp.where(tau >= t0, 1.0, 0.0)
+            g = on if shape == "switch_on" else 1.0 - on
+        arg = order * x[theta]
+        v = g * (jnp.cos(arg) * p["cos_rad"] + jnp.sin(arg) * p["sin_rad"])
+        mask = (jnp.arange(n_channels) == channel).astype(float)
+        return v[:, None] * mask[None, :]
+
+    return Candidate(
+        f"the order-{order} {shape.replace('_', ' ')} on channel {channel}",
+        fn,
+        (Param("cos_rad", "rad"), Param("sin_rad", "rad")),
+        explanation="an order of one channel that grows or switches over the record (the "
+        "alternative a catalog effect of the run means must beat where the modulated_orders "
+        "view located one)",
+    )
+
+
+def _rivals(prep, findings) -> list[tuple[int, int, str, float, float]]:
+    """``(order, channel, shape, t0, t1)`` of each growth or switch the ``modulated_orders``
+    view located on one channel (``findings``)."""
+    tau = np.asarray(prep.rows["tau"], float)[np.asarray(prep.keep, bool)]
+    if not tau.size:
+        return []
+    lo, hi = float(tau.min()), float(tau.max())
+    if not hi > lo:  # no span of time for a growth
+        return []
+    out = []
+    for f in findings:
+        d = f.detail or {}
+        if f.view != "modulated_orders" or d.get("modulation") not in SHAPES:
+            continue
+        orders, heads = f.where.get("orders") or [], f.where.get("heads") or []
+        if len(orders) != 1 or float(orders[0]) != round(float(orders[0])):
+            continue
+        shape = d["modulation"]
+        t0 = float(d["global_step_time_s"]) if shape.startswith("switch") else lo
+        for h in heads:
+            out.append((round(float(orders[0])), int(h), shape, t0, hi))
+    return out
+
+
+def _dof(term) -> int:
+    """The term's fitted values (its degrees of freedom)."""
+    return int(sum(np.sum(v) for v in term.free.values()))
+
+
+def modulated_rival_rule(prep, fitter, cand: Candidate, findings, base: list, term):
+    """Rule ``located_share_min`` of a catalog effect of the run means (``RIVAL_OF`` in its
+    signature; not a discovered or exported one) against each growth or switch of an order
+    on one channel the ``modulated_orders`` view located (``findings``): ``(rule, reason)``
+    where that located form, fitted beside ``base`` as a term of its own, gains more
+    chi-square than the fitted ``term`` and ``term`` beside it gains less than
+    ``chi2_threshold(alpha, dof, 1)`` (the finder's own ``alpha``, ``dof`` its fitted values),
+    else ``None``."""
+    if not set(cand.signature) & set(RIVAL_OF) or cand.name.startswith("discovered_"):
+        return None
+    rows = prep.rows
+    theta = "theta_eff" if "theta_eff" in rows else "theta"
+    if theta not in rows or "tau" not in rows:
+        return None
+    located = _rivals(prep, findings)
+    if not located:
+        return None
+    need = chi2_threshold(prep.settings.alpha, _dof(term), 1)
+    C = int(prep.n_channels)
+    for order, ch, shape, t0, t1 in located:
+        if ch >= C:
+            continue
+        rival = make_term(_modulated_term(order, ch, C, shape, t0, t1, theta), prep)
+        fits = [list(base), [*base, term], [*base, rival], [*base, rival, term]]
+        f0, f1, fo, f2 = drive_many([fitter.fit_steps(f, max_steps=TRIAL_STEPS) for f in fits])
+        a, b = f0.chi2 - f1.chi2, f0.chi2 - fo.chi2
+        beside = fo.chi2 - f2.chi2
+        if b > a and beside < need:
+            return (
+                "located_share_min",
+                f"the order-{order} {shape.replace('_', ' ')} located on channel {ch} fits "
+                f"better: chi2 {b:.1f} vs {a:.1f} for this effect, which beside it gains "
+                f"{beside:.1f} (needs {need:.1f} at alpha {prep.settings.alpha:g})",
+            )
+    return None
