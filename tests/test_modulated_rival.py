@@ -38,6 +38,30 @@ def test_growing_order_of_one_sensor_is_not_named_a_delay_step():
     assert truth["frame"] in frames, d["report"]
 
 
+def test_switching_order_of_one_sensor_is_not_named_a_bearing_wobble():
+    """An order-5 pattern of one moving sensor switched on at one run, 5x the noise
+    (training seed 20261420 of the same run, ``sensor_step`` ``[20261420, 0, 1, 0, 0]``):
+    the catalog's ``bearing_wobble`` from one run on took a part of it and was named (main
+    2a08959). The located switch on that sensor fits better (116 chi-square against 49) and
+    the wobble beside it gains nothing significant: refused, and discovery models the switch
+    in that sensor's frame."""
+    rec, truth = outside_record(
+        np.random.default_rng([20261420, 0, 1, 0, 0]), "sensor_step", 5.0, "sds", 3000
+    )
+    d = diagnose(rec).doc
+    assert not d["effects"], d["report"]
+    refused = [r for r in d["rejected"] if r["name"] == "bearing_wobble"]
+    assert any("fits better" in r["reason"] for r in refused), d["report"]
+    frames = {
+        t["frame"]
+        for u in d["unexplained"]
+        if u.get("model")
+        for t in u["model"]["terms"]
+        if t["line_kind"] == "order" and t["value"] == truth["line"][1]
+    }
+    assert truth["frame"] in frames, d["report"]
+
+
 def test_true_delay_step_keeps_its_name(tmp_path):
     """A true step of one sensor's delay (the generated ``sensor_delay_step`` record of the
     catalog benchmark's kind, 12 platform positions) is not an order of the platform angle:

@@ -6,7 +6,9 @@ switches on at one time moves that sensor's run means in steps from run to run, 
 catalog's ``sensor_delay_step`` (a step of one sensor's run-mean delay, order 0 from one
 run on) takes a part of it: on the fresh seeds 20261415-17 four of the eleven SDS misses of
 the discovery benchmark (a slow growth or a step at order 5 on one sensor, 5x the noise)
-were named ``sensor_delay_step``, the structure never reaching discovery. The
+were named ``sensor_delay_step``, the structure never reaching discovery (and on training
+seed 20261420 a step at order 5 on one sensor was named ``bearing_wobble``, a wobble of the
+axis from one run on: the same pattern). The
 ``modulated_orders`` view locates that growth or switch on its channel; here it is fitted
 as a term of its own (:func:`_modulated_term`) and the two compared by a likelihood ratio
 at the finder's own ``alpha``: where the located form fits better than the catalog effect
@@ -30,7 +32,8 @@ from ._stats_pass import drive_many
 from ._views import chi2_threshold
 
 RIVAL_OF = ("run_step",)
-"""Signature views of the catalog effects this rival is asked of (those of the run means)."""
+"""Signature views of the catalog effects this rival is asked of (those of the run means);
+and of every effect that changes from one run on (a ``first_run`` parameter)."""
 
 SHAPES = ("growth", "decay", "switch_on", "switch_off")
 """The ``modulated_orders`` view's amplitude shapes (:mod:`._views_modulated`)."""
@@ -99,13 +102,15 @@ def _dof(term) -> int:
 
 def modulated_rival_rule(prep, fitter, cand: Candidate, findings, base: list, term):
     """Rule ``located_share_min`` of a catalog effect of the run means (``RIVAL_OF`` in its
-    signature; not a discovered or exported one) against each growth or switch of an order
-    on one channel the ``modulated_orders`` view located (``findings``): ``(rule, reason)``
-    where that located form, fitted beside ``base`` as a term of its own, gains more
-    chi-square than the fitted ``term`` and ``term`` beside it gains less than
-    ``chi2_threshold(alpha, dof, 1)`` (the finder's own ``alpha``, ``dof`` its fitted values),
-    else ``None``."""
-    if not set(cand.signature) & set(RIVAL_OF) or cand.name.startswith("discovered_"):
+    signature) or one that changes from one run on (a ``first_run`` parameter:
+    ``bearing_wobble``, ``sensor_delay_step``), not a discovered or exported one, against
+    each growth or switch of an order on one channel the ``modulated_orders`` view located
+    (``findings``): ``(rule, reason)`` where that located form, fitted beside ``base`` as a
+    term of its own, gains more chi-square than the fitted ``term`` and ``term`` beside it
+    gains less than ``chi2_threshold(alpha, dof, 1)`` (the finder's own ``alpha``, ``dof``
+    its fitted values), else ``None``."""
+    changes = set(cand.signature) & set(RIVAL_OF) or any(q.first_run for q in cand.params)
+    if not changes or cand.name.startswith("discovered_"):
         return None
     rows = prep.rows
     theta = "theta_eff" if "theta_eff" in rows else "theta"
