@@ -76,5 +76,8 @@ def test_true_delay_step_keeps_its_name(tmp_path):
         n_runs=12,
     )[0]
     d = diagnose(rec).doc
+    # the view locates switches of orders on the sensors (the step's aliases on 12
+    # positions): the rule is asked, and the delay step beats each
+    assert any(f["view"] == "modulated_orders" for f in d["findings_before"]), d["report"]
     assert d["effects"] and d["effects"][0]["name"] == "sensor_delay_step", d["report"]
     assert not any("fits better" in r["reason"] for r in d["rejected"]), d["report"]
