@@ -39,32 +39,42 @@ SHAPES = ("growth", "decay", "switch_on", "switch_off")
 """The ``modulated_orders`` view's amplitude shapes (:mod:`._views_modulated`)."""
 
 
-@functools.lru_cache(maxsize=64)
-def _modulated_term(
-    order: int, channel: int, n_channels: int, shape: str, t0: float, t1: float, theta: str
-) -> Candidate:
-    """A line at shaft ``order`` on ``channel`` alone (rad, ``cos_rad`` / ``sin_rad`` of
-    ``order theta``), times the amplitude shape the ``modulated_orders`` view located:
-    ``growth`` linear from 0 at the global time ``t0`` (s) to 1 at ``t1``, ``decay`` 1 minus
-    that, ``switch_on`` 0 before ``t0`` and 1 from it, ``switch_off`` the reverse."""
+@functools.lru_cache(maxsize=32)
+def _modulated_term(shape: str, n_channels: int, theta: str) -> Candidate:
+    """A line at shaft order ``order`` on channel ``channel`` alone (rad, ``cos_rad`` /
+    ``sin_rad`` of ``order theta``), times the amplitude shape the ``modulated_orders`` view
+    located: ``growth`` linear from 0 at the global time ``t0_s`` (s) to 1 at ``t1_s``,
+    ``decay`` 1 minus that, ``switch_on`` 0 before ``t0_s`` and 1 from it, ``switch_off`` the
+    reverse. The order, channel and times are held parameters: one compiled function per
+    shape serves every located form."""
 
     def fn(p, x):
         tau = x["tau"]
         if shape in ("growth", "decay"):
-            g = jnp.clip((tau - t0) / (t1 - t0), 0.0, 1.0)
+            g = jnp.clip((tau - p["t0_s"]) / (p["t1_s"] - p["t0_s"]), 0.0, 1.0)
             g = g if shape == "growth" else 1.0 - g
         else:
-            on = jnp.where(tau >= t0, 1.0, 0.0)
+            on = jnp.where(tau >= p["t0_s"], 1.0, 0.0)
             g = on if shape == "switch_on" else 1.0 - on
-        arg = order * x[theta]
+        arg = p["order"] * x[theta]
         v = g * (jnp.cos(arg) * p["cos_rad"] + jnp.sin(arg) * p["sin_rad"])
-        mask = (jnp.arange(n_channels) == channel).astype(float)
+        mask = (jnp.arange(n_channels) == p["channel"]).astype(float)
         return v[:, None] * mask[None, :]
 
+    def held(name: str, unit: str, what: str) -> Param:
+        return Param(name, unit, linear=False, fit=False, description=what)
+
     return Candidate(
-        f"the order-{order} {shape.replace('_', ' ')} on channel {channel}",
+        f"the located order {shape.replace('_', ' ')} of one channel",
         fn,
-        (Param("cos_rad", "rad"), Param("sin_rad", "rad")),
+        (
+            Param("cos_rad", "rad"),
+            Param("sin_rad", "rad"),
+            held("order", "1", "the shaft order"),
+            held("channel", "1", "the channel"),
+            held("t0_s", "s", "global time of the change (growth: its start)"),
+            held("t1_s", "s", "global time of the growth's end"),
+        ),
         explanation="an order of one channel that grows or switches over the record (the "
         "alternative a catalog effect of the run means must beat where the modulated_orders "
         "view located one)",
@@ -121,14 +131,22 @@ def modulated_rival_rule(prep, fitter, cand: Candidate, findings, base: list, te
         return None
     need = chi2_threshold(prep.settings.alpha, _dof(term), 1)
     C = int(prep.n_channels)
+    located = [r for r in located if r[1] < C]
+    if not located:
+        return None
+    # every fit side by side, in one pass over the rows per round (issue 43): the base and
+    # the base with the candidate once, each located form beside the base without and with it
+    fits = [list(base), [*base, term]]
     for order, ch, shape, t0, t1 in located:
-        if ch >= C:
-            continue
-        rival = make_term(_modulated_term(order, ch, C, shape, t0, t1, theta), prep)
-        fits = [list(base), [*base, term], [*base, rival], [*base, rival, term]]
-        f0, f1, fo, f2 = drive_many([fitter.fit_steps(f, max_steps=TRIAL_STEPS) for f in fits])
-        a, b = f0.chi2 - f1.chi2, f0.chi2 - fo.chi2
-        beside = fo.chi2 - f2.chi2
+        at = {"order": order, "channel": ch, "t0_s": t0, "t1_s": t1}
+        rival = make_term(_modulated_term(shape, C, theta), prep, at)
+        fits += [[*base, rival], [*base, rival, term]]
+    done = drive_many([fitter.fit_steps(f, max_steps=TRIAL_STEPS) for f in fits])
+    f0, f1 = done[:2]
+    a = f0.chi2 - f1.chi2
+    for i, (order, ch, shape, _, _) in enumerate(located):
+        fo, f2 = done[2 + 2 * i : 4 + 2 * i]
+        b, beside = f0.chi2 - fo.chi2, fo.chi2 - f2.chi2
         if b > a and beside < need:
             return (
                 "located_share_min",
