@@ -11,7 +11,6 @@ import numpy as np
 
 from ._candidates import Candidate, Param
 from ._fit import make_term
-from ._modulated_rival import modulated_rival_rule
 from ._spill import _kept, rival_rule
 
 ORDER_STEP_ORDER = 1
@@ -105,10 +104,8 @@ def change_rival_rule(prep, fitter, cand: Candidate, findings, base: list, term)
 
 def rivals_rule(prep, fitter, cand: Candidate, findings, base: list, term):
     """:func:`._spill.rival_rule` (the candidate's own rivals), then
-    :func:`change_rival_rule`, then :func:`._modulated_rival.modulated_rival_rule`: the
-    first ``(rule, reason)`` that refuses ``term``, else ``None``."""
-    return (
-        rival_rule(prep, fitter, cand, base, term)
-        or change_rival_rule(prep, fitter, cand, findings, base, term)
-        or modulated_rival_rule(prep, fitter, cand, findings, base, term)
+    :func:`change_rival_rule`: the first ``(rule, reason)`` that refuses ``term``, else
+    ``None``."""
+    return rival_rule(prep, fitter, cand, base, term) or change_rival_rule(
+        prep, fitter, cand, findings, base, term
     )
