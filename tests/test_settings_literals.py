@@ -188,7 +188,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_pairs.py", 2): COUNT + " (a pair of columns; half the values); a squared norm",
     ("kinds/sds/_sds_pairs.py", 3): COUNT + " (degrees of freedom of an F-test)",
     ("kinds/sds/_sds_pairs.py", 1e-10): NUMERIC + " (a singular pair's Gram determinant)",
-    ("kinds/sds/_sds_common_mod.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("kinds/sds/_sds_common_mod.py", 2): DOF
     + " (2 dof of a cos / sin pair; half the runs: the common orders a record resolves;"
     + " a squared trace)",

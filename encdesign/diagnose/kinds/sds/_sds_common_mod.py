@@ -41,7 +41,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
-from ...engine._views_modulated import _basis
+from ...engine._views_modulated import _basis, _power2
 from ...engine._views_orders import time_order
 
 VIEW = "common_modulated"
@@ -100,12 +100,7 @@ def powers(
     P = A.reshape(n * C, S * L, 2)
     G = np.einsum("kgi,kgj->gij", P, P)  # (S L, 2, 2)
     b = np.einsum("k,kgi->gi", y, P)
-    det = G[:, 0, 0] * G[:, 1, 1] - G[:, 0, 1] ** 2
-    ok = det > 1e-9 * np.maximum(G[:, 0, 0] + G[:, 1, 1], 1e-300) ** 2
-    q = (
-        b[:, 0] ** 2 * G[:, 1, 1] - 2 * b[:, 0] * b[:, 1] * G[:, 0, 1] + b[:, 1] ** 2 * G[:, 0, 0]
-    ) / np.where(ok, det, 1.0)
-    return np.where(ok, np.maximum(q, 0.0), 0.0).reshape(S, L)
+    return _power2(G[:, None], b[:, :, None])[:, 0].reshape(S, L)
 
 
 def view_common_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
