@@ -7,8 +7,9 @@ the band of lines (``FinderSettings.reduce_line_hz``), not for every order the b
 grow to: most records' bases do not grow that far, and a longer block is fewer rows for
 every later stage. The block keeps every order up to ``orders_kept`` within
 ``FinderSettings.reduce_attenuation_max`` (:func:`._reduce.orders_kept`). When a growth of
-the base (``_engine._grow_to``) settles on an order whose views would scan past
-``orders_kept`` (:func:`check_growth`, before any view scans there), the diagnosis stops
+the base (``_engine._grow_to``) proposes an order whose views would scan past
+``orders_kept`` (:func:`check_growth`, before the growth's own checks, which scan there;
+so also where those checks would have undone the growth), the diagnosis stops
 (:class:`GrowthPastBlock`) and starts again from the record, reduced with the block planned
 for every order the base can grow to (:func:`._reduce.scan_orders_reached` with growth: the
 block before session 27), read again from its file when it was reduced as it was read
