@@ -39,12 +39,14 @@ REDUCE_GATHER_ROWS = 700
 REDUCE = (
     "import encdesign.diagnose._dispatch as d, encdesign.diagnose.engine._settings as s; "
     f"d.DEFAULT_SETTINGS = s.FinderSettings(**{REDUCE_SETTINGS!r}); "
+    "import encdesign.diagnose.engine._engine as e; e.DEFAULT_SETTINGS = d.DEFAULT_SETTINGS; "
     f"import encdesign._distributed as g; g.GATHER_ROWS = {REDUCE_GATHER_ROWS}; "
 )
 """Launcher setup that lowers the reduction's threshold and widens its bound, so that a
 12,000-row record at 1 kHz (1,000-2,500 rows per revolution) is reduced to blocks of a few
 rows as it is read (``open_recording``), and gathers the reduced rows 700 at a time (several
-collectives per column, as at 10^8 rows)."""
+collectives per column, as at 10^8 rows); the engine's settings are the same (a restart,
+``_reduce_restart``, reduces the record again with them)."""
 
 DEALT = (
     "import jax, encdesign.diagnose.engine._workshare as w; "
@@ -68,13 +70,19 @@ TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
 
 def _record(
-    path: Path, seed: int, n: int = 1000, speed_rev_s: float = 0.6, group_rows: int = 0
+    path: Path,
+    seed: int,
+    n: int = 1000,
+    speed_rev_s: float = 0.6,
+    group_rows: int = 0,
+    orders: tuple[int, ...] = (1, 2, 3, 4, 5),
 ) -> Path:
     """4 heads x 4 runs of ``n`` rows (1 kHz, ``speed_rev_s`` + 0.4 r rev/s in run ``r``,
-    0.5 urad noise, disk errors of orders 1-5, per-run zeros) with a 31 Hz vibration of
-    1.5 urad on every head; with ``group_rows`` a Parquet table in row groups of that many
-    rows (else a CSV)."""
+    0.5 urad noise, disk errors of ``orders`` (4 / m urad; 1.5 urad from order 13), per-run
+    zeros) with a 31 Hz vibration of 1.5 urad on every head; with ``group_rows`` a Parquet
+    table in row groups of that many rows (else a CSV)."""
     rng = np.random.default_rng(seed)
+    amp = {m: 4e-6 / m if m < 13 else 1.5e-6 for m in orders}
     R, heads = 4, 4
     alpha = np.array([0.0, 2.1, 4.2, 0.9])
     cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []} | {
@@ -88,7 +96,7 @@ def _record(
         cols["run"].append(np.full(n, r))
         cols["theta_ref"].append(th + rng.uniform(-3, 3))
         for k in range(heads):
-            e = sum(4e-6 / m * np.sin(m * (th - alpha[k]) + m) for m in range(1, 6))
+            e = sum(a * np.sin(m * (th - alpha[k]) + m) for m, a in amp.items())
             e = e + 1.5e-6 * np.sin(2 * np.pi * 31.0 * t + rng.uniform(0, 6))
             cols[f"h{k}"].append(th + e + rng.normal(0, 0.5e-6, n) + zero[k])
     columns = {k: np.concatenate(v) for k, v in cols.items()}
@@ -150,6 +158,7 @@ def _diagnose_here(monkeypatch, rec: Path, out: Path, reduce: bool = False, *fla
     only; no interpreter to start: CI time). Returns its JSON."""
     import encdesign._distributed as g
     import encdesign.diagnose._dispatch as d
+    import encdesign.diagnose.engine._engine as e
     import encdesign.diagnose.engine._fit as f
     from encdesign.cli import main
     from encdesign.diagnose.engine._settings import FinderSettings
@@ -157,6 +166,7 @@ def _diagnose_here(monkeypatch, rec: Path, out: Path, reduce: bool = False, *fla
     monkeypatch.setattr(f, "CHUNK_ROWS", CHUNK)
     if reduce:
         monkeypatch.setattr(d, "DEFAULT_SETTINGS", FinderSettings(**REDUCE_SETTINGS))
+        monkeypatch.setattr(e, "DEFAULT_SETTINGS", d.DEFAULT_SETTINGS)
         monkeypatch.setattr(g, "GATHER_ROWS", REDUCE_GATHER_ROWS)
     assert main(["diagnose", str(rec), *flags, "--json", str(out), "--quiet"]) == 0
     return json.loads(out.read_text(encoding="utf-8"))
@@ -253,6 +263,29 @@ def test_a_parquet_record_reduced_on_two_processes_gives_the_one_process_diagnos
     blocks = 12_000 // red["block_rows"]
     assert blocks - red["stretches"] <= red["reduced_rows"] <= blocks
     assert one["verdict"] == two["verdict"] == "missing_physics"
+    assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
+    diff = _differences(one, two)
+    _keep(one, two)
+    assert not diff, "\n".join(diff[:40])
+
+
+def test_a_reduced_record_restarted_on_two_processes_gives_the_one_process_diagnosis(
+    tmp_path, monkeypatch
+):
+    """Disk orders 13-18 grow the base past what the block planned for order 12 keeps
+    (``_reduce_restart``): every process stops at the same growth and reads the record
+    again (the block for every growth is under 2 rows there: the whole record), and the
+    diagnosis on two processes is the one on one process."""
+    orders = (1, 2, 3, 4, 5, *range(13, 19))
+    rec = _record(
+        tmp_path / "rec.toml", 7972, n=3000, speed_rev_s=0.4, group_rows=997, orders=orders
+    )
+    one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json", True)
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), REDUCE)
+    red = one["reduced"]
+    assert not red["applied"] and red["planned_for_growth"]
+    assert red["restart"]["block_rows"] >= 2 and one["base"]["max_order"] > 12
+    assert one["verdict"] == two["verdict"]
     assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
     diff = _differences(one, two)
     _keep(one, two)

@@ -67,8 +67,7 @@ from ._located import value_in_interval
 from ._noise import noise_spectral_dof
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
-from ._reduce import plan as reduce_plan
-from ._reduce import reduce_recording
+from ._reduce_restart import check_growth, orders_checked, run_reduced, state_reduction
 from ._refine import checked_fit, heldout_decides_orders, refine_base
 from ._results import PlotData
 from ._select import Selection, select
@@ -175,6 +174,7 @@ def _grow_to(
     M = int(max(found))
     if past is not None and M <= past:
         return None
+    check_growth(prep, limit, M)  # issue 43: not past the orders a reduced record keeps
     if line and not growth_beside_line(prep, fitter.residual(fit.terms), order, M, L, base_info):
         return None
     lowered = (base_info.get("order_choice") or {}).get("lowered", False)
@@ -679,21 +679,6 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     return doc
 
 
-def _state_reduction(doc: dict, reduced: dict) -> None:
-    """The document says whether the record was reduced to block means (``reduced``:
-    :func:`._reduce.plan`); the tests a reduced record cannot make are ``not_testable``."""
-    doc["reduced"] = reduced
-    lost = reduced.get("not_testable") or []
-    names = {e["name"] for e in lost}
-    doc["not_testable"] = [e for e in doc["not_testable"] if e["name"] not in names] + lost
-    if reduced["applied"]:
-        doc["notes"].append(
-            f"reduced to the means of blocks of {reduced['block_rows']} rows "
-            f"({reduced['rows']} rows to {reduced['reduced_rows']}; attenuation at most "
-            f"{reduced['attenuation_max']:g} up to {reduced['f_needed_hz']:.4g} Hz)"
-        )
-
-
 def run_engine(
     kind: Kind,
     rec,
@@ -723,72 +708,79 @@ def run_engine(
     settings = DEFAULT_SETTINGS if settings is None else settings
     t0 = time.perf_counter()
     pg = _Progress(verbose)
+    own = max_order is None
+    order0, grows = (kind.default_max_order if own else max_order), kind.grows_orders and own
     try:
-        with timing() as timer:
-            with stage("reduce"):  # issue 43: a long record on block means
-                own = max_order is None
-                order0 = kind.default_max_order if own else max_order
-                if reduced is None:  # (else reduced as it was read: _reduce_stream)
-                    reduced = reduce_plan(rec, order0, kind.grows_orders and own, settings)
-                    if reduced["applied"]:
-                        rec = reduce_recording(rec, reduced)
-            with stage("data"):
-                kd = kind.data(rec, settings)
-            meta = dict(rec.meta)
-            meta.setdefault("kind", rec.kind)
-            with stage("prepare"):
-                prep = kind.prepare(kd, meta, settings)
-            pg.stage("prepared")
-            with stage("base_fit"):
-                order, limit = _order_of(kd, prep, kind, max_order)
-                base_terms, base_info = _base_terms(kind, prep, order)
-                fitter = Fitter(prep, progress=pg.chunk_done)
-                seen: dict[str, Candidate] = {}
-                for c in [*kind.candidates(prep.ctx), *extra_candidates]:
-                    seen[c.name] = c  # later ones (reference, user terms) override by name
-                grow = kind.grows_orders and max_order is None
-                base_fit, order, limit = _fit_base(
-                    kind, prep, fitter, base_terms, base_info, order, limit, grow
+        with timing() as timer:  # issue 43: a long record on block means (_reduce_restart)
+
+            def once(r, red: dict):
+                return _diagnose(
+                    kind, r, red, max_order, max_effects, extra_candidates, pg, settings
                 )
-                scan = scan_order_of(limit, order, prep.settings)
-                prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
-                prep.base_terms = tuple(base_fit.terms)
-            pg.stage("base fitted")
-            with stage("select"):
-                sel = select(
-                    prep,
-                    fitter,
-                    base_fit.terms,
-                    list(seen.values()),
-                    kind.views(prep),
-                    scan,
-                    max_effects,
-                    pg.log,
-                )
-            pg.stage("selected")
-            pg.stage("held-out + goodness of fit")
-            with stage("report"):
-                doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
-                pg.stage("report")
-                doc = kind.finish(prep, doc, settings)
-                _state_reduction(doc, reduced)
-                doc["verdict"] = decide_verdict(doc)
-            with stage("bounds"):  # issue 44 F: what the record could have shown
-                ref = bounds_reference(doc, sel, max_effects)
-                cands = list(seen.values())
-                doc["detection_bounds"] = detection_bounds(
-                    prep, fitter, ref, cands, kind.views(prep), scan
-                )
-                doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
-                doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)
-            with stage("report"):
-                contributions = effect_contributions(prep, fitter, sel)
+
+            doc, plot = run_reduced(once, rec, reduced, order0, grows, settings)
         doc["time_s"] = time.perf_counter() - t0
         doc["timings_s"] = dict(timer.totals)
         doc["timings_cpu_s"] = dict(timer.cpu_totals)
         doc["report"] = report_text(doc) + kind.report_lines(doc)
     finally:
         pg.close()
+    return doc, plot
+
+
+def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates, pg, settings):
+    """:func:`run_engine`'s diagnosis of ``rec``, reduced as ``reduced`` says (or not):
+    ``(document without its times and report, plot data)``."""
+    with stage("data"):
+        kd = kind.data(rec, settings)
+    meta = dict(rec.meta)
+    meta.setdefault("kind", rec.kind)
+    with stage("prepare"):
+        prep = kind.prepare(kd, meta, settings)
+    prep.orders_kept = orders_checked(reduced)  # issue 43: a growth past it restarts
+    pg.stage("prepared")
+    with stage("base_fit"):
+        order, limit = _order_of(kd, prep, kind, max_order)
+        base_terms, base_info = _base_terms(kind, prep, order)
+        fitter = Fitter(prep, progress=pg.chunk_done)
+        seen: dict[str, Candidate] = {}
+        for c in [*kind.candidates(prep.ctx), *extra_candidates]:
+            seen[c.name] = c  # later ones (reference, user terms) override by name
+        grow = kind.grows_orders and max_order is None
+        base_fit, order, limit = _fit_base(
+            kind, prep, fitter, base_terms, base_info, order, limit, grow
+        )
+        scan = scan_order_of(limit, order, prep.settings)
+        prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
+        prep.base_terms = tuple(base_fit.terms)
+    pg.stage("base fitted")
+    with stage("select"):
+        sel = select(
+            prep,
+            fitter,
+            base_fit.terms,
+            list(seen.values()),
+            kind.views(prep),
+            scan,
+            max_effects,
+            pg.log,
+        )
+    pg.stage("selected")
+    pg.stage("held-out + goodness of fit")
+    with stage("report"):
+        doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
+        pg.stage("report")
+        doc = kind.finish(prep, doc, settings)
+        state_reduction(doc, reduced)
+        doc["verdict"] = decide_verdict(doc)
+    with stage("bounds"):  # issue 44 F: what the record could have shown
+        ref = bounds_reference(doc, sel, max_effects)
+        cands = list(seen.values())
+        doc["detection_bounds"] = detection_bounds(prep, fitter, ref, cands, kind.views(prep), scan)
+        doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
+        doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)
+    with stage("report"):
+        contributions = effect_contributions(prep, fitter, sel)
     plot = PlotData(
         prep=prep,
         base_resid=sel.base_resid,

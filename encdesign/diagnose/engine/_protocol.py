@@ -300,6 +300,10 @@ class Prepared:
     # (the views then treat ``sigma`` as known); the spectrum view's test reads it
     # (``_views_estimated.estimated_test``)
     noise_dof: np.ndarray | None = None
+    # issue 43: the highest order a record reduced for the base's declared order keeps within
+    # the bound, where the base grows (``_reduce_restart.check_growth``: a growth whose views
+    # would scan past it restarts the diagnosis), else None
+    orders_kept: int | None = None
     # the sums the views keep across this record's scans (``_views_sums``): owned by this
     # diagnosis alone, never shared with another record's
     view_sums: ViewSums = dataclasses.field(default_factory=ViewSums, compare=False, repr=False)

@@ -17,9 +17,14 @@ The error is bounded and stated: the mean of ``B`` rows multiplies a sinusoid of
 ``f`` by ``D = sin(pi f B dt) / (B sin(pi f dt))`` (:func:`attenuation`; ``1 - D`` is
 ``(B^2 - 1) (pi f dt)^2 / 6`` to leading order). ``B`` is the largest block for which the
 highest frequency any view or candidate needs is attenuated by at most
-``FinderSettings.reduce_attenuation_max``: the highest order the base can grow to and the
-views scan (:func:`scan_orders_reached`) times the fastest shaft rate, and
-``FinderSettings.reduce_line_hz`` (the band of lines in Hz kept within the bound). Orders
+``FinderSettings.reduce_attenuation_max``: the highest order the views scan on the base of
+the declared order (:func:`scan_orders_reached`, session 27: not the orders the base could
+grow to) times the fastest shaft rate, and ``FinderSettings.reduce_line_hz`` (the band of
+lines in Hz kept within the bound). The block keeps every order up to ``orders_kept``
+(:func:`orders_kept`) within the bound; a growth of the base whose views would scan past it
+stops the engine, and the record is reduced again with the block for every order the base
+can grow to (:mod:`._reduce_restart`; ``reduced.restart`` in the JSON), so no order or
+line that a view tested is attenuated past the bound. Orders
 ``L`` and ``2 L`` of the signal period (``interpolation_error``, the ``line_phase`` view) are
 far above that band: a reduced record cannot test them, and its diagnosis says so
 (``not_testable``). When ``B`` comes out below 2 the record is left as it is
@@ -52,9 +57,10 @@ PASS_ROWS = 1 << 20
 
 
 def scan_orders_reached(default_order: int, grows: bool, settings: FinderSettings) -> int:
-    """Highest integer order the engine can scan on a record when the user sets no order:
-    the base grows at most twice (to the orders the views find, each time up to twice its
-    order or ``scan_order_min``) and the views scan twice the final order."""
+    """Highest integer order the engine can scan on a record from a base of
+    ``default_order``: with ``grows``, the base grows at most twice (to the orders the views
+    find, each time up to twice its order or ``scan_order_min``); the views scan twice the
+    final order (at least ``scan_order_min``)."""
     o = int(default_order)
     for _ in range(2 if grows else 0):
         o = max(2 * o, settings.scan_order_min)
@@ -83,6 +89,24 @@ def _longest_block(f_hz: float, dt: float, tol: float, B_max: int) -> int:
     while B < B_max and attenuation(f_hz, dt, B + 1) <= tol:
         B += 1
     return B
+
+
+def orders_kept(rate: float, dt: float, B: int, tol: float, least: int) -> int | None:
+    """The highest integer order (at least ``least``, which the block was chosen for) whose
+    frequency at the fastest shaft rate ``rate`` (rev/s) the mean of ``B`` rows sampled every
+    ``dt`` s attenuates by at most ``tol`` (:func:`attenuation`); ``None`` for a shaft that
+    does not turn (no order has a frequency)."""
+    if not (math.isfinite(rate) and rate > 0 and dt > 0 and B > 1):
+        return None
+    # from the leading order (1 - D = (B^2 - 1) x^2 / 6, at most the exact 1 - D), then
+    # checked exactly; 1 - D grows with f up to the kernel's first zero, far above tol
+    x = math.sqrt(6.0 * tol / (B * B - 1.0))
+    m = max(int(least), int(x / (math.pi * dt * rate)))
+    while m > least and attenuation(m * rate, dt, B) > tol:
+        m -= 1
+    while attenuation((m + 1) * rate, dt, B) <= tol:
+        m += 1
+    return m
 
 
 def _angle_columns(rec: Recording) -> list[str]:
@@ -162,10 +186,13 @@ def plan_for(
     grows: bool,
     settings: FinderSettings,
     steps: Callable[[], tuple[float, float]],
+    grown: bool = False,
 ) -> dict:
     """The ``reduced`` entry of a record of kind ``kind`` and ``n`` rows (without
     ``block_rows`` when it is not reduced for its kind or size); ``steps``: a function that
-    returns the record's ``(dt, rate)`` (s, rev/s), called only when they are needed."""
+    returns the record's ``(dt, rate)`` (s, rev/s), called only when they are needed. The
+    block keeps the orders the views scan on the base of ``default_order``; with ``grown``
+    (a restart, :mod:`._reduce_restart`) every order the base can grow to (``grows``)."""
     tol = float(settings.reduce_attenuation_max)
     out: dict = {"applied": False, "rows": int(n), "min_rows": int(settings.reduce_min_rows)}
     if kind not in REDUCIBLE_KINDS:
@@ -177,14 +204,20 @@ def plan_for(
         )
         return out
     dt, rate = steps()
-    M = scan_orders_reached(default_order, grows, settings)
+    M = scan_orders_reached(default_order, grows and grown, settings)
     f_need = max(M * rate, float(settings.reduce_line_hz))
     B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
     out.update(
         block_rows=B,
         dt_s=dt,
         shaft_rate_max_rev_s=rate,
+        planned_for="every order the base can grow to"
+        if grows and grown
+        else f"the views' scan of the base of order {int(default_order)}",
+        base_grows=bool(grows),
+        planned_for_growth=bool(grows and grown),
         orders_needed=int(M),
+        orders_kept=orders_kept(rate, dt, B, tol, M),
         line_band_hz=float(settings.reduce_line_hz),
         f_needed_hz=f_need,
         attenuation_max=tol,
@@ -193,7 +226,9 @@ def plan_for(
         "D = sin(pi f B dt) / (B sin(pi f dt)) (its phase at the block's mean time); 1 - D "
         "grows with f, and at the highest frequency needed (orders_needed x "
         "shaft_rate_max_rev_s, and line_band_hz) it is at most attenuation_max "
-        "(FinderSettings.reduce_attenuation_max)",
+        "(FinderSettings.reduce_attenuation_max); so it is at every order up to orders_kept, "
+        "and a base grown so that the views would scan past orders_kept restarts the "
+        "diagnosis on the block planned for every order the base can grow to (restart)",
     )
     if B < 2:
         out["reason"] = (
@@ -205,17 +240,19 @@ def plan_for(
     return out
 
 
-def plan(rec: Recording, default_order: int, grows: bool, settings: FinderSettings) -> dict:
+def plan(
+    rec: Recording, default_order: int, grows: bool, settings: FinderSettings, grown: bool = False
+) -> dict:
     """Whether and how ``rec`` is reduced: the JSON entry ``reduced`` of the diagnosis
     (``applied``, ``block_rows``, the bound, the frequencies it covers, the reason), with the
-    row flags ``_starts`` (removed before the document)."""
+    row flags ``_starts`` (removed before the document); ``grown``: :func:`plan_for`."""
     found: dict = {}
 
     def steps() -> tuple[float, float]:
         found["starts"], dt, rate = _boundaries(rec)
         return dt, rate
 
-    out = plan_for(rec.kind, rec.n_rows, default_order, grows, settings, steps)
+    out = plan_for(rec.kind, rec.n_rows, default_order, grows, settings, steps, grown)
     if out["applied"]:
         out["_starts"] = found["starts"]
     return out

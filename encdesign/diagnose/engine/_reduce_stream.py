@@ -63,11 +63,14 @@ def stream_reduce(
     path: str | os.PathLike,
     settings: FinderSettings,
     order_of: Callable[[str], tuple[int, bool]],
+    grown: bool = False,
 ) -> tuple[Recording, dict] | None:
     """The reduced recording of the TOML file ``path`` and its ``reduced`` entry, read row
     group by row group; ``None`` when the record is not a Parquet table to reduce (then it is
     loaded whole, and any error in it is raised there). ``order_of(kind)``: the base's start
-    order and whether it grows (:func:`._reduce.scan_orders_reached`)."""
+    order and whether it grows (:func:`._reduce.scan_orders_reached`); ``grown``: the block
+    planned for every order the base can grow to (:func:`._reduce.plan_for`, a restart). The
+    entry keeps the file's path (``_source``, removed before the document) for a restart."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -131,7 +134,7 @@ def stream_reduce(
         return dt, (float(np.max(rates)) / dt / (2 * math.pi) if rates else 0.0)
 
     order0, grows = order_of(kind)
-    info = plan_for(kind, pf.metadata.num_rows, order0, grows, settings, steps)
+    info = plan_for(kind, pf.metadata.num_rows, order0, grows, settings, steps, grown)
     if not info["applied"]:
         return None
     B, dt = int(info["block_rows"]), float(info["dt_s"])
@@ -157,6 +160,7 @@ def stream_reduce(
         streamed_row_groups=G,
     )
     meta = signal_period_tests(meta, info)
+    info["_source"] = str(path)
     return Recording(kind, meta, out, path=path), info
 
 
