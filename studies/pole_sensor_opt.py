@@ -62,7 +62,7 @@ from encdesign.design import (
     paired_comparison,
 )
 from encdesign.io import int_arg, new_figure, save_figure, study_parser, write_results
-from encdesign.objectives import SDSTolerances, sds_residuals
+from encdesign.objectives import SDSTolerances, sds_motor, sds_residuals
 from encdesign.physics import equally_spaced
 
 NAME = "pole-sensor-opt"
@@ -75,14 +75,16 @@ class _Eval(NamedTuple):
     values: tuple[float, ...]
 
 
-def _residuals(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
-    """``r(y, fixed)``: the SDS residuals (rad) of the builds with moving sensors at
-    ``[0, *y]`` rad and fixed sensors at ``fixed`` (rad)."""
+def _residuals(n_sensors, tol, key, n_builds, marks, n_phi):
+    """``r(y, fixed, motor)``: the SDS residuals (rad) of the builds with moving sensors at
+    ``[0, *y]`` rad, fixed sensors at ``fixed`` (rad) and ``motor`` (a dense
+    :func:`~encdesign.objectives.sds_motor`: an argument, so that one compiled program
+    serves every pole count)."""
 
-    def r(y, fixed):
+    def r(y, fixed, motor):
         moving = jnp.concatenate([jnp.zeros(1), y])
         return sds_residuals(
-            pole_pairs,
+            0,  # not used: the motor is given
             n_sensors,
             tol,
             key=key,
@@ -91,16 +93,18 @@ def _residuals(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
             n_phi=n_phi,
             fixed_azimuths_rad=fixed,
             moving_azimuths_rad=moving,
+            motor=motor,
         )
 
     return r
 
 
-def _log_residual(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi):
+def _log_residual(n_sensors, tol, key, n_builds, marks, n_phi):
     """``f(y, args)``: log of the mean SDS residual (rad) with moving sensors at
-    ``[0, *y]`` rad and fixed sensors equally spaced (``args``: their azimuths, rad)."""
-    r = _residuals(pole_pairs, n_sensors, tol, key, n_builds, marks, n_phi)
-    return lambda y, fixed: jnp.log(jnp.mean(r(y, fixed)))
+    ``[0, *y]`` rad (``args``: the fixed sensors' azimuths, rad, and the motor, as
+    :func:`_residuals`)."""
+    r = _residuals(n_sensors, tol, key, n_builds, marks, n_phi)
+    return lambda y, args: jnp.log(jnp.mean(r(y, *args)))
 
 
 def _log_mean(vals) -> float:
@@ -112,18 +116,19 @@ def _gaps_deg(moving_rad: np.ndarray) -> list[float]:
     return [float(g) for g in np.degrees(np.diff(np.append(a, a[0] + 2 * math.pi)))]
 
 
-def _optimise_azimuths(c, rj, tol, key, n_builds, marks, n_phi, starts, max_steps, seed):
+def _optimise_azimuths(c, rj, f, motor, starts, max_steps, seed):
     """Best of ``starts`` BFGS runs from random moving-sensor layouts for one combination
-    (``rj``: its residuals compiled, :func:`_residuals`, for the start values)."""
+    (``rj``: its residuals compiled, :func:`_residuals`, for the start values; ``f``: the
+    sensor count's :func:`_log_residual`, one function for every pole count: ``optimise``
+    reuses its compiled solver; ``motor``: the combination's dense motor)."""
     pp, ns = c["pole_pairs"], c["n_sensors"]
     fixed = np.asarray(equally_spaced(ns))
-    f = _log_residual(pp, ns, tol, key, n_builds, marks, n_phi)
     rng = np.random.default_rng([seed, pp, ns])
     runs = []
     for _ in range(starts):
         y0 = rng.uniform(0.0, 2 * math.pi, ns - 1)
         sol = optimise(f, BFGS(rtol=1e-7, atol=1e-10, max_steps=max_steps), y0,
-                       jnp.asarray(fixed))  # fmt: skip
+                       (jnp.asarray(fixed), motor))  # fmt: skip
         f0 = _log_mean(rj(jnp.asarray(y0), jnp.asarray(fixed)))
         runs.append((float(sol.objective), sol, y0, f0))
     ok = [r for r in runs if math.isfinite(r[0])]
@@ -149,16 +154,18 @@ def _optimise_azimuths(c, rj, tol, key, n_builds, marks, n_phi, starts, max_step
             for r in runs
         ],
         "pole_multiple_of_sensors": pp % ns == 0,
-    }, (f, sol.value, fixed)
+    }, (sol.value, fixed)
 
 
-def _gradient_check(f, rj, y, fixed, h: float = 1e-5) -> dict[str, float]:
-    """AD gradient of ``f`` (log residual) in the moving and fixed azimuths against
-    central differences (step ``h`` rad) of the log mean of ``rj`` (the residuals,
+def _gradient_check(f, motor, rj, y, fixed, h: float = 1e-5) -> dict[str, float]:
+    """AD gradient of ``f`` (log residual, with ``motor``) in the moving and fixed azimuths
+    against central differences (step ``h`` rad) of the log mean of ``rj`` (the residuals,
     compiled)."""
     g_m, g_f = (
         np.asarray(g)
-        for g in jax.jit(jax.grad(f, argnums=(0, 1)))(jnp.asarray(y), jnp.asarray(fixed))
+        for g in jax.jit(jax.grad(lambda y, fx: f(y, (fx, motor)), argnums=(0, 1)))(
+            jnp.asarray(y), jnp.asarray(fixed)
+        )
     )
     fd = np.array(
         [
@@ -181,14 +188,15 @@ def _gradient_check(f, rj, y, fixed, h: float = 1e-5) -> dict[str, float]:
     }
 
 
-def _fresh_check(row, tol, key, n_fresh, marks, n_phi) -> dict:
-    """The optimised azimuths of ``row`` and equally spaced sensors (same combination) on
-    ``n_fresh`` fresh builds, the same for both: the paired comparison of the residuals."""
+def _fresh_check(row, motor, tol, key, n_fresh, marks, n_phi) -> dict:
+    """The optimised azimuths of ``row`` and equally spaced sensors (same combination,
+    ``motor`` its dense motor) on ``n_fresh`` fresh builds, the same for both: the paired
+    comparison of the residuals."""
     pp, ns = row["pole_pairs"], row["n_sensors"]
-    r = jax.jit(_residuals(pp, ns, tol, fresh_key(key), n_fresh, marks, n_phi))
+    r = jax.jit(_residuals(ns, tol, fresh_key(key), n_fresh, marks, n_phi))
     fixed = jnp.asarray(np.asarray(equally_spaced(ns)))
     y_opt = jnp.asarray(np.radians(row["moving_azimuths_deg"][1:]))
-    va, vb = np.asarray(r(y_opt, fixed)), np.asarray(r(fixed[1:], fixed))
+    va, vb = np.asarray(r(y_opt, fixed, motor)), np.asarray(r(fixed[1:], fixed, motor))
     base = {"pole_pairs": pp, "n_sensors": ns, "chosen": "optimised moving azimuths",
             "baseline": "equally spaced sensors", "n_fresh_builds": n_fresh}  # fmt: skip
     if not (np.all(np.isfinite(va)) and np.all(np.isfinite(vb))):
@@ -233,13 +241,25 @@ def main(argv: list[str] | None = None) -> int:
     tol = SDSTolerances()
     key = jax.random.key(args.seed)
     rec = CaseRecorder(args.out / "cases.jsonl")
-    compiled = {}  # (pole pairs, sensors) -> residuals, compiled once for both stages
+    # every motor dense to the highest order of the largest pole count (zeros above a
+    # motor's own orders): one shape for all, so the motor is an argument of one compiled
+    # program per sensor count (residuals, optimiser), not a constant of one per combination
+    max_order = 12 * max(poles)
+    motors = {pp: sds_motor(pp, tol, max_order) for pp in poles}
+    compiled = {}  # sensors -> residuals, compiled once for both stages and all pole counts
+    objectives = {}  # sensors -> log residual (one compiled optimiser each)
 
     def residuals_of(c):
-        k = (c["pole_pairs"], c["n_sensors"])
-        if k not in compiled:
-            compiled[k] = jax.jit(_residuals(*k, tol, key, n_builds, marks, n_phi))
-        return compiled[k]
+        ns, motor = c["n_sensors"], motors[c["pole_pairs"]]
+        if ns not in compiled:
+            compiled[ns] = jax.jit(_residuals(ns, tol, key, n_builds, marks, n_phi))
+        return lambda y, fixed: compiled[ns](y, fixed, motor)
+
+    def objective_of(c):
+        ns = c["n_sensors"]
+        if ns not in objectives:
+            objectives[ns] = _log_residual(ns, tol, key, n_builds, marks, n_phi)
+        return objectives[ns]
 
     def solve(c):
         # a strong float64 array, as in the second stage: one compilation serves both
@@ -286,8 +306,9 @@ def main(argv: list[str] | None = None) -> int:
         eq = {(r["pole_pairs"], r["n_sensors"]): r["residual_mean_rad"] for r in table}
         combos = [c for c in res.choices if c["n_sensors"] >= 2]
         for i, c in enumerate(combos):
-            row, (f, y, fixed) = _optimise_azimuths(
-                c, residuals_of(c), tol, key, n_builds, marks, n_phi, starts, max_steps, args.seed
+            motor = motors[c["pole_pairs"]]
+            row, (y, fixed) = _optimise_azimuths(
+                c, residuals_of(c), objective_of(c), motor, starts, max_steps, args.seed
             )
             row["residual_mean_arcsec"] = row["residual_mean_rad"] / ARCSEC
             row["residual_equal_spacing_rad"] = eq[(c["pole_pairs"], c["n_sensors"])]
@@ -301,7 +322,12 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
             if grad_check is None:  # one combination: AD against central differences
-                grad_check = {**c, **_gradient_check(f, residuals_of(c), np.asarray(y), fixed)}
+                grad_check = {
+                    **c,
+                    **_gradient_check(
+                        objective_of(c), motor, residuals_of(c), np.asarray(y), fixed
+                    ),
+                }
     rule, best_opt = {}, None
     good = [r for r in optimised if math.isfinite(r["residual_mean_rad"])]
     for ns in sorted({r["n_sensors"] for r in good}):
@@ -322,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     fresh_check = None
     if best_opt is not None:
-        fresh_check = _fresh_check(best_opt, tol, key, n_fresh, marks, n_phi)
+        motor = motors[best_opt["pole_pairs"]]
+        fresh_check = _fresh_check(best_opt, motor, tol, key, n_fresh, marks, n_phi)
         print(f"[{NAME}] {fresh_check['summary']}", file=sys.stderr)
     mult = [r["residual_mean_rad"] for r in ok_rows if r["pole_multiple_of_sensors"]]
     nonmult = [r["residual_mean_rad"] for r in ok_rows if not r["pole_multiple_of_sensors"]]

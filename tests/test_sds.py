@@ -480,3 +480,38 @@ def test_cli_sds_simulate_and_measure(tmp_path, capsys):
     _edit_csv(rec, lambda ls: _set_field(ls, 4, "mark", "21"))
     assert main(["sds", "measure", str(rec)]) == 2
     assert "out of range" in capsys.readouterr().err
+
+
+def test_padded_error_models_give_bit_equal_edge_times_in_one_program():
+    """``simulate._sds.padded_errors``: zero bearing components and axial orders appended
+    change no edge time (bit for bit, with jitter and clock), and a clean run, a wobbling
+    one and an axially tilted one then share one compiled edge-time program."""
+    from encdesign.physics._sds_errors import SDSErrors
+    from encdesign.simulate._conceal_sds import sds_bench_design
+    from encdesign.simulate._sds import _edge_times_jit, padded_errors
+
+    design = sds_bench_design(jax.random.key(5), 60, 0.0, 3, 2, 5)
+    clock = dict(clock_period_s=1e-8, jitter_s=1e-9)
+    models = [
+        SDSErrors(**clock),
+        SDSErrors(**clock, bearing_amplitude_m=[3e-6], bearing_ratio=[0.41],
+                  bearing_phase_rad=[1.0]),
+        SDSErrors(**clock, optical_tilt_moving_rad=0.01, axial_runout_cos_m=[2e-5, 0.0, 1e-5],
+                  axial_runout_sin_m=[1e-5, 0.0, -4e-6]),
+        ed.physics.reference_errors(),  # 8 bearing components, 2 axial orders
+        SDSErrors(thermal_drift_rad_per_k=1e-5, temperature_rate_k_per_s=0.1,
+                  temperature_offset_k=-0.2, bearing_amplitude_m=[1e-6] * 5,
+                  bearing_ratio=[0.3, 0.4, 0.5, 0.6, 0.7], bearing_phase_rad=[0.0] * 5),
+    ]  # fmt: skip
+    sizes = set()
+    for errors in models:
+        padded = padded_errors(errors)
+        sizes.add((padded.bearing_amplitude_m.shape, padded.axial_runout_cos_m.shape))
+        kw = dict(key=jax.random.key(9), first_rev=jnp.asarray(7.0))
+        old = _edge_times_jit(design, jnp.asarray(1.3), 3, errors, **kw)
+        new = _edge_times_jit(design, jnp.asarray(1.3), 3, padded, **kw)
+        for a, b in zip(old, new, strict=True):
+            assert np.array_equal(np.asarray(a), np.asarray(b))
+    # the first three (0, 1 and 0 bearing components, 0, 0 and 3 axial orders) pad alike,
+    # the last two (8 and 5 components, 2 and 0 orders) too
+    assert sizes == {((4,), (4,)), ((8,), (4,))}

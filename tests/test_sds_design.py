@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from encdesign import EncdesignInputError
-from encdesign.objectives import SDSTolerances, sds_residuals
+from encdesign.objectives import SDSTolerances, sds_motor, sds_residuals
 
 SMALL = {"n_builds": 2, "marks_per_rev": 120, "n_phi": 8}
 
@@ -70,3 +70,35 @@ def test_azimuths_must_match_the_sensor_count():
         sds_residuals(5, 3, SDSTolerances(), key=jax.random.key(0), n_builds=1,
                       moving_azimuths_rad=jnp.zeros(2), **{k: v for k, v in SMALL.items()
                                                            if k != "n_builds"})  # fmt: skip
+
+
+def test_a_dense_motor_argument_gives_every_pole_count_the_same_residuals_in_one_program():
+    """``sds_motor(p, tol, max_order)`` (dense to a common highest order) as an argument: the
+    residuals and their azimuth gradient of pole counts 5 and 6 equal those of their own
+    motors bit for bit, and one compiled program serves both (``pole-sensor-opt``)."""
+    tol = SDSTolerances()
+    moving = jnp.radians(jnp.array([0.0, 131.0, 229.0]))
+    fixed = jnp.radians(jnp.array([0.0, 120.0, 240.0]))
+    key = jax.random.key(4)
+    traces = []
+
+    def own(m, p):
+        vals = sds_residuals(p, 3, tol, key=key, n_builds=2, marks_per_rev=120, n_phi=8,
+                             fixed_azimuths_rad=fixed, moving_azimuths_rad=m)  # fmt: skip
+        return jnp.sum(vals)
+
+    def dense(m, motor):
+        traces.append(1)  # once per compiled program
+        vals = sds_residuals(0, 3, tol, key=key, n_builds=2, marks_per_rev=120, n_phi=8,
+                             fixed_azimuths_rad=fixed, moving_azimuths_rad=m,
+                             motor=motor)  # fmt: skip
+        return jnp.sum(vals)
+
+    f_dense = jax.jit(jax.value_and_grad(dense))
+    for p in (5, 6):
+        v0, g0 = jax.jit(jax.value_and_grad(own), static_argnums=1)(moving, p)
+        v1, g1 = f_dense(moving, sds_motor(p, tol, 72))
+        assert float(v1) == float(v0) and np.array_equal(np.asarray(g1), np.asarray(g0)), p
+    assert len(traces) == 1
+    with pytest.raises(EncdesignInputError, match="max_order"):
+        sds_motor(6, tol, 71)  # below the motor's own highest order (72)

@@ -51,6 +51,7 @@ from ..physics._layout import (
     layout_noise_amplification,
     least_squares_compensate,
 )
+from ..physics._motor import Motor
 from ..physics._selfcomp import cotangent_sensitivity as _cot_sensitivity
 from ..physics._selfcomp import encoder_map, self_compensate
 from ..physics._theorem import averaged_error
@@ -89,6 +90,7 @@ __all__ = [
     "tolerance_cost",
     "SDSTolerances",
     "sds_design",
+    "sds_motor",
     "sds_residuals",
     "LayoutDesign",
     "layout_residual",
@@ -657,6 +659,24 @@ class SDSTolerances(eqx.Module):
     axis_tilt_rad: float = 0.0
 
 
+def sds_motor(pole_pairs: int, tol: SDSTolerances, max_order: int | None = None) -> Motor:
+    """The motor of :func:`sds_design`: the reference family with ``pole_pairs``
+    (``physics.reference_motor``) and coil-mismatch ripple ``tol.speed_ripple`` at order 1
+    (2/3 of it at order 2); as a dense motor of orders ``1 … max_order``
+    (:meth:`~encdesign.Motor.as_dense`: the same shapes for every pole count) when
+    ``max_order`` is given (at least the motor's own highest order, ``12 · pole_pairs``)."""
+    from ..physics._sds import reference_motor
+
+    motor = reference_motor(
+        pole_pairs, low_order_torque=(tol.speed_ripple, 2.0 * tol.speed_ripple / 3.0)
+    )
+    if max_order is None:
+        return motor
+    if max_order < motor.max_order:
+        raise input_error("sds_motor.max_order", f"got {max_order}", f">= {motor.max_order}")
+    return motor.as_dense(max_order)
+
+
 def sds_design(
     pole_pairs: int,
     n_sensors: int,
@@ -667,13 +687,18 @@ def sds_design(
     n_harmonics: int = 16,
     fixed_azimuths_rad: Any = None,
     moving_azimuths_rad: Any = None,
+    motor: Motor | None = None,
 ) -> Any:
     """One SDS build: motor with ``pole_pairs`` (3-phase, six-step drive, coil-mismatch
     ripple ``tol.speed_ripple``), two disks whose mark errors are drawn from ``key`` with
     the amplitudes of ``tol``, ``n_sensors`` fixed and moving sensors: equally spaced, or at
     ``fixed_azimuths_rad`` / ``moving_azimuths_rad`` (rad, ``n_sensors`` each; may be
-    traced: the build is differentiable in the azimuths and in the tolerances)."""
-    from ..physics._sds import SDSDesign, equally_spaced, reference_disk, reference_motor
+    traced: the build is differentiable in the azimuths and in the tolerances).
+
+    ``motor``: that motor instead (:func:`sds_motor` of ``pole_pairs`` and ``tol``, or its
+    :meth:`~encdesign.Motor.as_dense` form, which may be traced: one compiled program then
+    serves every pole count); ``pole_pairs`` is then not used."""
+    from ..physics._sds import SDSDesign, equally_spaced, reference_disk
 
     fixed = equally_spaced(n_sensors) if fixed_azimuths_rad is None else fixed_azimuths_rad
     moving = equally_spaced(n_sensors) if moving_azimuths_rad is None else moving_azimuths_rad
@@ -684,9 +709,8 @@ def sds_design(
             )
 
     ka, kb = jax.random.split(key)
-    motor = reference_motor(
-        pole_pairs, low_order_torque=(tol.speed_ripple, 2.0 * tol.speed_ripple / 3.0)
-    )
+    if motor is None:
+        motor = sds_motor(pole_pairs, tol)
     kw: dict[str, Any] = dict(
         eccentricity_rad=tol.eccentricity_rad,
         ellipticity_rad=tol.ellipticity_rad,
@@ -714,6 +738,7 @@ def sds_residuals(
     n_phi: int = 32,
     fixed_azimuths_rad: Any = None,
     moving_azimuths_rad: Any = None,
+    motor: Motor | None = None,
 ) -> Array:
     """SDS residual over the platform turn (RMS of the φ error minus its mean, rad;
     :func:`encdesign.physics._sds.sds_residual`) of ``n_builds`` Monte Carlo builds. Build ``i``
@@ -721,7 +746,8 @@ def sds_residuals(
     builds are split over the devices of the ``"builds"`` mesh
     (:func:`encdesign.design.shard_builds`). Sensors equally spaced unless
     ``fixed_azimuths_rad`` / ``moving_azimuths_rad`` are given (:func:`sds_design`);
-    differentiable in the azimuths and in the tolerances ``tol``."""
+    differentiable in the azimuths and in the tolerances ``tol``. ``motor``: as in
+    :func:`sds_design` (a traced dense motor: one program for every pole count)."""
     from ..physics._sds import sds_residual
     from ..physics._sds_errors import SDSErrors
 
@@ -736,6 +762,7 @@ def sds_residuals(
             marks_per_rev=marks_per_rev,
             fixed_azimuths_rad=fixed_azimuths_rad,
             moving_azimuths_rad=moving_azimuths_rad,
+            motor=motor,
         )
         return sds_residual(d, errors, n_phi=n_phi)
 

@@ -12,6 +12,7 @@ continue across runs). The readout (edge times into φ) is
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -35,6 +36,38 @@ was built and scored with (its drift and partial-effect truths are computed on t
 axis); the plain simulator had one, which no test or figure depended on."""
 
 _edge_times_jit = jax.jit(edge_times, static_argnums=(2,), static_argnames=("n_newton",))
+
+PAD_TERMS = 4
+"""The bearing-runout components and axial-runout orders of an error model are padded with
+zero terms to a multiple of this many (at least this many) before the edge times are
+compiled (:func:`padded_errors`): runs and benches whose models differ only in how many
+such terms they have (a clean run beside a wobbling or a tilted one) then share one
+compiled program instead of one each (2-5 s of compiling per program)."""
+
+
+def padded_errors(errors: SDSErrors) -> SDSErrors:
+    """``errors`` with zero-size terms appended (:data:`PAD_TERMS`): bearing components of
+    amplitude 0 (ratio 0, phase 0) and axial-runout orders with coefficients 0. The same
+    physics and, term by term, the same arithmetic: each added term contributes an exact
+    zero (``0 · sin(·)``, ``0 · cos(·)``) after the existing ones, so the edge times are
+    bit-equal (``tests/test_sds_sim.py``)."""
+
+    def pad(a: jax.Array) -> jax.Array:
+        n = int(a.shape[0])
+        size = max(PAD_TERMS, -(-n // PAD_TERMS) * PAD_TERMS)
+        return jnp.concatenate([a, jnp.zeros(size - n, dtype=a.dtype)])
+
+    return SDSErrors(
+        **{
+            **{f.name: getattr(errors, f.name) for f in dataclasses.fields(errors)},
+            "axial_runout_cos_m": pad(errors.axial_runout_cos_m),
+            "axial_runout_sin_m": pad(errors.axial_runout_sin_m),
+            "bearing_amplitude_m": pad(errors.bearing_amplitude_m),
+            "bearing_ratio": pad(errors.bearing_ratio),
+            "bearing_phase_rad": pad(errors.bearing_phase_rad),
+        }
+    )
+
 
 EdgeHook = Callable[[int, float, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -81,7 +114,7 @@ def sds_bench_columns(
             design,
             jnp.asarray(phi),
             n_revs + 1,
-            errors[i] if per_run else errors,
+            padded_errors(errors[i] if per_run else errors),
             key=jax.random.fold_in(key, i),
             first_rev=jnp.asarray(i * (n_revs + 1 + RUN_SPACING_REVS), float),
             n_newton=n_newton,
