@@ -24,6 +24,21 @@ own test. The factor a test's chi-square is multiplied by is ``(sigma / sigma')^
 The ``modulated_orders`` view's growths and switches are read the same way
 (:func:`modulated_scale`: the order's cos / sin times the shape), so a growing or switching
 order no longer dilutes its own test either (session 23, s23-mod41).
+
+The common factor ``g`` (:func:`._sds_noise._common_factor`, capped by
+:func:`._sds_noise._direct_common_factor`) models the run means' noise as ``s^2`` on every
+component plus an excess ``e = s^2 (g^2 - 1)`` on the moving sensors' common component only
+(the fixed sensors' timing noise, the same in every pair of a run): covariance
+``s^2 I + e P_c``, ``P_c`` the projector on the per-run means over the moving sensors. A test
+of columns ``X`` then sees ``s^2 + e kappa`` with ``kappa = tr(P_X P_c) / rank(X)``
+(:func:`common_share`): 1 for a pattern common to the moving sensors, ``1 / M`` for an order
+of one sensor, 0 for their differences. Its level without its columns is therefore
+``s' c(nu - r) sqrt(1 + kappa (g(s')^2 - 1))`` (session 27): the same as before for common
+patterns, a factor ``g`` no longer charged in full to a one-sensor test (``g`` = 1.0-1.35 on
+the discovery benchmark's SDS records, while the true common level there was 0.5-1.5 times
+the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its false-alarm
+rate at its share of a common excess 3 ``s^2``, and was 20 times below it with the full
+factor). The level the record is whitened with keeps the full factor (``kappa = 1``).
 """
 
 from __future__ import annotations
