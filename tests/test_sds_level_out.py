@@ -289,7 +289,9 @@ def test_common_share_of_one_sensor_common_and_difference_patterns():
     assert common_share(diff) == pytest.approx(0.0, abs=1e-12)
     A = np.stack([one, common, diff, order_columns(phi, M, 2, 0) + 0.5 * common], 2)
     want = [common_share(A[:, :, i]) for i in range(A.shape[2])]
-    np.testing.assert_allclose(pair_shares(A), want, rtol=1e-9, atol=1e-12)
+    got = pair_shares(A)
+    assert got is not None
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
 
 
 def test_one_sensor_test_at_its_share_of_the_common_excess():
@@ -322,9 +324,10 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
         y = sd * rng.standard_normal(R * M) + tau * np.repeat(rng.standard_normal(R), M)
         e = y - Q @ (Q.T @ y)
         lo = LevelOut(e, Q, R * M, level, False, M)
+        lo.share = True  # FinderSettings.sds_level_common_share
         chi2 = float(np.sum((U.T @ y) ** 2)) / lo.sigma**2
         shared.append(chi2 * lo(X) / 2)
-        lo_full = LevelOut(e, Q, R * M, lambda s, n: level(s, n), False, M)  # no share
+        lo_full = LevelOut(e, Q, R * M, level, False, M)  # share off: the full factor
         full.append(chi2 * lo_full(X) / 2)
     rate = np.mean(np.asarray(shared) > thr)
     assert 0.8 * np.exp(-thr) < rate < 5.5e-2

@@ -101,6 +101,7 @@ class LevelOut:
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
         self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
+        self.share = False  # the common factor at the columns' share (:func:`with_share`)
         self.sigma = float(sigma_of(math.sqrt(self.ssr / self.nu), self.nu)) if ok else 0.0
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +121,8 @@ class LevelOut:
         common factor."""
         g, r = np.asarray(g, float), np.asarray(r, int)
         out = np.ones(g.shape)
-        idx = np.flatnonzero((r > 0) & (self.nu - r >= 3))
+        # r = 0 (the columns inside Q: the level took them already): s' = s, only the share
+        idx = np.flatnonzero(((r > 0) | (share is not None)) & (self.nu - r >= 3))
         n = self.nu - r.ravel()[idx]
         s2 = np.maximum(self.ssr - g.ravel()[idx], 0.0) / n
         keep = s2 > 0
@@ -139,13 +141,14 @@ class LevelOut:
         if X.ndim != 3 or X.shape[1] != self.M or not self.sigma > 0:
             return 1.0
         Xp, n2 = self._off(X)
-        if not np.any(n2 > 0):
+        if not np.any(n2 > 0):  # no column at all
             return 1.0
         U, s, _ = np.linalg.svd(Xp, full_matrices=False)
         U = U[:, s > 1e-6 * math.sqrt(float(n2.max()))]
         g = float(np.sum((U.T @ self.e) ** 2))
         k = common_share(X if not self.proj else X - X.mean(1, keepdims=True))
-        return float(self._factor(np.array([g]), np.array([U.shape[1]]), np.array([k]))[0])
+        k = np.array([k]) if self.share else None
+        return float(self._factor(np.array([g]), np.array([U.shape[1]]), k)[0])
 
     def pairs(self, A: np.ndarray) -> np.ndarray:
         """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2)."""
@@ -160,7 +163,14 @@ class LevelOut:
         b = np.einsum("n,ngi->gi", self.e, P)
         proj = np.einsum("gi,gij->gj", b, V)  # b along the eigenvectors
         g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
-        return self._factor(g, big.sum(1), pair_shares(A if not self.proj else None))
+        return self._factor(g, big.sum(1), pair_shares(A if self.share and not self.proj else None))
+
+
+def with_share(factor: LevelOut, settings) -> LevelOut:
+    """``factor`` with its common factor charged at the tested columns' share where
+    ``settings.sds_level_common_share`` says so (module doc; the whitening level unchanged)."""
+    factor.share = bool(settings.sds_level_common_share)
+    return factor
 
 
 def common_share(X: np.ndarray) -> float:
@@ -217,7 +227,7 @@ def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: i
     ``orders`` view's chi-square (:class:`LevelOut` of that order on that moving sensor's
     run means; 1 on the other channels)."""
     phi = np.asarray(phi, float)
-    key = (phi.tobytes(), int(M), int(max_order), int(C))
+    key = (phi.tobytes(), int(M), int(max_order), int(C), factor.share)
     if key in factor.memo:
         return factor.memo[key]
     m = np.arange(1, max_order + 1)
@@ -244,6 +254,7 @@ def modulated_scale(
     phi = np.asarray(phi, float)
     W = np.asarray(shapes, float)
     key = ("modulated", phi.tobytes(), W.tobytes(), W.shape, int(M), int(max_order), int(C))
+    key = (*key, factor.share)
     if key in factor.memo:
         return factor.memo[key]
     S, R = W.shape
