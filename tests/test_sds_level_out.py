@@ -332,3 +332,27 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
     rate = np.mean(np.asarray(shared) > thr)
     assert 0.8 * np.exp(-thr) < rate < 5.5e-2
     assert np.mean(np.asarray(full) > thr) < 1e-2
+
+
+def test_the_setting_switches_the_share():
+    """``FinderSettings.sds_level_common_share`` reaches the factor (:func:`with_share`):
+    off (the default) a one-sensor order is charged the full common factor, as before
+    session 27; on, its share ``1 / M`` of it, so its factor is larger; a common pattern's
+    factor is the same either way (its share is 1)."""
+    from encdesign.diagnose import FinderSettings
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel, with_share
+
+    rng = np.random.default_rng(2028)
+    R, M = 24, 3
+    e, Q, n_ind = _setup(rng)
+    phi = rng.uniform(0, 2 * np.pi, R)
+    X = order_columns(phi, M, 5, 1)
+    common = np.repeat(X[:, 1:2], M, axis=1)
+    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
+    off = with_share(lo, FinderSettings())
+    f_off, c_off = off(X), off(common)
+    assert not off.share
+    on = with_share(lo, FinderSettings(sds_level_common_share=1))
+    assert on.share
+    assert on(X) > 1.3 * f_off
+    assert on(common) == pytest.approx(c_off, rel=1e-12)

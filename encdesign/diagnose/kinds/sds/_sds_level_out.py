@@ -33,7 +33,8 @@ component plus an excess ``e = s^2 (g^2 - 1)`` on the moving sensors' common com
 of columns ``X`` then sees ``s^2 + e kappa`` with ``kappa = tr(P_X P_c) / rank(X)``
 (:func:`common_share`): 1 for a pattern common to the moving sensors, ``1 / M`` for an order
 of one sensor, 0 for their differences. Its level without its columns is therefore
-``s' c(nu - r) sqrt(1 + kappa (g(s')^2 - 1))`` (session 27): the same as before for common
+``s' c(nu - r) sqrt(1 + kappa (g(s')^2 - 1))`` (session 27, with
+``FinderSettings.sds_level_common_share`` on; off by default): the same as before for common
 patterns, a factor ``g`` no longer charged in full to a one-sensor test (``g`` = 1.0-1.35 on
 the discovery benchmark's SDS records, while the true common level there was 0.5-1.5 times
 the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its false-alarm
