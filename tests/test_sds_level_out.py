@@ -270,3 +270,89 @@ def test_factor_on_arrays_equals_the_scalar_levels(proj):
     # through the batched pairs too: the same factors as one column pair at a time
     A = np.stack([order_columns(phi, M, m, k) for k in range(M) for m in (2, 5, 11)], 2)
     np.testing.assert_allclose(lo.pairs(A), [lo(A[:, :, i]) for i in range(A.shape[2])], 1e-12)
+
+
+def test_common_share_of_one_sensor_common_and_difference_patterns():
+    """:func:`common_share` is ``1 / M`` for an order on one moving sensor, 1 for a pattern
+    common to them and 0 for one of their differences; :func:`pair_shares` gives the same
+    per pair (session 27)."""
+    from encdesign.diagnose.kinds.sds._sds_level_out import common_share, pair_shares
+
+    rng = np.random.default_rng(27)
+    R, M = 24, 3
+    phi = rng.uniform(0, 2 * np.pi, R)
+    one = order_columns(phi, M, 5, 1)
+    common = np.repeat(one[:, 1:2], M, axis=1)
+    diff = one - one.mean(1, keepdims=True)
+    assert common_share(one) == pytest.approx(1 / M, rel=1e-12)
+    assert common_share(common) == pytest.approx(1.0, rel=1e-12)
+    assert common_share(diff) == pytest.approx(0.0, abs=1e-12)
+    A = np.stack([one, common, diff, order_columns(phi, M, 2, 0) + 0.5 * common], 2)
+    want = [common_share(A[:, :, i]) for i in range(A.shape[2])]
+    got = pair_shares(A)
+    assert got is not None
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_one_sensor_test_at_its_share_of_the_common_excess():
+    """Run means with a noise common to the moving sensors (``tau`` per run on every
+    sensor: the common component's variance ``sd^2 + M tau^2``, the common factor's excess
+    ``e = M tau^2``, here 3 ``sd^2``): a test of an order of one sensor sees ``sd^2 + e / M``
+    (its share ``1 / M`` of the common component), and read against the level without its
+    columns with the common factor weighed by that share (:class:`RunMeanLevel`'s ``share``)
+    its chi-square over 4000 draws passes the F(2, nu')'s 5e-2 quantile ``f`` at a rate
+    between the known level's (``exp(-f)``, 3.8e-2: only ``sd^2`` is estimated, ``e`` is
+    given) and the F's 5e-2. With the full common factor (``sd^2 + e``, session 26) the rate
+    falls to a fraction of it: power the finder lost on the one-sensor cases of the
+    discovery benchmark (issue 41, session 27)."""
+    from scipy import stats
+
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel
+
+    rng = np.random.default_rng(2027)
+    R, M, sd, tau = 24, 3, 1.0, 1.0
+    phi = rng.uniform(0, 2 * np.pi, R)
+    X = order_columns(phi, M, 5, 1)
+    P = np.kron(np.eye(R), np.ones((M, 1))) / np.sqrt(M)  # (R*M, R): the common parts
+    D = rng.standard_normal((R * M, 10))
+    Q = span_basis(np.concatenate([P, D - P @ (P.T @ D)], 1))  # every common direction
+    U = span_basis(X.reshape(R * M, 2))
+    level = RunMeanLevel(lambda n: 1.0, M * tau**2, None)
+    thr = stats.f.isf(5e-2, 2, R * M - Q.shape[1] - 2)
+    shared, full = [], []
+    for _ in range(4000):
+        y = sd * rng.standard_normal(R * M) + tau * np.repeat(rng.standard_normal(R), M)
+        e = y - Q @ (Q.T @ y)
+        lo = LevelOut(e, Q, R * M, level, False, M)
+        lo.share = True  # FinderSettings.sds_level_common_share
+        chi2 = float(np.sum((U.T @ y) ** 2)) / lo.sigma**2
+        shared.append(chi2 * lo(X) / 2)
+        lo_full = LevelOut(e, Q, R * M, level, False, M)  # share off: the full factor
+        full.append(chi2 * lo_full(X) / 2)
+    rate = np.mean(np.asarray(shared) > thr)
+    assert 0.8 * np.exp(-thr) < rate < 5.5e-2
+    assert np.mean(np.asarray(full) > thr) < 1e-2
+
+
+def test_the_setting_switches_the_share():
+    """``FinderSettings.sds_level_common_share`` reaches the factor (:func:`with_share`):
+    off (the default) a one-sensor order is charged the full common factor, as before
+    session 27; on, its share ``1 / M`` of it, so its factor is larger; a common pattern's
+    factor is the same either way (its share is 1)."""
+    from encdesign.diagnose import FinderSettings
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel, with_share
+
+    rng = np.random.default_rng(2028)
+    R, M = 24, 3
+    e, Q, n_ind = _setup(rng)
+    phi = rng.uniform(0, 2 * np.pi, R)
+    X = order_columns(phi, M, 5, 1)
+    common = np.repeat(X[:, 1:2], M, axis=1)
+    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
+    off = with_share(lo, FinderSettings())
+    f_off, c_off = off(X), off(common)
+    assert not off.share
+    on = with_share(lo, FinderSettings(sds_level_common_share=1))
+    assert on.share
+    assert on(X) > 1.3 * f_off
+    assert on(common) == pytest.approx(c_off, rel=1e-12)

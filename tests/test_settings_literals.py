@@ -198,6 +198,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_level_out.py", 1e-6): NUMERIC
     + " (a direction of the columns the level's basis holds: its singular value off it)",
     ("kinds/sds/_sds_level_out.py", 1e-12): NUMERIC + " (the same cut-off on a squared norm)",
+    ("kinds/sds/_sds_level_out.py", 1e-9): NUMERIC
+    + " (common_share: the columns' rank, singular values above 1e-9 of the largest)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
     ("kinds/sds/_sds_terms.py", 4): SEARCH
     + " (detection-bound probes: a step's first run at the quartiles of the runs)",

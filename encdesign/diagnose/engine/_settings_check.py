@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-MAY_BE_ZERO = ("discover_max_aliases", "vibration_staircase_harmonics")
-"""Counts where 0 turns a search off (checked as integers >= 0)."""
+MAY_BE_ZERO = ("discover_max_aliases", "vibration_staircase_harmonics", "sds_level_common_share")
+"""Counts where 0 turns a search off, and switches (checked as integers >= 0)."""
 
 
 def check_settings(s) -> None:

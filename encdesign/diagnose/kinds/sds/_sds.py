@@ -76,7 +76,7 @@ from ._sds_data import (
     sds_speed_harmonics,
     stamp_lattice,
 )
-from ._sds_level_out import LevelOut, modulated_scale, orders_scale
+from ._sds_level_out import LevelOut, modulated_scale, orders_scale, with_share
 from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
@@ -241,7 +241,7 @@ def _level_and_angle(prep: Prepared) -> tuple[LevelOut, np.ndarray] | None:
     if factor is None:
         return None
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
-    return factor, np.asarray(prep.rows[name], float)[prep.keep]
+    return with_share(factor, prep.settings), np.asarray(prep.rows[name], float)[prep.keep]
 
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:

@@ -24,6 +24,22 @@ own test. The factor a test's chi-square is multiplied by is ``(sigma / sigma')^
 The ``modulated_orders`` view's growths and switches are read the same way
 (:func:`modulated_scale`: the order's cos / sin times the shape), so a growing or switching
 order no longer dilutes its own test either (session 23, s23-mod41).
+
+The common factor ``g`` (:func:`._sds_noise._common_factor`, capped by
+:func:`._sds_noise._direct_common_factor`) models the run means' noise as ``s^2`` on every
+component plus an excess ``e = s^2 (g^2 - 1)`` on the moving sensors' common component only
+(the fixed sensors' timing noise, the same in every pair of a run): covariance
+``s^2 I + e P_c``, ``P_c`` the projector on the per-run means over the moving sensors. A test
+of columns ``X`` then sees ``s^2 + e kappa`` with ``kappa = tr(P_X P_c) / rank(X)``
+(:func:`common_share`): 1 for a pattern common to the moving sensors, ``1 / M`` for an order
+of one sensor, 0 for their differences. Its level without its columns is therefore
+``s' c(nu - r) sqrt(1 + kappa (g(s')^2 - 1))`` (session 27, with
+``FinderSettings.sds_level_common_share`` on; off by default): the same as before for common
+patterns, a factor ``g`` no longer charged in full to a one-sensor test (``g`` = 1.0-1.35 on
+the discovery benchmark's SDS records, while the true common level there was 0.5-1.5 times
+the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its false-alarm
+rate at its share of a common excess 3 ``s^2``, and was 20 times below it with the full
+factor). The level the record is whitened with keeps the full factor (``kappa = 1``).
 """
 
 from __future__ import annotations
@@ -48,13 +64,20 @@ class RunMeanLevel:
     def __init__(self, widen: Callable[[float], float], excess: float, ucl: float | None):
         self.widen, self.excess, self.ucl = widen, float(excess), ucl
 
-    def __call__(self, s, nu) -> np.ndarray:
+    def __call__(self, s, nu, share=None) -> np.ndarray:
+        """The level (rad) at raw levels ``s`` with ``nu`` degrees of freedom; ``share``
+        (same shape, 0..1; ``None``: 1): the tested columns' share ``kappa`` in the moving
+        sensors' common component (:func:`common_share`), whose factor is then
+        ``sqrt(1 + kappa (g^2 - 1))`` (module doc: the common part's excess reaches a
+        test only through its common component)."""
         s, nu = np.asarray(s, float), np.asarray(nu)
         vals, inv = np.unique(nu, return_inverse=True)
         c = np.array([self.widen(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
         g = np.sqrt(1.0 + self.excess / s**2)
         if self.ucl is not None:
             g = np.minimum(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)))
+        if share is not None:
+            g = np.sqrt(1.0 + np.clip(np.asarray(share, float), 0.0, 1.0) * (g**2 - 1.0))
         return s * c * g
 
 
@@ -79,6 +102,7 @@ class LevelOut:
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
         self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
+        self.share = False  # the common factor at the columns' share (:func:`with_share`)
         self.sigma = float(sigma_of(math.sqrt(self.ssr / self.nu), self.nu)) if ok else 0.0
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,18 +113,27 @@ class LevelOut:
         X = X.reshape(X.shape[0] * X.shape[1], -1)
         return X - self.Q @ (self.Q.T @ X), np.sum(X**2, 0)
 
-    def _factor(self, g: np.ndarray, r: np.ndarray) -> np.ndarray:
+    def _factor(self, g: np.ndarray, r: np.ndarray, share=None) -> np.ndarray:
         """``(sigma / sigma')^2`` per power ``g`` taken by columns of rank ``r`` (arrays of
         one shape): one call of ``sigma_of`` on all of them (session 24: a call per entry
-        was a fifth of an SDS record's discovery time)."""
+        was a fifth of an SDS record's discovery time). ``share`` (same shape): the
+        columns' share in the common component (:func:`common_share`), passed on to
+        ``sigma_of`` where it takes one (:class:`RunMeanLevel`); ``None``: the full
+        common factor."""
         g, r = np.asarray(g, float), np.asarray(r, int)
         out = np.ones(g.shape)
-        idx = np.flatnonzero((r > 0) & (self.nu - r >= 3))
+        # r = 0 (the columns inside Q: the level took them already): s' = s, only the share
+        idx = np.flatnonzero(((r > 0) | (share is not None)) & (self.nu - r >= 3))
         n = self.nu - r.ravel()[idx]
         s2 = np.maximum(self.ssr - g.ravel()[idx], 0.0) / n
-        idx, n, s2 = idx[s2 > 0], n[s2 > 0], s2[s2 > 0]
+        keep = s2 > 0
+        idx, n, s2 = idx[keep], n[keep], s2[keep]
         if idx.size:
-            sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
+            if share is not None and isinstance(self.sigma_of, RunMeanLevel):
+                k = np.asarray(share, float).ravel()[idx]
+                sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k), float)
+            else:
+                sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
             out.flat[idx] = (self.sigma / sig) ** 2
         return out
 
@@ -109,12 +142,14 @@ class LevelOut:
         if X.ndim != 3 or X.shape[1] != self.M or not self.sigma > 0:
             return 1.0
         Xp, n2 = self._off(X)
-        if not np.any(n2 > 0):
+        if not np.any(n2 > 0):  # no column at all
             return 1.0
         U, s, _ = np.linalg.svd(Xp, full_matrices=False)
         U = U[:, s > 1e-6 * math.sqrt(float(n2.max()))]
         g = float(np.sum((U.T @ self.e) ** 2))
-        return float(self._factor(np.array([g]), np.array([U.shape[1]]))[0])
+        k = common_share(X if not self.proj else X - X.mean(1, keepdims=True))
+        k = np.array([k]) if self.share else None
+        return float(self._factor(np.array([g]), np.array([U.shape[1]]), k)[0])
 
     def pairs(self, A: np.ndarray) -> np.ndarray:
         """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2)."""
@@ -129,7 +164,52 @@ class LevelOut:
         b = np.einsum("n,ngi->gi", self.e, P)
         proj = np.einsum("gi,gij->gj", b, V)  # b along the eigenvectors
         g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
-        return self._factor(g, big.sum(1))
+        return self._factor(g, big.sum(1), pair_shares(A if self.share and not self.proj else None))
+
+
+def with_share(factor: LevelOut, settings) -> LevelOut:
+    """``factor`` with its common factor charged at the tested columns' share where
+    ``settings.sds_level_common_share`` says so (module doc; the whitening level unchanged)."""
+    factor.share = bool(settings.sds_level_common_share)
+    return factor
+
+
+def common_share(X: np.ndarray) -> float:
+    """``kappa = tr(P_X P_c) / rank(X)``: the share of columns ``X`` (R, M, q) on the run
+    means in the moving sensors' common component (``P_c``: per run, the mean over the
+    moving sensors; ``P_X``: the projector on the columns' span). 1 for a pattern common to
+    the moving sensors, ``1 / M`` for a pattern of one sensor, 0 for the sensors'
+    differences; 1 for columns of rank 0 (nothing to weigh)."""
+    X = np.asarray(X, float)
+    R, M = X.shape[0], X.shape[1]
+    F = X.reshape(R * M, -1)
+    U, s, _ = np.linalg.svd(F, full_matrices=False)
+    U = U[:, s > 1e-9 * max(float(s.max(initial=0.0)), 1e-300)]
+    if U.shape[1] == 0:
+        return 1.0
+    c = U.reshape(R, M, -1).sum(1) / math.sqrt(M)  # (R, rank): the common Helmert parts
+    return float(np.sum(c**2) / U.shape[1])
+
+
+def pair_shares(A: np.ndarray | None) -> np.ndarray | None:
+    """``(G,)``: :func:`common_share` of each pair of columns of ``A`` (R, M, G, 2), from
+    the pair's 2x2 Gram matrices (all of ``A`` and its common part), ``tr(G^+ G_c) /
+    rank``; ``None`` for ``None`` (run means projected on the differences: no common
+    factor to weigh)."""
+    if A is None:
+        return None
+    A = np.asarray(A, float)
+    M = A.shape[1]
+    c = A.sum(1) / math.sqrt(M)  # (R, G, 2)
+    gram = np.einsum("rmgi,rmgj->gij", A, A)
+    gc = np.einsum("rgi,rgj->gij", c, c)
+    ev, V = np.linalg.eigh(gram)
+    big = ev > 1e-12 * np.maximum(ev.max(1, keepdims=True), 1e-300)
+    inv = np.where(big, 1.0 / np.where(big, ev, 1.0), 0.0)
+    pinv = np.einsum("gik,gk,gjk->gij", V, inv, V)
+    r = big.sum(1)
+    tr = np.einsum("gij,gji->g", pinv, gc)
+    return np.where(r > 0, tr / np.maximum(r, 1), 1.0)
 
 
 def order_columns(phi: np.ndarray, M: int, order: int, sensor: int) -> np.ndarray:
@@ -148,7 +228,7 @@ def orders_scale(factor: LevelOut, phi: np.ndarray, M: int, max_order: int, C: i
     ``orders`` view's chi-square (:class:`LevelOut` of that order on that moving sensor's
     run means; 1 on the other channels)."""
     phi = np.asarray(phi, float)
-    key = (phi.tobytes(), int(M), int(max_order), int(C))
+    key = (phi.tobytes(), int(M), int(max_order), int(C), factor.share)
     if key in factor.memo:
         return factor.memo[key]
     m = np.arange(1, max_order + 1)
@@ -175,6 +255,7 @@ def modulated_scale(
     phi = np.asarray(phi, float)
     W = np.asarray(shapes, float)
     key = ("modulated", phi.tobytes(), W.tobytes(), W.shape, int(M), int(max_order), int(C))
+    key = (*key, factor.share)
     if key in factor.memo:
         return factor.memo[key]
     S, R = W.shape
