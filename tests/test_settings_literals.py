@@ -225,6 +225,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_spill.py", "TRIAL_STEPS"): BOUND
     + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
+    ("engine/_views_leakage.py", "_GOLDEN_STEPS"): NUMERIC
+    + " (golden-section steps of a line's frequency within its bin: 4e-9 bins)",
     ("engine/_bounds.py", "SEEN_RTOL"): NUMERIC + " (rounding of a noncentrality comparison)",
     ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
     + " (the share rules' size: the located excess within 2 %, the size within 1 %)",

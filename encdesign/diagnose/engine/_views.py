@@ -32,6 +32,7 @@ from scipy import stats
 from ._located import change_chi2, change_row, interval_of, located_time
 from ._timing import stage
 from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
+from ._views_leakage import separate_lines
 from ._views_orders import order_scan
 from ._views_sums import Whitened, linear, sums_of
 from ._views_time import best_step, cusum_edge, time_steps_beside_order_change
@@ -300,6 +301,9 @@ def view_spectrum(prep, rw) -> list[Finding]:
         P[0] = 0.0
         if (b - a) % 2 == 0:
             P[-1] = 0.0
+        Ps = P.sum(1)  # each line's power: three bins (leakage), tested on the centre
+        idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
+        lines = separate_lines(rw, (a, b), kr, X, Ps, idx, thr, prep.settings)
         f = np.fft.rfftfreq(b - a, dt)
         # revolutions per second from the steady speeds (a record that turns back and
         # forth has no net advance)
@@ -309,10 +313,7 @@ def view_spectrum(prep, rw) -> list[Finding]:
         if np.median(om) < 0:
             X = np.conj(X)  # (a copy: the transform is shared with the band view)
         per_run.append((r, frev))
-        Ps = P.sum(1)
-        # power of each line: three bins (leakage), tested on the centre
-        idx = np.flatnonzero((Ps > thr) & (Ps >= np.roll(Ps, 1)) & (Ps >= np.roll(Ps, -1)))
-        for i in idx[np.argsort(-Ps[idx])][: prep.settings.spectrum_peaks_per_run]:
+        for i in lines:
             lo, hi = max(i - 1, 1), min(i + 2, Ps.size)
             band = P[lo:hi].sum(0)
             # parabolic interpolation of the frequency
