@@ -336,8 +336,8 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
 
 def test_the_setting_switches_the_share():
     """``FinderSettings.sds_level_common_share`` reaches the factor (:func:`with_share`):
-    off (the default) a one-sensor order is charged the full common factor, as before
-    session 27; on, its share ``1 / M`` of it, so its factor is larger; a common pattern's
+    off, a one-sensor order is charged the full common factor, as before session 27; on,
+    its share ``1 / M`` of it, so its factor is larger; a common pattern's
     factor is the same either way (its share is 1)."""
     from encdesign.diagnose import FinderSettings
     from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel, with_share
@@ -349,10 +349,39 @@ def test_the_setting_switches_the_share():
     X = order_columns(phi, M, 5, 1)
     common = np.repeat(X[:, 1:2], M, axis=1)
     lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
-    off = with_share(lo, FinderSettings())
+    off = with_share(lo, FinderSettings(sds_level_common_share=0))
     f_off, c_off = off(X), off(common)
     assert not off.share
     on = with_share(lo, FinderSettings(sds_level_common_share=1))
     assert on.share
     assert on(X) > 1.3 * f_off
     assert on(common) == pytest.approx(c_off, rel=1e-12)
+
+
+def test_run_step_scale_is_the_factor_of_the_step_and_the_outlier():
+    """:func:`run_step_scale` gives per moving sensor the factor of the ``run_step`` view's
+    centred step (from run ``k`` on) and centred one-run outlier on that sensor's run means
+    (only the kept runs, in the level's order), as :class:`LevelOut` reads them one by one;
+    with a common excess and the share on, a one-sensor outlier's factor is larger than at
+    the full common factor (session 27: read at its share as the ``orders`` view's tests)."""
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel, run_step_scale
+
+    rng = np.random.default_rng(2029)
+    R, M = 24, 3
+    keep = np.ones(R + 2, bool)
+    keep[[5, 17]] = False  # two runs the level dropped
+    e, Q, n_ind = _setup(rng, R=R, M=M)
+    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
+    lo.share = True
+    f_step, f_out = run_step_scale(lo, keep, M)
+    assert f_step.shape == f_out.shape == (M, R + 2)
+    j = np.arange(R + 2)
+    for m, k in [(0, 3), (1, 11), (2, 20)]:
+        X = np.zeros((R + 2, M, 1))
+        X[:, m, 0] = (j >= k) - np.mean(j >= k)
+        assert f_step[m, k] == pytest.approx(lo(X[keep]), rel=1e-9)
+        X[:, m, 0] = (j == k) - 1.0 / (R + 2)
+        assert f_out[m, k] == pytest.approx(lo(X[keep]), rel=1e-9)
+    lo_full = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
+    _, f_out_full = run_step_scale(lo_full, keep, M)
+    assert np.all(f_out[:, keep] > 1.3 * f_out_full[:, keep])

@@ -76,7 +76,13 @@ from ._sds_data import (
     sds_speed_harmonics,
     stamp_lattice,
 )
-from ._sds_level_out import LevelOut, modulated_scale, orders_scale, with_share
+from ._sds_level_out import (
+    LevelOut,
+    modulated_scale,
+    orders_scale,
+    run_step_scale,
+    with_share,
+)
 from ._sds_noise import (
     EXPLANATIONS,
     REFERENCE_RADIUS_M,
@@ -117,6 +123,10 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
     n_tests = max(1, 2 * M * (R - 1))
     thr = _thr(prep.settings.alpha, 1, n_tests)
     c_change = change_chi2(prep.settings.change_time_level)
+    f_step, f_out = np.ones((M, R)), np.ones((M, R))
+    level = _level_and_angle(prep)
+    if level is not None and level[0].share and np.asarray(prep.keep).size == R:
+        f_step, f_out = run_step_scale(level[0], np.asarray(prep.keep, bool), M)
     out = []
     for m in range(M):
         x = r[:, m] - r[:, m].mean()
@@ -125,12 +135,13 @@ def view_run_step(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Findi
         for k in range(1, R):
             s = (np.arange(R) >= k).astype(float)
             s -= s.mean()
-            pw = float((s @ x) ** 2 / (s @ s))
+            pw = float((s @ x) ** 2 / (s @ s)) * float(f_step[m, k])
             prof[k] = pw
             if pw > best[0]:
                 best = (pw, k, "step")
-        j = int(np.argmax(np.abs(x)))
-        pw_out = float(x[j] ** 2 * R / (R - 1))
+        p_out = x**2 * R / (R - 1) * f_out[m]  # at the level without itself (its share)
+        j = int(np.argmax(p_out))
+        pw_out = float(p_out[j])
         if pw_out > best[0]:
             best = (pw_out, j, "run_outlier")
         if best[0] > thr:

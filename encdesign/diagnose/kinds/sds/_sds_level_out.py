@@ -34,12 +34,15 @@ of columns ``X`` then sees ``s^2 + e kappa`` with ``kappa = tr(P_X P_c) / rank(X
 (:func:`common_share`): 1 for a pattern common to the moving sensors, ``1 / M`` for an order
 of one sensor, 0 for their differences. Its level without its columns is therefore
 ``s' c(nu - r) sqrt(1 + kappa (g(s')^2 - 1))`` (session 27, with
-``FinderSettings.sds_level_common_share`` on; off by default): the same as before for common
-patterns, a factor ``g`` no longer charged in full to a one-sensor test (``g`` = 1.0-1.35 on
-the discovery benchmark's SDS records, while the true common level there was 0.5-1.5 times
-the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its false-alarm
-rate at its share of a common excess 3 ``s^2``, and was 20 times below it with the full
-factor). The level the record is whitened with keeps the full factor (``kappa = 1``).
+``FinderSettings.sds_level_common_share`` on, the default since s27-sds27b; the ``run_step``
+view's steps and outliers are read so too, :func:`run_step_scale`, so every one-sensor test
+is read at its share and the views' findings rank like with like): the same as before for
+common patterns, a factor ``g`` no longer charged in full to a one-sensor test (``g`` =
+1.0-1.35 on the discovery benchmark's SDS records, while the true common level there was
+0.5-1.5 times the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its
+false-alarm rate at its share of a common excess 3 ``s^2``, and was 20 times below it with
+the full factor). The level the record is whitened with keeps the full factor (``kappa =
+1``).
 """
 
 from __future__ import annotations
@@ -268,5 +271,35 @@ def modulated_scale(
     f = factor.pairs(A.reshape(R, M, S * M * max_order, 2)).reshape(S, M, max_order)
     out[:, :, :M] = np.moveaxis(f, 1, 2)
     out.setflags(write=False)
+    factor.memo[key] = out
+    return out
+
+
+def run_step_scale(factor: LevelOut, keep: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, R)`` twice: per moving sensor the factor on the ``run_step`` view's chi-square
+    of a step from run ``k`` on (column 0 unused: no step) and of an outlier at run ``k``
+    (:class:`LevelOut` of the centred step / indicator on that sensor's run means, rows
+    ``keep`` of the ``R`` runs in the level's order), so a one-sensor step or outlier is read
+    at its share of the common factor as the ``orders`` and ``modulated_orders`` views'
+    one-sensor tests are (session 27: the ranking of the views' findings compares like with
+    like; used where ``FinderSettings.sds_level_common_share`` is on)."""
+    keep = np.asarray(keep, bool)
+    R = keep.size
+    key = ("run_step", keep.tobytes(), int(M), factor.share)
+    if key in factor.memo:
+        return factor.memo[key]
+    j = np.arange(R)
+    steps = (j[None, :] >= j[:, None]).astype(float)  # (k, R): on from run k
+    steps -= steps.mean(1, keepdims=True)
+    outl = np.eye(R) - 1.0 / R
+    shapes = np.concatenate([steps, outl])[:, keep]  # (2R, kept)
+    S, n = shapes.shape
+    A = np.zeros((n, M, M, S, 2))
+    for m in range(M):
+        A[:, m, m, :, 0] = shapes.T
+    f = factor.pairs(A.reshape(n, M, M * S, 2)).reshape(M, S)
+    out = (f[:, :R], f[:, R:])
+    for a in out:
+        a.setflags(write=False)
     factor.memo[key] = out
     return out
