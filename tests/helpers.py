@@ -625,3 +625,33 @@ def time_view_findings(rec) -> tuple[dict, list[dict]]:
         if f.get("view") == "time"
     ]
     return doc, found
+
+
+def reduce_test_record(
+    rng, n_per_run: int, fs: float, heads: int, amp: dict, phase: dict, vib=None
+):
+    """A long multihead record for the block-mean reduction's tests (issue 43): ``heads`` heads
+    and ``theta_ref``, 3 runs at 2, 2.5, 3 rev/s sampled at ``fs`` Hz, a disk error of orders
+    ``amp`` (rad) at phases ``phase`` (rad), 0.5 urad noise; ``vib`` (rad, or None for none
+    and no random draw) a 31 Hz vibration at a random phase per run."""
+    import numpy as np
+
+    from encdesign.io._recording import Recording
+
+    alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
+    cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []}
+    cols.update({f"h{k}": [] for k in range(heads)})
+    for r in range(3):
+        t = np.arange(n_per_run) / fs
+        th = 2 * np.pi * (2.0 + 0.5 * r) * t + rng.uniform(0, 6)
+        cols["t"].append(t)
+        cols["run"].append(np.full(n_per_run, r))
+        cols["theta_ref"].append(th + rng.uniform(-1, 1))
+        for k in range(heads):
+            e = sum(a * np.sin(m * (th - alpha[k]) + phase[m]) for m, a in amp.items())
+            if vib is not None:
+                e = e + vib * np.sin(2 * np.pi * 31.0 * t + rng.uniform(0, 6))
+            cols[f"h{k}"].append(th + e + rng.normal(0, 5e-7, n_per_run) + rng.uniform(-2, 2))
+    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "signal_periods_per_rev": 2048}
+    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
+    return Recording("multihead", meta, {k: np.concatenate(v) for k, v in cols.items()})

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import validate_diagnosis
+from helpers import reduce_test_record, validate_diagnosis
 
 from encdesign import Recording
 from encdesign.diagnose import diagnose
@@ -20,23 +20,9 @@ LOW = FinderSettings(reduce_min_rows=1000)
 def _record(seed: int, n_per_run: int, fs: float, heads: int = 2, vib: float = 0.0) -> Recording:
     """``heads`` heads and ``theta_ref``, 3 runs at 2-3 rev/s sampled at ``fs`` Hz,
     disk errors of orders 1-4, 0.5 urad noise, a ``vib`` rad 31 Hz vibration."""
-    rng = np.random.default_rng(seed)
-    alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
-    cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []}
-    cols.update({f"h{k}": [] for k in range(heads)})
-    for r in range(3):
-        t = np.arange(n_per_run) / fs
-        th = 2 * np.pi * (2.0 + 0.5 * r) * t + rng.uniform(0, 6)
-        cols["t"].append(t)
-        cols["run"].append(np.full(n_per_run, r))
-        cols["theta_ref"].append(th + rng.uniform(-1, 1))
-        for k in range(heads):
-            e = sum(3e-6 / m * np.sin(m * (th - alpha[k]) + m) for m in range(1, 5))
-            e = e + vib * np.sin(2 * np.pi * 31.0 * t + rng.uniform(0, 6))
-            cols[f"h{k}"].append(th + e + rng.normal(0, 5e-7, n_per_run) + rng.uniform(-2, 2))
-    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "signal_periods_per_rev": 2048}
-    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
-    return Recording("multihead", meta, {k: np.concatenate(v) for k, v in cols.items()})
+    amp = {m: 3e-6 / m for m in range(1, 5)}
+    phase = {m: float(m) for m in range(1, 5)}
+    return reduce_test_record(np.random.default_rng(seed), n_per_run, fs, heads, amp, phase, vib)
 
 
 def test_short_records_are_untouched():

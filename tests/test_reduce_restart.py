@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import validate_diagnosis
+from helpers import reduce_test_record, validate_diagnosis
 
 from encdesign import Recording
 from encdesign.diagnose import diagnose
@@ -29,24 +29,10 @@ def _record(seed: int, n_per_run: int, fs: float, top: int, heads: int = 2) -> R
     error of orders 1-4 (3 / m urad) and 13-``top`` (1.5 urad each; none for ``top`` < 13),
     0.5 urad noise."""
     rng = np.random.default_rng(seed)
-    alpha = np.array([0.0, 2.1, 4.2, 0.9][:heads])
     orders = [*range(1, 5), *range(13, top + 1)]
     amp = {m: 3e-6 / m if m < 5 else 1.5e-6 for m in orders}
     phase = {m: rng.uniform(0, 6) for m in orders}
-    cols: dict[str, list] = {"t": [], "run": [], "theta_ref": []}
-    cols.update({f"h{k}": [] for k in range(heads)})
-    for r in range(3):
-        t = np.arange(n_per_run) / fs
-        th = 2 * np.pi * (2.0 + 0.5 * r) * t + rng.uniform(0, 6)
-        cols["t"].append(t)
-        cols["run"].append(np.full(n_per_run, r))
-        cols["theta_ref"].append(th + rng.uniform(-1, 1))
-        for k in range(heads):
-            e = sum(a * np.sin(m * (th - alpha[k]) + phase[m]) for m, a in amp.items())
-            cols[f"h{k}"].append(th + e + rng.normal(0, 5e-7, n_per_run) + rng.uniform(-2, 2))
-    enc = {"head_angles_deg": np.degrees(alpha).tolist(), "signal_periods_per_rev": 2048}
-    meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
-    return Recording("multihead", meta, {k: np.concatenate(v) for k, v in cols.items()})
+    return reduce_test_record(rng, n_per_run, fs, heads, amp, phase)
 
 
 @pytest.mark.parametrize(("dt", "rate"), [(2e-5, 1.8), (5e-5, 2.0), (1e-5, 0.7), (2e-5, 0.1)])
