@@ -50,22 +50,20 @@ def padded_errors(errors: SDSErrors) -> SDSErrors:
     amplitude 0 (ratio 0, phase 0) and axial-runout orders with coefficients 0. The same
     physics and, term by term, the same arithmetic: each added term contributes an exact
     zero (``0 · sin(·)``, ``0 · cos(·)``) after the existing ones, so the edge times are
-    bit-equal (``tests/test_sds_sim.py``)."""
+    bit-equal (``tests/test_sds.py``)."""
 
     def pad(a: jax.Array) -> jax.Array:
         n = int(a.shape[0])
         size = max(PAD_TERMS, -(-n // PAD_TERMS) * PAD_TERMS)
         return jnp.concatenate([a, jnp.zeros(size - n, dtype=a.dtype)])
 
-    return SDSErrors(
-        **{
-            **{f.name: getattr(errors, f.name) for f in dataclasses.fields(errors)},
-            "axial_runout_cos_m": pad(errors.axial_runout_cos_m),
-            "axial_runout_sin_m": pad(errors.axial_runout_sin_m),
-            "bearing_amplitude_m": pad(errors.bearing_amplitude_m),
-            "bearing_ratio": pad(errors.bearing_ratio),
-            "bearing_phase_rad": pad(errors.bearing_phase_rad),
-        }
+    return dataclasses.replace(
+        errors,
+        axial_runout_cos_m=pad(errors.axial_runout_cos_m),
+        axial_runout_sin_m=pad(errors.axial_runout_sin_m),
+        bearing_amplitude_m=pad(errors.bearing_amplitude_m),
+        bearing_ratio=pad(errors.bearing_ratio),
+        bearing_phase_rad=pad(errors.bearing_phase_rad),
     )
 
 
