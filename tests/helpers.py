@@ -655,3 +655,43 @@ def reduce_test_record(
     enc = {"head_angles_deg": np.degrees(alpha).tolist(), "signal_periods_per_rev": 2048}
     meta = {"format": "encdesign-recording/1", "kind": "multihead", "encoder": enc}
     return Recording("multihead", meta, {k: np.concatenate(v) for k, v in cols.items()})
+
+
+# --- one diagnosis per test process (CI time) ---
+_SHARED_DIAGNOSES: dict = {}
+
+
+def _record_digest(rec) -> str:
+    """A digest of everything of ``rec`` a diagnosis reads: kind, metadata, path and every
+    column's name, dtype and bytes."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    h = hashlib.sha256(repr((rec.kind, str(rec.path))).encode())
+    h.update(json.dumps(rec.meta, sort_keys=True, default=repr).encode())
+    for name in sorted(rec.columns):
+        col = np.ascontiguousarray(np.asarray(rec.columns[name]))
+        h.update(repr((name, col.dtype.str, col.shape)).encode())
+        h.update(col.tobytes())
+    return h.hexdigest()
+
+
+def shared_diagnosis(rec, **kw):
+    """``diagnose(rec, **kw)`` computed once per test process for each record and arguments
+    (keyword arguments whose values compare by value: ``settings``, ``max_order``): tests of
+    one file or of several that diagnose the same record share one diagnosis. The record is
+    known by its content (:func:`_record_digest`), never by the test that made it; each call
+    gets its own deep copy, which the test may change. One store per process, whether a test
+    file imports these helpers as ``helpers`` or as ``tests.helpers`` (two module objects)."""
+    import copy
+
+    from encdesign.diagnose import diagnose
+    from tests import helpers
+
+    store = helpers._SHARED_DIAGNOSES
+    key = (_record_digest(rec), tuple(sorted(kw.items())))
+    if key not in store:
+        store[key] = diagnose(rec, **kw)
+    return copy.deepcopy(store[key])

@@ -11,7 +11,7 @@ order untouched.
 
 import numpy as np
 import pytest
-from helpers import validate_diagnosis
+from helpers import shared_diagnosis, validate_diagnosis
 
 from encdesign import Recording
 from encdesign.diagnose import BaseOrder, Diagnosis, FinderSettings, diagnose
@@ -63,7 +63,7 @@ def test_a_few_turns_get_a_base_order_chosen_by_heldout_error(seed, turns):
     here, 1.6-3.7x; the 1.5-turn ones pass there too); a lowered order keeps every order of
     the error."""
     rec, truth = stepper_sensor_record(seed, turns)
-    d = diagnose(rec)
+    d = shared_diagnosis(rec)  # the one-turn ones: also the ratio test's
     doc = d.to_json()
     assert doc["verdict"] == "consistent", doc["report"]
     assert doc["heldout_rms_before"] <= RATIO * doc["rms_before"], doc["report"]
@@ -125,7 +125,7 @@ def test_the_ratio_setting_decides_whether_orders_are_tried():
     ill-conditioned again); with the default the order is lowered."""
     for seed in range(601, 611):  # the first of these records whose default base is lowered
         rec, _ = stepper_sensor_record(seed, 1.0)
-        low = diagnose(rec)
+        low = shared_diagnosis(rec)
         if low.base_order.lowered:
             break
     off = diagnose(rec, settings=FinderSettings(base_order_ratio=1e6))

@@ -15,7 +15,7 @@ from encdesign.io import Recording
 from encdesign.physics._effects import CATALOG_MULTIHEAD
 from encdesign.physics._sensor_effects import CATALOG_REFERENCE
 from encdesign.simulate._outside import outside_record
-from tests.helpers import validate_diagnosis
+from tests.helpers import shared_diagnosis, validate_diagnosis
 
 
 def _models(doc) -> list[dict]:
@@ -292,7 +292,7 @@ def test_sds_growth_of_one_sensor_is_a_growth_with_its_level_at_its_order(seed, 
 
 def test_sds_clean_record_gets_nothing():
     rec, _ = outside_record(np.random.default_rng(803), "clean", 0.0, "sds")
-    d = diagnose(rec)
+    d = shared_diagnosis(rec)  # also test_sds_common_mod's clean record
     assert not _terms(d.doc), d.doc["report"]
 
 

@@ -16,13 +16,13 @@ import pytest
 
 from encdesign import load_recording
 from encdesign.cli import main as cli_main
-from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._document import nuisance_rows
 from encdesign.diagnose.engine._html import fitted_curves, render_html, report_inputs
 from encdesign.diagnose.engine._html_discovery import discovered_terms, spectrum_data
 from encdesign.io._recording import write_recording
 from encdesign.simulate import simulate_plan as simulate
 from encdesign.simulate import simulate_quadrature, write_concealed_sds
+from tests.helpers import shared_diagnosis
 
 PLAN = {"per_run_zeros": True, "transient": True, "glitches": 1, "amplitude": 1.0}
 
@@ -85,7 +85,7 @@ SECTIONS = ("verdict", "summary", "noise", "gof", "effects", "alternatives", "nu
 
 @pytest.mark.parametrize("kind", ["multihead", "sensor", "motion", "quadrature", "sds"])
 def test_report_shows_every_item(kind, tmp_path):
-    d = diagnose(_record(kind, tmp_path))
+    d = shared_diagnosis(_record(kind, tmp_path))  # multihead's: also the notebook test's
     text = render_html(d)
     doc, rows = report_inputs(d)
     assert rows is not None and rows["base_resid"].shape == rows["final_resid"].shape
@@ -203,7 +203,7 @@ def test_nuisance_rows_format_each_kind_once():
 def test_diagnosis_renders_in_a_notebook(tmp_path):
     """``Diagnosis._repr_html_``: the report's verdict line and tables (a fragment with its
     own scoped style, no figures), every value from the document escaped."""
-    d = diagnose(_record("multihead", tmp_path))
+    d = shared_diagnosis(_record("multihead", tmp_path))
     doc = d.to_json()
     h = d._repr_html_()
     assert f'<span class="verdict v-{doc["verdict"]}">{doc["verdict"]}</span>' in h
@@ -244,7 +244,7 @@ def test_report_shows_the_discovered_model_where_it_is():
     spectrum figure reaches them (and shows the line there), the discovered model is shown
     with a figure of each term over the residual in its own frame, and each refusal row
     carries its selection round (a candidate tried in several rounds: once per round)."""
-    d = diagnose(load_recording(MOTEUS))
+    d = shared_diagnosis(load_recording(MOTEUS))  # also test_reference's measured-sensor test
     doc, rows = report_inputs(d)
     located = [o for f in doc["unexplained"] for o in f["where"].get("orders") or []]
     assert located and max(located) > 200, located

@@ -564,11 +564,11 @@ def _plain_direction_offset(rec, max_order):
 
 @pytest.mark.parametrize("name", ["moteus_cal", "magalpha_cal"])
 def test_engine_on_the_measured_sensors(name):
-    from encdesign.diagnose import diagnose
+    from tests.helpers import shared_diagnosis
 
     pytest.importorskip("encdesign.diagnose.engine._engine")
     rec = load_recording(DATA / f"{name}.toml")
-    doc = diagnose(rec).doc
+    doc = shared_diagnosis(rec).doc  # moteus's: also test_html_report's discovered-model test
     b = doc["base"]["terms"]["base"]
     dom = rd.dominant_orders(b["fourier_cos_rad"]["value"], b["fourier_sin_rad"]["value"], n=2)
     named = {e["name"]: e for e in doc["effects"]}

@@ -17,7 +17,12 @@ from encdesign.diagnose.engine._engine import run_engine
 from encdesign.diagnose.engine._results import Alternative, Confounded, Effect, Finding, Refusal
 from encdesign.diagnose.kinds.multihead._multihead import MULTIHEAD
 from encdesign.io._study import to_jsonable
-from tests.helpers import slow_wobble_bench, stepped_sensor_record, validate_diagnosis
+from tests.helpers import (
+    shared_diagnosis,
+    slow_wobble_bench,
+    stepped_sensor_record,
+    validate_diagnosis,
+)
 
 
 def _dump(doc) -> str:
@@ -104,7 +109,7 @@ def test_doubted_dominant_wobble_is_named_with_doubt_alternatives_and_one_pair(s
     ``unexplained``; the wobble and the vibration (one speed: the same column) are ONE
     ``confounded`` entry saying what separates them, never two refusals."""
     rec = slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=seed)
-    d = diagnose(rec)
+    d = shared_diagnosis(rec)  # seed 1's: also the rule-name test's
     validate_diagnosis(d.to_json())
     assert d.verdict == "missing_physics", d["report"]
     (e,) = d.effects
@@ -128,7 +133,7 @@ def test_a_doubt_without_dominance_still_refuses():
     from encdesign.diagnose import FinderSettings
 
     rec = slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=0)
-    d = diagnose(rec, settings=FinderSettings(dominant_ratio=1e9))
+    d = shared_diagnosis(rec, settings=FinderSettings(dominant_ratio=1e9))  # rule-name test too
     assert not d.effects and d.verdict == "unexplained"
     assert any(r.rule == "bearing_wobble.plausible" for r in d.rejected)
 
@@ -150,11 +155,11 @@ def _rules_of(d) -> list:
 @pytest.mark.parametrize(
     "make",
     [
-        lambda: diagnose(
+        lambda: shared_diagnosis(
             slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=0),
             settings=FinderSettings(dominant_ratio=1e9),
         ),
-        lambda: diagnose(slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=1)),
+        lambda: shared_diagnosis(slow_wobble_bench(speeds_rev_s=(1.0,), n_per_run=2500, seed=1)),
         lambda: diagnose(stepped_sensor_record(3, hysteresis_rad=4e-4)[0]),
     ],
     ids=["refused_wobble", "doubted_wobble", "stepped"],

@@ -10,7 +10,7 @@ from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.engine._views import chi2_threshold
 from encdesign.diagnose.kinds.sds._sds_common_mod import common_max_order, powers, shapes
 from encdesign.simulate._outside import CLASSES, outside_record
-from tests.helpers import validate_diagnosis
+from tests.helpers import shared_diagnosis, validate_diagnosis
 
 R, M, C = 24, 3, 12
 
@@ -91,6 +91,6 @@ def test_a_platform_step_at_twice_the_noise_is_located_and_modelled_in_the_platf
 @pytest.mark.parametrize("seed", [803])
 def test_a_clean_record_has_no_common_switch(seed):
     rec, _ = outside_record(np.random.default_rng(seed), "clean", 0.0, "sds")
-    d = diagnose(rec)
+    d = shared_diagnosis(rec)  # 803's: also test_discover's clean SDS record
     assert d.verdict == "consistent", d.doc["report"]
     assert not [u for u in d.doc["unexplained"] if u.get("view") == "common_modulated"]
