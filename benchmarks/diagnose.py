@@ -50,7 +50,10 @@
    ``cpu_speedup_vs_first``: the first process count's CPU s over the largest CPU s of one
    process of this count (what the split achieves where each process has a core to itself).
    Every process also reports its own engine stages (``stages_cpu_s``, ``stages_wall_s``:
-   the document has process 0's) and its JAX compilations (``compile``). By environment:
+   the document has process 0's), the largest RSS sampled every 20 ms in each stage
+   (``stages_peak_rss_bytes``, JAX buffers included: ``outer/inner`` for a stage nested in
+   another, e.g. ``bounds/views``) and its JAX compilations
+   (``compile``). By environment:
    ``ENCDESIGN_BENCH_STAGES=engine._fit:Fitter.chunk_residual=resid_rows*,...`` charges
    the named functions (modules under ``encdesign.diagnose``) to stages of their own (a
    name ending in ``*`` gains ``_alone`` inside a share of dealt items), to see which work
@@ -530,12 +533,35 @@ def _proc_child(
 
     opened_timing = engine.timing
 
+    peaks: dict[str, int] = {}  # stage -> the largest RSS sampled in it (bytes)
+    sampling = {"timer": None, "on": True}
+
+    def sample() -> None:  # RSS every 20 ms (JAX buffers included, unlike tracemalloc)
+        page = os.sysconf("SC_PAGE_SIZE")
+        while sampling["on"]:
+            timer = sampling["timer"]
+            st = list(timer._stack) if timer is not None else []
+            name = "/".join(st[:1] + st[-1:] if len(st) > 1 else st) or "outside"
+            with open("/proc/self/statm") as fh:
+                rss = int(fh.read().split()[1]) * page
+            peaks[name] = max(peaks.get(name, 0), rss)
+            time.sleep(0.02)
+
+    import threading
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    if Path("/proc/self/statm").is_file():
+        sampler.start()
+
     @contextlib.contextmanager
     def kept_timing():  # every process's own stage times (the document has process 0's)
         with opened_timing() as timer:
+            sampling["timer"] = timer
             yield timer
+        sampling["timer"] = None
         stages["stages_cpu"] = dict(timer.cpu_totals)
         stages["stages_wall"] = dict(timer.totals)
+        stages["stages_peak_rss_bytes"] = dict(peaks)
 
     engine.timing = kept_timing
     _split_stages(os.environ.get("ENCDESIGN_BENCH_STAGES", ""))
@@ -574,7 +600,10 @@ def _proc_child(
         wall_s=time.perf_counter() - t0,
         cpu_s=ru.ru_utime + ru.ru_stime,
         peak_rss_bytes=ru.ru_maxrss * 1024,
-        **{k + ("_s" if k.startswith(("read", "stages")) else ""): v for k, v in stages.items()},
+        **{
+            k + ("_s" if k.startswith(("read", "stages_cpu", "stages_wall")) else ""): v
+            for k, v in stages.items()
+        },
     )
     Path(stats).write_text(json.dumps(got))
     return rc

@@ -221,14 +221,15 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover_lines.py", "STEP_BINS"): SEARCH + " (change points a step term scans)",
     ("engine/_discover_lines.py", "STEP_EXACT_ROWS"): BOUND
     + " (rows up to which a step is located with the catalog model projected out)",
-    ("engine/_bounds.py", "VIEW_DOUBLINGS"): BOUND + " (sizes tried before a view is called blind)",
+    ("engine/_bounds_shares.py", "VIEW_DOUBLINGS"): BOUND
+    + " (sizes tried before a view is called blind)",
     ("engine/_spill.py", "TRIAL_STEPS"): BOUND
     + " (Levenberg-Marquardt steps of a fit, as the trial fits of stage 4)",
     ("engine/_bounds.py", "VIEW_BISECTIONS"): BOUND + " (bisections of a bound: 2 %)",
     ("engine/_views_leakage.py", "_GOLDEN_STEPS"): NUMERIC
     + " (golden-section steps of a line's frequency within its bin: 4e-9 bins)",
     ("engine/_bounds.py", "SEEN_RTOL"): NUMERIC + " (rounding of a noncentrality comparison)",
-    ("engine/_bounds.py", "SHARE_TOL"): NUMERIC
+    ("engine/_bounds_shares.py", "SHARE_TOL"): NUMERIC
     + " (the share rules' size: the located excess within 2 %, the size within 1 %)",
     ("engine/_bounds.py", "PROBE_NORM"): NUMERIC
     + " (the probe's whitened norm: the fits are linear in it)",

@@ -79,12 +79,13 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy import optimize, stats
 
+from ._bounds_shares import VIEW_DOUBLINGS, _share_size
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
 from ._rowshare import summed
-from ._select import _has_run_constants, _order_key, _reaches
+from ._select import _has_run_constants, _order_key
 from ._stats_pass import ChunkMemo
 from ._steps import frozen
 from ._views import locate
@@ -104,9 +105,6 @@ CONVENTION = (
 
 CONVENTION_SHORT = "50 % power at the finder's thresholds"
 """Each bound's ``convention`` in the JSON."""
-
-VIEW_DOUBLINGS = 12
-"""Doublings of the size beyond the criterion's before a view is called blind to it."""
 
 VIEW_BISECTIONS = 5
 """Bisections of the size between the last size a view missed and the first it found
@@ -365,20 +363,36 @@ class _Bench:
         for i, (_, pr) in enumerate(probes):
             self._pre[id(pr)] = (ranks[gi[i]], (G, Gu, hv[i], huv[i], qv[i], quv[i]))
 
+    def release(self) -> None:
+        """Drop what the last probe's observations hold (issue 43, peak memory): the
+        prepared copy's ``y`` goes back to the reference prediction and the fitter's
+        normal equations summed from the old one are dropped, their Gram matrices kept
+        (:meth:`._normal.BlockCache.release_observations`: no later fit matches them, each
+        probe's observations are a new array), so the old observations are freed before the
+        next ones are made."""
+        self.prep.y = self.pred
+        self.fitter.blocks.release_observations()
+
     def own_rms(self, v: np.ndarray) -> float:
         """The own RMS of the unit effect ``v`` in noise units, as the rule
-        ``plausible_ratio`` measures a fitted term's (``_select._term_rms``)."""
+        ``plausible_ratio`` measures a fitted term's (``_select._term_rms``): one copy of the
+        kept rows, whitened and squared in place (the same numbers as whitening and
+        squaring into new arrays)."""
         prep = self.prep
         keep = prep.keep
-        w = v[keep] / prep.sigma[None, :]
-        tot = float(np.sum(w * w))
+        w = v[keep]
+        w /= prep.sigma[None, :]
+        means: list[float] = []  # the run means' share, per channel
         if self.per_run:
             run = np.asarray(prep.run)[keep]
             R = prep.ctx.n_runs
             cnt = np.bincount(run, minlength=R)
             for c in range(w.shape[1]):
                 s1 = np.bincount(run, weights=w[:, c], minlength=R)
-                tot -= float(np.sum(s1 * s1 / np.maximum(cnt, 1)))
+                means.append(float(np.sum(s1 * s1 / np.maximum(cnt, 1))))
+        tot = float(np.sum(np.square(w, out=w)))
+        for m in means:
+            tot -= m
         C = prep.n_channels
         eff = (C - 1) / C if prep.kd.project else 1.0
         return math.sqrt(max(tot, 0.0) / max(float(keep.sum()) * C * eff, 1.0))
@@ -392,6 +406,10 @@ class _Bench:
         residual of the unit effect (n, C) and its own RMS (:meth:`own_rms`); ``None`` when
         the effect vanishes on the kept rows."""
         prep, fitter = self.prep, self.fitter
+        # the last probe's observations and the views' sums of its residual (a reused scan
+        # matches its own residual only) are freed before this one's are made (issue 43)
+        self.release()
+        sums_of(prep).forget()
         term = _held_term(cand, prep, probe)
         pre = self._pre.pop(id(probe), None)
         sw = 1.0 / prep.sigma
@@ -407,13 +425,20 @@ class _Bench:
             k_lin = pre[0]
             v = _values(fitter, [term])
         if prep.kd.project:
-            v = v - v.mean(1, keepdims=True)
+            v -= v.mean(1, keepdims=True)
         keep = prep.keep
-        norm = math.sqrt(float(np.sum((v[keep] * sw[None, :]) ** 2)))
+        vw = v[keep]  # one copy of the kept rows, whitened and squared in place
+        vw *= sw[None, :]
+        norm = math.sqrt(float(np.sum(np.square(vw, out=vw))))
+        del vw
         if not (norm > 0 and math.isfinite(norm)):
             return None
         c = PROBE_NORM / norm
-        prep.y = self.pred + c * v
+        own = self.own_rms(v)
+        # the observations ``pred + c v`` made in v's own array (issue 43: one whole-record
+        # array fewer; the same numbers)
+        v *= c
+        prep.y = np.add(self.pred, v, out=v)
         # the base's nonlinear parameters held, as the selection's trial fits hold them: a
         # linear refit whose Jacobians are cached across probes
         static = frozen(self.base_terms)
@@ -427,8 +452,10 @@ class _Bench:
             fitter.keep_accumulated(static, acc)
         base = fitter.fit(static)
         resid = fitter.residual(base.terms)
+        self.release()  # its observations are not needed past its residual (issue 43)
+        resid /= c
         k = k_lin + _n_nonlinear(cand, prep, probe.held)
-        return base.chi2 / c**2, k, resid / c, self.own_rms(v)
+        return base.chi2 / c**2, k, resid, own
 
     def heldout_gain(self, cand: Candidate, probe: Probe, a: float) -> float:
         """The held-out gain of ``cand`` (its probe's nonlinear values held, its linear
@@ -439,12 +466,14 @@ class _Bench:
         prep, fitter = self.prep, self.fitter
         term = _held_term(cand, prep, probe)
         v = _values(fitter, [term])
-        prep.y = self.y0 + a * v
+        v *= a
+        prep.y = np.add(self.y0, v, out=v)  # ``y0 + a v`` in v's own array (issue 43)
+        del v
         try:
             r0 = fitter.fit(frozen(self.base_terms))
             r1 = fitter.fit([*frozen(self.base_terms), term])
         finally:
-            prep.y = self.pred
+            self.release()
         return float(r0.heldout_chi2 - r1.heldout_chi2)
 
 
@@ -526,57 +555,6 @@ def _bound_entry(
     return {**worst, "where": probe.where, "at": probe.at} | (
         {"each": each} if probe.worst_of else {}
     )
-
-
-def _own_shares(prep, resid, views, scan, a: float, sig: set[str], ref) -> tuple[float, float]:
-    """``(share, left)`` of rules 4 and 5 for the effect at size ``a`` (``resid`` its
-    noise-free unit residual) beside the final findings ``ref``: at each place its own error
-    is located, weighted by its power there, the share of the structure there that is its
-    own (what its fit clears), and in its signature views the share it leaves (a place where
-    the final findings keep ``untouched_share`` or more is another effect's and set aside):
-    the rules of stage 4 (``_select.own_share``) on a record that holds it and that structure."""
-    s = prep.settings
-    num = den = num_s = den_s = 0.0
-    for g in locate(prep, resid, views, scan, scale=a, reuse=True):
-        w = float(g.power)
-        if w <= 0:
-            continue
-        other = sum(max(float(f.power) - float(f.dof), 0.0) for f in ref if _reaches(f, (g,)))
-        num += w * w / (w + other)
-        den += w
-        if g.view in sig and other < s.untouched_share * (w + other):
-            num_s += w * other / (w + other)
-            den_s += w
-    return (num / den if den > 0 else 0.0), (num_s / den_s if den_s > 0 else 0.0)
-
-
-def _share_size(prep, resid, views, scan, a0: float, sig: set[str], ref):
-    """``(size, i)``: the smallest size from ``a0`` up at which the effect passes rules 4 and
-    5 of the module doc beside the final findings ``ref`` (:func:`_own_shares`), and the
-    index of the rule that asked most at ``a0``: its share grows with the size squared while
-    the structure beside it dominates, so a few rescalings reach it; ``(None, i)`` when no
-    view locates it within :data:`VIEW_DOUBLINGS` doublings."""
-    s = prep.settings
-    sh, sl = s.located_share_min, s.signature_left_max
-    a, first = a0, None
-    for _ in range(VIEW_DOUBLINGS):
-        share, left = _own_shares(prep, resid, views, scan, a, sig, ref)
-        ratios = [
-            sh / share if share > 0 else math.inf,
-            left / sl if sl > 0 else (math.inf if left > 0 else 0.0),
-        ]
-        if first is None:
-            first = int(np.argmax(ratios))
-        worst = max(ratios)
-        if worst <= 1 + SHARE_TOL:
-            return a, first
-        a *= 2.0 if not math.isfinite(worst) else math.sqrt(worst)
-    return None, first or 0
-
-
-SHARE_TOL = 0.02
-"""Relative shortfall of the located excess accepted when rescaling to the share rules'
-size (the power is quadratic in the size: about 1 % of the size)."""
 
 
 def _over_budget(prep, cand, probe: Probe, ref: Reference) -> str | None:
@@ -670,7 +648,9 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
             return {**entry, "n_params": int(k), "note": "no view locates it at any size tried"}
         if a_share > a:
             a, rule = a_share, ("located_share_min", "signature_left_max")[i]
-        # and the held-out gain on the record itself, beside the structure it leaves
+        # and the held-out gain on the record itself, beside the structure it leaves (the
+        # views' sums of its residual are not needed past its scans: issue 43)
+        sums_of(bench.prep).forget()
         a_ho = _heldout_size(bench, cand, probe, a, s.heldout_min)
         if a_ho is None:
             return {**entry, "n_params": int(k), "note": "no held-out gain at any size tried"}
@@ -717,6 +697,9 @@ def detection_bounds(
     if not work:
         return out
     bench = _Bench(prep, fitter, ref)
+    # the selection's fits are done: the engine fitter's per-chunk caches (the candidates'
+    # Jacobians, its static blocks') are freed for the bench's own (issue 43, peak memory)
+    fitter.release_chunks()
     if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare)
         items = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
         try:

@@ -171,6 +171,17 @@ class Fitter:
         self.blocks.clear()
         self._jbytes = 0
 
+    def release_chunks(self) -> None:
+        """Drop what is cached per chunk (the linear terms' Jacobians, the static blocks'
+        processed Jacobians: up to :data:`CACHE_BYTES` each), keeping the per-block Gram
+        matrices and normal equations: once the fits it served are done (the detection
+        bounds fit with a fitter of their own: issue 43, peak memory). Later evaluations
+        compute what is no longer cached (a linear term's value directly, not as
+        ``v0 + J p``: the same up to rounding)."""
+        self._jcache.clear()
+        self._jbytes = 0
+        self.blocks.release_processed()
+
     def keep_accumulated(self, static: Sequence[Term], acc: Accumulated) -> None:
         """Use ``acc`` as the normal equations of the static block ``static`` (a refit of
         the block on ``acc.y`` then makes no pass over the rows)."""

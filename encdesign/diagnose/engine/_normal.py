@@ -202,6 +202,22 @@ class BlockCache:
         self._acc.clear()
         self._pbytes = self._gbytes = self._abytes = 0
 
+    def release_processed(self) -> None:
+        """Drop the processed Jacobians per chunk (the largest entries), keeping the Gram
+        matrices and normal equations: a fitter whose fits are done (issue 43, peak
+        memory)."""
+        self._proc.clear()
+        self._pbytes = 0
+
+    def release_observations(self) -> None:
+        """Drop the normal equations (each holds its observations, an (n, C) array),
+        keeping their Gram matrices, which do not depend on the observations: for a
+        prepared record whose ``y`` is replaced by a new array (no kept normal equations
+        match it), so the old one can be freed (issue 43, peak memory)."""
+        accs, self._acc, self._abytes = self._acc, {}, 0
+        for skey, acc in accs.items():
+            self.keep_gram(skey, acc.G, acc.Gu)
+
     def processed(self, skey: tuple, a: int):
         """The processed Jacobian of block ``skey`` on the chunk from row ``a``, or ``None``."""
         return self._proc.get((skey, a))
