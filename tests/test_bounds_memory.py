@@ -24,12 +24,14 @@ ROWS = 1 << 16
 """Rows of the record (8 chunks of the fitter): whole-record arrays outweigh a chunk's."""
 
 FIRST_PROBE_ARRAYS_MAX = 4.5
-LATER_PROBE_ARRAYS_MAX = 2.5
+LATER_PROBE_ARRAYS_MAX = 3.0
 """Whole-record (n, C) arrays a probe may allocate at its peak beyond what it found: main
 before session 28, 6.2 on the first probe and 5.1-5.2 on every later one (this record); now
-3.7 and at most 1.6: the unit effect, whose array becomes the observations, one copy of the
-kept rows for its norm and RMS, the residual, a chunk's arrays (about 1.2 here, 8 chunks),
-and from the second probe on the last probe's observations and residual freed first."""
+3.5 and 1.2-2.6 (measured at the merge, fresh and warm compilation caches alike; the helper's
+report said at most 1.6, which its own commit does not reproduce): the unit effect, whose
+array becomes the observations, one copy of the kept rows for its norm and RMS, the residual,
+a chunk's arrays (about 1.2 here, 8 chunks), and from the second probe on the last probe's
+observations and residual freed first. Each bound sits between main's number and today's."""
 
 
 def test_a_probe_holds_few_whole_record_arrays(monkeypatch):
