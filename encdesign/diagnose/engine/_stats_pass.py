@@ -132,7 +132,21 @@ class StatsPass:
         self.parts.append(np.concatenate([v.ravel() for v in self.sums[: len(self.shapes)]]))
 
     def chunk(self, a: int, b: int, x: dict) -> None:
-        """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums."""
+        """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums; a request
+        that joined a lead's pass keeps nothing in the fitter's caches (alone, after the
+        lead's pass, it found them full on a long record: a cached Jacobian and the compiled
+        value differ in rounding, so the caches' contents must be those of the passes one
+        after another)."""
+        if self.lead is None:
+            self._chunk(a, b, x)
+            return
+        self.fitter.keeps = False
+        try:
+            self._chunk(a, b, x)
+        finally:
+            self.fitter.keeps = True
+
+    def _chunk(self, a: int, b: int, x: dict) -> None:
         fitter, prep, jac, K = self.fitter, self.fitter.prep, self.jac, self.K
         static, dyn, p, p_s = self.static, self.dyn, self.p, self.p_s
         A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = self.sums
