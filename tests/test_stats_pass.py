@@ -165,3 +165,64 @@ def test_a_candidates_screened_starts_side_by_side_equal_them_one_after_another(
     together = [*got[0], got[1]]
     assert rounds[0] == 4  # the three screens and the free line's first pass, one pass
     _assert_bit_equal(alone, together)
+
+
+def test_a_fit_beside_the_fit_of_its_leading_block_takes_one_pass(monkeypatch):
+    """The step rule's pair (``_steps.beaten_by_step``: the frozen base with a located step,
+    and the same with a candidate at its fitted values) side by side in one
+    :func:`drive_many`: the second fit's leading block (base and step) is the first fit's
+    whole block, whose Gram matrices that fit's pass sums and keeps; one after another the
+    second sums only its own columns' products beside them. Side by side it sums those in
+    the same pass (:meth:`StatsPass.join`, issue 43, session 28): one pass for both, not two
+    (main waited a round), and both fits equal the fits one after another on one fitter to
+    the last bit; so do a screen of two more candidates beside the base's own first pass."""
+    from encdesign.diagnose.engine import _fit, _stats_pass
+    from encdesign.diagnose.engine._fit import Fitter, make_term
+    from encdesign.diagnose.engine._steps import frozen, step_term
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+
+    monkeypatch.setattr(_fit, "CACHE_BYTES", 0.0)
+    prep, _, held = _bench_base(False)
+    rows = np.flatnonzero((prep.run == 1) & prep.keep)
+    sel = np.zeros(prep.ctx.n_runs)
+    sel[1] = 1.0
+    step = dict(
+        tau_s=float(prep.rows.take("tau", rows)[rows.size // 3]),
+        channels=np.array([0.0, 1.0, 0.0]),
+        run_sel=sel,
+    )
+    lines = frozen([make_term(VIBRATION, prep, {"frequency_hz": f}) for f in (3.7, 5.3)])
+
+    def fitter() -> Fitter:
+        f = Fitter(prep)
+        f.chunk = 1024
+        assert f.n_chunks() > 1
+        return f
+
+    pairs = [
+        [[*held, step_term(prep, step)], [*held, step_term(prep, step), lines[0]]],
+        [list(held), [*held, lines[0]], [*held, lines[1]]],
+    ]
+    for fits, n_models in zip(pairs, (2, 3)):
+        f1 = fitter()
+        alone = [f1.fit(list(ts)) for ts in fits]
+        rounds: list[int] = []
+        run = _stats_pass.run_passes
+
+        def counted(passes, run=run, rounds=rounds):
+            rounds.append(sum(s.done is None for s in passes))
+            return run(passes)
+
+        monkeypatch.setattr(_stats_pass, "run_passes", counted)
+        f = fitter()
+        together = _stats_pass.drive_many([f.fit_steps(list(ts)) for ts in fits])
+        monkeypatch.setattr(_stats_pass, "run_passes", run)
+        assert rounds[0] == n_models  # every fit in the first pass (main: the first alone)
+        assert sum(r > 0 for r in rounds) == 1  # linear fits: one pass in all
+        for a, b in zip(alone, together, strict=True):
+            assert a.chi2 == b.chi2 and a.heldout_chi2 == b.heldout_chi2
+            np.testing.assert_array_equal(a.A, b.A)
+            for ta, tb in zip(a.terms, b.terms):
+                for k in ta.values:
+                    np.testing.assert_array_equal(ta.values[k], tb.values[k])
+        assert len({a.chi2 for a in alone}) == n_models  # they differ: the test tells them apart

@@ -140,6 +140,9 @@ class Fitter:
         self._jbytes = 0
         self.blocks = BlockCache()  # static blocks: processed Jacobians, Gram matrices
         self.memo: ChunkMemo | None = None  # during a pass for several fits (_stats_pass)
+        # while a request that joined a lead's pass sums (_stats_pass.StatsPass.join): keep
+        # nothing in the caches, as after the lead's pass alone (its caches already full)
+        self.keeps = True
 
     def n_chunks(self) -> int:
         """Chunks of a pass over all rows."""
@@ -224,7 +227,7 @@ class Fitter:
                         memo.put(("jac", *key), hit)
                 v0, Jt = hit
                 nbytes = Jt.nbytes + v0.nbytes
-                if self._jbytes + nbytes < CACHE_BYTES:
+                if self.keeps and self._jbytes + nbytes < CACHE_BYTES:
                     self._jcache[key] = hit
                     self._jbytes += nbytes
             v0, Jt = hit
@@ -381,7 +384,7 @@ class Fitter:
         hit = self.blocks.processed(skey, a)
         if hit is None:
             hit = self._processed(static, a, b, x, sc)
-            if keep:
+            if keep and self.keeps:
                 self.blocks.keep_processed(skey, a, (None, *hit[1:]))
             return hit
         return (self._values(static, a, b, x) if pred else None, *hit[1:])

@@ -75,12 +75,12 @@ class StatsPass:
         self.fitter = fitter
         self.jac = jac
         prep = fitter.prep
-        self.K = K = prep.settings.n_folds
+        self.K = prep.settings.n_folds
         self.terms = terms = list(terms)
         self.static = static = [t for t in terms if linear_only(t)]
         self.dyn = dyn = [t for t in terms if not linear_only(t)]
-        self.p_s = p_s = sum(t.n_free() for t in static)
-        self.p = p = sum(t.n_free() for t in terms)
+        self.p_s = sum(t.n_free() for t in static)
+        self.p = sum(t.n_free() for t in terms)
         self.sc_s, self.sc_d = free_scales(static), free_scales(dyn)
         self.skey = static_key(static)
         # the free nonlinear terms' identity (a pass for several fits shares their
@@ -94,18 +94,34 @@ class StatsPass:
             if got is not None:
                 self.done = fitter._caller_order(terms, static, dyn, *got, self.sc_s, self.sc_d)
                 return
-        self.gram = gram = fitter.blocks.gram(self.skey)
+        self.gram = fitter.blocks.gram(self.skey)
         # the longest leading block with kept Gram matrices: only the other columns' products
-        self.k0 = k0 = fitter.blocks.longest_prefix(static)
-        self.p0 = p0 = sum(t.n_free() for t in static[:k0]) if gram is None else p_s
+        self.lead: StatsPass | None = None
+        self._plan(fitter.blocks.longest_prefix(static))
+        self.kept_gram: tuple | None = None
+        self.parts: list[np.ndarray] = []
+        self.sums: list = []
+
+    def _plan(self, k0: int) -> None:
+        """The sums' shapes where the leading ``k0`` terms' Gram matrices are known (kept, or
+        summed by a lead in the same pass, :meth:`join`): only the other columns' products."""
+        K, p, p_s, gram = self.K, self.p, self.p_s, self.gram
+        self.k0 = k0
+        self.p0 = p0 = sum(t.n_free() for t in self.static[:k0]) if gram is None else p_s
         self.p_t = p_t = p_s - p0
         shapes = [(K, p, p), (K, p), (K,), (K,)]
-        if jac:  # the static block's own normal equations, whitened and not (for ssr)
+        if self.jac:  # the static block's own normal equations, whitened and not (for ssr)
             shapes += [(K, p_s), (K,), (K, p_s), (K,)]
             shapes += [(K, p_s, p_t), (K, p_s, p_t)] if gram is None else []
         self.shapes = shapes
-        self.parts: list[np.ndarray] = []
-        self.sums: list = []
+
+    def join(self, k0: int, lead: StatsPass) -> None:
+        """Sum beside ``lead`` (a request of the same pass, before this one, that sums and
+        keeps the Gram matrices of this block's leading ``k0`` terms) only the other columns'
+        products, as this request would after ``lead``'s pass: the same sums, one pass less
+        (issue 43: a candidate's fit beside the fit of its leading block)."""
+        self.lead = lead
+        self._plan(k0)
 
     def open_group(self) -> None:
         """Start the sums of one row group."""
@@ -116,7 +132,21 @@ class StatsPass:
         self.parts.append(np.concatenate([v.ravel() for v in self.sums[: len(self.shapes)]]))
 
     def chunk(self, a: int, b: int, x: dict) -> None:
-        """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums."""
+        """Add the chunk of rows ``a:b`` (row columns ``x``) to the group's sums; a request
+        that joined a lead's pass keeps nothing in the fitter's caches (alone, after the
+        lead's pass, it found them full on a long record: a cached Jacobian and the compiled
+        value differ in rounding, so the caches' contents must be those of the passes one
+        after another)."""
+        if self.lead is None:
+            self._chunk(a, b, x)
+            return
+        self.fitter.keeps = False
+        try:
+            self._chunk(a, b, x)
+        finally:
+            self.fitter.keeps = True
+
+    def _chunk(self, a: int, b: int, x: dict) -> None:
         fitter, prep, jac, K = self.fitter, self.fitter.prep, self.jac, self.K
         static, dyn, p, p_s = self.static, self.dyn, self.p, self.p_s
         A, g, c, ssr, h, q, hu, qu, new_gram, new_gu = self.sums
@@ -227,7 +257,10 @@ class StatsPass:
             gram = self.gram
             if gram is None:
                 lead = fitter.gram(static[: self.k0])
+                if lead is None and self.lead is not None and self.lead.kept_gram is not None:
+                    lead = tuple(G[:, : self.p0, : self.p0] for G in self.lead.kept_gram)
                 gram = fitter._assemble(static, self.p0, new_gram, new_gu, lead)
+            self.kept_gram = gram
             A[:, :p_s, :p_s] = gram[0]
             A[:, p_s:, :p_s] = np.transpose(A[:, :p_s, p_s:], (0, 2, 1))
             acc = Accumulated(fitter.prep.y, self.held, self.z_s, self.sc_s, *gram, h, q, hu, qu)
@@ -284,8 +317,25 @@ def drive(steps: FitSteps):
 def _waits(sp: StatsPass, kept: set) -> bool:
     """Whether the request of ``sp`` would start from a longer leading block's kept Gram
     matrices (``kept``: those the round's earlier passes will keep) than it found: it then
-    waits one round, so that it sums what it would sum after those passes, alone."""
+    waits one round, so that it sums what it would sum after those passes, alone (unless it
+    :func:`_joins` them)."""
     return any(static_key(sp.static[:k]) in kept for k in range(sp.k0 + 1, len(sp.static)))
+
+
+def _joins(sp: StatsPass, kept: set, leads: dict) -> bool:
+    """Where ``sp`` :func:`_waits`: join the round instead (:meth:`StatsPass.join`) when what
+    it would find kept after the round is known now: the longest of its leading blocks that
+    a request of the round with the Jacobian sums and keeps (``leads``: static key -> that
+    request; a values-only request keeps nothing), and its own whole block is no request's
+    (then it would be answered from the kept normal equations). Whether it joined."""
+    if static_key(sp.static) in kept:
+        return False
+    k = next(
+        (k for k in range(len(sp.static) - 1, sp.k0, -1) if static_key(sp.static[:k]) in leads), 0
+    )
+    if k:
+        sp.join(k, leads[static_key(sp.static[:k])])
+    return True
 
 
 class Many(tuple):
@@ -301,7 +351,10 @@ def drive_many(all_steps: Sequence[FitSteps]) -> list:
     of the round keeps (the frozen base of a candidate's first pass, before the base's own
     first pass) waits for the next round: one after another, it would have found them kept
     and summed the new columns only (the same numbers as one fit after another, not the
-    whole block's rounding)."""
+    whole block's rounding); where what it would find is known now (:func:`_joins`), it
+    sums those new columns beside that request in the same pass instead (issue 43: the
+    candidates' screened starts beside the first pass that sums the frozen base's Gram
+    matrices, a fit beside the fit of its leading block), one pass less."""
     out: list = [None] * len(all_steps)
     reqs: dict[int, StatsRequest | Many] = {}
 
@@ -315,16 +368,20 @@ def drive_many(all_steps: Sequence[FitSteps]) -> list:
     for i in range(len(all_steps)):
         advance(i, None)
     while reqs:
-        idx, passes, kept = [], [], set()
+        idx, passes, kept, leads = [], [], set(), {}
         for i, req in reqs.items():
             for j, one in enumerate(req if isinstance(req, Many) else [req]):
                 sp = StatsPass(*one)
-                if sp.done is None and _waits(sp, kept):
+                if sp.done is None and _waits(sp, kept) and not _joins(sp, kept, leads):
                     continue  # (next round, as it would run after that pass alone)
                 idx.append((i, j))
                 passes.append(sp)
                 if sp.done is None and sp.gram is None:  # the leading blocks' Gram it keeps
-                    kept |= {static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)}
+                    keys = [static_key(sp.static[:k]) for k in range(1, len(sp.static) + 1)]
+                    kept |= set(keys)
+                    if sp.jac:
+                        for key in keys:
+                            leads.setdefault(key, sp)
         got: dict[int, dict[int, tuple]] = {}
         for (i, j), ans in zip(idx, run_passes(passes)):
             got.setdefault(i, {})[j] = ans

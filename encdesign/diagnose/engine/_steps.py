@@ -18,6 +18,7 @@ from ._candidates import Candidate, Param
 from ._fit import FitResult, Fitter, Term, make_term
 from ._located import change_chi2, interval_of, located_time, profile_scan
 from ._protocol import Prepared
+from ._stats_pass import drive, drive_many
 from ._steps_near import off_change
 from ._tangent import tangent_terms
 
@@ -185,12 +186,16 @@ def beaten_by_step(
     cand = frozen(fr.terms[-1:])
     for st in steps:
         key = (st["tau_s"], st["run"], tuple(st["channels"]))
-        if key not in cache:
-            cache[key] = fitter.fit([*base_terms, step_term(prep, st)])
         f = st["finding"]
         for attempt in range(2):
+            with_cand = fitter.fit_steps([*base_terms, step_term(prep, st), *cand])
+            if key not in cache:  # the step alone and with the candidate side by side: the
+                # second sums its own columns beside the first's pass (_stats_pass.drive_many)
+                alone = fitter.fit_steps([*base_terms, step_term(prep, st)])
+                cache[key], both = drive_many([alone, with_cand])
+            else:
+                both = drive(with_cand)
             fs = cache[key]
-            both = fitter.fit([*base_terms, step_term(prep, st), *cand])
             if fr.chi2 - both.chi2 < prep.settings.bic_min + logn:
                 break  # with the candidate there is no step left: it makes it
             dchi = fs.chi2 - both.chi2
@@ -226,8 +231,6 @@ def beaten_by_step(
                 return None
             st, f = st2, st2["finding"]
             key = (st["tau_s"], st["run"], tuple(st["channels"]))
-            if key not in cache:
-                cache[key] = fitter.fit([*base_terms, step_term(prep, st)])
     return None
 
 
