@@ -199,15 +199,21 @@ def main(argv: list[str] | None = None) -> int:
     def f_ms(angles, k=key, n=n_builds):
         return layout_metrics(_design(angles, args), tol, key=k, n_builds=n, metric="ms")
 
-    f_rms = jax.jit(lambda a: jnp.sqrt(jnp.mean(f_ms(a))))
-    # per-build mean squares of the fresh builds (independent key, the same for all layouts)
-    f_fresh = jax.jit(lambda a: f_ms(a, fresh_key(key), n_fresh))
+    # per-build mean squares, one compiled program per build count (the study's builds,
+    # shared by the RMS and the 99th percentile; the fresh builds)
+    ms_jit = jax.jit(f_ms, static_argnames="n")
 
+    def f_rms(a):
+        return jnp.sqrt(jnp.mean(ms_jit(a)))
+
+    def f_p99(a):
+        return jnp.percentile(jnp.sqrt(ms_jit(a)), 99.0)
+
+    # per-build mean squares of the fresh builds (independent key, the same for all layouts)
     def fresh_rms(angles):
-        ms = np.asarray(f_fresh(jnp.asarray(angles)))
+        ms = np.asarray(ms_jit(jnp.asarray(angles), fresh_key(key), n_fresh))
         return ms, math.sqrt(float(np.mean(ms)))
 
-    f_p99 = jax.jit(lambda a: jnp.percentile(jnp.sqrt(f_ms(a)), 99.0))
     rec = CaseRecorder(args.out / "cases.jsonl")
     results, figures = [], []
     fig, axes = new_figure(2, len(args.heads), figsize=(4.5 * len(args.heads), 8))

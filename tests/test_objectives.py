@@ -1,5 +1,6 @@
 """Objectives: physics of the residual pipeline and gradients of every objective vs FD."""
 
+import functools
 import math
 
 import equinox as eqx
@@ -48,7 +49,14 @@ TOL = Tolerances(
     axial_runout=2e-6,
     noise=1e-7,
 )
-Z = build_normals(jax.random.key(4), jnp.arange(1), n_build_normals(DESIGN))[0]
+
+
+@functools.cache
+def _z() -> jax.Array:
+    """One build's normals for DESIGN, made on first use (not while pytest collects),
+    eagerly even when the first use is inside a trace."""
+    with jax.ensure_compile_time_eval():
+        return build_normals(jax.random.key(4), jnp.arange(1), n_build_normals(DESIGN))[0]
 
 
 def _check(f, x, rel_h=1e-4, rtol=2e-5):
@@ -91,13 +99,13 @@ def test_self_compensation_removes_degenerate_grating_modes():
 
 
 def test_rms_peak_and_noise_terms_are_consistent():
-    r = build_residual(DESIGN, TOL, Z)
+    r = build_residual(DESIGN, TOL, _z())
     assert abs(float(jnp.mean(r))) < 1e-18
     ms_noise = float(calibration_noise_ms(DESIGN, TOL))
-    assert float(residual_rms(DESIGN, TOL, Z)) ** 2 == pytest.approx(
+    assert float(residual_rms(DESIGN, TOL, _z())) ** 2 == pytest.approx(
         float(jnp.mean(r**2)) + ms_noise, rel=1e-12
     )
-    assert float(residual_peak(DESIGN, TOL, Z)) >= float(jnp.sqrt(jnp.mean(r**2)))
+    assert float(residual_peak(DESIGN, TOL, _z())) >= float(jnp.sqrt(jnp.mean(r**2)))
     # noise term scales with the noise variance and the cotangent amplification
     tol2 = eqx.tree_at(lambda t: t.noise, TOL, 2e-7)
     assert float(calibration_noise_ms(DESIGN, tol2)) == pytest.approx(4 * ms_noise, rel=1e-12)
@@ -106,7 +114,7 @@ def test_rms_peak_and_noise_terms_are_consistent():
 def test_residual_rms_gradient_for_every_tolerance():
     # d rms / d ln sigma_i for all seven tolerances at once (one compile)
     base = TOL.vector()
-    f = jax.jit(lambda u: residual_rms(DESIGN, Tolerances.from_vector(base * jnp.exp(u)), Z))
+    f = jax.jit(lambda u: residual_rms(DESIGN, Tolerances.from_vector(base * jnp.exp(u)), _z()))
     _check(f, jnp.zeros(len(TOLERANCE_NAMES)) + 0.05, rel_h=1e-3, rtol=1e-5)
 
 
@@ -125,13 +133,13 @@ SMALL = EncoderDesign(
 def test_residual_peak_and_reference_angle_gradients():
     def f(a):
         d = eqx.tree_at(lambda d: d.reference_angle_rad, SMALL, a)
-        return residual_peak(d, TOL, Z)
+        return residual_peak(d, TOL, _z())
 
     _check(jax.jit(f), jnp.array(SMALL.reference_angle_rad), rel_h=1e-6)
 
     def g(a):
         d = eqx.tree_at(lambda d: d.reference_angle_rad, SMALL, a)
-        return residual_rms(d, TOL, Z)
+        return residual_rms(d, TOL, _z())
 
     _check(jax.jit(g), jnp.array(SMALL.reference_angle_rad), rel_h=1e-6)
 

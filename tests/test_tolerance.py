@@ -1,5 +1,6 @@
 """Tolerance budgets on an analytic error model, and the three studies in --quick mode."""
 
+import functools
 import json
 import math
 
@@ -30,22 +31,29 @@ def _z(seed, n):
     return build_normals(jax.random.key(seed), jnp.arange(n), 3)
 
 
-Z_TRAIN = _z(0, 400)
+@functools.cache
+def _z_train() -> jax.Array:
+    """The training builds, made on first use (not while pytest collects), eagerly even
+    when the first use is inside a trace."""
+    with jax.ensure_compile_time_eval():
+        return _z(0, 400)
 
 
-def ms_fn(s, z=Z_TRAIN):
-    """Mean-square error of each build: sum_i (w_i s_i z_i)^2 (linear error model)."""
+def ms_fn(s, z=None):
+    """Mean-square error of each build: sum_i (w_i s_i z_i)^2 (linear error model);
+    ``z`` defaults to the training builds."""
+    z = _z_train() if z is None else z
     return jnp.sum((WEIGHT * s * z) ** 2, axis=1)
 
 
-def values_fn(s, z=Z_TRAIN):
+def values_fn(s, z=None):
     return jnp.sqrt(ms_fn(s, z))
 
 
 def test_contributions_are_exact_variance_shares():
     s = jnp.array([0.3, 0.1, 0.8])
     con = contributions(ms_fn, values_fn, s, NAMES)
-    per = np.asarray(jnp.mean((WEIGHT * s * Z_TRAIN) ** 2, axis=0))
+    per = np.asarray(jnp.mean((WEIGHT * s * _z_train()) ** 2, axis=0))
     np.testing.assert_allclose(con.variance_share, per / per.sum(), rtol=1e-12)
     assert con.variance_share.sum() == pytest.approx(1.0)
     assert con.order[0] == int(np.argmax(per))
@@ -125,7 +133,7 @@ def test_pareto_front_is_monotone_checked_and_warm_started(tmp_path):
         # independent Monte Carlo: meets the target within 2 s.e., and agrees with the
         # training yield within 3 combined standard errors
         assert r["meets_target"], r
-        se_train = math.sqrt(r["train_yield"] * (1 - r["train_yield"]) / Z_TRAIN.shape[0])
+        se_train = math.sqrt(r["train_yield"] * (1 - r["train_yield"]) / _z_train().shape[0])
         se = math.hypot(se_train, r["checked_yield_stderr"])
         assert abs(r["checked_yield"] - r["train_yield"]) <= 3 * se + 1e-12, r
     # the warm start is used: a cold allocation at the same target takes more steps to the
