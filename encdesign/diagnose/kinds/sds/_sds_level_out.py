@@ -97,16 +97,35 @@ class LevelOut:
     (widening and common factor, as :func:`._sds_noise._level_sigma` makes it:
     :class:`RunMeanLevel`). A direction of the columns that ``Q`` holds
     (its part off ``Q`` below ``1e-6`` of the columns' norm) is no degree of freedom of the
-    level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1."""
+    level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1. ``share``:
+    the common factor charged at the tested columns' share (:func:`common_share`;
+    ``FinderSettings.sds_level_common_share``, given where the level is built,
+    :func:`._sds_noise.run_mean_levels`), fixed at construction (:attr:`share`)."""
 
-    def __init__(self, e, Q, n_ind: int, sigma_of: Callable[..., float | np.ndarray], proj, M):
+    def __init__(
+        self,
+        e,
+        Q,
+        n_ind: int,
+        sigma_of: Callable[..., float | np.ndarray],
+        proj,
+        M,
+        share: bool = False,
+    ):
         self.e, self.Q, self.sigma_of, self.proj, self.M = e, Q, sigma_of, bool(proj), int(M)
+        self._share = bool(share)
         self.ssr = float(e @ e)
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
         self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
-        self.share = False  # the common factor at the columns' share (:func:`with_share`)
         self.sigma = float(sigma_of(math.sqrt(self.ssr / self.nu), self.nu)) if ok else 0.0
+
+    @property
+    def share(self) -> bool:
+        """Whether a test's common factor is charged at its columns' share (module doc);
+        set when the level is built, never after (the views and discovery share one
+        level)."""
+        return self._share
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``X`` (R, M, ...) projected as the run means are, flattened to (R*M, -1), and
@@ -168,13 +187,6 @@ class LevelOut:
         proj = np.einsum("gi,gij->gj", b, V)  # b along the eigenvectors
         g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
         return self._factor(g, big.sum(1), pair_shares(A if self.share and not self.proj else None))
-
-
-def with_share(factor: LevelOut, settings) -> LevelOut:
-    """``factor`` with its common factor charged at the tested columns' share where
-    ``settings.sds_level_common_share`` says so (module doc; the whitening level unchanged)."""
-    factor.share = bool(settings.sds_level_common_share)
-    return factor
 
 
 def common_share(X: np.ndarray) -> float:

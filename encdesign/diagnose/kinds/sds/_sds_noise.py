@@ -364,6 +364,7 @@ def _level_sigma(
     phi: np.ndarray | None = None,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
     state: dict | None = None,
+    share: bool = False,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -476,7 +477,7 @@ def _level_sigma(
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
         sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
-        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M)
+        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share)
     if info is not None:
         info.update(
             run_means_rad=s_raw,
@@ -534,6 +535,7 @@ def run_mean_levels(
             common_quantile=settings.sds_common_level_quantile,
             pairs=pairs,
             state=state,
+            share=settings.sds_level_common_share > 0,
         )
 
     return levels
