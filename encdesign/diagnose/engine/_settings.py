@@ -103,6 +103,15 @@ class FinderSettings(AbstractSelectionSettings):
     fresh s27-sds27b against off: SDS discovery frame right 37/45 -> 38/45, clean 40/40
     ``consistent`` on both, SDS catalog 6542 and 6543 every row equal)."""
 
+    sds_level_common_direct: int = eqx.field(default=0, static=True)
+    """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
+    without a test's columns takes the moving sensors' common component at its own unbiased
+    level (the base residual's common component off the base's common columns and the
+    test's common part), mixed with the differences' level at the columns' share and widened
+    for the mix's Welch-Satterthwaite degrees of freedom (:mod:`._sds_level_common`, issue
+    41 session 28), instead of session 27's common factor (capped at an upper confidence
+    limit, floored at 1)."""
+
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
     take change points and single-value outliers out of the run-mean noise level
