@@ -111,11 +111,11 @@ class FinderSettings(AbstractSelectionSettings):
     for the mix's Welch-Satterthwaite degrees of freedom (:mod:`._sds_level_common`, issue
     41 session 28), instead of session 27's common factor (capped at an upper confidence
     limit, floored at 1). Off: measured on (fresh, against main 956bab0) SDS discovery frame
-    right 24/30 -> 25/30 (20261450-51), clean 40/40 ``consistent`` on both, but the SDS
-    catalog set 6560 lost an out-of-catalog location (6560529, order 5 near the noise:
-    ``thermal_drift`` named) and three 20x discovery cases gained a catalog name not in
-    their truth: the common component also holds common structure the test's columns do not
-    span (training 20261430: a 2x ``platform_step`` modelled at the wrong order)."""
+    right 37/45 -> 39/45 (20261450-52), clean 40/40 ``consistent`` on both, but the SDS
+    catalog sets 6560 and 6561 each lost an out-of-catalog location (order 5 near the noise:
+    ``thermal_drift`` / ``beam_tilt_axial`` named) and five discovery cases gained a catalog
+    name not in their truth: the common component also holds common structure the test's
+    columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
 
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
