@@ -323,8 +323,7 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
     for _ in range(4000):
         y = sd * rng.standard_normal(R * M) + tau * np.repeat(rng.standard_normal(R), M)
         e = y - Q @ (Q.T @ y)
-        lo = LevelOut(e, Q, R * M, level, False, M)
-        lo.share = True  # FinderSettings.sds_level_common_share
+        lo = LevelOut(e, Q, R * M, level, False, M, share=True)  # sds_level_common_share
         chi2 = float(np.sum((U.T @ y) ** 2)) / lo.sigma**2
         shared.append(chi2 * lo(X) / 2)
         lo_full = LevelOut(e, Q, R * M, level, False, M)  # share off: the full factor
@@ -335,27 +334,46 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
 
 
 def test_the_setting_switches_the_share():
-    """``FinderSettings.sds_level_common_share`` reaches the factor (:func:`with_share`):
-    off, a one-sensor order is charged the full common factor, as before session 27; on,
-    its share ``1 / M`` of it, so its factor is larger; a common pattern's
-    factor is the same either way (its share is 1)."""
+    """``FinderSettings.sds_level_common_share`` reaches the factor where the level is built
+    (:func:`_sds_noise.run_mean_levels` passes it to :func:`_sds_noise._level_sigma`, which
+    builds the :class:`LevelOut`): off, a one-sensor order is charged the full common
+    factor, as before session 27; on, its share ``1 / M`` of it, so its factor is larger; a
+    common pattern's factor is the same either way (its share is 1). The flag is fixed at
+    construction (session 28: it was set on the one shared level by the views and by
+    discovery): it cannot be assigned."""
     from encdesign.diagnose import FinderSettings
-    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel, with_share
+    from encdesign.diagnose.kinds.sds._sds_noise import _level_sigma
 
     rng = np.random.default_rng(2028)
-    R, M = 24, 3
-    e, Q, n_ind = _setup(rng)
+    R, M, K = 24, 3, 4
     phi = rng.uniform(0, 2 * np.pi, R)
+    Xs = np.repeat(np.stack([np.ones(R), np.cos(phi), np.sin(phi)], 1), M, axis=0)
+    resid = rng.standard_normal((R, M * K))
+    fixed = 1.5 * rng.standard_normal((R, 2))  # the fixed sensors' excess: g > 1
     X = order_columns(phi, M, 5, 1)
     common = np.repeat(X[:, 1:2], M, axis=1)
-    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
-    off = with_share(lo, FinderSettings(sds_level_common_share=0))
-    f_off, c_off = off(X), off(common)
-    assert not off.share
-    on = with_share(lo, FinderSettings(sds_level_common_share=1))
-    assert on.share
-    assert on(X) > 1.3 * f_off
-    assert on(common) == pytest.approx(c_off, rel=1e-12)
+    out = {}
+    for on in (0, 1):
+        settings = FinderSettings(sds_level_common_share=on)
+        state: dict = {}
+        _level_sigma(
+            resid,
+            K,
+            Xs,
+            False,
+            test_p=1e-3,
+            level_alpha=1e-3,
+            fixed=fixed,
+            state=state,
+            share=settings.sds_level_common_share > 0,
+        )
+        lo = state["factor"]
+        assert lo.share is bool(on)
+        with pytest.raises(AttributeError):
+            lo.share = not on  # pyright: ignore[reportAttributeAccessIssue]
+        out[on] = lo(X), lo(common)
+    assert out[1][0] > 1.3 * out[0][0]
+    assert out[1][1] == pytest.approx(out[0][1], rel=1e-12)
 
 
 def test_run_step_scale_is_the_factor_of_the_step_and_the_outlier():
@@ -371,8 +389,7 @@ def test_run_step_scale_is_the_factor_of_the_step_and_the_outlier():
     keep = np.ones(R + 2, bool)
     keep[[5, 17]] = False  # two runs the level dropped
     e, Q, n_ind = _setup(rng, R=R, M=M)
-    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
-    lo.share = True
+    lo = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M, share=True)
     f_step, f_out = run_step_scale(lo, keep, M)
     assert f_step.shape == f_out.shape == (M, R + 2)
     j = np.arange(R + 2)

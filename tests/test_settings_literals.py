@@ -200,6 +200,14 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_level_out.py", 1e-12): NUMERIC + " (the same cut-off on a squared norm)",
     ("kinds/sds/_sds_level_out.py", 1e-9): NUMERIC
     + " (common_share: the columns' rank, singular values above 1e-9 of the largest)",
+    ("kinds/sds/_sds_level_common.py", 1e-10): NUMERIC
+    + " (the base's common columns' rank, as _sds_noise.span_basis cuts)",
+    ("kinds/sds/_sds_level_common.py", 2): SHAPE + " (the square of a column norm)",
+    ("kinds/sds/_sds_level_common.py", 1e-6): NUMERIC
+    + " (a direction of the columns' common parts: its singular value, as LevelOut cuts)",
+    ("kinds/sds/_sds_level_common.py", 1e-12): NUMERIC + " (the same cut-off on a squared norm)",
+    ("kinds/sds/_sds_level_common.py", 3): COUNT
+    + " (degrees of freedom left for the common component's level, as LevelOut's)",
     ("kinds/sds/_sds_terms.py", 2): COUNT + " (two sensors)",
     ("kinds/sds/_sds_terms.py", 4): SEARCH
     + " (detection-bound probes: a step's first run at the quartiles of the runs)",

@@ -62,8 +62,6 @@ def level_thresholds(
     factor = getattr(getattr(prep.ctx, "noise_info", None), "level_factor", None)
     if factor is None:
         return thresh
-    if hasattr(factor, "share"):  # the SDS run means' factor (kinds/sds/_sds_level_out)
-        factor.share = bool(getattr(prep.settings, "sds_level_common_share", 0))
     M = int(np.asarray(prep.consts["psi_m"]).size)
     out = np.array(thresh, float)
     for i, tm in enumerate(lib):

@@ -103,6 +103,20 @@ class FinderSettings(AbstractSelectionSettings):
     fresh s27-sds27b against off: SDS discovery frame right 37/45 -> 38/45, clean 40/40
     ``consistent`` on both, SDS catalog 6542 and 6543 every row equal)."""
 
+    sds_level_common_direct: int = eqx.field(default=0, static=True)
+    """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
+    without a test's columns takes the moving sensors' common component at its own unbiased
+    level (the base residual's common component off the base's common columns and the
+    test's common part), mixed with the differences' level at the columns' share and widened
+    for the mix's Welch-Satterthwaite degrees of freedom (:mod:`._sds_level_common`, issue
+    41 session 28), instead of session 27's common factor (capped at an upper confidence
+    limit, floored at 1). Off: measured on (fresh, against main 956bab0) SDS discovery frame
+    right 37/45 -> 39/45 (20261450-52), clean 40/40 ``consistent`` on both, but the SDS
+    catalog sets 6560 and 6561 each lost an out-of-catalog location (order 5 near the noise:
+    ``thermal_drift`` / ``beam_tilt_axial`` named) and five discovery cases gained a catalog
+    name not in their truth: the common component also holds common structure the test's
+    columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
+
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
     take change points and single-value outliers out of the run-mean noise level

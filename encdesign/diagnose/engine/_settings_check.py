@@ -6,7 +6,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
-MAY_BE_ZERO = ("discover_max_aliases", "vibration_staircase_harmonics", "sds_level_common_share")
+MAY_BE_ZERO = (
+    "discover_max_aliases",
+    "vibration_staircase_harmonics",
+    "sds_level_common_share",
+    "sds_level_common_direct",
+)
 """Counts where 0 turns a search off, and switches (checked as integers >= 0)."""
 
 

@@ -81,7 +81,6 @@ from ._sds_level_out import (
     modulated_scale,
     orders_scale,
     run_step_scale,
-    with_share,
 )
 from ._sds_noise import (
     EXPLANATIONS,
@@ -252,7 +251,7 @@ def _level_and_angle(prep: Prepared) -> tuple[LevelOut, np.ndarray] | None:
     if factor is None:
         return None
     name = "theta_eff" if "theta_eff" in prep.rows else "theta"
-    return with_share(factor, prep.settings), np.asarray(prep.rows[name], float)[prep.keep]
+    return factor, np.asarray(prep.rows[name], float)[prep.keep]
 
 
 def view_mean_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:

@@ -52,6 +52,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ._sds_level_common import CommonPart
+
 
 class RunMeanLevel:
     """``sigma_of(s, nu)`` on arrays: the run-mean level (rad) of raw levels ``s`` (rad) with
@@ -67,6 +69,12 @@ class RunMeanLevel:
     def __init__(self, widen: Callable[[float], float], excess: float, ucl: float | None):
         self.widen, self.excess, self.ucl = widen, float(excess), ucl
 
+    def widening(self, nu) -> np.ndarray:
+        """``c = widen(nu)`` on an array of degrees of freedom (once per distinct value)."""
+        nu = np.asarray(nu)
+        vals, inv = np.unique(nu, return_inverse=True)
+        return np.array([self.widen(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
+
     def __call__(self, s, nu, share=None) -> np.ndarray:
         """The level (rad) at raw levels ``s`` with ``nu`` degrees of freedom; ``share``
         (same shape, 0..1; ``None``: 1): the tested columns' share ``kappa`` in the moving
@@ -74,8 +82,7 @@ class RunMeanLevel:
         ``sqrt(1 + kappa (g^2 - 1))`` (module doc: the common part's excess reaches a
         test only through its common component)."""
         s, nu = np.asarray(s, float), np.asarray(nu)
-        vals, inv = np.unique(nu, return_inverse=True)
-        c = np.array([self.widen(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
+        c = self.widening(nu)
         g = np.sqrt(1.0 + self.excess / s**2)
         if self.ucl is not None:
             g = np.minimum(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)))
@@ -97,16 +104,43 @@ class LevelOut:
     (widening and common factor, as :func:`._sds_noise._level_sigma` makes it:
     :class:`RunMeanLevel`). A direction of the columns that ``Q`` holds
     (its part off ``Q`` below ``1e-6`` of the columns' norm) is no degree of freedom of the
-    level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1."""
+    level (it is not in ``e``); fewer than 3 degrees of freedom left: factor 1. ``share``:
+    the common factor charged at the tested columns' share (:func:`common_share`;
+    ``FinderSettings.sds_level_common_share``, given where the level is built,
+    :func:`._sds_noise.run_mean_levels`), fixed at construction (:attr:`share`). ``common``
+    (with the share, a :class:`RunMeanLevel` and the run means not projected): the base
+    residual's run means (R, M) and the base's common columns (R, k), whose common component
+    (:class:`._sds_level_common.CommonPart`) at its own unbiased
+    level then replaces the common factor in a test's level where it has degrees of freedom
+    left (``FinderSettings.sds_level_common_direct``, session 28)."""
 
-    def __init__(self, e, Q, n_ind: int, sigma_of: Callable[..., float | np.ndarray], proj, M):
+    def __init__(
+        self,
+        e,
+        Q,
+        n_ind: int,
+        sigma_of: Callable[..., float | np.ndarray],
+        proj,
+        M,
+        share: bool = False,
+        common: tuple[np.ndarray, np.ndarray] | None = None,
+    ):
         self.e, self.Q, self.sigma_of, self.proj, self.M = e, Q, sigma_of, bool(proj), int(M)
+        self._share = bool(share)
+        direct = self._share and not self.proj and isinstance(sigma_of, RunMeanLevel)
+        self.common = CommonPart(*common) if direct and common is not None else None
         self.ssr = float(e @ e)
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
         self.memo: dict = {}  # orders_scale per (angles, orders, channels): views re-run often
-        self.share = False  # the common factor at the columns' share (:func:`with_share`)
         self.sigma = float(sigma_of(math.sqrt(self.ssr / self.nu), self.nu)) if ok else 0.0
+
+    @property
+    def share(self) -> bool:
+        """Whether a test's common factor is charged at its columns' share (module doc);
+        set when the level is built, never after (the views and discovery share one
+        level)."""
+        return self._share
 
     def _off(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``X`` (R, M, ...) projected as the run means are, flattened to (R*M, -1), and
@@ -116,13 +150,16 @@ class LevelOut:
         X = X.reshape(X.shape[0] * X.shape[1], -1)
         return X - self.Q @ (self.Q.T @ X), np.sum(X**2, 0)
 
-    def _factor(self, g: np.ndarray, r: np.ndarray, share=None) -> np.ndarray:
+    def _factor(self, g: np.ndarray, r: np.ndarray, share=None, gc=None) -> np.ndarray:
         """``(sigma / sigma')^2`` per power ``g`` taken by columns of rank ``r`` (arrays of
         one shape): one call of ``sigma_of`` on all of them (session 24: a call per entry
         was a fifth of an SDS record's discovery time). ``share`` (same shape): the
         columns' share in the common component (:func:`common_share`), passed on to
         ``sigma_of`` where it takes one (:class:`RunMeanLevel`); ``None``: the full
-        common factor."""
+        common factor. ``gc`` (two arrays of that shape, with ``common``): the power the
+        columns' common parts take from the common component and their rank
+        (:class:`._sds_level_common.CommonPart`): the level with the common component at
+        its own level where it is defined."""
         g, r = np.asarray(g, float), np.asarray(r, int)
         out = np.ones(g.shape)
         # r = 0 (the columns inside Q: the level took them already): s' = s, only the share
@@ -135,6 +172,14 @@ class LevelOut:
             if share is not None and isinstance(self.sigma_of, RunMeanLevel):
                 k = np.asarray(share, float).ravel()[idx]
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k), float)
+                if (
+                    self.common is not None
+                    and gc is not None
+                    and isinstance(self.sigma_of, RunMeanLevel)
+                ):
+                    pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
+                    own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
+                    sig = np.where(np.isfinite(own), own, sig)
             else:
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
             out.flat[idx] = (self.sigma / sig) ** 2
@@ -152,7 +197,11 @@ class LevelOut:
         g = float(np.sum((U.T @ self.e) ** 2))
         k = common_share(X if not self.proj else X - X.mean(1, keepdims=True))
         k = np.array([k]) if self.share else None
-        return float(self._factor(np.array([g]), np.array([U.shape[1]]), k)[0])
+        gc = None
+        if self.common is not None:
+            pc, rc = self.common.power(X)
+            gc = (np.array([pc]), np.array([rc]))
+        return float(self._factor(np.array([g]), np.array([U.shape[1]]), k, gc)[0])
 
     def pairs(self, A: np.ndarray) -> np.ndarray:
         """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2)."""
@@ -167,14 +216,9 @@ class LevelOut:
         b = np.einsum("n,ngi->gi", self.e, P)
         proj = np.einsum("gi,gij->gj", b, V)  # b along the eigenvectors
         g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
-        return self._factor(g, big.sum(1), pair_shares(A if self.share and not self.proj else None))
-
-
-def with_share(factor: LevelOut, settings) -> LevelOut:
-    """``factor`` with its common factor charged at the tested columns' share where
-    ``settings.sds_level_common_share`` says so (module doc; the whitening level unchanged)."""
-    factor.share = bool(settings.sds_level_common_share)
-    return factor
+        k = pair_shares(A if self.share and not self.proj else None)
+        gc = self.common.pair_powers(A) if self.common is not None else None
+        return self._factor(g, big.sum(1), k, gc)
 
 
 def common_share(X: np.ndarray) -> float:

@@ -91,11 +91,10 @@ def common_x_orders(consts: Mapping[str, Any], orders) -> list[int]:
 
 
 def coil_orders(meta: Mapping[str, Any], consts: Mapping[str, Any]) -> tuple[int, ...]:
-    """The coil orders ``1 … pole_pairs − 1`` ``coil_mismatch`` may fit, less those with one
-    phase at every moving sensor without phi_ref (:func:`common_x_orders`): on the projected
-    values their columns are rounding, which a fit takes at any amplitude (2.6e6 rad at order
-    4 of four equally spaced sensors, training key 7258500), as the base leaves such design
-    orders out."""
+    """The coil orders ``1 … pole_pairs − 1`` ``coil_mismatch`` may fit, less those with one phase
+    at every moving sensor without phi_ref (:func:`common_x_orders`): on the projected values their
+    columns are rounding, which a fit takes at any amplitude (2.6e6 rad at order 4 of four equally
+    spaced sensors, training key 7258500), as the base leaves such design orders out."""
     pp = int(meta.get("encoder", {}).get("pole_pairs", 0) or 0)
     gone = set(common_x_orders(consts, range(1, pp)))
     return tuple(o for o in range(1, pp) if o not in gone)
@@ -188,8 +187,7 @@ def _saturating_columns(
     platform bench can put there: a constant per moving sensor, rotating orders ``1..L``
     and the design orders in ``x = φ + ψ_m``, common orders ``1..L`` in ``φ``, a drift in
     time; ``L`` as large as ``fraction`` (``FinderSettings.sds_saturate_fraction``) of the values
-    allows. Projected on the
-    moving-sensor differences without ``phi_ref``."""
+    allows. Projected on the moving-sensor differences without ``phi_ref``."""
     phi = np.asarray(rows["phi"], float)
     psi_m = np.asarray(consts["psi_m"], float)
     R, M = phi.size, psi_m.size
@@ -301,11 +299,10 @@ def _common_excess(lv: list[float], fixed: np.ndarray | None, M: int, K: int) ->
 
 
 def common_base_columns(phi: np.ndarray, psi_m: np.ndarray, orders_base: list[int]) -> np.ndarray:
-    """Columns ``(R, k)`` the base model puts in the run means' part common to the moving
-    sensors (with ``phi_ref``): the constant and, per design order ``n`` of the base, the
-    mean over the moving sensors of its columns ``cos / sin n (φ + ψ_m)`` where that mean
-    is not zero (``n ψ_m`` not spread evenly: e.g. ``n`` a multiple of ``M`` for equally
-    spaced sensors)."""
+    """Columns ``(R, k)`` the base model puts in the run means' part common to the moving sensors
+    (with ``phi_ref``): the constant and, per design order ``n`` of the base, the mean over the
+    moving sensors of its columns ``cos / sin n (φ + ψ_m)`` where that mean is not zero
+    (``n ψ_m`` not spread evenly: e.g. ``n`` a multiple of ``M`` for equally spaced sensors)."""
     phi = np.asarray(phi, float)
     psi = np.asarray(psi_m, float)
     cols = [np.ones(phi.size)]
@@ -364,6 +361,8 @@ def _level_sigma(
     phi: np.ndarray | None = None,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
     state: dict | None = None,
+    share: bool = False,
+    direct: bool = False,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -376,12 +375,12 @@ def _level_sigma(
     either; with the platform angles ``phi`` (one per run, rows in time order) also an order
     of ``phi`` on one sensor that is there throughout, grows or switches on (a pair of
     columns, :func:`_order_groups`, F(2, dof); each step takes the column or pair of least
-    Bonferroni-adjusted p-value; issue 41, session 18). The level is ``sqrt(SSR / nu)``
-    with ``nu`` = independent values − rank (without
-    ``phi_ref`` the values of a run are projected on the moving-sensor differences: ``R·(M −
-    1)`` independent values, not ``R·M``), then widened by :func:`dof_widening` (``nu``) for
-    its estimation error: with ~12 platform positions it is known to ~±17 %, which the
-    engine's known-level tests would otherwise turn into false alarms. With ``phi_ref`` it
+    Bonferroni-adjusted p-value; issue 41, session 18). The level is ``sqrt(SSR / nu)`` with
+    ``nu`` = independent values − rank (without ``phi_ref`` the values of a run are projected
+    on the moving-sensor differences: ``R·(M − 1)`` independent values, not ``R·M``), then
+    widened by :func:`dof_widening` (``nu``) for its estimation error: with ~12 platform
+    positions it is known to ~±17 %, which the engine's known-level tests would otherwise
+    turn into false alarms. With ``phi_ref`` it
     is then raised by :func:`_common_factor` (from the contrasts and the fixed sensors' run
     means ``fixed``): the saturated fit leaves the run means' common component no degrees
     of freedom. With ``common_base`` (the base's common columns, :func:`common_base_columns`)
@@ -476,7 +475,8 @@ def _level_sigma(
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
         sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
-        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M)
+        common = (resid[:, :M], common_base) if direct and common_base is not None else None
+        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common)
     if info is not None:
         info.update(
             run_means_rad=s_raw,
@@ -534,6 +534,8 @@ def run_mean_levels(
             common_quantile=settings.sds_common_level_quantile,
             pairs=pairs,
             state=state,
+            share=settings.sds_level_common_share > 0,
+            direct=settings.sds_level_common_direct > 0,
         )
 
     return levels
