@@ -172,11 +172,7 @@ class LevelOut:
             if share is not None and isinstance(self.sigma_of, RunMeanLevel):
                 k = np.asarray(share, float).ravel()[idx]
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k), float)
-                if (
-                    self.common is not None
-                    and gc is not None
-                    and isinstance(self.sigma_of, RunMeanLevel)
-                ):
+                if self.common is not None and gc is not None:  # (set only on a RunMeanLevel)
                     pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
                     own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
                     sig = np.where(np.isfinite(own), own, sig)
