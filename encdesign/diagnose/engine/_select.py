@@ -30,6 +30,7 @@ from ._evidence import (
 )
 from ._evidence import term_rms as _term_rms
 from ._fit import FitResult, Fitter, Term, make_term
+from ._fit_memo import remembered_fit, remembering
 from ._goodness import goodness_of_fit
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
@@ -575,7 +576,7 @@ def _backward(prep, fitter, accepted, current, cur_resid, findings, rejected, vi
         return current, cur_resid, findings, without
     for s in list(accepted):
         others = frozen([t for t in current.terms if t.cand.name != s.name])
-        fr = fitter.fit(others)
+        fr = remembered_fit(fitter, others)
         without[s.name] = fr
         if fr.heldout_chi2 - current.heldout_chi2 < prep.settings.heldout_min:
             accepted.remove(s)
@@ -635,8 +636,14 @@ def select(
     log: Callable[[str], None] = lambda s: None,
 ):
     """Forward selection with refits, then a backward held-out check (stage 4); returns the
-    :class:`Selection`."""
-    base = fitter.fit(base_terms)
+    :class:`Selection`. A fit made twice in it is made once (:mod:`._fit_memo`)."""
+    with remembering():
+        return _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects, log)
+
+
+def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects, log):
+    """:func:`select`'s work, inside its memo of fits."""
+    base = remembered_fit(fitter, base_terms)
     cur_resid = fitter.residual(base.terms)
     findings0 = locate(prep, cur_resid, views, scan_order)
     N = prep.n_values
@@ -725,7 +732,8 @@ def select(
                 + ": this recording cannot tell them apart; the name is only the one with "
                 "the lower information criterion",
             ]
-        full = fitter.fit(_unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
+        # (the rules may have made this fit already: _kept_fit's with the candidate)
+        full = remembered_fit(fitter, _unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
         if full.chi2 <= fr.chi2:
             fr = full
         del cur_resid, st  # (one residual held at a time)
@@ -750,7 +758,7 @@ def select(
         fr = without.get(s.name)
         if fr is None:
             others = frozen([t for t in current.terms if t.cand.name != s.name])
-            fr = fitter.fit(others) if len(accepted) > 1 else base
+            fr = remembered_fit(fitter, others) if len(accepted) > 1 else base
         shares[s.name] = float((fr.chi2 - current.chi2) / total) if total > 0 else 0.0
     return Selection(
         base=base,

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 
 from ._candidates import Candidate, Param
 from ._fit import make_term
+from ._fit_memo import remembered_steps
 from ._stats_pass import drive_many
 
 TRIAL_STEPS = 12
@@ -61,7 +62,8 @@ def _kept_fit(fitter, base: list, term, other) -> tuple[float | None, dict | Non
     fits = [list(base), [*base, term], [*base, other], [*base, other, term]]
     # the four fits side by side (issue 43): one pass over the rows per round for all, the
     # model's Jacobian at its start made once per chunk; each gets the numbers it gets alone
-    f0, f1, fo, f2 = drive_many([fitter.fit_steps(f, max_steps=TRIAL_STEPS) for f in fits])
+    # (a fit the selection made before, or makes again, is made once: _fit_memo)
+    f0, f1, fo, f2 = drive_many([remembered_steps(fitter, f, TRIAL_STEPS) for f in fits])
     g0 = f0.chi2 - f1.chi2
     if g0 <= 0:
         return None, None

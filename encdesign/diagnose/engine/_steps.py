@@ -184,17 +184,21 @@ def beaten_by_step(
     k = max(fr.n_determined(len(fr.terms) - 1), 0)
     base_terms = frozen(current.terms)
     cand = frozen(fr.terms[-1:])
+    first = _first_fits(fitter, prep, base_terms, cand, steps, cache)
     for st in steps:
-        key = (st["tau_s"], st["run"], tuple(st["channels"]))
+        key = _step_key(st)
         f = st["finding"]
         for attempt in range(2):
-            with_cand = fitter.fit_steps([*base_terms, step_term(prep, st), *cand])
-            if key not in cache:  # the step alone and with the candidate side by side: the
-                # second sums its own columns beside the first's pass (_stats_pass.drive_many)
-                alone = fitter.fit_steps([*base_terms, step_term(prep, st)])
-                cache[key], both = drive_many([alone, with_cand])
+            if attempt == 0:
+                both = first[key]
             else:
-                both = drive(with_cand)
+                with_cand = fitter.fit_steps([*base_terms, step_term(prep, st), *cand])
+                if key not in cache:  # the step alone and with the candidate side by side:
+                    # the second sums its own columns beside the first's pass (drive_many)
+                    alone = fitter.fit_steps([*base_terms, step_term(prep, st)])
+                    cache[key], both = drive_many([alone, with_cand])
+                else:
+                    both = drive(with_cand)
             fs = cache[key]
             if fr.chi2 - both.chi2 < prep.settings.bic_min + logn:
                 break  # with the candidate there is no step left: it makes it
@@ -230,8 +234,42 @@ def beaten_by_step(
                 # speed: it is no longer the step this rule is about (issue 44 E)
                 return None
             st, f = st2, st2["finding"]
-            key = (st["tau_s"], st["run"], tuple(st["channels"]))
+            key = _step_key(st)
     return None
+
+
+def _step_key(st: dict) -> tuple:
+    """A located step's identity in :func:`beaten_by_step`'s cache: its time, run, channels."""
+    return (st["tau_s"], st["run"], tuple(st["channels"]))
+
+
+def _first_fits(fitter, prep, base_terms, cand, steps: list[dict], cache: dict) -> dict:
+    """The first attempt's fits of every step of :func:`beaten_by_step` side by side, one
+    pass over the rows for all (issue 43; one after another, a pass per step): per step key
+    the fit of the frozen model with the step and the candidate ``cand`` (frozen), and into
+    ``cache`` the fit with the step alone where it is not there yet. The fits are linear
+    (one pass each); each sums what it would sum alone after the others' passes
+    (:func:`._stats_pass.drive_many`: a step's fit beside the first's, whose leading block,
+    the frozen model, it shares, sums only its own columns; the same numbers). A step past
+    one that refuses the candidate is fitted too: in the same pass, it costs its own
+    columns' sums, not a pass."""
+    fits, where = [], []
+    for st in steps:
+        key = _step_key(st)
+        if any(w == ("both", key) for w in where):
+            continue  # (the same step twice)
+        if key not in cache and ("alone", key) not in where:
+            fits.append(fitter.fit_steps([*base_terms, step_term(prep, st)]))
+            where.append(("alone", key))
+        fits.append(fitter.fit_steps([*base_terms, step_term(prep, st), *cand]))
+        where.append(("both", key))
+    first = {}
+    for (what, key), got in zip(where, drive_many(fits)):
+        if what == "alone":
+            cache[key] = got
+        else:
+            first[key] = got
+    return first
 
 
 REFINE_STEP_SHIFTS = 3
