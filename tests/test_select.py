@@ -64,3 +64,37 @@ def test_a_tie_that_fits_better_says_the_criterion_decided():
     assert "information criterion" in better and "-1631.7" in better
     alike = tie_reason("vibration", 3.2, 0.984, -1631.7, -1669.1, s)
     assert "fits as well (chi-square +3.2" in alike
+
+
+def test_one_residual_is_held_while_the_selection_scans(monkeypatch):
+    """Issue 43 (peak memory): each scan the selection makes of its current residual has no
+    other residual of the selection beside it (on main the round's residual stayed alive
+    through the scan after a candidate was named: the default argument of ``kept_resid``)."""
+    import sys
+    import weakref
+
+    import encdesign.diagnose.engine._fit as fit_mod
+    import encdesign.diagnose.engine._select as select_mod
+    from tests.test_diagnose import _bench as bench
+
+    made: list = []
+    residual, locate = fit_mod.Fitter.residual, select_mod.locate
+    alive_at_scans: list[int] = []
+
+    def tracked(self, terms):
+        r = residual(self, terms)
+        made.append(weakref.ref(r))
+        return r
+
+    def scanned(prep, resid, *a, **k):
+        if sys._getframe(1).f_code.co_name == "select":  # the selection's own scans
+            alive_at_scans.append(sum(w() is not None and w() is not resid for w in made))
+        return locate(prep, resid, *a, **k)
+
+    monkeypatch.setattr(fit_mod.Fitter, "residual", tracked)
+    monkeypatch.setattr(select_mod, "locate", scanned)
+    rec, _ = bench(6, vibration_hz=37.0)
+    d = diagnose(rec)
+    assert [e["name"] for e in d.effects] == ["vibration"]
+    assert len(alive_at_scans) >= 2  # the base's residual and the named effect's
+    assert alive_at_scans == [0] * len(alive_at_scans)

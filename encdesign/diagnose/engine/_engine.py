@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import input_error
+from ._aside import SetAside
 from ._bounds import REFERENCE_DESCRIPTION, Reference, detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
@@ -774,11 +775,18 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
         state_reduction(doc, reduced)
         doc["verdict"] = decide_verdict(doc)
     with stage("bounds"):  # issue 44 F: what the record could have shown
+        # the selection's two residuals are not read by the bounds (the stage with the
+        # highest peak on a long record): in a temporary file meanwhile (issue 43, _aside)
+        aside = SetAside([sel.base_resid, sel.final_resid])
+        sel = dataclasses.replace(sel, base_resid=None, final_resid=None)
         ref = bounds_reference(doc, sel, max_effects)
         cands = list(seen.values())
         doc["detection_bounds"] = detection_bounds(prep, fitter, ref, cands, kind.views(prep), scan)
         doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
         doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)
+        base_resid, final_resid = aside.restore()
+        sel = dataclasses.replace(sel, base_resid=base_resid, final_resid=final_resid)
+        del base_resid, final_resid
     with stage("report"):
         contributions = effect_contributions(prep, fitter, sel)
     plot = PlotData(

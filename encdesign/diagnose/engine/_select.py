@@ -736,7 +736,9 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
         full = remembered_fit(fitter, _unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
         if full.chi2 <= fr.chi2:
             fr = full
-        del cur_resid, st  # (one residual held at a time)
+        # (one residual held at a time: kept_resid's default argument holds this round's
+        # residual too, through the next scan; issue 43, peak memory)
+        del cur_resid, st, kept_resid
         resid = fitter.residual(fr.terms)
         accepted.append(
             Step(cand.name, fr, dbic, dho, col, notes, trms, erms, ties, doubt, alternatives)
