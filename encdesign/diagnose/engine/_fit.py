@@ -280,8 +280,8 @@ class Fitter:
             ]
             if held_lin:
                 v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
-            if whole and isinstance(Jt, Factored):
-                Jt = Jt.whole()
+            if isinstance(Jt, Factored) and whole:  # (a value only: never made whole)
+                Jt = Jt.whole() if jac else None
             return v, Jt
         memo = self.memo  # during a pass for several fits: this term at these values, this chunk
         mkey = ("term", id(term.cand), a, jac, term_key(term)) if memo is not None else ()
@@ -397,27 +397,36 @@ class Fitter:
 
     def _scaled_jacobian(self, terms: Sequence[Term], a: int, b: int, x: dict, order, sc):
         """:meth:`jacobian` with rows in ``order``, projected, whitened and scaled by ``sc``:
-        ``(J - mean) sqrt(w) sc``. Where the first term is linear with a factored Jacobian
-        (:class:`Factored`), its columns are one matrix product of its fold-sorted features
-        with its weights projected, whitened and scaled (``P (X W) = X (P W)``: the same
-        numbers to rounding, without the term's ``(rows, C, k)`` Jacobian, its sort or its
-        passes; issue 43)."""
+        ``(J - mean) sqrt(w) sc``. A linear term with a factored Jacobian (:class:`Factored`)
+        gets its columns as one matrix product of its fold-sorted features with its weights
+        projected, whitened and scaled (``P (X W) = X (P W)``: the same numbers to rounding,
+        without the term's ``(rows, C, k)`` Jacobian, its sort or its passes; issue 43); the
+        other terms' columns are the numbers :meth:`jacobian` gives, scaled."""
+        if not any(linear_only(t) and factors_of(t.cand) is not None for t in terms):
+            pred, J = self.jacobian(terms, a, b, x, order)
+            J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
+            return pred, J
+        got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
         sw = np.sqrt(self.w_ch)
-        first = terms[0] if terms else None
-        if first is not None and linear_only(first) and factors_of(first.cand) is not None:
-            v, F0 = self.eval_term(first, a, b, x, jac=True, whole=False)
-            if isinstance(F0, Factored):
-                k0 = F0.W.shape[2]
-                W = F0.W - F0.W.mean(1, keepdims=True) if self.prep.kd.project else F0.W
-                S0 = F0.whole(order, W * (sw[:, None] * sc[None, :k0]))
-                if len(terms) == 1:
-                    return v, S0
-                pr, Jr = self.jacobian(terms[1:], a, b, x, order)
-                Jr *= sw[:, None] * sc[None, k0:]
-                return v + pr, np.concatenate([S0, Jr], axis=2)
-        pred, J = self.jacobian(terms, a, b, x, order)
-        J *= sw[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
-        return pred, J
+        C = self.prep.n_channels
+        ks = [J.W.shape[2] if isinstance(J, Factored) else J.shape[2] for _, J in got]
+        out = np.empty((b - a, C, sum(ks)))
+        pred = np.zeros((b - a, C))
+        at = 0
+        for (v, J), k in zip(got, ks):
+            pred += v
+            s = sw[:, None] * sc[None, at : at + k]
+            if isinstance(J, Factored):
+                W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
+                out[:, :, at : at + k] = J.whole(order, W * s)
+            else:
+                cols = out[:, :, at : at + k]
+                cols[...] = J[order]
+                if self.prep.kd.project:
+                    cols -= cols.mean(1, keepdims=True)
+                cols *= s
+            at += k
+        return pred, out
 
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]
