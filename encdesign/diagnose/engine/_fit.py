@@ -233,8 +233,11 @@ class Fitter:
             fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
             key = (id(term.cand), a, held, fmask)
             hit = self._jcache.get(key)
-            if hit is None and not jac:  # a value only (the Jacobian is not cached): no Jacobian
+            factors = factors_of(term.cand)
+            if hit is None and not jac and factors is None:  # a value only: no Jacobian
                 return np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None
+            # (a factored term's value is v0 + X (W p) whether its factors were kept or not:
+            # the same numbers whatever the caches hold, on one process or several)
             if hit is None:
                 memo = self.memo  # during a pass for several fits: another fit's, this chunk
                 hit = memo.get(("jac", *key)) if memo is not None else None
@@ -244,7 +247,6 @@ class Fitter:
                         q.name: (np.zeros_like(p[q.name]) if q.linear else p[q.name])
                         for q in term.cand.params
                     }
-                    factors = factors_of(term.cand)
                     if factors is not None:  # J = X W: per-row features, not (rows, C, k)
                         v0, X, W = factors(p0, x, term.free, b - a)
                         hit = (v0, Factored(X, W))
@@ -256,7 +258,7 @@ class Fitter:
                         memo.put(("jac", *key), hit)
                 v0, Jt = hit
                 nbytes = Jt.nbytes + v0.nbytes
-                if self.keeps and self._jbytes + nbytes < CACHE_BYTES:
+                if jac and self.keeps and self._jbytes + nbytes < CACHE_BYTES:
                     self._jcache[key] = hit
                     self._jbytes += nbytes
             v0, Jt = hit
