@@ -17,6 +17,7 @@ from ._constants import CACHE_BYTES, CHUNK_ROWS
 from ._normal import (
     Accumulated,
     BlockCache,
+    factors_of,
     free_scales,
     linear_only,
     linear_valjac,
@@ -127,6 +128,27 @@ class FitResult:
         return math.sqrt(self.heldout_ssr / max(prep.n_values, 1))
 
 
+@dataclasses.dataclass
+class Factored:
+    """A term's Jacobian on a chunk as ``J[n, c, j] = sum_f X[n, f] W[f, c, j]``
+    (:func:`._normal.register_factors`): ``X`` (rows, F), ``W`` (F, C, k)."""
+
+    X: np.ndarray
+    W: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held."""
+        return int(self.X.nbytes + self.W.nbytes)
+
+    def whole(self, order: np.ndarray | None = None, W: np.ndarray | None = None) -> np.ndarray:
+        """``J`` (rows, C, k), its rows in ``order`` where given, from weights ``W`` (default
+        the term's own): one matrix product."""
+        X = self.X if order is None else self.X[order]
+        W = self.W if W is None else W
+        return (X @ W.reshape(W.shape[0], -1)).reshape(X.shape[0], *W.shape[1:])
+
+
 class Fitter:
     """Chunked evaluation of a sum of terms, its Jacobian and the per-fold statistics."""
 
@@ -194,12 +216,14 @@ class Fitter:
         """The kept ``(G, Gu)`` of the static block ``static`` (:mod:`._normal`) or ``None``."""
         return self.blocks.gram(static_key(static))
 
-    def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool):
+    def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool, whole: bool = True):
         """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
 
         A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
         depending only on the held (nonlinear) parameters: those are cached (within a
-        memory budget), so refits with other terms cost one matrix product."""
+        memory budget), so refits with other terms cost one matrix product. A term with a
+        factored Jacobian (:func:`._normal.register_factors`) keeps ``J = X W`` as its
+        factors: without ``whole``, the Jacobian is returned as :class:`Factored`."""
 
         def params() -> dict:  # NumPy values: the compiled function transfers them itself
             return dict(term.values)  # (a jnp.asarray each was ~10% of a long diagnosis)
@@ -209,8 +233,11 @@ class Fitter:
             fmask = tuple(term.free[q.name].tobytes() for q in term.cand.params)
             key = (id(term.cand), a, held, fmask)
             hit = self._jcache.get(key)
-            if hit is None and not jac:  # a value only (the Jacobian is not cached): no Jacobian
+            factors = factors_of(term.cand)
+            if hit is None and not jac and factors is None:  # a value only: no Jacobian
                 return np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None
+            # (a factored term's value is v0 + X (W p) whether its factors were kept or not:
+            # the same numbers whatever the caches hold, on one process or several)
             if hit is None:
                 memo = self.memo  # during a pass for several fits: another fit's, this chunk
                 hit = memo.get(("jac", *key)) if memo is not None else None
@@ -220,14 +247,18 @@ class Fitter:
                         q.name: (np.zeros_like(p[q.name]) if q.linear else p[q.name])
                         for q in term.cand.params
                     }
-                    v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
-                    v0 = np.asarray(v0)[: b - a]
-                    hit = (v0, self._gather(term, J, b - a, v0.shape[1]))
+                    if factors is not None:  # J = X W: per-row features, not (rows, C, k)
+                        v0, X, W = factors(p0, x, term.free, b - a)
+                        hit = (v0, Factored(X, W))
+                    else:
+                        v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
+                        v0 = np.asarray(v0)[: b - a]
+                        hit = (v0, self._gather(term, J, b - a, v0.shape[1]))
                     if memo is not None:
                         memo.put(("jac", *key), hit)
                 v0, Jt = hit
                 nbytes = Jt.nbytes + v0.nbytes
-                if self.keeps and self._jbytes + nbytes < CACHE_BYTES:
+                if jac and self.keeps and self._jbytes + nbytes < CACHE_BYTES:
                     self._jcache[key] = hit
                     self._jbytes += nbytes
             v0, Jt = hit
@@ -236,7 +267,12 @@ class Fitter:
                 or [np.zeros(0)]
             )
             # held linear parameters (fit=False) enter through v0 only when zero: add them
-            v = v0 + (Jt.reshape(-1, lin.size) @ lin).reshape(v0.shape) if lin.size else v0.copy()
+            if not lin.size:
+                v = v0.copy()
+            elif isinstance(Jt, Factored):
+                v = v0 + Jt.X @ (Jt.W.reshape(-1, lin.size) @ lin).reshape(Jt.X.shape[1], -1)
+            else:
+                v = v0 + (Jt.reshape(-1, lin.size) @ lin).reshape(v0.shape)
             held_lin = [
                 q
                 for q in term.cand.params
@@ -246,6 +282,8 @@ class Fitter:
             ]
             if held_lin:
                 v = np.asarray(_val_fn(term.cand)(params(), x))[: b - a]
+            if isinstance(Jt, Factored) and whole:  # (a value only: never made whole)
+                Jt = Jt.whole() if jac else None
             return v, Jt
         memo = self.memo  # during a pass for several fits: this term at these values, this chunk
         mkey = ("term", id(term.cand), a, jac, term_key(term)) if memo is not None else ()
@@ -351,14 +389,46 @@ class Fitter:
             if got is not None:
                 pred = np.zeros((b - a, self.prep.n_channels))
                 for tm in terms:
-                    pred += self.eval_term(tm, a, b, x, jac=True)[0]
+                    pred += self.eval_term(tm, a, b, x, jac=True, whole=False)[0]
                 return (pred, *got)
         order, edges = self._fold_order(a, b)
-        pred, J = self.jacobian(terms, a, b, x, order)
-        J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
+        pred, J = self._scaled_jacobian(terms, a, b, x, order, sc)
         if memo is not None:
             memo.put(mkey, (J, order, edges))
         return pred, J, order, edges
+
+    def _scaled_jacobian(self, terms: Sequence[Term], a: int, b: int, x: dict, order, sc):
+        """:meth:`jacobian` with rows in ``order``, projected, whitened and scaled by ``sc``:
+        ``(J - mean) sqrt(w) sc``. A linear term with a factored Jacobian (:class:`Factored`)
+        gets its columns as one matrix product of its fold-sorted features with its weights
+        projected, whitened and scaled (``P (X W) = X (P W)``: the same numbers to rounding,
+        without the term's ``(rows, C, k)`` Jacobian, its sort or its passes; issue 43); the
+        other terms' columns are the numbers :meth:`jacobian` gives, scaled."""
+        if not any(linear_only(t) and factors_of(t.cand) is not None for t in terms):
+            pred, J = self.jacobian(terms, a, b, x, order)
+            J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
+            return pred, J
+        got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
+        sw = np.sqrt(self.w_ch)
+        C = self.prep.n_channels
+        ks = [J.W.shape[2] if isinstance(J, Factored) else J.shape[2] for _, J in got]
+        out = np.empty((b - a, C, sum(ks)))
+        pred = np.zeros((b - a, C))
+        at = 0
+        for (v, J), k in zip(got, ks):
+            pred += v
+            s = sw[:, None] * sc[None, at : at + k]
+            if isinstance(J, Factored):
+                W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
+                out[:, :, at : at + k] = J.whole(order, W * s)
+            else:
+                cols = out[:, :, at : at + k]
+                cols[...] = J[order]
+                if self.prep.kd.project:
+                    cols -= cols.mean(1, keepdims=True)
+                cols *= s
+            at += k
+        return pred, out
 
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]

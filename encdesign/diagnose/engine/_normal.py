@@ -90,6 +90,27 @@ def linear_valjac(cand):
     return jax.jit(vj)
 
 
+_FACTORS: dict = {}
+
+
+def register_factors(cand, factors) -> None:
+    """Give ``cand`` a factored Jacobian over its linear parameters (issue 43):
+    ``factors(p, x, free, rows) -> (v0 (rows, C), X (rows, F), W (F, C, k))`` on a chunk's
+    first ``rows`` rows, with its nonlinear parameters held at ``p``'s values and its linear
+    ones at zero: ``v0`` the value there, and the Jacobian over the ``k`` free linear scalars
+    (in :func:`linear_valjac`'s order, gathered by the ``free`` masks) ``J[n, c, j] =
+    sum_f X[n, f] W[f, c, j]``. Per-row features shared by every channel: the fitter
+    caches ``X`` (``F`` numbers a row, not ``C k``) and makes the projected, whitened,
+    scaled Jacobian of a static block that starts with the term in one matrix product
+    (``Fitter._processed``). It must equal :func:`linear_valjac` to rounding (tested)."""
+    _FACTORS[cand] = factors
+
+
+def factors_of(cand):
+    """The function :func:`register_factors` gave ``cand``, or ``None``."""
+    return _FACTORS.get(cand)
+
+
 def static_key(static: Sequence) -> tuple:
     """The identity of a static block's Jacobian: per term its candidate, its nonlinear
     values and its free masks (the linear values do not change the Jacobian)."""

@@ -36,13 +36,14 @@ from ....physics import _effects as fx
 from ...engine import _stepped
 from ...engine._candidates import Candidate, Context, Param
 from ...engine._kind import AbstractKind
+from ...engine._normal import register_factors
 from ...engine._prepare import prepare as engine_prepare
 from ...engine._protocol import FitDivergence, KindData, KindView, Prepared, steady_tolerance
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import chi2_threshold
 from ...engine._views_modulated import view_modulated_orders
 from ._confound import own_order_confound, staircase_confound
-from ._fourier import base_value, fourier_columns, fourier_sum
+from ._fourier import base_factors, base_value, fourier_columns, fourier_sum
 from ._multihead_probes import (
     BEAM_TILT_AXIAL,
     BEAM_TILT_AXIAL_NO_REF,
@@ -319,7 +320,7 @@ def _base_candidate(
                 description="angle zero of each run after the first",
             )
         )
-    return Candidate(
+    cand = Candidate(
         "base",
         fn,
         tuple(params),
@@ -328,6 +329,8 @@ def _base_candidate(
         valjac=valjac,
         value=base_value(shifted, mask),
     )
+    register_factors(cand, base_factors(C, R, M, live, placed))  # issue 43: J = X W
+    return cand
 
 
 def _hold_run_offsets(terms, prep: Prepared) -> str | None:
