@@ -13,7 +13,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ._candidates import Candidate
-from ._constants import CACHE_BYTES, CHUNK_ROWS
+from ._constants import CACHE_BYTES, CHUNK_ROWS, FIT_STOP_CHI2, FIT_STOP_REL
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -651,7 +651,7 @@ class Fitter:
                 terms = new
                 A, g, c, ssr, sc = yield (self, new, True)
                 lam = max(lam / 10, 1e-9)
-                if rel < 1e-7 or (ct - c2.sum()) < 1e-2:
+                if rel < FIT_STOP_REL or (ct - c2.sum()) < FIT_STOP_CHI2:
                     break
                 # the next Gauss-Newton step would lower chi-square negligibly: converged
                 dz1, _ = solve_determined(A.sum(0), g.sum(0), 0.0)

@@ -12,6 +12,7 @@ import numpy as np
 
 from ._candidates import Candidate
 from ._change_rival import rivals_rule
+from ._constants import fit_stop_tolerance
 from ._dealt_fits import private
 from ._document import jsonable
 from ._evidence import (
@@ -734,7 +735,11 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
             ]
         # (the rules may have made this fit already: _kept_fit's with the candidate)
         full = remembered_fit(fitter, _unfrozen(fr.terms[:-1], current.terms) + fr.terms[-1:])
-        if full.chi2 <= fr.chi2:
+        # the refit frees the base too, so its optimum is never above the frozen base's: a
+        # chi-square above it by less than the fits' stopping tolerance is rounding, and the
+        # refit (whose standard errors carry the base's) is kept; not a tie decided by the
+        # last bits (issue 43: a factored Jacobian's rounding flipped it at 10^7 rows)
+        if full.chi2 <= fr.chi2 + fit_stop_tolerance(fr.chi2):
             fr = full
         # (one residual held at a time: kept_resid's default argument holds this round's
         # residual too, through the next scan; issue 43, peak memory)
