@@ -23,8 +23,8 @@ from encdesign.diagnose import diagnose
 ROWS = 1 << 16
 """Rows of the record (8 chunks of the fitter): whole-record arrays outweigh a chunk's."""
 
-FIRST_PROBE_ARRAYS_MAX = 4.5
-LATER_PROBE_ARRAYS_MAX = 3.0
+FIRST_PROBE_ARRAYS_MAX = 5.5
+LATER_PROBE_ARRAYS_MAX = 4.2
 """Whole-record (n, C) arrays a probe may allocate at its peak beyond what it found: main
 before session 28, 6.2 on the first probe and 5.1-5.2 on every later one (this record); now
 3.5 and 1.2-2.6 (measured at the merge, fresh and warm compilation caches alike; the helper's
@@ -33,7 +33,12 @@ array becomes the observations, one copy of the kept rows for its norm and RMS, 
 a chunk's arrays (about 1.2 here, 8 chunks), and from the second probe on the last probe's
 observations and residual freed first. Each bound sits between main's number and today's.
 Traced from the first probe on (session 29): 6.2 and 5.1-5.2 before session 28 (4497be4^),
-3.6 and 1.2-2.6 now."""
+3.6 and 1.2-2.6 at session 29's start; 4.93 and 2.65-3.78 once s29-long29a's factored base
+Jacobian is merged (the fitter of a probe caches the base's per-row factors X, cos / sin of
+the shaft orders and the run one-hot: R + 2M columns a row, up to the fitter's cache bound,
+which on this short record is not reached), so the bounds were raised to 5.5 and 4.2 (between
+that and before session 28, which still fails them); the 10^7-row benchmark's peak is the
+measure of the long record's memory (issue 43)."""
 
 
 def test_a_probe_holds_few_whole_record_arrays(monkeypatch):
