@@ -695,3 +695,19 @@ def shared_diagnosis(rec, **kw):
     if key not in store:
         store[key] = diagnose(rec, **kw)
     return copy.deepcopy(store[key])
+
+
+def count_passes(monkeypatch) -> list[int]:
+    """Patch the engine's :func:`._stats_pass.run_passes` to record, per pass, how many of its
+    requests needed the rows (a request already done is answered without them)."""
+    from encdesign.diagnose.engine import _stats_pass
+
+    passes: list[int] = []
+    run = _stats_pass.run_passes
+
+    def counted(reqs):
+        passes.append(sum(s.done is None for s in reqs))
+        return run(reqs)
+
+    monkeypatch.setattr(_stats_pass, "run_passes", counted)
+    return passes

@@ -7,23 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
+from tests.helpers import count_passes
 from tests.test_fit_fast import _bench_base
-
-
-def _counting(monkeypatch) -> list[int]:
-    """Patch :func:`._stats_pass.run_passes` to record each pass's requests that needed
-    the rows."""
-    from encdesign.diagnose.engine import _stats_pass
-
-    passes: list[int] = []
-    run = _stats_pass.run_passes
-
-    def counted(reqs):
-        passes.append(sum(s.done is None for s in reqs))
-        return run(reqs)
-
-    monkeypatch.setattr(_stats_pass, "run_passes", counted)
-    return passes
 
 
 def test_a_fit_asked_twice_is_made_once_and_equals_the_fit_made_again(monkeypatch):
@@ -45,7 +30,7 @@ def test_a_fit_asked_twice_is_made_once_and_equals_the_fit_made_again(monkeypatc
     other = [*held, make_term(VIBRATION, prep, {"frequency_hz": 5.3})]
     linear = [*held, *frozen([make_term(VIBRATION, prep, {"frequency_hz": 5.3})])]
     again = fitter.fit(list(terms))  # the same fit, made again
-    passes = _counting(monkeypatch)
+    passes = count_passes(monkeypatch)
 
     def made(fn) -> int:
         n = len(passes)

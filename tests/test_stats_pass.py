@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
+from tests.helpers import count_passes
 from tests.test_fit_fast import _bench_base
 
 
@@ -151,14 +152,7 @@ def test_a_candidates_screened_starts_side_by_side_equal_them_one_after_another(
     f1 = fitter()
     alone = [f1.fit([*held, t]) for t in screens] + [f1.fit([*held, free], max_steps=6)]
     f = fitter()
-    rounds: list[int] = []
-    run = _stats_pass.run_passes
-
-    def counted(passes):
-        rounds.append(sum(s.done is None for s in passes))
-        return run(passes)
-
-    monkeypatch.setattr(_stats_pass, "run_passes", counted)
+    rounds = count_passes(monkeypatch)
     got = _stats_pass.drive_many(
         [screened_starts(f, list(held), screens), f.fit_steps([*held, free], max_steps=6)]
     )

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 
 import encdesign  # noqa: F401  (float64)
+from tests.helpers import count_passes
 from tests.test_fit_fast import _bench_base
 from tests.test_stats_pass import _assert_bit_equal
 
@@ -62,14 +63,7 @@ def test_every_located_step_is_tried_in_one_pass(monkeypatch):
         )
     f = fitter()
     base, cand, current, fr = model(f)
-    passes: list[int] = []
-    run = _stats_pass.run_passes
-
-    def counted(reqs):
-        passes.append(sum(s.done is None for s in reqs))
-        return run(reqs)
-
-    monkeypatch.setattr(_stats_pass, "run_passes", counted)
+    passes = count_passes(monkeypatch)
     cache: dict = {}
     first = _steps._first_fits(f, prep, base, cand, steps, cache)
     assert [p for p in passes if p] == [4]  # two steps, each alone and with the candidate
