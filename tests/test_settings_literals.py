@@ -277,6 +277,12 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_noise.py", "ROBUST_ROWS"): BOUND,
     ("engine/_constants.py", "CHUNK_ROWS"): BOUND,
     ("engine/_constants.py", "CACHE_BYTES"): BOUND,
+    ("engine/_constants.py", "FIT_STOP_CHI2"): NUMERIC
+    + " (the Levenberg-Marquardt loop's stopping tolerance in chi-square; the selection reads "
+    "a difference below it as the fits stopping, not the data)",
+    ("engine/_constants.py", "FIT_STOP_REL"): NUMERIC + " (the same tolerance, relative)",
+    ("kinds/multihead/_fourier.py", "TRIG_TABLE_ERROR"): NUMERIC
+    + " (the angle-addition recurrence's stated rounding bound, in units of m eps: tested)",
     ("engine/_normal.py", "CANCEL_MAX"): NUMERIC
     + " (accumulated normal equations used only while their rounding stays ~2e-12 relative)",
     ("engine/_normal.py", "PIVOT_TIE"): NUMERIC
@@ -332,6 +338,9 @@ DEFAULTS: dict[tuple[str, str], str] = {
     ("engine/_normal.py", "_pivoted_rank.tol"): NUMERIC + " (rank cut-off)",
     ("engine/_fit.py", "fit.max_steps"): BOUND + " (Levenberg-Marquardt steps)",
     ("engine/_fit.py", "fit_steps.max_steps"): BOUND + " (the same steps, fit as a generator)",
+    ("engine/_fit_memo.py", "remembered_steps.max_steps"): BOUND
+    + " (Levenberg-Marquardt steps, as Fitter.fit)",
+    ("engine/_fit_memo.py", "remembered_fit.max_steps"): BOUND + " (the same steps)",
     ("engine/_document.py", "_g.digits"): REPORT + " (significant digits printed)",
     ("engine/_html_discovery.py", "order_amplitudes.chunk"): PLOT,
     ("engine/_lattice.py", "_approximate_gcd.max_iter"): BOUND,
