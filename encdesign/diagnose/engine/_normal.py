@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import weakref
 from collections.abc import Sequence
 
 import jax
@@ -90,7 +91,9 @@ def linear_valjac(cand):
     return jax.jit(vj)
 
 
-_FACTORS: dict = {}
+_FACTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""Candidate -> its factored Jacobian (:func:`register_factors`); an entry goes with its
+candidate (a diagnosis builds its own base), so nothing accumulates over diagnoses."""
 
 
 def register_factors(cand, factors) -> None:
