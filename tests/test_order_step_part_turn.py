@@ -26,6 +26,17 @@ def shift_record(seed: int) -> tuple[Recording, dict]:
 
 
 SEEDS = list(range(7620, 7640))
+"""The training seeds of this work (``benchmarks/SEEDS.md``, session 22)."""
+
+RUN = (7620, 7621, 7622, 7623, 7624, 7625, 7629, 7630, 7636, 7638)
+"""The seeds this test runs (CI time, session 30): those main once missed (7620, 7622,
+7623, 7629, 7630; 7625, a drop of session 22 since recovered) and one of each change place
+and head count the others add (``WHERE`` x 2-4 heads: 7621 run start, 3 heads; 7624 run
+start, 4; 7636 run start, 2; 7638 pause, 4), back-and-forth and one-way runs, two and three
+runs among them. Left out: 7627 and 7632, where nothing is located (the test asserts
+nothing there), and 7626, 7628, 7631, 7633-7635, 7637, 7639, each a place and head count
+kept above, located inside their intervals on session 30's main (about 40 s CPU on a cold
+cache). The rate over fresh records is ``benchmarks/change_coverage.py``'s."""
 
 
 def _first_order_step(doc: dict) -> dict | None:
@@ -65,7 +76,7 @@ def _marks(seed: int):
     return NOT_RUN if seed == 7630 else OPEN
 
 
-@pytest.mark.parametrize("seed", [pytest.param(s, marks=_marks(s)) for s in SEEDS])
+@pytest.mark.parametrize("seed", [pytest.param(s, marks=_marks(s)) for s in RUN])
 def test_the_order_change_is_located_where_the_data_put_it(seed):
     """The ``order_step`` view's located change, and every named effect's located time,
     hold the truth in their intervals on the recording's own ``t``. Main put the view's
