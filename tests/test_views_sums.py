@@ -140,3 +140,42 @@ def test_the_module_keeps_no_state():
             continue
         ok = isinstance(v, (types.ModuleType, types.FunctionType, type, *constants))
         assert ok or v is typing.Any, (name, type(v))
+
+
+def test_the_multihead_views_scan_the_residual_without_a_whitened_copy(monkeypatch):
+    """Issue 43 (peak memory): the multihead kind's own views read the residual by rows
+    (``KindView.rows``), so a scan makes no whitened copy of the whole residual (``8 C``
+    bytes a row; on main one per scan), and they find what they find on the copy, to the
+    last bit."""
+    import dataclasses
+
+    from encdesign.diagnose.engine._views import locate
+    from encdesign.diagnose.kinds.multihead import _multihead
+    from tests.test_diagnose import _bench
+
+    copies: list[tuple] = []
+    as_array = Whitened.__array__
+
+    def counted(self, dtype=None, copy=None):
+        copies.append(self.shape)
+        return as_array(self, dtype, copy)
+
+    monkeypatch.setattr(Whitened, "__array__", counted)
+    rec, _ = _bench(6, vibration_hz=37.0)
+    d = diagnose(rec)
+    assert [e["name"] for e in d.effects] == ["vibration"]
+    assert copies == []
+    prep, resid = d.plot_data.prep, d.plot_data.base_resid
+    views = _multihead.MULTIHEAD_VIEWS
+    mine = [v for v in views if not isinstance(v, str)]
+    assert mine and all(v.rows for v in mine)
+    on_copy = tuple(v if isinstance(v, str) else dataclasses.replace(v, rows=False) for v in views)
+
+    def found(vs):
+        s = float(np.mean(prep.sigma))
+        return [f.to_json(s) for f in locate(prep, resid, vs, 12)]
+
+    by_rows = found(views)
+    assert copies == []
+    assert found(on_copy) == by_rows
+    assert copies  # (the copy was made there)

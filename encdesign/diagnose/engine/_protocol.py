@@ -342,10 +342,17 @@ class FitDivergence(ArithmeticError):
 class KindView:
     """A kind's own view, ``fn(prep, rw, scan_order) -> [Finding, ...]`` on the whitened
     residual as an array, with the ``view`` names of the findings it reports (the detection
-    bounds run only the views a candidate's signature names)."""
+    bounds run only the views a candidate's signature names).
+
+    ``rows``: the view reads ``rw`` only by rows (``rw[i]``, ``rw[a:b]``, ``rw[idx]``,
+    ``rw[idx, ch]``) and its ``shape``: it is handed the engine's
+    :class:`~._views_sums.Whitened` residual, whitened where it is indexed (the same numbers),
+    instead of a whitened copy of the whole residual (``8 C`` bytes per row at every scan:
+    issue 43, peak memory)."""
 
     fn: Any
     names: tuple[str, ...]
+    rows: bool = False
 
     def __call__(self, prep, rw: np.ndarray, scan_order: int) -> list:
         return self.fn(prep, rw, scan_order)

@@ -765,6 +765,8 @@ def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float
         for v in mine:
             if isinstance(v, str):
                 got.append(VIEWS[v](prep, rw, scan_order))
+            elif getattr(v, "rows", False):  # a kind's own view that reads rows only
+                got.append(v(prep, rw, scan_order))
             else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
                 if rw_array is None:
                     rw_array = np.asarray(rw)

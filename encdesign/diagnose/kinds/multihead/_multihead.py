@@ -673,8 +673,8 @@ MULTIHEAD_VIEWS = (
     "direction",
     "speed",
     "angle_trend",
-    KindView(view_order_step, ("order_step",)),
-    KindView(view_modulated_orders, ("modulated_orders",)),
+    KindView(view_order_step, ("order_step",), rows=True),
+    KindView(view_modulated_orders, ("modulated_orders",), rows=True),
 )
 """The views run on a multihead record's residual."""
 
