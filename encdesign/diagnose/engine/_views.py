@@ -763,13 +763,10 @@ def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float
     def scans(mine: list) -> list[list[Finding]]:  # this process's views (_workshare.deal)
         got, rw_array = [], None
         for v in mine:
-            if isinstance(v, str):
-                got.append(VIEWS[v](prep, rw, scan_order))
-            elif getattr(v, "rows", False):  # a kind's own view that reads rows only
-                got.append(v(prep, rw, scan_order))
+            if isinstance(v, str) or getattr(v, "rows", False):  # rows only (KindView.rows)
+                got.append((VIEWS[v] if isinstance(v, str) else v)(prep, rw, scan_order))
             else:  # a kind's own view: a callable ``view(prep, rw, scan_order)`` on an array
-                if rw_array is None:
-                    rw_array = np.asarray(rw)
+                rw_array = np.asarray(rw) if rw_array is None else rw_array
                 got.append(v(prep, rw_array, scan_order))
         return got
 
