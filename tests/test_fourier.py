@@ -60,7 +60,8 @@ def test_base_factors_equal_the_linear_jacobian(C, R, M, held):
     want = np.concatenate(want, 2)
     factors = factors_of(cand)
     assert factors is not None
-    v, X, W = factors(p, x, free, n)
+    v, X, W, E = factors(p, x, free, n)
+    assert E is None
     assert X.shape == (n, R + 2 * M) and W.shape == (R + 2 * M, C, want.shape[2])
     got = (X @ W.reshape(W.shape[0], -1)).reshape(want.shape)
     bound = (TRIG_TABLE_ERROR * M + M * 120.0) * EPS  # the table's and m |phi| eps, |phi| < 120
@@ -98,3 +99,40 @@ def test_static_block_from_factors_equals_the_jacobian_and_compiles_nothing(monk
         np.testing.assert_allclose(c, c0, rtol=1e-9)
         np.testing.assert_allclose(ssr, ssr0, rtol=1e-9)
         np.testing.assert_array_equal(sc, sc0)
+
+
+@pytest.mark.parametrize("C,R,M,held", [(4, 4, 12, ()), (3, 1, 7, (3,)), (1, 2, 5, ())])
+def test_base_full_factors_equal_the_hand_jacobian(C, R, M, held):
+    """With ``full`` (every parameter free, at nonzero values): ``[X W, E]`` and the value
+    equal the candidate's compiled ``valjac`` (itself checked against ``jacfwd``) to the
+    rounding of ``m phi``, the slope's columns to that times ``sum m (|a_m| + |b_m|)``."""
+    import jax
+
+    from encdesign.diagnose.engine._fit import Factored
+    from encdesign.diagnose.engine._normal import factors_of
+
+    cand = _base_candidate(C, R, M, held)
+    rng = np.random.default_rng(7 + C + 10 * R + 100 * M)
+    n = 600
+    x = {
+        "theta_raw": np.cumsum(rng.uniform(0, 0.05, n)) + 30.0,
+        "run_onehot": np.eye(R)[rng.integers(0, R, n)],
+        "alpha": np.arange(C) * 2 * np.pi / C + 0.1,
+    }
+    p = {q.name: rng.normal(0, 1e-3, q.resolved_shape(C, R)) for q in cand.params}
+    free = {q.name: np.ones(q.resolved_shape(C, R), bool) for q in cand.params}
+    assert cand.valjac is not None
+    v_want, J = jax.jit(cand.valjac)(p, x)
+    want = np.concatenate([np.asarray(J[q.name]).reshape(n, C, -1) for q in cand.params], 2)
+    factors = factors_of(cand)
+    assert factors is not None
+    v, X, W, E = factors(p, x, free, n, full=True)
+    assert (E is None) == (R == 1)
+    got = Factored(X, W, E).whole()
+    assert got.shape == want.shape
+    size = 1.0 + np.sum(np.arange(1, M + 1) * (np.abs(p["fourier_cos_rad"]) + 1.0))
+    bound = (TRIG_TABLE_ERROR * M + M * 120.0) * EPS * size
+    np.testing.assert_allclose(got, want, rtol=0, atol=bound)
+    np.testing.assert_allclose(v, np.asarray(v_want), rtol=0, atol=bound)
+    order = rng.permutation(n)  # rows in a given order: the same rows
+    np.testing.assert_array_equal(Factored(X, W, E).whole(order), got[order])
