@@ -136,3 +136,48 @@ def test_base_full_factors_equal_the_hand_jacobian(C, R, M, held):
     np.testing.assert_allclose(v, np.asarray(v_want), rtol=0, atol=bound)
     order = rng.permutation(n)  # rows in a given order: the same rows
     np.testing.assert_array_equal(Factored(X, W, E).whole(order), got[order])
+
+
+@pytest.mark.parametrize("ref", [True, False])
+def test_free_base_gram_from_features_equals_the_whole_jacobian(monkeypatch, ref):
+    """The base with its placements and run zeros free (no static block): the statistics
+    summed from the factored columns' features (``StatsPass._gram_f``, ``_grad_f``: ``sum_c
+    Wp_c^T (X^T X) Wp_c``) equal those summed from the whole processed Jacobian to rounding,
+    beside a second free nonlinear term (a vibration: its columns the "other" ones) and
+    beside a static block (the vibration at a held frequency: ``_cross_f``), and
+    the pass forms no ``(rows, C, k)`` product of the factors (a counter: it fails with the
+    features switched off)."""
+    from encdesign.diagnose.engine import _stats_pass
+    from encdesign.diagnose.engine._fit import Factored, Fitter, make_term
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+    from tests.test_fit_fast import _fitted
+
+    prep, _, held = _fitted(ref)
+    base = held[0].copy()
+    for q in base.cand.params:  # the nonlinear parameters free again
+        base.free[q.name][...] = q.fit
+    vib = make_term(VIBRATION, prep, {"frequency_hz": 23.0, "cos_rad": 1e-7})
+    made: list = []
+    real = Factored.into
+    monkeypatch.setattr(Factored, "into", lambda s, *a, **k: made.append(1) or real(s, *a, **k))
+    vib_held = vib.copy()  # a static block beside the free base: the cross products S^T D
+    vib_held.free["frequency_hz"][...] = False
+    for terms in ([base], [base, vib], [vib_held, base]):
+        made.clear()
+        A, g, c, ssr, sc = Fitter(prep).stats(terms)
+        assert not made
+        with monkeypatch.context() as mp:
+            mp.setattr(_stats_pass, "FEATURE_GRAM", False)
+            A0, g0, c0, ssr0, sc0 = Fitter(prep).stats(terms)
+        assert made
+        d = np.sqrt(np.einsum("kjj->kj", A0))
+        np.testing.assert_allclose(
+            A / (d[:, :, None] * d[:, None, :]),
+            A0 / (d[:, :, None] * d[:, None, :]),
+            rtol=0,
+            atol=1e-12,
+        )
+        np.testing.assert_allclose(g, g0, rtol=0, atol=1e-10 * np.abs(g0).max())
+        np.testing.assert_array_equal(c, c0)
+        np.testing.assert_array_equal(ssr, ssr0)
+        np.testing.assert_array_equal(sc, sc0)

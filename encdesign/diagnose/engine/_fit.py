@@ -460,6 +460,63 @@ class Fitter:
             at += k
         return pred, out
 
+    def feature_parts(self, terms: Sequence[Term], a: int, b: int, x: dict, sc, key: tuple = ()):
+        """The projected, whitened, scaled, fold-sorted Jacobian of ``terms`` on one chunk
+        with one term's factored columns (:class:`Factored`) left as features and weights,
+        or ``None`` where no term (or more than one) has them: ``(pred, Xo (rows, F) sorted,
+        Wp (F, C, kw) = P W sqrt(w) sc, fcols, O (rows, C, q) the other columns as
+        :meth:`_scaled_jacobian` makes them, ocols, order, edges)``, ``fcols`` / ``ocols`` the
+        columns' places in the terms' order. A pass's per-fold Gram matrix of the factored
+        columns is then ``sum_c Wp_c^T (Xo^T Xo) Wp_c`` (``F^2`` products a row instead of
+        ``C kw^2``; issue 43: the base fit with its placements and run zeros free); with
+        ``key``, from or into the memo of a pass for several fits."""
+        memo = self.memo if key else None
+        if memo is not None:
+            got = memo.get(("parts_dyn", key, a))
+            if got is not None:
+                return got
+        got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
+        if sum(isinstance(J, Factored) for _, J in got) != 1:
+            return None
+        order, edges = self._fold_order(a, b)
+        sw = np.sqrt(self.w_ch)
+        C = self.prep.n_channels
+        ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
+        kw = next(J.W.shape[2] for _, J in got if isinstance(J, Factored))
+        out = np.empty((b - a, C, sum(ks) - kw))
+        pred = np.zeros((b - a, C))
+        fcols, ocols = [], []
+        at = oat = 0
+        Xo = Wp = None
+        for (v, J), k in zip(got, ks):
+            pred += v
+            s = sw[:, None] * sc[None, at : at + k]
+            if isinstance(J, Factored):
+                W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
+                Xo, Wp = J.X[order], W * s[:, :kw]
+                fcols += range(at, at + kw)
+                ocols += range(at + kw, at + k)
+                if J.E is None:
+                    at += k
+                    continue
+                cols = out[:, :, oat : oat + k - kw]
+                cols[...] = J.E[order]
+                s = s[:, kw:]
+                oat += k - kw
+            else:
+                ocols += range(at, at + k)
+                cols = out[:, :, oat : oat + k]
+                cols[...] = J[order]
+                oat += k
+            if self.prep.kd.project:
+                cols -= cols.mean(1, keepdims=True)
+            cols *= s
+            at += k
+        parts = (pred, Xo, Wp, np.asarray(fcols, int), out, np.asarray(ocols, int), order, edges)
+        if memo is not None:
+            memo.put(("parts_dyn", key, a), parts)
+        return parts
+
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]
         order = np.argsort(f, kind="stable")
