@@ -14,6 +14,7 @@ import scipy.linalg as sla
 
 from ._candidates import Candidate
 from ._constants import CACHE_BYTES, CHUNK_ROWS, FIT_STOP_CHI2, FIT_STOP_REL
+from ._features import Factored
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -126,42 +127,6 @@ class FitResult:
     def heldout_rms(self, prep: Prepared) -> float:
         """K-fold held-out residual RMS (unit of y)."""
         return math.sqrt(self.heldout_ssr / max(prep.n_values, 1))
-
-
-@dataclasses.dataclass
-class Factored:
-    """A term's Jacobian on a chunk as ``J[n, c, j] = sum_f X[n, f] W[f, c, j]`` followed by
-    the columns ``E`` (:func:`._normal.register_factors`): ``X`` (rows, F), ``W`` (F, C, k),
-    ``E`` (rows, C, e) or ``None``."""
-
-    X: np.ndarray
-    W: np.ndarray
-    E: np.ndarray | None = None
-
-    @property
-    def nbytes(self) -> int:
-        """Bytes held."""
-        return int(self.X.nbytes + self.W.nbytes + (0 if self.E is None else self.E.nbytes))
-
-    @property
-    def width(self) -> int:
-        """Columns of ``J``."""
-        return int(self.W.shape[2] + (0 if self.E is None else self.E.shape[2]))
-
-    def whole(self, order: np.ndarray | None = None) -> np.ndarray:
-        """``J`` (rows, C, k + e), its rows in ``order`` where given."""
-        X = self.X if order is None else self.X[order]
-        out = np.empty((X.shape[0], self.W.shape[1], self.width))
-        self.into(out, X)
-        if self.E is not None:
-            out[:, :, self.W.shape[2] :] = self.E if order is None else self.E[order]
-        return out
-
-    def into(self, out: np.ndarray, X: np.ndarray, W: np.ndarray | None = None) -> None:
-        """``out[:, :, :k] = X W`` (weights ``W``, default the term's own): one product."""
-        W = self.W if W is None else W
-        k = W.shape[2]
-        out[:, :, :k] = (X @ W.reshape(W.shape[0], -1)).reshape(X.shape[0], *W.shape[1:])
 
 
 class Fitter:
@@ -459,63 +424,6 @@ class Fitter:
             cols *= s
             at += k
         return pred, out
-
-    def feature_parts(self, terms: Sequence[Term], a: int, b: int, x: dict, sc, key: tuple = ()):
-        """The projected, whitened, scaled, fold-sorted Jacobian of ``terms`` on one chunk
-        with one term's factored columns (:class:`Factored`) left as features and weights,
-        or ``None`` where no term (or more than one) has them: ``(pred, Xo (rows, F) sorted,
-        Wp (F, C, kw) = P W sqrt(w) sc, fcols, O (rows, C, q) the other columns as
-        :meth:`_scaled_jacobian` makes them, ocols, order, edges)``, ``fcols`` / ``ocols`` the
-        columns' places in the terms' order. A pass's per-fold Gram matrix of the factored
-        columns is then ``sum_c Wp_c^T (Xo^T Xo) Wp_c`` (``F^2`` products a row instead of
-        ``C kw^2``; issue 43: the base fit with its placements and run zeros free); with
-        ``key``, from or into the memo of a pass for several fits."""
-        memo = self.memo if key else None
-        if memo is not None:
-            got = memo.get(("parts_dyn", key, a))
-            if got is not None:
-                return got
-        got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
-        if sum(isinstance(J, Factored) for _, J in got) != 1:
-            return None
-        order, edges = self._fold_order(a, b)
-        sw = np.sqrt(self.w_ch)
-        C = self.prep.n_channels
-        ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
-        kw = next(J.W.shape[2] for _, J in got if isinstance(J, Factored))
-        out = np.empty((b - a, C, sum(ks) - kw))
-        pred = np.zeros((b - a, C))
-        fcols, ocols = [], []
-        at = oat = 0
-        Xo = Wp = None
-        for (v, J), k in zip(got, ks):
-            pred += v
-            s = sw[:, None] * sc[None, at : at + k]
-            if isinstance(J, Factored):
-                W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
-                Xo, Wp = J.X[order], W * s[:, :kw]
-                fcols += range(at, at + kw)
-                ocols += range(at + kw, at + k)
-                if J.E is None:
-                    at += k
-                    continue
-                cols = out[:, :, oat : oat + k - kw]
-                cols[...] = J.E[order]
-                s = s[:, kw:]
-                oat += k - kw
-            else:
-                ocols += range(at, at + k)
-                cols = out[:, :, oat : oat + k]
-                cols[...] = J[order]
-                oat += k
-            if self.prep.kd.project:
-                cols -= cols.mean(1, keepdims=True)
-            cols *= s
-            at += k
-        parts = (pred, Xo, Wp, np.asarray(fcols, int), out, np.asarray(ocols, int), order, edges)
-        if memo is not None:
-            memo.put(("parts_dyn", key, a), parts)
-        return parts
 
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ._features import feature_parts
 from ._normal import (
     Accumulated,
     factors_of,
@@ -181,7 +182,7 @@ class StatsPass:
         parts = None
         if dyn and jac and FEATURE_GRAM:
             if sum(factors_of(t.cand) is not None for t in dyn) == 1:
-                parts = fitter.feature_parts(dyn, a, b, x, self.sc_d, self.dkey)
+                parts = feature_parts(fitter, dyn, a, b, x, self.sc_d, self.dkey)
         if dyn:
             if parts is not None:  # (the factored columns' Gram from their features)
                 pd, Jd = parts[0], None
@@ -258,7 +259,7 @@ class StatsPass:
 
     def _gram_f(self, a: int, k: int, parts: tuple, lo: int, hi: int) -> np.ndarray:
         """The free nonlinear terms' Gram matrix on fold ``k`` (rows ``lo:hi`` of the sorted
-        chunk from row ``a``) from :meth:`._fit.Fitter.feature_parts`: the factored columns'
+        chunk from row ``a``) from :func:`._features.feature_parts`: the factored columns'
         ``sum_c Wp_c^T (X^T X) Wp_c``, their products with the other columns ``sum_c Wp_c^T
         (X^T O_c)``, the other columns' own ``O^T O`` (the same sums as ``D^T D`` of the
         whole Jacobian ``D``, in another order: equal to rounding); from the memo of a pass
@@ -291,7 +292,7 @@ class StatsPass:
     @staticmethod
     def _grad_f(parts: tuple, lo: int, hi: int, rwk: np.ndarray, p_d: int) -> np.ndarray:
         """``D^T r`` on fold rows ``lo:hi`` (whitened residual ``rwk`` (rows, C)) from
-        :meth:`._fit.Fitter.feature_parts`: ``sum_c Wp_c^T (X^T r_c)`` for the factored
+        :func:`._features.feature_parts`: ``sum_c Wp_c^T (X^T r_c)`` for the factored
         columns, ``O^T r`` for the others."""
         _, Xo, Wp, fc, O, oc, _, _ = parts
         F, C, kw = Wp.shape
@@ -304,7 +305,7 @@ class StatsPass:
     @staticmethod
     def _cross_f(parts: tuple, lo: int, hi: int, Sk: np.ndarray, p_d: int) -> np.ndarray:
         """``S^T D`` on fold rows ``lo:hi`` (``Sk`` the static block's processed Jacobian
-        there, (rows, C, p_s)) from :meth:`._fit.Fitter.feature_parts`: ``sum_c (S_c^T X)
+        there, (rows, C, p_s)) from :func:`._features.feature_parts`: ``sum_c (S_c^T X)
         Wp_c`` for the factored columns, ``S^T O`` for the others."""
         _, Xo, Wp, fc, O, oc, _, _ = parts
         Xk = Xo[lo:hi]
