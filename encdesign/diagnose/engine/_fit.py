@@ -14,6 +14,7 @@ import scipy.linalg as sla
 
 from ._candidates import Candidate
 from ._constants import CACHE_BYTES, CHUNK_ROWS, FIT_STOP_CHI2, FIT_STOP_REL
+from ._features import Factored
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -128,27 +129,6 @@ class FitResult:
         return math.sqrt(self.heldout_ssr / max(prep.n_values, 1))
 
 
-@dataclasses.dataclass
-class Factored:
-    """A term's Jacobian on a chunk as ``J[n, c, j] = sum_f X[n, f] W[f, c, j]``
-    (:func:`._normal.register_factors`): ``X`` (rows, F), ``W`` (F, C, k)."""
-
-    X: np.ndarray
-    W: np.ndarray
-
-    @property
-    def nbytes(self) -> int:
-        """Bytes held."""
-        return int(self.X.nbytes + self.W.nbytes)
-
-    def whole(self, order: np.ndarray | None = None, W: np.ndarray | None = None) -> np.ndarray:
-        """``J`` (rows, C, k), its rows in ``order`` where given, from weights ``W`` (default
-        the term's own): one matrix product."""
-        X = self.X if order is None else self.X[order]
-        W = self.W if W is None else W
-        return (X @ W.reshape(W.shape[0], -1)).reshape(X.shape[0], *W.shape[1:])
-
-
 class Fitter:
     """Chunked evaluation of a sum of terms, its Jacobian and the per-fold statistics."""
 
@@ -248,7 +228,7 @@ class Fitter:
                         for q in term.cand.params
                     }
                     if factors is not None:  # J = X W: per-row features, not (rows, C, k)
-                        v0, X, W = factors(p0, x, term.free, b - a)
+                        v0, X, W, _ = factors(p0, x, term.free, b - a)
                         hit = (v0, Factored(X, W))
                     else:
                         v0, J = linear_valjac(term.cand)(p0, x)  # linear tangents only
@@ -290,7 +270,13 @@ class Fitter:
         got = memo.get(mkey) if memo is not None else None
         if got is not None:
             return got
-        if jac:
+        factors = factors_of(term.cand) if jac else None
+        if factors is not None:  # J = [X W, E]: kept factored (made whole where asked); the
+            # value the compiled one (a hand valjac's value is it: the same prediction, and so
+            # chi-square, as without the factors)
+            _, X, W, E = factors(params(), x, term.free, b - a, full=True)
+            got = (np.asarray(_val_fn(term.cand)(params(), x))[: b - a], Factored(X, W, E))
+        elif jac:
             v, J = valjac_fn(term.cand)(params(), x)
             v = np.asarray(v)[: b - a]
             got = (v, self._gather(term, J, b - a, v.shape[1]))
@@ -298,6 +284,8 @@ class Fitter:
             got = (np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None)
         if memo is not None:
             memo.put(mkey, got)
+        if whole and isinstance(got[1], Factored):
+            return got[0], got[1].whole()
         return got
 
     @staticmethod
@@ -399,19 +387,19 @@ class Fitter:
 
     def _scaled_jacobian(self, terms: Sequence[Term], a: int, b: int, x: dict, order, sc):
         """:meth:`jacobian` with rows in ``order``, projected, whitened and scaled by ``sc``:
-        ``(J - mean) sqrt(w) sc``. A linear term with a factored Jacobian (:class:`Factored`)
-        gets its columns as one matrix product of its fold-sorted features with its weights
+        ``(J - mean) sqrt(w) sc``. A term with a factored Jacobian (:class:`Factored`) gets
+        its ``X W`` columns as one matrix product of its fold-sorted features with its weights
         projected, whitened and scaled (``P (X W) = X (P W)``: the same numbers to rounding,
         without the term's ``(rows, C, k)`` Jacobian, its sort or its passes; issue 43); the
         other terms' columns are the numbers :meth:`jacobian` gives, scaled."""
-        if not any(linear_only(t) and factors_of(t.cand) is not None for t in terms):
+        if not any(factors_of(t.cand) is not None for t in terms):
             pred, J = self.jacobian(terms, a, b, x, order)
             J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
             return pred, J
         got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
         sw = np.sqrt(self.w_ch)
         C = self.prep.n_channels
-        ks = [J.W.shape[2] if isinstance(J, Factored) else J.shape[2] for _, J in got]
+        ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
         out = np.empty((b - a, C, sum(ks)))
         pred = np.zeros((b - a, C))
         at = 0
@@ -419,14 +407,21 @@ class Fitter:
             pred += v
             s = sw[:, None] * sc[None, at : at + k]
             if isinstance(J, Factored):
+                kw = J.W.shape[2]
                 W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
-                out[:, :, at : at + k] = J.whole(order, W * s)
+                J.into(out[:, :, at : at + kw], J.X[order], W * s[:, :kw])
+                if J.E is None:
+                    at += k
+                    continue
+                cols = out[:, :, at + kw : at + k]
+                cols[...] = J.E[order]
+                s = s[:, kw:]
             else:
                 cols = out[:, :, at : at + k]
                 cols[...] = J[order]
-                if self.prep.kd.project:
-                    cols -= cols.mean(1, keepdims=True)
-                cols *= s
+            if self.prep.kd.project:
+                cols -= cols.mean(1, keepdims=True)
+            cols *= s
             at += k
         return pred, out
 

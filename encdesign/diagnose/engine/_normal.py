@@ -97,15 +97,16 @@ candidate (a diagnosis builds its own base), so nothing accumulates over diagnos
 
 
 def register_factors(cand, factors) -> None:
-    """Give ``cand`` a factored Jacobian over its linear parameters (issue 43):
-    ``factors(p, x, free, rows) -> (v0 (rows, C), X (rows, F), W (F, C, k))`` on a chunk's
-    first ``rows`` rows, with its nonlinear parameters held at ``p``'s values and its linear
-    ones at zero: ``v0`` the value there, and the Jacobian over the ``k`` free linear scalars
-    (in :func:`linear_valjac`'s order, gathered by the ``free`` masks) ``J[n, c, j] =
-    sum_f X[n, f] W[f, c, j]``. Per-row features shared by every channel: the fitter
-    caches ``X`` (``F`` numbers a row, not ``C k``) and makes the projected, whitened,
-    scaled Jacobian of a static block that starts with the term in one matrix product
-    (``Fitter._processed``). It must equal :func:`linear_valjac` to rounding (tested)."""
+    """Give ``cand`` a factored Jacobian (issue 43): ``factors(p, x, free, rows, full=False)
+    -> (v (rows, C), X (rows, F), W (F, C, k), E)`` on a chunk's first ``rows`` rows. The
+    Jacobian over the free scalars (gathered by the ``free`` masks, in parameter order) is
+    ``J[n, c, j] = sum_f X[n, f] W[f, c, j]`` followed by the columns ``E`` ((rows, C, e) or
+    ``None``). Without ``full``: over the linear parameters only (as
+    :func:`linear_valjac`), the nonlinear ones held at ``p``'s values, the linear ones at
+    zero, ``v`` the value there; with ``full``: at ``p``'s values, every free scalar. Per-row
+    features shared by every channel: the fitter caches ``X`` (``F`` numbers a row, not ``C
+    k``) and makes the projected, whitened, scaled Jacobian as one matrix product
+    (``Fitter._processed``). It must equal the compiled Jacobian to rounding (tested)."""
     _FACTORS[cand] = factors
 
 

@@ -23,8 +23,22 @@ from typing import Any
 
 import numpy as np
 
-from ._normal import Accumulated, free_scales, free_values, held_key, linear_only, static_key
+from ._features import feature_parts
+from ._normal import (
+    Accumulated,
+    factors_of,
+    free_scales,
+    free_values,
+    held_key,
+    linear_only,
+    static_key,
+)
 from ._rowshare import my_groups, reduce_groups, row_groups, unflatten
+
+FEATURE_GRAM = True
+"""Sum a request's free nonlinear Gram matrix from a factored term's features
+(:meth:`StatsPass._gram_f`) where it has no static block; ``False``: from the whole
+processed Jacobian (the same sums to rounding; tests compare the two)."""
 
 StatsRequest = tuple[Any, Sequence[Any], bool]
 """``(fitter, terms, jac)``: what :meth:`._fit.Fitter.stats` is asked."""
@@ -165,8 +179,14 @@ class StatsPass:
             if prep.kd.project:
                 rs = rs - rs.mean(1, keepdims=True)
             rs = (rs * sw)[order]
+        parts = None
+        if dyn and jac and FEATURE_GRAM:
+            if sum(factors_of(t.cand) is not None for t in dyn) == 1:
+                parts = feature_parts(fitter, dyn, a, b, x, self.sc_d, self.dkey)
         if dyn:
-            if jac:
+            if parts is not None:  # (the factored columns' Gram from their features)
+                pd, Jd = parts[0], None
+            elif jac:
                 pd, Jd, _, _ = fitter._processed(dyn, a, b, x, self.sc_d, self.dkey)
             else:
                 pd = sum(fitter.eval_term(tm, a, b, x, jac=False)[0] for tm in dyn)
@@ -201,6 +221,11 @@ class StatsPass:
                 gk, guk = self._gram_s(a, k, Sk, Js_[lo:hi])
                 new_gram[k] += gk
                 new_gu[k] += guk
+            if parts is not None:
+                A[k, p_s:, p_s:] += self._gram_f(a, k, parts, lo, hi)
+                g[k, p_s:] += self._grad_f(parts, lo, hi, rw[lo:hi], p - p_s)
+                if p_s:
+                    A[k, :p_s, p_s:] += self._cross_f(parts, lo, hi, Js_[lo:hi], p - p_s)
             if Jd is not None and Jd.shape[2]:
                 Dk = Jd[lo:hi].reshape(rk.size, p - p_s)
                 A[k, :p_s, p_s:] += Sk.T @ Dk
@@ -231,6 +256,64 @@ class StatsPass:
         if memo is not None:
             memo.put(key, got)
         return got
+
+    def _gram_f(self, a: int, k: int, parts: tuple, lo: int, hi: int) -> np.ndarray:
+        """The free nonlinear terms' Gram matrix on fold ``k`` (rows ``lo:hi`` of the sorted
+        chunk from row ``a``) from :func:`._features.feature_parts`: the factored columns'
+        ``sum_c Wp_c^T (X^T X) Wp_c``, their products with the other columns ``sum_c Wp_c^T
+        (X^T O_c)``, the other columns' own ``O^T O`` (the same sums as ``D^T D`` of the
+        whole Jacobian ``D``, in another order: equal to rounding); from the memo of a pass
+        for several fits where another fit's request holds the same free nonlinear terms."""
+        memo = self.fitter.memo
+        got = memo.get(("gram_f", self.dkey, a, k)) if memo is not None else None
+        if got is not None:
+            return got
+        _, Xo, Wp, fc, O, oc, _, _ = parts
+        F, C, kw = Wp.shape
+        q = O.shape[2]
+        Xk = Xo[lo:hi]
+        W2 = Wp.reshape(F * C, kw)
+        T = ((Xk.T @ Xk) @ Wp.reshape(F, C * kw)).reshape(F * C, kw)
+        Gff = W2.T @ T
+        got = np.empty((kw + q, kw + q))
+        got[np.ix_(fc, fc)] = 0.5 * (Gff + Gff.T)
+        if q:
+            Ok = O[lo:hi]
+            XtO = (Xk.T @ Ok.reshape(hi - lo, C * q)).reshape(F * C, q)
+            Gfo = W2.T @ XtO
+            O2 = Ok.reshape(-1, q)
+            got[np.ix_(fc, oc)] = Gfo
+            got[np.ix_(oc, fc)] = Gfo.T
+            got[np.ix_(oc, oc)] = O2.T @ O2
+        if memo is not None:
+            memo.put(("gram_f", self.dkey, a, k), got)
+        return got
+
+    @staticmethod
+    def _grad_f(parts: tuple, lo: int, hi: int, rwk: np.ndarray, p_d: int) -> np.ndarray:
+        """``D^T r`` on fold rows ``lo:hi`` (whitened residual ``rwk`` (rows, C)) from
+        :func:`._features.feature_parts`: ``sum_c Wp_c^T (X^T r_c)`` for the factored
+        columns, ``O^T r`` for the others."""
+        _, Xo, Wp, fc, O, oc, _, _ = parts
+        F, C, kw = Wp.shape
+        out = np.empty(p_d)
+        out[fc] = Wp.reshape(F * C, kw).T @ (Xo[lo:hi].T @ rwk).ravel()
+        if oc.size:
+            out[oc] = O[lo:hi].reshape(-1, oc.size).T @ rwk.ravel()
+        return out
+
+    @staticmethod
+    def _cross_f(parts: tuple, lo: int, hi: int, Sk: np.ndarray, p_d: int) -> np.ndarray:
+        """``S^T D`` on fold rows ``lo:hi`` (``Sk`` the static block's processed Jacobian
+        there, (rows, C, p_s)) from :func:`._features.feature_parts`: ``sum_c (S_c^T X)
+        Wp_c`` for the factored columns, ``S^T O`` for the others."""
+        _, Xo, Wp, fc, O, oc, _, _ = parts
+        Xk = Xo[lo:hi]
+        out = np.empty((Sk.shape[2], p_d))
+        out[:, fc] = sum((Sk[:, c, :].T @ Xk) @ Wp[:, c, :] for c in range(Wp.shape[1]))
+        if oc.size:
+            out[:, oc] = Sk.reshape(-1, Sk.shape[2]).T @ O[lo:hi].reshape(-1, oc.size)
+        return out
 
     def _gram_d(self, a: int, k: int, Dk: np.ndarray) -> np.ndarray:
         """``Dk^T Dk``, fold ``k`` of the chunk from row ``a``: from the memo of a pass for

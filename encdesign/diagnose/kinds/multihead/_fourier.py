@@ -92,21 +92,30 @@ TRIG_TABLE_ERROR = 4.0
 
 
 def base_factors(C: int, R: int, M: int, live: np.ndarray, placed: bool) -> Callable:
-    """The base term's Jacobian over its linear parameters as a product ``J = X W``
-    (``engine._normal.register_factors``): per row the features ``X = [run one-hot (R),
-    cos(m theta) (M), sin(m theta) (M)]`` (:func:`trig_table`, theta with the runs' angle
-    zeros), per head the weights ``W (F, C, free)``: ``cos(m (theta - alpha_c)) = cos(m
-    theta) cos(m alpha_c) + sin(m theta) sin(m alpha_c)``, ``sin(m (theta - alpha_c)) =
-    sin(m theta) cos(m alpha_c) - cos(m theta) sin(m alpha_c)``, an offset the run's one-hot.
-    Every head shares the row's ``F = R + 2 M`` features, so the fitter makes the processed
-    (fold-sorted, projected, whitened, scaled) Jacobian in one matrix product
-    (``Fitter._processed``). The same columns as the candidate's ``valjac`` (its ``mask``
-    ``live``) to rounding (tested). The nonlinear parameters must be held (their values
-    enter ``theta`` and ``alpha``); the value at zero linear parameters is 0."""
+    """The base term's Jacobian as a product ``J = X W`` (``engine._normal.register_factors``):
+    per row the features ``X = [run one-hot (R), cos(m theta) (M), sin(m theta) (M)]``
+    (:func:`trig_table`, theta with the runs' angle zeros), per head the weights ``W (F, C,
+    k)``: ``cos(m (theta - alpha_c)) = cos(m theta) cos(m alpha_c) + sin(m theta) sin(m
+    alpha_c)``, ``sin(m (theta - alpha_c)) = sin(m theta) cos(m alpha_c) - cos(m theta)
+    sin(m alpha_c)``, an offset the run's one-hot, a placement's column ``-slope`` on its head
+    (``slope = sum_m m (b_m cos - a_m sin)``, linear in the features too). Every head shares
+    the row's ``F = R + 2 M`` features, so the fitter makes the processed (fold-sorted,
+    projected, whitened, scaled) Jacobian in one matrix product (``Fitter._processed``).
+    With ``full`` (the parameters' own values, nonlinear ones free too) the runs' angle
+    zeros' columns, ``slope`` times the run's one-hot (not a product of the features with
+    weights), come as ``E`` (rows, C, R - 1), after ``X W``'s; else ``E`` is ``None``, the
+    nonlinear parameters held and the value that at zero linear parameters (0). The same
+    columns as the candidate's ``valjac`` (its ``mask`` ``live``) to rounding (tested)."""
     live = np.asarray(live, float)
     m = np.arange(1, M + 1, dtype=float)
+    j = np.arange(M)
+    F = R + 2 * M
+    Woff = np.zeros((F, C, R, C))
+    for r in range(R):
+        Woff[r, np.arange(C), r, np.arange(C)] = 1.0
+    Woff = Woff.reshape(F, C, R * C)
 
-    def factors(p: dict, x: dict, free: dict, rows: int):
+    def factors(p: dict, x: dict, free: dict, rows: int, full: bool = False):
         oh = np.asarray(x["run_onehot"], float)[:rows]
         th = np.asarray(x["theta_raw"], float)[:rows]
         if R > 1:
@@ -115,26 +124,40 @@ def base_factors(C: int, R: int, M: int, live: np.ndarray, placed: bool) -> Call
         if C > 1 and placed:
             alpha = alpha + np.concatenate([[0.0], np.asarray(p["placement_rad"], float)])
         cm, sm = trig_table(th, M)
-        F = R + 2 * M
         X = np.empty((rows, F))
         X[:, :R] = oh
         X[:, R : R + M] = cm.T
         X[:, R + M :] = sm.T
         ang = m[:, None] * alpha[None, :]  # (M, C)
         ca, sa = np.cos(ang) * live[:, None], np.sin(ang) * live[:, None]
-        Woff = np.zeros((F, C, R, C))
-        for r in range(R):
-            Woff[r, np.arange(C), r, np.arange(C)] = 1.0
         Wc = np.zeros((F, C, M))
         Ws = np.zeros((F, C, M))
-        j = np.arange(M)
         Wc[R + j, :, j] = ca
         Wc[R + M + j, :, j] = sa
         Ws[R + M + j, :, j] = ca
         Ws[R + j, :, j] = -sa
-        blocks = {"offset_rad": Woff.reshape(F, C, R * C), "fourier_cos_rad": Wc}
-        blocks["fourier_sin_rad"] = Ws
-        W = np.concatenate([blocks[k][:, :, np.asarray(free[k]).ravel()] for k in blocks], axis=2)
-        return np.zeros((rows, C)), X, W
+        blocks = {"offset_rad": Woff, "fourier_cos_rad": Wc, "fourier_sin_rad": Ws}
+        if not full:
+            W = np.concatenate([blocks[k][:, :, np.asarray(free[k]).ravel()] for k in blocks], 2)
+            return np.zeros((rows, C)), X, W, None
+        a = np.asarray(p["fourier_cos_rad"], float)
+        b = np.asarray(p["fourier_sin_rad"], float)
+        lin = np.concatenate([np.asarray(p["offset_rad"], float).ravel(), a, b])
+        Wall = np.concatenate([Woff, Wc, Ws], 2)
+        v = X @ (Wall @ lin)  # (F, C) weights of the value
+        Wsl = np.zeros((F, C))  # slope = X Wsl
+        Wsl[R + j] = m[:, None] * (b[:, None] * ca + a[:, None] * sa)
+        Wsl[R + M + j] = m[:, None] * (b[:, None] * sa - a[:, None] * ca)
+        if C > 1 and placed:
+            Wpl = np.zeros((F, C, C - 1))
+            Wpl[:, np.arange(1, C), np.arange(C - 1)] = -Wsl[:, 1:]
+            blocks["placement_rad"] = Wpl
+        W = np.concatenate([blocks[k][:, :, np.asarray(free[k]).ravel()] for k in blocks], 2)
+        E = None
+        if R > 1:
+            fr = np.asarray(free["run_angle_offset_rad"]).ravel()
+            if fr.any():
+                E = (X @ Wsl)[:, :, None] * oh[:, None, 1:][:, :, fr]
+        return v, X, W, E
 
     return factors
