@@ -165,8 +165,9 @@ def test_layout_residual_equals_cramer_pipeline_on_the_n_plus_1_layout():
     )
     lay = _layout(cramer.head_angles_rad, weights=jnp.array([1.0, 1.0, 1.0, 0.0]))
     key = jax.random.key(3)
-    a = build_metrics(cramer, TOL, key=key, n_builds=6)
-    b = layout_metrics(lay, TOL, key=key, n_builds=6)
+    # compiled: one program each (eagerly, every operation is a compile of its own)
+    a = jax.jit(lambda k: build_metrics(cramer, TOL, key=k, n_builds=6))(key)
+    b = jax.jit(lambda k: layout_metrics(lay, TOL, key=k, n_builds=6))(key)
     np.testing.assert_allclose(b, a, rtol=1e-10)
 
 
