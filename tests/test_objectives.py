@@ -162,8 +162,13 @@ def test_percentile_and_smooth_yield_gradients():
     d_fd = (np.asarray(both(0.1 + h)) - np.asarray(both(0.1 - h))) / (2 * h)
     assert np.all(np.abs(d_ad) > 0)
     np.testing.assert_allclose(d_ad, d_fd, rtol=1e-4)
-    exact = float(build_yield(SMALL, TOL, 3e-6, key=key, n_builds=24))
-    vals = np.asarray(build_metrics(SMALL, TOL, key=key, n_builds=24))
+    exact, vals = jax.jit(  # one compiled program (eagerly, every operation compiles)
+        lambda k: (
+            build_yield(SMALL, TOL, 3e-6, key=k, n_builds=24),
+            build_metrics(SMALL, TOL, key=k, n_builds=24),
+        )
+    )(key)
+    exact, vals = float(exact), np.asarray(vals)
     assert exact == pytest.approx(np.mean(vals <= 3e-6))
 
 
