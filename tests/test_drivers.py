@@ -290,7 +290,7 @@ def test_statuses_are_one_enumeration_with_a_message_each():
 
 def test_results_render_in_a_notebook():
     """``_repr_html_`` of every driver result: the status and its key numbers, escaped."""
-    s = optimise(_bowl, BFGS(), jnp.zeros(2))
+    s = optimise(_bowl, BFGS(), jnp.zeros(2), TRUE_GRADIENT)
     h = s._repr_html_()
     assert '<span class="badge ok">success</span>' in h and "Solution (bfgs)" in h
     assert f"<td>{s.n_steps}</td>" in h and "[3, 3]" in h  # the steps and the value
