@@ -81,11 +81,14 @@ def test_least_squares_recovers_the_disk_error_for_random_layouts(seed, n_heads)
 
 @jax.jit  # one compile per head count, not one per operation (op by op: 16-55 compiles)
 def _cotangent_and_layout_maps(th, y, angles, w):
-    """Cramer's map of the ``N + 1`` layout and the least-squares map, at ``th``."""
+    """Cramer's map of the ``N + 1`` layout and the least-squares map, at ``th``; the noise
+    amplification of both (least squares: per order and aggregate; Cramer's: the same)."""
     n_sym = angles.shape[0] - 1
     cot = encoder_map(self_compensate(th, y, angles, n_sym, M), angles[:n_sym])
     ls = layout_map(least_squares_compensate(th, y, angles, M), w)
-    return ls(th), cot(th)
+    amp, _, agg = layout_noise_amplification(angles, M, w)
+    amp_c, agg_c = cotangent_sensitivity(angles[n_sym], symmetric_angles(n_sym), M)
+    return ls(th), cot(th), (amp, agg, amp_c, agg_c)
 
 
 @pytest.mark.parametrize("n_sym", [2, 3, 4])
@@ -98,11 +101,11 @@ def test_cotangent_equations_are_the_n_plus_1_special_case(n_sym, seed):
     w = np.r_[np.full(n_sym, 1.0 / n_sym), 0.0]  # Cramer averages the symmetric heads only
     for noise in (0.0, 1e-7):
         th, y = _readings(angles, s, c, noise=noise, seed=seed)
-        ls, cot = _cotangent_and_layout_maps(*map(jnp.asarray, (th, y, angles, w)))
+        ls, cot, amps = _cotangent_and_layout_maps(*map(jnp.asarray, (th, y, angles, w)))
         # with or without noise the two maps are the same linear function of the readings
         np.testing.assert_allclose(ls, cot, rtol=0, atol=1e-18)
-    amp, _, agg = layout_noise_amplification(angles, M, w)
-    amp_c, agg_c = cotangent_sensitivity(ref, symmetric_angles(n_sym), M)
+    amp, agg, amp_c, agg_c = amps
+    assert float(angles[n_sym]) == ref
     deg = np.arange(1, M + 1) % n_sym == 0
     np.testing.assert_allclose(np.asarray(amp)[deg], np.asarray(amp_c)[deg], rtol=1e-12)
     np.testing.assert_allclose(float(agg), float(agg_c), rtol=1e-12)
@@ -165,8 +168,9 @@ def test_layout_residual_equals_cramer_pipeline_on_the_n_plus_1_layout():
     )
     lay = _layout(cramer.head_angles_rad, weights=jnp.array([1.0, 1.0, 1.0, 0.0]))
     key = jax.random.key(3)
-    a = build_metrics(cramer, TOL, key=key, n_builds=6)
-    b = layout_metrics(lay, TOL, key=key, n_builds=6)
+    # compiled: one program each (eagerly, every operation is a compile of its own)
+    a = jax.jit(lambda k: build_metrics(cramer, TOL, key=k, n_builds=6))(key)
+    b = jax.jit(lambda k: layout_metrics(lay, TOL, key=k, n_builds=6))(key)
     np.testing.assert_allclose(b, a, rtol=1e-10)
 
 

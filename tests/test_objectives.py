@@ -99,16 +99,20 @@ def test_self_compensation_removes_degenerate_grating_modes():
 
 
 def test_rms_peak_and_noise_terms_are_consistent():
-    r = build_residual(DESIGN, TOL, _z())
+    @jax.jit  # the four terms in one compiled program (eagerly, one compile per operation)
+    def terms(tol):
+        z = _z()
+        return (build_residual(DESIGN, tol, z), calibration_noise_ms(DESIGN, tol),
+                residual_rms(DESIGN, tol, z), residual_peak(DESIGN, tol, z))  # fmt: skip
+
+    r, ms_noise, rms, peak = terms(TOL)
+    ms_noise = float(ms_noise)
     assert abs(float(jnp.mean(r))) < 1e-18
-    ms_noise = float(calibration_noise_ms(DESIGN, TOL))
-    assert float(residual_rms(DESIGN, TOL, _z())) ** 2 == pytest.approx(
-        float(jnp.mean(r**2)) + ms_noise, rel=1e-12
-    )
-    assert float(residual_peak(DESIGN, TOL, _z())) >= float(jnp.sqrt(jnp.mean(r**2)))
+    assert float(rms) ** 2 == pytest.approx(float(jnp.mean(r**2)) + ms_noise, rel=1e-12)
+    assert float(peak) >= float(jnp.sqrt(jnp.mean(r**2)))
     # noise term scales with the noise variance and the cotangent amplification
     tol2 = eqx.tree_at(lambda t: t.noise, TOL, 2e-7)
-    assert float(calibration_noise_ms(DESIGN, tol2)) == pytest.approx(4 * ms_noise, rel=1e-12)
+    assert float(terms(tol2)[1]) == pytest.approx(4 * ms_noise, rel=1e-12)
 
 
 def test_residual_rms_gradient_for_every_tolerance():
@@ -162,8 +166,13 @@ def test_percentile_and_smooth_yield_gradients():
     d_fd = (np.asarray(both(0.1 + h)) - np.asarray(both(0.1 - h))) / (2 * h)
     assert np.all(np.abs(d_ad) > 0)
     np.testing.assert_allclose(d_ad, d_fd, rtol=1e-4)
-    exact = float(build_yield(SMALL, TOL, 3e-6, key=key, n_builds=24))
-    vals = np.asarray(build_metrics(SMALL, TOL, key=key, n_builds=24))
+    exact, vals = jax.jit(  # one compiled program (eagerly, every operation compiles)
+        lambda k: (
+            build_yield(SMALL, TOL, 3e-6, key=k, n_builds=24),
+            build_metrics(SMALL, TOL, key=k, n_builds=24),
+        )
+    )(key)
+    exact, vals = float(exact), np.asarray(vals)
     assert exact == pytest.approx(np.mean(vals <= 3e-6))
 
 

@@ -484,8 +484,9 @@ def test_cli_sds_simulate_and_measure(tmp_path, capsys):
 
 def test_padded_error_models_give_bit_equal_edge_times_in_one_program():
     """``simulate._sds.padded_errors``: zero bearing components and axial orders appended
-    change no edge time (bit for bit, with jitter and clock), and a clean run, a wobbling
-    one and an axially tilted one then share one compiled edge-time program."""
+    change no edge time (bit for bit, with jitter and clock), and a clean run and a wobbling,
+    axially tilted one then share one compiled edge-time program. (Three models, three
+    unpadded shapes: each shape is a compile of its own.)"""
     from encdesign.physics._sds_errors import SDSErrors
     from encdesign.simulate._conceal_sds import sds_bench_design
     from encdesign.simulate._sds import _edge_times_jit, padded_errors
@@ -495,11 +496,10 @@ def test_padded_error_models_give_bit_equal_edge_times_in_one_program():
     models = [
         SDSErrors(**clock),
         SDSErrors(**clock, bearing_amplitude_m=[3e-6], bearing_ratio=[0.41],
-                  bearing_phase_rad=[1.0]),
-        SDSErrors(**clock, optical_tilt_moving_rad=0.01, axial_runout_cos_m=[2e-5, 0.0, 1e-5],
-                  axial_runout_sin_m=[1e-5, 0.0, -4e-6]),
-        ed.physics.reference_errors(),  # 8 bearing components, 2 axial orders
-        SDSErrors(thermal_drift_rad_per_k=1e-5, temperature_rate_k_per_s=0.1,
+                  bearing_phase_rad=[1.0], optical_tilt_moving_rad=0.01,
+                  axial_runout_cos_m=[2e-5, 0.0, 1e-5], axial_runout_sin_m=[1e-5, 0.0, -4e-6]),
+        # every reference term (2 axial orders), 5 bearing components, a thermal ramp
+        ed.physics.reference_errors(thermal_drift_rad_per_k=1e-5, temperature_rate_k_per_s=0.1,
                   temperature_offset_k=-0.2, bearing_amplitude_m=[1e-6] * 5,
                   bearing_ratio=[0.3, 0.4, 0.5, 0.6, 0.7], bearing_phase_rad=[0.0] * 5),
     ]  # fmt: skip
@@ -512,6 +512,6 @@ def test_padded_error_models_give_bit_equal_edge_times_in_one_program():
         new = _edge_times_jit(design, jnp.asarray(1.3), 3, padded, **kw)
         for a, b in zip(old, new, strict=True):
             assert np.array_equal(np.asarray(a), np.asarray(b))
-    # the first three (0, 1 and 0 bearing components, 0, 0 and 3 axial orders) pad alike,
-    # the last two (8 and 5 components, 2 and 0 orders) too
+    # the first two (0 and 1 bearing components, 0 and 3 axial orders) pad alike, the
+    # last (5 components, 2 orders) to the next bucket
     assert sizes == {((4,), (4,)), ((8,), (4,))}
