@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 OUT    ?= results
 
-.PHONY: setup demo test lint typecheck format bench clean
+.PHONY: setup demo test test-sweeps lint typecheck format bench clean
 
 $(VENV)/.installed: pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "$(PYTHON) not found; run make PYTHON=python3"; exit 1; }
@@ -37,7 +37,13 @@ test: setup
 	# made the Monte Carlo drivers' values depend on the chunking (tests/test_drivers.py), each
 	# on a fresh clone's CI, and the latter saved no wall time there (pytest 909 s)
 	JAX_COMPILATION_CACHE_DIR=$(CURDIR)/.cache/jax JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0 \
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 -m "not sweep" tests
+
+# the verdict guards' further seeds and settings (pytest marker `sweep`, docs/DEVELOPING.md
+# "Test tiers"): not in `make test` (CI time); run them before merging a change to the finder
+test-sweeps: setup
+	JAX_COMPILATION_CACHE_DIR=$(CURDIR)/.cache/jax JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS=0 \
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n 2 --dist worksteal --durations=25 -m sweep tests
 
 lint: setup
 	$(VENV)/bin/ruff check encdesign studies tests benchmarks

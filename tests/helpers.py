@@ -711,3 +711,33 @@ def count_passes(monkeypatch) -> list[int]:
 
     monkeypatch.setattr(_stats_pass, "run_passes", counted)
     return passes
+
+
+def sweep(cases, keep) -> list:
+    """``cases`` as ``pytest.param``\\ s for ``pytest.mark.parametrize``, those in ``keep``
+    plain and every other one marked ``sweep`` (docs/DEVELOPING.md, "Test tiers"): ``make
+    test`` (so CI) runs the kept cases, ``make test-sweeps`` the rest. A case is one value,
+    or a tuple of the arguments of a multi-argument parametrize (then spread); a case already
+    a ``pytest.param`` keeps its own marks and id (``keep`` names it by its value, or the
+    tuple of its values). An entry of ``keep`` that is not a case raises ``ValueError``
+    rather than silently running nothing."""
+    import pytest
+
+    def _parts(c):
+        if hasattr(c, "values") and hasattr(c, "marks"):
+            return tuple(c.values), list(c.marks), c.id
+        return (c if isinstance(c, tuple) else (c,)), [], None
+
+    def _key(values):
+        return values[0] if len(values) == 1 else values
+
+    cases = [_parts(c) for c in cases]
+    known = [_key(v) for v, _, _ in cases]
+    missing = [k for k in keep if k not in known]
+    if missing:
+        raise ValueError(f"sweep: kept cases {missing!r} are not among the cases {known!r}")
+    out = []
+    for values, marks, id_ in cases:
+        extra = [] if _key(values) in keep else [pytest.mark.sweep]
+        out.append(pytest.param(*values, marks=marks + extra, id=id_))
+    return out

@@ -7,6 +7,7 @@ import types
 
 import numpy as np
 import pytest
+from helpers import sweep
 
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose._dispatch import diagnose
@@ -58,8 +59,14 @@ def test_runout_orders_follow_the_record_not_a_share_of_the_strongest():
     assert (9 / 40) ** 2 < 0.1
 
 
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
 @pytest.mark.parametrize(
-    ("geometry", "seed"), [("4i+1", 501), ("4i+1", 503), ("3+1", 501), ("3+1", 503)]
+    ("geometry", "seed"),
+    sweep(
+        [("4i+1", 501), ("4i+1", 503), ("3+1", 501), ("3+1", 503)],
+        (("4i+1", 501), ("3+1", 503)),
+    ),
 )
 def test_three_effects_at_once_all_named_nothing_they_explain_left(geometry, seed):
     """Vibration, a beam tilt with axial runout at orders 1-3 and a weaker interpolation error
@@ -74,7 +81,9 @@ def test_three_effects_at_once_all_named_nothing_they_explain_left(geometry, see
     assert d["unexplained"] == [], [(f["view"], f["where"]) for f in d["unexplained"]]
 
 
-@pytest.mark.parametrize("seed", [501, 502])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize("seed", sweep([501, 502], (501,)))
 def test_a_weak_effect_is_not_refused_for_unrelated_structure(seed):
     """A strong vibration, a weak interpolation error and an out-of-catalog order on one head
     (12x the noise): the interpolation error explains all of what its own fitted error shows

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import sweep
 
 from encdesign.diagnose import diagnose
 from encdesign.io._recording import Recording
@@ -73,7 +74,9 @@ def _record(seed: int, interp: bool, ratio: int = 2) -> tuple[Recording, dict]:
 
 # 7806 is left out: its order L is located by none of interpolation_error's views once the
 # degenerate line_phase is gone, so it is never tried (main misses it too: a known miss)
-@pytest.mark.parametrize("seed", [s for s in range(7800, 7812) if s != 7806])
+# ``make test`` runs two seeds of each; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize("seed", sweep([s for s in range(7800, 7812) if s != 7806], (7800, 7801)))
 def test_interpolation_error_at_half_the_lattice_is_named_and_clears_its_view(seed):
     rec, truth = _record(seed, True)
     d = diagnose(rec).doc
@@ -84,7 +87,7 @@ def test_interpolation_error_at_half_the_lattice_is_named_and_clears_its_view(se
     assert not [u for u in d.get("unexplained", []) if u["view"] == "line_phase"], why
 
 
-@pytest.mark.parametrize("seed", [7812, 7813, 7814, 7815])
+@pytest.mark.parametrize("seed", sweep([7812, 7813, 7814, 7815], (7812, 7813)))
 def test_quantization_alone_at_twice_the_signal_periods_names_no_interpolation_error(seed):
     rec, truth = _record(seed, False)
     d = diagnose(rec).doc

@@ -8,6 +8,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
+from helpers import sweep
 
 import encdesign
 from encdesign.diagnose._dispatch import diagnose
@@ -144,13 +145,20 @@ def scores(doc: dict, truth: dict) -> list[dict]:
 
 @pytest.mark.parametrize(
     ("seed", "change", "H", "R", "clock", "ref"),
-    [
-        (701, "head_step", 3, 2, "one", True),
-        (702, "head_step", 4, 3, "per_run", False),
-        (703, "ecc_shift", 3, 2, "one", True),
-        (704, "ecc_shift", 5, 3, "per_run", True),
-        (705, "ecc_shift", 4, 1, "one", False),
-    ],
+    sweep(
+        [
+            (701, "head_step", 3, 2, "one", True),
+            (702, "head_step", 4, 3, "per_run", False),
+            (703, "ecc_shift", 3, 2, "one", True),
+            (704, "ecc_shift", 5, 3, "per_run", True),
+            (705, "ecc_shift", 4, 1, "one", False),
+        ],
+        (
+            (701, "head_step", 3, 2, "one", True),
+            (702, "head_step", 4, 3, "per_run", False),
+            (705, "ecc_shift", 4, 1, "one", False),
+        ),
+    ),
 )
 def test_located_time_on_the_recordings_clock_with_its_interval(seed, change, H, R, clock, ref):
     """Each located time of a generated change lies in the truth's run, on the record's own
@@ -181,6 +189,7 @@ def test_located_time_on_the_recordings_clock_with_its_interval(seed, change, H,
 COVERAGE_SEEDS = tuple(range(700, 710))
 
 
+@pytest.mark.sweep  # a rate over 10 records: ``make test-sweeps`` (session 31, CI time)
 def test_located_times_cover_the_truth_on_generated_records():
     """Issue 44 C acceptance: over 10 generated records (head steps and eccentricity shifts,
     2-5 heads, 1-3 runs, a clock per run or one clock with pauses, with and without a

@@ -10,6 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from helpers import sweep
 
 from encdesign import Recording
 from encdesign.diagnose import FinderSettings
@@ -68,7 +69,12 @@ angle-trend views were judged before the growth (session 17: 5.2 s CPU of the 17
 cost)."""
 
 
-@pytest.mark.parametrize(("seed", "M", "turns"), [c for c in CASES if c not in BLOCKED])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize(
+    ("seed", "M", "turns"),
+    sweep([c for c in CASES if c not in BLOCKED], ((1401, 14, 0.8), (1404, 15, 0.85))),
+)
 def test_clean_record_with_orders_above_12_is_consistent(seed, M, turns):
     # (the two BLOCKED cases run in the test below at a share of 1e-12: the share only
     # enters the growth's vetoes, each a test `x > share * located`, so a record that grows

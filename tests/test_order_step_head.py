@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import sweep
 
 import encdesign
 from encdesign.diagnose.engine._located import in_interval
@@ -45,13 +46,16 @@ def _cp():
 
 @pytest.mark.parametrize(
     ("seed", "cls", "i"),
-    [
-        (7920, "mh_bench_jump", 0),  # 2+1, reference, one run
-        (7920, "mh_bench_jump", 1),  # 2+1 / 3+1, two runs
-        (7921, "mh_bench_jump", 5),
-        (7921, "mh_head_step", 0),  # whole turns
-        (7921, "mh_head_step", 4),
-    ],
+    sweep(
+        [
+            (7920, "mh_bench_jump", 0),  # 2+1, reference, one run
+            (7920, "mh_bench_jump", 1),  # 2+1 / 3+1, two runs
+            (7921, "mh_bench_jump", 5),
+            (7921, "mh_head_step", 0),  # whole turns
+            (7921, "mh_head_step", 4),
+        ],
+        ((7920, "mh_bench_jump", 1), (7921, "mh_head_step", 0)),
+    ),
 )
 def test_a_one_head_step_is_located_by_the_time_view_not_as_an_order_change(seed, cls, i):
     r = _cp().run_record(seed, cls, i)
@@ -120,12 +124,16 @@ def _located_at_truth(rec, truth):
     assert any(in_interval(lt, truth["t_s"], truth["run"]) for lt in lts), (truth, found)
 
 
-@pytest.mark.parametrize("seed", [7928, 7929, 7930, 7931])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize("seed", sweep([7928, 7929, 7930, 7931], (7928,)))
 def test_a_step_near_a_runs_end_is_a_located_step(seed):
     _located_at_truth(*step_record(seed))
 
 
-@pytest.mark.parametrize("seed", [7926, 7927, 7928, 7929])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize("seed", sweep([7926, 7927, 7928, 7929], (7926, 7928)))
 def test_a_small_step_is_found_by_the_time_views_step_test(seed):
     """A step of 60-100 chi-square inside a run: below the block test's threshold (31 dof),
     found and located by the best single step (``_views_time``)."""

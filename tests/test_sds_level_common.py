@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import sweep
 from scipy import stats
 
 from encdesign.diagnose.kinds.sds._sds_level_out import (
@@ -92,8 +93,15 @@ def test_one_sensor_level_mixes_the_common_part_at_its_share():
     assert sc[3, 0] == pytest.approx(lo(order_columns(phi, M, 4, 0)), rel=1e-9)
 
 
-@pytest.mark.parametrize("frame", ["sensor", "common"])
-@pytest.mark.parametrize("sc", [0.4, 2.5])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize(
+    ("sc", "frame"),
+    sweep(
+        [(0.4, "sensor"), (0.4, "common"), (2.5, "sensor"), (2.5, "common")],
+        ((0.4, "sensor"), (2.5, "common")),
+    ),
+)
 def test_one_sensor_and_common_tests_keep_their_false_alarm_rate(sc, frame):
     """Under noise whose common component is quieter (0.4) or louder (2.5) than the
     differences, the chi-square of an order on one moving sensor or common to all of them

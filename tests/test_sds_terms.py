@@ -12,7 +12,7 @@ overruled); the other records are controls that were right on ``main`` and stay 
 from __future__ import annotations
 
 import pytest
-from helpers import concealed_sds_layout
+from helpers import concealed_sds_layout, sweep
 
 from encdesign.diagnose import diagnose
 
@@ -29,7 +29,11 @@ def _record(tmp_path, effect: str, seed: int, g: int, geometries=GEOMETRIES, **e
     return concealed_sds_layout(tmp_path, seed, g, geometries[g], effect, **extra)
 
 
-@pytest.mark.parametrize("seed, g", [(7541, 0), (7542, 3), (7540, 1), (7541, 2)])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize(
+    "seed, g", sweep([(7541, 0), (7542, 3), (7540, 1), (7541, 2)], ((7541, 0), (7540, 1)))
+)
 def test_one_run_transient_is_located_not_named(tmp_path, seed, g):
     """A moving sensor's bracket shifted in one run only (8x the near-noise amplitude) is no
     catalog effect: nothing is named, and the ``run_step`` view locates it on that sensor in
@@ -64,7 +68,11 @@ DRIFTS = (
 )
 
 
-@pytest.mark.parametrize("seed, g", [(7547, 2), (7548, 2), (7546, 0), (7546, 2)])
+# ``make test`` runs the kept cases; the others are the ``sweep`` tier (``make
+# test-sweeps``; session 31, CI time)
+@pytest.mark.parametrize(
+    "seed, g", sweep([(7547, 2), (7548, 2), (7546, 0), (7546, 2)], ((7547, 2), (7546, 0)))
+)
 def test_a_drift_from_half_way_is_a_drift_not_a_delay_step(tmp_path, seed, g):
     """A thermal drift from half-way through the record (``partial``) moves every moving
     sensor alike; a delay step fitted to it is nearly equal on all of them, which its own

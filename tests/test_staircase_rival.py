@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import sweep
 
 from encdesign import Recording
 from encdesign.diagnose import diagnose
@@ -53,7 +54,12 @@ CASES = [(s, c) for s in range(7580, 7587) for c in ("L", "2L")]
 CASES += [(s, "real") for s in range(7587, 7590)]
 
 
-@pytest.mark.parametrize(("seed", "case"), CASES)
+# ``make test`` runs one record of each case; the others are the ``sweep`` tier
+# (``make test-sweeps``; session 31, CI time)
+KEEP = ((7580, "L"), (7580, "2L"), (7587, "real"))
+
+
+@pytest.mark.parametrize(("seed", "case"), sweep(CASES, KEEP))
 def test_the_staircase_is_no_interpolation_error(seed, case):
     rec, truth = _record(seed, case)
     d = diagnose(rec).doc
