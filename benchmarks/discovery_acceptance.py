@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             r = t[key]
             if r[1]:
                 parts.append(f"{name} {_fmt(r)}{'' if line is None else ' ' + _met(r, line)}")
-        print(f"  {label}: " + "; ".join(parts))
+        print(f"  {label}: " + ("; ".join(parts) or "no case"))
     for name, t in table.items():
         if name == "all":
             continue
