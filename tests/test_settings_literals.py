@@ -53,7 +53,7 @@ UNIVERSAL = {0: SIGN, 1: SIGN, -1: SIGN, 1e-300: GUARD}
 
 ALLOWED: dict[tuple[str, float], str] = {
     # engine
-    ("engine/_bounds.py", 1e-10): NUMERIC + " (rank tolerance of the probe's eigenvalues)",
+    ("engine/_bounds_sums.py", 1e-10): NUMERIC + " (rank tolerance of the probe's eigenvalues)",
     ("engine/_bounds.py", 1e-12): GUARD + " (a probe the base spans entirely)",
     ("engine/_bounds.py", 2): SHAPE
     + " (the square of the probe's norm; log N of at least two values)",

@@ -80,6 +80,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ._bounds_shares import VIEW_DOUBLINGS, _share_size
+from ._bounds_sums import _add_gram, _channel_products, _rank
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, _val_fn, make_term
 from ._normal import Accumulated, factors_of, free_scales, free_values, held_key
@@ -240,33 +241,12 @@ def _held_term(cand: Candidate, prep: Prepared, probe: Probe) -> Term:
     return term
 
 
-def _add_gram(prep: Prepared, gram: np.ndarray, J, a: int, b: int, sw: np.ndarray) -> None:
-    """Add the whitened Gram matrix of the Jacobian ``J`` of rows ``a:b`` (kept rows,
-    projected where the kind projects) to ``gram``."""
-    p = gram.shape[0]
-    k = prep.keep[a:b]
-    if p and k.any():
-        Jk = J[k]
-        if prep.kd.project:
-            Jk = Jk - Jk.mean(1, keepdims=True)
-        Jw = (Jk * sw[None, :, None]).reshape(-1, p)
-        gram += Jw.T @ Jw
-
-
 def _columns_key(term: Term) -> tuple:
     """What a linear-only term's Jacobian on a chunk depends on besides the chunk (the key
     of :meth:`._fit.Fitter.eval_term`'s Jacobian cache): its candidate, its nonlinear
     values and its free masks."""
     held = tuple(term.values[q.name].tobytes() for q in term.cand.params if not q.linear)
     return id(term.cand), held, tuple(term.free[q.name].tobytes() for q in term.cand.params)
-
-
-def _rank(gram: np.ndarray) -> int:
-    """The numerical rank of a Gram matrix (columns normalized; relative 1e-10)."""
-    d = np.sqrt(np.maximum(np.diag(gram), 0.0))
-    ok = d > 0
-    ev = np.linalg.eigvalsh(gram[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])) if ok.any() else []
-    return int(np.sum(np.asarray(ev) > 1e-10 * max(float(np.max(ev, initial=0.0)), 1e-300)))
 
 
 class _Bench:
@@ -295,8 +275,12 @@ class _Bench:
         prediction plus ``c v``, whose residual at the base's values is ``c u``: its refit's
         normal equations are these sums scaled (:mod:`._normal`), so it needs no pass over
         the rows of its own (each probe used to recompute ``S`` where the cache does not
-        hold it: the largest cost of the bounds on long records). :meth:`probe` uses them
-        and falls back to its own pass for a probe not prepared."""
+        hold it: the largest cost of the bounds on long records). The products are summed
+        channel by channel (:func:`_channel_products`: the whitened and unwhitened sums from
+        one product each, issue 43), with each probe's whitened unit effect's sums per run
+        and channel on the kept rows: its norm and own RMS (:meth:`own_rms`) without a copy
+        of the record. :meth:`probe` uses them and falls back to its own pass for a probe
+        not prepared."""
         prep, fitter = self.prep, self.fitter
         K = prep.settings.n_folds
         static = frozen(self.base_terms)
@@ -322,23 +306,22 @@ class _Bench:
             np.zeros((m, K)),
             np.zeros((m, K)),
         )
+        C, R = prep.n_channels, prep.ctx.n_runs
+        s1 = np.zeros((R, C, m))  # each probe's whitened unit effect summed per run, channel
         w = fitter.w_ch
         sw = np.sqrt(w)
         memo = ChunkMemo()  # (the fitter's during the pass)
 
         def add(sums: list, a: int, b: int, x) -> None:  # the rows split over processes
-            G, Gu, hv, huv, qv, quv, *grams = sums
+            G, Gu, hv, huv, qv, quv, s1, *grams = sums
             got = fitter.processed_block(static, a, b, x, sc, pred=False, keep=False)
             _, S, order, edges = got
             rows = [(k, edges[k], edges[k + 1]) for k in range(K) if edges[k + 1] > edges[k]]
             for k, lo, hi in rows if kept is None else ():
-                Sk = S[lo:hi].reshape(-1, p)
-                G[k] += Sk.T @ Sk
-                Su = (S[lo:hi] / sw[None, :, None]).reshape(-1, p)
-                Gu[k] += Su.T @ Su
+                _channel_products(S[lo:hi], S[lo:hi], w, G[k], Gu[k])
             if not m:
                 return
-            U = np.empty((b - a, prep.n_channels, m))
+            U = np.empty((b - a, C, m))
             memo.at(a)
             for i, t in enumerate(terms):
                 va, J = fitter.eval_term(t, a, b, x, jac=True)
@@ -348,26 +331,26 @@ class _Bench:
                     va = va - va.mean(1, keepdims=True)
                 U[:, :, i] = va * sw
             U = U[order]
-            for k, lo, hi in rows:  # every probe at once (a matrix product per fold)
-                Uk = U[lo:hi].reshape(-1, m)
-                UUk = (U[lo:hi] / w[None, :, None]).reshape(-1, m)
-                Sk = S[lo:hi].reshape(-1, p)
-                hv[:, k] += (Sk.T @ Uk).T
-                huv[:, k] += (Sk.T @ UUk).T
-                qv[:, k] += np.einsum("ij,ij->j", Uk, Uk)
-                quv[:, k] += np.einsum("ij,ij->j", Uk, UUk)
+            run = np.asarray(prep.run[a:b])[order]
+            for k, lo, hi in rows:  # every probe at once (a matrix product per fold, channel)
+                _channel_products(S[lo:hi], U[lo:hi], w, hv[:, k].T, huv[:, k].T)
+                _channel_products(U[lo:hi], U[lo:hi], w, qv[:, k], quv[:, k], diagonal=True)
+            kept_rows = slice(rows[0][1], rows[-1][2]) if rows else slice(0, 0)
+            for r in np.unique(run[kept_rows]):  # (the kept rows: those of a fold)
+                s1[r] += U[kept_rows][run[kept_rows] == r].sum(0)
 
         fitter.memo = memo
         try:
-            got = summed(fitter, [G, Gu, hv, huv, qv, quv, *grams], add)
+            got = summed(fitter, [G, Gu, hv, huv, qv, quv, s1, *grams], add)
         finally:
             fitter.memo = None
-        G, Gu, hv, huv, qv, quv, *grams = got
+        G, Gu, hv, huv, qv, quv, s1, *grams = got
         if kept is not None:  # (not summed in the pass: zeros there)
             G, Gu = kept
         ranks = [_rank(g) for g in grams]
         for i, (_, pr) in enumerate(probes):
-            self._pre[id(pr)] = (ranks[gi[i]], (G, Gu, hv[i], huv[i], qv[i], quv[i]))
+            unit = (float(np.sum(qv[i])), s1[:, :, i])  # its norm squared, its run sums
+            self._pre[id(pr)] = (ranks[gi[i]], (G, Gu, hv[i], huv[i], qv[i], quv[i]), unit)
 
     def release(self) -> None:
         """Drop what the last probe's observations hold (issue 43, peak memory): the
@@ -378,6 +361,20 @@ class _Bench:
         next ones are made."""
         self.prep.y = self.pred
         self.fitter.blocks.release_observations()
+
+    def _own_from_sums(self, tot: float, s1: np.ndarray) -> float:
+        """:meth:`own_rms` from the prepared sums (:meth:`prepare`): ``tot`` the whitened unit
+        effect's sum of squares on the kept rows, ``s1`` (R, C) its sums per run and channel
+        there."""
+        prep = self.prep
+        keep = prep.keep
+        if self.per_run:
+            cnt = np.bincount(np.asarray(prep.run)[keep], minlength=prep.ctx.n_runs)
+            for c in range(s1.shape[1]):
+                tot -= float(np.sum(s1[:, c] * s1[:, c] / np.maximum(cnt, 1)))
+        C = prep.n_channels
+        eff = (C - 1) / C if prep.kd.project else 1.0
+        return math.sqrt(max(tot, 0.0) / max(float(keep.sum()) * C * eff, 1.0))
 
     def own_rms(self, v: np.ndarray) -> float:
         """The own RMS of the unit effect ``v`` in noise units, as the rule
@@ -427,22 +424,27 @@ class _Bench:
                 v[a:b] = va
                 _add_gram(prep, gram, J, a, b, sw)
             k_lin = _rank(gram)
-        else:  # the Jacobian's rank and the base's sums from the shared pass (prepare)
+        else:  # the Jacobian's rank, its norm, own RMS and the base's sums: the shared pass
             k_lin = pre[0]
+            norm = math.sqrt(pre[2][0])
+            if not (norm > 0 and math.isfinite(norm)):
+                return None
+            own = self._own_from_sums(*pre[2])
             # its compiled value: the prepared pass cached its Jacobian where the budget
             # allowed, and v0 + J p rounds otherwise (the caches must not change a bound)
             v = _values(fitter, [term], compiled=True)
         if prep.kd.project:
             v -= v.mean(1, keepdims=True)
-        keep = prep.keep
-        vw = v[keep]  # one copy of the kept rows, whitened and squared in place
-        vw *= sw[None, :]
-        norm = math.sqrt(float(np.sum(np.square(vw, out=vw))))
-        del vw
-        if not (norm > 0 and math.isfinite(norm)):
-            return None
+        if pre is None:
+            keep = prep.keep
+            vw = v[keep]  # one copy of the kept rows, whitened and squared in place
+            vw *= sw[None, :]
+            norm = math.sqrt(float(np.sum(np.square(vw, out=vw))))
+            del vw
+            if not (norm > 0 and math.isfinite(norm)):
+                return None
+            own = self.own_rms(v)
         c = PROBE_NORM / norm
-        own = self.own_rms(v)
         # the observations ``pred + c v`` made in v's own array (issue 43: one whole-record
         # array fewer; the same numbers)
         v *= c
