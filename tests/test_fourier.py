@@ -1,7 +1,7 @@
-"""Issue 43: the base term's factored Jacobian (``kinds/multihead/_fourier.py``): the
-angle-addition table of ``cos(m theta)``, ``sin(m theta)`` within its stated bound, the
-factors ``J = X W`` against the compiled linear Jacobian, and the fitter's processed static
-block made from them (one product, no compiled Jacobian) against the one made from ``J``."""
+"""Issue 43: the base term's factored Jacobian (``kinds/multihead/_fourier.py``): the angle-addition
+table of ``cos(m theta)``, ``sin(m theta)`` (``engine._views_orders.harmonics``) within its stated
+bound, the factors ``J = X W`` against the compiled linear Jacobian, and the fitter's processed
+static block made from them (one product, no compiled Jacobian) against the one made from ``J``."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import encdesign  # noqa: F401  (float64)
-from encdesign.diagnose.kinds.multihead._fourier import TRIG_TABLE_ERROR, trig_table
+from encdesign.diagnose.engine._views_orders import harmonics
+from encdesign.diagnose.kinds.multihead._fourier import TRIG_TABLE_ERROR
 from encdesign.diagnose.kinds.multihead._multihead import _base_candidate
 
 EPS = np.finfo(float).eps
@@ -22,7 +23,7 @@ def test_trig_table_within_its_stated_bound():
     rng = np.random.default_rng(3)
     th = np.concatenate([rng.uniform(-7, 7, 4000), rng.uniform(0, 2e3, 4000)])
     M = 64
-    cm, sm = trig_table(th, M)
+    cm, sm = harmonics(th, M)
     m = np.arange(1, M + 1)[:, None]
     arg = m.astype(np.longdouble) * th.astype(np.longdouble)[None, :]
     err = np.maximum(np.abs(cm - np.cos(arg)), np.abs(sm - np.sin(arg))).astype(float)

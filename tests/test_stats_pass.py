@@ -217,3 +217,52 @@ def test_a_fit_beside_the_fit_of_its_leading_block_takes_one_pass(monkeypatch):
         assert rounds[0] == n_models  # every fit in the first pass (main: the first alone)
         assert sum(r > 0 for r in rounds) == 1  # linear fits: one pass in all
         _assert_bit_equal(alone, together, n_models)
+
+
+def test_scaled_columns_keep_the_factored_features_they_multiply_out():
+    """One helper makes a chunk's processed columns (``_features.scaled_columns``): the free
+    base (factored, issue 43) beside an unfactored vibration line. With ``features``, the
+    other columns are those it makes whole to the last bit, and the kept ``Xo Wp`` is the
+    factored columns it multiplies out; both equal the fitter's plain Jacobian, sorted,
+    projected, whitened and scaled, to rounding. ``eval_term``'s ``compiled`` value is the
+    compiled function's even where the term's Jacobian is cached."""
+    from encdesign.diagnose.engine._features import Factored, feature_parts, scaled_columns
+    from encdesign.diagnose.engine._fit import Fitter, _val_fn, make_term
+    from encdesign.diagnose.kinds.multihead._multihead_terms import VIBRATION
+
+    prep, _, held = _bench_base(False)
+    model = [t.copy() for t in held]
+    for t in model:
+        for q in t.cand.params:
+            t.free[q.name][...] = bool(q.fit)
+    terms = [make_term(VIBRATION, prep, {"frequency_hz": 3.7}), *model]
+    f = Fitter(prep)
+    a, b, x = next(iter(f.chunks()))
+    sc = np.random.default_rng(3).uniform(0.5, 2.0, sum(t.n_free() for t in terms))
+    got = [f.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
+    assert [isinstance(J, Factored) for _, J in got] == [False, True]
+    order, _ = f._fold_order(a, b)
+    pred, whole, *_ = scaled_columns(f, got, order, sc)
+    pred_k, out, Xo, Wp, fcols, ocols = scaled_columns(f, got, order, sc, features=True)
+    assert fcols.size and ocols.size and sorted([*fcols, *ocols]) == list(range(sc.size))
+    np.testing.assert_array_equal(pred_k, pred)
+    np.testing.assert_array_equal(out, whole[:, :, ocols])
+    XW = np.empty((b - a, prep.n_channels, fcols.size))
+    Factored(Xo, Wp).into(XW, Xo)
+    np.testing.assert_array_equal(XW, whole[:, :, fcols])
+    parts = feature_parts(f, terms, a, b, x, sc)
+    assert parts is not None
+    np.testing.assert_array_equal(parts[4], out)
+    _, J = f.jacobian(terms, a, b, x, order)
+    J *= np.sqrt(f.w_ch)[:, None] * sc[None, :]
+    np.testing.assert_allclose(whole, J, rtol=1e-9, atol=1e-9 * np.abs(J).max())
+    with np.testing.assert_raises(ValueError):  # one factored term kept at most
+        scaled_columns(f, [*got, got[1]], order, np.concatenate([sc, sc[1:]]), features=True)
+
+    line = [t.copy() for t in terms[:1]]
+    line[0].free["frequency_hz"][...] = False  # linear only: its Jacobian cached
+    f.fit(line, max_steps=1)
+    assert f._jcache  # (without ``compiled``: ``v0 + J p`` from it)
+    v = f.eval_term(line[0], a, b, x, jac=False, compiled=True)[0]
+    want = np.asarray(_val_fn(VIBRATION)(dict(line[0].values), x))[: b - a]
+    np.testing.assert_array_equal(v, want)

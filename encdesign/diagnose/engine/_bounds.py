@@ -82,8 +82,8 @@ from scipy import optimize, stats
 from ._bounds_shares import VIEW_DOUBLINGS, _share_size
 from ._bounds_sums import _add_gram, _channel_products, _rank
 from ._candidates import Candidate, Probe
-from ._fit import Fitter, Term, _val_fn, make_term
-from ._normal import Accumulated, factors_of, free_scales, free_values, held_key
+from ._fit import Fitter, Term, make_term
+from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
 from ._rowshare import summed
 from ._select import _has_run_constants, _order_key
@@ -212,10 +212,7 @@ def _values(fitter: Fitter, terms: Sequence[Term], compiled: bool = False) -> np
     out = np.zeros_like(fitter.prep.y)
     for a, b, x in fitter.chunks():
         for t in terms:
-            if compiled and factors_of(t.cand) is None:
-                out[a:b] += np.asarray(_val_fn(t.cand)(dict(t.values), x))[: b - a]
-            else:
-                out[a:b] += fitter.eval_term(t, a, b, x, jac=False)[0]
+            out[a:b] += fitter.eval_term(t, a, b, x, jac=False, compiled=compiled)[0]
     return out
 
 

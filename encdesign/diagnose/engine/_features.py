@@ -47,16 +47,70 @@ class Factored:
         out[:, :, :k] = (X @ W.reshape(W.shape[0], -1)).reshape(X.shape[0], *W.shape[1:])
 
 
+def scaled_columns(fitter, got: Sequence, order: np.ndarray, sc, features: bool = False):
+    """The columns of one chunk's Jacobian, its rows in ``order`` (the fold order),
+    projected (where the kind projects), whitened and scaled by ``sc``: ``(J - mean) sqrt(w)
+    sc``, from ``got`` (each term's ``(value, J)`` from ``Fitter.eval_term(..., jac=True,
+    whole=False)``, ``J`` (rows, C, k) or :class:`Factored`). A factored term's ``X W``
+    columns are one matrix product of its fold-sorted features with its weights projected,
+    whitened and scaled (``P (X W) = X (P W)``); its ``E`` columns and the other terms' are
+    copied, projected and scaled like an unfactored Jacobian's. Returns ``(pred (rows, C),
+    out (rows, C, q), Xo, Wp, fcols, ocols)``: with ``features``, one factored term's ``X W``
+    columns are left out of ``out`` and kept as ``Xo = X[order]`` (rows, F) and ``Wp = P W
+    sqrt(w) sc`` (F, C, kw) (``None`` without ``features`` or a factored term), ``fcols`` /
+    ``ocols`` the places of the kept and of ``out``'s columns in the terms' order.
+    (``Fitter._scaled_jacobian`` and :func:`feature_parts`.)"""
+    project = fitter.prep.kd.project
+    sw = np.sqrt(fitter.w_ch)
+    rows, C = len(order), sw.shape[0]
+    ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
+    kept = sum(J.W.shape[2] for _, J in got if isinstance(J, Factored)) if features else 0
+    out = np.empty((rows, C, sum(ks) - kept))
+    pred = np.zeros((rows, C))
+    fcols, ocols = [], []
+    at = oat = 0  # the next column in the terms' order, in ``out``
+    Xo = Wp = None
+    for (v, J), k in zip(got, ks):
+        pred += v
+        s = sw[:, None] * sc[None, at : at + k]
+        first = at  # the first of the term's columns copied into ``out``
+        if isinstance(J, Factored):
+            kw = J.W.shape[2]
+            W = J.W - J.W.mean(1, keepdims=True) if project else J.W
+            if features:
+                if Xo is not None:
+                    raise ValueError("features: one factored term at most")
+                Xo, Wp = J.X[order], W * s[:, :kw]
+                fcols += range(at, at + kw)
+            else:
+                J.into(out[:, :, oat : oat + kw], J.X[order], W * s[:, :kw])
+                ocols += range(at, at + kw)
+                oat += kw
+            if J.E is None:
+                at += k
+                continue
+            first, s, J = at + kw, s[:, kw:], J.E
+        cols = out[:, :, oat : oat + at + k - first]
+        cols[...] = J[order]
+        if project:
+            cols -= cols.mean(1, keepdims=True)
+        cols *= s
+        ocols += range(first, at + k)
+        oat += at + k - first
+        at += k
+    return pred, out, Xo, Wp, np.asarray(fcols, int), np.asarray(ocols, int)
+
+
 def feature_parts(fitter, terms: Sequence, a: int, b: int, x: dict, sc, key: tuple = ()):
     """The projected, whitened, scaled, fold-sorted Jacobian of ``terms`` on one chunk
     with one term's factored columns (:class:`Factored`) left as features and weights,
     or ``None`` where no term (or more than one) has them: ``(pred, Xo (rows, F) sorted,
     Wp (F, C, kw) = P W sqrt(w) sc, fcols, O (rows, C, q) the other columns as
     ``Fitter._scaled_jacobian`` makes them, ocols, order, edges)``, ``fcols`` / ``ocols``
-    the columns' places in the terms' order. A pass's per-fold Gram matrix of the factored
-    columns is then ``sum_c Wp_c^T (Xo^T Xo) Wp_c`` (``F^2`` products a row instead of
-    ``C kw^2``; issue 43: the base fit with its placements and run zeros free); with
-    ``key``, from or into the memo of a pass for several fits."""
+    the columns' places in the terms' order (:func:`scaled_columns`). A pass's per-fold
+    Gram matrix of the factored columns is then ``sum_c Wp_c^T (Xo^T Xo) Wp_c`` (``F^2``
+    products a row instead of ``C kw^2``; issue 43: the base fit with its placements and
+    run zeros free); with ``key``, from or into the memo of a pass for several fits."""
     memo = fitter.memo if key else None
     if memo is not None:
         got = memo.get(("parts_dyn", key, a))
@@ -66,43 +120,11 @@ def feature_parts(fitter, terms: Sequence, a: int, b: int, x: dict, sc, key: tup
     if sum(isinstance(J, Factored) for _, J in got) != 1:
         return None
     order, edges = fitter._fold_order(a, b)
-    sw = np.sqrt(fitter.w_ch)
-    C = fitter.prep.n_channels
-    ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
-    kw = next(J.W.shape[2] for _, J in got if isinstance(J, Factored))
-    out = np.empty((b - a, C, sum(ks) - kw))
-    pred = np.zeros((b - a, C))
-    fcols, ocols = [], []
-    at = oat = 0
-    Xo = Wp = None
-    for (v, J), k in zip(got, ks):
-        pred += v
-        s = sw[:, None] * sc[None, at : at + k]
-        if isinstance(J, Factored):
-            W = J.W - J.W.mean(1, keepdims=True) if fitter.prep.kd.project else J.W
-            Xo, Wp = J.X[order], W * s[:, :kw]
-            fcols += range(at, at + kw)
-            ocols += range(at + kw, at + k)
-            if J.E is None:
-                at += k
-                continue
-            cols = out[:, :, oat : oat + k - kw]
-            cols[...] = J.E[order]
-            s = s[:, kw:]
-            oat += k - kw
-        else:
-            ocols += range(at, at + k)
-            cols = out[:, :, oat : oat + k]
-            cols[...] = J[order]
-            oat += k
-        if fitter.prep.kd.project:
-            cols -= cols.mean(1, keepdims=True)
-        cols *= s
-        at += k
-    parts = (pred, Xo, Wp, np.asarray(fcols, int), out, np.asarray(ocols, int), order, edges)
+    pred, out, Xo, Wp, fcols, ocols = scaled_columns(fitter, got, order, sc, features=True)
+    parts = (pred, Xo, Wp, fcols, out, ocols, order, edges)
     if memo is not None:
         memo.put(("parts_dyn", key, a), parts)
     return parts
 
 
-__all__ = ["Factored", "feature_parts"]
+__all__ = ["Factored", "feature_parts", "scaled_columns"]

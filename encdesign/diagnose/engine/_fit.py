@@ -14,7 +14,7 @@ import scipy.linalg as sla
 
 from ._candidates import Candidate
 from ._constants import CACHE_BYTES, CHUNK_ROWS, FIT_STOP_CHI2, FIT_STOP_REL
-from ._features import Factored
+from ._features import Factored, scaled_columns
 from ._normal import (
     Accumulated,
     BlockCache,
@@ -196,14 +196,27 @@ class Fitter:
         """The kept ``(G, Gu)`` of the static block ``static`` (:mod:`._normal`) or ``None``."""
         return self.blocks.gram(static_key(static))
 
-    def eval_term(self, term: Term, a: int, b: int, x: dict, jac: bool, whole: bool = True):
+    def eval_term(
+        self,
+        term: Term,
+        a: int,
+        b: int,
+        x: dict,
+        jac: bool,
+        whole: bool = True,
+        compiled: bool = False,
+    ):
         """Value (rows, C) and Jacobian (rows, C, free) of one term on one chunk.
 
         A term whose free parameters are all linear is ``v0 + J p_lin`` with ``v0`` and ``J``
         depending only on the held (nonlinear) parameters: those are cached (within a
         memory budget), so refits with other terms cost one matrix product. A term with a
         factored Jacobian (:func:`._normal.register_factors`) keeps ``J = X W`` as its
-        factors: without ``whole``, the Jacobian is returned as :class:`Factored`."""
+        factors: without ``whole``, the Jacobian is returned as :class:`Factored`. With
+        ``compiled`` (a value only, ``jac`` false), the term's compiled value, never ``v0 +
+        J p`` from a Jacobian the caches happen to hold (the two differ in the last bit): the
+        same numbers whatever the caches hold (a factored term's value is ``v0 + X (W p)``
+        either way)."""
 
         def params() -> dict:  # NumPy values: the compiled function transfers them itself
             return dict(term.values)  # (a jnp.asarray each was ~10% of a long diagnosis)
@@ -214,7 +227,7 @@ class Fitter:
             key = (id(term.cand), a, held, fmask)
             hit = self._jcache.get(key)
             factors = factors_of(term.cand)
-            if hit is None and not jac and factors is None:  # a value only: no Jacobian
+            if (hit is None or compiled) and not jac and factors is None:  # a value only
                 return np.asarray(_val_fn(term.cand)(params(), x))[: b - a], None
             # (a factored term's value is v0 + X (W p) whether its factors were kept or not:
             # the same numbers whatever the caches hold, on one process or several)
@@ -397,33 +410,7 @@ class Fitter:
             J *= np.sqrt(self.w_ch)[:, None] * sc[None, :]  # (J - mean) (sc sqrt(w)), in place
             return pred, J
         got = [self.eval_term(t, a, b, x, jac=True, whole=False) for t in terms]
-        sw = np.sqrt(self.w_ch)
-        C = self.prep.n_channels
-        ks = [J.width if isinstance(J, Factored) else J.shape[2] for _, J in got]
-        out = np.empty((b - a, C, sum(ks)))
-        pred = np.zeros((b - a, C))
-        at = 0
-        for (v, J), k in zip(got, ks):
-            pred += v
-            s = sw[:, None] * sc[None, at : at + k]
-            if isinstance(J, Factored):
-                kw = J.W.shape[2]
-                W = J.W - J.W.mean(1, keepdims=True) if self.prep.kd.project else J.W
-                J.into(out[:, :, at : at + kw], J.X[order], W * s[:, :kw])
-                if J.E is None:
-                    at += k
-                    continue
-                cols = out[:, :, at + kw : at + k]
-                cols[...] = J.E[order]
-                s = s[:, kw:]
-            else:
-                cols = out[:, :, at : at + k]
-                cols[...] = J[order]
-            if self.prep.kd.project:
-                cols -= cols.mean(1, keepdims=True)
-            cols *= s
-            at += k
-        return pred, out
+        return scaled_columns(self, got, order, sc)[:2]
 
     def _fold_order(self, a: int, b: int):
         f = self.prep.fold[a:b]

@@ -9,6 +9,8 @@ from collections.abc import Callable
 import jax.numpy as jnp
 import numpy as np
 
+from ...engine._views_orders import harmonics
+
 
 def fourier_sum(phi, a, b):
     """``sum_{m=1..M} a_m cos(m phi) + b_m sin(m phi)`` (``phi`` any shape, rad; ``a``,
@@ -59,53 +61,27 @@ def base_value(shifted: Callable, mask) -> Callable:
     return value
 
 
-def trig_table(theta: np.ndarray, M: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(cos(m theta), sin(m theta))`` for ``m = 1..M``, each ``(M, n)`` (``theta`` ``(n,)``,
-    rad), from ``cos theta`` and ``sin theta`` by the angle-addition recurrence
-    ``exp(i (m+1) theta) = exp(i m theta) exp(i theta)``: two transcendentals per angle and six
-    flops per order instead of ``2 M`` transcendentals (issue 43: the base term's Jacobian on
-    every chunk of every pass). Rounding: each complex product adds at most ``sqrt(5) eps``
-    relative (Brent, Percival and Zimmermann 2007), so order ``m`` differs from
-    ``exp(i m theta)`` of the rounded ``theta`` by at most about ``(sqrt(5) m + 1) eps``
-    (:data:`TRIG_TABLE_ERROR` ``* m * eps``, tested), where ``cos(m theta)`` computed
-    directly carries the rounding of ``m theta``, about ``|m theta| eps``."""
-    n = theta.shape[0]
-    cm, sm = np.empty((M, n)), np.empty((M, n))
-    if M == 0:
-        return cm, sm
-    c1, s1 = np.cos(theta), np.sin(theta)
-    cm[0], sm[0] = c1, s1
-    t = np.empty(n)
-    for k in range(1, M):
-        np.multiply(cm[k - 1], c1, out=cm[k])
-        np.multiply(sm[k - 1], s1, out=t)
-        cm[k] -= t
-        np.multiply(sm[k - 1], c1, out=sm[k])
-        np.multiply(cm[k - 1], s1, out=t)
-        sm[k] += t
-    return cm, sm
-
-
 TRIG_TABLE_ERROR = 4.0
-"""Bound (in units of ``m * eps``) on :func:`trig_table`'s departure from ``cos(m theta)``,
-``sin(m theta)`` of the rounded angle: ``sqrt(5) + 1`` per complex product, rounded up."""
+"""Bound (in units of ``m * eps``) on the angle-addition table's departure from ``cos(m
+theta)``, ``sin(m theta)`` of the rounded angle (``engine._views_orders.harmonics``, the
+base factors' features): ``sqrt(5) + 1`` per complex product, rounded up."""
 
 
 def base_factors(C: int, R: int, M: int, live: np.ndarray, placed: bool) -> Callable:
-    """The base term's Jacobian as a product ``J = X W`` (``engine._normal.register_factors``):
-    per row the features ``X = [run one-hot (R), cos(m theta) (M), sin(m theta) (M)]``
-    (:func:`trig_table`, theta with the runs' angle zeros), per head the weights ``W (F, C,
-    k)``: ``cos(m (theta - alpha_c)) = cos(m theta) cos(m alpha_c) + sin(m theta) sin(m
-    alpha_c)``, ``sin(m (theta - alpha_c)) = sin(m theta) cos(m alpha_c) - cos(m theta)
-    sin(m alpha_c)``, an offset the run's one-hot, a placement's column ``-slope`` on its head
-    (``slope = sum_m m (b_m cos - a_m sin)``, linear in the features too). Every head shares
-    the row's ``F = R + 2 M`` features, so the fitter makes the processed (fold-sorted,
-    projected, whitened, scaled) Jacobian in one matrix product (``Fitter._processed``).
-    With ``full`` (the parameters' own values, nonlinear ones free too) the runs' angle
-    zeros' columns, ``slope`` times the run's one-hot (not a product of the features with
-    weights), come as ``E`` (rows, C, R - 1), after ``X W``'s; else ``E`` is ``None``, the
-    nonlinear parameters held and the value that at zero linear parameters (0). The same
-    columns as the candidate's ``valjac`` (its ``mask`` ``live``) to rounding (tested)."""
+    """The base term's Jacobian as a product ``J = X W`` (``engine._normal.register_factors``): per
+    row the features ``X = [run one-hot (R), cos(m theta) (M), sin(m theta) (M)]``
+    (``engine._views_orders.harmonics``, theta with the runs' angle zeros), per head the weights ``W
+    (F, C, k)``: ``cos(m (theta - alpha_c)) = cos(m theta) cos(m alpha_c) + sin(m theta) sin(m
+    alpha_c)``, ``sin(m (theta - alpha_c)) = sin(m theta) cos(m alpha_c) - cos(m theta) sin(m
+    alpha_c)``, an offset the run's one-hot, a placement's column ``-slope`` on its head (``slope =
+    sum_m m (b_m cos - a_m sin)``, linear in the features too). Every head shares the row's ``F = R
+    + 2 M`` features, so the fitter makes the processed (fold-sorted, projected, whitened, scaled)
+    Jacobian in one matrix product (``Fitter._processed``). With ``full`` (the parameters' own
+    values, nonlinear ones free too) the runs' angle zeros' columns, ``slope`` times the run's
+    one-hot (not a product of the features with weights), come as ``E`` (rows, C, R - 1), after ``X
+    W``'s; else ``E`` is ``None``, the nonlinear parameters held and the value that at zero linear
+    parameters (0). The same columns as the candidate's ``valjac`` (its ``mask`` ``live``) to
+    rounding (tested)."""
     live = np.asarray(live, float)
     m = np.arange(1, M + 1, dtype=float)
     j = np.arange(M)
@@ -123,7 +99,7 @@ def base_factors(C: int, R: int, M: int, live: np.ndarray, placed: bool) -> Call
         alpha = np.asarray(x["alpha"], float)
         if C > 1 and placed:
             alpha = alpha + np.concatenate([[0.0], np.asarray(p["placement_rad"], float)])
-        cm, sm = trig_table(th, M)
+        cm, sm = harmonics(th, M)
         X = np.empty((rows, F))
         X[:, :R] = oh
         X[:, R : R + M] = cm.T
