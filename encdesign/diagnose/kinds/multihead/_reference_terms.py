@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
@@ -27,6 +28,7 @@ from ....physics._sensor_effects import (
 )
 from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._lattice import Lattice, detect_lsb
+from ...engine._padded import eval_rows
 
 __all__ = ["CANDIDATES", "interpolation_candidate"]
 
@@ -185,11 +187,12 @@ INTERP_SMOOTH_ORDERS = 12
 """Fourier orders of the sensor's own error function in its angle (held, for the phase)."""
 
 
-def _sensor_angle(p: dict, x: dict) -> Array:
+def _sensor_angle(p: dict, x: dict, xp=jnp) -> Array:
     """The angle the sensor sees, ``theta + e(theta)`` (the held smooth fit; its zero per
-    run is the reference's: a re-zeroed reading's offset is not a signal phase)."""
+    run is the reference's: a re-zeroed reading's offset is not a signal phase). ``xp``:
+    ``jnp`` in the term, ``np`` on concrete rows (no XLA program per record length)."""
     th = x["theta"]
-    return th + _smooth_basis(th, INTERP_SMOOTH_ORDERS) @ p["smooth_rad"]
+    return th + _smooth_basis(th, INTERP_SMOOTH_ORDERS, xp) @ p["smooth_rad"]
 
 
 def _sensor_angle_fit(ctx: Context) -> dict:
@@ -199,7 +202,7 @@ def _sensor_angle_fit(ctx: Context) -> dict:
     th = np.asarray(rows["theta"], dtype=np.float64)
     oh = np.asarray(rows["run_onehot"], dtype=np.float64)
     d = np.asarray(rows["reading"], dtype=np.float64)[:, 0] - th
-    F = np.asarray(_smooth_basis(jnp.asarray(th), INTERP_SMOOTH_ORDERS))
+    F = _smooth_basis(th, INTERP_SMOOTH_ORDERS, np)
     coef, *_ = np.linalg.lstsq(np.concatenate([oh, F], 1), d, rcond=None)
     R = oh.shape[1]
     return {"smooth_rad": coef[R:]}
@@ -219,8 +222,8 @@ def _interp_applies(ctx: Context) -> str | None:
     # each sample's signal phase is known (P times the angle the sensor sees), so orders P
     # and 2P beyond the sampling's Nyquist order are no obstacle (they alias in time, not in
     # phase); what is needed is that the sampled phases cover the signal period
-    x = {k: jnp.asarray(ctx.rows[k]) for k in ("theta", "run_onehot")}
-    psi = P * np.asarray(_sensor_angle(_sensor_angle_fit(ctx), x))
+    x = {"theta": np.asarray(th, dtype=np.float64)}
+    psi = P * _sensor_angle(_sensor_angle_fit(ctx), x, np)
     X = np.stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)], 1)
     lam = float(np.linalg.eigvalsh(X.T @ X / psi.size)[0])
     spread = ctx.settings.interp_spread_min
@@ -289,25 +292,27 @@ QUANT_POLY_DEGREE = 8
 """Degree of the per-run Legendre polynomials in the angle (part of a turn, drifts)."""
 
 
-def _smooth_basis(theta: Array, n_orders: int) -> Array:
-    m = jnp.arange(1, n_orders + 1, dtype=jnp.float64)
+def _smooth_basis(theta: Array, n_orders: int, xp=jnp) -> Array:
+    """``cos(m theta)`` then ``sin(m theta)``, ``m = 1 … n_orders`` (``theta`` in rad), shape
+    ``(n, 2 n_orders)``; ``xp``: ``jnp`` in a term, ``np`` on concrete rows."""
+    m = xp.arange(1, n_orders + 1, dtype=xp.float64)
     arg = theta[:, None] * m[None, :]
-    return jnp.concatenate([jnp.cos(arg), jnp.sin(arg)], axis=1)
+    return xp.concatenate([xp.cos(arg), xp.sin(arg)], axis=1)
 
 
-def _legendre(u: Array, degree: int) -> Array:
+def _legendre(u: Array, degree: int, xp=jnp) -> Array:
     """``P_0 … P_degree`` at ``u`` (Bonnet's recursion), shape ``(n, degree + 1)``."""
-    out = [jnp.ones_like(u), u]
+    out = [xp.ones_like(u), u]
     for k in range(1, degree):
         out.append(((2 * k + 1) * u * out[k] - k * out[k - 1]) / (k + 1))
-    return jnp.stack(out[: degree + 1], axis=1)
+    return xp.stack(out[: degree + 1], axis=1)
 
 
-def _poly_basis(theta: Array, onehot: Array, mid: Array, half: Array) -> Array:
-    """Per-run Legendre polynomials of the angle scaled to ``[-1, 1]`` over the run,
-    shape ``(n, R * (degree + 1))`` (run-major)."""
+def _poly_basis(theta: Array, onehot: Array, mid: Array, half: Array, xp=jnp) -> Array:
+    """Per-run Legendre polynomials of the angle (rad) scaled to ``[-1, 1]`` over the run,
+    shape ``(n, R * (degree + 1))`` (run-major); ``xp`` as :func:`_smooth_basis`."""
     u = (theta - onehot @ mid) / (onehot @ half)
-    L = _legendre(u, QUANT_POLY_DEGREE)
+    L = _legendre(u, QUANT_POLY_DEGREE, xp)
     return (onehot[:, :, None] * L[:, None, :]).reshape(theta.shape[0], -1)
 
 
@@ -331,6 +336,12 @@ def _quant_fn(p: dict, x: dict) -> Array:
     off = x["run_onehot"] @ p["lattice_offset_rad"]
     e = quantization_rad(_quant_smooth(p, x), p["lsb_rad"], off, p["blur_rad"])
     return (p["amplitude"] * e)[:, None]
+
+
+_quant_fn_jit = jax.jit(_quant_fn)
+""":func:`_quant_fn` as one XLA program (the start evaluates it on whole records through
+:func:`~encdesign.diagnose.engine._padded.eval_rows`: a compile per bucketed length, not one
+per operation and record length)."""
 
 
 def _quant_lattice(ctx: Context) -> Lattice:
@@ -377,8 +388,8 @@ def smooth_reading(ctx: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
             lo[r], hi[r] = th[m].min(), th[m].max()
     mid, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
     K = rebuild_orders(ctx)
-    F = np.asarray(_smooth_basis(jnp.asarray(th), K))
-    Pb = np.asarray(_poly_basis(*(jnp.asarray(v) for v in (th, onehot, mid, half))))
+    F = _smooth_basis(th, K, np)
+    Pb = _poly_basis(th, onehot, mid, half, np)
     A = np.concatenate([F, Pb, motion], 1)
     c, *_ = np.linalg.lstsq(A, reading - th, rcond=None)
     # in the layout of QUANT_SMOOTH_ORDERS orders (cosines, then sines), the orders above K
@@ -441,7 +452,7 @@ def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
         "blur_rad": np.asarray(0.0),
         "amplitude": np.asarray(1.0),
     }
-    x = {k: jnp.asarray(v) for k, v in rows.items()}
+    x = {k: np.asarray(rows[k]) for k in ("theta", "run_onehot", "omega", "direction")}
     r = np.asarray(residual, dtype=np.float64).reshape(reading.size, -1)[:, 0]
     best = (np.inf, 0.0)
     step = BLUR_GRID[1] - BLUR_GRID[0]
@@ -449,7 +460,7 @@ def _quant_start(ctx: Context, residual: np.ndarray, findings: list) -> list[dic
         if grid is None:  # the finer grid about the coarse grid's best
             grid = np.clip(best[1] / q + step * (BLUR_GRID - 0.5), 0.0, None)
         for b in grid * q:
-            col = np.asarray(_quant_fn({**p0, "blur_rad": np.asarray(b)}, x))[:, 0]
+            col = eval_rows(_quant_fn_jit, {**p0, "blur_rad": np.asarray(b)}, x)[:, 0]
             sse = float(np.sum((r - col) ** 2))
             if sse < best[0]:
                 best = (sse, float(b))

@@ -61,6 +61,7 @@ import numpy as np
 from ...engine._fit import valjac_fn as _valjac_fn
 from ...engine._kind import AbstractKind
 from ...engine._located import change_chi2, interval_of, located_time
+from ...engine._padded import eval_rows
 from ...engine._protocol import KindView, Prepared
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
 from ...engine._views import Finding
@@ -94,7 +95,6 @@ from ._sds_noise import (
 from ._sds_probes import with_probes
 from ._sds_terms import (
     _const_term,
-    _jx,
     _ripple_term,
     _wobble_grid,
     _wobble_onsets,
@@ -184,7 +184,7 @@ def _matched_view(name: str):
         cand = cands[name]
         if cand.applies is not None and cand.applies(ctx):
             return []
-        x = _jx(ctx)
+        consts = {k: v for k, v in ctx.consts.items() if isinstance(v, np.ndarray)}
         resid = rw * prep.sigma[None, :]
         starts = cand.start(ctx, resid, []) if cand.start else [{}]
         best = (0.0, 0)
@@ -195,7 +195,7 @@ def _matched_view(name: str):
                 v0 = st.get(q.name)
                 p[q.name] = jnp.asarray(np.zeros(shp) if v0 is None else v0, float)
             free = [q.name for q in cand.params if q.fit]
-            _, J = _valjac_fn(cand)(p, x)
+            _, J = eval_rows(_valjac_fn(cand), p, ctx.rows, consts)  # bucketed lengths
             cols = (
                 np.concatenate([np.asarray(J[k]).reshape(*rw.shape, -1) for k in free], axis=-1)
                 / prep.sigma[None, :, None]

@@ -14,6 +14,7 @@ import numpy as np
 from scipy import stats
 
 from ...engine._candidates import Candidate, Context, Param, Probe
+from ...engine._padded import eval_rows
 from ._sds_drift import drift_derived, drift_fn, drift_probes, drift_start
 from ._sds_noise import (
     BEAM_ORDERS,
@@ -264,19 +265,18 @@ def _wobble_cols_jit(rho, x):
     return jnp.stack([a, b], -1)
 
 
-_wobble_cols_grid = jax.jit(jax.vmap(_wobble_cols_jit, in_axes=(0, None)))
-
-
-def _jx(ctx: Context) -> dict:
-    x = {k: jnp.asarray(v) for k, v in ctx.rows.items()}
-    x.update({k: jnp.asarray(v) for k, v in ctx.consts.items() if isinstance(v, np.ndarray)})
-    return x
+@jax.jit
+def _wobble_cols_grid(rho, x):
+    """The two columns at every ratio of ``rho``, rows first: ``(n, G, C, 2)``."""
+    return jnp.moveaxis(jax.vmap(_wobble_cols_jit, in_axes=(0, None))(rho, x), 1, 0)
 
 
 def _wobble_start(ctx: Context, resid: np.ndarray, findings) -> list[dict]:
     rw = resid / ctx.noise[None, :]
     grid = _wobble_grid(ctx)
-    allc = np.asarray(_wobble_cols_grid(jnp.asarray(grid), _jx(ctx)))  # (G, n, C, 2)
+    consts = {k: v for k, v in ctx.consts.items() if isinstance(v, np.ndarray)}
+    # (G, n, C, 2), in bucketed lengths of rows (not one program per record length)
+    allc = np.moveaxis(eval_rows(_wobble_cols_grid, grid, ctx.rows, consts), 0, 1)
     run_index = np.asarray(ctx.rows["run_index"], float)
     onsets = _wobble_onsets(int(ctx.n_runs))
     # power of the two columns per (ratio, onset) from per-row normal equations summed over
