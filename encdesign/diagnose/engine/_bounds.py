@@ -360,9 +360,10 @@ class _Bench:
         self.fitter.blocks.release_observations()
 
     def _own_from_sums(self, tot: float, s1: np.ndarray) -> float:
-        """:meth:`own_rms` from the prepared sums (:meth:`prepare`): ``tot`` the whitened unit
-        effect's sum of squares on the kept rows, ``s1`` (R, C) its sums per run and channel
-        there."""
+        """The own RMS from a whitened unit effect's sums on the kept rows: ``tot`` its sum of
+        squares, ``s1`` (R, C) its sums per run and channel (read where the run means are
+        fitted): from the prepared pass (:meth:`prepare`) or from the effect itself
+        (:meth:`own_rms`)."""
         prep = self.prep
         keep = prep.keep
         if self.per_run:
@@ -382,20 +383,13 @@ class _Bench:
         keep = prep.keep
         w = v[keep]
         w /= prep.sigma[None, :]
-        means: list[float] = []  # the run means' share, per channel
+        R = prep.ctx.n_runs
+        s1 = np.zeros((R, w.shape[1]))  # its sums per run and channel (the run means' share)
         if self.per_run:
             run = np.asarray(prep.run)[keep]
-            R = prep.ctx.n_runs
-            cnt = np.bincount(run, minlength=R)
             for c in range(w.shape[1]):
-                s1 = np.bincount(run, weights=w[:, c], minlength=R)
-                means.append(float(np.sum(s1 * s1 / np.maximum(cnt, 1))))
-        tot = float(np.sum(np.square(w, out=w)))
-        for m in means:
-            tot -= m
-        C = prep.n_channels
-        eff = (C - 1) / C if prep.kd.project else 1.0
-        return math.sqrt(max(tot, 0.0) / max(float(keep.sum()) * C * eff, 1.0))
+                s1[:, c] = np.bincount(run, weights=w[:, c], minlength=R)
+        return self._own_from_sums(float(np.sum(np.square(w, out=w))), s1)
 
     def probe(self, cand: Candidate, probe: Probe):
         """``(lam, k, residual, own)``: the noncentrality of the unit effect after the reference
