@@ -87,7 +87,7 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     if g0 <= 0:
         return None, []
     k = f2.n_determined(len(f2.terms) - 1)
-    dbic = -(g1 - max(k, 0) * math.log(max(prep.n_values, 2)))
+    dbic = -(g1 - max(k, 0) * math.log(prep.n_values))  # (rows kept: N > 2)
     dho = fo.heldout_chi2 - f2.heldout_chi2
     kept = g1 / g0
     what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}):"
