@@ -93,7 +93,7 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}):"
     rules = []
     if dbic > -s.bic_min:
-        rules.append(("bic_min", "information criterion not lowered enough (dBIC {dbic:.1f})"))
+        rules.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
     if dho < s.heldout_min:
         rules.append(
             (
