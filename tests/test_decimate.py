@@ -117,3 +117,20 @@ def test_only_windows_within_one_stretch_on_a_fixed_grid_and_short_records_are_l
     off = {k: v for k, v in info.items() if k != "decimation"}
     assert decimate_recording(rec, off, FinderSettings(reduce_decimation_max=1)) is rec
     assert "off" in off["decimation"]["reason"]
+
+
+def test_a_block_too_short_for_half_the_bound_keeps_the_whole_bound():
+    """Where the block for half the bound would be a single row, stage 2 cannot follow a
+    reduction that is not made: the block takes the whole bound, as without stage 2."""
+    from encdesign.diagnose.engine._reduce import plan_for
+
+    s = FinderSettings()
+    got = plan_for("multihead", 10**7, 12, False, s, lambda: (2e-5, 26.5))  # 636 Hz
+    assert got["applied"] and got["block_rows"] >= 2
+    assert got["block_attenuation_max"] == s.reduce_attenuation_max
+    off = plan_for(
+        "multihead", 10**7, 12, False, FinderSettings(reduce_decimation_max=1), lambda: (2e-5, 26.5)
+    )
+    assert off["block_rows"] == got["block_rows"]
+    on = plan_for("multihead", 10**7, 12, False, s, lambda: (2e-5, 1.8))  # the benchmark's
+    assert on["block_attenuation_max"] == 0.5 * s.reduce_attenuation_max

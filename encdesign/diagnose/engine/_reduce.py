@@ -237,7 +237,7 @@ def plan_for(
     f_need = max(M * rate, float(settings.reduce_line_hz))
     # stage 2 (_decimate, a FIR and decimation) takes half the bound where it can apply
     B = _longest_block(f_need, dt, 0.5 * tol, int(settings.reduce_min_rows))
-    staged = _staged(n, B, dt, f_need, settings)
+    staged = B > 1 and _staged(n, B, dt, f_need, settings)  # (else the block as before)
     if not staged:
         B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
     out.update(
