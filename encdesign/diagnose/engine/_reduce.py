@@ -29,6 +29,10 @@ line that a view tested is attenuated past the bound. Orders
 far above that band: a reduced record cannot test them, and its diagnosis says so
 (``not_testable``). When ``B`` comes out below 2 the record is left as it is
 (``reduced.applied`` false, with the reason).
+
+Session 32: stage 2 (:mod:`._decimate`, a FIR low-pass and decimation of the block means)
+follows where it can (a factor of 2 or more, :data:`MIN_ROWS_OUT` rows left); the block then
+takes half of ``reduce_attenuation_max`` (``block_attenuation_max``) and the filter the rest.
 """
 
 from __future__ import annotations
