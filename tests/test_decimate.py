@@ -134,3 +134,22 @@ def test_a_block_too_short_for_half_the_bound_keeps_the_whole_bound():
     assert off["block_rows"] == got["block_rows"]
     on = plan_for("multihead", 10**7, 12, False, s, lambda: (2e-5, 1.8))  # the benchmark's
     assert on["block_attenuation_max"] == 0.5 * s.reduce_attenuation_max
+
+
+def test_the_noise_of_a_decimated_record_is_taken_above_its_passband():
+    """At 3 rows per cycle of the passband's edge second differences see the structure
+    below it; the Hann periodogram above the passband sees the noise alone."""
+    from encdesign.diagnose.engine._noise import noise_band, noise_sigma
+
+    rng = np.random.default_rng(8021)
+    fs, f_pass, n = 300.0, 100.0, 20_000
+    t = np.arange(n) / fs
+    r = 1e-6 * rng.standard_normal((n, 2))
+    r[:, 0] += 3e-5 * np.sin(2 * math.pi * 31.0 * t)  # a line 30x the noise
+    r[:, 1] += 3e-5 * np.sin(2 * math.pi * 2.0 * t)  # an order
+    seg = np.zeros(n, np.int64)
+    seg[n // 2 :] = 1
+    sigma, robust = noise_band(r, seg, f_pass, fs)
+    assert np.allclose(sigma, 1e-6, rtol=0.03) and np.allclose(robust, 1e-6, rtol=0.05)
+    assert noise_sigma(r, seg)[0] > 3e-6  # second differences: the line's
+    assert noise_band(r[:40], seg[:40], f_pass, fs) is None  # no segment long enough
