@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
 import sys
 import time
@@ -81,7 +82,10 @@ def _dump_long(n_rows: int, out: Path, rate_hz: float, reduce_min_rows: int) -> 
 
     rec = bench._bench_recording(n_rows, 4, 5, True, rate_hz=rate_hz)
     c0 = time.process_time()
-    d = diagnose(rec, verbose=False, settings=FinderSettings(reduce_min_rows=reduce_min_rows))
+    got = os.environ.get("ENCDESIGN_REDUCE_DECIMATION_MAX")  # session 32: stage 2 (1: off)
+    dec = FinderSettings().reduce_decimation_max if got is None else int(got)
+    s = FinderSettings(reduce_min_rows=reduce_min_rows, reduce_decimation_max=dec)
+    d = diagnose(rec, verbose=False, settings=s)
     cpu = time.process_time() - c0
     out.write_text(json.dumps(d.doc, default=str), encoding="utf-8")
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024

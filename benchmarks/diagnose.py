@@ -326,7 +326,11 @@ def _child(
     from encdesign.diagnose.engine._settings import FinderSettings
 
     rec = _bench_recording(n_rows, heads, 5, effect, rate_hz=rate_hz)
-    settings = None if reduce_min_rows is None else FinderSettings(reduce_min_rows=reduce_min_rows)
+    settings = (
+        None
+        if reduce_min_rows is None
+        else FinderSettings(reduce_min_rows=reduce_min_rows, reduce_decimation_max=_decimation())
+    )
     stages: dict[str, float] = {}
     io: dict = {"table": table}
     if table != "memory":
@@ -517,7 +521,9 @@ def _proc_child(
     from encdesign.diagnose.engine._settings import FinderSettings
 
     if min_rows > 0:
-        dispatch.DEFAULT_SETTINGS = FinderSettings(reduce_min_rows=min_rows)
+        dispatch.DEFAULT_SETTINGS = FinderSettings(
+            reduce_min_rows=min_rows, reduce_decimation_max=_decimation()
+        )
     stages: dict = {}
     opened = D.open_recording
 
@@ -607,6 +613,16 @@ def _proc_child(
     )
     Path(stats).write_text(json.dumps(got))
     return rc
+
+
+def _decimation() -> int:
+    """``FinderSettings.reduce_decimation_max`` of the benchmark's settings (session 32,
+    stage 2 of a long record's reduction): the environment's
+    ``ENCDESIGN_REDUCE_DECIMATION_MAX`` (1: off), else the default."""
+    from encdesign.diagnose.engine._settings import FinderSettings
+
+    got = os.environ.get("ENCDESIGN_REDUCE_DECIMATION_MAX")
+    return FinderSettings().reduce_decimation_max if got is None else int(got)
 
 
 def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s: float) -> dict:

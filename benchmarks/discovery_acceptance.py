@@ -19,7 +19,8 @@ pools them over files (several seeds, several kinds) and prints, per kind and ov
   the benchmark is out of the catalog, so each such name is a false one);
 * every miss of the frame (class, size, kind, verdict, named effects, the oracle's
   noncentrality ``lambda`` against the true term's multiple-testing and the locating
-  thresholds, the finder's noise over the true noise);
+  thresholds, the finder's noise over the true noise and, on SDS, its parts; a catalog take
+  scored confounded only because nothing was located after it is marked so);
 * and, from conceal-benchmark JSONs (``--catalog``), the catalog's rates per kind.
 
 The issue's lines: frame right >= 90 %, exponent within 2 SE >= 90 %, held-out gain >= 80 %
@@ -95,6 +96,10 @@ def rates(cases: list[dict], clean: list[dict]) -> dict[str, Any]:
         "gain": _rate([r >= 0.8 for r in ratios]),
         "gain_median": med,
         "confounded": sum(bool(c.get("confounded")) for c in cases),
+        "confounded_at_line": sum(
+            bool(c.get("confounded")) and c.get("confounded_at_truth_line") is not False
+            for c in cases
+        ),
         "catalog": sum(bool(c["catalog"]) for c in cases),
         "named_beside": sum(bool(c["effects"]) and not c["catalog"] for c in cases),
         "oracle_undetectable": sum(not c.get("oracle_detectable") for c in cases),
@@ -118,6 +123,17 @@ def miss_line(c: dict) -> str:
     ]
     if c.get("catalog"):
         marks.append("catalog take, " + ("confounded" if c.get("confounded") else "not confounded"))
+        if c.get("confounded") and c.get("confounded_at_truth_line") is False:
+            marks.append(  # the located reading only: the truth's model at its line still gains
+                "not confounded at the truth's line (gain "
+                f"{c.get('gain_true_after_catalog_at_line_chi2', math.nan):.1f})"
+            )
+    parts = c.get("noise_finder_over_true_parts") or {}
+    if parts:  # session 32: the SDS level ratio as its product
+        marks.append(
+            "noise ratio = estimate {estimate:.2f} x widening {widening:.2f} x common factor "
+            "{common_factor:.2f} x level mix {level_mix:.2f}".format(**parts)
+        )
     return (
         f"{c['kind']} {c['class']} {c['size']:g}x (seed {c.get('_seed')}): verdict "
         f"{c['verdict']}, named [{', '.join(c['effects'])}], term {got} vs truth "
@@ -181,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     print()
     for name, r in table.items():
         print(
-            f"{name}: catalog takes {r['catalog']} (confounded {r['confounded']}), a catalog "
+            f"{name}: catalog takes {r['catalog']} (confounded {r['confounded']}; at the "
+            f"truth's line {r['confounded_at_line']}), a catalog "
             f"name beside a discovered term {r['named_beside']}, not "
             f"oracle-detectable {r['oracle_undetectable']}, oracle-detectable incl. confounded "
             f"{_fmt(r['frame_oracle_incl_confounded'])}, clean not consistent "

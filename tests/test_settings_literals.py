@@ -72,6 +72,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     "the base's order, as in _document.scan_order_of; a block of at least two rows)",
     ("engine/_reduce_stream.py", 2): SHAPE + " (a row's stretch-start flag depends on it and "
     "the two rows before it: the rows of context carried into a row group or a share)",
+    ("engine/_decimate.py", 0.5): PHYSICS + " (half the rate: the Nyquist frequency)",
+    ("engine/_noise.py", 2): PHYSICS + " (half the rate: the Nyquist frequency)",
     ("engine/_reduce.py", 6.0): NUMERIC + " (the leading order of the Dirichlet kernel, "
     "(B^2 - 1) x^2 / 6: a start the exact check then moves)",
     ("engine/_evidence.py", 2): REPORT + " (at most two confounded partners)",
@@ -263,6 +265,25 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover_law.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
     ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
     ("engine/_document.py", "LATTICE_ROWS"): BOUND,
+    ("engine/_reduce.py", "RATE_OVER_NEEDED"): BOUND
+    + " (stage 2's output rate over the highest frequency needed: rows per second kept; the "
+    "bound itself is reduce_attenuation_max, checked on the design)",
+    ("engine/_reduce.py", "MIN_ROWS_OUT"): BOUND
+    + " (stage 2 is not applied where fewer rows would be left)",
+    ("engine/_decimate.py", "KAISER_BETA"): NUMERIC
+    + " (the FIR design's window; the taps grow until the bound holds)",
+    ("engine/_decimate.py", "PC_ERROR_MAX"): NUMERIC
+    + " (the design's power complementarity, white noise stays white within it; stated)",
+    ("engine/_decimate.py", "TAPS_PER_TRANSITION"): SEARCH + " (the first design's taps)",
+    ("engine/_decimate.py", "TAPS_GROWTH"): SEARCH + " (taps of the next design tried)",
+    ("engine/_decimate.py", "STOP_CHECK_POINTS"): REPORT
+    + " (frequencies on which the stopband's gain is stated)",
+    ("engine/_decimate.py", "TAPS_MAX"): BOUND + " (taps of the longest design tried)",
+    ("engine/_decimate.py", "CHECK_POINTS"): NUMERIC
+    + " (frequencies on which the design's bound is checked)",
+    ("engine/_decimate.py", "OUT_CHUNK"): BOUND + " (outputs filtered at a time: memory)",
+    ("engine/_noise.py", "NOISE_BAND_MIN_ROWS"): BOUND
+    + " (segments shorter add nothing to the decimated record's first noise estimate)",
     ("engine/_reduce.py", "PASS_ROWS"): BOUND + " (rows per slice of the reduction's passes)",
     ("engine/_reduce.py", "GAP_STEPS"): NUMERIC + " (a block is evenly sampled, as the "
     "attenuation bound assumes: one missed sample, a step of 2 intervals, ends a stretch)",

@@ -66,7 +66,7 @@ from ._growth_line import growth_beside_line
 from ._growth_start import grown_base
 from ._kind import AbstractKind as Kind
 from ._located import value_in_interval
-from ._noise import noise_spectral_dof
+from ._noise import noise_method, noise_spectral_dof
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
 from ._reduce_restart import check_growth, orders_checked, run_reduced, state_reduction
@@ -627,9 +627,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
         "noise": {
             "per_channel": [float(s) for s in prep.sigma],
             "channels": kd.channel_names,
-            "method": "median of the base residual's periodogram per channel (white noise: "
-            "ln 2 sigma^2; structure in fewer than half the bins cannot inflate it); second "
-            "differences for the first weights and the glitch scan",
+            "method": noise_method(prep),
         },
         "goodness_of_fit": goodness_of_fit(prep, sel.final_resid, final.n_params),
         "goodness_of_fit_base": sel.gof0,

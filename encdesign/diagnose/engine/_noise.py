@@ -118,6 +118,82 @@ def noise_sigma(
     return np.sqrt(np.einsum("ij,ij->j", d2, d2) / d2.shape[0] / 6.0)
 
 
+NOISE_BAND_KEY = "_noise_band_hz"
+"""The key of a recording's ``meta`` that holds ``(passband_hz, rate_hz)`` of a record
+decimated by stage 2 of a long record's reduction (issue 43, ``_decimate``)."""
+
+NOISE_BAND_MIN_ROWS = 64
+"""Segments of fewer rows add nothing to :func:`noise_band`."""
+
+
+def noise_band(
+    r: np.ndarray, seg: np.ndarray, f_pass: float, fs: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Noise std per channel of a record low-passed to ``f_pass`` Hz and sampled at ``fs``
+    Hz with a power-complementary filter (``_decimate``: white noise stays white, and the
+    band from ``f_pass`` to ``fs / 2`` holds the noise alone, where second differences would
+    see the structure up to ``f_pass``, close to ``fs / 3``): the mean and (robust) the
+    median over ``ln 2`` of the Hann-windowed periodogram ``|X_k|^2 / sum(w^2)`` of each
+    segment's rows (``seg``; ``-1``: left out) in that band. Returns ``(sigma, sigma_robust)``
+    (C,), or ``None`` where no segment of :data:`NOISE_BAND_MIN_ROWS` rows has a bin there."""
+    seg = np.asarray(seg)
+    cut = np.flatnonzero(np.diff(seg) != 0) + 1
+    lo = np.concatenate([[0], cut])
+    hi = np.concatenate([cut, [seg.size]])
+    bins = []
+    for a, b in zip(lo, hi):
+        m = int(b - a)
+        if seg[a] < 0 or m < NOISE_BAND_MIN_ROWS:
+            continue
+        f = np.fft.rfftfreq(m, 1.0 / fs)
+        sel = (f > f_pass) & (f < fs / 2)
+        if not sel.any():
+            continue
+        w = np.hanning(m)
+        x = r[a:b] - r[a:b].mean(0)
+        X = np.fft.rfft(x * w[:, None], axis=0)[sel]
+        bins.append((X.real**2 + X.imag**2) / float(np.sum(w * w)))
+    if not bins:
+        return None
+    P = np.concatenate(bins, 0)
+    return np.sqrt(P.mean(0)), np.sqrt(np.median(P, 0) / math.log(2.0))
+
+
+def noise_method(prep: Prepared) -> str:
+    """The document's ``noise.method``: how :func:`noise_spectral_dof` estimated it."""
+    out = (
+        "median of the base residual's periodogram per channel (white noise: ln 2 sigma^2; "
+        "structure in fewer than half the bins cannot inflate it); second differences for "
+        "the first weights and the glitch scan"
+    )
+    if NOISE_BAND_KEY in (prep.ctx.meta or {}):
+        out += (
+            "; decimated (reduced.decimation): Hann-windowed, on the band above the passband, "
+            "which holds the noise alone, for both (second differences see the structure "
+            "below it)"
+        )
+    return out
+
+
+def _band_bins(x: np.ndarray, kept: np.ndarray, f_pass: float, fs: float) -> np.ndarray:
+    """Periodogram bins (rows: bins, columns: channels) of one run's residual ``x`` (rows
+    left out zero; ``kept``) of a record decimated by stage 2 (``_decimate``), in the band
+    from ``f_pass`` to ``fs / 2`` Hz that holds its white noise alone: Hann-windowed (the
+    leakage of the lines below ``f_pass`` falls off as the cube of the distance, where a
+    rectangular window's spreads a strong line over many of a short run's bins), scaled by
+    the window's power on the kept rows (white noise: ``sigma^2`` times a unit exponential),
+    every other bin (the window's neighbouring bins are correlated)."""
+    m = x.shape[0]
+    w = np.hanning(m)
+    norm = float(np.sum(w * w * kept))
+    f = np.fft.rfftfreq(m, 1.0 / fs)
+    sel = np.flatnonzero((f > f_pass) & (f < fs / 2))[::2]
+    if sel.size == 0 or norm <= 0:
+        return np.zeros((0, x.shape[1]))
+    X = np.fft.rfft(x * w[:, None], axis=0)[sel]
+    return (X.real**2 + X.imag**2) / norm
+
+
 def noise_spectral(prep: Prepared, resid: np.ndarray, n_params: int) -> np.ndarray:
     """Noise std per channel (:func:`noise_spectral_dof`'s ``sigma``)."""
     return noise_spectral_dof(prep, resid, n_params)[0]
@@ -152,6 +228,7 @@ def noise_spectral_dof(
     smaller of the two per channel, whose ``dof`` is then taken as unlimited (unknown)."""
     C = resid.shape[1]
     bins = [[] for _ in range(C)]
+    band = (prep.ctx.meta or {}).get(NOISE_BAND_KEY)
     for r in range(prep.ctx.n_runs):
         rows = np.flatnonzero(prep.run == r)
         kr = prep.keep[rows]
@@ -160,15 +237,19 @@ def noise_spectral_dof(
             continue
         x = np.where(kr[:, None], resid[rows], 0.0)
         x = x - np.where(kr[:, None], x.sum(0) / nk, 0.0)
-        P = np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
-        P = P[1 : (x.shape[0] - 1) // 2 + 1]
+        if band is not None:
+            P = _band_bins(x, kr, band[0], band[1])
+        else:
+            P = np.abs(np.fft.rfft(x, axis=0)) ** 2 / nk
+            P = P[1 : (x.shape[0] - 1) // 2 + 1]
         for k in range(C):
             bins[k].append(P[:, k])
     out = np.full(C, np.nan)
     n_dof = np.full(C, np.inf)
     eff = (C - 1) / C if prep.kd.project and C > 1 else 1.0
     share = n_params / prep.n_values if prep.n_values > 0 else 0.0
-    dof = 1.0 - share if 0 <= share < 1 else 1.0
+    # a decimated record's band above its passband: the fitted terms lie below it
+    dof = 1.0 - share if 0 <= share < 1 and band is None else 1.0
     for k in range(C):
         if bins[k]:
             allb = np.concatenate(bins[k])

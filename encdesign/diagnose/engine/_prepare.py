@@ -11,7 +11,7 @@ from scipy import stats
 
 from ..._errors import input_error
 from ._candidates import Context
-from ._noise import noise_d2, noise_sigma, robust_scale
+from ._noise import NOISE_BAND_KEY, noise_band, noise_d2, noise_sigma, robust_scale
 from ._nuisances import LATE_STAMPS_REASON, angle_steps, late_stamp_rows
 from ._protocol import KeptRows, KindData, Prepared, RowColumns, steady_tolerance
 from ._settings import DEFAULT_SETTINGS, FinderSettings
@@ -432,7 +432,7 @@ def _mask_rows(kd: KindData, seg, run, order_runs, excluded) -> np.ndarray:
     return seg_motion
 
 
-def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort, settings):
+def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort, settings, band=None):
     """Glitches and count jumps on a first detrended residual (``keep`` updated in place),
     and the noise per channel (robust first). Returns ``(kd, glitches, count_jumps, seg_eff,
     sigma)``."""
@@ -474,8 +474,13 @@ def _glitches_and_noise(kd: KindData, seg, keep, run, order_runs, sort, settings
     for i, _, _ in jumps_raw:  # the step itself is not noise
         seg_noise[max(i - 1, 0) : i + 1] = -1
     yd = _detrend(y, seg_eff)
-    sigma = noise_sigma(yd, seg_noise, robust=False, t=t)
-    sigma_r = noise_sigma(yd, seg_noise, robust=True, t=t)
+    # a decimated record (issue 43, stage 2: ``band``) holds only noise above its passband
+    got = None if band is None else noise_band(yd, seg_noise, band[0], band[1])
+    if got is not None:
+        sigma, sigma_r = got
+    else:
+        sigma = noise_sigma(yd, seg_noise, robust=False, t=t)
+        sigma_r = noise_sigma(yd, seg_noise, robust=True, t=t)
     del yd
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, sigma_r)
     if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
@@ -584,7 +589,7 @@ def prepare(kd: KindData, meta: dict, settings: FinderSettings = DEFAULT_SETTING
             "a shaft turning steadily",
         )
     kd, glitches, count_jumps, seg_eff, sigma = _glitches_and_noise(
-        kd, seg, keep, run, order_runs, sort, settings
+        kd, seg, keep, run, order_runs, sort, settings, meta.get(NOISE_BAND_KEY)
     )
     ang = kd.theta_ref if kd.theta_ref is not None else kd.shaft  # recurring: of the angle
     steps_of_angle, count_jumps = angle_steps(count_jumps, ang, settings)

@@ -29,6 +29,10 @@ line that a view tested is attenuated past the bound. Orders
 far above that band: a reduced record cannot test them, and its diagnosis says so
 (``not_testable``). When ``B`` comes out below 2 the record is left as it is
 (``reduced.applied`` false, with the reason).
+
+Session 32: stage 2 (:mod:`._decimate`, a FIR low-pass and decimation of the block means)
+follows where it can (a factor of 2 or more, :data:`MIN_ROWS_OUT` rows left); the block then
+takes half of ``reduce_attenuation_max`` (``block_attenuation_max``) and the filter the rest.
 """
 
 from __future__ import annotations
@@ -51,6 +55,15 @@ GAP_STEPS = 1.5
 SPEED_QUANTILE = 0.99
 """The fastest shaft rate is this quantile of ``|d shaft / dt|`` over the rows (a glitch or
 a count jump cannot set it)."""
+
+RATE_OVER_NEEDED = 3.0
+"""Stage 2 (:mod:`._decimate`): the output rate is at least this multiple of
+``f_needed_hz`` (the transition band, from ``f_needed_hz`` to ``rate_out - f_needed_hz``,
+at least ``f_needed_hz`` wide)."""
+
+MIN_ROWS_OUT = 4096
+"""Stage 2 is not applied where it would leave fewer rows than this (the engine's folds,
+spectra and segments want rows)."""
 
 PASS_ROWS = 1 << 20
 """Rows per slice of the reduction's passes (bounded temporary memory)."""
@@ -107,6 +120,26 @@ def orders_kept(rate: float, dt: float, B: int, tol: float, least: int) -> int |
     while attenuation((m + 1) * rate, dt, B) <= tol:
         m += 1
     return m
+
+
+def decimation_factor(fs_in: float, f_need: float, settings: FinderSettings) -> int:
+    """Stage 2's decimation factor ``R`` (:mod:`._decimate`) for rows at ``fs_in`` Hz: the
+    largest integer with ``fs_in / R`` at least :data:`RATE_OVER_NEEDED` x ``f_need`` (Hz),
+    at most ``settings.reduce_decimation_max``."""
+    if not (fs_in > 0 and f_need > 0):
+        return 1
+    R = int(fs_in / (RATE_OVER_NEEDED * f_need))
+    return max(1, min(int(settings.reduce_decimation_max), R))
+
+
+def _staged(n: int, B: int, dt: float, f_need: float, settings: FinderSettings) -> bool:
+    """Whether stage 2 (:mod:`._decimate`) can follow blocks of ``B`` rows of a record of
+    ``n`` rows sampled every ``dt`` s: a factor of 2 or more, and at least
+    :data:`MIN_ROWS_OUT` rows left (before the stretches' edges)."""
+    if not dt > 0:
+        return False
+    R = decimation_factor(1.0 / (B * dt), f_need, settings)
+    return R > 1 and n // (B * R) >= MIN_ROWS_OUT
 
 
 def _angle_columns(rec: Recording) -> list[str]:
@@ -206,7 +239,11 @@ def plan_for(
     dt, rate = steps()
     M = scan_orders_reached(default_order, grows and grown, settings)
     f_need = max(M * rate, float(settings.reduce_line_hz))
-    B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
+    # stage 2 (_decimate, a FIR and decimation) takes half the bound where it can apply
+    B = _longest_block(f_need, dt, 0.5 * tol, int(settings.reduce_min_rows))
+    staged = B > 1 and _staged(n, B, dt, f_need, settings)  # (else the block as before)
+    if not staged:
+        B = _longest_block(f_need, dt, tol, int(settings.reduce_min_rows))
     out.update(
         block_rows=B,
         dt_s=dt,
@@ -221,6 +258,7 @@ def plan_for(
         line_band_hz=float(settings.reduce_line_hz),
         f_needed_hz=f_need,
         attenuation_max=tol,
+        block_attenuation_max=0.5 * tol if staged else tol,
         attenuation_at_f_needed=attenuation(f_need, dt, B),
         bound="the mean of B rows sampled every dt multiplies a sinusoid of frequency f by "
         "D = sin(pi f B dt) / (B sin(pi f dt)) (its phase at the block's mean time); 1 - D "

@@ -29,6 +29,7 @@ from typing import TypeVar
 
 from ..._errors import input_error
 from ...io._recording import Recording, load_recording
+from ._decimate import decimate_recording
 from ._document import scan_order_of
 from ._protocol import Prepared
 from ._reduce import plan as reduce_plan
@@ -77,8 +78,14 @@ def state_reduction(doc: dict, reduced: dict) -> None:
     names = {e["name"] for e in lost}
     doc["not_testable"] = [e for e in doc["not_testable"] if e["name"] not in names] + lost
     if reduced["applied"]:
+        dec = reduced.get("decimation") or {}
+        by = (
+            f", low-passed and decimated by {dec['factor']} to {dec['rate_out_hz']:.4g} Hz"
+            if dec.get("applied")
+            else ""
+        )
         doc["notes"].append(
-            f"reduced to the means of blocks of {reduced['block_rows']} rows "
+            f"reduced to the means of blocks of {reduced['block_rows']} rows{by} "
             f"({reduced['rows']} rows to {reduced['reduced_rows']}; attenuation at most "
             f"{reduced['attenuation_max']:g} up to {reduced['f_needed_hz']:.4g} Hz)"
         )
@@ -124,11 +131,13 @@ def run_reduced(
             (``reduced["_source"]``) whose base grew past what its block keeps.
     """
     full, given = rec, reduced is not None
+    reduced = None if reduced is None else dict(reduced)  # (stage 2 adds to its own copy)
     with stage("reduce"):
         if reduced is None:
             reduced = reduce_plan(rec, order0, grows, settings)
             if reduced["applied"]:
                 rec = reduce_recording(rec, reduced)
+    rec = _stage2(rec, reduced, settings)
     try:
         return once(rec, reduced)
     except GrowthPastBlock as exc:
@@ -148,4 +157,14 @@ def run_reduced(
             "block_rows": int(reduced["block_rows"]),
             "reduced_rows": int(reduced["reduced_rows"]),
         }
+        rec = _stage2(rec, again, settings)
         return once(rec, again)
+
+
+def _stage2(rec: Recording, reduced: dict, settings: FinderSettings) -> Recording:
+    """The block means ``rec`` (``reduced``: their entry) low-passed and decimated
+    (:mod:`._decimate`, stage 2), once; a record not reduced is returned as it is."""
+    if not reduced.get("applied") or "decimation" in reduced:
+        return rec
+    with stage("decimate"):
+        return decimate_recording(rec, reduced, settings)

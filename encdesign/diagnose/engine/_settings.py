@@ -706,6 +706,12 @@ class FinderSettings(AbstractSelectionSettings):
     reduce_line_hz: float = eqx.field(default=100.0, static=True)
     """... lines in Hz up to this frequency are kept within that bound. Issue 43."""
 
+    reduce_decimation_max: int = eqx.field(default=1_000_000, static=True)
+    """... the block means are then low-passed and decimated by an integer factor ``R`` of at
+    most this (stage 2, ``_decimate``: rows at about 3x the highest frequency needed, the
+    bound split between the two stages; ``reduced.decimation`` in the JSON); 1 turns stage
+    2 off. Session 32 (issue 43)."""
+
     modulated_orders_alpha: float = eqx.field(default=1e-3, static=True)
     """``modulated_orders`` view (``_views_modulated``): family-wise false-alarm rate of its
     scan of orders whose amplitude grows or switches (Bonferroni over orders x channels x

@@ -1,0 +1,70 @@
+"""The discovery benchmark's oracle (``benchmarks/discovery.py``, issue 41, session 32): on an
+SDS record the base residual is the record's exact structure and noise after the base model
+(no noise source outside the oracle's ``eps``), and the finder's level over the true one is
+the product of its parts."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+
+import discovery as B  # noqa: E402
+
+from encdesign.diagnose._dispatch import diagnose  # noqa: E402
+from encdesign.diagnose.engine import _engine  # noqa: E402
+from encdesign.simulate._outside import outside_record  # noqa: E402
+
+SEED = [8043, 0, 9, 1, 0]  # training seed (session 32): a 5x sensor_frame case
+
+
+def _oracle(monkeypatch, twin_noise: bool = False) -> dict:
+    monkeypatch.setattr(_engine, "discover", B._capture)
+    monkeypatch.setattr(_engine, "_document", B._capture_document)
+    if twin_noise:  # the structure-free twin keeps a noise the record's eps does not hold
+        real = B.outside_record
+
+        def leaky(rng, cls, size, kind, rows, noise=True):
+            return real(rng, cls, size, kind, rows, noise=noise or size == 0.0)
+
+        monkeypatch.setattr(B, "outside_record", leaky)
+    B._CAP.clear()
+    rec, _ = outside_record(np.random.default_rng(SEED), "sensor_frame", 5.0, "sds", 3000)
+    diagnose(rec)
+    return B._oracle("sensor_frame", 5.0, "sds", SEED, 3000)
+
+
+@pytest.fixture(scope="module")
+def oracle():
+    mp = pytest.MonkeyPatch()
+    try:
+        yield _oracle(mp)
+    finally:
+        mp.undo()
+
+
+def test_the_base_residual_is_the_records_structure_and_noise(oracle):
+    """The base residual equals the exact structure plus noise after the base's columns to
+    1e-2 (0.1-0.5 % on training records): the finder's SDS level, 1.4-1.8 times the true
+    one on every case, is not fed by a noise source the oracle leaves out."""
+    assert oracle["oracle_noncentrality"] > 100
+    assert oracle["oracle_closure"] < 1e-2
+
+
+def test_the_closure_sees_a_noise_the_oracle_leaves_out(monkeypatch):
+    """The check can fail: a structure-free twin that keeps its own noise (so the oracle's
+    ``mu + eps`` hold a noise the record does not) leaves the base residual far from them."""
+    assert _oracle(monkeypatch, twin_noise=True)["oracle_closure"] > 0.3
+
+
+def test_the_level_ratio_is_the_product_of_its_parts(oracle):
+    """``noise_finder_over_true`` = raw estimate over the true differences' level x widening
+    x common factor x the differences' true level over the structure's."""
+    parts = oracle["noise_finder_over_true_parts"]
+    assert set(parts) == {"estimate", "widening", "common_factor", "level_mix", "product"}
+    assert parts["product"] == pytest.approx(oracle["noise_finder_over_true"], rel=1e-9)
+    assert parts["widening"] > 1.0 and parts["common_factor"] >= 1.0
+    lv = oracle["noise_finder_run_means"]
+    assert parts["widening"] == lv["widening"] and parts["common_factor"] == lv["common_factor"]
