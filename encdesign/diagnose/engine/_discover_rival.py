@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from ._discover_export import candidate_name, discovered_candidate
 from ._fit import Fitter, make_term
 from ._fit_memo import remembered_fit, remembered_steps
-from ._select import Selection, _refusal
+from ._select import Selection, _refusal, gain_rules
 from ._stats_pass import drive_many
 from ._timing import stage
 from ._views import locate
@@ -91,16 +91,7 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     dho = fo.heldout_chi2 - f2.heldout_chi2
     kept = g1 / g0
     what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}):"
-    rules = []
-    if dbic > -s.bic_min:
-        rules.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
-    if dho < s.heldout_min:
-        rules.append(
-            (
-                "heldout_min",
-                f"held-out chi-square lowered by {dho:.1f} only (needs {s.heldout_min:.0f})",
-            )
-        )
+    rules = gain_rules(s, dbic, dho)
     if kept < s.located_share_min:
         rules.append(
             (

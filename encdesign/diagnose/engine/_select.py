@@ -286,21 +286,30 @@ def _sort_trials(trials: list, applicable: list) -> None:
         g0 = g1
 
 
-def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
-    """The rules on the criterion, the held-out gain, plausibility and conditioning:
-    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
-    s = prep.settings
-    N = prep.n_values
-    reasons = []
+def gain_rules(s, dbic: float, dho: float) -> list[tuple[str, str]]:
+    """The rules on a candidate's gain, ``[(rule, reason), ...]``: ``bic_min`` on its
+    information criterion change ``dbic`` and ``heldout_min`` on its held-out chi-square
+    gain ``dho`` (``s``: the :class:`FinderSettings`); the selection's and the discovered
+    model's re-test (:mod:`._discover_rival`) ask the same."""
+    out = []
     if dbic > -s.bic_min:
-        reasons.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
+        out.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
     if dho < s.heldout_min:
-        reasons.append(
+        out.append(
             (
                 "heldout_min",
                 f"held-out chi-square lowered by {dho:.1f} only (needs {s.heldout_min:.0f})",
             )
         )
+    return out
+
+
+def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
+    """The rules on the criterion, the held-out gain, plausibility and conditioning:
+    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
+    s = prep.settings
+    N = prep.n_values
+    reasons = gain_rules(s, dbic, dho)
     term = fr.terms[-1]
     trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
     erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
