@@ -153,3 +153,39 @@ def test_the_noise_of_a_decimated_record_is_taken_above_its_passband():
     assert np.allclose(sigma, 1e-6, rtol=0.03) and np.allclose(robust, 1e-6, rtol=0.05)
     assert noise_sigma(r, seg)[0] > 3e-6  # second differences: the line's
     assert noise_band(r[:40], seg[:40], f_pass, fs) is None  # no segment long enough
+
+
+def test_split_over_processes_the_shares_are_whole_chunks_and_bit_equal_to_one(monkeypatch):
+    """Issue 43: on N processes each filters its chunk_share of the outputs and the shares
+    are gathered. Two processes simulated in one: each share computed in turn (the gather
+    records it), concatenated, must be the one-process columns bit for bit."""
+    import types
+
+    from encdesign.diagnose.engine import _decimate as d
+
+    rng = np.random.default_rng(8023)
+    dt, B, f_need = 2e-5, 8, 100.0
+    rec, info = _stage1(_columns(400_000, B * dt, rng, sine_hz=30.0, amp=1e-4), B, dt, f_need)
+    one = decimate_recording(rec, dict(info), ON)
+    n_out = one.n_rows
+    assert n_out > 2 * d.OUT_CHUNK and n_out % d.OUT_CHUNK  # 3+ chunks, the last short
+    shares, got = [], {}
+
+    def gather(mine, counts):
+        got.setdefault("parts", []).append(mine)
+        got["counts"] = counts
+        return np.zeros((sum(counts), mine.shape[1]))
+
+    monkeypatch.setattr(d, "allgather_concat", gather)
+    for p in range(2):
+        shares.append(d.chunk_share(n_out, 2, p))
+        fake = types.SimpleNamespace(process_count=lambda: 2, process_index=lambda p=p: p)
+        monkeypatch.setattr(d, "jax", fake)
+        decimate_recording(rec, dict(info), ON)
+    assert shares[0] == (0, shares[1][0]) and shares[1][1] == n_out
+    assert shares[1][0] % d.OUT_CHUNK == 0 and 0 < shares[1][0] < n_out
+    assert got["counts"] == [b - a for a, b in shares]
+    both = np.concatenate(got["parts"])
+    fir = [k for k in rec.columns if k not in ("t", "run")]
+    for j, k in enumerate(fir):
+        assert np.array_equal(both[:, j], one.columns[k])  # bit for bit

@@ -31,8 +31,10 @@ transition band is stated (``power_complementary_error``, at most :data:`PC_ERRO
 turn (:func:`._reduce.stretch_starts` on the reduced columns). Outputs lie on one fixed grid
 of the stage-1 rows (centres ``h + k R``); only those whose whole window lies in one stretch
 are kept (``run`` is constant there), and the rows left out are counted. Stage 2 runs on the
-whole stage-1 record that every process holds after the gather, so one process and several
-give the same document bit for bit.
+whole stage-1 record that every process holds after the gather; on several processes each
+filters a contiguous share of the output chunks (:data:`OUT_CHUNK` outputs each, the same
+chunks as on one process: :func:`chunk_share`) and the filtered columns are gathered, so one
+process and several give the same document bit for bit.
 
 Where ``R`` would be under 2, or fewer than :data:`MIN_ROWS_OUT` outputs would be left (short
 or few stretches for the filter), stage 2 is not applied
@@ -46,8 +48,10 @@ from __future__ import annotations
 
 import math
 
+import jax
 import numpy as np
 
+from ..._distributed import allgather_concat, split_range
 from ...io._recording import KINDS as SPECS
 from ...io._recording import Recording
 from ._noise import NOISE_BAND_KEY
@@ -59,6 +63,7 @@ from ._reduce import (
     shaft_of,
     stretch_starts,
 )
+from ._rowshare import is_alone
 from ._settings import FinderSettings
 
 KAISER_BETA = 6.0
@@ -208,10 +213,14 @@ def decimate_recording(rec: Recording, info: dict, settings: FinderSettings) -> 
         )
         return rec
     ints = set(SPECS[rec.kind].int_columns) | {"t"}
-    cols = {}
-    for name, col in rec.columns.items():
-        v = np.asarray(col)
-        cols[name] = v[centre].copy() if name in ints else _filtered(v, taps, centre)
+    fir = [k for k in rec.columns if k not in ints]
+    got_fir = _filtered_columns([rec.columns[k] for k in fir], taps, centre)
+    cols = {
+        k: np.ascontiguousarray(got_fir[:, fir.index(k)])
+        if k in fir
+        else np.asarray(v)[centre].copy()
+        for k, v in rec.columns.items()
+    }
     stretches = int(np.count_nonzero(starts))
     dec.update(
         applied=True,
@@ -252,6 +261,32 @@ def decimate_recording(rec: Recording, info: dict, settings: FinderSettings) -> 
     meta = dict(rec.meta)
     meta[NOISE_BAND_KEY] = (f_need, float(got["rate_out_hz"]))  # (_prepare: its noise)
     return Recording(rec.kind, meta, cols, path=rec.path)
+
+
+def chunk_share(n_out: int, parts: int, part: int) -> tuple[int, int]:
+    """Outputs ``[lo, hi)`` of ``n_out`` that process ``part`` of ``parts`` filters: a
+    contiguous share of the :data:`OUT_CHUNK` chunks (:func:`split_range`), so every chunk,
+    and its ``w @ taps``, has the same rows and shape as on one process."""
+    n_chunks = -(-int(n_out) // OUT_CHUNK)
+    lo, hi = split_range(n_chunks, parts, part)
+    return min(lo * OUT_CHUNK, n_out), min(hi * OUT_CHUNK, n_out)
+
+
+def _filtered_columns(vs: list, taps: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``(centre.size, len(vs))``: the FIR ``taps`` on each column of ``vs`` at rows
+    ``centre`` (:func:`_filtered`). On several processes (outside :func:`._rowshare.alone`)
+    each filters its :func:`chunk_share` of the outputs and the shares are gathered (one
+    :func:`allgather_concat`): every process ends with the same columns, bit for bit those
+    of one process."""
+    parts, part = (1, 0) if is_alone() else (jax.process_count(), jax.process_index())
+    lo, hi = chunk_share(centre.size, parts, part)
+    mine = np.empty((hi - lo, len(vs)))
+    for j, v in enumerate(vs):
+        mine[:, j] = _filtered(v, taps, centre[lo:hi])
+    if parts == 1:
+        return mine
+    counts = [b - a for a, b in (chunk_share(centre.size, parts, p) for p in range(parts))]
+    return allgather_concat(mine, counts)
 
 
 def _filtered(v: np.ndarray, taps: np.ndarray, centre: np.ndarray) -> np.ndarray:
