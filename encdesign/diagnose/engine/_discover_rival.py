@@ -151,7 +151,7 @@ def rival_names(
         worst: tuple[float, str, list] | None = None
         for s in sel.accepted:
             kept, rules = _test(prep, fitter, list(sel.final.terms), s.name, disc, specs)
-            if rules and (worst is None or kept < worst[0]):
+            if rules and kept is not None and (worst is None or kept < worst[0]):
                 worst = (kept, s.name, rules)
         if worst is None:
             break
