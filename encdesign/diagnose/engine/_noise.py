@@ -145,14 +145,9 @@ def noise_band(
         m = int(b - a)
         if seg[a] < 0 or m < NOISE_BAND_MIN_ROWS:
             continue
-        f = np.fft.rfftfreq(m, 1.0 / fs)
-        sel = (f > f_pass) & (f < fs / 2)
-        if not sel.any():
-            continue
-        w = np.hanning(m)
-        x = r[a:b] - r[a:b].mean(0)
-        X = np.fft.rfft(x * w[:, None], axis=0)[sel]
-        bins.append((X.real**2 + X.imag**2) / float(np.sum(w * w)))
+        P = _band_bins(r[a:b] - r[a:b].mean(0), np.ones(m, bool), f_pass, fs, True)
+        if P.shape[0]:
+            bins.append(P)
     if not bins:
         return None
     P = np.concatenate(bins, 0)
@@ -175,19 +170,22 @@ def noise_method(prep: Prepared) -> str:
     return out
 
 
-def _band_bins(x: np.ndarray, kept: np.ndarray, f_pass: float, fs: float) -> np.ndarray:
+def _band_bins(
+    x: np.ndarray, kept: np.ndarray, f_pass: float, fs: float, every_bin: bool = False
+) -> np.ndarray:
     """Periodogram bins (rows: bins, columns: channels) of one run's residual ``x`` (rows
     left out zero; ``kept``) of a record decimated by stage 2 (``_decimate``), in the band
     from ``f_pass`` to ``fs / 2`` Hz that holds its white noise alone: Hann-windowed (the
     leakage of the lines below ``f_pass`` falls off as the cube of the distance, where a
     rectangular window's spreads a strong line over many of a short run's bins), scaled by
     the window's power on the kept rows (white noise: ``sigma^2`` times a unit exponential),
-    every other bin (the window's neighbouring bins are correlated)."""
+    every other bin (the window's neighbouring bins are correlated), or with ``every_bin``
+    every bin (:func:`noise_band`)."""
     m = x.shape[0]
     w = np.hanning(m)
     norm = float(np.sum(w * w * kept))
     f = np.fft.rfftfreq(m, 1.0 / fs)
-    sel = np.flatnonzero((f > f_pass) & (f < fs / 2))[::2]
+    sel = np.flatnonzero((f > f_pass) & (f < fs / 2))[:: 1 if every_bin else 2]
     if sel.size == 0 or norm <= 0:
         return np.zeros((0, x.shape[1]))
     X = np.fft.rfft(x * w[:, None], axis=0)[sel]
