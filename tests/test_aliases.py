@@ -11,7 +11,7 @@ import pytest
 import encdesign
 from encdesign.diagnose._dispatch import diagnose
 from encdesign.diagnose.kinds.multihead._aliases import folded_hz
-from tests.helpers import validate_diagnosis
+from tests.helpers import sweep, validate_diagnosis
 
 NOISE = 0.5e-6
 FS = 200.0
@@ -85,7 +85,9 @@ def test_an_interpolation_error_folded_onto_one_line_is_not_a_vibration(seed):
     assert vib and "folded by the sampling" in vib[0]["reason"], (truth, d.doc["report"])
 
 
-@pytest.mark.parametrize("seed", [7492, 7495])
+# ``make test`` runs 7492; 7495, another draw of the same control, is the ``sweep`` tier
+# (session 33, CI time)
+@pytest.mark.parametrize("seed", sweep([7492, 7495], (7492,)))
 def test_a_vibration_off_the_folded_orders_is_still_named(seed):
     """The control: a line at one speed away from the folded ``L`` and ``2 L`` is named
     vibration at its frequency."""

@@ -215,30 +215,39 @@ def _dealt(log: Path) -> dict[int, list[tuple[int, int]]]:
     return out
 
 
-def test_two_processes_give_the_one_process_diagnosis(tmp_path, monkeypatch):
-    rec = _record(tmp_path / "rec.toml", seed=20261204)
-    log = tmp_path / "dealt.txt"
-    one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json")
-    split = tmp_path / "split.txt"
-    setup = DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
-    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
+def _assert_shared(split: Path, log: Path, two: dict) -> None:
+    """What :data:`SPLIT` and :data:`DEALT` logged on two processes: every row pass, the
+    trial fits' (side by side, their starts dealt) and the row sums of the rules and the
+    runs' alignment among them, split (the same gathers on both processes, each having
+    summed its share of the groups); the views and the bounds' probes dealt (the same
+    dealings on both processes, their shares adding up, each with work in all of them)."""
     assert dist.process_count() == 1  # this test process joined nothing
-    # every row pass, the trial fits' (side by side, their starts dealt) and the row sums of
-    # the rules and the runs' alignment among them, split: the same gathers on both
-    # processes, each having summed its share of the groups
     rows = _dealt(split)
     assert sorted(rows) == [0, 1] and [n for n, _ in rows[0]] == [n for n, _ in rows[1]]
     assert len(rows[0]) >= 20
     for (n, k0), (_, k1) in zip(rows[0], rows[1]):
         assert k0 + k1 == n and k0 >= 1 and (k1 >= 1 or n < 2)
-    # the views and the bounds' probes were dealt: the same dealings on both processes,
-    # their shares adding up, each with work in all of them
     dealt = _dealt(log)
     assert sorted(dealt) == [0, 1] and [n for n, _ in dealt[0]] == [n for n, _ in dealt[1]]
     assert len(dealt[0]) >= 2  # the views of each residual and the bounds' probes
     for (n, k0), (_, k1) in zip(dealt[0], dealt[1]):
         assert k0 + k1 == n and (k0 >= 1 and k1 >= 1 or n < 2)
     assert len(two["detection_bounds"]) >= 2
+
+
+@pytest.mark.sweep  # CI time (session 33): make test makes these checks on the restart test
+def test_two_processes_give_the_one_process_diagnosis(tmp_path, monkeypatch):
+    """A CSV record never reduced, on two processes: its row passes split and its views and
+    probes dealt (:func:`_assert_shared`), and the one-process diagnosis. In ``make test``
+    the restart test below makes the same checks on its whole record, which after the
+    restart is never reduced either (a Parquet file every process reads whole, as it
+    reads a CSV): this one runs in ``make test-sweeps``."""
+    rec = _record(tmp_path / "rec.toml", seed=20261204)
+    log, split = tmp_path / "dealt.txt", tmp_path / "split.txt"
+    one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json")
+    setup = DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
+    _assert_shared(split, log, two)
     assert one["verdict"] == two["verdict"]
     assert [e["name"] for e in one["effects"]] == [e["name"] for e in two["effects"]]
     assert one["effects"], "the vibration is named"
@@ -275,13 +284,18 @@ def test_a_reduced_record_restarted_on_two_processes_gives_the_one_process_diagn
     """Disk orders 13-18 grow the base past what the block planned for order 12 keeps
     (``_reduce_restart``): every process stops at the same growth and reads the record
     again (the block for every growth is under 2 rows there: the whole record), and the
-    diagnosis on two processes is the one on one process."""
+    diagnosis on two processes is the one on one process. Its row passes are split and its
+    views and probes dealt (:func:`_assert_shared`: the two-process checks of the CSV test
+    above, which runs in ``make test-sweeps`` only; CI time, session 33)."""
     orders = (1, 2, 3, 4, 5, *range(13, 19))
     rec = _record(
         tmp_path / "rec.toml", 7972, n=3000, speed_rev_s=0.4, group_rows=997, orders=orders
     )
+    log, split = tmp_path / "dealt.txt", tmp_path / "split.txt"
     one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json", True)
-    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), REDUCE)
+    setup = REDUCE + DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
+    _assert_shared(split, log, two)
     red = one["reduced"]
     assert not red["applied"] and red["planned_for_growth"]
     assert red["restart"]["block_rows"] >= 2 and one["base"]["max_order"] > 12

@@ -9,6 +9,7 @@ import pytest
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
+from tests.helpers import sweep
 
 NOISE = 0.5e-6
 
@@ -40,7 +41,9 @@ def _drift_record(seed: int, rate_rad_per_s: float, temp_k_per_s: float = 0.0) -
     return Recording("multihead", meta, {k: np.concatenate(v) for k, v in cols.items()})
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+# each test runs one draw of its record in ``make test`` (seed 1) and its other draw in the
+# ``sweep`` tier (session 33, CI time)
+@pytest.mark.parametrize("seed", sweep([1, 2], (1,)))
 def test_drift_over_runs_with_own_zeros_is_named(seed):
     rate = 0.4e-6  # rad/s: 1.2 urad over a run of head 0, 0.5 urad noise
     k_t = 0.05  # K/s: the temperature follows the drift (0.75 K over the record)
@@ -50,7 +53,7 @@ def test_drift_over_runs_with_own_zeros_is_named(seed):
     np.testing.assert_allclose(got, rate * np.array([1.0, -0.6, 0.3, -0.8]), atol=0.15 * rate)
 
 
-@pytest.mark.parametrize("seed", [1, 4])
+@pytest.mark.parametrize("seed", sweep([1, 4], (1,)))
 def test_a_drift_in_time_without_temp_c_is_located_never_thermal_drift(seed):
     """Issue 44 E: without a temp_c column a slow drift is not attributed to temperature:
     thermal_drift is not testable, and the drift is reported located (view ``drift``) on

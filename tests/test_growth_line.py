@@ -16,6 +16,7 @@ import pytest
 
 from encdesign import Recording
 from encdesign.diagnose._dispatch import diagnose
+from tests.helpers import sweep
 
 NOISE = 2.3e-7
 """The heads' white noise (rad)."""
@@ -79,7 +80,9 @@ def test_leaked_line_no_longer_keeps_the_base_below_the_disk_orders(seed):
     assert d["base"]["max_order"] >= 14, d["base"]["max_order"]
 
 
-@pytest.mark.parametrize("seed", [7721, 7723])
+# ``make test`` runs the control on 7721; 7723, another draw of the same configuration (disk
+# orders 1-10, the line at 20x the noise), is the ``sweep`` tier (session 33, CI time)
+@pytest.mark.parametrize("seed", sweep([7721, 7723], (7721,)))
 def test_a_real_interpolation_line_still_vetoes_the_growth(seed):
     # (disk orders 1-10, an interpolation error at 20x the noise: the line stays
     # significant beside the orders 13-24 it aliases onto; named, the base stays at 12)

@@ -21,6 +21,7 @@ from tests.helpers import (
     shared_diagnosis,
     slow_wobble_bench,
     stepped_sensor_record,
+    sweep,
     validate_diagnosis,
 )
 
@@ -100,7 +101,9 @@ def test_invariants_are_checked():
         )
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+# ``make test`` runs seed 1 (its diagnosis shared with the rule-name test); seed 0, another
+# draw of the same bench, is the ``sweep`` tier (session 33, CI time)
+@pytest.mark.parametrize("seed", sweep([0, 1], (1,)))
 def test_doubted_dominant_wobble_is_named_with_doubt_alternatives_and_one_pair(seed):
     """Issue 22 item 3, on the issue's class at ONE speed (``slow_wobble_bench``): the
     wobble at order 0.4 lowers the criterion far more than anything but a vibration at the
