@@ -630,16 +630,24 @@ def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s:
     collect what each process reported; a case over ``timeout_s`` is stopped."""
     import tempfile
 
+    from encdesign import _cpu
     from encdesign._distributed import free_port
 
     port = free_port()
     with tempfile.TemporaryDirectory(prefix="bench-split-") as tmp:
         st = [str(Path(tmp) / f"p{i}.json") for i in range(processes)]
         procs = []
+        env = dict(os.environ)
+        if processes > 1 and not env.get(_cpu.ENV) and not env.get("OMP_NUM_THREADS"):
+            # as encdesign diagnose --processes N does (spawn_local): each process its part
+            # of the cores' CPU devices (one process: encdesign's default, as a user runs it)
+            env[_cpu.ENV] = str(max(1, _cpu.cores() // processes))
         for i in range(processes):
             cmd = [sys.executable, __file__, "--proc-child", str(path), st[i], mode]
             cmd += [str(processes), str(i), str(port), str(min_rows)]
-            procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
+            procs.append(
+                subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+            )
         t0, timed_out, errs = time.perf_counter(), False, []
         for p in procs:
             try:
