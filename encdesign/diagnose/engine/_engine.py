@@ -49,6 +49,7 @@ from ._aside import SetAside
 from ._bounds import REFERENCE_DESCRIPTION, Reference, detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
+from ._discover_rival import discovered
 from ._document import (
     global_times_in_own_clock,
     lattice_effect,
@@ -571,13 +572,16 @@ def _nearest_catalog(rejected: list[dict]) -> list[dict]:
     return sorted(seen.values(), key=lambda r: r["delta_bic"])[:3]
 
 
-def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) -> dict:
-    """The diagnosis document before the kind's additions, the verdict and the report.
-
-    With ``fitter``, each ``unexplained`` finding gains a ``model``: what discovery
-    (:mod:`encdesign.diagnose.engine._discover`) models of it outside the catalog, fitted jointly
-    with the final catalog model (the verdict stays ``unexplained``)."""
+def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) -> tuple:
+    """``(document, selection)``: the document before the kind's additions, the verdict and
+    the report. With ``fitter``, each ``unexplained`` finding gains a ``model``: what
+    discovery (:mod:`._discover`) models of it outside the catalog, fitted jointly with the
+    final catalog model (the verdict stays ``unexplained``); the named effects are re-tested
+    beside it (:mod:`._discover_rival`: the selection less those it refuses)."""
     kd = prep.kd
+    models = None
+    if fitter is not None:
+        sel, models = discovered(prep, fitter, sel, kind.views(prep), scan, discover)
     base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))
     effects = [_effect_json(prep, sel, s, fitter) for s in sel.accepted]
@@ -588,9 +592,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     for u in unexplained:  # a located step: where it lies in the motion (issue 22 item 4)
         if (ctx := step_context(prep, u)) is not None:
             u["step_at"] = ctx
-    if fitter is not None and unexplained:  # issue 41: discovery after the catalog
-        with stage("discovery"):  # its own stage (was timed inside the report's)
-            models = discover(prep, fitter, sel.final.terms, sel.final_resid, sel.findings[:12])
+    if models is not None:
         near = _nearest_catalog(sel.rejected)
         for u, m in zip(unexplained, models):
             if m is not None:
@@ -675,7 +677,7 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
         prep.n, int(prep.keep.sum()), prep.excluded, prep.settings
     )
     doc.update(kind.summary(prep, base_params))
-    return doc
+    return doc, sel
 
 
 def run_engine(
@@ -767,7 +769,7 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
     pg.stage("selected")
     pg.stage("held-out + goodness of fit")
     with stage("report"):
-        doc = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
+        doc, sel = _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter)
         pg.stage("report")
         doc = kind.finish(prep, doc, settings)
         state_reduction(doc, reduced)

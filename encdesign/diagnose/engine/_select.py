@@ -289,7 +289,8 @@ def _sort_trials(trials: list, applicable: list) -> None:
 def gain_rules(s, dbic: float, dho: float) -> list[tuple[str, str]]:
     """The rules on a candidate's gain, ``[(rule, reason), ...]``: ``bic_min`` on its
     information criterion change ``dbic`` and ``heldout_min`` on its held-out chi-square
-    gain ``dho`` (``s``: the :class:`FinderSettings`)."""
+    gain ``dho`` (``s``: the :class:`FinderSettings`); the selection's and the discovered
+    model's re-test (:mod:`._discover_rival`) ask the same."""
     out = []
     if dbic > -s.bic_min:
         out.append(("bic_min", f"information criterion not lowered enough (dBIC {dbic:.1f})"))
