@@ -258,16 +258,19 @@ def test_sweep_resume_gives_the_uninterrupted_table(uninterrupted, tmp_path, kep
 
 
 def test_sweep_resume_checks_the_seed(uninterrupted, tmp_path, capsys):
+    import dataclasses
+
     from encdesign.design._cases import write_cases
 
+    # the first 5 cases as if run with seed 2, resumed by the seed-1 sweep (the seed-1
+    # program is the fixture's: a sweep of another seed would compile its builds anew)
     part = tmp_path / "other-seed.jsonl"
-    write_cases(part, uninterrupted[:5])
-    assert (
-        main(["sweep", str(_sweep_file(tmp_path, seed=2)), "--resume", str(part), *NO_FRESH]) == 0
-    )
+    write_cases(part, [dataclasses.replace(c, seed=2) for c in uninterrupted[:5]])
+    assert main(["sweep", str(_sweep_file(tmp_path)), "--resume", str(part), *NO_FRESH]) == 0
     out = read_cases(part)
     assert "0 reused" in capsys.readouterr().out
-    assert [c.seed for c in out[:9]] == [2] * 9 and len(out) == 14  # seed-1 cases kept after
+    assert [c.seed for c in out[:9]] == [1] * 9 and len(out) == 14  # seed-2 cases kept after
+    assert [c.seed for c in out[9:]] == [2] * 5
 
 
 def test_sweep_on_two_processes_writes_the_same_case_file(uninterrupted, tmp_path):

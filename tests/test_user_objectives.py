@@ -99,7 +99,10 @@ def _problem(objective, variables, **extra):
 SMOOTH_VARS = {
     "gap": {"units": "mm", "start": 1.0, "lower": 0.2, "upper": 2.5},
     "sigma": {"units": "urad", "start": 100.0, "lower": 1.0, "upper": 500.0},
-    "n_heads": {"values": [2, 4]},
+    # one of the declared values (2, 3, 4), not two: each value is a solve compiled anew
+    # (CI time); the best of several discrete values is picked by the same solve_problem in
+    # tests/test_problem.py::test_enumeration_wrapped_around_continuous_optimum
+    "n_heads": {"values": [4]},
 }
 
 
