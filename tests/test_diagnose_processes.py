@@ -422,28 +422,3 @@ def test_a_private_fitter_caches_apart_from_the_shared_one():
     own._jcache["x"] = 1
     assert own.blocks.gram(("a",)) is not None and own.blocks.gram(("b",)) is not None
     assert shared.blocks.gram(("b",)) is None and "x" not in shared._jcache
-
-
-def test_a_deal_weighs_items_by_their_measured_costs():
-    """With ``costs`` (``_workshare.deal``, the views of every scan): each item's CPU time is
-    recorded under its key (the latest measurement); the next deal weighs each item by
-    it, an unmeasured one by the mean of those measured (session 34: the views were dealt
-    one weight each, process 0 got the heavy spectrum and orders scans)."""
-    from encdesign.diagnose.engine._workshare import _weights, deal, shares
-
-    costs: dict = {}
-    assert deal(["a", "bb", "ccc"], lambda xs: [len(x) for x in xs], costs=costs, key=str) == [
-        1,
-        2,
-        3,
-    ]
-    assert sorted(costs) == ["a", "bb", "ccc"] and all(v >= 0.0 for v in costs.values())
-    first = dict(costs)
-    deal(["bb"], lambda xs: [len(x) for x in xs], costs=costs, key=str)
-    assert sorted(costs) == ["a", "bb", "ccc"] and costs["a"] == first["a"]  # bb's the latest
-    measured = {"spectrum": 0.6, "orders": 0.2, "time": 0.1, "band": 0.1}
-    w = _weights(["spectrum", "orders", "time", "band"], None, measured, str)
-    assert shares(w, 2) == [[0], [1, 2, 3]]  # one weight each: [[0, 2], [1, 3]]
-    w = _weights(["spectrum", "orders", "new"], None, measured, str)
-    assert w == pytest.approx([0.6, 0.2, 0.4])  # the mean of the items measured
-    assert _weights(["x", "y"], lambda s: 5.0, {}, str) == [5.0, 5.0]

@@ -34,7 +34,7 @@ from ._timing import stage
 from ._views_estimated import estimated_log10_p, estimated_threshold, pooled_noise_dof
 from ._views_leakage import separate_lines
 from ._views_orders import order_scan
-from ._views_sums import Whitened, linear, sums_of, view_key
+from ._views_sums import Whitened, linear, sums_of
 from ._views_time import best_step, cusum_edge, time_steps_beside_order_change
 from ._workshare import deal
 
@@ -770,8 +770,7 @@ def _locate(prep, resid: np.ndarray, views: tuple, scan_order: int, scale: float
                 got.append(v(prep, rw_array, scan_order))
         return got
 
-    sums = sums_of(prep)  # each view's CPU time in the scan before: the deal's weights
-    for found in deal(list(views), scans, costs=sums.view_costs, key=view_key):
+    for found in deal(list(views), scans):
         out += found
     out = time_steps_beside_order_change(out, prep.settings)
     # a spectrum line at an integer order takes its heads from the rotation-locked fit of

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-from collections.abc import Callable, Hashable, Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -66,9 +66,6 @@ class ViewSums:
 
     def __init__(self) -> None:
         self._geom: dict[tuple, Any] = {}
-        # each view's CPU time (s) in the latest scan that dealt it over processes
-        # (``_workshare.deal``'s ``costs``: the same numbers on every process)
-        self.view_costs: dict[Hashable, float] = {}
         self._scan: _Scan | None = None
         self._last: _Scan | None = None
 
@@ -127,15 +124,6 @@ class ViewSums:
         return got if scan.scale == 1.0 else [v * scan.scale for v in got]
 
 
-def view_key(view) -> str:
-    """A view's name in :attr:`ViewSums.view_costs` (a kind's own view by its
-    function)."""
-    if isinstance(view, str):
-        return view
-    fn = getattr(view, "fn", view)
-    return f"{getattr(fn, '__module__', '')}.{getattr(fn, '__qualname__', repr(fn))}"
-
-
 def sums_of(prep: Any) -> ViewSums:
     """The :class:`ViewSums` of a prepared record (``prep.view_sums``)."""
     got = getattr(prep, "view_sums", None)
@@ -186,4 +174,4 @@ class Whitened:
         return self.shape[0]
 
 
-__all__ = ["ViewSums", "Whitened", "fingerprint", "geometry", "linear", "sums_of", "view_key"]
+__all__ = ["ViewSums", "Whitened", "fingerprint", "geometry", "linear", "sums_of"]

@@ -21,8 +21,7 @@ shared one, and :func:`._dealt_fits.pack_fit` readies a fit to travel.
 from __future__ import annotations
 
 import pickle
-import time
-from collections.abc import Callable, Hashable, MutableMapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 import jax
@@ -50,8 +49,6 @@ def deal(
     items: Sequence[_T],
     work: Callable[[list[_T]], list[_R]],
     weight: Callable[[_T], float] | None = None,
-    costs: MutableMapping[Hashable, float] | None = None,
-    key: Callable[[_T], Hashable] | None = None,
 ) -> list[_R]:
     """``work(items)`` (one result per item, in order), each process working on its share
     of the items (:func:`shares` by ``weight``, 1 each by default) alone and the results
@@ -59,35 +56,18 @@ def deal(
     in process order; its message when it does not pickle). Fewer items than processes
     (one on two: a round with one candidate) are not dealt: every process then works on all
     of them, each row pass split over the processes as everywhere else; nor are items met
-    inside a share of items (a process alone works on all of them).
-
-    ``costs`` (with ``key``): measured costs, kept by the caller across deals of the same
-    kind of items (the views of every scan of one record). Each dealt item is then worked on
-    by itself (``work([x])``) and its CPU time (s, :func:`time.process_time`) gathered with
-    its result, so every process records the same number under ``key(x)`` (the latest
-    measurement of a key: a view's scans cost less as the residual's structure is fitted,
-    its first one up to 20 times more than its last); an item whose key has a measured cost
-    weighs it, the others the mean of those measured (``weight`` or 1 where none is). Which
-    process works on an item never changes its result (each computes it alone), only how
-    evenly the processes are loaded."""
+    inside a share of items (a process alone works on all of them)."""
     items = list(items)
     n = jax.process_count()
     if len(items) < n or is_alone():  # too few to deal (all of them on every process, row
         return list(work(items))  # passes split), or inside a share of items dealt already
-    mine = shares(_weights(items, weight, costs, key), n)[jax.process_index()]
+    mine = shares([1.0 if weight is None else weight(x) for x in items], n)[jax.process_index()]
     try:
         with alone():
-            if costs is None:
-                got, spent = list(work([items[i] for i in mine])), [0.0] * len(mine)
-            else:  # one at a time, each timed
-                got, spent = [], []
-                for i in mine:
-                    t0 = time.process_time()
-                    got += list(work([items[i]]))
-                    spent.append(time.process_time() - t0)
+            got = list(work([items[i] for i in mine]))
         if len(got) != len(mine):
             raise ValueError(f"deal: {len(got)} results for {len(mine)} items")
-        msg = pickle.dumps((None, list(zip(mine, got, spent))), protocol=pickle.HIGHEST_PROTOCOL)
+        msg = pickle.dumps((None, list(zip(mine, got))), protocol=pickle.HIGHEST_PROTOCOL)
     except Exception as exc:  # every process must reach the gather, or the others wait
         try:
             msg = pickle.dumps((exc, None), protocol=pickle.HIGHEST_PROTOCOL)
@@ -96,31 +76,15 @@ def deal(
     out: list = [None] * len(items)
     errors = []
     for blob in allgather_bytes(msg):
-        err, triples = pickle.loads(blob)
+        err, pairs = pickle.loads(blob)
         if err is not None:
             errors.append(err)
             continue
-        for i, r, t in triples:
+        for i, r in pairs:
             out[i] = r
-            if costs is not None and key is not None:
-                costs[key(items[i])] = float(t)
     if errors:
         raise errors[0]
     return out
-
-
-def _weights(items: list, weight, costs, key) -> list[float]:
-    """:func:`deal`'s weight of each item: its measured cost where ``costs`` holds its key,
-    else the mean measured cost (``weight`` or 1 where nothing is measured yet)."""
-    own = [1.0 if weight is None else float(weight(x)) for x in items]
-    if costs is None or key is None:
-        return own
-    known = [costs.get(key(x)) for x in items]
-    seen = [c for c in known if c is not None]
-    if not seen:
-        return own
-    mean = sum(seen) / len(seen)
-    return [mean if c is None else float(c) for c in known]
 
 
 __all__ = ["deal", "shares"]
