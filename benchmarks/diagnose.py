@@ -187,6 +187,8 @@ def _write_bench_parquet(folder: Path, n_rows: int, heads: int, effect, rate_hz:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from encdesign.io._parquet import write_options  # as encdesign writes Parquet
+
     data = folder / "rec.parquet"
     writer = None
     gen = _bench_blocks(n_rows, heads, 5, effect, rate_hz)
@@ -198,7 +200,7 @@ def _write_bench_parquet(folder: Path, n_rows: int, heads: int, effect, rate_hz:
             break
         tab = pa.table(part)
         if writer is None:
-            writer = pq.ParquetWriter(data, tab.schema)
+            writer = pq.ParquetWriter(data, tab.schema, **write_options(tab.schema))
         writer.write_table(tab)
     writer.close()
     angles = ", ".join(repr(a) for a in enc["head_angles_deg"])

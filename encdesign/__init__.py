@@ -12,11 +12,14 @@ The top level holds the names most users need, grouped by concept (:data:`__all_
 ``encdesign.calibrate`` (calibration) and ``encdesign.simulate`` (bench simulators).
 """
 
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
 import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
 from . import _cpu as _cpu
+from ._lazy import lazy_exports as _lazy_exports
 
 _cpu.configure()  # one CPU device per core unless the user chose (docs/scale.md)
 
@@ -29,116 +32,125 @@ from ._errors import (
     OptimisationError as OptimisationError,
 )
 
-# --- recordings (files of every kind)
-from .io import (
-    Recording as Recording,
-    load_recording as load_recording,
-    write_recording as write_recording,
-)
 
-# --- the multihead encoder: kinematic model of read heads on a grating disk
-from .physics import (
-    Disk as Disk,
-    EncoderModel as EncoderModel,
-    Heads as Heads,
-    Motion as Motion,
-    head_errors as head_errors,
-    head_readings as head_readings,
-    make_model as make_model,
-    noisy_head_readings as noisy_head_readings,
-)
+# The names below are imported when first used (``_lazy``): ``import encdesign`` costs JAX
+# and the configuration above, not every subpackage's dependencies (the design drivers'
+# optimisers, the simulators, ...); a command such as ``encdesign diagnose`` imports only
+# what it runs (docs/scale.md, "Start"). ``from encdesign import X``, ``encdesign.X`` and
+# ``dir(encdesign)`` work as before. This block is the list (type checkers read it too).
+if _TYPE_CHECKING:
+    # --- recordings (files of every kind)
+    from .io import (
+        Recording as Recording,
+        load_recording as load_recording,
+        write_recording as write_recording,
+    )
 
-# --- self-compensation and the encoder theorem
-from .physics import (
-    EncoderMap as EncoderMap,
-    SelfCompensation as SelfCompensation,
-    apply_map as apply_map,
-    cotangent_sensitivity as cotangent_sensitivity,
-    encoder_map as encoder_map,
-    self_compensate as self_compensate,
-    surviving_orders as surviving_orders,
-)
+    # --- the multihead encoder: kinematic model of read heads on a grating disk
+    from .physics import (
+        Disk as Disk,
+        EncoderModel as EncoderModel,
+        Heads as Heads,
+        Motion as Motion,
+        head_errors as head_errors,
+        head_readings as head_readings,
+        make_model as make_model,
+        noisy_head_readings as noisy_head_readings,
+    )
 
-# --- the shifted-delta-sum (SDS) timing instrument
-from .physics import (
-    DiskMarks as DiskMarks,
-    Motor as Motor,
-    SDSDesign as SDSDesign,
-    SDSErrors as SDSErrors,
-    edge_times as edge_times,
-    reference_design as reference_design,
-    reference_errors as reference_errors,
-    sds_from_edges as sds_from_edges,
-    sds_phi_error as sds_phi_error,
-    simulate_readings as simulate_readings,
-)
+    # --- self-compensation and the encoder theorem
+    from .physics import (
+        EncoderMap as EncoderMap,
+        SelfCompensation as SelfCompensation,
+        apply_map as apply_map,
+        cotangent_sensitivity as cotangent_sensitivity,
+        encoder_map as encoder_map,
+        self_compensate as self_compensate,
+        surviving_orders as surviving_orders,
+    )
 
-# --- quadrature signals and vibration
-from .physics import (
-    EllipseParams as EllipseParams,
-    SignalErrors as SignalErrors,
-    Vibration as Vibration,
-    fit_ellipse as fit_ellipse,
-    phase_error_exact_rad as phase_error_exact_rad,
-    quadrature_signals as quadrature_signals,
-    synthesize_signals as synthesize_signals,
-)
+    # --- the shifted-delta-sum (SDS) timing instrument
+    from .physics import (
+        DiskMarks as DiskMarks,
+        Motor as Motor,
+        SDSDesign as SDSDesign,
+        SDSErrors as SDSErrors,
+        edge_times as edge_times,
+        reference_design as reference_design,
+        reference_errors as reference_errors,
+        sds_from_edges as sds_from_edges,
+        sds_phi_error as sds_phi_error,
+        simulate_readings as simulate_readings,
+    )
 
-# --- design files and bench simulation
-from .design import (
-    Design as Design,
-    load_design as load_design,
-)
-from .simulate import (
-    simulate_recording as simulate_recording,
-    simulate_sds_recording as simulate_sds_recording,
-)
+    # --- quadrature signals and vibration
+    from .physics import (
+        EllipseParams as EllipseParams,
+        SignalErrors as SignalErrors,
+        Vibration as Vibration,
+        fit_ellipse as fit_ellipse,
+        phase_error_exact_rad as phase_error_exact_rad,
+        quadrature_signals as quadrature_signals,
+        synthesize_signals as synthesize_signals,
+    )
 
-# --- design problems, drivers and tolerances
-from .design import (
-    BFGS as BFGS,
-    EncoderDesign as EncoderDesign,
-    MonteCarloResult as MonteCarloResult,
-    Problem as Problem,
-    ProblemResult as ProblemResult,
-    Solution as Solution,
-    Tolerances as Tolerances,
-    allocate as allocate,
-    check_gradients as check_gradients,
-    check_yield as check_yield,
-    load_problem as load_problem,
-    monte_carlo as monte_carlo,
-    objective_function as objective_function,
-    optimise as optimise,
-    solve_problem as solve_problem,
-    sweep_problem as sweep_problem,
-    variable as variable,
-)
+    # --- design files and bench simulation
+    from .design import (
+        Design as Design,
+        load_design as load_design,
+    )
+    from .simulate import (
+        simulate_recording as simulate_recording,
+        simulate_sds_recording as simulate_sds_recording,
+    )
 
-# --- diagnosis (the discrepancy finder): ``encdesign.diagnose`` is the subpackage
-from . import diagnose as diagnose
-from .diagnose import (
-    Candidate as Candidate,
-    Diagnosis as Diagnosis,
-    diagnosis_report_text as diagnosis_report_text,
-    sds_readings_from_recording as sds_readings_from_recording,
-)
+    # --- design problems, drivers and tolerances
+    from .design import (
+        BFGS as BFGS,
+        EncoderDesign as EncoderDesign,
+        MonteCarloResult as MonteCarloResult,
+        Problem as Problem,
+        ProblemResult as ProblemResult,
+        Solution as Solution,
+        Tolerances as Tolerances,
+        allocate as allocate,
+        check_gradients as check_gradients,
+        check_yield as check_yield,
+        load_problem as load_problem,
+        monte_carlo as monte_carlo,
+        objective_function as objective_function,
+        optimise as optimise,
+        solve_problem as solve_problem,
+        sweep_problem as sweep_problem,
+        variable as variable,
+    )
 
-# --- calibration
-from .calibrate import (
-    CalibrationCurve as CalibrationCurve,
-    ClosureResult as ClosureResult,
-    fit_curve as fit_curve,
-    reference_map as reference_map,
-    solve_closure as solve_closure,
-)
+    # --- diagnosis (the discrepancy finder): ``encdesign.diagnose`` is the subpackage
+    from . import diagnose as diagnose
+    from .diagnose import (
+        Candidate as Candidate,
+        Diagnosis as Diagnosis,
+        diagnosis_report_text as diagnosis_report_text,
+        sds_readings_from_recording as sds_readings_from_recording,
+    )
 
-# --- the other subpackages, reachable as attributes (``encdesign.physics.mark_angles``)
-from . import calibrate as calibrate
-from . import design as design
-from . import io as io
-from . import physics as physics
-from . import simulate as simulate
+    # --- calibration
+    from .calibrate import (
+        CalibrationCurve as CalibrationCurve,
+        ClosureResult as ClosureResult,
+        fit_curve as fit_curve,
+        reference_map as reference_map,
+        solve_closure as solve_closure,
+    )
+
+    # --- the other subpackages, reachable as attributes (``encdesign.physics.mark_angles``)
+    from . import calibrate as calibrate
+    from . import design as design
+    from . import io as io
+    from . import physics as physics
+    from . import simulate as simulate
+
+__getattr__, __dir__ = _lazy_exports(__name__, __file__)
 
 __all__ = [
     # errors

@@ -118,3 +118,46 @@ def test_objective_names_kept_once():
     for n in _objectives.__all__:
         assert getattr(objectives, n) is getattr(_objectives, n)
     assert objectives.PROBLEM_OBJECTIVES is _registry.PROBLEM_OBJECTIVES
+
+
+def test_import_is_lazy():
+    """``import encdesign`` and the diagnose command import no subpackage they do not run
+    (``encdesign._lazy``; docs/scale.md, "Start"): a diagnosis never imports the design
+    drivers (their optimisers), the simulators or the calibration; run in a fresh
+    interpreter so that nothing imported earlier decides it."""
+    code = (
+        "import sys\n"
+        "import encdesign, encdesign.cli._diagnose\n"
+        "never = ('encdesign.design', 'encdesign.simulate', 'encdesign.calibrate', 'optimistix')\n"
+        "early = never + ('encdesign.diagnose', 'encdesign.physics._ellipse', 'scipy.optimize')\n"
+        "got = [m for m in early if m in sys.modules]\n"
+        "assert not got, got\n"
+        "import encdesign.diagnose\n"
+        "got = [m for m in never if m in sys.modules]\n"
+        "assert not got, got\n"
+        "assert encdesign.Disk is encdesign.physics.Disk\n"
+        "from encdesign import load_problem\n"
+        "assert 'encdesign.design' in sys.modules\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+@pytest.mark.parametrize("pkg", ["encdesign", "encdesign.physics"])
+def test_lazy_names_are_their_modules_objects(pkg):
+    """Every name a lazy ``__init__`` lists resolves to the object of the module it names,
+    and ``dir`` lists it."""
+    from encdesign._lazy import exports_of
+
+    mod = importlib.import_module(pkg)
+    assert mod.__file__ is not None
+    table = exports_of(mod.__file__)
+    assert len(table) > 10
+    for name, (base, attr) in table.items():
+        if base.strip(".") == "":
+            want = importlib.import_module(f"{base}{attr}", pkg)
+        else:
+            want = getattr(importlib.import_module(base, pkg), attr)
+        assert getattr(mod, name) is want, name
+        assert name in dir(mod)
+    with pytest.raises(AttributeError, match="no attribute"):
+        mod.not_a_name  # noqa: B018

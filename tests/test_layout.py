@@ -31,6 +31,7 @@ LAYERS = {
     "_distributed": 1.5,  # the scale-out runtime; imports _cpu, _checks, _errors
     "_usercode": 0.5,  # base, above _errors (it raises the input error)
     "_checks": 0,
+    "_lazy": 0,  # re-exports imported on first use (the top level, physics)
     "_html": 0,  # HTML pieces of the reports and of the results' notebook display
     "errors": 0.25,  # the public face of _errors (the classes and input_error)
     "distributed": 1.75,  # the public face of the scale-out runtime _distributed

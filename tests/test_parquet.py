@@ -64,6 +64,26 @@ def test_round_trip_in_row_groups_is_exact(tmp_path, monkeypatch, seed):
     assert _digest(tmp_path / "a.parquet") == before  # the input is never modified
 
 
+def test_float_columns_are_written_plain_and_uncompressed(tmp_path):
+    """A float64 reading does not compress, and its decode from ``snappy`` cost twice the CPU
+    (issue 43, docs/scale.md): float columns are written plain and uncompressed, the others
+    dictionary-encoded and ``snappy``-compressed; a ``snappy`` file is still read."""
+    cols = _columns(5)
+    write_recording(tmp_path / "a.toml", "multihead", cols, encoder=ENC, parquet=True)
+    meta = pq.ParquetFile(tmp_path / "a.parquet").metadata.row_group(0)
+    got = {meta.column(i).path_in_schema: meta.column(i) for i in range(meta.num_columns)}
+    for name, col in got.items():
+        if cols[name].dtype.kind == "f":
+            assert col.compression == "UNCOMPRESSED" and "PLAIN_DICTIONARY" not in col.encodings
+            assert "RLE_DICTIONARY" not in col.encodings, name
+        else:
+            assert col.compression == "SNAPPY", name
+    pq.write_table(pa.table(cols), tmp_path / "a.parquet", compression="snappy")
+    back = load_recording(tmp_path / "a.toml")
+    for k, v in cols.items():
+        np.testing.assert_array_equal(back.columns[k], v)
+
+
 def test_data_name_suffix_chooses_parquet_and_gzip_is_refused(tmp_path):
     cols = _columns(1)
     write_recording(tmp_path / "b.toml", "multihead", cols, encoder=ENC, data_name="x.pq")

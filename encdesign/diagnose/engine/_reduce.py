@@ -329,8 +329,13 @@ def block_means(v: np.ndarray, B: int, full: np.ndarray, first: bool = False) ->
     number of blocks of ``B`` rows), or with ``first`` their first values (the run). Each
     block's mean is the same bits wherever it lies in ``v`` (a contiguous row of the kept
     blocks, reduced on its own), so any split of the record gives the same means."""
-    m = np.asarray(v).reshape(-1, B)[full]
-    return m[:, 0] if first else m.mean(1)
+    m = np.asarray(v).reshape(-1, B)
+    if first:
+        return m[full, 0]
+    # every block's mean, then the kept ones: no copy of the kept rows (issue 43, the read's
+    # memory traffic); a block's mean is its own row's reduction either way
+    means = m.mean(1)
+    return means if full.all() else means[full]
 
 
 def reduce_recording(rec: Recording, info: dict) -> Recording:

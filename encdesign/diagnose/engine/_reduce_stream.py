@@ -236,7 +236,7 @@ class _Share:
         B, lo, keep = self.B, self.lo, self.B + 2
         k = lo // B + 1  # the next block to close (block lo // B: finish)
         tail: Columns | None = None
-        base = lo  # the row of the record that cols[...][0] is
+        base = lo  # the row of the record that the tail's (else the group's) first row is
         for g in groups:
             part = group(g)
             gs, ge = int(offsets[g]), int(offsets[g + 1])
@@ -248,9 +248,12 @@ class _Share:
                 if gs - lo < keep:
                     old = self.head.get(h, part[h][:0])
                     self.head[h] = np.concatenate([old, part[h][: keep - old.size]])
-            cols = part if tail is None else {h: np.concatenate([tail[h], part[h]]) for h in part}
-            del part
-            st = flags(cols)  # exact from row lo + 2 on (two rows before each)
+            # the rows [base, ge) are the tail (rows carried from the group before, at most
+            # B + 1) and then the group, never copied whole: ``rows`` joins a range across
+            # the two, and a row's flag depends only on it and the two rows before it
+            T = 0 if tail is None else gs - base
+            rows = _Joined(tail, part, T)
+            st = rows.flags(flags)  # exact from row lo + 2 on (two rows before each)
             first = max(gs, lo + 2)
             if first < ge:
                 self.n_starts += int(st[first - base :].sum())
@@ -258,15 +261,20 @@ class _Share:
             if k_end > k:
                 a, b = k * B - base, k_end * B - base
                 full = full_blocks(st[a:b], B)
-                self._put({h: cols[h][a:b] for h in self.names}, full, self.at)
-                self.at += int(full.sum())
+                # a block that starts in the tail on its own, the others views of the group
+                m = B if a < T else b - a
+                self._put(rows.take(self.names, a, a + m), full[: m // B], self.at)
+                self.at += int(full[: m // B].sum())
+                if m < b - a:
+                    self._put(rows.take(self.names, a + m, b), full[m // B :], self.at)
+                    self.at += int(full[m // B :].sum())
                 k = k_end
             # the open block and the row before it (its second row's flag needs two rows
             # before it), and the group's last two rows (the next group's first rows' flags)
             cut = max(base, min(k * B - 1, ge - 2))
-            tail = {h: cols[h][cut - base :].copy() for h in self.names}
+            tail = {h: v.copy() for h, v in rows.take(self.names, cut - base, ge - base).items()}
             base = cut
-            del cols, st
+            del part, rows, st
         return {h: v.tolist() for h, v in self.edge.items()}
 
     def finish(self, before: list[dict[str, list]], flags: Callable[[Columns], np.ndarray]) -> None:
@@ -301,3 +309,36 @@ class _Share:
     def take(self, h: str) -> np.ndarray:
         """The share's block means of column ``h`` (released from the share)."""
         return self.out.pop(h)[: self.at]
+
+
+class _Joined:
+    """Rows ``tail`` then ``part`` (``T`` rows of ``tail``; ``tail`` ``None`` when ``T`` is
+    0) seen as one table without joining the columns: :meth:`take` gives views of ``part``
+    where a range lies in it and joins only a range that crosses from ``tail`` into it."""
+
+    def __init__(self, tail: Columns | None, part: Columns, T: int):
+        self.tail, self.part, self.T = tail, part, T
+
+    def take(self, names: list[str], a: int, b: int) -> Columns:
+        """Rows ``[a, b)`` of every column ``names``."""
+        T, tail, part = self.T, self.tail, self.part
+        if a >= T or tail is None:
+            return {h: part[h][a - T : b - T] for h in names}
+        if b <= T:
+            return {h: tail[h][a:b] for h in names}
+        return {h: np.concatenate([tail[h][a:], part[h][: b - T]]) for h in names}
+
+    def flags(self, flags: Callable[[Columns], np.ndarray]) -> np.ndarray:
+        """``flags`` of all the rows, as on the joined table: the group's own from its third
+        row on, the tail's and the group's first two from the tail and those two rows (a
+        row's flag depends on it and the two rows before it)."""
+        T, part = self.T, self.part
+        n = len(next(iter(part.values())))
+        if self.tail is None or T == 0:
+            return flags(part)
+        if n < 2:
+            names = list(part)
+            return flags(self.take(names, 0, T + n))
+        edge = flags(self.take(list(part), 0, T + 2))
+        own = flags(part)
+        return np.concatenate([edge, own[2:]])
