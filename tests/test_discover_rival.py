@@ -76,3 +76,32 @@ def test_a_catalog_effect_that_is_there_keeps_its_name_beside_a_discovered_one()
     refused = {r["name"] for r in d.doc["rejected"] if r["reason"].startswith(RULE_PREFIX)}
     assert "vibration" not in refused  # (main's false beam_tilt_axial is, as above)
     assert _law(d.doc, truth["line"][1])["frame"] == "shaft"  # the structure stays discovered
+
+
+def test_a_vibration_on_a_part_of_a_discovered_ring_down_is_refused():
+    """Training seed 8074 (session 34): a mode rung at the start of each run (``fixed_hz``,
+    5x the noise, its own Q). The catalog's steady ``vibration`` takes the mean of each run's
+    ring-down, and the discovered ``ringing`` term at its frequency keeps the decay beside it.
+    Main (e8089bd) named ``vibration`` beside the discovered term: the effect failed the
+    rules beside it, but the term's held-out gain beside it was below the effect's whole. Per
+    term, the discovered term in the effect's place (a fixed frequency) that keeps a gain
+    past the catalog's gain rules beside it holds the larger structure: the name is refused
+    and the ring-down is discovered whole."""
+    rec, truth = outside_record(
+        np.random.default_rng([8074, 41, 5]), "fixed_hz", 5.0, "multihead", ROWS
+    )
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert d.verdict == "unexplained", d.doc["report"]
+    assert [e["name"] for e in d.doc["effects"]] == [], d.doc["report"]
+    refused = [r for r in d.doc["rejected"] if r["reason"].startswith(RULE_PREFIX)]
+    assert [r["name"] for r in refused] == ["vibration"], d.doc["rejected"]
+    assert "in its place" in refused[0]["reason"], refused[0]["reason"]
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        for t in (u.get("model") or {}).get("terms", ())
+        if t["line_kind"] == "hz" and abs(t["value"] - truth["line"][1]) < 0.5
+    ]
+    assert terms and terms[0]["frame"] == "hz", d.doc["report"]
+    assert {t["modulation"] for t in terms} == {"ringing"}, terms
