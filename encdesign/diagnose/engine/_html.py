@@ -237,7 +237,7 @@ def fig_heads(doc: Mapping[str, Any], rows: ReportRows) -> str:
         axes[0].plot(x, noise, "k_", ms=18, mew=2, label="noise")
     axes[0].set_xticks(x, rows["channels"], fontsize=7, rotation=45 if C > 6 else 0)
     axes[0].set(ylabel=f"RMS ({doc['unit']})", title="per channel")
-    axes[0].legend(fontsize=7)
+    axes[0].legend(loc="best", fontsize=7)
     if has_theta:
         ph = np.degrees(np.mod(theta[keep], 2 * np.pi))
         s = _stride(ph.size * min(C, MAX_PANELS))
@@ -250,7 +250,7 @@ def fig_heads(doc: Mapping[str, Any], rows: ReportRows) -> str:
             ylabel=f"base residual ({doc['unit']})",
             title="base residual by angle, per channel",
         )
-        axes[1].legend(fontsize=6, markerscale=6, ncol=2)
+        axes[1].legend(loc="best", fontsize=6, markerscale=6, ncol=2)
     return _png(fig)
 
 
@@ -291,7 +291,7 @@ def fig_fitted(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
         m = c[keep, k]
         axes[0].plot(tau[s], m[s], "-", lw=0.8, color=colors[i % len(colors)], label=name)
     axes[0].set(xlabel="time, runs end to end (s)", ylabel=f"{rows['channels'][k]} ({doc['unit']})")
-    axes[0].legend(fontsize=7, markerscale=5)
+    axes[0].legend(loc="best", fontsize=7, markerscale=5)
     if has_theta:
         ph = np.degrees(np.mod(theta[keep], 2 * np.pi))
         o = np.argsort(ph)[s]
@@ -300,7 +300,7 @@ def fig_fitted(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
             m = c[keep, k]
             axes[1].plot(ph[o], m[o], ".", ms=1.5, color=colors[i % len(colors)], label=name)
         axes[1].set(xlabel="angle mod one turn (deg)", ylabel=f"{rows['channels'][k]}")
-        axes[1].legend(fontsize=7, markerscale=5)
+        axes[1].legend(loc="best", fontsize=7, markerscale=5)
     names = ", ".join(name for name, _ in curves)
     fig.suptitle(f"fitted: {names} (channel {rows['channels'][k]})", fontsize=9)
     return _png(fig)
@@ -321,7 +321,7 @@ def fig_before_after(doc: Mapping[str, Any], rows: ReportRows | None) -> str:
     if noise:
         axes[0].axhline(float(np.mean(noise)), color="k", ls=":", label="noise")
     axes[0].set(ylabel=f"residual RMS ({doc['unit']})", title="before / after each step")
-    axes[0].legend(fontsize=7)
+    axes[0].legend(loc="best", fontsize=7)
     if rows is not None:
         keep = rows["keep"]
         for key, lab, col in (
@@ -333,7 +333,7 @@ def fig_before_after(doc: Mapping[str, Any], rows: ReportRows | None) -> str:
             if v.size:
                 axes[1].hist(v, bins=80, histtype="step", color=col, label=lab, density=True)
         axes[1].set(xlabel=f"residual ({doc['unit']})", ylabel="density", title="residuals")
-        axes[1].legend(fontsize=7)
+        axes[1].legend(loc="best", fontsize=7)
     return _png(fig)
 
 

@@ -110,7 +110,7 @@ def fig_spectrum(doc: Mapping[str, Any], rows: ReportRows | None = None) -> str 
             fontsize=8,
         )
     ax.set(xlabel="order (cycles per turn)", ylabel=f"amplitude ({doc['unit']}, channel mean)")
-    ax.legend(fontsize=8)
+    ax.legend(loc="best", fontsize=8)
     return _png(fig)
 
 
@@ -229,7 +229,7 @@ def fig_discovered(doc: Mapping[str, Any], rows: ReportRows) -> str | None:
         )
         what = "order" if t.get("line_kind") != "hz" else "frequency"
         ax.set(xlabel=f"phase of the {what} (deg)", ylabel=f"{chans[k]} ({doc['unit']})")
-        ax.legend(fontsize=6, markerscale=1.5)
+        ax.legend(loc="best", fontsize=6, markerscale=1.5)
     for ax in axes[len(terms) :]:
         ax.set_visible(False)
     fig.suptitle("discovered terms (outside the catalog) over the final residual", fontsize=9)

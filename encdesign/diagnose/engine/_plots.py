@@ -56,7 +56,7 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
     ax.axhline(float(np.mean(doc["noise"]["per_channel"])), color="k", ls=":", label="noise")
     ax.set_ylabel(f"residual RMS ({doc['unit']})")
     ax.set_title(f"verdict: {doc['verdict']}")
-    ax.legend(fontsize=8)
+    ax.legend(loc="best", fontsize=8)
     paths.append(save_figure(fig, out, "rms_before_after.png"))
     C = r0.shape[1]
     fig, axes = new_figure(C, 1, figsize=(7, 1.6 * C + 1.0), sharex=True)
@@ -87,7 +87,7 @@ def engine_plots(d: Any, out_dir: str | os.PathLike) -> list:
         f = np.fft.rfftfreq(x.shape[0], dt)
         ax.semilogy(f[1:], X[1:] + 1e-30, lw=0.6, label=lab)
     ax.set(xlabel="frequency (Hz, runs end to end)", ylabel=f"amplitude ({doc['unit']})")
-    ax.legend(fontsize=8)
+    ax.legend(loc="best", fontsize=8)
     paths.append(save_figure(fig, out, "residual_spectra.png"))
     return paths
 

@@ -765,17 +765,17 @@ def quadrature_plots(d: Any, folder: Any) -> list:
         label="ellipse (base)",
     )
     ax[0].set(aspect="equal", xlabel="sa", ylabel="sb", title="Lissajous figure")
-    ax[0].legend(fontsize=7)
+    ax[0].legend(loc="best", fontsize=7)
     o = np.argsort(psi[keep])
     ph_deg = np.degrees(psi[keep][o])
     ax[1].plot(ph_deg, r0[keep, 0][o], ",", color="tab:red", label="base")
     ax[1].plot(ph_deg, r1[keep, 0][o], ",", color="tab:blue", label="final")
     ax[1].set(xlabel="signal phase (deg)", ylabel="radial residual (relative to A0)")
     ax[1].set_title(f"verdict: {doc['verdict']}")
-    ax[1].legend(fontsize=7)
+    ax[1].legend(loc="best", fontsize=7)
     sp = doc["spectrum"]
     ax[2].semilogy(sp["orders"], np.asarray(sp["before"]) + 1e-30, "o-", ms=3, label="base")
     ax[2].semilogy(sp["orders"], np.asarray(sp["after"]) + 1e-30, "o-", ms=3, label="final")
     ax[2].set(xlabel="order (cycles per signal period)", ylabel="radial amplitude (1)")
-    ax[2].legend(fontsize=7)
+    ax[2].legend(loc="best", fontsize=7)
     return [save_figure(fig, Path(folder), "lissajous.png")]
