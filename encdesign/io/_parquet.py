@@ -27,12 +27,15 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._errors import input_error
 from ._table import TableRef
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 __all__ = [
     "PARQUET_SUFFIXES",
@@ -230,7 +233,7 @@ def read_parquet_columns(
     return names, cols, ParquetRef(where, starts or [0])
 
 
-def write_options(schema: Any) -> dict[str, Any]:
+def write_options(schema: pa.Schema) -> dict[str, dict[str, str] | list[str]]:
     """``pyarrow.parquet.ParquetWriter`` options for a table of ``schema`` (a
     ``pyarrow.Schema``): float64 columns plain and uncompressed, the others dictionary-encoded
     where it pays and ``snappy``-compressed (Parquet's defaults).
