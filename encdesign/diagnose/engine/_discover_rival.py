@@ -119,7 +119,7 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     if g0 <= 0:
         return None, []
     k = f2.n_determined(len(f2.terms) - 1)
-    dbic = -(g1 - max(k, 0) * math.log(prep.n_values))  # (rows kept: N > 2)
+    dbic = _dbic(prep, g1, k)
     dho = fo.heldout_chi2 - f2.heldout_chi2
     kept = g1 / g0
     what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}):"
@@ -154,6 +154,12 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     )
     rules = [(r, f"{what} {why}" if i == 0 else why) for i, (r, why) in enumerate(rules)]
     return kept, [(r, why, dbic) for r, why in rules]
+
+
+def _dbic(prep, gain: float, k: int) -> float:
+    """The information criterion change of a chi-square ``gain`` bought with ``k``
+    determined scalars, over the record's kept values (rows kept: N > 2)."""
+    return -(gain - max(k, 0) * math.log(prep.n_values))
 
 
 def _place(term, spec: dict) -> bool:
@@ -194,7 +200,7 @@ def _holder(prep, fitter: Fitter, base: list, term, disc: list, specs: list[dict
     k_eff = fb.n_determined(len(fb.terms) - 1)
     fails = gain_rules(
         s,
-        -(fd.chi2 - fb.chi2 - max(k_eff, 0) * math.log(prep.n_values)),
+        _dbic(prep, fd.chi2 - fb.chi2, k_eff),
         fd.heldout_chi2 - fb.heldout_chi2,
     )
     if not fails and kept >= s.located_share_min:
@@ -204,7 +210,7 @@ def _holder(prep, fitter: Fitter, base: list, term, disc: list, specs: list[dict
     if own >= whole:
         return name, own, ", at least the effect's whole: the larger structure"
     k = fb.n_determined(len(base))  # the discovered term's determined scalars
-    dbic = -(f1.chi2 - fb.chi2 - max(k, 0) * math.log(prep.n_values))
+    dbic = _dbic(prep, f1.chi2 - fb.chi2, k)
     if _place(term, specs[j]) and not gain_rules(s, dbic, own):
         return name, own, ", in its place (a fixed frequency), past the catalog's gain rules"
     return None
