@@ -4,15 +4,19 @@ through one compiled program (issue 43).
 :func:`jax.experimental.multihost_utils.process_allgather` runs an XLA program, compiled
 once per shape and process (30-80 ms of CPU on a 2-core machine). A diagnosis split over
 two processes at 10^7 rows gathered arrays of 13 shapes: 13 of the 29 programs each process
-compiled. Here no gather compiles a program of its own:
+compiled. Here they compile one program, and the block means of a long record's read one
+more:
 
 * an array of at most :data:`KV_BYTES_MAX` bytes a process goes through the coordinator's
   key-value store (``jax.distributed``'s client: ``key_value_set_bytes``,
   ``blocking_key_value_get_bytes``): about 1-2 ms a gather and nothing compiled;
-* a larger one is cut into pieces of :data:`CHUNK_BYTES` and every piece goes through the
-  same compiled all-gather (``int64[CHUNK_BYTES / 8]``): one program for all of them. The
-  store is no route for them: measured on 2 processes, 256 KiB took 17 ms through the
-  store and 1.3 ms compiled (after the compilation), 1 MiB 109 ms against 10 ms.
+* a larger one, up to :data:`WHOLE_BYTES`, is cut into pieces of :data:`CHUNK_BYTES` and
+  every piece goes through the same compiled all-gather (``int64[CHUNK_BYTES / 8]``): one
+  program for all of them. The store is no route for them: measured on 2 processes, 256 KiB
+  took 17 ms through the store and 1.3 ms compiled (after the compilation), 1 MiB 109 ms
+  against 10 ms;
+* a larger one still (a step of the block means a long record's read gathers, all of one
+  shape) goes whole through a compiled all-gather of its own shape, as ``int64``.
 
 Either way every process receives every process's bytes unchanged, so nothing computed from
 a gather depends on the path it took.
@@ -20,16 +24,18 @@ a gather depends on the path it took.
 **The keys and their lifetime.** A :class:`StoreGather` is made when the runtime is joined
 (:func:`encdesign._distributed.initialize`) and dropped when it is left; it numbers its
 gathers ``0, 1, 2, ...``. Every process makes the same gathers in the same order (as for any
-collective), so gather ``s`` has the key ``encdesign/gather/s/p`` on process ``p``. Each
+collective), so gather ``s`` has one key on each process ``p``,
+``encdesign/gather/p/f/s`` (``f = s //`` :data:`KEYS_PER_FOLDER`). Each
 gather, whatever its route, first passes a header through the store: the gather's name, the
 array's shape and dtype (or ``bytes``) and its size, then the bytes themselves where they are
 small. A process that finds another's header different from its own raises
 :class:`~encdesign.DistributedError` naming both (the processes went out of step) instead of
 waiting forever for a key nobody writes or a collective nobody joins: the name is in the
 value, not in the key, so that processes out of step still meet at the same key. A process
-deletes its own key of gather ``s - 1`` once it has read every key of gather ``s`` (every
-other process wrote its key of ``s``, so it has read all of ``s - 1``): no barrier, and the
-store holds at most two keys a process whatever the length of the run.
+deletes its folder ``f - 1`` (one call) once it has read every key of gather
+``s = f x KEYS_PER_FOLDER``: every other process wrote its key of ``s``, so it has read all
+keys of the gathers before. No barrier, and the store holds at most ``KEYS_PER_FOLDER + 2``
+keys a process whatever the length of the run.
 
 **The client.** JAX 0.10.2 has no public way to the runtime's client (``jax.distributed``
 exports ``initialize``, ``is_initialized`` and ``shutdown`` only); :func:`runtime_client` is
@@ -53,6 +59,12 @@ KV_BYTES_MAX = 1 << 15
 
 CHUNK_BYTES = 1 << 20
 """The bytes a process sends in one call of the one compiled all-gather of larger arrays."""
+
+WHOLE_BYTES = 1 << 22
+"""An array of more bytes than this a process goes whole through a compiled all-gather of
+its own shape (the block means of a long record's read, cut into steps of one shape by
+:func:`~encdesign._distributed.allgather_concat`): pieces cost more calls than one compiled
+program."""
 
 TIMEOUT_MS = 24 * 3600 * 1000
 """How long a process waits for another's key of the same gather (a process that dies
@@ -112,6 +124,7 @@ class StoreGather:
         *,
         max_bytes: int = KV_BYTES_MAX,
         chunk_bytes: int = CHUNK_BYTES,
+        whole_bytes: int = WHOLE_BYTES,
         timeout_ms: int = TIMEOUT_MS,
     ) -> None:
         self.client = client
@@ -119,11 +132,11 @@ class StoreGather:
         self.n = int(process_count)
         self.max_bytes = int(max_bytes)
         self.chunk_bytes = -(-int(chunk_bytes) // 8) * 8
+        self.whole_bytes = int(whole_bytes)
         self.timeout_ms = int(timeout_ms)
         self.seq = 0
         self.through_store = 0
         self.compiled = 0
-        self._mine: str | None = None
 
     def _round(
         self, name: str, sig: str, payload: bytes, inline: bool
@@ -136,9 +149,8 @@ class StoreGather:
             raise ValueError(f"a gather's name without '|' or newlines, not {name!r}")
         seq = self.seq
         self.seq += 1
-        key = f"{PREFIX}{seq}/"
         head = f"{name}|{sig}|{len(payload)}|{int(inline)}\n".encode()
-        self.client.key_value_set_bytes(key + str(self.me), head + (payload if inline else b""))
+        self.client.key_value_set_bytes(_key(self.me, seq), head + (payload if inline else b""))
         sizes: list[int] = []
         out: list[bytes | None] = []
         for p in range(self.n):
@@ -147,7 +159,7 @@ class StoreGather:
                 out.append(payload if inline else None)
                 continue
             try:
-                blob = self.client.blocking_key_value_get_bytes(key + str(p), self.timeout_ms)
+                blob = self.client.blocking_key_value_get_bytes(_key(p, seq), self.timeout_ms)
             except Exception as exc:  # the runtime's own error (a timeout, a dead process)
                 raise DistributedError(
                     f"gather {seq} ({name!r}): process {self.me} got nothing from process "
@@ -165,9 +177,8 @@ class StoreGather:
                 raise DistributedError(f"gather {seq} ({name!r}): process {p}'s value truncated")
             sizes.append(int(t_size))
             out.append(body if t_inline == "1" else None)
-        if self._mine is not None:
-            self.client.key_value_delete(self._mine)
-        self._mine = key + str(self.me)
+        if seq % KEYS_PER_FOLDER == 0 and seq > 0:  # every process is past the last folder
+            self.client.key_value_delete(_folder(self.me, seq // KEYS_PER_FOLDER - 1))
         return sizes, out
 
     def allgather(self, x: np.ndarray, name: str) -> np.ndarray:
@@ -175,18 +186,21 @@ class StoreGather:
         every process) stacked in process order, on every process."""
         x = np.ascontiguousarray(x)
         sig = f"{x.dtype.str}{list(x.shape)}"
+        raw = x.reshape(-1).view(np.uint8)
         inline = x.nbytes <= self.max_bytes  # the same on every process (same shape)
-        data = x.tobytes()
-        sizes, got = self._round(name, sig, data, inline)
-        if not inline:
-            self.compiled += 1
-            got = chunked_allgather(data, sizes, self.chunk_bytes)
-        else:
+        _, got = self._round(name, sig, raw.tobytes() if inline else b"", inline)
+        if inline:
             self.through_store += 1
-        out = np.empty((self.n, *x.shape), x.dtype)
-        for p, blob in enumerate(got):
-            out[p] = x if p == self.me else np.frombuffer(blob or b"", x.dtype).reshape(x.shape)
-        return out
+            out = np.empty((self.n, *x.shape), x.dtype)
+            for p, blob in enumerate(got):
+                out[p] = x if p == self.me else np.frombuffer(blob or b"", x.dtype).reshape(x.shape)
+            return out
+        self.compiled += 1
+        if x.nbytes > self.whole_bytes and x.nbytes % 8 == 0:  # one piece: its own program
+            every = compiled_allgather(raw.view(np.int64)).view(np.uint8)
+        else:
+            every = pieces_allgather(raw, [x.nbytes] * self.n, self.chunk_bytes)
+        return every.view(x.dtype).reshape(self.n, *x.shape)
 
     def allgather_bytes(self, data: bytes, name: str) -> list[bytes]:
         """Every process's ``data`` (any length) in process order, on every process: through
@@ -197,26 +211,40 @@ class StoreGather:
             self.through_store += 1
             return [g or b"" for g in got]
         self.compiled += 1
-        return chunked_allgather(data, sizes, self.chunk_bytes)
+        every = pieces_allgather(np.frombuffer(data, np.uint8), sizes, self.chunk_bytes)
+        return [every[p, :n].tobytes() for p, n in enumerate(sizes)]
 
 
-def chunked_allgather(data: bytes, sizes: Sequence[int], chunk_bytes: int) -> list[bytes]:
-    """Every process's ``data`` (``sizes[p]`` bytes on process ``p``, known to all) in
-    process order, through one compiled all-gather of ``int64[chunk_bytes / 8]`` called once
-    per piece of ``chunk_bytes`` of the largest."""
-    sizes = [int(n) for n in sizes]
-    out = [bytearray(n) for n in sizes]
+KEYS_PER_FOLDER = 16
+"""Gathers whose keys of one process share a folder of the store (deleted in one go)."""
+
+
+def _folder(process: int, folder: int) -> str:
+    return f"{PREFIX}{process}/{folder}/"
+
+
+def _key(process: int, seq: int) -> str:
+    """Process ``process``'s key of gather ``seq``."""
+    return f"{_folder(process, seq // KEYS_PER_FOLDER)}{seq}"
+
+
+def pieces_allgather(raw: np.ndarray, sizes: Sequence[int], chunk_bytes: int) -> np.ndarray:
+    """``uint8[processes, max(sizes)]``: every process's bytes ``raw`` (``sizes[p]`` on
+    process ``p``, known to all; the rest of a row zeros) in process order, through one
+    compiled all-gather of ``int64[chunk_bytes / 8]`` called once per piece of
+    ``chunk_bytes`` of the largest."""
+    m = max(int(n) for n in sizes)
+    out = np.zeros((len(sizes), m), np.uint8)
     pad = np.zeros(chunk_bytes // 8, np.int64)
-    raw = pad.view(np.uint8)
-    for a in range(0, max(max(sizes), 1), chunk_bytes):
-        piece = np.frombuffer(data[a : a + chunk_bytes], np.uint8)
-        raw[: piece.size] = piece
-        raw[piece.size :] = 0
-        got = compiled_allgather(pad).view(np.uint8)
-        for p, n in enumerate(sizes):
-            k = max(0, min(chunk_bytes, n - a))
-            out[p][a : a + k] = got[p, :k].tobytes()
-    return [bytes(o) for o in out]
+    buf = pad.view(np.uint8)
+    for a in range(0, max(m, 1), chunk_bytes):
+        k = max(0, min(chunk_bytes, raw.size - a))
+        buf[:k] = raw[a : a + k]
+        buf[k:] = 0
+        got = compiled_allgather(pad).view(np.uint8).reshape(len(sizes), chunk_bytes)
+        e = min(m, a + chunk_bytes)
+        out[:, a:e] = got[:, : e - a]
+    return out
 
 
 def bucket(n: int) -> int:

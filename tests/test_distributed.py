@@ -145,8 +145,9 @@ class _Store:
             return self.kv[key]
 
     def key_value_delete(self, key: str) -> None:
-        with self.cv:
-            del self.kv[key]
+        with self.cv:  # a key, or a folder ("…/") and every key in it
+            for k in [k for k in self.kv if k == key or (key.endswith("/") and k.startswith(key))]:
+                del self.kv[k]
 
 
 def _on_threads(n: int, work, monkeypatch=None) -> list:
@@ -166,7 +167,9 @@ def _on_threads(n: int, work, monkeypatch=None) -> list:
         monkeypatch.setattr(_kv_gather, "compiled_allgather", compiled)
 
     def run(k: int) -> None:
-        g = _kv_gather.StoreGather(store, k, n, max_bytes=4096, chunk_bytes=1000, timeout_ms=2000)
+        g = _kv_gather.StoreGather(
+            store, k, n, max_bytes=4096, chunk_bytes=1000, whole_bytes=20000, timeout_ms=2000
+        )
         try:
             out[k] = work(g, k)
         except Exception as exc:
@@ -186,20 +189,25 @@ def test_store_gathers_are_exact_and_the_store_does_not_grow(monkeypatch):
 
     def work(g, k):
         got = []
-        for i in range(50):  # 50 gathers: the store holds at most two keys a process
+        for i in range(50):  # 105 gathers: the store holds their keys a folder at a time
             got.append(g.allgather(parts[k][: 4 + i % 40] * (i + 1), "sums"))
             got.append(g.allgather_bytes(b"%d:" % k * (k + 1) * (50 * i), "blobs"))
+            if i % 10 == 0:  # over whole_bytes: one compiled gather of its own shape
+                got.append(g.allgather(np.arange(3000) * (k + i), "whole"))
         return got, g.through_store, g.compiled
 
     store, *res = _on_threads(3, work, monkeypatch)
     for got, n_store, n_compiled in res:
         # small ones through the store, the larger in pieces of 1000 bytes (one compiled shape)
-        assert (n_store, n_compiled) == (64, 36)  # a blob over 4096 bytes from i = 14
+        assert (n_store, n_compiled) == (64, 41)  # a blob over 4096 bytes from i = 14
         for i in range(50):
             want = np.stack([p[: 4 + i % 40] * (i + 1) for p in parts])
-            assert got[2 * i].tobytes() == want.tobytes()  # bit for bit
-            assert got[2 * i + 1] == [b"%d:" % p * (p + 1) * (50 * i) for p in range(3)]
-    assert store.most <= 2 * 3 and len(store.kv) == 3
+            assert got.pop(0).tobytes() == want.tobytes()  # bit for bit
+            assert got.pop(0) == [b"%d:" % p * (p + 1) * (50 * i) for p in range(3)]
+            if i % 10 == 0:
+                assert np.array_equal(got.pop(0), [np.arange(3000) * (p + i) for p in range(3)])
+    assert store.most <= 3 * (_kv_gather.KEYS_PER_FOLDER + 2)
+    assert len(store.kv) == 3 * (105 % _kv_gather.KEYS_PER_FOLDER)
 
 
 def test_a_store_gather_out_of_step_raises_and_names_both():
