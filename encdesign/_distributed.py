@@ -61,6 +61,7 @@ from jax.sharding import PartitionSpec as P
 from . import _cpu
 from ._checks import int_arg
 from ._errors import DistributedError, EncdesignInputError, input_error
+from ._kv_gather import StoreGather, bucket, compiled_allgather, padded_bytes_allgather
 
 BUILDS_AXIS = "builds"
 """Name of the mesh axis the Monte Carlo builds are split over."""
@@ -236,6 +237,7 @@ def initialize(launch: Launch, *, timeout_s: float = 60.0, heartbeat_s: int = 20
             )
         except (ValueError, RuntimeError) as exc:
             raise DistributedError(f"cluster auto-detection failed: {exc}") from None
+        _join_store()
         return
     if launch.coordinator is None:
         raise DistributedError("no coordinator address to join (--coordinator HOST:PORT)")
@@ -254,10 +256,41 @@ def initialize(launch: Launch, *, timeout_s: float = 60.0, heartbeat_s: int = 20
         )
     except RuntimeError as exc:
         raise DistributedError(f"jax.distributed.initialize: {exc}") from None
+    _join_store()
+
+
+_RUNTIME: list[StoreGather] = []
+"""The joined runtime's :class:`~._kv_gather.StoreGather` (none before :func:`initialize`
+and after :func:`shutdown`): it owns the numbering of the gathers' keys in the store."""
+
+
+def _join_store() -> None:
+    """Hold a :class:`~._kv_gather.StoreGather` for the runtime just joined (none when its
+    client cannot be reached: the gathers are then compiled, as before)."""
+    from ._kv_gather import runtime_client
+
+    _RUNTIME.clear()
+    client, _why = runtime_client()
+    if client is not None and jax.process_count() > 1:
+        _RUNTIME.append(StoreGather(client, jax.process_index(), jax.process_count()))
+
+
+def store_gather() -> StoreGather | None:
+    """The joined runtime's store gatherer, if any (its counters: ``seq``, ``through_store``,
+    ``compiled``)."""
+    return _RUNTIME[0] if _RUNTIME else None
+
+
+def _allgather(x: np.ndarray, name: str) -> np.ndarray:
+    """``[process_count, *x.shape]``: every process's ``x`` (the same shape and dtype on all)
+    in process order, through the store where it can (:mod:`._kv_gather`), else compiled."""
+    g = store_gather()
+    return compiled_allgather(x) if g is None else g.allgather(x, name)
 
 
 def shutdown() -> None:
     """Leave the distributed runtime (a barrier: every process calls it)."""
+    _RUNTIME.clear()
     if jax.distributed.is_initialized():
         jax.distributed.shutdown()
 
@@ -432,36 +465,26 @@ def split_range(n: int, parts: int, part: int) -> tuple[int, int]:
     return start, min(start + size, n)
 
 
-def allgather_rows(rows: np.ndarray, n_total: int) -> np.ndarray:
+def allgather_rows(rows: np.ndarray, n_total: int, name: str = "rows") -> np.ndarray:
     """Concatenate every process's ``rows [m_p, k]`` (its :func:`split_range` share, in
-    process order) into ``[n_total, k]`` on every process (one collective)."""
+    process order) into ``[n_total, k]`` on every process (one gather, ``name``)."""
     rows = np.asarray(rows, dtype=np.float64)
     if jax.process_count() == 1:
         return rows
-    from jax.experimental import multihost_utils
-
     size = -(-int(n_total) // jax.process_count())
     k = int(np.prod(rows.shape[1:], dtype=np.int64))
-    pad = np.full((size, bucket(k)), np.nan)  # a row's values, then padding
+    width = k if store_gather() is not None else bucket(k)  # compiled per shape: few shapes
+    pad = np.full((size, width), np.nan)  # a row's values, then padding
     pad[: rows.shape[0], :k] = rows.reshape(rows.shape[0], k)
-    got = np.asarray(multihost_utils.process_allgather(pad))
+    got = _allgather(pad, name)
     return got.reshape(-1, pad.shape[1])[:n_total, :k].reshape(-1, *rows.shape[1:])
-
-
-def bucket(n: int) -> int:
-    """The length a collective of ``n`` values is padded to: the next ``2^j`` or
-    ``3 * 2^(j - 1)`` (at least 1; half as much again at most). Each shape of a collective is
-    compiled once per process (some 10-50 ms of CPU); a record's row passes gather sums of
-    many sizes, and padded so they need a few programs, not one per size."""
-    p = 1 << max(int(n) - 1, 0).bit_length()  # the next power of two
-    return 3 * p // 4 if p >= 4 and 3 * p // 4 >= n else p
 
 
 GATHER_ROWS = 1 << 20
 """Rows per process in one collective of :func:`allgather_concat` (bounds its temporaries)."""
 
 
-def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
+def allgather_concat(rows: np.ndarray, counts: Sequence[int], name: str = "concat") -> np.ndarray:
     """Concatenate every process's ``rows [m_p, ...]`` in process order on every process,
     ``counts[p]`` being ``m_p`` (known to all, e.g. from :func:`allgather_objects`); the
     dtype is kept. The result is allocated once and filled by collectives of at most
@@ -470,8 +493,6 @@ def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
     rows = np.asarray(rows)
     if jax.process_count() == 1:
         return rows
-    from jax.experimental import multihost_utils
-
     counts = [int(c) for c in counts]
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     out = np.empty((int(starts[-1]), *rows.shape[1:]), rows.dtype)
@@ -480,7 +501,7 @@ def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
         pad = np.zeros((step, *rows.shape[1:]), rows.dtype)
         mine = rows[a : a + step]
         pad[: mine.shape[0]] = mine
-        got = np.asarray(multihost_utils.process_allgather(pad))
+        got = _allgather(pad, name)
         for p, c in enumerate(counts):
             k = max(0, min(step, c - a))
             out[starts[p] + a : starts[p] + a + k] = got[p, :k]
@@ -488,7 +509,7 @@ def allgather_concat(rows: np.ndarray, counts: Sequence[int]) -> np.ndarray:
     return out
 
 
-def allgather_objects(items: Sequence[Any]) -> list[Any]:
+def allgather_objects(items: Sequence[Any], name: str = "objects") -> list[Any]:
     """Every process's list of JSON-able ``items`` (its share of tasks, e.g. benchmark rows),
     concatenated in process order on every process (two collectives: lengths, then bytes).
     NumPy scalars and arrays become Python numbers and lists."""
@@ -505,30 +526,26 @@ def allgather_objects(items: Sequence[Any]) -> list[Any]:
         raise TypeError(f"not JSON-able: {type(x).__name__}")
 
     out: list[Any] = []
-    for blob in allgather_bytes(json.dumps(items, default=plain).encode("utf-8")):
+    for blob in allgather_bytes(json.dumps(items, default=plain).encode("utf-8"), name):
         out += json.loads(blob.decode("utf-8"))
     return out
 
 
 SMALL_GATHER_BYTES = 1 << 13
-"""The least :func:`allgather_bytes` pads to: the small gathers of a diagnosis (flags,
-counts, edges, a few KiB at most) then share one compiled program instead of one per size
-(issue 43: at 10^7 rows on 2 processes, 7 of the 19 programs compiled for collectives were
-these, some 10-50 ms of CPU each whatever the split; now they are one)."""
+"""The least :func:`allgather_bytes` pads to where there is no key-value store to use: the
+small gathers of a diagnosis (flags, counts, edges, a few KiB at most) then share one
+compiled program instead of one per size."""
 
 
-def allgather_bytes(data: bytes) -> list[bytes]:
-    """Every process's ``data``, in process order, on every process (two collectives:
-    sizes, then the bytes padded to the largest's :func:`bucket`, at least
-    :data:`SMALL_GATHER_BYTES`)."""
-    from jax.experimental import multihost_utils
-
-    buf = np.frombuffer(data, dtype=np.uint8)
-    sizes = np.asarray(multihost_utils.process_allgather(np.array([buf.size], np.int64)))
-    pad = np.zeros(max(bucket(int(sizes.max())), SMALL_GATHER_BYTES), np.uint8)
-    pad[: buf.size] = buf
-    got = np.asarray(multihost_utils.process_allgather(pad))
-    return [bytes(row[: int(n)]) for row, n in zip(got, sizes.reshape(-1))]
+def allgather_bytes(data: bytes, name: str = "bytes") -> list[bytes]:
+    """Every process's ``data``, in process order, on every process (:mod:`._kv_gather`:
+    through the runtime's key-value store when every process's is small, else in pieces
+    through its one compiled gather; without the store, two compiled collectives: sizes, then
+    the bytes padded to the largest's :func:`bucket`, at least :data:`SMALL_GATHER_BYTES`)."""
+    g = store_gather()
+    if g is None:
+        return padded_bytes_allgather(data, SMALL_GATHER_BYTES)
+    return g.allgather_bytes(data, name)
 
 
 def is_my_task(i: int) -> bool:

@@ -5,7 +5,8 @@ processes at hand (driven by ``tests/test_distributed.py``).
 :func:`run_checks`'s results to ``OUT.json``. The test module also calls
 :func:`run_checks` in its own process, on one device, for the reference. ``--die`` makes
 process 1 exit with status 7 right after joining, while process 0 waits for it in a
-collective.
+collective. ``--mismatch`` makes the two processes make different gathers; each writes the
+error it got to ``OUT.json.pK``.
 """
 
 import argparse
@@ -84,6 +85,7 @@ def run_checks(sds: bool = False) -> dict:
     mc_mesh = monte_carlo(metric, t_mesh, key=key, n=SCALE_BUILDS, dim=dim, chunk_size=32)
     tasks = [{"task": i, "by": dist.process_index()} for i in range(5) if dist.is_my_task(i)]
     out = {
+        "gathers": _gathers(),
         "tasks": sorted(dist.allgather_objects(tasks), key=lambda t: t["task"]),
         "devices": dist.n_build_shards(),
         "processes": jax.process_count(),
@@ -102,11 +104,57 @@ def run_checks(sds: bool = False) -> dict:
     return out
 
 
+def _gathers() -> dict:
+    """Gathers of every size, each process's part made from its index: small ones through
+    the runtime's key-value store (``_kv_gather``), one over its bound in compiled pieces."""
+    import jax
+    import numpy as np
+
+    from encdesign import _kv_gather
+
+    k, n = dist.process_index(), jax.process_count()
+    g = dist.store_gather()
+    before = (g.through_store, g.compiled) if g is not None else (0, 0)
+    rows = dist.allgather_rows(np.arange(6.0).reshape(2, 3) + 10 * k, 2 * n)
+    blobs = dist.allgather_bytes(f"p{k}".encode() * (k + 1))
+    m = (_kv_gather.CHUNK_BYTES + 3 * _kv_gather.KV_BYTES_MAX) // 8  # two pieces
+    big = dist.allgather_concat(
+        np.arange(m + 5 * k, dtype=np.int64) + 7 * k, [m + 5 * p for p in range(n)]
+    )
+    after = (g.through_store, g.compiled) if g is not None else (0, 0)
+    return {
+        "rows": rows.tolist(),
+        "bytes": [b.decode() for b in blobs],
+        "big_size": int(big.size),
+        "big_sum": int(big.sum()),
+        "through_store": after[0] - before[0],
+        "compiled": after[1] - before[1],
+    }
+
+
+def _mismatch(out: Path) -> None:
+    """Process 0 gathers rows, process 1 bytes: each must raise a DistributedError."""
+    import numpy as np
+
+    from encdesign import DistributedError
+
+    try:
+        if dist.process_index() == 0:
+            dist.allgather_rows(np.zeros((1, 2)), 2)
+        else:
+            dist.allgather_bytes(b"x")
+        msg = "no error"
+    except DistributedError as exc:
+        msg = f"DistributedError: {exc}"
+    Path(f"{out}.p{dist.process_index()}").write_text(msg)
+
+
 def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("out", type=Path)
     p.add_argument("--die", action="store_true")
     p.add_argument("--sds", action="store_true")
+    p.add_argument("--mismatch", action="store_true")
     dist.add_launch_flags(p)
     args = p.parse_args()
     dist.initialize(dist.launch_from_args(args), timeout_s=60, heartbeat_s=10)
@@ -114,6 +162,10 @@ def main() -> int:
         if dist.process_index() == 1:
             os._exit(7)
         dist.barrier("never-complete")
+    if args.mismatch:
+        _mismatch(args.out)
+        dist.shutdown()
+        return 0
     out = run_checks(sds=args.sds)
     if dist.is_main_process():
         args.out.write_text(json.dumps(out))

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from helpers import env_without_device_count
 
-from encdesign import EncdesignInputError
+from encdesign import EncdesignInputError, _kv_gather
 from encdesign import _distributed as dist
 from encdesign.cli import main
 from encdesign.design._cases import CaseRecorder, part_path, read_cases
@@ -98,6 +98,129 @@ def test_two_processes_on_localhost_agree_with_one(runs):
     # tasks (e.g. benchmark recordings) dealt round-robin and gathered
     assert r["tasks"] == [{"task": i, "by": i % 2} for i in range(5)]
     assert runs["single"]["tasks"] == [{"task": i, "by": 0} for i in range(5)]
+    # gathers of every size: small ones through the key-value store, exact (nothing compiled)
+    g, m = r["gathers"], (_kv_gather.CHUNK_BYTES + 3 * _kv_gather.KV_BYTES_MAX) // 8
+    assert g["rows"] == [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0], [10.0, 11.0, 12.0], [13.0, 14.0, 15.0]]
+    assert g["bytes"] == ["p0", "p1p1"]
+    assert g["big_size"] == 2 * m + 5  # over KV_BYTES_MAX: two pieces through one program
+    assert g["big_sum"] == m * (m - 1) // 2 + (m + 5) * (m + 4) // 2 + 7 * (m + 5)
+    assert (g["through_store"], g["compiled"]) == (2, 1)
+    assert runs["single"]["gathers"]["rows"] == g["rows"][:2]
+
+
+def test_processes_out_of_step_in_a_gather_raise_a_clear_error(tmp_path):
+    """Process 0 gathers rows while process 1 gathers bytes: both raise a DistributedError
+    that names both gathers, within seconds (no hang)."""
+    t0 = time.monotonic()
+    out = tmp_path / "m.json"
+    rc = dist.spawn_local(
+        [str(out), "--mismatch"], 2, env=_env(), program=[sys.executable, str(WORKER)]
+    )
+    assert rc == 0 and time.monotonic() - t0 < 120
+    for k in (0, 1):
+        msg = Path(f"{out}.p{k}").read_text()
+        assert msg.startswith("DistributedError: gather 0: process")
+        assert "'rows'" in msg and "'bytes'" in msg and "out of step" in msg
+
+
+class _Store:
+    """An in-memory key-value store with the runtime client's methods (threads as processes)."""
+
+    def __init__(self) -> None:
+        self.kv: dict[str, bytes] = {}
+        self.cv = threading.Condition()
+        self.most = 0
+
+    def key_value_set_bytes(self, key: str, value: bytes, allow_overwrite: bool = False) -> None:
+        with self.cv:
+            assert allow_overwrite or key not in self.kv
+            self.kv[key] = bytes(value)
+            self.most = max(self.most, len(self.kv))
+            self.cv.notify_all()
+
+    def blocking_key_value_get_bytes(self, key: str, timeout_in_ms: int) -> bytes:
+        with self.cv:
+            if not self.cv.wait_for(lambda: key in self.kv, timeout_in_ms / 1000):
+                raise RuntimeError(f"DEADLINE_EXCEEDED: {key}")
+            return self.kv[key]
+
+    def key_value_delete(self, key: str) -> None:
+        with self.cv:  # a key, or a folder ("…/") and every key in it
+            for k in [k for k in self.kv if k == key or (key.endswith("/") and k.startswith(key))]:
+                del self.kv[k]
+
+
+def _on_threads(n: int, work, monkeypatch=None) -> list:
+    """``work(gatherer, k)`` on ``n`` threads as processes ``k``, sharing a :class:`_Store`
+    (with ``monkeypatch``, the compiled all-gather too: a collective of the threads)."""
+    store, out = _Store(), [None] * n
+    if monkeypatch is not None:
+        meet, parts = threading.Barrier(n), {}
+
+        def compiled(x):
+            parts[threading.current_thread().name] = np.array(x)
+            meet.wait(10)
+            got = np.stack([parts[f"p{p}"] for p in range(n)])
+            meet.wait(10)
+            return got
+
+        monkeypatch.setattr(_kv_gather, "compiled_allgather", compiled)
+
+    def run(k: int) -> None:
+        g = _kv_gather.StoreGather(
+            store, k, n, max_bytes=4096, chunk_bytes=1000, whole_bytes=20000, timeout_ms=2000
+        )
+        try:
+            out[k] = work(g, k)
+        except Exception as exc:
+            out[k] = exc
+
+    threads = [threading.Thread(target=run, args=(k,), name=f"p{k}") for k in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    return [store, *out]
+
+
+def test_store_gathers_are_exact_and_the_store_does_not_grow(monkeypatch):
+    rng = np.random.default_rng(5)
+    parts = [rng.standard_normal((40, 7)) * 10.0 ** rng.integers(-300, 300, (40, 7)) for _ in "abc"]
+
+    def work(g, k):
+        got = []
+        for i in range(50):  # 105 gathers: the store holds their keys a folder at a time
+            got.append(g.allgather(parts[k][: 4 + i % 40] * (i + 1), "sums"))
+            got.append(g.allgather_bytes(b"%d:" % k * (k + 1) * (50 * i), "blobs"))
+            if i % 10 == 0:  # over whole_bytes: one compiled gather of its own shape
+                got.append(g.allgather(np.arange(3000) * (k + i), "whole"))
+        return got, g.through_store, g.compiled
+
+    store, *res = _on_threads(3, work, monkeypatch)
+    for got, n_store, n_compiled in res:
+        # small ones through the store, the larger in pieces of 1000 bytes (one compiled shape)
+        assert (n_store, n_compiled) == (64, 41)  # a blob over 4096 bytes from i = 14
+        for i in range(50):
+            want = np.stack([p[: 4 + i % 40] * (i + 1) for p in parts])
+            assert got.pop(0).tobytes() == want.tobytes()  # bit for bit
+            assert got.pop(0) == [b"%d:" % p * (p + 1) * (50 * i) for p in range(3)]
+            if i % 10 == 0:
+                assert np.array_equal(got.pop(0), [np.arange(3000) * (p + i) for p in range(3)])
+    assert store.most <= 3 * (_kv_gather.KEYS_PER_FOLDER + 2)
+    assert len(store.kv) == 3 * (105 % _kv_gather.KEYS_PER_FOLDER)
+
+
+def test_a_store_gather_out_of_step_raises_and_names_both():
+    def work(g, k):
+        g.allgather_bytes(b"ok", "first")
+        if k == 0:
+            return g.allgather(np.zeros(3), "sums")
+        return g.allgather(np.zeros(4), "sums")
+
+    _, a, b = _on_threads(2, work)
+    for exc in (a, b):
+        assert isinstance(exc, dist.DistributedError)
+        assert "gather 1" in str(exc) and "<f8[3]" in str(exc) and "<f8[4]" in str(exc)
 
 
 def test_chunk_plan_spreads_the_builds_evenly():

@@ -28,7 +28,8 @@ LAYERS = {
     "_progress": 0,
     "_tuning": 0,
     "_cpu": 1,  # the CPU device default; imports _errors
-    "_distributed": 1.5,  # the scale-out runtime; imports _cpu, _checks, _errors
+    "_distributed": 1.5,  # the scale-out runtime; imports _cpu, _checks, _errors, _kv_gather
+    "_kv_gather": 1.25,  # the runtime's all-gathers through its key-value store; imports _errors
     "_usercode": 0.5,  # base, above _errors (it raises the input error)
     "_checks": 0,
     "_lazy": 0,  # re-exports imported on first use (the top level, physics)
