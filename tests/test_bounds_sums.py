@@ -70,7 +70,7 @@ def test_prepared_bounds_equal_each_probe_on_its_own(monkeypatch):
     monkeypatch.setattr(bounds._Bench, "probe", counted)
     shared = diagnose(rec).doc
     assert len(used) >= 4 and all(used), used
-    monkeypatch.setattr(bounds._Bench, "prepare", lambda self, probes, mine=None: None)
+    monkeypatch.setattr(bounds._Bench, "prepare", lambda self, probes: None)
     first = list(got)
     used.clear()
     got.clear()

@@ -5,11 +5,9 @@ side by side, the rules' and the runs' alignment's row sums, the vibration start
 search) are summed in fixed groups of chunks, each process its share, the groups' sums
 gathered through ``jax.distributed``; the views and the detection bounds' probes are dealt
 over the processes (``engine._workshare``), each process working on its share alone, the
-results gathered; a candidate's trial fit, term RMS and probes run on its home process
-(``engine._homes``): the diagnosis on two processes must equal the one on one process
-(verdict, effects and every number within 1e-12 relative; timings aside), each process
-must have had a share of the dealt items and of every row pass's groups, and a candidate
-that is not named must have been evaluated on one process only."""
+results gathered: the diagnosis on two processes must equal the one on one process
+(verdict, effects and every number within 1e-12 relative; timings aside), and each process
+must have had a share of the dealt items and of every row pass's groups."""
 
 from __future__ import annotations
 
@@ -67,16 +65,6 @@ SPLIT = (
 """Launcher setup that logs each gather of a pass's row groups (``_rowshare.reduce_groups``
 on several processes): the process, the groups and how many it summed, one line each to
 the file ``log``."""
-
-HOMED = (
-    "import atexit, jax, encdesign.diagnose.engine._fit as fm; _ran = set(); "
-    "fm.Fitter.eval_term = (lambda f: lambda self, term, *a, **k: (_ran.add("
-    "(jax.process_index(), term.cand.name)), f(self, term, *a, **k))[1])(fm.Fitter.eval_term); "
-    "atexit.register(lambda: open({log!r}, 'a').write("
-    "''.join(f'{{p}} {{c}}\\n' for p, c in _ran))); "
-)
-"""Launcher setup that logs, at exit, each process and the terms it evaluated (their
-candidates' names, ``Fitter.eval_term``), one line each to the file ``log``."""
 
 TIMING_KEYS = ("timings_s", "timings_cpu_s")
 
@@ -247,24 +235,6 @@ def _assert_shared(split: Path, log: Path, two: dict) -> None:
     assert len(two["detection_bounds"]) >= 2
 
 
-def _assert_homed(log: Path, two: dict) -> None:
-    """Each candidate the selection tried and did not name (nor pair with a named one) was
-    evaluated on one process only, its home (``engine._homes``): its trial fit, its term
-    RMS and its bounds' probes there, its programs compiled there only (on main, every
-    process evaluated every candidate)."""
-    ran: dict[str, set[int]] = {}
-    for line in log.read_text(encoding="utf-8").splitlines():
-        p, name = line.split()
-        ran.setdefault(name, set()).add(int(p))
-    named = {e["name"] for e in two["effects"]}
-    named |= {c["name"] for e in two["effects"] for c in e.get("confounded_with", [])}
-    tried = {r["name"] for r in two["rejected"]} | {b["effect"] for b in two["detection_bounds"]}
-    homed = sorted(tried - named)
-    assert len(homed) >= 2, (homed, sorted(ran))
-    shared = {c: sorted(ran.get(c, ())) for c in homed if len(ran.get(c, ())) != 1}
-    assert not shared, f"evaluated on these processes, not one: {shared}"
-
-
 @pytest.mark.sweep  # CI time (session 33): make test makes these checks on the restart test
 def test_two_processes_give_the_one_process_diagnosis(tmp_path, monkeypatch):
     """A CSV record never reduced, on two processes: its row passes split and its views and
@@ -321,14 +291,11 @@ def test_a_reduced_record_restarted_on_two_processes_gives_the_one_process_diagn
     rec = _record(
         tmp_path / "rec.toml", 7972, n=3000, speed_rev_s=0.4, group_rows=997, orders=orders
     )
-    log, split, homed = tmp_path / "dealt.txt", tmp_path / "split.txt", tmp_path / "homed.txt"
+    log, split = tmp_path / "dealt.txt", tmp_path / "split.txt"
     one = _diagnose_here(monkeypatch, rec, tmp_path / "one.json", True)
     setup = REDUCE + DEALT.format(log=str(log)) + SPLIT.format(log=str(split))
-    two = _diagnose(
-        rec, tmp_path / "two.json", 2, dist.free_port(), setup + HOMED.format(log=str(homed))
-    )
+    two = _diagnose(rec, tmp_path / "two.json", 2, dist.free_port(), setup)
     _assert_shared(split, log, two)
-    _assert_homed(homed, two)
     red = one["reduced"]
     assert not red["applied"] and red["planned_for_growth"]
     assert red["restart"]["block_rows"] >= 2 and one["base"]["max_order"] > 12
@@ -437,7 +404,6 @@ def test_a_trial_fit_is_gathered_whole_and_rejoins_its_candidates():
         unpack_fit(pack_fit(fr), [b, a])  # type: ignore[list-item]
     assert pack_fit(None) is None and unpack_fit(None, []) is None
     assert deal([3, 1, 2], lambda xs: [x * x for x in xs]) == [9, 1, 4]
-    assert deal([3, 1, 2], lambda xs: [x * x for x in xs], home=lambda x: x) == [9, 1, 4]
 
 
 def test_a_private_fitter_caches_apart_from_the_shared_one():

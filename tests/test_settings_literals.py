@@ -125,7 +125,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_results.py", 2): SHAPE + " (a pair)",
     ("engine/_results.py", 1e-12): NUMERIC + " (a correlation <= 1 up to rounding)",
     ("engine/_select.py", 2): SHAPE + " (a squared correlation)",
-    ("engine/_collinear.py", 2): SHAPE + " (a squared correlation)",
     ("engine/_settings_check.py", 2): COUNT + " (K-fold needs 2 folds)",
     ("engine/_stepped.py", 8): COUNT + " (the segment finder's own minimum)",
     ("engine/_steps.py", 2): COUNT,

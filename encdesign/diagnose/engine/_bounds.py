@@ -71,25 +71,21 @@ is a copy of the prepared one, fitted by a fitter of its own).
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
 
-import jax
 import numpy as np
 from scipy import optimize, stats
 
-from ..._distributed import allgather_objects
 from ._bounds_shares import VIEW_DOUBLINGS, _share_size
 from ._bounds_sums import _add_gram, _channel_products, _rank
 from ._candidates import Candidate, Probe
 from ._fit import Fitter, Term, make_term
-from ._homes import homes
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
-from ._rowshare import alone, summed
+from ._rowshare import summed
 from ._select import _has_run_constants, _order_key
 from ._stats_pass import ChunkMemo
 from ._steps import frozen
@@ -268,9 +264,7 @@ class _Bench:
         self.per_run = _has_run_constants(ref.terms[: ref.n_base])
         self._pre: dict[int, tuple] = {}  # id(probe) -> its sums from the shared pass
 
-    def prepare(
-        self, probes: Sequence[tuple[Candidate, Probe]], mine: Sequence[bool] | None = None
-    ) -> None:
+    def prepare(self, probes: Sequence[tuple[Candidate, Probe]]) -> None:
         """One pass over the rows for all ``probes`` (issue 43): each one's own Jacobian (its
         rank) and, per fold, the sums of the base's processed (whitened, projected, scaled)
         Jacobian ``S`` with the probe's processed unit effect ``u``: ``S^T u``, ``|u|^2``
@@ -283,9 +277,7 @@ class _Bench:
         one product each, issue 43), with each probe's whitened unit effect's sums per run
         and channel on the kept rows: its norm and own RMS (:meth:`own_rms`) without a copy
         of the record. :meth:`probe` uses them and falls back to its own pass for a probe
-        not prepared. With ``mine`` (per probe), only those probes are prepared, the others'
-        columns left at zero (each probe's sums are then the same numbers: a product's
-        column does not depend on the values of the others, only on their number)."""
+        not prepared."""
         prep, fitter = self.prep, self.fitter
         K = prep.settings.n_folds
         static = frozen(self.base_terms)
@@ -329,9 +321,6 @@ class _Bench:
             U = np.empty((b - a, C, m))
             memo.at(a)
             for i, t in enumerate(terms):
-                if mine is not None and not mine[i]:  # (another process's: zeros)
-                    U[:, :, i] = 0.0
-                    continue
                 va, J = fitter.eval_term(t, a, b, x, jac=True)
                 if firsts[gi[i]] == i:
                     _add_gram(prep, grams[gi[i]], J, a, b, 1.0 / prep.sigma)
@@ -357,8 +346,6 @@ class _Bench:
             G, Gu = kept
         ranks = [_rank(g) for g in grams]
         for i, (_, pr) in enumerate(probes):
-            if mine is not None and not mine[i]:
-                continue
             unit = (float(np.sum(qv[i])), s1[:, :, i])  # its norm squared, its run sums
             self._pre[id(pr)] = (ranks[gi[i]], (G, Gu, hv[i], huv[i], qv[i], quv[i]), unit)
 
@@ -714,24 +701,12 @@ def detection_bounds(
     # the selection's fits are done: the engine fitter's per-chunk caches (the candidates'
     # Jacobians, its static blocks') are freed for the bench's own (issue 43, peak memory)
     fitter.release_chunks()
-    # each candidate's probes on its home process (_homes: its programs compiled there only)
-    home_of = homes(prep, fitter.chunk, [c for c in candidates if _applies(c, prep)])
-
-    def home(item: tuple[Candidate, Probe]) -> int:
-        return home_of.get(item[0].name, 0)
-
-    n = jax.process_count()
-    if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare): on
-        # several processes each prepares its own probes over all rows (alone)
+    if ref.room:  # one pass over the rows for every probe's refit (_Bench.prepare)
         items = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
-        failed = False
         try:
-            with alone() if n > 1 else contextlib.nullcontext():
-                bench.prepare(items, [home(it) % n == jax.process_index() for it in items])
+            bench.prepare(items)
         except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-            failed = True
-        if failed or (n > 1 and any(allgather_objects([failed]))):
-            bench._pre.clear()  # each probe then makes its own pass (on every process)
+            bench._pre.clear()  # each probe then makes its own pass
 
     def bounds_of(mine: list) -> list:  # this process's parameter sets (_workshare.deal)
         got = []
@@ -745,7 +720,7 @@ def detection_bounds(
     # every parameter set of every probe (a probe and its worst_of) is one work item
     sets = [(c, q) for c, probes in work for pr in probes for q in (pr, *pr.worst_of)]
     try:
-        done = iter(deal(sets, bounds_of, home=home))
+        done = iter(deal(sets, bounds_of))
     finally:
         sums_of(prep).forget()  # the last probe's residual and its views' sums
     for cand, probes in work:
@@ -760,14 +735,13 @@ def detection_bounds(
     return out
 
 
-def _applies(cand: Candidate, prep: Prepared) -> bool:
-    """Whether ``cand`` applies to the record (no reason it cannot be tested)."""
-    return not (cand.applies is not None and cand.applies(prep.ctx))
-
-
 def _bounded(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list:
     """The candidates a record's bounds are about: those that apply and are not named."""
-    return [c for c in candidates if c.name not in ref.named and _applies(c, prep)]
+    return [
+        c
+        for c in candidates
+        if c.name not in ref.named and not (c.applies is not None and c.applies(prep.ctx))
+    ]
 
 
 def not_covered(candidates: Sequence[Candidate], prep: Prepared, ref: Reference) -> list[str]:

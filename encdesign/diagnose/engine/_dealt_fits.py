@@ -1,18 +1,16 @@
 """Fits that travel between processes (issue 43, :mod:`._workshare`): a selection round's
-trial fits are made on their candidates' home processes (:mod:`._homes`), each process's on
-a fitter of its own, and gathered."""
+trial fits are dealt over the processes, each on a fitter of its own, and gathered."""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Sequence
 from typing import cast
 
 from ._candidates import Candidate
 from ._fit import FitResult, Fitter
 from ._normal import BlockCache
-from ._workshare import deal
 
 
 def private(fitter: Fitter) -> Fitter:
@@ -64,22 +62,4 @@ def unpack_fit(packed: PackedFit | None, cands: Sequence[Candidate]) -> FitResul
     return fr
 
 
-def dealt_trials(
-    cands: Sequence[Candidate],
-    model: Sequence[Candidate],
-    home: Mapping[str, int],
-    run: Callable[[list[Candidate]], list[tuple]],
-) -> list[tuple]:
-    """``run(cands)``'s results, ``(fit or None, *more)`` per candidate (``more``
-    picklable), each candidate's made on its ``home`` process (``run`` of that process's
-    candidates, in order, alone: :func:`._workshare.deal`) and gathered; each fit's terms
-    are ``model``'s candidates and then its own."""
-
-    def work(mine: list[int]) -> list[tuple]:
-        return [(pack_fit(f), *more) for f, *more in run([cands[i] for i in mine])]
-
-    got = deal(list(range(len(cands))), work, home=lambda i: home.get(cands[i].name, 0))
-    return [(unpack_fit(pk, [*model, c]), *more) for c, (pk, *more) in zip(cands, got)]
-
-
-__all__ = ["PackedFit", "dealt_trials", "pack_fit", "private", "unpack_fit"]
+__all__ = ["PackedFit", "pack_fit", "private", "unpack_fit"]

@@ -12,12 +12,8 @@ import numpy as np
 
 from ._candidates import Candidate
 from ._change_rival import rivals_rule
-from ._collinear import collinear_columns as _collinear_columns
-from ._collinear import collinearity as _collinearity
-from ._collinear import hold as _hold
-from ._collinear import local_names as _local_names
 from ._constants import fit_stop_tolerance
-from ._dealt_fits import dealt_trials, private
+from ._dealt_fits import private
 from ._document import jsonable
 from ._evidence import (
     Chosen,
@@ -37,7 +33,6 @@ from ._evidence import term_rms as _term_rms
 from ._fit import FitResult, Fitter, Term, make_term
 from ._fit_memo import remembered_fit, remembering
 from ._goodness import goodness_of_fit
-from ._homes import homes
 from ._nuisances import drifts_in_time
 from ._protocol import Prepared
 from ._spill import band_share, edge_beyond, kept_gain_share, same_place
@@ -65,6 +60,91 @@ class Step:
     confounded: list[dict] = dataclasses.field(default_factory=list)
     doubt: dict | None = None
     alternatives: list[dict] = dataclasses.field(default_factory=list)
+
+
+def _collinearity(fit: FitResult, n_base_terms: int) -> float:
+    """Largest canonical correlation between the last term's columns and the base's."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    A = fit.A
+    p = A.shape[0]
+    if s1 <= s0 or base_n == 0:
+        return 0.0
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    e = np.arange(s0, s1)
+    Abb, Aee, Abe = An[np.ix_(b, b)], An[np.ix_(e, e)], An[np.ix_(b, e)]
+    try:
+        Lb = np.linalg.pinv(Abb, rcond=1e-10, hermitian=True)
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    M = Le @ Abe.T @ Lb @ Abe
+    ev = np.linalg.eigvals(M).real
+    del p
+    return float(math.sqrt(min(max(ev.max(initial=0.0), 0.0), 1.0)))
+
+
+def _collinear_columns(fit: FitResult, n_base_terms: int, refuse: float) -> np.ndarray:
+    """Local indices (in the last term's free vector) to hold so that the rest of the term
+    has a canonical correlation with the base model's columns of at most
+    ``settings.collinear_refuse``: greedily, the column best explained by the base and the columns
+    kept so far first."""
+    s0, s1 = fit.slices[-1]
+    base_n = fit.slices[n_base_terms - 1][1] if n_base_terms else 0
+    if s1 <= s0 or base_n == 0:
+        return np.zeros(0, int)
+    A = fit.A
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    An = A / np.outer(d, d)
+    b = np.arange(base_n)
+    Lb = np.linalg.pinv(An[np.ix_(b, b)], rcond=1e-10, hermitian=True)
+    keep = list(range(s0, s1))
+    held: list[int] = []
+    for _ in range(s1 - s0):
+        e = np.asarray(keep)
+        Aee, Abe = An[np.ix_(e, e)], An[np.ix_(b, e)]
+        Le = np.linalg.pinv(Aee, rcond=1e-10, hermitian=True)
+        ev = np.linalg.eigvals(Le @ Abe.T @ Lb @ Abe).real
+        if ev.size == 0 or ev.max() <= refuse**2:
+            break
+        r2 = np.einsum("bj,bc,cj->j", Abe, Lb, Abe)
+        j = int(np.argmax(r2))
+        held.append(keep.pop(j) - s0)
+        if not keep:
+            break
+    return np.asarray(sorted(held), int)
+
+
+def _hold(term: Term, local: np.ndarray) -> Term:
+    """``term`` with the free scalars at ``local`` (free-vector indices) held at zero."""
+    t2 = term.copy()
+    pos = 0
+    local = set(int(i) for i in local)
+    for q in t2.cand.params:
+        m = t2.free[q.name]
+        flat = m.ravel()
+        v = t2.values[q.name].ravel()
+        for j in np.flatnonzero(flat):
+            if pos in local:
+                flat[j] = False
+                v[j] = 0.0
+            pos += 1
+        t2.free[q.name] = flat.reshape(m.shape)
+        t2.values[q.name] = v.reshape(m.shape)
+    return t2
+
+
+def _local_names(held_term: Term, local: np.ndarray, fitted: Term) -> list[str]:
+    del fitted
+    names = []
+    for q in held_term.cand.params:
+        m = held_term.free[q.name]
+        for ij in np.argwhere(~m):
+            names.append(f"{q.name}{[int(v) for v in ij] if ij.size else ''}")
+    del local
+    return names
 
 
 def _unfrozen(terms: list[Term], like: list[Term]) -> list[Term]:
@@ -170,38 +250,24 @@ def _trial_fit(st, cand, current, n_base_terms, rejected, held_notes, log, start
 
 
 def _trial_fits(st, cands: list, current, n_base_terms: int, log) -> list:
-    """``(fit or None, refusals, held notes or None, term RMS or None)`` of each candidate's
-    trial fit, made on its home process (:mod:`._homes`) beside the others homed there
-    (:func:`._stats_pass.drive_many`, on a fitter of their own), with the term RMS of
-    :func:`_criterion_rules` (on a copy of the shared fitter, as :func:`_choose` made it),
-    and gathered (:func:`._dealt_fits.dealt_trials`). The starts are made on every process
-    (the vibration's line search splits its rows, ``_runout.split_gains``)."""
+    """``(fit or None, refusals, held notes or None)`` of each candidate's trial fit, side
+    by side (:func:`._stats_pass.drive_many`, on a fitter of their own) on every process,
+    each pass's rows split over the processes (:mod:`._rowshare`: the base's per-chunk
+    Jacobian made once per row, not on every process over every row as when the fits were
+    dealt); so are the starts' (the vibration's line search, ``_runout.split_gains``)."""
     prep, resid, findings = st["prep"], st["kept_resid"], st["findings"]
     with stage("candidates"):
-        starts = {c.name: c.start(prep.ctx, resid(), findings) if c.start else [{}] for c in cands}
-
-        def run(mine: list) -> list:  # this process's candidates, alone (_workshare.deal)
-            st2 = dict(st, fitter=private(st["fitter"]))
-            refused: list[list[dict]] = [[] for _ in mine]
-            notes: list[dict[str, list[str]]] = [{} for _ in mine]
-            fits = [
-                _trial_fit(st2, c, current, n_base_terms, refused[i], notes[i], log, starts[c.name])
-                for i, c in enumerate(mine)
+        starts = [c.start(prep.ctx, resid(), findings) if c.start else [{}] for c in cands]
+        st2 = dict(st, fitter=private(st["fitter"]))
+        refused: list[list[dict]] = [[] for _ in cands]
+        notes: list[dict[str, list[str]]] = [{} for _ in cands]
+        bests = drive_many(
+            [
+                _trial_fit(st2, c, current, n_base_terms, refused[i], notes[i], log, starts[i])
+                for i, c in enumerate(cands)
             ]
-            own = private(st["fitter"])
-            return [
-                (b, refused[i], notes[i].get(c.name), _own_rms(own, b, prep, n_base_terms))
-                for i, (c, b) in enumerate(zip(mine, drive_many(fits)))
-            ]
-
-        return dealt_trials(cands, [t.cand for t in current.terms], st["homes"], run)
-
-
-def _own_rms(fitter: Fitter, fr: FitResult | None, prep: Prepared, n_base: int) -> float | None:
-    """The term RMS of ``fr``'s last term (rule ``plausible_ratio``), or ``None``."""
-    if fr is None:
-        return None
-    return _term_rms(fitter, fr.terms[-1], prep, _has_run_constants(fr.terms[:n_base]))
+        )
+    return [(b, refused[i], notes[i].get(c.name)) for i, (c, b) in enumerate(zip(cands, bests))]
 
 
 def _sort_trials(trials: list, applicable: list) -> None:
@@ -238,16 +304,14 @@ def gain_rules(s, dbic: float, dho: float) -> list[tuple[str, str]]:
     return out
 
 
-def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms, trms=None) -> tuple:
+def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
     """The rules on the criterion, the held-out gain, plausibility and conditioning:
-    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)`` (``trms``: the term
-    RMS made with the trial fit, :func:`_trial_fits`; ``None``: made here)."""
+    ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
     s = prep.settings
     N = prep.n_values
     reasons = gain_rules(s, dbic, dho)
     term = fr.terms[-1]
-    if trms is None:
-        trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
+    trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
     erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
     if trms > s.plausible_ratio * max(erms, 1e-300) and trms > s.plausible_rms_min:
         reasons.append(
@@ -434,8 +498,7 @@ def _choose(
     step_fits: dict = {}
     dominant, partners = None, []
     if trials and trials[0].k_new > 0 and trials[0].dbic < -s.bic_min:
-        trms0 = st["term_rms"].get(trials[0].cand.name)
-        r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms, trms0)[0]
+        r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
         if r0 and only_doubts(trials[0].cand, r0):  # only then is dominance worth a pass
             dominant, partners = find_dominant(st, trials)
     refused: list[Refused] = []
@@ -450,7 +513,7 @@ def _choose(
             rejected.append(_refusal(cand.name, [("identifiable", reason)]))
             continue
         reasons, trms, erms, col = _criterion_rules(
-            prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms, st["term_rms"].get(cand.name)
+            prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms
         )
         doubt = None
         if reasons and chosen is None and cand is dominant and only_doubts(cand, reasons):
@@ -601,7 +664,6 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
     n_base_terms = len(base.terms)
     tried_names: set[str] = set()
     applicable = _applicable(prep, candidates, not_testable)
-    homes_of = homes(prep, fitter.chunk, applicable)  # (each candidate's process: _homes)
     gof0 = goodness_of_fit(prep, cur_resid, current.n_params)
     held_notes: dict[str, list[str]] = {}
     step_refusals: list[tuple[str, Any]] = []
@@ -628,8 +690,6 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
             scan_order=scan_order,
             free_steps=free_steps(prep, findings, fit=(fitter, current.terms)),
             change_steps=free_steps(prep, findings, at_changes=True, fit=(fitter, current.terms)),
-            homes=homes_of,
-            term_rms={},
         )
         trials: list[Trial] = []
         todo = []
@@ -642,10 +702,9 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
                 continue
             tried_names.add(cand.name)
             todo.append(cand)
-        for cand, (best, refused, notes, trms) in zip(
+        for cand, (best, refused, notes) in zip(
             todo, _trial_fits(st, todo, current, n_base_terms, log)
         ):
-            st["term_rms"][cand.name] = trms
             rejected += refused
             if notes is not None:
                 held_notes[cand.name] = notes

@@ -49,7 +49,6 @@ def deal(
     items: Sequence[_T],
     work: Callable[[list[_T]], list[_R]],
     weight: Callable[[_T], float] | None = None,
-    home: Callable[[_T], int] | None = None,
 ) -> list[_R]:
     """``work(items)`` (one result per item, in order), each process working on its share
     of the items (:func:`shares` by ``weight``, 1 each by default) alone and the results
@@ -57,20 +56,12 @@ def deal(
     in process order; its message when it does not pickle). Fewer items than processes
     (one on two: a round with one candidate) are not dealt: every process then works on all
     of them, each row pass split over the processes as everywhere else; nor are items met
-    inside a share of items (a process alone works on all of them).
-
-    With ``home`` (item -> process index, the same on every process), each item goes to its
-    home process whatever the number of items (a candidate's items follow the candidate:
-    its programs are compiled there only, :mod:`._homes`); ``weight`` is then not read."""
+    inside a share of items (a process alone works on all of them)."""
     items = list(items)
     n = jax.process_count()
-    if is_alone() or (home is None and len(items) < n):  # inside a share dealt already, or
-        return list(work(items))  # too few to deal (all of them on every process, rows split)
-    me = jax.process_index()
-    if home is not None:
-        mine = [i for i, x in enumerate(items) if home(x) % n == me]
-    else:
-        mine = shares([1.0 if weight is None else weight(x) for x in items], n)[me]
+    if len(items) < n or is_alone():  # too few to deal (all of them on every process, row
+        return list(work(items))  # passes split), or inside a share of items dealt already
+    mine = shares([1.0 if weight is None else weight(x) for x in items], n)[jax.process_index()]
     try:
         with alone():
             got = list(work([items[i] for i in mine]))
