@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import sys
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
-from tqdm.auto import tqdm
+if TYPE_CHECKING:  # imported where a bar is made (issue 43: a quiet diagnosis never does)
+    from tqdm.auto import tqdm
 
 
 def progress_bar(
@@ -23,6 +24,8 @@ def progress_bar(
 
     Use as a context manager; ``update(n)`` advances by ``n`` items.
     """
+    from tqdm.auto import tqdm
+
     return tqdm(
         total=int(total),
         desc=label,

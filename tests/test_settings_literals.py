@@ -157,7 +157,6 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/multihead/_order_step_bins.py", 2): DOF + " (order 1's sin and cos beside the run "
     "constants: the view's base without the base's own columns)",
     ("kinds/multihead/_runout.py", 2): PHYSICS + " (a squared amplitude)",
-    ("kinds/multihead/_multihead_terms.py", 1e-6): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_multihead_terms.py", 8): COUNT + " (at least 8 rows per bin)",
     ("kinds/multihead/_order_step_head.py", 2): SHAPE + " (the order-1 pair: sin, cos)",
     ("kinds/multihead/_vibration_doubt.py", 1e-9): GUARD + " (a zero span of revolutions)",
@@ -332,6 +331,7 @@ CONSTANTS: dict[tuple[str, str], str] = {
     + " (rows per block of the vibration start's gains: the items split over the processes)",
     ("kinds/multihead/_runout.py", "RUNOUT_ORDERS"): PHYSICS,
     ("kinds/multihead/_multihead_terms.py", "ORDER_STEP_BINS"): BOUND,
+    ("kinds/multihead/_beam_tilt.py", "SPAN_MIN"): NUMERIC + " (a zero pattern vector)",
     ("kinds/multihead/_reference_terms.py", "INTERP_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_SMOOTH_ORDERS"): MODEL,
     ("kinds/multihead/_reference_terms.py", "QUANT_POLY_DEGREE"): MODEL,

@@ -18,6 +18,7 @@ from ._features import Factored, scaled_columns
 from ._normal import (
     Accumulated,
     BlockCache,
+    compiled_valjac,
     factors_of,
     free_scales,
     linear_only,
@@ -44,7 +45,7 @@ def valjac_fn(cand: Candidate):
         J = jax.jacfwd(cand.fn)(p, x)
         return v, J
 
-    return jax.jit(vj if cand.valjac is None else cand.valjac)
+    return jax.jit(vj) if cand.valjac is None else compiled_valjac(cand.valjac)
 
 
 @functools.lru_cache(maxsize=256)

@@ -11,6 +11,8 @@ import math
 import numpy as np
 
 from ...engine._candidates import Context, Probe
+from ...engine._normal import register_factors
+from ._beam_tilt import bt_factors
 from ._multihead_terms import BEAM_TILT_AXIAL as _BT
 from ._multihead_terms import BEAM_TILT_AXIAL_NO_REF as _BT_NO_REF
 from ._multihead_terms import BEARING_WOBBLE as _WB
@@ -95,6 +97,8 @@ def _es_probes(ctx: Context) -> list[Probe]:
 
 BEAM_TILT_AXIAL = dataclasses.replace(_BT, probes=_bt_probes)
 BEAM_TILT_AXIAL_NO_REF = dataclasses.replace(_BT_NO_REF, probes=_bt_probes)
+register_factors(BEAM_TILT_AXIAL, bt_factors(False))  # issue 43: J = X W, never compiled
+register_factors(BEAM_TILT_AXIAL_NO_REF, bt_factors(True))
 BEARING_WOBBLE = dataclasses.replace(_WB, probes=_wb_probes)
 ECCENTRICITY_SHIFT = dataclasses.replace(_ES, probes=_es_probes)
 

@@ -15,6 +15,7 @@ from ...engine._protocol import Prepared
 from ...engine._views import Finding, chi2_threshold, log10_tail_p
 from ...engine._views_time import order_change_fits_better
 from ._aliases import catalog_orders_at
+from ._beam_tilt import _bt_head_specific, bt_valjac
 from ._order_step_bins import order_step_bins, order_step_width
 from ._order_step_head import base_rows, head_step_gain
 from ._order_step_zeros import _gain, shift_time_profile, zero_profile
@@ -37,34 +38,6 @@ from ._vibration_jac import bearing_wobble_valjac, eccentricity_shift_valjac, vi
 
 def _R(x):
     return x["radius_m"]
-
-
-def _bt_basis(alpha, m: float, project: bool):
-    """Orthonormal head vectors (complex, (q, C)) of what the base model spans at order ``m``:
-    the disk error every head sees phase-shifted by its azimuth, ``u_k = exp(-i m alpha_k)``,
-    and without theta_ref also the common mode (the head mean is projected out)."""
-    C = alpha.shape[0]
-    u = jnp.exp(-1j * m * alpha)
-    if not project:
-        return (u / jnp.sqrt(C))[None, :]
-    q1 = jnp.ones(C, complex) / jnp.sqrt(C)
-    v = u - q1 * jnp.vdot(q1, u)
-    nv = jnp.sqrt(jnp.sum(jnp.abs(v) ** 2))
-    # at a multiple of the head symmetry u is the common mode itself: one vector only
-    q2 = jnp.where(nv > 1e-6 * jnp.sqrt(C), v / jnp.maximum(nv, 1e-300), 0.0)
-    return jnp.stack([q1, q2])
-
-
-def _bt_head_specific(alpha, coefs, project: bool):
-    """Per runout order: the complex head coefficients ``z_k = c_k - i s_k`` less their part
-    in the base model's span (what the disk error, or the head mean, would take)."""
-    out = []
-    for j, m in enumerate(RUNOUT_ORDERS):
-        c, s_ = coefs[j]
-        w = c - 1j * s_
-        Q = _bt_basis(alpha, m, project)
-        out.append(w - Q.T @ (jnp.conj(Q) @ w))
-    return out
 
 
 def _bt_make(project: bool) -> Candidate:
@@ -115,6 +88,7 @@ def _bt_make(project: bool) -> Candidate:
         "(fitted: its part the base model's disk error cannot take).",
         start=_bt_start,
         derived=_bt_derived,
+        valjac=bt_valjac(project),
     )
 
 
