@@ -209,6 +209,26 @@ def test_quadrature_even_harmonic_flags_the_offsets_it_biases(tmp_path):
     assert abs(ell["offset_a"]["value"] - 0.02) > 5 * ell["offset_a"]["se"]  # why it is said
 
 
+def test_quadrature_clipping_found_beneath_a_glitch_beyond_the_clipped_level():
+    """A glitch beyond a clipped extreme (added after the clipping) does not hide that
+    extreme: the level with fewer samples beyond it than a clipped level holds is tried
+    (training seed 6678, quadrature 15: the hidden flat floor was fitted as signal_shape).
+    Unclipped extremes stay unflagged."""
+    from encdesign.diagnose.kinds.quadrature._quadrature import detect_clipping, ellipse_start
+
+    rng = np.random.default_rng(3)
+    phi = rng.uniform(0, 2 * np.pi, 3000)
+    sa = 0.02 + np.cos(phi) + rng.normal(0, 1e-3, phi.size)
+    sb = -0.01 + 0.97 * np.sin(phi) + rng.normal(0, 1e-3, phi.size)
+    sa = np.clip(sa, -0.9, 0.94)  # sa clipped at both extremes, sb not
+    i = int(np.flatnonzero(sa == -0.9)[0])
+    sa[i] -= 0.1  # one glitch below the clipped floor
+    clip = detect_clipping(sa, sb, ellipse_start(sa, sb))
+    got = {(c["channel"], round(c["level"], 6)) for c in clip["channels"]}
+    assert got == {("sa", 0.94), ("sa", -0.9)}, clip["channels"]
+    assert not clip["mask"][i]
+
+
 def test_quadrature_clipping_is_unexplained_not_signal_shape(tmp_path):
     d = diagnose(_quad(tmp_path, clip=0.93), plots=tmp_path / "fig").doc
     validate_diagnosis(d)

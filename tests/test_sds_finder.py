@@ -332,6 +332,26 @@ def test_coarse_clock_is_noticed(sds_bench):
     assert q["lattice_period_s"] == pytest.approx(2.5e-8, rel=1e-3) and q["predicted_floor_rad"]
 
 
+def test_wobble_within_the_floor_of_a_coarse_unlocked_clock_is_not_named(tmp_path):
+    """Stamps on a 20x lattice of a clock not locked to the motor (the conceal benchmark's
+    ``--sds-unlocked-clock`` offset of training seed 6677, record 18): the rounding beats
+    with the mark spacing and a wobble of 0.7x the quantization floor fitted it, named
+    before ``timing_quantization``. Now refused (confounded with the rounding), the lattice
+    named alone; a 1x clock keeps its wobbles (``test_bearing_wobble_from_a_later_run``)."""
+    rec, _ = write_concealed_sds(
+        tmp_path / "q.toml",
+        key=jax.random.key(6677517),
+        effect="timing_quantization",
+        concealment="clear",
+        n_runs=N_RUNS,
+        speed_offset=1.2881746480838805e-05,
+    )
+    d = _diag(rec)
+    assert [e["name"] for e in d["effects"]] == ["timing_quantization"], d["report"]
+    refused = [r for r in d["rejected"] if r["name"] == "bearing_wobble"]
+    assert refused and "quantization floor" in refused[0]["reason"]
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_stamp_lattice_any_clock(seed):
     rng = np.random.default_rng(seed)

@@ -71,6 +71,7 @@ from ...engine._views import make_where as _where
 from ._sds_common_mod import view_common_modulated
 from ._sds_data import (
     SDSPairTable,
+    lattice_floor,
     sds_data,
     sds_pair_table,
     sds_prepare,
@@ -375,13 +376,7 @@ def sds_summary(prep: Prepared, base_params: dict) -> dict:
     kd = prep.kd
     lat = dict(kd.lattice or {})
     P = lat.get("period_s")
-    T = kd.table.period_s
-    N = kd.table.n_marks
-    floor = None
-    if P is not None:
-        # uniform stamp error (var P^2/12) on the 2N window edges of a pair: seed 001 eq. 23
-        floor = 2 * math.pi * P / (T * math.sqrt(6 * N))
-    ratio = P / kd.declared_clock_s if (P is not None and kd.declared_clock_s) else None
+    ratio, floor = lattice_floor(kd)
     return {
         "clock": {
             "declared_period_s": kd.declared_clock_s,

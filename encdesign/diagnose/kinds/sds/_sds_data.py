@@ -320,6 +320,20 @@ class SDSKindData(KindData):
     speed: dict | None = None
 
 
+def lattice_floor(kd: SDSKindData) -> tuple[float | None, float | None]:
+    """``(ratio, floor)``: the stamps' lattice period over the declared clock period (``None``
+    without a lattice or a declared clock) and the quantization floor of one pair reading on
+    that lattice, rad (``None`` without a lattice): a uniform stamp error (variance
+    ``P^2 / 12``) on the ``2 N`` window edges of a pair, ``2 pi P / (T sqrt(6 N))`` with ``P``
+    the lattice period, ``T`` the revolution time and ``N`` the marks (seed 001 eq. 23)."""
+    P = (kd.lattice or {}).get("period_s")
+    if P is None:
+        return None, None
+    T, N = kd.table.period_s, kd.table.n_marks
+    floor = 2 * math.pi * P / (T * math.sqrt(6 * N))
+    return (P / kd.declared_clock_s if kd.declared_clock_s else None), floor
+
+
 def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDSKindData:
     """Rows (runs) and channels (moving sensor × {run mean, revolution contrasts});
     ``settings``: the time-stamp lattice thresholds."""

@@ -15,6 +15,7 @@ from scipy import stats
 
 from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._padded import eval_rows
+from ._sds_data import SDSKindData, lattice_floor
 from ._sds_drift import drift_derived, drift_fn, drift_probes, drift_start
 from ._sds_noise import (
     BEAM_ORDERS,
@@ -178,6 +179,36 @@ def _wobble_onsets(R: int) -> list[int]:
     """Onsets tried for the bearing wobble: every run, or from a quarter, half or three
     quarters of the runs on (Bonferroni over them in its matched view)."""
     return sorted({0, *(int(round(R * f)) for f in (0.25, 0.5, 0.75))} - {R})
+
+
+def _wobble_plausible(ctx: Context, params: dict) -> str | None:
+    """A wobble no larger than the quantization floor of a stamp lattice coarser than the
+    declared clock (the lattice ``timing_quantization`` is named from) is refused: the
+    stamps' rounding on that lattice beats with the mark spacing (a clock not locked to the
+    motor), a sawtooth whose part left in each revolution's reading turns by a fraction of a
+    cycle from one revolution to the next, as a wobble's does, at up to about the floor
+    (seed 001 eq. 23: what the rounding adds to a pair reading); the record cannot tell such
+    a wobble from the rounding (training seed 6677, record 18: a 20x clock read as
+    ``bearing_wobble`` of 0.7 x the floor). The amplitude compared is the one the readings
+    see (``sinc``-attenuated over the window), rad."""
+    kd = ctx.data
+    if not isinstance(kd, SDSKindData):
+        return None
+    ratio, floor = lattice_floor(kd)
+    if ratio is None or floor is None or not ratio > ctx.settings.sds_lattice_coarser:
+        return None
+    rho = float(np.asarray(params["frequency_ratio"]))
+    seen = abs(float(np.sinc(rho))) * math.hypot(
+        float(np.asarray(params["sin_rad"])), float(np.asarray(params["cos_rad"]))
+    )
+    if seen <= floor:
+        return (
+            f"its amplitude ({seen:.3g} rad in the readings) is within the quantization "
+            f"floor ({floor:.3g} rad) of the stamps' lattice, {ratio:.3g} x the declared "
+            "clock: the rounding on that lattice beats with the mark spacing as a wobble "
+            "does (confounded with timing_quantization)"
+        )
+    return None
 
 
 def _beam_fn(p, x):
@@ -649,7 +680,7 @@ def _catalog(
             kinds=("sds",),
             explanation=EXPLANATIONS["bearing_wobble"],
             start=_wobble_start,
-            plausible=_no_transient(),
+            plausible=_no_transient(_wobble_plausible),
             rivals=_transient_rivals,
             derived=_wobble_derived,
         ),
