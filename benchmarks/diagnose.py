@@ -60,6 +60,12 @@
    runs whole on every process; ``ENCDESIGN_BENCH_PROFILE=DIR`` writes each process's
    cProfile (CPU s) to ``DIR/pP-I.pstats``; ``ENCDESIGN_BENCH_DOCS=DIR`` keeps the
    documents (``DIR/ROWS-EFFECT-P.json``).
+   ``--long-ceiling`` adds, for each process count P > 1, what no split can beat on this
+   machine: P independent one-process diagnoses of ``rows / P`` rows each (their own
+   Parquet file, the same generator), started at once (``mode`` ``independent``,
+   ``wall_s_case`` until the last ends), and one of them alone (``independent_alone``).
+   Nothing passes between them; each pays its own start, imports and compilation, as every
+   process of a split must. ``ceiling_speedup``: the one-process case's wall over theirs.
 
     python benchmarks/diagnose.py --json results/bench-diagnose.json [--rows 1e4 1e5 1e6]
         [--long-rows 1e6 1e7] [--long-table parquet]
@@ -761,7 +767,86 @@ def _long_processes(args: argparse.Namespace) -> list[dict]:
                         r["differing"] = bad[:20]
                     rows.append(r)
                     print(json.dumps(r), file=sys.stderr, flush=True)
+                if args.long_ceiling and mode == "diagnose":
+                    rows += _ceiling_cases(args, n, eff, Path(tmp), rows)
     return rows
+
+
+def _ceiling_cases(args: argparse.Namespace, n: int, eff: str, tmp: Path, rows: list) -> list:
+    """``--long-ceiling``: for each process count P > 1, P independent one-process
+    diagnoses of ``n // P`` rows started at once, and one of them alone (module docstring,
+    section 7)."""
+    one = next(
+        (r for r in rows if r["n_rows"] == n and r["effect"] == eff and r["processes"] == 1),
+        None,
+    )
+    out: list[dict] = []
+    for P in sorted({p for p in args.long_processes if p > 1}):
+        folder = tmp / f"part{P}"
+        folder.mkdir()
+        effect = False if eff == "clean" else eff
+        path = _write_bench_parquet(folder, n // P, 4, effect, args.long_rate)
+        for together in (P, 1):
+            r = dict(n_rows=n, n_heads=4, effect=eff, rate_hz=args.long_rate, rows_each=n // P)
+            r.update(
+                _independent_case(path, together, args.reduce_min_rows or 0, args.case_timeout)
+            )
+            r["mode"] = "independent" if together > 1 else "independent_alone"
+            r["processes"] = P
+            if one is not None and r["wall_s_case"] > 0:
+                r["ceiling_speedup"] = one["wall_s_case"] / r["wall_s_case"]
+            out.append(r)
+            print(json.dumps(r), file=sys.stderr, flush=True)
+    return out
+
+
+def _independent_case(path: Path, count: int, min_rows: int, timeout_s: float) -> dict:
+    """``count`` one-process diagnoses of ``path`` (:func:`_proc_child`), started at once and
+    sharing nothing: wall s until the last ends, and each one's own report."""
+    import tempfile
+
+    from encdesign import _cpu
+
+    with tempfile.TemporaryDirectory(prefix="bench-indep-") as tmp:
+        st = [str(Path(tmp) / f"i{i}.json") for i in range(count)]
+        cmds = [
+            [sys.executable, __file__, "--proc-child", str(path), f, "diagnose", "1", "0", "0"]
+            + [str(min_rows)]
+            for f in st
+        ]
+        env = dict(os.environ)
+        if count > 1 and not env.get(_cpu.ENV) and not env.get("OMP_NUM_THREADS"):
+            env[_cpu.ENV] = str(max(1, _cpu.cores() // count))  # as a split's processes
+        t0 = time.perf_counter()
+        procs = [
+            subprocess.Popen(c, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+            for c in cmds
+        ]
+        errs, timed_out = [], False
+        for p in procs:
+            try:
+                _, err = p.communicate(timeout=max(1.0, timeout_s - (time.perf_counter() - t0)))
+                if p.returncode:
+                    errs.append(err.decode(errors="replace")[-1500:])
+            except subprocess.TimeoutExpired:
+                timed_out = True
+                for q in procs:
+                    if q.poll() is None:
+                        q.kill()
+                        q.wait()
+        wall = time.perf_counter() - t0
+        per = [json.loads(Path(f).read_text()) for f in st if Path(f).is_file()]
+    out = dict(
+        together=count,
+        wall_s_case=wall,
+        timed_out=timed_out,
+        per_process=per,
+        peak_rss_bytes_per_process=[r["peak_rss_bytes"] for r in per],
+        load_avg_end=os.getloadavg(),
+    )
+    if errs:
+        out["errors"] = errs
+    return out
 
 
 def _spawn(n_rows: int, heads: int, effect: bool | str, table: str = "memory") -> dict:
@@ -830,6 +915,12 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         help="long records split over processes: each --long-rows size on these process "
         "counts, from Parquet at --long-rate Hz (section 7)",
+    )
+    ap.add_argument(
+        "--long-ceiling",
+        action="store_true",
+        help="with --long-processes: also P independent one-process diagnoses of rows / P "
+        "rows at once, and one alone (what no split can beat here)",
     )
     ap.add_argument("--long-rate", type=float, default=1000.0)
     ap.add_argument("--long-effects", nargs="*", default=["clean", "vibration"])
