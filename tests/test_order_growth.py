@@ -195,3 +195,24 @@ def test_disk_orders_past_the_parameter_budget_join_the_base(seed, jitter):
     assert d["verdict"] == "consistent", (d["verdict"], [e["name"] for e in d["effects"]])
     assert b["max_order"] >= M - 1 and b["grown_past_budget"]["budget_order"] < M - 1, b
     assert 0.85 < d["noise"]["per_channel"][0] / noise < 1.15, d["noise"]
+
+
+def test_a_growth_refused_at_the_highest_located_order_takes_the_one_heldout_error_favours():
+    """Training ``finder_variations.py --set high --seed 6680`` record 7 (5 heads, 400 rows,
+    0.73 turn forward and back, disk orders 1-17, no reference): the held-out choice lowered
+    the base to 11, the orders view located 12-18 and higher, and the growth to the highest
+    (24) raised the held-out chi-square and was undone, leaving the record ``unexplained``
+    (main). The located order of least held-out chi-square (the disk's own 17) is grown to
+    instead, and the record is ``consistent``."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from finder_variations import clean_record
+
+    rec, desc = clean_record(np.random.default_rng([6680, 7]), 13, 21)
+    doc = diagnose(rec).doc
+    assert doc["base_order"]["lowered"], doc["base_order"]["reason"]
+    assert doc["verdict"] == "consistent", doc["report"]
+    assert doc["base"]["max_order"] == desc["M"] == 17, doc["base"]["max_order"]
+    assert max(doc["base"]["grown_orders"]) == 17, doc["base"]["grown_orders"]

@@ -394,6 +394,12 @@ def report_text(doc: dict) -> str:
                 )
                 + f" {u}"
             )
+        if (ag := bo.get("again")) is not None:  # session 36: beside the named effects
+            lines.append(
+                f"  again beside {', '.join(ag['effects'])}: order {ag['chosen']}; held-out RMS "
+                + ", ".join(f"{r['order']}: {r['heldout_rms']:.3g}" for r in ag["tried"])
+                + f" {u}"
+            )
     for f in doc["base"].get("fit_failures", []):  # issue 44 A: a stage that would diverge
         lines.append(f"fit failure ({f['stage']}): {f['cause']}; {f['recovery']}")
     if doc["base"]["unidentifiable"]:

@@ -46,6 +46,13 @@ import numpy as np
 
 from ..._errors import input_error
 from ._aside import SetAside
+from ._base_order import (
+    choose_base_order,
+    choose_order_again,
+    least_heldout_order,
+    set_order,
+    terms_at_order,
+)
 from ._bounds import REFERENCE_DESCRIPTION, Reference, detection_bounds, not_covered
 from ._candidates import Candidate
 from ._discover import discover
@@ -70,7 +77,7 @@ from ._noise import noise_method, noise_spectral_dof
 from ._nuisances import excluded_share, step_context
 from ._protocol import Prepared
 from ._reduce_restart import check_growth, orders_checked, run_reduced, state_reduction
-from ._refine import checked_fit, heldout_decides_orders, refine_base
+from ._refine import checked_fit, refine_base
 from ._results import PlotData
 from ._select import Selection, select
 from ._settings import DEFAULT_SETTINGS, SETTINGS_FIELDS, FinderSettings
@@ -79,11 +86,6 @@ from ._timing import stage, timing
 from ._views import locate
 from ._views_modulated import base_jacobian
 from ._views_time import findings_listed
-
-
-def _set_order(prep: Prepared, order: int) -> None:
-    """The base model's highest order is now ``order``: a new (read-only) context says so."""
-    prep.ctx = dataclasses.replace(prep.ctx, max_order=int(order))
 
 
 def _phase_at_orders(findings: list, L: int) -> float:
@@ -148,7 +150,7 @@ def _grow_to(
     lines off the integers goes with it; before it is undone, the grown base from the kind's
     own start at the grown order: :func:`._growth_start.grown_base`).
     Orders ``L`` and ``2 L`` of the signal period (``interpolation_error``'s) stay out. Where
-    held-out error lowered the base order (:func:`_choose_base_order`), growth is also undone
+    held-out error lowered the base order (:func:`choose_base_order`), growth is also undone
     when it raises the held-out chi-square; on part of a turn (``Prepared.part_turn_span``:
     the orders are not separable there; the kind's base says so) held-out error decides
     neither (it never lowers the order there). ``past``: the budget's order
@@ -183,8 +185,30 @@ def _grow_to(
     # (an order the held-out choice lowered, or one past the budget, grows only where
     # held-out error allows; the two held-out chi-squares in the same noise weights)
     ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered or past is not None else math.inf
-    terms, info = _terms_at_order(kind, prep, fit, M)
-    _set_order(prep, M)
+    judged = (p0, veto, ho0, past)
+    grown, refused = _grown_at(kind, prep, fitter, fit, (order, M, limit), judged, base_info)
+    lower = sorted({m for m in found if order < m < M})
+    if grown is None and refused and lowered and past is None and lower:
+        # session 36: held-out error refused the highest located order; the located order
+        # it favours (the same rule as the base order's choice), once
+        M2 = least_heldout_order(kind, prep, fitter, fit, order, lower, ho0)
+        if M2 is not None:
+            grown, _ = _grown_at(kind, prep, fitter, fit, (order, M2, limit), judged, base_info)
+            M, found = M2, [m for m in found if m <= M2]
+    if grown is None:
+        return None
+    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
+    return M, grown
+
+
+def _grown_at(kind, prep: Prepared, fitter: Fitter, fit: FitResult, orders, judged, base_info):
+    """:func:`_grow_to`'s growth from ``order`` to ``M`` (``orders = (order, M, limit)``)
+    and its checks (``judged = (p0, veto, ho0, past)``). Returns ``(grown fit or None,
+    whether held-out error alone refused it)``."""
+    order, M, limit = orders
+    p0, veto, ho0, past = judged
+    terms, info = terms_at_order(kind, prep, fit, M)
+    set_order(prep, M)
     left = prep.settings.growth_left_max
     fitter.clear()
     hi1, fresh = scan_order_of(limit, M, prep.settings), lambda: _base_terms(kind, prep, M)[0]
@@ -193,133 +217,20 @@ def _grow_to(
     )
     tv = ("direction", "speed", "angle_trend")  # tied: judged after the growth
     tied = sum(max(f.power - f.dof, 0.0) for f in after if f.view in tv)
-    worse = grown.heldout_chi2 > ho0 or tied > max(veto, 0.0)
+    held = grown.heldout_chi2 > ho0
+    worse = held or tied > max(veto, 0.0)
     drop = ho0 - grown.heldout_chi2
     if past is not None and not drop >= prep.settings.heldout_min:
         worse = True
     if p1 > left * p0 or worse:
-        _set_order(prep, order)
+        set_order(prep, order)
         fitter.clear()
-        return None
+        return None, held and p1 <= left * p0 and not tied > max(veto, 0.0)
     base_info.update(info)
     if past is not None:  # the orders past the parameter budget, and what they earned
         base_info["grown_past_budget"] = {"budget_order": past, "heldout_chi2_drop": drop}
-    base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
     base_info.update({"grown_from_start": True} if restart else {})
-    return M, grown
-
-
-def _terms_at_order(kind: Kind, prep: Prepared, fit: FitResult, M: int) -> tuple[list, dict]:
-    """The kind's base terms at order ``M`` started from ``fit``'s values (orders above
-    ``M`` dropped, new orders at zero; scales from the noise), and the kind's base info."""
-    spec, info = kind.base(prep, M)
-    old = {t.cand.name: t for t in fit.terms}
-    terms = []
-    for cand, start in spec:
-        prev = old.get(cand.name)
-        st = dict(start)
-        if prev is not None:
-            for q in cand.params:
-                v = prev.values.get(q.name)
-                if v is None:
-                    continue
-                shp = q.resolved_shape(prep.n_channels, prep.ctx.n_runs)
-                if v.shape == shp:
-                    st[q.name] = v
-                elif v.ndim == 1 and len(shp) == 1 and v.size < shp[0]:
-                    st[q.name] = np.concatenate([v, np.zeros(shp[0] - v.size)])
-                elif v.ndim == 1 and len(shp) == 1:
-                    st[q.name] = v[: shp[0]]
-        tm = make_term(cand, prep, st)
-        for q in cand.params:
-            if q.scale is None:
-                tm.scale[q.name][...] = float(np.mean(prep.sigma))
-        terms.append(tm)
-    return terms, info
-
-
-def _order_row(prep: Prepared, M: int, f: FitResult) -> dict:
-    return {
-        "order": int(M),
-        "rms": f.rms(prep),
-        "heldout_rms": f.heldout_rms(prep),
-        "heldout_chi2": float(f.heldout_chi2),
-        "n_params": int(f.n_params),
-    }
-
-
-def _choose_base_order(
-    kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, order: int, base_info: dict
-):
-    """Issue 44 E: the base order chosen by held-out error where the base is
-    ill-conditioned. When the base's K-fold held-out RMS exceeds its fitted RMS by more than
-    ``settings.base_order_ratio`` (e.g. one turn forward and back at few samples per turn:
-    a held-out block's arc is bridged by orders the other folds cannot pin down), the base
-    is fitted at every order ``1 .. order`` in the engine's own folds and the order of least
-    held-out chi-square is taken, when it lowers the held-out chi-square by at least
-    ``settings.heldout_min``. A well-conditioned base (any long record) is never refitted, so
-    its result is unchanged. Records ``base_info["order_choice"]`` (each tried order's fitted
-    and held-out RMS); returns ``(order, fit)`` when the order was lowered, else ``None``."""
-    s = prep.settings
-    row0 = _order_row(prep, order, fit)
-    ratio = row0["heldout_rms"] / row0["rms"] if row0["rms"] > 0 else 1.0
-    choice = {
-        "start": int(order),
-        "chosen": int(order),
-        "lowered": False,
-        "heldout_ratio": float(ratio),
-        "ratio_max": float(s.base_order_ratio),
-        "tried": [row0],
-    }
-    base_info["order_choice"] = choice
-    if not heldout_decides_orders(prep):
-        choice["reason"] = (
-            f"every run covers less than one turn (widest {prep.part_turn_span:.3g} rad) in a "
-            "single pass: a held-out block's arc is seen by no other fold, so held-out error "
-            "measures how the orders extrapolate over it, not their need; the default order "
-            "kept (growth follows the orders the residual shows)"
-        )
-        return None
-    if not (math.isfinite(ratio) and ratio > s.base_order_ratio) or order <= 1:
-        choice["reason"] = (
-            f"held-out RMS {ratio:.3g}x the fitted RMS (at most "
-            f"FinderSettings.base_order_ratio = {s.base_order_ratio:g}): the default order kept"
-        )
-        return None
-    fitter.clear()
-    fit = fitter.fit(fit.terms)  # in the weights of the noise estimate, like every trial
-    fits = {order: fit}
-    choice["tried"] = [_order_row(prep, order, fit)]
-    for M in range(1, order):
-        terms, _ = _terms_at_order(kind, prep, fit, M)
-        _set_order(prep, M)
-        fitter.clear()
-        fits[M] = fitter.fit(terms)
-        choice["tried"].append(_order_row(prep, M, fits[M]))
-    _set_order(prep, order)
-    fitter.clear()
-    choice["tried"].sort(key=lambda r: r["order"])
-    ok = {M: f for M, f in fits.items() if math.isfinite(f.heldout_chi2)}
-    best = min(ok, key=lambda M: ok[M].heldout_chi2) if ok else order
-    gain = fit.heldout_chi2 - fits[best].heldout_chi2
-    if best == order or not gain >= s.heldout_min:
-        choice["reason"] = (
-            f"held-out RMS {ratio:.3g}x the fitted RMS (over FinderSettings.base_order_ratio = "
-            f"{s.base_order_ratio:g}); no lower order lowers the held-out chi-square by "
-            f"FinderSettings.heldout_min = {s.heldout_min:g}: the default order kept"
-        )
-        return None
-    _, info = kind.base(prep, best)
-    base_info.update(info)
-    choice.update(chosen=int(best), lowered=True)
-    choice["reason"] = (
-        f"held-out RMS {ratio:.3g}x the fitted RMS at order {order} (over "
-        f"FinderSettings.base_order_ratio = {s.base_order_ratio:g}): order {best} has the least "
-        f"held-out chi-square of orders 1-{order} ({gain:.1f} below order {order})"
-    )
-    _set_order(prep, best)
-    fitter.clear()
-    return best, fits[best]
+    return grown, False
 
 
 class _Progress:
@@ -375,7 +286,7 @@ def _order_of(kd, prep: Prepared, kind: Kind, max_order: int | None) -> tuple[in
 
 def _base_terms(kind: Kind, prep: Prepared, order: int) -> tuple[list, dict]:
     """The kind's base terms at ``order`` (scales from the noise) and its base info."""
-    _set_order(prep, order)
+    set_order(prep, order)
     base_spec, base_info = kind.base(prep, order)
     base_terms = [make_term(c, prep, st) for c, st in base_spec]
     for tm in base_terms:
@@ -426,7 +337,7 @@ def _fit_base(kind, prep, fitter, base_terms, base_info, order, limit, grow: boo
     _align(kind, prep, fitter, base_fit)
     _estimate_noise(kind, prep, fitter, base_fit)
     if grow:  # issue 44 E: an ill-conditioned base's order is chosen by held-out error
-        chosen = _choose_base_order(kind, prep, fitter, base_fit, order, base_info)
+        chosen = choose_base_order(kind, prep, fitter, base_fit, order, base_info)
         if chosen is not None:
             order, base_fit = chosen[0], checked_fit(kind, prep, fitter, chosen[1], base_info)
             _align(kind, prep, fitter, base_fit)
@@ -680,6 +591,29 @@ def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) 
     return doc, sel
 
 
+def _base_done(prep: Prepared, fitter: Fitter, base_fit: FitResult, order: int, limit: int):
+    """The base's Jacobian and terms for the views and candidates; returns the scan order."""
+    prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
+    prep.base_terms = tuple(base_fit.terms)
+    return scan_order_of(limit, order, prep.settings)
+
+
+def _refit_at(kind, prep: Prepared, fitter: Fitter, base_fit: FitResult, M: int, base_info):
+    """The base refitted at order ``M`` (:func:`._base_order.choose_order_again`'s), aligned,
+    its noise estimated again, as after the first held-out choice. Returns ``(M, fit)``."""
+    terms, info = terms_at_order(kind, prep, base_fit, M)
+    set_order(prep, M)
+    fitter.clear()
+    base_info.update(info)
+    choice = base_info["order_choice"]
+    choice.update(chosen=int(M), lowered=M < choice["start"])
+    choice["reason"] += "; " + choice["again"]["reason"]
+    fit = checked_fit(kind, prep, fitter, fitter.fit(terms), base_info)
+    _align(kind, prep, fitter, fit)
+    _estimate_noise(kind, prep, fitter, fit)
+    return M, fit
+
+
 def run_engine(
     kind: Kind,
     rec,
@@ -751,21 +685,23 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
         base_fit, order, limit = _fit_base(
             kind, prep, fitter, base_terms, base_info, order, limit, grow
         )
-        scan = scan_order_of(limit, order, prep.settings)
-        prep.base_jacobian = base_jacobian(prep, fitter, base_fit.terms)
-        prep.base_terms = tuple(base_fit.terms)
+        scan = _base_done(prep, fitter, base_fit, order, limit)
     pg.stage("base fitted")
+    cands = list(seen.values())
     with stage("select"):
         sel = select(
-            prep,
-            fitter,
-            base_fit.terms,
-            list(seen.values()),
-            kind.views(prep),
-            scan,
-            max_effects,
-            pg.log,
+            prep, fitter, base_fit.terms, cands, kind.views(prep), scan, max_effects, pg.log
         )
+        nb = len(sel.base.terms)
+        again = choose_order_again(kind, prep, fitter, sel.final, nb, order, base_info)
+    if again is not None:  # session 36: the held-out choice made again beside the effects
+        with stage("base_fit"):
+            order, base_fit = _refit_at(kind, prep, fitter, base_fit, again, base_info)
+            scan = _base_done(prep, fitter, base_fit, order, limit)
+        with stage("select"):
+            sel = select(
+                prep, fitter, base_fit.terms, cands, kind.views(prep), scan, max_effects, pg.log
+            )
     pg.stage("selected")
     pg.stage("held-out + goodness of fit")
     with stage("report"):
@@ -780,7 +716,6 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
         aside = SetAside([sel.base_resid, sel.final_resid])
         sel = dataclasses.replace(sel, base_resid=None, final_resid=None)
         ref = bounds_reference(doc, sel, max_effects)
-        cands = list(seen.values())
         doc["detection_bounds"] = detection_bounds(prep, fitter, ref, cands, kind.views(prep), scan)
         doc["detection_bounds_not_covered"] = not_covered(cands, prep, ref)
         doc["detection_bounds_reference"] = ref.to_json(REFERENCE_DESCRIPTION)

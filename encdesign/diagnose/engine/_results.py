@@ -477,6 +477,8 @@ class BaseOrder(_Entry):
         tried: each tried order's fitted and held-out RMS (:class:`OrderTrial`); only
             ``start`` when the ratio is within ``ratio_max``.
         reason: the choice, in words.
+        extra: ``again`` (session 36): where effects were named on a lowered order, the
+            same choice made again beside them (their names, each tried order, the order).
     """
 
     start: int
