@@ -119,7 +119,7 @@ def _run_lines(prep) -> dict[int, tuple[float, float]]:
     has_omega = "omega" in prep.rows
     for r, (a, b) in run_spans(prep.run):
         kr = np.asarray(prep.keep[a:b], bool)
-        if b - a < 2 or not kr.any():
+        if b - a <= 1 or not kr.any():  # no span to read a bin from
             continue
         t = np.asarray(prep.rows.column("t", a, b), float)
         dt = float(np.median(np.diff(t)))
