@@ -50,7 +50,17 @@ and decaying with its own Q is the case (session 34): the steady ``vibration``, 
 first, takes the mean of each run's ring-down (its whole held-out gain 2,195-27,305 on the
 traced training cases) and the discovered ``ringing`` term keeps the decay beside it
 (1,399-86,318, past the gain rules), while the vibration keeps 0-13 % of its gain beside
-the term. A true steady ``vibration`` leaves no such term at its frequency.
+the term. A true steady ``vibration`` leaves no such term at its frequency. Since session 36
+the place is the frequency: a discovered line at the effect's frequency in one of its runs,
+within ``peak_match_bins`` of that run's frequency bin (the views' rule of one line), a
+fixed-frequency line or a shaft order ``m`` at ``m`` times the run's revolutions per second
+(a ``vibration`` at order 14 of the slowest run took 88 % of an order 14 whose amplitude falls
+with the speed, and kept 0.2 % of its gain beside the discovered law). And a discovered
+fixed-frequency line's frequency is fitted here (it is discovery's located bin: 0.15-0.35 Hz
+from a ring-down the ``vibration`` fits to 0.01 Hz, beside which the vibration kept 21-52 %
+of its gain; at the fitted frequency 8-9 %); a frequency that leaves its line
+(``peak_match_bins`` of its runs' widest bin) makes the term no rival, as an exponent out of
+range does.
 
 An effect that fails is refused (``rejected``, the rule and the reason; no ``round``: after
 the selection, as the backward check), the catalog model is refitted without it and discovery
