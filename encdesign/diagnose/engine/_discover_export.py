@@ -30,10 +30,12 @@ def candidate_name(term: Mapping[str, Any]) -> str:
     return re.sub(r"[^a-z0-9]+", "_", raw.lower()).strip("_")
 
 
-def _phase(spec: Mapping[str, Any], x: dict):
+def _phase(spec: Mapping[str, Any], x: dict, f_hz=None):
+    """The line's phase (rad) at each row; ``f_hz``: a fixed-frequency line's fitted
+    frequency (Hz; default: the discovered one)."""
     v = float(spec["value"])
     if spec["line_kind"] == "hz":
-        return 2 * math.pi * v * x["t"]
+        return 2 * math.pi * (v if f_hz is None else f_hz) * x["t"]
     return v * x["theta"]
 
 
@@ -94,9 +96,13 @@ def _modulation(spec: Mapping[str, Any], p: dict, x: dict):
     return jnp.ones_like(x["t"])
 
 
-def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
-    """The candidate of one discovered term's JSON entry (``unexplained[i].model.terms[j]``)."""
+def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) -> Candidate:
+    """The candidate of one discovered term's JSON entry (``unexplained[i].model.terms[j]``).
+    ``free_frequency``: a fixed-frequency (``hz``) line's frequency is a fitted parameter
+    ``frequency_hz`` (Hz; start it at the discovered ``value``), as the catalog's
+    ``vibration`` fits its own (the re-test of catalog names, :mod:`._discover_rival`)."""
     name = candidate_name(spec)
+    free_f = free_frequency and spec["line_kind"] == "hz"
     per_run = spec["modulation"] == "per_cell" or spec["line_kind"] == "hz"
     offset = spec["line_kind"] == "order" and float(spec["value"]) == 0.0
     shape = "runs" if per_run else "1"
@@ -116,7 +122,8 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             if level:  # a growth with its own level
                 return base * (a + g * p["cos_rate_rad"])
             return g * base * (a[:, None] if per_run else a)
-        cpart, spart = _frame(spec, x, _phase(spec, x), C)
+        f_hz = p["frequency_hz"] if free_f else None
+        cpart, spart = _frame(spec, x, _phase(spec, x, f_hz), C)
         if per_run:
             a = (x["run_onehot"] @ p["cos_rad"])[:, None]
             b = (x["run_onehot"] @ p["sin_rad"])[:, None]
@@ -146,6 +153,10 @@ def discovered_candidate(spec: Mapping[str, Any]) -> Candidate:
             params.append(
                 Param(nm, unit, shape, description="change within the run (per half span)")
             )
+    if free_f:
+        params.append(
+            Param("frequency_hz", "Hz", "1", linear=False, scale=1e-3, description="frequency")
+        )
     start = None
     if spec["modulation"] == "speed":
         b0 = float(spec["scaling"]["beta"])

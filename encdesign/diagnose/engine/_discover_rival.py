@@ -50,7 +50,17 @@ and decaying with its own Q is the case (session 34): the steady ``vibration``, 
 first, takes the mean of each run's ring-down (its whole held-out gain 2,195-27,305 on the
 traced training cases) and the discovered ``ringing`` term keeps the decay beside it
 (1,399-86,318, past the gain rules), while the vibration keeps 0-13 % of its gain beside
-the term. A true steady ``vibration`` leaves no such term at its frequency.
+the term. A true steady ``vibration`` leaves no such term at its frequency. Since session 36
+the place is the frequency: a discovered line at the effect's frequency in one of its runs,
+within ``peak_match_bins`` of that run's frequency bin (the views' rule of one line), a
+fixed-frequency line or a shaft order ``m`` at ``m`` times the run's revolutions per second
+(a ``vibration`` at order 14 of the slowest run took 88 % of an order 14 whose amplitude falls
+with the speed, and kept 0.2 % of its gain beside the discovered law). And a discovered
+fixed-frequency line's frequency is fitted here (it is discovery's located bin: 0.15-0.35 Hz
+from a ring-down the ``vibration`` fits to 0.01 Hz, beside which the vibration kept 21-52 %
+of its gain; at the fitted frequency 8-9 %); a frequency that leaves its line
+(``peak_match_bins`` of its runs' widest bin) makes the term no rival, as an exponent out of
+range does.
 
 An effect that fails is refused (``rejected``, the rule and the reason; no ``round``: after
 the selection, as the backward check), the catalog model is refitted without it and discovery
@@ -71,13 +81,15 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from ._discover_export import candidate_name, discovered_candidate
 from ._fit import Fitter, make_term
 from ._fit_memo import remembered_fit, remembered_steps
 from ._select import Selection, _refusal, gain_rules
 from ._stats_pass import drive_many
 from ._timing import stage
-from ._views import locate
+from ._views import locate, run_spans
 from ._views_time import findings_listed
 
 RULE_PREFIX = "beside the discovered model"
@@ -95,11 +107,64 @@ def _specs(models: Sequence[dict | None]) -> list[dict]:
 
 
 def _terms(prep, specs: list[dict]) -> list:
+    """The discovered terms, their exponents and fixed frequencies free (session 36: a
+    line at a fixed frequency was fitted at the frequency discovery located, its bin's,
+    0.15-0.35 Hz from a mode the catalog's ``vibration`` fits to 0.01 Hz)."""
     out = []
     for s in specs:
-        start = {"beta": float(s["scaling"]["beta"])} if s["modulation"] == "speed" else None
-        out.append(make_term(discovered_candidate(s), prep, start))
+        start = {}
+        if s["modulation"] == "speed":
+            start["beta"] = float(s["scaling"]["beta"])
+        if s["line_kind"] == "hz":
+            start["frequency_hz"] = float(s["value"])
+        out.append(make_term(discovered_candidate(s, free_frequency=True), prep, start))
     return out
+
+
+def _run_lines(prep) -> dict[int, tuple[float, float]]:
+    """Each run's ``(revolutions per second, frequency bin in Hz)`` by its id, over its
+    kept rows, as the spectrum view reads them (:func:`._views.view_spectrum`: the median
+    ``|omega| / 2 pi`` and the transform's bin ``1 / (rows x dt)``; no ``omega``: 0)."""
+    out = {}
+    has_omega = "omega" in prep.rows
+    for r, (a, b) in run_spans(prep.run):
+        kr = np.asarray(prep.keep[a:b], bool)
+        if b - a <= 1 or not kr.any():  # no span to read a bin from
+            continue
+        t = np.asarray(prep.rows.column("t", a, b), float)
+        dt = float(np.median(np.diff(t)))
+        frev = 0.0
+        if has_omega:
+            om = np.asarray(prep.rows.column("omega", a, b), float)[kr]
+            frev = float(np.median(np.abs(om))) / (2 * math.pi)
+        rid = int(prep.run_ids[r]) if r < len(prep.run_ids) else r
+        out[rid] = (frev, 1.0 / ((b - a) * dt) if dt > 0 else math.inf)
+    return out
+
+
+def _line_hz(spec: dict, fitted, lines: dict[int, tuple[float, float]]) -> list[tuple]:
+    """``[(frequency Hz, bin Hz), ...]``: the discovered term's line in each of its runs
+    (``fitted``: its fitted term; a fixed-frequency line at its fitted frequency, a shaft
+    order ``m`` at ``m`` x the run's revolutions per second; none for an offset)."""
+    v = float(spec["value"])
+    if spec["line_kind"] == "hz":
+        v = float(np.asarray(fitted.values.get("frequency_hz", v)))
+    elif v == 0.0:
+        return []
+    runs = [r for r in spec["runs"] if r in lines]
+    return [(v if spec["line_kind"] == "hz" else v * lines[r][0], lines[r][1]) for r in runs]
+
+
+def _moved(prep, spec: dict, fitted, lines: dict[int, tuple[float, float]]) -> bool:
+    """Whether a fixed-frequency term's fitted frequency left its line: more than
+    ``peak_match_bins`` of its runs' widest bin from the discovered one (the views' rule of
+    one line, :func:`._views.view_spectrum`)."""
+    if "frequency_hz" not in fitted.values:
+        return False
+    bins = [lines[r][1] for r in spec["runs"] if r in lines]
+    f = float(np.asarray(fitted.values["frequency_hz"]))
+    width = prep.settings.peak_match_bins * (max(bins) if bins else math.inf)
+    return not abs(f - float(spec["value"])) <= width
 
 
 def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs: list[dict]):
@@ -112,8 +177,11 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     fits = [base, [*base, term], [*base, *disc], [*base, *disc, term]]
     f0, f1, fo, f2 = drive_many([remembered_steps(fitter, f) for f in fits])
     bmax = s.discover_beta_max
-    for d in fo.terms[len(base) :]:  # a rival only with an exponent in the range searched
-        if "beta" in d.values and not abs(float(d.values["beta"])) <= bmax:
+    lines = _run_lines(prep)
+    for d, sp in zip(fo.terms[len(base) :], specs):  # a rival only with an exponent in the
+        if "beta" in d.values and not abs(float(d.values["beta"])) <= bmax:  # range searched
+            return None, []
+        if _moved(prep, sp, d, lines):  # ... and a fixed frequency on its line
             return None, []
     g0, g1 = f0.chi2 - f1.chi2, fo.chi2 - f2.chi2
     if g0 <= 0:
@@ -142,7 +210,7 @@ def _test(prep, fitter: Fitter, final_terms: list, name: str, disc: list, specs:
     whole = f0.heldout_chi2 - f1.heldout_chi2
     if not rules:
         return kept, []
-    holder = _holder(prep, fitter, base, term, disc, specs, f1, g0, whole)
+    holder = _holder(prep, fitter, base, term, disc, specs, f1, g0, whole, lines)
     if holder is None:
         return kept, []
     name_j, own, place = holder
@@ -162,14 +230,25 @@ def _dbic(prep, gain: float, k: int) -> float:
     return -(gain - max(k, 0) * math.log(prep.n_values))
 
 
-def _place(term, spec: dict) -> bool:
-    """Whether the discovered term ``spec`` sits in the place of the fitted catalog effect
-    ``term``: a line at a fixed frequency (a fitted ``frequency_hz``, the catalog's
-    ``vibration``) and a discovered term in the frame of a fixed frequency (``hz``)."""
-    return "frequency_hz" in term.values and spec["frame"] == "hz"
+def _place(prep, term, spec: dict, fitted, lines: dict[int, tuple[float, float]]) -> bool:
+    """Whether the discovered term ``spec`` (``fitted``: its fitted term) sits in the place
+    of the fitted catalog effect ``term``: a line at a fixed frequency (a fitted
+    ``frequency_hz``, the catalog's ``vibration``) and a discovered line at that frequency
+    in one of its runs, within ``peak_match_bins`` of the run's frequency bin (the views'
+    rule of one line): a line in the frame of a fixed frequency (``hz``), or a shaft order
+    ``m`` where ``m`` x the run's revolutions per second is that frequency (session 36: a
+    ``vibration`` at order 14 of the slowest run, of an order 14 whose amplitude falls with
+    the speed)."""
+    if "frequency_hz" not in term.values:
+        return False
+    f = float(np.asarray(term.values["frequency_hz"]))
+    width = prep.settings.peak_match_bins
+    return any(abs(fl - f) <= width * b for fl, b in _line_hz(spec, fitted, lines))
 
 
-def _holder(prep, fitter: Fitter, base: list, term, disc: list, specs: list[dict], f1, g0, whole):
+def _holder(
+    prep, fitter: Fitter, base: list, term, disc: list, specs: list[dict], f1, g0, whole, lines
+):
     """The discovered term of ``disc`` the fitted effect ``term`` holds a part of:
     ``(name, its held-out gain beside the effect, words)``, or ``None``. ``f1``: the fit of
     ``base`` and the effect.
@@ -211,8 +290,8 @@ def _holder(prep, fitter: Fitter, base: list, term, disc: list, specs: list[dict
         return name, own, ", at least the effect's whole: the larger structure"
     k = fb.n_determined(len(base))  # the discovered term's determined scalars
     dbic = _dbic(prep, f1.chi2 - fb.chi2, k)
-    if _place(term, specs[j]) and not gain_rules(s, dbic, own):
-        return name, own, ", in its place (a fixed frequency), past the catalog's gain rules"
+    if _place(prep, term, specs[j], fb.terms[len(base)], lines) and not gain_rules(s, dbic, own):
+        return name, own, ", in its place (at its frequency), past the catalog's gain rules"
     return None
 
 
