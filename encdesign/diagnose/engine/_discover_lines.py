@@ -294,6 +294,45 @@ def _exact_gains(Z: np.ndarray, rw: np.ndarray, J: np.ndarray, positions) -> np.
     return np.asarray(out)
 
 
+def _switch_gains(Z: np.ndarray, rw: np.ndarray, J: np.ndarray, positions) -> np.ndarray:
+    """Chi-square the columns ``Z`` (n, C, q) switched on from each position take from the
+    residual ``rw`` (n, C) alone, as the library's ``step`` term is fitted (no level
+    before the change), with the catalog model's Jacobian ``J`` (n, C, p) projected out
+    (Frisch-Waugh), from suffix sums."""
+
+    def prefix(x):
+        return np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, 0)])
+
+    czz = prefix(np.einsum("ncq,ncr->nqr", Z, Z))
+    czr = prefix(np.einsum("ncq,nc->nq", Z, rw))
+    cjz = prefix(np.einsum("ncp,ncq->npq", J, Z))
+    Pj = _pinv(np.einsum("ncp,ncr->pr", J, J))
+    Jr = np.einsum("ncp,nc->p", J, rw)
+    out = []
+    for p in positions:
+        GUU, JU = czz[-1] - czz[p], cjz[-1] - cjz[p]
+        e = czr[-1] - czr[p] - JU.T @ Pj @ Jr
+        out.append(float(e @ _pinv(GUU - JU.T @ Pj @ JU, raw=GUU) @ e))
+    return np.asarray(out)
+
+
+def _frame_switch_gains(
+    sds: tuple[int, np.ndarray, bool], Z: np.ndarray, rw, J, line: Line, positions
+) -> np.ndarray:
+    """SDS: per position, the largest chi-square a ``step`` term of one of the line's frames
+    (:func:`_sds_frame_maps`: the platform, the azimuths, each moving sensor) takes there
+    (:func:`_switch_gains` on the frame's columns: ``Z`` (n, C, M nj), each moving sensor
+    its own, mapped by the frame); ``sds``: :func:`sds_channels`."""
+    Mn = sds[0]
+    n, C = Z.shape[:2]
+    Z4 = Z.reshape(n, C, Mn, -1)
+    best = np.full(len(positions), -np.inf)
+    for M in _sds_frame_maps(line, C, sds).values():
+        Zf = np.einsum("nckj,kjl->ncl", Z4, M[:Mn])
+        best = np.maximum(best, _switch_gains(Zf, rw, J, positions))
+    return best
+
+
 def _residual_gains(B, r, seg_starts, positions, n) -> np.ndarray:
     """:func:`_exact_gains` without the catalog model (each channel its own, the constant
     line projected out) for a long record: sums per segment (``seg_starts``: the sorted
@@ -325,16 +364,23 @@ def locate_steps(
     :data:`STEP_BINS` equal-count bin edges of the kept rows and the times the finder's
     views located (:func:`located_steps`), where a step of the line's cos / sin (each
     channel its own, the constant line projected out) takes the most chi-square from the
-    residual; a scanned edge is refined to the row between its neighbours. The scan runs
-    over all kept rows (2 at least on either side); where its best change point falls in the
-    first or last ``settings.discover_step_margin`` of them, the line gets no step term (an
-    end effect: a start-up or a stop the segmentation kept; restricting the scan instead put
-    such a transient's change at the margin's edge, a change time that is nowhere in the
-    record). With ``J``
-    (all rows, (n, C, p): the whitened Jacobian of the final catalog model, given for
-    records of at most :data:`STEP_EXACT_ROWS` rows) the catalog model is projected out
-    too, as in the fit. ``n_tests``: the change points tried (the term's multiple-testing
-    count)."""
+    residual; a scanned edge is refined to the row between its neighbours. An SDS record
+    (with ``J``) scans instead the ``step`` terms of the line's frames as the library fits
+    them (:func:`_frame_switch_gains`: switched on from zero, one frame's columns): on 24
+    golden-angle platform positions the constant line of each moving sensor, 2 columns each,
+    takes most of an order switching on, and the scan above placed a platform step of 45.7
+    chi-square at a change point where that term took 22.8 (session 36: the benchmark's
+    ``platform_step`` 2x on 20261499, order 5 from run 9 located at run 18). Each step term
+    is counted once per change point in the multiple-testing threshold
+    (:func:`thresholds`), which covers the best of the frames at the best change point.
+    The scan runs over all kept rows (2 at least on either side); where its best change
+    point falls in the first or last ``settings.discover_step_margin`` of them, the line
+    gets no step term (an end effect: a start-up or a stop the segmentation kept;
+    restricting the scan instead put such a transient's change at the margin's edge, a
+    change time that is nowhere in the record). With ``J`` (all rows, (n, C, p): the
+    whitened Jacobian of the final catalog model, given for records of at most
+    :data:`STEP_EXACT_ROWS` rows) the catalog model is projected out too, as in the fit.
+    ``n_tests``: the change points tried (the term's multiple-testing count)."""
     kidx = np.flatnonzero(prep.keep)
     tau = tau_of(prep)
     order = kidx[np.argsort(tau[kidx], kind="stable")]
@@ -370,7 +416,9 @@ def locate_steps(
         B = phase_basis(ln, th, t)  # (n, nj)
         Z = _step_columns(prep, B) if Jk is not None else None
 
-        def gains(ps, B=B, Z=Z) -> np.ndarray:
+        def gains(ps, B=B, Z=Z, ln=ln) -> np.ndarray:
+            if Z is not None and Jk is not None and sds is not None:
+                return _frame_switch_gains(sds, Z, rw, Jk, ln, list(ps))
             if Z is not None and Jk is not None:
                 return _exact_gains(Z, rw, Jk, ps)
             return _residual_gains(B, rw[:, chans], cand, ps, n)
