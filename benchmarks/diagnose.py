@@ -633,6 +633,25 @@ def _decimation() -> int:
     return FinderSettings().reduce_decimation_max if got is None else int(got)
 
 
+def _wait_all(procs: list, t0: float, timeout_s: float) -> tuple[float, bool, list[str]]:
+    """Wait for every process started at ``t0`` (``time.perf_counter``), at most
+    ``timeout_s`` in all (then every one still running is killed): ``(wall s, timed out,
+    the last 1,500 characters of each failed process's standard error)``."""
+    timed_out, errs = False, []
+    for p in procs:
+        try:
+            _, err = p.communicate(timeout=max(1.0, timeout_s - (time.perf_counter() - t0)))
+            if p.returncode:
+                errs.append(err.decode(errors="replace")[-1500:])
+        except subprocess.TimeoutExpired:
+            timed_out = True
+            for q in procs:
+                if q.poll() is None:
+                    q.kill()
+                    q.wait()
+    return time.perf_counter() - t0, timed_out, errs
+
+
 def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s: float) -> dict:
     """Run one split case (``processes`` :func:`_proc_child` processes on ``path``) and
     collect what each process reported; a case over ``timeout_s`` is stopped."""
@@ -656,19 +675,7 @@ def _split_case(path: Path, mode: str, processes: int, min_rows: int, timeout_s:
             procs.append(
                 subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
             )
-        t0, timed_out, errs = time.perf_counter(), False, []
-        for p in procs:
-            try:
-                _, err = p.communicate(timeout=max(1.0, timeout_s - (time.perf_counter() - t0)))
-                if p.returncode:
-                    errs.append(err.decode(errors="replace")[-1500:])
-            except subprocess.TimeoutExpired:
-                timed_out = True
-                for q in procs:
-                    if q.poll() is None:
-                        q.kill()
-                        q.wait()
-        wall = time.perf_counter() - t0
+        wall, timed_out, errs = _wait_all(procs, time.perf_counter(), timeout_s)
         per = [json.loads(Path(f).read_text()) for f in st if Path(f).is_file()]
         out: dict = dict(
             mode=mode,
@@ -822,19 +829,7 @@ def _independent_case(path: Path, count: int, min_rows: int, timeout_s: float) -
             subprocess.Popen(c, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
             for c in cmds
         ]
-        errs, timed_out = [], False
-        for p in procs:
-            try:
-                _, err = p.communicate(timeout=max(1.0, timeout_s - (time.perf_counter() - t0)))
-                if p.returncode:
-                    errs.append(err.decode(errors="replace")[-1500:])
-            except subprocess.TimeoutExpired:
-                timed_out = True
-                for q in procs:
-                    if q.poll() is None:
-                        q.kill()
-                        q.wait()
-        wall = time.perf_counter() - t0
+        wall, timed_out, errs = _wait_all(procs, t0, timeout_s)
         per = [json.loads(Path(f).read_text()) for f in st if Path(f).is_file()]
     out = dict(
         together=count,
