@@ -66,6 +66,30 @@ def order_row(prep: Prepared, M: int, f: FitResult) -> dict:
     }
 
 
+def fits_at_orders(
+    kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, orders, order: int, extra=()
+) -> dict[int, FitResult]:
+    """The base refitted at each of ``orders`` from ``fit``'s values
+    (:func:`terms_at_order`), with the terms ``extra`` beside it, in the same folds and noise
+    weights; the context's order is ``order`` again on return."""
+    fits: dict[int, FitResult] = {}
+    for M in orders:
+        terms, _ = terms_at_order(kind, prep, fit, M)
+        set_order(prep, M)
+        fitter.clear()
+        fits[M] = fitter.fit([*terms, *extra])
+    set_order(prep, order)
+    fitter.clear()
+    return fits
+
+
+def least_heldout(fits: dict[int, FitResult]) -> int | None:
+    """The order of least finite held-out chi-square among ``fits`` (the first of equals,
+    in their order); ``None`` where none is finite."""
+    ok = {M: f for M, f in fits.items() if math.isfinite(f.heldout_chi2)}
+    return min(ok, key=lambda M: ok[M].heldout_chi2) if ok else None
+
+
 def choose_base_order(
     kind: Kind, prep: Prepared, fitter: Fitter, fit: FitResult, order: int, base_info: dict
 ):
@@ -106,19 +130,12 @@ def choose_base_order(
         return None
     fitter.clear()
     fit = fitter.fit(fit.terms)  # in the weights of the noise estimate, like every trial
-    fits = {order: fit}
-    choice["tried"] = [order_row(prep, order, fit)]
-    for M in range(1, order):
-        terms, _ = terms_at_order(kind, prep, fit, M)
-        set_order(prep, M)
-        fitter.clear()
-        fits[M] = fitter.fit(terms)
-        choice["tried"].append(order_row(prep, M, fits[M]))
-    set_order(prep, order)
-    fitter.clear()
-    choice["tried"].sort(key=lambda r: r["order"])
-    ok = {M: f for M, f in fits.items() if math.isfinite(f.heldout_chi2)}
-    best = min(ok, key=lambda M: ok[M].heldout_chi2) if ok else order
+    fits = {order: fit} | fits_at_orders(kind, prep, fitter, fit, range(1, order), order)
+    choice["tried"] = sorted(
+        (order_row(prep, M, f) for M, f in fits.items()), key=lambda r: r["order"]
+    )
+    best = least_heldout(fits)
+    best = order if best is None else best
     gain = fit.heldout_chi2 - fits[best].heldout_chi2
     if best == order or not gain >= s.heldout_min:
         choice["reason"] = (
@@ -164,18 +181,10 @@ def choose_order_again(
     if not choice.get("lowered") or not effects or order != choice.get("chosen"):
         return None
     start, s = int(choice["start"]), prep.settings
-    fits: dict[int, FitResult] = {}
-    rows = []
-    for M in range(1, start + 1):
-        terms, _ = terms_at_order(kind, prep, final, M)
-        set_order(prep, M)
-        fitter.clear()
-        fits[M] = fitter.fit([*terms, *effects])
-        rows.append(order_row(prep, M, fits[M]))
-    set_order(prep, order)
-    fitter.clear()
-    ok = {M: f for M, f in fits.items() if math.isfinite(f.heldout_chi2)}
-    best = min(ok, key=lambda M: ok[M].heldout_chi2) if ok else start
+    fits = fits_at_orders(kind, prep, fitter, final, range(1, start + 1), order, effects)
+    rows = [order_row(prep, M, f) for M, f in fits.items()]
+    best = least_heldout(fits)
+    best = start if best is None else best
     gain = fits[start].heldout_chi2 - fits[best].heldout_chi2
     chosen = best if gain >= s.heldout_min else start
     again = {
@@ -206,16 +215,8 @@ def least_heldout_order(
     :func:`choose_base_order`), where it lowers ``ho0`` (the base's at ``order``) by at
     least ``settings.heldout_min``; else ``None``. The context's order is ``order`` again on
     return."""
-    ho: dict[int, float] = {}
-    for M in orders:
-        terms, _ = terms_at_order(kind, prep, fit, M)
-        set_order(prep, M)
-        fitter.clear()
-        ho[M] = float(fitter.fit(terms).heldout_chi2)
-    set_order(prep, order)
-    fitter.clear()
-    ok = {M: h for M, h in ho.items() if math.isfinite(h)}
-    if not ok:
+    fits = fits_at_orders(kind, prep, fitter, fit, orders, order)
+    best = least_heldout(fits)
+    if best is None:
         return None
-    best = min(ok, key=lambda M: ok[M])
-    return best if ho0 - ok[best] >= prep.settings.heldout_min else None
+    return best if ho0 - float(fits[best].heldout_chi2) >= prep.settings.heldout_min else None
