@@ -180,3 +180,29 @@ def test_a_true_vibration_in_the_place_of_a_discovered_order_keeps_its_name():
     assert abs(d.doc["effects"][0]["params"]["frequency_hz"]["value"] - f) < 0.1
     assert "vibration" not in {r["name"] for r in _refused(d.doc)}
     assert _law(d.doc, truth["line"][1])["frame"] == "shaft"
+
+
+def test_discovery_off_leaves_the_catalog_selection(tmp_path):
+    """``FinderSettings.discover`` = 0 (``encdesign diagnose --no-discover``, session 37):
+    the catalog's selection alone. On the record above the catalog's ``beam_tilt_axial``
+    stays named (no discovered model to re-test it beside), no finding gains a ``model``,
+    and the switch is reported in the document's settings; the CLI flag sets it."""
+    import json
+
+    from encdesign.cli import main as cli_main
+    from encdesign.io import write_recording
+
+    rec, _ = _record()
+    d = diagnose(rec, settings=FinderSettings(discover=0))
+    validate_diagnosis(d.doc)
+    assert d.doc["settings"]["discover"] == 0
+    assert not any(u.get("model") for u in d.doc["unexplained"]), d.doc["unexplained"]
+    assert not _refused(d.doc), d.doc["rejected"]
+    assert "beam_tilt_axial" in [e["name"] for e in d.doc["effects"]], d.doc["report"]
+    path = tmp_path / "r.toml"
+    write_recording(path, rec.kind, rec.columns, encoder=rec.meta["encoder"])
+    out = tmp_path / "o.json"
+    assert cli_main(["diagnose", str(path), "--json", str(out), "--quiet", "--no-discover"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["settings"]["discover"] == 0
+    assert [e["name"] for e in doc["effects"]] == [e["name"] for e in d.doc["effects"]]

@@ -51,6 +51,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-effects", type=int_arg(0, 100), default=3, help="most effects to name"
     )
+    parser.add_argument(
+        "--no-discover",
+        action="store_true",
+        help="the catalog only: no discovery of structure outside the catalog, so no named "
+        "effect is re-tested beside a discovered model (faster; FinderSettings.discover = 0)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_launch_flags(parser)
 
@@ -82,6 +88,13 @@ def run(args: argparse.Namespace) -> int:
         return rc
 
 
+def _settings(args: argparse.Namespace):
+    """The finder's settings the flags ask for (``None``: the defaults)."""
+    from ..diagnose import FinderSettings
+
+    return FinderSettings(discover=0) if args.no_discover else None
+
+
 def _run_helper(args: argparse.Namespace) -> int:
     """A process other than 0: the same diagnosis (its share of the row passes), silent,
     nothing written."""
@@ -99,6 +112,7 @@ def _run_helper(args: argparse.Namespace) -> int:
         candidates=cands,
         verbose=False,
         plots=None,
+        settings=_settings(args),
     )
     return 0
 
@@ -118,6 +132,7 @@ def _run(args: argparse.Namespace) -> int:
         candidates=cands,
         verbose=not args.quiet,
         plots=args.plots,
+        settings=_settings(args),
     )
     doc = d.doc
     write_json(args.json, doc)

@@ -485,13 +485,14 @@ def _nearest_catalog(rejected: list[dict]) -> list[dict]:
 
 def _document(kind, rec, prep, sel, base_info, order, limit, scan, fitter=None) -> tuple:
     """``(document, selection)``: the document before the kind's additions, the verdict and
-    the report. With ``fitter``, each ``unexplained`` finding gains a ``model``: what
-    discovery (:mod:`._discover`) models of it outside the catalog, fitted jointly with the
-    final catalog model (the verdict stays ``unexplained``); the named effects are re-tested
-    beside it (:mod:`._discover_rival`: the selection less those it refuses)."""
+    the report. With ``fitter`` and ``settings.discover`` on, each ``unexplained`` finding
+    gains a ``model``: what discovery (:mod:`._discover`) models of it outside the catalog,
+    fitted jointly with the final catalog model (the verdict stays ``unexplained``); the
+    named effects are re-tested beside it (:mod:`._discover_rival`: the selection less those
+    it refuses)."""
     kd = prep.kd
     models = None
-    if fitter is not None:
+    if fitter is not None and prep.settings.discover:
         sel, models = discovered(prep, fitter, sel, kind.views(prep), scan, discover)
     base, final = sel.base, sel.final
     sig_mean = float(np.mean(prep.sigma))

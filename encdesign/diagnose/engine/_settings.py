@@ -384,6 +384,15 @@ class FinderSettings(AbstractSelectionSettings):
     where it was located. Was an inline ``4`` (twice) in ``_steps``; set by hand in 0c3e0e7,
     moved unchanged in issue 44 G."""
 
+    discover: int = eqx.field(default=1, static=True)
+    """1: on, 0: off: discovery (issue 41) after the catalog selection: each ``unexplained``
+    finding gains the ``model`` discovery fits of it outside the catalog, and the named
+    effects are re-tested beside that model (``_discover_rival``), which can drop a name.
+    Off: the catalog's selection and verdict alone (faster; ``encdesign diagnose
+    --no-discover``). A switch, not a tuned number; on since discovery joined the finder.
+    Session 37 (s37-miss37) measured off against on (main f1eba4d) on the nine catalog
+    rate sets of fresh seeds 6721-6729: see ``benchmarks/SEEDS.md``."""
+
     discover_step_margin: float = eqx.field(default=0.1, static=True)
     """Discovery: a change point in the first or last this share of the kept rows (at least
     2) is an end effect (a start-up or a stop the segmentation kept), not a change of the

@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 MAY_BE_ZERO = (
+    "discover",
     "discover_max_aliases",
     "vibration_staircase_harmonics",
     "sds_level_common_share",
