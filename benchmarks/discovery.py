@@ -215,7 +215,7 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
     mod = truth["modulation"]
     best = thr = nan
     raw = D.thresholds(st.lib, st.settings.discover_alpha)
-    dof = [tm.H.shape[1] + (tm.beta is not None) for tm in st.lib]
+    dof = [tm.n_params for tm in st.lib]
     for ti, tm in enumerate(st.lib):
         if tm.line != li[0] or tm.frame != truth["frame"]:
             continue
