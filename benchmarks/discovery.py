@@ -8,6 +8,8 @@ the finder; discovery's model of the located line is scored against the truth:
 * ``modulation_right``: and its modulation (``cell <i>`` of the truth's run; ``step``:
   ``step_run_right`` also says whether the located change lies in the truth's run);
 * ``beta_within_2se``: for the classes with a speed law, ``|beta - truth| <= 2 SE``;
+* ``decay_within_2se`` (session 37): for ``fixed_hz`` read as a ``ringdown``, the decay time
+  within 2 standard errors of the truth's ``Q / (pi f)``;
 * ``gain_ratio``: held-out chi-square gain of the discovered terms at the line over that of
   the true model (the truth's frame and modulation fitted to the same record);
 * ``catalog``: the catalog named an effect that took the structure (not a discovery case);
@@ -215,7 +217,7 @@ def _gains(truth: dict, base: bool = False, forced: bool = False) -> tuple[float
     mod = truth["modulation"]
     best = thr = nan
     raw = D.thresholds(st.lib, st.settings.discover_alpha)
-    dof = [tm.H.shape[1] + (tm.beta is not None) for tm in st.lib]
+    dof = [tm.n_params for tm in st.lib]
     for ti, tm in enumerate(st.lib):
         if tm.line != li[0] or tm.frame != truth["frame"]:
             continue
@@ -487,6 +489,12 @@ def run_case(cls: str, size: float, kind: str, seed, rows: int) -> dict:
         if mod == "step" and t.get("step"):
             out["step_run_right"] = t["step"]["run"] == truth["run"]
             out["step_time_s"] = t["step"]["time_s"]
+        if truth.get("q") is not None and t["modulation"] == "ringdown":  # a mode's decay
+            pr = t["params"]
+            T0 = truth["q"] / (np.pi * truth["line"][1])
+            out["decay_time_s"], out["decay_time_true_s"] = pr["decay_time_s"], T0
+            se = pr["decay_time_se_s"]
+            out["decay_within_2se"] = bool(se and abs(pr["decay_time_s"] - T0) <= 2 * se)
         if truth.get("beta") is not None:
             sc = t.get("scaling")
             out["beta_within_2se"] = bool(
@@ -541,6 +549,7 @@ def summarise(cases: list[dict], clean: list[dict]) -> dict:
         "frame_right_excluding_catalog_and_base": rate([c["frame_right"] for c in disc]),
         "modulation_right": rate([c.get("modulation_right", False) for c in disc]),
         "beta_within_2se": rate([c["beta_within_2se"] for c in disc if "beta_within_2se" in c]),
+        "decay_within_2se": rate([c["decay_within_2se"] for c in disc if "decay_within_2se" in c]),
         "step_run_right": rate([c["step_run_right"] for c in disc if "step_run_right" in c]),
         "gain_ratio_ge_0_8": rate([r >= 0.8 for r in ratios]),
         "gain_ratio_median": float(np.median(ratios)) if ratios else None,

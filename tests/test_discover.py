@@ -5,6 +5,7 @@ carries a catalog name and the verdict stays ``unexplained``."""
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -129,33 +130,73 @@ def test_catalog_physics_stays_the_catalogs():
     assert not [t for t in _terms(d.doc) if t["line_kind"] == "hz" and abs(t["value"] - f0) < 1]
 
 
-def test_a_rung_mode_is_fixed_in_hz_and_rings(tmp_path):
+def test_a_rung_mode_is_fixed_in_hz_and_rings_down(tmp_path):
     """A structural mode rung at the start of every run, decaying at its own Q, is modelled
-    in its own frame (fixed in Hz) with its amplitude changing within the run: not the
-    catalog's steady vibration, and not a shaft order. The ``ringing`` modulation's round
-    trip: written as a --candidates file, it is named under its own name in a later
-    diagnosis of another record of the same bench (another seed: other phases, amplitudes
-    and noise; the same mode frequency and Q)."""
+    in its own frame (fixed in Hz) as a ring-down: each run its own amplitude and phase, one
+    decay time ``T`` over the runs with its standard error (and ``Q = pi f T``), within 3
+    standard errors of the truth's: not the catalog's steady vibration, and not a shaft
+    order. The ``ringdown`` modulation's round trip: written as a --candidates file, the
+    candidate evaluated at the discovered parameters is the term the document describes, and
+    it is named under its own name in a later diagnosis of another record of the same bench
+    (another seed: other phases, amplitudes and noise; the same mode frequency and Q). Main
+    (f1eba4d) had no ring-down: it modelled this mode with ``ringing`` (a linear change
+    within each run)."""
     rec, truth = outside_record(np.random.default_rng(47), "fixed_hz", 8.0, "multihead", 3000)
     d = diagnose(rec)
     validate_diagnosis(d.doc)
     f0 = truth["line"][1]
     mine = [t for t in _terms(d.doc) if t["line_kind"] == "hz" and abs(t["value"] - f0) < 0.5]
     assert mine and mine[0]["frame"] == "hz", d.doc["report"]
-    assert mine[0]["modulation"] == "ringing" and "own Q" in mine[0]["reading"]
+    t = mine[0]
+    assert t["modulation"] == "ringdown" and "decaying in" in t["reading"], t
+    pr = t["params"]
+    T0 = truth["q"] / (np.pi * f0)
+    assert abs(pr["decay_time_s"] - T0) <= 3 * pr["decay_time_se_s"], (pr, T0)
+    assert abs(pr["q_factor"] - np.pi * pr["frequency_hz"] * pr["decay_time_s"]) < 1e-9
+    assert abs(pr["frequency_hz"] - f0) < 0.1, (pr, f0)
     _no_catalog_name(d.doc)
     path = tmp_path / "mode.py"
     names = export_candidates(d.doc, path)
-    ring = [n for n in names if n.endswith("_hz_ringing")]
+    ring = [n for n in names if n.endswith("_hz_ringdown")]
     assert ring, names
     cands = [c for c in load_candidates(path) if c.name in ring]
-    assert {p.name for p in cands[0].params} >= {"cos_rate_rad", "sin_rate_rad"}
+    assert {p.name for p in cands[0].params} >= {"cos_rad", "sin_rad", "decay_s"}
+    _ring_down_evaluates_as_described(rec, t, cands[0])
     mode = (f0, truth["q"])
     rec2, _ = outside_record(np.random.default_rng(48), "fixed_hz", 8.0, "multihead", 3000, mode)
     d2 = diagnose(rec2, candidates=cands)
     validate_diagnosis(d2.doc)
     assert d2.verdict == "missing_physics", d2.doc["report"]
-    assert [e["name"] for e in d2.effects if e["name"] in ring], d2.doc["report"]
+    named = [e for e in d2.effects if e["name"] in ring]
+    assert named, d2.doc["report"]
+    assert abs(named[0]["params"]["decay_s"]["value"] - T0) < 0.3 * T0, named[0]["params"]
+
+
+def _ring_down_evaluates_as_described(rec, t: dict, cand) -> None:
+    """The exported ring-down candidate, at the discovered parameters, on the record's rows:
+    each run's cos/sin coefficients at the term's frequency times ``exp(-(t - the run's first
+    t) / T)`` on every head (the ``hz`` frame), as the document describes it."""
+    tt = np.asarray(rec.columns["t"], float)
+    run = np.unique(np.asarray(rec.columns["run"]), return_inverse=True)[1].ravel()
+    R = int(run.max()) + 1
+    first = np.array([tt[run == r][0] for r in range(R)])
+    last = np.array([tt[run == r][-1] for r in range(R)])
+    dt = np.median(np.diff(tt[run == 0]))
+    off = np.concatenate([[0.0], np.cumsum(last - first + dt)[:-1]])
+    tau = tt - first[run] + off[run]  # the engine's end-to-end time (its ``tau`` column)
+    oh = np.eye(R)[run]
+    C = len(rec.head_columns)
+    x = {"t": jnp.asarray(tt), "tau": jnp.asarray(tau), "run_onehot": jnp.asarray(oh)}
+    x["alpha"] = jnp.zeros(C)
+    c = np.asarray(t["params"]["coefficients"]).reshape(-1, 2)
+    assert c.shape[0] == R, c  # one cell per run on this bench
+    T, f = t["params"]["decay_time_s"], t["params"]["frequency_hz"]
+    p = {"cos_rad": jnp.asarray(c[:, 0]), "sin_rad": jnp.asarray(c[:, 1])}
+    got = np.asarray(cand.fn({**p, "decay_s": jnp.asarray(T)}, x))
+    e = np.exp(-(tt - first[run]) / T)
+    ph = 2 * np.pi * f * tt
+    want = (c[run, 0] * np.cos(ph) + c[run, 1] * np.sin(ph)) * e
+    np.testing.assert_allclose(got, np.repeat(want[:, None], C, 1), rtol=0, atol=1e-15)
 
 
 def test_export_candidates_round_trip(tmp_path):

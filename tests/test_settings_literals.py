@@ -65,6 +65,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("engine/_views_modulated.py", 2): DOF + " (a squared trace)",
     ("engine/_views_modulated.py", 4): COUNT + " (a change with 2 rows on either side)",
     ("engine/_discover_law.py", 1e-12): GUARD + " (log of a speed)",
+    ("engine/_discover_lines.py", 1e-12): GUARD + " (log of a speed)",
+    ("engine/_discover_ring.py", 1e-12): GUARD + " (the period of a line at 0 Hz)",
     ("engine/_document.py", 2): PHYSICS + " (the scan reaches the second harmonic of the base's "
     "highest order)",
     ("engine/_engine.py", 2): PHYSICS,
@@ -262,6 +264,11 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("engine/_discover.py", "MAX_CELLS"): BOUND + " (cells with a modulation of their own)",
     ("engine/_discover_law.py", "BETA_RANGE"): SEARCH + " (speed exponents searched)",
     ("engine/_discover_law.py", "KEEP_SHARE"): NUMERIC + " (a direction the catalog spans)",
+    ("engine/_discover_ring.py", "RING_RUNS_MAX"): SEARCH + " (longest decay time searched)",
+    ("engine/_discover_ring.py", "RING_PERIODS_MIN"): SEARCH + " (shortest decay time searched)",
+    ("engine/_discover_ring.py", "RING_GRID"): SEARCH + " (decay times on the starting grid)",
+    ("engine/_discover_ring.py", "XATOL_LOG_T"): NUMERIC + " (the decay time's search tolerance)",
+    ("engine/_discover_ring.py", "XATOL_F"): NUMERIC + " (the frequency's search tolerance)",
     ("engine/_document.py", "SWEEP_WINDOW"): BOUND + " (rows of a moving mean)",
     ("engine/_document.py", "LATTICE_ROWS"): BOUND,
     ("engine/_reduce.py", "RATE_OVER_NEEDED"): BOUND

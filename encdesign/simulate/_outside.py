@@ -121,7 +121,7 @@ def _truth(cls: str, C: int, rng, mode: tuple[float, float] | None = None) -> di
         q = float(rng.uniform(*Q_RANGE))
         if mode is not None:  # the bench's own mode (drawn all the same: the same stream)
             f, q = float(mode[0]), float(mode[1])
-        return dict(line=("hz", f), frame="hz", modulation="ringing", q=q)
+        return dict(line=("hz", f), frame="hz", modulation="ringdown", q=q)
     if cls == "catalog_vibration":
         return dict(line=("hz", float(rng.uniform(23.0, 37.0))), frame="hz", modulation="per_cell")
     if cls == "slow_growth":
@@ -205,7 +205,7 @@ def outside_record(
         if kind_l == "hz":
             phr = rng.uniform(0, 2 * np.pi, R)[run]
             s = A * np.sin(2 * np.pi * val * t + phr)[:, None] * np.ones(C)
-            if truth["modulation"] == "ringing":  # rung at the run's start, its own Q
+            if truth["modulation"] == "ringdown":  # rung at the run's start, its own Q
                 s = s * np.exp(-np.pi * val * t / truth["q"])[:, None]
         else:
             fr = truth["frame"]

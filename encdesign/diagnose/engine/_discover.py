@@ -17,15 +17,20 @@ generic library organised by **frame** and **modulation**:
   standard error), ``direction`` (opposite sign in the two directions), ``forward`` /
   ``reverse`` (one direction only), ``cell <i>`` (one run only), ``per_cell`` (each run its
   own amplitude and phase), ``ringing`` (a fixed-Hz line only: each run its own amplitude
-  and phase and their own linear change within the run: a mode rung and decaying at its own
-  Q), ``growth`` (amplitude linear in the time across runs, with its own level where
-  the catalog model leaves it: :mod:`._discover_growth`),
+  and phase and their own linear change within the run), ``ringdown`` (a fixed-Hz line
+  only: each run its own amplitude and phase times ``exp(-t_in_run / T)``, one decay time
+  ``T`` shared by the runs, fitted with a standard error, at the mode's own frequency
+  within a bin of the located one: a mode rung at the start of every run and decaying at its
+  own ``Q = pi f T``; :mod:`._discover_ring`), ``growth`` (amplitude linear in the time
+  across runs, with its own level where the catalog model leaves it:
+  :mod:`._discover_growth`),
   ``temperature`` (linear in ``temp_c``), ``step`` (the amplitude switches on at one change
   time: the best of the times the finder's views located (``time``, ``order_step``,
   ``run_step``) and :data:`STEP_BINS` change points over the kept rows, scanned per line on
   the residual; the scan is counted in the multiple-testing threshold).
 
-Every term is a linear (``speed``: nonlinear in ``beta`` only) restriction of one *full*
+Every term is a linear (``speed``: nonlinear in ``beta`` only; ``ringdown``: in ``T`` and its
+frequency, fitted before the sums) restriction of one *full*
 block per line: cos/sin of the line's phase, per cell and channel, times the within-cell
 modulations (1, time, temperature). One pass over the rows accumulates per held-out fold the
 Gram matrix of those columns, their products with the whitened residual and with the
@@ -54,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from ._discover_export import discovered_candidate
+from ._discover_export import discovered_candidate, nonlinear_start
 from ._discover_growth import best_at_place, growth_term, same_place
 from ._discover_law import (
     Sums,
@@ -73,6 +78,7 @@ from ._discover_lines import (
     STEP_EXACT_ROWS,
     Line,
     alias_neighbours,
+    cells,
     drive_neighbours,
     frame_maps,
     hmap,
@@ -85,6 +91,7 @@ from ._discover_lines import (
     tau_of,
     thresholds,
 )
+from ._discover_ring import locate_ringdowns, ring_columns, ring_json, run_starts
 from ._discover_words import reading
 from ._fit import make_term
 from ._settings import FinderSettings
@@ -98,37 +105,6 @@ _NOT_LOCATED = (
 )
 MAX_CELLS = 12
 """Cells (run x direction x speed) beyond which the cell modulations are left out."""
-
-
-# ----------------------------------------------------------------------------- lines
-
-
-# ----------------------------------------------------------------------------- cells
-
-
-def _cells(prep) -> tuple[np.ndarray, dict]:
-    """Cell index per row (-1: not kept) and the cells' run, direction and speed."""
-    keep = prep.keep
-    run = np.asarray(prep.run)
-    if prep.ctx.kind == "sds":  # one row per run, nothing varies but the time: one cell
-        run = np.zeros(prep.n, dtype=int)
-    om = np.asarray(prep.rows["omega"], float) if "omega" in prep.rows else np.zeros(prep.n)
-    sgn = np.where(om < 0, -1, 1)
-    lsp = np.round(np.log(np.maximum(np.abs(om), 1e-12)) / 0.05).astype(np.int64)
-    key = np.stack([run, sgn, lsp], 1)
-    key = np.where(keep[:, None], key, np.iinfo(np.int64).min)
-    uniq, inv = np.unique(key[keep], axis=0, return_inverse=True)
-    cell = -np.ones(prep.n, dtype=int)
-    cell[keep] = inv.ravel()
-    S = len(uniq)
-    speed = np.array([np.median(np.abs(om[cell == s])) for s in range(S)])
-    info = {
-        "run": uniq[:, 0].astype(int),
-        "direction": uniq[:, 1].astype(int),
-        "speed": speed,
-        "rows": np.bincount(cell[keep], minlength=S),
-    }
-    return cell, info
 
 
 # ----------------------------------------------------------------------------- sums
@@ -160,11 +136,13 @@ def accumulate(
     cinfo,
     steps: Sequence[dict | None] | None = None,
     jac: np.ndarray | None = None,
+    rings: Sequence[dict | None] | None = None,
 ) -> Sums:
     """One pass over the rows: the per-fold sums of every line's full block (see module);
     ``steps``: per line its change time (:func:`locate_steps`), the ``step`` block;
     ``jac``: the catalog model's whitened Jacobian on every row (:func:`_jacobian`), else
-    evaluated per chunk."""
+    evaluated per chunk; ``rings``: per line its ring-down (:func:`locate_ringdowns`), the
+    ``ringdown`` block."""
     K = prep.settings.n_folds
     C = prep.n_channels
     S = len(cinfo["speed"])
@@ -172,11 +150,15 @@ def accumulate(
     has_temp = prep.ctx.driver_name != "time" and "driver" in prep.rows
     steps = list(steps) if steps is not None else [None] * len(lines)
     has_step = any(st is not None for st in steps)
+    rings = list(rings) if rings is not None else [None] * len(lines)
+    has_ring = any(rg is not None for rg in rings)
     blocks = (
         ["static", "growth"]
         + (["temperature"] if has_temp else [])
         + (["step"] if has_step else [])
+        + (["ringdown"] if has_ring else [])
     )
+    starts = run_starts(prep) if has_ring else np.zeros(0)
     nb = len(blocks)
     layout, slices, q0 = [], [], 0
     for ln in lines:
@@ -220,13 +202,16 @@ def accumulate(
         if has_temp:
             mods.append((np.asarray(x["driver"][: b - a], float)[kb] - dmid) / dsc)
         cols = []
-        for ln, stp in zip(lines, steps):
+        ru = np.asarray(prep.run[a:b])[kb] if has_ring else np.zeros(0, int)
+        for ln, stp, rg in zip(lines, steps, rings):
             B = phase_basis(ln, th, t)
             for m in mods:
                 cols.append(B * m[:, None])
             if has_step:
                 on = tau >= stp["tau_s"] if stp is not None else np.zeros(th.size, bool)
                 cols.append(B * on[:, None])
+            if has_ring:
+                cols.append(ring_columns(B, th, t, tau, ru, starts, rg))
         Xc = np.concatenate(cols, 1)  # (rows, U)
         rw = (resid[a:b] / sig[None, :])[kb]
         fo = prep.fold[a:b][kb]
@@ -304,6 +289,7 @@ def library(
     settings: FinderSettings,
     sds: tuple[int, np.ndarray, bool] | None = None,
     steps: Sequence[dict | None] | None = None,
+    rings: Sequence[dict | None] | None = None,
 ) -> list[Term]:
     """Every (line, frame, modulation) term the record can test."""
     S = len(cinfo["speed"])
@@ -322,6 +308,9 @@ def library(
                     if ln.kind == "hz":  # a mode's amplitude changing within every run
                         H = np.concatenate([hmap(lay, 0, M, eye), hmap(lay, 1, M, eye)], 1)
                         out.append(Term(li, name, "ringing", H))
+                    if rings is not None and rings[li] is not None:  # rung, decaying
+                        H = hmap(lay, sums.blocks.index("ringdown"), M, eye)
+                        out.append(Term(li, name, "ringdown", H, decay=rings[li]))
                 continue
             one = np.ones(S)
             out.append(Term(li, name, "static", hmap(lay, 0, M, one)))
@@ -395,7 +384,7 @@ def _forward(
             else:
                 Dt, et = D[i], e[i]
             gi = _gain(Dt, et, Dr[i])
-            q = tm.H.shape[1] + (tm.beta is not None)
+            q = tm.n_params
             if gi <= thresh[i]:
                 continue
             m = gi * (1.0 - me * q) - thresh[i]
@@ -447,7 +436,7 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     near = drive_neighbours(lines, dict(prep.ctx.meta), prep.settings)
     for li, extra in alias_neighbours(lines, prep).items():
         near.setdefault(li, []).extend(extra)
-    cell, cinfo = _cells(prep)
+    cell, cinfo = cells(prep)
     C = prep.n_channels
     alpha = np.asarray(getattr(prep.kd, "alpha", np.zeros(C)), float)
     if alpha.size != C:
@@ -455,9 +444,19 @@ def build(prep, fitter, terms: Sequence[Any], resid: np.ndarray, findings) -> St
     sds = sds_channels(prep)
     jac = _jacobian(prep, fitter, terms) if prep.n <= STEP_EXACT_ROWS else None
     steps = locate_steps(prep, resid, lines, findings, jac)
-    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps, jac)
+    S = len(cinfo["speed"])
+    rings: list[dict | None] = [None] * len(lines)
+    if sds is None and S <= MAX_CELLS and any(ln.kind == "hz" for ln in lines):
+        tj = terms if jac is not None else []  # longer records: the residual alone
+
+        def sums_at(li: int, ring: dict) -> Sums:
+            ln = [lines[li]]
+            return accumulate(prep, fitter, tj, resid, ln, cell, cinfo, None, jac, [ring])
+
+        rings = locate_ringdowns(prep, lines, S, lambda ln: frame_maps(ln, C, alpha), sums_at)
+    sums = accumulate(prep, fitter, terms, resid, lines, cell, cinfo, steps, jac, rings)
     infl = float(sums.rr.sum()) / max(prep.n_values, 1.0)
-    lib = library(lines, sums, cinfo, C, alpha, prep.settings, sds, steps)
+    lib = library(lines, sums, cinfo, C, alpha, prep.settings, sds, steps, rings)
     for tm in lib:
         if tm.modulation == "speed":
             _fit_beta(tm, sums.layout[tm.line], sums.slices[tm.line], sums, cinfo["speed"], infl)
@@ -541,10 +540,7 @@ def _refit(
     new = []
     for i in kept:
         spec = _term_json(prep, st, kept, i, incl, gains)
-        b0 = st.lib[i].beta
-        new.append(
-            make_term(discovered_candidate(spec), prep, None if b0 is None else {"beta": b0})
-        )
+        new.append(make_term(discovered_candidate(spec), prep, nonlinear_start(spec) or None))
     res = fitter.fit([*terms, *new])
     cat = res.terms[: len(terms)]
     return cat, fitter.residual(cat)
@@ -665,6 +661,7 @@ def _term_json(
     elif prep.ctx.kind == "sds":  # the moving sensors' run-mean channels
         heads = [c for c in names if "." not in c]
     scaling = None
+    ring = ring_json(prep, tm)
     law = tm if tm.beta is not None else None
     if tm.modulation == "per_cell":  # the best law across the runs, described, not chosen
         law = _sibling(tm, lib, "speed")
@@ -693,6 +690,7 @@ def _term_json(
             "amplitude": amp,
             "amplitude_se": amp_se,
             "unit": prep.kd.unit,
+            **ring[0],
         },
         **({"step": step_json(prep, tm.step)} if tm.step is not None else {}),
         "heldout_gain_chi2": float(gains["entry"][i]),
@@ -714,6 +712,7 @@ def _term_json(
             "speed_ref_rad_s": float(np.exp(np.mean(np.log(np.maximum(cinfo["speed"], 1e-12))))),
             **({"step_tau_s": tm.step["tau_s"]} if tm.step is not None else {}),
             **({"growth_level": True} if tm.level else {}),
+            **ring[1],
             **({"n_moving": int(st_sds[0]), "projected": bool(st_sds[2])} if st_sds else {}),
         },
     }

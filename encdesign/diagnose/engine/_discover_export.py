@@ -93,7 +93,21 @@ def _modulation(spec: Mapping[str, Any], p: dict, x: dict):
         return (x["driver"] - ex["driver_mid"]) / ex["driver_half"]
     if mod == "step":
         return (x["tau"] >= ex["step_tau_s"]) * 1.0
+    if mod == "ringdown":  # rung at each run's start, decaying in decay_s
+        t_in = x["tau"] - x["run_onehot"] @ jnp.asarray(ex["run_start_tau_s"])
+        return jnp.exp(-jnp.maximum(t_in, 0.0) / p["decay_s"])
     return jnp.ones_like(x["t"])
+
+
+def nonlinear_start(spec: Mapping[str, Any]) -> dict[str, float]:
+    """The discovered values of a term's nonlinear parameters (a speed exponent ``beta``, a
+    ring-down's decay time ``decay_s``): where its candidate's fit starts."""
+    out = {}
+    if spec["modulation"] == "speed":
+        out["beta"] = float(spec["scaling"]["beta"])
+    if spec["modulation"] == "ringdown":
+        out["decay_s"] = float(spec["params"]["decay_time_s"])
+    return out
 
 
 def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) -> Candidate:
@@ -122,7 +136,7 @@ def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) 
             if level:  # a growth with its own level
                 return base * (a + g * p["cos_rate_rad"])
             return g * base * (a[:, None] if per_run else a)
-        f_hz = p["frequency_hz"] if free_f else None
+        f_hz = p["frequency_hz"] if free_f else spec["params"].get("frequency_hz")
         cpart, spart = _frame(spec, x, _phase(spec, x, f_hz), C)
         if per_run:
             a = (x["run_onehot"] @ p["cos_rad"])[:, None]
@@ -159,23 +173,32 @@ def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) 
         )
     start = None
     if spec["modulation"] == "speed":
-        b0 = float(spec["scaling"]["beta"])
         params.append(
             Param("beta", "1", "1", linear=False, scale=0.1, description="speed exponent")
         )
+    if spec["modulation"] == "ringdown":
+        d0 = float(spec["params"]["decay_time_s"])
+        params.append(
+            Param("decay_s", "s", "1", linear=False, scale=0.1 * d0, description="decay time")
+        )
+    if nonlinear_start(spec):
+        s0 = nonlinear_start(spec)
 
         def start(ctx, resid, findings):  # noqa: ARG001 - the StartFn contract
-            return [{"beta": jnp.asarray(b0)}]
+            return [{k: jnp.asarray(v) for k, v in s0.items()}]
 
     def plausible(ctx, p):  # noqa: ARG001 - the Candidate contract
         bmax = ctx.settings.discover_beta_max
         if "beta" in p and not (-bmax <= float(p["beta"]) <= bmax):
             return f"speed exponent {float(p['beta']):.2f} outside [-{bmax:g}, {bmax:g}]"
+        ratio = ctx.settings.discover_size_ratio_max
+        d0 = nonlinear_start(spec).get("decay_s")
+        if d0 is not None and not (d0 / ratio <= float(p["decay_s"]) <= d0 * ratio):
+            return f"decay time {float(p['decay_s']):.3g} s far from the discovered {d0:.3g} s"
         amp = math.sqrt(
             float(jnp.mean(jnp.asarray(p["cos_rad"]) ** 2))
             + float(jnp.mean(jnp.asarray(p.get("sin_rad", 0.0)) ** 2))
         )
-        ratio = ctx.settings.discover_size_ratio_max
         if amp0 > 0 and not (amp0 / ratio <= amp <= amp0 * ratio):
             return f"amplitude {amp:.3g} {unit} far from the discovered {amp0:.3g} {unit}"
         return None

@@ -121,7 +121,7 @@ def best_at_place(
             ):
                 continue
             g = _heldout(sums.A, sums.b, _embed(sums, [*others, tm]), folds, sums.raw)
-            g = g * (1.0 - me * (H.shape[1] + (tm.beta is not None))) - thresh[j]
+            g = g * (1.0 - me * tm.n_params) - thresh[j]
             if g > best_g:
                 best, best_g = j, g
         out[n] = best

@@ -18,7 +18,9 @@ class Term:
     """One library term: ``line``, ``frame``, ``modulation``; ``H`` maps its parameters to
     the line's full block; ``beta`` the speed exponent (``speed`` modulation); ``step`` its
     change time (``step`` modulation, :func:`locate_steps`); ``level``: a ``growth`` term that
-    holds its own level (its first half of ``H``, :mod:`._discover_growth`)."""
+    holds its own level (its first half of ``H``, :mod:`._discover_growth`); ``decay``: the
+    decay time a ``ringdown`` term shares over the runs and its standard error
+    (:func:`._discover_ring.locate_ringdowns`)."""
 
     line: int
     frame: str
@@ -29,10 +31,16 @@ class Term:
     H0: np.ndarray | None = None
     step: dict | None = None
     level: bool = False
+    decay: dict | None = None
 
     @property
     def name(self) -> str:
         return f"{self.frame} / {self.modulation} @ line {self.line}"
+
+    @property
+    def n_params(self) -> int:
+        """Parameters the term fits: its linear ones, a speed exponent, a decay time."""
+        return self.H.shape[1] + (self.beta is not None) + (self.decay is not None)
 
 
 @dataclasses.dataclass

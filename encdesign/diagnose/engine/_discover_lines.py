@@ -211,6 +211,31 @@ def located_steps(findings: Sequence[Any]) -> list[tuple[float, str]]:
     return out
 
 
+def cells(prep) -> tuple[np.ndarray, dict]:
+    """Cell index per row (-1: not kept) and the cells' run, direction and speed."""
+    keep = prep.keep
+    run = np.asarray(prep.run)
+    if prep.ctx.kind == "sds":  # one row per run, nothing varies but the time: one cell
+        run = np.zeros(prep.n, dtype=int)
+    om = np.asarray(prep.rows["omega"], float) if "omega" in prep.rows else np.zeros(prep.n)
+    sgn = np.where(om < 0, -1, 1)
+    lsp = np.round(np.log(np.maximum(np.abs(om), 1e-12)) / 0.05).astype(np.int64)
+    key = np.stack([run, sgn, lsp], 1)
+    key = np.where(keep[:, None], key, np.iinfo(np.int64).min)
+    uniq, inv = np.unique(key[keep], axis=0, return_inverse=True)
+    cell = -np.ones(prep.n, dtype=int)
+    cell[keep] = inv.ravel()
+    S = len(uniq)
+    speed = np.array([np.median(np.abs(om[cell == s])) for s in range(S)])
+    info = {
+        "run": uniq[:, 0].astype(int),
+        "direction": uniq[:, 1].astype(int),
+        "speed": speed,
+        "rows": np.bincount(cell[keep], minlength=S),
+    }
+    return cell, info
+
+
 def phase_basis(line: Line, th: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``(rows, n_basis)`` cos/sin of the line's phase (order 0: a constant)."""
     if line.kind == "order" and line.value == 0:
@@ -552,6 +577,6 @@ def thresholds(lib: Sequence[Any], alpha: float) -> np.ndarray:
     out = []
     for tm in lib:
         n = n_step if tm.step is not None else n_other
-        q = tm.H.shape[1] + (tm.beta is not None)
+        q = tm.n_params
         out.append(stats.chi2.isf(alpha * share / max(n, 1), q))
     return np.asarray(out)

@@ -83,7 +83,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ._discover_export import candidate_name, discovered_candidate
+from ._discover_export import candidate_name, discovered_candidate, nonlinear_start
 from ._fit import Fitter, make_term
 from ._fit_memo import remembered_fit, remembered_steps
 from ._select import Selection, _refusal, gain_rules
@@ -112,11 +112,9 @@ def _terms(prep, specs: list[dict]) -> list:
     0.15-0.35 Hz from a mode the catalog's ``vibration`` fits to 0.01 Hz)."""
     out = []
     for s in specs:
-        start = {}
-        if s["modulation"] == "speed":
-            start["beta"] = float(s["scaling"]["beta"])
+        start = nonlinear_start(s)
         if s["line_kind"] == "hz":
-            start["frequency_hz"] = float(s["value"])
+            start["frequency_hz"] = float(s["params"].get("frequency_hz", s["value"]))
         out.append(make_term(discovered_candidate(s, free_frequency=True), prep, start))
     return out
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from ._discover_ring import ring_words
 from ._settings import FinderSettings
 
 
@@ -54,8 +55,9 @@ MOD_WORDS = {
     "forward": "in the positive direction only",
     "reverse": "in the negative direction only",
     "per_cell": "its own amplitude and phase in every run (intermittent)",
-    "ringing": "its own amplitude and phase in every run, changing within the run: a "
-    "structural mode rung (by the start of the run, an impact) and decaying at its own Q",
+    "ringing": "its own amplitude and phase in every run, changing linearly within the run: a "
+    "structural mode rung (by the start of the run, an impact) and decaying at its own Q, or "
+    "building up",
     "growth": "growing linearly with the time across the record (a slow growth or drift)",
     "temperature": "linear in the temperature",
     "step": "switching on at one change time (a change of the set-up: a part that loosened, "
@@ -106,6 +108,8 @@ def reading(line, tm, meta: dict, L: int, cinfo: dict, C: int, settings: FinderS
         mw = f"amplitude ~ speed^({tm.beta:.2f}{se}) across {S} steady speeds: " + _speed_cause(
             tm.beta, tm.beta_se, settings.speed_cause_se
         )
+    elif tm.modulation == "ringdown" and tm.decay is not None:
+        mw = ring_words(tm.decay)
     elif tm.modulation.startswith("cell "):
         s = int(tm.modulation.split()[1])
         mw = f"in run {int(cinfo['run'][s])} only (intermittent)"
