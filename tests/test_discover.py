@@ -454,3 +454,29 @@ def test_terms_the_record_cannot_tell_apart_count_as_one():
     assert _same_span(sums, fwd, rev) and _same_span(sums, fwd, fwd)
     assert not _same_span(sums, fwd, static)  # nothing of it left after the catalog
     assert not _same_span(sums, fwd, other)
+
+
+def test_a_term_the_catalog_mostly_spans_is_not_tied_with_one_the_record_tells_apart():
+    """A term the catalog model mostly spans (a disk order the base holds: its remnant after
+    the projection, 5e-4 of its raw norm, lies on the one head whose placement moved) and a
+    term whose projected columns differ from that remnant by 4e-4 of their direction are told
+    apart by the record, so the selection's pick is not replaced by the first of the library
+    (on training seed 20261507 the ``disk`` frame replaced ``head 2``, held-out gain 26,717
+    against 26,726, because the joint rank was read on the raw Gram's scale, where that
+    difference is under 1e-6)."""
+    from encdesign.diagnose.engine._discover import _same_span
+    from encdesign.diagnose.engine._discover_law import Sums, Term
+
+    keep_a, keep_b, cos2 = 5e-4, 0.75, 0.9996
+    c = np.sqrt(keep_a * keep_b * cos2)
+    A = np.array([[keep_a, c], [c, keep_b]])[None]
+    sums = Sums.__new__(Sums)
+    sums.A, sums.raw, sums.slices = A, np.eye(2)[None], {0: slice(0, 2)}
+    disk = Term(0, "disk", "static", np.array([[1.0], [0.0]]))
+    head = Term(0, "head 2", "static", np.array([[0.0], [1.0]]))
+    assert not _same_span(sums, disk, head)
+    # the same remnant along the head's direction exactly: the record cannot tell them apart
+    sums.A = np.array([[keep_a, np.sqrt(keep_a * keep_b)], [np.sqrt(keep_a * keep_b), keep_b]])[
+        None
+    ]
+    assert _same_span(sums, disk, head)

@@ -57,6 +57,7 @@ import numpy as np
 from ._discover_export import discovered_candidate
 from ._discover_growth import best_at_place, growth_term, same_place
 from ._discover_law import (
+    KEEP_SHARE,
     Sums,
     Term,
     _embed,
@@ -591,14 +592,21 @@ def _same_span(sums: Sums, a: Term, b: Term) -> bool:
     sl = sums.slices[a.line]
     At, Rt = sums.A.sum(0)[sl, sl], sums.raw.sum(0)[sl, sl]
 
-    def rank(H: np.ndarray) -> int:
-        # on the unit-diagonal form of the raw Gram (as _pinv: a direction that keeps less
-        # than 1e-6 of its raw norm after the catalog's projection is not there)
-        d = np.sqrt(np.maximum(np.diag(H.T @ Rt @ H), 1e-300))
+    def rank(H: np.ndarray, N: np.ndarray) -> int:
+        # on the unit-diagonal form of the Gram N: eigenvalues over KEEP_SHARE
+        d = np.sqrt(np.maximum(np.diag(H.T @ N @ H), 1e-300))
         ev = np.linalg.eigvalsh((H.T @ At @ H) / d[:, None] / d[None, :])
-        return int(np.sum(ev > 1e-6))
+        return int(np.sum(ev > KEEP_SHARE))
 
-    return rank(a.H) == q == rank(b.H) and rank(np.concatenate([a.H, b.H], 1)) == q
+    # each term has all its directions (scaled by the raw Gram, as _psolve: a direction
+    # that keeps less than KEEP_SHARE of its raw norm after the catalog's projection is not
+    # there), and the two span the same columns on what the projection left (scaled by the
+    # projected Gram): a term the catalog mostly spans keeps a small remnant that can lie
+    # within KEEP_SHARE of the raw norm of another term's direction and still differ from
+    # it (a disk order the base holds, moved by a head's placement: the remnant is on that
+    # head, held-out gain 26,717 where the head's term gains 26,726); the record tells them
+    # apart, so the selection's pick stands.
+    return rank(a.H, Rt) == q == rank(b.H, Rt) and rank(np.concatenate([a.H, b.H], 1), At) == q
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:
