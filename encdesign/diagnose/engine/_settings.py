@@ -527,7 +527,9 @@ class FinderSettings(AbstractSelectionSettings):
     sds_delay_shared_max: float = eqx.field(default=0.5, static=True)
     """sds: rule ``sensor_delay_step.plausible``: refused when another moving sensor carries
     over this share of the largest delay step (a pattern common to the moving sensors is not
-    one sensor's delay). Was an inline 0.5 in ``_sds_noise``; set by hand in 7492207."""
+    one sensor's delay). Was an inline 0.5 in ``_sds_noise``; set by hand in 7492207. Also
+    the share that makes a one-run deviation of the base run means common to the moving
+    sensors, hence no one sensor's transient (``_sds_noise._shared``, session 37)."""
 
     angle_step_size_tol: float = eqx.field(default=0.5, static=True)
     """Recurring steps at one angle are one step when their sizes are within this share of

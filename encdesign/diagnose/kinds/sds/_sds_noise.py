@@ -695,12 +695,33 @@ def transient_cells(ctx: Context) -> list[tuple[int, int, float, float]]:
     return sorted(out, key=lambda c: -c[2])
 
 
+def _shared(ctx: Context, m: int, j: int) -> bool:
+    """Whether the deviation of run ``j`` on moving sensor ``m`` (its base run means less
+    their mean, rad) is common to the moving sensors: another one carries, with the same
+    sign, over ``sds_delay_shared_max`` of it in that run (as a delay step shared by the
+    sensors is not one sensor's delay)."""
+    base = noise_info(ctx).base_resid
+    M = int(np.asarray(ctx.consts["psi_m"]).size)
+    if base is None or M < 2 or not 0 <= j < base.shape[0]:
+        return False
+    dev = base[:, :M] - base[:, :M].mean(0, keepdims=True)
+    own = float(dev[j, m])
+    other = np.delete(dev[j], m) * np.sign(own)
+    return bool(np.any(other > ctx.settings.sds_delay_shared_max * abs(own)))
+
+
 def _transient(ctx: Context) -> str | None:
     """A one-run transient on one sensor dominates the base residual
     (:func:`transient_cells`). A smooth effect fitted to such a record would take a part of
     the transient; it is not named (a doubt; the candidate must also keep its gain beside
-    the transients' own offsets: ``Candidate.rivals``, a test)."""
-    cells = transient_cells(ctx)
+    the transients' own offsets: ``Candidate.rivals``, a test). A run's deviation that the
+    moving sensors share (:func:`_shared`) is not one sensor's transient but a pattern of
+    the platform angle, which the base residual of a smooth common structure (orders of
+    phi on golden-angle positions: beam tilt x axial runout) can concentrate on one run:
+    no doubt then, the rivals' test alone decides (training seed 6708 record 11: a 40x
+    ``beam_tilt_axial``, whose run means follow orders 1 and 3 to 3 nrad of 530, refused
+    for "run index 10" on all three moving sensors)."""
+    cells = [c for c in transient_cells(ctx) if not _shared(ctx, c[0], c[1])]
     if not cells:
         return None
     m, jo, po, tot = cells[0]
