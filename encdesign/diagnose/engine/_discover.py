@@ -57,7 +57,6 @@ import numpy as np
 from ._discover_export import discovered_candidate
 from ._discover_growth import best_at_place, growth_term, same_place
 from ._discover_law import (
-    KEEP_SHARE,
     Sums,
     Term,
     _embed,
@@ -65,8 +64,10 @@ from ._discover_law import (
     _gain,
     _heldout,
     _psolve,
+    _same_span,
     _scatter_se,
     _sibling,
+    _tie_pick,
 )
 from ._discover_level import level_thresholds
 from ._discover_lines import (
@@ -562,8 +563,9 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     folds = list(range(K))
     me = st.settings.discover_model_error
     chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
-    # of terms the record cannot tell apart, the first of the library (not rounding's pick)
-    chosen = [next(j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])) for i in chosen]
+    # of terms the record cannot tell apart, the first of the library the catalog does not
+    # mostly span (not rounding's pick)
+    chosen = [_tie_pick(sums, lib, i, st.settings.discover_own_share_min) for i in chosen]
     if len(st.cinfo["speed"]) == 1:  # one cell (SDS): static, growth, step; no per-run terms
         chosen = best_at_place(sums, lib, chosen, st.thresh, me)
     incl = np.zeros(len(lib))
@@ -578,35 +580,6 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
         for i in set(got) | same:
             incl[i] += 1.0 / K
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
-
-
-def _same_span(sums: Sums, a: Term, b: Term) -> bool:
-    """Whether two terms at one line span the same columns once the catalog model is
-    projected out (e.g. one sensor's ``forward``, ``reverse``, ``direction`` and the one
-    reverse run's ``cell`` where the base holds the static order): the record cannot tell
-    them apart, so a repeat of the selection that takes either includes both (ties broken
-    by rounding would otherwise split the inclusion probability)."""
-    q = a.H.shape[1]
-    if a is b or a.line != b.line or b.H.shape[1] != q or a.beta is not None or b.beta is not None:
-        return a is b
-    sl = sums.slices[a.line]
-    At, Rt = sums.A.sum(0)[sl, sl], sums.raw.sum(0)[sl, sl]
-
-    def rank(H: np.ndarray, N: np.ndarray) -> int:
-        # on the unit-diagonal form of the Gram N: eigenvalues over KEEP_SHARE
-        d = np.sqrt(np.maximum(np.diag(H.T @ N @ H), 1e-300))
-        ev = np.linalg.eigvalsh((H.T @ At @ H) / d[:, None] / d[None, :])
-        return int(np.sum(ev > KEEP_SHARE))
-
-    # each term has all its directions (scaled by the raw Gram, as _psolve: a direction
-    # that keeps less than KEEP_SHARE of its raw norm after the catalog's projection is not
-    # there), and the two span the same columns on what the projection left (scaled by the
-    # projected Gram): a term the catalog mostly spans keeps a small remnant that can lie
-    # within KEEP_SHARE of the raw norm of another term's direction and still differ from
-    # it (a disk order the base holds, moved by a head's placement: the remnant is on that
-    # head, held-out gain 26,717 where the head's term gains 26,726); the record tells them
-    # apart, so the selection's pick stands.
-    return rank(a.H, Rt) == q == rank(b.H, Rt) and rank(np.concatenate([a.H, b.H], 1), At) == q
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:
