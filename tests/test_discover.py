@@ -495,3 +495,46 @@ def test_terms_the_record_cannot_tell_apart_count_as_one():
     assert _same_span(sums, fwd, rev) and _same_span(sums, fwd, fwd)
     assert not _same_span(sums, fwd, static)  # nothing of it left after the catalog
     assert not _same_span(sums, fwd, other)
+
+
+def test_of_terms_the_record_cannot_tell_apart_the_catalogs_remnant_is_not_taken():
+    """Two terms of the same span after the catalog's projection, one of which the catalog
+    mostly spans (a disk order the base holds: 5e-4 of its raw norm left, on the head whose
+    placement moved) and one it spans little: the tie goes to the first of the library that
+    keeps ``discover_own_share_min`` of its norm, not to the catalog's remnant; where both
+    or neither keep it, to the first of the library."""
+    from encdesign.diagnose.engine._discover_law import Sums, Term, _same_span, _tie_pick
+
+    keep_a, keep_b, cos2 = 5e-4, 0.75, 0.9996
+    c = np.sqrt(keep_a * keep_b * cos2)
+    sums = Sums.__new__(Sums)
+    sums.A = np.array([[keep_a, c], [c, keep_b]])[None]
+    sums.raw, sums.slices = np.eye(2)[None], {0: slice(0, 2)}
+    disk = Term(0, "disk", "static", np.array([[1.0], [0.0]]))
+    head = Term(0, "head 2", "static", np.array([[0.0], [1.0]]))
+    own_min = FinderSettings().discover_own_share_min
+    assert keep_a < own_min < keep_b
+    assert _same_span(sums, disk, head)
+    assert (
+        _tie_pick(sums, [disk, head], 0, own_min) == 1 == _tie_pick(sums, [disk, head], 1, own_min)
+    )
+    sums.A = np.array([[0.5, 0.5], [0.5, 0.5]])[None]  # both their own: the first
+    assert _tie_pick(sums, [disk, head], 1, own_min) == 0
+    sums.A = np.full((1, 2, 2), 1e-3)  # both mostly the catalog's: the first
+    assert _tie_pick(sums, [disk, head], 1, own_min) == 0
+
+
+def test_a_defect_of_one_head_at_a_disk_order_the_base_holds_is_read_on_that_head():
+    """Training seed 20261507 (``benchmarks/discovery.py``'s ``head_defect`` 5x multihead
+    case, seed ``[20261507, 0, 1, 1, 0]``): order 9 on head 2 alone, an order the base's disk
+    error holds. Head 2's placement moved to take part of it, and the ``disk`` term kept a
+    remnant of 5e-4 of its norm on head 2, the same span as head 2's term to 1e-6; as the
+    first of the library it replaced it (frame ``disk``, held-out gain 26,717 against
+    26,726). The term most its own is taken: ``head 2``."""
+    rec, truth = outside_record(
+        np.random.default_rng([20261507, 0, 1, 1, 0]), "head_defect", 5.0, "multihead", 3000
+    )
+    assert truth["frame"] == "head 2" and truth["line"] == ("order", 9)
+    d = diagnose(rec).doc
+    mine = [t for t in _terms(d) if t["value"] == 9]
+    assert mine and {t["frame"] for t in mine} == {"head 2"}, d["report"]

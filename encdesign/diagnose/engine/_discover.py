@@ -69,8 +69,10 @@ from ._discover_law import (
     _gain,
     _heldout,
     _psolve,
+    _same_span,
     _scatter_se,
     _sibling,
+    _tie_pick,
 )
 from ._discover_level import level_thresholds
 from ._discover_lines import (
@@ -557,8 +559,9 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     folds = list(range(K))
     me = st.settings.discover_model_error
     chosen = _forward(sums.A, sums.b, lib, sums, folds, st.thresh, me)
-    # of terms the record cannot tell apart, the first of the library (not rounding's pick)
-    chosen = [next(j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])) for i in chosen]
+    # of terms the record cannot tell apart, the first of the library the catalog does not
+    # mostly span (not rounding's pick)
+    chosen = [_tie_pick(sums, lib, i, st.settings.discover_own_share_min) for i in chosen]
     if len(st.cinfo["speed"]) == 1:  # one cell (SDS): static, growth, step; no per-run terms
         chosen = best_at_place(sums, lib, chosen, st.thresh, me)
     incl = np.zeros(len(lib))
@@ -573,28 +576,6 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
         for i in set(got) | same:
             incl[i] += 1.0 / K
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
-
-
-def _same_span(sums: Sums, a: Term, b: Term) -> bool:
-    """Whether two terms at one line span the same columns once the catalog model is
-    projected out (e.g. one sensor's ``forward``, ``reverse``, ``direction`` and the one
-    reverse run's ``cell`` where the base holds the static order): the record cannot tell
-    them apart, so a repeat of the selection that takes either includes both (ties broken
-    by rounding would otherwise split the inclusion probability)."""
-    q = a.H.shape[1]
-    if a is b or a.line != b.line or b.H.shape[1] != q or a.beta is not None or b.beta is not None:
-        return a is b
-    sl = sums.slices[a.line]
-    At, Rt = sums.A.sum(0)[sl, sl], sums.raw.sum(0)[sl, sl]
-
-    def rank(H: np.ndarray) -> int:
-        # on the unit-diagonal form of the raw Gram (as _pinv: a direction that keeps less
-        # than 1e-6 of its raw norm after the catalog's projection is not there)
-        d = np.sqrt(np.maximum(np.diag(H.T @ Rt @ H), 1e-300))
-        ev = np.linalg.eigvalsh((H.T @ At @ H) / d[:, None] / d[None, :])
-        return int(np.sum(ev > 1e-6))
-
-    return rank(a.H) == q == rank(b.H) and rank(np.concatenate([a.H, b.H], 1)) == q
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:

@@ -193,3 +193,49 @@ def _heldout(
         beta = _psolve(At - Af[k], bt - bf[k], raw=Rt - Rf[k])
         out += float(2 * beta @ bf[k] - beta @ Af[k] @ beta)
     return out
+
+
+def _same_span(sums: Sums, a: Term, b: Term) -> bool:
+    """Whether two terms at one line span the same columns once the catalog model is
+    projected out (e.g. one sensor's ``forward``, ``reverse``, ``direction`` and the one
+    reverse run's ``cell`` where the base holds the static order): the record cannot tell
+    them apart, so a repeat of the selection that takes either includes both (ties broken
+    by rounding would otherwise split the inclusion probability)."""
+    q = a.H.shape[1]
+    if a is b or a.line != b.line or b.H.shape[1] != q or a.beta is not None or b.beta is not None:
+        return a is b
+    sl = sums.slices[a.line]
+    At, Rt = sums.A.sum(0)[sl, sl], sums.raw.sum(0)[sl, sl]
+
+    def rank(H: np.ndarray) -> int:
+        # on the unit-diagonal form of the raw Gram (as _pinv: a direction that keeps less
+        # than 1e-6 of its raw norm after the catalog's projection is not there)
+        d = np.sqrt(np.maximum(np.diag(H.T @ Rt @ H), 1e-300))
+        ev = np.linalg.eigvalsh((H.T @ At @ H) / d[:, None] / d[None, :])
+        return int(np.sum(ev > 1e-6))
+
+    return rank(a.H) == q == rank(b.H) and rank(np.concatenate([a.H, b.H], 1)) == q
+
+
+def _kept_share(sums: Sums, tm: Term) -> float:
+    """The share of a term's raw norm (its columns' whitened Gram, summed over the folds)
+    that the projection on the catalog model's Jacobian leaves it: 1 where the catalog spans
+    none of it, near 0 where a catalog effect holds the same structure (a disk order the base
+    holds: what is left is the part its fitted placements moved)."""
+    sl = sums.slices[tm.line]
+    raw = float(np.trace(tm.H.T @ sums.raw.sum(0)[sl, sl] @ tm.H))
+    return float(np.trace(tm.H.T @ sums.A.sum(0)[sl, sl] @ tm.H)) / raw if raw > 0 else 0.0
+
+
+def _tie_pick(sums: Sums, lib: Sequence[Term], i: int, own_min: float) -> int:
+    """Of the terms of the library with the same span as term ``i`` (:func:`_same_span`: the
+    record cannot tell them apart), the first of the library that keeps at least
+    ``own_min`` (``settings.discover_own_share_min``) of its raw norm after the catalog's
+    projection (:func:`_kept_share`), else the first. A term the catalog mostly spans is
+    the catalog's structure, and its remnant can coincide with another term's columns to
+    ``KEEP_SHARE`` of its raw norm: a disk order the base holds, moved by one head's
+    placement, left 5e-4 of its norm on that head, and as the first of the library it
+    replaced that head's own term (training seed 20261507, ``head_defect`` 5x: frame
+    ``disk`` for ``head 2``)."""
+    same = [j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])]
+    return next((j for j in same if _kept_share(sums, lib[j]) >= own_min), same[0])

@@ -531,12 +531,15 @@ class FinderSettings(AbstractSelectionSettings):
     sds_transient_share: float = eqx.field(default=0.5, static=True)
     """sds: a significant one-run deviation on one sensor that fits better than any step
     and holds over this share of the sensor's power is a transient (reported unexplained,
-    no smooth effect named). Was an inline 0.5 in ``_sds_noise._transient``; fc0e1ba."""
+    no smooth effect named). Was an inline 0.5 in ``_sds_noise._transient`` (in
+    ``_sds_transient`` since session 37); fc0e1ba."""
 
     sds_delay_shared_max: float = eqx.field(default=0.5, static=True)
     """sds: rule ``sensor_delay_step.plausible``: refused when another moving sensor carries
     over this share of the largest delay step (a pattern common to the moving sensors is not
-    one sensor's delay). Was an inline 0.5 in ``_sds_noise``; set by hand in 7492207."""
+    one sensor's delay). Was an inline 0.5 in ``_sds_noise``; set by hand in 7492207. Also
+    the share that makes a one-run deviation of the base run means common to the moving
+    sensors, hence no one sensor's transient (``_sds_noise._shared``, session 37)."""
 
     angle_step_size_tol: float = eqx.field(default=0.5, static=True)
     """Recurring steps at one angle are one step when their sizes are within this share of
@@ -598,6 +601,16 @@ class FinderSettings(AbstractSelectionSettings):
     selected again) only where its Jacobian spans at least this share of their fitted signal;
     below it the linear joint fit of the sums is the joint fit. Set by hand (issue 41, s16):
     refits that changed the model had shares 0.84-1, the others 1e-4-1e-3 (seeds 4105)."""
+
+    discover_own_share_min: float = eqx.field(default=0.01, static=True)
+    """Discovery: of library terms the record cannot tell apart (the same span once the
+    catalog model is projected out), one that keeps less than this share of its raw norm
+    after that projection is the catalog's structure (the catalog spans over 99 % of it) and
+    is not taken to stand for them while another keeps more (``_discover_law._tie_pick``;
+    the first of the library otherwise). Set by hand (session 37) in the gap between the
+    remnants of structure the base holds (a disk order moved by a head's placement 5e-4,
+    the static order of one sensor 2.4e-3) and terms of their own (0.08-0.75), on training
+    seeds 20261507 and 20261516."""
 
     discover_size_ratio_max: float = eqx.field(default=100.0, static=True)
     """Discovery: an exported candidate whose refit amplitude is more than this many times

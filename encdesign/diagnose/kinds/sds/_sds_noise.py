@@ -677,48 +677,6 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
     return None
 
 
-def transient_cells(ctx: Context) -> list[tuple[int, int, float, float]]:
-    """``(sensor, run index, chi-square, the sensor's chi-square)`` of each moving sensor
-    whose base run means a one-run transient dominates, the largest first: its largest
-    single-run deviation is significant (1 dof, Bonferroni over sensors × runs), fits better
-    than any step and holds over ``sds_transient_share`` of the sensor's power."""
-    ch = noise_info(ctx).run_change_power
-    if not ch:
-        return []
-    R = int(ctx.n_runs)
-    thr = _thr(ctx.settings.alpha, 1, 2 * len(ch) * max(R - 1, 1))
-    out = [
-        (m, int(jo), float(po), float(tot))
-        for m, (ps, _, po, jo, tot) in enumerate(ch)
-        if po > thr and po > ps and po > ctx.settings.sds_transient_share * tot
-    ]
-    return sorted(out, key=lambda c: -c[2])
-
-
-def _transient(ctx: Context) -> str | None:
-    """A one-run transient on one sensor dominates the base residual
-    (:func:`transient_cells`). A smooth effect fitted to such a record would take a part of
-    the transient; it is not named (a doubt; the candidate must also keep its gain beside
-    the transients' own offsets: ``Candidate.rivals``, a test)."""
-    cells = transient_cells(ctx)
-    if not cells:
-        return None
-    m, jo, po, tot = cells[0]
-    return (
-        f"the base residual is dominated by one run's deviation on m{m} (run index "
-        f"{jo}, chi-square {po:.0f} of the sensor's {tot:.0f}): a transient no "
-        "catalog effect makes, reported as unexplained"
-    )
-
-
-def _no_transient(fn=None):
-    def plausible(ctx: Context, params: dict) -> str | None:
-        return _transient(ctx) or (fn(ctx, params) if fn is not None else None)
-
-    plausible.__doc__ = (fn.__doc__ or "") + " Refused, too, when :func:`_transient` says so."
-    return plausible
-
-
 def _drift_plausible(ctx: Context, params: dict) -> str | None:
     """A drift in time is refused when an order of the platform angle (common to the
     moving sensors) fits the base residual's common structure better by BIC (ln of the

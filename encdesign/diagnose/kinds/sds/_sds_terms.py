@@ -25,13 +25,12 @@ from ._sds_noise import (
     _delay_gauge,
     _delay_plausible,
     _drift_plausible,
-    _no_transient,
     _saturating_columns,
     base_orders,
     coil_orders,
     noise_info,
-    transient_cells,
 )
+from ._sds_transient import _no_transient, transient_cells
 
 # ----------------------------------------------------------------------------- terms
 
