@@ -59,7 +59,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     + " (the square of the probe's norm; log N of at least two values)",
     ("engine/_discover.py", -2): SHAPE + " (the sentinel line index of the run constants)",
     ("engine/_discover.py", 1e-12): GUARD + " (log of a speed)",
-    ("engine/_discover.py", 1e-6): NUMERIC + " (rank of two terms' projected Gram: same span; "
+    ("engine/_discover_law.py", 1e-6): NUMERIC + " (rank of two terms' projected Gram: same span; "
     "a direction keeping less of its raw norm is dropped, as in _pinv)",
     ("engine/_views_modulated.py", 1e-9): NUMERIC + " (a singular 2x2 matrix)",
     ("engine/_views_modulated.py", 2): DOF + " (a squared trace)",
@@ -176,6 +176,7 @@ ALLOWED: dict[tuple[str, float], str] = {
     "takes 1 and 2)",
     ("kinds/quadrature/_quadrature.py", 8): COUNT + " (8 kept samples per radial order: the "
     "phase is sampled irregularly)",
+    ("kinds/sds/_sds_transient.py", 2): COUNT + " (another moving sensor to share a deviation)",
     ("kinds/sds/_sds_data.py", 2): COUNT + " (revolutions per run); two mark periods",
     ("kinds/sds/_sds_data.py", 4): COUNT + " (runs, marks)",
     ("kinds/sds/_sds_data.py", 16): COUNT + " (stamp differences)",
