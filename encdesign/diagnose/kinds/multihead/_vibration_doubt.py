@@ -126,12 +126,16 @@ def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, 
     """``(frequency, margin)``: the line's frequency refined on a grid of +-2 Rayleigh bins
     (the spectrum's peak of a record with excluded stretches, set to zero, can split in two
     and sit a bin off: a frequency fit started there does not find the line), then, where
-    the margin is measured, on finer grids about the best (:data:`REFINE_ROUNDS`, each a
-    tenth of the step before: a thousandth of a bin, a phase error of at most 0.003 rad over
-    the run; session 37: on a strong line the grid's own step, up to 0.16 rad of phase over
-    the run, cost the line more chi-square than the nearest integer order's mismatch did,
-    and a true vibration at apparent order 811.03 over 0.79 turn was refused as order 811,
-    training seed 6716 of ``benchmarks/short_arcs.py --set effects``), and at one
+    the margin is measured, the line's gain on finer grids about the best
+    (:data:`REFINE_ROUNDS`, each a tenth of the step before: a thousandth of a bin, a phase
+    error of at most 0.003 rad over the run; session 37: on a strong line the grid's own
+    step, up to 0.16 rad of phase over the run, cost the line more chi-square than the
+    nearest integer order's mismatch did, and a true vibration at apparent order 811.03
+    over 0.79 turn was refused as order 811, training seed 6716 of
+    ``benchmarks/short_arcs.py --set effects``; the frequency returned, the fit's start,
+    stays the first grid's: a start moved by the refinement flipped a one-speed sensor's
+    numerical tie between ``vibration`` and ``bearing_wobble``, the same model there, fresh
+    seed 6732 of ``--kinds sensor,quadrature`` record 9), and at one
     speed by how much (whitened chi-square less ``k ln N`` for its parameters) a line fixed
     in time at it beats rotation-locked errors at :func:`locked_orders` (the same phase in
     every run: ``cos m theta, sin m theta`` per channel). A line at a non-integer order
@@ -174,13 +178,14 @@ def locked_margin(ctx: Context, resid: np.ndarray, f_hz: float) -> tuple[float, 
     step = 0.1 / T  # the first grid's: 41 frequencies over +-2 bins
     first = grid(f_hz + np.linspace(-2.0, 2.0, 41) / T)
     best = max(first)
+    f_best = best[1]  # the fit's start (the fit refines it)
     if w is None or not orders:
-        return best[1], NO_DOUBT
+        return f_best, NO_DOUBT
     for _ in range(REFINE_ROUNDS):  # finer grids about the best, a tenth of the step each
         fine = grid(best[1] + np.linspace(-step, step, 21))
         best = max([best, *fine])
         step /= 10.0
-    g_vib, f_best = best
+    g_vib = best[0]  # the line's gain at its refined frequency
     k_vib = 2 * oh.shape[1] * rw.shape[1]
     own = g_vib - k_vib * math.log(N)
     # each alternative less k ln N for its own parameters; the line must beat every one:
