@@ -248,6 +248,8 @@ CONSTANTS: dict[tuple[str, str], str] = {
     ("kinds/multihead/_vibration_doubt.py", "NO_DOUBT"): GUARD
     + " (the margin reported where a vibration doubt rule does not apply: no one speed, no "
     "value lattice; it passes any margin setting)",
+    ("kinds/multihead/_vibration_doubt.py", "REFINE_ROUNDS"): NUMERIC
+    + " (the line frequency's finer grids in locked_margin)",
     ("kinds/multihead/_multihead_terms.py", "VIBRATION_PROBE_NYQUIST"): SEARCH
     + " (the frequency at which the vibration's detection bound is stated, reported with it)",
     ("kinds/multihead/_multihead_probes.py", "WOBBLE_PROBE_FRACTION"): SEARCH

@@ -117,3 +117,23 @@ def test_a_quantized_sensor_with_a_delay_gets_no_false_vibration(seed):
         named,
         [r["reason"] for r in d["rejected"] if r["name"] == "vibration"],
     )
+
+
+def test_a_strong_line_near_an_integer_order_on_one_pass_is_named():
+    """Training ``short_arcs.py --set effects --seed 6716`` record 0 (session 37): a true
+    ``vibration`` (4 heads, 5000 rows, one run over 0.79 turn, one speed, 14x the noise) at
+    apparent order 811.03. The rule against a rotation-locked order fitted the line on a grid
+    of a tenth of a Rayleigh bin, whose step on so strong a line (up to 0.16 rad of phase over
+    the run) cost it more chi-square than order 811's own mismatch: ``locked_margin`` -4135,
+    the vibration refused and the record ``unexplained`` (main f1eba4d). With the frequency
+    refined about the grid's best the line beats the order and is named."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from short_arcs import short_record
+
+    rec, desc = short_record(np.random.default_rng([6716, 44, 0]), "vibration")
+    d = diagnose(rec).doc
+    assert [e["name"] for e in d["effects"]] == ["vibration"], d["report"]
+    assert not any(r["name"] == "vibration" for r in d["rejected"]), d["rejected"]
