@@ -118,6 +118,21 @@ def _refused(doc: dict) -> list[dict]:
     return [r for r in doc["rejected"] if r["reason"].startswith(RULE_PREFIX)]
 
 
+def _vibration_refused_beside_ring_down(key: list[int]) -> tuple[dict, list, list]:
+    """A sensor ``fixed_hz`` 2x record of the discovery benchmark diagnosed: no effect named,
+    ``vibration`` the one refusal, every discovered term an ``hz`` ring-down. Returns the
+    truth, the refusals and the discovered terms."""
+    rec, truth = _bench(key, "fixed_hz", 2.0, "sensor")
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert [e["name"] for e in d.doc["effects"]] == [], d.doc["report"]
+    refused = _refused(d.doc)
+    assert [r["name"] for r in refused] == ["vibration"], d.doc["rejected"]
+    hz = [t for u in d.doc["unexplained"] for t in (u.get("model") or {}).get("terms", ())]
+    assert {(t["frame"], t["modulation"]) for t in hz} == {("hz", "ringdown")}, hz
+    return truth, refused, hz
+
+
 def test_a_vibration_beside_a_ring_down_located_a_bin_off_is_refused():
     """Training seed 20261494 (session 34's fresh set, session 36): a sensor ``fixed_hz``
     mode at 2x the noise (24.82 Hz, Q 52). Discovery located the ring-down at 24.66 Hz (its
@@ -125,15 +140,8 @@ def test_a_vibration_beside_a_ring_down_located_a_bin_off_is_refused():
     beside the ``ringing`` term at 24.66 Hz, past ``located_share_min`` (20 %). Main
     (6ae5e82) named it. With the term's frequency fitted in the re-test (24.82 Hz beside
     the effect) the vibration keeps 8 % (dBIC +12.8) and is refused in its place."""
-    rec, truth = _bench([20261494, 1, 3, 0, 0], "fixed_hz", 2.0, "sensor")
-    d = diagnose(rec)
-    validate_diagnosis(d.doc)
-    assert [e["name"] for e in d.doc["effects"]] == [], d.doc["report"]
-    refused = _refused(d.doc)
-    assert [r["name"] for r in refused] == ["vibration"], d.doc["rejected"]
+    truth, refused, hz = _vibration_refused_beside_ring_down([20261494, 1, 3, 0, 0])
     assert "in its place" in refused[0]["reason"], refused[0]["reason"]
-    hz = [t for u in d.doc["unexplained"] for t in (u.get("model") or {}).get("terms", ())]
-    assert {(t["frame"], t["modulation"]) for t in hz} == {("hz", "ringdown")}, hz
     assert all(abs(t["value"] - truth["line"][1]) < 0.5 for t in hz), hz
 
 
@@ -146,14 +154,7 @@ def test_a_vibration_beside_a_ring_down_fitted_as_a_decay_is_refused():
     the located one) the vibration keeps under 10 % of its gain beside it and the existing
     rule refuses it; the mode is discovered whole, its decay time within 2 standard errors
     of the truth's."""
-    rec, truth = _bench([8093, 1, 0, 0, 0], "fixed_hz", 2.0, "sensor")
-    d = diagnose(rec)
-    validate_diagnosis(d.doc)
-    assert [e["name"] for e in d.doc["effects"]] == [], d.doc["report"]
-    refused = _refused(d.doc)
-    assert [r["name"] for r in refused] == ["vibration"], d.doc["rejected"]
-    hz = [t for u in d.doc["unexplained"] for t in (u.get("model") or {}).get("terms", ())]
-    assert {(t["frame"], t["modulation"]) for t in hz} == {("hz", "ringdown")}, hz
+    truth, _, hz = _vibration_refused_beside_ring_down([8093, 1, 0, 0, 0])
     f0 = truth["line"][1]
     T0 = truth["q"] / (np.pi * f0)
     pr = hz[0]["params"]
