@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from pathlib import Path
 from typing import Any, ClassVar, final
 
 import jax.numpy as jnp
@@ -736,11 +738,9 @@ def quadrature_report_lines(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def quadrature_plots(d: Any, folder: Any) -> list:
+def quadrature_plots(d: Any, folder: str | os.PathLike) -> list[Path]:
     """Lissajous figure (kept and excluded samples, base ellipse) and the radial residual
     against the signal phase (base and final model), plus the order spectrum."""
-    from pathlib import Path
-
     from ....io._study import new_figure, save_figure
 
     pd = d.plot_data
