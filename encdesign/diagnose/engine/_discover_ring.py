@@ -112,31 +112,32 @@ def locate_ringdowns(
             out.append(None)
             continue
         frames = maps(ln)
-        rr: list[float] = []
-        best_fr: list[str] = []
 
-        def drop(u: float, f: float, frame: str | None, li=li, frames=frames, rr=rr, bf=best_fr):
+        def drop_at(u: float, f: float, frame: str | None, li=li, frames=frames):
+            """The ring-down's best chi-square drop over the frames (or in ``frame``) at
+            ``T = exp(u)`` and ``f`` Hz, that frame, and the residual's chi-square."""
             sums = sums_at(li, {"tau_s": math.exp(u), "f_hz": f})
-            rr.append(float(sums.rr.sum()))
             bl = sums.blocks.index("ringdown")
             At, bt, Rt = sums.A.sum(0), sums.b.sum(0), sums.raw.sum(0)
-            best = -np.inf
+            best, best_fr = -np.inf, ""
             for fr, M in frames.items():
                 if frame is not None and fr != frame:
                     continue
                 H = hmap(sums.layout[0], bl, M, np.eye(S))
                 g = _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
                 if g > best:
-                    best = g
-                    bf[:] = [fr]
-            return best
+                    best, best_fr = g, fr
+            return best, best_fr, float(sums.rr.sum())
+
+        def drop(u: float, f: float, frame: str | None, drop_at=drop_at) -> float:
+            return drop_at(u, f, frame)[0]
 
         grid = np.linspace(math.log(lo), math.log(hi), RING_GRID)
         f0 = float(ln.value)
-        vals = [drop(float(u), f0, None) for u in grid]
+        at_grid = [drop_at(float(u), f0, None) for u in grid]
+        vals = [a[0] for a in at_grid]
         i = int(np.argmax(vals))
-        drop(float(grid[i]), f0, None)
-        fr = best_fr[0]
+        fr, rr0 = at_grid[i][1], at_grid[0][2]
         u0 = _search(lambda u, fr=fr, f0=f0: drop(u, f0, fr), grid, XATOL_LOG_T, vals)
         fb = 1.0 / span if span > 0 else 0.0
         fg = f0 + fb * np.linspace(-1, 1, 9)
@@ -148,7 +149,7 @@ def locate_ringdowns(
         g0 = drop(u1, f1, fr)
         curv = -(drop(u1 + h, f1, fr) - 2 * g0 + drop(u1 - h, f1, fr)) / h**2
         tau = math.exp(u1)
-        infl = rr[0] / max(prep.n_values, 1.0)
+        infl = rr0 / max(prep.n_values, 1.0)
         se = tau * math.sqrt(2.0 / curv) * math.sqrt(max(infl, 1.0)) if curv > 0 else None
         out.append({"tau_s": tau, "tau_se_s": se, "f_hz": f1, "frame": fr})
     return out
