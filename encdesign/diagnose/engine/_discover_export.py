@@ -172,17 +172,17 @@ def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) 
             Param("frequency_hz", "Hz", "1", linear=False, scale=1e-3, description="frequency")
         )
     start = None
-    if spec["modulation"] == "speed":
+    s0 = nonlinear_start(spec)  # the exponent's and the decay time's discovered values
+    if "beta" in s0:
         params.append(
             Param("beta", "1", "1", linear=False, scale=0.1, description="speed exponent")
         )
-    if spec["modulation"] == "ringdown":
-        d0 = float(spec["params"]["decay_time_s"])
+    d0 = s0.get("decay_s")
+    if d0 is not None:
         params.append(
             Param("decay_s", "s", "1", linear=False, scale=0.1 * d0, description="decay time")
         )
-    if nonlinear_start(spec):
-        s0 = nonlinear_start(spec)
+    if s0:
 
         def start(ctx, resid, findings):  # noqa: ARG001 - the StartFn contract
             return [{k: jnp.asarray(v) for k, v in s0.items()}]
@@ -192,7 +192,6 @@ def discovered_candidate(spec: Mapping[str, Any], free_frequency: bool = False) 
         if "beta" in p and not (-bmax <= float(p["beta"]) <= bmax):
             return f"speed exponent {float(p['beta']):.2f} outside [-{bmax:g}, {bmax:g}]"
         ratio = ctx.settings.discover_size_ratio_max
-        d0 = nonlinear_start(spec).get("decay_s")
         if d0 is not None and not (d0 / ratio <= float(p["decay_s"]) <= d0 * ratio):
             return f"decay time {float(p['decay_s']):.3g} s far from the discovered {d0:.3g} s"
         amp = math.sqrt(
