@@ -131,6 +131,12 @@ class Context:
             engine-owned).
         noise_info: what the kind's noise hook found beside the levels
             (``NoiseEstimate.info``; engine-owned, ``None`` before the noise stage).
+        orders_left_out: the integer orders above the base's that the base residual's
+            ``orders`` view located where the base's order growth was tried and undone
+            (engine-owned; empty where no growth was undone). The growth is undone where the
+            grown base leaves much of what the views located (a step, say): those orders are
+            then still in the residual, and a line among them is tested against them (the
+            vibration's ``locked_margin``).
         data: the kind's own data of this record (the
             :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
             often the kind's subclass of it), read-only.
@@ -153,6 +159,7 @@ class Context:
     driver_name: str | None = None
     noise_info: Any = None
     data: Any = None
+    orders_left_out: tuple[int, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)

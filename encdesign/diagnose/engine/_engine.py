@@ -187,7 +187,7 @@ def _grow_to(
     ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered or past is not None else math.inf
     judged = (p0, veto, ho0, past)
     grown, refused = _grown_at(kind, prep, fitter, fit, (order, M, limit), judged, base_info)
-    lower = sorted({m for m in found if order < m < M})
+    lower, located = sorted({m for m in found if order < m < M}), sorted(set(found))
     if grown is None and refused and lowered and past is None and lower:
         # session 36: held-out error refused the highest located order; the located order
         # it favours (the same rule as the base order's choice), once
@@ -195,7 +195,9 @@ def _grow_to(
         if M2 is not None:
             grown, _ = _grown_at(kind, prep, fitter, fit, (order, M2, limit), judged, base_info)
             M, found = M2, [m for m in found if m <= M2]
-    if grown is None:
+    if grown is None:  # the orders the residual showed, left out (the vibration's doubt)
+        left = set(prep.ctx.orders_left_out) | set(located)
+        prep.ctx = dataclasses.replace(prep.ctx, orders_left_out=tuple(sorted(left)))
         return None
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
     return M, grown
