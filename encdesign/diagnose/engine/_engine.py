@@ -50,6 +50,8 @@ from ._base_order import (
     choose_base_order,
     choose_order_again,
     least_heldout_order,
+    order_beside_refused,
+    order_row,
     set_order,
     terms_at_order,
 )
@@ -612,6 +614,9 @@ def _refit_at(kind, prep: Prepared, fitter: Fitter, base_fit: FitResult, M: int,
     choice.update(chosen=int(M), lowered=M < choice["start"])
     choice["reason"] += "; " + choice["again"]["reason"]
     fit = checked_fit(kind, prep, fitter, fitter.fit(terms), base_info)
+    if M not in {r["order"] for r in choice["tried"]}:  # (order_beside_refused: not tried)
+        tried = [*choice["tried"], order_row(prep, M, fit)]
+        choice["tried"] = sorted(tried, key=lambda r: r["order"])
     _align(kind, prep, fitter, fit)
     _estimate_noise(kind, prep, fitter, fit)
     return M, fit
@@ -697,6 +702,10 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
         )
         nb = len(sel.base.terms)
         again = choose_order_again(kind, prep, fitter, sel.final, nb, order, base_info)
+        if again is None and grow:  # session 38: the same beside an effect held-out refused
+            again = order_beside_refused(
+                kind, prep, fitter, sel.heldout_refused, nb, order, base_info
+            )
     if again is not None:  # session 36: the held-out choice made again beside the effects
         with stage("base_fit"):
             order, base_fit = _refit_at(kind, prep, fitter, base_fit, again, base_info)
