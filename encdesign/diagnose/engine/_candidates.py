@@ -131,15 +131,15 @@ class Context:
             engine-owned).
         noise_info: what the kind's noise hook found beside the levels
             (``NoiseEstimate.info``; engine-owned, ``None`` before the noise stage).
+        data: the kind's own data of this record (the
+            :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
+            often the kind's subclass of it), read-only.
         orders_left_out: the integer orders above the base's that the base residual's
             ``orders`` view located where the base's order growth was tried and undone
             (engine-owned; empty where no growth was undone). The growth is undone where the
             grown base leaves much of what the views located (a step, say): those orders are
             then still in the residual, and a line among them is tested against them (the
             vibration's ``locked_margin``).
-        data: the kind's own data of this record (the
-            :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
-            often the kind's subclass of it), read-only.
     """
 
     kind: str
