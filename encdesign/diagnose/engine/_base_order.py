@@ -220,3 +220,62 @@ def least_heldout_order(
     if best is None:
         return None
     return best if ho0 - float(fits[best].heldout_chi2) >= prep.settings.heldout_min else None
+
+
+def order_beside_refused(
+    kind: Kind,
+    prep: Prepared,
+    fitter: Fitter,
+    refused: tuple[float, FitResult] | None,
+    n_base: int,
+    order: int,
+    base_info: dict,
+) -> int | None:
+    """The held-out choice of :func:`choose_base_order` made with an effect fitted beside
+    the base that the information criterion took and held-out error alone refused
+    (``refused``: :attr:`._select.Selection.heldout_refused`, its ``delta BIC`` and fit).
+
+    The base's own held-out RMS may stay under ``settings.base_order_ratio`` of its fitted
+    RMS while the base with the effect beside it does not: the effect's columns can leave
+    the base's orders for the folds to pin down (session 38: a direction offset on one
+    sensor against a reference over 0.76 turn forward and back, the forward pass shortened
+    by the start-up rows excluded, training seed 6723 of ``studies/conceal_benchmark.py
+    --kinds sensor,quadrature`` record 7: base 1.38, with the offset over 1.5, held-out
+    chi-square raised by 4351 at order 12, lowered at order 8). Where the model with the
+    effect exceeds the ratio, the base (the order not chosen by held-out error before, nor
+    past the default) is fitted at every order ``1 .. order`` with the effect's terms and
+    the effects named before it (``fit.terms[n_base:]``) beside it, in the same folds and
+    noise weights, and the order of least held-out chi-square is taken where it lowers the
+    held-out chi-square by ``settings.heldout_min`` (the rule of the first choice). Records
+    ``base_info["order_choice"]["again"]``; returns the lower order, else ``None``."""
+    choice = base_info.get("order_choice") or {}
+    if refused is None or choice.get("lowered") or order != choice.get("chosen") or order <= 1:
+        return None
+    if not heldout_decides_orders(prep):
+        return None
+    s, fit = prep.settings, refused[1]
+    rms = fit.rms(prep)
+    ratio = fit.heldout_rms(prep) / rms if rms > 0 else 1.0
+    if not (math.isfinite(ratio) and ratio > s.base_order_ratio):
+        return None
+    effects = list(fit.terms[n_base:])
+    fits = fits_at_orders(kind, prep, fitter, fit, range(1, order + 1), order, effects)
+    best = least_heldout(fits)
+    if best is None or best == order:
+        return None
+    gain = fits[order].heldout_chi2 - fits[best].heldout_chi2
+    if not gain >= s.heldout_min:
+        return None
+    names = ", ".join(t.cand.name for t in effects)
+    choice["again"] = {
+        "effects": [t.cand.name for t in effects],
+        "tried": [order_row(prep, M, f) for M, f in fits.items()],
+        "chosen": int(best),
+        "reason": (
+            f"with {names} fitted beside the base (refused by held-out error alone at order "
+            f"{order}: held-out RMS {ratio:.3g}x the fitted RMS, over "
+            f"FinderSettings.base_order_ratio = {s.base_order_ratio:g}), order {best} has the "
+            f"least held-out chi-square of orders 1-{order} ({gain:.1f} below order {order})"
+        ),
+    }
+    return int(best)

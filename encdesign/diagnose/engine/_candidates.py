@@ -134,6 +134,12 @@ class Context:
         data: the kind's own data of this record (the
             :class:`~encdesign.diagnose.engine._protocol.KindData` its ``data()`` built,
             often the kind's subclass of it), read-only.
+        orders_left_out: the integer orders above the base's that the base residual's
+            ``orders`` view located where the base's order growth was tried and undone
+            (engine-owned; empty where no growth was undone). The growth is undone where the
+            grown base leaves much of what the views located (a step, say): those orders are
+            then still in the residual, and a line among them is tested against them (the
+            vibration's ``locked_margin``).
     """
 
     kind: str
@@ -153,6 +159,7 @@ class Context:
     driver_name: str | None = None
     noise_info: Any = None
     data: Any = None
+    orders_left_out: tuple[int, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)

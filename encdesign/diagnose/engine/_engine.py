@@ -50,6 +50,8 @@ from ._base_order import (
     choose_base_order,
     choose_order_again,
     least_heldout_order,
+    order_beside_refused,
+    order_row,
     set_order,
     terms_at_order,
 )
@@ -187,7 +189,7 @@ def _grow_to(
     ho0 = fitter.fit(fit.terms).heldout_chi2 if lowered or past is not None else math.inf
     judged = (p0, veto, ho0, past)
     grown, refused = _grown_at(kind, prep, fitter, fit, (order, M, limit), judged, base_info)
-    lower = sorted({m for m in found if order < m < M})
+    lower, located = sorted({m for m in found if order < m < M}), sorted(set(found))
     if grown is None and refused and lowered and past is None and lower:
         # session 36: held-out error refused the highest located order; the located order
         # it favours (the same rule as the base order's choice), once
@@ -195,7 +197,9 @@ def _grow_to(
         if M2 is not None:
             grown, _ = _grown_at(kind, prep, fitter, fit, (order, M2, limit), judged, base_info)
             M, found = M2, [m for m in found if m <= M2]
-    if grown is None:
+    if grown is None:  # the orders the residual showed, left out (the vibration's doubt)
+        left = set(prep.ctx.orders_left_out) | set(located)
+        prep.ctx = dataclasses.replace(prep.ctx, orders_left_out=tuple(sorted(left)))
         return None
     base_info["grown_orders"] = sorted(set(base_info.get("grown_orders", [])) | set(found))
     return M, grown
@@ -610,6 +614,9 @@ def _refit_at(kind, prep: Prepared, fitter: Fitter, base_fit: FitResult, M: int,
     choice.update(chosen=int(M), lowered=M < choice["start"])
     choice["reason"] += "; " + choice["again"]["reason"]
     fit = checked_fit(kind, prep, fitter, fitter.fit(terms), base_info)
+    if M not in {r["order"] for r in choice["tried"]}:  # (order_beside_refused: not tried)
+        tried = [*choice["tried"], order_row(prep, M, fit)]
+        choice["tried"] = sorted(tried, key=lambda r: r["order"])
     _align(kind, prep, fitter, fit)
     _estimate_noise(kind, prep, fitter, fit)
     return M, fit
@@ -695,6 +702,10 @@ def _diagnose(kind, rec, reduced: dict, max_order, max_effects, extra_candidates
         )
         nb = len(sel.base.terms)
         again = choose_order_again(kind, prep, fitter, sel.final, nb, order, base_info)
+        if again is None and grow:  # session 38: the same beside an effect held-out refused
+            again = order_beside_refused(
+                kind, prep, fitter, sel.heldout_refused, nb, order, base_info
+            )
     if again is not None:  # session 36: the held-out choice made again beside the effects
         with stage("base_fit"):
             order, base_fit = _refit_at(kind, prep, fitter, base_fit, again, base_info)

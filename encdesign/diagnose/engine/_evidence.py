@@ -279,3 +279,20 @@ def alternatives_of(chosen: Chosen, trials: list[Trial]) -> list[dict]:
             }
         )
     return out
+
+
+def heldout_refused(prep: Prepared, trials, rejected, confounded, rnd: int, best):
+    """``best`` or this round's trial of least delta BIC, if lower, that the criterion took
+    (below ``-settings.bic_min``) and only held-out error refused (rule ``heldout_min``
+    alone: in this round's ``rejected``, or in a ``confounded`` pair): ``(delta BIC, fit)``."""
+    names = {
+        r["name"]
+        for r in rejected
+        if r.get("round") == rnd and r.get("rules", [r.get("rule")]) == ["heldout_min"]
+    }
+    names |= {n for c in confounded if c.get("rule") == "heldout_min" for n in c["pair"]}
+    for t in trials:
+        if t.cand.name in names and t.dbic < -prep.settings.bic_min:
+            if best is None or t.dbic < best[0]:
+                best = (float(t.dbic), t.fit)
+    return best

@@ -21,6 +21,7 @@ from ._evidence import (
     Trial,
     alternatives_of,
     find_dominant,
+    heldout_refused,
     only_doubts,
     partner_entry,
     refused_pair,
@@ -618,6 +619,7 @@ class Selection:
         confounded: pairs refused together that the record cannot separate (JSON entries).
         shares: each named effect's share of what all explain together.
         tried: names of the candidates tried.
+        heldout_refused: ``(delta BIC, fit)``, :func:`._evidence.heldout_refused`'s, or None.
     """
 
     base: FitResult
@@ -633,6 +635,7 @@ class Selection:
     confounded: list[dict]
     shares: dict[str, float]
     tried: list[str]
+    heldout_refused: tuple[float, FitResult] | None = None
 
 
 def select(
@@ -668,6 +671,7 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
     held_notes: dict[str, list[str]] = {}
     step_refusals: list[tuple[str, Any]] = []
     confounded: list[dict] = []
+    ho_refused: tuple[float, FitResult] | None = None
     for rnd in range(1, max_effects + 1):
         seen = {f.view for f in findings}
         gof = goodness_of_fit(prep, cur_resid, current.n_params)
@@ -730,6 +734,7 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
         )
         for r in rejected:  # the selection round that refused it (1-based; earlier: marked)
             r.setdefault("round", rnd)
+        ho_refused = heldout_refused(prep, trials, rejected, confounded, rnd, ho_refused)
         if chosen is None:
             break
         cand, fr, dbic, dho, col, notes, trms, erms, ties, doubt = chosen
@@ -791,4 +796,5 @@ def _select(prep, fitter, base_terms, candidates, views, scan_order, max_effects
         confounded=confounded,
         shares=shares,
         tried=sorted(tried_names),
+        heldout_refused=ho_refused,
     )

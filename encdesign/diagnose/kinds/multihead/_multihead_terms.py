@@ -24,6 +24,7 @@ from ._vibration_doubt import (
     NO_DOUBT,
     arc_orders,
     covered_turns,
+    left_out_orders,
     locked_margin,
     one_speed,
     order_res,
@@ -296,14 +297,16 @@ def _vb_plausible(ctx, v):
         # orders within the arc's resolution (issue 44)
         folded = catalog_orders_at(ctx, f, w, res * w / (2 * np.pi))
         near = abs(order - round(order)) < res and round(order) >= 1
-        arc = arc_orders(ctx, order)
+        left = left_out_orders(ctx, order)  # seen once: the orders the base left out
+        arc = sorted(set(arc_orders(ctx, order)) | set(left))
         wide = any(m != round(order) for m in arc)  # part of a turn: more than the nearest
         if (near or folded or wide) and margin < ctx.settings.locked_margin:
             m = folded[0] if folded else round(order)
             at = f" folded by the sampling (apparent order {order:.3f})" if folded else ""
             alt = f"order {m}"
             if wide and not folded:
-                alt = f"orders {arc[0]}-{arc[-1]} (part of a turn, {covered_turns(ctx):.2f})"
+                why = "; located in the base residual, left out of the base" if left else ""
+                alt = f"orders {arc[0]}-{arc[-1]} (part of a turn, {covered_turns(ctx):.2f}{why})"
             return (
                 f"at one speed a line at {f:.4g} Hz is shaft order {m if folded else order:.6g}"
                 f"{at}: a rotation-locked error at {alt} fits as well (chi-square margin "

@@ -84,11 +84,31 @@ def arc_orders(ctx: Context, order: float) -> list[int]:
     return [m for m in range(max(1, math.ceil(order - h)), math.floor(order + h) + 1)]
 
 
+def left_out_orders(ctx: Context, order: float) -> list[int]:
+    """On part of a turn seen once (where :func:`arc_orders` is silent): the integer orders
+    within the arc's main lobe (``1 / c`` orders for an arc of ``c`` turns) of a line at
+    apparent ``order`` that the base residual showed as integer orders and the base's growth
+    left out (``Context.orders_left_out``, above the base's order now). Seen once, a line
+    and the orders of its lobe are the same samples; where the record itself showed those
+    orders missing from the base (the growth undone because other structure, a step of the
+    disk on its hub say, dominated what the views located: session 38, training seeds 6707
+    and 6729 of ``benchmarks/short_arcs.py --set effects``, record 1, an eccentricity shift
+    read as a vibration among disk orders 13-16 the base left out), the line is not its own
+    unless it beats them."""
+    c = covered_turns(ctx)
+    left = [m for m in ctx.orders_left_out if m > int(ctx.max_order)]
+    if not left or not 0 < c < 1 or arc_orders(ctx, order):
+        return []
+    return [m for m in left if abs(m - order) <= 1.0 / c]
+
+
 def locked_orders(ctx: Context, order: float) -> list[int]:
     """The rotation-locked orders a line at apparent ``order`` (one speed) is tested against:
-    the nearest integer (``>= 1``) and, on part of a turn, :func:`arc_orders`."""
+    the nearest integer (``>= 1``) and, on part of a turn, :func:`arc_orders` (or, seen
+    once, :func:`left_out_orders`)."""
     m = round(order)
-    return sorted(({m} if m >= 1 else set()) | set(arc_orders(ctx, order)))
+    arc = set(arc_orders(ctx, order)) | set(left_out_orders(ctx, order))
+    return sorted(({m} if m >= 1 else set()) | arc)
 
 
 def _whitened(ctx: Context, resid: np.ndarray) -> np.ndarray:
