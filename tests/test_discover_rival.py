@@ -232,3 +232,30 @@ def test_discovery_off_leaves_the_catalog_selection(tmp_path):
     doc = json.loads(out.read_text())
     assert doc["settings"]["discover"] == 0
     assert [e["name"] for e in doc["effects"]] == [e["name"] for e in d.doc["effects"]]
+
+
+def test_a_doubted_catalog_name_beside_a_discovered_term_of_equal_size_is_refused():
+    """Training seed 8160 (session 38): a 20x step of moving sensor m0 at platform order 7.
+    Main (d5b4fb1) named ``beam_tilt_axial`` with its own plausibility doubt (the common
+    structure peaks at order 7, not at the beam-tilt orders), named for its lead over every
+    other catalog candidate. Beside the discovered step it kept 1 % of its gain, and the step
+    kept a held-out gain beside it (1,622) within 0.2 % of the effect's whole (1,624): the
+    size test alone cannot decide, the doubt does. The step's frame stays that sensor's."""
+    rec, truth = outside_record(
+        np.random.default_rng([8160, 0, 1, 0, 0]), "sensor_step", 20.0, "sds"
+    )
+    assert (truth["frame"], truth["modulation"]) == ("sensor m0", "step")
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert d.verdict == "unexplained", d.doc["report"]
+    assert d.doc["effects"] == [], [e["name"] for e in d.doc["effects"]]
+    refused = {r["name"]: r for r in d.doc["rejected"] if r["reason"].startswith(RULE_PREFIX)}
+    assert "beam_tilt_axial" in refused, d.doc["rejected"]
+    assert "plausibility doubt" in refused["beam_tilt_axial"]["reason"]
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        for t in (u.get("model") or {}).get("terms", ())
+        if t["line_kind"] == "order" and t["value"] == truth["line"][1]
+    ]
+    assert terms and (terms[0]["frame"], terms[0]["modulation"]) == ("sensor m0", "step")
