@@ -562,13 +562,12 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     # of terms the record cannot tell apart, the first of the library the catalog does not
     # mostly span (not rounding's pick)
     chosen = [_tie_pick(sums, lib, i, st.settings.discover_own_share_min) for i in chosen]
-    chosen = [lower_alias(st, i) for i in chosen]
     if len(st.cinfo["speed"]) == 1:  # one cell (SDS): static, growth, step; no per-run terms
         chosen = best_at_place(sums, lib, chosen, st.thresh, me)
     incl = np.zeros(len(lib))
     for k in folds:
         rest = [f for f in folds if f != k]
-        got = [lower_alias(st, j) for j in _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me)]
+        got = _forward(sums.A, sums.b, lib, sums, rest, st.thresh, me)
         same = {
             i
             for i in chosen
@@ -577,44 +576,6 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
         for i in set(got) | same:
             incl[i] += 1.0 / K
     return [i for i in chosen if incl[i] >= st.settings.discover_inclusion_min], incl
-
-
-def lower_alias(st: State, i: int) -> int:
-    """Of the terms at a lower order in the frame and modulation of term ``i`` (an integer
-    order) that the record cannot tell apart from it, the lowest; else ``i``. Two terms are
-    not told apart where each passes its multiple-testing threshold alone and neither
-    gains past its threshold beside the other (in-sample, all folds): on a few platform
-    positions (an SDS record) two orders can be near-aliases, and the forward selection
-    then picks the higher by the noise. The lower order is the simpler reading of the same
-    columns (the rule of :func:`._discover_lines.alias_neighbours`, which brings the lower
-    aliases of a located order as lines; session 38: where both are located, training seed
-    20261520's SDS ``platform_step`` 2x at order 5 was read ``order 26, platform, static``:
-    gains 41.9 and 42.3 alone, 3.2 and 3.6 beside each other, thresholds 18.0)."""
-    sums, lib, lines = st.sums, st.lib, st.lines
-    a = lib[i]
-    la = lines[a.line]
-    if la.kind != "order" or la.value <= 0 or a.beta is not None:
-        return i
-    At, bt, Rt = sums.A.sum(0), sums.b.sum(0), sums.raw.sum(0)
-
-    def gain(terms: list[Term]) -> float:
-        H = _embed(sums, terms)
-        return _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
-
-    g_a = gain([a])
-    best, best_v = i, la.value
-    for j, b in enumerate(lib):
-        lb = lines[b.line]
-        if not (
-            lb.kind == "order"
-            and 0 < lb.value < best_v
-            and (b.frame, b.modulation) == (a.frame, a.modulation)
-        ):
-            continue
-        g_b, g_ab = gain([b]), gain([a, b])
-        if g_b > st.thresh[j] and g_ab - g_a <= st.thresh[j] and g_ab - g_b <= st.thresh[i]:
-            best, best_v = j, lb.value
-    return best
 
 
 def _gains(st: State, kept: list[int]) -> dict[str, dict]:
