@@ -538,3 +538,44 @@ def test_a_defect_of_one_head_at_a_disk_order_the_base_holds_is_read_on_that_hea
     d = diagnose(rec).doc
     mine = [t for t in _terms(d) if t["value"] == 9]
     assert mine and {t["frame"] for t in mine} == {"head 2"}, d["report"]
+
+
+def _alias_state(seed: int, high: int, amp: float):
+    """Discovery's state (:class:`encdesign.diagnose.engine._discover.State`) of a run-mean
+    order 5 of amplitude ``amp`` (whitened) on 24 golden-angle platform positions (the SDS
+    bench's), with unit white noise, and two located lines, orders 5 and ``high``, each with
+    its ``static`` term (threshold 18, the SDS records' order), five folds."""
+    from encdesign.diagnose.engine import _discover as D
+    from encdesign.diagnose.engine._discover_law import Sums, Term
+    from encdesign.diagnose.engine._discover_lines import Line
+
+    rng = np.random.default_rng(seed)
+    phi = np.arange(24) * 2 * np.pi * (1 - 2 / (1 + 5**0.5))
+    X = np.concatenate([np.c_[np.cos(m * phi), np.sin(m * phi)] for m in (5, high)], 1)
+    y = amp * np.cos(5 * phi + rng.uniform(0, 2 * np.pi)) + rng.normal(size=24)
+    fold = np.arange(24) % 5
+    A = np.stack([X[fold == k].T @ X[fold == k] for k in range(5)])
+    b = np.stack([X[fold == k].T @ y[fold == k] for k in range(5)])
+    rr = np.array([y[fold == k] @ y[fold == k] for k in range(5)])
+    sums = Sums(A, b, rr, A.copy(), [slice(0, 2), slice(2, 4)], [(1, 1, 1, 2)] * 2, ["static"], {})
+    lib = [Term(0, "platform", "static", np.eye(2)), Term(1, "platform", "static", np.eye(2))]
+    cinfo = {"speed": np.ones(1), "run": np.zeros(1, int), "direction": np.ones(1, int)}
+    lines = [Line("order", 5.0), Line("order", float(high))]
+    return D, D.State(lines, [0, 1], cinfo, sums, lib, np.full(2, 18.0), 1.0, 0, FinderSettings())
+
+
+def test_a_located_line_whose_structure_a_near_alias_takes_says_so():
+    """Session 38: on 24 golden-angle positions orders 5 and 29 share 0.7 of their columns
+    (squared canonical correlations); with this noise draw the forward selection keeps the
+    order 29 term by the noise, and the order 5 term, past its threshold alone, gains less
+    than it beside it. Main (d5b4fb1) said no term passes at order 5 (training seed
+    20261520's SDS ``platform_step`` 2x, its order 5 taken by order 26); the reason now
+    says that its best term passes alone and that the term at the other line takes it.
+    Which of the two the record holds it cannot tell (no pick is claimed)."""
+    D, st = _alias_state(14, 29, 2.2)
+    kept, _ = D.select_terms(st)
+    assert kept == [1], kept
+    reason = D._model_json(st, kept, [{}], 0, {})["reason"]
+    assert "passes its threshold alone" in reason, reason
+    assert "beside the terms kept at order 29" in reason, reason
+    assert "beside" not in D._model_json(st, [], [], 0, {})["reason"]

@@ -208,6 +208,27 @@ def test_a_true_vibration_in_the_place_of_a_discovered_order_keeps_its_name():
     assert _law(d.doc, truth["line"][1])["frame"] == "shaft"
 
 
+def test_a_vibration_at_an_order_in_runs_the_discovered_term_leaves_is_refused():
+    """Training seed 20261519 (session 37's fresh set, session 38): a sensor
+    ``direction_lag`` 20x, order 13 with opposite signs in the two directions, each at two
+    speeds. The catalog's ``vibration`` at 23.36 Hz (order 13 of the two faster runs) took
+    those runs; beside it and the base's static order, discovery's ``direction``,
+    ``forward``, ``reverse``, ``cell 0`` and ``cell 1`` had equal gains, and rounding kept
+    ``cell 1``, which covers none of the vibration's runs, so main (d5b4fb1) named
+    ``vibration`` beside it. Tested beside the model discovered without it (the order's
+    ``direction`` over the four runs), the vibration keeps none of its gain and is refused;
+    the order is discovered whole, in the truth's frame and modulation."""
+    rec, truth = _bench([20261519, 1, 6, 2, 0], "direction_lag", 20.0, "sensor")
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert [e["name"] for e in d.doc["effects"]] == [], d.doc["report"]
+    refused = _refused(d.doc)
+    assert [r["name"] for r in refused] == ["vibration"], d.doc["rejected"]
+    assert "discovered without it" in refused[0]["reason"], refused[0]["reason"]
+    t = _law(d.doc, truth["line"][1])
+    assert (t["frame"], t["modulation"], t["runs"]) == ("shaft", "direction", [0, 1, 2, 3]), t
+
+
 def test_discovery_off_leaves_the_catalog_selection(tmp_path):
     """``FinderSettings.discover`` = 0 (``encdesign diagnose --no-discover``, session 37):
     the catalog's selection alone. On the record above the catalog's ``beam_tilt_axial``

@@ -73,6 +73,7 @@ from ._discover_law import (
     _scatter_se,
     _sibling,
     _tie_pick,
+    taken_by,
 )
 from ._discover_level import level_thresholds
 from ._discover_lines import (
@@ -718,7 +719,7 @@ def _model_json(st: State, kept: list[int], terms_json: list[dict], fi: int, nea
         return _none(
             f"no term of the library ({N} terms: frames x modulations) passes the "
             f"multiple-testing threshold with a positive held-out gain at "
-            f"{st.lines[li].label()}",
+            f"{st.lines[li].label()}" + taken_by(st.sums, st.lib, st.lines, st.thresh, kept, li),
             library_size=N,
         )
     K = st.sums.A.shape[0]

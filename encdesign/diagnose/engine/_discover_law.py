@@ -12,6 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import optimize
 
+from ._discover_lines import Line
+
 
 @dataclasses.dataclass
 class Term:
@@ -239,3 +241,47 @@ def _tie_pick(sums: Sums, lib: Sequence[Term], i: int, own_min: float) -> int:
     ``disk`` for ``head 2``)."""
     same = [j for j in range(len(lib)) if _same_span(sums, lib[i], lib[j])]
     return next((j for j in same if _kept_share(sums, lib[j]) >= own_min), same[0])
+
+
+def taken_by(
+    sums: Sums,
+    lib: Sequence[Term],
+    lines: Sequence[Line],
+    thresh: np.ndarray,
+    kept: list[int],
+    li: int,
+) -> str:
+    """Words for a located line ``li`` at which no term is kept although its best term
+    (largest in-sample gain past its threshold ``thresh``) passes its multiple-testing
+    threshold alone: where beside the terms kept (``kept``, at other lines) it gains no more
+    than its threshold, those terms take its structure, and the record cannot tell the two
+    apart; empty otherwise. On an SDS record's few platform positions two orders can be
+    near-aliases, and the noise picks one (session 38: training seed 20261520's
+    ``platform_step`` 2x at order 5 and order 26, gains 41.9 and 42.3 alone, 3.2 and 3.6
+    beside each other, thresholds 18.0; a rule reading the lower order read training seed
+    7572's order 7 as order 1, so the record's words say which lines tie, and no pick is
+    claimed)."""
+    own = [i for i, tm in enumerate(lib) if tm.line == li]
+    if not kept or not own:
+        return ""
+    At, bt, Rt = sums.A.sum(0), sums.b.sum(0), sums.raw.sum(0)
+
+    def gain(terms: list[Term]) -> float:
+        H = _embed(sums, terms)
+        return _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+
+    alone = {i: gain([lib[i]]) for i in own}
+    i = max(own, key=lambda j: alone[j] - thresh[j])
+    if alone[i] <= thresh[i]:
+        return ""
+    ks = [lib[j] for j in kept]
+    beside = gain([*ks, lib[i]]) - gain(ks)
+    if beside > thresh[i]:
+        return ""
+    where = ", ".join(sorted({lines[t.line].label() for t in ks}))
+    return (
+        f"; its best term ({lib[i].frame} / {lib[i].modulation}) passes its threshold alone "
+        f"(chi-square {alone[i]:.1f} against {float(thresh[i]):.1f}) but gains "
+        f"{max(beside, 0.0):.1f} beside the terms kept at {where}: they take its structure, "
+        "and the record cannot tell the lines apart"
+    )

@@ -173,10 +173,12 @@ def _test(
     disc: list,
     specs: list[dict],
     doubted: bool = False,
+    how: str = "",
 ):
     """``(kept share, [(rule, reason), ...])`` of the named effect ``name`` beside the
     discovered terms ``disc``; no rule: it keeps its name. ``doubted``: the selection named
-    it despite its own plausibility doubt (:func:`_holder`)."""
+    it despite its own plausibility doubt (:func:`_holder`). ``how``: words after the terms'
+    names in the reason (how the model was discovered)."""
     s = prep.settings
     idx = next(i for i, t in enumerate(final_terms) if t.cand.name == name)
     base = [t for i, t in enumerate(final_terms) if i != idx]
@@ -197,7 +199,7 @@ def _test(
     dbic = _dbic(prep, g1, k)
     dho = fo.heldout_chi2 - f2.heldout_chi2
     kept = g1 / g0
-    what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}):"
+    what = f"{RULE_PREFIX} ({', '.join(candidate_name(t) for t in specs[:4])}){how}:"
     rules = gain_rules(s, dbic, dho)
     if kept < s.located_share_min:
         rules.append(
@@ -354,6 +356,90 @@ def _without(
     )
 
 
+def _uncovered(prep, sel: Selection, specs: list[dict]) -> list[str]:
+    """The named effects at a fixed frequency (a fitted ``frequency_hz``, the catalog's
+    ``vibration``) in the place of a discovered shaft order in a run its term does not cover:
+    ``m`` x that run's revolutions per second within ``peak_match_bins`` of the run's
+    frequency bin of the effect's frequency (the views' rule of one line, as
+    :func:`_place`), where ``m`` is the order of a discovered line (not an offset)."""
+    lines = _run_lines(prep)
+    width = prep.settings.peak_match_bins
+    out = []
+    for t in sel.final.terms:
+        if t.cand.name not in {s.name for s in sel.accepted} or "frequency_hz" not in t.values:
+            continue
+        f = float(np.asarray(t.values["frequency_hz"]))
+        for sp in specs:
+            m = float(sp["value"])
+            if sp["line_kind"] == "hz" or m == 0.0:
+                continue
+            if any(
+                r not in sp["runs"] and abs(m * frev - f) <= width * b
+                for r, (frev, b) in lines.items()
+            ):
+                out.append(t.cand.name)
+                break
+    return out
+
+
+def _without_rival(
+    prep,
+    fitter: Fitter,
+    sel: Selection,
+    specs: list[dict],
+    rediscover: Callable[[Selection], list[dict | None]],
+    views: tuple[str, ...],
+    scan: int,
+) -> tuple[Selection, list[dict | None]] | None:
+    """Session 38: a named effect at a fixed frequency tested beside the model discovery
+    builds without it (:func:`_uncovered` names the ones to test).
+
+    Within one steady run a shaft order ``m`` is a line at one frequency, ``m`` x the run's
+    revolutions per second, which the catalog's ``vibration`` (each run its own amplitude
+    and phase) fits exactly: named first, it takes that run's part of an order line (or,
+    where two runs share a speed, both runs' parts), and discovery, fitted beside it, models
+    what is left. The model it then keeps is shaped by the effect's take: where the base
+    holds the static order, the runs left can be one run's remnant, so that of the terms the
+    record then cannot tell apart (``direction``, ``forward``, ``reverse``, ``cell <i>``, at
+    equal gain) rounding picks one that covers none of the effect's runs (training seeds
+    20261519 sensor ``direction_lag`` 20x, read ``cell 1`` beside a ``vibration`` at order 13
+    of the two faster runs; 20261514 sensor ``intermittent`` 20x, read ``cell 1`` beside a
+    ``vibration`` at order 9 of the slowest run). Such a term takes nothing of the effect,
+    and the test beside it (:func:`_test`) keeps the name.
+
+    The rival of the effect is then the model discovery builds on the record without it:
+    the catalog model refitted without the effect, discovery run again on its residual, and
+    the effect tested beside its shaft-order terms (a fixed-frequency line discovered there
+    is the effect's own structure: a true steady ``vibration``, fitted again as an ``hz``
+    line, is no rival of itself) by the same rules (:func:`_test`: the catalog's
+    gain rules and ``located_share_min``, and a discovered term holding the larger structure
+    or in its place). A true fixed-frequency line in runs at other speeds is at other orders
+    there, which no order term fits, so it keeps its gain beside them; a line the
+    rediscovered order term fits in the effect's runs leaves it a remnant. ``(selection,
+    models)`` with the first effect that fails refused, else ``None``."""
+    worst = None
+    for name in _uncovered(prep, sel, specs):
+        alt = _without(prep, fitter, sel, name, {}, views, scan)
+        models = rediscover(alt)
+        # its rivals are the shaft orders discovered without it: a fixed-frequency line
+        # discovered there is the effect's own structure, which it keeps (discovery never
+        # takes a catalog effect's structure)
+        specs2 = [sp for sp in _specs(models) if sp["line_kind"] != "hz" and sp["value"] != 0]
+        if not specs2:
+            continue
+        disc = _terms(prep, specs2)
+        how = ", discovered without it"
+        doubted = any(a.doubt is not None for a in sel.accepted if a.name == name)
+        kept, rules = _test(prep, fitter, list(sel.final.terms), name, disc, specs2, doubted, how)
+        if rules and kept is not None and (worst is None or kept < worst[0]):
+            worst = (kept, name, rules, alt, models)
+    if worst is None:
+        return None
+    _, name, rules, alt, models = worst
+    entry = _refusal(name, [(r, why) for r, why, _ in rules], rules[0][2])
+    return dataclasses.replace(alt, rejected=[*sel.rejected, entry]), models
+
+
 def rival_names(
     prep,
     fitter: Fitter,
@@ -379,7 +465,11 @@ def rival_names(
             if rules and kept is not None and (worst is None or kept < worst[0]):
                 worst = (kept, s.name, rules)
         if worst is None:
-            break
+            alt = _without_rival(prep, fitter, sel, specs, rediscover, views, scan)
+            if alt is None:
+                break
+            sel, models = alt
+            continue
         _, name, rules = worst
         entry = _refusal(name, [(r, why) for r, why, _ in rules], rules[0][2])
         sel = _without(prep, fitter, sel, name, entry, views, scan)
