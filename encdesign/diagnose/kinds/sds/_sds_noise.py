@@ -363,6 +363,7 @@ def _level_sigma(
     state: dict | None = None,
     share: bool = False,
     direct: bool = False,
+    component: bool = False,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -475,8 +476,9 @@ def _level_sigma(
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
         sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
-        common = (resid[:, :M], common_base) if direct and common_base is not None else None
-        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common)
+        both = direct or component
+        common = (resid[:, :M], common_base) if both and common_base is not None else None
+        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
     if info is not None:
         info.update(
             run_means_rad=s_raw,
@@ -536,6 +538,7 @@ def run_mean_levels(
             state=state,
             share=settings.sds_level_common_share > 0,
             direct=settings.sds_level_common_direct > 0,
+            component=settings.sds_level_per_component > 0,
         )
 
     return levels
