@@ -393,7 +393,8 @@ def _level_sigma(
     fixed sensors' timing noise enters every pair alike) and for the differences; the larger
     per-value level is used (the engine weighs channels as independent: this keeps its tests
     conservative for common and differential patterns alike). ``state`` (a dict) receives
-    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`)."""
+    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`;
+    ``direct`` / ``component``: sessions 28 / 38, :mod:`._sds_level_component`)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
@@ -476,8 +477,8 @@ def _level_sigma(
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
         sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
-        both = direct or component
-        common = (resid[:, :M], common_base) if both and common_base is not None else None
+        both = (direct or component) and common_base is not None
+        common = (resid[:, :M], common_base) if both else None
         state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
     if info is not None:
         info.update(
