@@ -117,6 +117,19 @@ class FinderSettings(AbstractSelectionSettings):
     name not in their truth: the common component also holds common structure the test's
     columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
 
+    sds_level_per_component: int = eqx.field(default=1, static=True)
+    """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
+    without a test's columns per component, the moving sensors' common component at its own
+    unbiased level (session 28's, without the test's common part) and the differences at
+    theirs, mixed at the columns' share and widened for the mix's Welch-Satterthwaite degrees
+    of freedom, taken only where it is below session 27's level (:mod:`._sds_level_component`,
+    issue 41 session 38): common structure the test's columns do not span never raises a
+    test's level above session 27's, which was session 28's failure. A switch, no unit. On
+    since s38-sds38: measured (fresh, against main d5b4fb1) SDS discovery frame right 25/30 ->
+    26/30 (20261526-27, the rest case for case equal), clean SDS 50/50 ``consistent`` with no
+    term on both (20261528), the SDS catalog sets 6750 and 6751 every row equal; training
+    20261518 and 20261520 26/30 against 24/30."""
+
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
     take change points and single-value outliers out of the run-mean noise level

@@ -12,6 +12,7 @@ MAY_BE_ZERO = (
     "vibration_staircase_harmonics",
     "sds_level_common_share",
     "sds_level_common_direct",
+    "sds_level_per_component",
 )
 """Counts where 0 turns a search off, and switches (checked as integers >= 0)."""
 

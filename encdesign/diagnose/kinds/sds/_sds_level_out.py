@@ -42,7 +42,9 @@ common patterns, a factor ``g`` no longer charged in full to a one-sensor test (
 0.5-1.5 times the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its
 false-alarm rate at its share of a common excess 3 ``s^2``, and was 20 times below it with
 the full factor). The level the record is whitened with keeps the full factor (``kappa =
-1``).
+1``). Since session 38 (``FinderSettings.sds_level_per_component``, on) a test's common
+part is read at the common component's own level where that is below session 27's
+(:mod:`._sds_level_component`).
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ._sds_level_common import CommonPart
+from ._sds_level_component import ComponentLevel
 
 
 class RunMeanLevel:
@@ -112,7 +115,10 @@ class LevelOut:
     residual's run means (R, M) and the base's common columns (R, k), whose common component
     (:class:`._sds_level_common.CommonPart`) at its own unbiased
     level then replaces the common factor in a test's level where it has degrees of freedom
-    left (``FinderSettings.sds_level_common_direct``, session 28)."""
+    left (``FinderSettings.sds_level_common_direct``, session 28). ``component`` (with
+    ``common``): that level taken only where it is below session 27's
+    (:class:`._sds_level_component.ComponentLevel`,
+    ``FinderSettings.sds_level_per_component``, session 38)."""
 
     def __init__(
         self,
@@ -124,11 +130,13 @@ class LevelOut:
         M,
         share: bool = False,
         common: tuple[np.ndarray, np.ndarray] | None = None,
+        component: bool = False,
     ):
         self.e, self.Q, self.sigma_of, self.proj, self.M = e, Q, sigma_of, bool(proj), int(M)
         self._share = bool(share)
         direct = self._share and not self.proj and isinstance(sigma_of, RunMeanLevel)
-        self.common = CommonPart(*common) if direct and common is not None else None
+        part = ComponentLevel if component else CommonPart
+        self.common = part(*common) if direct and common is not None else None
         self.ssr = float(e @ e)
         self.nu = int(n_ind - Q.shape[1])
         ok = self.nu > 0 and self.ssr > 0
@@ -174,8 +182,11 @@ class LevelOut:
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k), float)
                 if self.common is not None and gc is not None:  # (set only on a RunMeanLevel)
                     pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
-                    own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
-                    sig = np.where(np.isfinite(own), own, sig)
+                    if isinstance(self.common, ComponentLevel):
+                        sig = self.common.capped(self.sigma_of.widening, s2, n, k, pc, rc, sig)
+                    else:
+                        own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
+                        sig = np.where(np.isfinite(own), own, sig)
             else:
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
             out.flat[idx] = (self.sigma / sig) ** 2

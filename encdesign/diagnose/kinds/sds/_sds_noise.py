@@ -363,6 +363,7 @@ def _level_sigma(
     state: dict | None = None,
     share: bool = False,
     direct: bool = False,
+    component: bool = False,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -392,7 +393,8 @@ def _level_sigma(
     fixed sensors' timing noise enters every pair alike) and for the differences; the larger
     per-value level is used (the engine weighs channels as independent: this keeps its tests
     conservative for common and differential patterns alike). ``state`` (a dict) receives
-    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`)."""
+    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`;
+    ``direct`` / ``component``: sessions 28 / 38, :mod:`._sds_level_component`)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
@@ -475,8 +477,9 @@ def _level_sigma(
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
         sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
-        common = (resid[:, :M], common_base) if direct and common_base is not None else None
-        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common)
+        both = (direct or component) and common_base is not None
+        common = (resid[:, :M], common_base) if both else None
+        state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
     if info is not None:
         info.update(
             run_means_rad=s_raw,
@@ -536,6 +539,7 @@ def run_mean_levels(
             state=state,
             share=settings.sds_level_common_share > 0,
             direct=settings.sds_level_common_direct > 0,
+            component=settings.sds_level_per_component > 0,
         )
 
     return levels
