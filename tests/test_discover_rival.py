@@ -280,3 +280,40 @@ def test_a_doubted_catalog_name_beside_a_discovered_term_of_equal_size_is_refuse
         if t["line_kind"] == "order" and t["value"] == truth["line"][1]
     ]
     assert terms and (terms[0]["frame"], terms[0]["modulation"]) == ("sensor m0", "step")
+
+
+def _beside(seed: list[int], cls: str, kind: str, frame: str, modulation: str) -> None:
+    """The record of ``seed`` (its class ``cls`` at 20x): the catalog names the selection
+    gave beside the discovered term are refused beside it, and the term keeps its frame."""
+    rec, truth = outside_record(np.random.default_rng(seed), cls, 20.0, kind, 3000)
+    assert (truth["frame"], truth["modulation"]) == (frame, modulation)
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert d.doc["effects"] == [], [e["name"] for e in d.doc["effects"]]
+    assert any(r["reason"].startswith(RULE_PREFIX) for r in d.doc["rejected"])
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        for t in (u.get("model") or {}).get("terms", ())
+        if t["line_kind"] == "order" and t["value"] == truth["line"][1]
+    ]
+    assert terms and (terms[0]["frame"], terms[0]["modulation"]) == (frame, modulation)
+
+
+def test_a_catalog_name_keeping_no_heldout_gain_beside_a_discovered_step_is_refused():
+    """Training seed 20261523 (session 38): a 20x step at platform order 7 of an SDS record.
+    Main (fcaf394) named ``beam_tilt_axial`` (not doubted): beside the discovered platform
+    step it kept 0.05 % of its gain and no held-out gain (-0.7), while the step kept a
+    held-out gain of 2,522 beside it, past the gain rules, against the effect's whole 8,520:
+    the size test alone kept the name of an effect the step predicts entirely."""
+    _beside([20261523, 0, 12, 2, 0], "platform_step", "sds", "platform", "step")
+
+
+def test_catalog_names_beside_a_discovered_speed_law_fitted_jointly_are_refused():
+    """Training seed 20261522 (session 38): a 20x order 13 of the shaft whose amplitude
+    follows the speed, on four heads. Main (fcaf394) named ``beam_tilt_axial`` and
+    ``eccentricity_shift``; each kept under 1 % of its gain beside the discovered law, but
+    the joint fit of the law and the catalog model left the held-out rows 4.8e11 worse than
+    the law alone (the fold fits of the pair diverge), so the law's held-out gain beside the
+    effect read -4.8e11 and the size test kept both names."""
+    _beside([20261522, 0, 7, 2, 0], "speed_lag", "multihead", "shaft", "speed")

@@ -290,7 +290,18 @@ def _holder(
     sensor at order 7, named ``beam_tilt_axial`` with the doubt "the common structure peaks
     at order 7, not at the beam-tilt orders", kept 1 % of its gain beside the discovered
     step, and the step kept 1,622 of held-out gain beside it against the effect's whole
-    1,624: a tie of the two sizes, where the size test alone cannot decide)."""
+    1,624: a tie of the two sizes, where the size test alone cannot decide). Or where the
+    effect keeps no held-out gain beside the term (what it predicts on rows it was not fitted
+    on, the term predicts) and the term's gain beside it passes the catalog's gain rules: the
+    effect is then a part of the term's structure, whatever their sizes (session 38: a
+    ``beam_tilt_axial``, not doubted, kept 0.05 % of its gain and a held-out gain of -0.7
+    beside a discovered 20x step at platform order 7, which kept 2,522 beside it against the
+    effect's whole 8,520; training seed 20261523). There the joint model is no better than
+    the term alone, and the term's held-out gain beside the effect is read against the
+    better of the two fits: the fold fits of a pair collinear within the other folds can
+    leave the held-out rows far worse (4.8e11 of held-out chi-square beside a discovered
+    speed law, against the law alone, that kept a ``beam_tilt_axial`` and an
+    ``eccentricity_shift`` named; training seed 20261522)."""
     s = prep.settings
     fits = [f for d in disc for f in ([*base, d], [*base, d, term])]
     done = drive_many([remembered_steps(fitter, f) for f in fits])
@@ -311,7 +322,12 @@ def _holder(
     )
     if not fails and kept >= s.located_share_min:
         return None  # the effect keeps its gain beside each term alone: none holds it
-    own = f1.heldout_chi2 - fb.heldout_chi2
+    # the effect keeps no held-out gain beside the term (what it predicts on held-out rows the
+    # term predicts): the joint model is then no better than the term alone, whose held-out
+    # chi-square is the joint one's (a fold fit of the two together can also leave the rows
+    # it did not see far worse, where the pair is collinear within the other folds)
+    nested = fd.heldout_chi2 - fb.heldout_chi2 <= 0.0
+    own = f1.heldout_chi2 - min(fb.heldout_chi2, fd.heldout_chi2)
     name = candidate_name(specs[j])
     if own >= whole:
         return name, own, ", at least the effect's whole: the larger structure"
@@ -326,6 +342,13 @@ def _holder(
             ", past the catalog's gain rules, and the effect was named despite its own "
             "plausibility doubt only for its lead over every other catalog candidate, "
             "which this term takes",
+        )
+    if nested and not gain_rules(s, dbic, own):
+        return (
+            name,
+            own,
+            ", past the catalog's gain rules, while the effect keeps no held-out gain beside "
+            "the term: what it predicts, the term predicts",
         )
     return None
 
