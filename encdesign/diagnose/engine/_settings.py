@@ -117,18 +117,25 @@ class FinderSettings(AbstractSelectionSettings):
     name not in their truth: the common component also holds common structure the test's
     columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
 
-    sds_level_per_component: int = eqx.field(default=1, static=True)
+    sds_level_per_component: int = eqx.field(default=0, static=True)
     """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
     without a test's columns per component, the moving sensors' common component at its own
     unbiased level (session 28's, without the test's common part) and the differences at
     theirs, mixed at the columns' share and widened for the mix's Welch-Satterthwaite degrees
     of freedom, taken only where it is below session 27's level (:mod:`._sds_level_component`,
     issue 41 session 38): common structure the test's columns do not span never raises a
-    test's level above session 27's, which was session 28's failure. A switch, no unit. On
-    since s38-sds38: measured (fresh, against main d5b4fb1) SDS discovery frame right 25/30 ->
-    26/30 (20261526-27, the rest case for case equal), clean SDS 50/50 ``consistent`` with no
-    term on both (20261528), the SDS catalog sets 6750 and 6751 every row equal; training
-    20261518 and 20261520 26/30 against 24/30."""
+    test's level above session 27's, which was session 28's failure. A switch, no unit. Off
+    (the session 38 lead's fresh measurement, below). s38-sds38 measured (fresh, against
+    main d5b4fb1) SDS discovery frame right 25/30 -> 26/30 (20261526-27, the rest case for
+    case equal), clean SDS 50/50 ``consistent`` with no term on both (20261528), the SDS
+    catalog sets 6750 and 6751 every row equal; training
+    20261518 and 20261520 26/30 against 24/30. The lead's fresh seeds (main fcaf394 against
+    08ce75d, on): SDS discovery 20261523 12/15 -> 13/15 (a 2x ``sensor_frame`` gained),
+    20261524 13/15 -> 12/15 (a 2x ``sensor_frame`` read on sensor m0 lost: ``unexplained``
+    without a term), so +2 -1 over 60 fresh cases; and a drop on the SDS catalog set
+    ``--sds-unlocked-clock --seed 6742``: record 23, clean, ``consistent`` -> ``unexplained``
+    (a one-sensor order-2 ``decay`` of the run means at chi-square 88 against 24.5, nothing at
+    session 27's level; now training). Off until the false-alarm side is understood."""
 
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that

@@ -42,7 +42,7 @@ common patterns, a factor ``g`` no longer charged in full to a one-sensor test (
 0.5-1.5 times the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its
 false-alarm rate at its share of a common excess 3 ``s^2``, and was 20 times below it with
 the full factor). The level the record is whitened with keeps the full factor (``kappa =
-1``). Since session 38 (``FinderSettings.sds_level_per_component``, on) a test's common
+1``). Since session 38 (``FinderSettings.sds_level_per_component``, off by default) a test's common
 part is read at the common component's own level where that is below session 27's
 (:mod:`._sds_level_component`).
 """
