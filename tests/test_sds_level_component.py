@@ -12,29 +12,7 @@ from scipy import stats
 from encdesign.diagnose.kinds.sds._sds_level_component import ComponentLevel
 from encdesign.diagnose.kinds.sds._sds_level_out import LevelOut, RunMeanLevel, order_columns
 from encdesign.diagnose.kinds.sds._sds_noise import dof_widening, span_basis
-
-
-def _saturating(phi: np.ndarray, M: int, L: int) -> np.ndarray:
-    """``(R*M, k)``: every run's mean over the moving sensors (the finder's saturating
-    columns leave the common component no degrees of freedom) and per moving sensor a
-    constant and the orders ``1..L`` of ``phi``."""
-    R = phi.size
-    cols = [np.kron(np.eye(R), np.ones((M, 1)))]
-    for m in range(M):
-        c = np.zeros((R, M, 2 * L + 1))
-        c[:, m, 0] = 1.0
-        for n in range(1, L + 1):
-            c[:, m, 2 * n - 1], c[:, m, 2 * n] = np.cos(n * phi), np.sin(n * phi)
-        cols.append(c.reshape(R * M, -1))
-    return np.concatenate(cols, 1)
-
-
-def _draw(rng, R: int, M: int, sc: float) -> np.ndarray:
-    """Run means (R, M): level 1 along every difference of the moving sensors, ``sc`` along
-    their common component."""
-    y = rng.standard_normal((R, M))
-    y = y - y.mean(1, keepdims=True)
-    return y + sc * rng.standard_normal((R, 1)) / math.sqrt(M)
+from tests.test_sds_level_common import _draw, _saturating
 
 
 def _level(y, phi, L, excess, Q, mode: str, p: float | None = None) -> LevelOut:
