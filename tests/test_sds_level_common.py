@@ -43,6 +43,19 @@ def _draw(rng, R: int, M: int, sc: float) -> np.ndarray:
     return y + sc * rng.standard_normal((R, 1)) / math.sqrt(M)
 
 
+def _order_7(phi: np.ndarray, M: int, frame: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(X, U)``: the columns (R, M, 2) of order 7 on moving sensor 0 (``frame`` "sensor")
+    or common to the moving sensors ("common"), and the orthonormal basis of their span off
+    the per-sensor constants (what the false-alarm tests project the noise on)."""
+    R = phi.size
+    X = order_columns(phi, M, 7, 0)
+    if frame == "common":
+        X = np.repeat(order_columns(phi, 1, 7, 0), M, axis=1)
+    B = np.kron(np.ones((R, 1)), np.eye(M))
+    Xb = X.reshape(R * M, 2) - B @ np.linalg.lstsq(B, X.reshape(R * M, 2), rcond=None)[0]
+    return X, span_basis(Xb)
+
+
 def _level_out(y, phi, L, excess, p=None, direct=True, Q=None) -> LevelOut:
     """The :class:`LevelOut` of run means ``y`` (the share on) with the saturating columns
     of :func:`_saturating`, the base's common columns the constant, the common factor's
@@ -114,12 +127,7 @@ def test_one_sensor_and_common_tests_keep_their_false_alarm_rate(sc, frame):
     rng = np.random.default_rng(int(sc * 10) + (frame == "common"))
     R, M, L, p = 24, 3, 3, 1e-2
     phi = rng.uniform(0, 2 * np.pi, R)
-    X = order_columns(phi, M, 7, 0)
-    if frame == "common":
-        X = np.repeat(order_columns(phi, 1, 7, 0), M, axis=1)
-    B = np.kron(np.ones((R, 1)), np.eye(M))
-    Xb = X.reshape(R * M, 2) - B @ np.linalg.lstsq(B, X.reshape(R * M, 2), rcond=None)[0]
-    U = span_basis(Xb)
+    X, U = _order_7(phi, M, frame)
     excess = max(sc**2 - 1.0, 0.0)
     compare = sc < 1 and frame == "sensor"  # session 27's factor read only where compared
     Q = span_basis(_saturating(phi, M, L))  # the same for every draw (phi is fixed)

@@ -12,7 +12,7 @@ from scipy import stats
 from encdesign.diagnose.kinds.sds._sds_level_component import ComponentLevel
 from encdesign.diagnose.kinds.sds._sds_level_out import LevelOut, RunMeanLevel, order_columns
 from encdesign.diagnose.kinds.sds._sds_noise import dof_widening, span_basis
-from tests.test_sds_level_common import _draw, _saturating
+from tests.test_sds_level_common import _draw, _order_7, _saturating
 
 
 def _level(y, phi, L, excess, Q, mode: str, p: float | None = None) -> LevelOut:
@@ -70,12 +70,7 @@ def test_false_alarm_rate_of_one_sensor_and_common_tests(sc, frame):
     rng = np.random.default_rng(int(sc * 10) + 7 * (frame == "common"))
     R, M, L, p = 24, 3, 3, 1e-2
     phi = rng.uniform(0, 2 * np.pi, R)
-    X = order_columns(phi, M, 7, 0)
-    if frame == "common":
-        X = np.repeat(order_columns(phi, 1, 7, 0), M, axis=1)
-    B = np.kron(np.ones((R, 1)), np.eye(M))
-    Xb = X.reshape(R * M, 2) - B @ np.linalg.lstsq(B, X.reshape(R * M, 2), rcond=None)[0]
-    U = span_basis(Xb)
+    X, U = _order_7(phi, M, frame)
     Q = span_basis(_saturating(phi, M, L))
     excess = max(sc**2 - 1.0, 0.0)
     chis = []
