@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._discover_law import KEEP_SHARE, Sums, Term, _embed, _gain, _heldout
+from ._discover_law import KEEP_SHARE, Sums, Term, _embed, _gain_in, _heldout
 from ._discover_lines import hmap
 
 
@@ -114,11 +114,7 @@ def best_at_place(
             if not same_place(lib[i], tm) or (j != i and (j in out or nested(sums, lib[i], tm))):
                 continue
             sl = sums.slices[tm.line]
-            H = tm.H
-            if (
-                j != i
-                and _gain(H.T @ At[sl, sl] @ H, H.T @ bt[sl], H.T @ Rt[sl, sl] @ H) <= thresh[j]
-            ):
+            if j != i and _gain_in(tm.H, At[sl, sl], bt[sl], Rt[sl, sl]) <= thresh[j]:
                 continue
             g = _heldout(sums.A, sums.b, _embed(sums, [*others, tm]), folds, sums.raw)
             g = g * (1.0 - me * tm.n_params) - thresh[j]

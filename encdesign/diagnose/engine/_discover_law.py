@@ -115,14 +115,19 @@ def _gain(A: np.ndarray, b: np.ndarray, raw: np.ndarray | None = None) -> float:
     return float(b @ _psolve(A, b, raw=raw)) if b.size else 0.0
 
 
+def _gain_in(H: np.ndarray, A: np.ndarray, b: np.ndarray, raw: np.ndarray) -> float:
+    """In-sample chi-square drop of the restriction ``H`` (columns in the coordinates of the
+    summed sums ``A``, ``b``, ``raw``): :func:`_gain` of its projected Gram."""
+    return _gain(H.T @ A @ H, H.T @ b, H.T @ raw @ H)
+
+
 def _fit_beta(term: Term, lay, sl: slice, sums: Sums, speed: np.ndarray, infl: float) -> None:
     """The speed exponent minimising chi-square, and its standard error (profile curvature,
     inflated by ``infl``, the residual's chi-square per value when above 1)."""
     At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
 
     def g(beta: float) -> float:
-        H = _speed_H(term, lay, beta, speed)
-        return -_gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+        return -_gain_in(_speed_H(term, lay, beta, speed), At, bt, Rt)
 
     grid = np.linspace(*BETA_RANGE, 33)
     vals = [g(v) for v in grid]
@@ -161,7 +166,7 @@ def _scatter_se(tm: Term, lib: Sequence[Term], sums: Sums) -> None:
     At, bt, Rt = sums.A.sum(0)[sl, sl], sums.b.sum(0)[sl], sums.raw.sum(0)[sl, sl]
 
     def g(H: np.ndarray) -> float:
-        return _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+        return _gain_in(H, At, bt, Rt)
 
     dof = pc.H.shape[1] - tm.H.shape[1] - 1
     if dof > 0:
@@ -267,8 +272,7 @@ def taken_by(
     At, bt, Rt = sums.A.sum(0), sums.b.sum(0), sums.raw.sum(0)
 
     def gain(terms: list[Term]) -> float:
-        H = _embed(sums, terms)
-        return _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+        return _gain_in(_embed(sums, terms), At, bt, Rt)
 
     alone = {i: gain([lib[i]]) for i in own}
     i = max(own, key=lambda j: alone[j] - thresh[j])

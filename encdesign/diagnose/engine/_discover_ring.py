@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy import optimize
 
-from ._discover_law import Sums, Term, _gain
+from ._discover_law import Sums, Term, _gain_in
 from ._discover_lines import Line, hmap, phase_basis, tau_of
 
 RING_RUNS_MAX = 10.0
@@ -124,7 +124,7 @@ def locate_ringdowns(
                 if frame is not None and fr != frame:
                     continue
                 H = hmap(sums.layout[0], bl, M, np.eye(S))
-                g = _gain(H.T @ At @ H, H.T @ bt, H.T @ Rt @ H)
+                g = _gain_in(H, At, bt, Rt)
                 if g > best:
                     best, best_fr = g, fr
             return best, best_fr, float(sums.rr.sum())
