@@ -323,7 +323,7 @@ def ratio_limit(prep: Prepared) -> float:
     most of any smooth error in time, so a true effect shows a large ratio at any size; the
     limit there is the one the selection already puts on conditioning (session 39: three true
     eccentricity shifts on 0.34-0.58 turn of the ``short_arcs`` set, their times within
-    0.7 ms and sizes within 2 % once named, were refused at 4.3-5.4)."""
+    1.4 ms and two of their sizes within 2 % once named, were refused at 4.3-5.4)."""
     s = prep.settings
     if prep.part_turn_span is None:
         return s.plausible_ratio
