@@ -82,6 +82,7 @@ from scipy import optimize, stats
 from ._bounds_shares import VIEW_DOUBLINGS, _share_size
 from ._bounds_sums import _add_gram, _channel_products, _rank
 from ._candidates import Candidate, Probe
+from ._evidence import ratio_limit
 from ._fit import Fitter, Term, make_term
 from ._normal import Accumulated, free_scales, free_values, held_key
 from ._protocol import Prepared
@@ -665,9 +666,10 @@ def _one_bound(prep, bench: _Bench, cand, probe: Probe, views, scan, ref: Refere
         "n_params": int(k),
     }
     # rule plausible_ratio: its own size against what it explains (sqrt(lambda / N)), the
-    # same ratio at any size; it refuses only above plausible_rms_min noise units
+    # same ratio at any size; it refuses only above plausible_rms_min noise units (its
+    # limit: ``_evidence.ratio_limit``, the conditioning limit's on part of a turn)
     ratio = own / math.sqrt(lam_base / N)
-    if ratio > s.plausible_ratio:
+    if ratio > ratio_limit(prep):
         a_max = s.plausible_rms_min / own
         why = (
             f"its own size is {ratio:.3g}x the residual it explains (the model takes most of "

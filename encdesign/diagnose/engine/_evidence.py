@@ -165,12 +165,21 @@ def refused_pair(prep, fitter, cur_resid, refused: list, rejected: list, confoun
         return
 
 
-def find_dominant(st, trials: list[Trial]) -> tuple[Candidate | None, list]:
+def find_dominant(st, trials: list[Trial], rules=None) -> tuple[Candidate | None, list]:
     """``(candidate, partners)``: the first trial's candidate when it lowers the criterion
     far more than any other that is not the same fitted error (``dominant_ratio`` times and
     ``dominant_gap`` more than the next such trial, or than nothing), else ``(None, [])``;
     ``partners``: the trials before that one whose fitted error correlates with it above
-    ``tie_corr`` (at most two: one residual pass each), as ``(trial, chi2 gap, corr)``."""
+    ``tie_corr`` (at most two: one residual pass each), as ``(trial, chi2 gap, corr)``.
+
+    Not where a partner fits within ``tie_chi2`` of it and the criterion rules ``rules(trial)``
+    (``[(rule, reason), ...]``) refuse that partner for nothing: the record cannot tell the
+    two apart, and the doubt against the first is then not outweighed by any evidence, so
+    the undoubted one is the reading (session 39: on one sensor of 16 signal periods a disk
+    order 16 was named ``bearing_wobble`` at frequency ratio 15.9999, doubted as synchronous,
+    over ``interpolation_error``, correlation 1.000 and chi-square +1.5, its lead in the
+    criterion only its fewer parameters; training ``finder_variations.py --set high --seed
+    6745`` record 6)."""
     prep, fitter = st["prep"], st["fitter"]
     s = prep.settings
     if not trials or trials[0].dbic >= -s.bic_min:
@@ -186,6 +195,8 @@ def find_dominant(st, trials: list[Trial]) -> tuple[Candidate | None, list]:
                 continue
         d1 = min(tr.dbic, 0.0)
         break
+    if rules is not None and any(g <= s.tie_chi2 and not rules(tr) for tr, g, _ in partners):
+        return None, []
     if -d0 >= s.dominant_ratio * -d1 and d1 - d0 >= s.dominant_gap:
         return trials[0].cand, partners
     return None, []
@@ -296,3 +307,24 @@ def heldout_refused(prep: Prepared, trials, rejected, confounded, rnd: int, best
             if best is None or t.dbic < best[0]:
                 best = (float(t.dbic), t.fit)
     return best
+
+
+def ratio_limit(prep: Prepared) -> float:
+    """The ratio of a candidate's own size to what it explains above which rule
+    ``plausible_ratio`` refuses it as a cancellation of base terms: ``plausible_ratio``, and
+    where every run covers less than one turn (``Prepared.part_turn_span``) the ratio of the
+    conditioning limit ``collinear_refuse`` instead, ``1 / sqrt(1 - collinear_refuse^2)``
+    (10.0 at 0.995), where that is larger.
+
+    For a term linear in its size the ratio is a property of its shape on the record, not of
+    the fit: its own RMS over the RMS it explains is ``1 / sqrt(1 - rho^2)``, ``rho`` the
+    correlation of its fitted error with the base model's span (4 is ``rho`` 0.968). Over
+    part of a turn seen once, angle and time are one to one and the base's disk orders span
+    most of any smooth error in time, so a true effect shows a large ratio at any size; the
+    limit there is the one the selection already puts on conditioning (session 39: three true
+    eccentricity shifts on 0.34-0.58 turn of the ``short_arcs`` set, their times within
+    1.4 ms and two of their sizes within 2 % once named, were refused at 4.3-5.4)."""
+    s = prep.settings
+    if prep.part_turn_span is None:
+        return s.plausible_ratio
+    return max(s.plausible_ratio, 1.0 / math.sqrt(max(1.0 - s.collinear_refuse**2, 1e-300)))

@@ -24,6 +24,7 @@ from ._evidence import (
     heldout_refused,
     only_doubts,
     partner_entry,
+    ratio_limit,
     refused_pair,
     rule_args,
     separate_by,
@@ -308,18 +309,17 @@ def gain_rules(s, dbic: float, dho: float) -> list[tuple[str, str]]:
 def _criterion_rules(prep, fitter, cand, fr, dbic, dho, dchi, n_base_terms) -> tuple:
     """The rules on the criterion, the held-out gain, plausibility and conditioning:
     ``([(rule, reason), ...], term_rms, explained_rms, collinearity)``."""
-    s = prep.settings
-    N = prep.n_values
+    s, N = prep.settings, prep.n_values
     reasons = gain_rules(s, dbic, dho)
     term = fr.terms[-1]
     trms = _term_rms(fitter, term, prep, _has_run_constants(fr.terms[:n_base_terms]))
     erms = math.sqrt(max(dchi, 0.0) / max(N, 1))
-    if trms > s.plausible_ratio * max(erms, 1e-300) and trms > s.plausible_rms_min:
+    if trms > (lim := ratio_limit(prep)) * max(erms, 1e-300) and trms > s.plausible_rms_min:
         reasons.append(
             (
                 "plausible_ratio",
                 f"implausible: its own size ({trms:.3g} noise units RMS) is over "
-                f"{s.plausible_ratio:.0f}x the residual it explains ({erms:.3g})",
+                f"{lim:.3g}x the residual it explains ({erms:.3g})",
             )
         )
     col = _collinearity(fr, n_base_terms)
@@ -494,14 +494,14 @@ def _choose(
     """Stage 4's decision for one round: the best trial every rule accepts (with the ties
     it cannot be told from), or ``None``; every other trial is a named refusal, except two
     refused by the same rule that the record cannot separate: one ``confounded`` entry."""
-    prep, fitter = st["prep"], st["fitter"]
-    s = prep.settings
-    step_fits: dict = {}
-    dominant, partners = None, []
+    prep, fitter, step_fits = st["prep"], st["fitter"], dict()
+    s, dominant, partners = prep.settings, None, []
     if trials and trials[0].k_new > 0 and trials[0].dbic < -s.bic_min:
         r0 = _criterion_rules(prep, fitter, *rule_args(trials[0]), n_base_terms)[0]
         if r0 and only_doubts(trials[0].cand, r0):  # only then is dominance worth a pass
-            dominant, partners = find_dominant(st, trials)
+            dominant, partners = find_dominant(
+                st, trials, lambda t: _criterion_rules(prep, fitter, *rule_args(t), n_base_terms)[0]
+            )
     refused: list[Refused] = []
     chosen: Chosen | None = None
     for dbic, cand, fr, dho, dchi, k_new in trials:

@@ -134,7 +134,13 @@ def detect_clipping(
     amplitude) of its peak sit at the observed extreme, and the ellipse fitted to all samples
     reaches more than ``settings.clip_beyond_share`` of the amplitude beyond it. The level
     tried is the extreme, then (where that fails) the value with fewer samples beyond it
-    than a clipped level must hold: a glitch beyond a clipped level does not hide it. Returns
+    than a clipped level must hold: a glitch beyond a clipped level does not hide it. A
+    clipped level hides the arc about the peak, even about it, so each side of the peak (the
+    other signal above or below its centre) must hold half the samples a clipped level
+    needs: samples of one phase bunch at a level wherever the phase dwells (a reversal; a
+    sampling rate locked to the signal period puts a sample at the same phase every period;
+    session 39, training ``sensor,quadrature`` seed 6753 record 18: 110 samples at one phase,
+    102-103 deg, 13 deg from the peak, read as clipping). Returns
     ``mask`` (samples at a clipped level), ``channels`` (one dict per clipped channel
     extreme) and ``phase_deg`` (the phases where clipping happens).
     """
@@ -148,14 +154,17 @@ def detect_clipping(
     # the clipping, training seed 6678: one sample 0.1 below a floor of 483 clipped samples
     # hid it, whose flat segment was then fitted as signal_shape)
     k = int(min(max(math.floor(need), 0), sa.size - 1))
-    for name, s, centre, amp in (("sa", sa, p, a), ("sb", sb, q, b)):
+    for name, s, centre, amp, other, mid in (("sa", sa, p, a, sb, q), ("sb", sb, q, b, sa, p)):
         srt = np.sort(s)
         for sign in (1.0, -1.0):
             model_extreme = centre + sign * amp
             for level in dict.fromkeys((srt[-1], srt[-1 - k]) if sign > 0 else (srt[0], srt[k])):
                 at = np.abs(s - level) < band * amp
                 beyond = sign * (model_extreme - level)
-                if at.sum() > need and beyond > settings.clip_beyond_share * amp:
+                # and the level hides the arc about the peak, which is even about it: each
+                # side (the other signal above or below its centre) holds half of it
+                side = min(np.sum(other[at] > mid), np.sum(other[at] < mid))
+                if side > need / 2 and beyond > settings.clip_beyond_share * amp:
                     break
             else:
                 continue
