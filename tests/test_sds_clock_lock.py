@@ -109,3 +109,37 @@ def test_near_lock_the_run_mean_level_holds_the_common_component():
     g1 = out[1.0][1]["run_means_common_factor"]
     assert g1 == pytest.approx(out[1.0][1]["run_means_common_factor_direct"])
     assert out[0.0][0] < 0.4 * seen < seen < out[1.0][0]
+
+
+@pytest.mark.parametrize("switch", [0, 1])
+def test_the_switch_reaches_the_level(switch):
+    """``FinderSettings.sds_clock_lock_level`` and the record's ``clock_lock`` constant reach
+    the level where the kind builds it (:func:`_sds_noise.run_mean_levels`): off (the
+    default) the factor is ``min(indirect, direct)`` whatever the share; on, at share 1, it
+    is the direct one."""
+    from encdesign.diagnose import FinderSettings
+    from encdesign.diagnose.kinds.sds._sds_noise import run_mean_levels
+
+    rng = np.random.default_rng(2)
+    R, M, K = 12, 3, 4
+    phi = np.sort(rng.uniform(0, 2 * np.pi, R))
+    rows = {
+        "phi": phi,
+        "theta": phi,
+        "tmid_c": np.linspace(-1, 1, R)[:, None] + np.zeros((R, K)),
+        "fixed_c": 0.1 * rng.standard_normal((R, 2)),
+    }
+    consts = {
+        "psi_m": np.array([0.3, 2.4, 4.5]),
+        "proj": np.asarray(0.0),
+        "clock_lock": np.asarray(1.0),
+    }
+    means = rng.standard_normal((R, M)) + 6.0 * rng.standard_normal((R, 1))
+    resid = np.concatenate([means, 0.5 * rng.standard_normal((R, M * (K - 1)))], 1)
+    levels = run_mean_levels(K, rows, consts, [], FinderSettings(sds_clock_lock_level=switch))
+    info: dict = {}
+    levels(resid, info)
+    g, g_i = info["run_means_common_factor"], info["run_means_common_factor_indirect"]
+    g_d = info["run_means_common_factor_direct"]
+    assert g_d is not None and g_d > g_i
+    assert g == pytest.approx(g_d if switch else min(g_i, g_d))
