@@ -137,6 +137,12 @@ class FinderSettings(AbstractSelectionSettings):
     (a one-sensor order-2 ``decay`` of the run means at chi-square 88 against 24.5, nothing at
     session 27's level; now training). Off until the false-alarm side is understood."""
 
+    sds_clock_lock_level: int = eqx.field(default=0, static=True)
+    """sds with phi_ref, 1: on, 0: off: the run means' common factor mixed with the direct one
+    at the clock's rounding share (``_sds_clock_lock``). A switch. Clean training keys
+    8210000-23, 8211000-23: common component 1.65x the model near lock. Off: fresh
+    ``--sds-unlocked-clock --seed 6771`` 31/31 -> 28/31 (s39-clock39; now training)."""
+
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that
     take change points and single-value outliers out of the run-mean noise level

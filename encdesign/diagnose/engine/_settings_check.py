@@ -13,6 +13,7 @@ MAY_BE_ZERO = (
     "sds_level_common_share",
     "sds_level_common_direct",
     "sds_level_per_component",
+    "sds_clock_lock_level",
 )
 """Counts where 0 turns a search off, and switches (checked as integers >= 0)."""
 

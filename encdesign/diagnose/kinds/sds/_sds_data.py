@@ -15,6 +15,7 @@ from ....io._recording import Recording
 from ...engine._candidates import Context
 from ...engine._protocol import KindData, Prepared, RowColumns
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
+from ._sds_clock_lock import clock_lock_share
 from ._sds_noise import (
     REFERENCE_RADIUS_M,
     design_orders,
@@ -41,6 +42,8 @@ class SDSPairTable:
         psi_fixed_rad, psi_moving_rad: nominal sensor azimuths (TOML), rad.
         period_s: mean revolution time, s.
         n_marks: marks per revolution.
+        run_clock_s: per run ``(first edge time, revolution time)`` of sensor f0, s, shape
+            (P, 2) (:func:`_run_clock`).
     """
 
     run_ids: np.ndarray
@@ -58,6 +61,7 @@ class SDSPairTable:
     psi_moving_rad: np.ndarray
     period_s: float
     n_marks: int
+    run_clock_s: np.ndarray | None = None
 
 
 def _wrap(x):
@@ -91,6 +95,22 @@ def _split_runs(rec: Recording):
     return where, n_marks, nf, nm, out
 
 
+def _run_clock(times: np.ndarray, marks: np.ndarray, n_marks: int) -> tuple[float, float]:
+    """``(first edge time, revolution time)`` (s) of one sensor's edges in one run: the time
+    from each edge to the same mark's edge one revolution on, averaged over the run's edges
+    (the marks' and the motor's once-per-revolution patterns cancel in each difference; a
+    line through the stamps against the edge count does not cancel them: 7 ticks off at
+    six revolutions). Over a few thousand edges the stamps' rounding and jitter average to
+    a few thousandths of a clock tick, which :func:`._sds_clock_lock.clock_lock_share` needs; one
+    revolution's window (``period_s``) is known to a few tenths of a tick only. Revolution
+    time 0 where the edges are not consecutive marks for more than a revolution."""
+    t = np.asarray(times, float)
+    step = np.mod(np.diff(np.asarray(marks, np.int64)), n_marks)
+    if t.size <= n_marks or np.any(step != 1):
+        return (float(t[0]) if t.size else 0.0, 0.0)
+    return float(t[0]), float(np.mean(t[n_marks:] - t[:-n_marks]))
+
+
 def sds_pair_table(rec: Recording) -> SDSPairTable:
     """Per-pair, per-revolution SDS readings and window mid-times of an ``sds`` recording.
 
@@ -107,8 +127,9 @@ def sds_pair_table(rec: Recording) -> SDSPairTable:
     psi_m = np.radians(np.asarray(enc["moving_sensor_angles_deg"], dtype=float))
     offsets = jnp.asarray(psi_m[None, :] - psi_f[:, None])
     acc: dict[str, list] = {k: [] for k in ("run", "rev", "f", "m", "t", "tf", "tm", "v")}
-    refs, meas, periods = [], [], []
+    refs, meas, periods, clocks = [], [], [], []
     for i, (r, times, marks, ref) in enumerate(runs):
+        clocks.append(_run_clock(times["f0"], marks["f0"], n_marks))
         alpha, period, k_f, tau, k_m = _run_windows(where, r, times, marks, n_marks, nf, nm)
         # a reading needs every window to start at the anchor (within two mark spacings):
         # a sensor whose edges begin later in the record gives a shifted window
@@ -160,6 +181,7 @@ def sds_pair_table(rec: Recording) -> SDSPairTable:
         psi_moving_rad=psi_m,
         period_s=float(np.mean(periods)),
         n_marks=n_marks,
+        run_clock_s=np.asarray(clocks, float),
     )
 
 
@@ -396,6 +418,11 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
         psi_m=np.asarray(tab.psi_moving_rad, float),
         helmert=H,
         proj=np.asarray(0.0 if has_ref else 1.0),
+        clock_lock=np.asarray(
+            clock_lock_share(
+                tab.run_clock_s, 1.0 / float(clock_hz) if clock_hz else None, K, tab.n_marks
+            )
+        ),
         omega=np.asarray(omega),
         t_mean=np.asarray(t_mean),
     )

@@ -54,6 +54,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ._sds_clock_lock import lock_mixed_factor
 from ._sds_level_common import CommonPart
 from ._sds_level_component import ComponentLevel
 
@@ -65,12 +66,19 @@ class RunMeanLevel:
     the common factor ``g(s) = sqrt(1 + excess / s^2)`` (:func:`._sds_noise._common_factor`,
     ``excess`` (rad^2) its ``e``, 0 where the run means are projected on the differences),
     capped by ``sqrt(max(1, ucl / s^2))`` (:func:`._sds_noise._direct_common_factor`, ``ucl``
-    (rad^2) its upper confidence limit; ``None``: no cap). Neither ``excess`` nor ``ucl``
+    (rad^2) its upper confidence limit; ``None``: no cap), or mixed with it at the share
+    ``lock`` (:func:`._sds_clock_lock.lock_mixed_factor`). Neither ``excess`` nor ``ucl``
     depends on ``s``: :class:`LevelOut` reads hundreds of levels without a Python call
     each, equal to those functions' (``tests/test_sds_level_out.py``)."""
 
-    def __init__(self, widen: Callable[[float], float], excess: float, ucl: float | None):
-        self.widen, self.excess, self.ucl = widen, float(excess), ucl
+    def __init__(
+        self,
+        widen: Callable[[float], float],
+        excess: float,
+        ucl: float | None,
+        lock: float = 0.0,
+    ):
+        self.widen, self.excess, self.ucl, self.lock = widen, float(excess), ucl, float(lock)
 
     def widening(self, nu) -> np.ndarray:
         """``c = widen(nu)`` on an array of degrees of freedom (once per distinct value)."""
@@ -88,7 +96,7 @@ class RunMeanLevel:
         c = self.widening(nu)
         g = np.sqrt(1.0 + self.excess / s**2)
         if self.ucl is not None:
-            g = np.minimum(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)))
+            g = lock_mixed_factor(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)), self.lock)
         if share is not None:
             g = np.sqrt(1.0 + np.clip(np.asarray(share, float), 0.0, 1.0) * (g**2 - 1.0))
         return s * c * g

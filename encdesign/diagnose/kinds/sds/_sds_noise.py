@@ -18,6 +18,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
+from ._sds_clock_lock import lock_mixed_factor
 from ._sds_drift import _step_or_outlier, drift_power_at, onset_power
 from ._sds_level_out import LevelOut, RunMeanLevel
 from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
@@ -364,6 +365,7 @@ def _level_sigma(
     share: bool = False,
     direct: bool = False,
     component: bool = False,
+    lock: float = 0.0,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -381,20 +383,19 @@ def _level_sigma(
     on the moving-sensor differences: ``R·(M − 1)`` independent values, not ``R·M``), then
     widened by :func:`dof_widening` (``nu``) for its estimation error: with ~12 platform
     positions it is known to ~±17 %, which the engine's known-level tests would otherwise
-    turn into false alarms. With ``phi_ref`` it
-    is then raised by :func:`_common_factor` (from the contrasts and the fixed sensors' run
-    means ``fixed``): the saturated fit leaves the run means' common component no degrees
-    of freedom. With ``common_base`` (the base's common columns, :func:`common_base_columns`)
-    and ``common_quantile`` that factor is capped at what the common component of ``resid``
-    itself supports (:func:`_direct_common_factor`).
+    turn into false alarms. With ``phi_ref`` it is then raised by :func:`_common_factor` (from
+    the contrasts and the fixed sensors' run means ``fixed``): the saturated fit leaves the run
+    means' common component no degrees of freedom. With ``common_base`` (the base's common
+    columns, :func:`common_base_columns`) and ``common_quantile`` that factor is capped at what
+    the common component of ``resid`` supports (:func:`_direct_common_factor`), or mixed with it
+    at the clock's rounding share ``lock`` (:func:`lock_mixed_factor`).
 
-    Contrasts: the robust scale (1.4826 MAD) of the contrasts themselves (nothing constant
-    within a run reaches them), separately for the part common to the moving sensors (the
-    fixed sensors' timing noise enters every pair alike) and for the differences; the larger
-    per-value level is used (the engine weighs channels as independent: this keeps its tests
-    conservative for common and differential patterns alike). ``state`` (a dict) receives
-    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`;
-    ``direct`` / ``component``: sessions 28 / 38, :mod:`._sds_level_component`)."""
+    Contrasts: the robust scale (1.4826 MAD) of the contrasts (nothing constant within a run
+    reaches them), separately for the part common to the moving sensors (the fixed sensors'
+    timing noise enters every pair alike) and for the differences; the larger per-value level is
+    used (the engine weighs channels as independent: conservative). ``state`` (a dict) receives
+    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`; ``direct``
+    / ``component``: sessions 28 / 38, :mod:`._sds_level_component`)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
@@ -469,14 +470,14 @@ def _level_sigma(
         g_d = None
         if not proj and common_base is not None and common_quantile is not None:
             g_d = _direct_common_factor(resid[:, :M], common_base, s, common_quantile)
-        return (min(g_i, g_d) if g_d is not None else g_i), g_i, g_d
+        return float(lock_mixed_factor(g_i, g_d, lock)), g_i, g_d
 
     g, g_ind, g_dir = factors(s_raw)
     out[:M] = s_raw * c * g
     if state is not None:  # s * widening(nu) * factors(s)[0] on arrays of s and nu
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
-        sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl)
+        sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl, lock)
         both = (direct or component) and common_base is not None
         common = (resid[:, :M], common_base) if both else None
         state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
@@ -522,6 +523,7 @@ def run_mean_levels(
     )
     fixed = np.asarray(rows["fixed_c"], float)
     common = common_base_columns(rows["phi"], consts["psi_m"], orders)
+    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (settings.sds_clock_lock_level > 0)
 
     def levels(resid: np.ndarray, info: dict | None = None, state=None) -> np.ndarray:
         return _level_sigma(
@@ -540,6 +542,7 @@ def run_mean_levels(
             share=settings.sds_level_common_share > 0,
             direct=settings.sds_level_common_direct > 0,
             component=settings.sds_level_per_component > 0,
+            lock=lock,
         )
 
     return levels
