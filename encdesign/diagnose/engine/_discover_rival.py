@@ -398,7 +398,7 @@ def _holder(
     # (``bic_min``, ``heldout_min``, ``located_share_min``): a held-out gain under
     # ``heldout_min`` is no evidence of its own by the catalog's own measure
     nested = fd.heldout_chi2 - fb.heldout_chi2 <= 0.0 or (
-        len(fails) == 2 and kept < s.located_share_min
+        {r for r, _ in fails} == {"bic_min", "heldout_min"} and kept < s.located_share_min
     )
     own = f1.heldout_chi2 - min(fb.heldout_chi2, fd.heldout_chi2)
     name = candidate_name(specs[j])
