@@ -317,3 +317,23 @@ def test_catalog_names_beside_a_discovered_speed_law_fitted_jointly_are_refused(
     the law alone (the fold fits of the pair diverge), so the law's held-out gain beside the
     effect read -4.8e11 and the size test kept both names."""
     _beside([20261522, 0, 7, 2, 0], "speed_lag", "multihead", "shaft", "speed")
+
+
+def test_a_catalog_name_failing_every_rule_beside_a_discovered_step_is_refused():
+    """Training seed 20261532 (session 39): a 20x step at platform order 7 of an SDS record.
+    Main (a25ef9d) named ``beam_tilt_axial`` (not doubted): beside the discovered platform
+    step it kept 0.18 % of its gain, a held-out gain of 1.8 (under ``heldout_min``) and a
+    criterion change of +29.8, failing every one of the catalog's rules, while the step kept
+    a held-out gain of 1,453 beside it against the effect's whole 4,820: a held-out gain
+    just above zero kept the name."""
+    _beside([20261532, 1, 12, 0, 0], "platform_step", "sds", "platform", "step")
+
+
+def test_a_catalog_name_beside_a_tie_of_discovered_modulations_is_refused():
+    """Training seed 20261532 (session 39): a 20x shaft-frame order 9 in the forward runs
+    only, on four heads. The fitted head placements took its static half; discovery's
+    ``direction``, ``forward`` and ``reverse`` at order 9 tied within ``tie_chi2`` of their
+    held-out gains and it kept ``direction``, beside which the ``beam_tilt_axial`` main
+    (a25ef9d) named on the head-specific low orders the moved placements left kept all its
+    gain. The tie decided by the joint fit (``forward``) takes it (0.15 % kept)."""
+    _beside([20261532, 0, 2, 0, 0], "one_direction", "multihead", "shaft", "forward")
