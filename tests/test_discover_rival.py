@@ -337,3 +337,38 @@ def test_a_catalog_name_beside_a_tie_of_discovered_modulations_is_refused():
     (a25ef9d) named on the head-specific low orders the moved placements left kept all its
     gain. The tie decided by the joint fit (``forward``) takes it (0.15 % kept)."""
     _beside([20261532, 0, 2, 0, 0], "one_direction", "multihead", "shaft", "forward")
+
+
+def test_a_doubted_catalog_name_on_an_order_discovery_finds_without_it_is_refused(tmp_path):
+    """Training seed 6741 (session 39), record 30 of ``studies/conceal_benchmark.py --kinds
+    sds``: an out-of-catalog order 5 of the platform angle near the noise, 12 positions.
+    Main (4668e7a) named ``beam_tilt_axial`` with its own plausibility doubt (the common
+    structure peaks at order 5) for its lead over every other catalog candidate; after it the
+    residual was consistent, so discovery never ran. Discovery without it finds ``order 5,
+    platform, static``: the effect keeps 1 % of its gain beside the term and the term as
+    little beside the effect (a mutual tie), which the information criterion breaks for the
+    term (2 parameters against the effect's 6)."""
+    import jax
+
+    from encdesign.simulate import write_concealed_sds
+
+    rec, truth = write_concealed_sds(
+        tmp_path / "r.toml",
+        key=jax.random.key(6741 * 1000 + 500 + 30),
+        effect="order_5",
+        concealment="near_noise",
+        phi_ref=True,
+        n_runs=12,
+    )
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert "beam_tilt_axial" not in [e["name"] for e in d.doc["effects"]], d.doc["report"]
+    refused = {r["name"]: r for r in d.doc["rejected"] if r["reason"].startswith(RULE_PREFIX)}
+    assert "beam_tilt_axial" in refused, d.doc["rejected"]
+    assert "information criterion prefers the term" in refused["beam_tilt_axial"]["reason"]
+    terms = [
+        (t["line"], t["frame"])
+        for u in d.doc["unexplained"]
+        for t in (u.get("model") or {}).get("terms", ())
+    ]
+    assert ("order 5", "platform") in terms, d.doc["report"]

@@ -73,6 +73,20 @@ discovery searches (``discover_beta_max``) is no rival: it refuses nothing (as a
 ``plausible`` hook refuses its values in :func:`._spill.rival_rule`). Its size is free: it
 takes the part of its structure the effect had taken (the ``plausible`` hook of an exported
 candidate, which asks for the discovered size, does not apply).
+
+Since session 39 a named effect the selection named despite its own ``plausible`` doubt (only
+for its lead over every other catalog candidate) is also tested beside the model discovery
+builds without it (:func:`_without_rival`), even where nothing is left unexplained beside it
+(the effect can take all of an out-of-catalog line, and discovery then never runs). Where the
+effect and the discovered term each fail the catalog's rules beside the other (a mutual tie
+the record cannot break by them), the information criterion decides (:func:`_holder`): the
+term, fitting the same structure with fewer parameters, is the reading. An ``order 5`` of
+the platform angle near the noise on 12 positions was named ``beam_tilt_axial`` doubted ("the
+common structure peaks at order 5"); discovery without it found ``order 5, platform,
+static``, beside which it kept 1 % of its gain, and the term kept a held-out gain of 11 beside
+it (2 parameters against its 6; training seeds 6741 record 30 and 6763 record 29 of
+``studies/conceal_benchmark.py --kinds sds``). A doubted effect that is there keeps its gain
+beside the term (the term fits one line of its structure), so it keeps its name.
 """
 
 from __future__ import annotations
@@ -369,7 +383,13 @@ def _holder(
     measure (a ``beam_tilt_axial`` kept 0.18 % of its gain, a held-out gain of 1.8 and a
     criterion change of +29.8 beside a discovered 20x platform step at order 7, which kept
     1,453 beside it against the effect's whole 4,820; training seed 20261532, SDS
-    ``platform_step`` 20x)."""
+    ``platform_step`` 20x). And (session 39) for a doubted effect, where the term fails the
+    catalog's gain rules beside the effect too (a mutual tie: each keeps too little beside
+    the other), where the information criterion prefers the term: its criterion change
+    beside the effect is at most the effect's beside it, the criterion of the term alone
+    against the effect alone (the same fit for fewer parameters; an ``order 5, platform,
+    static`` term, 2 parameters, against a doubted ``beam_tilt_axial``, 6, training seed
+    6741 record 30 of the SDS catalog set)."""
     s = prep.settings
     fits = [f for d in disc for f in ([*base, d], [*base, d, term])]
     done = drive_many([remembered_steps(fitter, f) for f in fits])
@@ -422,6 +442,19 @@ def _holder(
             own,
             ", past the catalog's gain rules, while the effect keeps no held-out gain beside "
             "the term: what it predicts, the term predicts",
+        )
+    # (session 39) a mutual tie of a doubted effect: each fails the catalog's rules beside
+    # the other, and the information criterion decides (the term's change beside the effect
+    # against the effect's beside the term: the criterion of the term alone against that of
+    # the effect alone, the same fit for fewer parameters)
+    if doubted and dbic <= _dbic(prep, fd.chi2 - fb.chi2, k_eff):
+        return (
+            name,
+            own,
+            f", and the effect keeps as little beside the term (a tie the record cannot "
+            f"break by the catalog's rules), while the term fits what the effect fits with "
+            f"{k} parameters against its {k_eff} (the information criterion prefers the "
+            f"term), and the effect was named despite its own plausibility doubt",
         )
     return None
 
@@ -511,16 +544,28 @@ def _without_rival(
     gain rules and ``located_share_min``, and a discovered term holding the larger structure
     or in its place). A true fixed-frequency line in runs at other speeds is at other orders
     there, which no order term fits, so it keeps its gain beside them; a line the
-    rediscovered order term fits in the effect's runs leaves it a remnant. ``(selection,
-    models)`` with the first effect that fails refused, else ``None``."""
+    rediscovered order term fits in the effect's runs leaves it a remnant. Since session 39
+    each effect named despite its own ``plausible`` doubt is tested the same way, beside all
+    the terms discovered without it (where its removal leaves findings to discover): the
+    selection named it only for its lead over every other catalog candidate, which a term
+    discovery finds in its place can take (:func:`_holder`). ``(selection, models)`` with the
+    first effect that fails refused, else ``None``."""
     worst = None
-    for name in _uncovered(prep, sel, specs):
+    fixed = _uncovered(prep, sel, specs)
+    doubted_names = [a.name for a in sel.accepted if a.doubt is not None and a.name not in fixed]
+    for name in [*fixed, *doubted_names]:
         alt = _without(prep, fitter, sel, name, {}, views, scan)
+        if name not in fixed and not findings_listed(alt.findings, 12):
+            continue  # nothing is left without the doubted effect to discover
         models = rediscover(alt)
         # its rivals are the shaft orders discovered without it: a fixed-frequency line
         # discovered there is the effect's own structure, which it keeps (discovery never
-        # takes a catalog effect's structure)
-        specs2 = [sp for sp in _specs(models) if sp["line_kind"] != "hz" and sp["value"] != 0]
+        # takes a catalog effect's structure); a doubted effect's rivals are all the terms
+        specs2 = [
+            sp
+            for sp in _specs(models)
+            if name not in fixed or (sp["line_kind"] != "hz" and sp["value"] != 0)
+        ]
         if not specs2:
             continue
         disc = _terms(prep, specs2)
@@ -560,12 +605,10 @@ def rival_names(
     fails). ``rediscover(selection)``: discovery on a selection's final model and residual."""
     while sel.accepted:
         specs = _specs(models)
-        if not specs:
-            break
         disc = _terms(prep, specs)
         ties = _ties(prep, models)
         worst: tuple[float, str, list] | None = None
-        for s in sel.accepted:
+        for s in sel.accepted if specs else ():
             kept, rules = _test(
                 prep,
                 fitter,
@@ -596,14 +639,18 @@ def discovered(prep, fitter: Fitter, sel: Selection, views, scan: int, discover:
     catalog model, its residual and the first 12 findings) and the named effects re-tested
     beside its model (:func:`rival_names`): ``(selection, models or None)``; ``None`` where
     nothing is left unexplained."""
-    if not findings_listed(sel.findings, 12):
-        return sel, None
 
     def run(s: Selection) -> list[dict | None]:
         return discover(prep, fitter, s.final.terms, s.final_resid, s.findings[:12])
 
+    listed = findings_listed(sel.findings, 12)
+    if not listed and not any(a.doubt is not None for a in sel.accepted):
+        return sel, None
     with stage("discovery"):
-        return rival_names(prep, fitter, sel, run(sel), run, views, scan)
+        # (session 39) a doubted named effect is tested beside the model discovery builds
+        # without it even where nothing is left beside it (:func:`_without_rival`)
+        sel, models = rival_names(prep, fitter, sel, run(sel) if listed else [], run, views, scan)
+    return sel, models if findings_listed(sel.findings, 12) else None
 
 
 __all__ = ["RULE_PREFIX", "discovered", "rival_names"]
