@@ -9,6 +9,7 @@ held-out gain is the larger (session 33): ``tests/test_order_step_zeros.py``, tr
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from encdesign.diagnose import FinderSettings
 from encdesign.diagnose._dispatch import diagnose
@@ -55,6 +56,9 @@ def test_a_catalog_name_on_a_part_of_a_discovered_structure_is_refused():
     assert abs(t["scaling"]["beta"] - truth["beta"]) <= 2 * t["scaling"]["beta_se"]
 
 
+@pytest.mark.sweep  # CI time (session 40): a true vibration keeping its name beside a discovered
+# term runs in `make test`:
+# test_a_true_vibration_in_the_place_of_a_discovered_order_keeps_its_name
 def test_a_catalog_effect_that_is_there_keeps_its_name_beside_a_discovered_one():
     """The same record with a true catalog ``vibration`` added (a fixed frequency, each run
     its own amplitude and phase, 10x the noise): it stays named, and the order stays
@@ -78,6 +82,8 @@ def test_a_catalog_effect_that_is_there_keeps_its_name_beside_a_discovered_one()
     assert _law(d.doc, truth["line"][1])["frame"] == "shaft"  # the structure stays discovered
 
 
+@pytest.mark.sweep  # CI time (session 40): the vibration refused beside a discovered ring-down
+# runs in `make test` as the two tests test_a_vibration_beside_a_ring_down_*
 def test_a_vibration_on_a_part_of_a_discovered_ring_down_is_refused():
     """Training seed 8074 (session 34): a mode rung at the start of each run (``fixed_hz``,
     5x the noise, its own Q). The catalog's steady ``vibration`` takes the mean of each run's
@@ -300,6 +306,9 @@ def _beside(seed: list[int], cls: str, kind: str, frame: str, modulation: str) -
     assert terms and (terms[0]["frame"], terms[0]["modulation"]) == (frame, modulation)
 
 
+@pytest.mark.sweep  # CI time (session 40): a catalog name refused beside a discovered 20x SDS
+# platform step runs in `make test`:
+# test_a_catalog_name_failing_every_rule_beside_a_discovered_step_is_refused
 def test_a_catalog_name_keeping_no_heldout_gain_beside_a_discovered_step_is_refused():
     """Training seed 20261523 (session 38): a 20x step at platform order 7 of an SDS record.
     Main (fcaf394) named ``beam_tilt_axial`` (not doubted): beside the discovered platform

@@ -12,6 +12,7 @@ from scipy import stats
 from encdesign.diagnose.kinds.sds._sds_level_component import ComponentLevel
 from encdesign.diagnose.kinds.sds._sds_level_out import LevelOut, RunMeanLevel, order_columns
 from encdesign.diagnose.kinds.sds._sds_noise import dof_widening, span_basis
+from tests.helpers import sweep
 from tests.test_sds_level_common import _draw, _order_7, _saturating
 
 
@@ -57,8 +58,14 @@ def test_never_above_session_27_and_lower_with_a_quiet_common_component():
     )
 
 
+# the level is off by default (``FinderSettings.sds_level_per_component``): ``make test`` runs
+# one case of it, the others are the ``sweep`` tier (session 40, CI time)
 @pytest.mark.parametrize(
-    ("sc", "frame"), [(0.4, "sensor"), (1.0, "sensor"), (1.0, "common"), (2.5, "common")]
+    ("sc", "frame"),
+    sweep(
+        [(0.4, "sensor"), (1.0, "sensor"), (1.0, "common"), (2.5, "common")],
+        ((1.0, "common"),),
+    ),
 )
 def test_false_alarm_rate_of_one_sensor_and_common_tests(sc, frame):
     """Under noise whose common component is quieter (0.4), as loud as (1.0) or louder
@@ -82,6 +89,7 @@ def test_false_alarm_rate_of_one_sensor_and_common_tests(sc, frame):
     assert 0.3e-2 <= rate <= 1.8e-2, rate
 
 
+@pytest.mark.sweep  # an off setting's gain on one training record (session 40, CI time)
 def test_a_2x_one_sensor_order_found_with_the_per_component_level():
     """Training record ``[20261520, 0, 9, 0, 0]`` of ``benchmarks/discovery.py`` (a 2x static
     order 7 of moving sensor m1, its common component quieter than its differences), at 1500

@@ -23,6 +23,7 @@ import pytest
 from encdesign.diagnose.engine._settings import FinderSettings
 from encdesign.diagnose.engine._views import Finding
 from encdesign.diagnose.engine._views_time import findings_listed, time_steps_beside_order_change
+from tests.helpers import sweep
 
 
 def _cp():
@@ -32,16 +33,26 @@ def _cp():
     return change_points
 
 
+# ``make test`` runs one case of each place (in the pause, inside a run, at a run's start;
+# with and without a reference); the two repeats are the ``sweep`` tier (session 40, CI time)
 @pytest.mark.parametrize(
     ("seed", "cls", "i"),
-    [
-        (7950, "mh_arcs_noref", 1),  # 4 heads, 2 runs of 0.45 turn, the shift in the pause
-        (7950, "mh_arcs_noref", 3),  # 3 heads, 2 runs of 0.74 turn, in the pause
-        (7951, "mh_arcs_noref", 2),  # inside a run
-        (7950, "mh_part_ref", 2),  # 6 heads, 3 runs of 0.58 turn, a reference, inside run 1
-        (7950, "mh_part_ref", 3),  # 4 heads, 2 runs of 0.89 turn, at run 1's start
-        (7951, "mh_part_ref", 2),  # inside run 1 of 3
-    ],
+    sweep(
+        [
+            (7950, "mh_arcs_noref", 1),  # 4 heads, 2 runs of 0.45 turn, the shift in the pause
+            (7950, "mh_arcs_noref", 3),  # 3 heads, 2 runs of 0.74 turn, in the pause
+            (7951, "mh_arcs_noref", 2),  # inside a run
+            (7950, "mh_part_ref", 2),  # 6 heads, 3 runs of 0.58 turn, a reference, inside run 1
+            (7950, "mh_part_ref", 3),  # 4 heads, 2 runs of 0.89 turn, at run 1's start
+            (7951, "mh_part_ref", 2),  # inside run 1 of 3
+        ],
+        (
+            (7950, "mh_arcs_noref", 3),
+            (7951, "mh_arcs_noref", 2),
+            (7950, "mh_part_ref", 2),
+            (7950, "mh_part_ref", 3),
+        ),
+    ),
 )
 def test_a_part_turn_eccentricity_shift_gets_no_time_step_away_from_the_truth(seed, cls, i):
     """Every located time of the ``time`` view holds the truth, and the record's change is
