@@ -953,3 +953,28 @@ def test_a_vibration_near_a_base_order_at_one_speed_both_ways_is_named(tmp_path)
     assert set(named) == {"vibration"}, (list(named), [r["reason"][:90] for r in doc["rejected"]])
     f = named["vibration"]["params"]["frequency_hz"]["value"]
     assert f == pytest.approx(f_hz["f"], rel=2e-3)
+
+
+def test_a_reference_swept_both_ways_on_one_grid_has_no_lattice_and_no_crash():
+    """Training seed 6801 (session 40, ``benchmarks/finder_variations.py --set clean --seed
+    6801``, record 1): a clean one-head record whose reference sweeps forward and back over
+    the same evenly spaced angles, so its sorted values pair up 1.5e-12 rad apart. Euclid's
+    step of those gaps had no gap within its exact tolerance, and the weighted step was
+    0 / 0: the diagnosis crashed (``ValueError``) on main 78ce3cc. No lattice now, and the
+    record is diagnosed."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from finder_variations import clean_record
+
+    from encdesign.diagnose import diagnose
+    from encdesign.diagnose.engine._lattice import detect_lsb
+
+    rec, desc = clean_record(np.random.default_rng([6801, 1]), 3, 12)
+    assert desc["both"] and desc["H"] == 1
+    th, run = np.asarray(rec.columns["theta_ref"]), np.asarray(rec.columns["run"])
+    lat = detect_lsb(th, run, settings=FinderSettings())
+    assert lat.lsb_rad is None and "no lattice" in lat.note, lat
+    d = diagnose(rec).doc
+    assert d["sensor"]["reference_lattice"]["lsb_rad"] is None
+    assert d["verdict"] in ("consistent", "unexplained", "missing_physics")

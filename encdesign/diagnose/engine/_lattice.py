@@ -159,7 +159,14 @@ def detect_lsb(
             note=f"gaps are not integer multiples of d_min/j (j <= {max_divisor}): no lattice",
         )
     k = np.round(d / q)
-    ok = np.abs(d / q - k) <= tolerance
+    ok = (np.abs(d / q - k) <= tolerance) & (k > 0)
+    if not np.any(ok):
+        # (Euclid's step of an evenly sampled sweep with a few wider gaps: no gap within the
+        # exact tolerance of a multiple of it, so no step to refine; session 40, a clean
+        # multihead record's reference crashed here on 0 / 0)
+        return dataclasses.replace(
+            none, note=f"no gap is a whole multiple of the step {q:.6g} rad found: no lattice"
+        )
     q = float(np.sum(k[ok] * d[ok]) / np.sum(k[ok] ** 2))
     offsets: dict[int, float] = {}
     on = np.zeros(v.size, dtype=bool)
