@@ -137,11 +137,11 @@ class FinderSettings(AbstractSelectionSettings):
     (a one-sensor order-2 ``decay`` of the run means at chi-square 88 against 24.5, nothing at
     session 27's level; now training). Off until the false-alarm side is understood."""
 
-    sds_clock_lock_level: int = eqx.field(default=0, static=True)
-    """sds with phi_ref, 1: on, 0: off: the run means' common factor mixed with the direct one
-    at the clock's rounding share (``_sds_clock_lock``). A switch. Clean training keys
-    8210000-23, 8211000-23: common component 1.65x the model near lock. Off: fresh
-    ``--sds-unlocked-clock --seed 6771`` 31/31 -> 28/31 (s39-clock39; now training)."""
+    sds_clock_lock_level: int = eqx.field(default=1, static=True)
+    """sds with phi_ref (``_sds_clock_lock``): 1: the common views read the clock's rounding
+    constant within a run, predicted from the clock (s40-miss40; training 6785/23-24
+    ``consistent``); 2: also session 39's common factor mixed with the direct one at the lock
+    share (fresh 6771 31/31 -> 28/31, s39-clock39); 0: neither. See docs/diagnose.md."""
 
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that

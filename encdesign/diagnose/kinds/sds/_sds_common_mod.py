@@ -43,6 +43,7 @@ from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
 from ...engine._views_modulated import _basis, _power2
 from ...engine._views_orders import time_order
+from ._sds_noise import noise_info
 
 VIEW = "common_modulated"
 
@@ -124,6 +125,7 @@ def view_common_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> li
     W, names = shapes(n)
     sig = np.asarray(prep.sigma, float)[:M]
     pw = powers(r, phi, sig, np.concatenate([np.ones((1, n)), W]), orders, Q)
+    pw = pw * noise_info(prep.ctx).common_scale  # the clock's rounding (_sds_clock_lock)
     static, pw = pw[0], pw[1:]
     alpha = prep.settings.modulated_orders_alpha
     n_tests = [2 * L, 2 * (n - 1) * L]

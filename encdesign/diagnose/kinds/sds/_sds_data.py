@@ -15,7 +15,7 @@ from ....io._recording import Recording
 from ...engine._candidates import Context
 from ...engine._protocol import KindData, Prepared, RowColumns
 from ...engine._settings import DEFAULT_SETTINGS, FinderSettings
-from ._sds_clock_lock import clock_lock_share
+from ._sds_clock_lock import clock_lock_share, rounding_common_excess
 from ._sds_noise import (
     REFERENCE_RADIUS_M,
     design_orders,
@@ -403,6 +403,8 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
     enc = rec.encoder
     clock_hz = enc.get("clock_hz")
     lattice = stamp_lattice(np.asarray(rec.columns["t"], float), settings=settings)
+    clock_s = 1.0 / float(clock_hz) if clock_hz else None
+    lock = clock_lock_share(tab.run_clock_s, clock_s, K, tab.n_marks)
     rows_extra = dict(
         phi=np.asarray(phi, float),
         tf_c=tf - t_mean,
@@ -418,9 +420,11 @@ def sds_data(rec: Recording, settings: FinderSettings = DEFAULT_SETTINGS) -> SDS
         psi_m=np.asarray(tab.psi_moving_rad, float),
         helmert=H,
         proj=np.asarray(0.0 if has_ref else 1.0),
-        clock_lock=np.asarray(
-            clock_lock_share(
-                tab.run_clock_s, 1.0 / float(clock_hz) if clock_hz else None, K, tab.n_marks
+        clock_lock=np.asarray(lock),
+        # the clock's rounding constant within a run, common to the moving sensors (rad^2)
+        clock_round_excess=np.asarray(
+            rounding_common_excess(
+                tab.run_clock_s, clock_s, tab.psi_fixed_rad, tab.psi_moving_rad, tab.n_marks, lock
             )
         ),
         omega=np.asarray(omega),

@@ -135,6 +135,12 @@ class SDSNoiseInfo:
             for the probes' re-estimates (:func:`levels_of`); ``None`` before the stage ran.
         level_factor: ``factor(cols (R, M, q)) -> (sigma / sigma')^2``, the run-mean level
             without a test's columns (:mod:`._sds_level_out`); ``None`` before the stage ran.
+        common_scale: the factor (at most 1) on the chi-square of a pattern common to the
+            moving sensors in the whitened run means (the views ``common_orders`` and
+            ``common_modulated``): ``(g / g_c)^2``, ``g`` the run means' common factor the
+            record is whitened with, ``g_c`` the same with the clock's rounding constant
+            within a run (:func:`._sds_clock_lock.rounding_common_excess`,
+            ``FinderSettings.sds_clock_lock_level``), which only that component holds.
     """
 
     levels: dict = dataclasses.field(default_factory=dict)
@@ -143,6 +149,7 @@ class SDSNoiseInfo:
     run_change_power: tuple[tuple, ...] = ()
     base_resid: np.ndarray | None = dataclasses.field(default=None, compare=False, repr=False)
     level_factor: LevelOut | None = dataclasses.field(default=None, compare=False, repr=False)
+    common_scale: float = 1.0
 
 
 def noise_info(ctx: Context) -> SDSNoiseInfo:
@@ -347,6 +354,24 @@ def _direct_ucl(means: np.ndarray, base: np.ndarray | None, q: float | None) -> 
     return float(z @ z) / float(stats.chi2.ppf(q, dof))
 
 
+def _common_scale(info: dict, rounding: float, lock: float) -> float:
+    """The factor (at most 1) on the chi-square of a pattern common to the moving sensors
+    (``SDSNoiseInfo.common_scale``: the views ``common_orders`` and ``common_modulated``):
+    ``(g / g_c)^2``, ``g`` the run means' common factor the record is whitened with (``info``:
+    :func:`_level_sigma`'s), ``g_c`` the indirect one with its excess at least ``rounding``
+    (rad², the clock's rounding constant within a run,
+    :func:`._sds_clock_lock.rounding_common_excess`), capped (or mixed at the share ``lock``)
+    by the direct one as ``g`` is. Only the common component holds that rounding, so the
+    level every channel is whitened with keeps ``g``."""
+    g, g_i = info.get("run_means_common_factor"), info.get("run_means_common_factor_indirect")
+    s = float(info.get("run_means_rad") or 0.0)
+    if not rounding > 0 or not s > 0 or g is None or g_i is None:
+        return 1.0
+    g_c = math.sqrt(max(g_i * g_i, 1.0 + rounding / (s * s)))
+    g_c = float(lock_mixed_factor(g_c, info.get("run_means_common_factor_direct"), lock))
+    return min(1.0, (g / g_c) ** 2)
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -523,10 +548,13 @@ def run_mean_levels(
     )
     fixed = np.asarray(rows["fixed_c"], float)
     common = common_base_columns(rows["phi"], consts["psi_m"], orders)
-    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (settings.sds_clock_lock_level > 0)
+    switch = settings.sds_clock_lock_level  # 1: the rounding's level, 2: also the mixing
+    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (switch > 1)
+    rounding = float(np.asarray(consts.get("clock_round_excess", 0.0))) * (switch > 0 and not proj)
 
     def levels(resid: np.ndarray, info: dict | None = None, state=None) -> np.ndarray:
-        return _level_sigma(
+        info = {} if info is None and state is not None else info
+        sig = _level_sigma(
             resid,
             K,
             X,
@@ -544,6 +572,9 @@ def run_mean_levels(
             component=settings.sds_level_per_component > 0,
             lock=lock,
         )
+        if state is not None and info is not None:
+            state["common_scale"] = _common_scale(info, rounding, lock)
+        return sig
 
     return levels
 
@@ -580,6 +611,7 @@ def sds_noise(prep: Prepared, resid: np.ndarray) -> NoiseEstimate:
         run_change_power=tuple(_step_or_outlier(rwm[:, m]) for m in range(M)),
         base_resid=np.asarray(resid[prep.keep], float),
         level_factor=state.get("factor"),
+        common_scale=float(state.get("common_scale", 1.0)),
     )
     return NoiseEstimate(sig, found)
 
@@ -646,7 +678,7 @@ def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[
     M = prep.consts["psi_m"].size
     if float(prep.consts["proj"]) > 0:
         return []
-    pw = common_order_power(prep, rw[:, :M])
+    pw = common_order_power(prep, rw[:, :M]) * noise_info(prep.ctx).common_scale
     thr = _thr(prep.settings.alpha, 2, pw.size)
     out = []
     for i in np.flatnonzero(pw > thr):
