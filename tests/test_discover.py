@@ -579,3 +579,67 @@ def test_a_located_line_whose_structure_a_near_alias_takes_says_so():
     assert "passes its threshold alone" in reason, reason
     assert "beside the terms kept at order 29" in reason, reason
     assert "beside" not in D._model_json(st, [], [], 0, {})["reason"]
+
+
+def _step_alias_state(seed: int, amp: float, orders=(5, 8, 29), frames=None):
+    """Discovery's state of one sensor's run-mean order ``orders[0]`` of amplitude ``amp``
+    (whitened) switching on at run 11 of the 24 golden-angle platform positions (the SDS
+    bench's), with unit white noise, and a located line at each of ``orders`` with the
+    sensor's ``step`` term (from run 11; threshold 18, the SDS records' order; ``frames``:
+    each term's frame, else ``sensor m0``), five folds."""
+    from encdesign.diagnose.engine import _discover as D
+    from encdesign.diagnose.engine._discover_law import Sums, Term
+    from encdesign.diagnose.engine._discover_lines import Line
+
+    rng = np.random.default_rng(seed)
+    phi = np.arange(24) * 2 * np.pi * (1 - 2 / (1 + 5**0.5))
+    on = (np.arange(24) >= 11) * 1.0
+    X = np.concatenate([np.c_[on * np.cos(m * phi), on * np.sin(m * phi)] for m in orders], 1)
+    y = amp * on * np.cos(orders[0] * phi + rng.uniform(0, 2 * np.pi)) + rng.normal(size=24)
+    fold = np.arange(24) % 5
+    A = np.stack([X[fold == k].T @ X[fold == k] for k in range(5)])
+    b = np.stack([X[fold == k].T @ y[fold == k] for k in range(5)])
+    rr = np.array([y[fold == k] @ y[fold == k] for k in range(5)])
+    n = len(orders)
+    sl = [slice(2 * i, 2 * i + 2) for i in range(n)]
+    sums = Sums(A, b, rr, A.copy(), sl, [(1, 1, 1, 2)] * n, ["step"], {})
+    frames = frames or ["sensor m0"] * n
+    lib = [Term(i, frames[i], "step", np.eye(2)) for i in range(n)]
+    cinfo = {"speed": np.ones(1), "run": np.zeros(1, int), "direction": np.ones(1, int)}
+    lines = [Line("order", float(m)) for m in orders]
+    th = np.full(n, 18.0)
+    return D, D.State(lines, list(range(n)), cinfo, sums, lib, th, 1.0, 0, FinderSettings())
+
+
+def test_a_repeat_that_takes_the_same_frame_at_a_near_alias_line_includes_the_term():
+    """Session 40 (training seed 20261536's SDS ``sensor_step`` 5x: sensor m0's order 5 from
+    run 11, chosen at order 5 on all folds, the repeats taking the same sensor's step at the
+    near-aliases 8 and 29 on the golden-angle positions; inclusion 0.4, nothing kept). Here
+    the same on a reduced state: the order 5 step is chosen on all folds, two repeats take it
+    and three its near-alias at order 29, which gains no more than its threshold beside it,
+    and it no more than its own beside order 29 (one structure the record cannot place at
+    one line: ``one_structure``): they include it, and it is kept at order 5 (main, 78ce3cc:
+    inclusion 0.4, nothing kept).
+    The same columns in another frame, or two terms each gaining past its threshold beside
+    the other, are not one structure."""
+    D, st = _step_alias_state(4, 3.0)
+    kept, incl = D.select_terms(st)
+    assert kept == [0], (kept, incl)
+    assert incl[0] == 1.0, incl
+    from encdesign.diagnose.engine._discover_law import one_structure
+
+    assert one_structure(st.sums, st.lib, st.thresh, 0, 2)  # order 29: three repeats
+    assert one_structure(st.sums, st.lib, st.thresh, 2, 0)
+    assert not one_structure(st.sums, st.lib, st.thresh, 0, 0)  # one line: same_place's
+    D2, other = _step_alias_state(4, 3.0, frames=["sensor m0", "sensor m1", "sensor m1"])
+    assert not one_structure(other.sums, other.lib, other.thresh, 0, 2)  # two frames
+    assert D2.select_terms(other)[0] == [], "another sensor's step is no repeat of m0's"
+    # a second true order on the sensor: each keeps its gain beside the other
+    rng = np.random.default_rng(1)
+    phi = np.arange(24) * 2 * np.pi * (1 - 2 / (1 + 5**0.5))
+    on = (np.arange(24) >= 11) * 1.0
+    X = on[:, None] * np.c_[np.cos(5 * phi), np.sin(5 * phi), np.cos(7 * phi), np.sin(7 * phi)]
+    y = 8.0 * on * (np.cos(5 * phi) + np.sin(7 * phi + 1.0)) + rng.normal(size=24)
+    st.sums.A, st.sums.raw, st.sums.b = (X.T @ X)[None], (X.T @ X)[None], (X.T @ y)[None]
+    st.sums.slices = [slice(0, 2), slice(2, 4)]
+    assert not one_structure(st.sums, st.lib[:2], st.thresh[:2], 0, 1)

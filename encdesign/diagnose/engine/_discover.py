@@ -73,6 +73,7 @@ from ._discover_law import (
     _scatter_se,
     _sibling,
     _tie_pick,
+    one_structure,
     taken_by,
 )
 from ._discover_level import level_thresholds
@@ -553,7 +554,8 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
     """Forward selection on all folds (of the terms at a chosen term's line and frame, the
     held-out gain picks the modulation: :func:`best_at_place`), and each term's inclusion
     probability over the selections repeated without each fold (a repeat that takes a term
-    of the same span, :func:`_same_span`, or of the same line and frame includes it); the
+    of the same span, :func:`_same_span`, of the same line and frame, or of the same frame at
+    a line the record cannot tell apart from it, :func:`one_structure`, includes it); the
     terms kept (chosen on all folds and included at least ``settings.discover_inclusion_min``)."""
     sums, lib = st.sums, st.lib
     K = sums.A.shape[0]
@@ -572,7 +574,12 @@ def select_terms(st: State) -> tuple[list[int], np.ndarray]:
         same = {
             i
             for i in chosen
-            if any(_same_span(sums, lib[i], lib[j]) or same_place(lib[i], lib[j]) for j in got)
+            if any(
+                _same_span(sums, lib[i], lib[j])
+                or same_place(lib[i], lib[j])
+                or one_structure(sums, lib, st.thresh, i, j)
+                for j in got
+            )
         }
         for i in set(got) | same:
             incl[i] += 1.0 / K

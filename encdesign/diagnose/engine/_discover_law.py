@@ -224,6 +224,37 @@ def _same_span(sums: Sums, a: Term, b: Term) -> bool:
     return rank(a.H) == q == rank(b.H) and rank(np.concatenate([a.H, b.H], 1)) == q
 
 
+def one_structure(sums: Sums, lib: Sequence[Term], thresh: np.ndarray, i: int, j: int) -> bool:
+    """Whether terms ``i`` and ``j`` of one frame at two lines are one structure the record
+    cannot place at either line: each, fitted beside the other (all folds, after the
+    catalog's projection), gains no more than its own multiple-testing threshold ``thresh``
+    (the mutual tie of :func:`taken_by`, which then says so in a line's words). On an SDS
+    record's few platform positions two orders can be near-aliases, and the noise of the
+    folds left out decides which one a repeat of the selection takes: a repeat that takes
+    either has confirmed the structure in that frame, so it includes both
+    (:func:`._discover.select_terms`; the line reported is the one chosen on all folds).
+    Session 40: one sensor's order 5 switching on at run 11 of 24 (5x, training seed
+    20261536), chosen at order 5 on all folds; the repeats took the same sensor's step at
+    orders 8 and 29 and its growth at 8 (each beside the order 5 step 5.1, 5.2, 6.6 against
+    thresholds 16-17; the step beside them 8.7, 14.0, 13.4 against 18.8), its inclusion was
+    0.4, and nothing was kept. Terms of two frames, or at one line (:func:`_same_span`,
+    ``same_place``), are not this rule's."""
+    a, b = lib[i], lib[j]
+    if a.frame != b.frame or a.line == b.line:
+        return False
+    sa, sb = sums.slices[a.line], sums.slices[b.line]
+    rows = np.r_[np.arange(sa.start, sa.stop), np.arange(sb.start, sb.stop)]
+    At = sums.A[:, rows][:, :, rows].sum(0)  # the two lines' columns only
+    Rt = sums.raw[:, rows][:, :, rows].sum(0)
+    bt = sums.b[:, rows].sum(0)
+    na, qa = sa.stop - sa.start, a.H.shape[1]
+    H = np.zeros((rows.size, qa + b.H.shape[1]))
+    H[:na, :qa], H[na:, qa:] = a.H, b.H
+    both = _gain_in(H, At, bt, Rt)
+    alone_a, alone_b = _gain_in(H[:, :qa], At, bt, Rt), _gain_in(H[:, qa:], At, bt, Rt)
+    return both - alone_b <= thresh[i] and both - alone_a <= thresh[j]
+
+
 def _kept_share(sums: Sums, tm: Term) -> float:
     """The share of a term's raw norm (its columns' whitened Gram, summed over the folds)
     that the projection on the catalog model's Jacobian leaves it: 1 where the catalog spans
