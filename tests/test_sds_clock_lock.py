@@ -111,6 +111,18 @@ def test_near_lock_the_run_mean_level_holds_the_common_component():
     assert out[0.0][0] < 0.4 * seen < seen < out[1.0][0]
 
 
+def level_rows(rng: np.random.Generator, R: int, K: int) -> dict:
+    """The per-run rows :func:`_sds_noise.run_mean_levels` reads, for ``R`` runs of ``K``
+    sensors at sorted random platform angles (rad)."""
+    phi = np.sort(rng.uniform(0, 2 * np.pi, R))
+    return {
+        "phi": phi,
+        "theta": phi,
+        "tmid_c": np.linspace(-1, 1, R)[:, None] + np.zeros((R, K)),
+        "fixed_c": 0.1 * rng.standard_normal((R, 2)),
+    }
+
+
 @pytest.mark.parametrize("switch", [0, 1, 2])
 def test_the_switch_reaches_the_level(switch):
     """``FinderSettings.sds_clock_lock_level`` and the record's ``clock_lock`` constant reach
@@ -123,13 +135,7 @@ def test_the_switch_reaches_the_level(switch):
 
     rng = np.random.default_rng(2)
     R, M, K = 12, 3, 4
-    phi = np.sort(rng.uniform(0, 2 * np.pi, R))
-    rows = {
-        "phi": phi,
-        "theta": phi,
-        "tmid_c": np.linspace(-1, 1, R)[:, None] + np.zeros((R, K)),
-        "fixed_c": 0.1 * rng.standard_normal((R, 2)),
-    }
+    rows = level_rows(rng, R, K)
     consts = {
         "psi_m": np.array([0.3, 2.4, 4.5]),
         "proj": np.asarray(0.0),

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from encdesign.diagnose.kinds.sds._sds_clock_lock import rounding_common_excess
+from tests.test_sds_clock_lock import level_rows
 
 TICK = 1e-8
 MARKS = 100
@@ -82,13 +83,7 @@ def test_common_tests_read_the_predicted_rounding_and_no_effect_raises_it(switch
 
     rng = np.random.default_rng(2)
     R, M, K = 12, 3, 4
-    phi = np.sort(rng.uniform(0, 2 * np.pi, R))
-    rows = {
-        "phi": phi,
-        "theta": phi,
-        "tmid_c": np.linspace(-1, 1, R)[:, None] + np.zeros((R, K)),
-        "fixed_c": 0.1 * rng.standard_normal((R, 2)),
-    }
+    rows = level_rows(rng, R, K)
     consts = {"psi_m": np.array([0.3, 2.4, 4.5]), "proj": np.asarray(0.0)}
     means = rng.standard_normal((R, M)) + 6.0 * rng.standard_normal((R, 1))
     resid = np.concatenate([means, 0.5 * rng.standard_normal((R, M * (K - 1)))], 1)
@@ -113,7 +108,7 @@ def test_common_tests_read_the_predicted_rounding_and_no_effect_raises_it(switch
         return
     assert scale1 == pytest.approx((g / math.sqrt(1.0 + e / s**2)) ** 2)
     assert scale1 < 0.5
-    tilt = np.repeat(12.0 * np.cos(phi + 0.4)[:, None], M, 1)
+    tilt = np.repeat(12.0 * np.cos(rows["phi"] + 0.4)[:, None], M, 1)
     _, info2, scale2 = level(resid + np.concatenate([tilt, 0 * resid[:, M:]], 1), e)
     assert info2["run_means_common_factor_direct"] > info1["run_means_common_factor_direct"]
     assert scale2 == pytest.approx(scale1, rel=0.02)
