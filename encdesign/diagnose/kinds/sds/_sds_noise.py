@@ -572,7 +572,7 @@ def run_mean_levels(
             component=settings.sds_level_per_component > 0,
             lock=lock,
         )
-        if state is not None and info is not None:
+        if state is not None:  # (``info`` is a dict there: the line above)
             state["common_scale"] = _common_scale(info, rounding, lock)
         return sig
 
