@@ -783,15 +783,11 @@ class FinderSettings(AbstractSelectionSettings):
 
     discover_max_aliases: int = eqx.field(default=5, static=True)
     """... at most this many alias orders (lines) per located order, the largest shares
-    first; 0 tests none. s20-alias41 set it to 5 by hand; on fresh seeds (20261359-20261361,
-    `benchmarks/discovery_sds_alias*_s20.json`) that changed one SDS case of 30, for the
-    worse (a `slow_growth` 5x lost its term to the larger library's threshold) and fixed
-    none, so it was off from session 20. On by default (5) since session 41: on 120 fresh
-    SDS cases since (sessions 40 and 41: 20261551-52, 20261554-55, 20261557-60) every case
-    equal with it on and off, the nine catalog sets 6804-6812 every record equal, and on
-    training 20261544 it turns a 5x one-sensor growth that the catalog's
-    `sensor_delay_step` took (discovery modelling an alias of its order) into its true order
-    and frame, the name refused beside it. SDS only (other kinds have no platform angle)."""
+    first; 0 tests none. Off from session 20 (fresh 20261359-20261361: one SDS case of 30
+    worse, a 5x `slow_growth` lost to the larger library's threshold, none fixed); 5 since
+    session 41: 120 fresh SDS cases (20261551-52, 20261554-55, 20261557-60) equal on and off,
+    the catalog sets 6804-6812 equal; on training 20261544 a 5x one-sensor growth the catalog
+    named `sensor_delay_step` (discovery modelling its alias) is read at its own order."""
 
     def __check_init__(self):
         check_settings(self)
