@@ -267,12 +267,13 @@ def test_sds_step_located_at_an_alias_order_is_modelled_at_its_own():
     locates order 8 (its alias on those positions: 5 and 8 golden angles apart by 13, 4.97
     turns); discovery tests the lower orders it may alias, and the held-out gain takes the
     step at order 5, on every moving sensor, switched on within a run of the truth's (the
-    alias search is off by default: ``FinderSettings.discover_max_aliases``). Since session
+    alias search, ``FinderSettings.discover_max_aliases``, on by default since session 41).
+    Since session
     21 the SDS ``modulated_orders`` view reports order 5 itself beside the static scan where
     its step is the stronger evidence (``scan_modulated(beside_static=True)``): located
     directly, the step is modelled at 5 without the alias search; located only at 8, the
     alias search must reach it."""
-    _, truth, d, mine = _sds("platform_step", 7509, settings=FinderSettings(discover_max_aliases=5))
+    _, truth, d, mine = _sds("platform_step", 7509)
     located = [o for u in d.doc["unexplained"] for o in u["where"].get("orders", [])]
     assert 8.0 in located, located  # the record's alias, as located
     assert mine, d.doc["report"]
@@ -284,6 +285,29 @@ def test_sds_step_located_at_an_alias_order_is_modelled_at_its_own():
         assert t["located"], t
     assert abs(t["step"]["run"] - truth["run"]) <= 1, t["step"]
     assert not [x for x in _terms(d.doc) if x["value"] == 8.0], d.doc["report"]
+
+
+@pytest.mark.sweep  # 20 s of CPU; its rule (the alias search on by default) runs in
+# ``make test`` as test_sds_step_located_at_an_alias_order_is_modelled_at_its_own (7509)
+def test_sds_growth_an_alias_step_left_to_a_catalog_name_is_modelled_at_its_order():
+    """Training case ``[20261544, 0, 4, 1, 0]`` of ``benchmarks/discovery.py`` (session 40): a
+    5x growth at order 5 on moving sensor m2. Without the alias search the catalog names
+    ``sensor_delay_step`` while discovery models the located alias, order 18 of m2, as a step;
+    with it (the default since session 41) the growth is modelled at its own order and frame,
+    and the catalog name is refused beside it: no catalog name on out-of-catalog physics."""
+    rec, truth = outside_record(
+        np.random.default_rng([20261544, 0, 4, 1, 0]), "slow_growth", 5.0, "sds"
+    )
+    d = diagnose(rec)
+    validate_diagnosis(d.doc)
+    assert d.verdict == "unexplained", d.doc["report"]
+    mine = [
+        t for t in _terms(d.doc) if t["line_kind"] == "order" and t["value"] == truth["line"][1]
+    ]
+    assert mine, d.doc["report"]
+    assert (mine[0]["frame"], mine[0]["modulation"]) == (truth["frame"], "growth"), d.doc["report"]
+    assert not [e["name"] for e in d.doc["effects"]], d.doc["report"]
+    _no_catalog_name(d.doc)
 
 
 # ``make test`` runs 7572 at 5x; the same record at 6x is the ``sweep`` tier (session 33,

@@ -781,13 +781,13 @@ class FinderSettings(AbstractSelectionSettings):
     further; each alias is a line of the library, counted in its multiple-testing threshold.
     Was the constant ``ALIAS_SHARE`` (s20-alias41; a field since s20-set44, unchanged)."""
 
-    discover_max_aliases: int = eqx.field(default=0, static=True)
+    discover_max_aliases: int = eqx.field(default=5, static=True)
     """... at most this many alias orders (lines) per located order, the largest shares
-    first; 0 (the default) tests none. s20-alias41 set it to 5 by hand; on fresh seeds
-    (20261359-20261361, `benchmarks/discovery_sds_alias*_s20.json`) that changed one SDS case
-    of 30, for the worse (a `slow_growth` 5x lost its term to the larger library's
-    threshold) and fixed none, so it is off by default (session 20): set it (e.g. 5) where a
-    bench's platform positions make near-aliases of the orders (few golden-angle runs)."""
+    first; 0 tests none. Off from session 20 (fresh 20261359-20261361: one SDS case of 30
+    worse, a 5x `slow_growth` lost to the larger library's threshold, none fixed); 5 since
+    session 41: 120 fresh SDS cases (20261551-52, 20261554-55, 20261557-60) equal on and off,
+    the catalog sets 6804-6812 equal; on training 20261544 a 5x one-sensor growth the catalog
+    named `sensor_delay_step` (discovery modelling its alias) is read at its own order."""
 
     def __check_init__(self):
         check_settings(self)
