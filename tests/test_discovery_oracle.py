@@ -68,3 +68,22 @@ def test_the_level_ratio_is_the_product_of_its_parts(oracle):
     assert parts["widening"] > 1.0 and parts["common_factor"] >= 1.0
     lv = oracle["noise_finder_run_means"]
     assert parts["widening"] == lv["widening"] and parts["common_factor"] == lv["common_factor"]
+
+
+def test_sds_noise_parts_keep_the_jitter_and_the_rounding_apart():
+    """``outside_record(..., sds_noise_parts=(jitter, rounding))``
+    (``benchmarks/sds_run_mean_levels.py``): the rounding alone puts every edge on the
+    100 MHz clock's grid, the jitter alone none, and both are the default record."""
+    from encdesign.simulate._conceal_sds import CLOCK_S
+
+    def edges(parts=(True, True)):
+        rec, _ = outside_record(
+            np.random.default_rng(8043), "clean", 0.0, "sds", sds_noise_parts=parts
+        )
+        return np.asarray(rec.columns["t"], float)
+
+    on_grid = lambda t: np.abs(t / CLOCK_S - np.round(t / CLOCK_S)) < 1e-6  # noqa: E731
+    both, jitter, rounding = edges(), edges((True, False)), edges((False, True))
+    assert both.size and np.all(on_grid(both)) and np.all(on_grid(rounding))
+    assert not np.any(on_grid(jitter))
+    assert not np.array_equal(both, rounding)  # the jitter moves edges by whole ticks too

@@ -152,6 +152,7 @@ def outside_record(
     mode: tuple[float, float] | None = None,
     *,
     noise: bool = True,
+    sds_noise_parts: tuple[bool, bool] = (True, True),
 ) -> tuple[Recording, dict]:
     """``(recording, truth)``: a bench of ``kind`` with one structure of class ``cls``
     (:data:`CLASSES`; ``"clean"``: none) of peak amplitude ``size`` x the noise.
@@ -161,6 +162,8 @@ def outside_record(
     the edges' timing jitter and the clock's rounding): with ``size`` 0 too, what is left
     of the same ``rng`` is the bench alone, so the structure and the noise of a record are
     known exactly (``benchmarks/discovery.py``'s oracle detectability).
+    ``sds_noise_parts``: on an SDS bench with ``noise``, which of ``(jitter, rounding)`` the
+    record keeps (``benchmarks/sds_run_mean_levels.py``: each source's levels apart).
 
     ``truth``: ``line`` (``("order", m)`` or ``("hz", f)``), ``frame``, ``modulation``,
     ``beta`` (speed exponent, where the class has one), ``alpha`` (head azimuths, rad)."""
@@ -171,7 +174,7 @@ def outside_record(
     if cls not in ("clean", *CONTROLS, *CONFOUNDED) and cls not in classes_for(kind):
         raise ValueError(f"class {cls!r} not on a {kind} bench; expected {classes_for(kind)}")
     if kind == "sds":
-        return _sds_record(rng, cls, size, noise)
+        return _sds_record(rng, cls, size, noise, sds_noise_parts)
     C = 4 if kind == "multihead" else 1
     both = cls in ("one_direction", "direction_lag")
     R = 4 if both else 3
@@ -261,11 +264,17 @@ def outside_record(
 
 
 def _sds_record(
-    rng: np.random.Generator, cls: str, size: float, noise: bool = True
+    rng: np.random.Generator,
+    cls: str,
+    size: float,
+    noise: bool = True,
+    parts: tuple[bool, bool] = (True, True),
 ) -> tuple[Recording, dict]:
     """An SDS bench (module doc) with one structure of ``cls`` on the moving sensors' edges:
     a delay ``A f(phi) / Omega`` (``A`` = ``size`` x :data:`SDS_NOISE_RAD`); ``noise``:
-    the edges' 1 ns jitter and the clock's rounding (else exact edge times)."""
+    the edges' 1 ns jitter and the clock's rounding, each where ``parts`` (jitter,
+    rounding) says (else exact edge times)."""
+    jitter, rounding = noise and parts[0], noise and parts[1]
     import jax
 
     from ..physics._sds_errors import SDSErrors
@@ -311,11 +320,11 @@ def _sds_record(
                 m = m + d
             else:
                 m[k] = m[k] + d
-        if not noise:
+        if not rounding:
             return f, m
         return np.ceil(f / CLOCK_S) * CLOCK_S, np.ceil(m / CLOCK_S) * CLOCK_S
 
-    errors = SDSErrors(clock_period_s=0.0, jitter_s=1e-9 if noise else 0.0)
+    errors = SDSErrors(clock_period_s=0.0, jitter_s=1e-9 if jitter else 0.0)
     cols = sds_bench_columns(design, phis, SDS_REVS, errors, key=kj, edge_hook=hook)
     meta = {
         "format": "encdesign-recording/1",
