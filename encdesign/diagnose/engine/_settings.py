@@ -117,25 +117,23 @@ class FinderSettings(AbstractSelectionSettings):
     name not in their truth: the common component also holds common structure the test's
     columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
 
-    sds_level_per_component: int = eqx.field(default=0, static=True)
+    sds_level_per_component: int = eqx.field(default=1, static=True)
     """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
     without a test's columns per component, the moving sensors' common component at its own
     unbiased level (session 28's, without the test's common part) and the differences at
     theirs, mixed at the columns' share and widened for the mix's Welch-Satterthwaite degrees
-    of freedom, taken only where it is below session 27's level (:mod:`._sds_level_component`,
-    issue 41 session 38): common structure the test's columns do not span never raises a
-    test's level above session 27's, which was session 28's failure. A switch, no unit. Off
-    (the session 38 lead's fresh measurement, below). s38-sds38 measured (fresh, against
-    main d5b4fb1) SDS discovery frame right 25/30 -> 26/30 (20261526-27, the rest case for
-    case equal), clean SDS 50/50 ``consistent`` with no term on both (20261528), the SDS
-    catalog sets 6750 and 6751 every row equal; training
-    20261518 and 20261520 26/30 against 24/30. The lead's fresh seeds (main fcaf394 against
-    08ce75d, on): SDS discovery 20261523 12/15 -> 13/15 (a 2x ``sensor_frame`` gained),
-    20261524 13/15 -> 12/15 (a 2x ``sensor_frame`` read on sensor m0 lost: ``unexplained``
-    without a term), so +2 -1 over 60 fresh cases; and a drop on the SDS catalog set
-    ``--sds-unlocked-clock --seed 6742``: record 23, clean, ``consistent`` -> ``unexplained``
-    (a one-sensor order-2 ``decay`` of the run means at chi-square 88 against 24.5, nothing at
-    session 27's level; now training). Off until the false-alarm side is understood."""
+    of freedom (the smaller of those at the estimate and at session 27's common variance,
+    session 41), taken only where it is below session 27's level
+    (:mod:`._sds_level_component`, issue 41 sessions 38, 41): common structure the test's
+    columns do not span never raises a test's level above session 27's. A switch, no unit.
+    Session 38 (s38-sds38, the lead's fresh seeds): SDS discovery +2 -1 over 60 fresh cases,
+    but the unlocked-clock catalog set 6742's clean record 23 ``unexplained`` (a one-sensor
+    order-2 ``decay`` at chi-square 88 against 24.5), so off. Session 41 (s41-pc41, on,
+    training): that decay's common part took 96 % of the common component, whose estimate
+    then fell to 1.26x the differences' level: the mix's dof 16 instead of 6 at session 27's
+    common variance. With the smaller dof record 23 is ``consistent``, 6742 31/31 every row
+    equal to main, clean SDS 8250 0/15 with a term, SDS discovery 20261541 (2x) every case
+    equal to main; docs/diagnose.md has the measurements."""
 
     sds_clock_lock_level: int = eqx.field(default=1, static=True)
     """sds with phi_ref (``_sds_clock_lock``): 1: the common views read the clock's rounding

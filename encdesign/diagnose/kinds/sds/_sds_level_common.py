@@ -101,13 +101,17 @@ class CommonPart:
         kappa: np.ndarray,
         gc: np.ndarray,
         rc: np.ndarray,
+        floor: np.ndarray | None = None,
     ) -> np.ndarray:
         """The level (rad) ``c(nu_X) sqrt(v)`` (module doc) of tests whose differences level
         without their columns is ``s2`` (rad^2) on ``n`` degrees of freedom, common share
         ``kappa``, taking power ``gc`` of rank ``rc`` from the common component (arrays of
         one shape); ``nan`` where the common component has fewer than 3 degrees of freedom
         left (the caller keeps session 27's level there). ``widening``: the level's
-        widening on an array of degrees of freedom."""
+        widening on an array of degrees of freedom. ``floor`` (rad^2, same shape; ``None``:
+        none): ``nu_X`` is also taken at the common component's variance ``max(sc'^2,
+        floor)`` and the smaller of the two is kept (``v`` itself is not changed:
+        :mod:`._sds_level_component`)."""
         s2, n = np.asarray(s2, float), np.asarray(n, float)
         kappa = np.clip(np.asarray(kappa, float), 0.0, 1.0)
         nc = self.dof - np.asarray(rc, int)
@@ -115,7 +119,14 @@ class CommonPart:
         ncs = np.where(ok, nc, 3).astype(float)
         sc2 = np.where(ok, self.zz - np.asarray(gc, float), 1.0) / ncs
         v = s2 + kappa * (sc2 - s2)
-        var = (1.0 - kappa) ** 2 * s2**2 / n + kappa**2 * sc2**2 / ncs
-        nu = np.floor(v**2 / np.maximum(var, 1e-300))
+
+        def dof(c2: np.ndarray) -> np.ndarray:  # Welch-Satterthwaite at common variance c2
+            var = (1.0 - kappa) ** 2 * s2**2 / n + kappa**2 * c2**2 / ncs
+            return (s2 + kappa * (c2 - s2)) ** 2 / np.maximum(var, 1e-300)
+
+        nu = np.floor(dof(sc2))
+        if floor is not None:  # (raised by a rounding's size: kappa = 1 gives nc twice)
+            nu2 = dof(np.maximum(sc2, np.asarray(floor, float))) * (1.0 + 1e-12)
+            nu = np.minimum(nu, np.floor(nu2))
         c = widening(np.maximum(nu, 1.0))
         return np.where(ok, c * np.sqrt(np.maximum(v, 0.0)), np.nan)

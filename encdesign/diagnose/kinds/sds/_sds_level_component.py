@@ -32,6 +32,25 @@ the two parts, each whitened apart, would be more powerful for one sensor's colu
 not what the views compute (their chi-square is whitened with one level and multiplied by
 ``(sigma / sigma_X)^2``, :meth:`._sds_level_out.LevelOut._factor`).
 
+**The degrees of freedom at the less favourable common variance** (session 41). The
+Welch-Satterthwaite ``nu_X`` needs the components' true variances; at the estimate ``sc'^2``
+(5-20 degrees of freedom, and less the test's own common part) it is overstated exactly where
+``sc'^2`` comes out low: the common component then weighs little in the mix and ``nu_X``
+approaches the differences' (a one-sensor test's widening 1.37 at 16 dof instead of 2.6 at 6).
+On the SDS catalog set 6742 (``--sds-unlocked-clock``, training) record 23, clean, an unlocked
+clock's common component ``sqrt(31)`` times the differences' over 7 degrees of freedom, 96 % of
+it along the common part of a one-sensor order-2 decay: ``sc'`` fell to 1.26 ``s'``, the dof
+to 16, and the decay read chi-square 52 against 24.5 (session 27's level: under 24.5). So
+``nu_X`` is also computed at the common variance ``max(sc'^2, s'^2 g(s')^2)`` (session 27's
+common variance at the test's ``s'``, from what no structure in the platform angle reaches)
+and the smaller of the two is kept (``v`` itself stays the estimate). As ``nu_X`` is not
+monotone in the common variance (the mix has the most degrees of freedom where the two parts
+weigh alike), the minimum of the two, not the dof at the larger variance, is what never
+overstates it; a common test (``kappa = 1``: ``nu_X`` = the common component's own) is
+unchanged. Under noise of that record's shape the one-sensor decay's false-alarm rate at 2e-3
+was 2.3x (5-11 of 1500 draws, 3 expected) and is 0-1x (0-3)
+(``tests/test_sds_level_component.py``).
+
 **The guard against session 28's failure.** Session 28 used ``sigma_own`` alone
 (``FinderSettings.sds_level_common_direct``): the base residual's common component also holds
 any common structure the test's columns do not span (a platform step's part off the tested
@@ -72,6 +91,7 @@ class ComponentLevel(CommonPart):
         gc: np.ndarray,
         rc: np.ndarray,
         ceiling: np.ndarray,
+        common: np.ndarray | None = None,
     ) -> np.ndarray:
         """The level (rad) ``min(sigma_own, sigma_27)`` (module doc) of tests whose
         differences' level without their columns is ``s2`` (rad^2) on ``n`` degrees of
@@ -79,7 +99,9 @@ class ComponentLevel(CommonPart):
         common component; ``ceiling`` (rad): session 27's level of the same tests (arrays
         of one shape). Where the common component has fewer than 3 degrees of freedom left
         the level is ``ceiling``. ``widening``: the level's widening on an array of degrees
-        of freedom."""
-        own = self.levels(widening, s2, n, kappa, gc, rc)
+        of freedom. ``common`` (rad^2, same shape; ``None``: none): session 27's common
+        variance ``s'^2 g(s')^2``, at which the degrees of freedom are also taken (module
+        doc)."""
+        own = self.levels(widening, s2, n, kappa, gc, rc, common)
         ceiling = np.asarray(ceiling, float)
         return np.where(np.isfinite(own), np.minimum(own, ceiling), ceiling)

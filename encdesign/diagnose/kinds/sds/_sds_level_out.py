@@ -42,9 +42,9 @@ common patterns, a factor ``g`` no longer charged in full to a one-sensor test (
 0.5-1.5 times the differences'; ``tests/test_sds_level_out.py``: a one-sensor test keeps its
 false-alarm rate at its share of a common excess 3 ``s^2``, and was 20 times below it with
 the full factor). The level the record is whitened with keeps the full factor (``kappa =
-1``). Since session 38 (``FinderSettings.sds_level_per_component``, off by default) a test's common
-part is read at the common component's own level where that is below session 27's
-(:mod:`._sds_level_component`).
+1``). Since session 38 (``FinderSettings.sds_level_per_component``, on since session
+41) a test's common part is read at the common component's own level where that is below
+session 27's (:mod:`._sds_level_component`).
 """
 
 from __future__ import annotations
@@ -94,12 +94,20 @@ class RunMeanLevel:
         test only through its common component)."""
         s, nu = np.asarray(s, float), np.asarray(nu)
         c = self.widening(nu)
-        g = np.sqrt(1.0 + self.excess / s**2)
-        if self.ucl is not None:
-            g = lock_mixed_factor(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)), self.lock)
+        g = self.common_factor(s)
         if share is not None:
             g = np.sqrt(1.0 + np.clip(np.asarray(share, float), 0.0, 1.0) * (g**2 - 1.0))
         return s * c * g
+
+    def common_factor(self, s) -> np.ndarray:
+        """The common factor ``g(s)`` (no unit, at least 1 where ``ucl`` is given) at raw
+        levels ``s`` (rad): the moving sensors' common component at ``s g(s)`` (class
+        doc)."""
+        s = np.asarray(s, float)
+        g = np.sqrt(1.0 + self.excess / s**2)
+        if self.ucl is not None:
+            g = lock_mixed_factor(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)), self.lock)
+        return g
 
 
 class LevelOut:
@@ -191,7 +199,10 @@ class LevelOut:
                 if self.common is not None and gc is not None:  # (set only on a RunMeanLevel)
                     pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
                     if isinstance(self.common, ComponentLevel):
-                        sig = self.common.capped(self.sigma_of.widening, s2, n, k, pc, rc, sig)
+                        g2 = self.sigma_of.common_factor(np.sqrt(s2)) ** 2
+                        sig = self.common.capped(
+                            self.sigma_of.widening, s2, n, k, pc, rc, sig, s2 * g2
+                        )
                     else:
                         own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
                         sig = np.where(np.isfinite(own), own, sig)
