@@ -84,6 +84,23 @@ def test_a_drift_from_half_way_is_a_drift_not_a_delay_step(tmp_path, seed, g):
     assert [e["name"] for e in d["effects"]] == ["thermal_drift"]
 
 
+def _clear_tilt(tmp_path, key: int) -> dict:
+    """The diagnosis document of a clear ``beam_tilt_axial`` SDS record of 12 runs
+    (``write_concealed_sds`` at ``key``)."""
+    import jax
+
+    from encdesign.simulate import write_concealed_sds
+
+    rec, _ = write_concealed_sds(
+        tmp_path / "r.toml",
+        key=jax.random.key(key),
+        effect="beam_tilt_axial",
+        concealment="clear",
+        n_runs=12,
+    )
+    return diagnose(rec).doc
+
+
 def test_a_deviation_every_moving_sensor_shares_is_no_transients_doubt(tmp_path):
     """A 40x ``beam_tilt_axial`` (orders 1 and 3 of the platform angle, common to the moving
     sensors; training seed 6708, record 11 of its SDS catalog set: ``write_concealed_sds`` at
@@ -93,18 +110,7 @@ def test_a_deviation_every_moving_sensor_shares_is_no_transients_doubt(tmp_path)
     record read ``unexplained``. A deviation the moving sensors share is a pattern of the
     platform angle, not one sensor's transient: the beam tilt is named (the rivals' test,
     beside that run's offsets, still applies) and the fit closes to the noise."""
-    import jax
-
-    from encdesign.simulate import write_concealed_sds
-
-    rec, _ = write_concealed_sds(
-        tmp_path / "r.toml",
-        key=jax.random.key(6708511),
-        effect="beam_tilt_axial",
-        concealment="clear",
-        n_runs=12,
-    )
-    d = diagnose(rec).doc
+    d = _clear_tilt(tmp_path, 6708511)
     assert [e["name"] for e in d["effects"]] == ["beam_tilt_axial"], d["report"]
     assert not any("one run's deviation" in r["reason"] for r in d["rejected"])
     assert d["verdict"] == "missing_physics"
@@ -119,17 +125,6 @@ def test_a_rival_the_candidate_holds_refuses_nothing(tmp_path):
     tilt closes the fit (chi-square 98 of 180 values) where the offsets leave 2057, and the
     offsets lower it by 0.9 beside the tilt: their structure is a part of the tilt's, and
     the rival refuses nothing (``_spill._nested``)."""
-    import jax
-
-    from encdesign.simulate import write_concealed_sds
-
-    rec, _ = write_concealed_sds(
-        tmp_path / "r.toml",
-        key=jax.random.key(6804511),
-        effect="beam_tilt_axial",
-        concealment="clear",
-        n_runs=12,
-    )
-    d = diagnose(rec).doc
+    d = _clear_tilt(tmp_path, 6804511)
     assert [e["name"] for e in d["effects"]] == ["beam_tilt_axial"], d["report"]
     assert not any("one-run offset" in r["reason"] for r in d["rejected"])
