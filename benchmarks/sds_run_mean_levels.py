@@ -45,7 +45,7 @@ sys.path.insert(0, "benchmarks")
 import discovery as B  # noqa: E402
 
 from encdesign.diagnose.engine._settings import DEFAULT_SETTINGS  # noqa: E402
-from encdesign.diagnose.kinds.sds._sds_clock_lock import _saw_covariance  # noqa: E402
+from encdesign.diagnose.kinds.sds._sds_clock_lock import mean_rounding_covariance  # noqa: E402
 from encdesign.diagnose.kinds.sds._sds_noise import _sensor_helmert  # noqa: E402
 from encdesign.simulate._conceal_sds import CLOCK_S, SPEED_RAD_S  # noqa: E402
 from encdesign.simulate._outside import outside_record  # noqa: E402
@@ -56,10 +56,8 @@ SOURCES = {"both": (True, True), "jitter": (True, False), "rounding": (False, Tr
 def predicted_rounding_ratio(psi_m: np.ndarray) -> float:
     """Common over differences' RMS of the moving sensors' rounding (module doc), from
     their azimuths ``psi_m`` (rad) and the bench's ticks a revolution."""
-    ticks = (2 * math.pi / SPEED_RAD_S) / CLOCK_S
-    d = ticks * np.asarray(psi_m, float) / (2 * math.pi)
-    v_m = float(np.mean(_saw_covariance(d[:, None] - d[None, :])))
-    M = d.size
+    v_m = mean_rounding_covariance(psi_m, (2 * math.pi / SPEED_RAD_S) / CLOCK_S)
+    M = int(np.size(psi_m))
     return math.sqrt((M - 1) * v_m / (1.0 / 12.0 - v_m))
 
 

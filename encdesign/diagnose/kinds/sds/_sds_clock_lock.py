@@ -73,6 +73,15 @@ def _saw_covariance(x: np.ndarray) -> np.ndarray:
     return 1.0 / 12.0 - 0.5 * v * (1.0 - v)
 
 
+def mean_rounding_covariance(psi: np.ndarray, ticks: float) -> float:
+    """The mean over every pair (a sensor with itself included) of sensors at azimuths
+    ``psi`` (rad) of their roundings' covariance (tick², :func:`_saw_covariance`) on a
+    revolution of ``ticks`` clock ticks: sensor ``s`` sees the marks ``ticks psi_s / 2 pi``
+    ticks later."""
+    d = float(ticks) * np.asarray(psi, float) / (2 * np.pi)
+    return float(np.mean(_saw_covariance(d[:, None] - d[None, :])))
+
+
 def rounding_common_excess(
     run_clock: np.ndarray | None,
     clock_s: float | None,
@@ -125,11 +134,8 @@ def rounding_common_excess(
     if M - 1 <= 0 or F <= 0:  # no differences of the moving sensors, or no fixed sensor
         return 0.0
 
-    def mean_cov(psi) -> float:
-        d = ticks * np.asarray(psi, float) / (2 * np.pi)
-        return float(np.mean(_saw_covariance(d[:, None] - d[None, :])))
-
-    v_m, v_f, c0 = mean_cov(psi_m), mean_cov(psi_f), 1.0 / 12.0
+    v_m, v_f = mean_rounding_covariance(psi_m, ticks), mean_rounding_covariance(psi_f, ticks)
+    c0 = 1.0 / 12.0
     excess = M * (v_m + v_f) - M * (c0 - v_m) / (M - 1)
     omega_tau = 2 * np.pi / period * float(clock_s)  # a tick in rad of the shaft
     e = lock * omega_tau * omega_tau * excess / n_marks

@@ -125,7 +125,7 @@ class CommonPart:
             return (s2 + kappa * (c2 - s2)) ** 2 / np.maximum(var, 1e-300)
 
         nu = np.floor(dof(sc2))
-        if floor is not None:  # (raised by a rounding's size: kappa = 1 gives nc twice)
+        if floor is not None:  # a hair up: where kappa = 1 both are nc, and floor() keeps it
             nu2 = dof(np.maximum(sc2, np.asarray(floor, float))) * (1.0 + 1e-12)
             nu = np.minimum(nu, np.floor(nu2))
         c = widening(np.maximum(nu, 1.0))
