@@ -21,6 +21,10 @@ pools them over files (several seeds, several kinds) and prints, per kind and ov
   noncentrality ``lambda`` against the true term's multiple-testing and the locating
   thresholds, the finder's noise over the true noise and, on SDS, its parts; a catalog take
   scored confounded only because nothing was located after it is marked so);
+* the expected frame right of an ideal test (:func:`ideal_power`, session 42): the true
+  structure's own columns at the finder's thresholds, with the true level known and, on SDS,
+  with the level estimated from the finder's own degrees of freedom: the ceiling that the
+  rate over all cases is to be read against;
 * and, from conceal-benchmark JSONs (``--catalog``), the catalog's rates per kind.
 
 The issue's lines: frame right >= 90 %, exponent within 2 SE >= 90 %, held-out gain >= 80 %
@@ -105,7 +109,46 @@ def rates(cases: list[dict], clean: list[dict]) -> dict[str, Any]:
         "oracle_undetectable": sum(not c.get("oracle_detectable") for c in cases),
         "clean_term": _rate([c["found_any"] for c in clean]),
         "clean_not_consistent": _rate([c.get("verdict") != "consistent" for c in clean]),
+        "ceiling_known": _ceiling(cases, estimated=False),
+        "ceiling_estimated": _ceiling(cases, estimated=True),
     }
+
+
+def ideal_power(c: dict, estimated: bool) -> float | None:
+    """The chance that an ideal test finds case ``c``'s structure (session 42): the true
+    structure's own columns (``true_dof`` of them), its noncentrality at the true noise
+    (``oracle_noncentrality``), read at the finder's thresholds (the larger of
+    ``threshold_true_raw_chi2`` and ``threshold_locate_chi2``, which already pay for the search
+    over the library). ``estimated`` False: the true level known (the benchmark's
+    ``oracle_power``, noncentral chi-square); True: the level estimated with the finder's own
+    degrees of freedom (``noise_finder_run_means.dof``, SDS only; ``None`` elsewhere), the
+    noncentral F-test at the same false-alarm probability: what no finder that estimates its
+    level from that many degrees of freedom can beat on average. ``None`` where a number is
+    missing."""
+    from scipy import stats
+
+    lam, q = c.get("oracle_noncentrality"), c.get("true_dof")
+    thr = [t for t in (c.get("threshold_true_raw_chi2"), c.get("threshold_locate_chi2")) if t]
+    thr = [t for t in thr if math.isfinite(t)]
+    if lam is None or not q or not thr or not math.isfinite(lam):
+        return None
+    t = max(thr)
+    if not estimated:
+        return float(stats.ncx2.sf(t, q, max(lam, 1e-12)))
+    nu = (c.get("noise_finder_run_means") or {}).get("dof")
+    if not nu:
+        return None
+    crit = stats.f.isf(stats.chi2.sf(t, q), q, nu)
+    return float(stats.ncf.sf(crit, q, nu, max(lam, 1e-12)))
+
+
+def _ceiling(cases: list[dict], estimated: bool) -> tuple[float, int] | None:
+    """``(expected cases found, cases)``: :func:`ideal_power` summed over ``cases``; ``None``
+    where a case has no number (the ceiling is read over all cases or not at all)."""
+    p = [ideal_power(c, estimated) for c in cases]
+    if not p or any(x is None for x in p):
+        return None
+    return float(sum(x for x in p if x is not None)), len(p)
 
 
 def _met(r: tuple[int, int], line: float) -> str:
@@ -204,6 +247,17 @@ def main(argv: list[str] | None = None) -> int:
             f"{_fmt(r['frame_oracle_incl_confounded'])}, clean not consistent "
             f"{_fmt(r['clean_not_consistent'])}"
         )
+    print("\nexpected frame right of an ideal test (the true columns at the finder's thresholds):")
+    for name, r in table.items():
+        out = []
+        for key, label in (
+            ("ceiling_known", "level known"),
+            ("ceiling_estimated", "level estimated with the finder's degrees of freedom"),
+        ):
+            if r[key] is not None:
+                e, n = r[key]
+                out.append(f"{label} {e:.1f}/{n} ({100 * e / n:.1f} %)")
+        print(f"  {name}: " + ("; ".join(out) or "-"))
     print("\nframe misses:")
     for c in cases:
         if not c["frame_right"]:

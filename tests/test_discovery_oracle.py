@@ -87,3 +87,31 @@ def test_sds_noise_parts_keep_the_jitter_and_the_rounding_apart():
     assert both.size and np.all(on_grid(both)) and np.all(on_grid(rounding))
     assert not np.any(on_grid(jitter))
     assert not np.array_equal(both, rounding)  # the jitter moves edges by whole ticks too
+
+
+def test_the_ideal_test_ceiling_is_its_closed_form_and_below_the_known_level():
+    """``discovery_acceptance.ideal_power`` (session 42): with the level known it is the
+    noncentral chi-square tail at the larger threshold; with the level estimated from ``nu``
+    degrees of freedom it is the noncentral F tail at the same false-alarm probability, below
+    the known level's and approaching it as ``nu`` grows; a case without numbers gives
+    ``None`` and makes the ceiling over its cases ``None``."""
+    from scipy import stats
+
+    import discovery_acceptance as A
+
+    c = {
+        "oracle_noncentrality": 30.0,
+        "true_dof": 2,
+        "threshold_true_raw_chi2": 21.3,
+        "threshold_locate_chi2": 23.1,
+        "noise_finder_run_means": {"dof": 36},
+    }
+    known = A.ideal_power(c, estimated=False)
+    assert known == pytest.approx(stats.ncx2.sf(23.1, 2, 30.0), rel=1e-12)
+    est = A.ideal_power(c, estimated=True)
+    assert est is not None and known is not None and 0.2 < est < known < 1.0
+    big = A.ideal_power({**c, "noise_finder_run_means": {"dof": 10**6}}, estimated=True)
+    assert big == pytest.approx(known, rel=1e-3)
+    assert A.ideal_power({**c, "noise_finder_run_means": {}}, estimated=True) is None
+    assert A._ceiling([c, c], estimated=False) == pytest.approx((2 * known, 2))
+    assert A._ceiling([c, {"true_dof": 2}], estimated=False) is None
