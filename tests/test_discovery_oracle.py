@@ -115,3 +115,18 @@ def test_the_ideal_test_ceiling_is_its_closed_form_and_below_the_known_level():
     assert A.ideal_power({**c, "noise_finder_run_means": {}}, estimated=True) is None
     assert A._ceiling([c, c], estimated=False) == pytest.approx((2 * known, 2))
     assert A._ceiling([c, {"true_dof": 2}], estimated=False) is None
+
+
+def test_the_rounding_ratio_is_its_prediction_over_disks_and_spreads_from_disk_to_disk():
+    """``benchmarks/sds_run_mean_levels.disk_ratio_spread`` (session 42): three moving sensors
+    a third of a revolution apart on 10^7 ticks (a third of a tick apart) give a rounding whose
+    common component has 1/4 of the differences' variance pooled over disks (the closed form
+    ``predicted_rounding_ratio`` squared, within 10 %), while one disk's own ratio ranges
+    beyond 0.1 to 0.8 (why the clock alone cannot set one record's common level)."""
+    import sds_run_mean_levels as L
+
+    psi = np.array([0.0, 2 * np.pi / 3, 4 * np.pi / 3])
+    assert L.predicted_rounding_ratio(psi) ** 2 == pytest.approx(0.25, rel=1e-6)
+    pooled, each = L.disk_ratio_spread(psi, 1e7, 200, np.random.default_rng(42), disks=300)
+    assert pooled == pytest.approx(0.25, rel=0.1)
+    assert each.size == 300 and each.min() < 0.1 and each.max() > 0.8
