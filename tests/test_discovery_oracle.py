@@ -95,9 +95,8 @@ def test_the_ideal_test_ceiling_is_its_closed_form_and_below_the_known_level():
     degrees of freedom it is the noncentral F tail at the same false-alarm probability, below
     the known level's and approaching it as ``nu`` grows; a case without numbers gives
     ``None`` and makes the ceiling over its cases ``None``."""
-    from scipy import stats
-
     import discovery_acceptance as A
+    from scipy import stats
 
     c = {
         "oracle_noncentrality": 30.0,
