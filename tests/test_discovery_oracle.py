@@ -94,7 +94,8 @@ def test_the_ideal_test_ceiling_is_its_closed_form_and_below_the_known_level():
     noncentral chi-square tail at the larger threshold; with the level estimated from ``nu``
     degrees of freedom it is the noncentral F tail at the same false-alarm probability, below
     the known level's and approaching it as ``nu`` grows; a case without numbers gives
-    ``None`` and makes the ceiling over its cases ``None``."""
+    ``None`` and makes the ceiling over its cases ``None``; read at the locating view's own
+    threshold a growth or a step pays the ``modulated_orders`` view's search."""
     import discovery_acceptance as A
     from scipy import stats
 
@@ -114,6 +115,17 @@ def test_the_ideal_test_ceiling_is_its_closed_form_and_below_the_known_level():
     assert A.ideal_power({**c, "noise_finder_run_means": {}}, estimated=True) is None
     assert A._ceiling([c, c], estimated=False) == pytest.approx((2 * known, 2))
     assert A._ceiling([c, {"true_dof": 2}], estimated=False) is None
+    # the locating view's own threshold: a static line is read as before; a step pays the
+    # modulated view's search over 2 K switch shapes (its threshold above the orders view's)
+    # or keeps half its power in the static scan; a growth keeps 3/4 there
+    assert A.ideal_power(c, estimated=True, views=True) == pytest.approx(est, rel=1e-12)
+    step = {**c, "truth": {"modulation": "step"}}
+    (k0, t0), (k1, t1) = A._view_routes(step)
+    assert (k0, t0) == (0.5, 23.1) and k1 == 1.0 and t1 > t0 + 3
+    growth = {**c, "truth": {"modulation": "growth"}}
+    (g0, _), (_, tg) = A._view_routes(growth)
+    assert g0 == 0.75 and t0 < tg < t1
+    assert A.ideal_power(step, estimated=True, views=True) < est
 
 
 def test_the_rounding_ratio_is_its_prediction_over_disks_and_spreads_from_disk_to_disk():
