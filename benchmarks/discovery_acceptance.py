@@ -21,6 +21,12 @@ pools them over files (several seeds, several kinds) and prints, per kind and ov
   noncentrality ``lambda`` against the true term's multiple-testing and the locating
   thresholds, the finder's noise over the true noise and, on SDS, its parts; a catalog take
   scored confounded only because nothing was located after it is marked so);
+* the expected frame right of an ideal test (:func:`ideal_power`, session 42): the true
+  structure's own columns at the finder's thresholds, with the true level known and, on SDS,
+  with the level estimated from the finder's own degrees of freedom, and that at the
+  threshold of the view that locates the structure (a growth or a step pays the
+  ``modulated_orders`` view's search over shapes): the ceiling that the rate over all cases
+  is to be read against;
 * and, from conceal-benchmark JSONs (``--catalog``), the catalog's rates per kind.
 
 The issue's lines: frame right >= 90 %, exponent within 2 SE >= 90 %, held-out gain >= 80 %
@@ -105,7 +111,85 @@ def rates(cases: list[dict], clean: list[dict]) -> dict[str, Any]:
         "oracle_undetectable": sum(not c.get("oracle_detectable") for c in cases),
         "clean_term": _rate([c["found_any"] for c in clean]),
         "clean_not_consistent": _rate([c.get("verdict") != "consistent" for c in clean]),
+        "ceiling_known": _ceiling(cases, estimated=False),
+        "ceiling_estimated": _ceiling(cases, estimated=True),
+        "ceiling_views": _ceiling(cases, estimated=True, views=True),
     }
+
+
+def _view_routes(c: dict) -> list[tuple[float, float]]:
+    """``(share, threshold)`` per way the finder's views can locate case ``c``'s structure
+    (session 42): the ``orders`` view at ``threshold_locate_chi2`` (``alpha`` over its
+    ``n`` order x channel tests) with the share of the structure's power a static fit keeps,
+    and for a growth or a step the ``modulated_orders`` view at its own family's threshold
+    (``modulated_orders_alpha / 2`` over ``2 n`` growth and decay tests, or ``2 K n`` switch
+    tests at ``K`` = ``modulated_orders_steps`` edges; ``engine/_views_modulated``) with all of
+    it. A static fit keeps 3/4 of a linear growth's power and ``1 - k / R`` of a step from
+    row ``k`` of ``R`` (the latter taken as 1/2 where ``R`` is not in the JSON). Only
+    ``[(1, threshold_locate_chi2)]`` for another modulation, ``[]`` without that threshold."""
+    from scipy import stats
+
+    from encdesign.diagnose.engine._settings import DEFAULT_SETTINGS as S
+
+    lt = c.get("threshold_locate_chi2")
+    if lt is None or not math.isfinite(lt):
+        return []
+    mod = (c.get("truth") or {}).get("modulation")
+    if mod not in ("growth", "step"):
+        return [(1.0, float(lt))]
+    n = S.alpha / float(stats.chi2.sf(lt, 2))  # the orders view's count of tests
+    count = 2 * n * (1 if mod == "growth" else S.modulated_orders_steps)
+    mt = float(stats.chi2.isf(S.modulated_orders_alpha / 2 / count, 2))
+    return [(0.75 if mod == "growth" else 0.5, float(lt)), (1.0, mt)]
+
+
+def ideal_power(c: dict, estimated: bool, views: bool = False) -> float | None:
+    """The chance that an ideal test finds case ``c``'s structure (session 42): the true
+    structure's own columns (``true_dof`` of them), its noncentrality at the true noise
+    (``oracle_noncentrality``), read at the finder's thresholds (the larger of
+    ``threshold_true_raw_chi2`` and ``threshold_locate_chi2``, which already pay for the search
+    over the library). ``estimated`` False: the true level known (the benchmark's
+    ``oracle_power``, noncentral chi-square); True: the level estimated with the finder's own
+    degrees of freedom (``noise_finder_run_means.dof``, SDS only; ``None`` elsewhere), the
+    noncentral F-test at the same false-alarm probability: what no finder that estimates its
+    level from that many degrees of freedom can beat on average. ``views``: the locating
+    threshold is that of the view that can locate the structure (:func:`_view_routes`: a
+    growth or a step pays the ``modulated_orders`` view's search over shapes, or is read by
+    the static scan with part of its power), the best route kept. ``None`` where a number is
+    missing."""
+    from scipy import stats
+
+    lam, q = c.get("oracle_noncentrality"), c.get("true_dof")
+    rt = c.get("threshold_true_raw_chi2")
+    routes = _view_routes(c) if views else []
+    if not views:
+        lt = c.get("threshold_locate_chi2")
+        routes = [(1.0, float(lt))] if lt is not None and math.isfinite(lt) else []
+    if rt is not None and math.isfinite(rt):
+        routes = [(k, max(t, float(rt))) for k, t in routes] or [(1.0, float(rt))]
+    if lam is None or not q or not routes or not math.isfinite(lam):
+        return None
+    nu = (c.get("noise_finder_run_means") or {}).get("dof")
+    if estimated and not nu:
+        return None
+    best = 0.0
+    for k, t in routes:
+        nc = max(k * lam, 1e-12)
+        if not estimated:
+            best = max(best, float(stats.ncx2.sf(t, q, nc)))
+        else:
+            crit = stats.f.isf(stats.chi2.sf(t, q), q, nu)
+            best = max(best, float(stats.ncf.sf(crit, q, nu, nc)))
+    return best
+
+
+def _ceiling(cases: list[dict], estimated: bool, views: bool = False) -> tuple[float, int] | None:
+    """``(expected cases found, cases)``: :func:`ideal_power` summed over ``cases``; ``None``
+    where a case has no number (the ceiling is read over all cases or not at all)."""
+    p = [ideal_power(c, estimated, views) for c in cases]
+    if not p or any(x is None for x in p):
+        return None
+    return float(sum(x for x in p if x is not None)), len(p)
 
 
 def _met(r: tuple[int, int], line: float) -> str:
@@ -204,6 +288,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{_fmt(r['frame_oracle_incl_confounded'])}, clean not consistent "
             f"{_fmt(r['clean_not_consistent'])}"
         )
+    print("\nexpected frame right of an ideal test (the true columns at the finder's thresholds):")
+    for name, r in table.items():
+        out = []
+        for key, label in (
+            ("ceiling_known", "level known"),
+            ("ceiling_estimated", "level estimated with the finder's degrees of freedom"),
+            ("ceiling_views", "the same at the locating view's own search threshold"),
+        ):
+            if r[key] is not None:
+                e, n = r[key]
+                out.append(f"{label} {e:.1f}/{n} ({100 * e / n:.1f} %)")
+        print(f"  {name}: " + ("; ".join(out) or "-"))
     print("\nframe misses:")
     for c in cases:
         if not c["frame_right"]:

@@ -26,7 +26,12 @@ differences (13-16.5e-9 rad against 1.9-2.8e-9 of the jitter), and its common co
 0.36-0.64 of its differences' (prediction 0.50); with both, the common is 0.50-0.94 of the
 differences'. The finder's run-mean level floors the common component at the differences'
 level (``_sds_noise._common_factor`` at least 1): a pattern common to the moving sensors is
-tested against about twice its true noise on this bench::
+tested against about twice its true noise on this bench.
+
+Session 42: ``rounding_over_disks`` simulates the rounding alone on 300 disks
+(:func:`disk_ratio_spread`): the common over the differences' variance is 0.25 pooled (the
+prediction) but 0.06-1.1 from one disk to the next (5-95 %), so a level predicted from the
+clock is not one record's level (it was tried as a level and left out: docs/diagnose.md)::
 
     python benchmarks/sds_run_mean_levels.py --seed 900 --n 12 --json out.json
 """
@@ -59,6 +64,30 @@ def predicted_rounding_ratio(psi_m: np.ndarray) -> float:
     v_m = mean_rounding_covariance(psi_m, (2 * math.pi / SPEED_RAD_S) / CLOCK_S)
     M = int(np.size(psi_m))
     return math.sqrt((M - 1) * v_m / (1.0 / 12.0 - v_m))
+
+
+def disk_ratio_spread(
+    psi_m: np.ndarray, ticks: float, n_marks: int, rng: np.random.Generator, disks: int = 300
+) -> tuple[float, np.ndarray]:
+    """The moving sensors' rounding, simulated (session 42): ``disks`` disks of ``n_marks``
+    marks whose sub-tick phases the graduation spreads uniformly, each read over 100 runs at
+    new platform phases by sensors at azimuths ``psi_m`` (rad) on a revolution of ``ticks``
+    clock ticks; the run means of the rounding ``round(u) - u`` (ticks). Returns the common
+    over the differences' variance pooled over the disks (the expectation
+    :func:`predicted_rounding_ratio` squares) and each disk's own (``(disks,)``). One disk's
+    ratio is set by the first few harmonics of its marks' phases (each an exponential draw),
+    so it spreads widely about the expectation: a prediction from the clock alone is a
+    prior of a few degrees of freedom, not a level."""
+    M = int(np.size(psi_m))
+    d = np.mod(ticks * np.asarray(psi_m, float) / (2 * math.pi), 1.0)
+    cov, each = np.zeros((M, M)), []
+    for _ in range(disks):
+        u = rng.uniform(0, 1, n_marks)
+        x = u[None, None, :] + d[None, :, None] + rng.uniform(0, 1, 100)[:, None, None]
+        c = np.cov(np.mean(np.round(x) - x, 2).T)
+        cov += c
+        each.append(c.sum() / M / ((np.trace(c) - c.sum() / M) / (M - 1)))
+    return float(cov.sum() / M / ((np.trace(cov) - cov.sum() / M) / (M - 1))), np.array(each)
 
 
 def levels(seed: int) -> dict:
@@ -111,12 +140,24 @@ def main(argv: list[str] | None = None) -> None:
         for k in SOURCES
     }
     print("common / differences:", json.dumps(spread))
+    psi = np.asarray(outside_record(np.random.default_rng(a.seed), "clean", 0.0, "sds")[1]["alpha"])
+    ticks = (2 * math.pi / SPEED_RAD_S) / CLOCK_S
+    pooled, each = disk_ratio_spread(psi, ticks, 200, np.random.default_rng(a.seed))
+    disks = {
+        "pooled_variance_ratio": pooled,
+        "predicted_variance_ratio": predicted_rounding_ratio(psi) ** 2,
+        "per_disk_variance_ratio_quantiles": {
+            str(q): float(np.quantile(each, q)) for q in (0.05, 0.25, 0.5, 0.75, 0.95)
+        },
+    }
+    print("the rounding's common / differences variance over simulated disks:", json.dumps(disks))
     if a.json:
         doc = {
             "seed": a.seed,
             "n": a.n,
             "seconds": time.time() - t0,
             "ratio_spread": spread,
+            "rounding_over_disks": disks,
             "rows": rows,
         }
         with open(a.json, "w") as f:
