@@ -70,8 +70,9 @@ def rounding_scale(ctx: Context, cols: np.ndarray, M: int) -> float:
     columns' share of their squared norm in that component (``common_share`` of the run-mean
     part times its share of the norm: 1 for a pattern common to the moving sensors and
     constant within a run, a third for one of three sensors' run means). 1 where ``S`` is 1
-    (no rounding constant within a run: the clock locked to the motor, or far from it)."""
-    scale = noise_info(ctx).common_scale
+    (no rounding constant within a run: the clock locked to the motor, or far from it) and
+    unless ``FinderSettings.sds_clock_lock_level`` is 3 (off by default: docs/diagnose.md)."""
+    scale = noise_info(ctx).common_scale if ctx.settings.sds_clock_lock_level == 3 else 1.0
     X = np.asarray(cols, float)
     total = float(np.sum(X**2))
     if not scale < 1.0 or not total > 0 or X.ndim != 3 or X.shape[1] < M:
@@ -92,12 +93,14 @@ def _within_rounding(ctx: Context, power: float, k: int) -> str | None:
     level every channel is whitened with, which leaves out that rounding (it lives only in
     the common component, session 40); a pattern common to the moving sensors is tested
     against the same noise whether a view or a candidate tests it. Nothing changes where the
-    rounding's share is 0 (the clock locked to the motor, or far from it: ``common_scale`` 1).
+    rounding's share is 0 (the clock locked to the motor, or far from it: ``common_scale`` 1),
+    nor unless ``FinderSettings.sds_clock_lock_level`` is 3 (off by default: near lock it lost
+    five of six training near-noise drifts, the model being the rounding's upper value).
     Training: unlocked-clock 6824 record 22 (session 42), clean, lock share 0.88, the
     rounding's common excess 17.9 nrad RMS (the record's own common noise 13.5 nrad against
     2.4 in the differences, by its noise-free twin) while the whitening level was 5.0 nrad:
     named ``beam_tilt_axial`` at dBIC -16.7."""
-    scale = noise_info(ctx).common_scale
+    scale = noise_info(ctx).common_scale if ctx.settings.sds_clock_lock_level == 3 else 1.0
     if not scale < 1.0 or not power > 0:
         return None
     n = int(np.asarray(ctx.rows["phi"]).size) * int(ctx.n_channels)

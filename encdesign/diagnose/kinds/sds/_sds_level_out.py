@@ -107,8 +107,8 @@ class RunMeanLevel:
         doc). ``test``: a test's level (read at its columns' share), whose excess is at
         least ``rounding`` (rad^2, :func:`._sds_clock_lock.rounding_common_excess`: the
         clock's rounding constant within a run, which only the common component holds;
-        session 42), as the common views read it (``SDSNoiseInfo.common_scale``); the
-        level the record is whitened with (``test`` false) does not take it."""
+        session 42; ``FinderSettings.sds_clock_lock_level`` 3, else 0), as the common views
+        read it (``SDSNoiseInfo.common_scale``); the whitening level (``test`` false) does not."""
         s = np.asarray(s, float)
         excess = max(self.excess, self.rounding) if test else self.excess
         g = np.sqrt(1.0 + excess / s**2)

@@ -548,8 +548,8 @@ def run_mean_levels(
     )
     fixed = np.asarray(rows["fixed_c"], float)
     common = common_base_columns(rows["phi"], consts["psi_m"], orders)
-    switch = settings.sds_clock_lock_level  # 1: the rounding's level, 2: also the mixing
-    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (switch > 1)
+    switch = settings.sds_clock_lock_level  # 1: the views' rounding, 2: mixing, 3: tests
+    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (switch == 2)
     rounding = float(np.asarray(consts.get("clock_round_excess", 0.0))) * (switch > 0 and not proj)
 
     def levels(resid: np.ndarray, info: dict | None = None, state=None) -> np.ndarray:
@@ -571,7 +571,7 @@ def run_mean_levels(
             direct=settings.sds_level_common_direct > 0,
             component=settings.sds_level_per_component > 0,
             lock=lock,
-            rounding=rounding,
+            rounding=rounding * (switch == 3),
         )
         if state is not None:  # (``info`` is a dict there: the line above)
             state["common_scale"] = _common_scale(info, rounding, lock)
