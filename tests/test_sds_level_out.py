@@ -213,6 +213,7 @@ def test_factor_on_arrays_equals_the_scalar_levels(proj):
     :func:`_sds_noise._level_sigma` where the common factor is raised by the fixed sensors
     and capped by the run means' common component, both over raw levels on either side of
     the cap (the cap and the indirect factor each decide some entries)."""
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel
     from encdesign.diagnose.kinds.sds._sds_noise import (
         _common_excess,
         _common_factor,
@@ -311,6 +312,8 @@ def test_one_sensor_test_at_its_share_of_the_common_excess():
     discovery benchmark (issue 41, session 27)."""
     from scipy import stats
 
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel
+
     rng = np.random.default_rng(2027)
     R, M, sd, tau = 24, 3, 1.0, 1.0
     phi = rng.uniform(0, 2 * np.pi, R)
@@ -404,6 +407,61 @@ def test_run_step_scale_is_the_factor_of_the_step_and_the_outlier():
     lo_full = LevelOut(e, Q, n_ind, RunMeanLevel(lambda n: 1.0, 2.0, None), False, M)
     _, f_out_full = run_step_scale(lo_full, keep, M)
     assert np.all(f_out[:, keep] > 1.3 * f_out_full[:, keep])
+
+
+def _rounding_record(rng, R: int = 12, M: int = 3):
+    """A setting like the unlocked-clock catalog set 6824's clean record 22 (session 42,
+    training): 12 golden-angle runs, three moving sensors, the saturating columns to order
+    1, the base's common columns the constant and the common parts of design orders 6 and
+    12. Returns ``(phi, Q, base, B)``, ``B`` the per-sensor constants' columns."""
+    from tests.test_sds_level_common import _saturating
+
+    phi = np.mod(2.39996 * np.arange(R) + rng.uniform(0, 2 * np.pi), 2 * np.pi)
+    Q = span_basis(_saturating(phi, M, 1))
+    base = np.stack([np.ones(R)] + [f(n * phi) for n in (6, 12) for f in (np.cos, np.sin)], 1)
+    return phi, Q, base, np.kron(np.ones((R, 1)), np.eye(M))
+
+
+def test_a_test_reads_the_clocks_rounding_at_its_share():
+    """Session 42: near lock the clock's rounding, constant within a run, puts an excess in
+    the run means' component common to the moving sensors that the revolution contrasts and
+    the fixed sensors' differences do not see (6824 record 22: the common component 13.5
+    nrad RMS against 2.4 in the differences, by its noise-free twin; session 27's factor
+    1.65). Under noise of that shape (common ``sqrt(31)`` times the differences', session 27's
+    excess 1.7, the rounding's predicted excess 30) an order on one sensor and one common to
+    the moving sensors, read against the level without their columns, exceed the
+    chi-square(2) tail at 1e-2 in 3 of 300 draws or so with the rounding given, and in a
+    third or more without it (main); the level the record is whitened with is the same."""
+    import math
+
+    from scipy import stats
+
+    from encdesign.diagnose.kinds.sds._sds_level_out import RunMeanLevel
+    from encdesign.diagnose.kinds.sds._sds_noise import dof_widening
+    from tests.test_sds_level_common import _draw
+
+    rng = np.random.default_rng(42)
+    R, M, p = 12, 3, 1e-2
+    phi, Q, base, B = _rounding_record(rng, R, M)
+    tests = []
+    for X in (order_columns(phi, M, 3, 0), np.repeat(order_columns(phi, 1, 3, 0), M, axis=1)):
+        Xf = X.reshape(R * M, 2)
+        tests.append((X, span_basis(Xf - B @ np.linalg.lstsq(B, Xf, rcond=None)[0])))
+    thr = stats.chi2.isf(p, 2)
+    hits = {0.0: [0, 0], 30.0: [0, 0]}
+    for _ in range(300):
+        y = _draw(rng, R, M, math.sqrt(31.0))
+        e = y.ravel() - Q @ (Q.T @ y.ravel())
+        sigma = []
+        for rounding, h in hits.items():
+            level = RunMeanLevel(lambda n: dof_widening(n, p=p), 1.7, None, 0.0, rounding)
+            lo = LevelOut(e, Q, R * M, level, False, M, True, (y, base), True)
+            sigma.append(lo.sigma)
+            for i, (X, U) in enumerate(tests):
+                h[i] += float(np.sum((U.T @ y.ravel()) ** 2)) / lo.sigma**2 * lo(X) > thr
+        assert sigma[1] == pytest.approx(sigma[0], rel=1e-12)
+    assert max(hits[30.0]) <= 10, hits
+    assert min(hits[0.0]) >= 60, hits
 
 
 def _common_level(y, phi, p_test: float, excess: float = 0.0):

@@ -182,6 +182,8 @@ ALLOWED: dict[tuple[str, float], str] = {
     ("kinds/sds/_sds_data.py", 16): COUNT + " (stamp differences)",
     ("kinds/sds/_sds_data.py", 100): BOUND + " (orders of the readout table)",
     ("kinds/sds/_sds_noise.py", 2): COUNT + "; DOF; a squared norm",
+    ("kinds/sds/_sds_common_rules.py", 2): DOF + " (a cos / sin pair; ln of at least 2 values)",
+    ("kinds/sds/_sds_common_rules.py", 3): COUNT + " (axes of an array)",
     ("kinds/sds/_sds_drift.py", 2): COUNT + " (ln of at least 2 run means; axes of an array)",
     ("kinds/sds/_sds_noise.py", 3): COUNT + " (degrees of freedom of an F-test)",
     ("kinds/sds/_sds_noise.py", 1e-9): NUMERIC,

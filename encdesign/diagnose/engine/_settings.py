@@ -138,7 +138,9 @@ class FinderSettings(AbstractSelectionSettings):
     """sds with phi_ref (``_sds_clock_lock``): 1: the common views read the clock's rounding
     constant within a run, predicted from the clock (s40-miss40; training 6785/23-24
     ``consistent``); 2: also session 39's common factor mixed with the direct one at the lock
-    share (fresh 6771 31/31 -> 28/31, s39-clock39); 0: neither. See docs/diagnose.md."""
+    share (fresh 6771 31/31 -> 28/31, s39-clock39); 3: 1 and the tests at the level without
+    their columns, the matched views and the common effects' criterion (s42-miss42: training
+    6824/22 ``consistent``, but near lock 1/6 near-noise drifts named, 6/6 at 1); 0: none."""
 
     sds_level_alpha: float = eqx.field(default=1e-3, static=True)
     """sds: family-wise level (Bonferroni over the candidate columns) of the F-tests that

@@ -69,6 +69,7 @@ from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
 from ._sds_common_mod import view_common_modulated, view_common_orders
+from ._sds_common_rules import rounding_scale
 from ._sds_data import (
     SDSPairTable,
     lattice_floor,
@@ -185,6 +186,7 @@ def _matched_view(name: str):
         if cand.applies is not None and cand.applies(ctx):
             return []
         consts = {k: v for k, v in ctx.consts.items() if isinstance(v, np.ndarray)}
+        M = int(np.asarray(ctx.consts["psi_m"]).size)
         resid = rw * prep.sigma[None, :]
         starts = cand.start(ctx, resid, []) if cand.start else [{}]
         best = (0.0, 0)
@@ -200,7 +202,7 @@ def _matched_view(name: str):
                 np.concatenate([np.asarray(J[k]).reshape(*rw.shape, -1) for k in free], axis=-1)
                 / prep.sigma[None, :, None]
             )
-            pw = _ls_power_flat(rw, cols)
+            pw = _ls_power_flat(rw, cols) * rounding_scale(ctx, cols, M)
             q_eff = int(np.linalg.matrix_rank(cols.reshape(-1, cols.shape[-1]), tol=None))
             if pw > best[0]:
                 best = (pw, max(q_eff, 1))

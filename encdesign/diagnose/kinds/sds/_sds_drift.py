@@ -15,7 +15,7 @@ An onset is tried where the data ask for it: the start at the best onset (scanne
 first window of every run but the first) is offered only when the drift from that run on
 fits the base run means better than the drift from the start by more than one parameter's
 worth (BIC: ln of the number of run means), the same measure the drift's plausibility rule
-(:func:`onset_power`, ``_sds_noise._drift_plausible``) uses against the platform's orders.
+(:func:`onset_power`, ``_sds_common_rules._drift_plausible``) uses against the platform's orders.
 """
 
 from __future__ import annotations

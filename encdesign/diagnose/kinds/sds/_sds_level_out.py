@@ -77,8 +77,10 @@ class RunMeanLevel:
         excess: float,
         ucl: float | None,
         lock: float = 0.0,
+        rounding: float = 0.0,
     ):
         self.widen, self.excess, self.ucl, self.lock = widen, float(excess), ucl, float(lock)
+        self.rounding = float(rounding)
 
     def widening(self, nu, p: float | None = None) -> np.ndarray:
         """``c = widen(nu)`` on an array of degrees of freedom (once per distinct value);
@@ -97,17 +99,22 @@ class RunMeanLevel:
         test only through its common component)."""
         s, nu = np.asarray(s, float), np.asarray(nu)
         c = self.widening(nu, p)
-        g = self.common_factor(s)
+        g = self.common_factor(s, test=share is not None)
         if share is not None:
             g = np.sqrt(1.0 + np.clip(np.asarray(share, float), 0.0, 1.0) * (g**2 - 1.0))
         return s * c * g
 
-    def common_factor(self, s) -> np.ndarray:
+    def common_factor(self, s, test: bool = False) -> np.ndarray:
         """The common factor ``g(s)`` (no unit, at least 1 where ``ucl`` is given) at raw
         levels ``s`` (rad): the moving sensors' common component at ``s g(s)`` (class
-        doc)."""
+        doc). ``test``: a test's level (read at its columns' share), whose excess is at
+        least ``rounding`` (rad^2, :func:`._sds_clock_lock.rounding_common_excess`: the
+        clock's rounding constant within a run, which only the common component holds;
+        session 42; ``FinderSettings.sds_clock_lock_level`` 3, else 0), as the common views
+        read it (``SDSNoiseInfo.common_scale``); the whitening level (``test`` false) does not."""
         s = np.asarray(s, float)
-        g = np.sqrt(1.0 + self.excess / s**2)
+        excess = max(self.excess, self.rounding) if test else self.excess
+        g = np.sqrt(1.0 + excess / s**2)
         if self.ucl is not None:
             g = lock_mixed_factor(g, np.sqrt(np.maximum(1.0, self.ucl / s**2)), self.lock)
         return g
@@ -209,7 +216,7 @@ class LevelOut:
                 if self.common is not None and gc is not None:  # (set only on a RunMeanLevel)
                     pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
                     if isinstance(self.common, ComponentLevel):
-                        g2 = self.sigma_of.common_factor(np.sqrt(s2)) ** 2
+                        g2 = self.sigma_of.common_factor(np.sqrt(s2), test=True) ** 2
                         sig = self.common.capped(widen, s2, n, k, pc, rc, sig, s2 * g2)
                     else:
                         own = self.common.levels(widen, s2, n, k, pc, rc)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,7 @@ from ...engine._candidates import Context
 from ...engine._protocol import NoiseEstimate, Prepared
 from ...engine._settings import FinderSettings
 from ._sds_clock_lock import lock_mixed_factor
-from ._sds_drift import _step_or_outlier, drift_power_at, onset_power
+from ._sds_drift import _step_or_outlier, onset_power
 from ._sds_level_out import LevelOut, RunMeanLevel
 from ._sds_pairs import _best_pair, _order_groups, _projected_pairs
 
@@ -368,6 +369,13 @@ def _common_scale(info: dict, rounding: float, lock: float) -> float:
     return min(1.0, (g / g_c) ** 2)
 
 
+def _widen(test_p: float, nu: float, p: float | None = None) -> float:
+    """:func:`dof_widening` at ``nu`` degrees of freedom and the test's ``p`` (``None``: the
+    level's ``test_p``): the run-mean level's widening, which a test may ask at its own ``p``
+    (:meth:`._sds_level_out.RunMeanLevel.widening`, session 42)."""
+    return dof_widening(nu, p=test_p if p is None else p)
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -387,6 +395,7 @@ def _level_sigma(
     direct: bool = False,
     component: bool = False,
     lock: float = 0.0,
+    rounding: float = 0.0,
 ) -> np.ndarray:
     """Noise per channel: one level for the run means, one for the revolution contrasts
     (each pooled over the moving sensors, which see the same clock and marks).
@@ -415,8 +424,7 @@ def _level_sigma(
     reaches them), separately for the part common to the moving sensors (the fixed sensors'
     timing noise enters every pair alike) and for the differences; the larger per-value level is
     used (the engine weighs channels as independent: conservative). ``state`` (a dict) receives
-    ``factor``: the run-mean level without a test's columns (:mod:`._sds_level_out`; ``direct``
-    / ``component``: sessions 28 / 38, :mod:`._sds_level_component`)."""
+    ``factor``: the level without a test's columns (:mod:`._sds_level_out`, with ``rounding``)."""
     R, C = resid.shape
     M = C // K
     out = np.empty(C)
@@ -498,7 +506,7 @@ def _level_sigma(
     if state is not None:  # s * widening(nu) * factors(s)[0] on arrays of s and nu
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
-        sigma_of = RunMeanLevel(lambda n, p=test_p: dof_widening(n, p=p), excess, ucl, lock)
+        sigma_of = RunMeanLevel(partial(_widen, test_p), excess, ucl, lock, rounding)
         both = (direct or component) and common_base is not None
         common = (resid[:, :M], common_base) if both else None
         state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
@@ -544,8 +552,8 @@ def run_mean_levels(
     )
     fixed = np.asarray(rows["fixed_c"], float)
     common = common_base_columns(rows["phi"], consts["psi_m"], orders)
-    switch = settings.sds_clock_lock_level  # 1: the rounding's level, 2: also the mixing
-    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (switch > 1)
+    switch = settings.sds_clock_lock_level  # 1: the views' rounding, 2: mixing, 3: tests
+    lock = float(np.asarray(consts.get("clock_lock", 0.0))) * (switch == 2)
     rounding = float(np.asarray(consts.get("clock_round_excess", 0.0))) * (switch > 0 and not proj)
 
     def levels(resid: np.ndarray, info: dict | None = None, state=None) -> np.ndarray:
@@ -567,6 +575,7 @@ def run_mean_levels(
             direct=settings.sds_level_common_direct > 0,
             component=settings.sds_level_per_component > 0,
             lock=lock,
+            rounding=rounding * (switch == 3),
         )
         if state is not None:  # (``info`` is a dict there: the line above)
             state["common_scale"] = _common_scale(info, rounding, lock)
@@ -689,33 +698,6 @@ def _coil_plausible(ctx: Context, params: dict) -> str | None:
     return None
 
 
-def _drift_plausible(ctx: Context, params: dict) -> str | None:
-    """A drift in time is refused when an order of the platform angle (common to the
-    moving sensors) fits the base residual's common structure better by BIC (ln of the
-    number of run means per parameter; the order has 2, the drift 1, or 2 with an onset in
-    the record, its power then at the fitted onset): with the platform stepped by a fixed
-    angle such an order is nearly a trend over the runs, and the better fit is the order
-    (out of catalog: reported, not named)."""
-    info = noise_info(ctx)
-    dv = info.drift_vs_orders
-    if not dv:
-        return None
-    pd, k = dv["drift_power"], 1
-    d = float(np.asarray(params.get("onset_from_start_s", 0.0)))
-    if d > 0 and info.base_resid is not None and ctx.noise is not None:
-        M = int(np.asarray(ctx.consts["psi_m"]).size)
-        rwm = info.base_resid[:, :M] / np.asarray(ctx.noise, float)[None, :M]
-        pd, k = drift_power_at(ctx.rows, ctx.consts, rwm, d), 2
-    if dv["order_power"] - pd > (2 - k) * math.log(max(dv["n_values"], 2)):
-        return (
-            f"order {dv['order']} of the platform angle fits the common structure better "
-            f"(chi-square {dv['order_power']:.0f}, 2 dof, vs {pd:.0f}, {k} dof) "
-            f"and is nearly a trend over these runs (correlation {dv['correlation']:.2f} with "
-            "a drift): not a drift in time"
-        )
-    return None
-
-
 def _delay_gauge(ctx: Context, delay) -> np.ndarray:
     """The fitted delays per moving sensor; without phi_ref a delay common to every moving
     sensor is taken by the per-run offset, so the delays are known up to a common value:
@@ -749,22 +731,4 @@ def _delay_plausible(ctx: Context, params: dict) -> str | None:
                 f"outlier fits with chi-square {po:.0f}, the best step from one run on with "
                 f"{ps:.0f}): a transient in one run, not a persisting delay step"
             )
-    return None
-
-
-def _beam_plausible(ctx: Context, params: dict) -> str | None:
-    """Beam tilt x axial runout lives at orders 1..3 of φ: refused when the base residual's
-    strongest common order is another one (an out-of-catalog order that orders 1..3 take in
-    part through the sparse platform positions)."""
-    pw = np.asarray(noise_info(ctx).common_order_power, float)
-    if pw.size == 0:
-        return None
-    top = int(np.argmax(pw)) + 1
-    if top not in BEAM_ORDERS and pw[top - 1] > ctx.settings.sds_common_order_ratio * max(
-        pw[n - 1] for n in BEAM_ORDERS if n <= pw.size
-    ):
-        return (
-            f"the common structure peaks at order {top} of the platform angle (chi-square "
-            f"{pw[top - 1]:.0f}), not at the beam-tilt orders {list(BEAM_ORDERS)}"
-        )
     return None

@@ -15,16 +15,15 @@ from scipy import stats
 
 from ...engine._candidates import Candidate, Context, Param, Probe
 from ...engine._padded import eval_rows
+from ._sds_common_rules import _beam_plausible, _drift_plausible
 from ._sds_data import SDSKindData, lattice_floor
 from ._sds_drift import drift_derived, drift_fn, drift_probes, drift_start
 from ._sds_noise import (
     BEAM_ORDERS,
     EXPLANATIONS,
-    _beam_plausible,
     _coil_plausible,
     _delay_gauge,
     _delay_plausible,
-    _drift_plausible,
     _saturating_columns,
     base_orders,
     coil_orders,
