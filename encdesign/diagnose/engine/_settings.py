@@ -117,23 +117,22 @@ class FinderSettings(AbstractSelectionSettings):
     name not in their truth: the common component also holds common structure the test's
     columns do not span (training 20261430: a 2x ``platform_step`` at the wrong order)."""
 
-    sds_level_per_component: int = eqx.field(default=1, static=True)
-    """sds with phi_ref and ``sds_level_common_share`` on, 1: on, 0: off: the run-mean level
+    sds_level_per_component: int = eqx.field(default=2, static=True)
+    """sds with phi_ref and ``sds_level_common_share`` on; 0: off; 1: the run-mean level
     without a test's columns per component, the moving sensors' common component at its own
-    unbiased level (session 28's, without the test's common part) and the differences at
-    theirs, mixed at the columns' share and widened for the mix's Welch-Satterthwaite degrees
-    of freedom (the smaller of those at the estimate and at session 27's common variance,
-    session 41), taken only where it is below session 27's level
-    (:mod:`._sds_level_component`, issue 41 sessions 38, 41): common structure the test's
-    columns do not span never raises a test's level above session 27's. A switch, no unit.
-    Session 38 (s38-sds38, the lead's fresh seeds): SDS discovery +2 -1 over 60 fresh cases,
-    but the unlocked-clock catalog set 6742's clean record 23 ``unexplained`` (a one-sensor
-    order-2 ``decay`` at chi-square 88 against 24.5), so off. Session 41 (s41-pc41, on,
-    training): that decay's common part took 96 % of the common component, whose estimate
-    then fell to 1.26x the differences' level: the mix's dof 16 instead of 6 at session 27's
-    common variance. With the smaller dof record 23 is ``consistent``, 6742 31/31 every row
-    equal to main, clean SDS 8250 0/15 with a term, SDS discovery 20261541 (2x) every case
-    equal to main; docs/diagnose.md has the measurements."""
+    unbiased level (without the test's common part) and the differences at theirs, mixed at
+    the columns' share and widened at the mix's Welch-Satterthwaite dof (the smaller of those at
+    the estimate and at session 27's common variance), only where below session 27's level
+    (:mod:`._sds_level_component`, issue 41 sessions 38, 41); 2: also the ``common_orders``
+    and ``common_modulated`` views' tests so read, widened at each view's own test ``p`` and
+    never above the whitening level (:func:`._sds_common_mod.common_view_scale`, session 42). A
+    switch, no unit. Session 38: off (clean 6742/23 read ``unexplained``); session 41
+    (s41-pc41, training 6742, 8250, 20261541): 1, the dof at the smaller of the two variances.
+    Session 42 (s42-common42): 2; before, the common views read at the whitening level, whose
+    common factor is at least 1, tested 2x platform steps at 2.1-2.3x their true noise (the
+    common component 0.5-0.94 of the differences on the discovery bench: locked clock's
+    rounding); measured fresh in docs/diagnose.md. Training: 20261558 (its 2x
+    ``platform_step``), synthetic rates (``tests/test_sds_level_out.py``)."""
 
     sds_clock_lock_level: int = eqx.field(default=1, static=True)
     """sds with phi_ref (``_sds_clock_lock``): 1: the common views read the clock's rounding

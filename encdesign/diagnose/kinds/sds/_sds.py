@@ -68,7 +68,7 @@ from ...engine._views import Finding
 from ...engine._views import chi2_threshold as _thr
 from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
-from ._sds_common_mod import view_common_modulated
+from ._sds_common_mod import view_common_modulated, view_common_orders
 from ._sds_common_rules import rounding_scale
 from ._sds_data import (
     SDSPairTable,
@@ -92,7 +92,6 @@ from ._sds_noise import (
     base_orders,
     noise_info,
     sds_noise,
-    view_common_orders,
 )
 from ._sds_probes import with_probes
 from ._sds_terms import (

@@ -1,7 +1,7 @@
 """An order of the platform angle common to the moving sensors that switches or grows over the
 runs (SDS, issue 41, session 26).
 
-The ``common_orders`` view (:func:`._sds_noise.view_common_orders`) fits each order ``n`` of
+The ``common_orders`` view (:func:`view_common_orders`) fits each order ``n`` of
 the platform angle φ with one amplitude and phase on every moving sensor over the whole
 record, and the ``modulated_orders`` view scans growths and switches per sensor only. A
 pattern common to the moving sensors that switches on from one run on (a platform gear or a
@@ -43,7 +43,8 @@ from ...engine._views import log10_tail_p as _logp
 from ...engine._views import make_where as _where
 from ...engine._views_modulated import _basis, _power2
 from ...engine._views_orders import time_order
-from ._sds_noise import noise_info
+from ._sds_level_out import common_shapes_scale
+from ._sds_noise import common_order_power, noise_info
 
 VIEW = "common_modulated"
 
@@ -124,13 +125,16 @@ def view_common_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> li
     Q = None if basis is None else basis[0]
     W, names = shapes(n)
     sig = np.asarray(prep.sigma, float)[:M]
-    pw = powers(r, phi, sig, np.concatenate([np.ones((1, n)), W]), orders, Q)
-    pw = pw * noise_info(prep.ctx).common_scale  # the clock's rounding (_sds_clock_lock)
-    static, pw = pw[0], pw[1:]
+    W1 = np.concatenate([np.ones((1, n)), W])
     alpha = prep.settings.modulated_orders_alpha
     n_tests = [2 * L, 2 * (n - 1) * L]
     thr = [_thr(alpha / 2, 2, nt) for nt in n_tests]
     fam = np.array([0 if b is None else 1 for _, b in names])
+    # each test's false-alarm probability: the static fit's (``common_orders``), the families'
+    p = np.concatenate([[prep.settings.alpha / L], alpha / 2 / np.asarray(n_tests)[fam]])
+    pw = powers(r, phi, sig, W1, orders, Q)
+    pw = pw * common_view_scale(prep, W1, kidx, orders, p)  # the level (session 42)
+    static, pw = pw[0], pw[1:]
     T = np.asarray(thr)[fam]
     out = []
     for i in range(L):
@@ -170,6 +174,64 @@ def view_common_modulated(prep: Prepared, rw: np.ndarray, scan_order: int) -> li
                 2,
                 _logp(float(pw[j, i]), 2),
                 detail=detail,
+            )
+        )
+    return out
+
+
+def common_view_scale(
+    prep: Prepared, shapes: np.ndarray, kidx: np.ndarray, orders: np.ndarray, p: np.ndarray
+) -> float | np.ndarray:
+    """The factor on the common views' chi-squares (``common_orders``, ``common_modulated``):
+    ``SDSNoiseInfo.common_scale`` (at most 1: the clock's rounding constant within a run that
+    the whitening level does not hold, :func:`_common_scale`) where it is below 1 or
+    ``FinderSettings.sds_level_per_component`` is below 2; else ``(S, L)`` per amplitude shape
+    (``shapes`` (S, n) over the kept rows ``kidx`` in the view's order) and order of ``orders``
+    the run-mean level without the tested columns, per component
+    (:func:`._sds_level_out.common_shapes_scale`, session 42), as the one-sensor views read
+    theirs, widened at each shape's false-alarm probability ``p`` (S,: its family's threshold's,
+    per test), and at least 1: a common test is never read above the whitening level, as
+    before (where the common component's own level is not lower, the widening at the
+    view's small ``p`` would otherwise raise it)."""
+    info = noise_info(prep.ctx)
+    lv = info.level_factor
+    if prep.settings.sds_level_per_component < 2 or lv is None or info.common_scale < 1:
+        return info.common_scale
+    keep = np.asarray(prep.keep, bool)
+    W = np.zeros((shapes.shape[0], keep.size))
+    W[:, np.asarray(kidx, int)] = shapes
+    phi = np.asarray(prep.rows["phi"], float)[keep]
+    p = np.asarray(p, float)
+    out = np.ones((shapes.shape[0], np.size(orders)))
+    for q in np.unique(p):  # one call per family
+        rows = np.flatnonzero(p == q)
+        out[rows] = common_shapes_scale(lv, phi, W[rows][:, keep], np.asarray(orders, float), q)
+    return np.maximum(out, 1.0)  # never below the whitening level's reading (before 42)
+
+
+def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
+    """Orders in φ common to every moving sensor (platform gear, axial runout, a reference
+    error), 2 dof each, Bonferroni over the orders, each read at :func:`common_view_scale`;
+    nothing without ``phi_ref``."""
+    M = prep.consts["psi_m"].size
+    if float(prep.consts["proj"]) > 0:
+        return []
+    pw = common_order_power(prep, rw[:, :M])
+    kidx = np.flatnonzero(np.asarray(prep.keep, bool))
+    p = np.array([prep.settings.alpha / pw.size])  # the Bonferroni threshold's
+    f = common_view_scale(prep, np.ones((1, kidx.size)), kidx, np.arange(1.0, pw.size + 1), p)
+    pw = pw * (np.asarray(f)[0] if np.ndim(f) else f)
+    thr = _thr(prep.settings.alpha, 2, pw.size)
+    out = []
+    for i in np.flatnonzero(pw > thr):
+        out.append(
+            Finding(
+                "common_orders",
+                _where(orders=[float(i + 1)], heads=list(range(M)), runs=prep.run_ids.tolist()),
+                float(pw[i]),
+                2,
+                _logp(float(pw[i]), 2),
+                detail={"n_values": int(rw.shape[0] * M), "common_to_moving_sensors": True},
             )
         )
     return out

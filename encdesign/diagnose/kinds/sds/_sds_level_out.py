@@ -82,20 +82,23 @@ class RunMeanLevel:
         self.widen, self.excess, self.ucl, self.lock = widen, float(excess), ucl, float(lock)
         self.rounding = float(rounding)
 
-    def widening(self, nu) -> np.ndarray:
-        """``c = widen(nu)`` on an array of degrees of freedom (once per distinct value)."""
+    def widening(self, nu, p: float | None = None) -> np.ndarray:
+        """``c = widen(nu)`` on an array of degrees of freedom (once per distinct value);
+        ``p``: the test's false-alarm probability, passed on as ``widen(nu, p)`` (``None``:
+        ``widen``'s own, the level's ``sds_sigma_test_p``)."""
         nu = np.asarray(nu)
         vals, inv = np.unique(nu, return_inverse=True)
-        return np.array([self.widen(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
+        w = (lambda v: self.widen(v)) if p is None else (lambda v: self.widen(v, p))
+        return np.array([w(float(v)) for v in vals.ravel()])[inv].reshape(nu.shape)
 
-    def __call__(self, s, nu, share=None) -> np.ndarray:
+    def __call__(self, s, nu, share=None, p: float | None = None) -> np.ndarray:
         """The level (rad) at raw levels ``s`` with ``nu`` degrees of freedom; ``share``
         (same shape, 0..1; ``None``: 1): the tested columns' share ``kappa`` in the moving
         sensors' common component (:func:`common_share`), whose factor is then
         ``sqrt(1 + kappa (g^2 - 1))`` (module doc: the common part's excess reaches a
         test only through its common component)."""
         s, nu = np.asarray(s, float), np.asarray(nu)
-        c = self.widening(nu)
+        c = self.widening(nu, p)
         g = self.common_factor(s, test=share is not None)
         if share is not None:
             g = np.sqrt(1.0 + np.clip(np.asarray(share, float), 0.0, 1.0) * (g**2 - 1.0))
@@ -181,7 +184,9 @@ class LevelOut:
         X = X.reshape(X.shape[0] * X.shape[1], -1)
         return X - self.Q @ (self.Q.T @ X), np.sum(X**2, 0)
 
-    def _factor(self, g: np.ndarray, r: np.ndarray, share=None, gc=None) -> np.ndarray:
+    def _factor(
+        self, g: np.ndarray, r: np.ndarray, share=None, gc=None, p: float | None = None
+    ) -> np.ndarray:
         """``(sigma / sigma')^2`` per power ``g`` taken by columns of rank ``r`` (arrays of
         one shape): one call of ``sigma_of`` on all of them (session 24: a call per entry
         was a fifth of an SDS record's discovery time). ``share`` (same shape): the
@@ -202,16 +207,19 @@ class LevelOut:
         if idx.size:
             if share is not None and isinstance(self.sigma_of, RunMeanLevel):
                 k = np.asarray(share, float).ravel()[idx]
-                sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k), float)
+                sig = np.asarray(self.sigma_of(np.sqrt(s2), n, k, p), float)
+                level = self.sigma_of
+
+                def widen(nu):  # the widening at the test's own p (None: the level's)
+                    return level.widening(nu, p)
+
                 if self.common is not None and gc is not None:  # (set only on a RunMeanLevel)
                     pc, rc = (np.asarray(a).ravel()[idx] for a in gc)
                     if isinstance(self.common, ComponentLevel):
                         g2 = self.sigma_of.common_factor(np.sqrt(s2), test=True) ** 2
-                        sig = self.common.capped(
-                            self.sigma_of.widening, s2, n, k, pc, rc, sig, s2 * g2
-                        )
+                        sig = self.common.capped(widen, s2, n, k, pc, rc, sig, s2 * g2)
                     else:
-                        own = self.common.levels(self.sigma_of.widening, s2, n, k, pc, rc)
+                        own = self.common.levels(widen, s2, n, k, pc, rc)
                         sig = np.where(np.isfinite(own), own, sig)
             else:
                 sig = np.asarray(self.sigma_of(np.sqrt(s2), n), float)
@@ -236,8 +244,10 @@ class LevelOut:
             gc = (np.array([pc]), np.array([rc]))
         return float(self._factor(np.array([g]), np.array([U.shape[1]]), k, gc)[0])
 
-    def pairs(self, A: np.ndarray) -> np.ndarray:
-        """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2)."""
+    def pairs(self, A: np.ndarray, p: float | None = None) -> np.ndarray:
+        """``(G,)``: the factor of each pair of columns of ``A`` (R, M, G, 2); ``p``: the
+        tests' false-alarm probability the level is widened at (``None``: the level's own,
+        ``sds_sigma_test_p``; only with the share, on a :class:`RunMeanLevel`)."""
         if not self.sigma > 0:
             return np.ones(A.shape[2])
         Xp, n2 = self._off(A)
@@ -251,7 +261,7 @@ class LevelOut:
         g = np.sum(np.where(big, proj**2 / np.where(big, ev, 1.0), 0.0), 1)
         k = pair_shares(A if self.share and not self.proj else None)
         gc = self.common.pair_powers(A) if self.common is not None else None
-        return self._factor(g, big.sum(1), k, gc)
+        return self._factor(g, big.sum(1), k, gc, p)
 
 
 def common_share(X: np.ndarray) -> float:
@@ -378,5 +388,38 @@ def run_step_scale(factor: LevelOut, keep: np.ndarray, M: int) -> tuple[np.ndarr
     out = (f[:, :R], f[:, R:])
     for a in out:
         a.setflags(write=False)
+    factor.memo[key] = out
+    return out
+
+
+def common_shapes_scale(
+    factor: LevelOut, phi: np.ndarray, shapes: np.ndarray, orders: np.ndarray, p: float
+) -> np.ndarray:
+    """``(S, L)``: per amplitude shape (``shapes`` (S, R): 1 for a static order, the
+    ``common_modulated`` view's growths and switches) and order of ``orders`` (L,) the factor
+    on the chi-square of a pattern common to the moving sensors, ``cos / sin (n phi)`` times the
+    shape on every moving sensor's run means (``phi`` (R,) the platform angle, rad; rows in
+    the level's order): :class:`LevelOut` of those columns, so a common pattern is read
+    against the run-mean level without itself and with the common component at its own level
+    where that is below session 27's (:mod:`._sds_level_component`; issue 41, session 42: the
+    ``common_orders`` and ``common_modulated`` views read at the whitening level had tested a
+    2x platform step at 2.1-2.3x its true noise). ``p``: the false-alarm probability of each
+    test (the view's threshold's): the level is widened at it, so a common component of few
+    degrees of freedom does not raise the rate at the view's Bonferroni-small ``p``
+    (``FinderSettings.sds_sigma_test_p`` is 1e-4; at 2e-6 and 17 degrees of freedom its
+    widening lets six times the rate through)."""
+    phi = np.asarray(phi, float)
+    W = np.asarray(shapes, float)
+    o = np.asarray(orders, float)
+    key = ("common", phi.tobytes(), W.tobytes(), W.shape, o.tobytes(), factor.share, p)
+    if key in factor.memo:
+        return factor.memo[key]
+    S, R = W.shape
+    ang = np.outer(phi, o)  # (R, L)
+    cs = np.stack([np.cos(ang), np.sin(ang)], -1)  # (R, L, 2)
+    A = W.T[:, :, None, None] * cs[:, None]  # (R, S, L, 2)
+    A = np.repeat(A.reshape(R, 1, S * o.size, 2), factor.M, axis=1)
+    out = factor.pairs(A, p).reshape(S, o.size)
+    out.setflags(write=False)
     factor.memo[key] = out
     return out

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -14,10 +15,6 @@ from scipy import stats
 from ...engine._candidates import Context
 from ...engine._protocol import NoiseEstimate, Prepared
 from ...engine._settings import FinderSettings
-from ...engine._views import Finding
-from ...engine._views import chi2_threshold as _thr
-from ...engine._views import log10_tail_p as _logp
-from ...engine._views import make_where as _where
 from ._sds_clock_lock import lock_mixed_factor
 from ._sds_drift import _step_or_outlier, onset_power
 from ._sds_level_out import LevelOut, RunMeanLevel
@@ -372,6 +369,13 @@ def _common_scale(info: dict, rounding: float, lock: float) -> float:
     return min(1.0, (g / g_c) ** 2)
 
 
+def _widen(test_p: float, nu: float, p: float | None = None) -> float:
+    """:func:`dof_widening` at ``nu`` degrees of freedom and the test's ``p`` (``None``: the
+    level's ``test_p``): the run-mean level's widening, which a test may ask at its own ``p``
+    (:meth:`._sds_level_out.RunMeanLevel.widening`, session 42)."""
+    return dof_widening(nu, p=test_p if p is None else p)
+
+
 def _level_sigma(
     resid: np.ndarray,
     K: int,
@@ -502,7 +506,7 @@ def _level_sigma(
     if state is not None:  # s * widening(nu) * factors(s)[0] on arrays of s and nu
         ucl = None if proj else _direct_ucl(resid[:, :M], common_base, common_quantile)
         excess = 0.0 if proj else _common_excess(lv, fixed, M, K)
-        sigma_of = RunMeanLevel(lambda n: dof_widening(n, p=test_p), excess, ucl, lock, rounding)
+        sigma_of = RunMeanLevel(partial(_widen, test_p), excess, ucl, lock, rounding)
         both = (direct or component) and common_base is not None
         common = (resid[:, :M], common_base) if both else None
         state["factor"] = LevelOut(e, Q, n_ind, sigma_of, proj, M, share, common, component)
@@ -671,29 +675,6 @@ def common_order_power(prep: Prepared, rwm: np.ndarray) -> np.ndarray:
             X = np.zeros_like(X)  # common to the moving sensors: taken by the run offsets
         out.append(_ls_power_flat(y[:, None], X[:, None, :]))
     return np.asarray(out)
-
-
-def view_common_orders(prep: Prepared, rw: np.ndarray, scan_order: int) -> list[Finding]:
-    """Orders in φ common to every moving sensor (platform gear, axial runout, a reference
-    error), 2 dof each, Bonferroni over the orders; nothing without ``phi_ref``."""
-    M = prep.consts["psi_m"].size
-    if float(prep.consts["proj"]) > 0:
-        return []
-    pw = common_order_power(prep, rw[:, :M]) * noise_info(prep.ctx).common_scale
-    thr = _thr(prep.settings.alpha, 2, pw.size)
-    out = []
-    for i in np.flatnonzero(pw > thr):
-        out.append(
-            Finding(
-                "common_orders",
-                _where(orders=[float(i + 1)], heads=list(range(M)), runs=prep.run_ids.tolist()),
-                float(pw[i]),
-                2,
-                _logp(float(pw[i]), 2),
-                detail={"n_values": int(rw.shape[0] * M), "common_to_moving_sensors": True},
-            )
-        )
-    return out
 
 
 def _coil_plausible(ctx: Context, params: dict) -> str | None:
