@@ -94,3 +94,31 @@ def test_a_clean_record_has_no_common_switch(seed):
     d = shared_diagnosis(rec)  # 803's: also test_discover's clean SDS record
     assert d.verdict == "consistent", d.doc["report"]
     assert not [u for u in d.doc["unexplained"] if u.get("view") == "common_modulated"]
+
+
+@pytest.mark.sweep  # a record diagnosed twice (session 42, CI time)
+def test_a_platform_step_read_at_the_common_components_own_level_is_located():
+    """The discovery benchmark's ``platform_step`` 2x record of seed 20261568 (fresh in
+    session 42, measured once on main and the branch, training from then: a common order
+    switching on, oracle noncentrality 106, its true common noise 0.58 of the differences'):
+    read at the whitening level (``sds_level_per_component`` 1, main 299ab35) the common views
+    test it at 2.3x its true noise and it reads ``consistent``; with the common views read per
+    component (2, the default since s42-common42) it is located and modelled in the platform
+    frame at its order."""
+    from encdesign.diagnose import FinderSettings
+
+    seed = [20261568, 0, CLASSES.index("platform_step"), 0, 0]
+    rec, truth = outside_record(np.random.default_rng(seed), "platform_step", 2.0, "sds", 3000)
+    off = diagnose(rec, settings=FinderSettings(sds_level_per_component=1))
+    assert off.verdict == "consistent", off.doc["report"]
+    d = diagnose(rec)
+    n = truth["line"][1]
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        if u.get("model")
+        for t in u["model"]["terms"]
+        if t["line_kind"] == "order" and t["value"] == n
+    ]
+    assert terms and terms[0]["frame"] == "platform", d.doc["report"]
+    assert not d.effects
