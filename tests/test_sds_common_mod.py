@@ -62,6 +62,19 @@ def test_pure_noise_stays_below_the_thresholds():
     assert over == 0
 
 
+def _assert_platform_term(d, n: int) -> None:
+    """Diagnosis ``d`` models order ``n`` in the platform frame and names no catalog effect."""
+    terms = [
+        t
+        for u in d.doc["unexplained"]
+        if u.get("model")
+        for t in u["model"]["terms"]
+        if t["line_kind"] == "order" and t["value"] == n
+    ]
+    assert terms and terms[0]["frame"] == "platform", d.doc["report"]
+    assert not d.effects
+
+
 def test_a_platform_step_at_twice_the_noise_is_located_and_modelled_in_the_platform_frame():
     """The discovery benchmark's ``platform_step`` 2x record of training seed 20261413 (order
     5 common to the moving sensors from run 11 on): on main eacb120 nothing is located
@@ -77,15 +90,7 @@ def test_a_platform_step_at_twice_the_noise_is_located_and_modelled_in_the_platf
         f.get("view") == "common_modulated" and f["where"].get("orders") == [float(n)]
         for f in d.doc["unexplained"]
     ), d.doc["report"]
-    terms = [
-        t
-        for u in d.doc["unexplained"]
-        if u.get("model")
-        for t in u["model"]["terms"]
-        if t["line_kind"] == "order" and t["value"] == n
-    ]
-    assert terms and terms[0]["frame"] == "platform", d.doc["report"]
-    assert not d.effects
+    _assert_platform_term(d, n)
 
 
 @pytest.mark.parametrize("seed", [803])
@@ -113,12 +118,4 @@ def test_a_platform_step_read_at_the_common_components_own_level_is_located():
     assert off.verdict == "consistent", off.doc["report"]
     d = diagnose(rec)
     n = truth["line"][1]
-    terms = [
-        t
-        for u in d.doc["unexplained"]
-        if u.get("model")
-        for t in u["model"]["terms"]
-        if t["line_kind"] == "order" and t["value"] == n
-    ]
-    assert terms and terms[0]["frame"] == "platform", d.doc["report"]
-    assert not d.effects
+    _assert_platform_term(d, n)
