@@ -61,6 +61,12 @@ def _beam_plausible(ctx: Context, params: dict) -> str | None:
     return _within_rounding(ctx, float(sum(pw[n - 1] for n in own)), 2 * len(own))
 
 
+def _tests_rounding_scale(ctx: Context) -> float:
+    """``SDSNoiseInfo.common_scale`` where ``FinderSettings.sds_clock_lock_level`` is 3 (the
+    tests of a common part read the clock's rounding), else 1."""
+    return noise_info(ctx).common_scale if ctx.settings.sds_clock_lock_level == 3 else 1.0
+
+
 def rounding_scale(ctx: Context, cols: np.ndarray, M: int) -> float:
     """The factor (at most 1) on the chi-square of columns ``cols`` (R, C, q; whitened, the
     first ``M`` channels the moving sensors' run means) with the part of them in the run
@@ -72,10 +78,12 @@ def rounding_scale(ctx: Context, cols: np.ndarray, M: int) -> float:
     constant within a run, a third for one of three sensors' run means). 1 where ``S`` is 1
     (no rounding constant within a run: the clock locked to the motor, or far from it) and
     unless ``FinderSettings.sds_clock_lock_level`` is 3 (off by default: docs/diagnose.md)."""
-    scale = noise_info(ctx).common_scale if ctx.settings.sds_clock_lock_level == 3 else 1.0
+    scale = _tests_rounding_scale(ctx)
+    if not scale < 1.0:  # the default: nothing to compute per start of the matched views
+        return 1.0
     X = np.asarray(cols, float)
     total = float(np.sum(X**2))
-    if not scale < 1.0 or not total > 0 or X.ndim != 3 or X.shape[1] < M:
+    if not total > 0 or X.ndim != 3 or X.shape[1] < M:
         return 1.0
     rm = X[:, :M, :]
     kappa = common_share(rm) * float(np.sum(rm**2)) / total
@@ -100,7 +108,7 @@ def _within_rounding(ctx: Context, power: float, k: int) -> str | None:
     rounding's common excess 17.9 nrad RMS (the record's own common noise 13.5 nrad against
     2.4 in the differences, by its noise-free twin) while the whitening level was 5.0 nrad:
     named ``beam_tilt_axial`` at dBIC -16.7."""
-    scale = noise_info(ctx).common_scale if ctx.settings.sds_clock_lock_level == 3 else 1.0
+    scale = _tests_rounding_scale(ctx)
     if not scale < 1.0 or not power > 0:
         return None
     n = int(np.asarray(ctx.rows["phi"]).size) * int(ctx.n_channels)
